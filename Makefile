@@ -1,0 +1,30 @@
+# Everything runs inside .venv, created on first use by scripts/setup.sh.
+VENV ?= .venv
+BIN := $(VENV)/bin
+
+.PHONY: setup demo test test-all lint bench clean
+
+$(BIN)/semattnet: pyproject.toml scripts/setup.sh
+	VENV=$(VENV) bash scripts/setup.sh
+	@touch $@
+
+setup: $(BIN)/semattnet
+
+demo: setup
+	$(BIN)/semattnet demo
+
+test: setup
+	$(BIN)/python -m pytest
+
+test-all: setup
+	$(BIN)/python -m pytest -m "slow or not slow"
+
+lint: setup
+	$(BIN)/ruff check src tests benchmarks
+	$(BIN)/ruff format --check src tests benchmarks
+
+bench: setup
+	$(BIN)/python benchmarks/bench_latency.py
+
+clean:
+	rm -rf build dist .pytest_cache .ruff_cache semattnet-demo

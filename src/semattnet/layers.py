@@ -1,0 +1,79 @@
+"""Convolutional building blocks shared by the three branches.
+
+The names and layouts follow the authors' release (itself derived from PENet) so that
+state-dict keys line up: ``convbnrelu`` and ``deconvbnrelu`` are ``nn.Sequential`` with the
+convolution at index 0 and the BatchNorm at index 1, and :class:`BasicBlock` is the
+torchvision ResNet block with attributes ``conv1``/``bn1``/``conv2``/``bn2``/``downsample``.
+All convolutions are bias-free; BatchNorm uses PyTorch defaults.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+__all__ = ["BasicBlock", "convbn", "convbnrelu", "deconvbnrelu"]
+
+
+def convbn(in_ch: int, out_ch: int, kernel_size: int = 3, stride: int = 1, padding: int = 1) -> nn.Sequential:
+    """Conv2d -> BatchNorm2d (keys ``0.weight``, ``1.*``)."""
+    return nn.Sequential(
+        nn.Conv2d(in_ch, out_ch, kernel_size, stride=stride, padding=padding, bias=False),
+        nn.BatchNorm2d(out_ch),
+    )
+
+
+def convbnrelu(in_ch: int, out_ch: int, kernel_size: int = 3, stride: int = 1, padding: int = 1) -> nn.Sequential:
+    """Conv2d -> BatchNorm2d -> ReLU."""
+    return nn.Sequential(*convbn(in_ch, out_ch, kernel_size, stride, padding), nn.ReLU(inplace=True))
+
+
+def deconvbnrelu(
+    in_ch: int,
+    out_ch: int,
+    kernel_size: int = 5,
+    stride: int = 2,
+    padding: int = 2,
+    output_padding: int = 1,
+) -> nn.Sequential:
+    """ConvTranspose2d -> BatchNorm2d -> ReLU; with the defaults it doubles H and W."""
+    return nn.Sequential(
+        nn.ConvTranspose2d(
+            in_ch, out_ch, kernel_size, stride=stride, padding=padding, output_padding=output_padding, bias=False
+        ),
+        nn.BatchNorm2d(out_ch),
+        nn.ReLU(inplace=True),
+    )
+
+
+class BasicBlock(nn.Module):
+    """ResNet basic block (He et al. 2016), as in torchvision.
+
+    ``conv3x3(stride) -> BN -> ReLU -> conv3x3 -> BN``, plus the identity (a strided 1x1
+    convolution + BN when the stride or the width changes), then ReLU.
+
+    Args:
+        inplanes: input channels.
+        planes: output channels.
+        stride: 1, or 2 to halve H and W.
+    """
+
+    def __init__(self, inplanes: int, planes: int, stride: int = 1) -> None:
+        super().__init__()
+        self.conv1 = nn.Conv2d(inplanes, planes, 3, stride=stride, padding=1, bias=False)
+        self.bn1 = nn.BatchNorm2d(planes)
+        self.relu = nn.ReLU(inplace=True)
+        self.conv2 = nn.Conv2d(planes, planes, 3, stride=1, padding=1, bias=False)
+        self.bn2 = nn.BatchNorm2d(planes)
+        self.downsample: nn.Module | None = None
+        if stride != 1 or inplanes != planes:
+            self.downsample = nn.Sequential(
+                nn.Conv2d(inplanes, planes, 1, stride=stride, bias=False),
+                nn.BatchNorm2d(planes),
+            )
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        identity = x if self.downsample is None else self.downsample(x)
+        out = self.relu(self.bn1(self.conv1(x)))
+        out = self.bn2(self.conv2(out))
+        return self.relu(out + identity)

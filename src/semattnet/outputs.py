@@ -1,0 +1,51 @@
+"""Typed results returned by the models' ``forward``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import torch
+
+__all__ = ["DepthCompletionOutput"]
+
+
+@dataclass
+class DepthCompletionOutput:
+    """Every depth and confidence SemAttNet computes, each (B, 1, H, W), depths in metres.
+
+    Attributes:
+        color_depth: colour-guided branch depth D_cg (paper eq. 4).
+        semantic_depth: semantic-guided branch depth D_sg (eq. 7); ``None`` for two-branch models.
+        guided_depth: depth-guided branch depth D_dg (eq. 10).
+        color_conf, semantic_conf, guided_conf: the per-pixel fusion weights of eq. 12, i.e.
+            the branch confidences after the softmax across branches (they sum to 1).
+        fused_depth: the backbone output D_f (eq. 12).
+        refined_s2_depth: after the dilation-2 propagation stage (the authors' "coarse_depth");
+            full model only.
+        refined_depth: after both propagation stages (the final prediction); full model only.
+    """
+
+    color_depth: torch.Tensor
+    semantic_depth: torch.Tensor | None
+    guided_depth: torch.Tensor
+    color_conf: torch.Tensor
+    semantic_conf: torch.Tensor | None
+    guided_conf: torch.Tensor
+    fused_depth: torch.Tensor
+    refined_s2_depth: torch.Tensor | None = None
+    refined_depth: torch.Tensor | None = None
+
+    @property
+    def depth(self) -> torch.Tensor:
+        """The model's final prediction: the refined depth if present, else the fused depth."""
+        return self.refined_depth if self.refined_depth is not None else self.fused_depth
+
+    def to_dict(self) -> dict[str, torch.Tensor]:
+        """The tensors that are present, by attribute name."""
+        return {f.name: v for f in fields(self) if (v := getattr(self, f.name)) is not None}
+
+    def map(self, fn) -> DepthCompletionOutput:  # type: ignore[no-untyped-def]
+        """A copy with ``fn`` applied to every tensor (e.g. cropping, ``.cpu()``)."""
+        return DepthCompletionOutput(
+            **{f.name: (None if (v := getattr(self, f.name)) is None else fn(v)) for f in fields(self)}
+        )
