@@ -9,8 +9,11 @@ computes it: for a k x k window with raster offsets ``o_t`` (scaled by the dilat
 where ``W`` is the normalised affinity of eq. 13 (``W_t = g_t / sum |g|``, ``W_c = 1 - sum g``),
 the affinity is taken at the *neighbour* position, ``h`` and ``W`` are zero outside the image,
 and ``h_0`` is the fixed input of the propagation. Every pixel spreads ``W_t h`` to its
-neighbours, which is exactly ``torch.nn.functional.fold`` (col2im): one pass, no padded k*k
-copies of the image (the authors' pad-and-sum built 2 * k * k of them per step).
+neighbours. Since ``W`` is fixed during a stage, we move each tap's weight to the pixel it is
+sent to once per stage (:func:`shift_affinity`); every step is then one fused in-place
+multiply-add per tap over the overlapping window (:func:`propagate_shifted`), with a hand-written
+backward of the same form. No padded k*k copies of the image are made per step (the authors'
+pad-and-sum built 2 * k * k of them).
 """
 
 from __future__ import annotations
@@ -23,7 +26,14 @@ from torch import nn
 
 from .layers import convbn
 
-__all__ = ["AffinityHead", "cspn_affinity", "downsample_sparse", "propagate"]
+__all__ = [
+    "AffinityHead",
+    "cspn_affinity",
+    "downsample_sparse",
+    "propagate",
+    "propagate_shifted",
+    "shift_affinity",
+]
 
 
 def cspn_affinity(guide: torch.Tensor) -> torch.Tensor:
@@ -59,6 +69,97 @@ class AffinityHead(nn.Module):
         return cspn_affinity(self.generate(feature))
 
 
+def _taps(k: int, dilation: int, height: int, width: int):  # type: ignore[no-untyped-def]
+    """For every non-centre tap t: (t, destination slices, source slices) with dst = src + o_t."""
+    r = k // 2
+    for t in range(k * k):
+        if t == (k * k) // 2:
+            continue
+        oy, ox = (t // k - r) * dilation, (t % k - r) * dilation
+        if abs(oy) >= height or abs(ox) >= width:
+            continue
+        dst = (slice(max(oy, 0), height + min(oy, 0)), slice(max(ox, 0), width + min(ox, 0)))
+        src = (slice(max(-oy, 0), height - max(oy, 0)), slice(max(-ox, 0), width - max(ox, 0)))
+        yield t, dst, src
+
+
+def _kernel_size(affinity: torch.Tensor) -> int:
+    kk = affinity.shape[1]
+    k = math.isqrt(kk)
+    if k * k != kk or k % 2 == 0:
+        raise ValueError(f"affinity must have k*k channels for an odd k, got {kk}")
+    return k
+
+
+def shift_affinity(affinity: torch.Tensor, dilation: int = 1) -> torch.Tensor:
+    """Move each tap's weight to the pixel it is sent to: ``S_t(p) = W_t(p - o_t)`` (0 outside).
+
+    The affinity is fixed during a stage, so this is done once and every step then reads
+    ``S_t(p) * h(p - o_t)``. The centre channel is unchanged (its offset is 0).
+    """
+    k = _kernel_size(affinity)
+    height, width = affinity.shape[-2:]
+    centre = (k * k) // 2
+    parts = []
+    for t in range(k * k):
+        if t == centre:
+            parts.append(affinity[:, t : t + 1])
+            continue
+        oy, ox = (t // k - k // 2) * dilation, (t % k - k // 2) * dilation
+        # Zero-padded shift by (oy, ox): pad on the side we move away from, then crop.
+        padded = F.pad(affinity[:, t : t + 1], (max(ox, 0), max(-ox, 0), max(oy, 0), max(-oy, 0)))
+        parts.append(padded[:, :, max(-oy, 0) : max(-oy, 0) + height, max(-ox, 0) : max(-ox, 0) + width])
+    return torch.cat(parts, dim=1)
+
+
+class _ShiftedPropagation(torch.autograd.Function):
+    """``h'(p) = sum_{t != c} S_t(p) h(p - o_t) + S_c(p) h_0(p)`` by in-place shifted multiply-adds.
+
+    One fused multiply-add per tap over the overlapping window, no k*k buffers; the backward
+    pass is the same kind of loop (the adjoint shifts).
+    """
+
+    @staticmethod
+    def forward(ctx, shifted: torch.Tensor, h: torch.Tensor, h0: torch.Tensor, dilation: int) -> torch.Tensor:  # type: ignore[override]
+        k = math.isqrt(shifted.shape[1])
+        c = (k * k) // 2
+        height, width = h.shape[-2:]
+        out = shifted[:, c : c + 1] * h0
+        for t, (dy, dx), (sy, sx) in _taps(k, dilation, height, width):
+            out[:, :, dy, dx].addcmul_(shifted[:, t : t + 1, dy, dx], h[:, :, sy, sx])
+        ctx.save_for_backward(shifted, h, h0)
+        ctx.dilation = dilation
+        return out
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, grad: torch.Tensor):  # type: ignore[no-untyped-def, override]
+        shifted, h, h0 = ctx.saved_tensors
+        k = math.isqrt(shifted.shape[1])
+        c = (k * k) // 2
+        height, width = h.shape[-2:]
+        grad_shifted = grad_h = grad_h0 = None
+        if ctx.needs_input_grad[0]:
+            grad_shifted = torch.zeros_like(shifted)
+            grad_shifted[:, c] = (grad * h0).sum(dim=1)
+            for t, (dy, dx), (sy, sx) in _taps(k, ctx.dilation, height, width):
+                grad_shifted[:, t, dy, dx] = (grad[:, :, dy, dx] * h[:, :, sy, sx]).sum(dim=1)
+        if ctx.needs_input_grad[1]:
+            grad_h = torch.zeros_like(h)
+            for t, (dy, dx), (sy, sx) in _taps(k, ctx.dilation, height, width):
+                grad_h[:, :, sy, sx].addcmul_(grad[:, :, dy, dx], shifted[:, t : t + 1, dy, dx])
+        if ctx.needs_input_grad[2]:
+            grad_h0 = grad * shifted[:, c : c + 1]
+        return grad_shifted, grad_h, grad_h0, None
+
+
+def propagate_shifted(shifted: torch.Tensor, h: torch.Tensor, h0: torch.Tensor, dilation: int = 1) -> torch.Tensor:
+    """One CSPN++ step from a kernel already passed through :func:`shift_affinity`."""
+    _kernel_size(shifted)
+    h0 = h0.expand_as(h)
+    return _ShiftedPropagation.apply(shifted, h, h0, dilation)
+
+
 def propagate(affinity: torch.Tensor, h: torch.Tensor, h0: torch.Tensor, dilation: int = 1) -> torch.Tensor:
     """One CSPN++ step (module docstring) for every channel of ``h`` with one shared kernel.
 
@@ -70,27 +171,10 @@ def propagate(affinity: torch.Tensor, h: torch.Tensor, h0: torch.Tensor, dilatio
         dilation: spacing of the window taps.
 
     Returns:
-        (B, C, H, W) the next estimate h_{n+1}.
+        (B, C, H, W) the next estimate h_{n+1}. For several steps with one kernel, shift it once
+        with :func:`shift_affinity` and call :func:`propagate_shifted`.
     """
-    b, kk, height, width = affinity.shape
-    k = math.isqrt(kk)
-    if k * k != kk or k % 2 == 0:
-        raise ValueError(f"affinity must have k*k channels for an odd k, got {kk}")
-    c = h.shape[1]
-    centre = kk // 2
-    is_centre = torch.zeros(kk, dtype=torch.bool, device=h.device)
-    is_centre[centre] = True
-    # Per tap: the value each pixel sends, W_t(q) * h(q), or W_c(q) * h_0(q) at the centre.
-    source = torch.where(is_centre[:, None, None], h0.unsqueeze(2), h.unsqueeze(2))  # (B, C, K, H, W)
-    sent = affinity.unsqueeze(1) * source
-    # fold adds tap t of pixel q into q + o_t: out(p) = sum_t sent_t(p - o_t).
-    return F.fold(
-        sent.reshape(b, c * kk, height * width),
-        output_size=(height, width),
-        kernel_size=k,
-        dilation=dilation,
-        padding=(k // 2) * dilation,
-    )
+    return propagate_shifted(shift_affinity(affinity, dilation), h, h0, dilation)
 
 
 def downsample_sparse(sparse: torch.Tensor, factor: int = 2) -> tuple[torch.Tensor, torch.Tensor]:

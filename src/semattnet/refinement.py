@@ -34,7 +34,7 @@ from torch import nn
 
 from .config import RefinementMode
 from .layers import convbn, convbnrelu
-from .propagation import AffinityHead, downsample_sparse, propagate
+from .propagation import AffinityHead, downsample_sparse, propagate_shifted, shift_affinity
 
 __all__ = ["AtrousCSPNRefinement", "run_cspn_stage"]
 
@@ -60,9 +60,10 @@ def run_cspn_stage(
     keep = 1.0 - mask
     blended: torch.Tensor | None = None
     for i, affinity in enumerate(affinities):
+        shifted = shift_affinity(affinity)
         h = start
         for _ in range(iterations):
-            h = propagate(affinity, h, h0)
+            h = propagate_shifted(shifted, h, h0)
             h = mask * sparse + keep * h
         term = kernel_conf[:, i : i + 1] * h
         blended = term if blended is None else blended + term
