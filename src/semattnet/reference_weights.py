@@ -13,10 +13,11 @@ import numpy as np
 import torch
 from torch import nn
 
-__all__ = ["reference_state_dict", "fill_reference_weights"]
+__all__ = ["fill_reference_weights", "reference_state_dict", "reference_value"]
 
 
-def _value(name: str, shape: tuple[int, ...], seed: int) -> np.ndarray:
+def reference_value(name: str, shape: tuple[int, ...], seed: int = 0) -> np.ndarray:
+    """The value of one state-dict entry under the rule."""
     rng = np.random.default_rng(zlib.crc32(name.encode()) + seed)
     leaf = name.rsplit(".", 1)[-1]
     if leaf == "num_batches_tracked":
@@ -37,7 +38,7 @@ def _value(name: str, shape: tuple[int, ...], seed: int) -> np.ndarray:
 def reference_state_dict(model: nn.Module, seed: int = 0) -> dict[str, torch.Tensor]:
     """The reference weights for every entry of ``model.state_dict()``."""
     return {
-        name: torch.from_numpy(_value(name, tuple(t.shape), seed))
+        name: torch.from_numpy(reference_value(name, tuple(t.shape), seed))
         for name, t in model.state_dict().items()
     }
 

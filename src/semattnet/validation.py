@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["SIZE_MULTIPLE", "check_inputs"]
+__all__ = ["SIZE_MULTIPLE", "check_inputs", "crop_padding", "pad_to_multiple"]
 
 #: H and W must be multiples of this (five stride-2 stages).
 SIZE_MULTIPLE = 32
@@ -56,3 +56,25 @@ def check_inputs(
             raise ValueError(f"{name} contains NaN or infinite values")
     if bool((sparse < 0).any()):
         raise ValueError("sparse depth contains negative values; depth is in metres with 0 = missing")
+
+
+def pad_to_multiple(
+    x: torch.Tensor, multiple: int = SIZE_MULTIPLE, value: float = 0.0
+) -> tuple[torch.Tensor, tuple[int, int, int, int]]:
+    """Pad (..., H, W) so both are multiples of ``multiple``: rows at the top (KITTI's sky side,
+    keeping the image bottom-aligned as in training), columns split left/right.
+
+    Returns the padded tensor and ``(top, bottom, left, right)`` for :func:`crop_padding`.
+    """
+    h, w = x.shape[-2:]
+    ph, pw = (-h) % multiple, (-w) % multiple
+    pad = (ph, 0, pw // 2, pw - pw // 2)
+    if ph or pw:
+        x = torch.nn.functional.pad(x, (pad[2], pad[3], pad[0], pad[1]), value=value)
+    return x, pad
+
+
+def crop_padding(x: torch.Tensor, pad: tuple[int, int, int, int]) -> torch.Tensor:
+    """Undo :func:`pad_to_multiple` on (..., H, W)."""
+    top, bottom, left, right = pad
+    return x[..., top : x.shape[-2] - bottom, left : x.shape[-1] - right]
