@@ -15,7 +15,9 @@ def _deterministic() -> None:
     torch.manual_seed(0)
 
 
-def random_inputs(b: int = 2, h: int = 64, w: int = 96, density: float = 0.05, seed: int = 0) -> dict[str, torch.Tensor]:
+def random_inputs(
+    b: int = 2, h: int = 64, w: int = 96, density: float = 0.05, seed: int = 0
+) -> dict[str, torch.Tensor]:
     """Inputs in the model's units: colours 0..255, sparse metres with ~density valid."""
     g = torch.Generator().manual_seed(seed)
     sparse = torch.rand(b, 1, h, w, generator=g) * 70 + 1

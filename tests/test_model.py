@@ -34,7 +34,9 @@ def test_fused_depth_is_eq12() -> None:
     model = build_model("semattnet_backbone", width=SMALL).eval()
     with torch.inference_mode():
         out = model(**random_inputs())
-    blend = out.color_conf * out.color_depth + out.semantic_conf * out.semantic_depth + out.guided_conf * out.guided_depth
+    blend = (
+        out.color_conf * out.color_depth + out.semantic_conf * out.semantic_depth + out.guided_conf * out.guided_depth
+    )
     assert torch.allclose(out.fused_depth, blend, rtol=1e-5, atol=1e-5)
 
 
@@ -111,8 +113,10 @@ def test_refinement_keeps_measurements() -> None:
         (lambda x: x.update(semantic=x["semantic"][:, :1]), "semantic must have 3 channel"),
         (lambda x: x.update(sparse=x["sparse"][:, :, :32]), "sparse has shape .* but rgb has"),
         (lambda x: x.update(sparse=x["sparse"][:1]), "batch and size must match"),
-        (lambda x: x.update(rgb=x["rgb"][..., :40], semantic=x["semantic"][..., :40], sparse=x["sparse"][..., :40]),
-         "not a positive multiple of 32"),
+        (
+            lambda x: x.update(rgb=x["rgb"][..., :40], semantic=x["semantic"][..., :40], sparse=x["sparse"][..., :40]),
+            "not a positive multiple of 32",
+        ),
         (lambda x: x["rgb"].__setitem__((0, 0, 0, 0), float("nan")), "rgb contains NaN"),
         (lambda x: x["sparse"].__setitem__((0, 0, 0, 0), float("inf")), "sparse contains NaN or infinite"),
         (lambda x: x["sparse"].__setitem__((0, 0, 0, 0), -1.0), "negative"),

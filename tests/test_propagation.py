@@ -16,8 +16,8 @@ from semattnet.propagation import (
 
 def slow_propagate(w: torch.Tensor, h: torch.Tensor, h0: torch.Tensor, dilation: int) -> torch.Tensor:
     """h'(p) = sum_{t != c} W_t(p - o_t) h(p - o_t) + W_c(p) h0(p), pixel by pixel, in float64."""
-    b, kk, height, width = w.shape
-    k = int(round(kk**0.5))
+    _b, kk, height, width = w.shape
+    k = round(kk**0.5)
     r, c = k // 2, kk // 2
     w, h, h0 = w.double(), h.double(), h0.double()
     out = torch.zeros_like(h)

@@ -56,7 +56,9 @@ def test_outputs_match_authors_code(models, name: str, prefix: str, pairs: dict[
         expected = ref[prefix + theirs]
         got = getattr(out, ours).numpy()
         err = np.abs(got - expected).max()
-        assert err <= 1e-4 * np.abs(expected).max(), f"{ours}: max error {err:.3g} vs scale {np.abs(expected).max():.3g}"
+        assert err <= 1e-4 * np.abs(expected).max(), (
+            f"{ours}: max error {err:.3g} vs scale {np.abs(expected).max():.3g}"
+        )
 
 
 def test_reference_weights_differ_between_models(models) -> None:

@@ -25,8 +25,14 @@ def main() -> None:
 
 
 @main.command()
-@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default="semattnet-demo",
-              show_default=True, help="Folder for the pictures and metrics.")
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default="semattnet-demo",
+    show_default=True,
+    help="Folder for the pictures and metrics.",
+)
 @click.option("--size", default="96x320", show_default=True, help="Scene size HxW (multiples of 32).")
 @click.option("--width", default=0.125, show_default=True, help="Model width multiplier (1.0 = paper).")
 @click.option("--steps", default=60, show_default=True, help="Training steps.")

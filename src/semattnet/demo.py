@@ -102,8 +102,17 @@ def run_demo(
     save_panel(tiles, out_dir / "panel.png", columns=1)
     seconds = time.perf_counter() - t0
     (out_dir / "metrics.json").write_text(
-        json.dumps({"rmse_mm": rmse, "final_loss": losses[-1] if losses else None, "seconds": seconds,
-                    "size": [h, w], "width": width, "steps": steps}, indent=2)  # fmt: skip
+        json.dumps(
+            {
+                "rmse_mm": rmse,
+                "final_loss": losses[-1] if losses else None,
+                "seconds": seconds,
+                "size": [h, w],
+                "width": width,
+                "steps": steps,
+            },
+            indent=2,
+        )
     )
     log("held-out RMSE (mm): " + ", ".join(f"{k.removesuffix('_depth')} {v:.0f}" for k, v in rmse.items()))
     log(f"wrote {out_dir / 'panel.png'}, {out_dir / 'depth.png'}, {out_dir / 'metrics.json'} in {seconds:.0f} s")

@@ -19,7 +19,7 @@ from torch import nn
 
 from .attention import SAMMAFB
 
-__all__ = ["FusionMode", "FEATURE_FUSION_MODES", "confidence_fusion", "fuse_features", "make_fusion_block"]
+__all__ = ["FEATURE_FUSION_MODES", "FusionMode", "confidence_fusion", "fuse_features", "make_fusion_block"]
 
 FusionMode = Literal["sammafb", "concat", "add"]
 FEATURE_FUSION_MODES: tuple[str, ...] = ("sammafb", "concat", "add")

@@ -38,8 +38,7 @@ def reference_value(name: str, shape: tuple[int, ...], seed: int = 0) -> np.ndar
 def reference_state_dict(model: nn.Module, seed: int = 0) -> dict[str, torch.Tensor]:
     """The reference weights for every entry of ``model.state_dict()``."""
     return {
-        name: torch.from_numpy(reference_value(name, tuple(t.shape), seed))
-        for name, t in model.state_dict().items()
+        name: torch.from_numpy(reference_value(name, tuple(t.shape), seed)) for name, t in model.state_dict().items()
     }
 
 

@@ -19,7 +19,10 @@ __all__ = ["MODELS", "build_model", "list_models"]
 #: name -> (description, config). Overrides passed to build_model replace fields.
 MODELS: dict[str, tuple[str, SemAttNetConfig]] = {
     "semattnet": ("Full SemAttNet: three branches, SAMMAFB, CSPN++ refinement (Table 2 g)", SemAttNetConfig()),
-    "semattnet_backbone": ("Three-branch backbone with SAMMAFB, no refinement (Table 2 f)", SemAttNetConfig(refine=False)),
+    "semattnet_backbone": (
+        "Three-branch backbone with SAMMAFB, no refinement (Table 2 f)",
+        SemAttNetConfig(refine=False),
+    ),
     "table2_a": ("CG + DG, fusion by addition", SemAttNetConfig(branches=2, fusion="add", refine=False)),
     "table2_b": ("CG + DG, fusion by concatenation", SemAttNetConfig(branches=2, fusion="concat", refine=False)),
     "table2_c": ("CG + DG, concatenation, CSPN++ refinement", SemAttNetConfig(branches=2, fusion="concat")),

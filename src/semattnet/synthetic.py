@@ -115,7 +115,7 @@ def make_frame(height: int = 128, width: int = 416, seed: int = 0, shadow: bool 
     sparse = np.zeros_like(depth)
     elevation = np.deg2rad(np.linspace(2.0, -24.8, 64))
     rows = np.round(cy - f * np.tan(elevation)).astype(int)
-    step = max(1, int(round(f * np.deg2rad(0.09) * 2.5)))
+    step = max(1, round(f * np.deg2rad(0.09) * 2.5))
     for r in rows[(rows >= 0) & (rows < height)]:
         cols = np.arange(int(rng.integers(0, step)), width, step)
         sparse[r, cols] = depth[r, cols]

@@ -41,7 +41,9 @@ def check_inputs(
     b, _, h, w = rgb.shape
     for name, t, _ in named[1:]:
         if (t.shape[0], t.shape[2], t.shape[3]) != (b, h, w):
-            raise ValueError(f"{name} has shape {tuple(t.shape)} but rgb has {tuple(rgb.shape)}: batch and size must match")
+            raise ValueError(
+                f"{name} has shape {tuple(t.shape)} but rgb has {tuple(rgb.shape)}: batch and size must match"
+            )
         if t.device != rgb.device:
             raise ValueError(f"{name} is on {t.device} but rgb is on {rgb.device}")
     if h % SIZE_MULTIPLE or w % SIZE_MULTIPLE or h == 0 or w == 0:

@@ -1,0 +1,29 @@
+"""Full-size runs (minutes on a CPU): ``pytest -m slow``."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+import semattnet
+
+from .conftest import random_inputs
+
+
+@pytest.mark.slow
+def test_full_width_full_size_forward() -> None:
+    model = semattnet.build_model("semattnet").eval()
+    x = random_inputs(b=1, h=352, w=1216)
+    with torch.inference_mode():
+        out = model(**x)
+    assert out.refined_depth.shape == (1, 1, 352, 1216)
+    assert all(torch.isfinite(t).all() for t in out.to_dict().values())
+
+
+@pytest.mark.slow
+def test_full_width_backward_at_training_crop() -> None:
+    model = semattnet.build_model("semattnet").train()
+    x = random_inputs(b=1, h=320, w=1216)
+    out = model(**x)
+    out.refined_depth.mean().backward()
+    assert model.backbone.rgb_conv_init[0].weight.grad is not None
