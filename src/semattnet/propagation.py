@@ -98,18 +98,12 @@ def shift_affinity(affinity: torch.Tensor, dilation: int = 1) -> torch.Tensor:
     ``S_t(p) * h(p - o_t)``. The centre channel is unchanged (its offset is 0).
     """
     k = _kernel_size(affinity)
-    height, width = affinity.shape[-2:]
     centre = (k * k) // 2
-    parts = []
-    for t in range(k * k):
-        if t == centre:
-            parts.append(affinity[:, t : t + 1])
-            continue
-        oy, ox = (t // k - k // 2) * dilation, (t % k - k // 2) * dilation
-        # Zero-padded shift by (oy, ox): pad on the side we move away from, then crop.
-        padded = F.pad(affinity[:, t : t + 1], (max(ox, 0), max(-ox, 0), max(oy, 0), max(-oy, 0)))
-        parts.append(padded[:, :, max(-oy, 0) : max(-oy, 0) + height, max(-ox, 0) : max(-ox, 0) + width])
-    return torch.cat(parts, dim=1)
+    shifted = torch.zeros_like(affinity)
+    shifted[:, centre] = affinity[:, centre]
+    for t, (dy, dx), (sy, sx) in _taps(k, dilation, *affinity.shape[-2:]):
+        shifted[:, t, dy, dx] = affinity[:, t, sy, sx]
+    return shifted
 
 
 class _ShiftedPropagation(torch.autograd.Function):

@@ -11,7 +11,8 @@ SIZE_MULTIPLE = 32
 
 
 def _is_tracing() -> bool:
-    return torch.jit.is_scripting() or torch.jit.is_tracing() or torch.compiler.is_compiling()
+    compiling = getattr(getattr(torch, "compiler", None), "is_compiling", None)  # torch >= 2.3
+    return torch.jit.is_scripting() or torch.jit.is_tracing() or bool(compiling and compiling())
 
 
 def check_inputs(
