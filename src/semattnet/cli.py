@@ -92,14 +92,13 @@ def convert(src: Path, dst: Path, overwrite: bool) -> None:
 
 
 def _load_or_exit(path: Path, loader):  # type: ignore[no-untyped-def]
+    """Run ``loader(path)``; a bad or unsafe checkpoint becomes a one-line CLI error."""
+    from .checkpoint import CheckpointError, UnsafeCheckpointError
+
     try:
         return loader(path)
-    except ValueError as exc:  # CheckpointError, UnsafeCheckpointError (UnpicklingError) below
+    except (CheckpointError, UnsafeCheckpointError) as exc:
         raise click.ClickException(str(exc)) from None
-    except Exception as exc:
-        if type(exc).__name__ == "UnsafeCheckpointError":
-            raise click.ClickException(str(exc)) from None
-        raise
 
 
 if __name__ == "__main__":
