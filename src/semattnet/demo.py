@@ -14,10 +14,10 @@ import torch
 from PIL import Image
 
 from ._device import resolve_device
+from .data.synthetic import SyntheticFrame, make_frame
 from .losses import semattnet_loss
 from .outputs import DepthCompletionOutput
 from .registry import build_model
-from .synthetic import SyntheticFrame, make_frame
 from .visualize import colorize_depth, save_panel
 
 __all__ = ["DemoResult", "run_demo"]

@@ -1,0 +1,26 @@
+"""Data: KITTI depth completion loaders, transforms, PNG I/O and synthetic KITTI-like scenes."""
+
+from .io import DataError, read_depth, read_image, read_intrinsics, write_depth, write_image
+from .kitti import FrameFiles, KittiDepthCompletion, find_frames
+from .synthetic import CITYSCAPES_PALETTE, SyntheticFrame, make_frame
+from .synthetic_tree import write_synthetic_kitti
+from .transforms import EvalTransform, Sample, TrainTransform
+
+__all__ = [
+    "CITYSCAPES_PALETTE",
+    "DataError",
+    "EvalTransform",
+    "FrameFiles",
+    "KittiDepthCompletion",
+    "Sample",
+    "SyntheticFrame",
+    "TrainTransform",
+    "find_frames",
+    "make_frame",
+    "read_depth",
+    "read_image",
+    "read_intrinsics",
+    "write_depth",
+    "write_image",
+    "write_synthetic_kitti",
+]

@@ -1,0 +1,78 @@
+"""Validate a KITTI depth completion tree (real or synthetic): what ``semattnet data check`` runs."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from . import layout
+from .io import DataError, read_depth, read_image
+from .kitti import find_frames
+
+__all__ = ["SplitReport", "check_tree"]
+
+
+@dataclass
+class SplitReport:
+    split: str
+    frames: int = 0
+    checked: int = 0
+    problems: list[str] = field(default_factory=list)
+    sparse_valid: list[float] = field(default_factory=list)
+    gt_valid: list[float] = field(default_factory=list)
+
+    def summary(self) -> str:
+        def pct(v: list[float]) -> str:
+            return f"{100 * np.mean(v):5.2f} %" if v else "   -   "
+
+        status = "ok" if not self.problems else f"{len(self.problems)} problem(s)"
+        return (f"{self.split:10s} {self.frames:7d} frames  checked {self.checked:7d}  "
+                f"sparse valid {pct(self.sparse_valid)}  gt valid {pct(self.gt_valid)}  {status}")  # fmt: skip
+
+
+def check_tree(
+    root: str | Path,
+    raw_root: str | Path | None = None,
+    semantic_root: str | Path | None = None,
+    sample: int | None = None,
+    progress: bool = True,
+) -> list[SplitReport]:
+    """Check every split present under ``root``: pairing, decoding, sizes, valid-pixel fractions.
+
+    Args:
+        sample: decode at most this many frames per split (evenly spaced); all by default.
+
+    Returns:
+        One report per split that has any file; a split's ``problems`` name files and faults.
+    """
+    root = Path(root)
+    reports = []
+    for split in layout.SPLITS:
+        frames, missing = find_frames(root, split, raw_root, semantic_root)
+        if not frames and not missing:
+            continue
+        rep = SplitReport(split, frames=len(frames))
+        rep.problems += [f"{name}: missing {', '.join(map(str, paths))}" for name, paths in missing]
+        chosen = frames if sample is None or sample >= len(frames) else [
+            frames[int(i)] for i in np.linspace(0, len(frames) - 1, sample)]  # fmt: skip
+        for f in tqdm(chosen, desc=f"checking {split}", disable=not progress, leave=False):
+            try:
+                sparse = read_depth(f.sparse)
+                shapes = {f.sparse: sparse.shape, f.rgb: read_image(f.rgb).shape[:2],
+                          f.semantic: read_image(f.semantic).shape[:2]}  # fmt: skip
+                rep.sparse_valid.append(float((sparse > 0).mean()))
+                if f.gt is not None:
+                    gt = read_depth(f.gt)
+                    shapes[f.gt] = gt.shape
+                    rep.gt_valid.append(float((gt > 0).mean()))
+                if len(set(shapes.values())) > 1:
+                    rep.problems.append(f"{f.name}: sizes disagree: " + ", ".join(
+                        f"{p} is {s[1]}x{s[0]}" for p, s in shapes.items()))  # fmt: skip
+            except DataError as exc:
+                rep.problems.append(str(exc))
+            rep.checked += 1
+        reports.append(rep)
+    return reports

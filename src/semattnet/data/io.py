@@ -1,0 +1,146 @@
+"""PNG input/output in KITTI's encodings, with errors that name the file and the problem.
+
+* Depth: 16-bit single-channel PNG, ``metres = value / 256``, 0 = no measurement.
+* RGB and semantic maps: 8-bit colour PNG (semantic maps are colour-coded, Cityscapes palette).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, UnidentifiedImageError
+
+__all__ = [
+    "DEPTH_SCALE",
+    "DataError",
+    "encode_depth",
+    "read_depth",
+    "read_image",
+    "read_intrinsics",
+    "write_depth",
+    "write_image",
+]
+
+#: KITTI stores depth * 256 in uint16.
+DEPTH_SCALE = 256.0
+
+
+class DataError(ValueError):
+    """A data file is missing, unreadable or not in the expected encoding."""
+
+
+def _open(path: str | os.PathLike[str]) -> Image.Image:
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: file not found")
+    try:
+        img = Image.open(path)
+        img.load()
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
+        raise DataError(f"{path}: not a readable PNG (truncated or corrupt?): {exc}") from None
+    return img
+
+
+def read_depth(path: str | os.PathLike[str]) -> np.ndarray:
+    """A KITTI depth PNG as (H, W) float32 metres (0 = no measurement).
+
+    Raises:
+        DataError: missing/corrupt file, or not a 16-bit single-channel image.
+    """
+    img = _open(path)
+    if img.mode not in ("I;16", "I;16B", "I;16L", "I"):
+        raise DataError(f"{path}: depth must be a 16-bit single-channel PNG, got mode {img.mode!r}")
+    a = np.asarray(img)
+    if img.mode == "I" and (a.min() < 0 or a.max() > 65535):
+        raise DataError(f"{path}: depth values outside the 16-bit range")
+    return (a.astype(np.float32) / DEPTH_SCALE).astype(np.float32)
+
+
+def read_image(path: str | os.PathLike[str]) -> np.ndarray:
+    """An 8-bit colour PNG as (H, W, 3) uint8 (an alpha channel is dropped).
+
+    Raises:
+        DataError: missing/corrupt file, or not an 8-bit colour image.
+    """
+    img = _open(path)
+    if img.mode == "RGBA":
+        img = img.convert("RGB")
+    if img.mode == "P":
+        img = img.convert("RGB")
+    if img.mode != "RGB":
+        raise DataError(f"{path}: expected an 8-bit colour (RGB) PNG, got mode {img.mode!r}")
+    return np.asarray(img, dtype=np.uint8)
+
+
+def encode_depth(depth: np.ndarray) -> np.ndarray:
+    """Metres -> KITTI uint16 (round(d * 256)); 0 stays 0 (no measurement), values clamp at 65535."""
+    d = np.asarray(depth, dtype=np.float64)
+    if not np.all(np.isfinite(d)):
+        raise DataError("depth to encode contains NaN or infinite values")
+    return np.clip(np.round(d * DEPTH_SCALE), 0, 65535).astype(np.uint16)
+
+
+def _atomic_save(img: Image.Image, path: Path, overwrite: bool, compress_level: int = 6) -> Path:
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; refusing to overwrite")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent)
+    os.close(fd)
+    try:
+        img.save(tmp, format="PNG", compress_level=compress_level)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+def write_depth(
+    path: str | os.PathLike[str], depth: np.ndarray, overwrite: bool = False, compress_level: int = 6
+) -> Path:
+    """Write (H, W) metres as a KITTI 16-bit PNG, atomically; refuses to overwrite by default."""
+    depth = np.asarray(depth)
+    if depth.ndim != 2:
+        raise DataError(f"{path}: depth must be (H, W), got shape {depth.shape}")
+    return _atomic_save(Image.fromarray(encode_depth(depth)), Path(path), overwrite, compress_level)
+
+
+def write_image(
+    path: str | os.PathLike[str], image: np.ndarray, overwrite: bool = False, compress_level: int = 6
+) -> Path:
+    """Write (H, W, 3) uint8 as an RGB PNG, atomically; refuses to overwrite by default."""
+    image = np.asarray(image)
+    if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
+        raise DataError(f"{path}: image must be (H, W, 3) uint8, got {image.shape} {image.dtype}")
+    return _atomic_save(Image.fromarray(image, mode="RGB"), Path(path), overwrite, compress_level)
+
+
+def read_intrinsics(path: str | os.PathLike[str], camera: str | None = None) -> np.ndarray:
+    """A 3x3 camera matrix from a KITTI file.
+
+    ``val_selection_cropped``/``test`` intrinsics files hold 9 numbers; a raw-data
+    ``calib_cam_to_cam.txt`` holds ``P_rect_0X`` rows (pass ``camera="02"``).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: file not found")
+    text = path.read_text()
+    try:
+        if camera is None:
+            values = [float(v) for v in text.split()]
+            if len(values) != 9:
+                raise DataError(f"{path}: expected 9 numbers (a 3x3 matrix), found {len(values)}")
+            return np.array(values, dtype=np.float64).reshape(3, 3)
+        for line in text.splitlines():
+            key, _, rest = line.partition(":")
+            if key.strip() == f"P_rect_{camera}":
+                p = np.array([float(v) for v in rest.split()], dtype=np.float64).reshape(3, 4)
+                return p[:, :3]
+    except ValueError as exc:
+        if isinstance(exc, DataError):
+            raise
+        raise DataError(f"{path}: malformed numbers: {exc}") from None
+    raise DataError(f"{path}: no P_rect_{camera} entry")
