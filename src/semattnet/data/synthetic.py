@@ -108,7 +108,7 @@ def _scene(rng: np.random.Generator) -> list[_Box]:
     return boxes
 
 
-def _cast(origin: np.ndarray, dirs: np.ndarray, boxes: list[_Box], road_half: float | None = None):  # type: ignore[no-untyped-def]
+def _cast(origin: np.ndarray, dirs: np.ndarray, boxes: list[_Box]):  # type: ignore[no-untyped-def]
     """Nearest hit along each ray: distance t (inf on a miss), box index (-1 ground, -2 sky), face axis."""
     n = dirs.shape[0]
     t_best = np.full(n, np.inf)
@@ -119,19 +119,21 @@ def _cast(origin: np.ndarray, dirs: np.ndarray, boxes: list[_Box], road_half: fl
     ground = (dirs[:, 1] > 1e-9) & (t_ground > 0)
     t_best[ground] = t_ground[ground]
     idx[ground] = -1
-    inv = np.where(np.abs(dirs) < 1e-12, 1e-12, dirs)
-    inv = 1.0 / inv
-    for b, box in enumerate(boxes):
-        t1 = (box.lo - origin) * inv
-        t2 = (box.hi - origin) * inv
-        tmin3 = np.minimum(t1, t2)
-        tmin = tmin3.max(axis=1)
-        tmax = np.maximum(t1, t2).min(axis=1)
+    inv = [1.0 / np.where(np.abs(dirs[:, k]) < 1e-12, 1e-12, dirs[:, k]) for k in range(3)]
+    for b, box in enumerate(boxes):  # slab test, one axis at a time (no reductions over a tiny axis)
+        near, far = [], []
+        for k in range(3):
+            t1, t2 = (box.lo[k] - origin[k]) * inv[k], (box.hi[k] - origin[k]) * inv[k]
+            near.append(np.minimum(t1, t2))
+            far.append(np.maximum(t1, t2))
+        tmin = np.maximum(np.maximum(near[0], near[1]), near[2])
+        tmax = np.minimum(np.minimum(far[0], far[1]), far[2])
         hit = (tmax >= tmin) & (tmin > 1e-6) & (tmin < t_best)
         if hit.any():
             t_best[hit] = tmin[hit]
             idx[hit] = b
-            axis[hit] = tmin3[hit].argmax(axis=1)
+            nx, ny, nz = near[0][hit], near[1][hit], near[2][hit]
+            axis[hit] = np.where((nx >= ny) & (nx >= nz), 0, np.where(ny >= nz, 1, 2))
     return t_best, idx, axis
 
 
