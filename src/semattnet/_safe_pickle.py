@@ -63,6 +63,7 @@ _SAFE: dict[tuple[str, str], Any] = {
     ("builtins", "complex"): complex,
     ("builtins", "bytearray"): bytearray,
     ("argparse", "Namespace"): __import__("argparse").Namespace,
+    ("_codecs", "encode"): __import__("codecs").encode,  # how protocol-2 pickles store bytes (NumPy arrays)
     ("torch", "Size"): torch.Size,
     ("torch", "device"): torch.device,
     ("torch._utils", "_rebuild_tensor"): torch._utils._rebuild_tensor,

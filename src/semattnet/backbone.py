@@ -64,6 +64,23 @@ class SemAttNetBackbone(ColorGuidedBranch, SemanticGuidedBranch, DepthGuidedBran
             self._build_semantic_guided(w)
         self._build_depth_guided(w, config)
 
+    def init_depth_heads(self, scale: float = 10.0, shift: float = 15.0) -> None:
+        """Start each branch's depth output at ``ReLU(scale * z + shift)`` metres (z ~ N(0, 1)).
+
+        The heads end in BatchNorm + ReLU, so with PyTorch's default init (scale 1, shift 0)
+        every depth starts near 0.5 m, and Adam moves the BN affine parameters by about lr per
+        step: tens of thousands of steps before outputs reach street depths. The authors did
+        that; for short or small runs a KITTI-scale start trains orders of magnitude faster.
+        Only the depth channel is changed, not the confidence channel.
+        """
+        heads = [self.rgb_decoder_output[1], self.decoder_layer6[1]]
+        if self.config.branches == 3:
+            heads.append(self.segment_decoder_layer6[1])
+        with torch.no_grad():
+            for bn in heads:
+                bn.weight[0] = scale
+                bn.bias[0] = shift
+
     @property
     def feature_channels(self) -> tuple[int, int]:
         """Channels of (feature_s1, feature_s2), the refinement's guidance features."""

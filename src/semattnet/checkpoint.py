@@ -135,7 +135,8 @@ def load_checkpoint(path: str | os.PathLike[str]) -> Checkpoint:
         obj = torch.load(path, map_location="cpu", pickle_module=module, weights_only=False)
     except UnsafeCheckpointError as exc:
         raise UnsafeCheckpointError(f"{path}: {exc}") from None
-    except (RuntimeError, pickle.UnpicklingError, EOFError, OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
+    except (RuntimeError, pickle.UnpicklingError, EOFError, OSError, ValueError, KeyError, TypeError,
+            zipfile.BadZipFile) as exc:  # fmt: skip
         raise CheckpointError(f"{path}: not a readable PyTorch checkpoint (truncated or corrupt?): {exc}") from exc
     return _checkpoint_from_object(obj, path, neutralised)
 

@@ -70,7 +70,9 @@ def run_demo(
     train = _to_tensors([make_frame(h, w, seed=seed * 1000 + i) for i in range(frames)], dev)
     held = make_frame(h, w, seed=seed * 1000 + 999, shadow=True)
     test = _to_tensors([held], dev)
-    model = build_model("semattnet", width=width).to(dev)
+    model = build_model("semattnet", width=width)
+    model.backbone.init_depth_heads()  # street-scale start: learns in minutes, not days
+    model = model.to(dev)
     n_params = sum(p.numel() for p in model.parameters())
     log(f"training SemAttNet (width {width}, {n_params / 1e6:.1f} M parameters) for {steps} steps on {dev} ...")
     opt = torch.optim.Adam(model.parameters(), lr=2e-3, betas=(0.9, 0.99), weight_decay=1e-6)

@@ -10,9 +10,10 @@ All convolutions are bias-free; BatchNorm uses PyTorch defaults.
 from __future__ import annotations
 
 import torch
+import torch.utils.checkpoint
 from torch import nn
 
-__all__ = ["BasicBlock", "convbn", "convbnrelu", "deconvbnrelu"]
+__all__ = ["BasicBlock", "convbn", "convbnrelu", "deconvbnrelu", "set_gradient_checkpointing"]
 
 
 def convbn(in_ch: int, out_ch: int, kernel_size: int = 3, stride: int = 1, padding: int = 1) -> nn.Sequential:
@@ -72,8 +73,28 @@ class BasicBlock(nn.Module):
                 nn.BatchNorm2d(planes),
             )
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
+    #: Recompute this block in the backward pass instead of storing its activations (set by
+    #: :func:`set_gradient_checkpointing`). BN running statistics then see each batch twice.
+    checkpointing: bool = False
+
+    def _forward(self, x: torch.Tensor) -> torch.Tensor:
         identity = x if self.downsample is None else self.downsample(x)
         out = self.relu(self.bn1(self.conv1(x)))
         out = self.bn2(self.conv2(out))
         return self.relu(out + identity)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if self.checkpointing and self.training and torch.is_grad_enabled():
+            return torch.utils.checkpoint.checkpoint(self._forward, x, use_reentrant=False)
+        return self._forward(x)
+
+
+def set_gradient_checkpointing(model: nn.Module, enabled: bool = True) -> int:
+    """Turn activation checkpointing of every :class:`BasicBlock` in ``model`` on or off.
+
+    Returns the number of blocks changed.
+    """
+    blocks = [m for m in model.modules() if isinstance(m, BasicBlock)]
+    for m in blocks:
+        m.checkpointing = enabled
+    return len(blocks)

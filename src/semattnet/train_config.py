@@ -1,0 +1,155 @@
+"""Typed training configuration with the paper's recipe as defaults (spec TRAINING.md).
+
+Three stages: ``backbone`` (stage 1), ``refine-init`` (CSPN++ head only, backbone frozen) and
+``full`` (everything, two learning rates). Fields left as ``None`` take the stage's default.
+Every run saves its resolved config as ``config.json`` beside its checkpoints.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+__all__ = ["STAGES", "TrainConfig"]
+
+Stage = Literal["backbone", "refine-init", "full"]
+STAGES: tuple[str, ...] = ("backbone", "refine-init", "full")
+
+# Authors' values: per-stage epochs, batch, learning rates and plateau patience.
+_STAGE_DEFAULTS: dict[str, dict[str, Any]] = {
+    "backbone": {"epochs": 60, "batch_size": 8, "lr": 0.00128, "head_lr": None, "patience": 4},
+    "refine-init": {"epochs": 5, "batch_size": 8, "lr": 0.00128, "head_lr": None, "patience": 8},
+    "full": {"epochs": 95, "batch_size": 16, "lr": 0.0025298, "head_lr": 0.025298, "patience": 8},
+}
+
+
+@dataclass
+class TrainConfig:
+    """Everything a training run depends on.
+
+    Attributes:
+        stage: ``backbone``, ``refine-init`` or ``full``.
+        data: KITTI depth completion root (or a ``semattnet synth`` tree).
+        raw_root, semantic_root: optional separate roots (see :class:`KittiDepthCompletion`).
+        out: run folder (checkpoints, logs, curves).
+        init: checkpoint of the previous stage (required for refine-init and full).
+        width, refinement_mode, branches, fusion: model options (paper defaults).
+        epochs, batch_size, lr, head_lr, patience: ``None`` = the stage's default; batch_size
+            is per process (the global batch is batch_size x processes).
+        depth_head_init: backbone stage from scratch; ``(scale, shift)`` for the branches' depth
+            outputs (see :meth:`SemAttNetBackbone.init_depth_heads`); ``None`` = PyTorch's init,
+            as the authors. ``(10, 15)`` makes short runs learn far faster.
+        branch_weights: backbone stage; ``w`` per epoch for the branch losses (eq. 14), the
+            last value repeating: the authors' (0.2, 0.2, 0.05, 0.05, 0.0).
+        crop, random_crop_height, flip, jitter: augmentation (paper: 352x1216, 320 rows, flip, 0.1);
+            ``random_crop_height=None`` is 320 rows, or the whole crop when that is smaller.
+        val_split, val_every, val_max_frames: validation each ``val_every`` epochs on at most
+            that many frames (all by default); ``val_split=""`` disables it.
+        amp: ``none``, ``bf16`` or ``fp16`` autocast (propagation always in float32).
+        grad_checkpointing: recompute ResNet blocks in backward to save activation memory.
+        sync_bn: SyncBatchNorm across processes.
+        save_every: also checkpoint every N optimiser steps (0 = at epoch ends only).
+        keep_last: periodic checkpoints kept besides ``last.pt`` and ``best.pt``.
+        max_steps: stop after N steps in total (0 = run all epochs).
+    """
+
+    stage: Stage = "backbone"
+    data: str = ""
+    raw_root: str | None = None
+    semantic_root: str | None = None
+    out: str = "runs/semattnet"
+    init: str | None = None
+    width: float = 1.0
+    branches: int = 3
+    fusion: str = "sammafb"
+    refinement_mode: str = "authors"
+    epochs: int | None = None
+    batch_size: int | None = None
+    lr: float | None = None
+    head_lr: float | None = None
+    patience: int | None = None
+    depth_head_init: tuple[float, float] | None = None
+    weight_decay: float = 1e-6
+    betas: tuple[float, float] = (0.9, 0.99)
+    branch_weights: tuple[float, ...] = (0.2, 0.2, 0.05, 0.05, 0.0)
+    crop: tuple[int, int] = (352, 1216)
+    random_crop_height: int | None = None
+    flip: bool = True
+    jitter: float = 0.1
+    val_split: str = "val_select"
+    val_every: int = 1
+    val_max_frames: int | None = None
+    amp: Literal["none", "bf16", "fp16"] = "none"
+    grad_checkpointing: bool = False
+    sync_bn: bool = False
+    workers: int = 4
+    seed: int = 0
+    save_every: int = 0
+    keep_last: int = 3
+    max_steps: int = 0
+    log_every: int = 10
+    device: str = "auto"
+
+    def __post_init__(self) -> None:
+        if self.stage not in STAGES:
+            raise ValueError(f"stage must be one of {STAGES}, got {self.stage!r}")
+        for key, value in _STAGE_DEFAULTS[self.stage].items():
+            if getattr(self, key) is None:
+                setattr(self, key, value)
+        if self.stage == "full" and self.head_lr is None:
+            self.head_lr = self.lr
+        if self.amp not in ("none", "bf16", "fp16"):
+            raise ValueError(f"amp must be none, bf16 or fp16, got {self.amp!r}")
+        self.betas = tuple(self.betas)  # type: ignore[assignment]
+        if self.depth_head_init is not None:
+            self.depth_head_init = tuple(self.depth_head_init)  # type: ignore[assignment]
+        self.branch_weights = tuple(self.branch_weights)
+        self.crop = tuple(self.crop)  # type: ignore[assignment]
+        if self.random_crop_height is None:
+            self.random_crop_height = min(320, self.crop[0])
+        if self.random_crop_height > self.crop[0]:
+            raise ValueError(f"random_crop_height {self.random_crop_height} exceeds the crop height {self.crop[0]}")
+
+    def branch_weight(self, epoch: int) -> float:
+        if self.stage != "backbone" or not self.branch_weights:
+            return 0.0
+        return self.branch_weights[min(epoch, len(self.branch_weights) - 1)]
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(data) - known
+        if unknown:
+            raise ValueError(f"unknown training option(s) {sorted(unknown)}")
+        return cls(**data)
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+
+    @classmethod
+    def load(cls, path: str | Path) -> TrainConfig:
+        return cls.from_dict(json.loads(Path(path).read_text()))
+
+    def with_overrides(self, pairs: list[str]) -> TrainConfig:
+        """Apply ``key=value`` strings (values parsed as JSON when possible)."""
+        data = self.to_dict()
+        for pair in pairs:
+            key, sep, raw = pair.partition("=")
+            key = key.strip().replace("-", "_")
+            if not sep or key not in data:
+                raise ValueError(f"bad override {pair!r}: expected key=value with key in {sorted(data)}")
+            try:
+                value = json.loads(raw)
+            except json.JSONDecodeError:
+                value = raw
+            data[key] = value
+        keys = {p.partition("=")[0].strip().replace("-", "_") for p in pairs}
+        if "crop" in keys and "random_crop_height" not in keys:
+            data["random_crop_height"] = None  # re-derive it from the new crop
+        return TrainConfig.from_dict(data)
