@@ -179,6 +179,193 @@ def train(stage: str, data_root: str | None, out: str | None, init: str | None, 
     click.echo(f"done: epoch {result['epoch']}, step {result['step']}, best RMSE {result['best_rmse_mm']:.1f} mm")
 
 
+@main.command()
+@click.argument("pred_dir", type=click.Path(exists=True, file_okay=False, path_type=Path))
+@click.argument("gt_dir", type=click.Path(exists=True, file_okay=False, path_type=Path))
+@click.option(
+    "--json",
+    "json_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Also write the metrics as JSON.",
+)
+@click.option("--min-gt", default=0.0, show_default=True, help="Count gt > this (0.1 = the authors' variant).")
+@click.option("--no-fill", is_flag=True, help="Do not fill prediction holes (the devkit fills them).")
+def metrics(pred_dir: Path, gt_dir: Path, json_path: Path | None, min_gt: float, no_fill: bool) -> None:
+    """Score 16-bit PNG depth predictions against ground truth (KITTI devkit metrics)."""
+    from .data.io import DataError
+    from .evaluation import score_folders
+
+    try:
+        m = score_folders(pred_dir, gt_dir, fill_holes=not no_fill, min_gt=min_gt)
+    except DataError as exc:
+        raise click.ClickException(str(exc)) from None
+    click.echo(m.table())
+    if json_path is not None:
+        json_path.write_text(json.dumps(m.compute(), indent=2) + "\n")
+
+
+@main.command()
+@click.option("--checkpoint", required=True, type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--data", "data_root", required=True, type=click.Path(exists=True, file_okay=False, path_type=Path))
+@click.option("--split", type=click.Choice(["val_select", "val"]), default="val_select", show_default=True)
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Folder for metrics.json, per_image.csv, predictions/ and pictures/.",
+)
+@click.option("--save-predictions", is_flag=True, help="Write 16-bit PNG predictions (needs --out).")
+@click.option("--pictures", default=0, show_default=True, help="Branch panels for the first N frames (needs --out).")
+@click.option("--device", default="auto", show_default=True)
+@click.option("--batch-size", default=1, show_default=True)
+@click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
+@click.option("--workers", default=2, show_default=True)
+@click.option("--max-frames", type=int, default=None)
+@click.option("--overwrite", is_flag=True)
+def evaluate(checkpoint: Path, data_root: Path, split: str, out: Path | None, save_predictions: bool, pictures: int,
+             device: str, batch_size: int, amp: str, workers: int, max_frames: int | None,
+             overwrite: bool) -> None:  # fmt: skip
+    """Evaluate a checkpoint on a KITTI (or synthetic) split with the official metrics."""
+    from .checkpoint import CheckpointError
+    from .data.io import DataError
+    from .evaluation import evaluate_checkpoint
+
+    if (save_predictions or pictures) and out is None:
+        raise click.UsageError("--save-predictions and --pictures need --out")
+    try:
+        res = evaluate_checkpoint(checkpoint, data_root, split, out, device, batch_size, amp, workers,
+                                  save_predictions, pictures, max_frames, overwrite)  # fmt: skip
+    except (CheckpointError, DataError, FileExistsError, ValueError) as exc:
+        raise click.ClickException(str(exc)) from None
+    click.echo(res["metrics"].table())
+    if out is not None:
+        click.echo(f"wrote {out / 'metrics.json'} and {out / 'per_image.csv'}")
+
+
+def _frames(rgb: Path, sparse: Path, semantic: Path | None) -> list[tuple[str, Path, Path, Path | None]]:
+    """Pair image files with sparse (and semantic) files by name; KITTI's val_selection_cropped
+    names (``..._image_...`` / ``..._velodyne_raw_...``) pair too."""
+    if rgb.is_file():
+        return [(rgb.stem, rgb, sparse, semantic)]
+    frames, missing = [], []
+    for image in sorted(rgb.glob("*.png")):
+        names = (image.name, image.name.replace("_image_", "_velodyne_raw_", 1))
+        lidar = next((sparse / n for n in names if (sparse / n).is_file()), None)
+        sem = None if semantic is None else semantic / image.name
+        if lidar is None or (sem is not None and not sem.is_file()):
+            missing.append(image.name)
+            continue
+        frames.append((image.stem, image, lidar, sem))
+    if missing:
+        raise click.ClickException(
+            f"{rgb}: no matching sparse/semantic file for {len(missing)} image(s), e.g. {missing[:3]}"
+        )
+    if not frames:
+        raise click.ClickException(f"{rgb}: no PNG images")
+    return frames
+
+
+@main.command()
+@click.option(
+    "--checkpoint",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    default=None,
+    help="Model weights (not needed with --method classical).",
+)
+@click.option("--rgb", required=True, type=click.Path(exists=True, path_type=Path), help="PNG file or folder.")
+@click.option(
+    "--sparse", required=True, type=click.Path(exists=True, path_type=Path), help="16-bit PNG file or folder."
+)
+@click.option("--semantic", type=click.Path(exists=True, path_type=Path), default=None, help="PNG file or folder.")
+@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path))
+@click.option("--npy", is_flag=True, help="Also write float32 .npy depth.")
+@click.option("--panel", is_flag=True, help="Also write the per-branch panel.")
+@click.option("--device", default="auto", show_default=True)
+@click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
+@click.option("--overwrite", is_flag=True, help="Replace existing outputs.")
+def predict(checkpoint: Path | None, rgb: Path, sparse: Path, semantic: Path | None, out: Path, npy: bool, panel: bool,
+            device: str, amp: str, overwrite: bool) -> None:  # fmt: skip
+    """Complete depth for one frame or folders of frames (any size)."""
+    import numpy as np
+
+    from .checkpoint import CheckpointError
+    from .data.io import DataError, read_depth, read_image, write_depth, write_image
+    from .inference import DepthCompleter, clamp_for_png
+    from .visualize import branch_panel, colorize_depth
+
+    if checkpoint is None:
+        raise click.UsageError("--checkpoint is required")
+    frames = _frames(rgb, sparse, semantic)
+    targets = [out / f"{name}{suffix}" for name, *_ in frames for suffix in (".png", "_color.png")]
+    existing = [p for p in targets if p.exists()]
+    if existing and not overwrite:
+        raise click.ClickException(f"{len(existing)} output(s) exist, e.g. {existing[0]}; pass --overwrite")
+    try:
+        completer = DepthCompleter.from_checkpoint(checkpoint, device=device, amp=amp)
+        for name, rgb_p, sparse_p, sem_p in frames:
+            image, lidar = read_image(rgb_p), read_depth(sparse_p)
+            sem = read_image(sem_p) if sem_p is not None else None
+            result = completer(image, lidar, sem)
+            depth = clamp_for_png(result.depth, name)
+            write_depth(out / f"{name}.png", depth, overwrite=True)
+            write_image(out / f"{name}_color.png", colorize_depth(depth), overwrite=True)
+            if npy:
+                np.save(out / f"{name}.npy", result.depth.astype(np.float32))
+            if panel:
+                branch_panel(out / f"{name}_panel.png", image, sem, lidar, result.outputs)
+            click.echo(f"{name}: {result.depth.shape[1]}x{result.depth.shape[0]} -> {out / (name + '.png')}")
+    except (CheckpointError, DataError, ValueError) as exc:
+        raise click.ClickException(str(exc)) from None
+
+
+@main.command()
+@click.option("--checkpoint", required=True, type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--data", "data_root", required=True, type=click.Path(exists=True, file_okay=False, path_type=Path))
+@click.option(
+    "--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Folder; OUT.zip is written too."
+)
+@click.option("--expected-frames", default=1000, show_default=True, help="0 accepts any count (synthetic data).")
+@click.option("--device", default="auto", show_default=True)
+@click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
+@click.option("--overwrite", is_flag=True)
+def submit(checkpoint: Path, data_root: Path, out: Path, expected_frames: int, device: str, amp: str,
+           overwrite: bool) -> None:  # fmt: skip
+    """Predict the KITTI test split and write the zip to upload (checked before zipping)."""
+    from .checkpoint import CheckpointError
+    from .data.io import DataError
+    from .evaluation import write_submission
+
+    try:
+        zip_path = write_submission(checkpoint, data_root, out, device, amp, expected_frames or None, overwrite)
+    except (CheckpointError, DataError, FileExistsError, ValueError) as exc:
+        raise click.ClickException(str(exc)) from None
+    click.echo(f"wrote {out} and {zip_path}")
+
+
+@main.command()
+@click.option("--pred", required=True, type=click.Path(exists=True, path_type=Path), help="16-bit PNG file or folder.")
+@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path))
+@click.option("--gt", type=click.Path(exists=True, path_type=Path), default=None, help="Ground truth: adds error maps.")
+@click.option("--vmax", default=80.0, show_default=True, help="Depth of the colour scale's top, metres.")
+def visualize(pred: Path, out: Path, gt: Path | None, vmax: float) -> None:
+    """Colourise saved depth predictions (and error maps against ground truth)."""
+    from .data.io import DataError, read_depth, write_image
+    from .visualize import colorize_depth, error_map
+
+    files = [pred] if pred.is_file() else sorted(pred.glob("*.png"))
+    try:
+        for f in files:
+            d = read_depth(f)
+            write_image(out / f"{f.stem}_color.png", colorize_depth(d, vmax), overwrite=True)
+            if gt is not None:
+                g = read_depth(gt if gt.is_file() else gt / f.name)
+                write_image(out / f"{f.stem}_error.png", error_map(d, g), overwrite=True)
+    except DataError as exc:
+        raise click.ClickException(str(exc)) from None
+    click.echo(f"wrote {len(files)} picture(s) to {out}")
+
+
 @main.group()
 def data() -> None:
     """Data sets: validation of KITTI / synthetic trees."""

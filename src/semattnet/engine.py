@@ -72,8 +72,13 @@ def evaluate_model(
     on_batch: Callable[[dict[str, Any], Any], None] | None = None,
     fill_holes: bool = True,
     min_gt: float = 0.0,
+    quantize: bool = False,
 ) -> KittiMetrics:
-    """Score ``model`` over ``loader`` (batches from :class:`KittiDepthCompletion`), all ranks."""
+    """Score ``model`` over ``loader`` (batches from :class:`KittiDepthCompletion`), all ranks.
+
+    ``quantize`` scores what a KITTI 16-bit PNG of the prediction holds (clamped, 1/256 m steps),
+    i.e. exactly what ``semattnet metrics`` and the benchmark see.
+    """
     metrics = KittiMetrics(fill_holes=fill_holes, min_gt=min_gt)
     was_training = model.training
     model.eval()
@@ -83,7 +88,10 @@ def evaluate_model(
             with _autocast(device, amp):
                 out = model(**x)
             if "gt" in batch:
-                metrics.update(out.depth.float(), batch["gt"].to(device), names=list(batch["name"]))
+                pred = out.depth.float()
+                if quantize:
+                    pred = torch.round(pred.clamp(1.0 / 256, 65535.0 / 256) * 256) / 256
+                metrics.update(pred, batch["gt"].to(device), names=list(batch["name"]))
             if on_batch is not None:
                 on_batch(batch, out)
     model.train(was_training)

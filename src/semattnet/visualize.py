@@ -8,7 +8,16 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
-__all__ = ["DEPTH_CMAP", "DEPTH_MAX_M", "colorize_depth", "save_panel"]
+__all__ = [
+    "DEPTH_CMAP",
+    "DEPTH_MAX_M",
+    "branch_panel",
+    "colorize_depth",
+    "confidence_image",
+    "error_map",
+    "plot_training_curves",
+    "save_panel",
+]
 
 #: Fixed scale of every depth picture: matplotlib's "turbo" from 0 to 80 m (KITTI's range);
 #: pixels without depth (0) are black.
@@ -78,3 +87,57 @@ def plot_training_curves(csv_path: str | Path, out_path: str | Path) -> Path | N
     fig.savefig(out_path, dpi=100)
     plt.close(fig)
     return out_path
+
+
+def error_map(pred: np.ndarray, gt: np.ndarray, abs_m: float = 3.0, rel: float = 0.05) -> np.ndarray:
+    """KITTI-style error image: error normalised by min(|e| / abs_m, |e| / gt / rel) in 10 log2
+    bins from 1/16 to 16, on ColorBrewer RdYlBu (blue = good, red = bad, KITTI's palette);
+    pixels without ground truth are black. Returns (H, W, 3) uint8."""
+    from matplotlib import colormaps
+
+    gt = np.asarray(gt, dtype=np.float64)
+    err = np.abs(np.asarray(pred, dtype=np.float64) - gt)
+    valid = gt > 0
+    norm = np.where(valid, np.minimum(err / abs_m, err / np.where(valid, gt, 1.0) / rel), 0.0)
+    bins = np.clip(np.floor(np.log2(np.maximum(norm, 1e-12))) + 5, 0, 9).astype(int)  # [0,1/16) -> 0 ... [16,inf) -> 9
+    colours = (colormaps["RdYlBu_r"].resampled(10)(np.arange(10))[:, :3] * 255 + 0.5).astype(np.uint8)
+    out = colours[bins]
+    out[~valid] = 0
+    return out
+
+
+def confidence_image(conf: np.ndarray) -> np.ndarray:
+    """A fusion weight in [0, 1] as (H, W, 3) uint8 on matplotlib's "viridis"."""
+    from matplotlib import colormaps
+
+    return (colormaps["viridis"](np.clip(conf, 0, 1))[..., :3] * 255 + 0.5).astype(np.uint8)
+
+
+def branch_panel(
+    path: str | Path,
+    rgb: np.ndarray,
+    semantic: np.ndarray | None,
+    sparse: np.ndarray,
+    outputs: dict[str, np.ndarray],
+    gt: np.ndarray | None = None,
+) -> Path:
+    """The paper's intermediate-depth figure for one frame: inputs, ground truth, CG / SG / DG,
+    fused and refined depths, the three fusion weights and (with ground truth) the error map."""
+    tiles: list[tuple[str, np.ndarray]] = [("RGB", np.asarray(rgb, dtype=np.uint8))]
+    if semantic is not None:
+        tiles.append(("semantic", np.asarray(semantic, dtype=np.uint8)))
+    tiles.append(("sparse LiDAR", colorize_depth(sparse)))
+    if gt is not None:
+        tiles.append(("ground truth", colorize_depth(gt)))
+    for key, label in (("color_depth", "CG depth"), ("semantic_depth", "SG depth"), ("guided_depth", "DG depth"),
+                       ("fused_depth", "fused depth"), ("refined_depth", "refined depth")):  # fmt: skip
+        if key in outputs:
+            tiles.append((label, colorize_depth(outputs[key])))
+    for key, label in (("color_conf", "CG weight"), ("semantic_conf", "SG weight"), ("guided_conf", "DG weight")):
+        if key in outputs:
+            tiles.append((label, confidence_image(outputs[key])))
+    if gt is not None:
+        final = outputs.get("refined_depth", outputs.get("fused_depth"))
+        if final is not None:
+            tiles.append(("error (KITTI colours)", error_map(final, gt)))
+    return save_panel(tiles, path, columns=1)
