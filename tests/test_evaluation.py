@@ -158,3 +158,15 @@ def test_error_map_colours() -> None:
     assert img[0, 3].tolist() == [0, 0, 0]  # no ground truth
     assert img[0, 0, 2] > img[0, 0, 0]  # perfect: blue
     assert img[0, 2, 0] > img[0, 2, 2]  # 10 m off: red
+
+
+def test_visualize_command(tree: Path, tmp_path: Path) -> None:
+    gt = tree / SEL / "groundtruth_depth"
+    out = run("visualize", "--pred", gt, "--gt", gt, "--out", tmp_path / "vis")
+    assert "wrote 3 picture(s)" in out
+    files = sorted(p.name for p in (tmp_path / "vis").iterdir())
+    assert len(files) == 6 and files[0].endswith("_color.png") and files[1].endswith("_error.png")
+    err = read_image(tmp_path / "vis" / files[1])
+    assert err.shape == (64, 128, 3)
+    valid = read_depth(sorted(gt.glob("*.png"))[0]) > 0
+    assert (err[valid][:, 2] > err[valid][:, 0]).all()  # perfect prediction: every scored pixel is blue
