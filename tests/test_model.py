@@ -171,3 +171,13 @@ def test_eval_is_deterministic_and_batch_independent() -> None:
         both = model(**x).refined_depth
         first = model(**{k: v[:1] for k, v in x.items()}).refined_depth
     assert torch.allclose(both[:1], first, rtol=1e-4, atol=1e-4)
+
+
+def test_empty_sparse_map_is_fine() -> None:
+    """A frame without any LiDAR point (legal in the data) must not produce NaNs anywhere."""
+    model = build_model("semattnet", width=SMALL).eval()
+    x = random_inputs(b=1, h=64, w=64)
+    x["sparse"] = torch.zeros_like(x["sparse"])
+    with torch.inference_mode():
+        out = model(**x)
+    assert all(torch.isfinite(t).all() for t in out.to_dict().values())

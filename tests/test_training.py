@@ -136,6 +136,18 @@ def test_stage_chaining_and_frozen_backbone(tree: Path, tmp_path: Path) -> None:
         Trainer(tiny(tree, tmp_path / "s4", stage="full"))
 
 
+def test_weights_only_export_of_a_training_checkpoint(tree: Path, tmp_path: Path) -> None:
+    from semattnet.checkpoint import load_model, save_safetensors
+
+    train(tiny(tree, tmp_path / "run", max_steps=1, val_split=""), log=lambda m: None)
+    ckpt = load_checkpoint(tmp_path / "run" / "checkpoints" / "last.pt")
+    assert {"optimizer", "scheduler", "rng", "train_config"} <= set(ckpt.extra)
+    out = save_safetensors(ckpt, tmp_path / "release.safetensors")
+    model = load_model(out)
+    assert model.config.width == 0.125 and not model.config.refine
+    assert out.stat().st_size < (tmp_path / "run" / "checkpoints" / "last.pt").stat().st_size / 2
+
+
 def test_corrupt_checkpoint_is_refused_and_previous_kept(tree: Path, tmp_path: Path) -> None:
     train(tiny(tree, tmp_path, max_steps=3, save_every=1, val_split=""), log=lambda m: None)
     last = tmp_path / "checkpoints" / "last.pt"
