@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import pickle
 from pathlib import Path
 
 import click
@@ -18,7 +19,18 @@ def _size(text: str) -> tuple[int, int]:
     return h, w
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _Group(click.Group):
+    """Turns the library's bad-input errors (a missing or corrupt file, a wrong size, an
+    unsafe checkpoint, an existing output) into one-line CLI errors, for every command."""
+
+    def invoke(self, ctx: click.Context):  # type: ignore[no-untyped-def]
+        try:
+            return super().invoke(ctx)
+        except (ValueError, FileExistsError, pickle.UnpicklingError) as exc:
+            raise click.ClickException(str(exc)) from None
+
+
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="semattnet")
 def main() -> None:
     """SemAttNet depth completion: models, checkpoints and demos."""
@@ -62,7 +74,7 @@ def info(checkpoint: Path) -> None:
     """Show what a checkpoint holds (never runs code from it)."""
     from .checkpoint import config_from_state_dict, load_checkpoint
 
-    ckpt = _load_or_exit(checkpoint, load_checkpoint)
+    ckpt = load_checkpoint(checkpoint)
     cfg = ckpt.config or config_from_state_dict(ckpt.state_dict)
     n = sum(v.numel() for k, v in ckpt.state_dict.items() if not k.endswith("num_batches_tracked"))
     click.echo(f"file:        {ckpt.path}  ({ckpt.format})")
@@ -86,7 +98,7 @@ def convert(src: Path, dst: Path, overwrite: bool) -> None:
 
     if dst.exists() and not overwrite:
         raise click.ClickException(f"{dst} exists; pass --overwrite to replace it")
-    ckpt = _load_or_exit(src, load_checkpoint)
+    ckpt = load_checkpoint(src)
     save_safetensors(ckpt, dst)
     click.echo(f"wrote {dst} ({len(ckpt.state_dict)} tensors, {dst.stat().st_size / 2**20:.1f} MiB)")
 
@@ -112,10 +124,7 @@ def synth(out_dir: Path, frames: int, eval_frames: int | None, size: str, seed: 
     """Generate synthetic KITTI-like scenes in the KITTI depth completion layout."""
     from .data.synthetic_tree import write_synthetic_kitti
 
-    try:
-        manifest = write_synthetic_kitti(out_dir, frames, _size(size), seed, eval_frames, workers, overwrite)
-    except FileExistsError as exc:
-        raise click.ClickException(str(exc)) from None
+    manifest = write_synthetic_kitti(out_dir, frames, _size(size), seed, eval_frames, workers, overwrite)
     counts = ", ".join(f"{k} {v}" for k, v in manifest["counts"].items())
     click.echo(f"wrote {out_dir}: {counts} (manifest: {out_dir / 'scenes.json'})")
 
@@ -152,30 +161,25 @@ def train(stage: str, data_root: str | None, out: str | None, init: str | None, 
           amp: str | None, device: str | None, workers: int | None, max_steps: int | None,
           overrides: tuple[str, ...]) -> None:  # fmt: skip
     """Train one stage of the paper's recipe (works under torchrun for DDP)."""
-    from .checkpoint import CheckpointError
-    from .data.io import DataError
     from .engine import train as run_training
     from .train_config import TrainConfig
 
-    try:
-        if resume:
-            if not out:
-                raise click.UsageError("--resume needs --out (the run folder)")
-            cfg = TrainConfig(out=out)
-        else:
-            base = TrainConfig.load(config_file).to_dict() if config_file else {"stage": stage}
-            given = {"stage": stage if not config_file else base["stage"], "data": data_root, "init": init,
-                     "epochs": epochs, "batch_size": batch_size, "lr": lr, "width": width, "amp": amp,
-                     "device": device, "workers": workers, "max_steps": max_steps,
-                     "crop": list(_size(crop)) if crop else None}  # fmt: skip
-            base.update({k: v for k, v in given.items() if v is not None})
-            base["out"] = out or base.get("out") or f"runs/{base['stage']}"
-            if "crop" in base and crop and not config_file:
-                base["random_crop_height"] = None  # re-derive from the new crop
-            cfg = TrainConfig.from_dict(base).with_overrides(list(overrides))
-        result = run_training(cfg, resume=resume, log=click.echo)
-    except (CheckpointError, DataError, ValueError) as exc:
-        raise click.ClickException(str(exc)) from None
+    if resume:
+        if not out:
+            raise click.UsageError("--resume needs --out (the run folder)")
+        cfg = TrainConfig(out=out)
+    else:
+        base = TrainConfig.load(config_file).to_dict() if config_file else {"stage": stage}
+        given = {"stage": stage if not config_file else base["stage"], "data": data_root, "init": init,
+                 "epochs": epochs, "batch_size": batch_size, "lr": lr, "width": width, "amp": amp,
+                 "device": device, "workers": workers, "max_steps": max_steps,
+                 "crop": list(_size(crop)) if crop else None}  # fmt: skip
+        base.update({k: v for k, v in given.items() if v is not None})
+        base["out"] = out or base.get("out") or f"runs/{base['stage']}"
+        if "crop" in base and crop and not config_file:
+            base["random_crop_height"] = None  # re-derive from the new crop
+        cfg = TrainConfig.from_dict(base).with_overrides(list(overrides))
+    result = run_training(cfg, resume=resume, log=click.echo)
     click.echo(f"done: epoch {result['epoch']}, step {result['step']}, best RMSE {result['best_rmse_mm']:.1f} mm")
 
 
@@ -193,13 +197,9 @@ def train(stage: str, data_root: str | None, out: str | None, init: str | None, 
 @click.option("--no-fill", is_flag=True, help="Do not fill prediction holes (the devkit fills them).")
 def metrics(pred_dir: Path, gt_dir: Path, json_path: Path | None, min_gt: float, no_fill: bool) -> None:
     """Score 16-bit PNG depth predictions against ground truth (KITTI devkit metrics)."""
-    from .data.io import DataError
     from .evaluation import score_folders
 
-    try:
-        m = score_folders(pred_dir, gt_dir, fill_holes=not no_fill, min_gt=min_gt)
-    except DataError as exc:
-        raise click.ClickException(str(exc)) from None
+    m = score_folders(pred_dir, gt_dir, fill_holes=not no_fill, min_gt=min_gt)
     click.echo(m.table())
     if json_path is not None:
         json_path.write_text(json.dumps(m.compute(), indent=2) + "\n")
@@ -227,17 +227,12 @@ def evaluate(checkpoint: Path, data_root: Path, split: str, out: Path | None, sa
              device: str, batch_size: int, amp: str, workers: int, max_frames: int | None,
              overwrite: bool) -> None:  # fmt: skip
     """Evaluate a checkpoint on a KITTI (or synthetic) split with the official metrics."""
-    from .checkpoint import CheckpointError
-    from .data.io import DataError
     from .evaluation import evaluate_checkpoint
 
     if (save_predictions or pictures) and out is None:
         raise click.UsageError("--save-predictions and --pictures need --out")
-    try:
-        res = evaluate_checkpoint(checkpoint, data_root, split, out, device, batch_size, amp, workers,
-                                  save_predictions, pictures, max_frames, overwrite)  # fmt: skip
-    except (CheckpointError, DataError, FileExistsError, ValueError) as exc:
-        raise click.ClickException(str(exc)) from None
+    res = evaluate_checkpoint(checkpoint, data_root, split, out, device, batch_size, amp, workers,
+                              save_predictions, pictures, max_frames, overwrite)  # fmt: skip
     click.echo(res["metrics"].table())
     if out is not None:
         click.echo(f"wrote {out / 'metrics.json'} and {out / 'per_image.csv'}")
@@ -289,8 +284,7 @@ def predict(checkpoint: Path | None, rgb: Path, sparse: Path, semantic: Path | N
     """Complete depth for one frame or folders of frames (any size)."""
     import numpy as np
 
-    from .checkpoint import CheckpointError
-    from .data.io import DataError, read_depth, read_image, write_depth, write_image
+    from .data.io import read_depth, read_image, write_depth, write_image
     from .inference import DepthCompleter, clamp_for_png
     from .visualize import branch_panel, colorize_depth
 
@@ -301,22 +295,19 @@ def predict(checkpoint: Path | None, rgb: Path, sparse: Path, semantic: Path | N
     existing = [p for p in targets if p.exists()]
     if existing and not overwrite:
         raise click.ClickException(f"{len(existing)} output(s) exist, e.g. {existing[0]}; pass --overwrite")
-    try:
-        completer = DepthCompleter.from_checkpoint(checkpoint, device=device, amp=amp)
-        for name, rgb_p, sparse_p, sem_p in frames:
-            image, lidar = read_image(rgb_p), read_depth(sparse_p)
-            sem = read_image(sem_p) if sem_p is not None else None
-            result = completer(image, lidar, sem)
-            depth = clamp_for_png(result.depth, name)
-            write_depth(out / f"{name}.png", depth, overwrite=True)
-            write_image(out / f"{name}_color.png", colorize_depth(depth), overwrite=True)
-            if npy:
-                np.save(out / f"{name}.npy", result.depth.astype(np.float32))
-            if panel:
-                branch_panel(out / f"{name}_panel.png", image, sem, lidar, result.outputs)
-            click.echo(f"{name}: {result.depth.shape[1]}x{result.depth.shape[0]} -> {out / (name + '.png')}")
-    except (CheckpointError, DataError, ValueError) as exc:
-        raise click.ClickException(str(exc)) from None
+    completer = DepthCompleter.from_checkpoint(checkpoint, device=device, amp=amp)
+    for name, rgb_p, sparse_p, sem_p in frames:
+        image, lidar = read_image(rgb_p), read_depth(sparse_p)
+        sem = read_image(sem_p) if sem_p is not None else None
+        result = completer(image, lidar, sem)
+        depth = clamp_for_png(result.depth, name)
+        write_depth(out / f"{name}.png", depth, overwrite=True)
+        write_image(out / f"{name}_color.png", colorize_depth(depth), overwrite=True)
+        if npy:
+            np.save(out / f"{name}.npy", result.depth.astype(np.float32))
+        if panel:
+            branch_panel(out / f"{name}_panel.png", image, sem, lidar, result.outputs)
+        click.echo(f"{name}: {result.depth.shape[1]}x{result.depth.shape[0]} -> {out / (name + '.png')}")
 
 
 @main.command()
@@ -332,14 +323,9 @@ def predict(checkpoint: Path | None, rgb: Path, sparse: Path, semantic: Path | N
 def submit(checkpoint: Path, data_root: Path, out: Path, expected_frames: int, device: str, amp: str,
            overwrite: bool) -> None:  # fmt: skip
     """Predict the KITTI test split and write the zip to upload (checked before zipping)."""
-    from .checkpoint import CheckpointError
-    from .data.io import DataError
     from .evaluation import write_submission
 
-    try:
-        zip_path = write_submission(checkpoint, data_root, out, device, amp, expected_frames or None, overwrite)
-    except (CheckpointError, DataError, FileExistsError, ValueError) as exc:
-        raise click.ClickException(str(exc)) from None
+    zip_path = write_submission(checkpoint, data_root, out, device, amp, expected_frames or None, overwrite)
     click.echo(f"wrote {out} and {zip_path}")
 
 
@@ -350,19 +336,16 @@ def submit(checkpoint: Path, data_root: Path, out: Path, expected_frames: int, d
 @click.option("--vmax", default=80.0, show_default=True, help="Depth of the colour scale's top, metres.")
 def visualize(pred: Path, out: Path, gt: Path | None, vmax: float) -> None:
     """Colourise saved depth predictions (and error maps against ground truth)."""
-    from .data.io import DataError, read_depth, write_image
+    from .data.io import read_depth, write_image
     from .visualize import colorize_depth, error_map
 
     files = [pred] if pred.is_file() else sorted(pred.glob("*.png"))
-    try:
-        for f in files:
-            d = read_depth(f)
-            write_image(out / f"{f.stem}_color.png", colorize_depth(d, vmax), overwrite=True)
-            if gt is not None:
-                g = read_depth(gt if gt.is_file() else gt / f.name)
-                write_image(out / f"{f.stem}_error.png", error_map(d, g), overwrite=True)
-    except DataError as exc:
-        raise click.ClickException(str(exc)) from None
+    for f in files:
+        d = read_depth(f)
+        write_image(out / f"{f.stem}_color.png", colorize_depth(d, vmax), overwrite=True)
+        if gt is not None:
+            g = read_depth(gt if gt.is_file() else gt / f.name)
+            write_image(out / f"{f.stem}_error.png", error_map(d, g), overwrite=True)
     click.echo(f"wrote {len(files)} picture(s) to {out}")
 
 
@@ -406,16 +389,6 @@ def data_check(roots: tuple[Path, ...], raw_root: Path | None, semantic_root: Pa
             bad += len(rep.problems)
     if bad:
         raise SystemExit(1)
-
-
-def _load_or_exit(path: Path, loader):  # type: ignore[no-untyped-def]
-    """Run ``loader(path)``; a bad or unsafe checkpoint becomes a one-line CLI error."""
-    from .checkpoint import CheckpointError, UnsafeCheckpointError
-
-    try:
-        return loader(path)
-    except (CheckpointError, UnsafeCheckpointError) as exc:
-        raise click.ClickException(str(exc)) from None
 
 
 if __name__ == "__main__":
