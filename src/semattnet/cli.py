@@ -279,27 +279,40 @@ def _frames(rgb: Path, sparse: Path, semantic: Path | None) -> list[tuple[str, P
 @click.option("--device", default="auto", show_default=True)
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
 @click.option("--overwrite", is_flag=True, help="Replace existing outputs.")
+@click.option(
+    "--method",
+    type=click.Choice(["semattnet", "classical"]),
+    default="semattnet",
+    show_default=True,
+    help="classical: the non-learned IP-Basic-style baseline (no checkpoint).",
+)
 def predict(checkpoint: Path | None, rgb: Path, sparse: Path, semantic: Path | None, out: Path, npy: bool, panel: bool,
-            device: str, amp: str, overwrite: bool) -> None:  # fmt: skip
+            device: str, amp: str, overwrite: bool, method: str) -> None:  # fmt: skip
     """Complete depth for one frame or folders of frames (any size)."""
     import numpy as np
+    import torch
 
+    from .classical import complete_classical
     from .data.io import read_depth, read_image, write_depth, write_image
-    from .inference import DepthCompleter, clamp_for_png
+    from .inference import Completion, DepthCompleter, clamp_for_png
     from .visualize import branch_panel, colorize_depth
 
-    if checkpoint is None:
-        raise click.UsageError("--checkpoint is required")
+    if method == "semattnet" and checkpoint is None:
+        raise click.UsageError("--checkpoint is required (or --method classical)")
     frames = _frames(rgb, sparse, semantic)
     targets = [out / f"{name}{suffix}" for name, *_ in frames for suffix in (".png", "_color.png")]
     existing = [p for p in targets if p.exists()]
     if existing and not overwrite:
         raise click.ClickException(f"{len(existing)} output(s) exist, e.g. {existing[0]}; pass --overwrite")
-    completer = DepthCompleter.from_checkpoint(checkpoint, device=device, amp=amp)
+    completer = DepthCompleter.from_checkpoint(checkpoint, device=device, amp=amp) if method == "semattnet" else None
     for name, rgb_p, sparse_p, sem_p in frames:
         image, lidar = read_image(rgb_p), read_depth(sparse_p)
         sem = read_image(sem_p) if sem_p is not None else None
-        result = completer(image, lidar, sem)
+        if completer is None:
+            dense = complete_classical(torch.from_numpy(lidar)[None, None])[0, 0].numpy()
+            result = Completion(depth=dense, outputs={"refined_depth": dense})
+        else:
+            result = completer(image, lidar, sem)
         depth = clamp_for_png(result.depth, name)
         write_depth(out / f"{name}.png", depth, overwrite=True)
         write_image(out / f"{name}_color.png", colorize_depth(depth), overwrite=True)
