@@ -170,3 +170,11 @@ def test_visualize_command(tree: Path, tmp_path: Path) -> None:
     assert err.shape == (64, 128, 3)
     valid = read_depth(sorted(gt.glob("*.png"))[0]) > 0
     assert (err[valid][:, 2] > err[valid][:, 0]).all()  # perfect prediction: every scored pixel is blue
+
+
+def test_evaluate_full_val_split(tree: Path, weights: Path, tmp_path: Path) -> None:
+    out = run("evaluate", "--checkpoint", weights, "--data", tree, "--split", "val", "--out", tmp_path / "v",
+              "--save-predictions", "--workers", "0", "--batch-size", "2")  # fmt: skip
+    assert "RMSE [mm]" in out and "(3 images)" in out
+    names = sorted(p.name for p in (tmp_path / "v" / "predictions").glob("*.png"))
+    assert names[0] == "2000_01_01_drive_1000_sync_image_02_0000000000.png" and len(names) == 3
