@@ -13,7 +13,6 @@ from __future__ import annotations
 import json
 import os
 import pickle
-import tempfile
 import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -23,6 +22,7 @@ from typing import Any
 import torch
 from torch import nn
 
+from ._atomic import atomic_path
 from ._safe_pickle import InertObject, UnsafeCheckpointError, safe_pickle_module
 from .config import SemAttNetConfig
 
@@ -269,13 +269,6 @@ def save_safetensors(ckpt: Checkpoint | Mapping[str, torch.Tensor], path: str | 
     meta["config"] = json.dumps(cfg.to_dict())
     meta["format"] = "semattnet"
     tensors = {k: v.detach().contiguous() for k, v in sd.items()}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    os.close(fd)
-    try:
-        save_file(tensors, tmp, metadata=meta)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    with atomic_path(path) as tmp:
+        save_file(tensors, str(tmp), metadata=meta)
     return path

@@ -13,7 +13,6 @@ import csv
 import math
 import os
 import random
-import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -27,6 +26,7 @@ from torch.utils.data import DataLoader, Dataset, Subset
 from tqdm import tqdm
 
 from . import distributed as dist_utils
+from ._atomic import atomic_path
 from ._device import resolve_device
 from .checkpoint import CheckpointError, load_checkpoint, load_weights
 from .data.kitti import KittiDepthCompletion
@@ -43,15 +43,8 @@ _TRAIN_FORMAT = "semattnet-train-v1"
 
 
 def _atomic_torch_save(obj: Any, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    os.close(fd)
-    try:
+    with atomic_path(path) as tmp:
         torch.save(obj, tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def _autocast(device: torch.device, amp: str):  # type: ignore[no-untyped-def]

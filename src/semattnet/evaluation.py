@@ -17,6 +17,7 @@ import torch
 from torch.utils.data import DataLoader, Subset
 from tqdm import tqdm
 
+from ._atomic import atomic_path
 from .data.io import DataError, read_depth, write_depth
 from .data.kitti import KittiDepthCompletion
 from .data.transforms import EvalTransform
@@ -179,11 +180,9 @@ def write_submission_files(
     finally:
         if tmp.exists():
             shutil.rmtree(tmp)
-    tmp_zip = zip_path.with_name(f".{zip_path.name}.tmp")
-    with zipfile.ZipFile(tmp_zip, "w", zipfile.ZIP_DEFLATED) as zf:
+    with atomic_path(zip_path) as tmp_zip, zipfile.ZipFile(tmp_zip, "w", zipfile.ZIP_DEFLATED) as zf:
         for p in sorted(out.glob("*.png")):
             zf.write(p, arcname=p.name)
-    os.replace(tmp_zip, zip_path)
     return zip_path
 
 

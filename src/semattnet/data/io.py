@@ -7,11 +7,12 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 from PIL import Image, UnidentifiedImageError
+
+from .._atomic import atomic_path
 
 __all__ = [
     "DEPTH_SCALE",
@@ -86,15 +87,8 @@ def encode_depth(depth: np.ndarray) -> np.ndarray:
 def _atomic_save(img: Image.Image, path: Path, overwrite: bool, compress_level: int = 6) -> Path:
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists; refusing to overwrite")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent)
-    os.close(fd)
-    try:
+    with atomic_path(path, suffix=".png") as tmp:
         img.save(tmp, format="PNG", compress_level=compress_level)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return path
 
 
