@@ -116,7 +116,8 @@ class Trainer:
         state = None
         if resume:
             state = self._read_state(self.ckpt_dir / "last.pt")
-            cfg = TrainConfig.from_dict(state["train_config"])
+            # The run may have moved: keep writing where it is now.
+            cfg = TrainConfig.from_dict(state["train_config"] | {"out": str(cfg.out)})
         self.cfg = cfg
         if not cfg.data:
             raise ValueError("no data root given (--data)")
