@@ -9,8 +9,8 @@ import numpy as np
 from tqdm import tqdm
 
 from . import layout
-from .io import DataError, read_depth, read_image
-from .kitti import find_frames
+from .io import DataError
+from .kitti import find_frames, load_frame
 
 __all__ = ["SplitReport", "check_tree"]
 
@@ -60,17 +60,10 @@ def check_tree(
             frames[int(i)] for i in np.linspace(0, len(frames) - 1, sample)]  # fmt: skip
         for f in tqdm(chosen, desc=f"checking {split}", disable=not progress, leave=False):
             try:
-                sparse = read_depth(f.sparse)
-                shapes = {f.sparse: sparse.shape, f.rgb: read_image(f.rgb).shape[:2],
-                          f.semantic: read_image(f.semantic).shape[:2]}  # fmt: skip
-                rep.sparse_valid.append(float((sparse > 0).mean()))
-                if f.gt is not None:
-                    gt = read_depth(f.gt)
-                    shapes[f.gt] = gt.shape
-                    rep.gt_valid.append(float((gt > 0).mean()))
-                if len(set(shapes.values())) > 1:
-                    rep.problems.append(f"{f.name}: sizes disagree: " + ", ".join(
-                        f"{p} is {s[1]}x{s[0]}" for p, s in shapes.items()))  # fmt: skip
+                loaded = load_frame(f)
+                rep.sparse_valid.append(float((loaded.sparse > 0).mean()))
+                if loaded.gt is not None:
+                    rep.gt_valid.append(float((loaded.gt > 0).mean()))
             except DataError as exc:
                 rep.problems.append(str(exc))
             rep.checked += 1

@@ -20,7 +20,7 @@ from . import layout
 from .io import DataError, read_depth, read_image, read_intrinsics
 from .transforms import Sample, Transform
 
-__all__ = ["FrameFiles", "KittiDepthCompletion", "find_frames"]
+__all__ = ["FrameFiles", "KittiDepthCompletion", "find_frames", "load_frame"]
 
 OnMissing = Literal["error", "skip"]
 
@@ -131,6 +131,29 @@ def find_frames(
     return _find_selection(root, split, sem)
 
 
+def load_frame(f: FrameFiles) -> Sample:
+    """Read one frame's files and check that their sizes agree.
+
+    Raises:
+        DataError: a file is missing, unreadable or badly encoded, or the sizes disagree.
+    """
+    sample = Sample(
+        rgb=read_image(f.rgb),
+        semantic=read_image(f.semantic),
+        sparse=read_depth(f.sparse),
+        gt=read_depth(f.gt) if f.gt is not None else None,
+        K=read_intrinsics(f.intrinsics, f.intrinsics_camera) if f.intrinsics is not None else None,
+    )
+    sizes = {f.rgb: sample.rgb.shape[:2], f.semantic: sample.semantic.shape[:2], f.sparse: sample.sparse.shape}
+    if sample.gt is not None:
+        sizes[f.gt] = sample.gt.shape  # type: ignore[index]
+    if len(set(sizes.values())) > 1:
+        raise DataError(
+            f"{f.name}: image sizes disagree: " + ", ".join(f"{p} is {v[1]}x{v[0]}" for p, v in sizes.items())
+        )
+    return sample
+
+
 def _describe(problems: list[tuple[str, list[Path | str]]], limit: int = 5) -> str:
     shown = "; ".join(f"{name}: missing {', '.join(map(str, paths))}" for name, paths in problems[:limit])
     more = f"; ... and {len(problems) - limit} more" if len(problems) > limit else ""
@@ -192,22 +215,7 @@ class KittiDepthCompletion(Dataset):
 
     def load(self, index: int) -> Sample:
         """The raw sample (numpy arrays, before any transform)."""
-        f = self.frames[index]
-        sample = Sample(
-            rgb=read_image(f.rgb),
-            semantic=read_image(f.semantic),
-            sparse=read_depth(f.sparse),
-            gt=read_depth(f.gt) if f.gt is not None else None,
-            K=read_intrinsics(f.intrinsics, f.intrinsics_camera) if f.intrinsics is not None else None,
-        )
-        sizes = {"rgb": sample.rgb.shape[:2], "semantic": sample.semantic.shape[:2], "sparse": sample.sparse.shape}
-        if sample.gt is not None:
-            sizes["gt"] = sample.gt.shape
-        if len(set(sizes.values())) > 1:
-            files = {"rgb": f.rgb, "semantic": f.semantic, "sparse": f.sparse, "gt": f.gt}
-            raise DataError(f"{f.name}: image sizes disagree: "
-                            + ", ".join(f"{files[k]} is {v[1]}x{v[0]}" for k, v in sizes.items()))  # fmt: skip
-        return sample
+        return load_frame(self.frames[index])
 
     def __getitem__(self, index: int) -> dict[str, Any]:
         sample = self.load(index)
