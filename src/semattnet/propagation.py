@@ -91,19 +91,43 @@ def _kernel_size(affinity: torch.Tensor) -> int:
     return k
 
 
+class _ShiftAffinity(torch.autograd.Function):
+    """``S_t(p) = W_t(p - o_t)``: one window copy per tap; the backward is the adjoint copy.
+
+    (Slice assignments under autograd would clone the whole k*k-channel gradient once per tap.)
+    """
+
+    @staticmethod
+    def forward(ctx, affinity: torch.Tensor, dilation: int) -> torch.Tensor:  # type: ignore[override]
+        ctx.dilation = dilation
+        return _shift_windows(affinity, dilation, adjoint=False)
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, grad: torch.Tensor):  # type: ignore[no-untyped-def, override]
+        return _shift_windows(grad, ctx.dilation, adjoint=True), None
+
+
+def _shift_windows(x: torch.Tensor, dilation: int, adjoint: bool) -> torch.Tensor:
+    k = math.isqrt(x.shape[1])
+    centre = (k * k) // 2
+    out = torch.zeros_like(x, memory_format=torch.contiguous_format)
+    out[:, centre] = x[:, centre]
+    for t, dst, src in _taps(k, dilation, *x.shape[-2:]):
+        if adjoint:
+            dst, src = src, dst
+        out[:, t, dst[0], dst[1]] = x[:, t, src[0], src[1]]
+    return out
+
+
 def shift_affinity(affinity: torch.Tensor, dilation: int = 1) -> torch.Tensor:
     """Move each tap's weight to the pixel it is sent to: ``S_t(p) = W_t(p - o_t)`` (0 outside).
 
     The affinity is fixed during a stage, so this is done once and every step then reads
     ``S_t(p) * h(p - o_t)``. The centre channel is unchanged (its offset is 0).
     """
-    k = _kernel_size(affinity)
-    centre = (k * k) // 2
-    shifted = torch.zeros_like(affinity)
-    shifted[:, centre] = affinity[:, centre]
-    for t, (dy, dx), (sy, sx) in _taps(k, dilation, *affinity.shape[-2:]):
-        shifted[:, t, dy, dx] = affinity[:, t, sy, sx]
-    return shifted
+    _kernel_size(affinity)
+    return _ShiftAffinity.apply(affinity, dilation)
 
 
 class _ShiftedPropagation(torch.autograd.Function):
