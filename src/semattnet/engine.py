@@ -142,8 +142,15 @@ class Trainer:
         self.val_loader = self._val_loader()
         params = self._param_groups()
         self.optimizer = torch.optim.Adam(params, betas=cfg.betas, weight_decay=cfg.weight_decay)
-        self.scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(self.optimizer, mode="min", factor=0.1,
-                                                                    patience=cfg.patience)  # fmt: skip
+        self.scheduler: Any
+        if cfg.lr_schedule == "cosine":  # per step, to zero at the last step
+            total = cfg.max_steps or cfg.epochs * len(self.loader)  # type: ignore[operator]
+            self.scheduler = torch.optim.lr_scheduler.LambdaLR(
+                self.optimizer, lambda step: 0.5 * (1.0 + math.cos(math.pi * min(step, total) / total))
+            )
+        else:  # the paper's: x0.1 when the validation RMSE stops improving
+            self.scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(self.optimizer, mode="min", factor=0.1,
+                                                                        patience=cfg.patience)  # fmt: skip
         self.scaler = torch.amp.GradScaler(self.device.type, enabled=cfg.amp == "fp16")
         if self.distributed:
             if cfg.sync_bn:
@@ -328,6 +335,8 @@ class Trainer:
                 self.scaler.scale(loss).backward()
                 self.scaler.step(self.optimizer)
                 self.scaler.update()
+                if cfg.lr_schedule == "cosine":
+                    self.scheduler.step()
                 self.pos.batch += 1
                 self.pos.step += 1
                 bar.update(1)
@@ -349,7 +358,8 @@ class Trainer:
             if self.val_loader is not None and (self.pos.epoch % cfg.val_every == 0 or self.pos.epoch == cfg.epochs):
                 last_val = self.validate()
                 rmse = last_val["rmse_mm"] if last_val else math.inf
-                self.scheduler.step(rmse)
+                if cfg.lr_schedule == "plateau":
+                    self.scheduler.step(rmse)
                 best = rmse < self.pos.best
                 self.pos.best = min(self.pos.best, rmse)
             self.save(best=best, periodic=True)

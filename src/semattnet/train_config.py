@@ -42,6 +42,8 @@ class TrainConfig:
         depth_head_init: backbone stage from scratch; ``(scale, shift)`` for the branches' depth
             outputs (see :meth:`SemAttNetBackbone.init_depth_heads`); ``None`` = PyTorch's init,
             as the authors. ``(10, 15)`` makes short runs learn far faster.
+        lr_schedule: ``plateau`` (paper: x0.1 after ``patience`` epochs without a better
+            validation RMSE) or ``cosine`` (per step, to zero at ``max_steps`` or the last epoch).
         branch_weights: backbone stage; ``w`` per epoch for the branch losses (eq. 14), the
             last value repeating: the authors' (0.2, 0.2, 0.05, 0.05, 0.0).
         crop, random_crop_height, flip, jitter: augmentation (paper: 352x1216, 320 rows, flip, 0.1);
@@ -71,6 +73,7 @@ class TrainConfig:
     lr: float | None = None
     head_lr: float | None = None
     patience: int | None = None
+    lr_schedule: Literal["plateau", "cosine"] = "plateau"
     depth_head_init: tuple[float, float] | None = None
     weight_decay: float = 1e-6
     betas: tuple[float, float] = (0.9, 0.99)
@@ -103,6 +106,8 @@ class TrainConfig:
             self.head_lr = self.lr
         if self.amp not in ("none", "bf16", "fp16"):
             raise ValueError(f"amp must be none, bf16 or fp16, got {self.amp!r}")
+        if self.lr_schedule not in ("plateau", "cosine"):
+            raise ValueError(f"lr_schedule must be plateau or cosine, got {self.lr_schedule!r}")
         self.betas = tuple(self.betas)  # type: ignore[assignment]
         if self.depth_head_init is not None:
             self.depth_head_init = tuple(self.depth_head_init)  # type: ignore[assignment]
