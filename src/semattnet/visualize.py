@@ -120,6 +120,7 @@ def branch_panel(
     sparse: np.ndarray,
     outputs: dict[str, np.ndarray],
     gt: np.ndarray | None = None,
+    columns: int = 1,
 ) -> Path:
     """The paper's intermediate-depth figure for one frame: inputs, ground truth, CG / SG / DG,
     fused and refined depths, the three fusion weights and (with ground truth) the error map."""
@@ -140,4 +141,4 @@ def branch_panel(
         final = outputs.get("refined_depth", outputs.get("fused_depth"))
         if final is not None:
             tiles.append(("error (KITTI colours)", error_map(final, gt)))
-    return save_panel(tiles, path, columns=1)
+    return save_panel(tiles, path, columns=columns)

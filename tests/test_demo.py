@@ -1,0 +1,100 @@
+"""The demo end to end (shortened) and its HTML report rendered by headless Chromium."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from semattnet.demo import DemoSettings, run_demo
+
+SHORT = DemoSettings(size=(64, 192), train_frames=8, eval_frames=4, steps=(3, 2), batch_size=2)
+
+
+@pytest.fixture(scope="module")
+def demo_run(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
+    out = tmp_path_factory.mktemp("demo")
+    lines: list[str] = []
+    return run_demo(out, SHORT, overwrite=True, log=lines.append), lines
+
+
+def test_short_demo_writes_report(demo_run) -> None:  # type: ignore[no-untyped-def]
+    result, lines = demo_run
+    out = result.out_dir
+    assert lines[-1].startswith("done in") and str(result.report_html.resolve()) in lines[-1]
+    assert set(result.metrics) == {"sparse", "classical", "semattnet", "two_branch"}
+    for method, groups in result.metrics.items():
+        assert set(groups) == {"all", "shadowed", "unshadowed"}, method
+        assert groups["all"]["images"] == 4 and groups["shadowed"]["images"] == 2
+        assert np.isfinite(groups["all"]["rmse_mm"])
+    # The classical completion is far better than the devkit-filled sparse input.
+    assert result.metrics["classical"]["all"]["rmse_mm"] < 0.5 * result.metrics["sparse"]["all"]["rmse_mm"]
+    assert result.steps == {"semattnet": {"backbone": 3, "full": 2}, "two_branch": {"backbone": 3, "full": 2}}
+    saved = json.loads((out / "metrics.json").read_text())
+    assert saved["metrics"]["semattnet"]["all"] == pytest.approx(result.metrics["semattnet"]["all"])
+    md = result.report_md.read_text()
+    assert "| Classical completion |" in md and "RMSE shadowed [mm]" in md
+    images = [line.split("](")[1].rstrip(")") for line in md.splitlines() if line.startswith("![")]
+    assert len(images) == 8  # 2 comparisons, 2 branch panels, 4 training curves
+    for rel in images:
+        assert (out / rel).is_file(), rel
+    for run in ("semattnet", "two_branch"):
+        for stage in ("backbone", "full"):
+            assert (out / "runs" / run / stage / "checkpoints" / "last.pt").is_file()
+
+
+def test_demo_refuses_a_non_empty_folder(tmp_path: Path) -> None:
+    (tmp_path / "keep.txt").write_text("x")
+    with pytest.raises(FileExistsError, match="not empty"):
+        run_demo(tmp_path, SHORT)
+    assert (tmp_path / "keep.txt").read_text() == "x"
+
+
+def _chromium() -> str | None:
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        if shutil.which(name):
+            return shutil.which(name)
+    if os.environ.get("SEMATTNET_REQUIRE_BROWSER"):
+        pytest.fail("no Chromium found: run scripts/setup-browser.sh")
+    pytest.skip("no Chromium (scripts/setup-browser.sh installs it)")
+    return None
+
+
+def _headless(browser: str, *args: str) -> subprocess.CompletedProcess[str]:
+    flags = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--no-first-run",
+             "--disable-background-networking", "--disable-extensions", "--hide-scrollbars"]  # fmt: skip
+    return subprocess.run([browser, *flags, *args], capture_output=True, text=True, timeout=120, check=True)
+
+
+def test_report_renders_in_chromium(demo_run, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    browser = _chromium()
+    assert browser is not None
+    result, _ = demo_run
+    url = result.report_html.resolve().as_uri()
+    dom = _headless(browser, "--virtual-time-budget=5000", "--dump-dom", url).stdout
+    assert 'data-images="8/8"' in dom, dom[:500]  # every <img> decoded (set by the page's load handler)
+    assert '<p class="broken">' not in dom
+    shot = tmp_path / "report.png"
+    _headless(browser, "--window-size=1200,2400", f"--screenshot={shot}", url)
+    pixels = np.asarray(Image.open(shot).convert("RGB")).astype(np.int16)
+    assert pixels.shape[:2] == (2400, 1200)
+    # Not a blank page: the figures put many distinct colours on screen.
+    assert len(np.unique(pixels.reshape(-1, 3)[::7], axis=0)) > 1000
+
+
+def test_broken_image_is_flagged(tmp_path: Path) -> None:
+    browser = _chromium()
+    assert browser is not None
+    from semattnet.report import write_report
+
+    metrics = {"sparse": {"all": {"rmse_mm": 1.0, "mae_mm": 1.0, "irmse_per_km": 1.0, "imae_per_km": 1.0}}}
+    setup = {"held_out": {"frames": 1, "shadowed": 0}, "device": "cpu", "torch_threads": 1, "seconds": 1.0}
+    _, html = write_report(tmp_path, metrics, {}, [("gone", "nope.png")], setup)
+    dom = _headless(browser, "--virtual-time-budget=5000", "--dump-dom", html.as_uri()).stdout
+    assert 'data-images="0/1"' in dom and '<p class="broken">missing image: nope.png</p>' in dom
