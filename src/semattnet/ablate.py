@@ -47,9 +47,9 @@ class AblationSettings:
     train_frames: int = 200
     eval_frames: int = 16
     width: float = 0.125
-    batch_size: int = 4
+    batch_size: int = 2
     lr: float = 2e-3
-    backbone_steps: int = 100
+    backbone_steps: int = 90
     full_steps: int = 40
     seeds: tuple[int, ...] = (0, 1, 2)
     configs: tuple[str, ...] = CONFIGS
