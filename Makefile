@@ -24,7 +24,7 @@ lint: setup
 	$(BIN)/ruff format --check src tests benchmarks
 
 bench: setup
-	$(BIN)/python benchmarks/bench_latency.py
+	$(BIN)/semattnet bench
 
 clean:
 	rm -rf build dist .pytest_cache .ruff_cache semattnet-demo

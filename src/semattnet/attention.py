@@ -38,7 +38,7 @@ class ChannelGate(nn.Module):
         return x * torch.sigmoid(avg + mx)[:, :, None, None]
 
 
-class _SpatialConv(nn.Module):
+class SpatialConv(nn.Module):
     """7x7 conv (2 -> 1, no bias) + BatchNorm with CBAM's momentum 0.01."""
 
     def __init__(self, kernel_size: int = 7) -> None:
@@ -58,7 +58,7 @@ class SpatialGate(nn.Module):
 
     def __init__(self, kernel_size: int = 7) -> None:
         super().__init__()
-        self.spatial = _SpatialConv(kernel_size)
+        self.spatial = SpatialConv(kernel_size)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         pooled = torch.cat((x.amax(dim=1, keepdim=True), x.mean(dim=1, keepdim=True)), dim=1)

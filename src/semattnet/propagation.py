@@ -31,6 +31,7 @@ __all__ = [
     "cspn_affinity",
     "downsample_sparse",
     "propagate",
+    "propagate_pad_and_sum",
     "propagate_shifted",
     "shift_affinity",
 ]
@@ -127,6 +128,8 @@ def shift_affinity(affinity: torch.Tensor, dilation: int = 1) -> torch.Tensor:
     ``S_t(p) * h(p - o_t)``. The centre channel is unchanged (its offset is 0).
     """
     _kernel_size(affinity)
+    if _exporting():
+        return _shift_functional(affinity, dilation)
     return _ShiftAffinity.apply(affinity, dilation)
 
 
@@ -171,10 +174,46 @@ class _ShiftedPropagation(torch.autograd.Function):
         return grad_shifted, grad_h, grad_h0, None
 
 
+def _exporting() -> bool:
+    """Tracing for ONNX / TorchScript or compiling: use plain tensor ops (no in-place, no autograd.Function)."""
+    return torch.onnx.is_in_onnx_export() or torch.jit.is_tracing() or torch.compiler.is_compiling()
+
+
+def _window(x: torch.Tensor, oy: int, ox: int) -> torch.Tensor:
+    """``x(p - o)`` for every p (zero outside the image), by one pad and one slice."""
+    height, width = x.shape[-2:]
+    py, px = abs(oy), abs(ox)
+    padded = F.pad(x, (px, px, py, py))
+    return padded[..., py - oy : py - oy + height, px - ox : px - ox + width]
+
+
+def _shift_functional(affinity: torch.Tensor, dilation: int) -> torch.Tensor:
+    k = _kernel_size(affinity)
+    r = k // 2
+    taps = []
+    for t in range(k * k):
+        oy, ox = (t // k - r) * dilation, (t % k - r) * dilation
+        taps.append(_window(affinity[:, t : t + 1], oy, ox))
+    return torch.cat(taps, dim=1)
+
+
+def _propagate_functional(shifted: torch.Tensor, h: torch.Tensor, h0: torch.Tensor, dilation: int) -> torch.Tensor:
+    k = _kernel_size(shifted)
+    r, c = k // 2, (k * k) // 2
+    out = shifted[:, c : c + 1] * h0
+    for t in range(k * k):
+        if t != c:
+            oy, ox = (t // k - r) * dilation, (t % k - r) * dilation
+            out = out + shifted[:, t : t + 1] * _window(h, oy, ox)
+    return out
+
+
 def propagate_shifted(shifted: torch.Tensor, h: torch.Tensor, h0: torch.Tensor, dilation: int = 1) -> torch.Tensor:
     """One CSPN++ step from a kernel already passed through :func:`shift_affinity`."""
     _kernel_size(shifted)
     h0 = h0.expand_as(h)
+    if _exporting():
+        return _propagate_functional(shifted, h, h0, dilation)
     return _ShiftedPropagation.apply(shifted, h, h0, dilation)
 
 
@@ -206,3 +245,26 @@ def downsample_sparse(sparse: torch.Tensor, factor: int = 2) -> tuple[torch.Tens
     nearest = -F.max_pool2d(-torch.where(valid, sparse, torch.full_like(sparse, math.inf)), factor)
     mask = F.max_pool2d(valid.to(sparse.dtype), factor)
     return torch.where(mask > 0, nearest, torch.zeros_like(nearest)), mask
+
+
+def propagate_pad_and_sum(affinity: torch.Tensor, h: torch.Tensor, h0: torch.Tensor, dilation: int = 1) -> torch.Tensor:
+    """The authors' pattern for one step, kept as the *naive reference* for benchmarks and tests.
+
+    Every weight channel and the current depth are zero-padded into k*k full-size shifted
+    copies, stacked, multiplied, summed and cropped: 2 * k * k padded (H + 2r) x (W + 2r)
+    tensors per step (rebuilt from the update rule of the spec, not their code). Same result
+    as :func:`propagate`.
+    """
+    k = _kernel_size(affinity)
+    r = (k // 2) * dilation
+    centre = (k * k) // 2
+    height, width = affinity.shape[-2:]
+    weights, depths = [], []
+    for t in range(k * k):
+        i, j = divmod(t, k)
+        top, left = r + (i - k // 2) * dilation, r + (j - k // 2) * dilation
+        pads = (left, 2 * r - left, top, 2 * r - top)
+        weights.append(F.pad(affinity[:, t : t + 1], pads))
+        depths.append(F.pad(h0 if t == centre else h, pads))
+    total = (torch.stack(weights) * torch.stack(depths)).sum(dim=0)
+    return total[:, :, r : r + height, r : r + width]

@@ -27,16 +27,31 @@ Parameter names are the authors' (``kernel_conf_layer``, ``mask_layer``,
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Literal
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
+from . import fused_propagation
 from .config import RefinementMode
 from .layers import convbn, convbnrelu
-from .propagation import AffinityHead, downsample_sparse, propagate_shifted, shift_affinity
+from .propagation import AffinityHead, downsample_sparse, propagate_pad_and_sum, propagate_shifted, shift_affinity
 
-__all__ = ["AtrousCSPNRefinement", "run_cspn_stage"]
+__all__ = ["AtrousCSPNRefinement", "PropagationImpl", "run_cspn_stage"]
+
+PropagationImpl = Literal["auto", "pytorch", "naive"]
+
+
+def _can_fuse(*tensors: torch.Tensor) -> bool:
+    """The compiled kernel serves float32 CPU inference (no autograd) when it could be built."""
+    if torch.is_grad_enabled() and any(t.requires_grad for t in tensors):
+        return False
+    if torch.onnx.is_in_onnx_export() or torch.jit.is_tracing() or torch.compiler.is_compiling():
+        return False
+    if any(t.device.type != "cpu" or t.dtype != torch.float32 for t in tensors):
+        return False
+    return fused_propagation.available()
 
 
 def run_cspn_stage(
@@ -47,6 +62,7 @@ def run_cspn_stage(
     sparse: torch.Tensor,
     mask: torch.Tensor,
     iterations: int,
+    impl: PropagationImpl = "auto",
 ) -> torch.Tensor:
     """Propagate once per kernel size with re-injection, then blend by kernel confidence.
 
@@ -56,15 +72,33 @@ def run_cspn_stage(
         kernel_conf: (B, len(affinities), H, W) softmax weights of the kernel sizes.
         sparse, mask: (B, 1, H, W) depth to re-inject and its learned mask in [0, 1].
         iterations: steps per kernel size.
+        impl: ``"auto"`` (the compiled kernel for float32 CPU inference when available, else
+            ``"pytorch"``), ``"pytorch"`` (shift once, in-place multiply-adds, autograd) or
+            ``"naive"`` (the authors' pad-and-sum, one channel at a time: benchmarks only).
     """
     keep = 1.0 - mask
     blended: torch.Tensor | None = None
+    if impl not in ("auto", "pytorch", "naive"):
+        raise ValueError(f"impl must be auto, pytorch or naive, got {impl!r}")
+    fused = impl == "auto" and _can_fuse(start, h0, mask, sparse, *affinities)
     for i, affinity in enumerate(affinities):
-        shifted = shift_affinity(affinity)
-        h = start
-        for _ in range(iterations):
-            h = propagate_shifted(shifted, h, h0)
-            h = mask * sparse + keep * h
+        if fused:  # one compiled pass per step (inference on the CPU)
+            h = fused_propagation.propagate_iterations(affinity, start, h0, mask, sparse, iterations)
+        elif impl == "naive":  # the authors: every polyphase sub-grid on its own, pad-and-sum
+            grids = []
+            for ch in range(start.shape[1]):
+                g = start[:, ch : ch + 1]
+                for _ in range(iterations):
+                    g = propagate_pad_and_sum(affinity, g, h0[:, ch : ch + 1])
+                    g = mask * sparse + keep * g
+                grids.append(g)
+            h = torch.cat(grids, dim=1)
+        else:
+            shifted = shift_affinity(affinity)
+            h = start
+            for _ in range(iterations):
+                h = propagate_shifted(shifted, h, h0)
+                h = mask * sparse + keep * h
         term = kernel_conf[:, i : i + 1] * h
         blended = term if blended is None else blended + term
     assert blended is not None
@@ -80,6 +114,8 @@ class AtrousCSPNRefinement:
     mask_layer_s2: nn.Sequential
     dimhalf_s2: nn.Sequential
     att_12: nn.Sequential
+    #: How to propagate (see :func:`run_cspn_stage`); ``"naive"`` is the authors' pattern.
+    propagation_impl: PropagationImpl = "auto"
 
     def _build_refinement(
         self, channels_s1: int, channels_s2: int, kernel_sizes: Sequence[int], iterations: int, mode: RefinementMode
@@ -115,7 +151,14 @@ class AtrousCSPNRefinement:
             affinities, kernel_conf, mask = self._heads(feature_s2, "_s2")
             grids = F.pixel_unshuffle(depth, 2)  # (B, 4, H/2, W/2): D[a::2, b::2] at channel 2a + b
             refined_grids = run_cspn_stage(
-                grids, grids, affinities, kernel_conf, sparse_s2, mask * valid_s2, self._iterations
+                grids,
+                grids,
+                affinities,
+                kernel_conf,
+                sparse_s2,
+                mask * valid_s2,
+                self._iterations,
+                self.propagation_impl,
             )
             refined_s2 = F.pixel_shuffle(refined_grids, 2)
 
@@ -128,5 +171,7 @@ class AtrousCSPNRefinement:
                 start, h0 = att[:, 0:1] * refined_s2 + att[:, 1:2] * depth, depth
             affinities, kernel_conf, mask = self._heads(feature_s1, "")
             valid = (sparse > 0).to(sparse.dtype)
-            refined = run_cspn_stage(start, h0, affinities, kernel_conf, sparse, mask * valid, self._iterations)
+            refined = run_cspn_stage(
+                start, h0, affinities, kernel_conf, sparse, mask * valid, self._iterations, self.propagation_impl
+            )
         return refined_s2, refined

@@ -1,0 +1,281 @@
+"""``semattnet bench``: latency, throughput and peak memory against the naive reference.
+
+Everything is measured in one process, so the ratios hold on any machine:
+
+* **naive reference**: the model as the authors run it: BatchNorm as separate layers and their
+  pad-and-sum propagation, one polyphase sub-grid at a time (``propagation_impl="naive"``);
+* **ours (float32)**: BatchNorm folded into the convolutions (:func:`fold_batchnorm`) and the
+  fused propagation kernel;
+* **fast**: the same under bfloat16 (CPU) / float16 (CUDA) autocast, propagation in float32.
+
+Timings are medians of ``repeats`` runs after a warm-up, synchronised on CUDA. GMACs are
+counted from the convolutions the model runs (hooks), and achieved GFLOP/s is compared with the
+measured peak of one large 3x3 convolution on the same device.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import statistics
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+
+from .fuse import fold_batchnorm
+from .losses import semattnet_loss
+from .propagation import cspn_affinity
+from .refinement import run_cspn_stage
+from .registry import build_model
+
+__all__ = ["BenchResult", "conv_peak_gflops", "count_macs", "peak_memory", "run_benchmark"]
+
+
+def _sync(device: torch.device) -> None:
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+def timeit(fn: Callable[[], Any], device: torch.device, repeats: int = 3, warmup: int = 1) -> float:
+    """Median seconds of ``fn()`` over ``repeats`` runs after ``warmup`` runs."""
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeats):
+        _sync(device)
+        t0 = time.perf_counter()
+        fn()
+        _sync(device)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+@contextlib.contextmanager
+def peak_memory(device: torch.device) -> Iterator[dict[str, float]]:
+    """Peak memory (MiB) while the block runs: CUDA allocator peak, or the process's peak
+    resident set on Linux (reset through ``/proc/self/clear_refs``); ``nan`` elsewhere."""
+    out: dict[str, float] = {"peak_mib": float("nan")}
+    if device.type == "cuda":
+        torch.cuda.reset_peak_memory_stats(device)
+        yield out
+        out["peak_mib"] = torch.cuda.max_memory_allocated(device) / 2**20
+        return
+    status = Path("/proc/self/status")
+    try:
+        Path("/proc/self/clear_refs").write_text("5")
+        ok = status.is_file()
+    except OSError:
+        ok = False
+    yield out
+    if ok:
+        for line in status.read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                out["peak_mib"] = int(line.split()[1]) / 1024
+
+
+def count_macs(model: nn.Module, inputs: dict[str, torch.Tensor]) -> float:
+    """Multiply-accumulates of every convolution in one forward pass (GMACs)."""
+    total = [0]
+
+    def conv_hook(m: nn.Module, args: tuple[torch.Tensor, ...], out: torch.Tensor) -> None:
+        w = m.weight
+        if isinstance(m, nn.ConvTranspose2d):  # every input pixel meets the whole kernel
+            total[0] += args[0].numel() * w.shape[1] * w.shape[2] * w.shape[3]
+        else:
+            total[0] += out.numel() * w.shape[1] * w.shape[2] * w.shape[3]
+
+    def linear_hook(m: nn.Module, args: tuple[torch.Tensor, ...], out: torch.Tensor) -> None:
+        total[0] += out.numel() * m.weight.shape[1]
+
+    handles = [
+        m.register_forward_hook(conv_hook) for m in model.modules() if isinstance(m, nn.Conv2d | nn.ConvTranspose2d)
+    ]
+    handles += [m.register_forward_hook(linear_hook) for m in model.modules() if isinstance(m, nn.Linear)]
+    try:
+        with torch.inference_mode():
+            model(**inputs)
+    finally:
+        for h in handles:
+            h.remove()
+    return total[0] / 1e9
+
+
+def conv_peak_gflops(device: torch.device, dtype: torch.dtype = torch.float32) -> float:
+    """Best achieved GFLOP/s of 3x3 convolutions of the model's typical shapes (channels x size)."""
+    best = 0.0
+    for ch, h, w in ((64, 176, 608), (256, 44, 152), (512, 22, 76)):
+        conv = nn.Conv2d(ch, ch, 3, padding=1, bias=False).to(device)
+        x = torch.randn(1, ch, h, w, device=device)
+        with torch.inference_mode(), torch.autocast(device.type, dtype=dtype, enabled=dtype != torch.float32):
+            seconds = timeit(lambda: conv(x), device, repeats=3)  # noqa: B023
+        best = max(best, 2 * ch * ch * 9 * h * w / seconds / 1e9)
+    return best
+
+
+@dataclass
+class BenchResult:
+    device: str
+    threads: int
+    size: tuple[int, int]
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    def header(self) -> list[str]:
+        head = f"{'what':52s} {'seconds':>9s} {'frames/s':>9s} {'peak MiB':>9s} {'x naive':>8s} {'max rel diff':>12s}"
+        return [f"device {self.device}, {self.threads} threads, {self.size[0]}x{self.size[1]}, batch 1", head]
+
+    @staticmethod
+    def row(r: dict[str, Any]) -> str:
+        ratio = f"{r['speedup']:8.2f}" if r.get("speedup") else " " * 8
+        diff = f"{r['max_rel_diff']:12.1e}" if r.get("max_rel_diff") is not None else " " * 12
+        return f"{r['what']:52s} {r['seconds']:9.3f} {1 / r['seconds']:9.2f} {r['peak_mib']:9.0f} {ratio} {diff}"
+
+    def table(self) -> str:
+        return "\n".join(self.header() + [self.row(r) for r in self.rows] + self.notes)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _frame(size: tuple[int, int], device: torch.device) -> dict[str, torch.Tensor]:
+    h, w = size
+    g = torch.Generator().manual_seed(0)
+    x = {"rgb": torch.rand(1, 3, h, w, generator=g) * 255, "semantic": torch.rand(1, 3, h, w, generator=g) * 255,
+         "sparse": torch.rand(1, 1, h, w, generator=g) * 80 * (torch.rand(1, 1, h, w, generator=g) < 0.05)}  # fmt: skip
+    return {k: v.to(device) for k, v in x.items()}
+
+
+def _rel(a: torch.Tensor, b: torch.Tensor) -> float:
+    return float((a.float() - b.float()).abs().max() / b.float().abs().max())
+
+
+def run_benchmark(
+    size: tuple[int, int] = (352, 1216),
+    device: str | torch.device = "cpu",
+    repeats: int = 3,
+    width: float = 1.0,
+    parts: tuple[str, ...] = ("propagation", "backbone", "full", "fast", "train"),
+    train_size: tuple[int, int] = (320, 1216),
+    model: nn.Module | None = None,
+    log: Callable[[str], None] = print,
+) -> BenchResult:
+    """Measure the parts asked for; ``model`` (a full SemAttNet) replaces random weights."""
+    if model is not None and not hasattr(model, "backbone"):
+        raise ValueError("bench needs a full SemAttNet (with refinement), not a backbone checkpoint")
+    dev = torch.device(device)
+    res = BenchResult(str(dev), torch.get_num_threads(), size)
+    fast_dtype = torch.bfloat16 if dev.type == "cpu" else torch.float16
+
+    def add(what: str, seconds: float, peak: float, speedup: float | None = None, diff: float | None = None) -> None:
+        res.rows.append({"what": what, "seconds": seconds, "peak_mib": peak, "speedup": speedup, "max_rel_diff": diff})
+        log(res.row(res.rows[-1]))
+
+    log("\n".join(res.header()))
+    if "propagation" in parts:
+        # Both stages of the refinement at full size, as the model runs them (heads random).
+        h, w = size
+        g = torch.Generator().manual_seed(0)
+
+        def heads(hh: int, ww: int) -> tuple[list[torch.Tensor], torch.Tensor, torch.Tensor]:
+            affs = [cspn_affinity(torch.randn(1, k * k - 1, hh, ww, generator=g)).to(dev) for k in (3, 5, 7)]
+            return (
+                affs,
+                torch.softmax(torch.randn(1, 3, hh, ww, generator=g), 1).to(dev),
+                torch.rand(1, 1, hh, ww, generator=g).to(dev),
+            )
+
+        a2, c2, m2 = heads(h // 2, w // 2)
+        a1, c1, m1 = heads(h, w)
+        grids = (torch.rand(1, 4, h // 2, w // 2, generator=g) * 80).to(dev)
+        d = (torch.rand(1, 1, h, w, generator=g) * 80).to(dev)
+        s2, s1 = grids[:, :1] * (m2 > 0.9), d * (m1 > 0.95)
+
+        def stages(impl: str) -> torch.Tensor:
+            r2 = run_cspn_stage(grids, grids, a2, c2, s2, m2, 6, impl)  # type: ignore[arg-type]
+            return run_cspn_stage(d, d, a1, c1, s1, m1, 6, impl) + r2.mean()  # type: ignore[arg-type]
+
+        with torch.inference_mode():
+            ref, ours = stages("naive"), stages("auto")
+            with peak_memory(dev) as pm:
+                t_naive = timeit(lambda: stages("naive"), dev, repeats)
+            add("propagation, naive (authors' pad-and-sum)", t_naive, pm["peak_mib"])
+            with peak_memory(dev) as pm:
+                t_ours = timeit(lambda: stages("auto"), dev, repeats)
+            add("propagation, ours", t_ours, pm["peak_mib"], t_naive / t_ours, _rel(ours, ref))
+
+    x = _frame(size, dev)
+    need_full = any(p in parts for p in ("full", "fast"))
+    if "backbone" in parts or need_full:
+        net = model if model is not None else build_model("semattnet", width=width)
+        net = net.to(dev).eval()
+        gmacs = count_macs(net, x)
+        peak = conv_peak_gflops(dev)
+        res.notes.append(f"{gmacs:.0f} GMACs per frame (convolutions); measured conv peak {peak:.0f} GFLOP/s (float32)")
+        fast_net = fold_batchnorm(net)
+        with torch.inference_mode():
+            if "backbone" in parts:
+                with peak_memory(dev) as pm:
+                    t_bb_naive = timeit(lambda: net.backbone(**x), dev, repeats)
+                add("backbone, naive (BN layers)", t_bb_naive, pm["peak_mib"])
+                with peak_memory(dev) as pm:
+                    t_bb = timeit(lambda: fast_net.backbone(**x), dev, repeats)
+                diff = _rel(fast_net.backbone(**x).fused_depth, net.backbone(**x).fused_depth)
+                add("backbone, ours (BN folded)", t_bb, pm["peak_mib"], t_bb_naive / t_bb, diff)
+            if need_full:
+                net.propagation_impl = "naive"
+                ref = net(**x).refined_depth
+                with peak_memory(dev) as pm:
+                    t_naive = timeit(lambda: net(**x), dev, repeats)
+                net.propagation_impl = "auto"
+                add("full model, naive reference", t_naive, pm["peak_mib"])
+                if "full" in parts:
+                    with peak_memory(dev) as pm:
+                        t_full = timeit(lambda: fast_net(**x), dev, repeats)
+                    add("full model, ours (float32)", t_full, pm["peak_mib"], t_naive / t_full,
+                        _rel(fast_net(**x).refined_depth, ref))  # fmt: skip
+                    achieved = 2 * gmacs / t_full
+                    res.notes.append(f"ours (float32): {achieved:.0f} GFLOP/s over the whole forward "
+                                     f"({100 * achieved / peak:.0f} % of the measured conv peak)")  # fmt: skip
+                if "fast" in parts:
+
+                    def fast() -> Any:
+                        with torch.autocast(dev.type, dtype=fast_dtype):
+                            return fast_net(**x)
+
+                    with peak_memory(dev) as pm:
+                        t_fast = timeit(fast, dev, repeats)
+                    add(f"full model, fast ({str(fast_dtype).removeprefix('torch.')} autocast)", t_fast,
+                        pm["peak_mib"], t_naive / t_fast, _rel(fast().refined_depth, ref))  # fmt: skip
+    if "train" in parts:
+        th, tw = train_size
+        xt = _frame(train_size, dev)
+        gt = torch.rand(1, 1, th, tw, device=dev) * 80
+        from .layers import set_gradient_checkpointing
+
+        base: float | None = None
+        for label, impl, checkpointing in (("naive reference", "naive", False), ("ours", "pytorch", False),
+                                           ("ours, activation checkpointing", "pytorch", True)):  # fmt: skip
+            tnet = (model if model is not None else build_model("semattnet", width=width)).to(dev).train()
+            tnet.propagation_impl = impl
+            set_gradient_checkpointing(tnet, checkpointing)
+
+            def step() -> None:
+                loss = semattnet_loss(tnet(**xt), gt, 0.0)  # noqa: B023 (called inside the loop)
+                loss.backward()
+                tnet.zero_grad(set_to_none=True)  # noqa: B023
+
+            with peak_memory(dev) as pm:
+                t_step = timeit(step, dev, max(1, repeats - 1))
+            base = base or pm["peak_mib"]
+            add(f"training step {th}x{tw}, {label}", t_step, pm["peak_mib"])
+            res.notes.append(f"training peak memory, {label}: {pm['peak_mib'] / base:.2f}x the naive reference's")
+            tnet.propagation_impl = "auto"
+            set_gradient_checkpointing(tnet, False)
+            del tnet
+    for note in res.notes:
+        log(note)
+    return res
