@@ -42,6 +42,15 @@ def test_fused_kernel_matches_pytorch_steps(k: int, dilation: int, channels: int
 
 
 @pytest.mark.parametrize(("k", "dilation"), [(3, 1), (5, 2), (7, 1)])
+def test_naive_reference_matches(k: int, dilation: int) -> None:
+    from semattnet.propagation import propagate, propagate_pad_and_sum
+
+    aff, start, h0, _, _ = _inputs(k, 2)
+    assert torch.allclose(propagate_pad_and_sum(aff, start, h0, dilation), propagate(aff, start, h0, dilation),
+                          rtol=1e-5, atol=1e-4)  # fmt: skip
+
+
+@pytest.mark.parametrize(("k", "dilation"), [(3, 1), (5, 2), (7, 1)])
 def test_export_friendly_path_matches(k: int, dilation: int) -> None:
     aff, start, h0, _, _ = _inputs(k, 3)
     a = propagate_shifted(shift_affinity(aff, dilation), start, h0, dilation)
@@ -113,6 +122,7 @@ def test_onnx_export_parity(tmp_path) -> None:  # type: ignore[no-untyped-def]
         assert rel <= 1e-4, (name, rel)
 
 
+@pytest.mark.slow
 def test_torchscript_export_runs(tmp_path) -> None:  # type: ignore[no-untyped-def]
     from semattnet.export import export_torchscript, output_names
 
@@ -122,13 +132,14 @@ def test_torchscript_export_runs(tmp_path) -> None:  # type: ignore[no-untyped-d
     x = _frame()
     outs = loaded(x["rgb"], x["semantic"], x["sparse"])
     names = output_names(model)
-    assert names[0] == "color_conf" or "refined_depth" in names
+    assert "refined_depth" in names and "fused_depth" in names
     with torch.inference_mode():
         ref = model(**x).to_dict()
     for name, got in zip(names, outs, strict=True):
         assert torch.allclose(got, ref[name], rtol=1e-4, atol=1e-4 * float(ref[name].abs().max())), name
 
 
+@pytest.mark.slow
 def test_bench_smoke() -> None:
     """Every part of `semattnet bench` runs and reports ratios and matching outputs (tiny model)."""
     from semattnet.benchmark import run_benchmark
@@ -136,9 +147,13 @@ def test_bench_smoke() -> None:
     lines: list[str] = []
     res = run_benchmark((64, 96), "cpu", repeats=1, width=0.125, train_size=(64, 96), log=lines.append)
     whats = [r["what"] for r in res.rows]
-    assert any(w.startswith("propagation, ours") for w in whats) and any(
-        w.startswith("full model, fast") for w in whats
-    )
+    assert any(w.startswith("propagation, ours") for w in whats)
+    from semattnet.benchmark import fast_mode_dtype
+
+    if fast_mode_dtype(torch.device("cpu")) is not None:
+        assert any(w.startswith("full model, fast") for w in whats)
+    else:  # no native bf16 here: skipped with a note, never run through the slow emulation
+        assert any("fast mode skipped" in n for n in res.notes)
     assert len([w for w in whats if w.startswith("training step")]) == 3
     for r in res.rows:
         assert r["seconds"] > 0

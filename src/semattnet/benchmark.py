@@ -32,7 +32,7 @@ from .propagation import cspn_affinity
 from .refinement import run_cspn_stage
 from .registry import build_model
 
-__all__ = ["BenchResult", "conv_peak_gflops", "count_macs", "peak_memory", "run_benchmark"]
+__all__ = ["BenchResult", "conv_peak_gflops", "count_macs", "fast_mode_dtype", "peak_memory", "run_benchmark"]
 
 
 def _sync(device: torch.device) -> None:
@@ -77,6 +77,16 @@ def peak_memory(device: torch.device) -> Iterator[dict[str, float]]:
                 out["peak_mib"] = int(line.split()[1]) / 1024
 
 
+def fast_mode_dtype(device: torch.device) -> torch.dtype | None:
+    """The autocast type of the fast mode: float16 on CUDA, bfloat16 on CPUs with native
+    bfloat16 convolutions (AVX-512 BF16 / AMX), ``None`` where it would be slower than float32."""
+    if device.type == "cuda":
+        return torch.float16
+    if device.type == "cpu" and torch.ops.mkldnn._is_mkldnn_bf16_supported():
+        return torch.bfloat16
+    return None
+
+
 def count_macs(model: nn.Module, inputs: dict[str, torch.Tensor]) -> float:
     """Multiply-accumulates of every convolution in one forward pass (GMACs)."""
     total = [0]
@@ -104,10 +114,14 @@ def count_macs(model: nn.Module, inputs: dict[str, torch.Tensor]) -> float:
     return total[0] / 1e9
 
 
-def conv_peak_gflops(device: torch.device, dtype: torch.dtype = torch.float32) -> float:
-    """Best achieved GFLOP/s of 3x3 convolutions of the model's typical shapes (channels x size)."""
+def conv_peak_gflops(
+    device: torch.device, size: tuple[int, int] = (352, 1216), dtype: torch.dtype = torch.float32
+) -> float:
+    """Best achieved GFLOP/s of 3x3 convolutions of the model's typical shapes at ``size``
+    (64 channels at 1/2, 256 at 1/8, 512 at 1/16 of the frame)."""
     best = 0.0
-    for ch, h, w in ((64, 176, 608), (256, 44, 152), (512, 22, 76)):
+    for ch, f in ((64, 2), (256, 8), (512, 16)):
+        h, w = max(1, size[0] // f), max(1, size[1] // f)
         conv = nn.Conv2d(ch, ch, 3, padding=1, bias=False).to(device)
         x = torch.randn(1, ch, h, w, device=device)
         with torch.inference_mode(), torch.autocast(device.type, dtype=dtype, enabled=dtype != torch.float32):
@@ -168,7 +182,13 @@ def run_benchmark(
         raise ValueError("bench needs a full SemAttNet (with refinement), not a backbone checkpoint")
     dev = torch.device(device)
     res = BenchResult(str(dev), torch.get_num_threads(), size)
-    fast_dtype = torch.bfloat16 if dev.type == "cpu" else torch.float16
+    fast_dtype = fast_mode_dtype(dev)
+    if "fast" in parts and fast_dtype is None:
+        parts = tuple(p for p in parts if p != "fast")
+        res.notes.append(
+            f"fast mode skipped: this CPU ({torch.backends.cpu.get_cpu_capability()}) has no native bfloat16 "
+            "convolutions, where oneDNN's emulation is far slower than float32"
+        )
 
     def add(what: str, seconds: float, peak: float, speedup: float | None = None, diff: float | None = None) -> None:
         res.rows.append({"what": what, "seconds": seconds, "peak_mib": peak, "speedup": speedup, "max_rel_diff": diff})
@@ -213,7 +233,7 @@ def run_benchmark(
         net = model if model is not None else build_model("semattnet", width=width)
         net = net.to(dev).eval()
         gmacs = count_macs(net, x)
-        peak = conv_peak_gflops(dev)
+        peak = conv_peak_gflops(dev, size)
         res.notes.append(f"{gmacs:.0f} GMACs per frame (convolutions); measured conv peak {peak:.0f} GFLOP/s (float32)")
         fast_net = fold_batchnorm(net)
         with torch.inference_mode():
