@@ -10,20 +10,42 @@ from pathlib import Path
 
 import torch
 from click.testing import CliRunner
-from PIL import Image
 
 import semattnet
 from semattnet.cli import main
 
 
-def test_demo_smoke(tmp_path: Path) -> None:
-    result = CliRunner().invoke(main, ["demo", "--out", str(tmp_path), "--size", "64x128", "--steps", "3"])
+def test_demo_cli(tmp_path: Path) -> None:
+    args = ["demo", "--out", str(tmp_path), "--size", "64x128", "--frames", "6", "--eval-frames", "2",
+            "--steps", "2,1", "--device", "cpu"]  # fmt: skip
+    result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
-    metrics = json.loads((tmp_path / "metrics.json").read_text())
-    assert set(metrics["rmse_mm"]) >= {"fused_depth", "refined_depth"}
-    depth = Image.open(tmp_path / "depth.png")
-    assert depth.size == (128, 64) and depth.mode.startswith("I;16")
-    assert Image.open(tmp_path / "panel.png").size[0] == 128
+    assert "Report: " in result.output and (tmp_path / "report.html").is_file()
+    metrics = json.loads((tmp_path / "metrics.json").read_text())["metrics"]
+    assert set(metrics) == {"sparse", "classical", "two_branch", "semattnet"}
+    again = CliRunner().invoke(main, args)  # never overwrites a previous report silently
+    assert again.exit_code != 0 and "--overwrite" in again.output
+    bad = CliRunner().invoke(main, [*args[:-4], "--steps", "x", "--overwrite"])
+    assert bad.exit_code != 0 and "BACKBONE,FULL" in bad.output
+
+
+def test_ablate_cli_resumes(tmp_path: Path) -> None:
+    base = ["ablate", "--out", str(tmp_path), "--size", "64x96", "--frames", "4", "--eval-frames", "2",
+            "--seeds", "0", "--backbone-steps", "2", "--full-steps", "1", "--device", "cpu"]  # fmt: skip
+    first = CliRunner().invoke(main, [*base, "--configs", "table2_a"])
+    assert first.exit_code == 0, first.output
+    done = tmp_path / "results" / "table2_a_seed0.json"
+    stamp = done.stat().st_mtime_ns
+    second = CliRunner().invoke(main, [*base, "--configs", "table2_a,table2_c"])
+    assert second.exit_code == 0, second.output
+    assert done.stat().st_mtime_ns == stamp  # finished runs are not redone
+    summary = json.loads((tmp_path / "ablation.json").read_text())["configs"]
+    assert set(summary) == {"table2_a", "table2_c"}
+    for row in summary.values():
+        assert {"all", "shadowed", "unshadowed", "per_seed"} <= set(row) and row["all"]["mean"] > 0
+    assert "| table2_c |" in (tmp_path / "ablation.md").read_text()
+    typo = CliRunner().invoke(main, [*base, "--configs", "table2_z"])
+    assert typo.exit_code != 0 and "unknown configuration 'table2_z'" in typo.output
 
 
 def test_console_script_is_installed() -> None:
