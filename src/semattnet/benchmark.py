@@ -32,7 +32,16 @@ from .propagation import cspn_affinity
 from .refinement import run_cspn_stage
 from .registry import build_model
 
-__all__ = ["BenchResult", "conv_peak_gflops", "count_macs", "fast_mode_dtype", "peak_memory", "run_benchmark"]
+__all__ = [
+    "BenchResult",
+    "conv_peak_gflops",
+    "count_macs",
+    "fast_mode_dtype",
+    "interleaved",
+    "peak_memory",
+    "run_benchmark",
+    "timeit",
+]
 
 
 def _sync(device: torch.device) -> None:
@@ -52,6 +61,20 @@ def timeit(fn: Callable[[], Any], device: torch.device, repeats: int = 3, warmup
         _sync(device)
         times.append(time.perf_counter() - t0)
     return statistics.median(times)
+
+
+def interleaved(fns: dict[str, Callable[[], Any]], device: torch.device, repeats: int = 3) -> dict[str, float]:
+    """Median seconds of each function, timed in turns (``a b c a b c ...``) so that slow drifts
+    of the machine's speed affect all of them alike. Run each once before, as a warm-up."""
+    times: dict[str, list[float]] = {k: [] for k in fns}
+    for _ in range(repeats):
+        for name, fn in fns.items():
+            _sync(device)
+            t0 = time.perf_counter()
+            fn()
+            _sync(device)
+            times[name].append(time.perf_counter() - t0)
+    return {k: statistics.median(v) for k, v in times.items()}
 
 
 @contextlib.contextmanager
@@ -219,13 +242,13 @@ def run_benchmark(
             return run_cspn_stage(d, d, a1, c1, s1, m1, 6, impl) + r2.mean()  # type: ignore[arg-type]
 
         with torch.inference_mode():
-            ref, ours = stages("naive"), stages("auto")
-            with peak_memory(dev) as pm:
-                t_naive = timeit(lambda: stages("naive"), dev, repeats)
-            add("propagation, naive (authors' pad-and-sum)", t_naive, pm["peak_mib"])
-            with peak_memory(dev) as pm:
-                t_ours = timeit(lambda: stages("auto"), dev, repeats)
-            add("propagation, ours", t_ours, pm["peak_mib"], t_naive / t_ours, _rel(ours, ref))
+            with peak_memory(dev) as pm_naive:
+                ref = stages("naive")
+            with peak_memory(dev) as pm_ours:
+                ours = stages("auto")
+            t = interleaved({"naive": lambda: stages("naive"), "ours": lambda: stages("auto")}, dev, repeats)
+        add("propagation, naive (authors' pad-and-sum)", t["naive"], pm_naive["peak_mib"])
+        add("propagation, ours", t["ours"], pm_ours["peak_mib"], t["naive"] / t["ours"], _rel(ours, ref))
 
     x = _frame(size, dev)
     need_full = any(p in parts for p in ("full", "fast"))
@@ -236,40 +259,46 @@ def run_benchmark(
         peak = conv_peak_gflops(dev, size)
         res.notes.append(f"{gmacs:.0f} GMACs per frame (convolutions); measured conv peak {peak:.0f} GFLOP/s (float32)")
         fast_net = fold_batchnorm(net)
-        with torch.inference_mode():
-            if "backbone" in parts:
-                with peak_memory(dev) as pm:
-                    t_bb_naive = timeit(lambda: net.backbone(**x), dev, repeats)
-                add("backbone, naive (BN layers)", t_bb_naive, pm["peak_mib"])
-                with peak_memory(dev) as pm:
-                    t_bb = timeit(lambda: fast_net.backbone(**x), dev, repeats)
-                diff = _rel(fast_net.backbone(**x).fused_depth, net.backbone(**x).fused_depth)
-                add("backbone, ours (BN folded)", t_bb, pm["peak_mib"], t_bb_naive / t_bb, diff)
-            if need_full:
-                net.propagation_impl = "naive"
-                ref = net(**x).refined_depth
-                with peak_memory(dev) as pm:
-                    t_naive = timeit(lambda: net(**x), dev, repeats)
+
+        def naive_full() -> Any:
+            net.propagation_impl = "naive"
+            try:
+                return net(**x)
+            finally:
                 net.propagation_impl = "auto"
-                add("full model, naive reference", t_naive, pm["peak_mib"])
-                if "full" in parts:
-                    with peak_memory(dev) as pm:
-                        t_full = timeit(lambda: fast_net(**x), dev, repeats)
-                    add("full model, ours (float32)", t_full, pm["peak_mib"], t_naive / t_full,
-                        _rel(fast_net(**x).refined_depth, ref))  # fmt: skip
-                    achieved = 2 * gmacs / t_full
-                    res.notes.append(f"ours (float32): {achieved:.0f} GFLOP/s over the whole forward "
-                                     f"({100 * achieved / peak:.0f} % of the measured conv peak)")  # fmt: skip
-                if "fast" in parts:
 
-                    def fast() -> Any:
-                        with torch.autocast(dev.type, dtype=fast_dtype):
-                            return fast_net(**x)
+        def fast_full() -> Any:
+            with torch.autocast(dev.type, dtype=fast_dtype):  # type: ignore[arg-type]
+                return fast_net(**x)
 
-                    with peak_memory(dev) as pm:
-                        t_fast = timeit(fast, dev, repeats)
-                    add(f"full model, fast ({str(fast_dtype).removeprefix('torch.')} autocast)", t_fast,
-                        pm["peak_mib"], t_naive / t_fast, _rel(fast().refined_depth, ref))  # fmt: skip
+        candidates: dict[str, Callable[[], Any]] = {}
+        if "backbone" in parts:
+            candidates["backbone, naive (BN layers)"] = lambda: net.backbone(**x)
+            candidates["backbone, ours (BN folded)"] = lambda: fast_net.backbone(**x)
+        if need_full:
+            candidates["full model, naive reference"] = naive_full
+        if "full" in parts:
+            candidates["full model, ours (float32)"] = lambda: fast_net(**x)
+        if "fast" in parts:
+            candidates[f"full model, fast ({str(fast_dtype).removeprefix('torch.')} autocast)"] = fast_full
+        with torch.inference_mode():
+            outputs, peaks = {}, {}
+            for what, fn in candidates.items():  # one run each: outputs, peak memory, warm-up
+                with peak_memory(dev) as pm:
+                    out = fn()
+                outputs[what] = out.depth
+                peaks[what] = pm["peak_mib"]
+            seconds = interleaved(candidates, dev, repeats)
+        for what in candidates:
+            kind = what.split(",")[0]
+            base = f"{kind}, naive" + (" (BN layers)" if kind == "backbone" else " reference")
+            naive = what == base
+            add(what, seconds[what], peaks[what], None if naive else seconds[base] / seconds[what],
+                None if naive else _rel(outputs[what], outputs[base]))  # fmt: skip
+        if "full" in parts:
+            achieved = 2 * gmacs / seconds["full model, ours (float32)"]
+            res.notes.append(f"ours (float32): {achieved:.0f} GFLOP/s over the whole forward "
+                             f"({100 * achieved / peak:.0f} % of the measured conv peak)")  # fmt: skip
     if "train" in parts:
         th, tw = train_size
         xt = _frame(train_size, dev)
