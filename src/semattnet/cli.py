@@ -45,7 +45,7 @@ def main() -> None:
     show_default=True,
     help="Folder for the data, runs, pictures and report.",
 )
-@click.option("--minutes", default=7.0, show_default=True, help="Training budget of the two models together.")
+@click.option("--minutes", default=6.0, show_default=True, help="Training budget of the two models together.")
 @click.option("--size", default="96x320", show_default=True, help="Scene size HxW (multiples of 32).")
 @click.option("--frames", default=200, show_default=True, help="Training scenes.")
 @click.option("--eval-frames", default=16, show_default=True, help="Held-out scenes (half shadowed).")

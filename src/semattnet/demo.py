@@ -46,7 +46,7 @@ class DemoSettings:
     eval_frames: int = 16
     width: float = 0.125
     batch_size: int = 2
-    minutes: float = 7.0
+    minutes: float = 6.0
     backbone_share: float = 0.4
     lr: float = 2e-3
     steps: tuple[int, int] | None = None
