@@ -7,6 +7,7 @@ them with the KITTI metrics, overall and separately for shadowed and unshadowed 
 
 from __future__ import annotations
 
+import functools
 import json
 import time
 from collections.abc import Callable
@@ -49,7 +50,7 @@ class HeldOut:
     samples: list[dict[str, Any]]  # as KittiDepthCompletion returns them (tensors, 0..255 images)
     shadowed: dict[str, bool]
 
-    @property
+    @functools.cached_property
     def gts(self) -> dict[str, np.ndarray]:
         return {n: s["gt"][0].numpy() for n, s in zip(self.names, self.samples, strict=True)}
 
