@@ -16,9 +16,9 @@ from pathlib import Path
 
 import torch
 
-from semattnet.checkpoint import load_model
-from semattnet.experiment import load_held_out, score
-from semattnet.fuse import fold_batchnorm
+from semattnet.apps.experiment import load_held_out, score
+from semattnet.models.bn_folding import fold_batchnorm
+from semattnet.weights.checkpoint import load_model
 
 
 def main() -> None:

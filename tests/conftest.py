@@ -27,3 +27,19 @@ def random_inputs(
         "semantic": torch.rand(b, 3, h, w, generator=g) * 255,
         "sparse": sparse,
     }
+
+
+def _devices() -> list[str]:
+    return ["cpu", "cuda"] if torch.cuda.is_available() else ["cpu"]
+
+
+@pytest.fixture(params=_devices())
+def device(request: pytest.FixtureRequest) -> torch.device:
+    """Every available device (CPU always; CUDA where present)."""
+    return torch.device(request.param)
+
+
+@pytest.fixture(params=[torch.float32, torch.float64], ids=["float32", "float64"])
+def dtype(request: pytest.FixtureRequest) -> torch.dtype:
+    """The floating-point types the numerics are tested in on every device."""
+    return request.param

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from semattnet._atomic import atomic_path
+from semattnet._utils.atomic import atomic_path
 
 
 def test_success_replaces_and_failure_keeps_the_old_file(tmp_path: Path) -> None:

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 import torch
 
-from semattnet.attention import SAMMAFB
-from semattnet.fusion import confidence_fusion, fuse_features, make_fusion_block
+from semattnet.models.attention import SAMMAFB
+from semattnet.models.confidence_fusion import confidence_fusion
+from semattnet.models.fusion import fuse_features, make_fusion_block
 
 
 def _numpy_sammafb(block: SAMMAFB, x: np.ndarray) -> np.ndarray:

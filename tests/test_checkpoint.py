@@ -12,7 +12,7 @@ import pytest
 import torch
 
 import semattnet
-from semattnet.checkpoint import (
+from semattnet.weights.checkpoint import (
     CheckpointError,
     StateDictMismatchError,
     UnsafeCheckpointError,

@@ -9,11 +9,11 @@ import pytest
 import torch
 from click.testing import CliRunner
 
-from semattnet.classical import complete_classical
+from semattnet.baselines.classical import complete_classical
 from semattnet.cli import main
 from semattnet.data.io import read_depth
-from semattnet.data.synthetic import make_frame
-from semattnet.metrics import KittiMetrics
+from semattnet.data.synthetic.scenes import make_frame
+from semattnet.evaluation.metrics import KittiMetrics
 
 SAMPLE = Path(__file__).parent / "data" / "kitti_sample"
 

@@ -11,7 +11,7 @@ import torch
 
 from semattnet.data.io import DataError, read_image, write_image
 from semattnet.data.kitti import KittiDepthCompletion
-from semattnet.data.synthetic_tree import write_synthetic_kitti
+from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.data.transforms import EvalTransform, TrainTransform
 
 SAMPLE = Path(__file__).parent / "data" / "kitti_sample"

@@ -10,7 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 from semattnet.cli import main
-from semattnet.data.synthetic import CITYSCAPES_PALETTE, make_frame
+from semattnet.data.synthetic.scenes import CITYSCAPES_PALETTE, make_frame
 
 
 @pytest.fixture(scope="module", params=[(352, 1216, 0), (352, 1216, 1), (96, 320, 2)])
@@ -80,7 +80,7 @@ def test_synth_and_check_commands(tmp_path: Path) -> None:
 
 
 def test_worker_count_does_not_change_the_data(tmp_path: Path) -> None:
-    from semattnet.data.synthetic_tree import write_synthetic_kitti
+    from semattnet.data.synthetic.tree import write_synthetic_kitti
 
     write_synthetic_kitti(tmp_path / "a", frames=3, size=(64, 128), seed=4, eval_frames=1, workers=1)
     write_synthetic_kitti(tmp_path / "b", frames=3, size=(64, 128), seed=4, eval_frames=1, workers=2)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from semattnet.demo import DemoSettings, run_demo
+from semattnet.apps.demo import DemoSettings, run_demo
 
 SHORT = DemoSettings(size=(64, 192), train_frames=8, eval_frames=4, steps=(3, 2), batch_size=2)
 
@@ -91,7 +91,7 @@ def test_report_renders_in_chromium(demo_run, tmp_path: Path) -> None:  # type: 
 def test_broken_image_is_flagged(tmp_path: Path) -> None:
     browser = _chromium()
     assert browser is not None
-    from semattnet.report import write_report
+    from semattnet.viz.report import write_report
 
     metrics = {"sparse": {"all": {"rmse_mm": 1.0, "mae_mm": 1.0, "irmse_per_km": 1.0, "imae_per_km": 1.0}}}
     setup = {"held_out": {"frames": 1, "shadowed": 0}, "device": "cpu", "torch_threads": 1, "seconds": 1.0}

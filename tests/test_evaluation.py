@@ -13,13 +13,13 @@ from click.testing import CliRunner
 from PIL import Image
 
 import semattnet
-from semattnet.checkpoint import save_safetensors
 from semattnet.cli import main
 from semattnet.data.io import read_depth, read_image, write_image
-from semattnet.data.synthetic_tree import write_synthetic_kitti
-from semattnet.evaluation import SubmissionError, write_submission_files
-from semattnet.inference import DepthCompleter
-from semattnet.visualize import error_map
+from semattnet.data.synthetic.tree import write_synthetic_kitti
+from semattnet.evaluation.submission import SubmissionError, write_submission_files
+from semattnet.inference.completer import DepthCompleter
+from semattnet.viz.depth import error_map
+from semattnet.weights.checkpoint import save_safetensors
 
 SAMPLE = Path(__file__).parent / "data" / "kitti_sample"
 SEL = "data_depth_selection/val_selection_cropped"
@@ -135,7 +135,7 @@ def test_python_api_any_size_and_clamping(weights: Path) -> None:
     with pytest.raises(ValueError, match="semantic map"):
         completer(rgb, sparse)
     with pytest.warns(UserWarning, match="clamped 1 pixel"):
-        from semattnet.inference import clamp_for_png
+        from semattnet.data.io import clamp_for_png
 
         assert clamp_for_png(np.array([0.0, 5.0])).min() == pytest.approx(1 / 256)
 

@@ -5,15 +5,11 @@ from __future__ import annotations
 import pytest
 import torch
 
-from semattnet import build_model, fused_propagation
-from semattnet.fuse import fold_batchnorm
-from semattnet.propagation import (
-    _propagate_functional,
-    _shift_functional,
-    cspn_affinity,
-    propagate_shifted,
-    shift_affinity,
-)
+from semattnet import build_model
+from semattnet.models.bn_folding import fold_batchnorm
+from semattnet.models.propagation import cpu_kernel as fused_propagation
+from semattnet.models.propagation import cspn_affinity, propagate_shifted, shift_affinity
+from semattnet.models.propagation.export import propagate_functional, shift_functional
 
 needs_kernel = pytest.mark.skipif(not fused_propagation.available(), reason="no C++ toolchain for the fused kernel")
 
@@ -43,7 +39,7 @@ def test_fused_kernel_matches_pytorch_steps(k: int, dilation: int, channels: int
 
 @pytest.mark.parametrize(("k", "dilation"), [(3, 1), (5, 2), (7, 1)])
 def test_naive_reference_matches(k: int, dilation: int) -> None:
-    from semattnet.propagation import propagate, propagate_pad_and_sum
+    from semattnet.models.propagation import propagate, propagate_pad_and_sum
 
     aff, start, h0, _, _ = _inputs(k, 2)
     assert torch.allclose(propagate_pad_and_sum(aff, start, h0, dilation), propagate(aff, start, h0, dilation),
@@ -54,7 +50,7 @@ def test_naive_reference_matches(k: int, dilation: int) -> None:
 def test_export_friendly_path_matches(k: int, dilation: int) -> None:
     aff, start, h0, _, _ = _inputs(k, 3)
     a = propagate_shifted(shift_affinity(aff, dilation), start, h0, dilation)
-    b = _propagate_functional(_shift_functional(aff, dilation), start, h0, dilation)
+    b = propagate_functional(shift_functional(aff, dilation), start, h0, dilation)
     assert torch.allclose(a, b, rtol=1e-5, atol=1e-4)
 
 
@@ -108,7 +104,7 @@ def test_onnx_export_parity(tmp_path) -> None:  # type: ignore[no-untyped-def]
     model = _randomised_bn(build_model("semattnet", width=0.125, iterations=2))
     x = _frame()
     path = tmp_path / "semattnet.onnx"
-    from semattnet.export import export_onnx
+    from semattnet.weights.export import export_onnx
 
     export_onnx(model, path, size=(64, 96))
     session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
@@ -125,7 +121,7 @@ def test_onnx_export_parity(tmp_path) -> None:  # type: ignore[no-untyped-def]
 
 @pytest.mark.slow
 def test_torchscript_export_runs(tmp_path) -> None:  # type: ignore[no-untyped-def]
-    from semattnet.export import export_torchscript, output_names
+    from semattnet.weights.export import export_torchscript, output_names
 
     model = _randomised_bn(build_model("semattnet", width=0.125))
     path = export_torchscript(model, tmp_path / "m.pt", size=(64, 96))
@@ -143,13 +139,13 @@ def test_torchscript_export_runs(tmp_path) -> None:  # type: ignore[no-untyped-d
 @pytest.mark.slow
 def test_bench_smoke() -> None:
     """Every part of `semattnet bench` runs and reports ratios and matching outputs (tiny model)."""
-    from semattnet.benchmark import run_benchmark
+    from semattnet.apps.benchmark import run_benchmark
 
     lines: list[str] = []
     res = run_benchmark((64, 96), "cpu", repeats=1, width=0.125, train_size=(64, 96), log=lines.append)
     whats = [r["what"] for r in res.rows]
     assert any(w.startswith("propagation, ours") for w in whats)
-    from semattnet.benchmark import fast_mode_dtype
+    from semattnet.apps.benchmark import fast_mode_dtype
 
     if fast_mode_dtype(torch.device("cpu")) is not None:
         assert any(w.startswith("full model, fast") for w in whats)

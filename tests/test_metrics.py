@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from semattnet.metrics import KittiMetrics, fill_holes_kitti, image_metrics
+from semattnet.evaluation.metrics import KittiMetrics, fill_holes_kitti, image_metrics
 
 
 def t(rows) -> torch.Tensor:  # type: ignore[no-untyped-def]

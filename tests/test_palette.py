@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semattnet.palette import (
+from semattnet.data.palette import (
     IGNORE_ID,
     LABEL_TO_TRAIN,
     NUM_CLASSES,
@@ -43,7 +43,7 @@ def test_ids_colors_round_trip() -> None:
 
 
 def test_synthetic_palette_agrees() -> None:
-    from semattnet.data.synthetic import CITYSCAPES_PALETTE
+    from semattnet.data.synthetic.scenes import CITYSCAPES_PALETTE
 
     table = dict(TRAIN_CLASSES)
     for name, color in CITYSCAPES_PALETTE.items():

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from semattnet.propagation import (
+from semattnet.models.propagation import (
     cspn_affinity,
     downsample_sparse,
     propagate,

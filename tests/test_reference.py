@@ -7,7 +7,7 @@ import pytest
 import torch
 
 import semattnet
-from semattnet.reference_weights import fill_reference_weights
+from tests._reference_weights import fill_reference_weights
 
 from .conftest import SPEC
 
@@ -63,7 +63,7 @@ def test_outputs_match_authors_code(models, name: str, prefix: str, pairs: dict[
 
 def test_reference_weights_differ_between_models(models) -> None:
     """The rule keys on full names: the same layer gets different weights in the two models."""
-    from semattnet.reference_weights import reference_value
+    from tests._reference_weights import reference_value
 
     a = reference_value("rgb_conv_init.0.weight", (32, 4, 5, 5))
     b = reference_value("backbone.rgb_conv_init.0.weight", (32, 4, 5, 5))

@@ -15,8 +15,8 @@ from torch import nn
 
 from semattnet.cli import main
 from semattnet.data.io import read_image, write_image
-from semattnet.palette import IGNORE_ID, UNKNOWN_COLOR, colors_to_ids
-from semattnet.segment import Segmenter, load_segmenter, segment_folder
+from semattnet.data.palette import IGNORE_ID, UNKNOWN_COLOR, colors_to_ids
+from semattnet.segmentation.segmenter import Segmenter, load_segmenter, segment_folder
 
 
 class TinySegNet(nn.Module):
@@ -120,7 +120,7 @@ def test_interrupted_run_resumes_without_redoing(exported: dict[str, Path], tmp_
 
 def test_kitti_loader_reads_segmented_maps(tmp_path: Path) -> None:
     from semattnet.data.kitti import KittiDepthCompletion
-    from semattnet.data.synthetic_tree import write_synthetic_kitti
+    from semattnet.data.synthetic.tree import write_synthetic_kitti
 
     root = tmp_path / "kitti"
     write_synthetic_kitti(root, frames=3, size=(64, 96), eval_frames=2, workers=1)

@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 import torch
 
-from semattnet.checkpoint import CheckpointError, load_checkpoint
-from semattnet.data.synthetic_tree import write_synthetic_kitti
-from semattnet.engine import Trainer, train
-from semattnet.layers import set_gradient_checkpointing
-from semattnet.registry import build_model
-from semattnet.train_config import TrainConfig
+from semattnet.data.synthetic.tree import write_synthetic_kitti
+from semattnet.models.layers import set_gradient_checkpointing
+from semattnet.models.registry import build_model
+from semattnet.training.config import TrainConfig
+from semattnet.training.trainer import Trainer, train
+from semattnet.weights.checkpoint import CheckpointError, load_checkpoint
 
 from .conftest import random_inputs
 
@@ -137,7 +137,7 @@ def test_stage_chaining_and_frozen_backbone(tree: Path, tmp_path: Path) -> None:
 
 
 def test_weights_only_export_of_a_training_checkpoint(tree: Path, tmp_path: Path) -> None:
-    from semattnet.checkpoint import load_model, save_safetensors
+    from semattnet.weights.checkpoint import load_model, save_safetensors
 
     train(tiny(tree, tmp_path / "run", max_steps=1, val_split=""), log=lambda m: None)
     ckpt = load_checkpoint(tmp_path / "run" / "checkpoints" / "last.pt")

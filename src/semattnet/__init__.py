@@ -1,20 +1,41 @@
-"""SemAttNet: attention-based semantic-aware guided depth completion (Nazir et al., IEEE Access 2022)."""
+"""SemAttNet: attention-based semantic-aware guided depth completion (Nazir et al., IEEE Access 2022).
 
-from .backbone import SemAttNetBackbone
-from .checkpoint import load_checkpoint, load_model, load_weights
-from .config import SemAttNetConfig
-from .model import SemAttNet
-from .outputs import DepthCompletionOutput
-from .registry import build_model, list_models
-from .validation import crop_padding, pad_to_multiple
+The package is laid out as the system is (see the README's "Architecture" section):
+:mod:`semattnet.models` (the network), :mod:`semattnet.weights` (checkpoints),
+:mod:`semattnet.data` (KITTI, synthetic scenes, PNG I/O, palette), :mod:`semattnet.segmentation`,
+:mod:`semattnet.training`, :mod:`semattnet.evaluation`, :mod:`semattnet.inference`,
+:mod:`semattnet.baselines`, :mod:`semattnet.viz`, :mod:`semattnet.apps` and :mod:`semattnet.cli`.
+The names below are the stable public API.
+"""
+
+import sys as _sys
+
+from semattnet._errors import SemAttNetError
+from semattnet.data import palette
+from semattnet.inference import DepthCompleter, crop_padding, pad_to_multiple
+from semattnet.models import (
+    DepthCompletionOutput,
+    SemAttNet,
+    SemAttNetBackbone,
+    SemAttNetConfig,
+    build_model,
+    list_models,
+)
+from semattnet.weights import load_checkpoint, load_model, load_weights
 
 __version__ = "0.1.0"
 
+# `import semattnet.palette` / `from semattnet.palette import ...` keep working (the module is
+# semattnet.data.palette).
+_sys.modules[__name__ + ".palette"] = palette
+
 __all__ = [
+    "DepthCompleter",
     "DepthCompletionOutput",
     "SemAttNet",
     "SemAttNetBackbone",
     "SemAttNetConfig",
+    "SemAttNetError",
     "__version__",
     "build_model",
     "crop_padding",
@@ -23,4 +44,5 @@ __all__ = [
     "load_model",
     "load_weights",
     "pad_to_multiple",
+    "palette",
 ]

@@ -1,10 +1,10 @@
 """Data: KITTI depth completion loaders, transforms, PNG I/O and synthetic KITTI-like scenes."""
 
-from .io import DataError, read_depth, read_image, read_intrinsics, write_depth, write_image
-from .kitti import FrameFiles, KittiDepthCompletion, find_frames
-from .synthetic import CITYSCAPES_PALETTE, SyntheticFrame, make_frame
-from .synthetic_tree import write_synthetic_kitti
-from .transforms import EvalTransform, Sample, TrainTransform
+from semattnet.data.io import DataError, read_depth, read_image, read_intrinsics, write_depth, write_image
+from semattnet.data.kitti import FrameFiles, KittiDepthCompletion, find_frames
+from semattnet.data.synthetic.scenes import CITYSCAPES_PALETTE, SyntheticFrame, make_frame
+from semattnet.data.synthetic.tree import write_synthetic_kitti
+from semattnet.data.transforms import EvalTransform, Sample, TrainTransform
 
 __all__ = [
     "CITYSCAPES_PALETTE",

@@ -2,17 +2,18 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
-from . import layout
-from .io import DataError
-from .kitti import find_frames, load_frame
+from semattnet.data import layout
+from semattnet.data.io import DataError
+from semattnet.data.kitti import find_frames, load_frame
 
-__all__ = ["SplitReport", "check_tree"]
+__all__ = ["SplitReport", "check_tree", "check_trees"]
 
 
 @dataclass
@@ -69,3 +70,29 @@ def check_tree(
             rep.checked += 1
         reports.append(rep)
     return reports
+
+
+def check_trees(
+    roots: Sequence[str | Path],
+    raw_root: str | Path | None = None,
+    semantic_root: str | Path | None = None,
+    sample: int | None = None,
+    log: Callable[[str], None] = print,
+) -> int:
+    """:func:`check_tree` for each root, reported through ``log``; returns the number of problems
+    (a root without any KITTI file counts as one). At most 20 problems are listed per split."""
+    bad = 0
+    for root in roots:
+        reports = check_tree(root, raw_root, semantic_root, sample)
+        log(f"{root}:")
+        if not reports:
+            log("  no KITTI depth completion files found")
+            bad += 1
+        for rep in reports:
+            log("  " + rep.summary())
+            for problem in rep.problems[:20]:
+                log(f"    - {problem}")
+            if len(rep.problems) > 20:
+                log(f"    ... {len(rep.problems) - 20} more")
+            bad += len(rep.problems)
+    return bad

@@ -7,16 +7,22 @@
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
-from .._atomic import atomic_path
+from semattnet._errors import SemAttNetError
+from semattnet._utils.atomic import atomic_path
 
 __all__ = [
     "DEPTH_SCALE",
+    "MAX_DEPTH_M",
+    "MAX_DEPTH_VALUE",
+    "MIN_DEPTH_M",
     "DataError",
+    "clamp_for_png",
     "encode_depth",
     "read_depth",
     "read_image",
@@ -25,11 +31,16 @@ __all__ = [
     "write_image",
 ]
 
-#: KITTI stores depth * 256 in uint16.
+#: KITTI stores depth * 256 in uint16: one step is 1/256 m.
 DEPTH_SCALE = 256.0
+#: Largest stored value (uint16).
+MAX_DEPTH_VALUE = 65535
+#: Depths a KITTI 16-bit PNG can hold: (0, 255.996] m; 0 means "no measurement / no prediction".
+MIN_DEPTH_M = 1.0 / DEPTH_SCALE
+MAX_DEPTH_M = MAX_DEPTH_VALUE / DEPTH_SCALE
 
 
-class DataError(ValueError):
+class DataError(SemAttNetError):
     """A data file is missing, unreadable or not in the expected encoding."""
 
 
@@ -55,7 +66,7 @@ def read_depth(path: str | os.PathLike[str]) -> np.ndarray:
     if img.mode not in ("I;16", "I;16B", "I;16L", "I"):
         raise DataError(f"{path}: depth must be a 16-bit single-channel PNG, got mode {img.mode!r}")
     a = np.asarray(img)
-    if img.mode == "I" and (a.min() < 0 or a.max() > 65535):
+    if img.mode == "I" and (a.min() < 0 or a.max() > MAX_DEPTH_VALUE):
         raise DataError(f"{path}: depth values outside the 16-bit range")
     return (a.astype(np.float32) / DEPTH_SCALE).astype(np.float32)
 
@@ -81,7 +92,16 @@ def encode_depth(depth: np.ndarray) -> np.ndarray:
     d = np.asarray(depth, dtype=np.float64)
     if not np.all(np.isfinite(d)):
         raise DataError("depth to encode contains NaN or infinite values")
-    return np.clip(np.round(d * DEPTH_SCALE), 0, 65535).astype(np.uint16)
+    return np.clip(np.round(d * DEPTH_SCALE), 0, MAX_DEPTH_VALUE).astype(np.uint16)
+
+
+def clamp_for_png(depth: np.ndarray, name: str = "prediction") -> np.ndarray:
+    """Clamp to what a KITTI 16-bit PNG can hold, warning when anything was out of range."""
+    low, high = int((depth < MIN_DEPTH_M).sum()), int((depth > MAX_DEPTH_M).sum())
+    if low or high:
+        warnings.warn(f"{name}: clamped {low} pixel(s) below {MIN_DEPTH_M:.4f} m and {high} above "
+                      f"{MAX_DEPTH_M:.2f} m to KITTI's 16-bit range", stacklevel=2)  # fmt: skip
+    return np.clip(depth, MIN_DEPTH_M, MAX_DEPTH_M)
 
 
 def _atomic_save(img: Image.Image, path: Path, overwrite: bool, compress_level: int = 6) -> Path:

@@ -16,9 +16,9 @@ from typing import Any, Literal
 import numpy as np
 from torch.utils.data import Dataset
 
-from . import layout
-from .io import DataError, read_depth, read_image, read_intrinsics
-from .transforms import Sample, Transform
+from semattnet.data import layout
+from semattnet.data.io import DataError, read_depth, read_image, read_intrinsics
+from semattnet.data.transforms import Sample, Transform
 
 __all__ = ["FrameFiles", "KittiDepthCompletion", "find_frames", "load_frame"]
 

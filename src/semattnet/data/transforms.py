@@ -15,7 +15,7 @@ from typing import Protocol
 import numpy as np
 import torch
 
-from .io import DataError
+from semattnet.data.io import DataError
 
 __all__ = ["EvalTransform", "Sample", "TrainTransform", "Transform", "bottom_crop", "color_jitter", "hflip"]
 

@@ -1,0 +1,5 @@
+"""``python -m semattnet``: the command line."""
+
+from semattnet.cli import main
+
+main()

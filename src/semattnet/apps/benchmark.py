@@ -1,0 +1,406 @@
+"""``semattnet bench``: latency, throughput and peak memory against the naive reference.
+
+Everything is measured in one process, so the ratios hold on any machine:
+
+* **naive reference**: the model as the authors run it: BatchNorm as separate layers and their
+  pad-and-sum propagation, one polyphase sub-grid at a time (``propagation_impl="naive"``);
+* **ours (float32)**: BatchNorm folded into the convolutions (:func:`fold_batchnorm`) and the
+  fused propagation kernel;
+* **fast**: the same under bfloat16 (CPU) / float16 (CUDA) autocast, propagation in float32.
+
+Timings are medians of ``repeats`` runs after a warm-up, synchronised on CUDA. GMACs are
+counted from the convolutions the model runs (hooks), and achieved GFLOP/s is compared with the
+measured peak of one large 3x3 convolution on the same device.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import statistics
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+
+from semattnet._utils.device import now
+from semattnet.models.bn_folding import fold_batchnorm
+from semattnet.models.layers import set_gradient_checkpointing
+from semattnet.models.propagation import cspn_affinity
+from semattnet.models.refinement import run_cspn_stage
+from semattnet.models.registry import build_model
+from semattnet.training.losses import semattnet_loss
+
+__all__ = [
+    "BenchResult",
+    "conv_peak_gflops",
+    "count_macs",
+    "fast_mode_dtype",
+    "interleaved",
+    "peak_memory",
+    "run_benchmark",
+    "timeit",
+]
+
+
+def timeit(fn: Callable[[], Any], device: torch.device, repeats: int = 3, warmup: int = 1) -> float:
+    """Median seconds of ``fn()`` over ``repeats`` runs after ``warmup`` runs."""
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeats):
+        t0 = now(device)
+        fn()
+        times.append(now(device) - t0)
+    return statistics.median(times)
+
+
+def interleaved(fns: dict[str, Callable[[], Any]], device: torch.device, repeats: int = 3) -> dict[str, float]:
+    """Median seconds of each function, timed in turns (``a b c a b c ...``) so that slow drifts
+    of the machine's speed affect all of them alike. Run each once before, as a warm-up."""
+    times: dict[str, list[float]] = {k: [] for k in fns}
+    for _ in range(repeats):
+        for name, fn in fns.items():
+            t0 = now(device)
+            fn()
+            times[name].append(now(device) - t0)
+    return {k: statistics.median(v) for k, v in times.items()}
+
+
+@contextlib.contextmanager
+def peak_memory(device: torch.device) -> Iterator[dict[str, float]]:
+    """Peak memory (MiB) while the block runs: CUDA allocator peak, or the process's peak
+    resident set on Linux (reset through ``/proc/self/clear_refs``); ``nan`` elsewhere."""
+    out: dict[str, float] = {"peak_mib": float("nan")}
+    if device.type == "cuda":
+        torch.cuda.reset_peak_memory_stats(device)
+        yield out
+        out["peak_mib"] = torch.cuda.max_memory_allocated(device) / 2**20
+        return
+    status = Path("/proc/self/status")
+    try:
+        Path("/proc/self/clear_refs").write_text("5")
+        ok = status.is_file()
+    except OSError:
+        ok = False
+    yield out
+    if ok:
+        for line in status.read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                out["peak_mib"] = int(line.split()[1]) / 1024
+
+
+def fast_mode_dtype(device: torch.device) -> torch.dtype | None:
+    """The autocast type of the fast mode: float16 on CUDA, bfloat16 on CPUs with native
+    bfloat16 convolutions (AVX-512 BF16 / AMX), ``None`` where it would be slower than float32."""
+    if device.type == "cuda":
+        return torch.float16
+    if device.type == "cpu" and torch.ops.mkldnn._is_mkldnn_bf16_supported():
+        return torch.bfloat16
+    return None
+
+
+def count_macs(model: nn.Module, inputs: dict[str, torch.Tensor]) -> float:
+    """Multiply-accumulates of every convolution in one forward pass (GMACs)."""
+    total = [0]
+
+    def conv_hook(m: nn.Module, args: tuple[torch.Tensor, ...], out: torch.Tensor) -> None:
+        w = m.weight
+        if isinstance(m, nn.ConvTranspose2d):  # every input pixel meets the whole kernel
+            total[0] += args[0].numel() * w.shape[1] * w.shape[2] * w.shape[3]
+        else:
+            total[0] += out.numel() * w.shape[1] * w.shape[2] * w.shape[3]
+
+    def linear_hook(m: nn.Module, args: tuple[torch.Tensor, ...], out: torch.Tensor) -> None:
+        total[0] += out.numel() * m.weight.shape[1]
+
+    handles = [
+        m.register_forward_hook(conv_hook) for m in model.modules() if isinstance(m, nn.Conv2d | nn.ConvTranspose2d)
+    ]
+    handles += [m.register_forward_hook(linear_hook) for m in model.modules() if isinstance(m, nn.Linear)]
+    try:
+        with torch.inference_mode():
+            model(**inputs)
+    finally:
+        for h in handles:
+            h.remove()
+    return total[0] / 1e9
+
+
+def conv_peak_gflops(
+    device: torch.device, size: tuple[int, int] = (352, 1216), dtype: torch.dtype = torch.float32
+) -> float:
+    """Best achieved GFLOP/s of 3x3 convolutions of the model's typical shapes at ``size``
+    (64 channels at 1/2, 256 at 1/8, 512 at 1/16 of the frame)."""
+    best = 0.0
+    for ch, f in ((64, 2), (256, 8), (512, 16)):
+        h, w = max(1, size[0] // f), max(1, size[1] // f)
+        conv = nn.Conv2d(ch, ch, 3, padding=1, bias=False).to(device)
+        x = torch.randn(1, ch, h, w, device=device)
+        with torch.inference_mode(), torch.autocast(device.type, dtype=dtype, enabled=dtype != torch.float32):
+            seconds = timeit(lambda: conv(x), device, repeats=3)  # noqa: B023
+        best = max(best, 2 * ch * ch * 9 * h * w / seconds / 1e9)
+    return best
+
+
+@dataclass
+class BenchResult:
+    device: str
+    threads: int
+    size: tuple[int, int]
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    def header(self) -> list[str]:
+        head = f"{'what':52s} {'seconds':>9s} {'frames/s':>9s} {'peak MiB':>9s} {'x naive':>8s} {'max rel diff':>12s}"
+        return [f"device {self.device}, {self.threads} threads, {self.size[0]}x{self.size[1]}, batch 1", head]
+
+    @staticmethod
+    def row(r: dict[str, Any]) -> str:
+        ratio = f"{r['speedup']:8.2f}" if r.get("speedup") else " " * 8
+        diff = f"{r['max_rel_diff']:12.1e}" if r.get("max_rel_diff") is not None else " " * 12
+        return f"{r['what']:52s} {r['seconds']:9.3f} {1 / r['seconds']:9.2f} {r['peak_mib']:9.0f} {ratio} {diff}"
+
+    def table(self) -> str:
+        return "\n".join(self.header() + [self.row(r) for r in self.rows] + self.notes)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _frame(size: tuple[int, int], device: torch.device) -> dict[str, torch.Tensor]:
+    h, w = size
+    g = torch.Generator().manual_seed(0)
+    x = {"rgb": torch.rand(1, 3, h, w, generator=g) * 255, "semantic": torch.rand(1, 3, h, w, generator=g) * 255,
+         "sparse": torch.rand(1, 1, h, w, generator=g) * 80 * (torch.rand(1, 1, h, w, generator=g) < 0.05)}  # fmt: skip
+    return {k: v.to(device) for k, v in x.items()}
+
+
+def _rel(a: torch.Tensor, b: torch.Tensor) -> float:
+    return float((a.float() - b.float()).abs().max() / b.float().abs().max())
+
+
+@dataclass
+class _Bench:
+    """What the parts of :func:`run_benchmark` share: the result, the device, the repeats, the log."""
+
+    res: BenchResult
+    dev: torch.device
+    repeats: int
+    log: Callable[[str], None]
+    #: Each part's tensors and models, held until the end, as when run_benchmark was one function:
+    #: the later parts' peak memory is measured with them resident, as in the README's table.
+    kept: list[Any] = field(default_factory=list)
+
+    def add(
+        self, what: str, seconds: float, peak: float, speedup: float | None = None, diff: float | None = None
+    ) -> None:
+        """Append a row to the result and log it."""
+        row = {"what": what, "seconds": seconds, "peak_mib": peak, "speedup": speedup, "max_rel_diff": diff}
+        self.res.rows.append(row)
+        self.log(self.res.row(row))
+
+
+def run_benchmark(
+    size: tuple[int, int] = (352, 1216),
+    device: str | torch.device = "cpu",
+    repeats: int = 3,
+    width: float = 1.0,
+    parts: tuple[str, ...] = ("propagation", "backbone", "full", "fast", "train"),
+    train_size: tuple[int, int] = (320, 1216),
+    model: nn.Module | None = None,
+    log: Callable[[str], None] = print,
+) -> BenchResult:
+    """Measure the parts asked for; ``model`` (a full SemAttNet) replaces random weights."""
+    if model is not None and not hasattr(model, "backbone"):
+        raise ValueError("bench needs a full SemAttNet (with refinement), not a backbone checkpoint")
+    dev = torch.device(device)
+    bench = _Bench(BenchResult(str(dev), torch.get_num_threads(), size), dev, repeats, log)
+    fast_dtype = fast_mode_dtype(dev)
+    parts = _without_unavailable_fast(parts, fast_dtype, bench.res)
+    log("\n".join(bench.res.header()))
+    if "propagation" in parts:
+        _bench_propagation(bench, size)
+    x = _frame(size, dev)
+    if any(p in parts for p in ("backbone", "full", "fast")):
+        net = model if model is not None else build_model("semattnet", width=width)
+        _bench_inference(bench, net.to(dev).eval(), x, parts, fast_dtype)
+    if "train" in parts:
+        _bench_training(bench, train_size, model, width)
+    for note in bench.res.notes:
+        log(note)
+    return bench.res
+
+
+def _without_unavailable_fast(
+    parts: tuple[str, ...], fast_dtype: torch.dtype | None, res: BenchResult
+) -> tuple[str, ...]:
+    """``parts`` without ``fast`` (and a note why) where the fast mode would be slower than float32."""
+    if "fast" not in parts or fast_dtype is not None:
+        return parts
+    res.notes.append(
+        f"fast mode skipped: this CPU ({torch.backends.cpu.get_cpu_capability()}) has no native bfloat16 "
+        "convolutions, where oneDNN's emulation is far slower than float32"
+    )
+    return tuple(p for p in parts if p != "fast")
+
+
+def _propagation_stages(size: tuple[int, int], dev: torch.device) -> Callable[[str], torch.Tensor]:
+    """Both stages of the refinement at full size, as the model runs them (heads random): ``impl`` -> depth."""
+    h, w = size
+    g = torch.Generator().manual_seed(0)
+
+    def heads(hh: int, ww: int) -> tuple[list[torch.Tensor], torch.Tensor, torch.Tensor]:
+        affs = [cspn_affinity(torch.randn(1, k * k - 1, hh, ww, generator=g)).to(dev) for k in (3, 5, 7)]
+        return (
+            affs,
+            torch.softmax(torch.randn(1, 3, hh, ww, generator=g), 1).to(dev),
+            torch.rand(1, 1, hh, ww, generator=g).to(dev),
+        )
+
+    a2, c2, m2 = heads(h // 2, w // 2)
+    a1, c1, m1 = heads(h, w)
+    grids = (torch.rand(1, 4, h // 2, w // 2, generator=g) * 80).to(dev)
+    d = (torch.rand(1, 1, h, w, generator=g) * 80).to(dev)
+    s2, s1 = grids[:, :1] * (m2 > 0.9), d * (m1 > 0.95)
+
+    def stages(impl: str) -> torch.Tensor:
+        r2 = run_cspn_stage(grids, grids, a2, c2, s2, m2, 6, impl)  # type: ignore[arg-type]
+        return run_cspn_stage(d, d, a1, c1, s1, m1, 6, impl) + r2.mean()  # type: ignore[arg-type]
+
+    return stages
+
+
+def _bench_propagation(bench: _Bench, size: tuple[int, int]) -> None:
+    """Rows: the refinement's propagation, the authors' pad-and-sum against ours."""
+    dev = bench.dev
+    stages = _propagation_stages(size, dev)
+    with torch.inference_mode():
+        with peak_memory(dev) as pm_naive:
+            ref = stages("naive")
+        with peak_memory(dev) as pm_ours:
+            ours = stages("auto")
+        t = interleaved({"naive": lambda: stages("naive"), "ours": lambda: stages("auto")}, dev, bench.repeats)
+    bench.add("propagation, naive (authors' pad-and-sum)", t["naive"], pm_naive["peak_mib"])
+    bench.add("propagation, ours", t["ours"], pm_ours["peak_mib"], t["naive"] / t["ours"], _rel(ours, ref))
+    bench.kept += [stages, ref, ours]
+
+
+def _bench_inference(
+    bench: _Bench, net: nn.Module, x: dict[str, torch.Tensor], parts: tuple[str, ...], fast_dtype: torch.dtype | None
+) -> None:
+    """Rows: backbone and full model, naive against ours (and the fast mode); notes: GMACs, GFLOP/s."""
+    dev = bench.dev
+    gmacs = count_macs(net, x)
+    peak = conv_peak_gflops(dev, bench.res.size)
+    bench.res.notes.append(
+        f"{gmacs:.0f} GMACs per frame (convolutions); measured conv peak {peak:.0f} GFLOP/s (float32)"
+    )
+    fast_net = fold_batchnorm(net)
+    candidates = _inference_candidates(net, fast_net, x, parts, fast_dtype, dev)
+    with torch.inference_mode():
+        outputs, peaks, last = _first_runs(candidates, dev)
+        seconds = interleaved(candidates, dev, bench.repeats)
+    for what in candidates:
+        kind = what.split(",")[0]
+        base = f"{kind}, naive" + (" (BN layers)" if kind == "backbone" else " reference")
+        naive = what == base
+        bench.add(what, seconds[what], peaks[what], None if naive else seconds[base] / seconds[what],
+                  None if naive else _rel(outputs[what], outputs[base]))  # fmt: skip
+    if "full" in parts:
+        achieved = 2 * gmacs / seconds["full model, ours (float32)"]
+        bench.res.notes.append(f"ours (float32): {achieved:.0f} GFLOP/s over the whole forward "
+                               f"({100 * achieved / peak:.0f} % of the measured conv peak)")  # fmt: skip
+    bench.kept += [net, fast_net, outputs, last]
+
+
+def _inference_candidates(
+    net: nn.Module,
+    fast_net: nn.Module,
+    x: dict[str, torch.Tensor],
+    parts: tuple[str, ...],
+    fast_dtype: torch.dtype | None,
+    dev: torch.device,
+) -> dict[str, Callable[[], Any]]:
+    """Row label -> forward pass to time; each kind's naive reference comes before ours."""
+
+    def naive_full() -> Any:
+        net.propagation_impl = "naive"
+        try:
+            return net(**x)
+        finally:
+            net.propagation_impl = "auto"
+
+    def fast_full() -> Any:
+        with torch.autocast(dev.type, dtype=fast_dtype):  # type: ignore[arg-type]
+            return fast_net(**x)
+
+    candidates: dict[str, Callable[[], Any]] = {}
+    if "backbone" in parts:
+        candidates["backbone, naive (BN layers)"] = lambda: net.backbone(**x)
+        candidates["backbone, ours (BN folded)"] = lambda: fast_net.backbone(**x)
+    if any(p in parts for p in ("full", "fast")):
+        candidates["full model, naive reference"] = naive_full
+    if "full" in parts:
+        candidates["full model, ours (float32)"] = lambda: fast_net(**x)
+    if "fast" in parts:
+        candidates[f"full model, fast ({str(fast_dtype).removeprefix('torch.')} autocast)"] = fast_full
+    return candidates
+
+
+def _first_runs(
+    candidates: dict[str, Callable[[], Any]], dev: torch.device
+) -> tuple[dict[str, torch.Tensor], dict[str, float], Any]:
+    """One run of each candidate (also the warm-up): its depth and its peak memory; and the last output."""
+    outputs, peaks = {}, {}
+    out = None
+    for what, fn in candidates.items():
+        with peak_memory(dev) as pm:
+            out = fn()
+        outputs[what] = out.depth
+        peaks[what] = pm["peak_mib"]
+    return outputs, peaks, out
+
+
+#: (label, propagation, activation checkpointing) of the training steps measured.
+_TRAIN_VARIANTS = (
+    ("naive reference", "naive", False),
+    ("ours", "pytorch", False),
+    ("ours, activation checkpointing", "pytorch", True),
+)
+
+
+def _bench_training(bench: _Bench, train_size: tuple[int, int], model: nn.Module | None, width: float) -> None:
+    """Rows: one training step (forward, loss, backward) per :data:`_TRAIN_VARIANTS`; notes: peak memory ratios."""
+    th, tw = train_size
+    xt = _frame(train_size, bench.dev)
+    gt = torch.rand(1, 1, th, tw, device=bench.dev) * 80
+    base: float | None = None
+    for label, impl, checkpointing in _TRAIN_VARIANTS:
+        tnet = (model if model is not None else build_model("semattnet", width=width)).to(bench.dev).train()
+        seconds, peak = _time_training_step(bench, tnet, impl, checkpointing, xt, gt)
+        del tnet
+        base = base or peak
+        bench.add(f"training step {th}x{tw}, {label}", seconds, peak)
+        bench.res.notes.append(f"training peak memory, {label}: {peak / base:.2f}x the naive reference's")
+
+
+def _time_training_step(
+    bench: _Bench, tnet: nn.Module, impl: str, checkpointing: bool, xt: dict[str, torch.Tensor], gt: torch.Tensor
+) -> tuple[float, float]:
+    """Median seconds and peak MiB of a training step of ``tnet`` with that propagation and checkpointing."""
+    tnet.propagation_impl = impl
+    set_gradient_checkpointing(tnet, checkpointing)
+
+    def step() -> None:
+        loss = semattnet_loss(tnet(**xt), gt, 0.0)
+        loss.backward()
+        tnet.zero_grad(set_to_none=True)
+
+    with peak_memory(bench.dev) as pm:
+        seconds = timeit(step, bench.dev, max(1, bench.repeats - 1))
+    tnet.propagation_impl = "auto"
+    set_gradient_checkpointing(tnet, False)
+    return seconds, pm["peak_mib"]

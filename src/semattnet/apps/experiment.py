@@ -1,0 +1,164 @@
+"""Small synthetic experiments shared by ``semattnet demo`` and ``semattnet ablate``.
+
+Generate a synthetic KITTI tree, train a model variant through the real training engine
+(backbone stage, then the full model when it refines), complete the held-out scenes and score
+them with the KITTI metrics, overall and separately for shadowed and unshadowed scenes.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from semattnet._utils.device import now
+from semattnet.data.kitti import KittiDepthCompletion
+from semattnet.data.synthetic.tree import write_synthetic_kitti
+from semattnet.data.transforms import EvalTransform
+from semattnet.evaluation.metrics import KittiMetrics
+from semattnet.inference.completer import DepthCompleter
+from semattnet.models.registry import build_model
+from semattnet.training.config import TrainConfig
+from semattnet.training.losses import semattnet_loss
+from semattnet.training.trainer import train
+
+__all__ = [
+    "GROUPS",
+    "HeldOut",
+    "complete_held_out",
+    "load_held_out",
+    "make_synthetic",
+    "score",
+    "step_seconds",
+    "train_variant",
+]
+
+GROUPS = ("all", "shadowed", "unshadowed")
+
+
+@dataclass
+class HeldOut:
+    """The held-out (val_select) scenes of a synthetic tree, in memory."""
+
+    names: list[str]
+    samples: list[dict[str, Any]]  # as KittiDepthCompletion returns them (tensors, 0..255 images)
+    shadowed: dict[str, bool]
+
+    @functools.cached_property
+    def gts(self) -> dict[str, np.ndarray]:
+        return {n: s["gt"][0].numpy() for n, s in zip(self.names, self.samples, strict=True)}
+
+
+def make_synthetic(root: Path, frames: int, eval_frames: int, size: tuple[int, int], seed: int = 0) -> HeldOut:
+    """Write a synthetic tree at ``root`` (half of each split shadowed) and load its held-out scenes."""
+    write_synthetic_kitti(root, frames=frames, size=size, seed=seed, eval_frames=eval_frames)
+    return load_held_out(root)
+
+
+def load_held_out(root: Path) -> HeldOut:
+    """The held-out scenes of a synthetic tree written by :func:`make_synthetic`."""
+    manifest = json.loads((root / "scenes.json").read_text())
+    shadowed = {e["name"]: bool(e["shadowed"]) for e in manifest["frames"] if e["split"] == "val_select"}
+    ds = KittiDepthCompletion(root, "val_select", transform=EvalTransform(None))
+    return HeldOut([f.name for f in ds.frames], [ds[i] for i in range(len(ds))], shadowed)
+
+
+def score(preds: dict[str, np.ndarray], held: HeldOut) -> dict[str, dict[str, float]]:
+    """KITTI metrics (means over images, devkit hole filling) per group of :data:`GROUPS`."""
+    gts = held.gts
+    out: dict[str, dict[str, float]] = {}
+    for group in GROUPS:
+        names = [n for n in preds if group == "all" or held.shadowed[n] == (group == "shadowed")]
+        if not names:
+            continue
+        m = KittiMetrics(keep_per_image=False)
+        for n in names:
+            m.update(torch.from_numpy(preds[n])[None, None], torch.from_numpy(gts[n])[None, None])
+        out[group] = m.compute()
+    return out
+
+
+def step_seconds(
+    size: tuple[int, int], batch_size: int, device: torch.device, model: str = "semattnet", **overrides: Any
+) -> float:
+    """Median wall time of one training step of a registered model (after a warm-up step)."""
+    h, w = size
+    g = torch.Generator().manual_seed(0)
+    x = {"rgb": torch.rand(batch_size, 3, h, w, generator=g) * 255,
+         "semantic": torch.rand(batch_size, 3, h, w, generator=g) * 255,
+         "sparse": torch.rand(batch_size, 1, h, w, generator=g) * 50
+         * (torch.rand(batch_size, 1, h, w, generator=g) < 0.05)}  # fmt: skip
+    x = {k: v.to(device) for k, v in x.items()}
+    gt = torch.full((batch_size, 1, h, w), 20.0, device=device)
+    net = build_model(model, **overrides).to(device).train()
+    opt = torch.optim.Adam(net.parameters(), lr=1e-6)
+    times = []
+    for _ in range(3):
+        start = now(device)
+        loss = semattnet_loss(net(**x), gt, 0.1)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        times.append(now(device) - start)
+    return float(np.median(times[1:]))
+
+
+def train_variant(
+    run_dir: Path,
+    data: Path,
+    backbone_steps: int,
+    full_steps: int,
+    *,
+    size: tuple[int, int],
+    width: float,
+    batch_size: int,
+    lr: float,
+    seed: int,
+    device: torch.device,
+    refine: bool = True,
+    log: Callable[[str], None] = print,
+    **model: Any,
+) -> Path:
+    """Train one variant (``model``: ``branches``, ``fusion``) and return its final checkpoint.
+
+    Backbone stage for ``backbone_steps`` (heads started at street scale, cosine schedule), then,
+    if ``refine``, the full model for ``full_steps`` (backbone at lr / 4, CSPN++ heads at lr).
+    """
+    common: dict[str, Any] = {
+        "data": str(data), "width": width, "batch_size": batch_size, "crop": size, "workers": 0,
+        "epochs": 10**6, "lr_schedule": "cosine", "val_split": "val_select", "seed": seed,
+        "device": str(device), "log_every": 1, **model,
+    }  # fmt: skip
+    train(TrainConfig(stage="backbone", out=str(run_dir / "backbone"), lr=lr, max_steps=backbone_steps,
+                      depth_head_init=(10.0, 15.0), **common), log=log)  # fmt: skip
+    last = run_dir / "backbone" / "checkpoints" / "last.pt"
+    if not refine:
+        return last
+    train(TrainConfig(stage="full", out=str(run_dir / "full"), init=str(last), lr=lr / 4, head_lr=lr,
+                      max_steps=full_steps, **common), log=log)  # fmt: skip
+    return run_dir / "full" / "checkpoints" / "last.pt"
+
+
+def complete_held_out(
+    checkpoint: Path,
+    held: HeldOut,
+    device: torch.device,
+    semantic: Callable[[torch.Tensor], torch.Tensor] | None = None,
+) -> dict[str, dict[str, np.ndarray]]:
+    """Every output of the checkpoint's model on every held-out scene: name -> output -> (H, W).
+
+    ``semantic`` optionally replaces each scene's semantic map (e.g. the no-segmenter fallback).
+    """
+    completer = DepthCompleter.from_checkpoint(checkpoint, device=device)
+    out = {}
+    for n, smp in zip(held.names, held.samples, strict=True):
+        sem = smp["semantic"][None] if semantic is None else semantic(smp["semantic"][None])
+        res = completer.run(smp["rgb"][None], sem, smp["sparse"][None])
+        out[n] = {k: v[0, 0].cpu().numpy() for k, v in res.to_dict().items()}
+    return out

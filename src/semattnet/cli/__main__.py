@@ -1,0 +1,5 @@
+"""``python -m semattnet.cli``."""
+
+from semattnet.cli import main
+
+main()

@@ -1,0 +1,105 @@
+"""Experiments: ``demo``, ``ablate``, ``bench``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from semattnet.cli._group import main
+from semattnet.cli._options import parse_size
+
+
+@main.command()
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default="semattnet-demo",
+    show_default=True,
+    help="Folder for the data, runs, pictures and report.",
+)
+@click.option("--minutes", default=6.0, show_default=True, help="Training budget of the two models together.")
+@click.option("--size", default="96x320", show_default=True, help="Scene size HxW (multiples of 32).")
+@click.option("--frames", default=200, show_default=True, help="Training scenes.")
+@click.option("--eval-frames", default=16, show_default=True, help="Held-out scenes (half shadowed).")
+@click.option("--width", default=0.125, show_default=True, help="Model width multiplier (1.0 = paper).")
+@click.option("--steps", default=None, help="Fixed steps per model as BACKBONE,FULL instead of the time budget.")
+@click.option("--seed", default=0, show_default=True)
+@click.option("--device", default="auto", show_default=True, help="auto, cpu or cuda[:N].")
+@click.option("--overwrite", is_flag=True, help="Replace the contents of --out.")
+def demo(out_dir: Path, minutes: float, size: str, frames: int, eval_frames: int, width: float, steps: str | None,
+         seed: int, device: str, overwrite: bool) -> None:  # fmt: skip
+    """Synthetic data -> train SemAttNet and the two-branch ablation -> evaluate -> HTML report."""
+    from semattnet.apps.demo import DemoSettings, run_demo
+
+    fixed = None
+    if steps is not None:
+        try:
+            bb, full = (int(v) for v in steps.split(","))
+        except ValueError:
+            msg = f"expected BACKBONE,FULL step counts, got {steps!r}"
+            raise click.BadParameter(msg, param_hint="--steps") from None
+        fixed = (bb, full)
+    settings = DemoSettings(size=parse_size(size), train_frames=frames, eval_frames=eval_frames, width=width,
+                            minutes=minutes, steps=fixed, seed=seed, device=device)  # fmt: skip
+    run_demo(out_dir, settings, overwrite=overwrite, log=click.echo)
+
+
+@main.command(context_settings={"show_default": True})
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default="semattnet-ablation",
+              help="Folder for data, runs and results; rerun to continue an interrupted ablation.")  # fmt: skip
+@click.option("--configs", default="all", help="Comma-separated table2_a ... table2_g, g_unknown_semantics.")
+@click.option("--seeds", default="0,1,2", help="Comma-separated training seeds.")
+@click.option("--backbone-steps", default=90, help="Backbone-stage steps (refining configurations).")
+@click.option("--full-steps", default=40, help="Full-model steps (non-refining configurations: more backbone steps).")
+@click.option("--size", default="96x320", help="Scene size HxW.")
+@click.option("--frames", default=200, help="Training scenes.")
+@click.option("--eval-frames", default=16, help="Held-out scenes (half shadowed).")
+@click.option("--width", default=0.125, help="Model width multiplier.")
+@click.option("--device", default="auto")
+def ablate(out_dir: Path, configs: str, seeds: str, backbone_steps: int, full_steps: int, size: str, frames: int,
+           eval_frames: int, width: float, device: str) -> None:  # fmt: skip
+    """Table 2 configurations (a)-(g) on synthetic scenes: RMSE per configuration, shadowed and not, over seeds."""
+    from semattnet.apps.ablate import CONFIGS, AblationSettings, run_ablation
+
+    try:
+        seed_list = tuple(int(v) for v in seeds.split(","))
+    except ValueError:
+        raise click.BadParameter(f"expected comma-separated integers, got {seeds!r}", param_hint="--seeds") from None
+    chosen = CONFIGS if configs == "all" else tuple(c.strip() for c in configs.split(",") if c.strip())
+    settings = AblationSettings(size=parse_size(size), train_frames=frames, eval_frames=eval_frames, width=width,
+                                backbone_steps=backbone_steps, full_steps=full_steps, seeds=seed_list,
+                                configs=chosen, device=device)  # fmt: skip
+    run_ablation(out_dir, settings, log=click.echo)
+    click.echo((out_dir / "ablation.md").read_text())
+
+
+@main.command(context_settings={"show_default": True})
+@click.option("--size", default="352x1216", help="Frame size HxW for inference.")
+@click.option("--train-size", default="320x1216", help="Crop size HxW for the training step.")
+@click.option("--device", default="auto", help="auto, cpu or cuda[:N].")
+@click.option("--repeats", default=3, help="Timed runs per measurement (median reported).")
+@click.option("--width", default=1.0, help="Model width multiplier (1.0 = paper).")
+@click.option("--parts", default="propagation,backbone,full,fast,train", help="What to measure.")
+@click.option("--checkpoint", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              help="Weights to use instead of random ones.")  # fmt: skip
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also write the results as JSON.")  # fmt: skip
+def bench(size: str, train_size: str, device: str, repeats: int, width: float, parts: str, checkpoint: Path | None,
+          json_path: Path | None) -> None:  # fmt: skip
+    """Latency, throughput and peak memory against the naive reference, in one process."""
+    from semattnet._utils.device import resolve_device
+    from semattnet.apps.benchmark import run_benchmark
+    from semattnet.weights.checkpoint import load_model
+
+    model = load_model(checkpoint) if checkpoint is not None else None
+    chosen = tuple(p.strip() for p in parts.split(",") if p.strip())
+    unknown = set(chosen) - {"propagation", "backbone", "full", "fast", "train"}
+    if unknown:
+        raise click.BadParameter(f"unknown part(s) {sorted(unknown)}", param_hint="--parts")
+    result = run_benchmark(parse_size(size), resolve_device(device), repeats, width, chosen,
+                           parse_size(train_size), model, log=click.echo)  # fmt: skip
+    if json_path is not None:
+        json_path.write_text(json.dumps(result.to_dict(), indent=2) + "\n")

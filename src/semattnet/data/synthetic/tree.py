@@ -1,0 +1,137 @@
+"""Write synthetic scenes as a KITTI depth completion tree that the KITTI loaders read unchanged.
+
+Splits: ``train`` and ``val`` in the raw-drive layout (drives of up to 10 frames, camera 02),
+``val_select`` in ``val_selection_cropped`` style and ``test`` in
+``test_depth_completion_anonymous`` style (no ground truth), semantic maps beside them, camera
+intrinsics (``calib_cam_to_cam.txt`` per date, one ``.txt`` per selection frame) and a
+``scenes.json`` manifest with each frame's seed and whether it is shadowed. Frame ``i`` of split
+``s`` always gets the same scene for a given seed, whatever the number of worker processes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import zlib
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from semattnet.data import layout
+from semattnet.data.io import write_depth as _write_depth
+from semattnet.data.io import write_image as _write_image
+from semattnet.data.synthetic.scenes import make_frame
+
+__all__ = ["SYNTH_DATE", "write_synthetic_kitti"]
+
+#: The date in synthetic drive names: clearly not a KITTI recording day.
+SYNTH_DATE = "2000_01_01"
+_FRAMES_PER_DRIVE = 10
+_DRIVE_BASE = {"train": 0, "val": 1000}
+
+
+def write_depth(path: Path, depth: np.ndarray) -> None:
+    _write_depth(path, depth, compress_level=1)  # fast; the encoding is unchanged
+
+
+def write_image(path: Path, image: np.ndarray) -> None:
+    _write_image(path, image, compress_level=1)
+
+
+def _frame_seed(seed: int, split: str, index: int) -> int:
+    return int(zlib.crc32(f"{seed}/{split}/{index}".encode()))
+
+
+def _write_calib(path: Path, K: np.ndarray) -> None:
+    p = np.hstack([K, np.zeros((3, 1))])
+    rows = [f"P_rect_0{c}: " + " ".join(f"{v:.6e}" for v in p.ravel()) for c in (0, 1, 2, 3)]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(rows) + "\n")
+
+
+def _job(args: tuple[Path, str, int, int, int, int, bool | None]) -> dict[str, Any]:
+    out, split, index, seed, height, width, shadow = args
+    fseed = _frame_seed(seed, split, index)
+    fr = make_frame(height, width, seed=fseed, shadow=shadow)
+    entry: dict[str, Any] = {"split": split, "index": index, "seed": fseed, "shadowed": fr.shadowed}
+    if split in ("train", "val"):
+        drive = f"{SYNTH_DATE}_drive_{_DRIVE_BASE[split] + index // _FRAMES_PER_DRIVE:04d}_sync"
+        frame = f"{index % _FRAMES_PER_DRIVE:010d}"
+        write_depth(layout.velodyne_path(out, split, drive, "02", frame), fr.sparse)
+        write_depth(layout.groundtruth_path(out, split, drive, "02", frame), fr.gt)
+        write_image(layout.raw_image_path(out / "kitti_raw", drive, "02", frame), fr.rgb)
+        write_image(layout.semantic_path(out / "semantic", drive, "02", frame), fr.semantic)
+        entry["name"] = f"{drive}_image_02_{frame}"
+    else:
+        sub = layout.VAL_SELECT_DIR if split == "val_select" else layout.TEST_DIR
+        base = out / layout.SELECTION / sub
+        if split == "val_select":
+            drive, frame = f"{SYNTH_DATE}_drive_{2000 + index // _FRAMES_PER_DRIVE:04d}_sync", f"{index:010d}"
+            image_name = layout.selection_name(drive, "image", frame, "02")
+            write_depth(base / "velodyne_raw" / layout.selection_name(drive, "velodyne_raw", frame, "02"), fr.sparse)
+            write_depth(
+                base / "groundtruth_depth" / layout.selection_name(drive, "groundtruth_depth", frame, "02"), fr.gt
+            )
+        else:
+            image_name = f"{index:010d}.png"
+            write_depth(base / "velodyne_raw" / image_name, fr.sparse)
+        write_image(base / "image" / image_name, fr.rgb)
+        write_image(base / "semantic" / image_name, fr.semantic)
+        (base / "intrinsics").mkdir(parents=True, exist_ok=True)
+        (base / "intrinsics" / (Path(image_name).stem + ".txt")).write_text(" ".join(f"{v:.6e}" for v in fr.K.ravel()))
+        entry["name"] = Path(image_name).stem
+    entry["K"] = fr.K.tolist()
+    return entry
+
+
+def write_synthetic_kitti(
+    out: str | os.PathLike[str],
+    frames: int = 100,
+    size: tuple[int, int] = (352, 1216),
+    seed: int = 0,
+    eval_frames: int | None = None,
+    workers: int | None = None,
+    overwrite: bool = False,
+    shadow_fraction: float = 0.5,
+) -> dict[str, Any]:
+    """Generate ``frames`` training frames and ``eval_frames`` frames for each of val,
+    val_select and test (default ``max(2, frames // 5)``) under ``out``.
+
+    Every frame alternates shadowed / unshadowed deterministically when ``shadow_fraction`` is
+    0.5 (exactly half of each split); otherwise each frame is shadowed with that probability.
+
+    Returns the manifest (also written to ``out/scenes.json``).
+
+    Raises:
+        FileExistsError: ``out`` holds files and ``overwrite`` is not set.
+    """
+    out = Path(out)
+    if out.exists() and any(out.iterdir()) and not overwrite:
+        raise FileExistsError(f"{out} is not empty; pass overwrite=True (--overwrite) to write into it")
+    height, width = size
+    n_eval = max(2, frames // 5) if eval_frames is None else eval_frames
+    jobs = []
+    for split, n in (("train", frames), ("val", n_eval), ("val_select", n_eval), ("test", n_eval)):
+        for i in range(n):
+            shadow = (i % 2 == 1) if shadow_fraction == 0.5 else None
+            jobs.append((out, split, i, seed, height, width, shadow))
+    if overwrite and out.exists():
+        import shutil
+
+        for sub in ("data_depth_velodyne", "data_depth_annotated", "kitti_raw", "semantic", layout.SELECTION):
+            shutil.rmtree(out / sub, ignore_errors=True)
+    workers = workers if workers is not None else min(len(jobs), os.cpu_count() or 1)
+    if workers > 1:
+        with ProcessPoolExecutor(workers) as pool:
+            entries = list(pool.map(_job, jobs, chunksize=4))
+    else:
+        entries = [_job(j) for j in jobs]
+    K0 = np.array(entries[0]["K"])
+    _write_calib(out / "kitti_raw" / SYNTH_DATE / "calib_cam_to_cam.txt", K0)  # train and val drives share it
+    manifest = {"generator": "semattnet.data.synthetic.scenes", "seed": seed, "size": [height, width],
+                "counts": {s: sum(e["split"] == s for e in entries) for s in layout.SPLITS},
+                "frames": [{k: v for k, v in e.items() if k != "K"} for e in entries]}  # fmt: skip
+    (out / "scenes.json").write_text(json.dumps(manifest, indent=1))
+    return manifest

@@ -1,0 +1,190 @@
+"""Scoring: a model over a data loader, a checkpoint over a KITTI split, prediction folders against ground truth.
+
+Every score goes through :class:`~semattnet.evaluation.metrics.KittiMetrics` (the devkit's rule).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+from torch.utils.data import DataLoader, Subset
+from tqdm import tqdm
+
+from semattnet._utils import distributed as dist_utils
+from semattnet._utils.device import autocast
+from semattnet.data.io import DEPTH_SCALE, MAX_DEPTH_M, MIN_DEPTH_M, DataError, clamp_for_png, read_depth, write_depth
+from semattnet.data.kitti import KittiDepthCompletion
+from semattnet.data.transforms import EvalTransform
+from semattnet.evaluation.metrics import KittiMetrics
+from semattnet.inference.completer import DepthCompleter
+
+__all__ = ["evaluate_checkpoint", "evaluate_model", "score_folders"]
+
+
+def score_folders(pred_dir: str | Path, gt_dir: str | Path, fill_holes: bool = True, min_gt: float = 0.0,
+                  progress: bool = True) -> KittiMetrics:  # fmt: skip
+    """Score 16-bit PNG predictions against ground truth, pairing files by name.
+
+    Raises:
+        DataError: the folders hold different file names (listed), or a pair differs in size.
+    """
+    pred_dir, gt_dir = Path(pred_dir), Path(gt_dir)
+    preds = {p.name: p for p in pred_dir.glob("*.png")}
+    gts = {p.name: p for p in gt_dir.glob("*.png")}
+    if not gts:
+        raise DataError(f"{gt_dir}: no PNG files")
+    if preds.keys() != gts.keys():
+        only_p, only_g = sorted(preds.keys() - gts.keys()), sorted(gts.keys() - preds.keys())
+        raise DataError(f"{pred_dir} has {len(preds)} files, {gt_dir} {len(gts)}; "
+                        f"without ground truth: {only_p[:5]}{' ...' if len(only_p) > 5 else ''}; "
+                        f"without prediction: {only_g[:5]}{' ...' if len(only_g) > 5 else ''}")  # fmt: skip
+    metrics = KittiMetrics(fill_holes=fill_holes, min_gt=min_gt)
+    bad = []
+    for name in tqdm(sorted(gts), desc="scoring", disable=not progress, leave=False):
+        pred, gt = read_depth(preds[name]), read_depth(gts[name])
+        if pred.shape != gt.shape:
+            bad.append(
+                f"{name}: prediction {pred.shape[1]}x{pred.shape[0]} vs ground truth {gt.shape[1]}x{gt.shape[0]}"
+            )
+            continue
+        metrics.update(torch.from_numpy(pred)[None, None], torch.from_numpy(gt)[None, None], names=[name])
+    if bad:
+        raise DataError(f"size mismatch in {len(bad)} pair(s): " + "; ".join(bad[:5]))
+    return metrics
+
+
+def evaluate_model(
+    model: nn.Module,
+    loader: DataLoader,
+    device: torch.device,
+    amp: str = "none",
+    progress: bool = True,
+    on_batch: Callable[[dict[str, Any], Any], None] | None = None,
+    fill_holes: bool = True,
+    min_gt: float = 0.0,
+    quantize: bool = False,
+) -> KittiMetrics:
+    """Score ``model`` over ``loader`` (batches from :class:`KittiDepthCompletion`), all ranks.
+
+    ``quantize`` scores what a KITTI 16-bit PNG of the prediction holds (clamped, 1/256 m steps),
+    i.e. exactly what ``semattnet metrics`` and the benchmark see.
+    """
+    metrics = KittiMetrics(fill_holes=fill_holes, min_gt=min_gt)
+    was_training = model.training
+    model.eval()
+    with torch.inference_mode():
+        for batch in tqdm(loader, desc="evaluating", disable=not (progress and dist_utils.is_main()), leave=False):
+            x = {k: batch[k].to(device, non_blocking=True) for k in ("rgb", "semantic", "sparse")}
+            with autocast(device, amp):
+                out = model(**x)
+            if "gt" in batch:
+                pred = out.depth.float()
+                if quantize:
+                    pred = torch.round(pred.clamp(MIN_DEPTH_M, MAX_DEPTH_M) * DEPTH_SCALE) / DEPTH_SCALE
+                metrics.update(pred, batch["gt"].to(device), names=list(batch["name"]))
+            if on_batch is not None:
+                on_batch(batch, out)
+    model.train(was_training)
+    metrics.reduce()
+    return metrics
+
+
+def _prediction_name(split: str, frame_name: str, gt_path: Path | None) -> str:
+    # val_select: the ground truth's own file name, so `semattnet metrics` pairs by name.
+    return gt_path.name if split == "val_select" and gt_path is not None else f"{frame_name}.png"
+
+
+def _eval_dataset(data: str | Path, split: str, raw_root: str | Path | None,
+                  semantic_root: str | Path | None) -> KittiDepthCompletion:  # fmt: skip
+    """The split as the benchmark scores it: val_select at full size, val cropped to 352x1216
+    (small synthetic trees: full frames)."""
+    ds = KittiDepthCompletion(data, split, raw_root, semantic_root,
+                              transform=EvalTransform(None if split == "val_select" else (352, 1216)))  # fmt: skip
+    if split == "val" and min(ds.load(0).size) < 352:
+        ds.transform = EvalTransform(None)
+    return ds
+
+
+def _prepare_out(out: Path, overwrite: bool) -> Path:
+    """Create ``out``; refuse a non-empty folder unless ``overwrite``."""
+    if out.exists() and any(out.iterdir()) and not overwrite:
+        raise FileExistsError(f"{out} is not empty; pass --overwrite to replace its contents")
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+class _FrameWriter:
+    """``on_batch`` callback of :func:`evaluate_model`: writes 16-bit predictions and the branch
+    panels of the first ``pictures`` frames."""
+
+    def __init__(self, ds: KittiDepthCompletion, split: str, out: Path, save_predictions: bool, pictures: int) -> None:
+        self.ds, self.split, self.out = ds, split, out
+        self.save_predictions, self.pictures, self.shown = save_predictions, pictures, 0
+
+    def __call__(self, batch: dict[str, Any], result: Any) -> None:
+        for i, idx in enumerate(batch["index"].tolist()):
+            frame = self.ds.frames[idx]
+            if self.save_predictions:
+                depth = clamp_for_png(result.depth[i, 0].float().cpu().numpy(), frame.name)
+                name = _prediction_name(self.split, frame.name, frame.gt)
+                write_depth(self.out / "predictions" / name, depth, overwrite=True)
+            if self.shown < self.pictures:
+                self._panel(batch, result, i, frame.name)
+
+    def _panel(self, batch: dict[str, Any], result: Any, i: int, name: str) -> None:
+        from semattnet.viz.panels import branch_panel
+
+        outputs = {k: v[i, 0].float().cpu().numpy() for k, v in result.to_dict().items()}
+        gt = batch["gt"][i, 0].numpy() if "gt" in batch else None
+        rgb, sem = (batch[k][i].permute(1, 2, 0).numpy() for k in ("rgb", "semantic"))
+        branch_panel(self.out / "pictures" / f"{name}.png", rgb, sem, batch["sparse"][i, 0].numpy(), outputs, gt)
+        self.shown += 1
+
+
+def _write_scores(out: Path, metrics: KittiMetrics, summary: dict[str, Any]) -> None:
+    """``metrics.json`` (the summary) and ``per_image.csv`` (one row per frame)."""
+    (out / "metrics.json").write_text(json.dumps(summary, indent=2) + "\n")
+    with open(out / "per_image.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(metrics.per_image[0]))
+        writer.writeheader()
+        writer.writerows(metrics.per_image)
+
+
+def evaluate_checkpoint(
+    checkpoint: str | Path,
+    data: str | Path,
+    split: str = "val_select",
+    out_dir: str | Path | None = None,
+    device: str = "auto",
+    batch_size: int = 1,
+    amp: str = "none",
+    workers: int = 2,
+    save_predictions: bool = False,
+    pictures: int = 0,
+    max_frames: int | None = None,
+    overwrite: bool = False,
+    raw_root: str | Path | None = None,
+    semantic_root: str | Path | None = None,
+) -> dict[str, Any]:
+    """Run a checkpoint over a split and score it; optionally write predictions and panels.
+
+    Writes into ``out_dir``: ``metrics.json``, ``per_image.csv``, ``predictions/`` (16-bit PNGs named
+    like the ground truth for val_select) and ``pictures/`` (branch panels of the first frames).
+    """
+    completer = DepthCompleter.from_checkpoint(checkpoint, device=device, amp=amp)
+    ds = _eval_dataset(data, split, raw_root, semantic_root)
+    subset = Subset(ds, range(min(len(ds), max_frames))) if max_frames else ds
+    out = _prepare_out(Path(out_dir), overwrite) if out_dir is not None else None
+    writer = _FrameWriter(ds, split, out, save_predictions, pictures) if out is not None else None
+    loader = DataLoader(subset, batch_size=batch_size, num_workers=workers)
+    metrics = evaluate_model(completer.model, loader, completer.device, amp, on_batch=writer, quantize=True)
+    result = metrics.compute() if metrics.per_image else {}
+    if out is not None and result:
+        _write_scores(out, metrics, {"checkpoint": str(checkpoint), "split": split} | result)
+    return {"metrics": metrics, "result": result}

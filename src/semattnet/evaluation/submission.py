@@ -1,0 +1,105 @@
+"""KITTI test-server submissions: predict the test split, check every file, zip."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import zipfile
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from semattnet._errors import SemAttNetError
+from semattnet._utils.atomic import atomic_path
+from semattnet.data.io import clamp_for_png, read_depth, write_depth
+from semattnet.data.kitti import KittiDepthCompletion
+from semattnet.inference.completer import DepthCompleter
+
+__all__ = ["KITTI_TEST_FRAMES", "SubmissionError", "write_submission", "write_submission_files"]
+
+KITTI_TEST_FRAMES = 1000
+
+
+class SubmissionError(SemAttNetError):
+    """A submission that would be rejected: wrong count, size or encoding."""
+
+
+def write_submission_files(
+    predictions: Iterable[tuple[str, np.ndarray]],
+    out: str | Path,
+    expected: dict[str, tuple[int, int]],
+    overwrite: bool = False,
+) -> Path:
+    """Write ``(file name, depth)`` pairs as KITTI 16-bit PNGs into ``out`` and zip them.
+
+    Everything goes to a temporary folder first; ``out`` and the zip appear only when the count,
+    every name, every size (``expected``: name -> (H, W)) and the encoding check out.
+
+    Raises:
+        SubmissionError: any check fails (nothing is written).
+        FileExistsError: ``out`` exists and ``overwrite`` is not set.
+    """
+    out = Path(out)
+    zip_path = out.with_suffix(".zip")
+    if (out.exists() or zip_path.exists()) and not overwrite:
+        raise FileExistsError(f"{out} or {zip_path} exists; pass --overwrite to replace them")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        for name, depth in predictions:
+            if name not in expected:
+                raise SubmissionError(f"unexpected prediction {name!r} (not a test frame)")
+            if depth.shape != expected[name]:
+                raise SubmissionError(f"{name}: prediction is {depth.shape[1]}x{depth.shape[0]}, "
+                                      f"the input is {expected[name][1]}x{expected[name][0]}")  # fmt: skip
+            write_depth(tmp / name, clamp_for_png(depth, name))
+        written = sorted(p.name for p in tmp.glob("*.png"))
+        if written != sorted(expected):
+            missing = sorted(set(expected) - set(written))
+            raise SubmissionError(f"{len(written)} predictions for {len(expected)} test frames; missing {missing[:5]}")
+        for name in written:  # read back: 16-bit, right size, no zeros (0 = "no prediction")
+            d = read_depth(tmp / name)
+            if d.shape != expected[name] or not (d > 0).all():
+                raise SubmissionError(f"{name}: failed the read-back check")
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(tmp, out)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+    with atomic_path(zip_path) as tmp_zip, zipfile.ZipFile(tmp_zip, "w", zipfile.ZIP_DEFLATED) as zf:
+        for p in sorted(out.glob("*.png")):
+            zf.write(p, arcname=p.name)
+    return zip_path
+
+
+def write_submission(
+    checkpoint: str | Path,
+    data: str | Path,
+    out: str | Path,
+    device: str = "auto",
+    amp: str = "none",
+    expected_frames: int | None = KITTI_TEST_FRAMES,
+    overwrite: bool = False,
+    semantic_root: str | Path | None = None,
+) -> Path:
+    """Predict the test split (``test_depth_completion_anonymous``) and write a ready-to-upload zip.
+
+    ``expected_frames`` is KITTI's 1000; pass ``None`` to accept any count (e.g. synthetic data).
+    """
+    ds = KittiDepthCompletion(data, "test", semantic_root=semantic_root)
+    if expected_frames is not None and len(ds) != expected_frames:
+        raise SubmissionError(f"{data}: the test split has {len(ds)} frames, KITTI expects {expected_frames}")
+    completer = DepthCompleter.from_checkpoint(checkpoint, device=device, amp=amp)
+    expected = {f.sparse.name: read_depth(f.sparse).shape for f in ds.frames}
+
+    def predictions() -> Iterable[tuple[str, np.ndarray]]:
+        for i in tqdm(range(len(ds)), desc="test split", leave=False):
+            x = ds[i]
+            res = completer.run(x["rgb"][None], x["semantic"][None], x["sparse"][None])
+            yield ds.frames[i].sparse.name, res.depth[0, 0].cpu().numpy()
+
+    return write_submission_files(predictions(), out, expected, overwrite)

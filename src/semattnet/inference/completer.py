@@ -1,0 +1,95 @@
+"""Depth completion for your own frames: NumPy in, NumPy out, any image size.
+
+With trained weights: ``DepthCompleter.from_checkpoint("semattnet.safetensors")``. Here a tiny
+untrained model shows the shapes:
+
+    >>> import numpy as np, semattnet
+    >>> completer = DepthCompleter(semattnet.build_model("semattnet", width=0.125), device="cpu")
+    >>> rgb = np.zeros((50, 70, 3), np.uint8)              # (H, W, 3) 0..255
+    >>> semantic = np.zeros((50, 70, 3), np.uint8)         # Cityscapes colours
+    >>> sparse = np.zeros((50, 70), np.float32); sparse[40, 10] = 12.5   # metres, 0 = none
+    >>> result = completer(rgb, sparse, semantic)
+    >>> result.depth.shape, result.depth.dtype            # cropped back to the input size
+    ((50, 70), dtype('float32'))
+
+Frames are padded to multiples of 32 (rows at the top, columns on both sides) and the outputs
+cropped back, so any size works, KITTI's 1242x375 included.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from semattnet._utils.device import amp_dtype, resolve_device
+from semattnet.inference.padding import crop_padding, pad_to_multiple
+from semattnet.models.outputs import DepthCompletionOutput
+from semattnet.weights.checkpoint import load_model
+
+__all__ = ["Completion", "DepthCompleter"]
+
+
+@dataclass
+class Completion:
+    """A completed frame: ``depth`` (H, W) metres plus every intermediate as (H, W) arrays."""
+
+    depth: np.ndarray
+    outputs: dict[str, np.ndarray]
+
+
+class DepthCompleter:
+    """A model ready for inference on NumPy frames of any size.
+
+    Args:
+        model: a SemAttNet (full or backbone) model.
+        device: ``auto``, ``cpu`` or ``cuda[:N]``.
+        amp: ``none``, ``bf16`` or ``fp16`` autocast (the propagation stays in float32).
+    """
+
+    def __init__(self, model: nn.Module, device: str | torch.device = "auto", amp: str = "none") -> None:
+        self.device = resolve_device(device)
+        self.model = model.to(self.device).eval()
+        self.amp = amp_dtype(amp)
+        self.needs_semantic = getattr(model, "config", None) is None or model.config.branches == 3
+
+    @classmethod
+    def from_checkpoint(
+        cls, path: str | Path, device: str | torch.device = "auto", amp: str = "none"
+    ) -> DepthCompleter:
+        return cls(load_model(path), device, amp)
+
+    def run(self, rgb: torch.Tensor, semantic: torch.Tensor | None, sparse: torch.Tensor) -> DepthCompletionOutput:
+        """Batched tensors (B, C, H, W) of any H, W -> outputs at the same size."""
+        rgb_p, pad = pad_to_multiple(rgb)
+        sparse_p, _ = pad_to_multiple(sparse)
+        sem_p = pad_to_multiple(semantic)[0] if semantic is not None else None
+        with torch.inference_mode(), torch.autocast(self.device.type, dtype=self.amp or torch.float32,
+                                                    enabled=self.amp is not None):  # fmt: skip
+            out = self.model(rgb=rgb_p.to(self.device), semantic=None if sem_p is None else sem_p.to(self.device),
+                             sparse=sparse_p.to(self.device))  # fmt: skip
+        return out.map(lambda t: crop_padding(t.float(), pad))
+
+    def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
+        """Complete one frame: ``rgb`` (H, W, 3) 0..255, ``sparse`` (H, W) metres (0 = none),
+        ``semantic`` (H, W, 3) colour-coded 0..255 (required by three-branch models)."""
+        rgb, sparse = np.asarray(rgb), np.asarray(sparse)
+        if rgb.ndim != 3 or rgb.shape[2] != 3:
+            raise ValueError(f"rgb must be (H, W, 3), got {rgb.shape}")
+        if sparse.shape != rgb.shape[:2]:
+            raise ValueError(f"sparse must be (H, W) = {rgb.shape[:2]}, got {sparse.shape}")
+        if semantic is None and self.needs_semantic:
+            raise ValueError("this model needs a semantic map (see `semattnet segment` or the README)")
+        if semantic is not None and np.asarray(semantic).shape != rgb.shape:
+            raise ValueError(f"semantic must be {rgb.shape}, got {np.asarray(semantic).shape}")
+
+        def image(a: np.ndarray) -> torch.Tensor:
+            return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32)).permute(2, 0, 1)[None]
+
+        out = self.run(image(rgb), None if semantic is None else image(semantic),
+                       torch.from_numpy(np.ascontiguousarray(sparse, dtype=np.float32))[None, None])  # fmt: skip
+        arrays = {k: v[0, 0].cpu().numpy() for k, v in out.to_dict().items()}
+        return Completion(depth=out.depth[0, 0].cpu().numpy(), outputs=arrays)

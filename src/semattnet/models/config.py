@@ -1,0 +1,112 @@
+"""The typed configuration from which every SemAttNet variant is built.
+
+Defaults are the paper's model (Table 2, row g): three branches, SAMMAFB fusion, CSPN++
+refinement with atrous propagation, full width. The ablations of Table 2 and smaller models
+for CPU training differ only in fields of :class:`SemAttNetConfig`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+from semattnet.models.fusion import FEATURE_FUSION_MODES, FusionMode
+
+__all__ = ["RefinementMode", "SemAttNetConfig", "Widths"]
+
+RefinementMode = Literal["authors", "clean"]
+_SCALES = (1, 2, 4, 8, 16, 32)
+
+
+@dataclass(frozen=True)
+class SemAttNetConfig:
+    """Architecture options.
+
+    Attributes:
+        branches: 3 for colour-, semantic- and depth-guided branches (CG + SG + DG, the paper),
+            2 for the two-branch ablation (CG + DG, as PENet's backbone).
+        fusion: feature fusion between branches: ``"sammafb"`` (paper), ``"concat"`` or ``"add"``.
+        refine: add the CSPN++ refinement with atrous propagation (paper Sec. III-C).
+        width: channel multiplier; 1.0 is the paper. Base width is ``round(32 * width)``
+            channels at full resolution, doubling at each of the five stride-2 stages.
+        reduction: SAMMAFB channel-MLP reduction ratio r.
+        kernel_sizes: CSPN++ propagation kernel sizes, blended per pixel by a learned confidence.
+        iterations: propagation steps per stage (dilation 2, then dilation 1); 6 + 6 in the paper.
+        refinement_mode: ``"authors"`` (default) reproduces the in-place aliasing of the released
+            code, which the released weights were trained with; ``"clean"`` is the plain reading of
+            the paper. See :mod:`semattnet.models.refinement`.
+    """
+
+    branches: Literal[2, 3] = 3
+    fusion: FusionMode = "sammafb"
+    refine: bool = True
+    width: float = 1.0
+    reduction: int = 16
+    kernel_sizes: tuple[int, ...] = (3, 5, 7)
+    iterations: int = 6
+    refinement_mode: RefinementMode = "authors"
+
+    def __post_init__(self) -> None:
+        if self.branches not in (2, 3):
+            raise ValueError(f"branches must be 2 (CG + DG) or 3 (CG + SG + DG), got {self.branches!r}")
+        if self.fusion not in FEATURE_FUSION_MODES:
+            raise ValueError(f"fusion must be one of {FEATURE_FUSION_MODES}, got {self.fusion!r}")
+        if not self.width > 0 or round(32 * self.width) < 4:
+            raise ValueError(f"width must be >= 0.125 (at least 4 base channels), got {self.width!r}")
+        if self.reduction < 1:
+            raise ValueError(f"reduction must be >= 1, got {self.reduction!r}")
+        if not self.kernel_sizes or any(k < 1 or k % 2 == 0 for k in self.kernel_sizes):
+            raise ValueError(f"kernel_sizes must be odd and positive, got {self.kernel_sizes!r}")
+        if self.iterations < 0:
+            raise ValueError(f"iterations must be >= 0, got {self.iterations!r}")
+        if self.refinement_mode not in ("authors", "clean"):
+            raise ValueError(f"refinement_mode must be 'authors' or 'clean', got {self.refinement_mode!r}")
+        object.__setattr__(self, "kernel_sizes", tuple(int(k) for k in self.kernel_sizes))
+
+    def replace(self, **changes: Any) -> SemAttNetConfig:
+        """A copy with some fields changed (validated)."""
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @property
+    def widths(self) -> Widths:
+        return Widths.from_config(self)
+
+
+@dataclass(frozen=True)
+class Widths:
+    """Channel widths per downsampling factor s in (1, 2, 4, 8, 16, 32).
+
+    ``base[s] = round(32 * width) * s`` is the colour-guided branch.
+    ``sg[s]`` / ``dg[s]`` are the semantic- / depth-guided encoder outputs: each stride-2 block
+    pair keeps the width of the fused features it consumes, so with concatenation the DG branch
+    grows to 192, 448, 960, 1984 channels (paper Sec. III-B, "two more layers") while the SG
+    branch matches CG. With addition every branch keeps the CG widths.
+    ``fused_sg[s]`` / ``fused_dg[s]`` are the widths entering each fusion block (s = 2 .. 16).
+    """
+
+    base: dict[int, int] = field(default_factory=dict)
+    sg: dict[int, int] = field(default_factory=dict)
+    dg: dict[int, int] = field(default_factory=dict)
+    fused_sg: dict[int, int] = field(default_factory=dict)
+    fused_dg: dict[int, int] = field(default_factory=dict)
+
+    @classmethod
+    def from_config(cls, cfg: SemAttNetConfig) -> Widths:
+        b = round(32 * cfg.width)
+        base = {s: b * s for s in _SCALES}
+        concat = cfg.fusion != "add"
+        sg: dict[int, int] = {2: base[2]}
+        dg: dict[int, int] = {2: base[2]}
+        fused_sg: dict[int, int] = {}
+        fused_dg: dict[int, int] = {}
+        for s in (2, 4, 8, 16):
+            fused_sg[s] = sg[s] + base[s] if concat else base[s]
+            # DG fuses its own features with the CG (and SG) decoder features.
+            fused_dg[s] = dg[s] + (cfg.branches - 1) * base[s] if concat else base[s]
+            sg[2 * s] = fused_sg[s] if concat else base[2 * s]
+            dg[2 * s] = fused_dg[s] if concat else base[2 * s]
+        return cls(base=base, sg=sg, dg=dg, fused_sg=fused_sg, fused_dg=fused_dg)

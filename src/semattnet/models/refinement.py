@@ -1,0 +1,183 @@
+"""CSPN++ refinement with atrous convolutions (paper Sec. III-C and "Effectiveness of CSPN++").
+
+The fused backbone depth is refined by 12 propagation steps per kernel size (3, 5, 7): six
+with dilation 2 at half-resolution guidance, then six with dilation 1 at full resolution. After
+every step the LiDAR measurements are re-injected through a learned mask,
+``h = m * d + (1 - m) * h``; each stage blends its per-kernel results with learned per-pixel
+kernel confidences (CSPN++'s adaptive kernel size).
+
+The dilation-2 stage runs on the four 2x2 polyphase sub-grids of the depth at once (they are
+independent; the half-resolution heads, sparse depth and mask are shared by all four), which is
+a full-resolution dilation-2 CSPN with nearest-upsampled heads.
+
+Two readings of the stage hand-over (``SemAttNetConfig.refinement_mode``):
+
+* ``"authors"`` (default; the released weights need it). The authors' code writes the stage-1
+  sub-grids back *into the backbone output tensor*. Hence stage 2 starts from the stage-1
+  result D' and also uses D' as its fixed input h_0; the learned blend
+  ``att_12[0] * D' + att_12[1] * D`` degenerates to D', so ``att_12`` and ``dimhalf_s2`` have no
+  effect and receive no gradient. We compute exactly that, without the in-place writes.
+* ``"clean"``: the paper's reading. h_0 is the backbone output in both stages; stage 2 starts
+  from ``a_0 * D' + a_1 * D`` with ``a = softmax(att_12([F_s1; up(dimhalf_s2(F_s2))]))``.
+
+Parameter names are the authors' (``kernel_conf_layer``, ``mask_layer``,
+``iter_guide_layer{3,5,7}`` and their ``_s2`` twins, ``dimhalf_s2``, ``att_12``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Literal
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from semattnet.models.config import RefinementMode
+from semattnet.models.layers import convbn, convbnrelu
+from semattnet.models.propagation import (
+    AffinityHead,
+    downsample_sparse,
+    propagate_pad_and_sum,
+    propagate_shifted,
+    shift_affinity,
+)
+from semattnet.models.propagation import cpu_kernel as fused_propagation
+
+__all__ = ["AtrousCSPNRefinement", "PropagationImpl", "run_cspn_stage"]
+
+PropagationImpl = Literal["auto", "pytorch", "naive"]
+
+
+def _can_fuse(*tensors: torch.Tensor) -> bool:
+    """The compiled kernel serves float32 CPU inference (no autograd) when it could be built."""
+    if torch.is_grad_enabled() and any(t.requires_grad for t in tensors):
+        return False
+    if torch.onnx.is_in_onnx_export() or torch.jit.is_tracing() or torch.compiler.is_compiling():
+        return False
+    if any(t.device.type != "cpu" or t.dtype != torch.float32 for t in tensors):
+        return False
+    return fused_propagation.available()
+
+
+def run_cspn_stage(
+    start: torch.Tensor,
+    h0: torch.Tensor,
+    affinities: Sequence[torch.Tensor],
+    kernel_conf: torch.Tensor,
+    sparse: torch.Tensor,
+    mask: torch.Tensor,
+    iterations: int,
+    impl: PropagationImpl = "auto",
+) -> torch.Tensor:
+    """Propagate once per kernel size with re-injection, then blend by kernel confidence.
+
+    Args:
+        start: (B, C, H, W) initial estimate; h0: (B, C, H, W) fixed input.
+        affinities: per kernel size, (B, k*k, H, W) normalised kernels.
+        kernel_conf: (B, len(affinities), H, W) softmax weights of the kernel sizes.
+        sparse, mask: (B, 1, H, W) depth to re-inject and its learned mask in [0, 1].
+        iterations: steps per kernel size.
+        impl: ``"auto"`` (the compiled kernel for float32 CPU inference when available, else
+            ``"pytorch"``), ``"pytorch"`` (shift once, in-place multiply-adds, autograd) or
+            ``"naive"`` (the authors' pad-and-sum, one channel at a time: benchmarks only).
+    """
+    keep = 1.0 - mask
+    blended: torch.Tensor | None = None
+    if impl not in ("auto", "pytorch", "naive"):
+        raise ValueError(f"impl must be auto, pytorch or naive, got {impl!r}")
+    fused = impl == "auto" and _can_fuse(start, h0, mask, sparse, *affinities)
+    for i, affinity in enumerate(affinities):
+        if fused:  # one compiled pass per step (inference on the CPU)
+            h = fused_propagation.propagate_iterations(affinity, start, h0, mask, sparse, iterations)
+        elif impl == "naive":  # the authors: every polyphase sub-grid on its own, pad-and-sum
+            grids = []
+            for ch in range(start.shape[1]):
+                g = start[:, ch : ch + 1]
+                for _ in range(iterations):
+                    g = propagate_pad_and_sum(affinity, g, h0[:, ch : ch + 1])
+                    g = mask * sparse + keep * g
+                grids.append(g)
+            h = torch.cat(grids, dim=1)
+        else:
+            shifted = shift_affinity(affinity)
+            h = start
+            for _ in range(iterations):
+                h = propagate_shifted(shifted, h, h0)
+                h = mask * sparse + keep * h
+        term = kernel_conf[:, i : i + 1] * h
+        blended = term if blended is None else blended + term
+    assert blended is not None
+    return blended
+
+
+class AtrousCSPNRefinement:
+    """Mixin: the CSPN++ heads and the two-stage atrous propagation on an ``nn.Module``."""
+
+    kernel_conf_layer: nn.Sequential
+    mask_layer: nn.Sequential
+    kernel_conf_layer_s2: nn.Sequential
+    mask_layer_s2: nn.Sequential
+    dimhalf_s2: nn.Sequential
+    att_12: nn.Sequential
+    #: How to propagate (see :func:`run_cspn_stage`); ``"naive"`` is the authors' pattern.
+    propagation_impl: PropagationImpl = "auto"
+
+    def _build_refinement(
+        self, channels_s1: int, channels_s2: int, kernel_sizes: Sequence[int], iterations: int, mode: RefinementMode
+    ) -> None:
+        self._kernel_sizes = tuple(kernel_sizes)
+        self._iterations = iterations
+        self._refinement_mode = mode
+        n = len(self._kernel_sizes)
+        for suffix, ch in (("", channels_s1), ("_s2", channels_s2)):
+            setattr(self, f"kernel_conf_layer{suffix}", convbn(ch, n))
+            setattr(self, f"mask_layer{suffix}", convbn(ch, 1))
+            for k in self._kernel_sizes:
+                setattr(self, f"iter_guide_layer{k}{suffix}", AffinityHead(ch, k))
+        self.dimhalf_s2 = convbnrelu(channels_s2, channels_s1, kernel_size=1, padding=0)
+        self.att_12 = convbnrelu(2 * channels_s1, 2, kernel_size=3, padding=1)
+
+    def _heads(self, feature: torch.Tensor, suffix: str) -> tuple[list[torch.Tensor], torch.Tensor, torch.Tensor]:
+        affinities = [getattr(self, f"iter_guide_layer{k}{suffix}")(feature) for k in self._kernel_sizes]
+        kernel_conf = torch.softmax(getattr(self, f"kernel_conf_layer{suffix}")(feature), dim=1)
+        mask = torch.sigmoid(getattr(self, f"mask_layer{suffix}")(feature))
+        return affinities, kernel_conf, mask
+
+    def _refine(
+        self, depth: torch.Tensor, sparse: torch.Tensor, feature_s1: torch.Tensor, feature_s2: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Refine ``depth`` (B, 1, H, W); returns (after the dilation-2 stage, final)."""
+        with torch.autocast(device_type=depth.device.type, enabled=False):
+            depth, sparse = depth.float(), sparse.float()
+            feature_s1, feature_s2 = feature_s1.float(), feature_s2.float()
+
+            # Stage 1: dilation 2, i.e. dilation 1 on each 2x2 polyphase sub-grid.
+            sparse_s2, valid_s2 = downsample_sparse(sparse, 2)
+            affinities, kernel_conf, mask = self._heads(feature_s2, "_s2")
+            grids = F.pixel_unshuffle(depth, 2)  # (B, 4, H/2, W/2): D[a::2, b::2] at channel 2a + b
+            refined_grids = run_cspn_stage(
+                grids,
+                grids,
+                affinities,
+                kernel_conf,
+                sparse_s2,
+                mask * valid_s2,
+                self._iterations,
+                self.propagation_impl,
+            )
+            refined_s2 = F.pixel_shuffle(refined_grids, 2)
+
+            # Stage 2: dilation 1 at full resolution.
+            if self._refinement_mode == "authors":
+                start = h0 = refined_s2
+            else:
+                half = F.interpolate(self.dimhalf_s2(feature_s2), scale_factor=2.0, mode="nearest")
+                att = torch.softmax(self.att_12(torch.cat((feature_s1, half), dim=1)), dim=1)
+                start, h0 = att[:, 0:1] * refined_s2 + att[:, 1:2] * depth, depth
+            affinities, kernel_conf, mask = self._heads(feature_s1, "")
+            valid = (sparse > 0).to(sparse.dtype)
+            refined = run_cspn_stage(
+                start, h0, affinities, kernel_conf, sparse, mask * valid, self._iterations, self.propagation_impl
+            )
+        return refined_s2, refined

@@ -1,0 +1,47 @@
+"""SemAttNet: the three-branch backbone followed by CSPN++ with atrous propagation (Fig. 2)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import torch
+from torch import nn
+
+from semattnet.models.backbone import SemAttNetBackbone
+from semattnet.models.config import SemAttNetConfig
+from semattnet.models.outputs import DepthCompletionOutput
+from semattnet.models.refinement import AtrousCSPNRefinement
+
+__all__ = ["SemAttNet"]
+
+
+class SemAttNet(AtrousCSPNRefinement, nn.Module):
+    """The full model (the authors' ``A_CSPN_plus_plus``): ``backbone.*`` plus the CSPN++ heads.
+
+    Args:
+        config: architecture options (``config.refine`` must be True; build a backbone-only
+            model with :class:`~semattnet.models.backbone.SemAttNetBackbone`).
+
+    Shape:
+        rgb (B, 3, H, W) 0..255, semantic (B, 3, H, W) 0..255, sparse (B, 1, H, W) metres ->
+        :class:`~semattnet.models.outputs.DepthCompletionOutput` with every map (B, 1, H, W).
+    """
+
+    def __init__(self, config: SemAttNetConfig | None = None) -> None:
+        nn.Module.__init__(self)
+        self.config = config = config if config is not None else SemAttNetConfig()
+        if not config.refine:
+            raise ValueError("SemAttNet is the refined model; use SemAttNetBackbone for refine=False")
+        self.backbone = SemAttNetBackbone(config)
+        c1, c2 = self.backbone.feature_channels
+        self._build_refinement(c1, c2, config.kernel_sizes, config.iterations, config.refinement_mode)
+
+    def forward(
+        self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
+    ) -> DepthCompletionOutput:
+        """Complete and refine depth. Inputs: RGB 0..255, semantic colours 0..255, sparse metres."""
+        if sparse is None:
+            raise ValueError("sparse depth is required")
+        out, feature_s1, feature_s2 = self.backbone.forward_features(rgb, semantic, sparse)
+        refined_s2, refined = self._refine(out.fused_depth, sparse, feature_s1, feature_s2)
+        return dataclasses.replace(out, refined_s2_depth=refined_s2, refined_depth=refined)

@@ -1,0 +1,269 @@
+"""Semantic maps for any frame: run a segmentation network the user supplies.
+
+SemAttNet reads colour-coded Cityscapes trainId maps (:mod:`semattnet.data.palette`). The authors only
+released precomputed maps for KITTI; :func:`segment_folder` makes them for any image tree with
+a network given by a SPEC (see :func:`load_segmenter`):
+
+* ``path/to/model.pt`` (or ``.ts``, ``.jit``, ``.torchscript``): a TorchScript module;
+* ``path/to/model.onnx``: an ONNX graph, run with onnxruntime (``pip install onnxruntime``);
+* ``torchvision:ARCH:WEIGHTS``: a torchvision segmentation architecture (e.g.
+  ``deeplabv3_resnet50``) with a state-dict file (``pip install torchvision``);
+* ``unknown``: no network, every pixel gets :data:`~semattnet.data.palette.UNKNOWN_COLOR` (the
+  fallback for frames without a segmenter; expect worse depth, see the README).
+
+The network takes (B, 3, H, W) float32 RGB, scaled to [0, 1] then normalised with ``mean`` /
+``std`` (ImageNet's by default, what torchvision and most Cityscapes models expect), and returns
+logits (B, C, h, w) (a tensor, a tuple whose first item is one, or a dict with ``"out"``) with
+C = 19 (trainIds) or 34 (Cityscapes labelIds), or already-decided (B, h, w) integer trainIds.
+Logits are resized bilinearly to the image size before the arg-max. Nothing is downloaded.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from tqdm import tqdm
+
+from semattnet._utils.device import resolve_device
+from semattnet.data.io import read_image, write_image
+from semattnet.data.palette import IGNORE_ID, NUM_CLASSES, ids_to_colors, label_ids_to_train_ids
+
+__all__ = [
+    "IMAGENET_MEAN",
+    "IMAGENET_STD",
+    "IMAGE_SUFFIXES",
+    "SegmentSummary",
+    "Segmenter",
+    "load_segmenter",
+    "segment_folder",
+]
+
+IMAGENET_MEAN = (0.485, 0.456, 0.406)
+IMAGENET_STD = (0.229, 0.224, 0.225)
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+_TORCHSCRIPT_SUFFIXES = (".pt", ".pth", ".ts", ".jit", ".torchscript")
+
+Network = Callable[[torch.Tensor], Any]
+
+
+class Segmenter:
+    """(B, H, W, 3) uint8 RGB images -> (B, H, W) uint8 Cityscapes trainIds (255 = unknown).
+
+    Args:
+        network: maps a normalised (B, 3, h, w) float32 tensor on ``device`` to the network's
+            output (module docstring); ``None`` is the no-segmenter fallback.
+        name: shown in error messages (the SPEC).
+        mean, std: per-channel normalisation after scaling to [0, 1].
+        input_size: run the network at this (h, w) (bilinear resize) instead of the image size.
+    """
+
+    def __init__(
+        self,
+        network: Network | None,
+        name: str,
+        device: torch.device | str = "cpu",
+        mean: Sequence[float] = IMAGENET_MEAN,
+        std: Sequence[float] = IMAGENET_STD,
+        input_size: tuple[int, int] | None = None,
+    ) -> None:
+        self.network, self.name = network, name
+        self.device = torch.device(device)
+        self.mean = torch.tensor(mean, dtype=torch.float32).view(1, 3, 1, 1)
+        self.std = torch.tensor(std, dtype=torch.float32).view(1, 3, 1, 1)
+        self.input_size = input_size
+
+    def __call__(self, images: np.ndarray) -> np.ndarray:
+        images = np.asarray(images)
+        if images.ndim != 4 or images.shape[-1] != 3:
+            raise ValueError(f"{self.name}: expected (B, H, W, 3) images, got {images.shape}")
+        b, h, w = images.shape[:3]
+        if self.network is None:
+            return np.full((b, h, w), IGNORE_ID, dtype=np.uint8)
+        x = torch.from_numpy(np.ascontiguousarray(images)).permute(0, 3, 1, 2).float() / 255.0
+        x = ((x - self.mean) / self.std).to(self.device)
+        if self.input_size is not None and tuple(self.input_size) != (h, w):
+            x = F.interpolate(x, size=self.input_size, mode="bilinear", align_corners=False)
+        with torch.inference_mode():
+            out = self.network(x)
+        return self._to_ids(out, (h, w))
+
+    def _to_ids(self, out: Any, size: tuple[int, int]) -> np.ndarray:
+        if isinstance(out, dict):
+            out = out["out"]
+        elif isinstance(out, (tuple, list)):
+            out = out[0]
+        out = torch.as_tensor(out)
+        if not out.is_floating_point():  # already class ids
+            ids = out if out.dim() == 4 else out[:, None]
+            ids = F.interpolate(ids.float(), size=size, mode="nearest").long()[:, 0]
+            bad = (ids != IGNORE_ID) & ((ids < 0) | (ids >= NUM_CLASSES))
+            if bool(bad.any()):
+                raise ValueError(f"{self.name}: returned class ids outside 0..{NUM_CLASSES - 1} and {IGNORE_ID}")
+            return ids.to(torch.uint8).cpu().numpy()
+        if out.dim() != 4:
+            raise ValueError(f"{self.name}: expected (B, C, H, W) logits, got shape {tuple(out.shape)}")
+        classes = out.shape[1]
+        if classes not in (NUM_CLASSES, 34):
+            raise ValueError(
+                f"{self.name}: returned {classes} classes; expected 19 (Cityscapes trainIds) or 34 (labelIds)"
+            )
+        ids = F.interpolate(out.float(), size=size, mode="bilinear", align_corners=False).argmax(dim=1)
+        ids_np = ids.cpu().numpy()
+        return label_ids_to_train_ids(ids_np) if classes == 34 else ids_np.astype(np.uint8)
+
+
+def _torchscript(path: Path, device: torch.device) -> Network:
+    try:
+        module = torch.jit.load(str(path), map_location=device)
+    except Exception as err:
+        raise ValueError(f"{path}: not a loadable TorchScript file ({type(err).__name__})") from None
+    return module.eval()
+
+
+def _onnx(path: Path, device: torch.device) -> Network:
+    try:
+        import onnxruntime as ort
+    except ImportError:
+        raise ValueError(f"{path}: ONNX models need onnxruntime (pip install onnxruntime)") from None
+    providers = ["CPUExecutionProvider"]
+    if device.type == "cuda" and "CUDAExecutionProvider" in ort.get_available_providers():
+        providers.insert(0, "CUDAExecutionProvider")
+    try:
+        session = ort.InferenceSession(str(path), providers=providers)
+    except Exception as err:
+        raise ValueError(f"{path}: not a loadable ONNX model ({err})") from None
+    name = session.get_inputs()[0].name
+
+    def run(x: torch.Tensor) -> torch.Tensor:
+        return torch.from_numpy(session.run(None, {name: x.cpu().numpy()})[0])
+
+    return run
+
+
+def _torchvision(arch: str, weights: Path, device: torch.device) -> Network:
+    try:
+        from torchvision.models import segmentation
+    except ImportError:
+        raise ValueError("torchvision models need torchvision (pip install torchvision)") from None
+    ctor = getattr(segmentation, arch, None)
+    if ctor is None or arch.startswith("_"):
+        raise ValueError(f"torchvision.models.segmentation has no architecture {arch!r}")
+    state = torch.load(str(weights), map_location="cpu", weights_only=True)
+    for key in ("model", "state_dict"):
+        if isinstance(state, dict) and isinstance(state.get(key), dict):
+            state = state[key]
+    if not isinstance(state, dict):
+        raise ValueError(f"{weights}: expected a state dict")
+    head = [k for k in state if k.startswith("classifier.") and k.endswith("weight")]
+    classes = int(state[sorted(head)[-1]].shape[0]) if head else NUM_CLASSES
+    aux = any(k.startswith("aux_classifier.") for k in state)
+    net = ctor(weights=None, weights_backbone=None, num_classes=classes, aux_loss=aux)
+    net.load_state_dict(state)
+    return net.to(device).eval()
+
+
+def load_segmenter(
+    spec: str,
+    device: str | torch.device = "auto",
+    mean: Sequence[float] = IMAGENET_MEAN,
+    std: Sequence[float] = IMAGENET_STD,
+    input_size: tuple[int, int] | None = None,
+) -> Segmenter:
+    """Build a :class:`Segmenter` from a SPEC (module docstring)."""
+    dev = resolve_device(device)
+    if spec == "unknown":
+        return Segmenter(None, spec, dev)
+    if spec.startswith("torchvision:"):
+        parts = spec.split(":", 2)
+        if len(parts) != 3 or not parts[1] or not parts[2]:
+            raise ValueError(f"{spec!r}: expected torchvision:ARCH:WEIGHTS, e.g. torchvision:deeplabv3_resnet50:w.pth")
+        weights = Path(parts[2])
+        if not weights.is_file():
+            raise ValueError(f"{weights}: no such weights file")
+        return Segmenter(_torchvision(parts[1], weights, dev), spec, dev, mean, std, input_size)
+    path = Path(spec)
+    if not path.is_file():
+        raise ValueError(
+            f"{spec}: no such model file (expected .onnx, TorchScript, torchvision:ARCH:WEIGHTS or unknown)"
+        )
+    if path.suffix.lower() == ".onnx":
+        return Segmenter(_onnx(path, dev), spec, dev, mean, std, input_size)
+    if path.suffix.lower() in _TORCHSCRIPT_SUFFIXES:
+        return Segmenter(_torchscript(path, dev), spec, dev, mean, std, input_size)
+    raise ValueError(
+        f"{spec}: unknown model format {path.suffix!r} (expected .onnx or {', '.join(_TORCHSCRIPT_SUFFIXES)})"
+    )
+
+
+@dataclass
+class SegmentSummary:
+    written: int
+    skipped: int  # already there from an earlier run
+    total: int
+
+
+def _images(root: Path, exclude: Path) -> list[Path]:
+    found = []
+    for dirpath, dirnames, filenames in os.walk(root):
+        here = Path(dirpath)
+        dirnames[:] = sorted(d for d in dirnames if not d.startswith(".") and (here / d).resolve() != exclude)
+        found += [here / f for f in sorted(filenames) if f.lower().endswith(IMAGE_SUFFIXES) and not f.startswith(".")]
+    return found
+
+
+def _batches(
+    items: Iterable[tuple[Path, Path, np.ndarray]], size: int
+) -> Iterator[list[tuple[Path, Path, np.ndarray]]]:
+    batch: list[tuple[Path, Path, np.ndarray]] = []
+    for item in items:
+        if batch and (len(batch) == size or item[2].shape != batch[0][2].shape):
+            yield batch
+            batch = []
+        batch.append(item)
+    if batch:
+        yield batch
+
+
+def segment_folder(
+    segmenter: Segmenter,
+    images: str | Path,
+    out: str | Path,
+    batch_size: int = 4,
+    overwrite: bool = False,
+    progress: bool = True,
+) -> SegmentSummary:
+    """Write a colour-coded map for every image under ``images`` into the mirrored path under ``out``.
+
+    ``kitti_raw/<date>/<drive>/image_02/data/<frame>.png`` becomes
+    ``out/<date>/<drive>/image_02/data/<frame>.png``: pass the raw root and the semantic root
+    the KITTI loader reads. Finished maps are skipped, so an interrupted run resumes where it
+    stopped (each map is written atomically: a map on disk is complete). Images of one size are
+    batched together.
+    """
+    images, out = Path(images), Path(out)
+    if not images.is_dir():
+        raise ValueError(f"{images}: not a folder of images")
+    if batch_size < 1:
+        raise ValueError(f"batch_size must be at least 1, got {batch_size}")
+    files = _images(images, out.resolve())
+    if not files:
+        raise ValueError(f"{images}: no {'/'.join(IMAGE_SUFFIXES)} images found")
+    targets = [out / f.relative_to(images).with_suffix(".png") for f in files]
+    todo = [(f, t) for f, t in zip(files, targets, strict=True) if overwrite or not t.exists()]
+    written = 0
+    with tqdm(total=len(files), initial=len(files) - len(todo), desc="segmenting", unit="image",
+              disable=not progress, dynamic_ncols=True) as bar:  # fmt: skip
+        for batch in _batches(((f, t, read_image(f)) for f, t in todo), batch_size):
+            ids = segmenter(np.stack([img for _, _, img in batch]))
+            for (_, target, _), m in zip(batch, ids, strict=True):
+                write_image(target, ids_to_colors(m), overwrite=overwrite)
+            written += len(batch)
+            bar.update(len(batch))
+    return SegmentSummary(written=written, skipped=len(files) - len(todo), total=len(files))

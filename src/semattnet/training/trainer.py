@@ -1,0 +1,385 @@
+"""The training loop: the paper's stages, DDP, AMP, exact resume.
+
+A :class:`Trainer` runs one stage of :class:`~semattnet.training.config.TrainConfig`. It checkpoints
+atomically (``last.pt`` at every save, ``best.pt`` on the best validation RMSE, the last
+``keep_last`` periodic ones), and ``resume=True`` continues from ``last.pt`` exactly, mid-epoch
+too: model, optimiser, scheduler, grad scaler, RNG states and the position in the epoch's data
+order are restored (data order and augmentation are functions of (seed, epoch, index)).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import random
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+from torch.utils.data import DataLoader, Dataset, Subset
+from tqdm import tqdm
+
+from semattnet._utils import distributed as dist_utils
+from semattnet._utils.atomic import atomic_path
+from semattnet._utils.device import autocast, resolve_device
+from semattnet.data.kitti import KittiDepthCompletion
+from semattnet.data.transforms import EvalTransform, TrainTransform
+from semattnet.evaluation.evaluate import evaluate_model
+from semattnet.models.layers import set_gradient_checkpointing
+from semattnet.models.registry import build_model
+from semattnet.training.config import TrainConfig
+from semattnet.training.losses import semattnet_loss
+from semattnet.weights.checkpoint import CheckpointError, load_checkpoint, load_weights
+
+__all__ = ["Trainer", "train"]
+
+_TRAIN_FORMAT = "semattnet-train-v1"
+
+
+def _atomic_torch_save(obj: Any, path: Path) -> None:
+    with atomic_path(path) as tmp:
+        torch.save(obj, tmp)
+
+
+def _process_device(name: str) -> torch.device:
+    """The device of this process: ``--device``, or under torchrun with CUDA the GPU of ``LOCAL_RANK``."""
+    device = resolve_device(name)
+    if device.type == "cuda" and "LOCAL_RANK" in os.environ:
+        device = torch.device("cuda", int(os.environ["LOCAL_RANK"]))
+        torch.cuda.set_device(device)
+    return device
+
+
+def _unwrap(model: nn.Module) -> nn.Module:
+    return model.module if isinstance(model, nn.parallel.DistributedDataParallel) else model
+
+
+@dataclass
+class _Position:
+    epoch: int = 0
+    batch: int = 0  # next batch index within the epoch
+    step: int = 0  # optimiser steps done in total
+    best: float = math.inf
+
+
+class Trainer:
+    """One training stage. ``Trainer(cfg).fit()`` (or ``resume=True`` to continue)."""
+
+    def __init__(self, cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = print) -> None:
+        self.device = _process_device(cfg.device)
+        self.distributed = dist_utils.init_distributed(self.device)
+        self.main = dist_utils.is_main()
+        self._log = log
+        self.out = Path(cfg.out)
+        self.ckpt_dir = self.out / "checkpoints"
+        state = None
+        if resume:
+            state = self._read_state(self.ckpt_dir / "last.pt")
+            # The run may have moved: keep writing where it is now.
+            cfg = TrainConfig.from_dict(state["train_config"] | {"out": str(cfg.out)})
+        self.cfg = cfg
+        if not cfg.data:
+            raise ValueError("no data root given (--data)")
+        self.pos = _Position()
+        torch.manual_seed(cfg.seed)
+        random.seed(cfg.seed)
+        np.random.seed(cfg.seed)
+        self.model = self._build_model(init_weights=state is None)
+        self._build_data()
+        self._build_optimisation()
+        if self.distributed:
+            self._wrap_distributed()
+        if state is not None:
+            self._restore(state)
+        self.tb = self._open_run_folder() if self.main else None
+
+    # ----------------------------------------------------------------------------- setup
+    def _build_data(self) -> None:
+        """The training set, its resumable sampler and loader, and the validation loader."""
+        cfg = self.cfg
+        self.train_set = KittiDepthCompletion(
+            cfg.data, "train", cfg.raw_root, cfg.semantic_root, seed=cfg.seed,
+            transform=TrainTransform(tuple(cfg.crop), cfg.random_crop_height or cfg.crop[0], cfg.flip, cfg.jitter),  # type: ignore[arg-type]
+        )  # fmt: skip
+        self.sampler = dist_utils.ResumableSampler(len(self.train_set), seed=cfg.seed)
+        self.loader = DataLoader(self.train_set, batch_size=cfg.batch_size, sampler=self.sampler,
+                                 num_workers=cfg.workers, drop_last=True, pin_memory=self.device.type == "cuda",
+                                 persistent_workers=False)  # fmt: skip
+        if len(self.loader) == 0:
+            raise ValueError(
+                f"{len(self.train_set)} training frames per process is fewer than one batch of {cfg.batch_size}"
+            )
+        self.val_loader = self._val_loader()
+
+    def _build_optimisation(self) -> None:
+        """Adam over the stage's parameter groups, the learning-rate schedule and the AMP grad scaler."""
+        cfg = self.cfg
+        self.optimizer = torch.optim.Adam(self._param_groups(), betas=cfg.betas, weight_decay=cfg.weight_decay)
+        self.scheduler: Any
+        if cfg.lr_schedule == "cosine":  # per step, to zero at the last step
+            total = cfg.max_steps or cfg.epochs * len(self.loader)  # type: ignore[operator]
+            self.scheduler = torch.optim.lr_scheduler.LambdaLR(
+                self.optimizer, lambda step: 0.5 * (1.0 + math.cos(math.pi * min(step, total) / total))
+            )
+        else:  # the paper's: x0.1 when the validation RMSE stops improving
+            self.scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(self.optimizer, mode="min", factor=0.1,
+                                                                        patience=cfg.patience)  # fmt: skip
+        self.scaler = torch.amp.GradScaler(self.device.type, enabled=cfg.amp == "fp16")
+
+    def _wrap_distributed(self) -> None:
+        """DDP (optionally with SyncBatchNorm) around the model."""
+        if self.cfg.sync_bn:
+            self.model = nn.SyncBatchNorm.convert_sync_batchnorm(self.model)
+        self.model = nn.parallel.DistributedDataParallel(
+            self.model, device_ids=[self.device.index] if self.device.type == "cuda" else None
+        )
+
+    def _open_run_folder(self) -> Any:
+        """Create the run folder, write ``config.json``; a TensorBoard writer if tensorboard is installed."""
+        self.out.mkdir(parents=True, exist_ok=True)
+        self.cfg.save(self.out / "config.json")
+        try:  # optional: pip install tensorboard
+            from torch.utils.tensorboard import SummaryWriter
+        except ImportError:
+            return None
+        return SummaryWriter(str(self.out / "tensorboard"))
+
+    def log(self, msg: str) -> None:
+        if self.main:
+            self._log(msg)
+
+    def _build_model(self, init_weights: bool) -> nn.Module:
+        cfg = self.cfg
+        name = "semattnet_backbone" if cfg.stage == "backbone" else "semattnet"
+        model = build_model(name, width=cfg.width, branches=cfg.branches, fusion=cfg.fusion,
+                            refinement_mode=cfg.refinement_mode)  # fmt: skip
+        if cfg.stage != "backbone":
+            if init_weights and not cfg.init:
+                raise ValueError(f"stage {cfg.stage!r} starts from the previous stage's checkpoint: pass --init PATH")
+            if init_weights:
+                ckpt = load_checkpoint(cfg.init)  # type: ignore[arg-type]
+                is_backbone = not any(k.startswith("backbone.") for k in ckpt.state_dict)
+                load_weights(model.backbone if is_backbone else model, ckpt)
+                self.log(f"initialised from {cfg.init} ({'backbone' if is_backbone else 'full model'})")
+            if cfg.stage == "refine-init":
+                for p in model.backbone.parameters():
+                    p.requires_grad_(False)
+            if cfg.refinement_mode == "authors":  # the aliasing bypasses them: they cannot learn
+                for p in (*model.dimhalf_s2.parameters(), *model.att_12.parameters()):
+                    p.requires_grad_(False)
+        elif cfg.init:
+            load_weights(model, load_checkpoint(cfg.init))
+        elif cfg.depth_head_init is not None:
+            model.init_depth_heads(*cfg.depth_head_init)
+        if cfg.grad_checkpointing:
+            set_gradient_checkpointing(model, True)
+        return model.to(self.device)
+
+    def _param_groups(self) -> list[dict[str, Any]]:
+        model, cfg = self.model, self.cfg
+        trainable = [(n, p) for n, p in model.named_parameters() if p.requires_grad]
+        if cfg.stage != "full":
+            return [{"params": [p for _, p in trainable], "lr": cfg.lr}]
+        backbone = [p for n, p in trainable if n.startswith("backbone.")]
+        head = [p for n, p in trainable if not n.startswith("backbone.")]
+        return [{"params": backbone, "lr": cfg.lr}, {"params": head, "lr": cfg.head_lr}]
+
+    def _val_loader(self) -> DataLoader | None:
+        cfg = self.cfg
+        if not cfg.val_split:
+            return None
+        ds: Dataset = KittiDepthCompletion(cfg.data, cfg.val_split, cfg.raw_root, cfg.semantic_root,
+                                           transform=EvalTransform(tuple(cfg.crop)))  # type: ignore[arg-type]  # fmt: skip
+        if cfg.val_max_frames:
+            ds = Subset(ds, range(min(cfg.val_max_frames, len(ds))))  # type: ignore[arg-type]
+        return DataLoader(ds, batch_size=1, sampler=dist_utils.ShardSampler(len(ds)), num_workers=cfg.workers)  # type: ignore[arg-type]
+
+    def _set_train_mode(self) -> None:
+        self.model.train()
+        if self.cfg.stage == "refine-init":  # frozen backbone: its BN statistics stay fixed too
+            _unwrap(self.model).backbone.eval()
+
+    # ----------------------------------------------------------------------------- state
+    def _state(self) -> dict[str, Any]:
+        rng = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
+        if torch.cuda.is_available():
+            rng["cuda"] = torch.cuda.get_rng_state_all()
+        return {
+            "format": _TRAIN_FORMAT,
+            "model": _unwrap(self.model).state_dict(),
+            "config": _unwrap(self.model).config.to_dict(),  # what load_checkpoint/load_model read
+            "train_config": self.cfg.to_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "scheduler": self.scheduler.state_dict(),
+            "scaler": self.scaler.state_dict(),
+            "rng": rng,
+            "epoch": self.pos.epoch,
+            "batch_in_epoch": self.pos.batch,
+            "global_step": self.pos.step,
+            "best_metric": self.pos.best,
+        }
+
+    @staticmethod
+    def _read_state(path: Path) -> dict[str, Any]:
+        if not path.is_file():
+            raise CheckpointError(f"{path}: nothing to resume from")
+        ckpt = load_checkpoint(path)
+        state = dict(ckpt.extra) | {"model": ckpt.state_dict, "epoch": ckpt.epoch}
+        if state.get("format") != _TRAIN_FORMAT:
+            raise CheckpointError(f"{path}: not a semattnet training checkpoint (no optimiser state to resume)")
+        return state
+
+    def _restore(self, state: dict[str, Any]) -> None:
+        load_weights(_unwrap(self.model), state["model"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.scheduler.load_state_dict(state["scheduler"])
+        self.scaler.load_state_dict(state["scaler"])
+        rng = state["rng"]
+        torch.set_rng_state(rng["torch"])
+        np.random.set_state(rng["numpy"])
+        random.setstate(rng["python"])
+        if "cuda" in rng and torch.cuda.is_available():
+            torch.cuda.set_rng_state_all(rng["cuda"])
+        self.pos = _Position(state["epoch"], state["batch_in_epoch"], state["global_step"], state["best_metric"])
+        self.log(f"resumed at epoch {self.pos.epoch}, batch {self.pos.batch}, step {self.pos.step}")
+
+    def save(self, best: bool = False, periodic: bool = False) -> None:
+        """Write ``last.pt`` (and ``best.pt`` / a numbered copy) atomically; rank 0 only."""
+        if not self.main:
+            return
+        state = self._state()
+        _atomic_torch_save(state, self.ckpt_dir / "last.pt")
+        if best:
+            _atomic_torch_save(state, self.ckpt_dir / "best.pt")
+        if periodic and self.cfg.keep_last > 0:
+            _atomic_torch_save(state, self.ckpt_dir / f"step-{self.pos.step:08d}.pt")
+            kept = sorted(self.ckpt_dir.glob("step-*.pt"))
+            for old in kept[: -self.cfg.keep_last]:
+                old.unlink()
+
+    # ----------------------------------------------------------------------------- loop
+    def _write_row(self, row: dict[str, Any]) -> None:
+        if not self.main:
+            return
+        path = self.out / "log.csv"
+        fields = ["time", "epoch", "step", "split", "loss", "lr", "rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km"]
+        new = not path.exists()
+        with open(path, "a", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
+            if new:
+                w.writeheader()
+            w.writerow({"time": f"{time.time():.1f}"} | row)
+        if self.tb is not None:
+            for key in ("loss", "lr", "rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km"):
+                if row.get(key) not in (None, ""):
+                    self.tb.add_scalar(f"{row['split']}/{key}", float(row[key]), int(row["step"]))
+
+    def validate(self) -> dict[str, float] | None:
+        if self.val_loader is None:
+            return None
+        result = evaluate_model(self.model, self.val_loader, self.device, self.cfg.amp).compute()
+        self._write_row({"epoch": self.pos.epoch, "step": self.pos.step, "split": self.cfg.val_split} | result)
+        self.log(f"epoch {self.pos.epoch}: {self.cfg.val_split} RMSE {result['rmse_mm']:.1f} mm, "
+                 f"MAE {result['mae_mm']:.1f} mm")  # fmt: skip
+        return result
+
+    def fit(self) -> dict[str, Any]:
+        """Run (or finish) the stage; returns the final position and last validation result."""
+        last_val: dict[str, float] | None = None
+        while self.pos.epoch < self.cfg.epochs:
+            finished_epoch = self._train_epoch()
+            if not finished_epoch:  # max_steps reached mid-epoch
+                self.save()
+                break
+            self.pos.epoch, self.pos.batch = self.pos.epoch + 1, 0
+            best, last_val = self._end_of_epoch(last_val)
+            self.save(best=best, periodic=True)
+            if self.cfg.max_steps and self.pos.step >= self.cfg.max_steps:
+                break
+        self._check_sync()
+        if self.tb is not None:
+            self.tb.close()
+        if self.main:
+            from semattnet.viz.curves import plot_training_curves
+
+            plot_training_curves(self.out / "log.csv", self.out / "curves.png")
+        return {"epoch": self.pos.epoch, "step": self.pos.step, "best_rmse_mm": self.pos.best, "val": last_val}
+
+    def _train_epoch(self) -> bool:
+        """Train from the current position to the end of the epoch (or ``max_steps``); True if it ended."""
+        cfg, epoch = self.cfg, self.pos.epoch
+        self.sampler.set_epoch(epoch)
+        self.train_set.set_epoch(epoch)
+        self.sampler.start_at(self.pos.batch * cfg.batch_size)
+        weight = cfg.branch_weight(epoch)
+        self._set_train_mode()
+        bar = tqdm(total=len(self.loader), initial=self.pos.batch, desc=f"epoch {epoch}",
+                   disable=not self.main, unit="batch", dynamic_ncols=True)  # fmt: skip
+        with bar:
+            for batch in self.loader:
+                loss = self._step(batch, weight)
+                bar.update(1)
+                bar.set_postfix(loss=f"{loss:.3f}", lr=f"{self.optimizer.param_groups[0]['lr']:.2e}")
+                if self.pos.step % cfg.log_every == 0 or self.pos.batch == len(self.loader):
+                    self._write_row({"epoch": epoch, "step": self.pos.step, "split": "train", "loss": loss,
+                                     "lr": self.optimizer.param_groups[0]["lr"]})  # fmt: skip
+                if cfg.save_every and self.pos.step % cfg.save_every == 0:
+                    self.save(periodic=True)
+                if cfg.max_steps and self.pos.step >= cfg.max_steps:
+                    break
+        return self.pos.batch >= len(self.loader)
+
+    def _step(self, batch: dict[str, Any], branch_weight: float) -> float:
+        """One optimiser step on ``batch`` (eq. 14 loss, AMP-aware); returns the loss."""
+        x = {k: batch[k].to(self.device, non_blocking=True) for k in ("rgb", "semantic", "sparse")}
+        gt = batch["gt"].to(self.device, non_blocking=True)
+        with autocast(self.device, self.cfg.amp):
+            out = self.model(**x)
+        loss = semattnet_loss(out.map(lambda t: t.float()), gt, branch_weight)
+        self.optimizer.zero_grad(set_to_none=True)
+        self.scaler.scale(loss).backward()
+        self.scaler.step(self.optimizer)
+        self.scaler.update()
+        if self.cfg.lr_schedule == "cosine":
+            self.scheduler.step()
+        self.pos.batch += 1
+        self.pos.step += 1
+        return loss.item()
+
+    def _end_of_epoch(self, last_val: dict[str, float] | None) -> tuple[bool, dict[str, float] | None]:
+        """Validate when due, step the plateau schedule; returns (new best?, last validation result)."""
+        cfg = self.cfg
+        if self.val_loader is None or not (self.pos.epoch % cfg.val_every == 0 or self.pos.epoch == cfg.epochs):
+            return False, last_val
+        last_val = self.validate()
+        rmse = last_val["rmse_mm"] if last_val else math.inf
+        if cfg.lr_schedule == "plateau":
+            self.scheduler.step(rmse)
+        best = rmse < self.pos.best
+        self.pos.best = min(self.pos.best, rmse)
+        return best, last_val
+
+    def _check_sync(self) -> None:
+        """Across ranks, every parameter must be identical after training (DDP's contract)."""
+        if not self.distributed:
+            return
+        total = torch.stack([p.detach().double().sum() for p in _unwrap(self.model).parameters()]).sum()
+        gathered = [torch.zeros_like(total) for _ in range(dist_utils.world_size())]
+        torch.distributed.all_gather(gathered, total)
+        if any(g != gathered[0] for g in gathered):
+            raise RuntimeError(f"ranks diverged: parameter checksums {[float(g) for g in gathered]}")
+        self.log(f"{dist_utils.world_size()} ranks in sync (parameter checksum {float(total):.6e})")
+
+
+def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = print) -> dict[str, Any]:
+    """Run one stage; joins/leaves the process group when launched by torchrun."""
+    try:
+        return Trainer(cfg, resume=resume, log=log).fit()
+    finally:
+        dist_utils.cleanup()

@@ -1,0 +1,65 @@
+"""Depth pictures: a fixed colour scale for depth, KITTI-style error maps, fusion-weight images."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["DEPTH_CMAP", "DEPTH_MAX_M", "colorize_depth", "confidence_image", "error_map", "write_depth_pictures"]
+
+#: Fixed scale of every depth picture: matplotlib's "turbo" from 0 to 80 m (KITTI's range);
+#: pixels without depth (0) are black.
+DEPTH_CMAP = "turbo"
+DEPTH_MAX_M = 80.0
+
+
+def colorize_depth(depth: np.ndarray, vmax: float = DEPTH_MAX_M, cmap: str = DEPTH_CMAP) -> np.ndarray:
+    """(H, W) metres -> (H, W, 3) uint8 on a fixed scale [0, vmax]; invalid (<= 0) is black."""
+    from matplotlib import colormaps
+
+    d = np.asarray(depth, dtype=np.float32)
+    rgb = colormaps[cmap](np.clip(d / vmax, 0.0, 1.0))[..., :3]
+    rgb[~(d > 0)] = 0.0
+    return (rgb * 255.0 + 0.5).astype(np.uint8)
+
+
+def error_map(pred: np.ndarray, gt: np.ndarray, abs_m: float = 3.0, rel: float = 0.05) -> np.ndarray:
+    """KITTI-style error image: error normalised by min(|e| / abs_m, |e| / gt / rel) in 10 log2
+    bins from 1/16 to 16, on ColorBrewer RdYlBu (blue = good, red = bad, KITTI's palette);
+    pixels without ground truth are black. Returns (H, W, 3) uint8."""
+    from matplotlib import colormaps
+
+    gt = np.asarray(gt, dtype=np.float64)
+    err = np.abs(np.asarray(pred, dtype=np.float64) - gt)
+    valid = gt > 0
+    norm = np.where(valid, np.minimum(err / abs_m, err / np.where(valid, gt, 1.0) / rel), 0.0)
+    bins = np.clip(np.floor(np.log2(np.maximum(norm, 1e-12))) + 5, 0, 9).astype(int)  # [0,1/16) -> 0 ... [16,inf) -> 9
+    colours = (colormaps["RdYlBu_r"].resampled(10)(np.arange(10))[:, :3] * 255 + 0.5).astype(np.uint8)
+    out = colours[bins]
+    out[~valid] = 0
+    return out
+
+
+def confidence_image(conf: np.ndarray) -> np.ndarray:
+    """A fusion weight in [0, 1] as (H, W, 3) uint8 on matplotlib's "viridis"."""
+    from matplotlib import colormaps
+
+    return (colormaps["viridis"](np.clip(conf, 0, 1))[..., :3] * 255 + 0.5).astype(np.uint8)
+
+
+def write_depth_pictures(pred: Path, out: Path, gt: Path | None = None, vmax: float = DEPTH_MAX_M) -> int:
+    """Colourise a 16-bit depth PNG (or a folder of them) into ``out/NAME_color.png``, with
+    ``out/NAME_error.png`` against ground truth ``gt`` (a file or a folder of same-named files).
+    Returns the number of predictions drawn."""
+    from semattnet.data.io import read_depth, write_image
+
+    pred, out = Path(pred), Path(out)
+    files = [pred] if pred.is_file() else sorted(pred.glob("*.png"))
+    for f in files:
+        d = read_depth(f)
+        write_image(out / f"{f.stem}_color.png", colorize_depth(d, vmax), overwrite=True)
+        if gt is not None:
+            g = read_depth(gt if Path(gt).is_file() else Path(gt) / f.name)
+            write_image(out / f"{f.stem}_error.png", error_map(d, g), overwrite=True)
+    return len(files)

@@ -1,0 +1,65 @@
+"""Panels: labelled tiles in one picture, and the per-branch panel (the paper's intermediate-depth figure)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, ImageDraw
+
+from semattnet.viz.depth import colorize_depth, confidence_image, error_map
+
+__all__ = ["branch_panel", "save_panel"]
+
+
+def save_panel(tiles: Sequence[tuple[str, np.ndarray]], path: str | Path, columns: int = 1) -> Path:
+    """Stack labelled (H, W, 3) uint8 tiles into one PNG (row-major, ``columns`` per row)."""
+    if not tiles:
+        raise ValueError("save_panel needs at least one tile")
+    h, w = tiles[0][1].shape[:2]
+    label_h = 14
+    rows = (len(tiles) + columns - 1) // columns
+    canvas = Image.new("RGB", (columns * w, rows * (h + label_h)), "white")
+    draw = ImageDraw.Draw(canvas)
+    for i, (label, tile) in enumerate(tiles):
+        if tile.shape[:2] != (h, w):
+            raise ValueError(f"tile {label!r} is {tile.shape[:2]}, expected {(h, w)}")
+        x, y = (i % columns) * w, (i // columns) * (h + label_h)
+        draw.text((x + 3, y + 1), label, fill="black")
+        canvas.paste(Image.fromarray(tile), (x, y + label_h))
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    canvas.save(path)
+    return path
+
+
+def branch_panel(
+    path: str | Path,
+    rgb: np.ndarray,
+    semantic: np.ndarray | None,
+    sparse: np.ndarray,
+    outputs: dict[str, np.ndarray],
+    gt: np.ndarray | None = None,
+    columns: int = 1,
+) -> Path:
+    """The paper's intermediate-depth figure for one frame: inputs, ground truth, CG / SG / DG,
+    fused and refined depths, the three fusion weights and (with ground truth) the error map."""
+    tiles: list[tuple[str, np.ndarray]] = [("RGB", np.asarray(rgb, dtype=np.uint8))]
+    if semantic is not None:
+        tiles.append(("semantic", np.asarray(semantic, dtype=np.uint8)))
+    tiles.append(("sparse LiDAR", colorize_depth(sparse)))
+    if gt is not None:
+        tiles.append(("ground truth", colorize_depth(gt)))
+    for key, label in (("color_depth", "CG depth"), ("semantic_depth", "SG depth"), ("guided_depth", "DG depth"),
+                       ("fused_depth", "fused depth"), ("refined_depth", "refined depth")):  # fmt: skip
+        if key in outputs:
+            tiles.append((label, colorize_depth(outputs[key])))
+    for key, label in (("color_conf", "CG weight"), ("semantic_conf", "SG weight"), ("guided_conf", "DG weight")):
+        if key in outputs:
+            tiles.append((label, confidence_image(outputs[key])))
+    if gt is not None:
+        final = outputs.get("refined_depth", outputs.get("fused_depth"))
+        if final is not None:
+            tiles.append(("error (KITTI colours)", error_map(final, gt)))
+    return save_panel(tiles, path, columns=columns)

@@ -1,0 +1,139 @@
+"""A pickle module for ``torch.load`` that never runs code named by the checkpoint.
+
+``torch.load(path, pickle_module=safe_pickle_module(), weights_only=False)`` resolves every
+global the pickle names through :meth:`Unpickler.find_class`:
+
+* tensors, parameters, dtypes, ``OrderedDict``, ``argparse.Namespace`` and NumPy scalars/arrays
+  resolve to the real objects (they only rebuild data);
+* names that can run code (``os.system``, ``builtins.eval``, ``subprocess.*``, ...) are refused
+  with :class:`UnsafeCheckpointError`;
+* any other class (e.g. the authors' ``metrics.Result``) becomes an inert stand-in that only
+  records the data it is built from, so its fields stay readable.
+"""
+
+from __future__ import annotations
+
+import pickle
+import types
+from typing import Any
+
+import torch
+
+from semattnet._errors import SemAttNetError
+
+__all__ = ["InertObject", "Unpickler", "UnsafeCheckpointError", "safe_pickle_module"]
+
+
+class UnsafeCheckpointError(SemAttNetError, pickle.UnpicklingError):
+    """The checkpoint references a callable that could execute code."""
+
+
+class InertObject:
+    """Stand-in for a class named by a checkpoint that we refuse to import.
+
+    Constructor arguments are kept in ``_args``; pickled state becomes attributes.
+    """
+
+    _pickled_name = "?"
+
+    def __new__(cls, *args: Any, **kwargs: Any) -> InertObject:
+        return object.__new__(cls)
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        self.__dict__["_args"] = args
+        if kwargs:
+            self.__dict__["_kwargs"] = kwargs
+
+    def __setstate__(self, state: Any) -> None:
+        if isinstance(state, tuple) and len(state) == 2 and isinstance(state[0], dict | type(None)):
+            state = {**(state[0] or {}), **(state[1] or {})}
+        if isinstance(state, dict):
+            self.__dict__.update({str(k): v for k, v in state.items()})
+        else:
+            self.__dict__["_state"] = state
+
+    def __repr__(self) -> str:
+        shown = {k: v for k, v in self.__dict__.items() if not isinstance(v, torch.Tensor)}
+        return f"<inert {self._pickled_name} {shown}>"
+
+
+_SAFE: dict[tuple[str, str], Any] = {
+    ("collections", "OrderedDict"): __import__("collections").OrderedDict,
+    ("builtins", "set"): set,
+    ("builtins", "frozenset"): frozenset,
+    ("builtins", "slice"): slice,
+    ("builtins", "complex"): complex,
+    ("builtins", "bytearray"): bytearray,
+    ("argparse", "Namespace"): __import__("argparse").Namespace,
+    ("_codecs", "encode"): __import__("codecs").encode,  # how protocol-2 pickles store bytes (NumPy arrays)
+    ("torch", "Size"): torch.Size,
+    ("torch", "device"): torch.device,
+    ("torch._utils", "_rebuild_tensor"): torch._utils._rebuild_tensor,
+    ("torch._utils", "_rebuild_tensor_v2"): torch._utils._rebuild_tensor_v2,
+    ("torch._utils", "_rebuild_parameter"): torch._utils._rebuild_parameter,
+    ("torch._utils", "_rebuild_parameter_with_state"): torch._utils._rebuild_parameter_with_state,
+    ("torch.nn.parameter", "Parameter"): torch.nn.Parameter,
+}
+for _name in ("_rebuild_tensor_v3",):
+    if hasattr(torch._utils, _name):
+        _SAFE[("torch._utils", _name)] = getattr(torch._utils, _name)
+
+_NUMPY_SAFE = {"_reconstruct", "scalar", "ndarray", "dtype"}
+_NUMPY_MODULES = {"numpy", "numpy.core.multiarray", "numpy._core.multiarray"}
+
+# Modules whose members can run code, touch files or the network, or import other code.
+_DANGEROUS_ROOTS = {
+    "os", "posix", "nt", "subprocess", "sys", "builtins", "__builtin__", "shutil", "socket",
+    "importlib", "runpy", "pickle", "_pickle", "marshal", "ctypes", "code", "codeop", "pty",
+    "webbrowser", "multiprocessing", "asyncio", "tempfile", "pathlib", "types", "functools",
+    "operator", "platform", "signal", "threading", "urllib", "http", "ftplib", "smtplib", "requests",
+    "pdb", "timeit", "trace", "inspect", "gc", "io", "shelve", "dbm", "sqlite3", "zipimport",
+}  # fmt: skip
+
+
+def _resolve_numpy(module: str, name: str) -> Any:
+    import numpy as np
+
+    if name == "ndarray":
+        return np.ndarray
+    if name == "dtype":
+        return np.dtype
+    for mod in ("numpy._core.multiarray", "numpy.core.multiarray"):
+        try:
+            return getattr(__import__(mod, fromlist=[name]), name)
+        except (ImportError, AttributeError):
+            continue
+    raise pickle.UnpicklingError(f"cannot resolve {module}.{name}")
+
+
+class Unpickler(pickle.Unpickler):
+    """Unpickler with the allow / refuse / neutralise policy of this module."""
+
+    #: Receives the qualified names replaced by inert stand-ins (see safe_pickle_module).
+    sink: set[str] | None = None
+
+    def find_class(self, module: str, name: str) -> Any:
+        if (module, name) in _SAFE:
+            return _SAFE[(module, name)]
+        if module == "torch" and isinstance(getattr(torch, name, None), torch.dtype):
+            return getattr(torch, name)
+        if module in _NUMPY_MODULES and name in _NUMPY_SAFE:
+            return _resolve_numpy(module, name)
+        if module.split(".")[0] in _DANGEROUS_ROOTS or name in {"eval", "exec", "system", "__import__", "popen"}:
+            raise UnsafeCheckpointError(f"refusing to load: the pickle calls {module}.{name}, which could run code")
+        qualname = f"{module}.{name}"
+        if self.sink is not None:
+            self.sink.add(qualname)
+        return type(name, (InertObject,), {"_pickled_name": qualname, "__module__": "semattnet.inert"})
+
+
+def safe_pickle_module() -> tuple[types.SimpleNamespace, set[str]]:
+    """A fresh pickle-module stand-in for ``torch.load`` and the set it fills with the names
+    of the classes it neutralised."""
+    neutralised: set[str] = set()
+    unpickler = type("Unpickler", (Unpickler,), {"sink": neutralised})
+
+    def load(file: Any, **kwargs: Any) -> Any:
+        return unpickler(file, **kwargs).load()
+
+    return types.SimpleNamespace(__name__="semattnet_safe_pickle", Unpickler=unpickler, load=load), neutralised

@@ -1,0 +1,275 @@
+"""Reading and writing weights: the authors' ``.pth.tar``, plain state dicts, safetensors.
+
+The authors' released checkpoints are torch pickles of a dict with ``model`` (the state dict),
+``epoch``, ``best_result`` (an object of their ``metrics.Result`` class), ``optimizer`` and
+``args`` (an ``argparse.Namespace``). :func:`load_checkpoint` reads them *without executing
+pickled code* (see :mod:`semattnet.weights._safe_pickle`): their classes become inert records and a
+checkpoint that names e.g. ``os.system`` is refused. :func:`load_weights` loads a state dict into
+a model and names every missing, unexpected or mis-shaped key.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import zipfile
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+
+from semattnet._errors import SemAttNetError
+from semattnet._utils.atomic import atomic_path
+from semattnet.models.config import SemAttNetConfig
+from semattnet.weights._safe_pickle import InertObject, UnsafeCheckpointError, safe_pickle_module
+
+__all__ = [
+    "Checkpoint",
+    "CheckpointError",
+    "StateDictMismatchError",
+    "UnsafeCheckpointError",
+    "config_from_state_dict",
+    "load_checkpoint",
+    "load_model",
+    "load_weights",
+    "save_safetensors",
+]
+
+
+class CheckpointError(SemAttNetError):
+    """A checkpoint file that cannot be read or holds no weights."""
+
+
+class StateDictMismatchError(SemAttNetError):
+    """Keys or shapes of a state dict do not match the model."""
+
+
+@dataclass
+class Checkpoint:
+    """Weights and whatever metadata the file carried.
+
+    Attributes:
+        path: the file read.
+        state_dict: parameter and buffer tensors by name (a ``module.`` prefix is removed).
+        format: ``"torch"`` (a pickled dict with a ``model``/``state_dict`` entry), ``"state_dict"``
+            (a pickled plain state dict) or ``"safetensors"``.
+        epoch: training epoch if recorded.
+        args: the training arguments (authors' ``argparse.Namespace``) as a dict, if recorded.
+        best_result: the authors' best validation result, as an inert record, if recorded.
+        config: our model config if the file records one.
+        extra: any other top-level entries (e.g. ``optimizer``).
+        neutralised: qualified names of pickled classes that were replaced by inert records.
+    """
+
+    path: Path
+    state_dict: dict[str, torch.Tensor]
+    format: str
+    epoch: int | None = None
+    args: dict[str, Any] | None = None
+    best_result: Any = None
+    config: SemAttNetConfig | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+    neutralised: set[str] = field(default_factory=set)
+
+
+def _strip_prefix(sd: Mapping[str, torch.Tensor], prefix: str = "module.") -> dict[str, torch.Tensor]:
+    if sd and all(k.startswith(prefix) for k in sd):
+        return {k[len(prefix) :]: v for k, v in sd.items()}
+    return dict(sd)
+
+
+def _config_from_metadata(raw: Any, path: Path) -> SemAttNetConfig | None:
+    if raw is None:
+        return None
+    try:
+        data = json.loads(raw) if isinstance(raw, str) else dict(raw)
+        if "kernel_sizes" in data:
+            data["kernel_sizes"] = tuple(data["kernel_sizes"])
+        return SemAttNetConfig(**data)
+    except (TypeError, ValueError) as exc:
+        raise CheckpointError(f"{path}: invalid model config in checkpoint: {exc}") from exc
+
+
+def _load_safetensors(path: Path) -> Checkpoint:
+    from safetensors import SafetensorError, safe_open
+
+    try:
+        with safe_open(str(path), framework="pt", device="cpu") as f:
+            meta = f.metadata() or {}
+            sd = {k: f.get_tensor(k) for k in f.keys()}
+    except (SafetensorError, OSError, ValueError) as exc:
+        raise CheckpointError(f"{path}: not a readable safetensors file ({exc})") from exc
+    epoch = meta.get("epoch")
+    return Checkpoint(
+        path=path,
+        state_dict=sd,
+        format="safetensors",
+        epoch=int(epoch) if epoch not in (None, "") else None,
+        args=json.loads(meta["args"]) if "args" in meta else None,
+        config=_config_from_metadata(meta.get("config"), path),
+        extra={k: v for k, v in meta.items() if k not in ("epoch", "args", "config")},
+    )
+
+
+def load_checkpoint(path: str | os.PathLike[str]) -> Checkpoint:
+    """Read weights from an authors' ``.pth.tar``, a saved state dict or a ``.safetensors`` file.
+
+    Never executes code from the file: see the module docstring. Tensors are loaded on CPU.
+
+    Raises:
+        CheckpointError: missing, truncated or corrupt file, or no state dict inside.
+        UnsafeCheckpointError: the pickle references a code-executing callable.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"{path}: no such checkpoint file")
+    with open(path, "rb") as f:
+        head = f.read(9)
+    if head[8:9] == b"{" and not zipfile.is_zipfile(path):
+        return _load_safetensors(path)  # an 8-byte header length, then the JSON header
+    module, neutralised = safe_pickle_module()
+    try:
+        obj = torch.load(path, map_location="cpu", pickle_module=module, weights_only=False)
+    except UnsafeCheckpointError as exc:
+        raise UnsafeCheckpointError(f"{path}: {exc}") from None
+    except (RuntimeError, pickle.UnpicklingError, EOFError, OSError, ValueError, KeyError, TypeError,
+            zipfile.BadZipFile) as exc:  # fmt: skip
+        raise CheckpointError(f"{path}: not a readable PyTorch checkpoint (truncated or corrupt?): {exc}") from exc
+    return _checkpoint_from_object(obj, path, neutralised)
+
+
+def _checkpoint_from_object(obj: Any, path: Path, neutralised: set[str]) -> Checkpoint:
+    if isinstance(obj, Mapping) and obj and all(isinstance(v, torch.Tensor) for v in obj.values()):
+        return Checkpoint(path=path, state_dict=_strip_prefix(obj), format="state_dict", neutralised=neutralised)
+    if not isinstance(obj, Mapping):
+        raise CheckpointError(f"{path}: expected a dict of tensors or a checkpoint dict, got {type(obj).__name__}")
+    key = next((k for k in ("model", "state_dict", "model_state") if isinstance(obj.get(k), Mapping)), None)
+    if key is None:
+        raise CheckpointError(f"{path}: no state dict found (looked for 'model', 'state_dict'); keys: {list(obj)}")
+    sd = obj[key]
+    bad = [k for k, v in sd.items() if not isinstance(v, torch.Tensor)]
+    if bad:
+        raise CheckpointError(f"{path}: entry {key!r} holds non-tensors, e.g. {bad[:3]}")
+    args = obj.get("args")
+    if args is not None and not isinstance(args, Mapping):
+        args = dict(vars(args)) if hasattr(args, "__dict__") else {"value": args}
+    epoch = obj.get("epoch")
+    return Checkpoint(
+        path=path,
+        state_dict=_strip_prefix(sd),
+        format="torch",
+        epoch=int(epoch) if isinstance(epoch, int) else None,
+        args=dict(args) if args is not None else None,
+        best_result=obj.get("best_result"),
+        config=_config_from_metadata(obj.get("config"), path),
+        extra={k: v for k, v in obj.items() if k not in (key, "epoch", "args", "best_result", "config")},
+        neutralised=neutralised,
+    )
+
+
+def load_weights(model: nn.Module, state_dict: Mapping[str, torch.Tensor] | Checkpoint, strict: bool = True) -> dict:
+    """Load ``state_dict`` into ``model``, reporting every mismatch by name.
+
+    Args:
+        model: the target.
+        state_dict: tensors by name, or a :class:`Checkpoint`.
+        strict: raise on any missing, unexpected or mis-shaped key (default). Otherwise load
+            the matching entries and return what was skipped.
+
+    Returns:
+        ``{"missing": [...], "unexpected": [...], "mismatched": [...]}``.
+
+    Raises:
+        StateDictMismatchError: with ``strict`` and any mismatch; the message names the keys.
+    """
+    source = state_dict.path if isinstance(state_dict, Checkpoint) else "state dict"
+    sd = _strip_prefix(state_dict.state_dict if isinstance(state_dict, Checkpoint) else state_dict)
+    own = model.state_dict()
+    missing = [k for k in own if k not in sd]
+    unexpected = [k for k in sd if k not in own]
+    mismatched = [
+        f"{k}: checkpoint {tuple(sd[k].shape)} vs model {tuple(own[k].shape)}"
+        for k in own
+        if k in sd and sd[k].shape != own[k].shape
+    ]
+    report = {"missing": missing, "unexpected": unexpected, "mismatched": mismatched}
+    if strict and (missing or unexpected or mismatched):
+        parts = []
+        for label, items in (("missing", missing), ("unexpected", unexpected), ("shape mismatch", mismatched)):
+            if items:
+                shown = ", ".join(items[:8]) + (f", ... ({len(items) - 8} more)" if len(items) > 8 else "")
+                parts.append(f"{len(items)} {label}: {shown}")
+        hint = ""
+        if missing and all(("backbone." + k) in own for k in sd):
+            hint = " (this is a backbone checkpoint: load it into model.backbone)"
+        raise StateDictMismatchError(f"{source} does not fit the model: " + "; ".join(parts) + hint)
+    skip = {m.split(":")[0] for m in mismatched}
+    model.load_state_dict({k: v for k, v in sd.items() if k in own and k not in skip}, strict=strict)
+    return report
+
+
+def config_from_state_dict(sd: Mapping[str, torch.Tensor]) -> SemAttNetConfig:
+    """Infer the architecture of a SemAttNet state dict (ours or the authors')."""
+    sd = _strip_prefix(sd)
+    refine = any(k.startswith("backbone.") for k in sd)
+    bb = {k.removeprefix("backbone."): v for k, v in sd.items() if not refine or k.startswith("backbone.")}
+    if "rgb_conv_init.0.weight" not in bb:
+        raise CheckpointError("not a SemAttNet state dict: no rgb_conv_init.0.weight")
+    base = bb["rgb_conv_init.0.weight"].shape[0]
+    branches = 3 if "segment_conv_init.0.weight" in bb else 2
+    if "cbam_192.ChannelGate.mlp.1.weight" in bb:
+        fusion = "sammafb"
+    else:
+        fusion = "add" if bb["depth_layer3.conv1.weight"].shape[1] == 2 * base else "concat"
+    kernel_sizes = tuple(
+        sorted(int(k.split(".")[0].removeprefix("iter_guide_layer")) for k in sd if k.endswith("generate.0.weight")
+               and not k.split(".")[0].endswith("_s2"))
+    )  # fmt: skip
+    cfg = SemAttNetConfig(branches=branches, fusion=fusion, refine=refine, width=base / 32)  # type: ignore[arg-type]
+    return cfg.replace(kernel_sizes=kernel_sizes) if kernel_sizes else cfg
+
+
+def load_model(path: str | os.PathLike[str], device: str | torch.device = "cpu", **overrides: Any) -> nn.Module:
+    """Build the model a checkpoint was made for and load its weights (strict), in eval mode.
+
+    ``overrides`` change config fields (e.g. ``refinement_mode="clean"``).
+    """
+    from semattnet.models.registry import build_model
+
+    ckpt = load_checkpoint(path)
+    cfg = ckpt.config or config_from_state_dict(ckpt.state_dict)
+    model = build_model(config=cfg.replace(**overrides) if overrides else cfg)
+    load_weights(model, ckpt)
+    return model.to(device).eval()
+
+
+def _json_default(o: Any) -> Any:
+    if isinstance(o, InertObject):
+        return {k: v for k, v in vars(o).items() if not k.startswith("_")}
+    return str(o)
+
+
+def save_safetensors(ckpt: Checkpoint | Mapping[str, torch.Tensor], path: str | os.PathLike[str]) -> Path:
+    """Write weights (and epoch/args/config metadata) as safetensors, atomically."""
+    from safetensors.torch import save_file
+
+    path = Path(path)
+    if isinstance(ckpt, Checkpoint):
+        sd, meta = ckpt.state_dict, {"source": ckpt.path.name}
+        if ckpt.epoch is not None:
+            meta["epoch"] = str(ckpt.epoch)
+        if ckpt.args is not None:
+            meta["args"] = json.dumps(ckpt.args, default=_json_default, sort_keys=True)
+        cfg = ckpt.config or config_from_state_dict(sd)
+    else:
+        sd, meta, cfg = dict(ckpt), {}, config_from_state_dict(ckpt)
+    meta["config"] = json.dumps(cfg.to_dict())
+    meta["format"] = "semattnet"
+    tensors = {k: v.detach().contiguous() for k, v in sd.items()}
+    with atomic_path(path) as tmp:
+        save_file(tensors, str(tmp), metadata=meta)
+    return path

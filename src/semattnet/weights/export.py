@@ -1,0 +1,79 @@
+"""Export a model to ONNX or TorchScript for deployment (fixed input size).
+
+Both trace the model with plain tensor ops (the propagation switches to its pad-and-slice form
+while tracing) after folding BatchNorm into the convolutions. Inputs are named ``rgb``,
+``semantic`` (three-branch models only) and ``sparse``; outputs carry the names of
+:class:`~semattnet.models.outputs.DepthCompletionOutput` fields (``refined_depth``, ``fused_depth``,
+..., for a backbone ``fused_depth`` and the branch outputs).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+from torch import nn
+
+from semattnet._utils.atomic import atomic_path
+from semattnet.models.bn_folding import fold_batchnorm
+
+__all__ = ["export_onnx", "export_torchscript", "output_names"]
+
+
+class _Flat(nn.Module):
+    """The model with positional inputs and a tuple of outputs (what exporters need)."""
+
+    def __init__(self, model: nn.Module, names: list[str], semantic: bool) -> None:
+        super().__init__()
+        self.model, self.names, self.semantic = model, names, semantic
+
+    def forward(self, *inputs: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        if self.semantic:
+            rgb, semantic, sparse = inputs
+        else:
+            (rgb, sparse), semantic = inputs, None
+        out = self.model(rgb=rgb, semantic=semantic, sparse=sparse).to_dict()
+        return tuple(out[n] for n in self.names)
+
+
+def _prepare(model: nn.Module, size: tuple[int, int]) -> tuple[_Flat, tuple[torch.Tensor, ...], list[str]]:
+    h, w = size
+    model = fold_batchnorm(model).cpu().float()
+    semantic = getattr(model, "config", None) is None or model.config.branches == 3
+    g = torch.Generator().manual_seed(0)
+    rgb = torch.rand(1, 3, h, w, generator=g) * 255
+    sparse = torch.rand(1, 1, h, w, generator=g) * 80 * (torch.rand(1, 1, h, w, generator=g) < 0.05)
+    example = (rgb, torch.rand(1, 3, h, w, generator=g) * 255, sparse) if semantic else (rgb, sparse)
+    with torch.inference_mode():
+        names = list(model(**dict(zip(_input_names(semantic), example, strict=True))).to_dict())
+    return _Flat(model, names, semantic).eval(), example, names
+
+
+def _input_names(semantic: bool) -> list[str]:
+    return ["rgb", "semantic", "sparse"] if semantic else ["rgb", "sparse"]
+
+
+def output_names(model: nn.Module, size: tuple[int, int] = (64, 96)) -> list[str]:
+    """Names of the exported outputs, in order."""
+    return _prepare(model, size)[2]
+
+
+def export_onnx(model: nn.Module, path: str | Path, size: tuple[int, int] = (352, 1216), opset: int = 17) -> Path:
+    """Write ``model`` as ONNX for (1, C, H, W) inputs of ``size``; returns the path."""
+    flat, example, names = _prepare(model, size)
+    path = Path(path)
+    with atomic_path(path, suffix=".onnx") as tmp, torch.no_grad():
+        torch.onnx.export(flat, example, str(tmp), input_names=_input_names(flat.semantic), output_names=names,
+                          opset_version=opset, dynamo=False)  # fmt: skip
+    return path
+
+
+def export_torchscript(model: nn.Module, path: str | Path, size: tuple[int, int] = (352, 1216)) -> Path:
+    """Write ``model`` as a traced TorchScript module (positional inputs, tuple of outputs)."""
+    flat, example, _ = _prepare(model, size)
+    path = Path(path)
+    with torch.no_grad():
+        traced = torch.jit.trace(flat, example, check_trace=False)
+    with atomic_path(path, suffix=".pt") as tmp:
+        traced.save(str(tmp))
+    return path
