@@ -17,8 +17,9 @@ PENet and SemAttNet reuse), over valid pixels p with error e = pred - gt:
   et al.'s monocular-depth "Sq Rel" divides by gt once (mean e^2 / gt, in metres); compare
   numbers across papers with care;
 * ``log10``: mean |log10 pred - log10 gt|;
-* ``silog``: sqrt(mean d^2 - (mean d)^2) * 100 with d = ln pred - ln gt. :class:`KittiMetrics` accumulates per-image values
-on any device and reduces across DDP ranks.
+* ``silog``: sqrt(mean d^2 - (mean d)^2) * 100 with d = ln pred - ln gt.
+
+:class:`KittiMetrics` accumulates per-image values on any device and reduces across DDP ranks.
 """
 
 from __future__ import annotations
@@ -118,7 +119,7 @@ class KittiMetrics:
         >>> import torch
         >>> gt = torch.full((1, 1, 4, 4), 10.0)          # (B, 1, H, W) metres, 0 = no ground truth
         >>> m = KittiMetrics()
-        >>> m.update(gt + 0.5, gt)                        # every pixel 0.5 m too far
+        >>> _ = m.update(gt + 0.5, gt)                    # every pixel 0.5 m too far
         >>> round(m.compute()["rmse_mm"], 3)              # mean over images, leaderboard units
         500.0
 

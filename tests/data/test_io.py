@@ -9,8 +9,8 @@ import pytest
 from PIL import Image
 
 from semattnet.data.io import DataError, encode_depth, read_depth, read_image, read_intrinsics, write_depth, write_image
+from tests._helpers import SAMPLE
 
-SAMPLE = Path(__file__).parent / "data" / "kitti_sample"
 VELO = SAMPLE / "data_depth_velodyne/train/2011_09_26_drive_0035_sync/proj_depth/velodyne_raw/image_02/0000000005.png"
 
 
@@ -80,6 +80,7 @@ def test_random_bytes_never_crash(tmp_path: Path) -> None:
     """Fuzz: garbage and mutated PNGs raise DataError (never another exception)."""
     rng = np.random.default_rng(0)
     good = VELO.read_bytes()
+    refused: list[int] = []
     for i in range(40):
         path = tmp_path / f"f{i}.png"
         if i % 2:
@@ -91,9 +92,14 @@ def test_random_bytes_never_crash(tmp_path: Path) -> None:
             path.write_bytes(rng.bytes(int(rng.integers(0, 500))))
         for reader in (read_depth, read_image):
             try:
-                reader(path)
-            except DataError:
-                pass
+                out = reader(path)
+            except DataError as exc:
+                assert str(path) in str(exc)  # the message names the file
+                refused.append(i)
+            else:  # a mutation that kept the PNG valid must still decode to the documented type
+                assert isinstance(out, np.ndarray) and out.dtype in (np.float32, np.uint8) and out.ndim in (2, 3)
+    # pure garbage (even i) is always refused, by both readers
+    assert set(range(0, 40, 2)) <= set(refused) and refused.count(0) == 2
 
 
 def test_intrinsics(tmp_path: Path) -> None:

@@ -20,8 +20,8 @@ from semattnet.evaluation.submission import SubmissionError, write_submission_fi
 from semattnet.inference.completer import DepthCompleter
 from semattnet.viz.depth import error_map
 from semattnet.weights.checkpoint import save_safetensors
+from tests._helpers import SAMPLE
 
-SAMPLE = Path(__file__).parent / "data" / "kitti_sample"
 SEL = "data_depth_selection/val_selection_cropped"
 
 

@@ -7,9 +7,8 @@ import pytest
 import torch
 
 import semattnet
+from tests._helpers import SPEC
 from tests._reference_weights import fill_reference_weights
-
-from .conftest import SPEC
 
 REFERENCE = SPEC / "reference" / "authors_seed0_b2_64x256.npz"
 BACKBONE_OUTPUTS = {"color_depth": "rgb_depth", "semantic_depth": "semantic_depth", "guided_depth": "d_depth",

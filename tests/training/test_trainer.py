@@ -20,8 +20,7 @@ from semattnet.models.registry import build_model
 from semattnet.training.config import TrainConfig
 from semattnet.training.trainer import Trainer, train
 from semattnet.weights.checkpoint import CheckpointError, load_checkpoint
-
-from .conftest import random_inputs
+from tests._helpers import random_inputs
 
 
 @pytest.fixture(scope="module")

@@ -14,8 +14,7 @@ from semattnet.cli import main
 from semattnet.data.io import read_depth
 from semattnet.data.synthetic.scenes import make_frame
 from semattnet.evaluation.metrics import KittiMetrics
-
-SAMPLE = Path(__file__).parent / "data" / "kitti_sample"
+from tests._helpers import SAMPLE
 
 
 def test_beats_the_sparse_input_on_synthetic_scenes() -> None:

@@ -22,8 +22,7 @@ from semattnet.weights.checkpoint import (
     load_weights,
     save_safetensors,
 )
-
-from .conftest import random_inputs
+from tests._helpers import random_inputs
 
 
 def _authors_checkpoint(path: Path, state_dict: dict) -> Path:

@@ -13,8 +13,8 @@ from semattnet.data.io import DataError, read_image, write_image
 from semattnet.data.kitti import KittiDepthCompletion
 from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.data.transforms import EvalTransform, TrainTransform
+from tests._helpers import SAMPLE
 
-SAMPLE = Path(__file__).parent / "data" / "kitti_sample"
 DRIVE = "2011_09_26_drive_0035_sync"
 
 

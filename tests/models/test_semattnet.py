@@ -7,8 +7,7 @@ import torch
 
 import semattnet
 from semattnet import SemAttNetConfig, build_model, list_models
-
-from .conftest import random_inputs
+from tests._helpers import random_inputs
 
 SMALL = 0.125
 

@@ -1,0 +1,41 @@
+"""The public API stays importable under its documented names (README, issue contracts)."""
+
+from __future__ import annotations
+
+import importlib
+
+import pytest
+
+import semattnet
+from semattnet import SemAttNetError
+
+
+def test_top_level_names() -> None:
+    for name in ("build_model", "list_models", "load_checkpoint", "load_model", "load_weights", "pad_to_multiple",
+                 "crop_padding", "DepthCompleter", "SemAttNetConfig", "DepthCompletionOutput", "palette"):  # fmt: skip
+        assert hasattr(semattnet, name), name
+    assert set(semattnet.__all__) <= set(dir(semattnet))
+
+
+def test_palette_alias() -> None:
+    from semattnet.palette import PALETTE, colors_to_ids
+
+    assert PALETTE.shape == (19, 3) and callable(colors_to_ids)
+    assert importlib.import_module("semattnet.palette") is importlib.import_module("semattnet.data.palette")
+
+
+@pytest.mark.parametrize(
+    "path",
+    [
+        "semattnet.data.io.DataError",
+        "semattnet.data.palette.UnknownColorError",
+        "semattnet.weights.CheckpointError",
+        "semattnet.weights.StateDictMismatchError",
+        "semattnet.weights.UnsafeCheckpointError",
+        "semattnet.evaluation.SubmissionError",
+    ],
+)
+def test_errors_share_one_root(path: str) -> None:
+    module, name = path.rsplit(".", 1)
+    cls = getattr(importlib.import_module(module), name)
+    assert issubclass(cls, SemAttNetError) and issubclass(cls, ValueError)
