@@ -7,9 +7,11 @@ Projection of a point ``p`` (LiDAR frame) into a camera with intrinsics ``K`` (p
 
 Pixel convention (KITTI's): pixel centres sit at integer coordinates, so pixel (row i, column j) covers
 ``[j - 0.5, j + 0.5) x [i - 0.5, i + 0.5)`` and a point lands in column ``floor(u + 0.5)``, row ``floor(v + 0.5)``
-(rounding half up). On the bundled KITTI frame this rounding puts 40 % of the official ``velodyne_raw`` points
-on exactly our pixel with the same depth (0.3 m), flooring only 24 %; the rest differ because KITTI's maps
-are ego-motion compensated (see :mod:`semattnet.geometry.motion`; with it, 93 % match to 1 cm).
+(rounding half up). Measured on the bundled KITTI frame against the official ``velodyne_raw`` map (fraction
+of its points with one of ours within 0/1/2 px, Chebyshev, and 0.3 m; camera 02, camera 03 alike to 1 %):
+rounding 0.40/0.90/0.96, flooring 0.24/0.88/0.97; point counts within 0.1 %. The rest differ because
+KITTI's maps are ego-motion compensated: after :func:`semattnet.geometry.deskew_scan`, rounding puts 93 %
+of them on exactly our pixel with the same depth to 1 cm.
 
 Back-projection of pixel (u, v) with depth z: ``x = (u - cx) z / fx``, ``y = (v - cy) z / fy``.
 """
