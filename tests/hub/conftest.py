@@ -114,6 +114,12 @@ def cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     monkeypatch.delenv("SEMATTNET_OFFLINE", raising=False)
     monkeypatch.delenv("HF_HUB_OFFLINE", raising=False)
     monkeypatch.setenv("HF_HUB_DISABLE_PROGRESS_BARS", "1")
+    try:  # huggingface_hub reads HF_HUB_OFFLINE once, at import: make sure it sees "online"
+        from huggingface_hub import constants
+    except ImportError:
+        pass
+    else:
+        monkeypatch.setattr(constants, "HF_HUB_OFFLINE", False)
     return root
 
 
@@ -130,9 +136,9 @@ def cache_files(root: Path) -> list[str]:
 
 @pytest.fixture(scope="session")
 def tiny_model() -> torch.nn.Module:
-    """The smallest full model the registry builds (width 0.125, ~5.7 M parameters)."""
+    """The smallest full model the registry builds (width 0.125, ~5.7 M parameters, 2 + 2 propagation steps)."""
     torch.manual_seed(1)
-    model = semattnet.build_model("semattnet", width=0.125).eval()
+    model = semattnet.build_model("semattnet", width=0.125, iterations=2).eval()
     with torch.no_grad():  # non-trivial BN statistics, so that a wrong load would show in the outputs
         for m in model.modules():
             if isinstance(m, torch.nn.BatchNorm2d):
@@ -144,12 +150,18 @@ def tiny_model() -> torch.nn.Module:
 @pytest.fixture(scope="session")
 def tiny_inputs() -> dict[str, torch.Tensor]:
     g = torch.Generator().manual_seed(0)
-    sparse = (torch.rand(1, 1, 32, 64, generator=g) * 60 + 1) * (torch.rand(1, 1, 32, 64, generator=g) < 0.1)
+    sparse = (torch.rand(1, 1, 32, 32, generator=g) * 60 + 1) * (torch.rand(1, 1, 32, 32, generator=g) < 0.1)
     return {
-        "rgb": torch.rand(1, 3, 32, 64, generator=g) * 255,
-        "semantic": torch.rand(1, 3, 32, 64, generator=g) * 255,
+        "rgb": torch.rand(1, 3, 32, 32, generator=g) * 255,
+        "semantic": torch.rand(1, 3, 32, 32, generator=g) * 255,
         "sparse": sparse,
     }
+
+
+@pytest.fixture(scope="session")
+def expected(tiny_model, tiny_inputs) -> torch.Tensor:
+    """The tiny model's prediction on the tiny inputs."""
+    return predict(tiny_model, tiny_inputs)
 
 
 def predict(model: torch.nn.Module, inputs: dict[str, torch.Tensor]) -> torch.Tensor:
