@@ -6,7 +6,8 @@ Which library moves the bytes:
   download is kept as ``<cache>/<dir>/.partial/<file>.part`` and continued with an HTTP ``Range``
   request (by the next call, or within the same call when the connection drops: ``http_get``
   retries with ``Range`` on its own); a server that ignores ``Range`` (``200`` instead of ``206``)
-  makes it start over cleanly, and a body shorter than the announced size is an error. Pooch was
+  makes it start over cleanly, and a body shorter than the announced size is an error. It writes
+  in chunks of 10 MiB, so a dropped connection loses at most the chunk in flight. Pooch was
   checked first: its ``HTTPDownloader`` (1.9) always rewrites the file from byte 0 and does not look
   at ``206`` vs ``200``, so it cannot resume. Without ``huggingface_hub`` installed, pooch's
   ``HTTPDownloader`` is used instead (whole-file downloads, no resume).
@@ -25,7 +26,8 @@ that file must match it (trust on first use). A cached file is re-hashed wheneve
 modification time differs from the values recorded when it was last verified.
 
 ``SEMATTNET_OFFLINE=1`` or ``HF_HUB_OFFLINE=1``: nothing touches the network; a cache hit works,
-a miss raises :class:`OfflineError` naming the file and where to put it.
+a miss raises :class:`OfflineError` naming the file and where to put it. (Both are read at each
+call; huggingface_hub itself reads ``HF_HUB_OFFLINE`` once, when it is imported.)
 
 Cache layout (``$SEMATTNET_CACHE``, default ``platformdirs.user_cache_dir("semattnet")``)::
 
