@@ -2,7 +2,7 @@
 
 ``pretrained`` is False (fresh weights; keyword arguments are config fields such as
 ``width=0.25``), True (the released weights, ``semattnet-kitti``) or a weights name, local path or
-URL (http(s)://, file://, gdrive://<id>, hf://owner/repo). See ``semattnet.hub.from_pretrained``.
+URL (http(s)://, file://, gdrive://<id>, hf://owner/repo). See ``semattnet.weights.from_pretrained``.
 """
 
 import os
@@ -21,13 +21,13 @@ def semattnet(pretrained=False, **kwargs):
 
     ``pretrained=True`` loads the authors' KITTI weights (Google Drive; needs gdown).
     """
-    from semattnet.hub import hub_model
+    from semattnet.weights import hub_model
 
     return hub_model("semattnet", pretrained, **kwargs)
 
 
 def semattnet_backbone(pretrained=False, **kwargs):
     """The three-branch backbone alone (paper Table 2, row f). The authors released no weights for it."""
-    from semattnet.hub import hub_model
+    from semattnet.weights import hub_model
 
     return hub_model("semattnet_backbone", pretrained, **kwargs)

@@ -17,8 +17,9 @@ PENet and SemAttNet reuse), over valid pixels p with error e = pred - gt:
   et al.'s monocular-depth "Sq Rel" divides by gt once (mean e^2 / gt, in metres); compare
   numbers across papers with care;
 * ``log10``: mean |log10 pred - log10 gt|;
-* ``silog``: sqrt(mean d^2 - (mean d)^2) * 100 with d = ln pred - ln gt. :class:`KittiMetrics` accumulates per-image values
-on any device and reduces across DDP ranks.
+* ``silog``: sqrt(mean d^2 - (mean d)^2) * 100 with d = ln pred - ln gt.
+
+:class:`KittiMetrics` accumulates per-image values on any device and reduces across DDP ranks.
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from semattnet._atomic import atomic_path
+from semattnet._utils.atomic import atomic_path
 from semattnet.data.io import DataError
 
 from .projection import PointCloud

@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 import torch
 
-from semattnet.checkpoint import CheckpointError
-from semattnet.hub import save_pretrained
+from semattnet.weights import save_pretrained
+from semattnet.weights.checkpoint import CheckpointError
 
 from .conftest import Server, predict
 
@@ -53,7 +53,7 @@ def test_backbone_has_no_default_weights() -> None:
 
 
 def test_default_weights_offline_name_the_authors_file(cache: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from semattnet.hub import OfflineError
+    from semattnet.weights import OfflineError
 
     monkeypatch.setenv("SEMATTNET_OFFLINE", "1")
     with pytest.raises(OfflineError) as err:

@@ -8,9 +8,9 @@ from urllib.parse import urlparse
 import pytest
 import torch
 
-from semattnet.hub import FORMATS, PretrainedWeights, UnknownWeightsError, get_weights, list_pretrained
-from semattnet.hub.pretrained import DEFAULT_WEIGHTS, default_weights, register_weights
-from semattnet.registry import MODELS
+from semattnet.models.registry import MODELS
+from semattnet.weights import FORMATS, PretrainedWeights, UnknownWeightsError, get_weights, list_pretrained
+from semattnet.weights.pretrained import DEFAULT_WEIGHTS, default_weights, register_weights
 
 UNITS = ("_mm", "_m", "_per_km", "_pct")
 INPUT_KEYS = {"rgb", "semantic", "sparse", "size_multiple"}

@@ -34,7 +34,7 @@ Cache layout (``$SEMATTNET_CACHE``, default ``platformdirs.user_cache_dir("semat
     pins.json                              sha256, size, mtime and origin of every verified file
     <weights name>/<file name>             registry records
     urls/<sha256(url)[:16]>/<file name>    any other URL
-    converted/<source sha256>.safetensors  pickles converted once (see semattnet.hub.api)
+    converted/<source sha256>.safetensors  pickles converted once (see semattnet.weights.api)
     huggingface/                           hf:// downloads when the cache is set explicitly
     .locks/                                inter-process locks
 """
@@ -57,8 +57,8 @@ from typing import Any
 from urllib.parse import unquote, urlparse
 from urllib.request import url2pathname
 
-from ._compat import atomic_path
-from .pretrained import PretrainedWeights, get_weights
+from semattnet._utils.atomic import atomic_path
+from semattnet.weights.pretrained import PretrainedWeights, get_weights
 
 __all__ = [
     "ENV_CACHE",

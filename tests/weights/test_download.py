@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from semattnet.hub import (
+from semattnet.weights import (
     ChecksumError,
     DownloadError,
     OfflineError,

@@ -14,15 +14,15 @@ import pytest
 import torch
 
 import semattnet
-from semattnet.checkpoint import CheckpointError, StateDictMismatchError, UnsafeCheckpointError
-from semattnet.hub import (
+from semattnet.weights import (
     OfflineError,
     PretrainedWeights,
     from_pretrained,
     read_pins,
     save_pretrained,
 )
-from semattnet.hub import api as hub_api
+from semattnet.weights import hub as hub_api
+from semattnet.weights.checkpoint import CheckpointError, StateDictMismatchError, UnsafeCheckpointError
 
 from .conftest import Server, cache_files, predict
 
@@ -117,7 +117,7 @@ def test_push_to_hub_uploads_a_loadable_folder(tmp_path: Path, monkeypatch, tiny
             return "commit-info"
 
     monkeypatch.setattr(huggingface_hub, "HfApi", FakeApi)
-    out = semattnet.hub.push_to_hub(tiny_model, "me/tiny", private=True, token="t", commit_message="m")
+    out = semattnet.weights.push_to_hub(tiny_model, "me/tiny", private=True, token="t", commit_message="m")
     assert out == "commit-info"
     assert calls == [("init", "t"), ("create_repo", "me/tiny", True, True), ("upload_folder", "me/tiny", "m")]
     assert torch.equal(predict(from_pretrained(uploaded), tiny_inputs), expected)

@@ -3,7 +3,7 @@
 Like torchvision's ``Weights`` enums and timm's pretrained configs, every record says what the
 weights are (architecture and config), where to get them (primary URL and mirrors), how to check
 them (sha256, size), under which terms (licence), what the paper reports for them, and what
-input they expect. :func:`semattnet.hub.from_pretrained` takes a record's name.
+input they expect. :func:`semattnet.weights.from_pretrained` takes a record's name.
 
 URL forms: ``https://...``, ``http://...``, ``file:///...``, ``gdrive://<file id>`` (Google Drive,
 downloaded with gdown) and ``hf://owner/repo[@revision][/file]`` (Hugging Face Hub).
@@ -19,7 +19,8 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Literal
 
-from ._compat import MODELS, SemAttNetConfig, build_model
+from semattnet.models.config import SemAttNetConfig
+from semattnet.models.registry import MODELS, build_model
 
 __all__ = [
     "DEFAULT_WEIGHTS",
@@ -35,7 +36,7 @@ __all__ = [
 #: File formats a record may name. ``authors-pth``: the authors' ``.pth.tar`` pickle (read with the
 #: safe unpickler, converted once to safetensors in the cache); ``torch``: a pickled state dict or
 #: checkpoint dict of this library; ``safetensors``: one ``.safetensors`` file; ``hf-folder``: a
-#: folder written by :func:`semattnet.hub.save_pretrained` (``config.json`` + ``model.safetensors``).
+#: folder written by :func:`semattnet.weights.save_pretrained` (``config.json`` + ``model.safetensors``).
 FORMATS = ("authors-pth", "torch", "safetensors", "hf-folder")
 WeightsFormat = Literal["authors-pth", "torch", "safetensors", "hf-folder"]
 
@@ -92,7 +93,7 @@ class PretrainedWeights:
         file_name: name of the file in the cache.
         format: one of :data:`FORMATS`.
         sha256: hex digest of the file, or None when nobody published one (then the first download is
-            pinned, see :mod:`semattnet.hub.download`).
+            pinned, see :mod:`semattnet.weights.download`).
         size_bytes: exact file size if known, else None.
         num_params: number of parameters of the model the weights fit.
         license: the terms, in words.
@@ -171,7 +172,7 @@ def register_weights(weights: PretrainedWeights, *, overwrite: bool = False) -> 
 
 
 def list_pretrained() -> list[str]:
-    """Names accepted by :func:`get_weights` and :func:`semattnet.hub.from_pretrained`."""
+    """Names accepted by :func:`get_weights` and :func:`semattnet.weights.from_pretrained`."""
     return list(_REGISTRY)
 
 

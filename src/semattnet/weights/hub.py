@@ -23,21 +23,20 @@ from typing import Any
 import torch
 from torch import nn
 
-from ._compat import (
-    MODELS,
+from semattnet._utils.atomic import atomic_path
+from semattnet._utils.version import library_version
+from semattnet.models.config import SemAttNetConfig
+from semattnet.models.registry import MODELS, build_model
+from semattnet.weights.checkpoint import (
     Checkpoint,
     CheckpointError,
-    SemAttNetConfig,
     UnsafeCheckpointError,
-    atomic_path,
-    build_model,
     config_from_state_dict,
-    library_version,
     load_checkpoint,
     load_weights,
     save_safetensors,
 )
-from .download import (
+from semattnet.weights.download import (
     OfflineError,
     _fetch_target,
     _key,
@@ -53,7 +52,7 @@ from .download import (
     sha256_file,
     verify_cached,
 )
-from .pretrained import PretrainedWeights, default_weights, get_weights, list_pretrained
+from semattnet.weights.pretrained import PretrainedWeights, default_weights, get_weights, list_pretrained
 
 __all__ = ["CONFIG_NAME", "WEIGHTS_NAME", "from_pretrained", "hub_model", "push_to_hub", "save_pretrained"]
 
@@ -92,8 +91,8 @@ def from_pretrained(
     Args:
         name_or_path_or_url: one of
 
-            * a registry name (:func:`~semattnet.hub.list_pretrained`, e.g. ``"semattnet-kitti"``) or
-              a :class:`~semattnet.hub.PretrainedWeights` record;
+            * a registry name (:func:`~semattnet.weights.list_pretrained`, e.g. ``"semattnet-kitti"``) or
+              a :class:`~semattnet.weights.PretrainedWeights` record;
             * a local file: the authors' ``.pth.tar``, a torch checkpoint or state dict of this
               library, or ``.safetensors``;
             * a local folder written by :func:`save_pretrained` (``config.json`` + ``model.safetensors``);
@@ -101,7 +100,7 @@ def from_pretrained(
               ``hf://owner/repo[@revision]`` (a saved folder on the Hugging Face Hub) /
               ``hf://owner/repo[@revision]/file``.
         sha256: expected sha256 of the downloaded file (for ``hf://owner/repo``: of its
-            ``model.safetensors``); see :func:`~semattnet.hub.fetch` for pinning.
+            ``model.safetensors``); see :func:`~semattnet.weights.fetch` for pinning.
         cache_dir: cache root (default ``$SEMATTNET_CACHE``, else the user cache folder).
         map_location: device to put the model on (default CPU).
         progress: show download progress.
@@ -114,7 +113,7 @@ def from_pretrained(
     Raises:
         UnsafeCheckpointError: a pickle that would run code (it is removed from the cache).
         CheckpointError: not a readable checkpoint, or weights that do not fit.
-        semattnet.hub.DownloadError: see :func:`~semattnet.hub.fetch`.
+        semattnet.weights.DownloadError: see :func:`~semattnet.weights.fetch`.
     """
     src = name_or_path_or_url
     device = map_location if map_location is not None else "cpu"
@@ -276,8 +275,8 @@ def _model_card(arch: str, cfg: SemAttNetConfig, n_params: int, weights: Pretrai
         "## Use",
         "",
         "```python",
-        "import semattnet.hub",
-        'model = semattnet.hub.from_pretrained("hf://<owner>/<repo>")  # or this folder\'s path',
+        "import semattnet.weights",
+        'model = semattnet.weights.from_pretrained("hf://<owner>/<repo>")  # or this folder\'s path',
         "out = model(rgb, semantic, sparse).depth",
         "```",
         "",
