@@ -21,7 +21,16 @@ from semattnet.models import (
     build_model,
     list_models,
 )
-from semattnet.weights import load_checkpoint, load_model, load_weights
+from semattnet.weights import (
+    from_pretrained,
+    get_weights,
+    list_pretrained,
+    load_checkpoint,
+    load_model,
+    load_weights,
+    push_to_hub,
+    save_pretrained,
+)
 
 __version__ = "0.1.0"
 
@@ -39,10 +48,15 @@ __all__ = [
     "__version__",
     "build_model",
     "crop_padding",
+    "from_pretrained",
+    "get_weights",
     "list_models",
+    "list_pretrained",
     "load_checkpoint",
     "load_model",
     "load_weights",
     "pad_to_multiple",
     "palette",
+    "push_to_hub",
+    "save_pretrained",
 ]

@@ -1,5 +1,15 @@
-"""Weights on disk: reading checkpoints without running their code, loading into models,
-conversion to safetensors, and ONNX / TorchScript export."""
+"""Weights: reading checkpoints without running their code, loading into models, conversion to
+safetensors, ONNX / TorchScript export, the released-weights registry and a verified download cache.
+
+>>> from semattnet import weights
+>>> weights.list_pretrained()
+['semattnet-kitti']
+>>> weights.get_weights("semattnet-kitti").paper_metrics["kitti/test"]["rmse_mm"]
+709.41
+
+Downloads need the ``hub`` extra (``pip install 'semattnet[hub]'``: pooch, huggingface_hub, gdown);
+local files and folders need nothing more.
+"""
 
 from semattnet.weights.checkpoint import (
     Checkpoint,
@@ -12,15 +22,60 @@ from semattnet.weights.checkpoint import (
     load_weights,
     save_safetensors,
 )
+from semattnet.weights.download import (
+    ENV_CACHE,
+    ENV_OFFLINE,
+    ChecksumError,
+    DownloadError,
+    OfflineError,
+    fetch,
+    get_cache_dir,
+    is_offline,
+    read_pins,
+    sha256_file,
+)
+from semattnet.weights.hub import CONFIG_NAME, WEIGHTS_NAME, from_pretrained, hub_model, push_to_hub, save_pretrained
+from semattnet.weights.pretrained import (
+    FORMATS,
+    PretrainedWeights,
+    UnknownWeightsError,
+    default_weights,
+    get_weights,
+    list_pretrained,
+    register_weights,
+)
 
 __all__ = [
+    "CONFIG_NAME",
+    "ENV_CACHE",
+    "ENV_OFFLINE",
+    "FORMATS",
+    "WEIGHTS_NAME",
     "Checkpoint",
     "CheckpointError",
+    "ChecksumError",
+    "DownloadError",
+    "OfflineError",
+    "PretrainedWeights",
     "StateDictMismatchError",
+    "UnknownWeightsError",
     "UnsafeCheckpointError",
     "config_from_state_dict",
+    "default_weights",
+    "fetch",
+    "from_pretrained",
+    "get_cache_dir",
+    "get_weights",
+    "hub_model",
+    "is_offline",
+    "list_pretrained",
     "load_checkpoint",
     "load_model",
     "load_weights",
+    "push_to_hub",
+    "read_pins",
+    "register_weights",
+    "save_pretrained",
     "save_safetensors",
+    "sha256_file",
 ]

@@ -1,0 +1,50 @@
+"""Geometry for depth completion: calibration, rigid transforms, LiDAR projection, point clouds, sparsity.
+
+Conventions: ``T_a_b`` is a 4x4 column-vector transform from frame ``b`` to frame ``a``
+(``p_cam = T_cam_lidar @ p_lidar``); ``K`` 3x3 intrinsics in pixels; ``P`` 3x4 projection; ``uv`` (N, 2)
+pixels with u = column, v = row, pixel centres at integer coordinates; ``xyz`` (N, 3) metres.
+Frames: ``lidar``, ``cam0``, ``rect`` (rectified cam0), ``cam2``/``cam3`` (rectified colour cameras).
+"""
+
+from .calibration import (
+    CameraCalibration,
+    RigCalibration,
+    read_cam_to_cam,
+    read_kitti_calibration,
+    read_rig_json,
+    read_velo_to_cam,
+)
+from .motion import VehicleMotion, deskew_scan, read_oxts_motion
+from .pointcloud_io import read_points, write_ply
+from .projection import PointCloud, depth_to_points, points_to_pixels, project_points, select_pixels
+from .sparsify import beam_ids, elevation_deg, keep_beams, keep_random, keep_row_bands
+from .transforms import check_rigid, check_rotation, invert_T, make_T, transform_points
+
+__all__ = [
+    "CameraCalibration",
+    "PointCloud",
+    "RigCalibration",
+    "VehicleMotion",
+    "beam_ids",
+    "check_rigid",
+    "check_rotation",
+    "depth_to_points",
+    "deskew_scan",
+    "elevation_deg",
+    "invert_T",
+    "keep_beams",
+    "keep_random",
+    "keep_row_bands",
+    "make_T",
+    "points_to_pixels",
+    "project_points",
+    "read_cam_to_cam",
+    "read_kitti_calibration",
+    "read_oxts_motion",
+    "read_points",
+    "read_rig_json",
+    "read_velo_to_cam",
+    "select_pixels",
+    "transform_points",
+    "write_ply",
+]

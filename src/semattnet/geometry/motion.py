@@ -1,0 +1,80 @@
+"""Ego-motion compensation ("deskewing") of a spinning-LiDAR scan.
+
+A Velodyne sweep takes one revolution (~0.1 s), while the car moves; KITTI triggers the cameras when the
+sensor faces forward (azimuth 0). KITTI's official ``velodyne_raw`` depth maps are compensated for this
+motion: on the bundled frame, deskewing with the OXTS velocity puts 93 % of their points on exactly our
+pixel with the same depth to 1 cm, against 13 % without it.
+
+Model (fitted on that frame: the sensor spins clockwise seen from above, i.e. towards negative azimuth):
+a point at azimuth ``phi = atan2(y, x)`` (radians, counter-clockwise from forward) was measured at
+``dt = -phi / (2 pi) * scan_period`` seconds relative to the forward-facing instant. With the vehicle's
+velocity ``v`` (m/s, LiDAR axes: x forward, y left, z up) and yaw rate ``w`` (rad/s) taken constant, the
+point in the LiDAR frame at the forward-facing instant is ``p0 = Rz(w dt) p + v dt``.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from semattnet.data.io import DataError
+
+__all__ = ["VehicleMotion", "deskew_scan", "read_oxts_motion"]
+
+
+@dataclass(frozen=True)
+class VehicleMotion:
+    """Velocity (3,) m/s as (forward, left, up) and yaw rate rad/s (counter-clockwise seen from above)."""
+
+    velocity: np.ndarray
+    yaw_rate: float
+
+
+def read_oxts_motion(path: str | os.PathLike[str]) -> VehicleMotion:
+    """Velocity and yaw rate from one KITTI raw OXTS packet (``oxts/data/NNNNNNNNNN.txt``, 30 numbers).
+
+    Uses ``vf, vl, vu`` (fields 9-11) and ``wu`` (field 23, rate around the upward axis). The IMU and the
+    Velodyne axes are nearly aligned in KITTI (both x forward, y left, z up), so these serve in the LiDAR frame.
+
+    Raises:
+        DataError: missing file, fewer than 23 numbers, or malformed numbers.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: OXTS file not found")
+    try:
+        vals = [float(v) for v in path.read_text().split()]
+    except ValueError as exc:
+        raise DataError(f"{path}: malformed numbers: {exc}") from None
+    if len(vals) < 23:
+        raise DataError(f"{path}: expected 30 OXTS fields, found {len(vals)}")
+    return VehicleMotion(np.array(vals[8:11], dtype=np.float64), float(vals[22]))
+
+
+def deskew_scan(
+    points: np.ndarray, velocity: np.ndarray, yaw_rate: float = 0.0, scan_period: float = 0.1
+) -> np.ndarray:
+    """Move every point to where it was at the forward-facing instant (see the module doc for the model).
+
+    Args:
+        points: (N, 3|4) LiDAR-frame points, metres (extra columns are kept unchanged).
+        velocity: (3,) vehicle velocity (forward, left, up), m/s. yaw_rate: rad/s.
+        scan_period: seconds per revolution (KITTI: ``timestamps_end - timestamps_start`` of the frame, ~0.103 s).
+
+    Returns:
+        (N, 3|4) compensated points, same dtype as ``points``.
+    """
+    pts = np.asarray(points)
+    xyz = pts[:, :3].astype(np.float64)
+    dt = -np.arctan2(xyz[:, 1], xyz[:, 0]) / (2 * np.pi) * float(scan_period)
+    a = float(yaw_rate) * dt
+    c, s = np.cos(a), np.sin(a)
+    out = pts.copy()
+    out[:, 0] = c * xyz[:, 0] - s * xyz[:, 1]
+    out[:, 1] = s * xyz[:, 0] + c * xyz[:, 1]
+    out[:, 2] = xyz[:, 2]
+    out[:, :3] += np.asarray(velocity, dtype=np.float64).reshape(1, 3) * dt[:, None]
+    return out

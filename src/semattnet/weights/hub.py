@@ -1,0 +1,379 @@
+"""``from_pretrained`` / ``save_pretrained`` / ``push_to_hub``: a model from a name, file, folder or URL.
+
+Every file is read through :func:`semattnet.checkpoint.load_checkpoint`, which never runs pickled
+code. A pickle that was downloaded (the authors' ``.pth.tar`` or a torch checkpoint) is converted
+once to ``<cache>/converted/<sha256 of the pickle>.safetensors``; later loads read that file.
+
+A saved folder (``save_pretrained``, and what ``push_to_hub`` uploads) holds:
+
+* ``config.json``: the :class:`~semattnet.SemAttNetConfig` fields plus ``arch`` (the registry
+  model name), ``library_name`` and ``library_version``;
+* ``model.safetensors``: the state dict (the config is also in its metadata);
+* ``README.md``: a short model card.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+
+from semattnet._utils.atomic import atomic_path
+from semattnet._utils.version import library_version
+from semattnet.models.config import SemAttNetConfig
+from semattnet.models.registry import MODELS, build_model
+from semattnet.weights.checkpoint import (
+    Checkpoint,
+    CheckpointError,
+    UnsafeCheckpointError,
+    config_from_state_dict,
+    load_checkpoint,
+    load_weights,
+    save_safetensors,
+)
+from semattnet.weights.download import (
+    OfflineError,
+    _fetch_target,
+    _key,
+    _lock,
+    _record,
+    _remove_empty_dirs,
+    _scheme,
+    _target,
+    _update_pins,
+    fetch_hf,
+    get_cache_dir,
+    is_offline,
+    sha256_file,
+    verify_cached,
+)
+from semattnet.weights.pretrained import PretrainedWeights, default_weights, get_weights, list_pretrained
+
+__all__ = ["CONFIG_NAME", "WEIGHTS_NAME", "from_pretrained", "hub_model", "push_to_hub", "save_pretrained"]
+
+CONFIG_NAME = "config.json"
+WEIGHTS_NAME = "model.safetensors"
+_META_KEYS = ("arch", "library_name", "library_version")
+_URL_SCHEMES = ("http", "https", "file", "gdrive", "hf")
+
+
+def _is_url(s: str) -> bool:
+    return "://" in s and _scheme(s) in _URL_SCHEMES
+
+
+def _is_safetensors(path: Path) -> bool:
+    """An 8-byte little-endian header length, then the JSON header (a torch zip starts with PK)."""
+    with open(path, "rb") as f:
+        head = f.read(9)
+    return len(head) == 9 and head[8:9] == b"{" and not head.startswith(b"PK")
+
+
+def _arch_for(cfg: SemAttNetConfig) -> str:
+    return "semattnet" if cfg.refine else "semattnet_backbone"
+
+
+def from_pretrained(
+    name_or_path_or_url: str | os.PathLike[str] | PretrainedWeights,
+    *,
+    sha256: str | None = None,
+    cache_dir: str | os.PathLike[str] | None = None,
+    map_location: str | torch.device | None = None,
+    progress: bool = True,
+    **overrides: Any,
+) -> nn.Module:
+    """A model with released or saved weights, in eval mode.
+
+    Args:
+        name_or_path_or_url: one of
+
+            * a registry name (:func:`~semattnet.weights.list_pretrained`, e.g. ``"semattnet-kitti"``) or
+              a :class:`~semattnet.weights.PretrainedWeights` record;
+            * a local file: the authors' ``.pth.tar``, a torch checkpoint or state dict of this
+              library, or ``.safetensors``;
+            * a local folder written by :func:`save_pretrained` (``config.json`` + ``model.safetensors``);
+            * a URL: ``http(s)://``, ``file://``, ``gdrive://<id>`` (a file), or
+              ``hf://owner/repo[@revision]`` (a saved folder on the Hugging Face Hub) /
+              ``hf://owner/repo[@revision]/file``.
+        sha256: expected sha256 of the downloaded file (for ``hf://owner/repo``: of its
+            ``model.safetensors``); see :func:`~semattnet.weights.fetch` for pinning.
+        cache_dir: cache root (default ``$SEMATTNET_CACHE``, else the user cache folder).
+        map_location: device to put the model on (default CPU).
+        progress: show download progress.
+        **overrides: config fields to change that do not change the weights' shapes, e.g.
+            ``refinement_mode="clean"``.
+
+    Returns:
+        The model (:class:`~semattnet.SemAttNet` or :class:`~semattnet.SemAttNetBackbone`), in eval mode.
+
+    Raises:
+        UnsafeCheckpointError: a pickle that would run code (it is removed from the cache).
+        CheckpointError: not a readable checkpoint, or weights that do not fit.
+        semattnet.weights.DownloadError: see :func:`~semattnet.weights.fetch`.
+    """
+    src = name_or_path_or_url
+    device = map_location if map_location is not None else "cpu"
+    if isinstance(src, PretrainedWeights):
+        return _from_entry(src, sha256, cache_dir, device, progress, overrides)
+    if isinstance(src, os.PathLike) or (isinstance(src, str) and not _is_url(src) and Path(src).exists()):
+        path = Path(src)
+        if path.is_dir():
+            return _from_folder(path, device, overrides)
+        return _build_and_load(load_checkpoint(path), None, device, overrides)
+    if not isinstance(src, str):
+        raise TypeError(f"expected a name, path or URL, got {type(src).__name__}")
+    if _is_url(src):
+        if _scheme(src) == "hf":
+            path = fetch_hf(src, sha256=sha256, cache_dir=cache_dir, allow_patterns=[CONFIG_NAME, WEIGHTS_NAME, "*.md"])
+            return _from_folder(path, device, overrides) if path.is_dir() else _load_any_file(path, device, overrides)
+        root = get_cache_dir(cache_dir).resolve()
+        return _from_download(root, _target(src, sha256, root, None), None, device, progress, overrides)
+    if src in list_pretrained():
+        return _from_entry(get_weights(src), sha256, cache_dir, device, progress, overrides)
+    raise ValueError(
+        f"{src!r} is not a known weights name ({', '.join(list_pretrained())}), an existing file or folder, "
+        "or a URL (http(s)://, file://, gdrive://<id>, hf://owner/repo)"
+    )
+
+
+def _from_entry(
+    entry: PretrainedWeights, sha256: str | None, cache_dir: Any, device: Any, progress: bool, overrides: dict
+) -> nn.Module:
+    root = get_cache_dir(cache_dir).resolve()
+    if entry.format == "hf-folder":
+        url = next((u for u in entry.urls if _scheme(u) == "hf"), None)
+        if url is None:
+            raise ValueError(f"weights {entry.name!r}: format 'hf-folder' needs an hf:// URL")
+        model = _from_folder(fetch_hf(url, sha256=sha256 or entry.sha256, cache_dir=cache_dir), device, overrides)
+        return _check_arch(model, entry)
+    target = _target(entry, sha256, root, None)
+    return _check_arch(_from_download(root, target, entry, device, progress, overrides), entry)
+
+
+def _check_arch(model: nn.Module, entry: PretrainedWeights) -> nn.Module:
+    want = entry.model_config()
+    got = model.config  # type: ignore[attr-defined]
+    if (got.branches, got.fusion, got.refine, got.width) != (want.branches, want.fusion, want.refine, want.width):
+        raise CheckpointError(f"weights {entry.name!r}: the file holds a {got} model, the record says {want}")
+    return model
+
+
+def _from_download(
+    root: Path, target: Any, entry: PretrainedWeights | None, device: Any, progress: bool, overrides: dict
+) -> nn.Module:
+    path, digest = _fetch_target(root, target, progress)
+    config = entry.model_config() if entry is not None else None
+    if _is_safetensors(path):
+        return _build_and_load(_read(root, path), config, device, overrides)
+    converted = root / "converted" / f"{digest}.safetensors"
+    if converted.is_file():
+        try:
+            verify_cached(root, converted, None, announce=False)
+            return _build_and_load(load_checkpoint(converted), config, device, overrides)
+        except (OSError, CheckpointError):
+            converted.unlink(missing_ok=True)  # damaged: convert again
+    with _lock(root, _key(root, converted)):
+        ckpt = _read(root, path)  # the safe unpickler; refuses code, removes the file if refused
+        save_safetensors(ckpt, converted)
+        origin = f"converted from {_key(root, path)}"
+        _update_pins(root, _key(root, converted), _record(converted, sha256_file(converted), origin, "converted"))
+    return _build_and_load(ckpt, config, device, overrides)
+
+
+def _read(root: Path, path: Path) -> Checkpoint:
+    """``load_checkpoint`` for a cached download; a file it refuses is removed from the cache."""
+    try:
+        return load_checkpoint(path)
+    except (UnsafeCheckpointError, CheckpointError):
+        path.unlink(missing_ok=True)
+        _update_pins(root, _key(root, path), None)
+        _remove_empty_dirs(path.parent, root)
+        raise
+
+
+def _load_any_file(path: Path, device: Any, overrides: dict) -> nn.Module:
+    return _build_and_load(load_checkpoint(path), None, device, overrides)
+
+
+def _build_and_load(ckpt: Checkpoint, config: SemAttNetConfig | None, device: Any, overrides: dict) -> nn.Module:
+    cfg = config or ckpt.config or config_from_state_dict(ckpt.state_dict)
+    if overrides:
+        cfg = cfg.replace(**overrides)
+    model = build_model(_arch_for(cfg), config=cfg)
+    load_weights(model, ckpt)
+    return model.to(device).eval()
+
+
+def _read_config(folder: Path) -> tuple[str, SemAttNetConfig]:
+    path = folder / CONFIG_NAME
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise CheckpointError(f"{path}: unreadable config ({exc})") from exc
+    if not isinstance(data, dict):
+        raise CheckpointError(f"{path}: expected a JSON object")
+    arch = data.get("arch", "semattnet")
+    if arch not in MODELS:
+        raise CheckpointError(f"{path}: unknown arch {arch!r}; available: {', '.join(MODELS)}")
+    fields = {k: v for k, v in data.items() if k not in _META_KEYS}
+    known = set(SemAttNetConfig().to_dict())
+    unknown = sorted(set(fields) - known)
+    if unknown:
+        raise CheckpointError(f"{path}: unknown config field(s) {unknown}; fields: {sorted(known)}")
+    try:
+        cfg = MODELS[arch][1].replace(**fields)
+    except (TypeError, ValueError) as exc:
+        raise CheckpointError(f"{path}: invalid config: {exc}") from exc
+    return arch, cfg
+
+
+def _from_folder(folder: Path, device: Any, overrides: dict) -> nn.Module:
+    weights = folder / WEIGHTS_NAME
+    if not weights.is_file():
+        present = sorted(p.name for p in folder.iterdir()) if folder.is_dir() else []
+        raise CheckpointError(f"{folder}: no {WEIGHTS_NAME} (found: {', '.join(present) or 'nothing'})")
+    config = _read_config(folder)[1] if (folder / CONFIG_NAME).is_file() else None
+    return _build_and_load(load_checkpoint(weights), config, device, overrides)
+
+
+# ----------------------------------------------------------------------------- saving
+
+
+def _model_card(arch: str, cfg: SemAttNetConfig, n_params: int, weights: PretrainedWeights | None) -> str:
+    license_line = weights.license if weights else "set by the uploader"
+    lines = [
+        "---",
+        "library_name: semattnet",
+        "tags: [depth-completion, kitti, lidar, pytorch, safetensors]",
+        "---",
+        "",
+        f"# SemAttNet ({arch})",
+        "",
+        "Depth completion from RGB, a colour-coded semantic map and sparse LiDAR depth "
+        "(Nazir et al., IEEE Access 2022, doi:10.1109/ACCESS.2022.3214316).",
+        "",
+        f"- parameters: {n_params:,}",
+        f"- config: `{json.dumps(cfg.to_dict())}`",
+        f"- licence: {license_line}",
+    ]
+    if weights is not None:
+        lines.append(f"- weights: `{weights.name}` ({weights.source or ', '.join(weights.urls)})")
+        for split, metrics in weights.paper_metrics.items():
+            shown = ", ".join(f"{k} {v}" for k, v in metrics.items())
+            lines.append(f"- paper, {split}: {shown}")
+    lines += [
+        "",
+        "## Input",
+        "",
+        "RGB and semantic colours as float 0..255 (B, 3, H, W); sparse depth in metres (B, 1, H, W), "
+        "0 = missing; H and W multiples of 32. Output depth in metres.",
+        "",
+        "## Use",
+        "",
+        "```python",
+        "import semattnet.weights",
+        'model = semattnet.weights.from_pretrained("hf://<owner>/<repo>")  # or this folder\'s path',
+        "out = model(rgb, semantic, sparse).depth",
+        "```",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def save_pretrained(
+    model: nn.Module,
+    folder: str | os.PathLike[str],
+    *,
+    config: SemAttNetConfig | None = None,
+    weights: PretrainedWeights | str | None = None,
+) -> Path:
+    """Write ``config.json``, ``model.safetensors`` and ``README.md`` into ``folder``.
+
+    Args:
+        model: a SemAttNet model (or anything with its state dict).
+        folder: created if missing; files in it are replaced atomically.
+        config: the model's config (default ``model.config``, else inferred from the state dict).
+        weights: the registry record the weights come from, for the model card (licence, metrics).
+
+    Returns:
+        ``folder``.
+    """
+    folder = Path(folder)
+    sd = {k: v.detach().to("cpu") for k, v in model.state_dict().items()}
+    cfg = config or getattr(model, "config", None) or config_from_state_dict(sd)
+    if not isinstance(cfg, SemAttNetConfig):
+        raise TypeError(f"config must be a SemAttNetConfig, got {type(cfg).__name__}")
+    entry = get_weights(weights) if isinstance(weights, str) else weights
+    arch = _arch_for(cfg)
+    folder.mkdir(parents=True, exist_ok=True)
+    save_safetensors(Checkpoint(path=folder / WEIGHTS_NAME, state_dict=sd, format="state_dict", config=cfg),
+                     folder / WEIGHTS_NAME)  # fmt: skip
+    meta = {"arch": arch, "library_name": "semattnet", "library_version": library_version(), **cfg.to_dict()}
+    with atomic_path(folder / CONFIG_NAME) as tmp:
+        tmp.write_text(json.dumps(meta, indent=2) + "\n")
+    n_params = sum(p.numel() for p in model.parameters())
+    with atomic_path(folder / "README.md") as tmp:
+        tmp.write_text(_model_card(arch, cfg, n_params, entry))
+    return folder
+
+
+def push_to_hub(
+    model: nn.Module,
+    repo_id: str,
+    *,
+    config: SemAttNetConfig | None = None,
+    weights: PretrainedWeights | str | None = None,
+    private: bool | None = None,
+    token: str | None = None,
+    revision: str | None = None,
+    commit_message: str = "Upload SemAttNet weights",
+) -> Any:
+    """Save like :func:`save_pretrained` and upload the folder to the Hugging Face Hub.
+
+    Creates the model repository if needed (``HfApi.create_repo(exist_ok=True)``), then
+    ``HfApi.upload_folder``; returns what ``upload_folder`` returns (the commit info).
+    """
+    if is_offline():
+        raise OfflineError("offline mode (SEMATTNET_OFFLINE/HF_HUB_OFFLINE): not uploading")
+    try:
+        from huggingface_hub import HfApi
+    except ImportError as exc:
+        raise ImportError("push_to_hub needs huggingface_hub: pip install 'semattnet[hub]'") from exc
+    api = HfApi(token=token)
+    api.create_repo(repo_id, repo_type="model", private=private, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="semattnet-push-") as tmp:
+        save_pretrained(model, tmp, config=config, weights=weights)
+        return api.upload_folder(
+            repo_id=repo_id, folder_path=tmp, repo_type="model", revision=revision, commit_message=commit_message
+        )
+
+
+# ----------------------------------------------------------------------------- torch.hub
+
+_LOAD_OPTIONS = ("sha256", "cache_dir", "map_location", "progress")
+
+
+def hub_model(arch: str, pretrained: bool | str | os.PathLike[str] = False, **kwargs: Any) -> nn.Module:
+    """The body of the ``hubconf.py`` entry points.
+
+    Args:
+        arch: registry model name (``"semattnet"`` or ``"semattnet_backbone"``).
+        pretrained: False (fresh weights; ``kwargs`` are config fields, e.g. ``width=0.25``), True
+            (the default released weights of ``arch``), or a weights name, path or URL.
+        **kwargs: with weights: ``sha256``, ``cache_dir``, ``map_location``, ``progress`` and config
+            fields that keep the shapes (e.g. ``refinement_mode``).
+    """
+    if pretrained is False or pretrained is None:
+        return build_model(arch, **kwargs)
+    options = {k: kwargs.pop(k) for k in _LOAD_OPTIONS if k in kwargs}
+    source: Any = default_weights(arch) if pretrained is True else pretrained
+    model = from_pretrained(source, **options, **kwargs)
+    want_refine = MODELS[arch][1].refine
+    if model.config.refine != want_refine:  # type: ignore[attr-defined]
+        kind = "full model" if model.config.refine else "backbone"  # type: ignore[attr-defined]
+        raise CheckpointError(f"{arch}: the weights {pretrained!r} are for the {kind}; use the matching entry point")
+    return model

@@ -1,0 +1,233 @@
+"""Registry of released weights: one :class:`PretrainedWeights` record per checkpoint.
+
+Like torchvision's ``Weights`` enums and timm's pretrained configs, every record says what the
+weights are (architecture and config), where to get them (primary URL and mirrors), how to check
+them (sha256, size), under which terms (licence), what the paper reports for them, and what
+input they expect. :func:`semattnet.weights.from_pretrained` takes a record's name.
+
+URL forms: ``https://...``, ``http://...``, ``file:///...``, ``gdrive://<file id>`` (Google Drive,
+downloaded with gdown) and ``hf://owner/repo[@revision][/file]`` (Hugging Face Hub).
+
+Only the full model was released by the authors; see :data:`FINDINGS` for what was checked.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, Literal
+
+from semattnet.models.config import SemAttNetConfig
+from semattnet.models.registry import MODELS, build_model
+
+__all__ = [
+    "DEFAULT_WEIGHTS",
+    "FORMATS",
+    "PretrainedWeights",
+    "UnknownWeightsError",
+    "default_weights",
+    "get_weights",
+    "list_pretrained",
+    "register_weights",
+]
+
+#: File formats a record may name. ``authors-pth``: the authors' ``.pth.tar`` pickle (read with the
+#: safe unpickler, converted once to safetensors in the cache); ``torch``: a pickled state dict or
+#: checkpoint dict of this library; ``safetensors``: one ``.safetensors`` file; ``hf-folder``: a
+#: folder written by :func:`semattnet.weights.save_pretrained` (``config.json`` + ``model.safetensors``).
+FORMATS = ("authors-pth", "torch", "safetensors", "hf-folder")
+WeightsFormat = Literal["authors-pth", "torch", "safetensors", "hf-folder"]
+
+#: The input contract of every model in this library (spec ARCHITECTURE.md "Inputs").
+_INPUTS: Mapping[str, Any] = MappingProxyType(
+    {
+        "rgb": "float32 (B, 3, H, W), raw colour values 0..255, no normalisation",
+        "semantic": (
+            "float32 (B, 3, H, W), colour-coded semantic image in the Cityscapes 19-class trainId palette "
+            "(road 128,64,128; sidewalk 244,35,232; ...), values 0..255; the authors used their precomputed maps"
+        ),
+        "sparse": "float32 (B, 1, H, W), depth in metres (KITTI uint16 PNG / 256), 0 = missing",
+        "size_multiple": 32,
+        "pad": "pad H and W up to a multiple of 32 (semattnet.pad_to_multiple) and crop the output back",
+        "training_crop_hw": (352, 1216),
+        "output": "depth in metres, (B, 1, H, W), not clamped",
+    }
+)
+
+_PAPER = (
+    "D. Nazir, A. Pagani, M. Liwicki, D. Stricker, M. Z. Afzal, 'SemAttNet: Towards Attention-based "
+    "Semantic Aware Guided Depth Completion', IEEE Access, 2022 (arXiv:2204.13635)"
+)
+_DOI = "10.1109/ACCESS.2022.3214316"
+_AUTHORS_REPO = "https://github.com/danishnazir/SemAttNet"
+_LICENSE_AUTHORS = (
+    "unspecified: the authors' repository has no licence file and its README grants no licence for the "
+    "weights (all rights reserved by default); trained on KITTI, whose data is CC BY-NC-SA 3.0. "
+    "Ask the authors before redistributing or using commercially."
+)
+
+#: What was checked about released checkpoints (kept here so the registry can be audited).
+FINDINGS = (
+    "The authors' README (main branch) links exactly one checkpoint, model_best_backup.pth.tar "
+    "(Google Drive id 1plg4zGCLYndP0xtkh_gjG1RZ4YzPeiDN), the full model. The training branch README "
+    "describes training the three-branch backbone first but links no backbone checkpoint, so there is "
+    "no 'semattnet-kitti-backbone' record. No checksum or file size is published."
+)
+
+
+class UnknownWeightsError(ValueError):
+    """A weights name that is not in the registry."""
+
+
+@dataclass(frozen=True)
+class PretrainedWeights:
+    """One released checkpoint.
+
+    Attributes:
+        name: registry key, e.g. ``"semattnet-kitti"``.
+        arch: model name for :func:`semattnet.build_model` (``"semattnet"``, ``"semattnet_backbone"``, ...).
+        config: :class:`~semattnet.SemAttNetConfig` fields that differ from ``arch``'s registered config.
+        urls: primary URL first, then mirrors, tried in order.
+        file_name: name of the file in the cache.
+        format: one of :data:`FORMATS`.
+        sha256: hex digest of the file, or None when nobody published one (then the first download is
+            pinned, see :mod:`semattnet.weights.download`).
+        size_bytes: exact file size if known, else None.
+        num_params: number of parameters of the model the weights fit.
+        license: the terms, in words.
+        paper_metrics: ``{"dataset/split": {"metric_unit": value}}``, e.g.
+            ``{"kitti/test": {"rmse_mm": 709.41}}``; units are suffixes (``mm``, ``per_km``).
+        preprocessing: the input contract (units, ranges, size multiple).
+        paper: citation of the paper.
+        doi: the paper's DOI.
+        source: where the URLs were taken from.
+        notes: anything else a user should know.
+        description: one line.
+    """
+
+    name: str
+    arch: str
+    urls: tuple[str, ...]
+    file_name: str
+    format: WeightsFormat
+    license: str
+    config: Mapping[str, Any] = field(default_factory=dict)
+    sha256: str | None = None
+    size_bytes: int | None = None
+    num_params: int | None = None
+    paper_metrics: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+    preprocessing: Mapping[str, Any] = field(default_factory=lambda: _INPUTS)
+    paper: str = ""
+    doi: str | None = None
+    source: str = ""
+    notes: str = ""
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        # Read-only views, so that a shared record cannot be changed by accident.
+        object.__setattr__(self, "urls", tuple(self.urls))
+        object.__setattr__(self, "config", MappingProxyType(dict(self.config)))
+        metrics = {split: MappingProxyType(dict(m)) for split, m in self.paper_metrics.items()}
+        object.__setattr__(self, "paper_metrics", MappingProxyType(metrics))
+        object.__setattr__(self, "preprocessing", MappingProxyType(dict(self.preprocessing)))
+
+    def __hash__(self) -> int:
+        return hash(self.name)
+
+    def model_config(self) -> SemAttNetConfig:
+        """The full config of the model these weights fit."""
+        base = MODELS[self.arch][1]
+        return base.replace(**self.config) if self.config else base
+
+    def build(self, **overrides: Any) -> Any:
+        """The untrained model these weights fit (``overrides`` change config fields)."""
+        return build_model(self.arch, config=self.model_config().replace(**overrides))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-serialisable data (e.g. for a model card)."""
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        out["urls"] = list(self.urls)
+        out["config"] = dict(self.config)
+        out["paper_metrics"] = {k: dict(v) for k, v in self.paper_metrics.items()}
+        out["preprocessing"] = {k: list(v) if isinstance(v, tuple) else v for k, v in self.preprocessing.items()}
+        return out
+
+
+_REGISTRY: dict[str, PretrainedWeights] = {}
+
+#: Default weights per architecture, used by ``pretrained=True`` in ``hubconf.py``.
+DEFAULT_WEIGHTS: dict[str, str] = {"semattnet": "semattnet-kitti"}
+
+
+def register_weights(weights: PretrainedWeights, *, overwrite: bool = False) -> PretrainedWeights:
+    """Add a record (e.g. your own mirror or fine-tuned weights) to the registry."""
+    if weights.name in _REGISTRY and not overwrite:
+        raise ValueError(f"weights {weights.name!r} are already registered (pass overwrite=True to replace them)")
+    if weights.arch not in MODELS:
+        raise ValueError(f"weights {weights.name!r}: unknown arch {weights.arch!r}; available: {', '.join(MODELS)}")
+    _REGISTRY[weights.name] = weights
+    return weights
+
+
+def list_pretrained() -> list[str]:
+    """Names accepted by :func:`get_weights` and :func:`semattnet.weights.from_pretrained`."""
+    return list(_REGISTRY)
+
+
+def get_weights(name: str) -> PretrainedWeights:
+    """The record called ``name``.
+
+    Raises:
+        UnknownWeightsError: one line naming the known records.
+    """
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise UnknownWeightsError(
+            f"unknown pretrained weights {name!r}; known: {', '.join(_REGISTRY) or '(none)'}"
+        ) from None
+
+
+def default_weights(arch: str) -> PretrainedWeights:
+    """The weights ``pretrained=True`` means for ``arch``."""
+    if arch not in DEFAULT_WEIGHTS:
+        raise UnknownWeightsError(
+            f"no released weights for {arch!r} (the authors released only the full model, 'semattnet'); "
+            "pass pretrained=<name, path or URL> instead"
+        )
+    return get_weights(DEFAULT_WEIGHTS[arch])
+
+
+register_weights(
+    PretrainedWeights(
+        name="semattnet-kitti",
+        arch="semattnet",
+        description="The authors' released SemAttNet (three-branch backbone + CSPN++), trained on KITTI",
+        urls=("gdrive://1plg4zGCLYndP0xtkh_gjG1RZ4YzPeiDN",),
+        file_name="model_best_backup.pth.tar",
+        format="authors-pth",
+        sha256=None,
+        size_bytes=None,
+        num_params=360_957_784,
+        license=_LICENSE_AUTHORS,
+        paper_metrics={
+            # Paper Table 1: KITTI depth completion online benchmark (test set).
+            "kitti/test": {"rmse_mm": 709.41, "mae_mm": 205.49, "irmse_per_km": 2.03, "imae_per_km": 0.90},
+            # Paper Table 2 row (g): the full model on the 1000-frame selected validation set.
+            "kitti/val-selection": {"rmse_mm": 738.13},
+        },
+        paper=_PAPER,
+        doi=_DOI,
+        source=f"{_AUTHORS_REPO} README, section 'Models'",
+        notes=(
+            "Authors' torch pickle (~1.44 GB: epoch, model state dict, best_result, args); read without "
+            "running pickled code and converted once to safetensors in the cache. No sha256 was published: "
+            "the first download is pinned (trust on first use) and its hash printed. Use "
+            "refinement_mode='authors' (the default): these weights were trained with the authors' aliasing "
+            "in the refinement. The 'kitti/val-selection' RMSE is the paper's ablation row (g); the README "
+            "says validation results can be reproduced with this file. " + FINDINGS
+        ),
+    )
+)

@@ -1,0 +1,94 @@
+"""The weights registry: a schema check over every record, lookups and errors."""
+
+from __future__ import annotations
+
+import re
+from urllib.parse import urlparse
+
+import pytest
+import torch
+
+from semattnet.models.registry import MODELS
+from semattnet.weights import FORMATS, PretrainedWeights, UnknownWeightsError, get_weights, list_pretrained
+from semattnet.weights.pretrained import DEFAULT_WEIGHTS, default_weights, register_weights
+
+UNITS = ("_mm", "_m", "_per_km", "_pct")
+INPUT_KEYS = {"rgb", "semantic", "sparse", "size_multiple"}
+
+
+@pytest.mark.parametrize("name", list_pretrained())
+def test_schema(name: str) -> None:
+    w = get_weights(name)
+    assert isinstance(w, PretrainedWeights) and w.name == name
+    assert re.fullmatch(r"[a-z0-9]+(-[a-z0-9]+)*", name)
+    assert w.arch in MODELS
+    cfg = w.model_config()  # the overrides are valid config fields
+    assert cfg == MODELS[w.arch][1].replace(**w.config)
+    assert w.urls, "at least one URL"
+    for url in w.urls:
+        scheme = urlparse(url).scheme
+        assert scheme in ("https", "http", "gdrive", "hf"), url
+        if scheme == "gdrive":
+            assert re.fullmatch(r"gdrive://[\w-]{10,}", url)
+    assert w.file_name and "/" not in w.file_name
+    assert w.format in FORMATS
+    assert w.sha256 is None or re.fullmatch(r"[0-9a-f]{64}", w.sha256)
+    assert w.size_bytes is None or (isinstance(w.size_bytes, int) and w.size_bytes > 0)
+    assert w.license.strip()
+    assert w.sha256 is not None or "trust on first use" in w.notes  # say what happens without a checksum
+    for split, metrics in w.paper_metrics.items():
+        assert re.fullmatch(r"[a-z0-9]+/[a-z0-9-]+", split), split
+        for key, value in metrics.items():
+            assert key.endswith(UNITS), f"{split}/{key}: metric keys carry their unit"
+            assert isinstance(value, float) and value > 0
+    assert INPUT_KEYS <= set(w.preprocessing)
+    assert w.preprocessing["size_multiple"] == 32
+    assert w.doi is None or re.fullmatch(r"10\.\d{4,}/\S+", w.doi)
+    assert w.paper and w.source
+    assert w.to_dict()["name"] == name
+
+
+@pytest.mark.parametrize("name", list_pretrained())
+def test_parameter_count_matches_the_architecture(name: str) -> None:
+    w = get_weights(name)
+    with torch.device("meta"):  # no memory for the 361 M parameters
+        model = w.build()
+    assert sum(p.numel() for p in model.parameters()) == w.num_params
+
+
+def test_authors_release() -> None:
+    w = get_weights("semattnet-kitti")
+    assert w.urls[0] == "gdrive://1plg4zGCLYndP0xtkh_gjG1RZ4YzPeiDN"
+    assert w.format == "authors-pth" and w.file_name == "model_best_backup.pth.tar" and w.arch == "semattnet"
+    assert dict(w.paper_metrics["kitti/test"]) == {
+        "rmse_mm": 709.41, "mae_mm": 205.49, "irmse_per_km": 2.03, "imae_per_km": 0.90
+    }  # fmt: skip
+    assert w.doi == "10.1109/ACCESS.2022.3214316"
+    assert w.num_params == 360_957_784  # spec ARCHITECTURE.md
+    assert "semattnet-kitti-backbone" not in list_pretrained()  # the authors released no backbone weights
+    assert default_weights("semattnet") is w and DEFAULT_WEIGHTS == {"semattnet": "semattnet-kitti"}
+
+
+def test_records_are_read_only() -> None:
+    w = get_weights("semattnet-kitti")
+    with pytest.raises(TypeError):
+        w.paper_metrics["kitti/test"]["rmse_mm"] = 1.0  # type: ignore[index]
+    with pytest.raises(AttributeError):
+        w.sha256 = "0" * 64  # type: ignore[misc]
+    assert hash(w) == hash("semattnet-kitti")
+
+
+def test_unknown_name_is_one_line_listing_known() -> None:
+    with pytest.raises(UnknownWeightsError) as err:
+        get_weights("semattnet-nyu")
+    assert str(err.value) == "unknown pretrained weights 'semattnet-nyu'; known: " + ", ".join(list_pretrained())
+    with pytest.raises(UnknownWeightsError, match="released only the full model"):
+        default_weights("semattnet_backbone")
+
+
+def test_register_rejects_duplicates_and_unknown_arch() -> None:
+    with pytest.raises(ValueError, match="already registered"):
+        register_weights(get_weights("semattnet-kitti"))
+    bad = PretrainedWeights(name="x", arch="resnet", urls=("https://e/x",), file_name="x", format="torch", license="l")
+    with pytest.raises(ValueError, match="unknown arch 'resnet'"):
+        register_weights(bad)
