@@ -20,7 +20,7 @@ import numpy as np
 
 from semattnet.data.io import DataError, read_image
 
-__all__ = ["RawDrive", "RawFrame", "parse_frames"]
+__all__ = ["RawDrive", "RawFrame", "parse_frames", "scan_periods"]
 
 
 @dataclass(frozen=True)
@@ -63,6 +63,24 @@ def parse_frames(spec: str | int | Sequence[int] | None) -> list[int] | None:
     return out
 
 
+def _seconds(stamp: str) -> float:
+    """Seconds of the day of a KITTI timestamp ``YYYY-MM-DD hh:mm:ss.fffffffff``."""
+    hh, mm, ss = stamp.split()[1].split(":")
+    return int(hh) * 3600 + int(mm) * 60 + float(ss)
+
+
+def scan_periods(drive_dir: str | os.PathLike[str]) -> list[float] | None:
+    """Seconds per revolution of each scan (``timestamps_end - timestamps_start`` in ``velodyne_points/``), or
+    None when the drive lacks those files (or they are malformed)."""
+    folder = Path(drive_dir) / "velodyne_points"
+    try:
+        starts = (folder / "timestamps_start.txt").read_text().split("\n")
+        ends = (folder / "timestamps_end.txt").read_text().split("\n")
+        return [_seconds(e) - _seconds(s) for s, e in zip(starts, ends, strict=False) if s.strip() and e.strip()]
+    except (OSError, ValueError, IndexError):
+        return None
+
+
 class RawDrive:
     """A KITTI raw drive read frame by frame for one colour camera.
 
@@ -70,7 +88,8 @@ class RawDrive:
         drive_dir: the ``DATE_drive_NNNN_sync`` folder; its parent holds the calibration files.
         camera: 0..3 (or "02"); KITTI's colour cameras are 2 (left) and 3 (right).
         deskew: compensate each scan for the vehicle's motion with its OXTS packet (see
-            :func:`semattnet.geometry.deskew_scan`), as KITTI's official ``velodyne_raw`` maps are.
+            :func:`semattnet.geometry.deskew_scan`), as KITTI's official ``velodyne_raw`` maps are; the scan period
+            comes from ``velodyne_points/timestamps_{start,end}.txt`` when present, else 0.1 s.
 
     Raises:
         DataError: the folder, the camera's images, the scans or the calibration are missing.
@@ -90,6 +109,7 @@ class RawDrive:
             if not folder.is_dir():
                 raise DataError(f"{folder}: not found (is {self.drive_dir} a KITTI raw *_sync drive folder?)")
         self.deskew = deskew
+        self.periods = scan_periods(self.drive_dir) if deskew else None
         self.calib = read_kitti_calibration(self.drive_dir.parent, self.camera)
         scans = {p.stem for p in self.scan_dir.glob("*.bin")}
         self.names = sorted(p.stem for p in self.image_dir.glob("*.png") if p.stem in scans)
@@ -138,5 +158,9 @@ class RawDrive:
                             f"the calibration says {w}x{h} for camera {self.camera}")  # fmt: skip
         if self.deskew:
             motion = read_oxts_motion(self.oxts_dir / f"{name}.txt")
-            points = deskew_scan(points, motion.velocity, motion.yaw_rate, DEFAULT_SCAN_PERIOD)
+            i = int(name)
+            ok = self.periods is not None and i < len(self.periods) and 0.05 < self.periods[i] < 0.2
+            points = deskew_scan(
+                points, motion.velocity, motion.yaw_rate, self.periods[i] if ok else DEFAULT_SCAN_PERIOD
+            )
         return RawFrame(name, int(name), image, points, self.calib, image_path, scan_path)
