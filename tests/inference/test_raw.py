@@ -93,3 +93,15 @@ def test_semantic_folder_fallback_and_confidence(tmp_path: Path) -> None:
     conf = fusion_confidence(rec(None, np.zeros((2, 2), np.float32)).outputs)
     assert conf is not None and np.allclose(conf, 0.7)
     assert fusion_confidence({"refined_depth": np.zeros((2, 2))}) is None
+
+
+def test_segmenter_spec_colours_the_semantic_map(tmp_path: Path) -> None:
+    from semattnet.data.palette import UNKNOWN_COLOR
+
+    rec = _Recorder()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a segmenter is given: no fallback warning
+        complete_kitti_raw(rec, DRIVE, tmp_path, frames="5", segmenter="unknown", log=lambda s: None)
+    assert rec.semantic.shape == (375, 1242, 3) and (rec.semantic == np.array(UNKNOWN_COLOR, np.uint8)).all()
+    with pytest.raises(ValueError, match="not both"):
+        complete_kitti_raw(rec, DRIVE, tmp_path / "x", frames="5", segmenter="unknown", semantic=tmp_path)

@@ -32,13 +32,22 @@ _INPUT = click.Path(exists=True, path_type=Path)
 @weights_option
 @click.option("--rgb", type=_INPUT, default=None, help="PNG file or folder (with --sparse).")
 @click.option("--sparse", type=_INPUT, default=None, help="16-bit PNG file or folder (with --rgb).")
-@click.option("--kitti-raw", type=click.Path(exists=True, file_okay=False, path_type=Path), default=None,
-              help="A KITTI raw drive folder RAW_ROOT/DATE/DATE_drive_NNNN_sync (instead of --rgb/--sparse).")
+@click.option(
+    "--kitti-raw",
+    type=click.Path(exists=True, file_okay=False, path_type=Path),
+    default=None,
+    help="A KITTI raw drive folder RAW_ROOT/DATE/DATE_drive_NNNN_sync (instead of --rgb/--sparse).",
+)
 @click.option("--frames", default=None, help="With --kitti-raw: indices, a range a-b or a comma list (default all).")
 @click.option("--camera", type=click.Choice(["2", "3"]), default="2", show_default=True, help="With --kitti-raw.")
 @click.option("--semantic", type=_INPUT, default=None, help="PNG file or folder of colour-coded semantic maps.")
-@click.option("--segment", "segment_spec", default=None, metavar="SPEC",
-              help="With --kitti-raw: segment each image with this model (see `semattnet segment --model`).")
+@click.option(
+    "--segment",
+    "segment_spec",
+    default=None,
+    metavar="SPEC",
+    help="With --kitti-raw: segment each image with this model (see `semattnet segment --model`).",
+)
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path))
 @click.option("--npy", is_flag=True, help="Also write float32 .npy depth.")
 @click.option("--panel", is_flag=True, help="Also write the per-branch panel (with --kitti-raw: a bird's-eye view).")
