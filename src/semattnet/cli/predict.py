@@ -7,48 +7,80 @@ from pathlib import Path
 import click
 
 from semattnet.cli._group import main
+from semattnet.cli._options import weights_option
+
+
+def _completer(method: str, checkpoint: Path | None, weights: str | None, device: str, amp: str):  # type: ignore[no-untyped-def]
+    """The completer the options name: the classical baseline or the model of --checkpoint / --weights."""
+    from semattnet.baselines.classical import ClassicalCompleter
+    from semattnet.cli._options import model_from_options
+    from semattnet.inference import DepthCompleter
+
+    if method == "classical":
+        return ClassicalCompleter()
+    if checkpoint is None and weights is None:
+        raise click.UsageError("--checkpoint or --weights is required (or --method classical)")
+    return DepthCompleter(model_from_options(checkpoint, weights, "cpu"), device=device, amp=amp)
+
+
+_INPUT = click.Path(exists=True, path_type=Path)
 
 
 @main.command()
+@click.option("--checkpoint", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              help="Model weights (not needed with --method classical).")  # fmt: skip
+@weights_option
+@click.option("--rgb", type=_INPUT, default=None, help="PNG file or folder (with --sparse).")
+@click.option("--sparse", type=_INPUT, default=None, help="16-bit PNG file or folder (with --rgb).")
 @click.option(
-    "--checkpoint",
-    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    "--kitti-raw",
+    type=click.Path(exists=True, file_okay=False, path_type=Path),
     default=None,
-    help="Model weights (not needed with --method classical).",
+    help="A KITTI raw drive folder RAW_ROOT/DATE/DATE_drive_NNNN_sync (instead of --rgb/--sparse).",
 )
-@click.option("--rgb", required=True, type=click.Path(exists=True, path_type=Path), help="PNG file or folder.")
+@click.option("--frames", default=None, help="With --kitti-raw: indices, a range a-b or a comma list (default all).")
+@click.option("--camera", type=click.Choice(["2", "3"]), default="2", show_default=True, help="With --kitti-raw.")
+@click.option("--semantic", type=_INPUT, default=None, help="PNG file or folder of colour-coded semantic maps.")
 @click.option(
-    "--sparse", required=True, type=click.Path(exists=True, path_type=Path), help="16-bit PNG file or folder."
+    "--segment",
+    "segment_spec",
+    default=None,
+    metavar="SPEC",
+    help="With --kitti-raw: segment each image with this model (see `semattnet segment --model`).",
 )
-@click.option("--semantic", type=click.Path(exists=True, path_type=Path), default=None, help="PNG file or folder.")
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path))
 @click.option("--npy", is_flag=True, help="Also write float32 .npy depth.")
-@click.option("--panel", is_flag=True, help="Also write the per-branch panel.")
+@click.option("--panel", is_flag=True, help="Also write the per-branch panel (with --kitti-raw: a bird's-eye view).")
+@click.option("--ply", is_flag=True, help="With --kitti-raw: also write the prediction as a binary PLY point cloud.")
+@click.option("--max-depth", default=80.0, show_default=True, help="PLY / bird's-eye view: drop deeper pixels, m.")
+@click.option("--top-crop", default=0, show_default=True, help="PLY / bird's-eye view: drop the top N rows (sky).")
+@click.option("--deskew", is_flag=True, help="With --kitti-raw: ego-motion compensate scans with their OXTS data.")
 @click.option("--device", default="auto", show_default=True)
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
 @click.option("--overwrite", is_flag=True, help="Replace existing outputs.")
-@click.option(
-    "--method",
-    type=click.Choice(["semattnet", "classical"]),
-    default="semattnet",
-    show_default=True,
-    help="classical: the non-learned IP-Basic-style baseline (no checkpoint).",
-)
-def predict(checkpoint: Path | None, rgb: Path, sparse: Path, semantic: Path | None, out: Path, npy: bool, panel: bool,
-            device: str, amp: str, overwrite: bool, method: str) -> None:  # fmt: skip
-    """Complete depth for one frame or folders of frames (any size)."""
-    from semattnet.baselines.classical import ClassicalCompleter
+@click.option("--method", type=click.Choice(["semattnet", "classical"]), default="semattnet", show_default=True,
+              help="classical: the non-learned IP-Basic-style baseline (no checkpoint).")  # fmt: skip
+def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, sparse: Path | None,
+            kitti_raw: Path | None, frames: str | None, camera: str, semantic: Path | None, segment_spec: str | None,
+            out: Path, npy: bool, panel: bool, ply: bool, max_depth: float, top_crop: int, deskew: bool, device: str,
+            amp: str, overwrite: bool, method: str) -> None:  # fmt: skip
+    """Complete depth for one frame, folders of frames (any size) or a KITTI raw drive."""
     from semattnet.data.pairing import pair_frames
-    from semattnet.inference import DepthCompleter, complete_folder
+    from semattnet.inference import complete_folder
+    from semattnet.inference.raw import complete_kitti_raw
 
-    if method == "semattnet" and checkpoint is None:
-        raise click.UsageError("--checkpoint is required (or --method classical)")
-    frames = pair_frames(rgb, sparse, semantic)
-    if method == "semattnet":
-        completer = DepthCompleter.from_checkpoint(checkpoint, device=device, amp=amp)
-    else:
-        completer = ClassicalCompleter()
-    complete_folder(completer, frames, out, npy=npy, panel=panel, overwrite=overwrite, log=click.echo)
+    if (kitti_raw is None) == (rgb is None and sparse is None) or (kitti_raw is None and None in (rgb, sparse)):
+        raise click.UsageError("give --rgb and --sparse, or --kitti-raw")
+    if kitti_raw is None and (ply or segment_spec or frames or deskew):
+        raise click.UsageError("--ply, --segment, --frames and --deskew need --kitti-raw")
+    completer = _completer(method, checkpoint, weights, device, amp)
+    if kitti_raw is not None:
+        complete_kitti_raw(completer, kitti_raw, out, frames=frames, camera=camera, semantic=semantic,
+                           segmenter=segment_spec, ply=ply, max_depth=max_depth, top_crop=top_crop, npy=npy,
+                           panel=panel, deskew=deskew, overwrite=overwrite, log=click.echo)  # fmt: skip
+        return
+    complete_folder(completer, pair_frames(rgb, sparse, semantic), out, npy=npy, panel=panel, overwrite=overwrite,
+                    log=click.echo)  # fmt: skip
 
 
 @main.command()

@@ -17,12 +17,14 @@ from .calibration import (
 from .motion import VehicleMotion, deskew_scan, read_oxts_motion
 from .pointcloud_io import read_points, write_ply
 from .projection import PointCloud, depth_to_points, points_to_pixels, project_points, select_pixels
+from .scan import ProjectionSummary, load_rig, project_scan, project_scan_file
 from .sparsify import beam_ids, elevation_deg, keep_beams, keep_random, keep_row_bands
 from .transforms import check_rigid, check_rotation, invert_T, make_T, transform_points
 
 __all__ = [
     "CameraCalibration",
     "PointCloud",
+    "ProjectionSummary",
     "RigCalibration",
     "VehicleMotion",
     "beam_ids",
@@ -35,9 +37,12 @@ __all__ = [
     "keep_beams",
     "keep_random",
     "keep_row_bands",
+    "load_rig",
     "make_T",
     "points_to_pixels",
     "project_points",
+    "project_scan",
+    "project_scan_file",
     "read_cam_to_cam",
     "read_kitti_calibration",
     "read_oxts_motion",

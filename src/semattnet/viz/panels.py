@@ -42,9 +42,11 @@ def branch_panel(
     outputs: dict[str, np.ndarray],
     gt: np.ndarray | None = None,
     columns: int = 1,
+    extra: Sequence[tuple[str, np.ndarray]] = (),
 ) -> Path:
     """The paper's intermediate-depth figure for one frame: inputs, ground truth, CG / SG / DG,
-    fused and refined depths, the three fusion weights and (with ground truth) the error map."""
+    fused and refined depths, the three fusion weights, (with ground truth) the error map, then the
+    ``extra`` labelled (H, W, 3) uint8 tiles (e.g. a bird's-eye view of the prediction)."""
     tiles: list[tuple[str, np.ndarray]] = [("RGB", np.asarray(rgb, dtype=np.uint8))]
     if semantic is not None:
         tiles.append(("semantic", np.asarray(semantic, dtype=np.uint8)))
@@ -62,4 +64,5 @@ def branch_panel(
         final = outputs.get("refined_depth", outputs.get("fused_depth"))
         if final is not None:
             tiles.append(("error (KITTI colours)", error_map(final, gt)))
+    tiles.extend((label, np.asarray(tile, dtype=np.uint8)) for label, tile in extra)
     return save_panel(tiles, path, columns=columns)

@@ -1,0 +1,166 @@
+"""Frames of a KITTI raw drive (``RAW_ROOT/DATE/DATE_drive_NNNN_sync``), straight from its own files.
+
+A drive folder holds ``image_0X/data/NNNNNNNNNN.png`` (rectified camera X), ``velodyne_points/data/NNNNNNNNNN.bin``
+(one Velodyne revolution per frame, LiDAR frame, metres) and ``oxts/data/NNNNNNNNNN.txt``; the calibration
+(``calib_cam_to_cam.txt``, ``calib_velo_to_cam.txt``) sits in the date folder, the drive's parent.
+
+    >>> drive = RawDrive("kitti_raw/2011_09_26/2011_09_26_drive_0035_sync", camera=2)   # doctest: +SKIP
+    >>> for frame in drive.select("0-10"):                                              # doctest: +SKIP
+    ...     frame.name, frame.image.shape, frame.points.shape, frame.calib.K
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from semattnet.data.io import DataError, read_image
+
+__all__ = ["RawDrive", "RawFrame", "parse_frames", "scan_periods"]
+
+
+@dataclass(frozen=True)
+class RawFrame:
+    """One synchronised frame: ``image`` (H, W, 3) uint8 from camera ``calib.camera``, ``points`` (N, 4) float32
+    (x, y, z metres in the LiDAR frame, reflectance; deskewed when the drive was opened with ``deskew=True``),
+    ``calib`` the LiDAR -> camera calibration, ``name`` the file stem ("0000000005") and the source paths."""
+
+    name: str
+    index: int
+    image: np.ndarray
+    points: np.ndarray
+    calib: object  # semattnet.geometry.RigCalibration (kept untyped to avoid an import cycle)
+    image_path: Path
+    scan_path: Path
+
+
+def parse_frames(spec: str | int | Sequence[int] | None) -> list[int] | None:
+    """Frame indices from ``"a-b"`` (inclusive), ``"1,3,5"``, ``"5"``, an int or a list; None stays None (all)."""
+    if spec is None:
+        return None
+    if isinstance(spec, int):
+        return [spec]
+    if not isinstance(spec, str):
+        return [int(i) for i in spec]
+    out: list[int] = []
+    try:
+        for part in (p.strip() for p in spec.split(",") if p.strip()):
+            if "-" in part:
+                a, b = (int(v) for v in part.split("-", 1))
+                if b < a:
+                    raise ValueError
+                out.extend(range(a, b + 1))
+            else:
+                out.append(int(part))
+    except ValueError:
+        raise DataError(f"frames: expected a range a-b or a comma list, e.g. 0-10 or 1,3,5; got {spec!r}") from None
+    if not out or min(out) < 0:
+        raise DataError(f"frames: no valid (non-negative) index in {spec!r}")
+    return out
+
+
+def _seconds(stamp: str) -> float:
+    """Seconds of the day of a KITTI timestamp ``YYYY-MM-DD hh:mm:ss.fffffffff``."""
+    hh, mm, ss = stamp.split()[1].split(":")
+    return int(hh) * 3600 + int(mm) * 60 + float(ss)
+
+
+def scan_periods(drive_dir: str | os.PathLike[str]) -> list[float] | None:
+    """Seconds per revolution of each scan (``timestamps_end - timestamps_start`` in ``velodyne_points/``), or
+    None when the drive lacks those files (or they are malformed)."""
+    folder = Path(drive_dir) / "velodyne_points"
+    try:
+        starts = (folder / "timestamps_start.txt").read_text().split("\n")
+        ends = (folder / "timestamps_end.txt").read_text().split("\n")
+        return [_seconds(e) - _seconds(s) for s, e in zip(starts, ends, strict=False) if s.strip() and e.strip()]
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+class RawDrive:
+    """A KITTI raw drive read frame by frame for one colour camera.
+
+    Args:
+        drive_dir: the ``DATE_drive_NNNN_sync`` folder; its parent holds the calibration files.
+        camera: 0..3 (or "02"); KITTI's colour cameras are 2 (left) and 3 (right).
+        deskew: compensate each scan for the vehicle's motion with its OXTS packet (see
+            :func:`semattnet.geometry.deskew_scan`), as KITTI's official ``velodyne_raw`` maps are; the scan period
+            comes from ``velodyne_points/timestamps_{start,end}.txt`` when present, else 0.1 s.
+
+    Raises:
+        DataError: the folder, the camera's images, the scans or the calibration are missing.
+    """
+
+    def __init__(self, drive_dir: str | os.PathLike[str], camera: str | int = 2, deskew: bool = False) -> None:
+        from semattnet.geometry import read_kitti_calibration
+
+        self.drive_dir = Path(drive_dir)
+        if not self.drive_dir.is_dir():
+            raise DataError(f"{self.drive_dir}: KITTI raw drive folder not found")
+        self.camera = f"{int(camera):02d}" if str(camera).isdigit() else str(camera)
+        self.image_dir = self.drive_dir / f"image_{self.camera}" / "data"
+        self.scan_dir = self.drive_dir / "velodyne_points" / "data"
+        self.oxts_dir = self.drive_dir / "oxts" / "data"
+        for folder in (self.image_dir, self.scan_dir):
+            if not folder.is_dir():
+                raise DataError(f"{folder}: not found (is {self.drive_dir} a KITTI raw *_sync drive folder?)")
+        self.deskew = deskew
+        self.periods = scan_periods(self.drive_dir) if deskew else None
+        self.calib = read_kitti_calibration(self.drive_dir.parent, self.camera)
+        scans = {p.stem for p in self.scan_dir.glob("*.bin")}
+        self.names = sorted(p.stem for p in self.image_dir.glob("*.png") if p.stem in scans)
+        if not self.names:
+            raise DataError(f"{self.drive_dir}: no frame has both an image in {self.image_dir} and a scan")
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def __iter__(self) -> Iterator[RawFrame]:
+        return (self.frame(name) for name in self.names)
+
+    def names_for(self, frames: str | int | Sequence[int] | None = None) -> list[str]:
+        """The frame names for indices (see :func:`parse_frames`; None: every frame with an image and a scan).
+
+        Raises:
+            DataError: an index with no image or no scan (the message lists what the drive has).
+        """
+        indices = parse_frames(frames)
+        if indices is None:
+            return list(self.names)
+        by_index = {int(n): n for n in self.names}
+        missing = [i for i in indices if i not in by_index]
+        if missing:
+            have = f"{self.names[0]}..{self.names[-1]}" if len(self.names) > 1 else self.names[0]
+            missed = ", ".join(map(str, missing[:5]))
+            raise DataError(f"{self.drive_dir}: no image_{self.camera} image and scan for frame(s) {missed}; "
+                            f"it has {len(self.names)} frame(s), {have}")  # fmt: skip
+        return [by_index[i] for i in indices]
+
+    def select(self, frames: str | int | Sequence[int] | None = None) -> Iterator[RawFrame]:
+        """The frames for ``frames`` (validated before the first is read)."""
+        names = self.names_for(frames)
+        return (self.frame(name) for name in names)
+
+    def frame(self, name: str) -> RawFrame:
+        """Read one frame by file stem; checks that the image has the calibration's size."""
+        from semattnet.geometry import deskew_scan, read_oxts_motion, read_points
+        from semattnet.geometry.scan import DEFAULT_SCAN_PERIOD
+
+        image_path, scan_path = self.image_dir / f"{name}.png", self.scan_dir / f"{name}.bin"
+        image, points = read_image(image_path), read_points(scan_path)
+        if self.calib.image_size is not None and image.shape[:2] != self.calib.image_size[::-1]:
+            w, h = self.calib.image_size
+            raise DataError(f"{image_path}: image is {image.shape[1]}x{image.shape[0]}, "
+                            f"the calibration says {w}x{h} for camera {self.camera}")  # fmt: skip
+        if self.deskew:
+            motion = read_oxts_motion(self.oxts_dir / f"{name}.txt")
+            i = int(name)
+            ok = self.periods is not None and i < len(self.periods) and 0.05 < self.periods[i] < 0.2
+            points = deskew_scan(
+                points, motion.velocity, motion.yaw_rate, self.periods[i] if ok else DEFAULT_SCAN_PERIOD
+            )
+        return RawFrame(name, int(name), image, points, self.calib, image_path, scan_path)

@@ -1,0 +1,107 @@
+"""The Python side of raw-drive completion: RawDrive frames, frame specs, complete_kitti_raw vs the CLI."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from semattnet.data.io import DataError, read_depth, read_image
+from semattnet.data.kitti_raw import RawDrive, parse_frames
+from semattnet.inference.raw import complete_kitti_raw, fusion_confidence
+from tests.inference._raw_sample import DRIVE, IMAGE_02, SCAN
+
+
+def test_raw_drive_yields_typed_frames() -> None:
+    drive = RawDrive(DRIVE, camera=3)
+    assert drive.names == ["0000000005"] and len(drive) == 1
+    (frame,) = list(drive)
+    assert frame.name == "0000000005" and frame.index == 5 and frame.calib.camera == "03"
+    assert frame.image.shape == (375, 1242, 3) and frame.image_path.parent.parent.name == "image_03"
+    assert frame.points.shape == (SCAN.stat().st_size // 16, 4) and frame.points.dtype == np.float32
+    deskewed = next(RawDrive(DRIVE, 2, deskew=True).select("5"))
+    assert 0.01 < np.abs(deskewed.points[:, :3] - frame.points[:, :3]).max() < 5.0  # moved, but not far
+
+
+@pytest.mark.parametrize(("spec", "expected"), [("0-3", [0, 1, 2, 3]), ("5", [5]), ("1,4, 7", [1, 4, 7]),
+                                                ("2-3,9", [2, 3, 9]), (None, None), (6, [6])])  # fmt: skip
+def test_parse_frames(spec: object, expected: list[int] | None) -> None:
+    assert parse_frames(spec) == expected  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("spec", ["3-1", "a", "", "-2"])
+def test_parse_frames_rejects(spec: str) -> None:
+    with pytest.raises(DataError, match="frames"):
+        parse_frames(spec)
+
+
+def test_missing_drive_and_camera_folders(tmp_path: Path) -> None:
+    with pytest.raises(DataError, match="drive folder not found"):
+        RawDrive(tmp_path / "nope")
+    with pytest.raises(DataError, match="image_01"):
+        RawDrive(DRIVE, camera=1)
+
+
+def test_python_api_gives_the_cli_depth(tmp_path: Path) -> None:
+    from semattnet.baselines.classical import ClassicalCompleter
+    from semattnet.cli import main
+
+    written = complete_kitti_raw(ClassicalCompleter(), DRIVE, tmp_path / "api", frames=[5], log=lambda s: None)
+    assert written == [tmp_path / "api" / "0000000005.png"]
+    result = CliRunner().invoke(main, ["predict", "--method", "classical", "--kitti-raw", str(DRIVE), "--out",
+                                       str(tmp_path / "cli")])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    api, cli = read_depth(written[0]), read_depth(tmp_path / "cli" / "0000000005.png")
+    assert np.array_equal(api, cli) and np.count_nonzero(api) > 0.5 * api.size
+
+
+class _Recorder:
+    """A completer that records the semantic map it receives and returns the sparse depth plus weights."""
+
+    needs_semantic = True
+
+    def __call__(self, rgb, sparse, semantic=None):  # type: ignore[no-untyped-def]
+        from semattnet.inference import Completion
+
+        self.semantic = semantic
+        ones = np.ones_like(sparse)
+        return Completion(
+            sparse + 1.0, {"color_conf": 0.2 * ones, "semantic_conf": 0.7 * ones, "guided_conf": 0.1 * ones}
+        )
+
+
+def test_semantic_folder_fallback_and_confidence(tmp_path: Path) -> None:
+    from semattnet.data.io import write_image
+    from semattnet.data.palette import UNKNOWN_COLOR
+
+    rec = _Recorder()
+    with pytest.warns(UserWarning, match="fallback"):
+        complete_kitti_raw(rec, DRIVE, tmp_path / "a", frames="5", log=lambda s: None)
+    assert rec.semantic.shape == (375, 1242, 3) and (rec.semantic == np.array(UNKNOWN_COLOR, np.uint8)).all()
+    sem_dir = tmp_path / "sem"
+    sem_dir.mkdir()
+    write_image(sem_dir / "0000000005.png", read_image(IMAGE_02)[::-1].copy())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        complete_kitti_raw(rec, DRIVE, tmp_path / "b", frames="5", semantic=sem_dir, log=lambda s: None)
+    assert np.array_equal(rec.semantic, read_image(IMAGE_02)[::-1])
+    with pytest.raises(DataError, match="0000000005.png"):
+        complete_kitti_raw(rec, DRIVE, tmp_path / "c", frames="5", semantic=tmp_path, log=lambda s: None)
+    conf = fusion_confidence(rec(None, np.zeros((2, 2), np.float32)).outputs)
+    assert conf is not None and np.allclose(conf, 0.7)
+    assert fusion_confidence({"refined_depth": np.zeros((2, 2))}) is None
+
+
+def test_segmenter_spec_colours_the_semantic_map(tmp_path: Path) -> None:
+    from semattnet.data.palette import UNKNOWN_COLOR
+
+    rec = _Recorder()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a segmenter is given: no fallback warning
+        complete_kitti_raw(rec, DRIVE, tmp_path, frames="5", segmenter="unknown", log=lambda s: None)
+    assert rec.semantic.shape == (375, 1242, 3) and (rec.semantic == np.array(UNKNOWN_COLOR, np.uint8)).all()
+    with pytest.raises(ValueError, match="not both"):
+        complete_kitti_raw(rec, DRIVE, tmp_path / "x", frames="5", segmenter="unknown", semantic=tmp_path)
