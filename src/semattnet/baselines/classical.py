@@ -29,7 +29,8 @@ __all__ = ["ClassicalCompleter", "complete_classical"]
 
 #: (far limit in metres, diamond radius): points nearer than the limit get that dilation radius.
 _DILATION_BANDS = ((15.0, 3), (30.0, 2), (float("inf"), 1))
-_LARGE_FILLS = (9, 17, 31)
+_LARGE_FILLS = (9, 17, 31)  # square kernels of the large-hole fills, in turn
+_CLOSE = 5  # closing kernel (square)
 
 
 def _max_run(x: torch.Tensor, size: int, dim: int) -> torch.Tensor:
@@ -141,7 +142,7 @@ def complete_classical(sparse: torch.Tensor, max_depth: float = 100.0) -> torch.
     valid = d > 0
     inv = torch.where(d > 0, max_depth + 1.0 - d, torch.zeros_like(d))  # near = large, valid > 0
     inv = _dilate_by_depth(d, inv)
-    inv = -_square(-_square(inv, 5), 5)  # closing
+    inv = -_square(-_square(inv, _CLOSE), _CLOSE)  # closing
     inv = _fill(inv, _square(inv, 7))
     inv = _extend_top(inv)
     for size in _LARGE_FILLS:
