@@ -81,9 +81,8 @@ def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, spli
         raise click.UsageError("--method classical needs --sparsity")
     if (save_predictions or pictures) and out is None:
         raise click.UsageError("--save-predictions and --pictures need --out")
-    if weights is not None or checkpoint is None:
-        raise click.UsageError("evaluate without --sparsity takes --checkpoint")
-    res = evaluate_checkpoint(checkpoint, data_root, split, out, device, batch_size, amp, workers,
+    model = checkpoint if weights is None and checkpoint is not None else model_from_options(checkpoint, weights)
+    res = evaluate_checkpoint(model, data_root, split, out, device, batch_size, amp, workers,
                               save_predictions, pictures, max_frames, overwrite)  # fmt: skip
     click.echo(res["metrics"].table())
     if out is not None:

@@ -163,7 +163,7 @@ def _write_scores(out: Path, metrics: KittiMetrics, summary: dict[str, Any]) -> 
 
 
 def evaluate_checkpoint(
-    checkpoint: str | Path,
+    checkpoint: str | Path | nn.Module,
     data: str | Path,
     split: str = "val_select",
     out_dir: str | Path | None = None,
@@ -178,12 +178,16 @@ def evaluate_checkpoint(
     raw_root: str | Path | None = None,
     semantic_root: str | Path | None = None,
 ) -> dict[str, Any]:
-    """Run a checkpoint over a split and score it; optionally write predictions and panels.
+    """Run a checkpoint (a path, or a loaded model) over a split and score it; optionally write
+    predictions and panels.
 
     Writes into ``out_dir``: ``metrics.json``, ``per_image.csv``, ``predictions/`` (16-bit PNGs named
     like the ground truth for val_select) and ``pictures/`` (branch panels of the first frames).
     """
-    completer = DepthCompleter.from_checkpoint(checkpoint, device=device, amp=amp)
+    if isinstance(checkpoint, nn.Module):
+        completer, label = DepthCompleter(checkpoint, device=device, amp=amp), type(checkpoint).__name__
+    else:
+        completer, label = DepthCompleter.from_checkpoint(checkpoint, device=device, amp=amp), str(checkpoint)
     ds = _eval_dataset(data, split, raw_root, semantic_root)
     subset = Subset(ds, range(min(len(ds), max_frames))) if max_frames else ds
     out = _prepare_out(Path(out_dir), overwrite) if out_dir is not None else None
@@ -192,5 +196,5 @@ def evaluate_checkpoint(
     metrics = evaluate_model(completer.model, loader, completer.device, amp, on_batch=writer, quantize=True)
     result = metrics.compute() if metrics.per_image else {}
     if out is not None and result:
-        _write_scores(out, metrics, {"checkpoint": str(checkpoint), "split": split} | result)
+        _write_scores(out, metrics, {"checkpoint": label, "split": split} | result)
     return {"metrics": metrics, "result": result}
