@@ -100,17 +100,22 @@ def plot_sweep(rows: list[dict[str, Any]], path: Path) -> Path:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.4), dpi=90)
+    methods = list(dict.fromkeys(r["method"] for r in rows))
     for ax, key, label in zip(axes, ("rmse_mm", "mae_mm"), ("RMSE [mm]", "MAE [mm]"), strict=True):
-        for method in dict.fromkeys(r["method"] for r in rows):
+        for i, method in enumerate(methods):
             for kind, style in (("beams", "o-"), ("keep", "s--")):
                 pts = sorted((r["density"], r[key]) for r in rows if r["method"] == method
                              and r["setting"].startswith(kind))  # fmt: skip
                 if pts:
-                    ax.plot(*zip(*pts, strict=True), style, label=f"{method} ({kind})")
+                    ax.plot(*zip(*pts, strict=True), style, color=f"C{i}", label=f"{method} ({kind})")
         ax.set_xscale("log")
-        ax.set_xlabel("input density (valid pixels / all)")
+        ax.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{100 * v:g} %"))
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_xlabel("input density (valid pixels)")
         ax.set_ylabel(label)
         ax.grid(True, which="both", alpha=0.3)
     axes[0].legend(fontsize=7)
