@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from semattnet.cli._group import main
+from semattnet.cli._options import model_from_options, weights_option
 
 
 @main.command()
@@ -33,14 +34,29 @@ def metrics(pred_dir: Path, gt_dir: Path, json_path: Path | None, min_gt: float,
 
 
 @main.command()
-@click.option("--checkpoint", required=True, type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--checkpoint", default=None, type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@weights_option
 @click.option("--data", "data_root", required=True, type=click.Path(exists=True, file_okay=False, path_type=Path))
 @click.option("--split", type=click.Choice(["val_select", "val"]), default="val_select", show_default=True)
 @click.option(
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
     default=None,
-    help="Folder for metrics.json, per_image.csv, predictions/ and pictures/.",
+    help="Folder for metrics.json, per_image.csv, predictions/ and pictures/ (or the sparsity sweep's files).",
+)
+@click.option(
+    "--sparsity",
+    "sparsity",
+    multiple=True,
+    metavar="beams=64,32,..|keep=1,0.5,..",
+    help="Sweep sparser inputs (repeatable): the model and the classical baseline side by side; needs --out.",
+)
+@click.option(
+    "--method",
+    type=click.Choice(["semattnet", "classical"]),
+    default="semattnet",
+    show_default=True,
+    help="With --sparsity: classical sweeps only the baseline (no model needed).",
 )
 @click.option("--save-predictions", is_flag=True, help="Write 16-bit PNG predictions (needs --out).")
 @click.option("--pictures", default=0, show_default=True, help="Branch panels for the first N frames (needs --out).")
@@ -50,19 +66,44 @@ def metrics(pred_dir: Path, gt_dir: Path, json_path: Path | None, min_gt: float,
 @click.option("--workers", default=2, show_default=True)
 @click.option("--max-frames", type=int, default=None)
 @click.option("--overwrite", is_flag=True)
-def evaluate(checkpoint: Path, data_root: Path, split: str, out: Path | None, save_predictions: bool, pictures: int,
-             device: str, batch_size: int, amp: str, workers: int, max_frames: int | None,
-             overwrite: bool) -> None:  # fmt: skip
-    """Evaluate a checkpoint on a KITTI (or synthetic) split with the official metrics."""
+def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, split: str, out: Path | None,
+             sparsity: tuple[str, ...], method: str, save_predictions: bool, pictures: int, device: str,
+             batch_size: int, amp: str, workers: int, max_frames: int | None, overwrite: bool) -> None:  # fmt: skip
+    """Evaluate a checkpoint on a KITTI (or synthetic) split with the official metrics, or sweep sparser inputs."""
+    if sparsity:
+        if out is None:
+            raise click.UsageError("--sparsity needs --out")
+        _sweep(checkpoint, weights, data_root, split, out, sparsity, method, device, max_frames, overwrite)
+        return
     from semattnet.evaluation.evaluate import evaluate_checkpoint
 
+    if method != "semattnet":
+        raise click.UsageError("--method classical needs --sparsity")
     if (save_predictions or pictures) and out is None:
         raise click.UsageError("--save-predictions and --pictures need --out")
-    res = evaluate_checkpoint(checkpoint, data_root, split, out, device, batch_size, amp, workers,
+    model = checkpoint if weights is None and checkpoint is not None else model_from_options(checkpoint, weights)
+    res = evaluate_checkpoint(model, data_root, split, out, device, batch_size, amp, workers,
                               save_predictions, pictures, max_frames, overwrite)  # fmt: skip
     click.echo(res["metrics"].table())
     if out is not None:
         click.echo(f"wrote {out / 'metrics.json'} and {out / 'per_image.csv'}")
+
+
+def _sweep(checkpoint: Path | None, weights: str | None, data_root: Path, split: str, out: Path,
+           sparsity: tuple[str, ...], method: str, device: str, max_frames: int | None,
+           overwrite: bool) -> None:  # fmt: skip
+    from semattnet.evaluation.sparsity import parse_settings, sweep_model
+
+    settings = parse_settings(sparsity)  # fail on a bad setting before loading anything
+    if method == "classical" and (checkpoint is not None or weights is not None):
+        raise click.UsageError("--method classical takes no --checkpoint / --weights")
+    model = model_from_options(checkpoint, weights, "cpu") if method == "semattnet" else None
+    rows = sweep_model(data_root, split, settings, model, out, device, max_frames, overwrite)
+    click.echo(f"{'method':>10} {'setting':>10} {'density':>8} {'RMSE':>8} {'MAE':>8} {'iRMSE':>7} {'iMAE':>6}")
+    for r in rows:
+        click.echo(f"{r['method']:>10} {r['setting']:>10} {r['density']:8.4f} {r['rmse_mm']:8.1f} {r['mae_mm']:8.1f} "
+                   f"{r['irmse_per_km']:7.2f} {r['imae_per_km']:6.2f}")  # fmt: skip
+    click.echo(f"wrote {out / 'sparsity.csv'}, {out / 'sparsity.json'} and {out / 'sparsity.png'}")
 
 
 @main.command()

@@ -18,7 +18,7 @@ from tqdm import tqdm
 
 from semattnet._utils import distributed as dist_utils
 from semattnet._utils.device import autocast
-from semattnet.data.io import DEPTH_SCALE, MAX_DEPTH_M, MIN_DEPTH_M, DataError, clamp_for_png, read_depth, write_depth
+from semattnet.data.io import DEPTH_SCALE, DataError, clamp_for_png, read_depth, write_depth
 from semattnet.data.kitti import KittiDepthCompletion
 from semattnet.data.transforms import EvalTransform
 from semattnet.evaluation.metrics import KittiMetrics
@@ -72,8 +72,8 @@ def evaluate_model(
 ) -> KittiMetrics:
     """Score ``model`` over ``loader`` (batches from :class:`KittiDepthCompletion`), all ranks.
 
-    ``quantize`` scores what a KITTI 16-bit PNG of the prediction holds (clamped, 1/256 m steps),
-    i.e. exactly what ``semattnet metrics`` and the benchmark see.
+    ``quantize`` scores what a KITTI 16-bit PNG of the prediction holds (clamped, 1/256 m steps,
+    holes kept as 0 for the devkit to fill), i.e. exactly what ``semattnet metrics`` and the benchmark see.
     """
     metrics = KittiMetrics(fill_holes=fill_holes, min_gt=min_gt)
     was_training = model.training
@@ -86,13 +86,19 @@ def evaluate_model(
             if "gt" in batch:
                 pred = out.depth.float()
                 if quantize:
-                    pred = torch.round(pred.clamp(MIN_DEPTH_M, MAX_DEPTH_M) * DEPTH_SCALE) / DEPTH_SCALE
+                    pred = _as_png(pred, list(batch["name"]))
                 metrics.update(pred, batch["gt"].to(device), names=list(batch["name"]))
             if on_batch is not None:
                 on_batch(batch, out)
     model.train(was_training)
     metrics.reduce()
     return metrics
+
+
+def _as_png(pred: torch.Tensor, names: list[str]) -> torch.Tensor:
+    """What the 16-bit PNGs of (B, 1, H, W) predictions hold: :func:`clamp_for_png`, 1/256 m steps."""
+    clamped = torch.stack([clamp_for_png(p, name) for p, name in zip(pred, names, strict=True)])
+    return torch.round(clamped * DEPTH_SCALE) / DEPTH_SCALE
 
 
 def _prediction_name(split: str, frame_name: str, gt_path: Path | None) -> str:
@@ -157,7 +163,7 @@ def _write_scores(out: Path, metrics: KittiMetrics, summary: dict[str, Any]) -> 
 
 
 def evaluate_checkpoint(
-    checkpoint: str | Path,
+    checkpoint: str | Path | nn.Module,
     data: str | Path,
     split: str = "val_select",
     out_dir: str | Path | None = None,
@@ -172,12 +178,16 @@ def evaluate_checkpoint(
     raw_root: str | Path | None = None,
     semantic_root: str | Path | None = None,
 ) -> dict[str, Any]:
-    """Run a checkpoint over a split and score it; optionally write predictions and panels.
+    """Run a checkpoint (a path, or a loaded model) over a split and score it; optionally write
+    predictions and panels.
 
     Writes into ``out_dir``: ``metrics.json``, ``per_image.csv``, ``predictions/`` (16-bit PNGs named
     like the ground truth for val_select) and ``pictures/`` (branch panels of the first frames).
     """
-    completer = DepthCompleter.from_checkpoint(checkpoint, device=device, amp=amp)
+    if isinstance(checkpoint, nn.Module):
+        completer, label = DepthCompleter(checkpoint, device=device, amp=amp), type(checkpoint).__name__
+    else:
+        completer, label = DepthCompleter.from_checkpoint(checkpoint, device=device, amp=amp), str(checkpoint)
     ds = _eval_dataset(data, split, raw_root, semantic_root)
     subset = Subset(ds, range(min(len(ds), max_frames))) if max_frames else ds
     out = _prepare_out(Path(out_dir), overwrite) if out_dir is not None else None
@@ -186,5 +196,5 @@ def evaluate_checkpoint(
     metrics = evaluate_model(completer.model, loader, completer.device, amp, on_batch=writer, quantize=True)
     result = metrics.compute() if metrics.per_image else {}
     if out is not None and result:
-        _write_scores(out, metrics, {"checkpoint": str(checkpoint), "split": split} | result)
+        _write_scores(out, metrics, {"checkpoint": label, "split": split} | result)
     return {"metrics": metrics, "result": result}

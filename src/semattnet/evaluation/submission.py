@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+import warnings
 import zipfile
 from collections.abc import Iterable
 from pathlib import Path
@@ -27,6 +28,23 @@ class SubmissionError(SemAttNetError):
     """A submission that would be rejected: wrong count, size or encoding."""
 
 
+def _read_back(folder: Path, names: list[str], expected: dict[str, tuple[int, int]]) -> int:
+    """Re-read every PNG: 16-bit, the right size. Holes (0) are legal: the devkit fills them from their
+    neighbours (``interpolateBackground``) before scoring; they are counted and reported in one warning."""
+    holes = {}
+    for name in names:
+        d = read_depth(folder / name)
+        if d.shape != expected[name]:
+            raise SubmissionError(f"{name}: failed the read-back check (reads back as {d.shape[1]}x{d.shape[0]})")
+        if n := int((d == 0).sum()):
+            holes[name] = n
+    if holes:
+        shown = ", ".join(f"{k} ({v})" for k, v in list(holes.items())[:5])
+        warnings.warn(f"submission: {sum(holes.values())} hole(s) (0 = no prediction, filled by the devkit) in "
+                      f"{len(holes)} file(s): {shown}{' ...' if len(holes) > 5 else ''}", stacklevel=3)  # fmt: skip
+    return sum(holes.values())
+
+
 def write_submission_files(
     predictions: Iterable[tuple[str, np.ndarray]],
     out: str | Path,
@@ -36,7 +54,8 @@ def write_submission_files(
     """Write ``(file name, depth)`` pairs as KITTI 16-bit PNGs into ``out`` and zip them.
 
     Everything goes to a temporary folder first; ``out`` and the zip appear only when the count,
-    every name, every size (``expected``: name -> (H, W)) and the encoding check out.
+    every name, every size (``expected``: name -> (H, W)) and the encoding check out. Holes (0, negative
+    or non-finite depth) are written as 0, which the KITTI devkit fills, and reported in a warning.
 
     Raises:
         SubmissionError: any check fails (nothing is written).
@@ -60,10 +79,7 @@ def write_submission_files(
         if written != sorted(expected):
             missing = sorted(set(expected) - set(written))
             raise SubmissionError(f"{len(written)} predictions for {len(expected)} test frames; missing {missing[:5]}")
-        for name in written:  # read back: 16-bit, right size, no zeros (0 = "no prediction")
-            d = read_depth(tmp / name)
-            if d.shape != expected[name] or not (d > 0).all():
-                raise SubmissionError(f"{name}: failed the read-back check")
+        _read_back(tmp, written, expected)
         if out.exists():
             shutil.rmtree(out)
         os.replace(tmp, out)
