@@ -1,6 +1,15 @@
 """The ``semattnet`` command line: one module per command group; commands parse options and call the library."""
 
-from semattnet.cli import apps, data, evaluate, models, predict, segment, train  # noqa: F401  (register the commands)
+from semattnet.cli import (  # noqa: F401  (register the commands)
+    apps,
+    data,
+    evaluate,
+    models,
+    predict,
+    segment,
+    train,
+    weights,
+)
 from semattnet.cli._group import main
 
 __all__ = ["main"]
