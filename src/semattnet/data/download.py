@@ -189,7 +189,8 @@ def _show(files: Sequence[PlannedFile], note: str, log: Log) -> None:
             log(f"  [manual]  -> {f.target}")
             log("    " + str(kf.SEMANTIC_MAPS["instructions"]))
         else:
-            log(f"  {f.url}  [{f.size or 'size unknown'}]  -> {f.target}")
+            only = f" (only {', '.join(f.archive.keep)})" if f.archive is not None and f.archive.keep else ""
+            log(f"  {f.url}  [{f.size or 'size unknown'}]  -> {f.target}{only}")
 
 
 def _get(f: PlannedFile, cache_dir: str | Path | None, progress: bool, delete: bool, log: Log) -> None:
@@ -230,9 +231,9 @@ def download_kitti(
         semattnet.weights.DownloadError: a download failed (resume by running again).
     """
     out, parts = Path(out), parse_what(what)
-    log(kf.KITTI_LICENSE)
     if not accept_license and not dry_run:
         raise LicenseNotAcceptedError(f"{kf.KITTI_LICENSE} -- pass --accept-kitti-license to accept it")
+    log(kf.KITTI_LICENSE)
     for part in parts:
         files, note = plan_part(part, out, mirror, semantic_archive)
         log(f"{part}:")
