@@ -1,6 +1,16 @@
 """The ``semattnet`` command line: one module per command group; commands parse options and call the library."""
 
-from semattnet.cli import apps, data, evaluate, models, predict, project, segment, train  # noqa: F401  (register)
+from semattnet.cli import (  # noqa: F401  (register the commands)
+    apps,
+    data,
+    evaluate,
+    models,
+    predict,
+    project,
+    segment,
+    train,
+    weights,
+)
 from semattnet.cli._group import main
 
 __all__ = ["main"]

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from semattnet.cli._group import main
-from semattnet.cli._options import parse_size
+from semattnet.cli._options import model_from_options, parse_size, weights_option
 
 
 @main.command()
@@ -85,16 +85,17 @@ def ablate(out_dir: Path, configs: str, seeds: str, backbone_steps: int, full_st
 @click.option("--parts", default="propagation,backbone,full,fast,train", help="What to measure.")
 @click.option("--checkpoint", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               help="Weights to use instead of random ones.")  # fmt: skip
+@weights_option
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also write the results as JSON.")  # fmt: skip
 def bench(size: str, train_size: str, device: str, repeats: int, width: float, parts: str, checkpoint: Path | None,
-          json_path: Path | None) -> None:  # fmt: skip
+          weights: str | None, json_path: Path | None) -> None:  # fmt: skip
     """Latency, throughput and peak memory against the naive reference, in one process."""
     from semattnet._utils.device import resolve_device
     from semattnet.apps.benchmark import run_benchmark
-    from semattnet.weights.checkpoint import load_model
 
-    model = load_model(checkpoint) if checkpoint is not None else None
+    given = checkpoint is not None or weights is not None
+    model = model_from_options(checkpoint, weights) if given else None
     chosen = tuple(p.strip() for p in parts.split(",") if p.strip())
     unknown = set(chosen) - {"propagation", "backbone", "full", "fast", "train"}
     if unknown:

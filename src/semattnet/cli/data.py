@@ -1,4 +1,4 @@
-"""Commands about data: ``synth`` and ``data check``."""
+"""Commands about data: ``synth``, ``data check`` and ``data download``."""
 
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ def synth(out_dir: Path, frames: int, eval_frames: int | None, size: str, seed: 
 
 @main.group()
 def data() -> None:
-    """Data sets: validation of KITTI / synthetic trees."""
+    """Data sets: download and validation of KITTI / synthetic trees."""
 
 
 @data.command("check")
@@ -61,4 +61,36 @@ def data_check(roots: tuple[Path, ...], raw_root: Path | None, semantic_root: Pa
     from semattnet.data.check import check_trees
 
     if check_trees(roots, raw_root, semantic_root, sample, log=click.echo):
+        raise SystemExit(1)
+
+
+@data.command("download")
+@click.option("--what", default="depth-completion,raw-subset", show_default=True,
+              help="Comma list of depth-completion, raw-subset, semantic (or all).")  # fmt: skip
+@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="Root of the KITTI tree (data_depth_*, kitti_raw, semantic).")  # fmt: skip
+@click.option("--accept-kitti-license", is_flag=True, help="Accept KITTI's CC BY-NC-SA 3.0 terms (required).")
+@click.option("--dry-run", is_flag=True, help="Print every URL, size and target folder; download nothing.")
+@click.option("--mirror", default=None, metavar="URL_PREFIX",
+              help="Fetch from this prefix instead of KITTI's server (same paths below it).")  # fmt: skip
+@click.option("--semantic-archive", default=None, metavar="PATH|URL",
+              help="The authors' semantic maps (a zip you downloaded), unpacked into OUT/semantic.")  # fmt: skip
+@click.option("--cache-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Download cache [$SEMATTNET_CACHE or the user cache].")  # fmt: skip
+@click.option("--delete-archives", is_flag=True, help="Delete each downloaded archive once it is unpacked.")
+@click.option("--check/--no-check", default=True, show_default=True, help="Run `data check` on OUT at the end.")
+def data_download(what: str, out_dir: Path, accept_kitti_license: bool, dry_run: bool, mirror: str | None,
+                  semantic_archive: str | None, cache_dir: Path | None, delete_archives: bool,
+                  check: bool) -> None:  # fmt: skip
+    """Download KITTI depth completion and the raw drives it needs into the loader layout; exits 1 on problems."""
+    from semattnet.data.download import download_kitti
+    from semattnet.weights.download import DownloadError
+
+    try:
+        problems = download_kitti(out_dir, what, accept_license=accept_kitti_license, dry_run=dry_run,
+                                  mirror=mirror, semantic_archive=semantic_archive, cache_dir=cache_dir,
+                                  delete_archives=delete_archives, check=check, log=click.echo)  # fmt: skip
+    except DownloadError as exc:
+        raise click.ClickException(f"{exc} (run the same command again to resume)") from None
+    if problems:
         raise SystemExit(1)

@@ -8,6 +8,16 @@ from pathlib import Path
 import click
 
 from semattnet.cli._group import main
+from semattnet.cli._options import weights_option
+
+
+def _source(checkpoint: Path | None, weights: str | None) -> Path:
+    """The local file named by CHECKPOINT or ``--weights`` (exactly one of them)."""
+    from semattnet.cli.weights import weights_file
+
+    if (checkpoint is None) == (weights is None):
+        raise click.UsageError("give a CHECKPOINT file or --weights NAME|PATH|URL (one of them)")
+    return checkpoint if checkpoint is not None else weights_file(weights)  # type: ignore[arg-type]
 
 
 @main.command()
@@ -20,12 +30,13 @@ def models(params: bool) -> None:
 
 
 @main.command()
-@click.argument("checkpoint", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-def info(checkpoint: Path) -> None:
-    """Show what a checkpoint holds (never runs code from it)."""
+@click.argument("checkpoint", required=False, type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@weights_option
+def info(checkpoint: Path | None, weights: str | None) -> None:
+    """Show what a checkpoint (or --weights) holds (never runs code from it)."""
     from semattnet.weights.checkpoint import config_from_state_dict, load_checkpoint
 
-    ckpt = load_checkpoint(checkpoint)
+    ckpt = load_checkpoint(_source(checkpoint, weights))
     cfg = ckpt.config or config_from_state_dict(ckpt.state_dict)
     n = sum(v.numel() for k, v in ckpt.state_dict.items() if not k.endswith("num_batches_tracked"))
     click.echo(f"file:        {ckpt.path}  ({ckpt.format})")
@@ -40,15 +51,20 @@ def info(checkpoint: Path) -> None:
 
 
 @main.command()
-@click.argument("src", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.argument("dst", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("paths", nargs=-1, required=True, metavar="[SRC] DST", type=click.Path(dir_okay=False, path_type=Path))
+@weights_option
 @click.option("--overwrite", is_flag=True, help="Replace DST if it exists.")
-def convert(src: Path, dst: Path, overwrite: bool) -> None:
-    """Convert a checkpoint (authors' .pth.tar, state dict) to weights-only safetensors."""
+def convert(paths: tuple[Path, ...], weights: str | None, overwrite: bool) -> None:
+    """Convert a checkpoint SRC (or --weights) to weights-only safetensors DST."""
     from semattnet.weights.checkpoint import load_checkpoint, save_safetensors
 
+    if len(paths) != (1 if weights is not None else 2):
+        raise click.UsageError("expected SRC DST, or --weights NAME|PATH|URL DST")
+    src, dst = (None, paths[0]) if weights is not None else paths
+    if src is not None and not src.is_file():
+        raise click.BadParameter(f"{src}: no such file", param_hint="SRC")
     if dst.exists() and not overwrite:
         raise click.ClickException(f"{dst} exists; pass --overwrite to replace it")
-    ckpt = load_checkpoint(src)
+    ckpt = load_checkpoint(_source(src, weights))
     save_safetensors(ckpt, dst)
     click.echo(f"wrote {dst} ({len(ckpt.state_dict)} tensors, {dst.stat().st_size / 2**20:.1f} MiB)")

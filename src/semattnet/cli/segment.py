@@ -12,7 +12,8 @@ from semattnet.cli._options import parse_size, parse_triple
 
 @main.command()
 @click.option("--model", "spec", required=True,
-              help="model.onnx, TorchScript file, torchvision:ARCH:WEIGHTS, or 'unknown' (no segmenter).")  # fmt: skip
+              help="model.onnx, TorchScript file, torchvision:ARCH:WEIGHTS, hf:ORG/NAME | hf:PATH | hf:default "
+                   "(SegFormer-B5 Cityscapes, needs semattnet[segment]), or 'unknown' (no segmenter).")  # fmt: skip
 @click.option("--images", required=True, type=click.Path(exists=True, file_okay=False, path_type=Path),
               help="Image tree, e.g. kitti_raw (searched recursively).")  # fmt: skip
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path),

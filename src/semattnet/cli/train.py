@@ -15,6 +15,8 @@ from semattnet.cli._options import parse_size
 )
 @click.option("--out", type=click.Path(file_okay=False), default=None, help="Run folder [runs/<stage>].")
 @click.option("--init", type=click.Path(dir_okay=False), default=None, help="Checkpoint of the previous stage.")
+@click.option("--init-weights", default=None, metavar="NAME|PATH|URL",
+              help="Released weights to start from instead of --init (see semattnet weights list).")  # fmt: skip
 @click.option(
     "--config",
     "config_file",
@@ -35,7 +37,8 @@ from semattnet.cli._options import parse_size
 @click.option(
     "--set", "overrides", multiple=True, metavar="KEY=VALUE", help="Any TrainConfig field, e.g. --set val_every=2."
 )
-def train(stage: str, data_root: str | None, out: str | None, init: str | None, config_file: str | None, resume: bool,
+def train(stage: str, data_root: str | None, out: str | None, init: str | None, init_weights: str | None,
+          config_file: str | None, resume: bool,
           epochs: int | None, batch_size: int | None, lr: float | None, width: float | None, crop: str | None,
           amp: str | None, device: str | None, workers: int | None, max_steps: int | None,
           overrides: tuple[str, ...]) -> None:  # fmt: skip
@@ -43,6 +46,12 @@ def train(stage: str, data_root: str | None, out: str | None, init: str | None, 
     from semattnet.training.config import TrainConfig
     from semattnet.training.trainer import train as run_training
 
+    if init_weights is not None:
+        from semattnet.cli.weights import weights_file
+
+        if init is not None:
+            raise click.UsageError("give --init or --init-weights, not both")
+        init = str(weights_file(init_weights))
     if resume:
         if not out:
             raise click.UsageError("--resume needs --out (the run folder)")

@@ -8,6 +8,10 @@ a network given by a SPEC (see :func:`load_segmenter`):
 * ``path/to/model.onnx``: an ONNX graph, run with onnxruntime (``pip install onnxruntime``);
 * ``torchvision:ARCH:WEIGHTS``: a torchvision segmentation architecture (e.g.
   ``deeplabv3_resnet50``) with a state-dict file (``pip install torchvision``);
+* ``hf:ORG/NAME``, ``hf:PATH`` or ``hf:default``: a Cityscapes-trained SegFormer / Mask2Former ...
+  through ``transformers`` (``pip install 'semattnet[segment]'``), its classes matched to trainIds
+  by name (:mod:`semattnet.segmentation.hf`; ``hf:default`` is SegFormer-B5, downloaded from the
+  Hugging Face Hub);
 * ``unknown``: no network, every pixel gets :data:`~semattnet.data.palette.UNKNOWN_COLOR` (the
   fallback for frames without a segmenter; expect worse depth, see the README).
 
@@ -15,7 +19,7 @@ The network takes (B, 3, H, W) float32 RGB, scaled to [0, 1] then normalised wit
 ``std`` (ImageNet's by default, what torchvision and most Cityscapes models expect), and returns
 logits (B, C, h, w) (a tensor, a tuple whose first item is one, or a dict with ``"out"``) with
 C = 19 (trainIds) or 34 (Cityscapes labelIds), or already-decided (B, h, w) integer trainIds.
-Logits are resized bilinearly to the image size before the arg-max. Nothing is downloaded.
+Logits are resized bilinearly to the image size before the arg-max. Only ``hf:`` specs download.
 """
 
 from __future__ import annotations
@@ -180,6 +184,10 @@ def load_segmenter(
     dev = resolve_device(device)
     if spec == "unknown":
         return Segmenter(None, spec, dev)
+    if spec.startswith("hf:"):
+        from semattnet.segmentation.hf import load_hf_network
+
+        return Segmenter(load_hf_network(spec[3:], dev), spec, dev, mean, std, input_size)
     if spec.startswith("torchvision:"):
         parts = spec.split(":", 2)
         if len(parts) != 3 or not parts[1] or not parts[2]:
@@ -191,7 +199,7 @@ def load_segmenter(
     path = Path(spec)
     if not path.is_file():
         raise ValueError(
-            f"{spec}: no such model file (expected .onnx, TorchScript, torchvision:ARCH:WEIGHTS or unknown)"
+            f"{spec}: no such model file (expected .onnx, TorchScript, torchvision:ARCH:WEIGHTS, hf:... or unknown)"
         )
     if path.suffix.lower() == ".onnx":
         return Segmenter(_onnx(path, dev), spec, dev, mean, std, input_size)

@@ -1,0 +1,126 @@
+"""``semattnet weights list/fetch`` and ``--weights`` on info, convert, bench and ``train --init-weights``."""
+
+from __future__ import annotations
+
+import functools
+import threading
+from collections.abc import Iterator
+from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
+
+import pytest
+import torch
+from click.testing import CliRunner
+from safetensors.torch import save_file
+
+import semattnet
+from semattnet.cli import main
+from semattnet.weights import pretrained, sha256_file
+from semattnet.weights.pretrained import PretrainedWeights
+
+NAME = "tiny-test"
+CONFIG = {"width": 0.125, "iterations": 2}
+
+
+class _Quiet(SimpleHTTPRequestHandler):
+    def log_message(self, format: str, *args: object) -> None:
+        pass
+
+
+@pytest.fixture(scope="module")
+def weights_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Safetensors weights of the smallest full model."""
+    torch.manual_seed(0)
+    model = semattnet.build_model("semattnet", **CONFIG)
+    path = tmp_path_factory.mktemp("w") / "tiny.safetensors"
+    save_file({k: v.contiguous() for k, v in model.state_dict().items()}, str(path))
+    return path
+
+
+@pytest.fixture
+def served(weights_file: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
+    """``weights_file`` on an HTTP server on 127.0.0.1, registered as NAME; an empty cache."""
+    monkeypatch.setenv("SEMATTNET_CACHE", str(tmp_path / "cache"))
+    monkeypatch.delenv("SEMATTNET_OFFLINE", raising=False)
+    monkeypatch.delenv("HF_HUB_OFFLINE", raising=False)
+    monkeypatch.setenv("HF_HUB_DISABLE_PROGRESS_BARS", "1")
+    try:
+        from huggingface_hub import constants
+    except ImportError:
+        pass
+    else:
+        monkeypatch.setattr(constants, "HF_HUB_OFFLINE", False)
+    handler = functools.partial(_Quiet, directory=str(weights_file.parent))
+    httpd = ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    threading.Thread(target=httpd.serve_forever, daemon=True).start()
+    url = f"http://127.0.0.1:{httpd.server_address[1]}/{weights_file.name}"
+    record = PretrainedWeights(name=NAME, arch="semattnet", urls=(url,), file_name="tiny.safetensors",
+                               format="safetensors", license="test only: not for release", config=CONFIG,
+                               num_params=5_700_000, paper_metrics={"synthetic/val": {"rmse_mm": 1234.5}})  # fmt: skip
+    monkeypatch.setitem(pretrained._REGISTRY, NAME, record)
+    yield url
+    httpd.shutdown()
+    httpd.server_close()
+
+
+def run(*args: str) -> str:
+    res = CliRunner().invoke(main, list(args))
+    assert res.exit_code == 0, res.output
+    return res.output
+
+
+def test_list_shows_the_registry() -> None:
+    out = run("weights", "list")
+    header = out.splitlines()[0].split()
+    assert header[:5] == ["name", "arch", "params", "file", "sha256"]
+    row = next(line for line in out.splitlines() if line.startswith("semattnet-kitti"))
+    assert "unknown (pinned on first download)" in row and "709.41 mm" in row and "361.0 M" in row
+
+
+def test_fetch_prints_path_and_sha_then_list_shows_the_pin(served: str, weights_file: Path, tmp_path: Path) -> None:
+    out = run("weights", "fetch", NAME, "--no-progress")
+    sha = sha256_file(weights_file)
+    path = Path(out.split("path:", 1)[1].split()[0])
+    assert path.is_file() and path.is_relative_to(tmp_path / "cache") and f"sha256: {sha}" in out
+    row = next(line for line in run("weights", "list").splitlines() if line.startswith(NAME))
+    assert f"{sha} (pinned)" in row and "1234.5 mm" in row and "test only" in row
+
+
+def test_fetch_unknown_name_is_one_line_error() -> None:
+    res = CliRunner().invoke(main, ["weights", "fetch", "no-such-weights"])
+    assert res.exit_code == 2 and "semattnet-kitti" in res.output
+
+
+def test_info_and_convert_take_weights(served: str, tmp_path: Path) -> None:
+    assert '"width": 0.125' in run("info", "--weights", NAME)
+    assert '"width": 0.125' in run("info", "--weights", served)  # a URL
+    dst = tmp_path / "out.safetensors"
+    run("convert", "--weights", NAME, str(dst))
+    assert dst.is_file()
+    bad = CliRunner().invoke(main, ["info"])
+    assert bad.exit_code == 2 and "--weights" in bad.output
+    both = CliRunner().invoke(main, ["convert", str(dst), str(tmp_path / "x"), "--weights", NAME])
+    assert both.exit_code == 2
+
+
+def test_bench_takes_weights(served: str) -> None:
+    out = run("bench", "--weights", NAME, "--parts", "full", "--size", "32x64", "--repeats", "1", "--device", "cpu")
+    assert "full" in out
+
+
+def test_train_init_weights_resolves_to_a_cached_file(
+    served: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import semattnet.training.trainer as trainer
+
+    seen = {}
+
+    def fake_train(cfg, resume=False, log=print):
+        seen["init"] = cfg.init
+        return {"epoch": 0, "step": 0, "best_rmse_mm": 0.0}
+
+    monkeypatch.setattr(trainer, "train", fake_train)
+    run("train", "--stage", "full", "--data", str(tmp_path), "--out", str(tmp_path / "run"), "--init-weights", NAME)
+    assert Path(seen["init"]).is_file() and Path(seen["init"]).is_relative_to(tmp_path / "cache")
+    both = CliRunner().invoke(main, ["train", "--init", "x.pth", "--init-weights", NAME])
+    assert both.exit_code == 2 and "not both" in both.output
