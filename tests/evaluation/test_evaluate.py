@@ -118,7 +118,7 @@ def test_predict_real_kitti_frame(weights: Path, tmp_path: Path) -> None:
     png = Image.open(tmp_path / "out" / "0000000005.png")
     assert png.size == (1242, 375) and png.mode.startswith("I;16")
     d = read_depth(tmp_path / "out" / "0000000005.png")
-    assert (d > 0).all() and d.max() <= 65535 / 256
+    assert (d >= 0).all() and d.max() <= 65535 / 256  # holes (no prediction) stay 0
     again = CliRunner().invoke(main, ["predict", "--checkpoint", str(weights), "--rgb", str(rgb), "--sparse",
                                       str(sparse), "--semantic", str(tmp_path / "sem.png"), "--out",
                                       str(tmp_path / "out")])  # fmt: skip
@@ -134,10 +134,12 @@ def test_python_api_any_size_and_clamping(weights: Path) -> None:
     assert res.depth.shape == (50, 77) and set(res.outputs) >= {"color_depth", "refined_depth", "guided_conf"}
     with pytest.raises(ValueError, match="semantic map"):
         completer(rgb, sparse)
-    with pytest.warns(UserWarning, match="clamped 1 pixel"):
-        from semattnet.data.io import clamp_for_png
+    from semattnet.data.io import clamp_for_png
 
-        assert clamp_for_png(np.array([0.0, 5.0])).min() == pytest.approx(1 / 256)
+    with pytest.warns(UserWarning, match="1 hole"):  # a hole stays a hole: 0, not 1/256 m
+        assert clamp_for_png(np.array([0.0, 5.0])).tolist() == [0.0, 5.0]
+    with pytest.warns(UserWarning, match="clamped 1 pixel"):  # a real depth below 1/256 m is raised to it
+        assert clamp_for_png(np.array([0.001, 5.0])).min() == pytest.approx(1 / 256)
 
 
 def test_submission_writer_refuses_and_writes_nothing(tmp_path: Path) -> None:

@@ -6,9 +6,9 @@ import math
 
 import pytest
 import torch
-from tests._base import BaseTester
 
 from semattnet.models.confidence_fusion import confidence_fusion
+from tests._base import BaseTester
 
 
 def _slow_reference(depths: list[torch.Tensor], confs: list[torch.Tensor]) -> torch.Tensor:

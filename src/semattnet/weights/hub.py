@@ -127,17 +127,23 @@ def from_pretrained(
     if not isinstance(src, str):
         raise TypeError(f"expected a name, path or URL, got {type(src).__name__}")
     if _is_url(src):
-        if _scheme(src) == "hf":
-            path = fetch_hf(src, sha256=sha256, cache_dir=cache_dir, allow_patterns=[CONFIG_NAME, WEIGHTS_NAME, "*.md"])
-            return _from_folder(path, device, overrides) if path.is_dir() else _load_any_file(path, device, overrides)
-        root = get_cache_dir(cache_dir).resolve()
-        return _from_download(root, _target(src, sha256, root, None), None, device, progress, overrides)
+        return _from_url(src, sha256, cache_dir, device, progress, overrides)
     if src in list_pretrained():
         return _from_entry(get_weights(src), sha256, cache_dir, device, progress, overrides)
     raise ValueError(
         f"{src!r} is not a known weights name ({', '.join(list_pretrained())}), an existing file or folder, "
         "or a URL (http(s)://, file://, gdrive://<id>, hf://owner/repo)"
     )
+
+
+def _from_url(src: str, sha256: str | None, cache_dir: str | os.PathLike[str] | None, device: Any,
+              progress: bool, overrides: dict[str, Any]) -> nn.Module:  # fmt: skip
+    """A model from ``hf://`` (a saved folder or one file) or a downloaded file URL."""
+    if _scheme(src) == "hf":
+        path = fetch_hf(src, sha256=sha256, cache_dir=cache_dir, allow_patterns=[CONFIG_NAME, WEIGHTS_NAME, "*.md"])
+        return _from_folder(path, device, overrides) if path.is_dir() else _load_any_file(path, device, overrides)
+    root = get_cache_dir(cache_dir).resolve()
+    return _from_download(root, _target(src, sha256, root, None), None, device, progress, overrides)
 
 
 def _from_entry(
