@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import torch
 
 REPO = Path(__file__).resolve().parents[1]
@@ -25,3 +26,15 @@ def random_inputs(
         "semantic": torch.rand(b, 3, h, w, generator=g) * 255,
         "sparse": sparse,
     }
+
+
+def agreement(ours: np.ndarray, ref: np.ndarray, radius: int, tol: float = 0.3) -> float:
+    """Fraction of ref's points with one of ours within ``radius`` px (Chebyshev) and ``tol`` m in depth."""
+    pad = np.pad(ours, radius)
+    rv, ru = np.nonzero(ref > 0)
+    hit = np.zeros(len(rv), bool)
+    for dv in range(-radius, radius + 1):
+        for du in range(-radius, radius + 1):
+            cand = pad[rv + radius + dv, ru + radius + du]
+            hit |= (cand > 0) & (np.abs(cand - ref[rv, ru]) <= tol)
+    return float(hit.mean())

@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 import torch
 
 from semattnet.baselines.classical import complete_classical
 from semattnet.data.io import read_depth
 from semattnet.evaluation.metrics import KittiMetrics
+from tests._helpers import SAMPLE
 
-SAMPLE = Path(__file__).parents[1] / "data" / "kitti_sample"
 DRIVE = "train/2011_09_26_drive_0035_sync/proj_depth"
 # Measured on this frame (RMSE mm, MAE mm, iRMSE 1/km, iMAE 1/km): 1289.5 236.9 5.62 1.30 (camera 02),
 # 1373.5 258.7 8.44 1.58 (camera 03); the thresholds leave about 3 % of margin.

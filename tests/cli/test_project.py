@@ -12,7 +12,8 @@ from click.testing import CliRunner
 
 from semattnet.cli import main
 from semattnet.data.io import read_depth
-from tests.inference._raw_sample import OXTS, RAW_DATE, SCAN, agreement, official_velodyne_raw
+from tests._helpers import agreement
+from tests.inference._raw_sample import OXTS, RAW_DATE, SCAN, official_velodyne_raw
 
 
 def _project(*args: str) -> tuple[int, str]:

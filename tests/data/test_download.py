@@ -18,8 +18,8 @@ from semattnet.data import kitti_files as kf
 from semattnet.data.download import UnsafeArchiveError, drives_for, extract_zip, parse_what
 from semattnet.data.io import read_image, write_image
 from semattnet.data.palette import ids_to_colors
+from tests._helpers import SAMPLE
 
-SAMPLE = Path(__file__).parent / "kitti_sample"
 DRIVE = "2011_09_26_drive_0035_sync"
 
 

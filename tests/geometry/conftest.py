@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-SAMPLE = Path(__file__).resolve().parents[1] / "data" / "kitti_sample"
+from tests._helpers import SAMPLE
+
 RAW_DATE = SAMPLE / "kitti_raw" / "2011_09_26"
 DRIVE = RAW_DATE / "2011_09_26_drive_0035_sync"
 SCAN = DRIVE / "velodyne_points" / "data" / "0000000005.bin"

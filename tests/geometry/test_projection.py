@@ -16,6 +16,7 @@ from semattnet.geometry import (
     read_kitti_calibration,
     read_oxts_motion,
 )
+from tests._helpers import agreement
 
 from .conftest import OXTS, RAW_DATE, SCAN_PERIOD, official_velodyne_raw
 
@@ -119,18 +120,6 @@ def test_round_trip_reproduces_the_depth_map_exactly(scan: np.ndarray) -> None:
     assert np.array_equal(again > 0, depth > 0) and np.abs(again - depth).max() < 1e-4
 
 
-def _agreement(ours: np.ndarray, ref: np.ndarray, radius: int, tol: float = 0.3) -> float:
-    """Fraction of ref's points with one of ours within ``radius`` px (Chebyshev) and ``tol`` m in depth."""
-    pad = np.pad(ours, radius)
-    rv, ru = np.nonzero(ref > 0)
-    hit = np.zeros(len(rv), bool)
-    for dv in range(-radius, radius + 1):
-        for du in range(-radius, radius + 1):
-            cand = pad[rv + radius + dv, ru + radius + du]
-            hit |= (cand > 0) & (np.abs(cand - ref[rv, ru]) <= tol)
-    return float(hit.mean())
-
-
 @pytest.mark.parametrize("camera", ["02", "03"])
 def test_acceptance_matches_kitti_official_velodyne_raw(scan: np.ndarray, camera: str) -> None:
     """Our projection of the raw scan against KITTI's own ``velodyne_raw`` map of the same frame."""
@@ -141,11 +130,11 @@ def test_acceptance_matches_kitti_official_velodyne_raw(scan: np.ndarray, camera
     ours = project_points(scan, cal.K, cal.T_cam_lidar, cal.image_size, name=str(camera))
     ms = (time.perf_counter() - t0) * 1000
     n_ref, n_ours = int(np.count_nonzero(ref)), int(np.count_nonzero(ours))
-    a0, a1, a2 = (_agreement(ours, ref, r) for r in (0, 1, 2))
+    a0, a1, a2 = (agreement(ours, ref, r) for r in (0, 1, 2))
     motion = read_oxts_motion(OXTS)
     deskewed = project_points(deskew_scan(scan, motion.velocity, motion.yaw_rate, SCAN_PERIOD), cal.K,
                               cal.T_cam_lidar, cal.image_size)  # fmt: skip
-    d0, d0_1cm = _agreement(deskewed, ref, 0), _agreement(deskewed, ref, 0, tol=0.01)
+    d0, d0_1cm = agreement(deskewed, ref, 0), agreement(deskewed, ref, 0, tol=0.01)
     print(f"\ncamera {camera}: official {n_ref} points, ours {n_ours} ({100 * (n_ours / n_ref - 1):+.2f} %), "
           f"within 0.3 m at 0/1/2 px: {a0:.4f}/{a1:.4f}/{a2:.4f}; deskewed: same pixel {d0:.4f}, "
           f"same pixel and 1 cm {d0_1cm:.4f}, {np.count_nonzero(deskewed)} points; projection {ms:.1f} ms")  # fmt: skip

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
+from tests._helpers import SAMPLE
 
-SAMPLE = Path(__file__).resolve().parents[1] / "data" / "kitti_sample"
 RAW_DATE = SAMPLE / "kitti_raw" / "2011_09_26"
 DRIVE = RAW_DATE / "2011_09_26_drive_0035_sync"
 SCAN = DRIVE / "velodyne_points" / "data" / "0000000005.bin"
@@ -17,18 +16,6 @@ IMAGE_02 = DRIVE / "image_02" / "data" / "0000000005.png"
 def official_velodyne_raw(camera: str) -> Path:
     return (SAMPLE / "data_depth_velodyne" / "train" / "2011_09_26_drive_0035_sync" / "proj_depth" / "velodyne_raw"
             / f"image_{camera}" / "0000000005.png")  # fmt: skip
-
-
-def agreement(ours: np.ndarray, ref: np.ndarray, radius: int, tol: float = 0.3) -> float:
-    """Fraction of ref's points with one of ours within ``radius`` px (Chebyshev) and ``tol`` m in depth."""
-    pad = np.pad(ours, radius)
-    rv, ru = np.nonzero(ref > 0)
-    hit = np.zeros(len(rv), bool)
-    for dv in range(-radius, radius + 1):
-        for du in range(-radius, radius + 1):
-            cand = pad[rv + radius + dv, ru + radius + du]
-            hit |= (cand > 0) & (np.abs(cand - ref[rv, ru]) <= tol)
-    return float(hit.mean())
 
 
 def tiny_checkpoint(path: Path) -> Path:
