@@ -98,3 +98,49 @@ def test_broken_image_is_flagged(tmp_path: Path) -> None:
     _, html = write_report(tmp_path, metrics, {}, [("gone", "nope.png")], setup)
     dom = _headless(browser, "--virtual-time-budget=5000", "--dump-dom", html.as_uri()).stdout
     assert 'data-images="0/1"' in dom and '<p class="broken">missing image: nope.png</p>' in dom
+
+
+def test_results_json_schema(demo_run) -> None:  # type: ignore[no-untyped-def]
+    result, _ = demo_run
+    doc = json.loads(result.results_json.read_text())
+    assert result.results_json == result.out_dir / "results.json"
+    assert doc["schema"] == "semattnet.demo.results/1" and doc["seeds"] == [0]
+    assert doc["units"] == {"rmse": "mm", "mae": "mm", "irmse": "1/km", "imae": "1/km"}
+    assert set(doc["methods"]) == {"sparse", "classical", "semattnet", "two_branch"}
+    for method, rec in doc["methods"].items():
+        assert isinstance(rec["label"], str)
+        for groups in (rec, rec["per_seed"]["0"]):
+            for group in ("all", "shadowed", "unshadowed"):
+                assert set(groups[group]) == {"rmse", "mae", "irmse", "imae", "images"}, (method, group)
+                assert all(isinstance(v, (int, float)) for v in groups[group].values())
+        assert rec["all"]["rmse"] == pytest.approx(result.metrics[method]["all"]["rmse_mm"])
+    assert doc["steps"] == result.steps
+    assert set(doc["wall_seconds"]) == {"total", "models"} and set(doc["wall_seconds"]["models"]) == set(result.steps)
+    assert {"cpu", "cores", "torch", "python", "device", "torch_threads"} <= set(doc["machine"])
+    assert doc["settings"]["size"] == [64, 192] and doc["held_out"] == {"frames": 4, "shadowed": 2}
+
+
+def test_demo_viewer_in_chromium(demo_run) -> None:  # type: ignore[no-untyped-def]
+    from semattnet.data.io import read_depth
+    from tests.apps._browser import hover_pixel, open_page, wait_ready
+
+    result, _ = demo_run
+    out = result.out_dir
+    assert result.viewer_html == out / "viewer.html" and 'href="viewer.html"' in result.report_html.read_text()
+    size = sum(p.stat().st_size for p in [out / "viewer.html", out / "plotly.min.js", *(out / "viewer").iterdir()])
+    assert size < 15e6
+    name = json.loads((out / "viewer" / "000.js").read_text().split(",", 1)[1].rstrip(");\n"))["name"]
+    gt = read_depth(
+        next(out.glob(f"data/**/groundtruth_depth/{name.replace('_image_', '_groundtruth_depth_', 1)}.png"))
+    )
+    v, u = np.argwhere(gt > 0)[len(np.argwhere(gt > 0)) // 3]
+    with open_page(result.viewer_html) as (page, errors):
+        wait_ready(page)
+        values = hover_pixel(page, int(u), int(v))
+        assert values["gt"] == pytest.approx(gt[v, u], abs=0.01)
+        assert {"lidar", "depth_semattnet", "depth_two_branch", "depth_classical", "out_color_conf"} <= set(values)
+        layers = page.eval_on_selector_all("#layers input", "xs => xs.map((x) => x.value)")
+        assert {"rgb", "semantic", "out_color_depth", "out_fused_depth", "error_semattnet"} <= set(layers)
+        counts = page.evaluate("document.getElementById('cloud').data.map((t) => t.x.length)")
+        assert counts[0] > 0 and counts[1] > 0
+    assert errors == []

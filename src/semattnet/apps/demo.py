@@ -5,13 +5,43 @@ width-reduced SemAttNet and the two-branch ablation (no semantic branch) with th
 budget through the real training engine (backbone stage, then the full model with CSPN++),
 scores both on held-out scenes with the KITTI metrics beside the sparse input and a classical
 non-learned completion, and writes ``report.md`` and ``report.html`` with the table, per-branch
-panels, error maps and training curves. No download; about 8 minutes on a 2-core CPU.
+panels, error maps and training curves, ``viewer.html`` (the interactive viewer of the
+held-out scenes, :mod:`semattnet.viz.viewer`) and ``results.json``. No download; about 8
+minutes on a 2-core CPU.
+
+``results.json`` (schema ``semattnet.demo.results/1``; units: RMSE and MAE in mm, iRMSE and
+iMAE in 1/km, as KITTI's leaderboard)::
+
+    {
+      "schema": "semattnet.demo.results/1",
+      "units": {"rmse": "mm", "mae": "mm", "irmse": "1/km", "imae": "1/km"},
+      "seeds": [0],                       # training seeds; the scenes come from settings.seed
+      "methods": {                        # sparse, classical, two_branch, semattnet
+        "semattnet": {
+          "label": "SemAttNet (...)",
+          "all": {"rmse": .., "mae": .., "irmse": .., "imae": .., "images": 16},  # mean over seeds
+          "shadowed": {...}, "unshadowed": {...},                                  # same keys
+          "per_seed": {"0": {"all": {...}, "shadowed": {...}, "unshadowed": {...}}}
+        }, ...
+      },
+      "steps": {"semattnet": {"backbone": N, "full": M}, "two_branch": {...}},  # per seed
+      "wall_seconds": {"total": s, "models": {"semattnet": s, "two_branch": s}},  # train + complete, all seeds
+      "machine": {"cpu": "model name", "cores": n, "torch": "2.x", "python": "3.x",
+                  "platform": "...", "device": "cpu", "torch_threads": n},
+      "held_out": {"frames": n, "shadowed": n},
+      "settings": {...}                   # DemoSettings as a dict
+    }
+
+The baselines do not depend on the training seed: their ``per_seed`` entries repeat the same
+numbers.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
+import platform
 import shutil
 import time
 from collections.abc import Callable
@@ -35,6 +65,7 @@ from semattnet.baselines.classical import complete_classical
 from semattnet.viz.depth import colorize_depth, error_map
 from semattnet.viz.panels import branch_panel, save_panel
 from semattnet.viz.report import write_report
+from semattnet.viz.viewer import ViewerFrame, write_viewer
 
 __all__ = ["DemoResult", "DemoSettings", "run_demo"]
 
@@ -60,6 +91,13 @@ class DemoSettings:
     steps: tuple[int, int] | None = None
     seed: int = 0
     device: str = "auto"
+    #: training seeds (each model is trained once per seed; the headline is the mean); None: (seed,)
+    seeds: tuple[int, ...] | None = None
+    #: held-out scenes in viewer.html (all by default: about 0.2 MB each at 96x320)
+    viewer_frames: int = 16
+
+    def training_seeds(self) -> tuple[int, ...]:
+        return tuple(self.seeds) if self.seeds else (self.seed,)
 
 
 @dataclass
@@ -67,10 +105,12 @@ class DemoResult:
     out_dir: Path
     report_md: Path
     report_html: Path
-    #: method -> group ("all", "shadowed", "unshadowed") -> KITTI metrics (leaderboard units)
+    #: method -> group ("all", "shadowed", "unshadowed") -> KITTI metrics (leaderboard units), mean over seeds
     metrics: dict[str, dict[str, dict[str, float]]]
     steps: dict[str, dict[str, int]] = field(default_factory=dict)
     seconds: float = 0.0
+    viewer_html: Path | None = None
+    results_json: Path | None = None
 
 
 #: (key, label, model overrides) of the learned models the demo trains.
@@ -90,11 +130,14 @@ _LABELS: dict[str, str] = {
 
 @dataclass
 class _Trained:
-    """Per learned model: its step counts, its run folder and its outputs on the held-out scenes."""
+    """Per learned model: its step counts, its run folder and its outputs on the held-out scenes
+    (of the first seed), its refined depths per seed, and its training wall time (all seeds)."""
 
     steps: dict[str, dict[str, int]] = field(default_factory=dict)
     runs: dict[str, Path] = field(default_factory=dict)
     outputs: dict[str, dict[str, dict[str, np.ndarray]]] = field(default_factory=dict)
+    per_seed: dict[int, dict[str, dict[str, np.ndarray]]] = field(default_factory=dict)
+    seconds: dict[str, float] = field(default_factory=dict)
 
 
 def run_demo(
@@ -114,23 +157,111 @@ def run_demo(
     log(f"[1/5] generating {s.train_frames} training and {s.eval_frames} held-out scenes at {h}x{w} ...")
     held = make_synthetic(out / "data", s.train_frames, s.eval_frames, s.size, s.seed)
     log("[2/5] scoring the sparse input and the classical (non-learned) completion ...")
-    preds = _baselines(held)
+    base = _baselines(held)
     trained = _train_models(s, device, out, held, log)  # [3/5] and [4/5]
-    preds |= {key: {n: o["refined_depth"] for n, o in outputs.items()} for key, outputs in trained.outputs.items()}
     order = ("sparse", "classical", *reversed([k for k, _, _ in _MODELS]))
-    metrics = {method: score(preds[method], held) for method in order}
-    log("[5/5] writing pictures and the report ...")
+    per_seed = {seed: {m: score((base | preds)[m], held) for m in order} for seed, preds in trained.per_seed.items()}
+    metrics = _mean_over_seeds(per_seed)
+    log("[5/5] writing pictures, the report and the viewer ...")
+    preds = base | trained.per_seed[s.training_seeds()[0]]
     figures = _figures(out / "pictures", held, preds, trained)
+    viewer = _viewer(out, held, preds, trained, s.viewer_frames)
     seconds = time.perf_counter() - t_start
     setup = {
         "device": str(device), "torch_threads": torch.get_num_threads(), "seconds": round(seconds, 1),
         "held_out": {"frames": len(held.names), "shadowed": sum(held.shadowed.values())},
-        "settings": asdict(s), "steps": trained.steps,
+        "settings": asdict(s), "steps": trained.steps, "seeds": list(s.training_seeds()),
     }  # fmt: skip
     (out / "metrics.json").write_text(json.dumps({"metrics": metrics, "setup": setup}, indent=2) + "\n")
-    md, html = write_report(out, metrics, _LABELS, figures, setup)
+    results = _write_results(out / "results.json", per_seed, metrics, trained, setup)
+    links = [("Interactive viewer of the held-out scenes (hover for depths, layers, 3D point cloud)", "viewer.html"),
+             ("All numbers as JSON", "results.json")]  # fmt: skip
+    md, html = write_report(out, metrics, _LABELS, figures, setup, links=links)
     _summarise(metrics, order, seconds, html, log)
-    return DemoResult(out, md, html, metrics, trained.steps, seconds)
+    return DemoResult(out, md, html, metrics, trained.steps, seconds, viewer, results)
+
+
+def _mean_over_seeds(
+    per_seed: dict[int, dict[str, dict[str, dict[str, float]]]],
+) -> dict[str, dict[str, dict[str, float]]]:
+    """method -> group -> metric: the mean over seeds of each number."""
+    first = next(iter(per_seed.values()))
+    return {
+        method: {
+            group: {k: float(np.mean([run[method][group][k] for run in per_seed.values()])) for k in values}
+            for group, values in groups.items()
+        }
+        for method, groups in first.items()
+    }
+
+
+#: results.json metric name -> key of :meth:`KittiMetrics.compute`.
+_RESULT_KEYS = {"rmse": "rmse_mm", "mae": "mae_mm", "irmse": "irmse_per_km", "imae": "imae_per_km", "images": "images"}
+
+
+def _record(groups: dict[str, dict[str, float]]) -> dict[str, dict[str, float]]:
+    return {g: {k: v[src] for k, src in _RESULT_KEYS.items() if src in v} for g, v in groups.items()}
+
+
+def _machine() -> dict[str, Any]:
+    """CPU model (from /proc/cpuinfo where there is one), core count, torch and Python versions."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.lower().startswith(("model name", "hardware")):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {"cpu": cpu, "cores": os.cpu_count(), "torch": torch.__version__, "python": platform.python_version(),
+            "platform": platform.platform()}  # fmt: skip
+
+
+def _write_results(
+    path: Path,
+    per_seed: dict[int, dict[str, dict[str, dict[str, float]]]],
+    metrics: dict[str, dict[str, dict[str, float]]],
+    trained: _Trained,
+    setup: dict[str, Any],
+) -> Path:
+    """Write ``results.json`` (schema in the module docstring)."""
+    methods = {
+        m: {"label": _LABELS[m], **_record(metrics[m]),
+            "per_seed": {str(seed): _record(run[m]) for seed, run in per_seed.items()}}
+        for m in metrics
+    }  # fmt: skip
+    doc = {
+        "schema": "semattnet.demo.results/1",
+        "units": {"rmse": "mm", "mae": "mm", "irmse": "1/km", "imae": "1/km"},
+        "seeds": setup["seeds"], "methods": methods, "steps": trained.steps,
+        "wall_seconds": {"total": setup["seconds"], "models": {k: round(v, 1) for k, v in trained.seconds.items()}},
+        "machine": {**_machine(), "device": setup["device"], "torch_threads": setup["torch_threads"]},
+        "held_out": setup["held_out"], "settings": setup["settings"],
+    }  # fmt: skip
+    path.write_text(json.dumps(doc, indent=2) + "\n")
+    return path
+
+
+def _intrinsics(sample: dict[str, Any]) -> np.ndarray | None:
+    """The scene's (3, 3) intrinsics, None when the sample has none (NaN-filled)."""
+    K = sample.get("K")
+    K = None if K is None else np.asarray(K, dtype=np.float64).reshape(3, 3)
+    return K if K is not None and np.isfinite(K).all() else None
+
+
+def _viewer(out: Path, held: HeldOut, preds: dict[str, dict[str, np.ndarray]], trained: _Trained, count: int) -> Path:
+    """``viewer.html`` for the first ``count`` held-out scenes: every method, SemAttNet's intermediates."""
+    frames = []
+    for n in held.names[:count]:
+        smp = held.samples[held.names.index(n)]
+        frames.append(ViewerFrame(
+            name=n, rgb=smp["rgb"].permute(1, 2, 0).numpy().astype(np.uint8), sparse=smp["sparse"][0].numpy(),
+            depths={m: preds[m][n] for m in ("classical", "two_branch", "semattnet")},
+            semantic=smp["semantic"].permute(1, 2, 0).numpy().astype(np.uint8), gt=held.gts[n],
+            outputs=trained.outputs["semattnet"][n], outputs_of="semattnet", K=_intrinsics(smp),
+            cloud_of="semattnet", note="shadowed" if held.shadowed[n] else "unshadowed",
+        ))  # fmt: skip
+    return write_viewer(out, frames, _LABELS, title="SemAttNet demo: held-out scenes", back=("report", "report.html"))
 
 
 def _make_empty(out: Path, overwrite: bool) -> None:
@@ -166,18 +297,26 @@ def _step_counts(s: DemoSettings, device: torch.device, overrides: dict[str, Any
 def _train_models(
     s: DemoSettings, device: torch.device, out: Path, held: HeldOut, log: Callable[[str], None]
 ) -> _Trained:
-    """Train each model of :data:`_MODELS` with the same budget, then complete the held-out scenes with it."""
+    """Train each model of :data:`_MODELS` with the same budget per seed, then complete the held-out scenes."""
     trained = _Trained()
+    seeds = s.training_seeds()
     for key, label, overrides in _MODELS:
         n_bb, n_full = _step_counts(s, device, overrides)
         trained.steps[key] = {"backbone": n_bb, "full": n_full}
-        log(f"[3/5] training {label}: {n_bb} backbone steps, then {n_full} full-model steps ...")
         trained.runs[key] = out / "runs" / key
-        ckpt = train_variant(trained.runs[key], out / "data", n_bb, n_full, size=s.size, width=s.width,
-                             batch_size=s.batch_size, lr=s.lr, seed=s.seed, device=device, log=log,
-                             **overrides)  # fmt: skip
-        log(f"[4/5] completing the held-out scenes with {label} ...")
-        trained.outputs[key] = complete_held_out(ckpt, held, device)
+        start = time.perf_counter()
+        for seed in seeds:
+            run = trained.runs[key] if seed == seeds[0] else out / "runs" / f"{key}_seed{seed}"
+            log(f"[3/5] training {label} (seed {seed}): {n_bb} backbone steps, then {n_full} full-model steps ...")
+            ckpt = train_variant(run, out / "data", n_bb, n_full, size=s.size, width=s.width,
+                                 batch_size=s.batch_size, lr=s.lr, seed=seed, device=device, log=log,
+                                 **overrides)  # fmt: skip
+            log(f"[4/5] completing the held-out scenes with {label} (seed {seed}) ...")
+            outputs = complete_held_out(ckpt, held, device)
+            trained.per_seed.setdefault(seed, {})[key] = {n: o["refined_depth"] for n, o in outputs.items()}
+            if seed == seeds[0]:
+                trained.outputs[key] = outputs
+        trained.seconds[key] = time.perf_counter() - start
     return trained
 
 

@@ -23,6 +23,16 @@ def _completer(method: str, checkpoint: Path | None, weights: str | None, device
     return DepthCompleter(model_from_options(checkpoint, weights, "cpu"), device=device, amp=amp)
 
 
+def _intrinsics(text: str | None):  # type: ignore[no-untyped-def]
+    """--K as a (3, 3) matrix, or None."""
+    from semattnet.viz.viewer import parse_intrinsics
+
+    try:
+        return parse_intrinsics(text) if text else None
+    except ValueError:
+        raise click.BadParameter(f"expected fx,fy,cx,cy or kitti, got {text!r}", param_hint="--K") from None
+
+
 _INPUT = click.Path(exists=True, path_type=Path)
 
 
@@ -60,10 +70,13 @@ _INPUT = click.Path(exists=True, path_type=Path)
 @click.option("--overwrite", is_flag=True, help="Replace existing outputs.")
 @click.option("--method", type=click.Choice(["semattnet", "classical"]), default="semattnet", show_default=True,
               help="classical: the non-learned IP-Basic-style baseline (no checkpoint).")  # fmt: skip
+@click.option("--report", is_flag=True, help="Also write viewer.html: hover depths, layers, 3D view (with --K).")
+@click.option("--K", "intrinsics", default=None, metavar="fx,fy,cx,cy|kitti",
+              help="With --report: camera intrinsics for the 3D view ('kitti': KITTI's camera 02).")  # fmt: skip
 def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, sparse: Path | None,
             kitti_raw: Path | None, frames: str | None, camera: str, semantic: Path | None, segment_spec: str | None,
             out: Path, npy: bool, panel: bool, ply: bool, max_depth: float, top_crop: int, deskew: bool, device: str,
-            amp: str, overwrite: bool, method: str) -> None:  # fmt: skip
+            amp: str, overwrite: bool, method: str, report: bool, intrinsics: str | None) -> None:  # fmt: skip
     """Complete depth for one frame, folders of frames (any size) or a KITTI raw drive."""
     from semattnet.data.pairing import pair_frames
     from semattnet.inference import complete_folder
@@ -73,14 +86,21 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
         raise click.UsageError("give --rgb and --sparse, or --kitti-raw")
     if kitti_raw is None and (ply or segment_spec or frames or deskew):
         raise click.UsageError("--ply, --segment, --frames and --deskew need --kitti-raw")
+    if kitti_raw is not None and report:
+        raise click.UsageError("--report needs --rgb/--sparse (not yet --kitti-raw)")
+    K = _intrinsics(intrinsics)
     completer = _completer(method, checkpoint, weights, device, amp)
     if kitti_raw is not None:
         complete_kitti_raw(completer, kitti_raw, out, frames=frames, camera=camera, semantic=semantic,
                            segmenter=segment_spec, ply=ply, max_depth=max_depth, top_crop=top_crop, npy=npy,
                            panel=panel, deskew=deskew, overwrite=overwrite, log=click.echo)  # fmt: skip
         return
-    complete_folder(completer, pair_frames(rgb, sparse, semantic), out, npy=npy, panel=panel, overwrite=overwrite,
-                    log=click.echo)  # fmt: skip
+    frame_list = pair_frames(rgb, sparse, semantic)
+    complete_folder(completer, frame_list, out, npy=npy, panel=panel, overwrite=overwrite, log=click.echo)
+    if report:
+        from semattnet.viz.viewer import write_prediction_report
+
+        write_prediction_report(out, frame_list, K=K, log=click.echo)
 
 
 @main.command()

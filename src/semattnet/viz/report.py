@@ -54,6 +54,7 @@ def write_report(
     figures: Sequence[tuple[str, str]],
     setup: dict[str, Any],
     title: str = "SemAttNet demo on synthetic scenes",
+    links: Sequence[tuple[str, str]] = (),
 ) -> tuple[Path, Path]:
     """Write ``report.md`` and ``report.html`` into ``out_dir``.
 
@@ -62,13 +63,14 @@ def write_report(
         labels: method -> display name.
         figures: (caption, image path relative to ``out_dir``).
         setup: facts shown under the table (device, timings, settings, ...).
+        links: (text, path relative to ``out_dir``) listed above the table, e.g. the viewer.
     """
     out = Path(out_dir)
     header, rows = metrics_rows(metrics, labels)
     facts = _facts(labels, setup)
     md_path, html_path = out / "report.md", out / "report.html"
-    _write(md_path, _markdown(title, header, rows, facts, figures))
-    _write(html_path, _html(title, header, rows, facts, figures))
+    _write(md_path, _markdown(title, header, rows, facts, figures, links))
+    _write(html_path, _html(title, header, rows, facts, figures, links))
     return md_path, html_path
 
 
@@ -91,10 +93,16 @@ def _facts(labels: dict[str, str], setup: dict[str, Any]) -> list[str]:
 
 
 def _markdown(
-    title: str, header: list[str], rows: list[list[str]], facts: list[str], figures: Sequence[tuple[str, str]]
+    title: str,
+    header: list[str],
+    rows: list[list[str]],
+    facts: list[str],
+    figures: Sequence[tuple[str, str]],
+    links: Sequence[tuple[str, str]] = (),
 ) -> str:
-    """The Markdown report: title, metrics table, facts, then each figure with its caption."""
-    md = [f"# {title}", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    """The Markdown report: title, links, metrics table, facts, then each figure with its caption."""
+    md = [f"# {title}", ""] + [f"- [{text}]({href})" for text, href in links] + ([""] if links else [])
+    md += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     md += ["| " + " | ".join(r) + " |" for r in rows]
     md += [""] + [f"- {f}" for f in facts] + [""]
     for caption, src in figures:
@@ -112,7 +120,12 @@ def _html_table(header: list[str], rows: list[list[str]]) -> str:
 
 
 def _html(
-    title: str, header: list[str], rows: list[list[str]], facts: list[str], figures: Sequence[tuple[str, str]]
+    title: str,
+    header: list[str],
+    rows: list[list[str]],
+    facts: list[str],
+    figures: Sequence[tuple[str, str]],
+    links: Sequence[tuple[str, str]] = (),
 ) -> str:
     """The self-contained HTML page; its script flags images that fail to load and counts those that do."""
     esc = html.escape
@@ -120,6 +133,7 @@ def _html(
         f'<figure><img src="{esc(src)}" alt="{esc(caption)}"><figcaption>{esc(caption)}</figcaption></figure>'
         for caption, src in figures
     )
+    nav = "".join(f'<li><a href="{esc(href)}">{esc(text)}</a></li>' for text, href in links)
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{esc(title)}</title>
 <style>
@@ -132,6 +146,7 @@ figcaption {{ color: #555; font-size: 0.9em; }} .broken {{ color: #b00; font-wei
 </style></head>
 <body data-images="pending">
 <h1>{esc(title)}</h1>
+{f'<ul class="links">{nav}</ul>' if nav else ""}
 <table>
 {_html_table(header, rows)}</table>
 <ul>{"".join(f"<li>{esc(f)}</li>" for f in facts)}</ul>
