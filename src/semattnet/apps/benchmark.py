@@ -25,6 +25,7 @@ from typing import Any
 import torch
 from torch import nn
 
+from semattnet._utils.cpu import has_native_bf16
 from semattnet._utils.device import now
 from semattnet.models.bn_folding import fold_batchnorm
 from semattnet.models.layers import set_gradient_checkpointing
@@ -94,10 +95,11 @@ def peak_memory(device: torch.device) -> Iterator[dict[str, float]]:
 
 def fast_mode_dtype(device: torch.device) -> torch.dtype | None:
     """The autocast type of the fast mode: float16 on CUDA, bfloat16 on CPUs with native
-    bfloat16 convolutions (AVX-512 BF16 / AMX), ``None`` where it would be slower than float32."""
+    bfloat16 instructions (AVX-512 BF16 / AMX: :func:`semattnet._utils.cpu.has_native_bf16`), ``None``
+    where it would be slower than float32 (oneDNN's own check also says yes where bf16 is emulated)."""
     if device.type == "cuda":
         return torch.float16
-    if device.type == "cpu" and torch.ops.mkldnn._is_mkldnn_bf16_supported():
+    if device.type == "cpu" and has_native_bf16():
         return torch.bfloat16
     return None
 
