@@ -67,7 +67,8 @@ def complete_folder(
         OutputError: ``out`` is an input folder or inside one.
     """
     out = Path(out)
-    inputs = [p for f in frames for p in (f.rgb, f.sparse, f.semantic)]
+    files = [Path(p) for f in frames for p in (f.rgb, f.sparse, f.semantic) if p is not None]
+    inputs = files + sorted({p.parent for p in files})  # the folders the frames come from count as inputs
     outputs = output_paths(frames, out, npy, panel)
     check_no_input_overlap(inputs, out_dir=out, out_files=outputs)
     refuse_existing(outputs, overwrite)
