@@ -60,8 +60,9 @@ def _steps(run: Path) -> list[int]:
     return [int(r["step"]) for r in csv.DictReader(open(run / "log.csv")) if r["split"] == "train"]
 
 
-def test_resume_equals_the_uninterrupted_run_in_every_saved_field(tree: Path, tmp_path: Path,
-                                                                   monkeypatch: pytest.MonkeyPatch) -> None:  # fmt: skip
+def test_resume_equals_the_uninterrupted_run_in_every_saved_field(
+    tree: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     train(_cfg(tree, tmp_path / "whole"), log=lambda m: None)
     save = Trainer.save
 

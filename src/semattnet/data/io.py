@@ -61,8 +61,8 @@ def _check_header(path: Path, img: Image.Image) -> None:
     if w <= 0 or h <= 0:
         raise DataError(f"{path}: the header gives an empty image ({w}x{h})")
     if w > MAX_IMAGE_SIDE or h > MAX_IMAGE_SIDE or w * h > MAX_IMAGE_PIXELS:
-        raise DataError(f"{path}: the header gives {w}x{h} pixels, above the limit of {MAX_IMAGE_SIDE} per "
-                        f"side and {MAX_IMAGE_PIXELS} in total (semattnet.data.io.MAX_IMAGE_*); not decoding")  # fmt: skip
+        raise DataError(f"{path}: the header gives {w}x{h} pixels, above the limit of {MAX_IMAGE_SIDE} a side "
+                        f"and {MAX_IMAGE_PIXELS} in all (semattnet.data.io.MAX_IMAGE_*); not decoding")  # fmt: skip
 
 
 def _open(path: str | os.PathLike[str]) -> Image.Image:
