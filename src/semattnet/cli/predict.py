@@ -88,7 +88,7 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
                            panel=panel, deskew=deskew, overwrite=overwrite, log=click.echo)  # fmt: skip
         return
     complete_folder(completer, pair_frames(rgb, sparse, semantic), out, npy=npy, panel=panel, overwrite=overwrite,
-                    log=click.echo)  # fmt: skip
+                    log=click.echo, inputs=(rgb, sparse, semantic))  # fmt: skip
 
 
 @main.command()

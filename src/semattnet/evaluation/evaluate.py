@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import csv
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -133,12 +133,13 @@ def score_folders_to_json(pred_dir: str | Path, gt_dir: str | Path, json_path: s
     return metrics
 
 
-def _prepare_out(out: Path, overwrite: bool, inputs: list[Any]) -> Path:
+def _prepare_out(out: Path, overwrite: bool, inputs: Sequence[Any] = ()) -> Path:
     """Check ``out``: not inside an input; a non-empty folder needs ``overwrite`` (which replaces
     only the files the evaluation writes)."""
     check_no_input_overlap(inputs, out_dir=out)
     if out.is_dir() and any(out.iterdir()) and not overwrite:
         raise FileExistsError(f"{out} is not empty; pass --overwrite to replace its contents")
+    out.mkdir(parents=True, exist_ok=True)
     return out
 
 

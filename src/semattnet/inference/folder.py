@@ -9,7 +9,7 @@ from typing import Protocol
 import numpy as np
 
 from semattnet._utils.atomic import atomic_path
-from semattnet._utils.outputs import check_no_input_overlap, refuse_existing, staged_outputs
+from semattnet._utils.outputs import OutputError, check_no_input_overlap, refuse_existing, staged_outputs
 from semattnet.data.io import clamp_for_png, read_depth, read_image, read_semantic, write_depth, write_image
 from semattnet.data.pairing import FramePaths
 from semattnet.inference.completer import Completion
@@ -53,6 +53,7 @@ def complete_folder(
     panel: bool = False,
     overwrite: bool = False,
     log: Callable[[str], None] = print,
+    inputs: Sequence[str | Path | None] | None = None,
 ) -> list[Path]:
     """Complete ``frames`` (see :func:`semattnet.data.pairing.pair_frames`) and write, per frame,
     ``NAME.png`` (KITTI 16-bit depth), ``NAME_color.png`` and optionally ``NAME.npy`` (float32
@@ -62,15 +63,20 @@ def complete_folder(
     every input is decoded before any work; outputs are staged and appear only when all frames
     succeeded, so a corrupt frame or a kill leaves ``out`` unchanged.
 
+    ``inputs``: the paths the user gave (files or folders; ``predict`` passes --rgb/--sparse/--semantic):
+    ``out`` may not be one of these folders or inside one. ``out`` may never be the folder of an input
+    file, and no output may resolve to an input file.
+
     Raises:
         FileExistsError: an output exists and ``overwrite`` is not set (checked before any work).
         OutputError: ``out`` is an input folder or inside one.
     """
     out = Path(out)
     files = [Path(p) for f in frames for p in (f.rgb, f.sparse, f.semantic) if p is not None]
-    inputs = files + sorted({p.parent for p in files})  # the folders the frames come from count as inputs
     outputs = output_paths(frames, out, npy, panel)
-    check_no_input_overlap(inputs, out_dir=out, out_files=outputs)
+    check_no_input_overlap([*files, *(inputs or ())], out_dir=out, out_files=outputs)
+    if out.resolve() in {p.resolve().parent for p in files}:
+        raise OutputError(f"output folder {out} holds input frames; choose an --out outside the inputs")
     refuse_existing(outputs, overwrite)
     check_frames(frames)
     with staged_outputs(out, overwrite=overwrite) as stage:
