@@ -115,7 +115,7 @@ def test_train_init_weights_resolves_to_a_cached_file(
 
     seen = {}
 
-    def fake_train(cfg, resume=False, log=print):
+    def fake_train(cfg, resume=False, log=print, **kw):
         seen["init"] = cfg.init
         return {"epoch": 0, "step": 0, "best_rmse_mm": 0.0}
 

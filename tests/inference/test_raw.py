@@ -83,13 +83,18 @@ def test_semantic_folder_fallback_and_confidence(tmp_path: Path) -> None:
     assert rec.semantic.shape == (375, 1242, 3) and (rec.semantic == np.array(UNKNOWN_COLOR, np.uint8)).all()
     sem_dir = tmp_path / "sem"
     sem_dir.mkdir()
-    write_image(sem_dir / "0000000005.png", read_image(IMAGE_02)[::-1].copy())
+    from semattnet.data.palette import ids_to_colors
+
+    # a semantic map must be palette-coloured (a photo or a JPEG-resaved map is refused)
+    palette_map = ids_to_colors((np.arange(375 * 1242).reshape(375, 1242) // 5000 % 19).astype(np.uint8))
+    write_image(sem_dir / "0000000005.png", palette_map)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         complete_kitti_raw(rec, DRIVE, tmp_path / "b", frames="5", semantic=sem_dir, log=lambda s: None)
-    assert np.array_equal(rec.semantic, read_image(IMAGE_02)[::-1])
+    assert np.array_equal(rec.semantic, palette_map)
+    (tmp_path / "empty").mkdir()
     with pytest.raises(DataError, match="0000000005.png"):
-        complete_kitti_raw(rec, DRIVE, tmp_path / "c", frames="5", semantic=tmp_path, log=lambda s: None)
+        complete_kitti_raw(rec, DRIVE, tmp_path / "c", frames="5", semantic=tmp_path / "empty", log=lambda s: None)
     conf = fusion_confidence(rec(None, np.zeros((2, 2), np.float32)).outputs)
     assert conf is not None and np.allclose(conf, 0.7)
     assert fusion_confidence({"refined_depth": np.zeros((2, 2))}) is None
@@ -104,4 +109,5 @@ def test_segmenter_spec_colours_the_semantic_map(tmp_path: Path) -> None:
         complete_kitti_raw(rec, DRIVE, tmp_path, frames="5", segmenter="unknown", log=lambda s: None)
     assert rec.semantic.shape == (375, 1242, 3) and (rec.semantic == np.array(UNKNOWN_COLOR, np.uint8)).all()
     with pytest.raises(ValueError, match="not both"):
-        complete_kitti_raw(rec, DRIVE, tmp_path / "x", frames="5", segmenter="unknown", semantic=tmp_path)
+        (tmp_path / "sem").mkdir()
+        complete_kitti_raw(rec, DRIVE, tmp_path / "x", frames="5", segmenter="unknown", semantic=tmp_path / "sem")

@@ -1,30 +1,112 @@
-"""Atomic file writes: write a temporary file beside the target, then rename it into place."""
+"""Atomic file writes: write a temporary file beside the target, then rename it into place.
+
+The temporary file is ``.NAME.pPID.XXXXXXXX[SUFFIX]`` in the target's folder. A process killed
+mid-write leaves it behind; the next write of the same target (by any process) removes such
+orphans whose process is gone. Files end up with the mode the umask gives a new file
+(``0o666 & ~umask``), or the mode of the file they replace, and are fsynced (file and folder)
+before the call returns, so a power cut leaves either the old or the new content.
+"""
 
 from __future__ import annotations
 
 import os
+import re
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["atomic_path"]
+__all__ = ["atomic_path", "clean_stale_temps", "fsync_dir", "new_file_mode"]
+
+
+def new_file_mode() -> int:
+    """The mode ``open()`` gives a new file under the current umask: ``0o666 & ~umask``."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def _pid_alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return pid < 2**22  # exists but belongs to someone else (or an impossible pid)
+    return True
+
+
+def clean_stale_temps(path: str | os.PathLike[str]) -> list[Path]:
+    """Remove temporary files a killed write of ``path`` left (``.NAME.pPID.*`` whose process is
+    gone, and the older ``.NAME.XXXXXXXX*`` form); returns what was removed."""
+    path = Path(path)
+    pattern = re.compile(rf"^\.{re.escape(path.name)}\.(?:p(\d+)\.)?[a-z0-9_]{{8}}(?:\.[A-Za-z0-9]+)?$")
+    removed = []
+    try:
+        entries = list(path.parent.iterdir())
+    except OSError:
+        return removed
+    for entry in entries:
+        m = pattern.match(entry.name)
+        if m is None or not entry.is_file() or (m.group(1) and _pid_alive(int(m.group(1)))):
+            continue
+        try:
+            entry.unlink()
+            removed.append(entry)
+        except FileNotFoundError:
+            pass
+    return removed
+
+
+def _fsync_file(path: str) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def fsync_dir(folder: str | os.PathLike[str]) -> None:
+    """Flush a folder's entries (a rename into it) to disk; a no-op where folders cannot be opened."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 @contextmanager
-def atomic_path(path: str | os.PathLike[str], suffix: str = "") -> Iterator[Path]:
+def atomic_path(path: str | os.PathLike[str], suffix: str = "", fsync: bool = True) -> Iterator[Path]:
     """Yield a temporary path in ``path``'s folder; on success it replaces ``path`` in one step.
 
-    If the block raises (or the process dies), ``path`` keeps its previous content and the
-    temporary file is removed (or, after a crash, left as a hidden ``.name.*`` file).
+    If the block raises, ``path`` keeps its previous content and the temporary file is removed;
+    after a kill the temporary file is removed by the next write of ``path``. The new file gets
+    the umask's mode (or the replaced file's mode); with ``fsync`` it is on disk on return.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
+    clean_stale_temps(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.p{os.getpid()}.", suffix=suffix, dir=path.parent)
     os.close(fd)
     try:
         yield Path(tmp)
+        try:
+            mode = path.stat().st_mode & 0o7777
+        except OSError:
+            mode = new_file_mode()
+        os.chmod(tmp, mode)
+        if fsync:
+            _fsync_file(tmp)
         os.replace(tmp, path)
+        if fsync:
+            fsync_dir(path.parent)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)

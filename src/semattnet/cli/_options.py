@@ -1,19 +1,79 @@
-"""Option parsing shared by the commands: sizes, triples, comma lists."""
+"""Option parsing and validation shared by every command: ranges, finite numbers, sizes, triples.
+
+Every numeric option of every command uses one of these types, so a bad value is refused with
+a one-line error naming the option before any work starts.
+"""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
+from typing import Any
 
 import click
 import torch
 
+#: A count of at least one (frames, steps, repeats, batch size).
+POSITIVE_INT = click.IntRange(min=1)
+#: A count that may be zero (0 = "none" / "all", as each option's help says).
+COUNT = click.IntRange(min=0)
+#: Largest side accepted by size options (the same limit :mod:`semattnet.data.io` reads).
+MAX_SIDE = 16384
 
-def parse_size(text: str) -> tuple[int, int]:
+
+class FiniteFloat(click.ParamType):
+    """A float that is not NaN or infinite, optionally within ``[low, high]`` (``low_open``: > low)."""
+
+    name = "float"
+
+    def __init__(self, low: float | None = None, high: float | None = None, low_open: bool = False) -> None:
+        self.low, self.high, self.low_open = low, high, low_open
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> float:
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        if not math.isfinite(x):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        if self.low is not None and (x <= self.low if self.low_open else x < self.low):
+            self.fail(f"{value!r} must be {'>' if self.low_open else '>='} {self.low:g}", param, ctx)
+        if self.high is not None and x > self.high:
+            self.fail(f"{value!r} must be <= {self.high:g}", param, ctx)
+        return x
+
+
+#: A strictly positive finite float (learning rates, widths, depths in metres, minutes).
+POSITIVE_FLOAT = FiniteFloat(0.0, low_open=True)
+#: A finite float >= 0.
+NONNEGATIVE_FLOAT = FiniteFloat(0.0)
+
+
+def parse_size(text: str, option: str | None = None, order: str = "HxW") -> tuple[int, int]:
+    """``"96x320"`` -> ``(96, 320)``; both sides must be whole numbers in 1..MAX_SIDE."""
     try:
-        h, w = (int(v) for v in text.lower().split("x"))
+        a, b = (int(v) for v in str(text).lower().split("x"))
     except ValueError:
-        raise click.BadParameter(f"expected HxW, e.g. 96x320; got {text!r}") from None
-    return h, w
+        raise click.BadParameter(f"expected {order}, e.g. 96x320; got {text!r}", param_hint=option) from None
+    if not (0 < a <= MAX_SIDE and 0 < b <= MAX_SIDE):
+        raise click.BadParameter(f"{order} sides must be in 1..{MAX_SIDE}; got {text!r}", param_hint=option)
+    return a, b
+
+
+class SizeType(click.ParamType):
+    """``HxW`` with both sides > 0 (returned as the text, validated: commands parse it with :func:`parse_size`)."""
+
+    name = "HxW"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> str:
+        try:
+            parse_size(value)
+        except click.BadParameter as exc:
+            self.fail(exc.message, param, ctx)
+        return str(value)
+
+
+SIZE = SizeType()
 
 
 def parse_triple(text: str, option: str) -> tuple[float, float, float]:

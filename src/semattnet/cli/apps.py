@@ -8,7 +8,15 @@ from pathlib import Path
 import click
 
 from semattnet.cli._group import main
-from semattnet.cli._options import model_from_options, parse_size, weights_option
+from semattnet.cli._options import (
+    COUNT,
+    POSITIVE_FLOAT,
+    POSITIVE_INT,
+    SIZE,
+    model_from_options,
+    parse_size,
+    weights_option,
+)
 
 
 @main.command()
@@ -20,13 +28,19 @@ from semattnet.cli._options import model_from_options, parse_size, weights_optio
     show_default=True,
     help="Folder for the data, runs, pictures and report.",
 )
-@click.option("--minutes", default=6.0, show_default=True, help="Training budget of the two models together.")
-@click.option("--size", default="96x320", show_default=True, help="Scene size HxW (multiples of 32).")
-@click.option("--frames", default=200, show_default=True, help="Training scenes.")
-@click.option("--eval-frames", default=16, show_default=True, help="Held-out scenes (half shadowed).")
-@click.option("--width", default=0.125, show_default=True, help="Model width multiplier (1.0 = paper).")
+@click.option(
+    "--minutes", type=POSITIVE_FLOAT, default=6.0, show_default=True, help="Training budget of the two models together."
+)
+@click.option("--size", type=SIZE, default="96x320", show_default=True, help="Scene size HxW (multiples of 32).")
+@click.option("--frames", type=POSITIVE_INT, default=200, show_default=True, help="Training scenes.")
+@click.option(
+    "--eval-frames", type=POSITIVE_INT, default=16, show_default=True, help="Held-out scenes (half shadowed)."
+)
+@click.option(
+    "--width", type=POSITIVE_FLOAT, default=0.125, show_default=True, help="Model width multiplier (1.0 = paper)."
+)
 @click.option("--steps", default=None, help="Fixed steps per model as BACKBONE,FULL instead of the time budget.")
-@click.option("--seed", default=0, show_default=True)
+@click.option("--seed", type=COUNT, default=0, show_default=True)
 @click.option("--device", default="auto", show_default=True, help="auto, cpu or cuda[:N].")
 @click.option("--overwrite", is_flag=True, help="Replace the contents of --out.")
 def demo(out_dir: Path, minutes: float, size: str, frames: int, eval_frames: int, width: float, steps: str | None,
@@ -52,12 +66,17 @@ def demo(out_dir: Path, minutes: float, size: str, frames: int, eval_frames: int
               help="Folder for data, runs and results; rerun to continue an interrupted ablation.")  # fmt: skip
 @click.option("--configs", default="all", help="Comma-separated table2_a ... table2_g, g_unknown_semantics.")
 @click.option("--seeds", default="0,1,2", help="Comma-separated training seeds.")
-@click.option("--backbone-steps", default=90, help="Backbone-stage steps (refining configurations).")
-@click.option("--full-steps", default=40, help="Full-model steps (non-refining configurations: more backbone steps).")
-@click.option("--size", default="96x320", help="Scene size HxW.")
-@click.option("--frames", default=200, help="Training scenes.")
-@click.option("--eval-frames", default=16, help="Held-out scenes (half shadowed).")
-@click.option("--width", default=0.125, help="Model width multiplier.")
+@click.option("--backbone-steps", type=POSITIVE_INT, default=90, help="Backbone-stage steps (refining configurations).")
+@click.option(
+    "--full-steps",
+    type=POSITIVE_INT,
+    default=40,
+    help="Full-model steps (non-refining configurations: more backbone steps).",
+)
+@click.option("--size", type=SIZE, default="96x320", help="Scene size HxW.")
+@click.option("--frames", type=POSITIVE_INT, default=200, help="Training scenes.")
+@click.option("--eval-frames", type=POSITIVE_INT, default=16, help="Held-out scenes (half shadowed).")
+@click.option("--width", type=POSITIVE_FLOAT, default=0.125, help="Model width multiplier.")
 @click.option("--device", default="auto")
 def ablate(out_dir: Path, configs: str, seeds: str, backbone_steps: int, full_steps: int, size: str, frames: int,
            eval_frames: int, width: float, device: str) -> None:  # fmt: skip
@@ -77,23 +96,26 @@ def ablate(out_dir: Path, configs: str, seeds: str, backbone_steps: int, full_st
 
 
 @main.command(context_settings={"show_default": True})
-@click.option("--size", default="352x1216", help="Frame size HxW for inference.")
-@click.option("--train-size", default="320x1216", help="Crop size HxW for the training step.")
+@click.option("--size", type=SIZE, default="352x1216", help="Frame size HxW for inference.")
+@click.option("--train-size", type=SIZE, default="320x1216", help="Crop size HxW for the training step.")
 @click.option("--device", default="auto", help="auto, cpu or cuda[:N].")
-@click.option("--repeats", default=3, help="Timed runs per measurement (median reported).")
-@click.option("--width", default=1.0, help="Model width multiplier (1.0 = paper).")
+@click.option("--repeats", type=POSITIVE_INT, default=3, help="Timed runs per measurement (median reported).")
+@click.option("--width", type=POSITIVE_FLOAT, default=1.0, help="Model width multiplier (1.0 = paper).")
 @click.option("--parts", default="propagation,backbone,full,fast,train", help="What to measure.")
 @click.option("--checkpoint", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               help="Weights to use instead of random ones.")  # fmt: skip
 @weights_option
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also write the results as JSON.")  # fmt: skip
+@click.option("--overwrite", is_flag=True, help="Replace an existing --json file.")
 def bench(size: str, train_size: str, device: str, repeats: int, width: float, parts: str, checkpoint: Path | None,
-          weights: str | None, json_path: Path | None) -> None:  # fmt: skip
+          weights: str | None, json_path: Path | None, overwrite: bool) -> None:  # fmt: skip
     """Latency, throughput and peak memory against the naive reference, in one process."""
     from semattnet._utils.device import resolve_device
+    from semattnet._utils.outputs import refuse_existing, write_text
     from semattnet.apps.benchmark import run_benchmark
 
+    refuse_existing([json_path] if json_path else [], overwrite)
     given = checkpoint is not None or weights is not None
     model = model_from_options(checkpoint, weights) if given else None
     chosen = tuple(p.strip() for p in parts.split(",") if p.strip())
@@ -103,4 +125,4 @@ def bench(size: str, train_size: str, device: str, repeats: int, width: float, p
     result = run_benchmark(parse_size(size), resolve_device(device), repeats, width, chosen,
                            parse_size(train_size), model, log=click.echo)  # fmt: skip
     if json_path is not None:
-        json_path.write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+        write_text(json_path, json.dumps(result.to_dict(), indent=2) + "\n", overwrite=overwrite)

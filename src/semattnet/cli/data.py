@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from semattnet.cli._group import main
-from semattnet.cli._options import parse_size
+from semattnet.cli._options import COUNT, POSITIVE_INT, SIZE, parse_size
 
 
 @main.command()
@@ -18,13 +18,18 @@ from semattnet.cli._options import parse_size
     required=True,
     help="Folder for the KITTI-layout tree.",
 )
-@click.option("--frames", default=100, show_default=True, help="Training frames.")
+@click.option("--frames", type=POSITIVE_INT, default=100, show_default=True, help="Training frames.")
 @click.option(
-    "--eval-frames", type=int, default=None, help="Frames for each of val, val_select, test [frames/5, >= 2]."
+    "--eval-frames",
+    type=click.IntRange(min=2),
+    default=None,
+    help="Frames for each of val, val_select, test [frames/5, >= 2].",
 )
-@click.option("--size", default="352x1216", show_default=True, help="Frame size HxW.")
-@click.option("--seed", default=0, show_default=True)
-@click.option("--workers", type=int, default=None, help="Processes [all cores]; the output does not depend on it.")
+@click.option("--size", type=SIZE, default="352x1216", show_default=True, help="Frame size HxW.")
+@click.option("--seed", type=COUNT, default=0, show_default=True)
+@click.option(
+    "--workers", type=POSITIVE_INT, default=None, help="Processes [all cores]; the output does not depend on it."
+)
 @click.option("--overwrite", is_flag=True, help="Write into a non-empty folder, replacing a previous tree.")
 def synth(out_dir: Path, frames: int, eval_frames: int | None, size: str, seed: int, workers: int | None,
           overwrite: bool) -> None:  # fmt: skip
@@ -55,7 +60,7 @@ def data() -> None:
     default=None,
     help="Semantic maps [ROOT/semantic or ROOT/semantics].",
 )
-@click.option("--sample", type=int, default=None, help="Decode at most N frames per split [all].")
+@click.option("--sample", type=POSITIVE_INT, default=None, help="Decode at most N frames per split [all].")
 def data_check(roots: tuple[Path, ...], raw_root: Path | None, semantic_root: Path | None, sample: int | None) -> None:
     """Check KITTI depth completion trees; exits 1 if anything is missing, unpaired or broken."""
     from semattnet.data.check import check_trees

@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
 
 from semattnet.cli._group import main
-from semattnet.cli._options import model_from_options, weights_option
+from semattnet.cli._options import COUNT, NONNEGATIVE_FLOAT, POSITIVE_INT, model_from_options, weights_option
 
 
 @main.command()
@@ -21,16 +20,23 @@ from semattnet.cli._options import model_from_options, weights_option
     default=None,
     help="Also write the metrics as JSON.",
 )
-@click.option("--min-gt", default=0.0, show_default=True, help="Count gt > this (0.1 = the authors' variant).")
+@click.option(
+    "--min-gt",
+    type=NONNEGATIVE_FLOAT,
+    default=0.0,
+    show_default=True,
+    help="Count gt > this (0.1 = the authors' variant).",
+)
 @click.option("--no-fill", is_flag=True, help="Do not fill prediction holes (the devkit fills them).")
-def metrics(pred_dir: Path, gt_dir: Path, json_path: Path | None, min_gt: float, no_fill: bool) -> None:
+@click.option("--overwrite", is_flag=True, help="Replace an existing --json file.")
+def metrics(
+    pred_dir: Path, gt_dir: Path, json_path: Path | None, min_gt: float, no_fill: bool, overwrite: bool
+) -> None:
     """Score 16-bit PNG depth predictions against ground truth (KITTI devkit metrics)."""
-    from semattnet.evaluation.evaluate import score_folders
+    from semattnet.evaluation.evaluate import score_folders_to_json
 
-    m = score_folders(pred_dir, gt_dir, fill_holes=not no_fill, min_gt=min_gt)
+    m = score_folders_to_json(pred_dir, gt_dir, json_path, overwrite, fill_holes=not no_fill, min_gt=min_gt)
     click.echo(m.table())
-    if json_path is not None:
-        json_path.write_text(json.dumps(m.compute(), indent=2) + "\n")
 
 
 @main.command()
@@ -59,12 +65,14 @@ def metrics(pred_dir: Path, gt_dir: Path, json_path: Path | None, min_gt: float,
     help="With --sparsity: classical sweeps only the baseline (no model needed).",
 )
 @click.option("--save-predictions", is_flag=True, help="Write 16-bit PNG predictions (needs --out).")
-@click.option("--pictures", default=0, show_default=True, help="Branch panels for the first N frames (needs --out).")
+@click.option(
+    "--pictures", type=COUNT, default=0, show_default=True, help="Branch panels for the first N frames (needs --out)."
+)
 @click.option("--device", default="auto", show_default=True)
-@click.option("--batch-size", default=1, show_default=True)
+@click.option("--batch-size", type=POSITIVE_INT, default=1, show_default=True)
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
-@click.option("--workers", default=2, show_default=True)
-@click.option("--max-frames", type=int, default=None)
+@click.option("--workers", type=COUNT, default=2, show_default=True)
+@click.option("--max-frames", type=POSITIVE_INT, default=None)
 @click.option("--overwrite", is_flag=True)
 def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, split: str, out: Path | None,
              sparsity: tuple[str, ...], method: str, save_predictions: bool, pictures: int, device: str,
@@ -112,7 +120,9 @@ def _sweep(checkpoint: Path | None, weights: str | None, data_root: Path, split:
 @click.option(
     "--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Folder; OUT.zip is written too."
 )
-@click.option("--expected-frames", default=1000, show_default=True, help="0 accepts any count (synthetic data).")
+@click.option(
+    "--expected-frames", type=COUNT, default=1000, show_default=True, help="0 accepts any count (synthetic data)."
+)
 @click.option("--device", default="auto", show_default=True)
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
 @click.option("--overwrite", is_flag=True)

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from semattnet.cli._group import main
-from semattnet.cli._options import weights_option
+from semattnet.cli._options import COUNT, POSITIVE_FLOAT, weights_option
 
 
 def _completer(method: str, checkpoint: Path | None, weights: str | None, device: str, amp: str):  # type: ignore[no-untyped-def]
@@ -62,8 +62,16 @@ _INPUT = click.Path(exists=True, path_type=Path)
 @click.option("--npy", is_flag=True, help="Also write float32 .npy depth.")
 @click.option("--panel", is_flag=True, help="Also write the per-branch panel (with --kitti-raw: a bird's-eye view).")
 @click.option("--ply", is_flag=True, help="With --kitti-raw: also write the prediction as a binary PLY point cloud.")
-@click.option("--max-depth", default=80.0, show_default=True, help="PLY / bird's-eye view: drop deeper pixels, m.")
-@click.option("--top-crop", default=0, show_default=True, help="PLY / bird's-eye view: drop the top N rows (sky).")
+@click.option(
+    "--max-depth",
+    type=POSITIVE_FLOAT,
+    default=80.0,
+    show_default=True,
+    help="PLY / bird's-eye view: drop deeper pixels, m.",
+)
+@click.option(
+    "--top-crop", type=COUNT, default=0, show_default=True, help="PLY / bird's-eye view: drop the top N rows (sky)."
+)
 @click.option("--deskew", is_flag=True, help="With --kitti-raw: ego-motion compensate scans with their OXTS data.")
 @click.option("--device", default="auto", show_default=True)
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
@@ -96,7 +104,8 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
                            panel=panel, deskew=deskew, overwrite=overwrite, log=click.echo)  # fmt: skip
         return
     frame_list = pair_frames(rgb, sparse, semantic)
-    complete_folder(completer, frame_list, out, npy=npy, panel=panel, overwrite=overwrite, log=click.echo)
+    complete_folder(completer, frame_list, out, npy=npy, panel=panel, overwrite=overwrite, log=click.echo,
+                    inputs=(rgb, sparse, semantic))  # fmt: skip
     if report:
         from semattnet.viz.viewer import write_prediction_report
 
@@ -107,10 +116,13 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
 @click.option("--pred", required=True, type=click.Path(exists=True, path_type=Path), help="16-bit PNG file or folder.")
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path))
 @click.option("--gt", type=click.Path(exists=True, path_type=Path), default=None, help="Ground truth: adds error maps.")
-@click.option("--vmax", default=80.0, show_default=True, help="Depth of the colour scale's top, metres.")
-def visualize(pred: Path, out: Path, gt: Path | None, vmax: float) -> None:
+@click.option(
+    "--vmax", type=POSITIVE_FLOAT, default=80.0, show_default=True, help="Depth of the colour scale's top, metres."
+)
+@click.option("--overwrite", is_flag=True, help="Replace existing pictures.")
+def visualize(pred: Path, out: Path, gt: Path | None, vmax: float, overwrite: bool) -> None:
     """Colourise saved depth predictions (and error maps against ground truth)."""
     from semattnet.viz.depth import write_depth_pictures
 
-    count = write_depth_pictures(pred, out, gt, vmax)
+    count = write_depth_pictures(pred, out, gt, vmax, overwrite=overwrite)
     click.echo(f"wrote {count} picture(s) to {out}")

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from semattnet.cli._group import main
+from semattnet.cli._options import POSITIVE_FLOAT, parse_size
 
 
 def _numbers(text: str | None, option: str) -> list[float] | None:
@@ -21,11 +22,7 @@ def _numbers(text: str | None, option: str) -> list[float] | None:
 def _size(text: str | None) -> tuple[int, int] | None:
     if text is None:
         return None
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise click.BadParameter(f"expected WxH, e.g. 1242x375; got {text!r}", param_hint="--size") from None
-    return w, h
+    return parse_size(text, "--size", order="WxH")
 
 
 _EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
@@ -59,6 +56,7 @@ _EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
 )
 @click.option(
     "--scan-period",
+    type=POSITIVE_FLOAT,
     default=0.1,
     show_default=True,
     help="With --deskew-oxts: seconds per LiDAR revolution (KITTI: timestamps_end - timestamps_start).",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from semattnet.cli._group import main
-from semattnet.cli._options import parse_size
+from semattnet.cli._options import COUNT, POSITIVE_FLOAT, POSITIVE_INT, SIZE, parse_size
 
 
 @main.command(context_settings={"show_default": True})
@@ -25,20 +25,21 @@ from semattnet.cli._options import parse_size
     help="A config.json to start from (options and --set override it).",
 )
 @click.option("--resume", is_flag=True, help="Continue the run in --out exactly where it stopped.")
-@click.option("--epochs", type=int, default=None, help="[stage default: 60 / 5 / 95]")
-@click.option("--batch-size", type=int, default=None, help="Per process [stage default: 8 / 8 / 16].")
-@click.option("--lr", type=float, default=None, help="[stage default]")
-@click.option("--width", type=float, default=None, help="Model width multiplier [1.0].")
-@click.option("--crop", default=None, help="Training crop HxW [352x1216].")
+@click.option("--overwrite", is_flag=True, help="Start over in a run folder that already holds a run.")
+@click.option("--epochs", type=POSITIVE_INT, default=None, help="[stage default: 60 / 5 / 95]")
+@click.option("--batch-size", type=POSITIVE_INT, default=None, help="Per process [stage default: 8 / 8 / 16].")
+@click.option("--lr", type=POSITIVE_FLOAT, default=None, help="[stage default]")
+@click.option("--width", type=POSITIVE_FLOAT, default=None, help="Model width multiplier [1.0].")
+@click.option("--crop", type=SIZE, default=None, help="Training crop HxW [352x1216].")
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default=None)
 @click.option("--device", default=None, help="auto, cpu or cuda.")
-@click.option("--workers", type=int, default=None, help="Data loading processes [4].")
-@click.option("--max-steps", type=int, default=None, help="Stop after N steps in total.")
+@click.option("--workers", type=COUNT, default=None, help="Data loading processes [4].")
+@click.option("--max-steps", type=COUNT, default=None, help="Stop after N steps in total.")
 @click.option(
     "--set", "overrides", multiple=True, metavar="KEY=VALUE", help="Any TrainConfig field, e.g. --set val_every=2."
 )
 def train(stage: str, data_root: str | None, out: str | None, init: str | None, init_weights: str | None,
-          config_file: str | None, resume: bool,
+          config_file: str | None, resume: bool, overwrite: bool,
           epochs: int | None, batch_size: int | None, lr: float | None, width: float | None, crop: str | None,
           amp: str | None, device: str | None, workers: int | None, max_steps: int | None,
           overrides: tuple[str, ...]) -> None:  # fmt: skip
@@ -67,5 +68,5 @@ def train(stage: str, data_root: str | None, out: str | None, init: str | None, 
         if "crop" in base and crop and not config_file:
             base["random_crop_height"] = None  # re-derive from the new crop
         cfg = TrainConfig.from_dict(base).with_overrides(list(overrides))
-    result = run_training(cfg, resume=resume, log=click.echo)
+    result = run_training(cfg, resume=resume, overwrite=overwrite, log=click.echo)
     click.echo(f"done: epoch {result['epoch']}, step {result['step']}, best RMSE {result['best_rmse_mm']:.1f} mm")

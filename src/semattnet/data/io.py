@@ -21,6 +21,8 @@ __all__ = [
     "DEPTH_SCALE",
     "MAX_DEPTH_M",
     "MAX_DEPTH_VALUE",
+    "MAX_IMAGE_PIXELS",
+    "MAX_IMAGE_SIDE",
     "MIN_DEPTH_M",
     "DataError",
     "clamp_for_png",
@@ -28,6 +30,7 @@ __all__ = [
     "read_depth",
     "read_image",
     "read_intrinsics",
+    "read_semantic",
     "write_depth",
     "write_image",
 ]
@@ -41,8 +44,25 @@ MIN_DEPTH_M = 1.0 / DEPTH_SCALE
 MAX_DEPTH_M = MAX_DEPTH_VALUE / DEPTH_SCALE
 
 
+#: Largest width or height accepted, checked in the header before decoding (KITTI: 1242).
+MAX_IMAGE_SIDE = 16384
+#: Largest width x height accepted (64 Mpx, ~256 MB as RGB): bigger headers are refused as
+#: decompression bombs before any pixel is decoded.
+MAX_IMAGE_PIXELS = 64 * 1024 * 1024
+
+
 class DataError(SemAttNetError):
     """A data file is missing, unreadable or not in the expected encoding."""
+
+
+def _check_header(path: Path, img: Image.Image) -> None:
+    """Refuse a zero or absurd size before decoding (hostile headers, decompression bombs)."""
+    w, h = img.size
+    if w <= 0 or h <= 0:
+        raise DataError(f"{path}: the header gives an empty image ({w}x{h})")
+    if w > MAX_IMAGE_SIDE or h > MAX_IMAGE_SIDE or w * h > MAX_IMAGE_PIXELS:
+        raise DataError(f"{path}: the header gives {w}x{h} pixels, above the limit of {MAX_IMAGE_SIDE} a side "
+                        f"and {MAX_IMAGE_PIXELS} in all (semattnet.data.io.MAX_IMAGE_*); not decoding")  # fmt: skip
 
 
 def _open(path: str | os.PathLike[str]) -> Image.Image:
@@ -50,10 +70,21 @@ def _open(path: str | os.PathLike[str]) -> Image.Image:
     if not path.is_file():
         raise DataError(f"{path}: file not found")
     try:
-        img = Image.open(path)
-        img.load()
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            img = Image.open(path)
+            _check_header(path, img)
+            img.load()
+    except DataError:
+        raise
+    except (Image.DecompressionBombError, Image.DecompressionBombWarning) as exc:
+        raise DataError(f"{path}: refused as a decompression bomb: {exc}") from None
+    except MemoryError:
+        raise DataError(f"{path}: too large to decode in memory") from None
     except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
         raise DataError(f"{path}: not a readable PNG (truncated or corrupt?): {exc}") from None
+    except Exception as exc:  # PIL raises many types on hostile files (struct.error, EOFError, ...)
+        raise DataError(f"{path}: not a readable PNG ({type(exc).__name__}: {exc})") from None
     return img
 
 
@@ -86,6 +117,20 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     if img.mode != "RGB":
         raise DataError(f"{path}: expected an 8-bit colour (RGB) PNG, got mode {img.mode!r}")
     return np.asarray(img, dtype=np.uint8)
+
+
+def read_semantic(path: str | os.PathLike[str]) -> np.ndarray:
+    """A colour-coded semantic map as (H, W, 3) uint8, checked against the Cityscapes palette.
+
+    Raises:
+        DataError: missing/corrupt file or not 8-bit colour.
+        UnknownColorError: pixels outside the palette (a resampled or JPEG-resaved map).
+    """
+    from semattnet.data.palette import colors_to_ids
+
+    colors = read_image(path)
+    colors_to_ids(colors, allow_unknown=True, source=str(path))
+    return colors
 
 
 def encode_depth(depth: np.ndarray) -> np.ndarray:

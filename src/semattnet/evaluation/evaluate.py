@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import csv
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -18,13 +18,14 @@ from tqdm import tqdm
 
 from semattnet._utils import distributed as dist_utils
 from semattnet._utils.device import autocast
+from semattnet._utils.outputs import check_no_input_overlap, staged_outputs, write_text
 from semattnet.data.io import DEPTH_SCALE, DataError, clamp_for_png, read_depth, write_depth
 from semattnet.data.kitti import KittiDepthCompletion
 from semattnet.data.transforms import EvalTransform
 from semattnet.evaluation.metrics import KittiMetrics
 from semattnet.inference.completer import DepthCompleter
 
-__all__ = ["evaluate_checkpoint", "evaluate_model", "score_folders"]
+__all__ = ["evaluate_checkpoint", "evaluate_model", "score_folders", "score_folders_to_json"]
 
 
 def score_folders(pred_dir: str | Path, gt_dir: str | Path, fill_holes: bool = True, min_gt: float = 0.0,
@@ -117,9 +118,26 @@ def _eval_dataset(data: str | Path, split: str, raw_root: str | Path | None,
     return ds
 
 
-def _prepare_out(out: Path, overwrite: bool) -> Path:
-    """Create ``out``; refuse a non-empty folder unless ``overwrite``."""
-    if out.exists() and any(out.iterdir()) and not overwrite:
+def score_folders_to_json(pred_dir: str | Path, gt_dir: str | Path, json_path: str | Path | None = None,
+                          overwrite: bool = False, fill_holes: bool = True,
+                          min_gt: float = 0.0) -> KittiMetrics:  # fmt: skip
+    """:func:`score_folders`, then (optionally) the metrics as JSON in ``json_path``: never an input
+    file, never replacing an existing file unless ``overwrite`` (both checked before scoring)."""
+    if json_path is not None:
+        check_no_input_overlap([pred_dir, gt_dir], out_files=[json_path])
+        if Path(json_path).exists() and not overwrite:
+            raise FileExistsError(f"{json_path} exists; pass --overwrite to replace it")
+    metrics = score_folders(pred_dir, gt_dir, fill_holes=fill_holes, min_gt=min_gt)
+    if json_path is not None:
+        write_text(json_path, json.dumps(metrics.compute(), indent=2) + "\n", overwrite=overwrite)
+    return metrics
+
+
+def _prepare_out(out: Path, overwrite: bool, inputs: Sequence[Any] = ()) -> Path:
+    """Check ``out``: not inside an input; a non-empty folder needs ``overwrite`` (which replaces
+    only the files the evaluation writes)."""
+    check_no_input_overlap(inputs, out_dir=out)
+    if out.is_dir() and any(out.iterdir()) and not overwrite:
         raise FileExistsError(f"{out} is not empty; pass --overwrite to replace its contents")
     out.mkdir(parents=True, exist_ok=True)
     return out
@@ -188,13 +206,18 @@ def evaluate_checkpoint(
         completer, label = DepthCompleter(checkpoint, device=device, amp=amp), type(checkpoint).__name__
     else:
         completer, label = DepthCompleter.from_checkpoint(checkpoint, device=device, amp=amp), str(checkpoint)
+    inputs = [data, raw_root, semantic_root, None if isinstance(checkpoint, nn.Module) else checkpoint]
+    out = _prepare_out(Path(out_dir), overwrite, inputs) if out_dir is not None else None
     ds = _eval_dataset(data, split, raw_root, semantic_root)
     subset = Subset(ds, range(min(len(ds), max_frames))) if max_frames else ds
-    out = _prepare_out(Path(out_dir), overwrite) if out_dir is not None else None
-    writer = _FrameWriter(ds, split, out, save_predictions, pictures) if out is not None else None
     loader = DataLoader(subset, batch_size=batch_size, num_workers=workers)
-    metrics = evaluate_model(completer.model, loader, completer.device, amp, on_batch=writer, quantize=True)
-    result = metrics.compute() if metrics.per_image else {}
-    if out is not None and result:
-        _write_scores(out, metrics, {"checkpoint": label, "split": split} | result)
+    if out is None:
+        metrics = evaluate_model(completer.model, loader, completer.device, amp, quantize=True)
+        return {"metrics": metrics, "result": metrics.compute() if metrics.per_image else {}}
+    with staged_outputs(out, overwrite=overwrite) as stage:  # all files appear together, or none
+        writer = _FrameWriter(ds, split, stage, save_predictions, pictures)
+        metrics = evaluate_model(completer.model, loader, completer.device, amp, on_batch=writer, quantize=True)
+        result = metrics.compute() if metrics.per_image else {}
+        if result:
+            _write_scores(stage, metrics, {"checkpoint": label, "split": split} | result)
     return {"metrics": metrics, "result": result}

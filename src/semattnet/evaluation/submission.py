@@ -14,7 +14,8 @@ import numpy as np
 from tqdm import tqdm
 
 from semattnet._errors import SemAttNetError
-from semattnet._utils.atomic import atomic_path
+from semattnet._utils.atomic import atomic_path, fsync_dir
+from semattnet._utils.outputs import check_no_input_overlap
 from semattnet.data.io import clamp_for_png, read_depth, write_depth
 from semattnet.data.kitti import KittiDepthCompletion
 from semattnet.inference.completer import DepthCompleter
@@ -45,6 +46,49 @@ def _read_back(folder: Path, names: list[str], expected: dict[str, tuple[int, in
     return sum(holes.values())
 
 
+def _check_replaceable(out: Path, zip_path: Path, expected: dict[str, tuple[int, int]], overwrite: bool) -> None:
+    """``out`` and the zip may be replaced only with ``overwrite``, and ``out`` only when it holds
+    nothing but submission PNGs: a file the submission does not own is never deleted."""
+    if not (out.exists() or zip_path.exists()):
+        return
+    if not overwrite:
+        raise FileExistsError(f"{out} or {zip_path} exists; pass --overwrite to replace them")
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(f"{out} is a file, not a submission folder; remove it or choose another --out")
+    foreign = sorted(p.name for p in out.iterdir() if p.name not in expected) if out.exists() else []
+    if foreign:
+        raise SubmissionError(f"{out} holds {len(foreign)} file(s) a submission does not write, e.g. "
+                              f"{out / foreign[0]}; --overwrite only replaces submission files: "
+                              "move them or choose another --out")  # fmt: skip
+
+
+def _clean_stale_stages(out: Path) -> None:
+    """Remove the temporary folders (``.OUT.pPID.*``) of killed submissions."""
+    from semattnet._utils.atomic import _pid_alive
+
+    for entry in out.parent.glob(f".{out.name}.p*"):
+        pid = entry.name[len(out.name) + 2 :].split(".")[0]
+        if entry.is_dir() and pid.isdigit() and not _pid_alive(int(pid)):
+            shutil.rmtree(entry, ignore_errors=True)
+
+
+def _write_checked(predictions: Iterable[tuple[str, np.ndarray]], tmp: Path,
+                   expected: dict[str, tuple[int, int]]) -> None:  # fmt: skip
+    """Write the predictions into ``tmp`` and check count, names, sizes and encoding."""
+    for name, depth in predictions:
+        if name not in expected:
+            raise SubmissionError(f"unexpected prediction {name!r} (not a test frame)")
+        if depth.shape != expected[name]:
+            raise SubmissionError(f"{name}: prediction is {depth.shape[1]}x{depth.shape[0]}, "
+                                  f"the input is {expected[name][1]}x{expected[name][0]}")  # fmt: skip
+        write_depth(tmp / name, clamp_for_png(depth, name))
+    written = sorted(p.name for p in tmp.glob("*.png"))
+    if written != sorted(expected):
+        missing = sorted(set(expected) - set(written))
+        raise SubmissionError(f"{len(written)} predictions for {len(expected)} test frames; missing {missing[:5]}")
+    _read_back(tmp, written, expected)
+
+
 def write_submission_files(
     predictions: Iterable[tuple[str, np.ndarray]],
     out: str | Path,
@@ -63,26 +107,16 @@ def write_submission_files(
     """
     out = Path(out)
     zip_path = out.with_suffix(".zip")
-    if (out.exists() or zip_path.exists()) and not overwrite:
-        raise FileExistsError(f"{out} or {zip_path} exists; pass --overwrite to replace them")
+    _check_replaceable(out, zip_path, expected, overwrite)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    _clean_stale_stages(out)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.p{os.getpid()}.", dir=out.parent))
     try:
-        for name, depth in predictions:
-            if name not in expected:
-                raise SubmissionError(f"unexpected prediction {name!r} (not a test frame)")
-            if depth.shape != expected[name]:
-                raise SubmissionError(f"{name}: prediction is {depth.shape[1]}x{depth.shape[0]}, "
-                                      f"the input is {expected[name][1]}x{expected[name][0]}")  # fmt: skip
-            write_depth(tmp / name, clamp_for_png(depth, name))
-        written = sorted(p.name for p in tmp.glob("*.png"))
-        if written != sorted(expected):
-            missing = sorted(set(expected) - set(written))
-            raise SubmissionError(f"{len(written)} predictions for {len(expected)} test frames; missing {missing[:5]}")
-        _read_back(tmp, written, expected)
+        _write_checked(predictions, tmp, expected)
         if out.exists():
-            shutil.rmtree(out)
+            shutil.rmtree(out)  # only submission PNGs (checked above)
         os.replace(tmp, out)
+        fsync_dir(out.parent)
     finally:
         if tmp.exists():
             shutil.rmtree(tmp)
@@ -106,6 +140,8 @@ def write_submission(
 
     ``expected_frames`` is KITTI's 1000; pass ``None`` to accept any count (e.g. synthetic data).
     """
+    check_no_input_overlap([data, semantic_root, checkpoint], out_dir=out)
+    check_no_input_overlap([data, semantic_root, checkpoint], out_files=[Path(out).with_suffix(".zip")])
     ds = KittiDepthCompletion(data, "test", semantic_root=semantic_root)
     if expected_frames is not None and len(ds) != expected_frames:
         raise SubmissionError(f"{data}: the test split has {len(ds)} frames, KITTI expects {expected_frames}")

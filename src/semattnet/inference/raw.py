@@ -17,7 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from semattnet.data.io import DataError, clamp_for_png, encode_depth, read_image, write_depth, write_image
+from semattnet._utils.atomic import atomic_path
+from semattnet._utils.outputs import check_no_input_overlap, refuse_existing, staged_outputs
+from semattnet.data.io import DataError, clamp_for_png, encode_depth, read_semantic, write_depth, write_image
 from semattnet.data.kitti_raw import RawDrive, RawFrame
 from semattnet.inference.folder import Completer
 
@@ -52,7 +54,7 @@ def _semantic_source(
         folder = Path(semantic)
         if not folder.is_dir():
             raise DataError(f"{folder}: semantic folder not found")
-        return lambda frame: read_image(folder / f"{frame.name}.png")
+        return lambda frame: read_semantic(folder / f"{frame.name}.png")
     if segmenter is not None:
         if isinstance(segmenter, str):
             from semattnet.segmentation.segmenter import load_segmenter
@@ -99,7 +101,8 @@ def _write_frame(frame: RawFrame, sparse: np.ndarray, sem: np.ndarray | None, re
     path = write_depth(out / f"{frame.name}.png", depth, overwrite=True)
     write_image(out / f"{frame.name}_color.png", colorize_depth(depth), overwrite=True)
     if opts["npy"]:
-        np.save(out / f"{frame.name}.npy", result.depth.astype(np.float32))
+        with atomic_path(out / f"{frame.name}.npy", suffix=".npy") as tmp:
+            np.save(tmp, result.depth.astype(np.float32))
     cloud = None
     if opts["ply"] or opts["panel"]:
         stored = encode_depth(depth).astype(np.float32) / 256.0
@@ -148,26 +151,29 @@ def complete_kitti_raw(
 
     Raises:
         FileExistsError: an output exists and ``overwrite`` is not set (checked before any work).
+        OutputError: ``out`` is the drive or semantic folder, or inside one.
         DataError: missing/corrupt drive files or frames, naming them.
+
+    Outputs are staged (:func:`semattnet._utils.outputs.staged_outputs`): they appear in ``out`` only
+    when every frame succeeded; a corrupt frame or a kill leaves ``out`` unchanged.
     """
     out = Path(out)
+    check_no_input_overlap([drive_dir, semantic], out_dir=out)
     drive = RawDrive(drive_dir, camera, deskew=deskew)
     names = drive.names_for(frames)
-    existing = [p for p in raw_output_paths(names, out, ply, npy, panel) if p.exists()]
-    if existing and not overwrite:
-        raise FileExistsError(f"{len(existing)} output(s) exist, e.g. {existing[0]}; pass --overwrite")
+    refuse_existing(raw_output_paths(names, out, ply, npy, panel), overwrite)
     semantic_for = _semantic_source(completer, semantic, segmenter)
     opts = {"ply": ply, "npy": npy, "panel": panel, "max_depth": max_depth, "top_crop": top_crop}
-    out.mkdir(parents=True, exist_ok=True)
-    written = []
-    for name in names:
-        frame = drive.frame(name)
-        sparse = project_frame(frame)
-        sem = semantic_for(frame)
-        result = completer(frame.image, sparse, sem)
-        written.append(_write_frame(frame, sparse, sem, result, out, opts))
-        log(f"{name}: {np.count_nonzero(sparse)} LiDAR pixels, {sparse.shape[1]}x{sparse.shape[0]} -> {written[-1]}")
-    return written
+    with staged_outputs(out, overwrite=overwrite) as stage:
+        for name in names:
+            frame = drive.frame(name)
+            sparse = project_frame(frame)
+            sem = semantic_for(frame)
+            result = completer(frame.image, sparse, sem)
+            _write_frame(frame, sparse, sem, result, stage, opts)
+            log(f"{name}: {np.count_nonzero(sparse)} LiDAR pixels, {sparse.shape[1]}x{sparse.shape[0]} "
+                f"-> {out / (name + '.png')}")  # fmt: skip
+    return [out / f"{name}.png" for name in names]
 
 
 def project_frame(frame: RawFrame) -> np.ndarray:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -117,6 +118,39 @@ class TrainConfig:
             self.random_crop_height = min(320, self.crop[0])
         if self.random_crop_height > self.crop[0]:
             raise ValueError(f"random_crop_height {self.random_crop_height} exceeds the crop height {self.crop[0]}")
+        self._validate()
+
+    def _validate(self) -> None:
+        """Refuse numbers that cannot train: NaN/inf or non-positive rates, zero or negative counts."""
+
+        def check(name: str, ok: bool, want: str) -> None:
+            if not ok:
+                raise ValueError(f"{name} must be {want}, got {getattr(self, name)!r}")
+
+        def finite(x: object) -> bool:
+            return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+        def whole(x: object, low: int) -> bool:
+            return isinstance(x, int) and not isinstance(x, bool) and x >= low
+
+        for name in ("lr", "head_lr", "width"):
+            value = getattr(self, name)
+            ok = (value is None and name == "head_lr") or (finite(value) and value > 0)
+            check(name, ok, "a finite number > 0")
+        for name in ("weight_decay", "jitter"):
+            check(name, finite(getattr(self, name)) and getattr(self, name) >= 0, "a finite number >= 0")
+        for name in ("epochs", "batch_size", "val_every", "log_every", "branches"):
+            check(name, whole(getattr(self, name), 1), "a whole number >= 1")
+        for name in ("patience", "workers", "seed", "save_every", "keep_last", "max_steps"):
+            check(name, whole(getattr(self, name), 0), "a whole number >= 0")
+        check("val_max_frames", self.val_max_frames is None or whole(self.val_max_frames, 1), "null or >= 1")
+        check("crop", len(self.crop) == 2 and all(whole(v, 1) for v in self.crop), "two whole numbers >= 1")
+        check("random_crop_height", whole(self.random_crop_height, 1), "a whole number >= 1")
+        check(
+            "betas", len(self.betas) == 2 and all(finite(b) and 0 <= b < 1 for b in self.betas), "two numbers in [0, 1)"
+        )
+        check("branch_weights", all(finite(w) and w >= 0 for w in self.branch_weights), "finite numbers >= 0")
+        check("sync_bn", isinstance(self.sync_bn, bool), "true or false")
 
     def branch_weight(self, epoch: int) -> float:
         if self.stage != "backbone" or not self.branch_weights:

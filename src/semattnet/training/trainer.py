@@ -13,6 +13,7 @@ import csv
 import math
 import os
 import random
+import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -37,9 +38,15 @@ from semattnet.training.config import TrainConfig
 from semattnet.training.losses import semattnet_loss
 from semattnet.weights.checkpoint import CheckpointError, load_checkpoint, load_weights
 
-__all__ = ["Trainer", "train"]
+__all__ = ["RUN_FILES", "Trainer", "prepare_run_folder", "train"]
 
 _TRAIN_FORMAT = "semattnet-train-v1"
+#: What a run writes into its folder (``--overwrite`` removes exactly these, nothing else).
+RUN_FILES = ("config.json", "log.csv", "curves.png", "checkpoints/last.pt", "checkpoints/best.pt")
+_SYNC_BN_CPU = (
+    "sync_bn needs CUDA (NCCL); set sync_bn=false: on CPU each process keeps its own BatchNorm "
+    "statistics (a multi-process CPU run averages gradients, not BatchNorm statistics)"
+)
 
 
 def _atomic_torch_save(obj: Any, path: Path) -> None:
@@ -86,6 +93,8 @@ class Trainer:
         self.cfg = cfg
         if not cfg.data:
             raise ValueError("no data root given (--data)")
+        if cfg.sync_bn and self.device.type != "cuda":
+            raise ValueError(_SYNC_BN_CPU)
         self.pos = _Position()
         torch.manual_seed(cfg.seed)
         random.seed(cfg.seed)
@@ -98,6 +107,8 @@ class Trainer:
         if state is not None:
             self._restore(state)
         self.tb = self._open_run_folder() if self.main else None
+        if state is not None and self.main:
+            _truncate_log(self.out / "log.csv", self.pos.step)
 
     # ----------------------------------------------------------------------------- setup
     def _build_data(self) -> None:
@@ -108,7 +119,11 @@ class Trainer:
             transform=TrainTransform(tuple(cfg.crop), cfg.random_crop_height or cfg.crop[0], cfg.flip, cfg.jitter),  # type: ignore[arg-type]
         )  # fmt: skip
         self.sampler = dist_utils.ResumableSampler(len(self.train_set), seed=cfg.seed)
+        # The loader's own generator: starting an epoch's iterator must not draw from the global RNG,
+        # or a resumed run (which starts a new iterator mid-epoch) would diverge from an uninterrupted one.
+        self.loader_rng = torch.Generator()
         self.loader = DataLoader(self.train_set, batch_size=cfg.batch_size, sampler=self.sampler,
+                                 generator=self.loader_rng,
                                  num_workers=cfg.workers, drop_last=True, pin_memory=self.device.type == "cuda",
                                  persistent_workers=False)  # fmt: skip
         if len(self.loader) == 0:
@@ -198,7 +213,8 @@ class Trainer:
                                            transform=EvalTransform(tuple(cfg.crop)))  # type: ignore[arg-type]  # fmt: skip
         if cfg.val_max_frames:
             ds = Subset(ds, range(min(cfg.val_max_frames, len(ds))))  # type: ignore[arg-type]
-        return DataLoader(ds, batch_size=1, sampler=dist_utils.ShardSampler(len(ds)), num_workers=cfg.workers)  # type: ignore[arg-type]
+        return DataLoader(ds, batch_size=1, sampler=dist_utils.ShardSampler(len(ds)), num_workers=cfg.workers,  # type: ignore[arg-type]
+                          generator=torch.Generator().manual_seed(cfg.seed))  # fmt: skip
 
     def _set_train_mode(self) -> None:
         self.model.train()
@@ -317,6 +333,7 @@ class Trainer:
         self.sampler.set_epoch(epoch)
         self.train_set.set_epoch(epoch)
         self.sampler.start_at(self.pos.batch * cfg.batch_size)
+        self.loader_rng.manual_seed(cfg.seed * 1_000_003 + epoch)  # worker seeds: a function of (seed, epoch)
         weight = cfg.branch_weight(epoch)
         self._set_train_mode()
         bar = tqdm(total=len(self.loader), initial=self.pos.batch, desc=f"epoch {epoch}",
@@ -377,8 +394,50 @@ class Trainer:
         self.log(f"{dist_utils.world_size()} ranks in sync (parameter checksum {float(total):.6e})")
 
 
-def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = print) -> dict[str, Any]:
-    """Run one stage; joins/leaves the process group when launched by torchrun."""
+def _truncate_log(path: Path, step: int) -> None:
+    """Drop the ``log.csv`` rows written after ``step`` (by a run killed after its last checkpoint):
+    a resumed run writes them again, so the log never holds a step twice."""
+    if not path.is_file():
+        return
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    if len(rows) < 2 or "step" not in rows[0]:
+        return
+    col = rows[0].index("step")
+    kept = [rows[0]] + [r for r in rows[1:] if len(r) > col and r[col].isdigit() and int(r[col]) <= step]
+    if len(kept) == len(rows):
+        return
+    with atomic_path(path, suffix=".csv") as tmp, open(tmp, "w", newline="") as f:
+        csv.writer(f).writerows(kept)
+
+
+def prepare_run_folder(out: str | os.PathLike[str], overwrite: bool = False) -> None:
+    """A new run (not ``resume``) refuses a folder that already holds a run; with ``overwrite`` it
+    removes the run's own files (:data:`RUN_FILES`, ``checkpoints/step-*.pt``, ``tensorboard/``) only."""
+    out = Path(out)
+    owned = [out / f for f in RUN_FILES] + sorted((out / "checkpoints").glob("step-*.pt"))
+    existing = [p for p in owned if p.exists()]
+    if not existing:
+        return
+    if not overwrite:
+        raise FileExistsError(f"{out} already holds a run ({existing[0]} exists); pass --resume to continue "
+                              "it or --overwrite to start over")  # fmt: skip
+    if os.environ.get("RANK", "0") == "0":
+        for p in existing:
+            p.unlink(missing_ok=True)
+        if (out / "tensorboard").is_dir():
+            shutil.rmtree(out / "tensorboard", ignore_errors=True)
+
+
+def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = print,
+          overwrite: bool = False) -> dict[str, Any]:  # fmt: skip
+    """Run one stage; joins/leaves the process group when launched by torchrun.
+
+    Without ``resume`` the run folder must not hold a run yet (``overwrite`` starts over, see
+    :func:`prepare_run_folder`); with ``resume`` the run continues exactly from ``last.pt``.
+    """
+    if not resume:
+        prepare_run_folder(cfg.out, overwrite)
     try:
         return Trainer(cfg, resume=resume, log=log).fit()
     finally:

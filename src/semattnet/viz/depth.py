@@ -48,18 +48,39 @@ def confidence_image(conf: np.ndarray) -> np.ndarray:
     return (colormaps["viridis"](np.clip(conf, 0, 1))[..., :3] * 255 + 0.5).astype(np.uint8)
 
 
-def write_depth_pictures(pred: Path, out: Path, gt: Path | None = None, vmax: float = DEPTH_MAX_M) -> int:
+def write_depth_pictures(
+    pred: Path, out: Path, gt: Path | None = None, vmax: float = DEPTH_MAX_M, overwrite: bool = False
+) -> int:
     """Colourise a 16-bit depth PNG (or a folder of them) into ``out/NAME_color.png``, with
     ``out/NAME_error.png`` against ground truth ``gt`` (a file or a folder of same-named files).
-    Returns the number of predictions drawn."""
-    from semattnet.data.io import read_depth, write_image
+    Returns the number of predictions drawn.
+
+    Output policy: ``out`` may not be (inside) an input folder; existing pictures are replaced only
+    with ``overwrite``; every input is read before anything is written and the pictures appear
+    together (staged), so a corrupt file or a kill leaves ``out`` unchanged.
+    """
+    from semattnet._utils.outputs import check_no_input_overlap, refuse_existing, staged_outputs
+    from semattnet.data.io import DataError, read_depth, write_image
 
     pred, out = Path(pred), Path(out)
     files = [pred] if pred.is_file() else sorted(pred.glob("*.png"))
-    for f in files:
-        d = read_depth(f)
-        write_image(out / f"{f.stem}_color.png", colorize_depth(d, vmax), overwrite=True)
-        if gt is not None:
-            g = read_depth(gt if Path(gt).is_file() else Path(gt) / f.name)
-            write_image(out / f"{f.stem}_error.png", error_map(d, g), overwrite=True)
+    if not files:
+        raise DataError(f"{pred}: no PNG predictions")
+    if vmax <= 0 or not np.isfinite(vmax):
+        raise ValueError(f"vmax must be a finite positive depth in metres, got {vmax}")
+    names = [f"{f.stem}{s}" for f in files for s in (("_color.png", "_error.png") if gt else ("_color.png",))]
+    check_no_input_overlap([pred, gt], out_dir=out, out_files=[out / n for n in names])
+    refuse_existing([out / n for n in names], overwrite)
+
+    def read(f: Path) -> tuple[np.ndarray, np.ndarray | None]:
+        return read_depth(f), None if gt is None else read_depth(gt if Path(gt).is_file() else Path(gt) / f.name)
+
+    for f in files:  # every input decodes before anything is written
+        read(f)
+    with staged_outputs(out, overwrite=overwrite) as stage:
+        for f in files:
+            d, g = read(f)
+            write_image(stage / f"{f.stem}_color.png", colorize_depth(d, vmax))
+            if g is not None:
+                write_image(stage / f"{f.stem}_error.png", error_map(d, g))
     return len(files)

@@ -1,0 +1,123 @@
+"""The output policy every command (and the library functions behind them) follows.
+
+1. Nothing existing is replaced unless ``overwrite=True`` (checked before any work).
+2. Outputs never go into an input: an output folder equal to or inside an input folder (the
+   folder of an input file counts) and an output file that resolves to an input are refused.
+3. Multi-file outputs are staged in a hidden folder inside the output folder and moved into
+   place only when every file was written: an error (a corrupt frame) or a kill writes nothing.
+   Stage folders a kill left behind are removed by the next staged write into the same folder.
+4. Single files are written atomically (:func:`semattnet._utils.atomic.atomic_path`): umask mode,
+   fsynced, orphaned temporary files cleaned on the next write of the same target.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from semattnet._errors import SemAttNetError
+from semattnet._utils.atomic import atomic_path, fsync_dir
+
+__all__ = [
+    "STAGE_PREFIX",
+    "OutputError",
+    "check_no_input_overlap",
+    "refuse_existing",
+    "staged_outputs",
+    "write_text",
+]
+
+#: Hidden staging folders inside an output folder: ``.semattnet-stage.XXXXXXXX``.
+STAGE_PREFIX = ".semattnet-stage."
+
+
+class OutputError(SemAttNetError):
+    """An output that would replace or land inside the command's own inputs."""
+
+
+def _resolve(path: str | os.PathLike[str]) -> Path:
+    return Path(path).expanduser().resolve()
+
+
+def refuse_existing(paths: Iterable[str | os.PathLike[str]], overwrite: bool) -> None:
+    """Raise :class:`FileExistsError` naming the first of ``paths`` that exists, unless ``overwrite``."""
+    if overwrite:
+        return
+    existing = [Path(p) for p in paths if Path(p).exists()]
+    if existing:
+        more = f" (and {len(existing) - 1} more)" if len(existing) > 1 else ""
+        raise FileExistsError(f"{existing[0]} exists{more}; pass --overwrite (overwrite=True) to replace it")
+
+
+def check_no_input_overlap(
+    inputs: Iterable[str | os.PathLike[str] | None],
+    out_dir: str | os.PathLike[str] | None = None,
+    out_files: Iterable[str | os.PathLike[str]] = (),
+) -> None:
+    """Refuse ``out_dir`` equal to or inside an input folder, and any of ``out_files`` that resolves
+    to an input file or to an existing file inside an input folder (symlinks are followed).
+
+    Raises:
+        OutputError: naming the output and the input it collides with.
+    """
+    folders, files = [], set()
+    for item in inputs:
+        if item is None:
+            continue
+        p = _resolve(item)
+        (folders.append(p) if p.is_dir() else files.add(p))
+    if out_dir is not None:
+        o = _resolve(out_dir)
+        for folder in folders:
+            if o == folder or o.is_relative_to(folder):
+                raise OutputError(f"output folder {out_dir} is the input folder {folder} or inside it; "
+                                  "choose an --out outside the inputs")  # fmt: skip
+    for f in out_files:
+        r = _resolve(f)
+        if r in files or (r.exists() and any(r.is_relative_to(folder) for folder in folders)):
+            raise OutputError(f"output {f} would replace the input {r}; choose another output path")
+
+
+def _clean_stale_stages(out: Path) -> None:
+    """Remove stage folders a killed run left in ``out`` (named with a process id that is gone)."""
+    from semattnet._utils.atomic import _pid_alive
+
+    for entry in out.glob(f"{STAGE_PREFIX}*"):
+        pid = entry.name[len(STAGE_PREFIX) :].split(".")[0]
+        if entry.is_dir() and pid.isdigit() and not _pid_alive(int(pid)):
+            shutil.rmtree(entry, ignore_errors=True)
+
+
+@contextmanager
+def staged_outputs(out: str | os.PathLike[str], overwrite: bool = False) -> Iterator[Path]:
+    """Yield a hidden folder inside ``out``; write the outputs there (same relative names). When
+    the block succeeds every file moves into ``out`` (refusing existing ones unless ``overwrite``,
+    checked before the first move); when it raises, or the process dies, ``out`` is unchanged."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    _clean_stale_stages(out)
+    stage = Path(tempfile.mkdtemp(prefix=f"{STAGE_PREFIX}{os.getpid()}.", dir=out))
+    try:
+        yield stage
+        files = sorted(p for p in stage.rglob("*") if p.is_file())
+        refuse_existing((out / p.relative_to(stage) for p in files), overwrite)
+        for p in files:
+            target = out / p.relative_to(stage)
+            target.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(p, target)
+        fsync_dir(out)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+
+
+def write_text(path: str | os.PathLike[str], text: str, overwrite: bool = False) -> Path:
+    """Write ``text`` to ``path`` atomically; refuses an existing file unless ``overwrite``."""
+    path = Path(path)
+    refuse_existing([path], overwrite)
+    with atomic_path(path, suffix=path.suffix) as tmp:
+        tmp.write_text(text)
+    return path
