@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from semattnet.data.io import DataError, read_depth, read_image
+from semattnet.data.io import DataError, read_depth
 from semattnet.data.kitti_raw import RawDrive, parse_frames
 from semattnet.inference.raw import complete_kitti_raw, fusion_confidence
-from tests.inference._raw_sample import DRIVE, IMAGE_02, SCAN
+from tests.inference._raw_sample import DRIVE, SCAN
 
 
 def test_raw_drive_yields_typed_frames() -> None:
