@@ -112,7 +112,8 @@ def inspect_weights_file(path: str | Path) -> Inspected:
     if head[:1] == b"\x80":  # pickle PROTO: a legacy torch.save file starts with its magic number
         return _inspect_legacy(path, size)
     raise CheckpointError(
-        f"not a checkpoint: {path} is neither safetensors nor a torch.save file (first bytes {head[:8]!r})"
+        f"not a checkpoint: {path} is not a readable weights file, neither safetensors nor torch.save "
+        f"(first bytes {head[:8]!r})"
     )
 
 
@@ -174,7 +175,7 @@ def _inspect_zip(path: Path, size: int) -> Inspected:
     except SemAttNetError:
         raise
     except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, OSError, ValueError) as exc:
-        raise CheckpointError(f"{path}: not a readable zip archive (truncated or corrupt?): {exc}") from None
+        raise CheckpointError(f"{path}: not a readable PyTorch checkpoint (truncated or corrupt?): {exc}") from None
     protocol, names, storages = _scan_pickle(path, io.BytesIO(pkl))
     _check_storage_sizes(path, storages, size)
     return Inspected(path=path, format="torch-zip", protocol=protocol, globals=names)
@@ -220,7 +221,7 @@ def _pickle_ops(path: Path, f: BinaryIO) -> list[tuple[str, Any]]:
     try:
         return [(op.name, arg) for op, arg, _ in pickletools.genops(f)]
     except (ValueError, EOFError, struct.error, UnicodeDecodeError) as exc:
-        raise CheckpointError(f"{path}: the pickle inside is truncated or corrupt ({exc})") from None
+        raise CheckpointError(f"{path}: not a readable PyTorch checkpoint (truncated or corrupt?): {exc}") from None
 
 
 _SCALAR_OPS = {
