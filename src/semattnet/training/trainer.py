@@ -37,6 +37,7 @@ from semattnet.models.registry import build_model
 from semattnet.training.config import TrainConfig
 from semattnet.training.losses import semattnet_loss
 from semattnet.weights.checkpoint import CheckpointError, load_checkpoint, load_weights
+from semattnet.weights.gate import DIGEST_KEY, tensor_digest
 
 __all__ = ["RUN_FILES", "Trainer", "prepare_run_folder", "train"]
 
@@ -270,6 +271,7 @@ class Trainer:
         if not self.main:
             return
         state = self._state()
+        state[DIGEST_KEY] = tensor_digest(state)  # load_checkpoint verifies it (resume, --init, predict, ...)
         _atomic_torch_save(state, self.ckpt_dir / "last.pt")
         if best:
             _atomic_torch_save(state, self.ckpt_dir / "best.pt")

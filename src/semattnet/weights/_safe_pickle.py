@@ -7,12 +7,18 @@ global the pickle names through :meth:`Unpickler.find_class`:
   resolve to the real objects (they only rebuild data);
 * names that can run code (``os.system``, ``builtins.eval``, ``subprocess.*``, ...) are refused
   with :class:`UnsafeCheckpointError`;
+* other names from ``torch``, NumPy and similar libraries are refused too (``torch.load`` named
+  by a pickle is code, not data), except what ``torch.load(weights_only=True)`` allows by default;
 * any other class (e.g. the authors' ``metrics.Result``) becomes an inert stand-in that only
   records the data it is built from, so its fields stay readable.
+
+:func:`resolve_global` is the policy; :mod:`semattnet.weights.checkpoint` applies it to the globals
+it finds (statically) in a pickle and hands the answers to ``torch.load(weights_only=True)``.
 """
 
 from __future__ import annotations
 
+import _compat_pickle
 import pickle
 import types
 from typing import Any
@@ -21,7 +27,7 @@ import torch
 
 from semattnet._errors import SemAttNetError
 
-__all__ = ["InertObject", "Unpickler", "UnsafeCheckpointError", "safe_pickle_module"]
+__all__ = ["InertObject", "Unpickler", "UnsafeCheckpointError", "resolve_global", "safe_pickle_module"]
 
 
 class UnsafeCheckpointError(SemAttNetError, pickle.UnpicklingError):
@@ -106,25 +112,63 @@ def _resolve_numpy(module: str, name: str) -> Any:
     raise pickle.UnpicklingError(f"cannot resolve {module}.{name}")
 
 
+# Libraries whose functions are code, not data: a name from them that is not allowed above is refused
+# rather than neutralised (e.g. ``torch.load`` or ``torch.jit.load`` named by a pickle).
+_LIBRARY_ROOTS = {"torch", "numpy", "safetensors", "semattnet", "torchvision", "scipy", "PIL", "cv2", "yaml"}
+_CODE_NAMES = {"eval", "exec", "system", "__import__", "popen", "compile", "getattr", "setattr", "open", "load",
+               "loads", "apply"}  # fmt: skip
+
+
+def _torch_weights_only_allowed() -> dict[str, Any]:
+    """The globals ``torch.load(weights_only=True)`` allows by default (tensor rebuilding, dtypes, ...)."""
+    try:
+        from torch._weights_only_unpickler import _get_allowed_globals
+
+        return dict(_get_allowed_globals())
+    except (ImportError, AttributeError):  # pragma: no cover - older or newer torch
+        return {}
+
+
+def resolve_global(module: str, name: str, sink: set[str] | None = None) -> Any:
+    """The object a pickle may get for the global ``module.name``, under this module's policy.
+
+    Data-rebuilding names resolve to the real objects; names that can run code raise
+    :class:`UnsafeCheckpointError`; any other class becomes an inert stand-in (its name is added to
+    ``sink``). Python 2 names (``commands.call``, ``__builtin__.eval``) are judged by the Python 3
+    names the unpickler would import (``subprocess.call``, ``builtins.eval``).
+    """
+    if (module, name) in _compat_pickle.NAME_MAPPING:
+        module, name = _compat_pickle.NAME_MAPPING[(module, name)]
+    elif module in _compat_pickle.IMPORT_MAPPING:
+        module = _compat_pickle.IMPORT_MAPPING[module]
+    if (module, name) in _SAFE:
+        return _SAFE[(module, name)]
+    if module == "torch" and isinstance(getattr(torch, name, None), torch.dtype):
+        return getattr(torch, name)
+    if module in _NUMPY_MODULES and name in _NUMPY_SAFE:
+        return _resolve_numpy(module, name)
+    root = module.split(".")[0]
+    if root in _DANGEROUS_ROOTS or name.split(".")[-1] in _CODE_NAMES:
+        raise UnsafeCheckpointError(f"refusing to load: the pickle calls {module}.{name}, which could run code")
+    allowed = _torch_weights_only_allowed().get(f"{module}.{name}")
+    if allowed is not None:
+        return allowed
+    if root in _LIBRARY_ROOTS or not name.isidentifier():
+        raise UnsafeCheckpointError(f"refusing to load: the pickle calls {module}.{name}, which is code, not data")
+    qualname = f"{module}.{name}"
+    if sink is not None:
+        sink.add(qualname)
+    return type(name, (InertObject,), {"_pickled_name": qualname, "__module__": "semattnet.inert"})
+
+
 class Unpickler(pickle.Unpickler):
-    """Unpickler with the allow / refuse / neutralise policy of this module."""
+    """Unpickler with the allow / refuse / neutralise policy of :func:`resolve_global`."""
 
     #: Receives the qualified names replaced by inert stand-ins (see safe_pickle_module).
     sink: set[str] | None = None
 
     def find_class(self, module: str, name: str) -> Any:
-        if (module, name) in _SAFE:
-            return _SAFE[(module, name)]
-        if module == "torch" and isinstance(getattr(torch, name, None), torch.dtype):
-            return getattr(torch, name)
-        if module in _NUMPY_MODULES and name in _NUMPY_SAFE:
-            return _resolve_numpy(module, name)
-        if module.split(".")[0] in _DANGEROUS_ROOTS or name in {"eval", "exec", "system", "__import__", "popen"}:
-            raise UnsafeCheckpointError(f"refusing to load: the pickle calls {module}.{name}, which could run code")
-        qualname = f"{module}.{name}"
-        if self.sink is not None:
-            self.sink.add(qualname)
-        return type(name, (InertObject,), {"_pickled_name": qualname, "__module__": "semattnet.inert"})
+        return resolve_global(module, name, self.sink)
 
 
 def safe_pickle_module() -> tuple[types.SimpleNamespace, set[str]]:

@@ -1,5 +1,9 @@
 """Reading and writing weights: the authors' ``.pth.tar``, plain state dicts, safetensors.
 
+Every file passes :mod:`semattnet.weights.gate` first (format from the bytes, structure, CRCs,
+TorchScript refused); torch pickles are then read by ``torch.load(weights_only=True)`` with an
+allow-list built from the globals the pickle names.
+
 The authors' released checkpoints are torch pickles of a dict with ``model`` (the state dict),
 ``epoch``, ``best_result`` (an object of their ``metrics.Result`` class), ``optimizer`` and
 ``args`` (an ``argparse.Namespace``). :func:`load_checkpoint` reads them *without executing
@@ -13,6 +17,8 @@ from __future__ import annotations
 import json
 import os
 import pickle
+import threading
+import warnings
 import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -25,7 +31,15 @@ from torch import nn
 from semattnet._errors import SemAttNetError
 from semattnet._utils.atomic import atomic_path
 from semattnet.models.config import SemAttNetConfig
-from semattnet.weights._safe_pickle import InertObject, UnsafeCheckpointError, safe_pickle_module
+from semattnet.weights._safe_pickle import InertObject, UnsafeCheckpointError, resolve_global, safe_pickle_module
+from semattnet.weights.gate import (
+    DIGEST_KEY,
+    CheckpointError,
+    Inspected,
+    inspect_weights_file,
+    tensor_digest,
+    verify_digest,
+)
 
 __all__ = [
     "Checkpoint",
@@ -38,10 +52,6 @@ __all__ = [
     "load_weights",
     "save_safetensors",
 ]
-
-
-class CheckpointError(SemAttNetError):
-    """A checkpoint file that cannot be read or holds no weights."""
 
 
 class StateDictMismatchError(SemAttNetError):
@@ -103,6 +113,7 @@ def _load_safetensors(path: Path) -> Checkpoint:
             sd = {k: f.get_tensor(k) for k in f.keys()}
     except (SafetensorError, OSError, ValueError) as exc:
         raise CheckpointError(f"{path}: not a readable safetensors file ({exc})") from exc
+    verify_digest(path, sd, meta.get(DIGEST_KEY))
     epoch = meta.get("epoch")
     return Checkpoint(
         path=path,
@@ -111,34 +122,68 @@ def _load_safetensors(path: Path) -> Checkpoint:
         epoch=int(epoch) if epoch not in (None, "") else None,
         args=json.loads(meta["args"]) if "args" in meta else None,
         config=_config_from_metadata(meta.get("config"), path),
-        extra={k: v for k, v in meta.items() if k not in ("epoch", "args", "config")},
+        extra={k: v for k, v in meta.items() if k not in ("epoch", "args", "config", DIGEST_KEY)},
     )
+
+
+_SAFE_GLOBALS_LOCK = threading.Lock()  # torch's safe-globals list is process-wide
+
+
+def _allow_list(info: Inspected) -> tuple[list[Any], set[str]]:
+    """``(object, "module.name")`` pairs for ``torch.serialization.safe_globals`` from the policy of
+    :func:`~semattnet.weights._safe_pickle.resolve_global`; raises on a code-running name."""
+    neutralised: set[str] = set()
+    pairs = []
+    for full in sorted(info.globals - {"<stack global>"}):
+        module, _, name = full.rpartition(".")
+        pairs.append((resolve_global(module, name, neutralised), full))
+    if any(full.startswith("numpy") for full in info.globals):  # a NumPy array (e.g. the RNG state) is built
+        import numpy as np  # by its dtype's class, which torch wants allow-listed too
+
+        pairs += [(cls, f"numpy.dtypes.{cls.__name__}") for cls in {type(np.dtype(c)) for c in "?bBhHiIlLqQefdFD"}]
+    return pairs, neutralised
+
+
+def _load_pickle(info: Inspected) -> tuple[Any, set[str]]:
+    """Unpickle a torch file the gate accepted: ``weights_only=True`` with our allow-list for
+    pickle protocols it supports (<= 3, what torch.save writes), else the safe unpickler."""
+    if info.protocol <= 3:
+        pairs, neutralised = _allow_list(info)
+        with _SAFE_GLOBALS_LOCK, torch.serialization.safe_globals(pairs), warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # torch's advice to re-run with weights_only=False
+            return torch.load(info.path, map_location="cpu", weights_only=True), neutralised
+    module, neutralised = safe_pickle_module()
+    return torch.load(info.path, map_location="cpu", pickle_module=module, weights_only=False), neutralised
 
 
 def load_checkpoint(path: str | os.PathLike[str]) -> Checkpoint:
     """Read weights from an authors' ``.pth.tar``, a saved state dict or a ``.safetensors`` file.
 
+    The file first passes :func:`~semattnet.weights.gate.inspect_weights_file` (format from the
+    bytes, structure, CRCs, no TorchScript); a recorded tensor sha256 is verified after loading.
     Never executes code from the file: see the module docstring. Tensors are loaded on CPU.
 
     Raises:
         CheckpointError: missing, truncated or corrupt file, or no state dict inside.
-        UnsafeCheckpointError: the pickle references a code-executing callable.
+        UnsafeCheckpointError: a TorchScript archive, or a pickle that references a code-executing callable.
     """
     path = Path(path)
-    if not path.is_file():
-        raise CheckpointError(f"{path}: no such checkpoint file")
-    with open(path, "rb") as f:
-        head = f.read(9)
-    if head[8:9] == b"{" and not zipfile.is_zipfile(path):
-        return _load_safetensors(path)  # an 8-byte header length, then the JSON header
-    module, neutralised = safe_pickle_module()
     try:
-        obj = torch.load(path, map_location="cpu", pickle_module=module, weights_only=False)
+        info = inspect_weights_file(path)
+        if info.format == "safetensors":
+            return _load_safetensors(path)
+        obj, neutralised = _load_pickle(info)
     except UnsafeCheckpointError as exc:
-        raise UnsafeCheckpointError(f"{path}: {exc}") from None
+        msg = str(exc)
+        raise UnsafeCheckpointError(msg if msg.startswith(str(path)) else f"{path}: {msg}") from None
+    except CheckpointError:
+        raise
     except (RuntimeError, pickle.UnpicklingError, EOFError, OSError, ValueError, KeyError, TypeError,
-            zipfile.BadZipFile) as exc:  # fmt: skip
-        raise CheckpointError(f"{path}: not a readable PyTorch checkpoint (truncated or corrupt?): {exc}") from exc
+            AttributeError, zipfile.BadZipFile) as exc:  # fmt: skip
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise CheckpointError(f"{path}: not a readable PyTorch checkpoint (truncated or corrupt?): {first}") from None
+    if isinstance(obj, Mapping):
+        verify_digest(path, obj, obj.get(DIGEST_KEY))
     return _checkpoint_from_object(obj, path, neutralised)
 
 
@@ -166,7 +211,7 @@ def _checkpoint_from_object(obj: Any, path: Path, neutralised: set[str]) -> Chec
         args=dict(args) if args is not None else None,
         best_result=obj.get("best_result"),
         config=_config_from_metadata(obj.get("config"), path),
-        extra={k: v for k, v in obj.items() if k not in (key, "epoch", "args", "best_result", "config")},
+        extra={k: v for k, v in obj.items() if k not in (key, "epoch", "args", "best_result", "config", DIGEST_KEY)},
         neutralised=neutralised,
     )
 
@@ -270,6 +315,7 @@ def save_safetensors(ckpt: Checkpoint | Mapping[str, torch.Tensor], path: str | 
     meta["config"] = json.dumps(cfg.to_dict())
     meta["format"] = "semattnet"
     tensors = {k: v.detach().contiguous() for k, v in sd.items()}
+    meta[DIGEST_KEY] = tensor_digest(tensors)  # verified by load_checkpoint: catches corrupt tensor bytes
     with atomic_path(path) as tmp:
         save_file(tensors, str(tmp), metadata=meta)
     return path
