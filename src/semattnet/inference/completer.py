@@ -26,6 +26,7 @@ import torch
 from torch import nn
 
 from semattnet._utils.device import amp_dtype, resolve_device
+from semattnet.inference.backends import optimize_for_inference
 from semattnet.inference.padding import crop_padding, pad_to_multiple
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.weights.checkpoint import load_model
@@ -48,19 +49,43 @@ class DepthCompleter:
         model: a SemAttNet (full or backbone) model.
         device: ``auto``, ``cpu`` or ``cuda[:N]``.
         amp: ``none``, ``bf16`` or ``fp16`` autocast (the propagation stays in float32).
+        backend: the inference engine (:func:`semattnet.inference.backends.optimize_for_inference`):
+            ``torch`` (default: BatchNorm folded, fused propagation), ``openvino``, ``onnxruntime``
+            or ``auto``; the fixed-size backends build (and cache on disk) one engine per padded
+            frame size, so they pay off over many frames of one size.
+        inplace: fold ``model`` itself instead of a copy (saves memory; ``from_checkpoint`` does).
     """
 
-    def __init__(self, model: nn.Module, device: str | torch.device = "auto", amp: str = "none") -> None:
+    def __init__(self, model: nn.Module, device: str | torch.device = "auto", amp: str = "none",
+                 backend: str = "torch", inplace: bool = False) -> None:  # fmt: skip
         self.device = resolve_device(device)
-        self.model = model.to(self.device).eval()
         self.amp = amp_dtype(amp)
+        self.backend = backend
         self.needs_semantic = getattr(model, "config", None) is None or model.config.branches == 3
+        self._source = model.to(self.device).eval()
+        self._inplace = inplace
+        self._engines: dict[tuple[int, int] | None, nn.Module] = {}
 
     @classmethod
-    def from_checkpoint(
-        cls, path: str | Path, device: str | torch.device = "auto", amp: str = "none"
-    ) -> DepthCompleter:
-        return cls(load_model(path), device, amp)
+    def from_checkpoint(cls, path: str | Path, device: str | torch.device = "auto", amp: str = "none",
+                        backend: str = "torch") -> DepthCompleter:  # fmt: skip
+        return cls(load_model(path), device, amp, backend, inplace=True)
+
+    def engine(self, size: tuple[int, int] | None = None) -> nn.Module:
+        """The engine for padded inputs of ``size`` (built on first use; one for all sizes with ``torch``)."""
+        fixed = self.backend in ("openvino", "onnxruntime") or (self.backend == "auto" and self.device.type == "cpu")
+        key = size if fixed else None
+        if key not in self._engines:
+            precision = "bf16" if self.amp is torch.bfloat16 and self.backend != "torch" else "f32"
+            self._engines[key] = optimize_for_inference(self._source, backend=self.backend, size=key,
+                                                        precision=precision, device=self.device,
+                                                        inplace=self._inplace and self.backend == "torch")  # fmt: skip
+        return self._engines[key]
+
+    @property
+    def model(self) -> nn.Module:
+        """The engine for any size (``torch`` backend), called like the model: what evaluation loops run."""
+        return self.engine(None) if self.backend == "torch" else self._source
 
     def run(self, rgb: torch.Tensor, semantic: torch.Tensor | None, sparse: torch.Tensor) -> DepthCompletionOutput:
         """Batched tensors (B, C, H, W) of any H, W -> outputs at the same size."""
@@ -69,8 +94,9 @@ class DepthCompleter:
         sem_p = pad_to_multiple(semantic)[0] if semantic is not None else None
         with torch.inference_mode(), torch.autocast(self.device.type, dtype=self.amp or torch.float32,
                                                     enabled=self.amp is not None):  # fmt: skip
-            out = self.model(rgb=rgb_p.to(self.device), semantic=None if sem_p is None else sem_p.to(self.device),
-                             sparse=sparse_p.to(self.device))  # fmt: skip
+            engine = self.engine(tuple(rgb_p.shape[-2:]))
+            out = engine(rgb=rgb_p.to(self.device), semantic=None if sem_p is None else sem_p.to(self.device),
+                         sparse=sparse_p.to(self.device))  # fmt: skip
         return out.map(lambda t: crop_padding(t.float(), pad))
 
     def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:

@@ -1,0 +1,96 @@
+"""Inference engines: the model made ready to run, by the fastest backend this machine has.
+
+>>> import torch, semattnet
+>>> from semattnet.inference.backends import optimize_for_inference
+>>> net = semattnet.build_model("semattnet", width=0.125)
+>>> engine = optimize_for_inference(net, backend="torch")
+>>> x = {"rgb": torch.zeros(1, 3, 64, 64), "semantic": torch.zeros(1, 3, 64, 64), "sparse": torch.zeros(1, 1, 64, 64)}
+>>> engine(**x).refined_depth.shape
+torch.Size([1, 1, 64, 64])
+
+Backends (see the README's "Benchmarks" for measurements and which to use on which CPU):
+
+* ``torch``: eager PyTorch on a BatchNorm-folded copy, with the fused C++ propagation kernel on
+  the CPU; any size, any device.
+* ``openvino``: the model exported to ONNX once, converted to OpenVINO IR and compiled for the
+  CPU at one input size; cached on disk by weights, size and versions (``pip install
+  'semattnet[openvino]'``).
+* ``onnxruntime``: the same ONNX export run by ONNX Runtime (``pip install 'semattnet[onnx]'``).
+* ``auto``: ``openvino`` for CPU inference at a known size when it is installed, else ``torch``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+
+import torch
+from torch import nn
+
+from semattnet.inference.backends._base import InferenceEngine, output_from_arrays
+from semattnet.inference.backends.torch_engine import TorchEngine
+
+__all__ = ["BACKENDS", "InferenceEngine", "available_backends", "choose_backend", "optimize_for_inference",
+           "output_from_arrays"]  # fmt: skip
+
+BACKENDS: tuple[str, ...] = ("torch", "openvino", "onnxruntime")
+PRECISIONS: tuple[str, ...] = ("f32", "bf16")
+_PACKAGES = {"openvino": "openvino", "onnxruntime": "onnxruntime"}
+
+
+def available_backends() -> list[str]:
+    """The backends whose packages are installed (``torch`` always)."""
+    return [b for b in BACKENDS if b == "torch" or importlib.util.find_spec(_PACKAGES[b]) is not None]
+
+
+def choose_backend(device: torch.device | str = "cpu", size: tuple[int, int] | None = None) -> str:
+    """What ``backend="auto"`` picks: OpenVINO for CPU inference at a fixed size if installed, else torch."""
+    if torch.device(device).type == "cpu" and size is not None and "openvino" in available_backends():
+        return "openvino"
+    return "torch"
+
+
+def _check(backend: str, precision: str, size: tuple[int, int] | None) -> None:
+    if backend not in (*BACKENDS, "auto"):
+        raise ValueError(f"unknown backend {backend!r}; choose one of auto, {', '.join(BACKENDS)}")
+    if precision not in PRECISIONS:
+        raise ValueError(f"unknown precision {precision!r}; choose one of {', '.join(PRECISIONS)}")
+    if backend in ("openvino", "onnxruntime") and size is None:
+        raise ValueError(f"the {backend} backend compiles for one input size: pass size=(H, W)")
+    if backend == "onnxruntime" and precision != "f32":
+        raise ValueError("the onnxruntime backend runs float32 only")
+
+
+def optimize_for_inference(
+    model: nn.Module,
+    *,
+    backend: str = "auto",
+    size: tuple[int, int] | None = None,
+    precision: str = "f32",
+    device: torch.device | str = "cpu",
+    cache_dir: str | os.PathLike[str] | None = None,
+    inplace: bool = False,
+    log=None,  # type: ignore[no-untyped-def]
+) -> InferenceEngine:
+    """``model`` ready to run: ``engine(rgb=, semantic=, sparse=)`` -> ``DepthCompletionOutput``.
+
+    The model itself is not changed (folding happens on a copy; ``inplace=True`` folds ``model``
+    itself and saves the copy's memory); the weights stay exactly in the authors' layout.
+    ``size`` (H, W; multiples of 32) is required by ``openvino``/``onnxruntime``, which compile for
+    one size (cached on disk under ``cache_dir``, default ``$SEMATTNET_CACHE``).
+    ``precision="bf16"`` is faster only on CPUs with native bfloat16 (on CUDA use ``torch`` with
+    autocast); ``f32`` outputs match the eager model within 1e-4 relative.
+    """
+    _check(backend, precision, size)
+    backend = choose_backend(device, size) if backend == "auto" else backend
+    needs_semantic = getattr(model, "config", None) is None or model.config.branches == 3
+    model = model.eval()
+    if backend == "torch":
+        return TorchEngine(model.to(device), precision, needs_semantic, inplace)
+    if backend == "onnxruntime":
+        from semattnet.inference.backends.onnxruntime_engine import OnnxRuntimeEngine
+
+        return OnnxRuntimeEngine(model.cpu(), tuple(size), needs_semantic, cache_dir, log)  # type: ignore[arg-type]
+    from semattnet.inference.backends.openvino_engine import OpenVinoEngine
+
+    return OpenVinoEngine(model.cpu(), tuple(size), needs_semantic, precision, cache_dir, log)  # type: ignore[arg-type]

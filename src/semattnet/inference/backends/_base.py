@@ -1,0 +1,57 @@
+"""What every inference engine is: an ``nn.Module`` called like the model, returning its typed output."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import fields
+
+import numpy as np
+import torch
+from torch import nn
+
+from semattnet.models.outputs import DepthCompletionOutput
+
+__all__ = ["InferenceEngine", "output_from_arrays"]
+
+_FIELDS = tuple(f.name for f in fields(DepthCompletionOutput))
+
+
+class InferenceEngine(nn.Module):
+    """``engine(rgb=, semantic=, sparse=)`` -> :class:`~semattnet.models.outputs.DepthCompletionOutput`.
+
+    Inputs as for the model: ``rgb`` (B, 3, H, W) 0..255, ``semantic`` (B, 3, H, W) colour-coded
+    0..255 (three-branch models), ``sparse`` (B, 1, H, W) metres, 0 = missing; H, W multiples of 32
+    and, for engines compiled for one ``size``, exactly that size.
+
+    Attributes:
+        backend: ``"torch"``, ``"onnxruntime"`` or ``"openvino"``.
+        size: the (H, W) the engine was compiled for, or ``None`` for any size.
+        precision: ``"f32"`` (the default; outputs within 1e-4 relative of the eager model) or ``"bf16"``.
+        needs_semantic: whether ``semantic`` is required.
+    """
+
+    backend: str = "?"
+
+    def __init__(self, size: tuple[int, int] | None, precision: str, needs_semantic: bool) -> None:
+        super().__init__()
+        self.size, self.precision, self.needs_semantic = size, precision, needs_semantic
+
+    def check_size(self, rgb: torch.Tensor) -> None:
+        """Refuse inputs of another size than the one the engine was compiled for."""
+        if self.size is not None and tuple(rgb.shape[-2:]) != tuple(self.size):
+            raise ValueError(
+                f"this {self.backend} engine was compiled for {self.size[0]}x{self.size[1]} inputs, got "
+                f"{rgb.shape[-2]}x{rgb.shape[-1]}; build one per size (optimize_for_inference(..., size=))"
+            )
+
+    def extra_repr(self) -> str:
+        return f"backend={self.backend}, size={self.size}, precision={self.precision}"
+
+
+def output_from_arrays(arrays: Mapping[str, np.ndarray | torch.Tensor]) -> DepthCompletionOutput:
+    """A typed output from named (B, 1, H, W) arrays (missing fields are ``None``)."""
+    unknown = set(arrays) - set(_FIELDS)
+    if unknown:
+        raise ValueError(f"unknown output names {sorted(unknown)}; expected some of {_FIELDS}")
+    tensors = {k: torch.as_tensor(np.asarray(v)) if not isinstance(v, torch.Tensor) else v for k, v in arrays.items()}
+    return DepthCompletionOutput(**{name: tensors.get(name) for name in _FIELDS})  # type: ignore[arg-type]

@@ -1,0 +1,71 @@
+"""OpenVINO engine: the cached ONNX export converted once to OpenVINO IR and compiled for the CPU.
+
+The IR (``model.xml``/``.bin``) and OpenVINO's compiled-blob cache live beside the ONNX file
+(``<cache>/engines/<key>/``), so a later process only loads them. Precision: ``f32`` (the
+default; ``INFERENCE_PRECISION_HINT=f32``, outputs within 1e-4 relative of eager PyTorch) or
+``bf16`` (OpenVINO's own default on CPUs with native bfloat16: several times faster there, at a
+measured accuracy cost; never chosen automatically).
+"""
+
+from __future__ import annotations
+
+import os
+
+import torch
+from torch import nn
+
+from semattnet.inference.backends._base import InferenceEngine, output_from_arrays
+from semattnet.inference.backends._export_cache import cached_onnx, engine_dir, engine_key
+from semattnet.models.outputs import DepthCompletionOutput
+
+__all__ = ["OpenVinoEngine"]
+
+
+def _import_openvino():  # type: ignore[no-untyped-def]
+    try:
+        import openvino
+    except ImportError:
+        raise ImportError("the openvino backend needs OpenVINO: pip install 'semattnet[openvino]'") from None
+    return openvino
+
+
+def _one_of(names: set[str], known: set[str]) -> str:
+    """The one name of a model port that we know (IR tensors carry several names)."""
+    matches = sorted(names & known)
+    if len(matches) != 1:
+        raise ValueError(f"cannot tell which port {sorted(names)} is; expected one of {sorted(known)}")
+    return matches[0]
+
+
+class OpenVinoEngine(InferenceEngine):
+    """A compiled OpenVINO CPU model at one ``size`` (LATENCY hint, all of this process's threads)."""
+
+    backend = "openvino"
+
+    def __init__(self, model: nn.Module, size: tuple[int, int], needs_semantic: bool, precision: str = "f32",
+                 cache_dir: str | os.PathLike[str] | None = None, log=None) -> None:  # type: ignore[no-untyped-def]  # fmt: skip
+        super().__init__(size, precision, needs_semantic)
+        ov = _import_openvino()
+        folder = engine_dir(engine_key(model, size, extra=f"openvino-{ov.__version__}"), cache_dir)
+        xml = folder / "model.xml"
+        core = ov.Core()
+        if not xml.is_file():
+            onnx_path = cached_onnx(model, size, folder, log)
+            # IR first (float32 weights: no fp16 compression), so later processes skip the ONNX file
+            ov.save_model(core.read_model(str(onnx_path)), str(xml), compress_to_fp16=False)
+        config = {"PERFORMANCE_HINT": "LATENCY", "INFERENCE_PRECISION_HINT": precision,
+                  "INFERENCE_NUM_THREADS": torch.get_num_threads(), "CACHE_DIR": str(folder / "blobs")}  # fmt: skip
+        self.compiled = core.compile_model(str(xml), "CPU", config)
+        self.request = self.compiled.create_infer_request()
+        self.input_names = [_one_of(i.get_names(), {"rgb", "semantic", "sparse"}) for i in self.compiled.inputs]
+        fields = set(DepthCompletionOutput.__dataclass_fields__)
+        self.output_names = [_one_of(o.get_names(), fields) for o in self.compiled.outputs]
+
+    def forward(
+        self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
+    ) -> DepthCompletionOutput:
+        self.check_size(rgb)
+        given = {"rgb": rgb, "semantic": semantic, "sparse": sparse}
+        result = self.request.infer([given[name].detach().cpu().float().numpy() for name in self.input_names])
+        arrays = {name: result[out] for name, out in zip(self.output_names, self.compiled.outputs, strict=True)}
+        return output_from_arrays({n: torch.from_numpy(a.copy()).to(rgb.device) for n, a in arrays.items()})

@@ -1,0 +1,94 @@
+"""Inference engines: parity of every backend with the eager model, the on-disk cache, bad input."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+import torch
+
+import semattnet
+from semattnet.inference.backends import _export_cache, available_backends, choose_backend, optimize_for_inference
+from tests._helpers import random_inputs
+
+SIZE = (64, 96)
+
+
+@pytest.fixture(scope="module")
+def model() -> torch.nn.Module:
+    torch.manual_seed(0)
+    net = semattnet.build_model("semattnet", width=0.125, iterations=2).eval()
+    with torch.no_grad():  # non-trivial BatchNorm statistics, so folding is really exercised
+        for m in net.modules():
+            if isinstance(m, torch.nn.BatchNorm2d):
+                m.running_mean.uniform_(-0.1, 0.1)
+                m.running_var.uniform_(0.5, 1.5)
+    return net
+
+
+def _rel(a: torch.Tensor, b: torch.Tensor) -> float:
+    return float((a - b).abs().max() / b.abs().max())
+
+
+@pytest.mark.parametrize("backend", ["torch", "onnxruntime", "openvino"])
+def test_backend_matches_eager(model: torch.nn.Module, backend: str, tmp_path: Path) -> None:
+    if backend not in available_backends():
+        pytest.skip(f"{backend} is not installed")
+    x = random_inputs(b=1, h=SIZE[0], w=SIZE[1])
+    with torch.inference_mode():
+        ref = model(**x)
+    engine = optimize_for_inference(model, backend=backend, size=SIZE, cache_dir=tmp_path)
+    out = engine(**x)
+    assert engine.backend == backend
+    assert set(out.to_dict()) == set(ref.to_dict())  # every intermediate the model returns
+    for name, tensor in ref.to_dict().items():
+        assert _rel(out.to_dict()[name], tensor) < 1e-4, name
+
+
+@pytest.mark.skipif(importlib.util.find_spec("onnxruntime") is None, reason="onnxruntime is not installed")
+def test_export_is_cached_by_weights_and_size(model: torch.nn.Module, tmp_path: Path, monkeypatch) -> None:
+    optimize_for_inference(model, backend="onnxruntime", size=SIZE, cache_dir=tmp_path)
+    assert len(list((tmp_path / "engines").glob("*/model.onnx"))) == 1
+    calls = []
+    monkeypatch.setattr(_export_cache, "export_onnx", lambda *a, **k: calls.append(a))
+    optimize_for_inference(model, backend="onnxruntime", size=SIZE, cache_dir=tmp_path)  # a cache hit
+    assert calls == []
+    other = semattnet.build_model("semattnet", width=0.125, iterations=2).eval()  # other weights: new key
+    assert _export_cache.engine_key(other, SIZE) != _export_cache.engine_key(model, SIZE)
+    assert _export_cache.engine_key(model, (32, 32)) != _export_cache.engine_key(model, SIZE)
+
+
+def test_bad_backend_precision_and_size(model: torch.nn.Module, tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="unknown backend 'tensorrt'"):
+        optimize_for_inference(model, backend="tensorrt")
+    with pytest.raises(ValueError, match="unknown precision"):
+        optimize_for_inference(model, backend="torch", precision="int8")
+    with pytest.raises(ValueError, match="compiles for one input size"):
+        optimize_for_inference(model, backend="onnxruntime")
+    if "onnxruntime" in available_backends():
+        engine = optimize_for_inference(model, backend="onnxruntime", size=SIZE, cache_dir=tmp_path)
+        with pytest.raises(ValueError, match="compiled for 64x96 inputs, got 32x32"):
+            engine(**random_inputs(b=1, h=32, w=32))
+
+
+def test_auto_choice() -> None:
+    assert choose_backend("cpu", None) == "torch"  # no fixed size: only torch runs any size
+    expected = "openvino" if "openvino" in available_backends() else "torch"
+    assert choose_backend("cpu", SIZE) == expected
+    assert choose_backend("cuda", SIZE) == "torch"
+
+
+def test_torch_engine_leaves_the_model_unchanged(model: torch.nn.Module) -> None:
+    before = {k: v.clone() for k, v in model.state_dict().items()}
+    optimize_for_inference(model, backend="torch")
+    after = model.state_dict()
+    assert before.keys() == after.keys() and all(torch.equal(before[k], after[k]) for k in before)
+
+
+def test_bf16_precision_runs_and_is_close(model: torch.nn.Module) -> None:
+    x = random_inputs(b=1, h=SIZE[0], w=SIZE[1])
+    with torch.inference_mode():
+        ref = model(**x).refined_depth
+    out = optimize_for_inference(model, backend="torch", precision="bf16")(**x).refined_depth
+    assert out.dtype == torch.float32 and _rel(out, ref) < 0.1
