@@ -137,9 +137,12 @@ def test_torchscript_export_runs(tmp_path) -> None:  # type: ignore[no-untyped-d
 
 
 @pytest.mark.slow
-def test_bench_smoke() -> None:
+def test_bench_smoke(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
     """Every part of `semattnet bench` runs and reports ratios and matching outputs (tiny model)."""
     from semattnet.apps.benchmark import run_benchmark
+    from semattnet.inference.backends import available_backends
+
+    monkeypatch.setenv("SEMATTNET_CACHE", str(tmp_path))  # exported engines go here, not to the user's cache
 
     lines: list[str] = []
     res = run_benchmark((64, 96), "cpu", repeats=1, width=0.125, train_size=(64, 96), log=lines.append)
@@ -152,8 +155,10 @@ def test_bench_smoke() -> None:
     else:  # no native bf16 here: skipped with a note, never run through the slow emulation
         assert any("fast mode skipped" in n for n in res.notes)
     assert len([w for w in whats if w.startswith("training step")]) == 3
+    assert {f"full model, backend {b} (f32)" for b in available_backends()} <= set(whats)
+    assert "CPU: " in "\n".join(lines)
     for r in res.rows:
         assert r["seconds"] > 0
-        if r["max_rel_diff"] is not None and "fast" not in r["what"]:
+        if r["max_rel_diff"] is not None and "fast" not in r["what"] and "bf16" not in r["what"]:
             assert r["max_rel_diff"] < 1e-4, r
     assert any("GMACs" in n for n in res.notes) and "x naive" in "\n".join(lines)

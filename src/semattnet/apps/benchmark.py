@@ -16,6 +16,7 @@ measured peak of one large 3x3 convolution on the same device.
 from __future__ import annotations
 
 import contextlib
+import functools
 import statistics
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
@@ -25,8 +26,9 @@ from typing import Any
 import torch
 from torch import nn
 
-from semattnet._utils.cpu import has_native_bf16
+from semattnet._utils.cpu import cpu_summary, has_native_bf16
 from semattnet._utils.device import now
+from semattnet.inference.backends import available_backends, optimize_for_inference
 from semattnet.models.bn_folding import fold_batchnorm
 from semattnet.models.layers import set_gradient_checkpointing
 from semattnet.models.propagation import cspn_affinity
@@ -153,11 +155,13 @@ class BenchResult:
     threads: int
     size: tuple[int, int]
     rows: list[dict[str, Any]] = field(default_factory=list)
+    cpu: str = field(default_factory=cpu_summary)
     notes: list[str] = field(default_factory=list)
 
     def header(self) -> list[str]:
         head = f"{'what':52s} {'seconds':>9s} {'frames/s':>9s} {'peak MiB':>9s} {'x naive':>8s} {'max rel diff':>12s}"
-        return [f"device {self.device}, {self.threads} threads, {self.size[0]}x{self.size[1]}, batch 1", head]
+        return [f"device {self.device}, {self.threads} threads, {self.size[0]}x{self.size[1]}, batch 1",
+                f"CPU: {self.cpu}", head]  # fmt: skip
 
     @staticmethod
     def row(r: dict[str, Any]) -> str:
@@ -210,7 +214,7 @@ def run_benchmark(
     device: str | torch.device = "cpu",
     repeats: int = 3,
     width: float = 1.0,
-    parts: tuple[str, ...] = ("propagation", "backbone", "full", "fast", "train"),
+    parts: tuple[str, ...] = ("propagation", "backbone", "full", "fast", "backends", "train"),
     train_size: tuple[int, int] = (320, 1216),
     model: nn.Module | None = None,
     log: Callable[[str], None] = print,
@@ -226,7 +230,7 @@ def run_benchmark(
     if "propagation" in parts:
         _bench_propagation(bench, size)
     x = _frame(size, dev)
-    if any(p in parts for p in ("backbone", "full", "fast")):
+    if any(p in parts for p in ("backbone", "full", "fast", "backends")):
         net = model if model is not None else build_model("semattnet", width=width)
         _bench_inference(bench, net.to(dev).eval(), x, parts, fast_dtype)
     if "train" in parts:
@@ -307,7 +311,7 @@ def _bench_inference(
         seconds = interleaved(candidates, dev, bench.repeats)
     for what in candidates:
         kind = what.split(",")[0]
-        base = f"{kind}, naive" + (" (BN layers)" if kind == "backbone" else " reference")
+        base = f"{kind}, naive" + (" (BN layers)" if kind == "backbone" else " reference")  # the kind's reference
         naive = what == base
         bench.add(what, seconds[what], peaks[what], None if naive else seconds[base] / seconds[what],
                   None if naive else _rel(outputs[what], outputs[base]))  # fmt: skip
@@ -343,13 +347,31 @@ def _inference_candidates(
     if "backbone" in parts:
         candidates["backbone, naive (BN layers)"] = lambda: net.backbone(**x)
         candidates["backbone, ours (BN folded)"] = lambda: fast_net.backbone(**x)
-    if any(p in parts for p in ("full", "fast")):
+    if any(p in parts for p in ("full", "fast", "backends")):
         candidates["full model, naive reference"] = naive_full
     if "full" in parts:
         candidates["full model, ours (float32)"] = lambda: fast_net(**x)
     if "fast" in parts:
         candidates[f"full model, fast ({str(fast_dtype).removeprefix('torch.')} autocast)"] = fast_full
+    if "backends" in parts:
+        candidates.update(_backend_candidates(net, x, dev, fast_dtype))
     return candidates
+
+
+def _backend_candidates(
+    net: nn.Module, x: dict[str, torch.Tensor], dev: torch.device, fast_dtype: torch.dtype | None
+) -> dict[str, Callable[[], Any]]:
+    """Every installed inference backend at this size (float32; also bf16 where the CPU has it natively)."""
+    size = tuple(x["rgb"].shape[-2:])
+    runs: dict[str, Callable[[], Any]] = {}
+    for backend in available_backends():
+        if backend != "torch" and dev.type != "cpu":
+            continue
+        precisions = ["f32"] + (["bf16"] if backend != "onnxruntime" and fast_dtype is torch.bfloat16 else [])
+        for precision in precisions:
+            engine = optimize_for_inference(net, backend=backend, size=size, precision=precision, device=dev)
+            runs[f"full model, backend {backend} ({precision})"] = functools.partial(engine, **x)
+    return runs
 
 
 def _first_runs(

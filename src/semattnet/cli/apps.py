@@ -101,7 +101,8 @@ def ablate(out_dir: Path, configs: str, seeds: str, backbone_steps: int, full_st
 @click.option("--device", default="auto", help="auto, cpu or cuda[:N].")
 @click.option("--repeats", type=POSITIVE_INT, default=3, help="Timed runs per measurement (median reported).")
 @click.option("--width", type=POSITIVE_FLOAT, default=1.0, help="Model width multiplier (1.0 = paper).")
-@click.option("--parts", default="propagation,backbone,full,fast,train", help="What to measure.")
+@click.option("--parts", default="propagation,backbone,full,fast,backends,train",
+              help="What to measure (backends: every installed inference backend).")  # fmt: skip
 @click.option("--checkpoint", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               help="Weights to use instead of random ones.")  # fmt: skip
 @weights_option
@@ -119,7 +120,7 @@ def bench(size: str, train_size: str, device: str, repeats: int, width: float, p
     given = checkpoint is not None or weights is not None
     model = model_from_options(checkpoint, weights) if given else None
     chosen = tuple(p.strip() for p in parts.split(",") if p.strip())
-    unknown = set(chosen) - {"propagation", "backbone", "full", "fast", "train"}
+    unknown = set(chosen) - {"propagation", "backbone", "full", "fast", "backends", "train"}
     if unknown:
         raise click.BadParameter(f"unknown part(s) {sorted(unknown)}", param_hint="--parts")
     result = run_benchmark(parse_size(size), resolve_device(device), repeats, width, chosen,
