@@ -92,6 +92,10 @@ def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, spli
     model = checkpoint if weights is None and checkpoint is not None else model_from_options(checkpoint, weights)
     res = evaluate_checkpoint(model, data_root, split, out, device, batch_size, amp, workers,
                               save_predictions, pictures, max_frames, overwrite)  # fmt: skip
+    from semattnet._utils.distributed import launch_rank
+
+    if launch_rank() != 0:  # under torchrun: every rank holds the merged metrics; rank 0 reports them
+        return
     click.echo(res["metrics"].table())
     if out is not None:
         click.echo(f"wrote {out / 'metrics.json'} and {out / 'per_image.csv'}")
