@@ -4,6 +4,7 @@ with two CPU processes writing exactly the files of one process."""
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -126,3 +127,23 @@ def test_predict_bad_frame_on_one_rank_stops_all(tmp_path: Path) -> None:
               nproc=2, logs=tmp_path / "logs")  # fmt: skip
     assert_one_line_error(res, tmp_path / "logs", 2, "f3.png")
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_predict_kitti_raw_two_processes_equals_one(tmp_path: Path) -> None:
+    from tests.inference._raw_sample import DRIVE, RAW_DATE
+
+    date = tmp_path / RAW_DATE.name
+    shutil.copytree(RAW_DATE, date)
+    drive = date / DRIVE.name
+    for sub, ext in (("image_02", ".png"), ("velodyne_points", ".bin")):
+        for i in (6, 7):  # three frames: the bundled one and two copies
+            shutil.copy(drive / sub / "data" / f"0000000005{ext}", drive / sub / "data" / f"{i:010d}{ext}")
+    common = ("predict", "--kitti-raw", drive, "--method", "classical", "--ply", "--top-crop", "100")
+    one = cli(*common, "--out", tmp_path / "one")
+    assert one.returncode == 0, one.stderr[-3000:]
+    res = cli(*common, "--out", tmp_path / "two", nproc=2, logs=tmp_path / "logs")
+    assert res.returncode == 0, res.stderr[-3000:]
+    a, b = tree_bytes(tmp_path / "one"), tree_bytes(tmp_path / "two")
+    assert len(a) == 3 * 3 and a == b
+    out0, out1 = rank_logs(tmp_path / "logs", "stdout")
+    assert "[rank 0/2] 0000000005" in out0 and "[rank 0/2] 0000000007" in out0 and "[rank 1/2] 0000000006" in out1
