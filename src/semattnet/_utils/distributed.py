@@ -9,7 +9,17 @@ import torch
 import torch.distributed as dist
 from torch.utils.data import Sampler
 
-__all__ = ["ResumableSampler", "ShardSampler", "cleanup", "init_distributed", "is_main", "rank", "world_size"]
+__all__ = [
+    "ResumableSampler",
+    "ShardSampler",
+    "cleanup",
+    "init_distributed",
+    "is_main",
+    "launch_rank",
+    "process_device",
+    "rank",
+    "world_size",
+]
 
 
 def init_distributed(device: torch.device) -> bool:
@@ -18,6 +28,23 @@ def init_distributed(device: torch.device) -> bool:
         return dist.is_initialized()
     dist.init_process_group("nccl" if device.type == "cuda" else "gloo")
     return True
+
+
+def process_device(name: str | torch.device = "auto") -> torch.device:
+    """The device of this process: ``name`` (``auto``, ``cpu``, ``cuda[:N]``), except that under
+    torchrun a CUDA device becomes ``cuda:LOCAL_RANK`` (one GPU per process), made current."""
+    from semattnet._utils.device import resolve_device
+
+    device = resolve_device(name)
+    if device.type == "cuda" and "LOCAL_RANK" in os.environ:
+        device = torch.device("cuda", int(os.environ["LOCAL_RANK"]))
+        torch.cuda.set_device(device)
+    return device
+
+
+def launch_rank() -> int:
+    """The rank torchrun gave this process (``RANK``), 0 outside torchrun; valid with or without a process group."""
+    return int(os.environ.get("RANK", "0")) if int(os.environ.get("WORLD_SIZE", "1")) > 1 else 0
 
 
 def cleanup() -> None:

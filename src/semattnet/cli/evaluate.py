@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import click
@@ -79,6 +80,7 @@ def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, spli
              batch_size: int, amp: str, workers: int, max_frames: int | None, overwrite: bool) -> None:  # fmt: skip
     """Evaluate a checkpoint on a KITTI (or synthetic) split with the official metrics, or sweep sparser inputs."""
     if sparsity:
+        _one_process("evaluate --sparsity")
         if out is None:
             raise click.UsageError("--sparsity needs --out")
         _sweep(checkpoint, weights, data_root, split, out, sparsity, method, device, max_frames, overwrite)
@@ -92,9 +94,19 @@ def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, spli
     model = checkpoint if weights is None and checkpoint is not None else model_from_options(checkpoint, weights)
     res = evaluate_checkpoint(model, data_root, split, out, device, batch_size, amp, workers,
                               save_predictions, pictures, max_frames, overwrite)  # fmt: skip
+    from semattnet._utils.distributed import launch_rank
+
+    if launch_rank() != 0:  # under torchrun: every rank holds the merged metrics; rank 0 reports them
+        return
     click.echo(res["metrics"].table())
     if out is not None:
         click.echo(f"wrote {out / 'metrics.json'} and {out / 'per_image.csv'}")
+
+
+def _one_process(command: str) -> None:
+    """Refuse to run ``command`` under torchrun with several processes (each would write the same files)."""
+    if int(os.environ.get("WORLD_SIZE", "1")) > 1:
+        raise click.UsageError(f"{command} runs in one process; start it without torchrun")
 
 
 def _sweep(checkpoint: Path | None, weights: str | None, data_root: Path, split: str, out: Path,
@@ -131,5 +143,6 @@ def submit(checkpoint: Path, data_root: Path, out: Path, expected_frames: int, d
     """Predict the KITTI test split and write the zip to upload (checked before zipping)."""
     from semattnet.evaluation.submission import write_submission
 
+    _one_process("submit")
     zip_path = write_submission(checkpoint, data_root, out, device, amp, expected_frames or None, overwrite)
     click.echo(f"wrote {out} and {zip_path}")

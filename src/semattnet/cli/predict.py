@@ -12,6 +12,7 @@ from semattnet.cli._options import COUNT, POSITIVE_FLOAT, weights_option
 
 def _completer(method: str, checkpoint: Path | None, weights: str | None, device: str, amp: str):  # type: ignore[no-untyped-def]
     """The completer the options name: the classical baseline or the model of --checkpoint / --weights."""
+    from semattnet._utils.distributed import process_device
     from semattnet.baselines.classical import ClassicalCompleter
     from semattnet.cli._options import model_from_options
     from semattnet.inference import DepthCompleter
@@ -20,7 +21,7 @@ def _completer(method: str, checkpoint: Path | None, weights: str | None, device
         return ClassicalCompleter()
     if checkpoint is None and weights is None:
         raise click.UsageError("--checkpoint or --weights is required (or --method classical)")
-    return DepthCompleter(model_from_options(checkpoint, weights, "cpu"), device=device, amp=amp)
+    return DepthCompleter(model_from_options(checkpoint, weights, "cpu"), device=process_device(device), amp=amp)
 
 
 def _intrinsics(text: str | None):  # type: ignore[no-untyped-def]
@@ -106,7 +107,9 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
     frame_list = pair_frames(rgb, sparse, semantic)
     complete_folder(completer, frame_list, out, npy=npy, panel=panel, overwrite=overwrite, log=click.echo,
                     inputs=(rgb, sparse, semantic))  # fmt: skip
-    if report:
+    from semattnet._utils.distributed import launch_rank
+
+    if report and launch_rank() == 0:  # under torchrun: once, after every rank's frames are in place
         from semattnet.viz.viewer import write_prediction_report
 
         write_prediction_report(out, frame_list, K=K, log=click.echo)

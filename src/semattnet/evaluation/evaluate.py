@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import json
 from collections.abc import Callable, Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -18,12 +19,13 @@ from tqdm import tqdm
 
 from semattnet._utils import distributed as dist_utils
 from semattnet._utils.device import autocast
-from semattnet._utils.outputs import check_no_input_overlap, staged_outputs, write_text
+from semattnet._utils.outputs import check_no_input_overlap, write_text
 from semattnet.data.io import DEPTH_SCALE, DataError, clamp_for_png, read_depth, write_depth
 from semattnet.data.kitti import KittiDepthCompletion
 from semattnet.data.transforms import EvalTransform
 from semattnet.evaluation.metrics import KittiMetrics
 from semattnet.inference.completer import DepthCompleter
+from semattnet.inference.sharding import agree, gather_rows, on_main, process_group, shared_stage
 
 __all__ = ["evaluate_checkpoint", "evaluate_model", "score_folders", "score_folders_to_json"]
 
@@ -76,6 +78,15 @@ def evaluate_model(
     ``quantize`` scores what a KITTI 16-bit PNG of the prediction holds (clamped, 1/256 m steps,
     holes kept as 0 for the devkit to fill), i.e. exactly what ``semattnet metrics`` and the benchmark see.
     """
+    metrics = _score_local(model, loader, device, amp, progress, on_batch, fill_holes, min_gt, quantize)
+    metrics.reduce()
+    return metrics
+
+
+def _score_local(model: nn.Module, loader: DataLoader, device: torch.device, amp: str, progress: bool,
+                 on_batch: Callable[[dict[str, Any], Any], None] | None, fill_holes: bool, min_gt: float,
+                 quantize: bool) -> KittiMetrics:  # fmt: skip
+    """:func:`evaluate_model` on this rank's batches only (no collective)."""
     metrics = KittiMetrics(fill_holes=fill_holes, min_gt=min_gt)
     was_training = model.training
     model.eval()
@@ -92,7 +103,6 @@ def evaluate_model(
             if on_batch is not None:
                 on_batch(batch, out)
     model.train(was_training)
-    metrics.reduce()
     return metrics
 
 
@@ -149,7 +159,13 @@ class _FrameWriter:
 
     def __init__(self, ds: KittiDepthCompletion, split: str, out: Path, save_predictions: bool, pictures: int) -> None:
         self.ds, self.split, self.out = ds, split, out
-        self.save_predictions, self.pictures, self.shown = save_predictions, pictures, 0
+        self.save_predictions, self.pictures = save_predictions, pictures
+
+    def expected(self, frames: int) -> list[str]:
+        """The files written for the first ``frames`` frames, relative to ``out``."""
+        todo = self.ds.frames[:frames]
+        preds = [f"predictions/{_prediction_name(self.split, f.name, f.gt)}" for f in todo]
+        return preds * self.save_predictions + [f"pictures/{f.name}.png" for f in todo[: self.pictures]]
 
     def __call__(self, batch: dict[str, Any], result: Any) -> None:
         for i, idx in enumerate(batch["index"].tolist()):
@@ -158,7 +174,7 @@ class _FrameWriter:
                 depth = clamp_for_png(result.depth[i, 0].float().cpu().numpy(), frame.name)
                 name = _prediction_name(self.split, frame.name, frame.gt)
                 write_depth(self.out / "predictions" / name, depth, overwrite=True)
-            if self.shown < self.pictures:
+            if idx < self.pictures:  # the split's first frames, whichever rank scores them
                 self._panel(batch, result, i, frame.name)
 
     def _panel(self, batch: dict[str, Any], result: Any, i: int, name: str) -> None:
@@ -168,7 +184,6 @@ class _FrameWriter:
         gt = batch["gt"][i, 0].numpy() if "gt" in batch else None
         rgb, sem = (batch[k][i].permute(1, 2, 0).numpy() for k in ("rgb", "semantic"))
         branch_panel(self.out / "pictures" / f"{name}.png", rgb, sem, batch["sparse"][i, 0].numpy(), outputs, gt)
-        self.shown += 1
 
 
 def _write_scores(out: Path, metrics: KittiMetrics, summary: dict[str, Any]) -> None:
@@ -201,23 +216,48 @@ def evaluate_checkpoint(
 
     Writes into ``out_dir``: ``metrics.json``, ``per_image.csv``, ``predictions/`` (16-bit PNGs named
     like the ground truth for val_select) and ``pictures/`` (branch panels of the first frames).
+
+    Under ``torchrun`` (same arguments on every rank; ``cuda:LOCAL_RANK`` on GPUs) rank ``r`` of ``W``
+    scores frames ``r, r + W, ...`` (each frame once); the metrics are summed over the ranks and the
+    per-image rows gathered in the split's order, so the files are those of one process.
     """
-    if isinstance(checkpoint, nn.Module):
-        completer, label = DepthCompleter(checkpoint, device=device, amp=amp), type(checkpoint).__name__
-    else:
-        completer, label = DepthCompleter.from_checkpoint(checkpoint, device=device, amp=amp), str(checkpoint)
+    completer, label = _completer(checkpoint, device, amp)
     inputs = [data, raw_root, semantic_root, None if isinstance(checkpoint, nn.Module) else checkpoint]
-    out = _prepare_out(Path(out_dir), overwrite, inputs) if out_dir is not None else None
-    ds = _eval_dataset(data, split, raw_root, semantic_root)
-    subset = Subset(ds, range(min(len(ds), max_frames))) if max_frames else ds
-    loader = DataLoader(subset, batch_size=batch_size, num_workers=workers)
-    if out is None:
-        metrics = evaluate_model(completer.model, loader, completer.device, amp, quantize=True)
-        return {"metrics": metrics, "result": metrics.compute() if metrics.per_image else {}}
-    with staged_outputs(out, overwrite=overwrite) as stage:  # all files appear together, or none
-        writer = _FrameWriter(ds, split, stage, save_predictions, pictures)
-        metrics = evaluate_model(completer.model, loader, completer.device, amp, on_batch=writer, quantize=True)
-        result = metrics.compute() if metrics.per_image else {}
-        if result:
-            _write_scores(stage, metrics, {"checkpoint": label, "split": split} | result)
+    with process_group():
+        out = on_main(_prepare_out, Path(out_dir), overwrite, inputs) if out_dir is not None else None
+        ds = _eval_dataset(data, split, raw_root, semantic_root)
+        frames = min(len(ds), max_frames) if max_frames else len(ds)
+        loader = DataLoader(Subset(ds, range(frames)), batch_size=batch_size, num_workers=workers,
+                            sampler=dist_utils.ShardSampler(frames))  # fmt: skip
+        score = partial(_score_local, completer.model, loader, completer.device, amp, True,
+                        fill_holes=True, min_gt=0.0, quantize=True)  # fmt: skip
+        if out is None:
+            metrics = _merge(agree(score, None), ds)
+            return {"metrics": metrics, "result": metrics.compute() if metrics.per_image else {}}
+        writer = _FrameWriter(ds, split, out, save_predictions, pictures)
+        expected = writer.expected(frames)
+        with shared_stage(out, overwrite, expected) as stage:  # all files appear together, or none
+            writer.out = stage
+            metrics = _merge(agree(score, writer), ds)
+            result = metrics.compute() if metrics.per_image else {}
+            if result:
+                expected += ["metrics.json", "per_image.csv"]
+                if dist_utils.is_main():
+                    _write_scores(stage, metrics, {"checkpoint": label, "split": split} | result)
     return {"metrics": metrics, "result": result}
+
+
+def _completer(checkpoint: str | Path | nn.Module, device: str, amp: str) -> tuple[DepthCompleter, str]:
+    """The completer (on ``cuda:LOCAL_RANK`` under torchrun with CUDA) and how metrics.json names it."""
+    device_ = dist_utils.process_device(device)
+    if isinstance(checkpoint, nn.Module):
+        return DepthCompleter(checkpoint, device=device_, amp=amp), type(checkpoint).__name__
+    return DepthCompleter.from_checkpoint(checkpoint, device=device_, amp=amp), str(checkpoint)
+
+
+def _merge(metrics: KittiMetrics, ds: KittiDepthCompletion) -> KittiMetrics:
+    """``metrics`` summed over the ranks, with every rank's per-image rows in the split's order (collective)."""
+    metrics.reduce()
+    position = {frame.name: i for i, frame in enumerate(ds.frames)}
+    metrics.per_image = gather_rows(metrics.per_image, key=lambda row: position[str(row["name"])])
+    return metrics

@@ -9,10 +9,11 @@ from typing import Protocol
 import numpy as np
 
 from semattnet._utils.atomic import atomic_path
-from semattnet._utils.outputs import OutputError, check_no_input_overlap, refuse_existing, staged_outputs
+from semattnet._utils.outputs import OutputError, check_no_input_overlap, refuse_existing
 from semattnet.data.io import clamp_for_png, read_depth, read_image, read_semantic, write_depth, write_image
 from semattnet.data.pairing import FramePaths
 from semattnet.inference.completer import Completion
+from semattnet.inference.sharding import agree, on_main, process_group, rank_log, shard, shared_stage
 
 __all__ = ["Completer", "check_frames", "complete_folder", "output_paths"]
 
@@ -67,23 +68,35 @@ def complete_folder(
     ``out`` may not be one of these folders or inside one. ``out`` may never be the folder of an input
     file, and no output may resolve to an input file.
 
+    Under ``torchrun`` (same arguments on every rank) the frames are split over the processes and
+    the files are those of one process (:mod:`semattnet.inference.sharding`).
+
     Raises:
         FileExistsError: an output exists and ``overwrite`` is not set (checked before any work).
         OutputError: ``out`` is an input folder or inside one.
     """
     out = Path(out)
-    files = [Path(p) for f in frames for p in (f.rgb, f.sparse, f.semantic) if p is not None]
     outputs = output_paths(frames, out, npy, panel)
+    with process_group():
+        on_main(_check_outputs, frames, out, outputs, inputs, overwrite)
+        mine = shard(frames)
+        agree(check_frames, mine)
+        log = rank_log(log)
+        with shared_stage(out, overwrite, [p.relative_to(out) for p in outputs]) as stage:
+            for frame in mine:
+                h, w = _write_frame(completer, frame, stage, npy, panel)
+                log(f"{frame.name}: {w}x{h} -> {out / (frame.name + '.png')}")
+    return [out / f"{f.name}.png" for f in frames]
+
+
+def _check_outputs(frames: Sequence[FramePaths], out: Path, outputs: list[Path],
+                   inputs: Sequence[str | Path | None] | None, overwrite: bool) -> None:  # fmt: skip
+    """Before any work: no output in or over an input, none existing unless ``overwrite``."""
+    files = [Path(p) for f in frames for p in (f.rgb, f.sparse, f.semantic) if p is not None]
     check_no_input_overlap([*files, *(inputs or ())], out_dir=out, out_files=outputs)
     if out.resolve() in {p.resolve().parent for p in files}:
         raise OutputError(f"output folder {out} holds input frames; choose an --out outside the inputs")
     refuse_existing(outputs, overwrite)
-    check_frames(frames)
-    with staged_outputs(out, overwrite=overwrite) as stage:
-        for frame in frames:
-            h, w = _write_frame(completer, frame, stage, npy, panel)
-            log(f"{frame.name}: {w}x{h} -> {out / (frame.name + '.png')}")
-    return [out / f"{f.name}.png" for f in frames]
 
 
 def _write_frame(completer: Completer, frame: FramePaths, stage: Path, npy: bool, panel: bool) -> tuple[int, int]:

@@ -18,10 +18,11 @@ from typing import Any
 import numpy as np
 
 from semattnet._utils.atomic import atomic_path
-from semattnet._utils.outputs import check_no_input_overlap, refuse_existing, staged_outputs
+from semattnet._utils.outputs import check_no_input_overlap, refuse_existing
 from semattnet.data.io import DataError, clamp_for_png, encode_depth, read_semantic, write_depth, write_image
 from semattnet.data.kitti_raw import RawDrive, RawFrame
 from semattnet.inference.folder import Completer
+from semattnet.inference.sharding import agree, on_main, process_group, rank_log, shard, shared_stage
 
 __all__ = ["complete_kitti_raw", "fusion_confidence", "project_frame", "raw_output_paths"]
 
@@ -63,7 +64,7 @@ def _semantic_source(
         return lambda frame: ids_to_colors(segmenter(frame.image[None])[0])
     if getattr(completer, "needs_semantic", False):
         warnings.warn("no semantic maps given (--semantic or --segment): using the 'unknown' fallback map, "
-                      "which costs accuracy", stacklevel=3)  # fmt: skip
+                      "which costs accuracy", stacklevel=4)  # fmt: skip
         return lambda frame: unknown_map(*frame.image.shape[:2])
     return lambda frame: None
 
@@ -155,25 +156,36 @@ def complete_kitti_raw(
         DataError: missing/corrupt drive files or frames, naming them.
 
     Outputs are staged (:func:`semattnet._utils.outputs.staged_outputs`): they appear in ``out`` only
-    when every frame succeeded; a corrupt frame or a kill leaves ``out`` unchanged.
+    when every frame succeeded; a corrupt frame or a kill leaves ``out`` unchanged. Under ``torchrun``
+    the frames are split over the processes, with the files of one process (:mod:`.sharding`).
     """
     out = Path(out)
+    with process_group():
+        drive, names = agree(_open_drive, drive_dir, out, semantic, camera, deskew, frames)
+        expected = raw_output_paths(names, out, ply, npy, panel)
+        on_main(refuse_existing, expected, overwrite)
+        semantic_for = agree(_semantic_source, completer, semantic, segmenter)
+        opts = {"ply": ply, "npy": npy, "panel": panel, "max_depth": max_depth, "top_crop": top_crop}
+        log = rank_log(log)
+        with shared_stage(out, overwrite, [p.relative_to(out) for p in expected]) as stage:
+            for name in shard(names):
+                frame = drive.frame(name)
+                sparse = project_frame(frame)
+                sem = semantic_for(frame)
+                result = completer(frame.image, sparse, sem)
+                _write_frame(frame, sparse, sem, result, stage, opts)
+                log(f"{name}: {np.count_nonzero(sparse)} LiDAR pixels, {sparse.shape[1]}x{sparse.shape[0]} "
+                    f"-> {out / (name + '.png')}")  # fmt: skip
+    return [out / f"{name}.png" for name in names]
+
+
+def _open_drive(drive_dir: str | os.PathLike[str], out: Path, semantic: str | os.PathLike[str] | None,
+                camera: str | int, deskew: bool,
+                frames: str | int | Sequence[int] | None) -> tuple[RawDrive, list[str]]:  # fmt: skip
+    """The drive and the names of the frames to complete, after checking ``out`` is outside the inputs."""
     check_no_input_overlap([drive_dir, semantic], out_dir=out)
     drive = RawDrive(drive_dir, camera, deskew=deskew)
-    names = drive.names_for(frames)
-    refuse_existing(raw_output_paths(names, out, ply, npy, panel), overwrite)
-    semantic_for = _semantic_source(completer, semantic, segmenter)
-    opts = {"ply": ply, "npy": npy, "panel": panel, "max_depth": max_depth, "top_crop": top_crop}
-    with staged_outputs(out, overwrite=overwrite) as stage:
-        for name in names:
-            frame = drive.frame(name)
-            sparse = project_frame(frame)
-            sem = semantic_for(frame)
-            result = completer(frame.image, sparse, sem)
-            _write_frame(frame, sparse, sem, result, stage, opts)
-            log(f"{name}: {np.count_nonzero(sparse)} LiDAR pixels, {sparse.shape[1]}x{sparse.shape[0]} "
-                f"-> {out / (name + '.png')}")  # fmt: skip
-    return [out / f"{name}.png" for name in names]
+    return drive, list(drive.names_for(frames))
 
 
 def project_frame(frame: RawFrame) -> np.ndarray:
