@@ -104,3 +104,14 @@ def model_from_options(checkpoint: Path | None, weights: str | None, device: str
     if checkpoint is not None:
         return load_model(checkpoint, device=device)
     raise click.UsageError("--checkpoint or --weights is required")
+
+
+#: ``--backend``: the inference engine of every command that runs a model (see ``optimize_for_inference``).
+backend_option = click.option(
+    "--backend",
+    type=click.Choice(["torch", "openvino", "onnxruntime", "auto"]),
+    default="torch",
+    show_default=True,
+    help="Inference engine: torch (BN folded, fused propagation), openvino / onnxruntime (exported once per "
+    "frame size, cached on disk; worth it over many frames) or auto.",
+)

@@ -8,7 +8,14 @@ from pathlib import Path
 import click
 
 from semattnet.cli._group import main
-from semattnet.cli._options import COUNT, NONNEGATIVE_FLOAT, POSITIVE_INT, model_from_options, weights_option
+from semattnet.cli._options import (
+    COUNT,
+    NONNEGATIVE_FLOAT,
+    POSITIVE_INT,
+    backend_option,
+    model_from_options,
+    weights_option,
+)
 
 
 @main.command()
@@ -75,9 +82,11 @@ def metrics(
 @click.option("--workers", type=COUNT, default=2, show_default=True)
 @click.option("--max-frames", type=POSITIVE_INT, default=None)
 @click.option("--overwrite", is_flag=True)
+@backend_option
 def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, split: str, out: Path | None,
              sparsity: tuple[str, ...], method: str, save_predictions: bool, pictures: int, device: str,
-             batch_size: int, amp: str, workers: int, max_frames: int | None, overwrite: bool) -> None:  # fmt: skip
+             batch_size: int, amp: str, workers: int, max_frames: int | None, overwrite: bool,
+             backend: str) -> None:  # fmt: skip
     """Evaluate a checkpoint on a KITTI (or synthetic) split with the official metrics, or sweep sparser inputs."""
     if sparsity:
         _one_process("evaluate --sparsity")
@@ -93,7 +102,7 @@ def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, spli
         raise click.UsageError("--save-predictions and --pictures need --out")
     model = checkpoint if weights is None and checkpoint is not None else model_from_options(checkpoint, weights)
     res = evaluate_checkpoint(model, data_root, split, out, device, batch_size, amp, workers,
-                              save_predictions, pictures, max_frames, overwrite)  # fmt: skip
+                              save_predictions, pictures, max_frames, overwrite, backend=backend)  # fmt: skip
     from semattnet._utils.distributed import launch_rank
 
     if launch_rank() != 0:  # under torchrun: every rank holds the merged metrics; rank 0 reports them
@@ -138,11 +147,13 @@ def _sweep(checkpoint: Path | None, weights: str | None, data_root: Path, split:
 @click.option("--device", default="auto", show_default=True)
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
 @click.option("--overwrite", is_flag=True)
+@backend_option
 def submit(checkpoint: Path, data_root: Path, out: Path, expected_frames: int, device: str, amp: str,
-           overwrite: bool) -> None:  # fmt: skip
+           overwrite: bool, backend: str) -> None:  # fmt: skip
     """Predict the KITTI test split and write the zip to upload (checked before zipping)."""
     from semattnet.evaluation.submission import write_submission
 
     _one_process("submit")
-    zip_path = write_submission(checkpoint, data_root, out, device, amp, expected_frames or None, overwrite)
+    zip_path = write_submission(checkpoint, data_root, out, device, amp, expected_frames or None, overwrite,
+                                backend=backend)  # fmt: skip
     click.echo(f"wrote {out} and {zip_path}")

@@ -7,10 +7,11 @@ from pathlib import Path
 import click
 
 from semattnet.cli._group import main
-from semattnet.cli._options import COUNT, POSITIVE_FLOAT, weights_option
+from semattnet.cli._options import COUNT, POSITIVE_FLOAT, backend_option, weights_option
 
 
-def _completer(method: str, checkpoint: Path | None, weights: str | None, device: str, amp: str):  # type: ignore[no-untyped-def]
+def _completer(method: str, checkpoint: Path | None, weights: str | None, device: str, amp: str,  # type: ignore[no-untyped-def]
+               backend: str = "torch"):  # fmt: skip
     """The completer the options name: the classical baseline or the model of --checkpoint / --weights."""
     from semattnet._utils.distributed import process_device
     from semattnet.baselines.classical import ClassicalCompleter
@@ -21,7 +22,8 @@ def _completer(method: str, checkpoint: Path | None, weights: str | None, device
         return ClassicalCompleter()
     if checkpoint is None and weights is None:
         raise click.UsageError("--checkpoint or --weights is required (or --method classical)")
-    return DepthCompleter(model_from_options(checkpoint, weights, "cpu"), device=process_device(device), amp=amp)
+    model = model_from_options(checkpoint, weights, "cpu")
+    return DepthCompleter(model, device=process_device(device), amp=amp, backend=backend, inplace=True)
 
 
 def _intrinsics(text: str | None):  # type: ignore[no-untyped-def]
@@ -76,6 +78,7 @@ _INPUT = click.Path(exists=True, path_type=Path)
 @click.option("--deskew", is_flag=True, help="With --kitti-raw: ego-motion compensate scans with their OXTS data.")
 @click.option("--device", default="auto", show_default=True)
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
+@backend_option
 @click.option("--overwrite", is_flag=True, help="Replace existing outputs.")
 @click.option("--method", type=click.Choice(["semattnet", "classical"]), default="semattnet", show_default=True,
               help="classical: the non-learned IP-Basic-style baseline (no checkpoint).")  # fmt: skip
@@ -85,7 +88,8 @@ _INPUT = click.Path(exists=True, path_type=Path)
 def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, sparse: Path | None,
             kitti_raw: Path | None, frames: str | None, camera: str, semantic: Path | None, segment_spec: str | None,
             out: Path, npy: bool, panel: bool, ply: bool, max_depth: float, top_crop: int, deskew: bool, device: str,
-            amp: str, overwrite: bool, method: str, report: bool, intrinsics: str | None) -> None:  # fmt: skip
+            amp: str, backend: str, overwrite: bool, method: str, report: bool,
+            intrinsics: str | None) -> None:  # fmt: skip
     """Complete depth for one frame, folders of frames (any size) or a KITTI raw drive."""
     from semattnet.data.pairing import pair_frames
     from semattnet.inference import complete_folder
@@ -98,7 +102,7 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
     if kitti_raw is not None and report:
         raise click.UsageError("--report needs --rgb/--sparse (not yet --kitti-raw)")
     K = _intrinsics(intrinsics)
-    completer = _completer(method, checkpoint, weights, device, amp)
+    completer = _completer(method, checkpoint, weights, device, amp, backend)
     if kitti_raw is not None:
         complete_kitti_raw(completer, kitti_raw, out, frames=frames, camera=camera, semantic=semantic,
                            segmenter=segment_spec, ply=ply, max_depth=max_depth, top_crop=top_crop, npy=npy,

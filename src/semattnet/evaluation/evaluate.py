@@ -210,9 +210,12 @@ def evaluate_checkpoint(
     overwrite: bool = False,
     raw_root: str | Path | None = None,
     semantic_root: str | Path | None = None,
+    backend: str = "torch",
 ) -> dict[str, Any]:
     """Run a checkpoint (a path, or a loaded model) over a split and score it; optionally write
-    predictions and panels.
+    predictions and panels. ``backend`` chooses the inference engine
+    (:func:`semattnet.inference.backends.optimize_for_inference`; fixed-size backends are built for
+    the split's frame size).
 
     Writes into ``out_dir``: ``metrics.json``, ``per_image.csv``, ``predictions/`` (16-bit PNGs named
     like the ground truth for val_select) and ``pictures/`` (branch panels of the first frames).
@@ -221,7 +224,7 @@ def evaluate_checkpoint(
     scores frames ``r, r + W, ...`` (each frame once); the metrics are summed over the ranks and the
     per-image rows gathered in the split's order, so the files are those of one process.
     """
-    completer, label = _completer(checkpoint, device, amp)
+    completer, label = _completer(checkpoint, device, amp, backend)
     inputs = [data, raw_root, semantic_root, None if isinstance(checkpoint, nn.Module) else checkpoint]
     with process_group():
         out = on_main(_prepare_out, Path(out_dir), overwrite, inputs) if out_dir is not None else None
@@ -229,7 +232,8 @@ def evaluate_checkpoint(
         frames = min(len(ds), max_frames) if max_frames else len(ds)
         loader = DataLoader(Subset(ds, range(frames)), batch_size=batch_size, num_workers=workers,
                             sampler=dist_utils.ShardSampler(frames))  # fmt: skip
-        score = partial(_score_local, completer.model, loader, completer.device, amp, True,
+        engine = completer.engine(tuple(ds[0]["rgb"].shape[-2:])) if frames else completer.model
+        score = partial(_score_local, engine, loader, completer.device, amp, True,
                         fill_holes=True, min_gt=0.0, quantize=True)  # fmt: skip
         if out is None:
             metrics = _merge(agree(score, None), ds)
@@ -247,12 +251,12 @@ def evaluate_checkpoint(
     return {"metrics": metrics, "result": result}
 
 
-def _completer(checkpoint: str | Path | nn.Module, device: str, amp: str) -> tuple[DepthCompleter, str]:
+def _completer(checkpoint: str | Path | nn.Module, device: str, amp: str, backend: str) -> tuple[DepthCompleter, str]:
     """The completer (on ``cuda:LOCAL_RANK`` under torchrun with CUDA) and how metrics.json names it."""
     device_ = dist_utils.process_device(device)
     if isinstance(checkpoint, nn.Module):
-        return DepthCompleter(checkpoint, device=device_, amp=amp), type(checkpoint).__name__
-    return DepthCompleter.from_checkpoint(checkpoint, device=device_, amp=amp), str(checkpoint)
+        return DepthCompleter(checkpoint, device=device_, amp=amp, backend=backend), type(checkpoint).__name__
+    return DepthCompleter.from_checkpoint(checkpoint, device=device_, amp=amp, backend=backend), str(checkpoint)
 
 
 def _merge(metrics: KittiMetrics, ds: KittiDepthCompletion) -> KittiMetrics:

@@ -135,6 +135,7 @@ def write_submission(
     expected_frames: int | None = KITTI_TEST_FRAMES,
     overwrite: bool = False,
     semantic_root: str | Path | None = None,
+    backend: str = "torch",
 ) -> Path:
     """Predict the test split (``test_depth_completion_anonymous``) and write a ready-to-upload zip.
 
@@ -145,7 +146,7 @@ def write_submission(
     ds = KittiDepthCompletion(data, "test", semantic_root=semantic_root)
     if expected_frames is not None and len(ds) != expected_frames:
         raise SubmissionError(f"{data}: the test split has {len(ds)} frames, KITTI expects {expected_frames}")
-    completer = DepthCompleter.from_checkpoint(checkpoint, device=device, amp=amp)
+    completer = DepthCompleter.from_checkpoint(checkpoint, device=device, amp=amp, backend=backend)
     expected = {f.sparse.name: read_depth(f.sparse).shape for f in ds.frames}
 
     def predictions() -> Iterable[tuple[str, np.ndarray]]:

@@ -28,7 +28,7 @@ from tqdm import tqdm
 
 from semattnet._utils import distributed as dist_utils
 from semattnet._utils.atomic import atomic_path
-from semattnet._utils.device import autocast, resolve_device
+from semattnet._utils.device import autocast
 from semattnet.data.kitti import KittiDepthCompletion
 from semattnet.data.transforms import EvalTransform, TrainTransform
 from semattnet.evaluation.evaluate import evaluate_model
@@ -55,15 +55,6 @@ def _atomic_torch_save(obj: Any, path: Path) -> None:
         torch.save(obj, tmp)
 
 
-def _process_device(name: str) -> torch.device:
-    """The device of this process: ``--device``, or under torchrun with CUDA the GPU of ``LOCAL_RANK``."""
-    device = resolve_device(name)
-    if device.type == "cuda" and "LOCAL_RANK" in os.environ:
-        device = torch.device("cuda", int(os.environ["LOCAL_RANK"]))
-        torch.cuda.set_device(device)
-    return device
-
-
 def _unwrap(model: nn.Module) -> nn.Module:
     return model.module if isinstance(model, nn.parallel.DistributedDataParallel) else model
 
@@ -80,7 +71,7 @@ class Trainer:
     """One training stage. ``Trainer(cfg).fit()`` (or ``resume=True`` to continue)."""
 
     def __init__(self, cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = print) -> None:
-        self.device = _process_device(cfg.device)
+        self.device = dist_utils.process_device(cfg.device)
         self.distributed = dist_utils.init_distributed(self.device)
         self.main = dist_utils.is_main()
         self._log = log
