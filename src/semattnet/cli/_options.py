@@ -13,6 +13,8 @@ from typing import Any
 import click
 import torch
 
+from semattnet._errors import SemAttNetError
+
 #: A count of at least one (frames, steps, repeats, batch size).
 POSITIVE_INT = click.IntRange(min=1)
 #: A count that may be zero (0 = "none" / "all", as each option's help says).
@@ -115,3 +117,15 @@ backend_option = click.option(
     help="Inference engine: torch (BN folded, fused propagation), openvino / onnxruntime (exported once per "
     "frame size, cached on disk; worth it over many frames) or auto.",
 )
+
+
+def weights_path(spec: str, param_hint: str = "--weights", progress: bool = True) -> Path:
+    """``resolve_weights_file`` with a bad name or path reported as a usage error of ``param_hint``."""
+    from semattnet.weights.listing import resolve_weights_file
+
+    try:
+        return resolve_weights_file(spec, progress=progress)
+    except ValueError as exc:
+        if isinstance(exc, SemAttNetError):  # a corrupt or refused file: a one-line error, not a usage error
+            raise
+        raise click.BadParameter(str(exc).removeprefix(f"--weights {spec!r}: "), param_hint=param_hint) from None

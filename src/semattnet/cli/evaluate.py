@@ -121,17 +121,14 @@ def _one_process(command: str) -> None:
 def _sweep(checkpoint: Path | None, weights: str | None, data_root: Path, split: str, out: Path,
            sparsity: tuple[str, ...], method: str, device: str, max_frames: int | None,
            overwrite: bool) -> None:  # fmt: skip
-    from semattnet.evaluation.sparsity import parse_settings, sweep_model
+    from semattnet.evaluation.sparsity import format_sweep, parse_settings, sweep_model
 
     settings = parse_settings(sparsity)  # fail on a bad setting before loading anything
     if method == "classical" and (checkpoint is not None or weights is not None):
         raise click.UsageError("--method classical takes no --checkpoint / --weights")
     model = model_from_options(checkpoint, weights, "cpu") if method == "semattnet" else None
     rows = sweep_model(data_root, split, settings, model, out, device, max_frames, overwrite)
-    click.echo(f"{'method':>10} {'setting':>10} {'density':>8} {'RMSE':>8} {'MAE':>8} {'iRMSE':>7} {'iMAE':>6}")
-    for r in rows:
-        click.echo(f"{r['method']:>10} {r['setting']:>10} {r['density']:8.4f} {r['rmse_mm']:8.1f} {r['mae_mm']:8.1f} "
-                   f"{r['irmse_per_km']:7.2f} {r['imae_per_km']:6.2f}")  # fmt: skip
+    click.echo(format_sweep(rows))
     click.echo(f"wrote {out / 'sparsity.csv'}, {out / 'sparsity.json'} and {out / 'sparsity.png'}")
 
 

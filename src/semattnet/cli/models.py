@@ -13,11 +13,11 @@ from semattnet.cli._options import weights_option
 
 def _source(checkpoint: Path | None, weights: str | None) -> Path:
     """The local file named by CHECKPOINT or ``--weights`` (exactly one of them)."""
-    from semattnet.cli.weights import weights_file
+    from semattnet.cli._options import weights_path
 
     if (checkpoint is None) == (weights is None):
         raise click.UsageError("give a CHECKPOINT file or --weights NAME|PATH|URL (one of them)")
-    return checkpoint if checkpoint is not None else weights_file(weights)  # type: ignore[arg-type]
+    return checkpoint if checkpoint is not None else weights_path(weights)  # type: ignore[arg-type]
 
 
 @main.command()

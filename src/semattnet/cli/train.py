@@ -48,11 +48,11 @@ def train(stage: str, data_root: str | None, out: str | None, init: str | None, 
     from semattnet.training.trainer import train as run_training
 
     if init_weights is not None:
-        from semattnet.cli.weights import weights_file
+        from semattnet.cli._options import weights_path
 
         if init is not None:
             raise click.UsageError("give --init or --init-weights, not both")
-        init = str(weights_file(init_weights))
+        init = str(weights_path(init_weights, "--init-weights"))
     if resume:
         if not out:
             raise click.UsageError("--resume needs --out (the run folder)")

@@ -22,7 +22,16 @@ from semattnet._errors import SemAttNetError
 from semattnet.evaluation.metrics import KittiMetrics
 from semattnet.geometry.sparsify import keep_random, keep_row_bands
 
-__all__ = ["FIELDS", "SparsityError", "parse_settings", "plot_sweep", "run_sparsity_sweep", "sweep_model", "thin"]
+__all__ = [
+    "FIELDS",
+    "SparsityError",
+    "format_sweep",
+    "parse_settings",
+    "plot_sweep",
+    "run_sparsity_sweep",
+    "sweep_model",
+    "thin",
+]
 
 FIELDS = ("method", "setting", "density", "rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km")
 NUM_BEAMS = 64
@@ -174,3 +183,12 @@ def sweep_model(
     completers["classical"] = ClassicalCompleter()
     return run_sparsity_sweep(data_root, split, settings, completers, out_dir, max_frames=max_frames,
                               overwrite=overwrite)  # fmt: skip
+
+
+def format_sweep(rows: list[dict]) -> str:
+    """The sweep's rows as a text table (method, setting, density, the four metrics in KITTI units)."""
+    lines = [f"{'method':>10} {'setting':>10} {'density':>8} {'RMSE':>8} {'MAE':>8} {'iRMSE':>7} {'iMAE':>6}"]
+    for r in rows:
+        lines.append(f"{r['method']:>10} {r['setting']:>10} {r['density']:8.4f} {r['rmse_mm']:8.1f} "
+                     f"{r['mae_mm']:8.1f} {r['irmse_per_km']:7.2f} {r['imae_per_km']:6.2f}")  # fmt: skip
+    return "\n".join(lines)

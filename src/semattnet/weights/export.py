@@ -9,6 +9,7 @@ while tracing) after folding BatchNorm into the convolutions. Inputs are named `
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import torch
@@ -62,7 +63,10 @@ def export_onnx(model: nn.Module, path: str | Path, size: tuple[int, int] = (352
     """Write ``model`` as ONNX for (1, C, H, W) inputs of ``size``; returns the path."""
     flat, example, names = _prepare(model, size)
     path = Path(path)
-    with atomic_path(path, suffix=".onnx") as tmp, torch.no_grad():
+    with atomic_path(path, suffix=".onnx") as tmp, torch.no_grad(), warnings.catch_warnings():
+        # the tracer's notes on shape checks and constant folding are expected here (fixed-size export)
+        warnings.simplefilter("ignore", torch.jit.TracerWarning)
+        warnings.filterwarnings("ignore", message="Constant folding")
         torch.onnx.export(flat, example, str(tmp), input_names=_input_names(flat.semantic), output_names=names,
                           opset_version=opset, dynamo=False)  # fmt: skip
     return path

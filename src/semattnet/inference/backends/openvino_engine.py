@@ -53,6 +53,7 @@ class OpenVinoEngine(InferenceEngine):
             onnx_path = cached_onnx(model, size, folder, log)
             # IR first (float32 weights: no fp16 compression), so later processes skip the ONNX file
             ov.save_model(core.read_model(str(onnx_path)), str(xml), compress_to_fp16=False)
+            onnx_path.unlink()  # only an intermediate here: the IR holds the same weights
         config = {"PERFORMANCE_HINT": "LATENCY", "INFERENCE_PRECISION_HINT": precision,
                   "INFERENCE_NUM_THREADS": torch.get_num_threads(), "CACHE_DIR": str(folder / "blobs")}  # fmt: skip
         self.compiled = core.compile_model(str(xml), "CPU", config)
