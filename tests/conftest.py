@@ -1,5 +1,8 @@
 from __future__ import annotations
 
+import os
+from collections.abc import Iterator
+
 import pytest
 import torch
 
@@ -25,3 +28,15 @@ def device(request: pytest.FixtureRequest) -> torch.device:
 def dtype(request: pytest.FixtureRequest) -> torch.dtype:
     """The floating-point types the numerics are tested in on every device."""
     return request.param
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _private_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """Downloads and exported engines go to a temporary cache, never the user's ($SEMATTNET_CACHE)."""
+    old = os.environ.get("SEMATTNET_CACHE")
+    os.environ["SEMATTNET_CACHE"] = str(tmp_path_factory.mktemp("semattnet-cache"))
+    yield
+    if old is None:
+        os.environ.pop("SEMATTNET_CACHE", None)
+    else:
+        os.environ["SEMATTNET_CACHE"] = old

@@ -180,3 +180,19 @@ def test_evaluate_full_val_split(tree: Path, weights: Path, tmp_path: Path) -> N
     assert "RMSE [mm]" in out and "(3 images)" in out
     names = sorted(p.name for p in (tmp_path / "v" / "predictions").glob("*.png"))
     assert names[0] == "2000_01_01_drive_1000_sync_image_02_0000000000.png" and len(names) == 3
+
+
+def test_submit_takes_weights_and_a_backend(tree: Path, weights: Path, tmp_path: Path) -> None:
+    """`submit --weights PATH --backend onnxruntime` gives the same PNGs as `--checkpoint PATH` (torch)."""
+    import importlib.util
+
+    backend = "onnxruntime" if importlib.util.find_spec("onnxruntime") else "torch"
+    run("submit", "--checkpoint", weights, "--data", tree, "--out", tmp_path / "a", "--expected-frames", "3")
+    run("submit", "--weights", weights, "--data", tree, "--out", tmp_path / "b", "--expected-frames", "3",
+        "--backend", backend)  # fmt: skip
+    for name in ("0000000000.png", "0000000001.png", "0000000002.png"):
+        a, b = read_depth(tmp_path / "a" / name), read_depth(tmp_path / "b" / name)
+        assert a.shape == b.shape and float(abs(a - b).max()) <= 2 / 256  # at most a rounding step or two
+    both = CliRunner().invoke(main, ["submit", "--checkpoint", str(weights), "--weights", str(weights), "--data",
+                                     str(tree), "--out", str(tmp_path / "c")])  # fmt: skip
+    assert both.exit_code == 2 and "exactly one of --checkpoint or --weights" in both.output

@@ -15,6 +15,7 @@ from semattnet.cli._options import (
     backend_option,
     model_from_options,
     weights_option,
+    weights_path,
 )
 
 
@@ -133,7 +134,8 @@ def _sweep(checkpoint: Path | None, weights: str | None, data_root: Path, split:
 
 
 @main.command()
-@click.option("--checkpoint", required=True, type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--checkpoint", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None)
+@weights_option
 @click.option("--data", "data_root", required=True, type=click.Path(exists=True, file_okay=False, path_type=Path))
 @click.option(
     "--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Folder; OUT.zip is written too."
@@ -145,12 +147,15 @@ def _sweep(checkpoint: Path | None, weights: str | None, data_root: Path, split:
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
 @click.option("--overwrite", is_flag=True)
 @backend_option
-def submit(checkpoint: Path, data_root: Path, out: Path, expected_frames: int, device: str, amp: str,
-           overwrite: bool, backend: str) -> None:  # fmt: skip
+def submit(checkpoint: Path | None, weights: str | None, data_root: Path, out: Path, expected_frames: int,
+           device: str, amp: str, overwrite: bool, backend: str) -> None:  # fmt: skip
     """Predict the KITTI test split and write the zip to upload (checked before zipping)."""
     from semattnet.evaluation.submission import write_submission
 
     _one_process("submit")
+    if (checkpoint is None) == (weights is None):
+        raise click.UsageError("give exactly one of --checkpoint or --weights")
+    checkpoint = checkpoint if checkpoint is not None else weights_path(weights)  # type: ignore[arg-type]
     zip_path = write_submission(checkpoint, data_root, out, device, amp, expected_frames or None, overwrite,
                                 backend=backend)  # fmt: skip
     click.echo(f"wrote {out} and {zip_path}")
