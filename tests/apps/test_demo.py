@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 from PIL import Image
 
 from semattnet.apps.demo import DemoSettings, run_demo
@@ -144,3 +145,23 @@ def test_demo_viewer_in_chromium(demo_run) -> None:  # type: ignore[no-untyped-d
         counts = page.evaluate("document.getElementById('cloud').data.map((t) => t.x.length)")
         assert counts[0] > 0 and counts[1] > 0
     assert errors == []
+
+
+def test_step_plan_equal_steps_or_equal_time(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """Equal steps (the paper's protocol): both models get the same counts, filling the budget together;
+    equal time: each model gets half the budget, so the cheaper one takes more steps."""
+    from semattnet.apps import demo
+
+    times = {3: (0.25, 0.5), 2: (0.125, 0.25)}  # seconds per (backbone, full) step: three- and two-branch
+    monkeypatch.setattr(demo, "_step_times", lambda s, device, overrides: times[overrides["branches"]])
+    s = demo.DemoSettings(minutes=1.0, backbone_share=0.5)
+    plan = demo._step_plan(s, torch.device("cpu"))
+    assert plan["semattnet"] == plan["two_branch"] == (80, 40)  # 30 s / (0.25 + 0.125), 30 s / (0.5 + 0.25)
+    spent = sum(
+        n_bb * times[b][0] + n_full * times[b][1] for (n_bb, n_full), b in zip(plan.values(), (3, 2), strict=True)
+    )
+    assert spent == pytest.approx(60.0)
+    plan = demo._step_plan(demo.DemoSettings(minutes=1.0, backbone_share=0.5, equal_steps=False), torch.device("cpu"))
+    assert plan == {"semattnet": (60, 30), "two_branch": (120, 60)}
+    two_seeds = demo._step_plan(demo.DemoSettings(minutes=1.0, backbone_share=0.5, seeds=(0, 1)), torch.device("cpu"))
+    assert two_seeds["semattnet"] == (40, 20)  # the budget covers every seed

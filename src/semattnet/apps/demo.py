@@ -1,8 +1,9 @@
 """The out-of-the-box demo: synthetic data -> train -> evaluate against baselines -> report.
 
 ``semattnet demo`` generates KITTI-like scenes (half of them with a hard shadow band), trains a
-width-reduced SemAttNet and the two-branch ablation (no semantic branch) with the same time
-budget through the real training engine (backbone stage, then the full model with CSPN++),
+width-reduced SemAttNet and the two-branch ablation (no semantic branch) for the same number of
+optimiser steps (the paper's protocol; ``DemoSettings.equal_steps``) within one time budget, through
+the real training engine (backbone stage, then the full model with CSPN++),
 scores both on held-out scenes with the KITTI metrics beside the sparse input and a classical
 non-learned completion, and writes ``report.md`` and ``report.html`` with the table, per-branch
 panels, error maps and training curves, ``viewer.html`` (the interactive viewer of the
@@ -74,10 +75,12 @@ __all__ = ["DemoResult", "DemoSettings", "run_demo"]
 class DemoSettings:
     """What the demo generates and trains.
 
-    ``minutes`` is the training budget of both learned models together (each gets half, split
-    ``backbone_share`` : rest between the backbone stage and the full model). The step counts
-    are derived from a short timing of each model on this machine, unless ``steps`` gives
-    (backbone, full) steps per model explicitly.
+    ``minutes`` is the training budget of both learned models and all seeds together, split
+    ``backbone_share`` : rest between the backbone stage and the full model. The step counts are
+    derived from a short timing of each model on this machine, unless ``steps`` gives (backbone,
+    full) steps per model explicitly. With ``equal_steps`` (the default, as the paper compares
+    configurations at equal epochs) both models get the same step counts, so the slower
+    three-branch model uses more of the time; ``equal_steps=False`` gives each model half the time.
     """
 
     size: tuple[int, int] = (96, 320)
@@ -95,6 +98,8 @@ class DemoSettings:
     seeds: tuple[int, ...] | None = None
     #: held-out scenes in viewer.html (all by default: about 0.2 MB each at 96x320)
     viewer_frames: int = 16
+    #: the same optimiser steps for both models (the paper's protocol), else the same time
+    equal_steps: bool = True
 
     def training_seeds(self) -> tuple[int, ...]:
         return tuple(self.seeds) if self.seeds else (self.seed,)
@@ -282,16 +287,27 @@ def _baselines(held: HeldOut) -> dict[str, dict[str, np.ndarray]]:
     return preds
 
 
-def _step_counts(s: DemoSettings, device: torch.device, overrides: dict[str, Any]) -> tuple[int, int]:
-    """(backbone, full) steps of one model: as set, or what its share of the time budget allows here."""
+def _step_plan(s: DemoSettings, device: torch.device) -> dict[str, tuple[int, int]]:
+    """(backbone, full) steps per model: as set, or what the time budget allows here, at equal
+    steps for both models (``equal_steps``) or an equal share of the time each."""
     if s.steps is not None:
-        n_bb, n_full = s.steps
-        return n_bb, n_full
-    budget = s.minutes * 60.0 / len(_MODELS)
+        return {key: (s.steps[0], s.steps[1]) for key, _, _ in _MODELS}
+    budget = s.minutes * 60.0 / len(s.training_seeds())
+    times = {key: _step_times(s, device, overrides) for key, _, overrides in _MODELS}
+    if s.equal_steps:  # one step of every model per "round": as many rounds as the budget holds
+        t_bb, t_full = (sum(t[i] for t in times.values()) for i in (0, 1))
+        n = (max(5, int(budget * s.backbone_share / t_bb)), max(5, int(budget * (1.0 - s.backbone_share) / t_full)))
+        return dict.fromkeys(times, n)
+    share = budget / len(_MODELS)
+    return {key: (max(5, int(share * s.backbone_share / t_bb)), max(5, int(share * (1.0 - s.backbone_share) / t_full)))
+            for key, (t_bb, t_full) in times.items()}  # fmt: skip
+
+
+def _step_times(s: DemoSettings, device: torch.device, overrides: dict[str, Any]) -> tuple[float, float]:
+    """Seconds per backbone-stage step and per full-model step of one model, timed here."""
     kw = {"width": s.width, **overrides}
     t_bb = step_seconds(s.size, s.batch_size, device, "semattnet_backbone", **kw)
-    t_full = step_seconds(s.size, s.batch_size, device, "semattnet", **kw)
-    return max(5, int(budget * s.backbone_share / t_bb)), max(5, int(budget * (1.0 - s.backbone_share) / t_full))
+    return t_bb, step_seconds(s.size, s.batch_size, device, "semattnet", **kw)
 
 
 def _train_models(
@@ -300,8 +316,9 @@ def _train_models(
     """Train each model of :data:`_MODELS` with the same budget per seed, then complete the held-out scenes."""
     trained = _Trained()
     seeds = s.training_seeds()
+    plan = _step_plan(s, device)
     for key, label, overrides in _MODELS:
-        n_bb, n_full = _step_counts(s, device, overrides)
+        n_bb, n_full = plan[key]
         trained.steps[key] = {"backbone": n_bb, "full": n_full}
         trained.runs[key] = out / "runs" / key
         start = time.perf_counter()

@@ -40,11 +40,13 @@ from semattnet.cli._options import (
     "--width", type=POSITIVE_FLOAT, default=0.125, show_default=True, help="Model width multiplier (1.0 = paper)."
 )
 @click.option("--steps", default=None, help="Fixed steps per model as BACKBONE,FULL instead of the time budget.")
+@click.option("--equal-time", is_flag=True,
+              help="Give each model half the time instead of the same steps (the default, as the paper).")  # fmt: skip
 @click.option("--seed", type=COUNT, default=0, show_default=True)
 @click.option("--device", default="auto", show_default=True, help="auto, cpu or cuda[:N].")
 @click.option("--overwrite", is_flag=True, help="Replace the contents of --out.")
 def demo(out_dir: Path, minutes: float, size: str, frames: int, eval_frames: int, width: float, steps: str | None,
-         seed: int, device: str, overwrite: bool) -> None:  # fmt: skip
+         equal_time: bool, seed: int, device: str, overwrite: bool) -> None:  # fmt: skip
     """Synthetic data -> train SemAttNet and the two-branch ablation -> evaluate -> HTML report."""
     from semattnet.apps.demo import DemoSettings, run_demo
 
@@ -57,7 +59,8 @@ def demo(out_dir: Path, minutes: float, size: str, frames: int, eval_frames: int
             raise click.BadParameter(msg, param_hint="--steps") from None
         fixed = (bb, full)
     settings = DemoSettings(size=parse_size(size), train_frames=frames, eval_frames=eval_frames, width=width,
-                            minutes=minutes, steps=fixed, seed=seed, device=device)  # fmt: skip
+                            minutes=minutes, steps=fixed, seed=seed, device=device,
+                            equal_steps=not equal_time)  # fmt: skip
     run_demo(out_dir, settings, overwrite=overwrite, log=click.echo)
 
 
