@@ -38,3 +38,17 @@ def agreement(ours: np.ndarray, ref: np.ndarray, radius: int, tol: float = 0.3) 
             cand = pad[rv + radius + dv, ru + radius + du]
             hit |= (cand > 0) & (np.abs(cand - ref[rv, ru]) <= tol)
     return float(hit.mean())
+
+
+def online_cache(monkeypatch, root: Path) -> Path:  # type: ignore[no-untyped-def]
+    """Point ``$SEMATTNET_CACHE`` at an empty ``root`` and make every downloader see "online"."""
+    monkeypatch.setenv("SEMATTNET_CACHE", str(root))
+    monkeypatch.delenv("SEMATTNET_OFFLINE", raising=False)
+    monkeypatch.delenv("HF_HUB_OFFLINE", raising=False)
+    monkeypatch.setenv("HF_HUB_DISABLE_PROGRESS_BARS", "1")
+    try:  # huggingface_hub reads HF_HUB_OFFLINE once, at import: make sure it sees "online"
+        from huggingface_hub import constants
+    except ImportError:
+        return root
+    monkeypatch.setattr(constants, "HF_HUB_OFFLINE", False)
+    return root

@@ -17,6 +17,7 @@ import semattnet
 from semattnet.cli import main
 from semattnet.weights import pretrained, sha256_file
 from semattnet.weights.pretrained import PretrainedWeights
+from tests._helpers import online_cache
 
 NAME = "tiny-test"
 CONFIG = {"width": 0.125, "iterations": 2}
@@ -40,16 +41,7 @@ def weights_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture
 def served(weights_file: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
     """``weights_file`` on an HTTP server on 127.0.0.1, registered as NAME; an empty cache."""
-    monkeypatch.setenv("SEMATTNET_CACHE", str(tmp_path / "cache"))
-    monkeypatch.delenv("SEMATTNET_OFFLINE", raising=False)
-    monkeypatch.delenv("HF_HUB_OFFLINE", raising=False)
-    monkeypatch.setenv("HF_HUB_DISABLE_PROGRESS_BARS", "1")
-    try:
-        from huggingface_hub import constants
-    except ImportError:
-        pass
-    else:
-        monkeypatch.setattr(constants, "HF_HUB_OFFLINE", False)
+    online_cache(monkeypatch, tmp_path / "cache")
     handler = functools.partial(_Quiet, directory=str(weights_file.parent))
     httpd = ThreadingHTTPServer(("127.0.0.1", 0), handler)
     threading.Thread(target=httpd.serve_forever, daemon=True).start()

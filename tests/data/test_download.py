@@ -18,7 +18,7 @@ from semattnet.data import kitti_files as kf
 from semattnet.data.download import UnsafeArchiveError, drives_for, extract_zip, parse_what
 from semattnet.data.io import read_image, write_image
 from semattnet.data.palette import ids_to_colors
-from tests._helpers import SAMPLE
+from tests._helpers import SAMPLE, online_cache
 
 DRIVE = "2011_09_26_drive_0035_sync"
 
@@ -51,16 +51,7 @@ def mirror(tmp_path: Path) -> Iterator[tuple[str, Path, list[str]]]:
 @pytest.fixture
 def env(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     cache = tmp_path / "cache"
-    monkeypatch.setenv("SEMATTNET_CACHE", str(cache))
-    monkeypatch.delenv("SEMATTNET_OFFLINE", raising=False)
-    monkeypatch.delenv("HF_HUB_OFFLINE", raising=False)
-    monkeypatch.setenv("HF_HUB_DISABLE_PROGRESS_BARS", "1")
-    try:
-        from huggingface_hub import constants
-    except ImportError:
-        pass
-    else:
-        monkeypatch.setattr(constants, "HF_HUB_OFFLINE", False)
+    online_cache(monkeypatch, cache)
     return cache
 
 

@@ -14,6 +14,7 @@ import pytest
 import torch
 
 import semattnet
+from tests._helpers import online_cache
 
 
 @dataclass
@@ -110,16 +111,7 @@ def server() -> Iterator[Server]:
 def cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """An empty cache in $SEMATTNET_CACHE, online."""
     root = tmp_path / "cache"
-    monkeypatch.setenv("SEMATTNET_CACHE", str(root))
-    monkeypatch.delenv("SEMATTNET_OFFLINE", raising=False)
-    monkeypatch.delenv("HF_HUB_OFFLINE", raising=False)
-    monkeypatch.setenv("HF_HUB_DISABLE_PROGRESS_BARS", "1")
-    try:  # huggingface_hub reads HF_HUB_OFFLINE once, at import: make sure it sees "online"
-        from huggingface_hub import constants
-    except ImportError:
-        pass
-    else:
-        monkeypatch.setattr(constants, "HF_HUB_OFFLINE", False)
+    online_cache(monkeypatch, root)
     return root
 
 
