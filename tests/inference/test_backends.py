@@ -92,3 +92,51 @@ def test_bf16_precision_runs_and_is_close(model: torch.nn.Module) -> None:
         ref = model(**x).refined_depth
     out = optimize_for_inference(model, backend="torch", precision="bf16")(**x).refined_depth
     assert out.dtype == torch.float32 and _rel(out, ref) < 0.1
+
+
+@pytest.mark.skipif(importlib.util.find_spec("onnxruntime") is None, reason="onnxruntime is not installed")
+def test_engines_run_the_network_in_the_graph_and_the_propagation_in_torch(tmp_path: Path) -> None:
+    """The cached graph ends at the refinement heads; the engine's propagation gives the eager result
+    (also in the paper's "clean" hand-over mode, whose blend weights come out of the graph)."""
+    import onnx
+
+    torch.manual_seed(1)
+    net = semattnet.build_model("semattnet", width=0.125, iterations=3, refinement_mode="clean").eval()
+    engine = optimize_for_inference(net, backend="onnxruntime", size=SIZE, cache_dir=tmp_path)
+    outputs = [o.name for o in onnx.load(next((tmp_path / "engines").glob("*/model.onnx"))).graph.output]
+    assert "refined_depth" not in outputs and "fused_depth" in outputs
+    assert {"refinement.att", "refinement.affinities.2", "refinement.mask_s2"} <= set(outputs)
+    x = random_inputs(b=1, h=SIZE[0], w=SIZE[1])
+    with torch.inference_mode():
+        ref = net(**x)
+    out = engine(**x)
+    for name in ("refined_s2_depth", "refined_depth"):
+        assert _rel(out.to_dict()[name], ref.to_dict()[name]) < 1e-4, name
+
+
+def test_whole_model_export_keeps_the_propagation(model: torch.nn.Module, tmp_path: Path) -> None:
+    onnx = pytest.importorskip("onnx")
+    from semattnet.weights.export import export_onnx
+
+    path = export_onnx(model, tmp_path / "m.onnx", size=(32, 64))
+    outputs = [o.name for o in onnx.load(path).graph.output]
+    assert "refined_depth" in outputs and not any(n.startswith("refinement.") for n in outputs)
+
+
+def test_refinement_inputs_round_trip_and_heads_need_iterations(model: torch.nn.Module) -> None:
+    from semattnet.inference.backends import output_from_arrays
+    from semattnet.models.refinement import RefinementInputs
+
+    x = random_inputs(b=1, h=32, w=64)
+    with torch.inference_mode():
+        out, heads = model.forward_network(**x)
+        ref = model(**x)
+    flat = heads.to_dict()
+    assert sorted(k for k in flat if "affinities" in k) == [f"refinement.affinities{s}.{i}" for s in ("", "_s2")
+                                                           for i in range(3)]  # fmt: skip
+    back = RefinementInputs.from_dict(flat)
+    assert all(torch.equal(a, b) for a, b in zip(back.affinities, heads.affinities, strict=True)) and back.att is None
+    got = output_from_arrays({**out.to_dict(), **flat}, iterations=2)
+    assert _rel(got.refined_depth, ref.refined_depth) < 1e-5
+    with pytest.raises(ValueError, match="iterations"):
+        output_from_arrays({**out.to_dict(), **flat})

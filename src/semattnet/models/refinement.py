@@ -26,8 +26,9 @@ Parameter names are the authors' (``kernel_conf_layer``, ``mask_layer``,
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import Literal
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields
+from typing import Any, Literal
 
 import torch
 import torch.nn.functional as F
@@ -44,7 +45,7 @@ from semattnet.models.propagation import (
 )
 from semattnet.models.propagation import cpu_kernel as fused_propagation
 
-__all__ = ["AtrousCSPNRefinement", "PropagationImpl", "run_cspn_stage"]
+__all__ = ["AtrousCSPNRefinement", "PropagationImpl", "RefinementInputs", "propagate_refinement", "run_cspn_stage"]
 
 PropagationImpl = Literal["auto", "pytorch", "naive"]
 
@@ -144,40 +145,98 @@ class AtrousCSPNRefinement:
         mask = torch.sigmoid(getattr(self, f"mask_layer{suffix}")(feature))
         return affinities, kernel_conf, mask
 
+    def refinement_inputs(
+        self, depth: torch.Tensor, sparse: torch.Tensor, feature_s1: torch.Tensor, feature_s2: torch.Tensor
+    ) -> RefinementInputs:
+        """Every head of both stages: the network's part of the refinement (no propagation yet)."""
+        with torch.autocast(device_type=depth.device.type, enabled=False):
+            depth, sparse = depth.float(), sparse.float()
+            feature_s1, feature_s2 = feature_s1.float(), feature_s2.float()
+            sparse_s2, valid_s2 = downsample_sparse(sparse, 2)
+            affinities_s2, kernel_conf_s2, mask_s2 = self._heads(feature_s2, "_s2")
+            att = None
+            if self._refinement_mode != "authors":
+                half = F.interpolate(self.dimhalf_s2(feature_s2), scale_factor=2.0, mode="nearest")
+                att = torch.softmax(self.att_12(torch.cat((feature_s1, half), dim=1)), dim=1)
+            affinities, kernel_conf, mask = self._heads(feature_s1, "")
+            valid = (sparse > 0).to(sparse.dtype)
+        return RefinementInputs(depth, sparse, sparse_s2, affinities_s2, kernel_conf_s2, mask_s2 * valid_s2,
+                                affinities, kernel_conf, mask * valid, att)  # fmt: skip
+
+    def propagation(self, inputs: RefinementInputs) -> tuple[torch.Tensor, torch.Tensor]:
+        """Both propagation stages of :func:`propagate_refinement` with this model's settings."""
+        return propagate_refinement(inputs, self._iterations, self.propagation_impl)
+
     def _refine(
         self, depth: torch.Tensor, sparse: torch.Tensor, feature_s1: torch.Tensor, feature_s2: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Refine ``depth`` (B, 1, H, W); returns (after the dilation-2 stage, final)."""
-        with torch.autocast(device_type=depth.device.type, enabled=False):
-            depth, sparse = depth.float(), sparse.float()
-            feature_s1, feature_s2 = feature_s1.float(), feature_s2.float()
+        return self.propagation(self.refinement_inputs(depth, sparse, feature_s1, feature_s2))
 
-            # Stage 1: dilation 2, i.e. dilation 1 on each 2x2 polyphase sub-grid.
-            sparse_s2, valid_s2 = downsample_sparse(sparse, 2)
-            affinities, kernel_conf, mask = self._heads(feature_s2, "_s2")
-            grids = F.pixel_unshuffle(depth, 2)  # (B, 4, H/2, W/2): D[a::2, b::2] at channel 2a + b
-            refined_grids = run_cspn_stage(
-                grids,
-                grids,
-                affinities,
-                kernel_conf,
-                sparse_s2,
-                mask * valid_s2,
-                self._iterations,
-                self.propagation_impl,
-            )
-            refined_s2 = F.pixel_shuffle(refined_grids, 2)
 
-            # Stage 2: dilation 1 at full resolution.
-            if self._refinement_mode == "authors":
-                start = h0 = refined_s2
-            else:
-                half = F.interpolate(self.dimhalf_s2(feature_s2), scale_factor=2.0, mode="nearest")
-                att = torch.softmax(self.att_12(torch.cat((feature_s1, half), dim=1)), dim=1)
-                start, h0 = att[:, 0:1] * refined_s2 + att[:, 1:2] * depth, depth
-            affinities, kernel_conf, mask = self._heads(feature_s1, "")
-            valid = (sparse > 0).to(sparse.dtype)
-            refined = run_cspn_stage(
-                start, h0, affinities, kernel_conf, sparse, mask * valid, self._iterations, self.propagation_impl
+@dataclass
+class RefinementInputs:
+    """What the two propagation stages read; the network computes all of it before any propagation.
+
+    ``depth`` is the backbone's fused depth D (B, 1, H, W); ``*_s2`` belong to the dilation-2
+    stage (half-resolution heads); ``mask*`` are the learned re-injection masks already multiplied
+    by the validity of the sparse depth; ``att`` is the stage hand-over blend of the ``"clean"``
+    mode (``None`` in the authors' mode). Engines that run the network elsewhere (OpenVINO, ONNX
+    Runtime) return these tensors and finish with :func:`propagate_refinement` in PyTorch.
+    """
+
+    depth: torch.Tensor
+    sparse: torch.Tensor
+    sparse_s2: torch.Tensor
+    affinities_s2: list[torch.Tensor]
+    kernel_conf_s2: torch.Tensor
+    mask_s2: torch.Tensor
+    affinities: list[torch.Tensor]
+    kernel_conf: torch.Tensor
+    mask: torch.Tensor
+    att: torch.Tensor | None = None
+
+    def to_dict(self, prefix: str = "refinement.") -> dict[str, torch.Tensor]:
+        """Flat named tensors (lists numbered), e.g. for an exported graph's outputs."""
+        out: dict[str, torch.Tensor] = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, list):
+                out.update({f"{prefix}{f.name}.{i}": v for i, v in enumerate(value)})
+            elif value is not None:
+                out[f"{prefix}{f.name}"] = value
+        return out
+
+    @classmethod
+    def from_dict(cls, tensors: Mapping[str, torch.Tensor], prefix: str = "refinement.") -> RefinementInputs:
+        """The inverse of :meth:`to_dict` (other keys are ignored)."""
+        kwargs: dict[str, Any] = {}
+        for f in fields(cls):
+            numbered = sorted(
+                (k for k in tensors if k.startswith(f"{prefix}{f.name}.")), key=lambda k: int(k.rsplit(".", 1)[1])
             )
-        return refined_s2, refined
+            kwargs[f.name] = [tensors[k] for k in numbered] if numbered else tensors.get(f"{prefix}{f.name}")
+        return cls(**kwargs)
+
+
+def propagate_refinement(
+    inputs: RefinementInputs, iterations: int, impl: PropagationImpl = "auto"
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """CSPN++ with atrous propagation (module docstring): (after the dilation-2 stage, final), each (B, 1, H, W).
+
+    Stage 1 runs dilation 2 as dilation 1 on the four 2x2 polyphase sub-grids; stage 2 runs
+    dilation 1 at full resolution, starting from stage 1's result (authors' mode) or from the
+    ``att`` blend of it and D with h_0 = D (clean mode).
+    """
+    ri = inputs
+    with torch.autocast(device_type=ri.depth.device.type, enabled=False):
+        grids = F.pixel_unshuffle(ri.depth, 2)  # (B, 4, H/2, W/2): D[a::2, b::2] at channel 2a + b
+        refined_grids = run_cspn_stage(grids, grids, ri.affinities_s2, ri.kernel_conf_s2, ri.sparse_s2, ri.mask_s2,
+                                       iterations, impl)  # fmt: skip
+        refined_s2 = F.pixel_shuffle(refined_grids, 2)
+        if ri.att is None:
+            start = h0 = refined_s2
+        else:
+            start, h0 = ri.att[:, 0:1] * refined_s2 + ri.att[:, 1:2] * ri.depth, ri.depth
+        refined = run_cspn_stage(start, h0, ri.affinities, ri.kernel_conf, ri.sparse, ri.mask, iterations, impl)
+    return refined_s2, refined

@@ -10,7 +10,7 @@ from torch import nn
 from semattnet.models.backbone import SemAttNetBackbone
 from semattnet.models.config import SemAttNetConfig
 from semattnet.models.outputs import DepthCompletionOutput
-from semattnet.models.refinement import AtrousCSPNRefinement
+from semattnet.models.refinement import AtrousCSPNRefinement, RefinementInputs
 
 __all__ = ["SemAttNet"]
 
@@ -40,8 +40,19 @@ class SemAttNet(AtrousCSPNRefinement, nn.Module):
         self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
     ) -> DepthCompletionOutput:
         """Complete and refine depth. Inputs: RGB 0..255, semantic colours 0..255, sparse metres."""
+        out, inputs = self.forward_network(rgb, semantic, sparse)
+        refined_s2, refined = self.propagation(inputs)
+        return dataclasses.replace(out, refined_s2_depth=refined_s2, refined_depth=refined)
+
+    def forward_network(
+        self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
+    ) -> tuple[DepthCompletionOutput, RefinementInputs]:
+        """Everything but the propagation: the backbone's output and the refinement heads.
+
+        ``forward`` is ``forward_network`` followed by :meth:`propagation`; inference engines
+        run this part in another runtime and the propagation in PyTorch's fused kernel.
+        """
         if sparse is None:
             raise ValueError("sparse depth is required")
         out, feature_s1, feature_s2 = self.backbone.forward_features(rgb, semantic, sparse)
-        refined_s2, refined = self._refine(out.fused_depth, sparse, feature_s1, feature_s2)
-        return dataclasses.replace(out, refined_s2_depth=refined_s2, refined_depth=refined)
+        return out, self.refinement_inputs(out.fused_depth, sparse, feature_s1, feature_s2)

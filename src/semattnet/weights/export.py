@@ -24,20 +24,32 @@ __all__ = ["export_onnx", "export_torchscript", "output_names"]
 class _Flat(nn.Module):
     """The model with positional inputs and a tuple of outputs (what exporters need)."""
 
-    def __init__(self, model: nn.Module, names: list[str], semantic: bool) -> None:
+    def __init__(self, model: nn.Module, names: list[str], semantic: bool, propagation: bool = True) -> None:
         super().__init__()
-        self.model, self.names, self.semantic = model, names, semantic
+        self.model, self.names, self.semantic, self.propagation = model, names, semantic, propagation
 
     def forward(self, *inputs: torch.Tensor) -> tuple[torch.Tensor, ...]:
         if self.semantic:
             rgb, semantic, sparse = inputs
         else:
             (rgb, sparse), semantic = inputs, None
-        out = self.model(rgb=rgb, semantic=semantic, sparse=sparse).to_dict()
+        out = _named_outputs(self.model, {"rgb": rgb, "semantic": semantic, "sparse": sparse}, self.propagation)
         return tuple(out[n] for n in self.names)
 
 
-def _prepare(model: nn.Module, size: tuple[int, int]) -> tuple[_Flat, tuple[torch.Tensor, ...], list[str]]:
+def _named_outputs(
+    model: nn.Module, inputs: dict[str, torch.Tensor | None], propagation: bool
+) -> dict[str, torch.Tensor]:
+    """The model's outputs by name; without ``propagation``, the network part and the refinement heads."""
+    if propagation or not hasattr(model, "forward_network"):
+        return model(**inputs).to_dict()
+    out, heads = model.forward_network(**inputs)
+    return {**out.to_dict(), **heads.to_dict()}
+
+
+def _prepare(
+    model: nn.Module, size: tuple[int, int], propagation: bool = True
+) -> tuple[_Flat, tuple[torch.Tensor, ...], list[str]]:
     h, w = size
     model = fold_batchnorm(model).cpu().float()
     semantic = getattr(model, "config", None) is None or model.config.branches == 3
@@ -46,8 +58,8 @@ def _prepare(model: nn.Module, size: tuple[int, int]) -> tuple[_Flat, tuple[torc
     sparse = torch.rand(1, 1, h, w, generator=g) * 80 * (torch.rand(1, 1, h, w, generator=g) < 0.05)
     example = (rgb, torch.rand(1, 3, h, w, generator=g) * 255, sparse) if semantic else (rgb, sparse)
     with torch.inference_mode():
-        names = list(model(**dict(zip(_input_names(semantic), example, strict=True))).to_dict())
-    return _Flat(model, names, semantic).eval(), example, names
+        names = list(_named_outputs(model, dict(zip(_input_names(semantic), example, strict=True)), propagation))
+    return _Flat(model, names, semantic, propagation).eval(), example, names
 
 
 def _input_names(semantic: bool) -> list[str]:
@@ -59,9 +71,17 @@ def output_names(model: nn.Module, size: tuple[int, int] = (64, 96)) -> list[str
     return _prepare(model, size)[2]
 
 
-def export_onnx(model: nn.Module, path: str | Path, size: tuple[int, int] = (352, 1216), opset: int = 17) -> Path:
-    """Write ``model`` as ONNX for (1, C, H, W) inputs of ``size``; returns the path."""
-    flat, example, names = _prepare(model, size)
+def export_onnx(
+    model: nn.Module, path: str | Path, size: tuple[int, int] = (352, 1216), opset: int = 17, propagation: bool = True
+) -> Path:
+    """Write ``model`` as ONNX for (1, C, H, W) inputs of ``size``; returns the path.
+
+    ``propagation=False`` (refining models) leaves the CSPN++ propagation out: the graph ends at
+    the backbone's outputs and the refinement heads (outputs named ``refinement.*``, see
+    :class:`~semattnet.models.refinement.RefinementInputs`), which our inference engines finish
+    with the fused propagation kernel. The default writes the whole model, for deployment.
+    """
+    flat, example, names = _prepare(model, size, propagation)
     path = Path(path)
     with atomic_path(path, suffix=".onnx") as tmp, torch.no_grad(), warnings.catch_warnings():
         # the tracer's notes on shape checks and constant folding are expected here (fixed-size export)

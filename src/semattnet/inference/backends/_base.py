@@ -10,10 +10,12 @@ import torch
 from torch import nn
 
 from semattnet.models.outputs import DepthCompletionOutput
+from semattnet.models.refinement import RefinementInputs, propagate_refinement
 
 __all__ = ["InferenceEngine", "output_from_arrays"]
 
 _FIELDS = tuple(f.name for f in fields(DepthCompletionOutput))
+_HEADS = "refinement."
 
 
 class InferenceEngine(nn.Module):
@@ -48,10 +50,25 @@ class InferenceEngine(nn.Module):
         return f"backend={self.backend}, size={self.size}, precision={self.precision}"
 
 
-def output_from_arrays(arrays: Mapping[str, np.ndarray | torch.Tensor]) -> DepthCompletionOutput:
-    """A typed output from named (B, 1, H, W) arrays (missing fields are ``None``)."""
-    unknown = set(arrays) - set(_FIELDS)
+def output_from_arrays(
+    arrays: Mapping[str, np.ndarray | torch.Tensor], iterations: int | None = None
+) -> DepthCompletionOutput:
+    """A typed output from named (B, 1, H, W) arrays (missing fields are ``None``).
+
+    Arrays named ``refinement.*`` are the refinement heads of a graph exported without its
+    propagation (:func:`semattnet.weights.export.export_onnx` with ``propagation=False``): both
+    CSPN++ stages then run here, ``iterations`` steps per kernel size, with the fused kernel.
+    """
+    tensors = {k: torch.as_tensor(np.asarray(v)) if not isinstance(v, torch.Tensor) else v for k, v in arrays.items()}
+    heads = {k: v for k, v in tensors.items() if k.startswith(_HEADS)}
+    unknown = set(tensors) - set(_FIELDS) - set(heads)
     if unknown:
         raise ValueError(f"unknown output names {sorted(unknown)}; expected some of {_FIELDS}")
-    tensors = {k: torch.as_tensor(np.asarray(v)) if not isinstance(v, torch.Tensor) else v for k, v in arrays.items()}
+    if heads:
+        if iterations is None:
+            raise ValueError("refinement heads without the number of propagation iterations")
+        with torch.inference_mode():
+            tensors["refined_s2_depth"], tensors["refined_depth"] = propagate_refinement(
+                RefinementInputs.from_dict(heads, _HEADS), iterations
+            )
     return DepthCompletionOutput(**{name: tensors.get(name) for name in _FIELDS})  # type: ignore[arg-type]

@@ -22,7 +22,7 @@ from semattnet.weights.download import get_cache_dir
 from semattnet.weights.export import export_onnx
 from semattnet.weights.gate import tensor_digest
 
-__all__ = ["cached_onnx", "engine_dir", "engine_key"]
+__all__ = ["cached_onnx", "engine_dir", "engine_key", "propagation_steps"]
 
 
 def engine_key(model: nn.Module, size: tuple[int, int], extra: str = "") -> str:
@@ -35,6 +35,7 @@ def engine_key(model: nn.Module, size: tuple[int, int], extra: str = "") -> str:
         "torch": torch.__version__,
         "semattnet": library_version(),
         "extra": extra,
+        "graph": "network-without-propagation",  # the export form: a new form never reuses old files
     }
     return hashlib.sha256(json.dumps(facts, sort_keys=True).encode()).hexdigest()[:24]
 
@@ -47,10 +48,21 @@ def engine_dir(key: str, cache_dir: str | os.PathLike[str] | None = None) -> Pat
 
 
 def cached_onnx(model: nn.Module, size: tuple[int, int], folder: Path, log=None) -> Path:  # type: ignore[no-untyped-def]
-    """``folder/model.onnx``, exported (BatchNorm folded) unless it is already there."""
+    """``folder/model.onnx``, exported (BatchNorm folded) unless it is already there.
+
+    The graph stops before the CSPN++ propagation (``export_onnx(propagation=False)``): the
+    engines finish it with the fused kernel, several times faster than the same steps as
+    hundreds of small graph operations (see :func:`propagation_steps`).
+    """
     path = folder / "model.onnx"
     if not path.is_file():
         if log is not None:
             log(f"exporting the model to ONNX at {size[0]}x{size[1]} (once; cached in {folder}) ...")
-        export_onnx(model, path, size=size)
+        export_onnx(model, path, size=size, propagation=False)
     return path
+
+
+def propagation_steps(model: nn.Module) -> int | None:
+    """Propagation steps per kernel size of a refining model (what its engine runs after the graph), else None."""
+    config = getattr(model, "config", None)
+    return config.iterations if config is not None and config.refine else None

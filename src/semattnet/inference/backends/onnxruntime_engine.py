@@ -8,7 +8,7 @@ import torch
 from torch import nn
 
 from semattnet.inference.backends._base import InferenceEngine, output_from_arrays
-from semattnet.inference.backends._export_cache import cached_onnx, engine_dir, engine_key
+from semattnet.inference.backends._export_cache import cached_onnx, engine_dir, engine_key, propagation_steps
 from semattnet.models.outputs import DepthCompletionOutput
 
 __all__ = ["OnnxRuntimeEngine"]
@@ -40,6 +40,7 @@ class OnnxRuntimeEngine(InferenceEngine):
         )
         self.input_names = [i.name for i in self.session.get_inputs()]
         self.output_names = [o.name for o in self.session.get_outputs()]
+        self.iterations = propagation_steps(model)
 
     def forward(
         self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
@@ -49,5 +50,6 @@ class OnnxRuntimeEngine(InferenceEngine):
         feeds = {name: given[name].detach().cpu().float().numpy() for name in self.input_names}
         arrays = self.session.run(self.output_names, feeds)
         return output_from_arrays(
-            {n: torch.from_numpy(a).to(rgb.device) for n, a in zip(self.output_names, arrays, strict=True)}
+            {n: torch.from_numpy(a).to(rgb.device) for n, a in zip(self.output_names, arrays, strict=True)},
+            self.iterations,
         )

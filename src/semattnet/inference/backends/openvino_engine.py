@@ -15,7 +15,7 @@ import torch
 from torch import nn
 
 from semattnet.inference.backends._base import InferenceEngine, output_from_arrays
-from semattnet.inference.backends._export_cache import cached_onnx, engine_dir, engine_key
+from semattnet.inference.backends._export_cache import cached_onnx, engine_dir, engine_key, propagation_steps
 from semattnet.models.outputs import DepthCompletionOutput
 
 __all__ = ["OpenVinoEngine"]
@@ -29,9 +29,9 @@ def _import_openvino():  # type: ignore[no-untyped-def]
     return openvino
 
 
-def _one_of(names: set[str], known: set[str]) -> str:
-    """The one name of a model port that we know (IR tensors carry several names)."""
-    matches = sorted(names & known)
+def _one_of(names: set[str], known: set[str], prefix: str = "\0") -> str:
+    """The one name of a model port that we know or that starts with ``prefix`` (IR tensors carry several names)."""
+    matches = sorted(n for n in names if n in known or n.startswith(prefix))
     if len(matches) != 1:
         raise ValueError(f"cannot tell which port {sorted(names)} is; expected one of {sorted(known)}")
     return matches[0]
@@ -60,7 +60,8 @@ class OpenVinoEngine(InferenceEngine):
         self.request = self.compiled.create_infer_request()
         self.input_names = [_one_of(i.get_names(), {"rgb", "semantic", "sparse"}) for i in self.compiled.inputs]
         fields = set(DepthCompletionOutput.__dataclass_fields__)
-        self.output_names = [_one_of(o.get_names(), fields) for o in self.compiled.outputs]
+        self.output_names = [_one_of(o.get_names(), fields, "refinement.") for o in self.compiled.outputs]
+        self.iterations = propagation_steps(model)
 
     def forward(
         self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
@@ -69,4 +70,5 @@ class OpenVinoEngine(InferenceEngine):
         given = {"rgb": rgb, "semantic": semantic, "sparse": sparse}
         result = self.request.infer([given[name].detach().cpu().float().numpy() for name in self.input_names])
         arrays = {name: result[out] for name, out in zip(self.output_names, self.compiled.outputs, strict=True)}
-        return output_from_arrays({n: torch.from_numpy(a.copy()).to(rgb.device) for n, a in arrays.items()})
+        tensors = {n: torch.from_numpy(a.copy()).to(rgb.device) for n, a in arrays.items()}
+        return output_from_arrays(tensors, self.iterations)
