@@ -82,6 +82,8 @@ class SyntheticFrame:
     meta: dict = field(default_factory=dict)
     #: (H, W) uint8 index into MATERIALS of the surface each pixel sees (all "matte" in the ideal style).
     material: np.ndarray | None = None
+    #: (H, W) bool: road markings and posters of the realistic style (colour edges on flat surfaces).
+    paint: np.ndarray | None = None
 
 
 @dataclass
@@ -561,14 +563,15 @@ def _road_markings(points: np.ndarray, road: np.ndarray, dress: _Dress) -> np.nd
 
 def _decorate(
     view: _View, labels: np.ndarray, albedo: np.ndarray, surfaces: tuple[np.ndarray, ...], dress: _Dress
-) -> np.ndarray:
-    """Realistic albedo: glass dark bluish, posters, road markings (colour edges, no depth edges)."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """Realistic albedo (glass dark bluish, posters, road markings) and where paint lies (no depth edges)."""
     material, poster, colour = surfaces
     albedo = albedo.copy()
     albedo[material == _MAT["glass"]] = _GLASS_RGB
     albedo[poster] = colour[poster]
-    albedo[_road_markings(view.points, labels == _ID["road"], dress)] = _MARKING_RGB
-    return albedo
+    marking = _road_markings(view.points, labels == _ID["road"], dress)
+    albedo[marking] = _MARKING_RGB
+    return albedo, poster | marking
 
 
 def _reflected_range(points: np.ndarray, dirs: np.ndarray, axis: np.ndarray, boxes: list[_Box]) -> np.ndarray:
@@ -627,14 +630,16 @@ def _sensor_effects(
 
 def _colours(
     view: _View, labels: np.ndarray, boxes: list[_Box], dress: _Dress | None, sun: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """(N, 3) albedo and (N,) material codes, with the realistic style's glass, posters, markings, camouflage."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(N, 3) albedo, (N,) material codes and (N,) paint mask, with the realistic style's glass, posters,
+    markings and camouflage (the ideal style: all matte, no paint beyond the centre line)."""
+    n = view.height * view.width
     if dress is None:
-        return _albedo(view, labels, boxes), np.zeros(view.height * view.width, dtype=np.int64)
+        return _albedo(view, labels, boxes), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool)
     _camouflage_poles(boxes, dress, sun)  # needs the sun; draws nothing
     surfaces = _surfaces(view.points, view.idx, view.axis, boxes)
-    albedo = _decorate(view, labels, _albedo(view, labels, boxes), surfaces, dress)
-    return albedo, np.where(view.far, _MAT["matte"], surfaces[0])
+    albedo, paint = _decorate(view, labels, _albedo(view, labels, boxes), surfaces, dress)
+    return albedo, np.where(view.far, _MAT["matte"], surfaces[0]), paint
 
 
 def _ground_truth(depth: np.ndarray, K: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -690,7 +695,7 @@ def make_frame(
     band = (0.0, 0.0)
     if shadow:
         light, band = _overpass(view, light, rng)
-    albedo, material = _colours(view, labels, boxes, dress, sun)
+    albedo, material, paint = _colours(view, labels, boxes, dress, sun)
     rgb = _render(view, albedo, light, exposure, rng)
     labels = labels.reshape(height, width)
     depth = np.where(view.far.reshape(height, width), 0.0, view.points[:, 2].reshape(height, width))
@@ -710,4 +715,5 @@ def make_frame(
         shadowed=shadow,
         meta=meta,
         material=material.astype(np.uint8).reshape(height, width),
+        paint=paint.reshape(height, width),
     )
