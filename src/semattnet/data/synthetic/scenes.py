@@ -540,14 +540,15 @@ def _surfaces(points: np.ndarray, idx: np.ndarray, axis: np.ndarray, boxes: list
     material = np.where(on_box, box_mat[safe], _MAT["matte"])
     material[(material == _MAT["glass"]) & (axis == 1)] = _MAT["matte"]  # a cabin's roof is not glass
     poster, colour = _posters(points, idx, axis, boxes)
-    windows = on_box & is_building[safe] & (axis != 1) & _window(points) & ~poster
-    material[windows] = _MAT["glass"]
+    facade = np.flatnonzero(on_box & is_building[safe] & (axis != 1) & ~poster)
+    material[facade[_window(points[facade])]] = _MAT["glass"]
     return material, poster, colour
 
 
 def _road_markings(points: np.ndarray, road: np.ndarray, dress: _Dress) -> np.ndarray:
     """Which road points carry paint (the realistic style's markings; the centre line is in :func:`_albedo`)."""
-    x, z, rh, m = points[:, 0], points[:, 2], dress.road_half, dress.markings
+    on = np.flatnonzero(road)
+    x, z, rh, m = points[on, 0], points[on, 2], dress.road_half, dress.markings
     paint = (np.abs(np.abs(x) - (rh - 0.3)) < 0.08) & (np.mod(z + m["edge_phase"], 5.0) < 2.5)
     if m["zebra_z"] is not None:
         paint |= (z > m["zebra_z"]) & (z < m["zebra_z"] + 3.0) & (np.mod(x + rh, 1.0) < 0.5) & (np.abs(x) < rh - 0.5)
@@ -558,7 +559,9 @@ def _road_markings(points: np.ndarray, road: np.ndarray, dress: _Dress) -> np.nd
         shaft = (dx < 0.12) & (dz > 0) & (dz < 2.5)
         head = (dz >= 2.5) & (dz < 4.0) & (dx < 0.5 * (1 - (dz - 2.5) / 1.5))
         paint |= shaft | head
-    return paint & road
+    out = np.zeros(len(road), dtype=bool)
+    out[on[paint]] = True
+    return out
 
 
 def _decorate(
