@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 
@@ -10,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from semattnet.cli import main
-from semattnet.data.synthetic.scenes import CITYSCAPES_PALETTE, make_frame
+from semattnet.data.synthetic.scenes import _ID, CITYSCAPES_PALETTE, MATERIALS, SCENE_STYLES, make_frame
 
 
 @pytest.fixture(scope="module", params=[(352, 1216, 0), (352, 1216, 1), (96, 320, 2)])
@@ -55,6 +56,31 @@ def test_deterministic_and_shadow_only_changes_colour() -> None:
     assert not np.array_equal(make_frame(64, 128, seed=6).depth, a.depth)
 
 
+def _digest(a: np.ndarray) -> str:
+    return hashlib.sha256(np.ascontiguousarray(a).tobytes()).hexdigest()[:16]
+
+
+# Computed on the generator before the "realistic" style existed: the default style must keep
+# drawing the same numbers in the same order (rgb, labels, sparse and gt in KITTI's 1/256 m steps).
+_PINNED = {
+    (64, 128, 3): ("7daa61081358ddca", "07506dac4202cb94", "d3a6cc73699ff92d", "53ce995fdac63be1", 114074.877, True),
+    (96, 320, 7): ("83c9576013a97a3f", "bce961f94cc5e9e3", "b90081d24f1d1ced", "79e531546b0b4b37", 617200.351, False),
+}
+
+
+@pytest.mark.parametrize("key", list(_PINNED))
+def test_ideal_style_is_unchanged(key: tuple[int, int, int]) -> None:
+    h, w, seed = key
+    f = make_frame(h, w, seed=seed)
+    rgb, labels, sparse, gt, depth_sum, shadowed = _PINNED[key]
+    assert _digest(f.rgb) == rgb
+    assert _digest(f.labels.astype(np.uint8)) == labels
+    assert _digest(np.round(f.sparse * 256).astype(np.uint16)) == sparse
+    assert _digest(np.round(f.gt * 256).astype(np.uint16)) == gt
+    assert f.depth.astype(np.float64).sum() == pytest.approx(depth_sum, abs=0.01)
+    assert f.shadowed is shadowed
+
+
 def test_synth_and_check_commands(tmp_path: Path) -> None:
     runner = CliRunner()
     out = tmp_path / "syn"
@@ -63,6 +89,7 @@ def test_synth_and_check_commands(tmp_path: Path) -> None:
     assert r.exit_code == 0, r.output
     manifest = json.loads((out / "scenes.json").read_text())
     assert manifest["counts"] == {"train": 4, "val": 2, "val_select": 2, "test": 2}
+    assert manifest["style"] == "ideal"
     assert [f["shadowed"] for f in manifest["frames"] if f["split"] == "train"] == [False, True, False, True]
     again = runner.invoke(main, ["synth", "--out", str(out), "--frames", "1", "--size", "64x128"])
     assert again.exit_code != 0 and "not empty" in again.output
@@ -79,6 +106,30 @@ def test_synth_and_check_commands(tmp_path: Path) -> None:
     assert str(victim) in check.output and "not a readable PNG" in check.output
 
 
+def test_style_reaches_the_tree_and_the_manifest(tmp_path: Path) -> None:
+    from semattnet.data import layout
+    from semattnet.data.io import read_depth
+    from semattnet.data.synthetic.tree import SYNTH_DATE, _frame_seed, write_synthetic_kitti
+
+    manifest = write_synthetic_kitti(tmp_path / "t", frames=2, size=(64, 128), seed=3, eval_frames=1, workers=1,
+                                     style="realistic")  # fmt: skip
+    assert manifest["style"] == json.loads((tmp_path / "t" / "scenes.json").read_text())["style"] == "realistic"
+    first = next(e for e in manifest["frames"] if e["split"] == "train" and e["index"] == 0)
+    expected = make_frame(64, 128, seed=_frame_seed(3, "train", 0), shadow=False, style="realistic").sparse
+    drive = f"{SYNTH_DATE}_drive_0000_sync"
+    written = layout.velodyne_path(tmp_path / "t", "train", drive, "02", "0000000000")
+    np.testing.assert_array_equal(read_depth(written), expected)
+    assert not np.array_equal(expected, make_frame(64, 128, seed=first["seed"], shadow=False).sparse)
+    with pytest.raises(ValueError, match="scene style"):
+        write_synthetic_kitti(tmp_path / "u", frames=1, size=(64, 128), style="nope")
+    r = CliRunner().invoke(main, ["synth", "--out", str(tmp_path / "c"), "--frames", "2", "--size", "48x96",
+                                  "--eval-frames", "2", "--workers", "1", "--style", "realistic"])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    assert json.loads((tmp_path / "c" / "scenes.json").read_text())["style"] == "realistic"
+    bad = CliRunner().invoke(main, ["synth", "--out", str(tmp_path / "d"), "--style", "photoreal"])
+    assert bad.exit_code != 0 and "photoreal" in bad.output
+
+
 def test_worker_count_does_not_change_the_data(tmp_path: Path) -> None:
     from semattnet.data.synthetic.tree import write_synthetic_kitti
 
@@ -88,3 +139,125 @@ def test_worker_count_does_not_change_the_data(tmp_path: Path) -> None:
     assert len(files) == 3 * 4 + 1 * 4 + 1 * 4 + 1 * 3  # train, val, val_select (4 PNGs a frame), test (3)
     for f in files:
         assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes(), f
+
+
+# --- the "realistic" style ---------------------------------------------------------------------------------
+
+_SEEDS = range(8)
+
+
+@pytest.fixture(scope="module")
+def realistic() -> list:  # type: ignore[type-arg]
+    return [make_frame(352, 1216, seed=s, shadow=False, style="realistic") for s in _SEEDS]
+
+
+@pytest.fixture(scope="module")
+def ideal() -> list:  # type: ignore[type-arg]
+    return [make_frame(352, 1216, seed=s, shadow=False) for s in _SEEDS]
+
+
+def _return_rate(frames: list, mask) -> float:  # type: ignore[no-untyped-def,type-arg]
+    """Share of the pixels ``mask(frame)`` selects that carry a LiDAR point, pooled over ``frames``."""
+    hits = sum(int((mask(f) & (f.sparse > 0)).sum()) for f in frames)
+    return hits / max(1, sum(int(mask(f).sum()) for f in frames))
+
+
+def _cars(f, material: str):  # type: ignore[no-untyped-def]
+    """Car pixels of one material between 5 and 30 m."""
+    return (f.labels == _ID["car"]) & (f.material == MATERIALS.index(material)) & (f.depth > 5) & (f.depth < 30)
+
+
+def test_realistic_is_deterministic_and_the_style_is_checked() -> None:
+    a, b = make_frame(96, 320, seed=5, style="realistic"), make_frame(96, 320, seed=5, style="realistic")
+    for k in ("rgb", "semantic", "sparse", "gt", "depth", "labels", "material", "paint"):
+        np.testing.assert_array_equal(getattr(a, k), getattr(b, k))
+    assert a.meta == b.meta and a.meta["style"] == "realistic"
+    assert not np.array_equal(a.rgb, make_frame(96, 320, seed=5).rgb)
+    assert not np.array_equal(a.sparse, make_frame(96, 320, seed=6, style="realistic").sparse)
+    assert SCENE_STYLES[0] == "ideal" and make_frame(64, 128, seed=1).meta["style"] == "ideal"
+    with pytest.raises(ValueError, match="scene style"):
+        make_frame(64, 128, style="photoreal")
+
+
+def test_realistic_keeps_kitti_statistics_and_exact_targets(realistic) -> None:  # type: ignore[no-untyped-def]
+    for f in realistic:
+        assert 0.03 < (f.sparse > 0).mean() < 0.06
+        assert 0.15 <= (f.gt > 0).mean() <= 0.20
+        gt = f.gt > 0
+        np.testing.assert_allclose(f.gt[gt], f.depth[gt], atol=1 / 512 + 1e-6)  # glass is a surface for the gt
+        assert {tuple(c) for c in np.unique(f.semantic.reshape(-1, 3), axis=0)} <= set(CITYSCAPES_PALETTE.values())
+        lidar = f.meta["lidar"]
+        assert lidar["returns"] < lidar["first_surface_hits"] <= lidar["rays"]
+
+
+def test_dark_paint_returns_few_points(realistic) -> None:  # type: ignore[no-untyped-def]
+    assert sum(f.meta["cars"]["dark"] for f in realistic) >= 3
+    assert sum(f.meta["lidar"]["dropped_dark"] for f in realistic) > 0
+    dark, matte = (
+        _return_rate(realistic, lambda f: _cars(f, "dark")),
+        _return_rate(realistic, lambda f: _cars(f, "matte")),
+    )
+    assert sum(int(_cars(f, "dark").sum()) for f in realistic) > 2000  # enough pixels to compare
+    assert dark < 0.4 * matte, (dark, matte)
+
+
+def test_glass_and_gloss_give_wrong_or_no_returns(realistic) -> None:  # type: ignore[no-untyped-def]
+    behind = 0
+    for f in realistic:
+        glass = (f.labels == _ID["car"]) & (f.material == MATERIALS.index("glass")) & (f.sparse > 0)
+        behind += int((glass & (f.sparse > f.depth + 0.5)).sum())
+    assert behind > 200  # the beams passed through the windows and came back from behind the car
+    assert sum(f.meta["lidar"]["wrong_glossy"] for f in realistic) > 0
+    glossy = sum(int(((f.material == 2) & (f.sparse > f.depth + 0.5)).sum()) for f in realistic)
+    assert glossy > 0  # mirrored beams: range too long
+    windows = _return_rate(realistic, lambda f: (f.labels == _ID["building"]) & (f.material == 3))
+    walls = _return_rate(realistic, lambda f: (f.labels == _ID["building"]) & (f.material == 0))
+    assert windows < 0.3 * walls, (windows, walls)
+
+
+def test_far_road_thins_out(realistic, ideal) -> None:  # type: ignore[no-untyped-def]
+    def ratio(frames: list) -> float:  # type: ignore[type-arg]
+        road = lambda f, lo, hi: (f.labels == _ID["road"]) & (f.depth >= lo) & (f.depth < hi)  # noqa: E731
+        return _return_rate(frames, lambda f: road(f, 30, 80)) / _return_rate(frames, lambda f: road(f, 0, 15))
+
+    assert ratio(realistic) < 0.7 * ratio(ideal), (ratio(realistic), ratio(ideal))
+
+
+def test_paint_changes_colour_not_depth(realistic, ideal) -> None:  # type: ignore[no-untyped-def]
+    assert sum(f.meta["posters"] for f in realistic) > 0
+    strong = 0
+    for f in realistic:
+        rgb, d, paint = f.rgb.astype(float), f.depth.astype(float), f.paint
+        pair = paint[:, 1:] & paint[:, :-1]  # neighbours both painted (a poster or a marking)
+        edge = pair & (np.abs(rgb[:, 1:] - rgb[:, :-1]).mean(-1) > 60)
+        strong += int(edge.sum())
+        assert np.all(np.abs(d[:, 1:] - d[:, :-1])[edge] < 0.02 * d[:, 1:][edge])  # flat under the paint
+    assert strong > 500
+
+    def bright_road(frames: list) -> float:  # type: ignore[type-arg]
+        shares = []
+        for f in frames:
+            grey = f.rgb.astype(float).mean(-1)[f.labels == _ID["road"]]
+            shares.append(np.mean(grey > 1.8 * np.median(grey)))
+        return float(np.mean(shares))
+
+    assert bright_road(realistic) > 2 * bright_road(ideal)  # markings beyond the centre line
+
+
+def _hidden_edges(f) -> int:  # type: ignore[no-untyped-def]
+    """Neighbour pixel pairs car or pole | wall (no glass, no dark paint), > 2 m apart in depth, with
+    the same colour (within 8 %, noise is 6 %) and not dark (where every colour looks alike)."""
+    matte = f.material == MATERIALS.index("matte")
+    fg = ((f.labels == _ID["car"]) | (f.labels == _ID["pole"])) & matte
+    bld, rgb, d = (f.labels == _ID["building"]) & matte, f.rgb.astype(float), f.depth
+    pair = (fg[:, 1:] & bld[:, :-1]) | (bld[:, 1:] & fg[:, :-1])
+    lum = rgb.mean(-1)
+    same = np.abs(rgb[:, 1:] - rgb[:, :-1]).mean(-1) < 0.08 * lum[:, 1:]
+    return int((pair & same & (lum[:, 1:] > 50) & (lum[:, :-1] > 50) & (np.abs(d[:, 1:] - d[:, :-1]) > 2.0)).sum())
+
+
+def test_depth_edges_without_colour_edges(realistic, ideal) -> None:  # type: ignore[no-untyped-def]
+    assert sum(f.meta["cars"]["camouflaged"] for f in realistic) > 0
+    assert sum(f.meta["camouflaged_poles"] for f in realistic) > 0
+    hidden, before = sum(map(_hidden_edges, realistic)), sum(map(_hidden_edges, ideal))
+    assert hidden > 4 * before + 100, (hidden, before)  # the ideal style has next to none

@@ -55,9 +55,12 @@ class HeldOut:
         return {n: s["gt"][0].numpy() for n, s in zip(self.names, self.samples, strict=True)}
 
 
-def make_synthetic(root: Path, frames: int, eval_frames: int, size: tuple[int, int], seed: int = 0) -> HeldOut:
-    """Write a synthetic tree at ``root`` (half of each split shadowed) and load its held-out scenes."""
-    write_synthetic_kitti(root, frames=frames, size=size, seed=seed, eval_frames=eval_frames)
+def make_synthetic(
+    root: Path, frames: int, eval_frames: int, size: tuple[int, int], seed: int = 0, style: str = "ideal"
+) -> HeldOut:
+    """Write a synthetic tree at ``root`` (half of each split shadowed, scenes of ``style``) and load
+    its held-out scenes."""
+    write_synthetic_kitti(root, frames=frames, size=size, seed=seed, eval_frames=eval_frames, style=style)
     return load_held_out(root)
 
 

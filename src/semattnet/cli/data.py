@@ -8,6 +8,7 @@ import click
 
 from semattnet.cli._group import main
 from semattnet.cli._options import COUNT, POSITIVE_INT, SIZE, parse_size
+from semattnet.data.synthetic.scenes import SCENE_STYLES
 
 
 @main.command()
@@ -31,12 +32,21 @@ from semattnet.cli._options import COUNT, POSITIVE_INT, SIZE, parse_size
     "--workers", type=POSITIVE_INT, default=None, help="Processes [all cores]; the output does not depend on it."
 )
 @click.option("--overwrite", is_flag=True, help="Write into a non-empty folder, replacing a previous tree.")
+@click.option(
+    "--style",
+    type=click.Choice(SCENE_STYLES),
+    default=SCENE_STYLES[0],
+    show_default=True,
+    help="ideal: LiDAR on every surface; realistic: LiDAR fails on dark/glossy paint and glass, far and grazing "
+    "surfaces, road markings and posters, grey cars before grey walls (semantics carry information).",
+)
 def synth(out_dir: Path, frames: int, eval_frames: int | None, size: str, seed: int, workers: int | None,
-          overwrite: bool) -> None:  # fmt: skip
+          overwrite: bool, style: str) -> None:  # fmt: skip
     """Generate synthetic KITTI-like scenes in the KITTI depth completion layout."""
     from semattnet.data.synthetic.tree import write_synthetic_kitti
 
-    manifest = write_synthetic_kitti(out_dir, frames, parse_size(size), seed, eval_frames, workers, overwrite)
+    manifest = write_synthetic_kitti(out_dir, frames, parse_size(size), seed, eval_frames, workers, overwrite,
+                                     style=style)  # fmt: skip
     counts = ", ".join(f"{k} {v}" for k, v in manifest["counts"].items())
     click.echo(f"wrote {out_dir}: {counts} (manifest: {out_dir / 'scenes.json'})")
 

@@ -4,7 +4,7 @@ Splits: ``train`` and ``val`` in the raw-drive layout (drives of up to 10 frames
 ``val_select`` in ``val_selection_cropped`` style and ``test`` in
 ``test_depth_completion_anonymous`` style (no ground truth), semantic maps beside them, camera
 intrinsics (``calib_cam_to_cam.txt`` per date, one ``.txt`` per selection frame) and a
-``scenes.json`` manifest with each frame's seed and whether it is shadowed. Frame ``i`` of split
+``scenes.json`` manifest with the scene style and each frame's seed and whether it is shadowed. Frame ``i`` of split
 ``s`` always gets the same scene for a given seed, whatever the number of worker processes.
 """
 
@@ -22,7 +22,7 @@ import numpy as np
 from semattnet.data import layout
 from semattnet.data.io import write_depth as _write_depth
 from semattnet.data.io import write_image as _write_image
-from semattnet.data.synthetic.scenes import make_frame
+from semattnet.data.synthetic.scenes import SCENE_STYLES, make_frame
 
 __all__ = ["SYNTH_DATE", "write_synthetic_kitti"]
 
@@ -51,10 +51,10 @@ def _write_calib(path: Path, K: np.ndarray) -> None:
     path.write_text("\n".join(rows) + "\n")
 
 
-def _job(args: tuple[Path, str, int, int, int, int, bool | None]) -> dict[str, Any]:
-    out, split, index, seed, height, width, shadow = args
+def _job(args: tuple[Path, str, int, int, int, int, bool | None, str]) -> dict[str, Any]:
+    out, split, index, seed, height, width, shadow, style = args
     fseed = _frame_seed(seed, split, index)
-    fr = make_frame(height, width, seed=fseed, shadow=shadow)
+    fr = make_frame(height, width, seed=fseed, shadow=shadow, style=style)
     entry: dict[str, Any] = {"split": split, "index": index, "seed": fseed, "shadowed": fr.shadowed}
     if split in ("train", "val"):
         drive = f"{SYNTH_DATE}_drive_{_DRIVE_BASE[split] + index // _FRAMES_PER_DRIVE:04d}_sync"
@@ -95,18 +95,23 @@ def write_synthetic_kitti(
     workers: int | None = None,
     overwrite: bool = False,
     shadow_fraction: float = 0.5,
+    style: str = "ideal",
 ) -> dict[str, Any]:
     """Generate ``frames`` training frames and ``eval_frames`` frames for each of val,
     val_select and test (default ``max(2, frames // 5)``) under ``out``.
 
     Every frame alternates shadowed / unshadowed deterministically when ``shadow_fraction`` is
     0.5 (exactly half of each split); otherwise each frame is shadowed with that probability.
+    ``style`` is a scene style of :data:`~semattnet.data.synthetic.scenes.SCENE_STYLES`.
 
     Returns the manifest (also written to ``out/scenes.json``).
 
     Raises:
         FileExistsError: ``out`` holds files and ``overwrite`` is not set.
+        ValueError: unknown ``style``.
     """
+    if style not in SCENE_STYLES:
+        raise ValueError(f"unknown scene style {style!r}; expected one of {SCENE_STYLES}")
     out = Path(out)
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise FileExistsError(f"{out} is not empty; pass overwrite=True (--overwrite) to write into it")
@@ -116,7 +121,7 @@ def write_synthetic_kitti(
     for split, n in (("train", frames), ("val", n_eval), ("val_select", n_eval), ("test", n_eval)):
         for i in range(n):
             shadow = (i % 2 == 1) if shadow_fraction == 0.5 else None
-            jobs.append((out, split, i, seed, height, width, shadow))
+            jobs.append((out, split, i, seed, height, width, shadow, style))
     if overwrite and out.exists():
         import shutil
 
@@ -130,7 +135,7 @@ def write_synthetic_kitti(
         entries = [_job(j) for j in jobs]
     K0 = np.array(entries[0]["K"])
     _write_calib(out / "kitti_raw" / SYNTH_DATE / "calib_cam_to_cam.txt", K0)  # train and val drives share it
-    manifest = {"generator": "semattnet.data.synthetic.scenes", "seed": seed, "size": [height, width],
+    manifest = {"generator": "semattnet.data.synthetic.scenes", "style": style, "seed": seed, "size": [height, width],
                 "counts": {s: sum(e["split"] == s for e in entries) for s in layout.SPLITS},
                 "frames": [{k: v for k, v in e.items() if k != "K"} for e in entries]}  # fmt: skip
     (out / "scenes.json").write_text(json.dumps(manifest, indent=1))
