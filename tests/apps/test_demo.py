@@ -105,12 +105,13 @@ def test_results_json_schema(demo_run) -> None:  # type: ignore[no-untyped-def]
     result, _ = demo_run
     doc = json.loads(result.results_json.read_text())
     assert result.results_json == result.out_dir / "results.json"
-    assert doc["schema"] == "semattnet.demo.results/1" and doc["seeds"] == [0]
+    assert doc["schema"] == "semattnet.demo.results/1" and doc["seeds"] == [0, 1]
     assert doc["units"] == {"rmse": "mm", "mae": "mm", "irmse": "1/km", "imae": "1/km"}
     assert set(doc["methods"]) == {"sparse", "classical", "semattnet", "two_branch"}
     for method, rec in doc["methods"].items():
         assert isinstance(rec["label"], str)
-        for groups in (rec, rec["per_seed"]["0"]):
+        assert set(rec["per_seed"]) == {"0", "1"}
+        for groups in (rec, rec["per_seed"]["0"], rec["per_seed"]["1"]):
             for group in ("all", "shadowed", "unshadowed"):
                 assert set(groups[group]) == {"rmse", "mae", "irmse", "imae", "images"}, (method, group)
                 assert all(isinstance(v, (int, float)) for v in groups[group].values())
@@ -119,6 +120,25 @@ def test_results_json_schema(demo_run) -> None:  # type: ignore[no-untyped-def]
     assert set(doc["wall_seconds"]) == {"total", "models"} and set(doc["wall_seconds"]["models"]) == set(result.steps)
     assert {"cpu", "cores", "torch", "python", "device", "torch_threads"} <= set(doc["machine"])
     assert doc["settings"]["size"] == [64, 192] and doc["held_out"] == {"frames": 4, "shadowed": 2}
+    assert doc["settings"]["style"] == "realistic"
+    # the headline of a learned model is the mean of its seeds
+    sem = doc["methods"]["semattnet"]
+    assert sem["all"]["rmse"] == pytest.approx(
+        (sem["per_seed"]["0"]["all"]["rmse"] + sem["per_seed"]["1"]["all"]["rmse"]) / 2
+    )
+    wins = doc["comparisons"]["semattnet_better_than"]
+    assert set(wins) == {"classical", "two_branch"} and set(wins["classical"]) == {"rmse", "mae", "irmse", "imae"}
+    assert wins["classical"]["mae"] == (sem["all"]["mae"] < doc["methods"]["classical"]["all"]["mae"])
+    assert len(doc["comparisons"]["verdicts"]) == 2
+
+
+def test_report_shows_every_seed_and_the_verdicts(demo_run) -> None:  # type: ignore[no-untyped-def]
+    result, _ = demo_run
+    md = result.report_md.read_text()
+    assert "| SemAttNet (CG + SG + DG, SAMMAFB, CSPN++), mean of 2 seeds |" in md
+    for seed in (0, 1):
+        assert f"|   SemAttNet, seed {seed} |" in md and f"|   Two-branch ablation, seed {seed} |" in md
+    assert "SemAttNet (mean of seeds 0, 1) vs Classical completion: better on" in md
 
 
 def test_demo_viewer_in_chromium(demo_run) -> None:  # type: ignore[no-untyped-def]
@@ -154,14 +174,16 @@ def test_step_plan_equal_steps_or_equal_time(monkeypatch) -> None:  # type: igno
 
     times = {3: (0.25, 0.5), 2: (0.125, 0.25)}  # seconds per (backbone, full) step: three- and two-branch
     monkeypatch.setattr(demo, "_step_times", lambda s, device, overrides: times[overrides["branches"]])
-    s = demo.DemoSettings(minutes=1.0, backbone_share=0.5)
+    s = demo.DemoSettings(minutes=1.0, backbone_share=0.5, seeds=(0,))
     plan = demo._step_plan(s, torch.device("cpu"))
     assert plan["semattnet"] == plan["two_branch"] == (80, 40)  # 30 s / (0.25 + 0.125), 30 s / (0.5 + 0.25)
     spent = sum(
         n_bb * times[b][0] + n_full * times[b][1] for (n_bb, n_full), b in zip(plan.values(), (3, 2), strict=True)
     )
     assert spent == pytest.approx(60.0)
-    plan = demo._step_plan(demo.DemoSettings(minutes=1.0, backbone_share=0.5, equal_steps=False), torch.device("cpu"))
+    plan = demo._step_plan(
+        demo.DemoSettings(minutes=1.0, backbone_share=0.5, equal_steps=False, seeds=(0,)), torch.device("cpu")
+    )
     assert plan == {"semattnet": (60, 30), "two_branch": (120, 60)}
-    two_seeds = demo._step_plan(demo.DemoSettings(minutes=1.0, backbone_share=0.5, seeds=(0, 1)), torch.device("cpu"))
-    assert two_seeds["semattnet"] == (40, 20)  # the budget covers every seed
+    two_seeds = demo._step_plan(demo.DemoSettings(minutes=1.0, backbone_share=0.5), torch.device("cpu"))
+    assert two_seeds["semattnet"] == (40, 20)  # the default trains two seeds; the budget covers both

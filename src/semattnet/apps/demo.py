@@ -95,11 +95,14 @@ class DemoSettings:
     seed: int = 0
     device: str = "auto"
     #: training seeds (each model is trained once per seed; the headline is the mean); None: (seed,)
-    seeds: tuple[int, ...] | None = None
+    seeds: tuple[int, ...] | None = (0, 1)
     #: held-out scenes in viewer.html (all by default: about 0.2 MB each at 96x320)
     viewer_frames: int = 16
     #: the same optimiser steps for both models (the paper's protocol), else the same time
     equal_steps: bool = True
+    #: synthetic scene style (:data:`semattnet.data.synthetic.SCENE_STYLES`): "realistic" has the
+    #: sensor failures and misleading colour edges where semantics carry information
+    style: str = "realistic"
 
     def training_seeds(self) -> tuple[int, ...]:
         return tuple(self.seeds) if self.seeds else (self.seed,)
@@ -160,7 +163,7 @@ def run_demo(
     torch.manual_seed(s.seed)
     h, w = s.size
     log(f"[1/5] generating {s.train_frames} training and {s.eval_frames} held-out scenes at {h}x{w} ...")
-    held = make_synthetic(out / "data", s.train_frames, s.eval_frames, s.size, s.seed)
+    held = make_synthetic(out / "data", s.train_frames, s.eval_frames, s.size, s.seed, style=s.style)
     log("[2/5] scoring the sparse input and the classical (non-learned) completion ...")
     base = _baselines(held)
     trained = _train_models(s, device, out, held, log)  # [3/5] and [4/5]
@@ -177,11 +180,14 @@ def run_demo(
         "held_out": {"frames": len(held.names), "shadowed": sum(held.shadowed.values())},
         "settings": asdict(s), "steps": trained.steps, "seeds": list(s.training_seeds()),
     }  # fmt: skip
+    setup["comparisons"] = comparisons(metrics)
+    setup["verdicts"] = _verdict_sentences(setup["comparisons"], setup["seeds"])
     (out / "metrics.json").write_text(json.dumps({"metrics": metrics, "setup": setup}, indent=2) + "\n")
     results = _write_results(out / "results.json", per_seed, metrics, trained, setup)
     links = [("Interactive viewer of the held-out scenes (hover for depths, layers, 3D point cloud)", "viewer.html"),
              ("All numbers as JSON", "results.json")]  # fmt: skip
-    md, html = write_report(out, metrics, _LABELS, figures, setup, links=links)
+    table, labels = _with_seed_rows(metrics, per_seed)
+    md, html = write_report(out, table, labels, figures, setup, links=links)
     _summarise(metrics, order, seconds, html, log)
     return DemoResult(out, md, html, metrics, trained.steps, seconds, viewer, results)
 
@@ -198,6 +204,47 @@ def _mean_over_seeds(
         }
         for method, groups in first.items()
     }
+
+
+def _with_seed_rows(
+    metrics: dict[str, dict[str, dict[str, float]]], per_seed: dict[int, dict[str, dict[str, dict[str, float]]]]
+) -> tuple[dict[str, dict[str, dict[str, float]]], dict[str, str]]:
+    """The report's table: every method (learned ones: mean over seeds), then each learned model's seeds."""
+    if len(per_seed) < 2:
+        return metrics, dict(_LABELS)
+    table, labels = {}, {}
+    for method, groups in metrics.items():
+        learned = method in {k for k, _, _ in _MODELS}
+        table[method] = groups
+        labels[method] = _LABELS[method] + (f", mean of {len(per_seed)} seeds" if learned else "")
+        for seed, run in per_seed.items() if learned else ():
+            table[f"{method}@seed{seed}"] = run[method]
+            labels[f"{method}@seed{seed}"] = f"  {_LABELS[method].split(' (')[0]}, seed {seed}"
+    return table, labels
+
+
+#: The demo's comparisons: SemAttNet against each of these, on these metrics (issue 16's bar).
+COMPARED: dict[str, tuple[str, ...]] = {"classical": ("rmse", "mae", "irmse", "imae"), "two_branch": ("rmse", "mae")}
+_METRICS = ("rmse", "mae", "irmse", "imae")
+
+
+def comparisons(metrics: dict[str, dict[str, dict[str, float]]]) -> dict[str, dict[str, bool]]:
+    """other method -> metric -> whether SemAttNet's held-out mean (over seeds) is lower (better)."""
+    ours = _record(metrics["semattnet"])["all"]
+    return {other: {k: ours[k] < _record(metrics[other])["all"][k] for k in _METRICS} for other in COMPARED}
+
+
+def _verdict_sentences(comparison: dict[str, dict[str, bool]], seeds: list[int]) -> list[str]:
+    """One plain sentence per compared method: where SemAttNet is better and where it is not."""
+    names = {"rmse": "RMSE", "mae": "MAE", "irmse": "iRMSE", "imae": "iMAE"}
+    out, which = [], f"seed{'s' if len(seeds) > 1 else ''} {', '.join(map(str, seeds))}"
+    for other, wins in comparison.items():
+        better = [names[k] for k in _METRICS if wins[k]]
+        worse = [names[k] for k in _METRICS if not wins[k]]
+        text = f"SemAttNet (mean of {which}) vs {_LABELS[other]}: "
+        text += f"better on {', '.join(better)}" if better else "better on no metric"
+        out.append(text + (f"; not better on {', '.join(worse)}." if worse else "."))
+    return out
 
 
 #: results.json metric name -> key of :meth:`KittiMetrics.compute`.
@@ -242,6 +289,7 @@ def _write_results(
         "wall_seconds": {"total": setup["seconds"], "models": {k: round(v, 1) for k, v in trained.seconds.items()}},
         "machine": {**_machine(), "device": setup["device"], "torch_threads": setup["torch_threads"]},
         "held_out": setup["held_out"], "settings": setup["settings"],
+        "comparisons": {"semattnet_better_than": setup["comparisons"], "verdicts": setup["verdicts"]},
     }  # fmt: skip
     path.write_text(json.dumps(doc, indent=2) + "\n")
     return path

@@ -78,6 +78,26 @@ class SizeType(click.ParamType):
 SIZE = SizeType()
 
 
+class SeedsType(click.ParamType):
+    """Comma-separated non-negative integers, e.g. ``0,1,2`` -> (0, 1, 2), no repeats."""
+
+    name = "SEEDS"
+
+    def convert(self, value, param, ctx):  # type: ignore[no-untyped-def]
+        if isinstance(value, tuple):
+            return value
+        try:
+            seeds = tuple(int(v) for v in str(value).split(","))
+        except ValueError:
+            self.fail(f"expected comma-separated integers, got {value!r}", param, ctx)
+        if any(v < 0 for v in seeds) or len(set(seeds)) != len(seeds):
+            self.fail(f"expected distinct non-negative integers, got {value!r}", param, ctx)
+        return seeds
+
+
+SEEDS = SeedsType()
+
+
 def parse_triple(text: str, option: str) -> tuple[float, float, float]:
     try:
         a, b, c = (float(v) for v in text.split(","))

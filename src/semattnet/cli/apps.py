@@ -12,11 +12,13 @@ from semattnet.cli._options import (
     COUNT,
     POSITIVE_FLOAT,
     POSITIVE_INT,
+    SEEDS,
     SIZE,
     model_from_options,
     parse_size,
     weights_option,
 )
+from semattnet.data.synthetic.scenes import SCENE_STYLES
 
 
 @main.command()
@@ -42,11 +44,17 @@ from semattnet.cli._options import (
 @click.option("--steps", default=None, help="Fixed steps per model as BACKBONE,FULL instead of the time budget.")
 @click.option("--equal-time", is_flag=True,
               help="Give each model half the time instead of the same steps (the default, as the paper).")  # fmt: skip
-@click.option("--seed", type=COUNT, default=0, show_default=True)
+@click.option("--seed", type=COUNT, default=0, show_default=True, help="Seed of the scenes.")
+@click.option("--seeds", type=SEEDS, default="0,1", show_default=True,
+              help="Training seeds: each model is trained once per seed within the budget; the table shows the "
+                   "mean and every seed.")  # fmt: skip
+@click.option("--style", type=click.Choice(SCENE_STYLES), default="realistic", show_default=True,
+              help="Scene style: realistic has LiDAR failures and colour edges without depth edges.")  # fmt: skip
 @click.option("--device", default="auto", show_default=True, help="auto, cpu or cuda[:N].")
 @click.option("--overwrite", is_flag=True, help="Replace the contents of --out.")
 def demo(out_dir: Path, minutes: float, size: str, frames: int, eval_frames: int, width: float, steps: str | None,
-         equal_time: bool, seed: int, device: str, overwrite: bool) -> None:  # fmt: skip
+         equal_time: bool, seed: int, seeds: tuple[int, ...], style: str, device: str,
+         overwrite: bool) -> None:  # fmt: skip
     """Synthetic data -> train SemAttNet and the two-branch ablation -> evaluate -> HTML report."""
     from semattnet.apps.demo import DemoSettings, run_demo
 
@@ -59,7 +67,7 @@ def demo(out_dir: Path, minutes: float, size: str, frames: int, eval_frames: int
             raise click.BadParameter(msg, param_hint="--steps") from None
         fixed = (bb, full)
     settings = DemoSettings(size=parse_size(size), train_frames=frames, eval_frames=eval_frames, width=width,
-                            minutes=minutes, steps=fixed, seed=seed, device=device,
+                            minutes=minutes, steps=fixed, seed=seed, seeds=seeds, style=style, device=device,
                             equal_steps=not equal_time)  # fmt: skip
     run_demo(out_dir, settings, overwrite=overwrite, log=click.echo)
 

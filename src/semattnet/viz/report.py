@@ -85,6 +85,7 @@ def _facts(labels: dict[str, str], setup: dict[str, Any]) -> list[str]:
         f"{labels.get(k, k)}: {v['backbone']} backbone steps, then {v['full']} full-model steps."
         for k, v in setup.get("steps", {}).items()
     ]
+    facts += list(setup.get("verdicts", []))
     facts.append(
         "Metrics are the KITTI benchmark's (means over images; holes in a prediction filled as the devkit "
         "does, so the sparse input is scored after that filling)."
