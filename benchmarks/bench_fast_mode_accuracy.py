@@ -1,8 +1,13 @@
-"""Accuracy cost of the fast mode (bf16 / fp16 autocast, propagation in float32) on a trained model.
+"""Accuracy cost of the reduced-precision modes on a trained model, next to their speed.
 
-Completes the held-out scenes of a synthetic tree with a trained checkpoint in float32 and in
-the fast mode and reports the refined-depth RMSE of both, their relative difference and the
-speed of each at that size. Typical use, after `semattnet demo`:
+Completes the held-out scenes of a synthetic tree with a trained checkpoint through every
+installed inference engine (:func:`semattnet.inference.backends.optimize_for_inference`) in
+float32 and in bfloat16 (torch: bf16 autocast with the propagation in float32; OpenVINO: its bf16
+inference precision, the propagation in PyTorch float32), and reports for each the four KITTI
+metrics, the largest per-pixel difference from eager float32 and the time per frame. On CUDA the
+torch fast mode is float16 autocast. bf16 is only worth it on CPUs with native bf16 instructions
+(:func:`semattnet._utils.cpu.has_native_bf16`); elsewhere it is reported but emulated and slow.
+Typical use, after `semattnet demo`:
 
     python benchmarks/bench_fast_mode_accuracy.py semattnet-demo/runs/semattnet/full/checkpoints/last.pt \\
         semattnet-demo/data
@@ -11,14 +16,30 @@ speed of each at that size. Typical use, after `semattnet demo`:
 from __future__ import annotations
 
 import argparse
+import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
 import torch
 
-from semattnet.apps.experiment import load_held_out, score
-from semattnet.models.bn_folding import fold_batchnorm
+from semattnet._utils.cpu import cpu_summary
+from semattnet.apps.experiment import HeldOut, load_held_out, score
+from semattnet.inference.backends import available_backends, optimize_for_inference
 from semattnet.weights.checkpoint import load_model
+
+
+def _complete(engine, held: HeldOut, device: torch.device) -> tuple[dict[str, np.ndarray], float]:  # type: ignore[no-untyped-def]
+    """Refined depth per held-out scene and the median seconds per frame (after one warm-up frame)."""
+    preds, times = {}, []
+    for i, (n, s) in enumerate(zip(held.names, held.samples, strict=True)):
+        x = {k: s[k][None].to(device) for k in ("rgb", "semantic", "sparse")}
+        t0 = time.perf_counter()
+        out = engine(**x).refined_depth.float()
+        if i:
+            times.append(time.perf_counter() - t0)
+        preds[n] = out[0, 0].cpu().numpy()
+    return preds, float(np.median(times)) if times else float("nan")
 
 
 def main() -> None:
@@ -28,24 +49,26 @@ def main() -> None:
     p.add_argument("--device", default="cpu")
     args = p.parse_args()
     device = torch.device(args.device)
-    dtype = torch.bfloat16 if device.type == "cpu" else torch.float16
-    model = fold_batchnorm(load_model(args.checkpoint)).to(device)
+    model = load_model(args.checkpoint).eval()
     held = load_held_out(args.data)
-    results = {}
-    for name, amp in (("float32", False), (f"fast ({str(dtype).removeprefix('torch.')})", True)):
-        preds, seconds = {}, 0.0
-        with torch.inference_mode(), torch.autocast(device.type, dtype=dtype, enabled=amp):
-            for n, s in zip(held.names, held.samples, strict=True):
-                x = {k: s[k][None].to(device) for k in ("rgb", "semantic", "sparse")}
-                t0 = time.perf_counter()
-                out = model(**x).refined_depth.float()
-                seconds += time.perf_counter() - t0
-                preds[n] = out[0, 0].cpu().numpy()
-        results[name] = (score(preds, held)["all"]["rmse_mm"], seconds / len(held.names))
-    (ref, t_ref), (fast, t_fast) = results.values()
-    for name, (rmse, sec) in results.items():
-        print(f"{name:16s} RMSE {rmse:9.1f} mm   {sec * 1e3:8.1f} ms/frame")
-    print(f"fast mode: RMSE {100 * (fast - ref) / ref:+.3f} % of float32, x{t_ref / t_fast:.2f} speed")
+    size = tuple(held.samples[0]["rgb"].shape[-2:])
+    backends = ["torch"] + ([b for b in available_backends() if b == "openvino"] if device.type == "cpu" else [])
+    rows = {}
+    with tempfile.TemporaryDirectory() as cache:
+        for backend in backends:
+            for precision in ("f32", "bf16"):
+                engine = optimize_for_inference(model, backend=backend, size=size, precision=precision,
+                                                device=device, cache_dir=cache)  # fmt: skip
+                rows[f"{backend} {precision}"] = _complete(engine, held, device)
+    ref = rows["torch f32"][0]
+    print(f"{cpu_summary()}; {len(held.names)} held-out scenes at {size[0]}x{size[1]}")
+    header = ("engine", "RMSE mm", "MAE mm", "iRMSE", "iMAE", "max |d| vs torch f32", "ms/frame")
+    print("  ".join(header))
+    for name, (preds, sec) in rows.items():
+        m = score(preds, held)["all"]
+        diff = max(float(np.abs(preds[n] - ref[n]).max()) for n in held.names)
+        print(f"{name:14s} {m['rmse_mm']:8.1f} {m['mae_mm']:7.1f} {m['irmse_per_km']:7.2f} {m['imae_per_km']:6.2f} "
+              f"{diff:9.4f} m {sec * 1e3:9.1f}")  # fmt: skip
 
 
 if __name__ == "__main__":
