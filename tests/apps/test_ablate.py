@@ -79,7 +79,9 @@ def test_refuses_unusable_results(ablated: tuple[Path, dict[str, Any], list[str]
     out, _, _ = ablated
     with pytest.raises(ValueError, match=r"other settings \(lr\)"):
         run_ablation(out, AblationSettings(**TINY, configs=("table2_b",), seeds=(0,), lr=1e-3), log=print)
-    with pytest.raises(ValueError, match="4 held-out scenes"):
+    with pytest.raises(
+        ValueError, match="6 training and 4 held-out scenes of \\(32, 64\\) from data seed 0, not 6 and 6"
+    ):
         run_ablation(out, AblationSettings(**{**TINY, "eval_frames": 6}, configs=("table2_b",), seeds=(0,)))
     old = tmp_path / "old"
     (old / "results").mkdir(parents=True)

@@ -165,12 +165,15 @@ def run_ablation(
 def _held_out(data: Path, s: AblationSettings, log: Callable[[str], None]) -> HeldOut:
     """The held-out scenes: of a previous run's data if there is one (to continue it), else of new data."""
     if (data / "scenes.json").is_file():
-        held = load_held_out(data)
-        shape = tuple(held.samples[0]["gt"].shape[-2:]) if held.samples else None
-        if len(held.names) != s.eval_frames or shape != tuple(s.size):
-            raise ValueError(f"{data} holds {len(held.names)} held-out scenes of {shape}, not {s.eval_frames} of "
-                             f"{tuple(s.size)}; use another --out for other data settings")  # fmt: skip
-        return held
+        manifest = json.loads((data / "scenes.json").read_text())
+        counts = manifest.get("counts", {})
+        found = (counts.get("train"), counts.get("val_select"), tuple(manifest.get("size", ())), manifest.get("seed"))
+        wanted = (s.train_frames, s.eval_frames, tuple(s.size), s.data_seed)
+        if found != wanted:
+            raise ValueError(f"{data} holds {found[0]} training and {found[1]} held-out scenes of {found[2]} from data "
+                             f"seed {found[3]}, not {wanted[0]} and {wanted[1]} of {wanted[2]} from seed {wanted[3]}; "
+                             "use another --out for other data settings")  # fmt: skip
+        return load_held_out(data)
     log(f"generating {s.train_frames} training and {s.eval_frames} held-out scenes at {s.size[0]}x{s.size[1]} ...")
     style = {"style": s.style} if s.style != "ideal" else {}
     return make_synthetic(data, s.train_frames, s.eval_frames, s.size, s.data_seed, **style)
