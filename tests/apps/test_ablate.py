@@ -80,9 +80,12 @@ def test_refuses_unusable_results(ablated: tuple[Path, dict[str, Any], list[str]
     with pytest.raises(ValueError, match=r"other settings \(lr\)"):
         run_ablation(out, AblationSettings(**TINY, configs=("table2_b",), seeds=(0,), lr=1e-3), log=print)
     with pytest.raises(
-        ValueError, match="6 training and 4 held-out scenes of \\(32, 64\\) from data seed 0, not 6 and 6"
+        ValueError,
+        match="6 training and 4 held-out realistic scenes of \\(32, 64\\) from data seed 0, not 6 and 6 realistic",
     ):
         run_ablation(out, AblationSettings(**{**TINY, "eval_frames": 6}, configs=("table2_b",), seeds=(0,)))
+    with pytest.raises(ValueError, match="held-out realistic scenes .* not 6 and 4 ideal ones"):
+        run_ablation(out, AblationSettings(**{**TINY, "style": "ideal"}, configs=("table2_b",), seeds=(0,)))
     old = tmp_path / "old"
     (old / "results").mkdir(parents=True)
     (old / "data").symlink_to(out / "data")

@@ -79,9 +79,10 @@ class AblationSettings:
     """Common budget: ``backbone_steps + full_steps`` optimiser steps for every configuration
     (refining ones: backbone stage then full model; the others: all in the backbone stage).
 
-    ``style`` is passed to the synthetic scene generator when it is not ``"ideal"`` (for a
-    generator that offers other styles); ``extra`` holds further ``TrainConfig`` options for every
-    training run (e.g. ``{"amp": True}``).
+    ``style`` is the synthetic scene style (:data:`semattnet.data.synthetic.SCENE_STYLES`; the
+    default ``"realistic"`` has the sensor failures and misleading colour edges where semantics
+    carry information); ``extra`` holds further ``TrainConfig`` options for every training run
+    (e.g. ``{"amp": True}``).
     """
 
     size: tuple[int, int] = (96, 320)
@@ -95,7 +96,7 @@ class AblationSettings:
     seeds: tuple[int, ...] = (0, 1, 2)
     configs: tuple[str, ...] = CONFIGS
     data_seed: int = 0
-    style: str = "ideal"
+    style: str = "realistic"
     device: str = "auto"
     extra: dict[str, Any] = field(default_factory=dict)
 
@@ -167,16 +168,17 @@ def _held_out(data: Path, s: AblationSettings, log: Callable[[str], None]) -> He
     if (data / "scenes.json").is_file():
         manifest = json.loads((data / "scenes.json").read_text())
         counts = manifest.get("counts", {})
-        found = (counts.get("train"), counts.get("val_select"), tuple(manifest.get("size", ())), manifest.get("seed"))
-        wanted = (s.train_frames, s.eval_frames, tuple(s.size), s.data_seed)
+        found = (counts.get("train"), counts.get("val_select"), tuple(manifest.get("size", ())), manifest.get("seed"),
+                 manifest.get("style", "ideal"))  # fmt: skip
+        wanted = (s.train_frames, s.eval_frames, tuple(s.size), s.data_seed, s.style)
         if found != wanted:
-            raise ValueError(f"{data} holds {found[0]} training and {found[1]} held-out scenes of {found[2]} from data "
-                             f"seed {found[3]}, not {wanted[0]} and {wanted[1]} of {wanted[2]} from seed {wanted[3]}; "
-                             "use another --out for other data settings")  # fmt: skip
+            msg = (f"{data} holds {found[0]} training and {found[1]} held-out {found[4]} scenes of {found[2]} from "
+                   f"data seed {found[3]}, not {wanted[0]} and {wanted[1]} {wanted[4]} ones of {wanted[2]} from seed "
+                   f"{wanted[3]}; use another --out for other data settings")  # fmt: skip
+            raise ValueError(msg)
         return load_held_out(data)
     log(f"generating {s.train_frames} training and {s.eval_frames} held-out scenes at {s.size[0]}x{s.size[1]} ...")
-    style = {"style": s.style} if s.style != "ideal" else {}
-    return make_synthetic(data, s.train_frames, s.eval_frames, s.size, s.data_seed, **style)
+    return make_synthetic(data, s.train_frames, s.eval_frames, s.size, s.data_seed, style=s.style)
 
 
 def _per_image(preds: Mapping[str, np.ndarray], held: HeldOut) -> dict[str, dict[str, float]]:

@@ -78,7 +78,7 @@ def demo(out_dir: Path, minutes: float, size: str, frames: int, eval_frames: int
 @click.option("--configs", default="all",
               help="all, claims (the five the claims need: table2_b,d,e,g, g_unknown_semantics) or a "
                    "comma-separated list of table2_a ... table2_g, g_unknown_semantics.")  # fmt: skip
-@click.option("--seeds", default="0,1,2", help="Comma-separated training seeds (paired: the same for every config).")
+@click.option("--seeds", type=SEEDS, default="0,1,2", help="Training seeds (paired: the same for every config).")
 @click.option(
     "--backbone-steps", type=POSITIVE_INT, default=400, help="Backbone-stage steps (refining configurations)."
 )
@@ -92,22 +92,19 @@ def demo(out_dir: Path, minutes: float, size: str, frames: int, eval_frames: int
 @click.option("--frames", type=POSITIVE_INT, default=200, help="Training scenes.")
 @click.option("--eval-frames", type=POSITIVE_INT, default=48, help="Held-out scenes (half shadowed).")
 @click.option("--width", type=POSITIVE_FLOAT, default=0.125, help="Model width multiplier.")
+@click.option("--style", type=click.Choice(SCENE_STYLES), default="realistic", help="Synthetic scene style.")
 @click.option("--device", default="auto")
-def ablate(out_dir: Path, configs: str, seeds: str, backbone_steps: int, full_steps: int, size: str, frames: int,
-           eval_frames: int, width: float, device: str) -> None:  # fmt: skip
+def ablate(out_dir: Path, configs: str, seeds: tuple[int, ...], backbone_steps: int, full_steps: int, size: str,
+           frames: int, eval_frames: int, width: float, style: str, device: str) -> None:  # fmt: skip
     """Table 2 configurations (a)-(g) on synthetic scenes over paired seeds: RMSE and MAE per configuration,
     shadowed and not, and a paired test of each claim (semantic branch, refinement, SAMMAFB, semantic input)."""
     from semattnet.apps.ablate import CLAIM_CONFIGS, CONFIGS, AblationSettings, run_ablation
 
-    try:
-        seed_list = tuple(int(v) for v in seeds.split(","))
-    except ValueError:
-        raise click.BadParameter(f"expected comma-separated integers, got {seeds!r}", param_hint="--seeds") from None
     named = {"all": CONFIGS, "claims": CLAIM_CONFIGS}
     chosen = named.get(configs) or tuple(c.strip() for c in configs.split(",") if c.strip())
     settings = AblationSettings(size=parse_size(size), train_frames=frames, eval_frames=eval_frames, width=width,
-                                backbone_steps=backbone_steps, full_steps=full_steps, seeds=seed_list,
-                                configs=chosen, device=device)  # fmt: skip
+                                backbone_steps=backbone_steps, full_steps=full_steps, seeds=seeds,
+                                configs=chosen, style=style, device=device)  # fmt: skip
     run_ablation(out_dir, settings, log=click.echo)
     click.echo((out_dir / "ablation.md").read_text())
 
