@@ -175,7 +175,7 @@ def test_step_plan_equal_steps_or_equal_time(monkeypatch) -> None:  # type: igno
     times = {3: (0.25, 0.5), 2: (0.125, 0.25)}  # seconds per (backbone, full) step: three- and two-branch
     monkeypatch.setattr(demo, "_step_times", lambda s, device, overrides: times[overrides["branches"]])
     monkeypatch.setattr(demo, "_OVERHEAD", 1.0)
-    s = demo.DemoSettings(minutes=1.0, backbone_share=0.5, seeds=(0,))
+    s = demo.DemoSettings(minutes=1.0, backbone_share=0.5, seeds=(0,), steps=None)
     plan = demo._step_plan(s, torch.device("cpu"))
     assert plan["semattnet"] == plan["two_branch"] == (80, 40)  # 30 s / (0.25 + 0.125), 30 s / (0.5 + 0.25)
     spent = sum(
@@ -183,13 +183,16 @@ def test_step_plan_equal_steps_or_equal_time(monkeypatch) -> None:  # type: igno
     )
     assert spent == pytest.approx(60.0)
     plan = demo._step_plan(
-        demo.DemoSettings(minutes=1.0, backbone_share=0.5, equal_steps=False, seeds=(0,)), torch.device("cpu")
+        demo.DemoSettings(minutes=1.0, backbone_share=0.5, equal_steps=False, seeds=(0,), steps=None),
+        torch.device("cpu"),
     )
     assert plan == {"semattnet": (60, 30), "two_branch": (120, 60)}
-    two_seeds = demo._step_plan(demo.DemoSettings(minutes=1.0, backbone_share=0.5), torch.device("cpu"))
+    two_seeds = demo._step_plan(demo.DemoSettings(minutes=1.0, backbone_share=0.5, steps=None), torch.device("cpu"))
     assert two_seeds["semattnet"] == (40, 20)  # the default trains two seeds; the budget covers both
     monkeypatch.setattr(demo, "_OVERHEAD", 2.0)  # real steps cost more than bare ones: fewer fit
-    assert demo._step_plan(demo.DemoSettings(minutes=1.0, backbone_share=0.5), torch.device("cpu"))["semattnet"] == (
+    assert demo._step_plan(demo.DemoSettings(minutes=1.0, backbone_share=0.5, steps=None), torch.device("cpu"))[
+        "semattnet"
+    ] == (
         20,
         10,
     )
