@@ -4,13 +4,13 @@
 and glossy paint and glass, markings and posters that change colour but not depth, grey cars
 before grey walls; half of them with a hard shadow band), trains a width-reduced SemAttNet and the
 two-branch ablation (no semantic branch) for the same number of optimiser steps (the paper's
-protocol; ``DemoSettings.equal_steps``), once per training seed (two by default), within one
-time budget, through the real training engine (backbone stage, then the full model with CSPN++),
+protocol; ``DemoSettings.equal_steps``), once per training seed (two by default), through the
+real training engine (backbone stage, then the full model with CSPN++),
 scores both on held-out scenes with the KITTI metrics beside the sparse input and a classical
 non-learned completion, and writes ``report.md`` and ``report.html`` with the table (each learned
 model's mean and every seed), a plain verdict per comparison, per-branch panels, error maps and
 training curves, ``viewer.html`` (the interactive viewer of the held-out scenes,
-:mod:`semattnet.viz.viewer`) and ``results.json``. No download; about 6.5 minutes on a 2-core CPU.
+:mod:`semattnet.viz.viewer`) and ``results.json``. No download; about 7.5 minutes on a 2-core CPU.
 
 ``results.json`` (schema ``semattnet.demo.results/1``; units: RMSE and MAE in mm, iRMSE and
 iMAE in 1/km, as KITTI's leaderboard)::
@@ -84,9 +84,10 @@ class DemoSettings:
     the same steps on every machine give the same numbers. With ``steps=None`` they come from
     ``minutes`` instead, the training budget of both models and all seeds together, split
     ``backbone_share`` : rest between the backbone stage and the full model, from a short timing
-    of each model on this machine (noisy on shared machines). With ``equal_steps`` (the default, as the paper compares
-    configurations at equal epochs) both models get the same step counts, so the slower
-    three-branch model uses more of the time; ``equal_steps=False`` gives each model half the time.
+    of each model on this machine (noisy on shared machines). With ``equal_steps`` (the default,
+    as the paper compares configurations at equal epochs) both models get the same step counts,
+    so the slower three-branch model uses more of the time; ``equal_steps=False`` gives each
+    model half the time.
     """
 
     size: tuple[int, int] = (96, 320)

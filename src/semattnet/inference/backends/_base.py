@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Mapping
 from dataclasses import fields
+from types import ModuleType
 
 import numpy as np
 import torch
@@ -12,10 +14,20 @@ from torch import nn
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.refinement import RefinementInputs, propagate_refinement
 
-__all__ = ["InferenceEngine", "output_from_arrays"]
+__all__ = ["HEADS_PREFIX", "ExportedGraphEngine", "InferenceEngine", "import_backend", "output_from_arrays"]
 
 _FIELDS = tuple(f.name for f in fields(DepthCompletionOutput))
-_HEADS = "refinement."
+#: Name prefix of the refinement heads an exported graph returns (see :func:`output_from_arrays`).
+HEADS_PREFIX = "refinement."
+_HEADS = HEADS_PREFIX
+
+
+def import_backend(module: str, extra: str) -> ModuleType:
+    """Import a backend's package, or say which ``pip install 'semattnet[extra]'`` provides it."""
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise ImportError(f"the {module} backend needs {module}: pip install 'semattnet[{extra}]'") from None
 
 
 class InferenceEngine(nn.Module):
@@ -72,3 +84,24 @@ def output_from_arrays(
                 RefinementInputs.from_dict(heads, _HEADS), iterations
             )
     return DepthCompletionOutput(**{name: tensors.get(name) for name in _FIELDS})  # type: ignore[arg-type]
+
+
+class ExportedGraphEngine(InferenceEngine):
+    """An engine over the cached ONNX export (network only): subclasses set ``input_names``,
+    ``iterations`` (propagation steps, or None) and implement :meth:`run_graph`; the refinement
+    heads the graph returns are finished here by :func:`output_from_arrays`."""
+
+    input_names: list[str]
+    iterations: int | None
+
+    def run_graph(self, feeds: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Output name -> array of one run of the graph on named float32 inputs."""
+        raise NotImplementedError
+
+    def forward(
+        self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
+    ) -> DepthCompletionOutput:
+        self.check_size(rgb)
+        given = {"rgb": rgb, "semantic": semantic, "sparse": sparse}
+        arrays = self.run_graph({name: given[name].detach().cpu().float().numpy() for name in self.input_names})
+        return output_from_arrays({n: torch.from_numpy(a).to(rgb.device) for n, a in arrays.items()}, self.iterations)

@@ -51,8 +51,8 @@ def cached_onnx(model: nn.Module, size: tuple[int, int], folder: Path, log=None)
     """``folder/model.onnx``, exported (BatchNorm folded) unless it is already there.
 
     The graph stops before the CSPN++ propagation (``export_onnx(propagation=False)``): the
-    engines finish it with the fused kernel, several times faster than the same steps as
-    hundreds of small graph operations (see :func:`propagation_steps`).
+    engines finish it with the fused kernel (:func:`propagation_steps` steps per kernel size),
+    several times faster than the same steps as hundreds of small graph operations.
     """
     path = folder / "model.onnx"
     if not path.is_file():

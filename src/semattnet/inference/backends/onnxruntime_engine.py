@@ -4,25 +4,17 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
 import torch
 from torch import nn
 
-from semattnet.inference.backends._base import InferenceEngine, output_from_arrays
+from semattnet.inference.backends._base import ExportedGraphEngine, import_backend
 from semattnet.inference.backends._export_cache import cached_onnx, engine_dir, engine_key, propagation_steps
-from semattnet.models.outputs import DepthCompletionOutput
 
 __all__ = ["OnnxRuntimeEngine"]
 
 
-def _import_onnxruntime():  # type: ignore[no-untyped-def]
-    try:
-        import onnxruntime
-    except ImportError:
-        raise ImportError("the onnxruntime backend needs onnxruntime: pip install 'semattnet[onnx]'") from None
-    return onnxruntime
-
-
-class OnnxRuntimeEngine(InferenceEngine):
+class OnnxRuntimeEngine(ExportedGraphEngine):
     """A CPU ``onnxruntime.InferenceSession`` over the cached ONNX export at one ``size``."""
 
     backend = "onnxruntime"
@@ -30,7 +22,7 @@ class OnnxRuntimeEngine(InferenceEngine):
     def __init__(self, model: nn.Module, size: tuple[int, int], needs_semantic: bool,
                  cache_dir: str | os.PathLike[str] | None = None, log=None) -> None:  # type: ignore[no-untyped-def]  # fmt: skip
         super().__init__(size, "f32", needs_semantic)
-        ort = _import_onnxruntime()
+        ort = import_backend("onnxruntime", "onnx")
         folder = engine_dir(engine_key(model, size), cache_dir)
         options = ort.SessionOptions()
         options.intra_op_num_threads = torch.get_num_threads()
@@ -42,14 +34,5 @@ class OnnxRuntimeEngine(InferenceEngine):
         self.output_names = [o.name for o in self.session.get_outputs()]
         self.iterations = propagation_steps(model)
 
-    def forward(
-        self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
-    ) -> DepthCompletionOutput:
-        self.check_size(rgb)
-        given = {"rgb": rgb, "semantic": semantic, "sparse": sparse}
-        feeds = {name: given[name].detach().cpu().float().numpy() for name in self.input_names}
-        arrays = self.session.run(self.output_names, feeds)
-        return output_from_arrays(
-            {n: torch.from_numpy(a).to(rgb.device) for n, a in zip(self.output_names, arrays, strict=True)},
-            self.iterations,
-        )
+    def run_graph(self, feeds: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        return dict(zip(self.output_names, self.session.run(self.output_names, feeds), strict=True))

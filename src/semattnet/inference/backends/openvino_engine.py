@@ -11,22 +11,15 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
 import torch
 from torch import nn
 
-from semattnet.inference.backends._base import InferenceEngine, output_from_arrays
+from semattnet.inference.backends._base import HEADS_PREFIX, ExportedGraphEngine, import_backend
 from semattnet.inference.backends._export_cache import cached_onnx, engine_dir, engine_key, propagation_steps
 from semattnet.models.outputs import DepthCompletionOutput
 
 __all__ = ["OpenVinoEngine"]
-
-
-def _import_openvino():  # type: ignore[no-untyped-def]
-    try:
-        import openvino
-    except ImportError:
-        raise ImportError("the openvino backend needs OpenVINO: pip install 'semattnet[openvino]'") from None
-    return openvino
 
 
 def _one_of(names: set[str], known: set[str], prefix: str = "\0") -> str:
@@ -37,7 +30,7 @@ def _one_of(names: set[str], known: set[str], prefix: str = "\0") -> str:
     return matches[0]
 
 
-class OpenVinoEngine(InferenceEngine):
+class OpenVinoEngine(ExportedGraphEngine):
     """A compiled OpenVINO CPU model at one ``size`` (LATENCY hint, all of this process's threads)."""
 
     backend = "openvino"
@@ -45,7 +38,7 @@ class OpenVinoEngine(InferenceEngine):
     def __init__(self, model: nn.Module, size: tuple[int, int], needs_semantic: bool, precision: str = "f32",
                  cache_dir: str | os.PathLike[str] | None = None, log=None) -> None:  # type: ignore[no-untyped-def]  # fmt: skip
         super().__init__(size, precision, needs_semantic)
-        ov = _import_openvino()
+        ov = import_backend("openvino", "openvino")
         folder = engine_dir(engine_key(model, size, extra=f"openvino-{ov.__version__}"), cache_dir)
         xml = folder / "model.xml"
         core = ov.Core()
@@ -60,15 +53,10 @@ class OpenVinoEngine(InferenceEngine):
         self.request = self.compiled.create_infer_request()
         self.input_names = [_one_of(i.get_names(), {"rgb", "semantic", "sparse"}) for i in self.compiled.inputs]
         fields = set(DepthCompletionOutput.__dataclass_fields__)
-        self.output_names = [_one_of(o.get_names(), fields, "refinement.") for o in self.compiled.outputs]
+        self.output_names = [_one_of(o.get_names(), fields, HEADS_PREFIX) for o in self.compiled.outputs]
         self.iterations = propagation_steps(model)
 
-    def forward(
-        self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
-    ) -> DepthCompletionOutput:
-        self.check_size(rgb)
-        given = {"rgb": rgb, "semantic": semantic, "sparse": sparse}
-        result = self.request.infer([given[name].detach().cpu().float().numpy() for name in self.input_names])
-        arrays = {name: result[out] for name, out in zip(self.output_names, self.compiled.outputs, strict=True)}
-        tensors = {n: torch.from_numpy(a.copy()).to(rgb.device) for n, a in arrays.items()}
-        return output_from_arrays(tensors, self.iterations)
+    def run_graph(self, feeds: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        result = self.request.infer([feeds[name] for name in self.input_names])
+        # copies: the request reuses its output buffers on the next call
+        return {name: result[port].copy() for name, port in zip(self.output_names, self.compiled.outputs, strict=True)}
