@@ -19,7 +19,6 @@ __all__ = ["HEADS_PREFIX", "ExportedGraphEngine", "InferenceEngine", "import_bac
 _FIELDS = tuple(f.name for f in fields(DepthCompletionOutput))
 #: Name prefix of the refinement heads an exported graph returns (see :func:`output_from_arrays`).
 HEADS_PREFIX = "refinement."
-_HEADS = HEADS_PREFIX
 
 
 def import_backend(module: str, extra: str) -> ModuleType:
@@ -72,7 +71,7 @@ def output_from_arrays(
     CSPN++ stages then run here, ``iterations`` steps per kernel size, with the fused kernel.
     """
     tensors = {k: torch.as_tensor(np.asarray(v)) if not isinstance(v, torch.Tensor) else v for k, v in arrays.items()}
-    heads = {k: v for k, v in tensors.items() if k.startswith(_HEADS)}
+    heads = {k: v for k, v in tensors.items() if k.startswith(HEADS_PREFIX)}
     unknown = set(tensors) - set(_FIELDS) - set(heads)
     if unknown:
         raise ValueError(f"unknown output names {sorted(unknown)}; expected some of {_FIELDS}")
@@ -81,7 +80,7 @@ def output_from_arrays(
             raise ValueError("refinement heads without the number of propagation iterations")
         with torch.inference_mode():
             tensors["refined_s2_depth"], tensors["refined_depth"] = propagate_refinement(
-                RefinementInputs.from_dict(heads, _HEADS), iterations
+                RefinementInputs.from_dict(heads, HEADS_PREFIX), iterations
             )
     return DepthCompletionOutput(**{name: tensors.get(name) for name in _FIELDS})  # type: ignore[arg-type]
 
