@@ -1,17 +1,31 @@
-"""The root of semattnet's error types.
+"""The root of semattnet's error types: one home for the classes every subpackage raises.
 
 Every error the library raises for bad input (a missing or corrupt file, a wrong shape, an unsafe
-checkpoint) derives from :class:`SemAttNetError`, which is a ``ValueError`` so that existing
-``except ValueError`` code keeps working. The subclasses live with the code that raises them:
-``semattnet.data.io.DataError``, ``semattnet.data.palette.UnknownColorError``,
-``semattnet.weights.CheckpointError`` / ``StateDictMismatchError`` / ``UnsafeCheckpointError``,
-``semattnet.evaluation.SubmissionError``.
+checkpoint, an option that means nothing) derives from :class:`SemAttNetError`, which is a
+``ValueError`` so that existing ``except ValueError`` code keeps working. The command line turns a
+:class:`SemAttNetError` (and an ``OSError``) into one line; anything else is a bug to report.
+
+- :class:`DataError`: a data file is missing, unreadable or not in the expected encoding.
+- :class:`InputError`: an argument (a tensor, an array, an option) is not what the function accepts.
+
+More specific classes live with the code that raises them and derive from these (for example
+``semattnet.data.palette.UnknownColorError``, ``semattnet.weights.CheckpointError``).
 """
 
 from __future__ import annotations
 
-__all__ = ["SemAttNetError"]
+__all__ = ["DataError", "InputError", "SemAttNetError"]
 
 
 class SemAttNetError(ValueError):
     """Bad input to semattnet; the message names the file, tensor or option and what is wrong."""
+
+
+class DataError(SemAttNetError):
+    """A data file is missing, unreadable or not in the expected encoding."""
+
+
+class InputError(SemAttNetError, TypeError):
+    """An argument (tensor, array, option value or combination) that the function does not accept.
+
+    Also a ``TypeError``, so code that caught the type errors of a wrong argument keeps working."""

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
-from semattnet._errors import SemAttNetError
+from semattnet._errors import DataError
 from semattnet._utils.atomic import atomic_path
 
 __all__ = [
@@ -49,10 +49,6 @@ MAX_IMAGE_SIDE = 16384
 #: Largest width x height accepted (64 Mpx, ~256 MB as RGB): bigger headers are refused as
 #: decompression bombs before any pixel is decoded.
 MAX_IMAGE_PIXELS = 64 * 1024 * 1024
-
-
-class DataError(SemAttNetError):
-    """A data file is missing, unreadable or not in the expected encoding."""
 
 
 def _check_header(path: Path, img: Image.Image) -> None:
