@@ -8,8 +8,6 @@ import numpy as np
 import torch
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared"
-SPEC = SHARED / "spec"
 #: One real KITTI frame (both cameras) in the official layouts; licence in tests/data/README.md.
 SAMPLE = REPO / "tests" / "data" / "kitti_sample"
 

@@ -6,7 +6,7 @@ from collections.abc import Iterator
 import pytest
 import torch
 
-from tests._helpers import REPO, SHARED, SPEC, random_inputs  # noqa: F401  (re-exported for old imports)
+from tests._helpers import REPO, random_inputs  # noqa: F401  (re-exported for old imports)
 
 
 @pytest.fixture(autouse=True)

@@ -2,15 +2,18 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
 
 import semattnet
-from tests._helpers import SPEC
 from tests._reference_weights import fill_reference_weights
 
-REFERENCE = SPEC / "reference" / "authors_seed0_b2_64x256.npz"
+#: The authors' outputs and state-dict names, kept in the repository (provenance in fixtures/README.md).
+FIXTURES = Path(__file__).resolve().parent / "fixtures"
+REFERENCE = FIXTURES / "authors_seed0_b2_64x256.npz"
 BACKBONE_OUTPUTS = {"color_depth": "rgb_depth", "semantic_depth": "semantic_depth", "guided_depth": "d_depth",
                     "fused_depth": "output"}  # fmt: skip
 FULL_OUTPUTS = {"color_conf": "rgb_conf", "semantic_conf": "semantic_conf", "guided_conf": "d_conf",
@@ -20,7 +23,7 @@ FULL_OUTPUTS = {"color_conf": "rgb_conf", "semantic_conf": "semantic_conf", "gui
 
 def _authors_entries(kind: str) -> list[tuple[str, tuple[int, ...], str]]:
     rows = []
-    for line in (SPEC / f"authors_state_dict_{kind}.tsv").read_text().splitlines():
+    for line in (FIXTURES / f"authors_state_dict_{kind}.tsv").read_text().splitlines():
         if line.startswith("#") or not line.strip():
             continue
         name, shape, dtype = line.split("\t")
