@@ -2,6 +2,7 @@
 
 from semattnet.cli import (  # noqa: F401  (register the commands)
     apps,
+    bag,
     data,
     evaluate,
     models,

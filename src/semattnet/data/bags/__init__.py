@@ -1,0 +1,58 @@
+"""Recorded robot data in and out: ROS 1 bags, ROS 2 bags (sqlite3, MCAP) and Rerun recordings.
+
+Reading needs no ROS installation (``rosbags``, extra ``ros``); Rerun needs ``rerun-sdk`` (extra ``rerun``).
+Both are imported on first use; a missing one is a one-line :class:`MissingExtraError` with the install hint.
+
+- Reading: :func:`list_topics`, :class:`BagPairs` (image + nearest scan + calibration from ``CameraInfo`` and
+  ``/tf_static``, or a rig file), the decoders of :mod:`.decode`, :class:`TransformTree`.
+- Writing: :func:`write_kitti_bag` / :func:`write_sensor_bag` (images, scans, CameraInfo, ``/tf_static``),
+  :class:`BagWriter` (completed depth 32FC1, coloured cloud, CameraInfo per frame).
+- Rerun: :class:`RerunLogger`.
+"""
+
+from .decode import (
+    CameraInfoData,
+    decode_camera_info,
+    decode_compressed_image,
+    decode_image,
+    decode_pointcloud2,
+    header_stamp_frame,
+)
+from .deps import MissingExtraError
+from .kitti import BagTopics, SensorRecord, WrittenBag, kitti_stamps_ns, write_kitti_bag, write_sensor_bag
+from .pairing import StampPairing, pair_stamps
+from .reader import TopicRow, format_topics, list_topics, open_bag
+from .rerun_log import RerunLogger
+from .source import BagPair, BagPairs
+from .tf import NoTransformError, TransformTree
+from .writer import BagWriter, MessageWriter, bag_format
+
+__all__ = [
+    "BagPair",
+    "BagPairs",
+    "BagTopics",
+    "BagWriter",
+    "CameraInfoData",
+    "MessageWriter",
+    "MissingExtraError",
+    "NoTransformError",
+    "RerunLogger",
+    "SensorRecord",
+    "StampPairing",
+    "TopicRow",
+    "TransformTree",
+    "WrittenBag",
+    "bag_format",
+    "decode_camera_info",
+    "decode_compressed_image",
+    "decode_image",
+    "decode_pointcloud2",
+    "format_topics",
+    "header_stamp_frame",
+    "kitti_stamps_ns",
+    "list_topics",
+    "open_bag",
+    "pair_stamps",
+    "write_kitti_bag",
+    "write_sensor_bag",
+]

@@ -1,0 +1,223 @@
+"""ROS messages -> NumPy: ``sensor_msgs`` Image, CompressedImage, PointCloud2, CameraInfo, and header stamps.
+
+The decoders take the message objects rosbags deserialises (ROS 1 and ROS 2 alike: rosbags names ROS 1's
+``Header.stamp`` ``sec``/``nanosec`` too; only CameraInfo's matrices differ in case, ``K`` vs ``k``) and a
+``topic`` that every error message names. Stamps are integer nanoseconds since the epoch.
+"""
+
+from __future__ import annotations
+
+import io
+import struct
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from semattnet._errors import DataError
+
+__all__ = [
+    "IMAGE_ENCODINGS",
+    "POINTFIELD_DTYPES",
+    "CameraInfoData",
+    "decode_camera_info",
+    "decode_compressed_image",
+    "decode_image",
+    "decode_pointcloud2",
+    "header_stamp_frame",
+    "stamp_ns",
+]
+
+#: ``sensor_msgs/Image`` encodings read as colour: encoding -> (channels, channel order to RGB).
+IMAGE_ENCODINGS: dict[str, tuple[int, tuple[int, ...]]] = {
+    "rgb8": (3, (0, 1, 2)),
+    "bgr8": (3, (2, 1, 0)),
+    "mono8": (1, (0, 0, 0)),
+}
+
+#: ``sensor_msgs/PointField`` datatype constants -> NumPy type (byte order applied per message).
+POINTFIELD_DTYPES: dict[int, str] = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
+
+#: Names of a per-point intensity field, first match wins (becomes the 4th column of the points).
+_INTENSITY_NAMES = ("intensity", "reflectance", "i")
+
+
+def stamp_ns(stamp: Any) -> int:
+    """Nanoseconds of a ``builtin_interfaces/Time`` (``sec``, ``nanosec``)."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def header_stamp_frame(rawdata: bytes | memoryview, ros1: bool) -> tuple[int, str]:
+    """(stamp ns, frame id) of a serialised message that starts with ``std_msgs/Header``, without decoding the
+    rest (Image, CompressedImage, PointCloud2, CameraInfo all do).
+
+    ROS 1: ``uint32 seq, uint32 sec, uint32 nsec, uint32 len, chars``; ROS 2 CDR: a 4-byte encapsulation header
+    (byte 1: 1 little-endian, 0 big-endian), ``int32 sec, uint32 nanosec, uint32 len (with NUL), chars``.
+    """
+    raw = bytes(rawdata[:4096])
+    if ros1:
+        _, sec, nsec, n = struct.unpack_from("<IIII", raw, 0)
+        return sec * 1_000_000_000 + nsec, raw[16 : 16 + n].decode("utf-8", "replace").lstrip("/")
+    order = "<" if raw[1] & 1 else ">"
+    sec, nsec, n = struct.unpack_from(f"{order}iII", raw, 4)
+    return sec * 1_000_000_000 + nsec, raw[16 : 16 + max(n - 1, 0)].decode("utf-8", "replace").lstrip("/")
+
+
+def _rows(data: np.ndarray, height: int, step: int, row_bytes: int, topic: str, what: str) -> np.ndarray:
+    """(height, row_bytes) uint8 view of ``data`` with rows ``step`` bytes apart (padding dropped)."""
+    if step < row_bytes:
+        raise DataError(f"{topic}: {what} step {step} is smaller than one row ({row_bytes} bytes)")
+    need = (height - 1) * step + row_bytes if height else 0  # the last row may lack its padding
+    if data.size < need:
+        raise DataError(f"{topic}: {what} holds {data.size} bytes, {height} rows of {step} need {height * step}")
+    if height == 0 or row_bytes == 0:
+        return np.zeros((height, row_bytes), np.uint8)
+    return np.lib.stride_tricks.as_strided(data, (height, row_bytes), (step, 1))
+
+
+def decode_image(msg: Any, topic: str) -> np.ndarray:
+    """(H, W, 3) uint8 RGB of a ``sensor_msgs/Image`` in rgb8, bgr8 or mono8 (mono is repeated), honouring
+    ``step`` (row padding).
+
+    Raises:
+        DataError: another encoding, or fewer bytes than ``height * step``; the message names the topic.
+    """
+    enc = str(msg.encoding)
+    if enc.lower() not in IMAGE_ENCODINGS:
+        have = ", ".join(IMAGE_ENCODINGS)
+        raise DataError(f"{topic}: unsupported image encoding {enc!r} (semattnet reads {have})")
+    channels, order = IMAGE_ENCODINGS[enc.lower()]
+    h, w = int(msg.height), int(msg.width)
+    data = np.ascontiguousarray(np.asarray(msg.data, dtype=np.uint8).reshape(-1))
+    rows = _rows(data, h, int(msg.step), w * channels, topic, "image")
+    img = rows.reshape(h, w, channels)
+    return np.ascontiguousarray(img[..., list(order)])
+
+
+def decode_compressed_image(msg: Any, topic: str) -> np.ndarray:
+    """(H, W, 3) uint8 RGB of a ``sensor_msgs/CompressedImage`` (JPEG or PNG, through Pillow).
+
+    Raises:
+        DataError: a compressed depth image, or data Pillow cannot decode; the message names the topic.
+    """
+    from PIL import Image, UnidentifiedImageError
+
+    fmt = str(msg.format)
+    if "compresseddepth" in fmt.lower().replace(" ", ""):
+        raise DataError(f"{topic}: compressed depth images ({fmt!r}) are not colour images")
+    try:
+        with Image.open(io.BytesIO(np.asarray(msg.data, dtype=np.uint8).tobytes())) as img:
+            return np.asarray(img.convert("RGB"), dtype=np.uint8)
+    except (UnidentifiedImageError, OSError, SyntaxError) as exc:
+        raise DataError(f"{topic}: cannot decode the compressed image (format {fmt!r}): {exc}") from None
+
+
+def _point_dtype(msg: Any, topic: str) -> tuple[np.dtype, dict[str, Any]]:
+    """Structured dtype (itemsize ``point_step``) of a PointCloud2's x, y, z and intensity fields."""
+    order = ">" if msg.is_bigendian else "<"
+    fields = {str(f.name): f for f in msg.fields}
+    missing = [n for n in ("x", "y", "z") if n not in fields]
+    if missing:
+        have = ", ".join(fields) or "none"
+        raise DataError(f"{topic}: PointCloud2 has no {'/'.join(missing)} field (fields: {have})")
+    names, formats, offsets = [], [], []
+    for n in ("x", "y", "z"):
+        f = fields[n]
+        if int(f.datatype) not in (7, 8):
+            raise DataError(f"{topic}: PointCloud2 field {n!r} must be FLOAT32 or FLOAT64, got datatype {f.datatype}")
+        names.append(n)
+        formats.append(order + POINTFIELD_DTYPES[int(f.datatype)])
+        offsets.append(int(f.offset))
+    intensity = next((fields[n] for n in _INTENSITY_NAMES if n in fields), None)
+    if intensity is not None and int(intensity.datatype) in POINTFIELD_DTYPES:
+        names.append("intensity")
+        formats.append(order + POINTFIELD_DTYPES[int(intensity.datatype)])
+        offsets.append(int(intensity.offset))
+    step = int(msg.point_step)
+    for n, fmt, off in zip(names, formats, offsets, strict=True):
+        if off + np.dtype(fmt).itemsize > step:
+            raise DataError(f"{topic}: PointCloud2 field {n!r} at byte {off} does not fit point_step {step}")
+    dtype = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": step})
+    return dtype, fields
+
+
+def decode_pointcloud2(msg: Any, topic: str) -> np.ndarray:
+    """(N, 3) or (N, 4) points of a ``sensor_msgs/PointCloud2``: x, y, z (metres, the message's frame) and
+    the intensity when the cloud has one (``intensity``/``reflectance``/``i``).
+
+    Any field layout with float32/float64 x, y, z: extra fields, padding, ``point_step`` larger than the fields,
+    ``row_step`` padding, big-endian data. Points with a NaN or infinite coordinate are dropped (``is_dense``
+    false). float32 when x, y, z all are, else float64.
+
+    Raises:
+        DataError: no x/y/z field, an integer x/y/z, or fewer bytes than the header says; naming the topic.
+    """
+    dtype, _ = _point_dtype(msg, topic)
+    h, w, step = int(msg.height), int(msg.width), int(msg.point_step)
+    data = np.ascontiguousarray(np.asarray(msg.data, dtype=np.uint8).reshape(-1))
+    rows = np.ascontiguousarray(_rows(data, h, int(msg.row_step), w * step, topic, "PointCloud2"))
+    pts = rows.reshape(-1).view(dtype) if rows.size else np.zeros(0, dtype)
+    xyz_types = [dtype.fields[n][0] for n in ("x", "y", "z")]
+    out_type = np.float32 if all(t.itemsize == 4 for t in xyz_types) else np.float64
+    cols = [pts[n].astype(out_type) for n in dtype.names]
+    out = np.stack(cols, 1) if len(pts) else np.zeros((0, len(cols)), out_type)
+    return out[np.isfinite(out[:, :3]).all(1)]
+
+
+@dataclass(frozen=True)
+class CameraInfoData:
+    """The fields of a ``sensor_msgs/CameraInfo`` (what a bag sink writes back).
+
+    Attributes:
+        width, height: image size, pixels. K: (3, 3) intrinsics of the raw image. D: distortion coefficients.
+        R: (3, 3) rectification rotation. P: (3, 4) projection of the rectified image.
+        distortion_model: e.g. ``plumb_bob``. frame_id: the optical frame. stamp_ns: header stamp.
+    """
+
+    width: int
+    height: int
+    K: np.ndarray
+    D: np.ndarray
+    R: np.ndarray
+    P: np.ndarray
+    distortion_model: str = "plumb_bob"
+    frame_id: str = ""
+    stamp_ns: int = 0
+
+    @property
+    def image_size(self) -> tuple[int, int]:
+        """(width, height) pixels."""
+        return (self.width, self.height)
+
+    def intrinsics(self, rectified: bool = True) -> np.ndarray:
+        """(3, 3) intrinsics: ``P``'s left 3x3 for a rectified image (when ``P`` is set), else ``K``."""
+        if rectified and np.any(self.P[:, :3]):
+            return self.P[:, :3].copy()
+        return self.K.copy()
+
+
+def _matrix(msg: Any, name: str, shape: tuple[int, int], topic: str) -> np.ndarray:
+    value = getattr(msg, name.upper(), None)
+    value = getattr(msg, name.lower()) if value is None else value
+    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    if arr.size != shape[0] * shape[1]:
+        raise DataError(f"{topic}: CameraInfo {name} has {arr.size} numbers, expected {shape[0] * shape[1]}")
+    return arr.reshape(shape)
+
+
+def decode_camera_info(msg: Any, topic: str) -> CameraInfoData:
+    """:class:`CameraInfoData` of a ``sensor_msgs/CameraInfo`` (ROS 1 ``K``/``P`` or ROS 2 ``k``/``p``).
+
+    Raises:
+        DataError: a zero image size or a matrix with neither a positive focal length in ``K`` nor in ``P``.
+    """
+    K, P = _matrix(msg, "K", (3, 3), topic), _matrix(msg, "P", (3, 4), topic)
+    R = _matrix(msg, "R", (3, 3), topic)
+    D = np.asarray(getattr(msg, "D", None) if hasattr(msg, "D") else msg.d, dtype=np.float64).reshape(-1)
+    w, h = int(msg.width), int(msg.height)
+    if w <= 0 or h <= 0:
+        raise DataError(f"{topic}: CameraInfo has no image size (width {w}, height {h})")
+    if not ((K[0, 0] > 0 and K[1, 1] > 0) or (P[0, 0] > 0 and P[1, 1] > 0)):
+        raise DataError(f"{topic}: CameraInfo is uncalibrated (K and P have no positive focal length)")
+    return CameraInfoData(w, h, K, D, R, P, str(msg.distortion_model), str(msg.header.frame_id).lstrip("/"),
+                          stamp_ns(msg.header.stamp))  # fmt: skip

@@ -1,0 +1,143 @@
+"""NumPy -> ROS messages (rosbags message objects of a type store): the inverse of :mod:`.decode`.
+
+Every builder takes the rosbags type store ``ts`` (ROS 1 Noetic or ROS 2 Humble, from
+:func:`semattnet.data.bags.deps.rosbags_typestore`), a stamp in integer nanoseconds and a frame id.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from semattnet._errors import InputError
+
+from .decode import CameraInfoData
+
+__all__ = [
+    "camera_info_message",
+    "compressed_image_message",
+    "depth_image_message",
+    "header",
+    "image_message",
+    "pack_rgb",
+    "pointcloud2_message",
+    "tf_message",
+]
+
+#: NumPy kind + size -> ``sensor_msgs/PointField`` datatype.
+_FIELD_TYPES = {("i", 1): 1, ("u", 1): 2, ("i", 2): 3, ("u", 2): 4, ("i", 4): 5, ("u", 4): 6, ("f", 4): 7, ("f", 8): 8}
+
+
+def _time(ts: Any, ns: int) -> Any:
+    return ts.types["builtin_interfaces/msg/Time"](sec=int(ns) // 1_000_000_000, nanosec=int(ns) % 1_000_000_000)
+
+
+def header(ts: Any, stamp_ns: int, frame_id: str, seq: int = 0) -> Any:
+    """A ``std_msgs/Header`` (ROS 1 has a ``seq``, ROS 2 not)."""
+    cls = ts.types["std_msgs/msg/Header"]
+    if "seq" in cls.__dataclass_fields__:
+        return cls(seq=seq, stamp=_time(ts, stamp_ns), frame_id=frame_id)
+    return cls(stamp=_time(ts, stamp_ns), frame_id=frame_id)
+
+
+def image_message(ts: Any, rgb: np.ndarray, stamp_ns: int, frame_id: str) -> Any:
+    """``sensor_msgs/Image`` rgb8 of an (H, W, 3) uint8 image (``step = 3 W``)."""
+    rgb = np.ascontiguousarray(rgb, dtype=np.uint8)
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise InputError(f"image: expected (H, W, 3) uint8, got shape {rgb.shape}")
+    h, w = rgb.shape[:2]
+    return ts.types["sensor_msgs/msg/Image"](header=header(ts, stamp_ns, frame_id), height=h, width=w,
+                                             encoding="rgb8", is_bigendian=0, step=3 * w,
+                                             data=rgb.reshape(-1))  # fmt: skip
+
+
+def depth_image_message(ts: Any, depth: np.ndarray, stamp_ns: int, frame_id: str) -> Any:
+    """``sensor_msgs/Image`` 32FC1 in metres (REP 118): pixels without depth (<= 0 or not finite) are NaN."""
+    d = np.asarray(depth, dtype=np.float32)
+    if d.ndim != 2:
+        raise InputError(f"depth: expected (H, W) metres, got shape {d.shape}")
+    d = np.where(np.isfinite(d) & (d > 0), d, np.float32(np.nan)).astype("<f4")
+    h, w = d.shape
+    return ts.types["sensor_msgs/msg/Image"](header=header(ts, stamp_ns, frame_id), height=h, width=w,
+                                             encoding="32FC1", is_bigendian=0, step=4 * w,
+                                             data=np.frombuffer(d.tobytes(), np.uint8))  # fmt: skip
+
+
+def compressed_image_message(ts: Any, rgb: np.ndarray, stamp_ns: int, frame_id: str, fmt: str = "png") -> Any:
+    """``sensor_msgs/CompressedImage`` of an (H, W, 3) uint8 image, ``fmt`` "png" (lossless) or "jpeg"."""
+    from PIL import Image
+
+    if fmt not in ("png", "jpeg"):
+        raise InputError(f"compressed image format: expected 'png' or 'jpeg', got {fmt!r}")
+    buf = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(rgb, dtype=np.uint8)).save(buf, format=fmt.upper(), quality=95)
+    return ts.types["sensor_msgs/msg/CompressedImage"](header=header(ts, stamp_ns, frame_id), format=fmt,
+                                                       data=np.frombuffer(buf.getvalue(), np.uint8))  # fmt: skip
+
+
+def pack_rgb(rgb: np.ndarray) -> np.ndarray:
+    """(N,) float32 of (N, 3) uint8 colours packed as RViz reads a PointCloud2 ``rgb`` field:
+    the bits of ``uint32 (r << 16) | (g << 8) | b`` reinterpreted as float32."""
+    c = np.asarray(rgb, dtype=np.uint32)
+    return ((c[:, 0] << 16) | (c[:, 1] << 8) | c[:, 2]).astype("<u4").view("<f4")
+
+
+def pointcloud2_message(ts: Any, fields: dict[str, np.ndarray], stamp_ns: int, frame_id: str,
+                        is_dense: bool | None = None) -> Any:  # fmt: skip
+    """An unorganised (height 1) little-endian ``sensor_msgs/PointCloud2`` with one (N,) column per field,
+    packed without padding in the given order (e.g. ``{"x": ..., "y": ..., "z": ..., "intensity": ...}``).
+
+    ``is_dense`` None: True when no x/y/z is NaN or infinite.
+    """
+    cols = {k: np.asarray(v).reshape(-1) for k, v in fields.items()}
+    n = {len(v) for v in cols.values()}
+    if len(n) != 1:
+        raise InputError(f"PointCloud2 fields must have one length, got { ({k: len(v) for k, v in cols.items()}) }")
+    dtype = np.dtype([(k, v.dtype.newbyteorder("<")) for k, v in cols.items()])
+    arr = np.empty(n.pop(), dtype)
+    for k, v in cols.items():
+        arr[k] = v
+    Field = ts.types["sensor_msgs/msg/PointField"]
+    pf = [Field(name=k, offset=dtype.fields[k][1], datatype=_FIELD_TYPES[(v.dtype.kind, v.dtype.itemsize)], count=1)
+          for k, v in cols.items()]  # fmt: skip
+    if is_dense is None:
+        xyz = [cols[k] for k in ("x", "y", "z") if k in cols]
+        is_dense = bool(all(np.isfinite(c).all() for c in xyz))
+    return ts.types["sensor_msgs/msg/PointCloud2"](header=header(ts, stamp_ns, frame_id), height=1, width=len(arr),
+                                                   fields=pf, is_bigendian=False, point_step=dtype.itemsize,
+                                                   row_step=dtype.itemsize * len(arr),
+                                                   data=np.frombuffer(arr.tobytes(), np.uint8),
+                                                   is_dense=is_dense)  # fmt: skip
+
+
+def camera_info_message(ts: Any, info: CameraInfoData, stamp_ns: int | None = None, frame_id: str | None = None) -> Any:
+    """``sensor_msgs/CameraInfo`` of :class:`CameraInfoData` (stamp and frame id from ``info`` unless given)."""
+    cls = ts.types["sensor_msgs/msg/CameraInfo"]
+    ros1 = "K" in cls.__dataclass_fields__
+    mats = {"D": info.D, "K": info.K, "R": info.R, "P": info.P}
+    kw = {(k if ros1 else k.lower()): np.asarray(v, dtype=np.float64).reshape(-1) for k, v in mats.items()}
+    roi = ts.types["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
+    hdr = header(ts, info.stamp_ns if stamp_ns is None else stamp_ns, info.frame_id if frame_id is None else frame_id)
+    return cls(header=hdr, height=int(info.height), width=int(info.width), distortion_model=info.distortion_model,
+               binning_x=0, binning_y=0, roi=roi, **kw)  # fmt: skip
+
+
+def tf_message(ts: Any, transforms: Sequence[tuple[str, str, np.ndarray]], stamp_ns: int) -> Any:
+    """``tf2_msgs/TFMessage`` of ``(parent, child, T_parent_child (4, 4))`` edges (``p_parent = T p_child``)."""
+    from .tf import matrix_to_quaternion
+
+    g = ts.types
+    out = []
+    for parent, child, T in transforms:
+        T = np.asarray(T, dtype=np.float64)
+        x, y, z, w = matrix_to_quaternion(T[:3, :3])
+        vec = g["geometry_msgs/msg/Vector3"](x=T[0, 3], y=T[1, 3], z=T[2, 3])
+        tr = g["geometry_msgs/msg/Transform"](
+            translation=vec, rotation=g["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w)
+        )
+        stamped = g["geometry_msgs/msg/TransformStamped"]
+        out.append(stamped(header=header(ts, stamp_ns, parent), child_frame_id=child, transform=tr))
+    return g["tf2_msgs/msg/TFMessage"](transforms=out)

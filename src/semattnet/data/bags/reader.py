@@ -1,0 +1,147 @@
+"""Opening a bag (ROS 1 ``.bag``, ROS 2 folder, or a bare ``.db3`` / ``.mcap`` file) through rosbags'
+``AnyReader``, listing its topics, finding a topic's connections and reading ``/tf_static``.
+
+Every rosbags, sqlite3 or decoding failure of a truncated or corrupt bag becomes one
+:class:`~semattnet._errors.DataError` line naming the file (:func:`bag_errors`).
+"""
+
+from __future__ import annotations
+
+import os
+import sqlite3
+import struct
+import zlib
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from semattnet._errors import DataError, SemAttNetError
+
+from .deps import import_extra, rosbags_typestore
+from .tf import TransformTree
+
+__all__ = [
+    "TF_STATIC_TOPIC",
+    "TopicRow",
+    "bag_errors",
+    "format_topics",
+    "is_ros1",
+    "list_topics",
+    "open_bag",
+    "read_transforms",
+    "topic_connections",
+]
+
+#: The topic of static transforms (``tf2_msgs/TFMessage``).
+TF_STATIC_TOPIC = "/tf_static"
+
+
+@dataclass(frozen=True)
+class TopicRow:
+    """One topic of a bag: its name, message type (``sensor_msgs/msg/Image``), message count and mean rate in Hz
+    from the receive times (None with fewer than two messages)."""
+
+    topic: str
+    msgtype: str
+    count: int
+    rate_hz: float | None
+
+
+def _reader_errors() -> tuple[type[BaseException], ...]:
+    rosbag1 = import_extra("rosbags.rosbag1", "reading ROS bags")
+    rosbag2 = import_extra("rosbags.rosbag2", "reading ROS bags")
+    highlevel = import_extra("rosbags.highlevel", "reading ROS bags")
+    serde = import_extra("rosbags.serde", "reading ROS bags")
+    return (highlevel.AnyReaderError, rosbag1.ReaderError, rosbag2.ReaderError, serde.SerdeError, sqlite3.Error,
+            struct.error, EOFError, zlib.error, KeyError, IndexError, UnicodeDecodeError, AssertionError,
+            ValueError)  # fmt: skip
+
+
+@contextmanager
+def bag_errors(path: str | os.PathLike[str]) -> Iterator[None]:
+    """Turn the failures of reading a truncated or corrupt bag into one :class:`DataError` line naming ``path``
+    (semattnet's own errors pass through unchanged)."""
+    errors = _reader_errors()
+    try:
+        yield
+    except SemAttNetError:
+        raise
+    except errors as exc:
+        why = " ".join(str(exc).split()) or type(exc).__name__
+        raise DataError(f"{path}: cannot read the bag (truncated or corrupt?): {why[:200]}") from None
+
+
+def is_ros1(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` is a ROS 1 bag (a ``.bag`` file); otherwise it is read as ROS 2."""
+    return Path(path).suffix == ".bag" and Path(path).is_file()
+
+
+@contextmanager
+def open_bag(path: str | os.PathLike[str]) -> Iterator[Any]:
+    """An open rosbags ``AnyReader`` of ``path``; reading errors inside the block name the file.
+
+    Raises:
+        DataError: ``path`` is missing, not a bag, truncated or corrupt.
+    """
+    highlevel = import_extra("rosbags.highlevel", "reading ROS bags")
+    path = Path(path)
+    if not path.exists():
+        raise DataError(f"{path}: bag not found")
+    with bag_errors(path):
+        reader = highlevel.AnyReader([path], default_typestore=rosbags_typestore(is_ros1(path)))
+        reader.open()
+        try:
+            yield reader
+        finally:
+            reader.close()
+
+
+def topic_connections(reader: Any, topic: str, msgtypes: Sequence[str], path: str | os.PathLike[str]) -> list[Any]:
+    """The reader's connections of ``topic``, checking that its type is one of ``msgtypes``.
+
+    Raises:
+        DataError: no such topic (the message lists those the bag has) or another message type.
+    """
+    conns = [c for c in reader.connections if c.topic == topic]
+    if not conns:
+        have = ", ".join(sorted({c.topic for c in reader.connections})) or "none"
+        raise DataError(f"{path}: no topic {topic!r} (topics: {have})")
+    bad = sorted({c.msgtype for c in conns if c.msgtype not in msgtypes})
+    if bad:
+        raise DataError(f"{path}: topic {topic!r} holds {bad[0]}, expected {' or '.join(msgtypes)}")
+    return conns
+
+
+def list_topics(path: str | os.PathLike[str]) -> list[TopicRow]:
+    """Every topic of the bag at ``path`` with its type, count and rate (what ``--list-topics`` prints)."""
+    with open_bag(path) as reader:
+        rows = []
+        for topic in sorted({c.topic for c in reader.connections}):
+            conns = [c for c in reader.connections if c.topic == topic]
+            times = [t for _, t, _ in reader.messages(connections=conns)]
+            span = (max(times) - min(times)) / 1e9 if len(times) > 1 else 0.0
+            rate = (len(times) - 1) / span if span > 0 else None
+            rows.append(TopicRow(topic, conns[0].msgtype, len(times), rate))
+    return rows
+
+
+def format_topics(rows: Sequence[TopicRow]) -> str:
+    """A plain-text table of :func:`list_topics` rows: topic, type, count, rate."""
+    head = ("topic", "type", "count", "rate (Hz)")
+    body = [(r.topic, r.msgtype, str(r.count), "-" if r.rate_hz is None else f"{r.rate_hz:.2f}") for r in rows]
+    widths = [max(len(x[i]) for x in [head, *body]) for i in range(4)]
+    fmt = lambda r: "  ".join(
+        v.ljust(w) if i < 2 else v.rjust(w) for i, (v, w) in enumerate(zip(r, widths, strict=True))
+    )  # noqa: E731
+    return "\n".join(fmt(r) for r in [head, *body])
+
+
+def read_transforms(reader: Any, path: str | os.PathLike[str], topic: str = TF_STATIC_TOPIC) -> TransformTree:
+    """Every static transform of ``topic`` (none when the bag lacks it) as a :class:`TransformTree`."""
+    tree = TransformTree(f"{path}: {topic}")
+    conns = [c for c in reader.connections if c.topic == topic]
+    for conn, _, raw in reader.messages(connections=conns):
+        tree.add_message(reader.deserialize(raw, conn.msgtype))
+    return tree

@@ -1,0 +1,170 @@
+"""Rerun recordings of completed frames (``rerun-sdk``, extra ``rerun``).
+
+Per frame, on one timeline (``sensor_time``) stamped with the sensor time, in the LiDAR frame ``world``
+(``FLU``, x forward, y left, z up)::
+
+    world/camera                  Transform3D: the camera pose T_lidar_cam
+    world/camera/image            Pinhole: K, image size (camera axes RDF: x right, y down, z forward)
+    world/camera/image/rgb        Image
+    world/camera/image/sparse     DepthImage, metres (meter = 1), the projected LiDAR input
+    world/camera/image/depth      DepthImage, metres, the completed depth
+    world/camera/image/semantic   SegmentationImage of Cityscapes trainIds (AnnotationContext: class labels)
+    world/lidar/points            Points3D, the scan
+    world/completed/points        Points3D, the completed depth back-projected with its colours
+
+A file recording is written to a hidden temporary file beside the target and moved into place at
+:meth:`RerunLogger.close`; after an error inside the ``with`` block nothing is left.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+
+from semattnet._errors import InputError
+from semattnet._utils.atomic import new_file_mode
+from semattnet.data.palette import IGNORE_ID, TRAIN_CLASSES, UNKNOWN_COLOR, colors_to_ids
+from semattnet.geometry import depth_to_points, invert_T
+
+from .deps import import_extra
+
+__all__ = ["ENTITIES", "TIMELINE", "RerunLogger", "read_rrd_frames"]
+
+#: The timeline every frame is logged on (sensor time, ns since the epoch).
+TIMELINE = "sensor_time"
+#: Entity paths by role (module doc).
+ENTITIES = {
+    "camera": "world/camera",
+    "pinhole": "world/camera/image",
+    "rgb": "world/camera/image/rgb",
+    "sparse": "world/camera/image/sparse",
+    "depth": "world/camera/image/depth",
+    "semantic": "world/camera/image/semantic",
+    "points": "world/lidar/points",
+    "cloud": "world/completed/points",
+}
+
+
+def _rerun() -> Any:
+    return import_extra("rerun", "writing a Rerun recording")
+
+
+class RerunLogger:
+    """Log frames to a ``.rrd`` file (``path``) and/or a spawned viewer (``spawn``).
+
+    Args:
+        path: the recording to write (staged, see the module doc); None: no file.
+        spawn: start a Rerun viewer and stream to it as well.
+        overwrite: replace an existing ``path`` (else :class:`FileExistsError` at once).
+        max_depth: completed-cloud points deeper than this are left out, metres (None: all).
+    """
+
+    def __init__(self, path: str | os.PathLike[str] | None = None, spawn: bool = False, overwrite: bool = False,
+                 app_id: str = "semattnet", max_depth: float | None = None) -> None:  # fmt: skip
+        if path is None and not spawn:
+            raise InputError("RerunLogger: give a .rrd path, spawn=True, or both")
+        self.path = None if path is None else Path(path)
+        if self.path is not None and self.path.exists() and not overwrite:
+            raise FileExistsError(f"{self.path} exists; refusing to overwrite (pass --overwrite / overwrite=True)")
+        rr = _rerun()
+        self.max_depth, self.frames = max_depth, 0
+        self.rec = rr.RecordingStream(app_id)
+        self._tmp: Path | None = None
+        if self.path is not None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.p{os.getpid()}.", suffix=".rrd", dir=self.path.parent)
+            os.close(fd)
+            self._tmp = Path(tmp)
+        if spawn:
+            self.rec.spawn(connect=self._tmp is None)
+        if spawn and self._tmp is not None:
+            self.rec.set_sinks(rr.FileSink(str(self._tmp)), rr.GrpcSink())
+        elif self._tmp is not None:
+            self.rec.save(str(self._tmp))
+        self._log_static(rr)
+
+    def _log_static(self, rr: Any) -> None:
+        self.rec.log("world", rr.ViewCoordinates.FLU, static=True)
+        labels = [rr.AnnotationInfo(id=i, label=name, color=c) for i, (name, c) in enumerate(TRAIN_CLASSES)]
+        labels.append(rr.AnnotationInfo(id=IGNORE_ID, label="unknown", color=UNKNOWN_COLOR))
+        self.rec.log(ENTITIES["semantic"], rr.AnnotationContext(labels), static=True)
+
+    def __enter__(self) -> RerunLogger:
+        return self
+
+    def log_frame(self, stamp_ns: int, rgb: np.ndarray, K: np.ndarray, T_cam_lidar: np.ndarray, *,
+                  sparse: np.ndarray | None = None, depth: np.ndarray | None = None,
+                  semantic: np.ndarray | None = None, points: np.ndarray | None = None) -> None:  # fmt: skip
+        """One frame at sensor time ``stamp_ns``: ``rgb`` (H, W, 3) uint8, ``K`` (3, 3), ``T_cam_lidar`` (4, 4);
+        optional ``sparse`` / ``depth`` (H, W) metres (0 = none), ``semantic`` (H, W) trainIds or (H, W, 3)
+        palette colours, ``points`` (N, 3|4) LiDAR frame."""
+        rr = _rerun()
+        rgb = np.asarray(rgb, dtype=np.uint8)
+        h, w = rgb.shape[:2]
+        K = np.asarray(K, dtype=np.float64)
+        T_lidar_cam = invert_T(np.asarray(T_cam_lidar, dtype=np.float64))
+        log = self.rec.log
+        self.rec.set_time(TIMELINE, timestamp=np.datetime64(int(stamp_ns), "ns"))
+        log(ENTITIES["camera"], rr.Transform3D(translation=T_lidar_cam[:3, 3], mat3x3=T_lidar_cam[:3, :3]))
+        log(ENTITIES["pinhole"], rr.Pinhole(image_from_camera=K, resolution=[w, h], camera_xyz=rr.ViewCoordinates.RDF))
+        log(ENTITIES["rgb"], rr.Image(rgb))
+        if sparse is not None:
+            log(ENTITIES["sparse"], rr.DepthImage(np.asarray(sparse, dtype=np.float32), meter=1.0))
+        if semantic is not None:
+            sem = np.asarray(semantic)
+            ids = colors_to_ids(sem, source="semantic map") if sem.ndim == 3 else sem.astype(np.uint8)
+            log(ENTITIES["semantic"], rr.SegmentationImage(ids))
+        if points is not None:
+            pts = np.asarray(points)[:, :3]
+            log(ENTITIES["points"], rr.Points3D(pts[np.isfinite(pts).all(1)]))
+        if depth is not None:
+            d = np.nan_to_num(np.asarray(depth, dtype=np.float32), nan=0.0)
+            log(ENTITIES["depth"], rr.DepthImage(d, meter=1.0))
+            cloud = depth_to_points(d, K, rgb=rgb, max_depth=self.max_depth).transform(T_lidar_cam, "lidar")
+            log(ENTITIES["cloud"], rr.Points3D(cloud.xyz, colors=cloud.rgb))
+        self.frames += 1
+
+    def close(self) -> None:
+        """Flush and finish; a file recording is moved into place."""
+        self._finish(ok=True)
+
+    def _finish(self, ok: bool) -> None:
+        rec, self.rec = self.rec, None
+        if rec is None:
+            return
+        try:
+            rec.flush()
+            rec.disconnect()
+            if ok and self._tmp is not None and self.path is not None:
+                os.chmod(self._tmp, new_file_mode())
+                os.replace(self._tmp, self.path)
+        finally:
+            if self._tmp is not None and self._tmp.exists():
+                self._tmp.unlink()
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:  # fmt: skip
+        self._finish(ok=exc_type is None)
+
+
+def read_rrd_frames(path: str | os.PathLike[str]) -> dict[str, list[int]]:
+    """Entity path (without the leading ``/``) -> the sorted sensor times (ns) it was logged at, of a ``.rrd``
+    file; static-only entities map to an empty list. (For checking a recording; needs ``rerun-sdk``.)"""
+    chunk = import_extra("rerun.chunk", "reading a Rerun recording")
+    store = chunk.RrdReader(str(path)).store()
+    out: dict[str, list[int]] = {}
+    for ch in store.stream():
+        entity = str(ch.entity_path).lstrip("/")
+        if entity.startswith("__"):
+            continue
+        times = out.setdefault(entity, [])
+        batch = ch.to_record_batch()
+        if TIMELINE in batch.schema.names:
+            col = batch.column(TIMELINE).cast("int64")
+            times.extend(int(v) for v in col.to_pylist() if v is not None)
+    return {k: sorted(v) for k, v in out.items()}

@@ -1,0 +1,250 @@
+"""Image + LiDAR scan pairs from a bag, with their calibration: what a bag frame source yields.
+
+:class:`BagPairs` checks everything it can before the first frame (topics and types, the pairing, the
+calibration: ``CameraInfo`` + ``/tf_static``, or a rig that overrides both) in one pass over the headers,
+then yields :class:`BagPair` in image order in a second pass, holding only the scans that images still
+to come need (memory stays bounded by the stamp skew, not by the bag's length).
+
+    >>> pairs = BagPairs("drive.mcap", "/kitti/camera_color_left/image_raw", "/kitti/velo/pointcloud")  # doctest: +SKIP
+    >>> print(pairs.pairing.describe())                                                                # doctest: +SKIP
+    >>> for p in pairs:                                                                                # doctest: +SKIP
+    ...     sparse = project_points(p.points, p.K, p.T_cam_lidar, p.image_size)
+"""
+
+from __future__ import annotations
+
+import os
+from collections import Counter, deque
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from semattnet._errors import DataError
+from semattnet.geometry import RigCalibration, read_rig_json
+
+from .decode import (
+    CameraInfoData,
+    decode_camera_info,
+    decode_compressed_image,
+    decode_image,
+    decode_pointcloud2,
+    header_stamp_frame,
+)
+from .pairing import StampPairing, pair_stamps
+from .reader import TF_STATIC_TOPIC, open_bag, read_transforms, topic_connections
+
+__all__ = ["CAMERA_INFO_TYPE", "IMAGE_TYPES", "POINTS_TYPE", "BagPair", "BagPairs", "rig_camera_info"]
+
+IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+POINTS_TYPE = "sensor_msgs/msg/PointCloud2"
+CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
+
+
+@dataclass(frozen=True)
+class BagPair:
+    """One image with its nearest scan.
+
+    Attributes:
+        name: the image's index in its topic, 10 digits ("0000000003"). index: that index.
+        stamp_ns: the image's header stamp (ns); scan_stamp_ns: the scan's.
+        image: (H, W, 3) uint8 RGB. points: (N, 3|4) LiDAR-frame metres (+ intensity), NaN points dropped.
+        frame_id: the camera (optical) frame; lidar_frame_id: the scan's frame.
+        K: (3, 3) intrinsics, pixels. image_size: (width, height). T_cam_lidar: (4, 4) LiDAR -> camera.
+        camera_info: the CameraInfo to write back with outputs (made from the rig when the bag has none).
+    """
+
+    name: str
+    index: int
+    stamp_ns: int
+    scan_stamp_ns: int
+    image: np.ndarray
+    points: np.ndarray
+    frame_id: str
+    lidar_frame_id: str
+    K: np.ndarray
+    image_size: tuple[int, int]
+    T_cam_lidar: np.ndarray
+    camera_info: CameraInfoData
+
+    @property
+    def calibration(self) -> RigCalibration:
+        """The pair's calibration as :class:`semattnet.geometry.RigCalibration` (for ``project_scan``)."""
+        return RigCalibration(self.K, self.T_cam_lidar, self.image_size, self.frame_id or None, source=self.name)
+
+
+def rig_camera_info(rig: RigCalibration, frame_id: str = "", stamp: int = 0) -> CameraInfoData:
+    """A distortion-free CameraInfo of a rig (``P = [K | 0]``)."""
+    if rig.image_size is None:
+        raise DataError(f"{rig.source or 'rig'}: the calibration does not give the image size")
+    K = np.asarray(rig.K, dtype=np.float64)
+    w, h = rig.image_size
+    return CameraInfoData(w, h, K, np.zeros(5), np.eye(3), np.hstack([K, np.zeros((3, 1))]), "plumb_bob", frame_id,
+                          stamp)  # fmt: skip
+
+
+class BagPairs:
+    """Image/scan pairs of one bag (see the module doc).
+
+    Args:
+        path: a ROS 1 ``.bag``, a ROS 2 bag folder, or a ``.db3`` / ``.mcap`` file.
+        image_topic: ``sensor_msgs/Image`` (rgb8, bgr8, mono8) or ``sensor_msgs/CompressedImage``.
+        points_topic: ``sensor_msgs/PointCloud2`` with x, y, z.
+        camera_info_topic: ``sensor_msgs/CameraInfo``; None: the bag's only CameraInfo topic (or the one sharing
+            the image topic's namespace). Not needed with ``rig``.
+        rig: a rig file (:func:`semattnet.geometry.read_rig_json`) or a ``RigCalibration`` (e.g. from
+            :func:`semattnet.geometry.load_rig`); overrides the bag's CameraInfo intrinsics and ``/tf_static``.
+        max_skew: seconds between an image and its scan at most (None: half the scan period).
+        rectified: the images are rectified: intrinsics are CameraInfo's ``P[:, :3]`` (else its ``K``).
+        tf_topic: where the static transforms are.
+
+    Raises:
+        DataError: a missing topic or wrong type, no scan within ``max_skew`` of any image, no transform between
+            the LiDAR and camera frames, no CameraInfo, a truncated bag; naming the file and topic.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], image_topic: str, points_topic: str,
+                 camera_info_topic: str | None = None, rig: str | os.PathLike[str] | RigCalibration | None = None,
+                 max_skew: float | None = None, rectified: bool = True,
+                 tf_topic: str = TF_STATIC_TOPIC) -> None:  # fmt: skip
+        self.path, self.image_topic, self.points_topic = Path(path), image_topic, points_topic
+        self.rig = read_rig_json(rig) if isinstance(rig, (str, os.PathLike)) else rig
+        self.rectified = rectified
+        self._transforms: dict[tuple[str, str], np.ndarray] = {}
+        with open_bag(self.path) as reader:
+            self.camera_info_topic = camera_info_topic
+            if self.rig is None and camera_info_topic is None:
+                self.camera_info_topic = self._find_camera_info(reader)
+            self._scan_headers(reader)
+            self.tree = read_transforms(reader, self.path, tf_topic) if self.rig is None else None
+        skew = None if max_skew is None else round(max_skew * 1e9)
+        self.pairing: StampPairing = pair_stamps(self.image_stamps, self.scan_stamps, skew)
+        self._check_pairing()
+        for i in np.nonzero(self.pairing.match >= 0)[0]:  # every calibration question answered up front
+            self.T_cam_lidar(self._camera_frame(int(i)), self.scan_frames[self.pairing.match[i]])
+            self._camera_info(int(i))
+
+    def _find_camera_info(self, reader: Any) -> str:
+        topics = sorted({c.topic for c in reader.connections if c.msgtype == CAMERA_INFO_TYPE})
+        if not topics:
+            raise DataError(f"{self.path}: no sensor_msgs/CameraInfo topic for {self.image_topic!r}; "
+                            "give the camera-info topic or a rig file")  # fmt: skip
+        if len(topics) == 1:
+            return topics[0]
+        ns = self.image_topic.rsplit("/", 1)[0]
+        near = [t for t in topics if t.rsplit("/", 1)[0] == ns]
+        if len(near) == 1:
+            return near[0]
+        raise DataError(f"{self.path}: several CameraInfo topics ({', '.join(topics)}); say which one")
+
+    def _scan_headers(self, reader: Any) -> None:
+        """Pass 1: stamps and frame ids of images and scans (headers only), every CameraInfo decoded."""
+        ros1 = not reader.is2
+        image_conns = topic_connections(reader, self.image_topic, IMAGE_TYPES, self.path)
+        scan_conns = topic_connections(reader, self.points_topic, (POINTS_TYPE,), self.path)
+        info_conns = []
+        if self.camera_info_topic is not None:
+            info_conns = topic_connections(reader, self.camera_info_topic, (CAMERA_INFO_TYPE,), self.path)
+        heads: dict[str, list[tuple[int, str]]] = {self.image_topic: [], self.points_topic: []}
+        self.infos: list[CameraInfoData] = []
+        for conn, t, raw in reader.messages(connections=image_conns + scan_conns + info_conns):
+            if conn.topic == self.camera_info_topic:
+                self.infos.append(decode_camera_info(reader.deserialize(raw, conn.msgtype), conn.topic))
+            else:
+                stamp, frame = header_stamp_frame(raw, ros1)
+                heads[conn.topic].append((stamp or t, frame))
+        self.image_stamps = np.array([s for s, _ in heads[self.image_topic]], dtype=np.int64)
+        self.image_frames = [f for _, f in heads[self.image_topic]]
+        self.scan_stamps = np.array([s for s, _ in heads[self.points_topic]], dtype=np.int64)
+        self.scan_frames = [f for _, f in heads[self.points_topic]]
+        if self.camera_info_topic is not None and not self.infos:
+            raise DataError(f"{self.path}: topic {self.camera_info_topic!r} has no message")
+        self._info_stamps = np.array([i.stamp_ns for i in self.infos], dtype=np.int64)
+
+    def _check_pairing(self) -> None:
+        for topic, stamps in ((self.image_topic, self.image_stamps), (self.points_topic, self.scan_stamps)):
+            if len(stamps) == 0:
+                raise DataError(f"{self.path}: topic {topic!r} has no message")
+        p = self.pairing
+        if p.paired == 0:
+            raise DataError(f"{self.path}: no {self.points_topic} scan within {p.max_skew_ns / 1e6:.1f} ms of any "
+                            f"{self.image_topic} image ({len(self.image_stamps)} images, {p.n_scans} scans, nearest "
+                            f"{p.skew_ns.min() / 1e6:.1f} ms apart); raise the max skew")  # fmt: skip
+
+    def _camera_frame(self, i: int) -> str:
+        if self.image_frames[i]:
+            return self.image_frames[i]
+        return self._camera_info(i).frame_id
+
+    def _camera_info(self, i: int) -> CameraInfoData:
+        """The CameraInfo nearest in time to image ``i`` (from the rig when given); checks the image size."""
+        if self.rig is not None:
+            info = rig_camera_info(self.rig, self.image_frames[i], int(self.image_stamps[i]))
+            if self.infos:  # keep the bag's own message for the sink, with the rig's intrinsics
+                near = self.infos[int(np.argmin(np.abs(self._info_stamps - self.image_stamps[i])))]
+                info = CameraInfoData(info.width, info.height, info.K, near.D, near.R, info.P, near.distortion_model,
+                                      near.frame_id, near.stamp_ns)  # fmt: skip
+            return info
+        return self.infos[int(np.argmin(np.abs(self._info_stamps - self.image_stamps[i])))]
+
+    def T_cam_lidar(self, camera_frame: str, lidar_frame: str) -> np.ndarray:
+        """(4, 4) LiDAR -> camera: the rig's, else chained from ``/tf_static`` (cached per frame pair)."""
+        if self.rig is not None:
+            return np.asarray(self.rig.T_cam_lidar, dtype=np.float64)
+        key = (camera_frame, lidar_frame)
+        if key not in self._transforms:
+            assert self.tree is not None
+            self._transforms[key] = self.tree.lookup(camera_frame, lidar_frame)
+        return self._transforms[key]
+
+    def __len__(self) -> int:
+        return self.pairing.paired
+
+    def _decode_image(self, reader: Any, conn: Any, raw: Any) -> np.ndarray:
+        msg = reader.deserialize(raw, conn.msgtype)
+        if conn.msgtype == IMAGE_TYPES[1]:
+            return decode_compressed_image(msg, conn.topic)
+        return decode_image(msg, conn.topic)
+
+    def _pair(self, i: int, image: np.ndarray, scan: tuple[np.ndarray, int, str]) -> BagPair:
+        points, scan_stamp, lidar_frame = scan
+        info = self._camera_info(i)
+        frame = self._camera_frame(i)
+        size = self.rig.image_size if self.rig is not None else info.image_size
+        assert size is not None
+        if image.shape[:2] != (size[1], size[0]):
+            raise DataError(f"{self.path}: {self.image_topic} image {i} is {image.shape[1]}x{image.shape[0]}, "
+                            f"the calibration says {size[0]}x{size[1]}")  # fmt: skip
+        K = np.asarray(self.rig.K, dtype=np.float64) if self.rig is not None else info.intrinsics(self.rectified)
+        return BagPair(f"{i:010d}", i, int(self.image_stamps[i]), scan_stamp, image, points, frame, lidar_frame, K,
+                       (int(size[0]), int(size[1])), self.T_cam_lidar(frame, lidar_frame), info)  # fmt: skip
+
+    def __iter__(self) -> Iterator[BagPair]:
+        """Pass 2: decode images and the scans they need, yield pairs in image order."""
+        match = self.pairing.match
+        need = Counter(int(j) for j in match if j >= 0)
+        scans: dict[int, tuple[np.ndarray, int, str]] = {}
+        pending: deque[tuple[int, np.ndarray]] = deque()
+        n_img = n_scan = 0
+        with open_bag(self.path) as reader:
+            conns = [c for c in reader.connections if c.topic in (self.image_topic, self.points_topic)]
+            for conn, _, raw in reader.messages(connections=conns):
+                if conn.topic == self.points_topic:
+                    j, n_scan = n_scan, n_scan + 1
+                    if need[j]:
+                        msg = reader.deserialize(raw, conn.msgtype)
+                        pts = decode_pointcloud2(msg, conn.topic)
+                        scans[j] = (pts, int(self.scan_stamps[j]), str(msg.header.frame_id).lstrip("/"))
+                else:
+                    i, n_img = n_img, n_img + 1
+                    if match[i] >= 0:
+                        pending.append((i, self._decode_image(reader, conn, raw)))
+                while pending and int(match[pending[0][0]]) in scans:
+                    i, image = pending.popleft()
+                    j = int(match[i])
+                    yield self._pair(i, image, scans[j])
+                    need[j] -= 1
+                    if need[j] == 0:
+                        del scans[j]
