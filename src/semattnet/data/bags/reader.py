@@ -132,9 +132,11 @@ def format_topics(rows: Sequence[TopicRow]) -> str:
     head = ("topic", "type", "count", "rate (Hz)")
     body = [(r.topic, r.msgtype, str(r.count), "-" if r.rate_hz is None else f"{r.rate_hz:.2f}") for r in rows]
     widths = [max(len(x[i]) for x in [head, *body]) for i in range(4)]
-    fmt = lambda r: "  ".join(
-        v.ljust(w) if i < 2 else v.rjust(w) for i, (v, w) in enumerate(zip(r, widths, strict=True))
-    )  # noqa: E731
+
+    def fmt(row: tuple[str, ...]) -> str:
+        cells = (v.ljust(w) if i < 2 else v.rjust(w) for i, (v, w) in enumerate(zip(row, widths, strict=True)))
+        return "  ".join(cells)
+
     return "\n".join(fmt(r) for r in [head, *body])
 
 
