@@ -144,6 +144,8 @@ def read_transforms(reader: Any, path: str | os.PathLike[str], topic: str = TF_S
     """Every static transform of ``topic`` (none when the bag lacks it) as a :class:`TransformTree`."""
     tree = TransformTree(f"{path}: {topic}")
     conns = [c for c in reader.connections if c.topic == topic]
+    if not conns:  # (rosbags reads every topic when given no connection)
+        return tree
     for conn, _, raw in reader.messages(connections=conns):
         tree.add_message(reader.deserialize(raw, conn.msgtype))
     return tree
