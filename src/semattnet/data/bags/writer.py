@@ -125,6 +125,8 @@ class BagWriter:
         self.path, self.fmt = Path(path), bag_format(path, fmt)
         self.topics = {k: f"{prefix.rstrip('/')}/{k}" for k in ("depth", "points", "camera_info")}
         self.max_depth = max_depth
+        if self.path.exists() and not overwrite:  # at once, before any frame is computed
+            raise FileExistsError(f"{self.path} exists; refusing to overwrite (pass --overwrite / overwrite=True)")
         self._stage = staged_bag(self.path, overwrite)
         self._out: MessageWriter | None = None
         self.frames = 0
