@@ -165,4 +165,4 @@ class ClassicalCompleter:
     def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
         dense = complete_classical(torch.from_numpy(np.ascontiguousarray(sparse, dtype=np.float32))[None, None])
         depth = dense[0, 0].numpy()
-        return Completion(depth=depth, outputs={"refined_depth": depth})
+        return Completion(depth=depth)
