@@ -222,23 +222,28 @@ def read_intrinsics(path: str | os.PathLike[str], camera: str | None = None) -> 
     """A 3x3 camera matrix from a KITTI file.
 
     ``val_selection_cropped``/``test`` intrinsics files hold 9 numbers; a raw-data
-    ``calib_cam_to_cam.txt`` holds ``P_rect_0X`` rows (pass ``camera="02"``): read by
-    :func:`semattnet.geometry.read_cam_to_cam` (the one KITTI calibration reader; ``K = P_rect[:, :3]``).
+    ``calib_cam_to_cam.txt`` holds ``P_rect_0X`` rows (pass ``camera="02"``): ``K = P_rect_0X[:, :3]``
+    (its last column is the stereo baseline, an extrinsic: see :mod:`semattnet.geometry.calibration`,
+    whose :func:`~semattnet.geometry.read_cam_to_cam` reads the whole rig and needs ``R_rect``/``S_rect``
+    too, which the synthetic trees do not write).
     """
     path = Path(path)
     if not path.is_file():
         raise DataError(f"{path}: file not found")
-    if camera is not None:
-        from semattnet.geometry.calibration import read_cam_to_cam
-
-        cameras = read_cam_to_cam(path)
-        if camera not in cameras:
-            raise DataError(f"{path}: no P_rect_{camera} entry")
-        return cameras[camera].K
+    text = path.read_text()
     try:
-        values = [float(v) for v in path.read_text().split()]
+        if camera is None:
+            values = [float(v) for v in text.split()]
+            if len(values) != 9:
+                raise DataError(f"{path}: expected 9 numbers (a 3x3 matrix), found {len(values)}")
+            return np.array(values, dtype=np.float64).reshape(3, 3)
+        for line in text.splitlines():
+            key, _, rest = line.partition(":")
+            if key.strip() == f"P_rect_{camera}":
+                p = np.array([float(v) for v in rest.split()], dtype=np.float64).reshape(3, 4)
+                return p[:, :3]
     except ValueError as exc:
+        if isinstance(exc, DataError):
+            raise
         raise DataError(f"{path}: malformed numbers: {exc}") from None
-    if len(values) != 9:
-        raise DataError(f"{path}: expected 9 numbers (a 3x3 matrix), found {len(values)}")
-    return np.array(values, dtype=np.float64).reshape(3, 3)
+    raise DataError(f"{path}: no P_rect_{camera} entry")
