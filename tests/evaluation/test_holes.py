@@ -15,7 +15,8 @@ from torch.utils.data import DataLoader
 from semattnet.data.io import MIN_DEPTH_M, clamp_for_png, read_depth
 from semattnet.data.pairing import FramePaths
 from semattnet.data.synthetic.tree import write_synthetic_kitti
-from semattnet.evaluation.evaluate import _eval_dataset, _FrameWriter, evaluate_model, score_folders
+from semattnet.evaluation.evaluate import PredictionWriter, evaluate_model, score_folders
+from semattnet.evaluation.split import eval_dataset
 from semattnet.evaluation.submission import write_submission_files
 from semattnet.inference.completer import Completion
 from semattnet.inference.folder import complete_folder
@@ -56,7 +57,7 @@ def test_predict_path_keeps_holes(tmp_path: Path) -> None:
     pred = _with_holes(np.full((20, 30), 7.0))
 
     def completer(image: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
-        return Completion(depth=pred, outputs={"refined_depth": pred})
+        return Completion(depth=pred)
 
     with pytest.warns(UserWarning, match="hole"):
         complete_folder(completer, [FramePaths("a", tmp_path / "a.png", tmp_path / "s.png")], tmp_path / "o", log=str)
@@ -86,9 +87,9 @@ class _HoleyModel(nn.Module):
 def test_evaluate_saved_and_quantized_scores_match_metrics(tmp_path: Path) -> None:
     root = tmp_path / "kitti"
     write_synthetic_kitti(root, 2, (48, 64), seed=3, eval_frames=2, workers=1)
-    ds = _eval_dataset(root, "val_select", None, None)
+    ds = eval_dataset(root, "val_select")
     out = tmp_path / "eval"
-    writer = _FrameWriter(ds, "val_select", out, save_predictions=True, pictures=0)
+    writer = PredictionWriter(ds, "val_select", out, save_predictions=True, pictures=0)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         m = evaluate_model(_HoleyModel(), DataLoader(ds), torch.device("cpu"), progress=False, on_batch=writer,

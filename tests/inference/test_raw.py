@@ -64,13 +64,16 @@ class _Recorder:
     needs_semantic = True
 
     def __call__(self, rgb, sparse, semantic=None):  # type: ignore[no-untyped-def]
+        import torch
+
         from semattnet.inference import Completion
+        from semattnet.models.outputs import DepthCompletionOutput
 
         self.semantic = semantic
-        ones = np.ones_like(sparse)
-        return Completion(
-            sparse + 1.0, {"color_conf": 0.2 * ones, "semantic_conf": 0.7 * ones, "guided_conf": 0.1 * ones}
-        )
+        depth = torch.from_numpy(sparse + 1.0)[None, None]
+        ones = torch.ones_like(depth)
+        output = DepthCompletionOutput(depth, depth, depth, 0.2 * ones, 0.7 * ones, 0.1 * ones, depth, None, depth)
+        return Completion(sparse + 1.0, output)
 
 
 def test_semantic_folder_fallback_and_confidence(tmp_path: Path) -> None:
@@ -95,9 +98,9 @@ def test_semantic_folder_fallback_and_confidence(tmp_path: Path) -> None:
     (tmp_path / "empty").mkdir()
     with pytest.raises(DataError, match="0000000005.png"):
         complete_kitti_raw(rec, DRIVE, tmp_path / "c", frames="5", semantic=tmp_path / "empty", log=lambda s: None)
-    conf = fusion_confidence(rec(None, np.zeros((2, 2), np.float32)).outputs)
+    conf = fusion_confidence(rec(None, np.zeros((2, 2), np.float32)).output)
     assert conf is not None and np.allclose(conf, 0.7)
-    assert fusion_confidence({"refined_depth": np.zeros((2, 2))}) is None
+    assert fusion_confidence(None) is None
 
 
 def test_segmenter_spec_colours_the_semantic_map(tmp_path: Path) -> None:

@@ -1,23 +1,45 @@
-"""Process-group helpers for ``torchrun`` (single- and multi-node) that also work in one process."""
+"""Process-group helpers for ``torchrun`` (single- and multi-node) that also work in one process.
+
+Besides rank / world size and the samplers, the collectives every command uses (in one process each
+is a plain call):
+
+* :func:`process_group`: join torchrun's group (gloo: only small messages travel) for a block.
+* :func:`on_main`: run on rank 0 only (checks before any work); its value or error reaches every rank.
+* :func:`agree`: run on every rank; if it failed anywhere, every rank raises the lowest rank's error.
+* :func:`gather_rows`: every rank's rows, merged in order. :func:`rank_log`: ``[rank r/W]`` prefixes.
+"""
 
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+import pickle
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any, TypeVar
 
 import torch
 import torch.distributed as dist
 from torch.utils.data import Sampler
 
+from semattnet._errors import SemAttNetError
+
+T = TypeVar("T")
+
 __all__ = [
     "ResumableSampler",
     "ShardSampler",
+    "agree",
     "cleanup",
+    "first_error",
+    "gather_rows",
     "init_distributed",
     "is_main",
     "launch_rank",
+    "on_main",
     "process_device",
+    "process_group",
     "rank",
+    "rank_log",
     "world_size",
 ]
 
@@ -62,6 +84,93 @@ def world_size() -> int:
 
 def is_main() -> bool:
     return rank() == 0
+
+
+@contextmanager
+def process_group() -> Iterator[bool]:
+    """Join torchrun's process group (gloo) for the block when launched with ``WORLD_SIZE`` > 1;
+    leave it afterwards unless it was joined before. Yields whether several processes take part."""
+    joined_before = dist.is_initialized()
+    active = init_distributed(torch.device("cpu"))
+    try:
+        yield active
+    finally:
+        if active and not joined_before:
+            cleanup()
+
+
+def rank_log(log: Callable[[str], None]) -> Callable[[str], None]:
+    """``log`` with ``[rank r/W]`` before each line when several processes run, else ``log``."""
+    if world_size() == 1:
+        return log
+    prefix = f"[rank {rank()}/{world_size()}] "
+    return lambda line: log(prefix + line)
+
+
+def _portable(error: BaseException | None) -> BaseException | None:
+    """``error`` if it survives pickling (to send it to the other ranks), else its message as a
+    :class:`SemAttNetError` (a ``ValueError``: the CLI prints it as one line)."""
+    if error is None:
+        return None
+    try:
+        return pickle.loads(pickle.dumps(error))
+    except Exception:
+        return SemAttNetError(str(error) or type(error).__name__)
+
+
+def first_error(error: Exception | None) -> BaseException | None:
+    """The error of the lowest rank that had one (collective: every rank calls it)."""
+    if world_size() == 1:
+        return error
+    errors: list[BaseException | None] = [None] * world_size()
+    dist.all_gather_object(errors, _portable(error))
+    first = next((i for i, e in enumerate(errors) if e is not None), None)
+    if first is None:
+        return None
+    return error if first == rank() else errors[first]  # our own keeps its traceback
+
+
+def agree(fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
+    """``fn(*args, **kwargs)`` on every rank; if it raised on any rank, every rank raises the error
+    of the lowest such rank (collective: every rank must call it)."""
+    result, error = None, None
+    try:
+        result = fn(*args, **kwargs)
+    except Exception as exc:
+        error = exc
+    first = first_error(error)
+    if first is not None:
+        raise first
+    return result  # type: ignore[return-value]
+
+
+def on_main(fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
+    """``fn(*args, **kwargs)`` on rank 0 only; every rank returns its result or raises its error
+    (collective). The result must pickle."""
+    if world_size() == 1:
+        return fn(*args, **kwargs)
+    box: list[Any] = [None, None]
+    if is_main():
+        try:
+            box[0] = fn(*args, **kwargs)
+        except Exception as exc:
+            box[1] = exc
+    local = box[1]
+    if is_main():
+        box[1] = _portable(box[1])
+    dist.broadcast_object_list(box, src=0)
+    if box[1] is not None:
+        raise local if local is not None else box[1]
+    return box[0]
+
+
+def gather_rows(rows: list[T], key: Callable[[T], Any]) -> list[T]:
+    """Every rank's ``rows``, together and sorted by ``key``, on every rank (collective)."""
+    if world_size() == 1:
+        return sorted(rows, key=key)
+    parts: list[list[T] | None] = [None] * world_size()
+    dist.all_gather_object(parts, rows)
+    return sorted((row for part in parts for row in part or ()), key=key)
 
 
 class ResumableSampler(Sampler[int]):

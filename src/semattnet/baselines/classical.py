@@ -23,6 +23,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from semattnet._errors import InputError
 from semattnet.inference.completer import Completion
 
 __all__ = ["ClassicalCompleter", "complete_classical"]
@@ -137,7 +138,7 @@ def complete_classical(sparse: torch.Tensor, max_depth: float = 100.0) -> torch.
     without any measurement stays 0.
     """
     if sparse.dim() != 4 or sparse.shape[1] != 1:
-        raise ValueError(f"sparse must be (B, 1, H, W), got {tuple(sparse.shape)}")
+        raise InputError(f"sparse must be (B, 1, H, W), got {tuple(sparse.shape)}")
     d = torch.nan_to_num(sparse.float(), nan=0.0, posinf=0.0, neginf=0.0).clamp(0, max_depth)
     valid = d > 0
     inv = torch.where(d > 0, max_depth + 1.0 - d, torch.zeros_like(d))  # near = large, valid > 0
@@ -165,4 +166,4 @@ class ClassicalCompleter:
     def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
         dense = complete_classical(torch.from_numpy(np.ascontiguousarray(sparse, dtype=np.float32))[None, None])
         depth = dense[0, 0].numpy()
-        return Completion(depth=depth, outputs={"refined_depth": depth})
+        return Completion(depth=depth)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from functools import partial
 from pathlib import Path
 
 import click
@@ -101,7 +102,10 @@ def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, spli
         raise click.UsageError("--method classical needs --sparsity")
     if (save_predictions or pictures) and out is None:
         raise click.UsageError("--save-predictions and --pictures need --out")
-    model = checkpoint if weights is None and checkpoint is not None else model_from_options(checkpoint, weights)
+    if (checkpoint is None) == (weights is None):
+        model_from_options(checkpoint, weights)  # the usage error, before any work
+    # a path, or the loader of --weights: called after the split and --out are checked
+    model = checkpoint if weights is None else partial(model_from_options, None, weights)
     res = evaluate_checkpoint(model, data_root, split, out, device, batch_size, amp, workers,
                               save_predictions, pictures, max_frames, overwrite, backend=backend)  # fmt: skip
     from semattnet._utils.distributed import launch_rank
@@ -127,7 +131,9 @@ def _sweep(checkpoint: Path | None, weights: str | None, data_root: Path, split:
     settings = parse_settings(sparsity)  # fail on a bad setting before loading anything
     if method == "classical" and (checkpoint is not None or weights is not None):
         raise click.UsageError("--method classical takes no --checkpoint / --weights")
-    model = model_from_options(checkpoint, weights, "cpu") if method == "semattnet" else None
+    if method == "semattnet" and (checkpoint is None) == (weights is None):
+        model_from_options(checkpoint, weights)  # the usage error, before any work
+    model = partial(model_from_options, checkpoint, weights, "cpu") if method == "semattnet" else None
     rows = sweep_model(data_root, split, settings, model, out, device, max_frames, overwrite)
     click.echo(format_sweep(rows))
     click.echo(f"wrote {out / 'sparsity.csv'}, {out / 'sparsity.json'} and {out / 'sparsity.png'}")

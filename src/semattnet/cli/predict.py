@@ -20,10 +20,19 @@ def _completer(method: str, checkpoint: Path | None, weights: str | None, device
 
     if method == "classical":
         return ClassicalCompleter()
-    if checkpoint is None and weights is None:
-        raise click.UsageError("--checkpoint or --weights is required (or --method classical)")
+    _check_method(method, checkpoint, weights)
     model = model_from_options(checkpoint, weights, "cpu")
     return DepthCompleter(model, device=process_device(device), amp=amp, backend=backend, inplace=True)
+
+
+def _check_method(method: str, checkpoint: Path | None, weights: str | None) -> None:
+    """The model options agree (checked before any work)."""
+    if method == "classical":
+        return
+    if checkpoint is None and weights is None:
+        raise click.UsageError("--checkpoint or --weights is required (or --method classical)")
+    if checkpoint is not None and weights is not None:
+        raise click.UsageError("give --checkpoint or --weights, not both")
 
 
 def _intrinsics(text: str | None):  # type: ignore[no-untyped-def]
@@ -91,9 +100,10 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
             amp: str, backend: str, overwrite: bool, method: str, report: bool,
             intrinsics: str | None) -> None:  # fmt: skip
     """Complete depth for one frame, folders of frames (any size) or a KITTI raw drive."""
-    from semattnet.data.pairing import pair_frames
-    from semattnet.inference import complete_folder
-    from semattnet.inference.raw import complete_kitti_raw
+    from semattnet._utils.distributed import launch_rank, process_group
+    from semattnet.data.sources import FolderSource, RawDriveSource, SemanticMaps
+    from semattnet.inference.pipeline import check_frames, complete_frames
+    from semattnet.inference.sinks import default_sinks
 
     if (kitti_raw is None) == (rgb is None and sparse is None) or (kitti_raw is None and None in (rgb, sparse)):
         raise click.UsageError("give --rgb and --sparse, or --kitti-raw")
@@ -101,22 +111,23 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
         raise click.UsageError("--ply, --segment, --frames and --deskew need --kitti-raw")
     if kitti_raw is not None and report:
         raise click.UsageError("--report needs --rgb/--sparse (not yet --kitti-raw)")
+    _check_method(method, checkpoint, weights)
     K = _intrinsics(intrinsics)
-    completer = _completer(method, checkpoint, weights, device, amp, backend)
-    if kitti_raw is not None:
-        complete_kitti_raw(completer, kitti_raw, out, frames=frames, camera=camera, semantic=semantic,
-                           segmenter=segment_spec, ply=ply, max_depth=max_depth, top_crop=top_crop, npy=npy,
-                           panel=panel, deskew=deskew, overwrite=overwrite, log=click.echo)  # fmt: skip
-        return
-    frame_list = pair_frames(rgb, sparse, semantic)
-    complete_folder(completer, frame_list, out, npy=npy, panel=panel, overwrite=overwrite, log=click.echo,
-                    inputs=(rgb, sparse, semantic))  # fmt: skip
-    from semattnet._utils.distributed import launch_rank
-
+    maps = SemanticMaps(segment_spec, folder=semantic is not None)
+    sinks = default_sinks(npy, panel, ply, max_depth, top_crop)
+    with process_group():
+        if kitti_raw is not None:
+            source = RawDriveSource(kitti_raw, frames, camera, semantic, deskew)
+        else:
+            source = FolderSource.pair(rgb, sparse, semantic, K=K)  # type: ignore[arg-type]
+        check_frames(source, sinks, out, overwrite=overwrite)  # every input and output, before the model
+        completer = _completer(method, checkpoint, weights, device, amp, backend)
+        complete_frames(source, completer, sinks, out, overwrite=overwrite, log=click.echo, semantic=maps,
+                        checked=True)  # fmt: skip
     if report and launch_rank() == 0:  # under torchrun: once, after every rank's frames are in place
         from semattnet.viz.viewer import write_prediction_report
 
-        write_prediction_report(out, frame_list, K=K, log=click.echo)
+        write_prediction_report(out, list(source.frames.values()), K=K, log=click.echo)  # type: ignore[attr-defined]
 
 
 @main.command()

@@ -26,7 +26,9 @@ __all__ = [
     "MIN_DEPTH_M",
     "DataError",
     "clamp_for_png",
+    "decode_depth",
     "encode_depth",
+    "quantize_depth",
     "read_depth",
     "read_image",
     "read_intrinsics",
@@ -96,7 +98,7 @@ def read_depth(path: str | os.PathLike[str]) -> np.ndarray:
     a = np.asarray(img)
     if img.mode == "I" and (a.min() < 0 or a.max() > MAX_DEPTH_VALUE):
         raise DataError(f"{path}: depth values outside the 16-bit range")
-    return (a.astype(np.float32) / DEPTH_SCALE).astype(np.float32)
+    return decode_depth(a)
 
 
 def read_image(path: str | os.PathLike[str]) -> np.ndarray:
@@ -130,11 +132,30 @@ def read_semantic(path: str | os.PathLike[str]) -> np.ndarray:
 
 
 def encode_depth(depth: np.ndarray) -> np.ndarray:
-    """Metres -> KITTI uint16 (round(d * 256)); 0 stays 0 (no measurement), values clamp at 65535."""
+    """Metres -> KITTI uint16 (round(d * 256)); 0 stays 0 (no measurement), values clamp at 65535.
+    The one quantiser of the project: :func:`quantize_depth` and :func:`write_depth` use it."""
     d = np.asarray(depth, dtype=np.float64)
     if not np.all(np.isfinite(d)):
         raise DataError("depth to encode contains NaN or infinite values")
     return np.clip(np.round(d * DEPTH_SCALE), 0, MAX_DEPTH_VALUE).astype(np.uint16)
+
+
+def decode_depth(values: np.ndarray) -> np.ndarray:
+    """KITTI uint16 -> (H, W) float32 metres (``value / 256``, 0 = none)."""
+    return (np.asarray(values).astype(np.float32) / DEPTH_SCALE).astype(np.float32)
+
+
+def quantize_depth(depth: Any) -> Any:
+    """Metres as a KITTI 16-bit PNG stores them (1/256 m steps, clamped to the uint16 range), as float32
+    metres; a NumPy array (via :func:`encode_depth`) or a torch tensor (same device). Finite input only:
+    apply :func:`clamp_for_png` first for predictions."""
+    if type(depth).__module__.split(".")[0] == "torch":
+        import torch
+
+        if not bool(torch.isfinite(depth).all()):
+            raise DataError("depth to encode contains NaN or infinite values")
+        return torch.clamp(torch.round(depth * DEPTH_SCALE), 0, MAX_DEPTH_VALUE) / DEPTH_SCALE
+    return decode_depth(encode_depth(depth))
 
 
 def clamp_for_png(depth: Any, name: str = "prediction") -> Any:
@@ -178,11 +199,13 @@ def _atomic_save(img: Image.Image, path: Path, overwrite: bool, compress_level: 
 def write_depth(
     path: str | os.PathLike[str], depth: np.ndarray, overwrite: bool = False, compress_level: int = 6
 ) -> Path:
-    """Write (H, W) metres as a KITTI 16-bit PNG, atomically; refuses to overwrite by default."""
+    """Write (H, W) metres as a KITTI 16-bit PNG, atomically; refuses to overwrite by default.
+    A uint16 array is taken as already encoded (:func:`encode_depth`) and written as is."""
     depth = np.asarray(depth)
     if depth.ndim != 2:
         raise DataError(f"{path}: depth must be (H, W), got shape {depth.shape}")
-    return _atomic_save(Image.fromarray(encode_depth(depth)), Path(path), overwrite, compress_level)
+    values = depth if depth.dtype == np.uint16 else encode_depth(depth)
+    return _atomic_save(Image.fromarray(values), Path(path), overwrite, compress_level)
 
 
 def write_image(
@@ -199,7 +222,10 @@ def read_intrinsics(path: str | os.PathLike[str], camera: str | None = None) -> 
     """A 3x3 camera matrix from a KITTI file.
 
     ``val_selection_cropped``/``test`` intrinsics files hold 9 numbers; a raw-data
-    ``calib_cam_to_cam.txt`` holds ``P_rect_0X`` rows (pass ``camera="02"``).
+    ``calib_cam_to_cam.txt`` holds ``P_rect_0X`` rows (pass ``camera="02"``): ``K = P_rect_0X[:, :3]``
+    (its last column is the stereo baseline, an extrinsic: see :mod:`semattnet.geometry.calibration`,
+    whose :func:`~semattnet.geometry.read_cam_to_cam` reads the whole rig and needs ``R_rect``/``S_rect``
+    too, which the synthetic trees do not write).
     """
     path = Path(path)
     if not path.is_file():

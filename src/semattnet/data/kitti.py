@@ -16,6 +16,7 @@ from typing import Any, Literal
 import numpy as np
 from torch.utils.data import Dataset
 
+from semattnet._errors import InputError
 from semattnet.data import layout
 from semattnet.data.io import DataError, read_depth, read_image, read_intrinsics
 from semattnet.data.transforms import Sample, Transform
@@ -123,7 +124,7 @@ def find_frames(
 ) -> tuple[list[FrameFiles], list[tuple[str, list[Path | str]]]]:
     """Index a split: the complete frames, and (frame, missing files) for the incomplete ones."""
     if split not in layout.SPLITS:
-        raise ValueError(f"unknown split {split!r}; choose one of {layout.SPLITS}")
+        raise InputError(f"split: unknown split {split!r}; choose one of {layout.SPLITS}")
     root = Path(root)
     sem = Path(semantic_root) if semantic_root is not None else None
     if split in ("train", "val"):
@@ -192,7 +193,7 @@ class KittiDepthCompletion(Dataset):
         seed: int = 0,
     ) -> None:
         if on_missing not in ("error", "skip"):
-            raise ValueError(f"on_missing must be 'error' or 'skip', got {on_missing!r}")
+            raise InputError(f"on_missing must be 'error' or 'skip', got {on_missing!r}")
         self.split = split
         self.frames, self.skipped = find_frames(root, split, raw_root, semantic_root)
         if self.skipped and on_missing == "error":

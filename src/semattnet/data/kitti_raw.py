@@ -52,7 +52,7 @@ def parse_frames(spec: str | int | Sequence[int] | None) -> list[int] | None:
             if "-" in part:
                 a, b = (int(v) for v in part.split("-", 1))
                 if b < a:
-                    raise ValueError
+                    raise ValueError  # caught below: reported as the DataError of a bad spec
                 out.extend(range(a, b + 1))
             else:
                 out.append(int(part))

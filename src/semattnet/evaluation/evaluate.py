@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import csv
 import json
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -20,14 +20,19 @@ from tqdm import tqdm
 from semattnet._utils import distributed as dist_utils
 from semattnet._utils.device import autocast
 from semattnet._utils.outputs import check_no_input_overlap, write_text
-from semattnet.data.io import DEPTH_SCALE, DataError, clamp_for_png, read_depth, write_depth
-from semattnet.data.kitti import KittiDepthCompletion
-from semattnet.data.transforms import EvalTransform
+from semattnet.data.frames import Frame
+from semattnet.data.io import DataError, clamp_for_png, quantize_depth, read_depth
+from semattnet.data.kitti import KittiDepthCompletion, load_frame
+from semattnet.data.sources.kitti_split import prediction_name
 from semattnet.evaluation.metrics import KittiMetrics
-from semattnet.inference.completer import DepthCompleter
+from semattnet.evaluation.split import eval_dataset, prepare_out
+from semattnet.inference.completer import Completion, DepthCompleter
+from semattnet.inference.pipeline import write_prediction
 from semattnet.inference.sharding import agree, gather_rows, on_main, process_group, shared_stage
+from semattnet.inference.sinks import DepthPngSink, PanelSink, Sink, output_files
+from semattnet.models.outputs import DepthCompletionOutput
 
-__all__ = ["evaluate_checkpoint", "evaluate_model", "score_folders", "score_folders_to_json"]
+__all__ = ["PredictionWriter", "evaluate_checkpoint", "evaluate_model", "score_folders", "score_folders_to_json"]
 
 
 def score_folders(pred_dir: str | Path, gt_dir: str | Path, fill_holes: bool = True, min_gt: float = 0.0,
@@ -107,25 +112,8 @@ def _score_local(model: nn.Module, loader: DataLoader, device: torch.device, amp
 
 
 def _as_png(pred: torch.Tensor, names: list[str]) -> torch.Tensor:
-    """What the 16-bit PNGs of (B, 1, H, W) predictions hold: :func:`clamp_for_png`, 1/256 m steps."""
-    clamped = torch.stack([clamp_for_png(p, name) for p, name in zip(pred, names, strict=True)])
-    return torch.round(clamped * DEPTH_SCALE) / DEPTH_SCALE
-
-
-def _prediction_name(split: str, frame_name: str, gt_path: Path | None) -> str:
-    # val_select: the ground truth's own file name, so `semattnet metrics` pairs by name.
-    return gt_path.name if split == "val_select" and gt_path is not None else f"{frame_name}.png"
-
-
-def _eval_dataset(data: str | Path, split: str, raw_root: str | Path | None,
-                  semantic_root: str | Path | None) -> KittiDepthCompletion:  # fmt: skip
-    """The split as the benchmark scores it: val_select at full size, val cropped to 352x1216
-    (small synthetic trees: full frames)."""
-    ds = KittiDepthCompletion(data, split, raw_root, semantic_root,
-                              transform=EvalTransform(None if split == "val_select" else (352, 1216)))  # fmt: skip
-    if split == "val" and min(ds.load(0).size) < 352:
-        ds.transform = EvalTransform(None)
-    return ds
+    """What the 16-bit PNGs of (B, 1, H, W) predictions hold: :func:`clamp_for_png`, then the one quantiser."""
+    return torch.stack([quantize_depth(clamp_for_png(p, name)) for p, name in zip(pred, names, strict=True)])
 
 
 def score_folders_to_json(pred_dir: str | Path, gt_dir: str | Path, json_path: str | Path | None = None,
@@ -143,47 +131,49 @@ def score_folders_to_json(pred_dir: str | Path, gt_dir: str | Path, json_path: s
     return metrics
 
 
-def _prepare_out(out: Path, overwrite: bool, inputs: Sequence[Any] = ()) -> Path:
-    """Check ``out``: not inside an input; a non-empty folder needs ``overwrite`` (which replaces
-    only the files the evaluation writes)."""
-    check_no_input_overlap(inputs, out_dir=out)
-    if out.is_dir() and any(out.iterdir()) and not overwrite:
-        raise FileExistsError(f"{out} is not empty; pass --overwrite to replace its contents")
-    out.mkdir(parents=True, exist_ok=True)
-    return out
+class PredictionWriter:
+    """``on_batch`` callback of :func:`evaluate_model`: each frame of the batch, as a
+    :class:`~semattnet.data.frames.Frame` with its typed result, through the one writer
+    (:func:`semattnet.inference.pipeline.write_prediction`) into the sinks: ``predictions/`` (16-bit PNGs
+    named like the ground truth for val_select) and the panels of the first ``pictures`` frames in
+    ``pictures/NAME.png``."""
 
-
-class _FrameWriter:
-    """``on_batch`` callback of :func:`evaluate_model`: writes 16-bit predictions and the branch
-    panels of the first ``pictures`` frames."""
-
-    def __init__(self, ds: KittiDepthCompletion, split: str, out: Path, save_predictions: bool, pictures: int) -> None:
-        self.ds, self.split, self.out = ds, split, out
-        self.save_predictions, self.pictures = save_predictions, pictures
+    def __init__(self, ds: KittiDepthCompletion, split: str, out: Path, save_predictions: bool, pictures: int,
+                 frames: int | None = None) -> None:  # fmt: skip
+        todo = ds.frames[: len(ds.frames) if frames is None else frames]
+        self.ds, self.out = ds, out
+        self.sinks: list[Sink] = []
+        if save_predictions:
+            rename = {f.name: prediction_name(split, f) for f in todo}
+            self.sinks.append(DepthPngSink(folder="predictions", rename=rename))
+        if pictures:
+            self.sinks.append(PanelSink(suffix=".png", folder="pictures", only={f.name for f in todo[:pictures]}))
 
     def expected(self, frames: int) -> list[str]:
         """The files written for the first ``frames`` frames, relative to ``out``."""
-        todo = self.ds.frames[:frames]
-        preds = [f"predictions/{_prediction_name(self.split, f.name, f.gt)}" for f in todo]
-        return preds * self.save_predictions + [f"pictures/{f.name}.png" for f in todo[: self.pictures]]
+        return output_files([f.name for f in self.ds.frames[:frames]], self.sinks)
 
     def __call__(self, batch: dict[str, Any], result: Any) -> None:
         for i, idx in enumerate(batch["index"].tolist()):
             frame = self.ds.frames[idx]
-            if self.save_predictions:
-                depth = clamp_for_png(result.depth[i, 0].float().cpu().numpy(), frame.name)
-                name = _prediction_name(self.split, frame.name, frame.gt)
-                write_depth(self.out / "predictions" / name, depth, overwrite=True)
-            if idx < self.pictures:  # the split's first frames, whichever rank scores them
-                self._panel(batch, result, i, frame.name)
+            if not any(sink.path(frame.name) for sink in self.sinks):
+                continue
+            write_prediction(self.out, _frame(batch, i, frame.name), _completion(result, i), self.sinks)
 
-    def _panel(self, batch: dict[str, Any], result: Any, i: int, name: str) -> None:
-        from semattnet.viz.panels import branch_panel
 
-        outputs = {k: v[i, 0].float().cpu().numpy() for k, v in result.to_dict().items()}
-        gt = batch["gt"][i, 0].numpy() if "gt" in batch else None
-        rgb, sem = (batch[k][i].permute(1, 2, 0).numpy() for k in ("rgb", "semantic"))
-        branch_panel(self.out / "pictures" / f"{name}.png", rgb, sem, batch["sparse"][i, 0].numpy(), outputs, gt)
+def _frame(batch: dict[str, Any], i: int, name: str) -> Frame:
+    """Item ``i`` of a :class:`KittiDepthCompletion` batch as a :class:`Frame` (images back to uint8)."""
+    rgb, sem = (batch[k][i].permute(1, 2, 0).clamp(0, 255).round().byte().numpy() for k in ("rgb", "semantic"))
+    gt = batch["gt"][i, 0].float().numpy() if "gt" in batch else None
+    return Frame(name, rgb, batch["sparse"][i, 0].float().numpy(), sem, gt=gt)
+
+
+def _completion(result: Any, i: int) -> Completion:
+    """Item ``i`` of a batched model result as a :class:`Completion` (typed when the model's output is)."""
+    depth = result.depth[i, 0].float().cpu().numpy()
+    if isinstance(result, DepthCompletionOutput):
+        return Completion(depth, result.map(lambda t: t[i : i + 1].float().cpu()))
+    return Completion(depth)
 
 
 def _write_scores(out: Path, metrics: KittiMetrics, summary: dict[str, Any]) -> None:
@@ -196,7 +186,7 @@ def _write_scores(out: Path, metrics: KittiMetrics, summary: dict[str, Any]) -> 
 
 
 def evaluate_checkpoint(
-    checkpoint: str | Path | nn.Module,
+    checkpoint: str | Path | nn.Module | Callable[[], nn.Module],
     data: str | Path,
     split: str = "val_select",
     out_dir: str | Path | None = None,
@@ -212,8 +202,9 @@ def evaluate_checkpoint(
     semantic_root: str | Path | None = None,
     backend: str = "torch",
 ) -> dict[str, Any]:
-    """Run a checkpoint (a path, or a loaded model) over a split and score it; optionally write
-    predictions and panels. ``backend`` chooses the inference engine
+    """Run a checkpoint (a path, a loaded model, or a function that loads one: called after the split
+    and the output folder are checked) over a split and score it; optionally write predictions and
+    panels (through :mod:`semattnet.inference.sinks`). ``backend`` chooses the inference engine
     (:func:`semattnet.inference.backends.optimize_for_inference`; fixed-size backends are built for
     the split's frame size).
 
@@ -224,12 +215,10 @@ def evaluate_checkpoint(
     scores frames ``r, r + W, ...`` (each frame once); the metrics are summed over the ranks and the
     per-image rows gathered in the split's order, so the files are those of one process.
     """
-    completer, label = _completer(checkpoint, device, amp, backend)
-    inputs = [data, raw_root, semantic_root, None if isinstance(checkpoint, nn.Module) else checkpoint]
+    inputs = [data, raw_root, semantic_root, checkpoint if isinstance(checkpoint, str | Path) else None]
     with process_group():
-        out = on_main(_prepare_out, Path(out_dir), overwrite, inputs) if out_dir is not None else None
-        ds = _eval_dataset(data, split, raw_root, semantic_root)
-        frames = min(len(ds), max_frames) if max_frames else len(ds)
+        ds, frames, out = _plan(data, split, raw_root, semantic_root, max_frames, out_dir, overwrite, inputs)
+        completer, label = _completer(checkpoint, device, amp, backend)  # after every check
         loader = DataLoader(Subset(ds, range(frames)), batch_size=batch_size, num_workers=workers,
                             sampler=dist_utils.ShardSampler(frames))  # fmt: skip
         engine = completer.engine(tuple(ds[0]["rgb"].shape[-2:])) if frames else completer.model
@@ -238,7 +227,7 @@ def evaluate_checkpoint(
         if out is None:
             metrics = _merge(agree(score, None), ds)
             return {"metrics": metrics, "result": metrics.compute() if metrics.per_image else {}}
-        writer = _FrameWriter(ds, split, out, save_predictions, pictures)
+        writer = PredictionWriter(ds, split, out, save_predictions, pictures, frames)
         expected = writer.expected(frames)
         with shared_stage(out, overwrite, expected) as stage:  # all files appear together, or none
             writer.out = stage
@@ -251,12 +240,28 @@ def evaluate_checkpoint(
     return {"metrics": metrics, "result": result}
 
 
-def _completer(checkpoint: str | Path | nn.Module, device: str, amp: str, backend: str) -> tuple[DepthCompleter, str]:
-    """The completer (on ``cuda:LOCAL_RANK`` under torchrun with CUDA) and how metrics.json names it."""
+def _plan(data: str | Path, split: str, raw_root: str | Path | None, semantic_root: str | Path | None,
+          max_frames: int | None, out_dir: str | Path | None, overwrite: bool,
+          inputs: list[Any]) -> tuple[KittiDepthCompletion, int, Path | None]:  # fmt: skip
+    """Every check before the model is loaded: the output folder (rank 0), the split indexed and the
+    frames to score decoded (each rank its share). Returns the dataset, the frame count and ``out``."""
+    out = on_main(prepare_out, Path(out_dir), overwrite, inputs) if out_dir is not None else None
+    ds = eval_dataset(data, split, raw_root, semantic_root)
+    frames = min(len(ds), max_frames) if max_frames else len(ds)
+    agree(lambda: [load_frame(ds.frames[i]) for i in dist_utils.ShardSampler(frames)])
+    return ds, frames, out
+
+
+def _completer(checkpoint: str | Path | nn.Module | Callable[[], nn.Module], device: str, amp: str,
+               backend: str) -> tuple[DepthCompleter, str]:  # fmt: skip
+    """The completer (on ``cuda:LOCAL_RANK`` under torchrun with CUDA) and how metrics.json names it;
+    ``checkpoint`` may be a function that loads the model (called only now, after every check)."""
     device_ = dist_utils.process_device(device)
-    if isinstance(checkpoint, nn.Module):
-        return DepthCompleter(checkpoint, device=device_, amp=amp, backend=backend), type(checkpoint).__name__
-    return DepthCompleter.from_checkpoint(checkpoint, device=device_, amp=amp, backend=backend), str(checkpoint)
+    if isinstance(checkpoint, str | Path):
+        return DepthCompleter.from_checkpoint(checkpoint, device=device_, amp=amp, backend=backend), str(checkpoint)
+    model = checkpoint if isinstance(checkpoint, nn.Module) else checkpoint()
+    label = getattr(checkpoint, "label", None) or type(model).__name__
+    return DepthCompleter(model, device=device_, amp=amp, backend=backend), str(label)
 
 
 def _merge(metrics: KittiMetrics, ds: KittiDepthCompletion) -> KittiMetrics:

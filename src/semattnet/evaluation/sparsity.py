@@ -20,7 +20,9 @@ import torch
 
 from semattnet._errors import SemAttNetError
 from semattnet.evaluation.metrics import KittiMetrics
+from semattnet.evaluation.split import eval_dataset, prepare_out
 from semattnet.geometry.sparsify import keep_random, keep_row_bands
+from semattnet.inference.backends import needs_semantic
 
 __all__ = [
     "FIELDS",
@@ -84,7 +86,7 @@ def _score_setting(ds: Any, setting: str, completers: dict[str, Callable[..., An
         densities.append(float((sparse > 0).mean()))
         gt = torch.from_numpy(s.gt)[None, None]
         for name, completer in completers.items():
-            sem = s.semantic if getattr(completer, "needs_semantic", False) else None
+            sem = s.semantic if needs_semantic(completer) else None
             depth = completer(s.rgb, sparse, sem).depth
             metrics[name].update(torch.from_numpy(np.asarray(depth, np.float32))[None, None], gt)
     rows = []
@@ -150,11 +152,14 @@ def run_sparsity_sweep(
     Writes ``sparsity.csv``, ``sparsity.json`` (rows with :data:`FIELDS`) and ``sparsity.png`` into
     ``out_dir``; returns the rows.
     """
-    from semattnet.evaluation.evaluate import _eval_dataset, _prepare_out
-
     settings = parse_settings(settings)
-    ds = _eval_dataset(data_root, split, None, None)
-    out = _prepare_out(Path(out_dir), overwrite)
+    ds = eval_dataset(data_root, split)
+    out = prepare_out(Path(out_dir), overwrite)
+    return _sweep(ds, out, settings, completers, seed, max_frames)
+
+
+def _sweep(ds: Any, out: Path, settings: list[str], completers: dict[str, Callable[..., Any]], seed: int,
+           max_frames: int | None) -> list[dict[str, Any]]:  # fmt: skip
     rows = [row for setting in settings for row in _score_setting(ds, setting, completers, seed, max_frames)]
     _write_tables(out, rows)
     plot_sweep(rows, out / "sparsity.png")
@@ -165,24 +170,26 @@ def sweep_model(
     data_root: str | Path,
     split: str,
     settings: Iterable[str],
-    model: torch.nn.Module | None,
+    model: torch.nn.Module | Callable[[], torch.nn.Module] | None,
     out_dir: str | Path,
     device: str = "auto",
     max_frames: int | None = None,
     overwrite: bool = False,
 ) -> list[dict[str, Any]]:
-    """:func:`run_sparsity_sweep` of ``model`` (as ``semattnet``; skipped when None) beside the classical
-    baseline (as ``classical``)."""
+    """:func:`run_sparsity_sweep` of ``model`` (as ``semattnet``; skipped when None; a function that loads
+    it is called after the split and ``out_dir`` are checked) beside the classical baseline (as ``classical``)."""
     from semattnet.baselines.classical import ClassicalCompleter
     from semattnet.inference.completer import DepthCompleter
 
     settings = parse_settings(settings)
+    ds = eval_dataset(data_root, split)
+    out = prepare_out(Path(out_dir), overwrite)
     completers: dict[str, Callable[..., Any]] = {}
     if model is not None:
-        completers["semattnet"] = DepthCompleter(model, device=device)
+        net = model if isinstance(model, torch.nn.Module) else model()
+        completers["semattnet"] = DepthCompleter(net, device=device)
     completers["classical"] = ClassicalCompleter()
-    return run_sparsity_sweep(data_root, split, settings, completers, out_dir, max_frames=max_frames,
-                              overwrite=overwrite)  # fmt: skip
+    return _sweep(ds, out, settings, completers, 0, max_frames)
 
 
 def format_sweep(rows: list[dict]) -> str:

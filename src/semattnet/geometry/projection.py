@@ -27,7 +27,14 @@ from semattnet.data.io import DataError
 
 from .transforms import _is_torch, transform_points
 
-__all__ = ["PointCloud", "depth_to_points", "points_to_pixels", "project_points", "select_pixels"]
+__all__ = [
+    "PointCloud",
+    "depth_to_points",
+    "pixel_indices",
+    "points_to_pixels",
+    "project_points",
+    "select_pixels",
+]
 
 
 def _check_points(points: Any, name: str) -> None:
@@ -74,6 +81,18 @@ def points_to_pixels(points: Any, K: Any, T_cam_lidar: Any, R_rect: Any = None) 
     return stack([u, v], 1), z
 
 
+def pixel_indices(uv: np.ndarray, image_size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pixel each continuous ``uv`` (N, 2) lands in, by the module's rule: column ``floor(u + 0.5)``, row
+    ``floor(v + 0.5)`` (pixel centres at integer coordinates). Returns int64 ``col``, ``row`` and the (N,) bool
+    ``inside`` (the pixel lies in an image of ``image_size`` = (width, height); outside pixels get -1); filter on
+    depth separately."""
+    uv = np.asarray(uv, dtype=np.float64)
+    col, row = np.floor(uv[:, 0] + 0.5), np.floor(uv[:, 1] + 0.5)
+    W, H = (int(s) for s in image_size)
+    inside = (col >= 0) & (col < W) & (row >= 0) & (row < H)  # False for NaN; no cast of huge values
+    return np.where(inside, col, -1).astype(np.int64), np.where(inside, row, -1).astype(np.int64), inside
+
+
 def project_points(
     points: Any,
     K: Any,
@@ -111,11 +130,11 @@ def project_points(
         raise DataError(f"{name}: no point in front of the camera (all {len(z)} have depth <= {min_depth} m)")
     if _is_torch(points):
         return _zbuffer_torch(uv, z, front, W, H, max_depth)
-    col, row = np.floor(uv[:, 0] + 0.5), np.floor(uv[:, 1] + 0.5)
-    keep = front & (col >= 0) & (col < W) & (row >= 0) & (row < H)
+    col, row, inside = pixel_indices(uv, (W, H))
+    keep = front & inside
     if max_depth is not None:
         keep &= z <= max_depth
-    flat = row[keep].astype(np.int64) * W + col[keep].astype(np.int64)
+    flat = row[keep] * W + col[keep]
     zk = z[keep]
     order = np.lexsort((zk, flat))  # by pixel, then nearest first
     flat, zk = flat[order], zk[order]

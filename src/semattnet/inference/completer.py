@@ -18,15 +18,18 @@ cropped back, so any size works, KITTI's 1242x375 included.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
 from torch import nn
 
+from semattnet._errors import InputError
 from semattnet._utils.device import amp_dtype, resolve_device
-from semattnet.inference.backends import optimize_for_inference
+from semattnet.inference.backends import needs_semantic, optimize_for_inference
 from semattnet.inference.padding import crop_padding, pad_to_multiple
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.weights.checkpoint import load_model
@@ -36,10 +39,29 @@ __all__ = ["Completion", "DepthCompleter"]
 
 @dataclass
 class Completion:
-    """A completed frame: ``depth`` (H, W) metres plus every intermediate as (H, W) arrays."""
+    """A completed frame: ``depth`` (H, W) float32 metres (the final prediction, as the method returned
+    it) and ``output``, the model's typed :class:`DepthCompletionOutput` ((1, 1, H, W) CPU tensors), or
+    None for a method without branches (the classical baseline)."""
 
     depth: np.ndarray
-    outputs: dict[str, np.ndarray]
+    output: DepthCompletionOutput | None = None
+
+    @property
+    def outputs(self) -> dict[str, np.ndarray]:
+        """Every map as an (H, W) array by field name (``{"refined_depth": depth}`` without ``output``):
+        what the panels and the viewer draw."""
+        if self.output is None:
+            return {"refined_depth": np.asarray(self.depth, dtype=np.float32)}
+        return {k: v[0, 0].float().cpu().numpy() for k, v in self.output.to_dict().items()}
+
+    @property
+    def confidence(self) -> np.ndarray | None:
+        """(H, W) largest of the fusion weights of eq. 12 (the method's confidence), or None without branches."""
+        if self.output is None:
+            return None
+        confs = [c for c in (self.output.color_conf, self.output.semantic_conf, self.output.guided_conf)
+                 if c is not None]  # fmt: skip
+        return torch.stack([c[0, 0].float().cpu() for c in confs]).amax(0).numpy()
 
 
 class DepthCompleter:
@@ -61,7 +83,7 @@ class DepthCompleter:
         self.device = resolve_device(device)
         self.amp = amp_dtype(amp)
         self.backend = backend
-        self.needs_semantic = getattr(model, "config", None) is None or model.config.branches == 3
+        self.needs_semantic = needs_semantic(model)
         self._source = model.to(self.device).eval()
         self._inplace = inplace
         self._engines: dict[tuple[int, int] | None, nn.Module] = {}
@@ -69,7 +91,17 @@ class DepthCompleter:
     @classmethod
     def from_checkpoint(cls, path: str | Path, device: str | torch.device = "auto", amp: str = "none",
                         backend: str = "torch") -> DepthCompleter:  # fmt: skip
+        """A completer for the weights file at ``path`` (see :func:`semattnet.weights.checkpoint.load_model`)."""
         return cls(load_model(path), device, amp, backend, inplace=True)
+
+    @classmethod
+    def from_pretrained(cls, name_or_path: str | os.PathLike[str], device: str | torch.device = "auto",
+                        amp: str = "none", backend: str = "torch", **kwargs: Any) -> DepthCompleter:  # fmt: skip
+        """A completer for released weights by name, a local file or folder, or a URL
+        (:func:`semattnet.weights.from_pretrained`, which takes ``kwargs``: ``sha256``, ``cache_dir``, ...)."""
+        from semattnet.weights import from_pretrained
+
+        return cls(from_pretrained(name_or_path, map_location="cpu", **kwargs), device, amp, backend, inplace=True)
 
     def engine(self, size: tuple[int, int] | None = None) -> nn.Module:
         """The engine for padded inputs of ``size`` (built on first use; one for all sizes with ``torch``)."""
@@ -104,18 +136,18 @@ class DepthCompleter:
         ``semantic`` (H, W, 3) colour-coded 0..255 (required by three-branch models)."""
         rgb, sparse = np.asarray(rgb), np.asarray(sparse)
         if rgb.ndim != 3 or rgb.shape[2] != 3:
-            raise ValueError(f"rgb must be (H, W, 3), got {rgb.shape}")
+            raise InputError(f"rgb must be (H, W, 3), got {rgb.shape}")
         if sparse.shape != rgb.shape[:2]:
-            raise ValueError(f"sparse must be (H, W) = {rgb.shape[:2]}, got {sparse.shape}")
+            raise InputError(f"sparse must be (H, W) = {rgb.shape[:2]}, got {sparse.shape}")
         if semantic is None and self.needs_semantic:
-            raise ValueError("this model needs a semantic map (see `semattnet segment` or the README)")
+            raise InputError("semantic: this model needs a semantic map (see `semattnet segment` or the README)")
         if semantic is not None and np.asarray(semantic).shape != rgb.shape:
-            raise ValueError(f"semantic must be {rgb.shape}, got {np.asarray(semantic).shape}")
+            raise InputError(f"semantic must be {rgb.shape}, got {np.asarray(semantic).shape}")
 
         def image(a: np.ndarray) -> torch.Tensor:
             return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32)).permute(2, 0, 1)[None]
 
         out = self.run(image(rgb), None if semantic is None else image(semantic),
                        torch.from_numpy(np.ascontiguousarray(sparse, dtype=np.float32))[None, None])  # fmt: skip
-        arrays = {k: v[0, 0].cpu().numpy() for k, v in out.to_dict().items()}
-        return Completion(depth=out.depth[0, 0].cpu().numpy(), outputs=arrays)
+        out = out.map(lambda t: t.cpu())
+        return Completion(depth=out.depth[0, 0].numpy(), output=out)

@@ -17,22 +17,20 @@ or :func:`~semattnet.evaluation.evaluate_checkpoint` on every rank with the same
 
 The process group carries only these small messages, so it uses gloo even when every rank
 runs its model on its own GPU (``cuda:LOCAL_RANK``). In one process every helper is a plain call.
+The generic collectives (``process_group``, ``on_main``, ``agree``, ``gather_rows``, ``rank_log``) live in
+:mod:`semattnet._utils.distributed`; they are re-exported here.
 """
 
 from __future__ import annotations
 
 import os
-import pickle
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TypeVar
 
-import torch
-import torch.distributed as dist
-
-from semattnet._errors import SemAttNetError
 from semattnet._utils import distributed as dist_utils
+from semattnet._utils.distributed import agree, first_error, gather_rows, on_main, process_group, rank_log
 from semattnet._utils.outputs import OutputError, staged_outputs
 
 __all__ = ["agree", "gather_rows", "on_main", "process_group", "rank_log", "shard", "shared_stage"]
@@ -40,96 +38,9 @@ __all__ = ["agree", "gather_rows", "on_main", "process_group", "rank_log", "shar
 T = TypeVar("T")
 
 
-@contextmanager
-def process_group() -> Iterator[bool]:
-    """Join torchrun's process group (gloo) for the block when launched with ``WORLD_SIZE`` > 1;
-    leave it afterwards unless it was joined before. Yields whether several processes take part."""
-    joined_before = dist.is_initialized()
-    active = dist_utils.init_distributed(torch.device("cpu"))
-    try:
-        yield active
-    finally:
-        if active and not joined_before:
-            dist_utils.cleanup()
-
-
 def shard(items: Sequence[T]) -> list[T]:
     """This rank's share of ``items``: every ``world_size()``-th item from position ``rank()``."""
     return list(items[dist_utils.rank() :: dist_utils.world_size()])
-
-
-def rank_log(log: Callable[[str], None]) -> Callable[[str], None]:
-    """``log`` with ``[rank r/W]`` before each line when several processes run, else ``log``."""
-    if dist_utils.world_size() == 1:
-        return log
-    prefix = f"[rank {dist_utils.rank()}/{dist_utils.world_size()}] "
-    return lambda line: log(prefix + line)
-
-
-def _portable(error: BaseException | None) -> BaseException | None:
-    """``error`` if it survives pickling (to send it to the other ranks), else its message as a
-    :class:`SemAttNetError` (a ``ValueError``: the CLI prints it as one line)."""
-    if error is None:
-        return None
-    try:
-        return pickle.loads(pickle.dumps(error))
-    except Exception:
-        return SemAttNetError(str(error) or type(error).__name__)
-
-
-def _first_error(error: Exception | None) -> BaseException | None:
-    """The error of the lowest rank that had one (collective: every rank calls it)."""
-    if dist_utils.world_size() == 1:
-        return error
-    errors: list[BaseException | None] = [None] * dist_utils.world_size()
-    dist.all_gather_object(errors, _portable(error))
-    first = next((i for i, e in enumerate(errors) if e is not None), None)
-    if first is None:
-        return None
-    return error if first == dist_utils.rank() else errors[first]  # our own keeps its traceback
-
-
-def agree(fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
-    """``fn(*args, **kwargs)`` on every rank; if it raised on any rank, every rank raises the error
-    of the lowest such rank (collective: every rank must call it)."""
-    result, error = None, None
-    try:
-        result = fn(*args, **kwargs)
-    except Exception as exc:
-        error = exc
-    first = _first_error(error)
-    if first is not None:
-        raise first
-    return result  # type: ignore[return-value]
-
-
-def on_main(fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
-    """``fn(*args, **kwargs)`` on rank 0 only; every rank returns its result or raises its error
-    (collective). The result must pickle."""
-    if dist_utils.world_size() == 1:
-        return fn(*args, **kwargs)
-    box: list[Any] = [None, None]
-    if dist_utils.is_main():
-        try:
-            box[0] = fn(*args, **kwargs)
-        except Exception as exc:
-            box[1] = exc
-    local = box[1]
-    if dist_utils.is_main():
-        box[1] = _portable(box[1])
-    dist.broadcast_object_list(box, src=0)
-    if box[1] is not None:
-        raise local if local is not None else box[1]
-    return box[0]
-
-
-def gather_rows(rows: list[T], key: Callable[[T], Any]) -> list[T]:
-    """Every rank's ``rows``, together and sorted by ``key``, on every rank (collective)."""
-    if dist_utils.world_size() == 1:
-        return sorted(rows, key=key)
-    parts: list[list[T] | None] = [None] * dist_utils.world_size()
-    dist.all_gather_object(parts, rows)
-    return sorted((row for part in parts for row in part or ()), key=key)
 
 
 def _check_complete(stage: Path, expected: Iterable[str | os.PathLike[str]]) -> None:
@@ -158,7 +69,7 @@ def shared_stage(out: str | os.PathLike[str], overwrite: bool = False,
             yield Path(stage)
         except Exception as exc:
             error = exc
-        first = _first_error(error)
+        first = first_error(error)
         if first is not None:
             raise first
         on_main(_check_complete, Path(stage), expected)

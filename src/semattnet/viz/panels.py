@@ -4,19 +4,21 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from PIL import Image, ImageDraw
 
+from semattnet._errors import InputError
 from semattnet.viz.depth import colorize_depth, confidence_image, error_map
 
-__all__ = ["branch_panel", "save_panel"]
+__all__ = ["birds_eye_tile", "branch_panel", "save_panel"]
 
 
 def save_panel(tiles: Sequence[tuple[str, np.ndarray]], path: str | Path, columns: int = 1) -> Path:
     """Stack labelled (H, W, 3) uint8 tiles into one PNG (row-major, ``columns`` per row)."""
     if not tiles:
-        raise ValueError("save_panel needs at least one tile")
+        raise InputError("save_panel: needs at least one tile, got none")
     h, w = tiles[0][1].shape[:2]
     label_h = 14
     rows = (len(tiles) + columns - 1) // columns
@@ -24,7 +26,7 @@ def save_panel(tiles: Sequence[tuple[str, np.ndarray]], path: str | Path, column
     draw = ImageDraw.Draw(canvas)
     for i, (label, tile) in enumerate(tiles):
         if tile.shape[:2] != (h, w):
-            raise ValueError(f"tile {label!r} is {tile.shape[:2]}, expected {(h, w)}")
+            raise InputError(f"save_panel: tile {label!r} is {tile.shape[:2]}, expected {(h, w)}")
         x, y = (i % columns) * w, (i // columns) * (h + label_h)
         draw.text((x + 3, y + 1), label, fill="black")
         canvas.paste(Image.fromarray(tile), (x, y + label_h))
@@ -66,3 +68,24 @@ def branch_panel(
             tiles.append(("error (KITTI colours)", error_map(final, gt)))
     tiles.extend((label, np.asarray(tile, dtype=np.uint8)) for label, tile in extra)
     return save_panel(tiles, path, columns=columns)
+
+
+def birds_eye_tile(cloud: Any, points: np.ndarray, calib: Any, shape: tuple[int, int], max_depth: float) -> np.ndarray:
+    """A square bird's-eye view of ``cloud`` (ahead up to min(max_depth, 50) m) centred in an (H, W) tile, with
+    the LiDAR ``points`` (LiDAR frame) that land in the image overlaid: in front of the camera and in a pixel
+    by :func:`semattnet.geometry.projection.pixel_indices` (the projection's own rule)."""
+    from semattnet.geometry import points_to_pixels, transform_points
+    from semattnet.geometry.projection import pixel_indices
+    from semattnet.viz.pointcloud import birds_eye_view
+
+    uv, z = points_to_pixels(points, calib.K, calib.T_cam_lidar)
+    size = calib.image_size if calib.image_size is not None else (shape[1], shape[0])
+    seen = (z > 0.1) & pixel_indices(uv, size)[2]
+    lidar = transform_points(calib.T_cam_lidar, np.asarray(points[seen, :3], dtype=np.float64))
+    far = float(min(max_depth, 50.0))
+    side = min(shape)
+    bev = birds_eye_view(cloud, size=(side, side), x_range=(-far / 2, far / 2), z_range=(0.0, far), lidar=lidar)
+    tile = np.zeros((*shape, 3), dtype=np.uint8)
+    top, left = (shape[0] - side) // 2, (shape[1] - side) // 2
+    tile[top : top + side, left : left + side] = bev
+    return tile

@@ -30,12 +30,24 @@ from torch import nn
 from semattnet.inference.backends._base import InferenceEngine, output_from_arrays
 from semattnet.inference.backends.torch_engine import TorchEngine
 
-__all__ = ["BACKENDS", "InferenceEngine", "available_backends", "choose_backend", "optimize_for_inference",
-           "output_from_arrays"]  # fmt: skip
+__all__ = ["BACKENDS", "InferenceEngine", "available_backends", "choose_backend", "needs_semantic",
+           "optimize_for_inference", "output_from_arrays"]  # fmt: skip
 
 BACKENDS: tuple[str, ...] = ("torch", "openvino", "onnxruntime")
 PRECISIONS: tuple[str, ...] = ("f32", "bf16")
 _PACKAGES = {"openvino": "openvino", "onnxruntime": "onnxruntime"}
+
+
+def needs_semantic(model: object) -> bool:
+    """Whether ``model`` takes a semantic map: a completer (or engine) says so in its ``needs_semantic``
+    attribute; a model does unless its config has two branches (a model without a config counts as
+    three-branch). The one home of this rule."""
+    if hasattr(model, "needs_semantic"):
+        return bool(model.needs_semantic)
+    if not isinstance(model, nn.Module):
+        return False
+    config = getattr(model, "config", None)
+    return config is None or getattr(config, "branches", 3) == 3
 
 
 def available_backends() -> list[str]:
@@ -83,14 +95,14 @@ def optimize_for_inference(
     """
     _check(backend, precision, size)
     backend = choose_backend(device, size) if backend == "auto" else backend
-    needs_semantic = getattr(model, "config", None) is None or model.config.branches == 3
+    semantic = needs_semantic(model)
     model = model.eval()
     if backend == "torch":
-        return TorchEngine(model.to(device), precision, needs_semantic, inplace)
+        return TorchEngine(model.to(device), precision, semantic, inplace)
     if backend == "onnxruntime":
         from semattnet.inference.backends.onnxruntime_engine import OnnxRuntimeEngine
 
-        return OnnxRuntimeEngine(model.cpu(), tuple(size), needs_semantic, cache_dir, log)  # type: ignore[arg-type]
+        return OnnxRuntimeEngine(model.cpu(), tuple(size), semantic, cache_dir, log)  # type: ignore[arg-type]
     from semattnet.inference.backends.openvino_engine import OpenVinoEngine
 
-    return OpenVinoEngine(model.cpu(), tuple(size), needs_semantic, precision, cache_dir, log)  # type: ignore[arg-type]
+    return OpenVinoEngine(model.cpu(), tuple(size), semantic, precision, cache_dir, log)  # type: ignore[arg-type]

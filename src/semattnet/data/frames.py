@@ -1,0 +1,116 @@
+"""One frame to complete, whatever it came from, and the protocol every source of frames follows.
+
+A :class:`Frame` is what every completer and every output sink sees: the image, the sparse depth map
+(already projected: a source that reads LiDAR scans projects them itself) and what else the source
+knows. A :class:`FrameSource` lists its frames by name, loads one by name, and checks every input
+before any work (so that a corrupt file fails the run before a model is loaded and before anything is
+written). The sources of :mod:`semattnet.data.sources` (a folder of files, a KITTI depth-completion
+split, a KITTI raw drive) implement it; a new dataset or recording format (a ROS bag, NYU v2, VOID)
+plugs into :func:`semattnet.inference.pipeline.complete_frames` by implementing it too, most simply by
+subclassing :class:`IndexedSource` and writing ``names``, ``load`` and ``inputs``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from semattnet._errors import DataError
+
+__all__ = ["Frame", "FrameSource", "IndexedSource"]
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One frame.
+
+    Attributes:
+        name: the frame's name (output files are named after it).
+        rgb: (H, W, 3) uint8 image.
+        sparse: (H, W) float32 sparse depth, metres, 0 = no measurement.
+        semantic: (H, W, 3) uint8 colour-coded semantic map (Cityscapes palette), or None.
+        K: (3, 3) intrinsics of the image, pixels, or None when the source does not know them.
+        timestamp: seconds (the source's clock), or None.
+        points: (N, 3|4) LiDAR points the sparse map was projected from (LiDAR frame, metres), or None.
+        calib: the calibration that projected them (a :class:`semattnet.geometry.RigCalibration`), or None.
+        gt: (H, W) float32 ground-truth depth in metres (0 = none), or None.
+        paths: the files it was read from, by role (``rgb``, ``sparse``, ``semantic``, ``gt``, ``scan``, ...).
+    """
+
+    name: str
+    rgb: np.ndarray
+    sparse: np.ndarray
+    semantic: np.ndarray | None = None
+    K: np.ndarray | None = None
+    timestamp: float | None = None
+    points: np.ndarray | None = None
+    calib: Any = None
+    gt: np.ndarray | None = None
+    paths: Mapping[str, Path] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        where = self.paths.get("rgb", self.name)
+        if self.rgb.ndim != 3 or self.rgb.shape[2] != 3:
+            raise DataError(f"{where}: the image must be (H, W, 3), got {self.rgb.shape}")
+        h, w = self.rgb.shape[:2]
+        for role, a in (("sparse", self.sparse), ("gt", self.gt), ("semantic", self.semantic)):
+            if a is not None and a.shape[:2] != (h, w):
+                raise DataError(f"{self.paths.get(role, self.name)}: {role} is {a.shape[1]}x{a.shape[0]}, "
+                                f"the image {w}x{h}")  # fmt: skip
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(H, W)."""
+        return self.rgb.shape[0], self.rgb.shape[1]
+
+    def with_semantic(self, semantic: np.ndarray | None) -> Frame:
+        """A copy with another semantic map."""
+        return replace(self, semantic=semantic)
+
+
+@runtime_checkable
+class FrameSource(Protocol):
+    """Frames by name: ``names`` (in order), ``len()``, iteration (yields :class:`Frame`), ``load(name)``,
+    ``check(names)`` (decode and validate those inputs, raising :class:`DataError` naming the file) and
+    ``inputs()`` (the files and folders that outputs must never land in or replace)."""
+
+    @property
+    def names(self) -> Sequence[str]: ...
+
+    def __len__(self) -> int: ...
+
+    def __iter__(self) -> Iterator[Frame]: ...
+
+    def load(self, name: str) -> Frame: ...
+
+    def check(self, names: Sequence[str] | None = None) -> None: ...
+
+    def inputs(self) -> list[Path]: ...
+
+
+class IndexedSource:
+    """Base of sources with random access by name: subclasses set ``names`` and write ``load`` and
+    ``inputs``; ``check`` loads every frame (override it when a cheaper full validation exists)."""
+
+    names: Sequence[str] = ()
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def __iter__(self) -> Iterator[Frame]:
+        return (self.load(name) for name in self.names)
+
+    def load(self, name: str) -> Frame:
+        raise NotImplementedError
+
+    def check(self, names: Sequence[str] | None = None) -> None:
+        """Decode every input of ``names`` (default: all), raising :class:`DataError` naming the file."""
+        for name in self.names if names is None else names:
+            self.load(name)
+
+    def inputs(self) -> list[Path]:
+        raise NotImplementedError

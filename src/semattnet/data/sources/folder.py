@@ -1,0 +1,45 @@
+"""A user's frames from files: image, sparse depth and (optional) semantic map paired by name."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from semattnet.data.frames import Frame, IndexedSource
+from semattnet.data.io import read_depth, read_image, read_semantic
+from semattnet.data.pairing import FramePaths, pair_frames
+
+__all__ = ["FolderSource"]
+
+
+class FolderSource(IndexedSource):
+    """Frames from :class:`~semattnet.data.pairing.FramePaths` (``FolderSource.pair(rgb, sparse, semantic)``
+    pairs files or folders by name). ``K``: the (3, 3) intrinsics of every frame, if known.
+    ``given``: the paths the user named (files or folders), protected from outputs too."""
+
+    def __init__(self, frames: Sequence[FramePaths], K: np.ndarray | None = None,
+                 given: Sequence[str | os.PathLike[str] | None] = ()) -> None:  # fmt: skip
+        self.frames = {f.name: f for f in frames}
+        self.names = [f.name for f in frames]
+        self.K = None if K is None else np.asarray(K, dtype=np.float64)
+        self.given = [Path(p) for p in given if p is not None]
+
+    @classmethod
+    def pair(cls, rgb: str | os.PathLike[str], sparse: str | os.PathLike[str],
+             semantic: str | os.PathLike[str] | None = None, K: np.ndarray | None = None) -> FolderSource:  # fmt: skip
+        """The frames of ``rgb``/``sparse``/``semantic`` (three files or three folders), paired by name."""
+        sem = Path(semantic) if semantic is not None else None
+        return cls(pair_frames(Path(rgb), Path(sparse), sem), K, given=(rgb, sparse, semantic))
+
+    def load(self, name: str) -> Frame:
+        f = self.frames[name]
+        paths = {"rgb": f.rgb, "sparse": f.sparse} | ({"semantic": f.semantic} if f.semantic is not None else {})
+        return Frame(name, read_image(f.rgb), read_depth(f.sparse),
+                     read_semantic(f.semantic) if f.semantic is not None else None, K=self.K, paths=paths)  # fmt: skip
+
+    def inputs(self) -> list[Path]:
+        files = [p for f in self.frames.values() for p in (f.rgb, f.sparse, f.semantic) if p is not None]
+        return [*files, *self.given]

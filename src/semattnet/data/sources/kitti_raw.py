@@ -1,0 +1,57 @@
+"""A KITTI raw drive as frames: each scan projected into the camera here, in the data layer."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from semattnet._errors import DataError
+from semattnet.data.frames import Frame, IndexedSource
+from semattnet.data.io import read_semantic
+from semattnet.data.kitti_raw import RawDrive, RawFrame
+
+__all__ = ["RawDriveSource", "project_frame"]
+
+
+def project_frame(frame: RawFrame) -> np.ndarray:
+    """(H, W) float32 sparse depth of a raw frame's scan in its camera (metres, 0 = none), by
+    :func:`semattnet.geometry.project_points` (pixel centres at integer coordinates)."""
+    from semattnet.geometry import project_points
+
+    return project_points(frame.points, frame.calib.K, frame.calib.T_cam_lidar, frame.calib.image_size,
+                          name=str(frame.scan_path))  # fmt: skip
+
+
+class RawDriveSource(IndexedSource):
+    """The frames ``frames`` (see :func:`semattnet.data.kitti_raw.parse_frames`) of a KITTI raw drive
+    (:class:`~semattnet.data.kitti_raw.RawDrive`: ``camera``, ``deskew``), with the points and calibration
+    each sparse map was projected from. ``semantic``: a folder of colour-coded maps named like the images.
+
+    Raises:
+        DataError: missing drive files, frames or semantic folder (naming them).
+    """
+
+    def __init__(self, drive_dir: str | os.PathLike[str], frames: str | int | Sequence[int] | None = None,
+                 camera: str | int = 2, semantic: str | os.PathLike[str] | None = None,
+                 deskew: bool = False) -> None:  # fmt: skip
+        self.drive = RawDrive(drive_dir, camera, deskew=deskew)
+        self.names = self.drive.names_for(frames)
+        self.semantic_dir = Path(semantic) if semantic is not None else None
+        if self.semantic_dir is not None and not self.semantic_dir.is_dir():
+            raise DataError(f"{self.semantic_dir}: semantic folder not found")
+
+    def load(self, name: str) -> Frame:
+        raw = self.drive.frame(name)
+        sem_path = self.semantic_dir / f"{name}.png" if self.semantic_dir is not None else None
+        sem = read_semantic(sem_path) if sem_path is not None else None
+        paths = {"rgb": raw.image_path, "scan": raw.scan_path} | ({"semantic": sem_path} if sem_path else {})
+        return Frame(name, raw.image, project_frame(raw), sem, K=raw.calib.K, points=raw.points,
+                     calib=raw.calib, paths=paths)  # fmt: skip
+
+    def inputs(self) -> list[Path]:
+        date = self.drive.drive_dir.parent
+        calib = [p for p in (date / "calib_cam_to_cam.txt", date / "calib_velo_to_cam.txt") if p.is_file()]
+        return [self.drive.drive_dir, *calib, *([self.semantic_dir] if self.semantic_dir is not None else [])]

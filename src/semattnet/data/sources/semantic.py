@@ -1,0 +1,54 @@
+"""The one place that decides a frame's semantic map when its source has none."""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+from semattnet._errors import InputError
+from semattnet.data.frames import Frame
+
+__all__ = ["SemanticMaps"]
+
+
+class SemanticMaps:
+    """Fills the semantic map of frames whose source gave none, for a completer that needs one
+    (:func:`semattnet.inference.backends.needs_semantic`): from ``segmenter`` (a
+    :class:`semattnet.segmentation.Segmenter` or its SPEC, loaded on the completer's device when bound),
+    else the ``unknown`` fallback map (warned once: it costs accuracy). A frame's own map is kept; for a
+    completer that needs none the frame passes as it is.
+
+    ``folder``: whether the source reads semantic maps from a folder (a folder and a segmenter exclude
+    each other; checked here, before any work). :meth:`bind` the completer before :meth:`fill`.
+    """
+
+    def __init__(self, segmenter: Any = None, folder: bool = False) -> None:
+        if folder and segmenter is not None:
+            raise InputError("semantic: give a semantic folder or a segmenter, not both")
+        self.segmenter, self.folder, self.needed = segmenter, folder, False
+        self._warned = False
+
+    def bind(self, completer: Any) -> SemanticMaps:
+        """Decide for ``completer``: whether it needs maps; a segmenter SPEC is loaded on its device."""
+        from semattnet.inference.backends import needs_semantic
+
+        self.needed = needs_semantic(completer)
+        if self.needed and isinstance(self.segmenter, str):
+            from semattnet.segmentation.segmenter import load_segmenter
+
+            self.segmenter = load_segmenter(self.segmenter, getattr(completer, "device", "auto"))
+        return self
+
+    def fill(self, frame: Frame) -> Frame:
+        """``frame`` with the semantic map the completer gets."""
+        from semattnet.data.palette import ids_to_colors, unknown_map
+
+        if not self.needed or frame.semantic is not None:
+            return frame
+        if self.segmenter is not None:
+            return frame.with_semantic(ids_to_colors(self.segmenter(frame.rgb[None])[0]))
+        if not self._warned:
+            warnings.warn("no semantic maps given (--semantic or --segment): using the 'unknown' fallback map, "
+                          "which costs accuracy", stacklevel=3)  # fmt: skip
+            self._warned = True
+        return frame.with_semantic(unknown_map(*frame.rgb.shape[:2]))

@@ -1,0 +1,34 @@
+"""What every scoring of a KITTI split starts with: the split as the benchmark scores it, and the output folder."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from semattnet._utils.outputs import check_no_input_overlap
+from semattnet.data.kitti import KittiDepthCompletion
+from semattnet.data.transforms import EvalTransform
+
+__all__ = ["eval_dataset", "prepare_out"]
+
+
+def eval_dataset(data: str | Path, split: str, raw_root: str | Path | None = None,
+                 semantic_root: str | Path | None = None) -> KittiDepthCompletion:  # fmt: skip
+    """The split as the benchmark scores it: val_select at full size, val cropped to 352x1216
+    (small synthetic trees: full frames)."""
+    ds = KittiDepthCompletion(data, split, raw_root, semantic_root,
+                              transform=EvalTransform(None if split == "val_select" else (352, 1216)))  # fmt: skip
+    if split == "val" and min(ds.load(0).size) < 352:
+        ds.transform = EvalTransform(None)
+    return ds
+
+
+def prepare_out(out: Path, overwrite: bool, inputs: Sequence[Any] = ()) -> Path:
+    """Check ``out``: not inside an input; a non-empty folder needs ``overwrite`` (which replaces
+    only the files the evaluation writes). Creates it."""
+    check_no_input_overlap(inputs, out_dir=out)
+    if out.is_dir() and any(out.iterdir()) and not overwrite:
+        raise FileExistsError(f"{out} is not empty; pass --overwrite to replace its contents")
+    out.mkdir(parents=True, exist_ok=True)
+    return out

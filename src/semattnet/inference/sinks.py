@@ -1,0 +1,203 @@
+"""Output sinks: what :func:`semattnet.inference.pipeline.complete_frames` writes per frame.
+
+Every sink receives a :class:`Prediction`: the :class:`~semattnet.data.frames.Frame`, the typed
+:class:`~semattnet.inference.completer.Completion` (with its
+:class:`~semattnet.models.outputs.DepthCompletionOutput`) and the depth after the one hole / clamp rule
+(:func:`semattnet.data.io.clamp_for_png`, applied once per frame) and the one quantisation
+(:func:`semattnet.data.io.encode_depth`, once per frame). The PLY and the panel use the depth exactly as
+the PNG stores it; the ``.npy`` holds the clamped depth at full float precision.
+
+Files per frame ``NAME`` (names as ``semattnet predict`` has always written them): ``NAME.png`` (KITTI
+16-bit depth), ``NAME_color.png``, ``NAME.npy`` (float32 metres), ``NAME.ply`` (back-projected, with the
+fusion confidence) and ``NAME_panel.png`` (per-branch panel, with a bird's-eye view when the frame's
+LiDAR points are known). A sink may write into a sub-folder, rename frames, or write only some frames
+(``semattnet evaluate`` writes ``predictions/`` and the ``pictures/`` of the first frames this way).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from semattnet._errors import InputError
+from semattnet.data.frames import Frame
+from semattnet.data.io import clamp_for_png, decode_depth, encode_depth, write_depth, write_image
+from semattnet.inference.completer import Completion
+
+__all__ = [
+    "ColorPngSink",
+    "DepthPngSink",
+    "NpySink",
+    "PanelSink",
+    "PlySink",
+    "Prediction",
+    "Sink",
+    "default_sinks",
+    "fusion_confidence",
+    "output_files",
+    "predict_frame",
+]
+
+
+def fusion_confidence(output: Any) -> np.ndarray | None:
+    """(H, W) largest fusion weight across the branches (eq. 12), or None when the method has none (classical).
+    ``output``: a :class:`Completion` or its :class:`DepthCompletionOutput` (or None)."""
+    if output is None:
+        return None
+    if not isinstance(output, Completion):
+        output = Completion(np.zeros(0, np.float32), output)
+    return output.confidence
+
+
+@dataclass
+class Prediction:
+    """One completed frame as the sinks see it.
+
+    ``depth``: (H, W) float32 metres after the hole / clamp rule (0 = hole); ``png``: its uint16 KITTI
+    encoding; ``stored``: the metres the PNG holds (1/256 m steps): what the PLY and the panel use."""
+
+    frame: Frame
+    completion: Completion
+    depth: np.ndarray
+    png: np.ndarray
+    stored: np.ndarray
+    _clouds: dict[tuple[float, int], Any] = field(default_factory=dict, repr=False)
+
+    def cloud(self, max_depth: float, top_crop: int) -> Any:
+        """The stored depth back-projected (:func:`semattnet.geometry.depth_to_points`) with the image's
+        colours and the fusion confidence; needs the frame's intrinsics."""
+        from semattnet.geometry import depth_to_points
+
+        if self.frame.K is None:
+            raise InputError(f"{self.frame.name}: a point cloud needs the frame's intrinsics K (--K), none given")
+        key = (float(max_depth), int(top_crop))
+        if key not in self._clouds:
+            camera = getattr(self.frame.calib, "camera", None)
+            name = f"cam{camera}" if camera else "cam"
+            self._clouds[key] = depth_to_points(self.stored, self.frame.K, rgb=self.frame.rgb,
+                                                confidence=self.completion.confidence, max_depth=max_depth,
+                                                top_crop=top_crop, frame=name)  # fmt: skip
+        return self._clouds[key]
+
+
+def predict_frame(frame: Frame, completion: Completion) -> Prediction:
+    """The one hole / clamp rule and the one quantisation, applied once to a frame's prediction."""
+    depth = np.asarray(clamp_for_png(np.asarray(completion.depth), frame.name), dtype=np.float32)
+    png = encode_depth(depth)
+    return Prediction(frame, completion, depth, png, decode_depth(png))
+
+
+@dataclass
+class Sink:
+    """Writes ``FOLDER/NAME+SUFFIX`` per frame (``rename``: frame name -> file name instead; ``only``:
+    the frames it writes, default all). Subclasses write the file in :meth:`save`."""
+
+    suffix: str = ".png"
+    folder: str = ""
+    only: Collection[str] | None = None
+    rename: Mapping[str, str] | None = None
+
+    def path(self, name: str) -> str | None:
+        """The file for frame ``name``, relative to the output folder (None: not written)."""
+        if self.only is not None and name not in self.only:
+            return None
+        file = self.rename[name] if self.rename is not None else f"{name}{self.suffix}"
+        return f"{self.folder}/{file}" if self.folder else file
+
+    def write(self, stage: Path, pred: Prediction) -> None:
+        rel = self.path(pred.frame.name)
+        if rel is not None:
+            (stage / rel).parent.mkdir(parents=True, exist_ok=True)
+            self.save(stage / rel, pred)
+
+    def save(self, path: Path, pred: Prediction) -> None:
+        raise NotImplementedError
+
+
+class DepthPngSink(Sink):
+    """``NAME.png``: the KITTI 16-bit depth (``metres * 256``, 0 = hole)."""
+
+    def save(self, path: Path, pred: Prediction) -> None:
+        write_depth(path, pred.png, overwrite=True)
+
+
+@dataclass
+class ColorPngSink(Sink):
+    """``NAME_color.png``: the stored depth in colour."""
+
+    suffix: str = "_color.png"
+
+    def save(self, path: Path, pred: Prediction) -> None:
+        from semattnet.viz.depth import colorize_depth
+
+        write_image(path, colorize_depth(pred.stored), overwrite=True)
+
+
+@dataclass
+class NpySink(Sink):
+    """``NAME.npy``: the clamped depth, float32 metres (0 = hole), unquantised."""
+
+    suffix: str = ".npy"
+
+    def save(self, path: Path, pred: Prediction) -> None:
+        from semattnet._utils.atomic import atomic_path
+
+        with atomic_path(path, suffix=".npy") as tmp:
+            np.save(tmp, pred.depth)
+
+
+@dataclass
+class PlySink(Sink):
+    """``NAME.ply``: the stored depth back-projected (camera frame: x right, y down, z forward, metres),
+    pixels deeper than ``max_depth`` or in the top ``top_crop`` rows left out, with the image's colours
+    and (for SemAttNet) the largest fusion weight as ``confidence``."""
+
+    suffix: str = ".ply"
+    max_depth: float = 80.0
+    top_crop: int = 0
+
+    def save(self, path: Path, pred: Prediction) -> None:
+        from semattnet.geometry import write_ply
+
+        write_ply(path, pred.cloud(self.max_depth, self.top_crop), overwrite=True)
+
+
+@dataclass
+class PanelSink(Sink):
+    """``NAME_panel.png``: the per-branch panel (with ground truth and its error map when the frame has
+    ground truth) and, when the frame's LiDAR points are known, a bird's-eye view of the cloud."""
+
+    suffix: str = "_panel.png"
+    max_depth: float = 80.0
+    top_crop: int = 0
+
+    def save(self, path: Path, pred: Prediction) -> None:
+        from semattnet.viz.panels import birds_eye_tile, branch_panel
+
+        frame, outputs = pred.frame, pred.completion.outputs
+        final = "refined_depth" if "refined_depth" in outputs else "fused_depth"
+        outputs[final] = pred.stored  # the depth as stored
+        extra = []
+        if frame.points is not None and frame.calib is not None and frame.K is not None:
+            cloud = pred.cloud(self.max_depth, self.top_crop)
+            bev = birds_eye_tile(cloud, frame.points, frame.calib, frame.size, self.max_depth)
+            extra.append(("bird's-eye view (LiDAR in magenta)", bev))
+        branch_panel(path, frame.rgb, frame.semantic, frame.sparse, outputs, gt=frame.gt, extra=extra)
+
+
+def default_sinks(npy: bool = False, panel: bool = False, ply: bool = False, max_depth: float = 80.0,
+                  top_crop: int = 0) -> list[Sink]:  # fmt: skip
+    """What ``semattnet predict`` writes: ``NAME.png`` and ``NAME_color.png``, then as asked ``NAME.ply``,
+    ``NAME.npy`` and ``NAME_panel.png``."""
+    sinks: list[Sink] = [DepthPngSink(), ColorPngSink()]
+    sinks += [PlySink(max_depth=max_depth, top_crop=top_crop)] * ply + [NpySink()] * npy
+    return sinks + [PanelSink(max_depth=max_depth, top_crop=top_crop)] * panel
+
+
+def output_files(names: Sequence[str], sinks: Sequence[Sink]) -> list[str]:
+    """Every file the sinks write for ``names``, relative to the output folder, frame by frame."""
+    return [p for name in names for sink in sinks if (p := sink.path(name)) is not None]
