@@ -34,6 +34,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from semattnet.models._tracing import is_tracing
 from semattnet.models.config import RefinementMode
 from semattnet.models.layers import convbn, convbnrelu
 from semattnet.models.propagation import (
@@ -54,7 +55,7 @@ def _can_fuse(*tensors: torch.Tensor) -> bool:
     """The compiled kernel serves float32 CPU inference (no autograd) when it could be built."""
     if torch.is_grad_enabled() and any(t.requires_grad for t in tensors):
         return False
-    if torch.onnx.is_in_onnx_export() or torch.jit.is_tracing() or torch.compiler.is_compiling():
+    if is_tracing():
         return False
     if any(t.device.type != "cpu" or t.dtype != torch.float32 for t in tensors):
         return False
