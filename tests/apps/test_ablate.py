@@ -12,6 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 import semattnet.apps.ablate as ablate_mod
+from semattnet._errors import DataError, InputError
 from semattnet.apps.ablate import CLAIM_CONFIGS, CLAIMS, SCHEMA, AblationSettings, run_ablation
 from semattnet.cli import main
 
@@ -77,27 +78,27 @@ def test_resume_does_not_retrain(ablated: tuple[Path, dict[str, Any], list[str]]
 
 def test_refuses_unusable_results(ablated: tuple[Path, dict[str, Any], list[str]], tmp_path: Path) -> None:
     out, _, _ = ablated
-    with pytest.raises(ValueError, match=r"other settings \(lr\)"):
+    with pytest.raises(DataError, match=r"other settings \(lr\)"):
         run_ablation(out, AblationSettings(**TINY, configs=("table2_b",), seeds=(0,), lr=1e-3), log=print)
     with pytest.raises(
-        ValueError,
+        DataError,
         match="6 training and 4 held-out realistic scenes of \\(32, 64\\) from data seed 0, not 6 and 6 realistic",
     ):
         run_ablation(out, AblationSettings(**{**TINY, "eval_frames": 6}, configs=("table2_b",), seeds=(0,)))
-    with pytest.raises(ValueError, match="held-out realistic scenes .* not 6 and 4 ideal ones"):
+    with pytest.raises(DataError, match="held-out realistic scenes .* not 6 and 4 ideal ones"):
         run_ablation(out, AblationSettings(**{**TINY, "style": "ideal"}, configs=("table2_b",), seeds=(0,)))
     old = tmp_path / "old"
     (old / "results").mkdir(parents=True)
     (old / "data").symlink_to(out / "data")
     (old / "results" / "table2_b_seed0.json").write_text(json.dumps({"rmse_mm": {"all": 1.0}}))
-    with pytest.raises(ValueError, match="older semattnet ablate without per-image metrics"):
+    with pytest.raises(DataError, match="older semattnet ablate without per-image metrics"):
         run_ablation(old, AblationSettings(**TINY, configs=("table2_b",), seeds=(0,)), log=print)
 
 
 def test_seed_rules(tmp_path: Path) -> None:
-    with pytest.raises(ValueError, match=r"paired tests \(semantic_branch\) need at least 2 seeds, got 1"):
+    with pytest.raises(InputError, match=r"paired tests \(semantic_branch\) need at least 2 seeds, got 1"):
         run_ablation(tmp_path, AblationSettings(**TINY, configs=("table2_b", "table2_d"), seeds=(0,)))
-    with pytest.raises(ValueError, match="distinct"):
+    with pytest.raises(InputError, match="distinct"):
         run_ablation(tmp_path, AblationSettings(**TINY, configs=("table2_b",), seeds=(0, 0)))
     assert not any(tmp_path.iterdir())  # refused before any work
 

@@ -11,7 +11,11 @@ import pytest
 from click.testing import CliRunner
 
 from semattnet.cli import main
-from semattnet.data.synthetic.scenes import _ID, CITYSCAPES_PALETTE, MATERIALS, SCENE_STYLES, make_frame
+from semattnet.data.io import DEPTH_SCALE
+from semattnet.data.synthetic.layout import CAM_HEIGHT
+from semattnet.data.synthetic.materials import CLASS_IDS as _ID
+from semattnet.data.synthetic.scenes import CITYSCAPES_PALETTE, MATERIALS, SCENE_STYLES, make_frame
+from semattnet.geometry import depth_to_points, project_points
 
 
 @pytest.fixture(scope="module", params=[(352, 1216, 0), (352, 1216, 1), (96, 320, 2)])
@@ -60,11 +64,14 @@ def _digest(a: np.ndarray) -> str:
     return hashlib.sha256(np.ascontiguousarray(a).tobytes()).hexdigest()[:16]
 
 
-# Computed on the generator before the "realistic" style existed: the default style must keep
-# drawing the same numbers in the same order (rgb, labels, sparse and gt in KITTI's 1/256 m steps).
+# The default style must keep drawing the same numbers in the same order (rgb, labels, sparse and gt in
+# KITTI's 1/256 m steps). Re-pinned with the pixel-convention fix (issue 22): camera rays now go through
+# pixel centres at integer coordinates and the LiDAR's points are binned by geometry.project_points
+# (column floor(u + 0.5)), no longer through u + 0.5 and floor(u); every draw of the generator is
+# unchanged (same meta, same LiDAR counts), the images and depths move by half a pixel.
 _PINNED = {
-    (64, 128, 3): ("7daa61081358ddca", "07506dac4202cb94", "d3a6cc73699ff92d", "53ce995fdac63be1", 114074.877, True),
-    (96, 320, 7): ("83c9576013a97a3f", "bce961f94cc5e9e3", "b90081d24f1d1ced", "79e531546b0b4b37", 617200.351, False),
+    (64, 128, 3): ("034bcad2882b174b", "fa12ae70bbbd0962", "6af5b210e2d28a2a", "f9a366bace802251", 114064.112, True),
+    (96, 320, 7): ("6ec46733573572c2", "38b65fa0e7f0bcfb", "0a8ea1c2e429d26d", "0f78160cf2cd4bb5", 615771.047, False),
 }
 
 
@@ -79,6 +86,28 @@ def test_ideal_style_is_unchanged(key: tuple[int, int, int]) -> None:
     assert _digest(np.round(f.gt * 256).astype(np.uint16)) == gt
     assert f.depth.astype(np.float64).sum() == pytest.approx(depth_sum, abs=0.01)
     assert f.shadowed is shadowed
+
+
+@pytest.mark.parametrize("style", SCENE_STYLES)
+def test_sparse_map_is_geometry_projection_of_the_lidar_points(style: str) -> None:
+    """One pixel convention: geometry.project_points of the frame's own LiDAR points is its sparse map."""
+    f = make_frame(96, 320, seed=11, style=style)
+    assert f.lidar_points is not None and f.T_cam_lidar is not None
+    assert f.lidar_points.shape[1] == 3 and len(f.lidar_points) > 500
+    depth = project_points(f.lidar_points, f.K, f.T_cam_lidar, (320, 96))
+    np.testing.assert_array_equal(np.round(depth * DEPTH_SCALE) / DEPTH_SCALE, f.sparse)
+    # The LiDAR frame has KITTI's Velodyne axes: x forward, z up (the sensor is 1.73 m above the road).
+    assert np.median(f.lidar_points[:, 0]) > 3 and np.percentile(f.lidar_points[:, 2], 5) < -1.5
+
+
+def test_camera_rays_go_through_integer_pixel_centres() -> None:
+    """Back-projecting the exact depth at integer (u, v) (geometry's convention) lands road pixels on the road
+    plane, to float32 precision; rays through u + 0.5 would miss it by half a pixel (~1 cm at 20 m)."""
+    f = make_frame(96, 320, seed=2, shadow=False)
+    road = (f.labels == _ID["road"]) & (f.depth > 10)
+    cloud = depth_to_points(f.depth, f.K, mask=road)
+    assert len(cloud) > 200
+    np.testing.assert_allclose(cloud.xyz[:, 1], CAM_HEIGHT, atol=2e-5 * cloud.xyz[:, 2].max())
 
 
 def test_synth_and_check_commands(tmp_path: Path) -> None:
@@ -109,13 +138,13 @@ def test_synth_and_check_commands(tmp_path: Path) -> None:
 def test_style_reaches_the_tree_and_the_manifest(tmp_path: Path) -> None:
     from semattnet.data import layout
     from semattnet.data.io import read_depth
-    from semattnet.data.synthetic.tree import SYNTH_DATE, _frame_seed, write_synthetic_kitti
+    from semattnet.data.synthetic.tree import SYNTH_DATE, frame_seed, write_synthetic_kitti
 
     manifest = write_synthetic_kitti(tmp_path / "t", frames=2, size=(64, 128), seed=3, eval_frames=1, workers=1,
                                      style="realistic")  # fmt: skip
     assert manifest["style"] == json.loads((tmp_path / "t" / "scenes.json").read_text())["style"] == "realistic"
     first = next(e for e in manifest["frames"] if e["split"] == "train" and e["index"] == 0)
-    expected = make_frame(64, 128, seed=_frame_seed(3, "train", 0), shadow=False, style="realistic").sparse
+    expected = make_frame(64, 128, seed=frame_seed(3, "train", 0), shadow=False, style="realistic").sparse
     drive = f"{SYNTH_DATE}_drive_0000_sync"
     written = layout.velodyne_path(tmp_path / "t", "train", drive, "02", "0000000000")
     np.testing.assert_array_equal(read_depth(written), expected)

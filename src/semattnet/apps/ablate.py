@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from semattnet._errors import DataError, InputError
 from semattnet._utils.atomic import atomic_path
 from semattnet._utils.device import resolve_device
 from semattnet.apps.experiment import (
@@ -113,7 +114,7 @@ def _variant(name: str) -> tuple[str, dict[str, Any]]:
         return "(g) trained and tested with the no-segmenter fallback map", {"branches": 3, "fusion": "sammafb",
                                                                              "refine": True}  # fmt: skip
     if name not in MODELS or not name.startswith("table2_"):
-        raise ValueError(f"unknown configuration {name!r}; choose from {', '.join(CONFIGS)}")
+        raise InputError(f"unknown configuration {name!r}; choose from {', '.join(CONFIGS)}")
     description, cfg = MODELS[name]
     return description, {"branches": cfg.branches, "fusion": cfg.fusion, "refine": cfg.refine}
 
@@ -132,10 +133,10 @@ def _stats(values: list[float]) -> dict[str, float]:
 def _check_seeds(s: AblationSettings, log: Callable[[str], None]) -> None:
     """Refuse fewer than 2 distinct seeds when a claim can be tested; warn below 3."""
     if len(set(s.seeds)) != len(s.seeds) or not s.seeds:
-        raise ValueError(f"seeds must be distinct and at least one, got {list(s.seeds)}")
+        raise InputError(f"seeds must be distinct and at least one, got {list(s.seeds)}")
     testable = [c[0] for c in CLAIMS if {c[2], c[3]} <= set(s.configs)]
     if testable and len(s.seeds) < 2:
-        raise ValueError(f"the paired tests ({', '.join(testable)}) need at least 2 seeds, got {len(s.seeds)}")
+        raise InputError(f"the paired tests ({', '.join(testable)}) need at least 2 seeds, got {len(s.seeds)}")
     if testable and len(s.seeds) < 3:
         log(f"warning: only {len(s.seeds)} seeds; the paired tests are weak below 3")
 
@@ -175,7 +176,7 @@ def _held_out(data: Path, s: AblationSettings, log: Callable[[str], None]) -> He
             msg = (f"{data} holds {found[0]} training and {found[1]} held-out {found[4]} scenes of {found[2]} from "
                    f"data seed {found[3]}, not {wanted[0]} and {wanted[1]} {wanted[4]} ones of {wanted[2]} from seed "
                    f"{wanted[3]}; use another --out for other data settings")  # fmt: skip
-            raise ValueError(msg)
+            raise DataError(msg)
         return load_held_out(data)
     log(f"generating {s.train_frames} training and {s.eval_frames} held-out scenes at {s.size[0]}x{s.size[1]} ...")
     return make_synthetic(data, s.train_frames, s.eval_frames, s.size, s.data_seed, style=s.style)
@@ -226,13 +227,13 @@ class _Run:
         """A saved result, refused if it lacks per-image metrics or was made with other settings."""
         record = json.loads(path.read_text())
         if record.get("schema") != _RESULT_SCHEMA or "per_image" not in record:
-            raise ValueError(f"{path} was written by an older semattnet ablate without per-image metrics, which "
+            raise DataError(f"{path} was written by an older semattnet ablate without per-image metrics, which "
                              "the paired tests need; move results/ away or use another --out")  # fmt: skip
         expected = json.loads(json.dumps(self.settings.protocol()))
         changed = sorted(k for k in expected.keys() | record["protocol"].keys()
                          if expected.get(k) != record["protocol"].get(k))  # fmt: skip
         if changed:
-            raise ValueError(f"{path} was made with other settings ({', '.join(changed)}); "
+            raise DataError(f"{path} was made with other settings ({', '.join(changed)}); "
                              "rerun with the same settings or use another --out")  # fmt: skip
         return record
 

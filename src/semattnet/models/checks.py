@@ -4,15 +4,12 @@ from __future__ import annotations
 
 import torch
 
+from semattnet.models._tracing import is_tracing
+
 __all__ = ["SIZE_MULTIPLE", "check_inputs"]
 
 #: H and W must be multiples of this (five stride-2 stages).
 SIZE_MULTIPLE = 32
-
-
-def _is_tracing() -> bool:
-    compiling = getattr(getattr(torch, "compiler", None), "is_compiling", None)  # torch >= 2.3
-    return torch.jit.is_scripting() or torch.jit.is_tracing() or bool(compiling and compiling())
 
 
 def check_inputs(
@@ -52,7 +49,7 @@ def check_inputs(
             f"input size {h}x{w} is not a positive multiple of {SIZE_MULTIPLE} in both dimensions; "
             "pad with semattnet.pad_to_multiple (and crop the outputs back)"
         )
-    if _is_tracing():
+    if is_tracing():
         return
     for name, t, _ in named:
         if not bool(torch.isfinite(t).all()):

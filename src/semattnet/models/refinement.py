@@ -34,6 +34,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from semattnet.models._tracing import is_tracing
 from semattnet.models.config import RefinementMode
 from semattnet.models.layers import convbn, convbnrelu
 from semattnet.models.propagation import (
@@ -45,16 +46,25 @@ from semattnet.models.propagation import (
 )
 from semattnet.models.propagation import cpu_kernel as fused_propagation
 
-__all__ = ["AtrousCSPNRefinement", "PropagationImpl", "RefinementInputs", "propagate_refinement", "run_cspn_stage"]
+__all__ = [
+    "HEADS_PREFIX",
+    "AtrousCSPNRefinement",
+    "PropagationImpl",
+    "RefinementInputs",
+    "propagate_refinement",
+    "run_cspn_stage",
+]
 
 PropagationImpl = Literal["auto", "pytorch", "naive"]
+#: Name prefix of the refinement heads' tensors in flat dicts (exported graphs' outputs, :class:`RefinementInputs`).
+HEADS_PREFIX = "refinement."
 
 
 def _can_fuse(*tensors: torch.Tensor) -> bool:
     """The compiled kernel serves float32 CPU inference (no autograd) when it could be built."""
     if torch.is_grad_enabled() and any(t.requires_grad for t in tensors):
         return False
-    if torch.onnx.is_in_onnx_export() or torch.jit.is_tracing() or torch.compiler.is_compiling():
+    if is_tracing():
         return False
     if any(t.device.type != "cpu" or t.dtype != torch.float32 for t in tensors):
         return False
@@ -196,7 +206,7 @@ class RefinementInputs:
     mask: torch.Tensor
     att: torch.Tensor | None = None
 
-    def to_dict(self, prefix: str = "refinement.") -> dict[str, torch.Tensor]:
+    def to_dict(self, prefix: str = HEADS_PREFIX) -> dict[str, torch.Tensor]:
         """Flat named tensors (lists numbered), e.g. for an exported graph's outputs."""
         out: dict[str, torch.Tensor] = {}
         for f in fields(self):
@@ -208,7 +218,7 @@ class RefinementInputs:
         return out
 
     @classmethod
-    def from_dict(cls, tensors: Mapping[str, torch.Tensor], prefix: str = "refinement.") -> RefinementInputs:
+    def from_dict(cls, tensors: Mapping[str, torch.Tensor], prefix: str = HEADS_PREFIX) -> RefinementInputs:
         """The inverse of :meth:`to_dict` (other keys are ignored)."""
         kwargs: dict[str, Any] = {}
         for f in fields(cls):

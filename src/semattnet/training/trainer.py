@@ -24,11 +24,11 @@ import numpy as np
 import torch
 from torch import nn
 from torch.utils.data import DataLoader, Dataset, Subset
-from tqdm import tqdm
 
 from semattnet._utils import distributed as dist_utils
 from semattnet._utils.atomic import atomic_path
 from semattnet._utils.device import autocast
+from semattnet._utils.progress import progress
 from semattnet.data.kitti import KittiDepthCompletion
 from semattnet.data.transforms import EvalTransform, TrainTransform
 from semattnet.evaluation.evaluate import evaluate_model
@@ -329,8 +329,9 @@ class Trainer:
         self.loader_rng.manual_seed(cfg.seed * 1_000_003 + epoch)  # worker seeds: a function of (seed, epoch)
         weight = cfg.branch_weight(epoch)
         self._set_train_mode()
-        bar = tqdm(total=len(self.loader), initial=self.pos.batch, desc=f"epoch {epoch}",
-                   disable=not self.main, unit="batch", dynamic_ncols=True)  # fmt: skip
+        bar = progress(total=len(self.loader), initial=self.pos.batch, desc=f"epoch {epoch}",
+                       enabled=self.main, unit="batch", dynamic_ncols=True)  # fmt: skip
+        loss = float("nan")
         with bar:
             for batch in self.loader:
                 loss = self._step(batch, weight)
@@ -343,6 +344,9 @@ class Trainer:
                     self.save(periodic=True)
                 if cfg.max_steps and self.pos.step >= cfg.max_steps:
                     break
+        if bar.disable:  # no bar (not a terminal): one line for the epoch instead
+            self.log(f"epoch {epoch}: batch {self.pos.batch}/{len(self.loader)}, step {self.pos.step}, "
+                     f"loss {loss:.3f}, lr {self.optimizer.param_groups[0]['lr']:.2e}")  # fmt: skip
         return self.pos.batch >= len(self.loader)
 
     def _step(self, batch: dict[str, Any], branch_weight: float) -> float:

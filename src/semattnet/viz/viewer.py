@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from semattnet._utils.atomic import atomic_path
+from semattnet.geometry.cameras import KITTI_K
 
 __all__ = [
     "ViewerFrame",
@@ -99,8 +100,6 @@ def cloud_points(depth: np.ndarray, K: np.ndarray, stride: int, rgb: np.ndarray 
 def parse_intrinsics(text: str) -> np.ndarray:
     """``"fx,fy,cx,cy"`` or ``"kitti"`` (KITTI's camera 02) -> (3, 3) K."""
     if text.strip().lower() == "kitti":
-        from semattnet.data.synthetic import KITTI_K
-
         return KITTI_K.copy()
     fx, fy, cx, cy = (float(v) for v in text.split(","))
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])

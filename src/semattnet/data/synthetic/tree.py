@@ -22,9 +22,9 @@ import numpy as np
 from semattnet.data import layout
 from semattnet.data.io import write_depth as _write_depth
 from semattnet.data.io import write_image as _write_image
-from semattnet.data.synthetic.scenes import SCENE_STYLES, make_frame
+from semattnet.data.synthetic.scenes import check_style, make_frame
 
-__all__ = ["SYNTH_DATE", "write_synthetic_kitti"]
+__all__ = ["SYNTH_DATE", "frame_seed", "write_synthetic_kitti"]
 
 #: The date in synthetic drive names: clearly not a KITTI recording day.
 SYNTH_DATE = "2000_01_01"
@@ -40,7 +40,8 @@ def write_image(path: Path, image: np.ndarray) -> None:
     _write_image(path, image, compress_level=1)
 
 
-def _frame_seed(seed: int, split: str, index: int) -> int:
+def frame_seed(seed: int, split: str, index: int) -> int:
+    """The scene seed of frame ``index`` of ``split`` in a tree written with ``seed``."""
     return int(zlib.crc32(f"{seed}/{split}/{index}".encode()))
 
 
@@ -53,7 +54,7 @@ def _write_calib(path: Path, K: np.ndarray) -> None:
 
 def _job(args: tuple[Path, str, int, int, int, int, bool | None, str]) -> dict[str, Any]:
     out, split, index, seed, height, width, shadow, style = args
-    fseed = _frame_seed(seed, split, index)
+    fseed = frame_seed(seed, split, index)
     fr = make_frame(height, width, seed=fseed, shadow=shadow, style=style)
     entry: dict[str, Any] = {"split": split, "index": index, "seed": fseed, "shadowed": fr.shadowed}
     if split in ("train", "val"):
@@ -108,10 +109,9 @@ def write_synthetic_kitti(
 
     Raises:
         FileExistsError: ``out`` holds files and ``overwrite`` is not set.
-        ValueError: unknown ``style``.
+        InputError: unknown ``style``.
     """
-    if style not in SCENE_STYLES:
-        raise ValueError(f"unknown scene style {style!r}; expected one of {SCENE_STYLES}")
+    check_style(style)
     out = Path(out)
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise FileExistsError(f"{out} is not empty; pass overwrite=True (--overwrite) to write into it")

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import torch
 
+from semattnet.models._tracing import is_tracing
 from semattnet.models.propagation._common import kernel_size, window
 
 __all__ = ["exporting", "propagate_functional", "shift_functional"]
@@ -13,7 +14,7 @@ __all__ = ["exporting", "propagate_functional", "shift_functional"]
 
 def exporting() -> bool:
     """Tracing for ONNX / TorchScript or compiling: use plain tensor ops (no in-place, no autograd.Function)."""
-    return torch.onnx.is_in_onnx_export() or torch.jit.is_tracing() or torch.compiler.is_compiling()
+    return is_tracing()
 
 
 def shift_functional(affinity: torch.Tensor, dilation: int) -> torch.Tensor:

@@ -1,0 +1,48 @@
+"""One home for progress bars: a tqdm bar only when its stream is a terminal.
+
+Written to a log file (``semattnet demo > log``) a tqdm bar writes every refresh, carriage returns
+and all; :func:`progress` turns the bar off unless the stream is a TTY (or ``force=True``), and
+:func:`is_interactive` tells callers to log one line per epoch instead.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Iterable
+from typing import IO, Any
+
+from tqdm import tqdm
+
+__all__ = ["is_interactive", "progress"]
+
+
+def is_interactive(stream: IO[str] | None = None) -> bool:
+    """Whether ``stream`` (default ``sys.stderr``, where tqdm writes) is a terminal."""
+    stream = sys.stderr if stream is None else stream
+    isatty = getattr(stream, "isatty", None)
+    try:
+        return bool(isatty and isatty())
+    except (ValueError, OSError):  # a closed or detached stream
+        return False
+
+
+def progress(
+    iterable: Iterable[Any] | None = None,
+    *,
+    enabled: bool = True,
+    force: bool | None = None,
+    file: IO[str] | None = None,
+    **kwargs: Any,
+) -> tqdm:  # type: ignore[type-arg]
+    """A ``tqdm`` bar over ``iterable`` (or a manual one with ``total=``), shown only where it belongs.
+
+    Args:
+        iterable: what to iterate (None: update the bar by hand).
+        enabled: False hides the bar whatever the stream (e.g. not the main process, ``progress=False``).
+        force: True shows the bar even when ``file`` is not a terminal, False never; None: only on a terminal.
+        file: the stream (default ``sys.stderr``).
+        **kwargs: passed to ``tqdm`` (``total``, ``desc``, ``unit``, ``leave``, ...).
+    """
+    stream = sys.stderr if file is None else file
+    shown = enabled and (force if force is not None else is_interactive(stream))
+    return tqdm(iterable, file=stream, disable=not shown, **kwargs)
