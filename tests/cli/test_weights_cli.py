@@ -114,5 +114,9 @@ def test_train_init_weights_resolves_to_a_cached_file(
     monkeypatch.setattr(trainer, "train", fake_train)
     run("train", "--stage", "full", "--data", str(tmp_path), "--out", str(tmp_path / "run"), "--init-weights", NAME)
     assert Path(seen["init"]).is_file() and Path(seen["init"]).is_relative_to(tmp_path / "cache")
-    both = CliRunner().invoke(main, ["train", "--init", "x.pth", "--init-weights", NAME])
-    assert both.exit_code == 2 and "not both" in both.output
+    local = tmp_path / "x.pth"
+    local.write_bytes(b"")
+    both = CliRunner().invoke(main, ["train", "--init", str(local), "--init-weights", NAME])
+    assert both.exit_code == 2 and "not both" in both.output and "--init-weights is an alias of --init" in both.output
+    missing = CliRunner().invoke(main, ["train", "--init", str(tmp_path / "missing.pth")])
+    assert missing.exit_code == 2 and "missing.pth" in missing.output
