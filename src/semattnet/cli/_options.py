@@ -189,7 +189,7 @@ def model_from_options(checkpoint: Path | None, weights: str | None, device: str
         raise click.UsageError("give --checkpoint or --weights, not both")
     spec = weights if weights is not None else checkpoint
     if spec is None:
-        raise click.UsageError("--weights (or its alias --checkpoint) is required")
+        raise click.UsageError("--checkpoint or --weights is required (they are one option: --checkpoint is an alias)")
     return from_pretrained(spec, map_location=device)
 
 
