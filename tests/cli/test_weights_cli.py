@@ -8,6 +8,7 @@ from collections.abc import Iterator
 from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
+import click
 import pytest
 import torch
 from click.testing import CliRunner
@@ -114,5 +115,40 @@ def test_train_init_weights_resolves_to_a_cached_file(
     monkeypatch.setattr(trainer, "train", fake_train)
     run("train", "--stage", "full", "--data", str(tmp_path), "--out", str(tmp_path / "run"), "--init-weights", NAME)
     assert Path(seen["init"]).is_file() and Path(seen["init"]).is_relative_to(tmp_path / "cache")
-    both = CliRunner().invoke(main, ["train", "--init", "x.pth", "--init-weights", NAME])
-    assert both.exit_code == 2 and "not both" in both.output
+    local = tmp_path / "x.pth"
+    local.write_bytes(b"")
+    both = CliRunner().invoke(main, ["train", "--init", str(local), "--init-weights", NAME])
+    assert both.exit_code == 2 and "not both" in both.output and "--init-weights is an alias of --init" in both.output
+    missing = CliRunner().invoke(main, ["train", "--init", str(tmp_path / "missing.pth")])
+    assert missing.exit_code == 2 and "missing.pth" in missing.output
+
+
+def _commands(group: click.Group, prefix: str = "") -> dict[str, click.Command]:
+    out: dict[str, click.Command] = {}
+    for name, cmd in group.commands.items():
+        out[prefix + name] = cmd
+        if isinstance(cmd, click.Group):
+            out.update(_commands(cmd, f"{prefix}{name} "))
+    return out
+
+
+def test_weights_and_checkpoint_are_one_option_on_every_loading_command() -> None:
+    loading = {}
+    for name, cmd in _commands(main).items():
+        flagged = [p for p in cmd.params if {"--weights", "--checkpoint"} & set(p.opts)]
+        if flagged:
+            (param,) = flagged  # one option, never two
+            loading[name] = param
+    assert {"predict", "evaluate", "submit", "bench", "info", "convert"} <= set(loading)
+    for name, param in loading.items():
+        assert param.name == "weights" and param.opts == ["--weights", "--checkpoint"], name
+        assert "--checkpoint is an alias" in (param.help or ""), name
+
+
+def test_checkpoint_spelling_gives_the_same_and_twice_is_refused(served: str, tmp_path: Path) -> None:
+    first = run("info", "--weights", NAME)  # downloads (and announces the pin), then the cache answers
+    assert run("info", "--checkpoint", NAME) == run("info", "--weights", NAME) and first.startswith("file:")
+    both = CliRunner().invoke(main, ["info", "--checkpoint", NAME, "--weights", NAME])
+    assert both.exit_code == 2 and "exactly one of --checkpoint or --weights, not both" in both.output
+    missing = CliRunner().invoke(main, ["bench", "--checkpoint", str(tmp_path / "none.pt")])
+    assert missing.exit_code == 2 and "none.pt" in missing.output and "'--weights' / '--checkpoint'" in missing.output

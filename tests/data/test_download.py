@@ -180,3 +180,17 @@ def test_parse_what_and_drive_source(tmp_path: Path) -> None:
     assert len(drives) == 151 and "shipped" in source
     (tmp_path / "data_depth_annotated/val" / DRIVE).mkdir(parents=True)
     assert drives_for(tmp_path)[0] == [DRIVE]
+
+
+def test_error_classes_and_the_shared_cache() -> None:
+    from semattnet import SemAttNetError
+    from semattnet._errors import DataError, InputError
+    from semattnet._utils import download as cache
+    from semattnet.data import download as kitti_download
+    from semattnet.data.download import LicenseNotAcceptedError
+
+    assert issubclass(UnsafeArchiveError, DataError) and issubclass(LicenseNotAcceptedError, InputError)
+    assert issubclass(LicenseNotAcceptedError, SemAttNetError)
+    assert kitti_download.fetch is cache.fetch  # KITTI archives go through the same verified cache as weights
+    with pytest.raises(LicenseNotAcceptedError, match="accept-kitti-license"):
+        kitti_download.download_kitti("/nonexistent", accept_license=False, log=lambda _: None)

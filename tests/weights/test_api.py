@@ -22,6 +22,7 @@ from semattnet.weights import (
     save_pretrained,
 )
 from semattnet.weights import hub as hub_api
+from semattnet.weights.builder import WeightsMismatchError
 from semattnet.weights.checkpoint import CheckpointError, StateDictMismatchError, UnsafeCheckpointError
 
 from .conftest import Server, cache_files, predict
@@ -205,5 +206,7 @@ def test_registry_arch_mismatch_is_refused(tmp_path: Path, cache: Path, tiny_mod
         name="wrong", arch="semattnet", config={"width": 0.25}, format="safetensors", license="t",
         urls=((folder / "model.safetensors").as_uri(),), file_name="model.safetensors",
     )  # fmt: skip
-    with pytest.raises(StateDictMismatchError, match="shape mismatch"):  # built as the record says, then strict
+    with pytest.raises(StateDictMismatchError) as err:  # the record is checked against the tensors' shapes
         hub_api.from_pretrained(entry)
+    assert isinstance(err.value, WeightsMismatchError) and "\n" not in str(err.value)
+    assert "weights 'wrong'" in str(err.value) and "width 0.25 recorded, 0.125 in the tensors" in str(err.value)

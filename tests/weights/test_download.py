@@ -202,3 +202,27 @@ def test_registry_name_and_bad_arguments(cache: Path) -> None:
         fetch("http://127.0.0.1:9/x", sha256="abc")
     with pytest.raises(DownloadError, match="unsupported URL"):
         fetch("ftp://127.0.0.1:9/x", progress=False)
+
+
+def test_errors_derive_from_the_root_and_stay_os_errors() -> None:
+    from semattnet import SemAttNetError
+    from semattnet._utils import download as cache_pkg
+    from semattnet.weights import UnknownWeightsError
+
+    for cls in (DownloadError, ChecksumError, OfflineError):
+        assert issubclass(cls, SemAttNetError) and issubclass(cls, OSError), cls
+    assert issubclass(UnknownWeightsError, SemAttNetError)
+    assert cache_pkg.DownloadError is DownloadError  # one home (semattnet._utils.download), re-exported
+    assert fetch.__module__ == "semattnet.weights.download"  # the weights layer: registry names and records
+    with pytest.raises(UnknownWeightsError):
+        fetch("no-such-weights")
+
+
+def test_the_generic_cache_takes_urls_only(tmp_path: Path, cache: Path) -> None:
+    from semattnet._utils.download import fetch as fetch_url
+
+    src = tmp_path / "a.bin"
+    src.write_bytes(BLOB)
+    assert fetch_url(src.as_uri(), sha256=SHA, progress=False) == fetch(src.as_uri(), sha256=SHA, progress=False)
+    with pytest.raises(DownloadError, match="unsupported URL"):
+        fetch_url("semattnet-kitti", progress=False)  # a registry name means nothing to the generic cache

@@ -53,14 +53,14 @@ from semattnet.apps.experiment import (
 from semattnet.data.palette import unknown_map
 from semattnet.evaluation.metrics import LEADERBOARD, KittiMetrics
 from semattnet.evaluation.paired import compare, differences
-from semattnet.models.registry import MODELS
+from semattnet.models.registry import MODELS, TABLE2
 from semattnet.segmentation.segmenter import Segmenter, segment_folder
 
 __all__ = ["CLAIMS", "CLAIM_CONFIGS", "CONFIGS", "SCHEMA", "AblationSettings", "run_ablation"]
 
 NO_SEMANTICS = "g_unknown_semantics"
 #: Configurations: Table 2 rows plus the no-semantics variant of (g).
-CONFIGS: tuple[str, ...] = (*(n for n in MODELS if n.startswith("table2_")), NO_SEMANTICS)
+CONFIGS: tuple[str, ...] = (*TABLE2, NO_SEMANTICS)
 #: The claims tested: (id, text, better configuration, worse configuration).
 CLAIMS: tuple[tuple[str, str, str, str], ...] = (
     ("semantic_branch", "the semantic branch helps", "table2_d", "table2_b"),

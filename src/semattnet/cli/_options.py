@@ -6,14 +6,14 @@ a one-line error naming the option before any work starts.
 
 from __future__ import annotations
 
+import functools
+import inspect
 import math
 from pathlib import Path
 from typing import Any
 
 import click
 import torch
-
-from semattnet._errors import SemAttNetError
 
 #: A count of at least one (frames, steps, repeats, batch size).
 POSITIVE_INT = click.IntRange(min=1)
@@ -106,26 +106,91 @@ def parse_triple(text: str, option: str) -> tuple[float, float, float]:
     return a, b, c
 
 
-#: ``--weights NAME|PATH|URL``: every command that reads a model takes it beside ``--checkpoint``.
-weights_option = click.option(
-    "--weights",
-    default=None,
-    metavar="NAME|PATH|URL",
-    help="Released weights by name (semattnet weights list), a local file or folder, an http(s)/file URL or hf://owner/repo.",
+WEIGHTS_HELP = (
+    "Model weights: a released name (semattnet weights list), a local file (.pth.tar, .pt, .safetensors) or "
+    "folder (save_pretrained), an http(s)/file URL, gdrive://ID or hf://owner/repo. "
+    "--checkpoint is an alias of this option (its older name)."
 )
 
 
+class WeightsSpec(click.ParamType):
+    """``NAME|PATH|URL``: an existing file or folder, a URL, or a registered weights name (checked, not fetched)."""
+
+    name = "NAME|PATH|URL"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> str:
+        from semattnet.weights.download import is_url
+        from semattnet.weights.pretrained import list_pretrained
+
+        text = str(value)
+        if is_url(text) or text in list_pretrained() or Path(text).expanduser().exists():
+            return text
+        self.fail(
+            f"{text!r} is not an existing file or folder, a URL (http(s)://, file://, gdrive://, hf://) or a "
+            f"registered weights name ({', '.join(list_pretrained())})",
+            param,
+            ctx,
+        )
+
+
+WEIGHTS_SPEC = WeightsSpec()
+
+
+def one_value(spec: click.ParamType) -> Any:
+    """The callback of an option with aliases, declared ``multiple`` (of plain text) only to see a second
+    use (``--checkpoint A --weights B``): refuse that first, then check the one value with ``spec``."""
+
+    def callback(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]) -> Any:
+        if len(values) > 1:
+            primary, *aliases = param.opts
+            names = " or ".join([*aliases, primary])
+            raise click.BadParameter(
+                f"{', '.join(aliases) or primary} is an alias of {primary}: give exactly one of {names}, not both",
+                ctx=ctx,
+                param=param,
+            )
+        return spec.convert(values[0], param, ctx) if values else None
+
+    return callback
+
+
+def weights_option(f: Any) -> Any:
+    """``--weights NAME|PATH|URL`` with ``--checkpoint`` as its alias: the one loader option of every command
+    that reads a model. The command receives it as ``weights`` (a str, or None).
+
+    Transitional: a command whose function still takes a ``checkpoint`` parameter (written for the two
+    options of before) receives ``checkpoint=None``; the value of either spelling arrives in ``weights``.
+    """
+    if "checkpoint" in inspect.signature(f).parameters:
+        body = f
+
+        @functools.wraps(body)
+        def f(*args: Any, **kwargs: Any) -> Any:
+            kwargs.setdefault("checkpoint", None)
+            return body(*args, **kwargs)
+
+    option = click.option(
+        "--weights",
+        "--checkpoint",
+        "weights",
+        multiple=True,
+        callback=one_value(WEIGHTS_SPEC),
+        metavar="NAME|PATH|URL",
+        help=WEIGHTS_HELP,
+    )
+    return option(f)
+
+
 def model_from_options(checkpoint: Path | None, weights: str | None, device: str = "cpu") -> torch.nn.Module:
-    """The model named by ``--checkpoint`` or ``--weights`` (exactly one of them)."""
-    from semattnet.weights import from_pretrained, load_model
+    """The model of ``--weights`` (or, from older callers, ``checkpoint``), through the one builder."""
+    from semattnet.weights import from_pretrained
 
     if checkpoint is not None and weights is not None:
         raise click.UsageError("give --checkpoint or --weights, not both")
-    if weights is not None:
-        return from_pretrained(weights, map_location=device)
-    if checkpoint is not None:
-        return load_model(checkpoint, device=device)
-    raise click.UsageError("--checkpoint or --weights is required")
+    spec = weights if weights is not None else checkpoint
+    if spec is None:
+        raise click.UsageError("--checkpoint or --weights is required (they are one option: --checkpoint is an alias)")
+    return from_pretrained(spec, map_location=device)
 
 
 #: ``--backend``: the inference engine of every command that runs a model (see ``optimize_for_inference``).
@@ -141,11 +206,10 @@ backend_option = click.option(
 
 def weights_path(spec: str, param_hint: str = "--weights", progress: bool = True) -> Path:
     """``resolve_weights_file`` with a bad name or path reported as a usage error of ``param_hint``."""
-    from semattnet.weights.listing import resolve_weights_file
+    from semattnet.weights.listing import WeightsSpecError, resolve_weights_file
+    from semattnet.weights.pretrained import UnknownWeightsError
 
-    try:
+    try:  # a corrupt or refused file is another SemAttNetError: a one-line error, not a usage error
         return resolve_weights_file(spec, progress=progress)
-    except ValueError as exc:
-        if isinstance(exc, SemAttNetError):  # a corrupt or refused file: a one-line error, not a usage error
-            raise
+    except (WeightsSpecError, UnknownWeightsError) as exc:
         raise click.BadParameter(str(exc).removeprefix(f"--weights {spec!r}: "), param_hint=param_hint) from None

@@ -119,22 +119,19 @@ def ablate(out_dir: Path, configs: str, seeds: tuple[int, ...], backbone_steps: 
 @click.option("--width", type=POSITIVE_FLOAT, default=1.0, help="Model width multiplier (1.0 = paper).")
 @click.option("--parts", default="propagation,backbone,full,fast,backends,train",
               help="What to measure (backends: every installed inference backend).")  # fmt: skip
-@click.option("--checkpoint", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
-              help="Weights to use instead of random ones.")  # fmt: skip
 @weights_option
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also write the results as JSON.")  # fmt: skip
 @click.option("--overwrite", is_flag=True, help="Replace an existing --json file.")
-def bench(size: str, train_size: str, device: str, repeats: int, width: float, parts: str, checkpoint: Path | None,
-          weights: str | None, json_path: Path | None, overwrite: bool) -> None:  # fmt: skip
+def bench(size: str, train_size: str, device: str, repeats: int, width: float, parts: str, weights: str | None,
+          json_path: Path | None, overwrite: bool) -> None:  # fmt: skip
     """Latency, throughput and peak memory against the naive reference, in one process."""
     from semattnet._utils.device import resolve_device
     from semattnet._utils.outputs import refuse_existing, write_text
     from semattnet.apps.benchmark import run_benchmark
 
     refuse_existing([json_path] if json_path else [], overwrite)
-    given = checkpoint is not None or weights is not None
-    model = model_from_options(checkpoint, weights) if given else None
+    model = model_from_options(None, weights) if weights is not None else None  # default: random weights
     chosen = tuple(p.strip() for p in parts.split(",") if p.strip())
     unknown = set(chosen) - {"propagation", "backbone", "full", "fast", "backends", "train"}
     if unknown:

@@ -50,7 +50,6 @@ def metrics(
 
 
 @main.command()
-@click.option("--checkpoint", default=None, type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @weights_option
 @click.option("--data", "data_root", required=True, type=click.Path(exists=True, file_okay=False, path_type=Path))
 @click.option("--split", type=click.Choice(["val_select", "val"]), default="val_select", show_default=True)
@@ -140,7 +139,6 @@ def _sweep(checkpoint: Path | None, weights: str | None, data_root: Path, split:
 
 
 @main.command()
-@click.option("--checkpoint", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None)
 @weights_option
 @click.option("--data", "data_root", required=True, type=click.Path(exists=True, file_okay=False, path_type=Path))
 @click.option(

@@ -49,8 +49,6 @@ _INPUT = click.Path(exists=True, path_type=Path)
 
 
 @main.command()
-@click.option("--checkpoint", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
-              help="Model weights (not needed with --method classical).")  # fmt: skip
 @weights_option
 @click.option("--rgb", type=_INPUT, default=None, help="PNG file or folder (with --sparse).")
 @click.option("--sparse", type=_INPUT, default=None, help="16-bit PNG file or folder (with --rgb).")

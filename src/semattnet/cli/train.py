@@ -5,7 +5,16 @@ from __future__ import annotations
 import click
 
 from semattnet.cli._group import main
-from semattnet.cli._options import COUNT, POSITIVE_FLOAT, POSITIVE_INT, SIZE, parse_size
+from semattnet.cli._options import (
+    COUNT,
+    POSITIVE_FLOAT,
+    POSITIVE_INT,
+    SIZE,
+    WEIGHTS_SPEC,
+    one_value,
+    parse_size,
+    weights_path,
+)
 
 
 @main.command(context_settings={"show_default": True})
@@ -14,9 +23,9 @@ from semattnet.cli._options import COUNT, POSITIVE_FLOAT, POSITIVE_INT, SIZE, pa
     "--data", "data_root", type=click.Path(file_okay=False), help="KITTI depth completion root (or a synth tree)."
 )
 @click.option("--out", type=click.Path(file_okay=False), default=None, help="Run folder [runs/<stage>].")
-@click.option("--init", type=click.Path(dir_okay=False), default=None, help="Checkpoint of the previous stage.")
-@click.option("--init-weights", default=None, metavar="NAME|PATH|URL",
-              help="Released weights to start from instead of --init (see semattnet weights list).")  # fmt: skip
+@click.option("--init", "--init-weights", "init", multiple=True, callback=one_value(WEIGHTS_SPEC),
+              metavar="NAME|PATH|URL", help="Weights to start from: the previous stage's checkpoint, or released "
+              "weights by name or URL (semattnet weights list). --init-weights is an alias.")  # fmt: skip
 @click.option(
     "--config",
     "config_file",
@@ -38,7 +47,7 @@ from semattnet.cli._options import COUNT, POSITIVE_FLOAT, POSITIVE_INT, SIZE, pa
 @click.option(
     "--set", "overrides", multiple=True, metavar="KEY=VALUE", help="Any TrainConfig field, e.g. --set val_every=2."
 )
-def train(stage: str, data_root: str | None, out: str | None, init: str | None, init_weights: str | None,
+def train(stage: str, data_root: str | None, out: str | None, init: str | None,
           config_file: str | None, resume: bool, overwrite: bool,
           epochs: int | None, batch_size: int | None, lr: float | None, width: float | None, crop: str | None,
           amp: str | None, device: str | None, workers: int | None, max_steps: int | None,
@@ -47,12 +56,8 @@ def train(stage: str, data_root: str | None, out: str | None, init: str | None, 
     from semattnet.training.config import TrainConfig
     from semattnet.training.trainer import train as run_training
 
-    if init_weights is not None:
-        from semattnet.cli._options import weights_path
-
-        if init is not None:
-            raise click.UsageError("give --init or --init-weights, not both")
-        init = str(weights_path(init_weights, "--init-weights"))
+    if init is not None:  # a name or URL goes through the download cache; a local file stays as it is
+        init = str(weights_path(init, "--init"))
     if resume:
         if not out:
             raise click.UsageError("--resume needs --out (the run folder)")

@@ -12,7 +12,7 @@ What ``semattnet data download`` runs. Three parts, chosen with ``what``:
 * ``semantic``: the authors' semantic maps, from an archive the user names (their Google Drive
   link is not recorded, so it cannot be fetched automatically), into ``ROOT/semantic``.
 
-Every file goes through :func:`semattnet.weights.download.fetch` (resumable, atomic, checked against
+Every file goes through :func:`semattnet._utils.download.fetch` (resumable, atomic, checked against
 its pin: KITTI publishes no checksums, so the first download of each archive is pinned), then is
 unpacked safely (a member with an absolute path or ``..`` refuses the whole archive; files already
 unpacked with the right size are skipped, so a second run resumes) and finally
@@ -29,6 +29,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
+from semattnet._errors import DataError, InputError
+from semattnet._utils.download import fetch
 from semattnet.data import kitti_files as kf
 
 __all__ = [
@@ -48,11 +50,11 @@ WHAT = ("depth-completion", "raw-subset", "semantic")
 Log = Callable[[str], None]
 
 
-class LicenseNotAcceptedError(ValueError):
+class LicenseNotAcceptedError(InputError):
     """KITTI's licence was not accepted (``accept_license=False``)."""
 
 
-class UnsafeArchiveError(ValueError):
+class UnsafeArchiveError(DataError):
     """An archive member would be written outside the target folder (absolute path or ``..``)."""
 
 
@@ -75,7 +77,7 @@ def parse_what(text: str | Sequence[str]) -> tuple[str, ...]:
         return WHAT
     unknown = chosen - set(WHAT)
     if unknown or not chosen:
-        raise ValueError(f"unknown part(s) {sorted(unknown) or '(none)'}; choose from {', '.join(WHAT)} or all")
+        raise InputError(f"unknown part(s) {sorted(unknown) or '(none)'}; choose from {', '.join(WHAT)} or all")
     return tuple(w for w in WHAT if w in chosen)
 
 
@@ -118,7 +120,7 @@ def plan_part(
         target = root / str(kf.SEMANTIC_MAPS["target"])
         archive = kf.KittiArchive("semantic", str(kf.SEMANTIC_MAPS["target"]), strip=("semantic", "semantics"))
         return [PlannedFile(part, semantic_archive, target, None, archive)], ""
-    raise ValueError(f"unknown part {part!r}; choose from {', '.join(WHAT)}")
+    raise InputError(f"unknown part {part!r}; choose from {', '.join(WHAT)}")
 
 
 # ----------------------------------------------------------------------------- unpacking
@@ -154,7 +156,7 @@ def extract_zip(
     try:
         zf = zipfile.ZipFile(path)
     except zipfile.BadZipFile as exc:
-        raise ValueError(f"{path}: not a zip archive ({exc})") from None
+        raise DataError(f"{path}: not a zip archive ({exc})") from None
     with zf:
         members = [(info, _strip(_safe_member(info.filename, path), strip)) for info in zf.infolist()]
         dest.mkdir(parents=True, exist_ok=True)
@@ -195,8 +197,6 @@ def _show(files: Sequence[PlannedFile], note: str, log: Log) -> None:
 
 def _get(f: PlannedFile, cache_dir: str | Path | None, progress: bool, delete: bool, log: Log) -> None:
     """Fetch one planned file (a URL, or a local path for the semantic archive) and unpack it."""
-    from semattnet.weights.download import fetch
-
     assert f.archive is not None and f.url is not None
     local = Path(f.url).expanduser()
     is_local = "://" not in f.url and local.is_file()
@@ -228,7 +228,7 @@ def download_kitti(
     Raises:
         LicenseNotAcceptedError: ``accept_license`` is false (a dry run only prints the licence).
         UnsafeArchiveError: an archive tries to write outside its folder.
-        semattnet.weights.DownloadError: a download failed (resume by running again).
+        semattnet.weights.DownloadError (``semattnet._utils.download``): a download failed (resume by running again).
     """
     out, parts = Path(out), parse_what(what)
     if not accept_license and not dry_run:

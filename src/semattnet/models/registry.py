@@ -1,55 +1,171 @@
-"""Model registry: ``build_model(name, **overrides)`` and the variants of the paper.
+"""Model registry: ``build_model(name, **overrides)``, the variants of the paper and their aliases.
 
 ``semattnet`` and ``semattnet_backbone`` are the released models (authors' parameter names);
-``table2_a`` ... ``table2_g`` are the ablations of the paper's Table 2.
+``table2_a`` ... ``table2_e`` are the ablations of the paper's Table 2. Rows (f) and (g) of
+Table 2 *are* the backbone and the full model, so ``table2_f`` and ``table2_g`` are aliases of
+them rather than rows of their own: :func:`list_models` names each architecture once, every alias
+resolves (:func:`resolve_model_name`), and :func:`describe_models` lists the aliases.
+
+The model class (full model with refinement vs backbone alone) is chosen in one place,
+:func:`model_class`, from the config's ``refine`` field.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
 from typing import Any
 
 from torch import nn
 
+from semattnet._errors import InputError
 from semattnet.models.backbone import SemAttNetBackbone
 from semattnet.models.config import SemAttNetConfig
 from semattnet.models.semattnet import SemAttNet
 
-__all__ = ["MODELS", "build_model", "describe_models", "list_models"]
+__all__ = [
+    "ALIASES",
+    "ARCH_FIELDS",
+    "MODELS",
+    "TABLE2",
+    "ModelSpec",
+    "UnknownModelError",
+    "arch_for",
+    "build_model",
+    "describe_models",
+    "list_models",
+    "model_class",
+    "model_config",
+    "resolve_model_name",
+]
 
-#: name -> (description, config). Overrides passed to build_model replace fields.
-MODELS: dict[str, tuple[str, SemAttNetConfig]] = {
-    "semattnet": ("Full SemAttNet: three branches, SAMMAFB, CSPN++ refinement (Table 2 g)", SemAttNetConfig()),
-    "semattnet_backbone": (
-        "Three-branch backbone with SAMMAFB, no refinement (Table 2 f)",
-        SemAttNetConfig(refine=False),
-    ),
-    "table2_a": ("CG + DG, fusion by addition", SemAttNetConfig(branches=2, fusion="add", refine=False)),
-    "table2_b": ("CG + DG, fusion by concatenation", SemAttNetConfig(branches=2, fusion="concat", refine=False)),
-    "table2_c": ("CG + DG, concatenation, CSPN++ refinement", SemAttNetConfig(branches=2, fusion="concat")),
-    "table2_d": ("CG + SG + DG, concatenation", SemAttNetConfig(fusion="concat", refine=False)),
-    "table2_e": ("CG + SG + DG, concatenation, CSPN++ refinement", SemAttNetConfig(fusion="concat")),
-    "table2_f": ("CG + SG + DG, SAMMAFB (= semattnet_backbone)", SemAttNetConfig(refine=False)),
-    "table2_g": ("CG + SG + DG, SAMMAFB, CSPN++ refinement (= semattnet)", SemAttNetConfig()),
-}
+#: The config fields a registered name fixes (the rest, e.g. ``width``, are free).
+ARCH_FIELDS = ("branches", "fusion", "refine")
+
+
+class UnknownModelError(InputError):
+    """A model name that is neither a registered model nor an alias."""
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """One registered architecture: its name, a one-line description, its config and its aliases."""
+
+    name: str
+    description: str
+    config: SemAttNetConfig
+    aliases: tuple[str, ...] = ()
+
+
+_SPECS = (
+    ModelSpec("semattnet", "Full SemAttNet: three branches, SAMMAFB, CSPN++ refinement (Table 2 g)",
+              SemAttNetConfig(), ("table2_g",)),
+    ModelSpec("semattnet_backbone", "Three-branch backbone with SAMMAFB, no refinement (Table 2 f)",
+              SemAttNetConfig(refine=False), ("table2_f",)),
+    ModelSpec("table2_a", "CG + DG, fusion by addition", SemAttNetConfig(branches=2, fusion="add", refine=False)),
+    ModelSpec("table2_b", "CG + DG, fusion by concatenation",
+              SemAttNetConfig(branches=2, fusion="concat", refine=False)),
+    ModelSpec("table2_c", "CG + DG, concatenation, CSPN++ refinement", SemAttNetConfig(branches=2, fusion="concat")),
+    ModelSpec("table2_d", "CG + SG + DG, concatenation", SemAttNetConfig(fusion="concat", refine=False)),
+    ModelSpec("table2_e", "CG + SG + DG, concatenation, CSPN++ refinement", SemAttNetConfig(fusion="concat")),
+)  # fmt: skip
+_BY_NAME = {s.name: s for s in _SPECS}
+
+#: alias -> registered name.
+ALIASES: Mapping[str, str] = {a: s.name for s in _SPECS for a in s.aliases}
+#: The rows (a) ... (g) of the paper's Table 2, in order (``table2_f``/``table2_g`` are aliases).
+TABLE2: tuple[str, ...] = tuple(f"table2_{row}" for row in "abcdefg")
+
+
+def resolve_model_name(name: str) -> str:
+    """The registered name for ``name`` (itself, or what the alias stands for).
+
+    Raises:
+        UnknownModelError: one line listing the names and aliases.
+    """
+    if name in _BY_NAME:
+        return name
+    if isinstance(name, str) and name in ALIASES:
+        return ALIASES[name]
+    raise UnknownModelError(f"unknown model {name!r}; available: {', '.join(_BY_NAME)} (aliases: {', '.join(ALIASES)})")
+
+
+class _Registry(Mapping[str, tuple[str, SemAttNetConfig]]):
+    """``MODELS``: name or alias -> ``(description, config)``; iterates each architecture once."""
+
+    def __getitem__(self, name: str) -> tuple[str, SemAttNetConfig]:
+        try:
+            spec = _BY_NAME[resolve_model_name(name)]
+        except UnknownModelError:
+            raise KeyError(name) from None
+        return spec.description, spec.config
+
+    def __contains__(self, name: object) -> bool:
+        return name in _BY_NAME or name in ALIASES
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(_BY_NAME)
+
+    def __len__(self) -> int:
+        return len(_BY_NAME)
+
+    def __repr__(self) -> str:
+        return f"MODELS({list(_BY_NAME)}, aliases={dict(ALIASES)})"
+
+
+#: name -> (description, config), read-only. Aliases are accepted as keys (``MODELS["table2_g"]``)
+#: but iteration, ``len`` and ``keys()`` give each architecture once.
+MODELS: Mapping[str, tuple[str, SemAttNetConfig]] = _Registry()
 
 
 def list_models() -> list[str]:
-    """Names accepted by :func:`build_model`."""
-    return list(MODELS)
+    """The registered names, each architecture once (aliases: :data:`ALIASES`)."""
+    return list(_BY_NAME)
 
 
-def build_model(name: str = "semattnet", config: SemAttNetConfig | None = None, **overrides: Any) -> nn.Module:
+def model_config(name: str) -> SemAttNetConfig:
+    """The registered config of ``name`` (or an alias)."""
+    return _BY_NAME[resolve_model_name(name)].config
+
+
+def model_class(cfg: SemAttNetConfig) -> type[nn.Module]:
+    """The class a config builds: :class:`SemAttNet` with ``refine``, else :class:`SemAttNetBackbone`."""
+    return SemAttNet if cfg.refine else SemAttNetBackbone
+
+
+def arch_for(cfg: SemAttNetConfig) -> str:
+    """The registered name whose :data:`ARCH_FIELDS` equal ``cfg``'s (the paper's models first)."""
+    key = tuple(getattr(cfg, f) for f in ARCH_FIELDS)
+    for spec in _SPECS:
+        if tuple(getattr(spec.config, f) for f in ARCH_FIELDS) == key:
+            return spec.name
+    return "semattnet" if cfg.refine else "semattnet_backbone"  # a combination the paper did not name
+
+
+def _check_overrides(cfg: SemAttNetConfig, overrides: Mapping[str, Any]) -> None:
+    unknown = set(overrides) - set(cfg.to_dict())
+    if unknown:
+        raise InputError(f"unknown config field(s) {sorted(unknown)}; fields: {sorted(cfg.to_dict())}")
+
+
+def build_model(name: str | None = None, config: SemAttNetConfig | None = None, **overrides: Any) -> nn.Module:
     """Build a registered model, optionally changing config fields.
 
+    ``name`` selects the architecture and its base config; ``config`` replaces the base config and
+    must be of the same architecture (equal :data:`ARCH_FIELDS`: ``branches``, ``fusion``,
+    ``refine``), else :class:`~semattnet.InputError`; ``overrides`` then change any field. With
+    ``config`` and no ``name``, the architecture is the config's own.
+
     Args:
-        name: one of :func:`list_models`.
-        config: a full config to use instead of the registered one (``name`` is then only
-            checked).
+        name: one of :func:`list_models` or an alias (:data:`ALIASES`); default ``"semattnet"``
+            (or, with ``config``, the config's architecture).
+        config: a full config to build instead of the registered one.
         **overrides: config fields to replace, e.g. ``width=0.25`` or ``refinement_mode="clean"``.
 
     Returns:
         :class:`~semattnet.models.semattnet.SemAttNet` when ``refine`` is set, else
-        :class:`~semattnet.models.backbone.SemAttNetBackbone`; freshly initialised (PyTorch defaults).
+        :class:`~semattnet.models.backbone.SemAttNetBackbone` (:func:`model_class`); freshly
+        initialised (PyTorch defaults).
 
     Example:
         >>> import semattnet
@@ -57,21 +173,27 @@ def build_model(name: str = "semattnet", config: SemAttNetConfig | None = None, 
         >>> type(net).__name__
         'SemAttNet'
     """
-    if name not in MODELS:
-        raise ValueError(f"unknown model {name!r}; available: {', '.join(MODELS)}")
-    cfg = config if config is not None else MODELS[name][1]
+    if name is None:
+        cfg = config if config is not None else model_config("semattnet")
+    else:
+        base = model_config(name)
+        cfg = base if config is None else config
+        wrong = [f"{f}={getattr(cfg, f)!r} (the model has {getattr(base, f)!r})" for f in ARCH_FIELDS
+                 if getattr(cfg, f) != getattr(base, f)]  # fmt: skip
+        if wrong:
+            raise InputError(f"build_model({name!r}, config=...): the config is not of that architecture: "
+                             f"{', '.join(wrong)}; pass config alone, or name {arch_for(cfg)!r}")  # fmt: skip
     if overrides:
-        unknown = set(overrides) - set(cfg.to_dict())
-        if unknown:
-            raise ValueError(f"unknown config field(s) {sorted(unknown)}; fields: {sorted(cfg.to_dict())}")
+        _check_overrides(cfg, overrides)
         cfg = cfg.replace(**overrides)
-    return SemAttNet(cfg) if cfg.refine else SemAttNetBackbone(cfg)
+    return model_class(cfg)(cfg)
 
 
 def describe_models(count_parameters: bool = False) -> str:
-    """One line per registered model: name, (parameter count,) description."""
+    """One line per registered architecture: name, (parameter count,) description, aliases."""
     lines = []
-    for name, (description, _) in MODELS.items():
-        count = f"{sum(p.numel() for p in build_model(name).parameters()):>13,d}  " if count_parameters else ""
-        lines.append(f"{name:20s} {count}{description}")
+    for spec in _SPECS:
+        count = f"{sum(p.numel() for p in build_model(spec.name).parameters()):>13,d}  " if count_parameters else ""
+        also = f" [alias: {', '.join(spec.aliases)}]" if spec.aliases else ""
+        lines.append(f"{spec.name:20s} {count}{spec.description}{also}")
     return "\n".join(lines)

@@ -1,5 +1,10 @@
 """Weights: reading checkpoints without running their code, loading into models, conversion to
-safetensors, ONNX / TorchScript export, the released-weights registry and a verified download cache.
+safetensors, ONNX / TorchScript export, the released-weights registry and fetching them through the
+verified download cache (:mod:`semattnet._utils.download`).
+
+Every model with weights is built by one function, :func:`build_model_with_weights` (config from
+the weights, then overrides, then a strict load): :func:`load_model`, :func:`from_pretrained`,
+:meth:`PretrainedWeights.build` and ``torch.hub`` (:func:`hub_model`) all call it.
 
 >>> from semattnet import weights
 >>> weights.list_pretrained()
@@ -11,12 +16,14 @@ Downloads need the ``hub`` extra (``pip install 'semattnet[hub]'``: pooch, huggi
 local files and folders need nothing more.
 """
 
+from semattnet.weights.builder import WeightsMismatchError, build_model_with_weights
 from semattnet.weights.checkpoint import (
     Checkpoint,
     CheckpointError,
     StateDictMismatchError,
     UnsafeCheckpointError,
     config_from_state_dict,
+    filter_state_dict,
     load_checkpoint,
     load_model,
     load_weights,
@@ -60,9 +67,12 @@ __all__ = [
     "StateDictMismatchError",
     "UnknownWeightsError",
     "UnsafeCheckpointError",
+    "WeightsMismatchError",
+    "build_model_with_weights",
     "config_from_state_dict",
     "default_weights",
     "fetch",
+    "filter_state_dict",
     "from_pretrained",
     "get_cache_dir",
     "get_weights",

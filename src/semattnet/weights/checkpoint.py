@@ -47,6 +47,7 @@ __all__ = [
     "StateDictMismatchError",
     "UnsafeCheckpointError",
     "config_from_state_dict",
+    "filter_state_dict",
     "load_checkpoint",
     "load_model",
     "load_weights",
@@ -86,9 +87,18 @@ class Checkpoint:
     neutralised: set[str] = field(default_factory=set)
 
 
-def _strip_prefix(sd: Mapping[str, torch.Tensor], prefix: str = "module.") -> dict[str, torch.Tensor]:
-    if sd and all(k.startswith(prefix) for k in sd):
-        return {k[len(prefix) :]: v for k, v in sd.items()}
+#: Key prefixes removed from every state dict read (``module.``: saved from DataParallel / DDP).
+KEY_PREFIXES = ("module.",)
+
+
+def filter_state_dict(sd: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """The one place key renames happen: a prefix of :data:`KEY_PREFIXES` shared by every key is removed.
+
+    Applied by :func:`load_checkpoint`, :func:`load_weights` and :func:`config_from_state_dict`.
+    """
+    for prefix in KEY_PREFIXES:
+        if sd and all(k.startswith(prefix) for k in sd):
+            return {k[len(prefix) :]: v for k, v in sd.items()}
     return dict(sd)
 
 
@@ -189,7 +199,7 @@ def load_checkpoint(path: str | os.PathLike[str]) -> Checkpoint:
 
 def _checkpoint_from_object(obj: Any, path: Path, neutralised: set[str]) -> Checkpoint:
     if isinstance(obj, Mapping) and obj and all(isinstance(v, torch.Tensor) for v in obj.values()):
-        return Checkpoint(path=path, state_dict=_strip_prefix(obj), format="state_dict", neutralised=neutralised)
+        return Checkpoint(path=path, state_dict=filter_state_dict(obj), format="state_dict", neutralised=neutralised)
     if not isinstance(obj, Mapping):
         raise CheckpointError(f"{path}: expected a dict of tensors or a checkpoint dict, got {type(obj).__name__}")
     key = next((k for k in ("model", "state_dict", "model_state") if isinstance(obj.get(k), Mapping)), None)
@@ -205,7 +215,7 @@ def _checkpoint_from_object(obj: Any, path: Path, neutralised: set[str]) -> Chec
     epoch = obj.get("epoch")
     return Checkpoint(
         path=path,
-        state_dict=_strip_prefix(sd),
+        state_dict=filter_state_dict(sd),
         format="torch",
         epoch=int(epoch) if isinstance(epoch, int) else None,
         args=dict(args) if args is not None else None,
@@ -232,7 +242,7 @@ def load_weights(model: nn.Module, state_dict: Mapping[str, torch.Tensor] | Chec
         StateDictMismatchError: with ``strict`` and any mismatch; the message names the keys.
     """
     source = state_dict.path if isinstance(state_dict, Checkpoint) else "state dict"
-    sd = _strip_prefix(state_dict.state_dict if isinstance(state_dict, Checkpoint) else state_dict)
+    sd = filter_state_dict(state_dict.state_dict if isinstance(state_dict, Checkpoint) else state_dict)
     own = model.state_dict()
     missing = [k for k in own if k not in sd]
     unexpected = [k for k in sd if k not in own]
@@ -259,7 +269,7 @@ def load_weights(model: nn.Module, state_dict: Mapping[str, torch.Tensor] | Chec
 
 def config_from_state_dict(sd: Mapping[str, torch.Tensor]) -> SemAttNetConfig:
     """Infer the architecture of a SemAttNet state dict (ours or the authors')."""
-    sd = _strip_prefix(sd)
+    sd = filter_state_dict(sd)
     refine = any(k.startswith("backbone.") for k in sd)
     bb = {k.removeprefix("backbone."): v for k, v in sd.items() if not refine or k.startswith("backbone.")}
     if "rgb_conv_init.0.weight" not in bb:
@@ -281,15 +291,13 @@ def config_from_state_dict(sd: Mapping[str, torch.Tensor]) -> SemAttNetConfig:
 def load_model(path: str | os.PathLike[str], device: str | torch.device = "cpu", **overrides: Any) -> nn.Module:
     """Build the model a checkpoint was made for and load its weights (strict), in eval mode.
 
-    ``overrides`` change config fields (e.g. ``refinement_mode="clean"``).
+    Goes through :func:`semattnet.weights.builder.build_model_with_weights`: the config recorded
+    in the file (else inferred from its shapes), then ``overrides``, which may change only fields
+    that keep the shapes (e.g. ``refinement_mode="clean"``).
     """
-    from semattnet.models.registry import build_model
+    from semattnet.weights import builder
 
-    ckpt = load_checkpoint(path)
-    cfg = ckpt.config or config_from_state_dict(ckpt.state_dict)
-    model = build_model(config=cfg.replace(**overrides) if overrides else cfg)
-    load_weights(model, ckpt)
-    return model.to(device).eval()
+    return builder.build_model_with_weights(load_checkpoint(path), overrides=overrides, device=device)
 
 
 def _json_default(o: Any) -> Any:

@@ -17,41 +17,43 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import torch
 from torch import nn
 
+from semattnet._errors import InputError
 from semattnet._utils.atomic import atomic_path
+from semattnet._utils.download import (
+    OfflineError,
+    cache_key,
+    cache_lock,
+    fetch_hf,
+    fetch_target,
+    get_cache_dir,
+    is_offline,
+    pin_record,
+    remove_empty_dirs,
+    sha256_file,
+    update_pins,
+    url_scheme,
+    verify_cached,
+)
 from semattnet._utils.version import library_version
 from semattnet.models.config import SemAttNetConfig
-from semattnet.models.registry import MODELS, build_model
+from semattnet.models.registry import MODELS, arch_for
+from semattnet.weights import builder
 from semattnet.weights.checkpoint import (
     Checkpoint,
     CheckpointError,
     UnsafeCheckpointError,
     config_from_state_dict,
     load_checkpoint,
-    load_weights,
     save_safetensors,
 )
-from semattnet.weights.download import (
-    OfflineError,
-    _fetch_target,
-    _key,
-    _lock,
-    _record,
-    _remove_empty_dirs,
-    _scheme,
-    _target,
-    _update_pins,
-    fetch_hf,
-    get_cache_dir,
-    is_offline,
-    sha256_file,
-    verify_cached,
-)
+from semattnet.weights.download import is_url, weights_target
 from semattnet.weights.pretrained import PretrainedWeights, default_weights, get_weights, list_pretrained
 
 __all__ = ["CONFIG_NAME", "WEIGHTS_NAME", "from_pretrained", "hub_model", "push_to_hub", "save_pretrained"]
@@ -59,11 +61,6 @@ __all__ = ["CONFIG_NAME", "WEIGHTS_NAME", "from_pretrained", "hub_model", "push_
 CONFIG_NAME = "config.json"
 WEIGHTS_NAME = "model.safetensors"
 _META_KEYS = ("arch", "library_name", "library_version")
-_URL_SCHEMES = ("http", "https", "file", "gdrive", "hf")
-
-
-def _is_url(s: str) -> bool:
-    return "://" in s and _scheme(s) in _URL_SCHEMES
 
 
 def _is_safetensors(path: Path) -> bool:
@@ -73,8 +70,20 @@ def _is_safetensors(path: Path) -> bool:
     return len(head) == 9 and head[8:9] == b"{" and not head.startswith(b"PK")
 
 
-def _arch_for(cfg: SemAttNetConfig) -> str:
-    return "semattnet" if cfg.refine else "semattnet_backbone"
+@dataclass(frozen=True)
+class _Load:
+    """What one ``from_pretrained`` call asks for, passed down to the builder."""
+
+    sha256: str | None
+    cache_dir: str | os.PathLike[str] | None
+    device: str | torch.device
+    progress: bool
+    overrides: dict[str, Any] = field(default_factory=dict)
+    arch: str | None = None
+
+    def build(self, ckpt: Checkpoint, config: SemAttNetConfig | None = None, source: str | None = None) -> nn.Module:
+        return builder.build_model_with_weights(ckpt, config=config, arch=self.arch, overrides=self.overrides,
+                                                device=self.device, source=source)  # fmt: skip
 
 
 def from_pretrained(
@@ -84,9 +93,13 @@ def from_pretrained(
     cache_dir: str | os.PathLike[str] | None = None,
     map_location: str | torch.device | None = None,
     progress: bool = True,
+    arch: str | None = None,
     **overrides: Any,
 ) -> nn.Module:
     """A model with released or saved weights, in eval mode.
+
+    Every source ends in :func:`semattnet.weights.builder.build_model_with_weights` (config from
+    the weights, then ``overrides``, then a strict load).
 
     Args:
         name_or_path_or_url: one of
@@ -104,8 +117,10 @@ def from_pretrained(
         cache_dir: cache root (default ``$SEMATTNET_CACHE``, else the user cache folder).
         map_location: device to put the model on (default CPU).
         progress: show download progress.
+        arch: a model name the weights must be for (full model vs backbone), e.g. a torch.hub entry point.
         **overrides: config fields to change that do not change the weights' shapes, e.g.
-            ``refinement_mode="clean"``.
+            ``refinement_mode="clean"``; a shape field (e.g. ``width``) that contradicts the weights
+            is a :class:`~semattnet.weights.builder.WeightsMismatchError`.
 
     Returns:
         The model (:class:`~semattnet.SemAttNet` or :class:`~semattnet.SemAttNetBackbone`), in eval mode.
@@ -116,78 +131,67 @@ def from_pretrained(
         semattnet.weights.DownloadError: see :func:`~semattnet.weights.fetch`.
     """
     src = name_or_path_or_url
-    device = map_location if map_location is not None else "cpu"
+    load = _Load(sha256, cache_dir, map_location if map_location is not None else "cpu", progress, overrides, arch)
     if isinstance(src, PretrainedWeights):
-        return _from_entry(src, sha256, cache_dir, device, progress, overrides)
-    if isinstance(src, os.PathLike) or (isinstance(src, str) and not _is_url(src) and Path(src).exists()):
+        return _from_entry(src, load)
+    if isinstance(src, os.PathLike) or (isinstance(src, str) and not is_url(src) and Path(src).exists()):
         path = Path(src)
-        if path.is_dir():
-            return _from_folder(path, device, overrides)
-        return _build_and_load(load_checkpoint(path), None, device, overrides)
+        return _from_folder(path, load) if path.is_dir() else load.build(load_checkpoint(path))
     if not isinstance(src, str):
-        raise TypeError(f"expected a name, path or URL, got {type(src).__name__}")
-    if _is_url(src):
-        return _from_url(src, sha256, cache_dir, device, progress, overrides)
+        raise InputError(f"from_pretrained: expected a name, path or URL, got {type(src).__name__}")
+    if is_url(src):
+        return _from_url(src, load)
     if src in list_pretrained():
-        return _from_entry(get_weights(src), sha256, cache_dir, device, progress, overrides)
-    raise ValueError(
+        return _from_entry(get_weights(src), load)
+    raise InputError(
         f"{src!r} is not a known weights name ({', '.join(list_pretrained())}), an existing file or folder, "
         "or a URL (http(s)://, file://, gdrive://<id>, hf://owner/repo)"
     )
 
 
-def _from_url(src: str, sha256: str | None, cache_dir: str | os.PathLike[str] | None, device: Any,
-              progress: bool, overrides: dict[str, Any]) -> nn.Module:  # fmt: skip
+def _from_url(src: str, load: _Load) -> nn.Module:
     """A model from ``hf://`` (a saved folder or one file) or a downloaded file URL."""
-    if _scheme(src) == "hf":
-        path = fetch_hf(src, sha256=sha256, cache_dir=cache_dir, allow_patterns=[CONFIG_NAME, WEIGHTS_NAME, "*.md"])
-        return _from_folder(path, device, overrides) if path.is_dir() else _load_any_file(path, device, overrides)
-    root = get_cache_dir(cache_dir).resolve()
-    return _from_download(root, _target(src, sha256, root, None), None, device, progress, overrides)
+    if url_scheme(src) == "hf":
+        patterns = [CONFIG_NAME, WEIGHTS_NAME, "*.md"]
+        path = fetch_hf(src, sha256=load.sha256, cache_dir=load.cache_dir, allow_patterns=patterns)
+        return _from_folder(path, load) if path.is_dir() else load.build(load_checkpoint(path))
+    root = get_cache_dir(load.cache_dir).resolve()
+    return _from_download(root, weights_target(src, load.sha256, root), None, load)
 
 
-def _from_entry(
-    entry: PretrainedWeights, sha256: str | None, cache_dir: Any, device: Any, progress: bool, overrides: dict
-) -> nn.Module:
-    root = get_cache_dir(cache_dir).resolve()
+def _from_entry(entry: PretrainedWeights, load: _Load) -> nn.Module:
+    root = get_cache_dir(load.cache_dir).resolve()
     if entry.format == "hf-folder":
-        url = next((u for u in entry.urls if _scheme(u) == "hf"), None)
+        url = next((u for u in entry.urls if url_scheme(u) == "hf"), None)
         if url is None:
-            raise ValueError(f"weights {entry.name!r}: format 'hf-folder' needs an hf:// URL")
-        model = _from_folder(fetch_hf(url, sha256=sha256 or entry.sha256, cache_dir=cache_dir), device, overrides)
-        return _check_arch(model, entry)
-    target = _target(entry, sha256, root, None)
-    return _check_arch(_from_download(root, target, entry, device, progress, overrides), entry)
+            raise InputError(f"weights {entry.name!r}: format 'hf-folder' needs an hf:// URL")
+        folder = fetch_hf(url, sha256=load.sha256 or entry.sha256, cache_dir=load.cache_dir)
+        return _from_folder(folder, load, entry)
+    return _from_download(root, weights_target(entry, load.sha256, root), entry, load)
 
 
-def _check_arch(model: nn.Module, entry: PretrainedWeights) -> nn.Module:
-    want = entry.model_config()
-    got = model.config  # type: ignore[attr-defined]
-    if (got.branches, got.fusion, got.refine, got.width) != (want.branches, want.fusion, want.refine, want.width):
-        raise CheckpointError(f"weights {entry.name!r}: the file holds a {got} model, the record says {want}")
-    return model
-
-
-def _from_download(
-    root: Path, target: Any, entry: PretrainedWeights | None, device: Any, progress: bool, overrides: dict
-) -> nn.Module:
-    path, digest = _fetch_target(root, target, progress)
+def _from_download(root: Path, target: Any, entry: PretrainedWeights | None, load: _Load) -> nn.Module:
+    path, digest = fetch_target(root, target, load.progress)
     config = entry.model_config() if entry is not None else None
+    source = f"weights {entry.name!r}" if entry is not None else None
     if _is_safetensors(path):
-        return _build_and_load(_read(root, path), config, device, overrides)
+        return load.build(_read(root, path), config, source)
     converted = root / "converted" / f"{digest}.safetensors"
     if converted.is_file():
         try:
             verify_cached(root, converted, None, announce=False)
-            return _build_and_load(load_checkpoint(converted), config, device, overrides)
+            ckpt = load_checkpoint(converted)
         except (OSError, CheckpointError):
             converted.unlink(missing_ok=True)  # damaged: convert again
-    with _lock(root, _key(root, converted)):
+        else:
+            return load.build(ckpt, config, source)
+    with cache_lock(root, cache_key(root, converted)):
         ckpt = _read(root, path)  # the safe unpickler; refuses code, removes the file if refused
         save_safetensors(ckpt, converted)
-        origin = f"converted from {_key(root, path)}"
-        _update_pins(root, _key(root, converted), _record(converted, sha256_file(converted), origin, "converted"))
-    return _build_and_load(ckpt, config, device, overrides)
+        origin = f"converted from {cache_key(root, path)}"
+        record = pin_record(converted, sha256_file(converted), origin, "converted")
+        update_pins(root, cache_key(root, converted), record)
+    return load.build(ckpt, config, source)
 
 
 def _read(root: Path, path: Path) -> Checkpoint:
@@ -196,22 +200,9 @@ def _read(root: Path, path: Path) -> Checkpoint:
         return load_checkpoint(path)
     except (UnsafeCheckpointError, CheckpointError):
         path.unlink(missing_ok=True)
-        _update_pins(root, _key(root, path), None)
-        _remove_empty_dirs(path.parent, root)
+        update_pins(root, cache_key(root, path), None)
+        remove_empty_dirs(path.parent, root)
         raise
-
-
-def _load_any_file(path: Path, device: Any, overrides: dict) -> nn.Module:
-    return _build_and_load(load_checkpoint(path), None, device, overrides)
-
-
-def _build_and_load(ckpt: Checkpoint, config: SemAttNetConfig | None, device: Any, overrides: dict) -> nn.Module:
-    cfg = config or ckpt.config or config_from_state_dict(ckpt.state_dict)
-    if overrides:
-        cfg = cfg.replace(**overrides)
-    model = build_model(_arch_for(cfg), config=cfg)
-    load_weights(model, ckpt)
-    return model.to(device).eval()
 
 
 def _read_config(folder: Path) -> tuple[str, SemAttNetConfig]:
@@ -237,13 +228,16 @@ def _read_config(folder: Path) -> tuple[str, SemAttNetConfig]:
     return arch, cfg
 
 
-def _from_folder(folder: Path, device: Any, overrides: dict) -> nn.Module:
+def _from_folder(folder: Path, load: _Load, entry: PretrainedWeights | None = None) -> nn.Module:
+    """A saved folder: its ``config.json`` (or the registry record it came from) and ``model.safetensors``."""
     weights = folder / WEIGHTS_NAME
     if not weights.is_file():
         present = sorted(p.name for p in folder.iterdir()) if folder.is_dir() else []
         raise CheckpointError(f"{folder}: no {WEIGHTS_NAME} (found: {', '.join(present) or 'nothing'})")
+    if entry is not None:  # the record is the authority on its weights (checked against the tensors)
+        return load.build(load_checkpoint(weights), entry.model_config(), f"weights {entry.name!r}")
     config = _read_config(folder)[1] if (folder / CONFIG_NAME).is_file() else None
-    return _build_and_load(load_checkpoint(weights), config, device, overrides)
+    return load.build(load_checkpoint(weights), config)
 
 
 # ----------------------------------------------------------------------------- saving
@@ -312,9 +306,9 @@ def save_pretrained(
     sd = {k: v.detach().to("cpu") for k, v in model.state_dict().items()}
     cfg = config or getattr(model, "config", None) or config_from_state_dict(sd)
     if not isinstance(cfg, SemAttNetConfig):
-        raise TypeError(f"config must be a SemAttNetConfig, got {type(cfg).__name__}")
+        raise InputError(f"save_pretrained: config must be a SemAttNetConfig, got {type(cfg).__name__}")
     entry = get_weights(weights) if isinstance(weights, str) else weights
-    arch = _arch_for(cfg)
+    arch = arch_for(cfg)
     folder.mkdir(parents=True, exist_ok=True)
     save_safetensors(Checkpoint(path=folder / WEIGHTS_NAME, state_dict=sd, format="state_dict", config=cfg),
                      folder / WEIGHTS_NAME)  # fmt: skip
@@ -364,22 +358,18 @@ _LOAD_OPTIONS = ("sha256", "cache_dir", "map_location", "progress")
 
 
 def hub_model(arch: str, pretrained: bool | str | os.PathLike[str] = False, **kwargs: Any) -> nn.Module:
-    """The body of the ``hubconf.py`` entry points.
+    """The body of the ``hubconf.py`` entry points; both branches go through the one builder.
 
     Args:
         arch: registry model name (``"semattnet"`` or ``"semattnet_backbone"``).
         pretrained: False (fresh weights; ``kwargs`` are config fields, e.g. ``width=0.25``), True
-            (the default released weights of ``arch``), or a weights name, path or URL.
+            (the default released weights of ``arch``), or a weights name, path or URL; the weights
+            must be for ``arch``'s model class (full model vs backbone).
         **kwargs: with weights: ``sha256``, ``cache_dir``, ``map_location``, ``progress`` and config
             fields that keep the shapes (e.g. ``refinement_mode``).
     """
     if pretrained is False or pretrained is None:
-        return build_model(arch, **kwargs)
+        return builder.build_model_with_weights(None, arch=arch, overrides=kwargs)
     options = {k: kwargs.pop(k) for k in _LOAD_OPTIONS if k in kwargs}
     source: Any = default_weights(arch) if pretrained is True else pretrained
-    model = from_pretrained(source, **options, **kwargs)
-    want_refine = MODELS[arch][1].refine
-    if model.config.refine != want_refine:  # type: ignore[attr-defined]
-        kind = "full model" if model.config.refine else "backbone"  # type: ignore[attr-defined]
-        raise CheckpointError(f"{arch}: the weights {pretrained!r} are for the {kind}; use the matching entry point")
-    return model
+    return from_pretrained(source, arch=arch, **options, **kwargs)

@@ -4,11 +4,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from semattnet._errors import InputError
 from semattnet.weights.pretrained import get_weights, list_pretrained
 
-__all__ = ["resolve_weights_file", "weights_table"]
+__all__ = ["WeightsSpecError", "resolve_weights_file", "weights_table"]
 
 _UNKNOWN_SHA = "unknown (pinned on first download)"
+
+
+class WeightsSpecError(InputError):
+    """A ``--weights`` value that names no file, folder, URL or registered weights."""
 
 
 def _licence(text: str) -> str:
@@ -57,11 +62,11 @@ def resolve_weights_file(spec: str, progress: bool = True) -> Path:
         path = fetch(spec, progress=progress)
     elif not path.exists():
         known = ", ".join(list_pretrained())
-        raise ValueError(f"--weights {spec!r}: not a file, a URL or a registered name ({known})")
+        raise WeightsSpecError(f"--weights {spec!r}: not a file, a URL or a registered name ({known})")
     if path.is_dir():
         path = path / WEIGHTS_NAME
         if not path.is_file():
-            raise ValueError(f"--weights {spec}: folder without {WEIGHTS_NAME}")
+            raise WeightsSpecError(f"--weights {spec}: folder without {WEIGHTS_NAME}")
     return path
 
 

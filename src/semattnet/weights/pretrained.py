@@ -19,8 +19,10 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Literal
 
+from semattnet._errors import InputError
 from semattnet.models.config import SemAttNetConfig
-from semattnet.models.registry import MODELS, build_model
+from semattnet.models.registry import UnknownModelError, model_config, resolve_model_name
+from semattnet.weights import builder
 
 __all__ = [
     "DEFAULT_WEIGHTS",
@@ -77,7 +79,7 @@ FINDINGS = (
 )
 
 
-class UnknownWeightsError(ValueError):
+class UnknownWeightsError(InputError):
     """A weights name that is not in the registry."""
 
 
@@ -138,12 +140,13 @@ class PretrainedWeights:
 
     def model_config(self) -> SemAttNetConfig:
         """The full config of the model these weights fit."""
-        base = MODELS[self.arch][1]
+        base = model_config(self.arch)
         return base.replace(**self.config) if self.config else base
 
     def build(self, **overrides: Any) -> Any:
-        """The untrained model these weights fit (``overrides`` change config fields)."""
-        return build_model(self.arch, config=self.model_config().replace(**overrides))
+        """The untrained model these weights fit (``overrides`` change config fields), through
+        :func:`semattnet.weights.builder.build_model_with_weights` without weights."""
+        return builder.build_model_with_weights(None, config=self.model_config(), arch=self.arch, overrides=overrides)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-serialisable data (e.g. for a model card)."""
@@ -164,9 +167,13 @@ DEFAULT_WEIGHTS: dict[str, str] = {"semattnet": "semattnet-kitti"}
 def register_weights(weights: PretrainedWeights, *, overwrite: bool = False) -> PretrainedWeights:
     """Add a record (e.g. your own mirror or fine-tuned weights) to the registry."""
     if weights.name in _REGISTRY and not overwrite:
-        raise ValueError(f"weights {weights.name!r} are already registered (pass overwrite=True to replace them)")
-    if weights.arch not in MODELS:
-        raise ValueError(f"weights {weights.name!r}: unknown arch {weights.arch!r}; available: {', '.join(MODELS)}")
+        raise InputError(f"weights {weights.name!r} are already registered (pass overwrite=True to replace them)")
+    try:
+        resolve_model_name(weights.arch)
+    except UnknownModelError as exc:
+        raise UnknownModelError(
+            f"weights {weights.name!r}: unknown arch {weights.arch!r}; {str(exc).split('; ', 1)[1]}"
+        ) from None
     _REGISTRY[weights.name] = weights
     return weights
 
