@@ -24,6 +24,7 @@ import torch
 from torch import nn
 
 from semattnet._utils.atomic import atomic_path
+from semattnet._utils.documents import read_document
 from semattnet._utils.version import library_version
 from semattnet.models.config import SemAttNetConfig
 from semattnet.models.registry import MODELS, build_model
@@ -216,10 +217,7 @@ def _build_and_load(ckpt: Checkpoint, config: SemAttNetConfig | None, device: An
 
 def _read_config(folder: Path) -> tuple[str, SemAttNetConfig]:
     path = folder / CONFIG_NAME
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise CheckpointError(f"{path}: unreadable config ({exc})") from exc
+    data = read_document(path, error=CheckpointError)  # bounded size and nesting
     if not isinstance(data, dict):
         raise CheckpointError(f"{path}: expected a JSON object")
     arch = data.get("arch", "semattnet")
