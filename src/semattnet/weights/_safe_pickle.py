@@ -258,6 +258,7 @@ class Unpickler(_BASE):
 
 
 _TORCH_ADVICE = re.compile(r"weights.only|safe_globals|trust|re-run|please", re.IGNORECASE)
+_ADVICE_CLAUSE = re.compile(r",? or (?:classes|types) allowlisted\s+via `add_safe_globals`")
 _UNSUPPORTED_GLOBAL = re.compile(r"Unsupported global: GLOBAL ([\w.]+)")
 _UNSUPPORTED_OPCODE = re.compile(r"Unsupported operand (\d+)")
 
@@ -272,7 +273,8 @@ def describe_torch_refusal(exc: BaseException) -> str:
         op = _OPCODE_NAME.get(int(m[1]), m[1])
         return f"refusing to load: the pickle uses opcode {op}, which the restricted loader does not accept"
     detail = text.split("WeightsUnpickler error:", 1)[-1]
-    kept = [s.strip() for s in re.split(r"(?<=[.!?])\s+|\n", detail) if s.strip() and not _TORCH_ADVICE.search(s)]
+    line = _ADVICE_CLAUSE.sub("", next((ln.strip() for ln in detail.splitlines() if ln.strip()), ""))
+    kept = [s for s in re.split(r"(?<=[.!?])\s+", line) if s and not _TORCH_ADVICE.search(s)]
     return "refusing to load: " + (kept[0] if kept else "the restricted loader refused the pickle")
 
 

@@ -293,10 +293,13 @@ def config_from_state_dict(sd: Mapping[str, torch.Tensor]) -> SemAttNetConfig:
         fusion = "add" if bb["depth_layer3.conv1.weight"].shape[1] == 2 * base else "concat"
     kernel_sizes = tuple(
         sorted(int(k.split(".")[0].removeprefix("iter_guide_layer")) for k in sd if k.endswith("generate.0.weight")
-               and not k.split(".")[0].endswith("_s2"))
+               and k.split(".")[0].removeprefix("iter_guide_layer").isdigit())
     )  # fmt: skip
-    cfg = SemAttNetConfig(branches=branches, fusion=fusion, refine=refine, width=base / 32)  # type: ignore[arg-type]
-    return cfg.replace(kernel_sizes=kernel_sizes) if kernel_sizes else cfg
+    try:  # sizes read from the tensors are held to the config's ranges
+        cfg = SemAttNetConfig(branches=branches, fusion=fusion, refine=refine, width=base / 32)  # type: ignore[arg-type]
+        return cfg.replace(kernel_sizes=kernel_sizes) if kernel_sizes else cfg
+    except ValueError as exc:
+        raise CheckpointError(f"not a SemAttNet state dict that can be built: {exc}") from None
 
 
 def load_model(path: str | os.PathLike[str], device: str | torch.device = "cpu", **overrides: Any) -> nn.Module:

@@ -31,6 +31,7 @@ trainer store under :data:`DIGEST_KEY`; :func:`verify_digest` checks it after lo
 
 from __future__ import annotations
 
+import collections
 import hashlib
 import io
 import itertools
@@ -148,10 +149,9 @@ def inspect_weights_file(path: str | Path) -> Inspected:
 
 
 def _is_tar(head: bytes) -> bool:
-    """Whether ``head`` (a file's first 512 bytes) is a tar header, as ``tarfile`` (and so the
-    legacy ``torch.load``) would read it: the ``ustar`` magic or a header whose checksum holds."""
-    if head[257:262] == b"ustar":
-        return True
+    """Whether ``head`` (a file's first 512 bytes) is a tar header exactly as ``tarfile`` (and so the
+    legacy ``torch.load``) reads one: a header whose checksum holds, with or without the ``ustar``
+    magic (old v7 headers have none; the magic alone could be bytes of a safetensors header)."""
     try:
         tarfile.TarInfo.frombuf(head, "utf-8", "surrogateescape")
     except tarfile.HeaderError:
@@ -247,7 +247,7 @@ def _inspect_zip(path: Path, size: int) -> Inspected:
 def _check_zip_members(path: Path, names: list[str]) -> str:
     """The archive's top-level folder; refuses TorchScript, members torch.save does not write and
     a member name given twice (torch would read one copy, the gate might check the other)."""
-    twice = sorted({n for n in names if names.count(n) > 1}) if len(set(names)) != len(names) else []
+    twice = sorted(n for n, k in collections.Counter(names).items() if k > 1)
     if twice:
         raise UnsafeCheckpointError(f"{path}: zip member {twice[0]!r} appears more than once; refusing the archive")
     prefixes = {n.split("/", 1)[0] for n in names}
