@@ -19,13 +19,13 @@ so that ``K @ (T_camX_lidar @ p)[:3] == P_rect_0X @ R_rect_00 @ T_cam0_lidar @ p
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from semattnet._utils.documents import read_document
 from semattnet.data.io import DataError
 
 from .transforms import check_rigid, check_rotation, make_T
@@ -256,20 +256,7 @@ def read_rig_json(path: str | os.PathLike[str]) -> RigCalibration:
     path = Path(path)
     if not path.is_file():
         raise DataError(f"{path}: rig file not found")
-    try:
-        if path.suffix.lower() in (".yaml", ".yml"):
-            try:
-                import yaml
-            except ImportError:
-                raise DataError(f"{path}: reading YAML needs PyYAML (pip install pyyaml); or use JSON") from None
-            try:
-                doc = yaml.safe_load(path.read_text())
-            except yaml.YAMLError as exc:
-                raise DataError(f"{path}: not valid YAML: {str(exc).splitlines()[0]}") from None
-        else:
-            doc = json.loads(path.read_text())
-    except (ValueError, UnicodeDecodeError) as exc:  # json.JSONDecodeError is a ValueError
-        raise DataError(f"{path}: not valid JSON: {str(exc).splitlines()[0]}") from None
+    doc = read_document(path)  # JSON or YAML, bounded in size and nesting, no YAML aliases
     if not isinstance(doc, dict):
         raise DataError(f"{path}: expected an object with keys K, T_cam_lidar, image_size")
     vals = {}

@@ -8,15 +8,37 @@ for CPU training differ only in fields of :class:`SemAttNetConfig`.
 from __future__ import annotations
 
 import dataclasses
+import math
+import numbers
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from semattnet._errors import InputError
 from semattnet.models.fusion import FEATURE_FUSION_MODES, FusionMode
 
-__all__ = ["RefinementMode", "SemAttNetConfig", "Widths"]
+__all__ = ["RANGES", "RefinementMode", "SemAttNetConfig", "Widths"]
 
 RefinementMode = Literal["authors", "clean"]
 _SCALES = (1, 2, 4, 8, 16, 32)
+
+#: Allowed ranges (inclusive) of the numeric fields: one home, checked for every config, including
+#: configs read from files (a ``config.json`` or checkpoint metadata asking for ``width=64`` or
+#: ``iterations=1e9`` would allocate or run without bound).
+RANGES: dict[str, tuple[float, float]] = {
+    "width": (0.125, 4.0),
+    "reduction": (1, 1024),
+    "kernel_sizes": (1, 15),
+    "iterations": (0, 32),
+}
+MAX_KERNELS = 8
+
+
+def _in_range(name: str, value: Any, integer: bool = True) -> None:
+    lo, hi = RANGES[name]
+    number = isinstance(value, numbers.Integral if integer else numbers.Real) and math.isfinite(value)
+    if isinstance(value, bool) or not number or not lo <= value <= hi:
+        kind = "an integer" if integer else "a number"
+        raise InputError(f"{name} must be {kind} in [{lo:g}, {hi:g}], got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -52,14 +74,15 @@ class SemAttNetConfig:
             raise ValueError(f"branches must be 2 (CG + DG) or 3 (CG + SG + DG), got {self.branches!r}")
         if self.fusion not in FEATURE_FUSION_MODES:
             raise ValueError(f"fusion must be one of {FEATURE_FUSION_MODES}, got {self.fusion!r}")
-        if not self.width > 0 or round(32 * self.width) < 4:
-            raise ValueError(f"width must be >= 0.125 (at least 4 base channels), got {self.width!r}")
-        if self.reduction < 1:
-            raise ValueError(f"reduction must be >= 1, got {self.reduction!r}")
-        if not self.kernel_sizes or any(k < 1 or k % 2 == 0 for k in self.kernel_sizes):
+        _in_range("width", self.width, integer=False)  # >= 0.125: at least 4 base channels
+        _in_range("reduction", self.reduction)
+        if not isinstance(self.kernel_sizes, tuple | list) or not 1 <= len(self.kernel_sizes) <= MAX_KERNELS:
+            raise InputError(f"kernel_sizes must be 1 to {MAX_KERNELS} odd sizes, got {self.kernel_sizes!r}")
+        for k in self.kernel_sizes:
+            _in_range("kernel_sizes", k)
+        if any(k % 2 == 0 for k in self.kernel_sizes):
             raise ValueError(f"kernel_sizes must be odd and positive, got {self.kernel_sizes!r}")
-        if self.iterations < 0:
-            raise ValueError(f"iterations must be >= 0, got {self.iterations!r}")
+        _in_range("iterations", self.iterations)
         if self.refinement_mode not in ("authors", "clean"):
             raise ValueError(f"refinement_mode must be 'authors' or 'clean', got {self.refinement_mode!r}")
         object.__setattr__(self, "kernel_sizes", tuple(int(k) for k in self.kernel_sizes))

@@ -10,7 +10,12 @@ global the pickle names through :meth:`Unpickler.find_class`:
 * other names from ``torch``, NumPy and similar libraries are refused too (``torch.load`` named
   by a pickle is code, not data), except what ``torch.load(weights_only=True)`` allows by default;
 * any other class (e.g. the authors' ``metrics.Result``) becomes an inert stand-in that only
-  records the data it is built from, so its fields stay readable.
+  records the data it is built from, so its fields stay readable;
+* state (BUILD, SETITEMS, ...) is applied only to objects the pickle created, never to a class,
+  function or module it named, so no load changes the calling process.
+
+:func:`describe_torch_refusal` turns a refusal of ``torch.load(weights_only=True)`` into one line
+without torch's advice to retry with ``weights_only=False``.
 
 :func:`resolve_global` is the policy; :mod:`semattnet.weights.checkpoint` applies it to the globals
 it finds (statically) in a pickle and hands the answers to ``torch.load(weights_only=True)``.
@@ -20,6 +25,10 @@ from __future__ import annotations
 
 import _compat_pickle
 import pickle
+import pickletools
+import re
+import struct
+import sys
 import types
 from typing import Any
 
@@ -27,7 +36,14 @@ import torch
 
 from semattnet._errors import SemAttNetError
 
-__all__ = ["InertObject", "Unpickler", "UnsafeCheckpointError", "resolve_global", "safe_pickle_module"]
+__all__ = [
+    "InertObject",
+    "Unpickler",
+    "UnsafeCheckpointError",
+    "describe_torch_refusal",
+    "resolve_global",
+    "safe_pickle_module",
+]
 
 
 class UnsafeCheckpointError(SemAttNetError, pickle.UnpicklingError):
@@ -161,14 +177,105 @@ def resolve_global(module: str, name: str, sink: set[str] | None = None) -> Any:
     return type(name, (InertObject,), {"_pickled_name": qualname, "__module__": "semattnet.inert"})
 
 
-class Unpickler(pickle.Unpickler):
-    """Unpickler with the allow / refuse / neutralise policy of :func:`resolve_global`."""
+def _is_shared(obj: Any, named: dict[int, Any]) -> bool:
+    """Whether ``obj`` is an object of the calling process rather than one the pickle created: a
+    global the pickle named (a class, function, module), or a built-in NumPy dtype singleton."""
+    if id(obj) in named or isinstance(obj, type | types.ModuleType | types.FunctionType | types.BuiltinFunctionType):
+        return True
+    np = sys.modules.get("numpy")
+    return np is not None and isinstance(obj, np.dtype) and bool(obj.isbuiltin)
+
+
+def _guarded(op: str, base: Any, target: Any) -> Any:
+    """``base`` (a ``pickle._Unpickler`` opcode handler) refusing to change a shared object."""
+
+    def load(self: Unpickler) -> None:
+        try:
+            obj = target(self)
+        except IndexError:
+            raise pickle.UnpicklingError(f"malformed pickle: {op} with an empty stack") from None
+        if _is_shared(obj, self.named):
+            what = getattr(obj, "__qualname__", None) or type(obj).__qualname__
+            raise UnsafeCheckpointError(
+                f"refusing to load: the pickle's {op} would change {what}, an object of this process, not a new "
+                "instance the pickle created"
+            )
+        base(self)
+
+    return load
+
+
+_BASE = pickle._Unpickler  # the Python implementation: its opcode table can be guarded
+_DISPATCH = dict(_BASE.dispatch)
+_OPCODE_NAME = {ord(o.code): o.name for o in pickletools.opcodes}
+for _op, _target in (
+    (pickle.BUILD, lambda u: u.stack[-2]),
+    (pickle.SETITEM, lambda u: u.stack[-3]),
+    (pickle.APPEND, lambda u: u.stack[-2]),
+    (pickle.SETITEMS, lambda u: u.metastack[-1][-1]),
+    (pickle.APPENDS, lambda u: u.metastack[-1][-1]),
+    (pickle.ADDITEMS, lambda u: u.metastack[-1][-1]),
+):
+    _DISPATCH[_op[0]] = _guarded(_OPCODE_NAME[_op[0]], _DISPATCH[_op[0]], _target)
+
+
+def _refuse_extension(self: Unpickler) -> None:
+    raise UnsafeCheckpointError("refusing to load: the pickle uses the copyreg extension registry (EXT opcodes)")
+
+
+for _op in (pickle.EXT1, pickle.EXT2, pickle.EXT4):
+    _DISPATCH[_op[0]] = _refuse_extension
+
+
+class Unpickler(_BASE):
+    """Unpickler with the allow / refuse / neutralise policy of :func:`resolve_global`.
+
+    Allow-listed classes stay inert: BUILD, SETITEM(S), APPEND(S) and ADDITEMS only change objects
+    the pickle itself created, never a class, function or module it named (``argparse.Namespace``
+    stays as it is), and the copyreg extension registry is not consulted.
+    """
 
     #: Receives the qualified names replaced by inert stand-ins (see safe_pickle_module).
     sink: set[str] | None = None
+    dispatch = _DISPATCH
+
+    def __init__(self, file: Any, **kwargs: Any) -> None:
+        super().__init__(file, **kwargs)
+        self.named: dict[int, Any] = {}  # id -> every object find_class gave out (kept alive)
 
     def find_class(self, module: str, name: str) -> Any:
-        return resolve_global(module, name, self.sink)
+        obj = resolve_global(module, name, self.sink)
+        self.named[id(obj)] = obj
+        return obj
+
+    def load(self) -> Any:
+        try:
+            return super().load()
+        except (pickle.UnpicklingError, SemAttNetError):
+            raise
+        except (IndexError, KeyError, TypeError, AttributeError, EOFError, ValueError, struct.error) as exc:
+            raise pickle.UnpicklingError(f"malformed pickle ({type(exc).__name__}: {exc})") from None
+
+
+_TORCH_ADVICE = re.compile(r"weights.only|safe_globals|trust|re-run|please", re.IGNORECASE)
+_ADVICE_CLAUSE = re.compile(r",? or (?:classes|types) allowlisted\s+via `add_safe_globals`")
+_UNSUPPORTED_GLOBAL = re.compile(r"Unsupported global: GLOBAL ([\w.]+)")
+_UNSUPPORTED_OPCODE = re.compile(r"Unsupported operand (\d+)")
+
+
+def describe_torch_refusal(exc: BaseException) -> str:
+    """One line saying why ``torch.load(weights_only=True)`` refused a pickle, without torch's
+    advice to retry with ``weights_only=False`` or to allow-list the global (never relayed)."""
+    text = str(exc)
+    if m := _UNSUPPORTED_GLOBAL.search(text):
+        return f"refusing to load: the pickle names {m[1]}, which is not allowed in weights"
+    if m := _UNSUPPORTED_OPCODE.search(text):
+        op = _OPCODE_NAME.get(int(m[1]), m[1])
+        return f"refusing to load: the pickle uses opcode {op}, which the restricted loader does not accept"
+    detail = text.split("WeightsUnpickler error:", 1)[-1]
+    line = _ADVICE_CLAUSE.sub("", next((ln.strip() for ln in detail.splitlines() if ln.strip()), ""))
+    kept = [s for s in re.split(r"(?<=[.!?])\s+", line) if s and not _TORCH_ADVICE.search(s)]
+    return "refusing to load: " + (kept[0] if kept else "the restricted loader refused the pickle")
 
 
 def safe_pickle_module() -> tuple[types.SimpleNamespace, set[str]]:

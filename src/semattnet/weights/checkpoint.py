@@ -31,7 +31,13 @@ from torch import nn
 from semattnet._errors import SemAttNetError
 from semattnet._utils.atomic import atomic_path
 from semattnet.models.config import SemAttNetConfig
-from semattnet.weights._safe_pickle import InertObject, UnsafeCheckpointError, resolve_global, safe_pickle_module
+from semattnet.weights._safe_pickle import (
+    InertObject,
+    UnsafeCheckpointError,
+    describe_torch_refusal,
+    resolve_global,
+    safe_pickle_module,
+)
 from semattnet.weights.gate import (
     DIGEST_KEY,
     CheckpointError,
@@ -161,7 +167,10 @@ def _load_pickle(info: Inspected) -> tuple[Any, set[str]]:
         pairs, neutralised = _allow_list(info)
         with _SAFE_GLOBALS_LOCK, torch.serialization.safe_globals(pairs), warnings.catch_warnings():
             warnings.simplefilter("ignore")  # torch's advice to re-run with weights_only=False
-            return torch.load(info.path, map_location="cpu", weights_only=True), neutralised
+            try:
+                return torch.load(info.path, map_location="cpu", weights_only=True), neutralised
+            except pickle.UnpicklingError as exc:  # never relay torch's advice to use weights_only=False
+                raise UnsafeCheckpointError(describe_torch_refusal(exc)) from None
     module, neutralised = safe_pickle_module()
     return torch.load(info.path, map_location="cpu", pickle_module=module, weights_only=False), neutralised
 
@@ -251,10 +260,19 @@ def load_weights(model: nn.Module, state_dict: Mapping[str, torch.Tensor] | Chec
         for k in own
         if k in sd and sd[k].shape != own[k].shape
     ]
+    kind = {k: (v.is_floating_point(), v.is_complex(), v.dtype == torch.bool) for k, v in own.items()}
+    retyped = [  # e.g. a safetensors F32 tensor relabelled I32: its bytes would load as huge floats
+        f"{k}: checkpoint {sd[k].dtype} vs model {own[k].dtype}"
+        for k in own
+        if k in sd and (sd[k].is_floating_point(), sd[k].is_complex(), sd[k].dtype == torch.bool) != kind[k]
+    ]
+    mismatched += retyped
     report = {"missing": missing, "unexpected": unexpected, "mismatched": mismatched}
     if strict and (missing or unexpected or mismatched):
         parts = []
-        for label, items in (("missing", missing), ("unexpected", unexpected), ("shape mismatch", mismatched)):
+        shapes = mismatched[: len(mismatched) - len(retyped)]
+        for label, items in (("missing", missing), ("unexpected", unexpected), ("shape mismatch", shapes),
+                             ("dtype mismatch", retyped)):  # fmt: skip
             if items:
                 shown = ", ".join(items[:8]) + (f", ... ({len(items) - 8} more)" if len(items) > 8 else "")
                 parts.append(f"{len(items)} {label}: {shown}")
@@ -272,8 +290,11 @@ def config_from_state_dict(sd: Mapping[str, torch.Tensor]) -> SemAttNetConfig:
     sd = filter_state_dict(sd)
     refine = any(k.startswith("backbone.") for k in sd)
     bb = {k.removeprefix("backbone."): v for k, v in sd.items() if not refine or k.startswith("backbone.")}
-    if "rgb_conv_init.0.weight" not in bb:
-        raise CheckpointError("not a SemAttNet state dict: no rgb_conv_init.0.weight")
+    need = ["rgb_conv_init.0.weight"]
+    need += [] if "cbam_192.ChannelGate.mlp.1.weight" in bb else ["depth_layer3.conv1.weight"]
+    absent = [k for k in need if k not in bb or bb[k].dim() < 2]
+    if absent:
+        raise CheckpointError(f"not a SemAttNet state dict: no {absent[0]} ({len(sd)} tensors)")
     base = bb["rgb_conv_init.0.weight"].shape[0]
     branches = 3 if "segment_conv_init.0.weight" in bb else 2
     if "cbam_192.ChannelGate.mlp.1.weight" in bb:
@@ -282,10 +303,13 @@ def config_from_state_dict(sd: Mapping[str, torch.Tensor]) -> SemAttNetConfig:
         fusion = "add" if bb["depth_layer3.conv1.weight"].shape[1] == 2 * base else "concat"
     kernel_sizes = tuple(
         sorted(int(k.split(".")[0].removeprefix("iter_guide_layer")) for k in sd if k.endswith("generate.0.weight")
-               and not k.split(".")[0].endswith("_s2"))
+               and k.split(".")[0].removeprefix("iter_guide_layer").isdigit())
     )  # fmt: skip
-    cfg = SemAttNetConfig(branches=branches, fusion=fusion, refine=refine, width=base / 32)  # type: ignore[arg-type]
-    return cfg.replace(kernel_sizes=kernel_sizes) if kernel_sizes else cfg
+    try:  # sizes read from the tensors are held to the config's ranges
+        cfg = SemAttNetConfig(branches=branches, fusion=fusion, refine=refine, width=base / 32)  # type: ignore[arg-type]
+        return cfg.replace(kernel_sizes=kernel_sizes) if kernel_sizes else cfg
+    except ValueError as exc:
+        raise CheckpointError(f"not a SemAttNet state dict that can be built: {exc}") from None
 
 
 def load_model(path: str | os.PathLike[str], device: str | torch.device = "cpu", **overrides: Any) -> nn.Module:

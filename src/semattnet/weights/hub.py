@@ -26,6 +26,7 @@ from torch import nn
 
 from semattnet._errors import InputError
 from semattnet._utils.atomic import atomic_path
+from semattnet._utils.documents import read_document
 from semattnet._utils.download import (
     OfflineError,
     cache_key,
@@ -207,10 +208,7 @@ def _read(root: Path, path: Path) -> Checkpoint:
 
 def _read_config(folder: Path) -> tuple[str, SemAttNetConfig]:
     path = folder / CONFIG_NAME
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise CheckpointError(f"{path}: unreadable config ({exc})") from exc
+    data = read_document(path, error=CheckpointError)  # bounded size and nesting
     if not isinstance(data, dict):
         raise CheckpointError(f"{path}: expected a JSON object")
     arch = data.get("arch", "semattnet")
