@@ -48,7 +48,9 @@ def docs_workspace(tmp_path_factory: pytest.TempPathFactory) -> Path:
     old = Path.cwd()
     os.chdir(root)
     try:
-        run_semattnet(["synth", "--out", "data/kitti", "--frames", "4", "--eval-frames", "2", "--size", "64x96"], "setup")
+        run_semattnet(
+            ["synth", "--out", "data/kitti", "--frames", "4", "--eval-frames", "2", "--size", "64x96"], "setup"
+        )
     finally:
         os.chdir(old)
     _tiny_model(root / "model.safetensors")
@@ -68,7 +70,9 @@ def page_env(tmp_path: Path) -> dict[str, str]:
         "MPLBACKEND": "Agg",
         "OMP_NUM_THREADS": "1",
         "PYTHONPATH": os.pathsep.join([src, *filter(None, [os.environ.get("PYTHONPATH")])]),
-        "PATH": os.pathsep.join([str(shim_bin(tmp_path / "bin")), os.environ.get("PATH", "")]),
+        "PATH": os.pathsep.join(
+            [str(shim_bin(tmp_path / "bin")), str(Path(sys.executable).parent), os.environ.get("PATH", "")]
+        ),
     }
 
 

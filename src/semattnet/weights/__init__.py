@@ -1,11 +1,12 @@
 """Weights: reading checkpoints without running their code, loading into models, conversion to
 safetensors, ONNX / TorchScript export, the released-weights registry and a verified download cache.
 
->>> from semattnet import weights
->>> weights.list_pretrained()
-['semattnet-kitti']
->>> weights.get_weights("semattnet-kitti").paper_metrics["kitti/test"]["rmse_mm"]
-709.41
+Examples:
+    >>> from semattnet import weights
+    >>> weights.list_pretrained()
+    ['semattnet-kitti']
+    >>> weights.get_weights("semattnet-kitti").paper_metrics["kitti/test"]["rmse_mm"]
+    709.41
 
 Downloads need the ``hub`` extra (``pip install 'semattnet[hub]'``: pooch, huggingface_hub, gdown);
 local files and folders need nothing more.
