@@ -2,7 +2,7 @@
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup demo test test-all lint bench clean
+.PHONY: setup demo test test-all lint docs bench clean
 
 $(BIN)/semattnet: pyproject.toml scripts/setup.sh
 	VENV=$(VENV) bash scripts/setup.sh
@@ -23,8 +23,11 @@ lint: setup
 	$(BIN)/ruff check src tests benchmarks hubconf.py
 	$(BIN)/ruff format --check src tests benchmarks hubconf.py
 
+docs: setup
+	NO_MKDOCS_2_WARNING=1 $(BIN)/python -m mkdocs build --strict --site-dir site
+
 bench: setup
 	$(BIN)/semattnet bench
 
 clean:
-	rm -rf build dist .pytest_cache .ruff_cache semattnet-demo
+	rm -rf build dist site .pytest_cache .ruff_cache semattnet-demo

@@ -64,7 +64,8 @@ class Segmenter:
         network: maps a normalised (B, 3, h, w) float32 tensor on ``device`` to the network's
             output (module docstring); ``None`` is the no-segmenter fallback.
         name: shown in error messages (the SPEC).
-        mean, std: per-channel normalisation after scaling to [0, 1].
+        mean: per-channel mean subtracted after scaling to [0, 1].
+        std: per-channel standard deviation divided by after subtracting ``mean``.
         input_size: run the network at this (h, w) (bilinear resize) instead of the image size.
     """
 

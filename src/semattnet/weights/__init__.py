@@ -6,11 +6,12 @@ Every model with weights is built by one function, :func:`build_model_with_weigh
 the weights, then overrides, then a strict load): :func:`load_model`, :func:`from_pretrained`,
 :meth:`PretrainedWeights.build` and ``torch.hub`` (:func:`hub_model`) all call it.
 
->>> from semattnet import weights
->>> weights.list_pretrained()
-['semattnet-kitti']
->>> weights.get_weights("semattnet-kitti").paper_metrics["kitti/test"]["rmse_mm"]
-709.41
+Examples:
+    >>> from semattnet import weights
+    >>> weights.list_pretrained()
+    ['semattnet-kitti']
+    >>> weights.get_weights("semattnet-kitti").paper_metrics["kitti/test"]["rmse_mm"]
+    709.41
 
 Downloads need the ``hub`` extra (``pip install 'semattnet[hub]'``: pooch, huggingface_hub, gdown);
 local files and folders need nothing more.

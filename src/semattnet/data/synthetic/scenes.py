@@ -141,7 +141,8 @@ def make_frame(
     """Generate one scene, deterministic in ``seed`` (and ``style``).
 
     Args:
-        height, width: image size (any; KITTI's raw frames are about 375 x 1242).
+        height: image height (any; KITTI's raw frames are about 375 x 1242).
+        width: image width.
         seed: random seed.
         shadow: add a hard shadow band across the scene (random, p = 0.5, when None).
         size_of_kitti: scale the intrinsics so the field of view is KITTI's at this width.
