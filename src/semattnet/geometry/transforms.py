@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from semattnet._errors import InputError
+
 __all__ = ["check_rigid", "check_rotation", "invert_T", "make_T", "transform_points"]
 
 Array = Any  # np.ndarray or torch.Tensor
@@ -77,7 +79,7 @@ def transform_points(T: Array, xyz: Array) -> Array:
         (N, 3) or (N, 3+k) points in frame ``a``, dtype of ``xyz`` for floating input.
     """
     if xyz.shape[-1] < 3:
-        raise ValueError(f"points must have at least 3 columns (x, y, z), got shape {tuple(xyz.shape)}")
+        raise InputError(f"points must have at least 3 columns (x, y, z), got shape {tuple(xyz.shape)}")
     if _is_torch(xyz):
         import torch
 

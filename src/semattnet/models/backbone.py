@@ -15,6 +15,7 @@ from typing import NamedTuple
 import torch
 from torch import nn
 
+from semattnet._errors import InputError
 from semattnet.models.branches import ColorGuidedBranch, DepthGuidedBranch, SemanticGuidedBranch
 from semattnet.models.checks import check_inputs
 from semattnet.models.confidence_fusion import confidence_fusion
@@ -120,5 +121,5 @@ class SemAttNetBackbone(ColorGuidedBranch, SemanticGuidedBranch, DepthGuidedBran
     ) -> DepthCompletionOutput:
         """Complete depth. Inputs: RGB 0..255, colour-coded semantic map 0..255, sparse metres."""
         if sparse is None:
-            raise ValueError("sparse depth is required")
+            raise InputError("sparse depth is required")
         return self.forward_features(rgb, semantic, sparse).output

@@ -11,6 +11,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from semattnet._errors import InputError
 from semattnet.models.fusion import FEATURE_FUSION_MODES, FusionMode
 
 __all__ = ["RefinementMode", "SemAttNetConfig", "Widths"]
@@ -49,19 +50,19 @@ class SemAttNetConfig:
 
     def __post_init__(self) -> None:
         if self.branches not in (2, 3):
-            raise ValueError(f"branches must be 2 (CG + DG) or 3 (CG + SG + DG), got {self.branches!r}")
+            raise InputError(f"branches must be 2 (CG + DG) or 3 (CG + SG + DG), got {self.branches!r}")
         if self.fusion not in FEATURE_FUSION_MODES:
-            raise ValueError(f"fusion must be one of {FEATURE_FUSION_MODES}, got {self.fusion!r}")
+            raise InputError(f"fusion must be one of {FEATURE_FUSION_MODES}, got {self.fusion!r}")
         if not self.width > 0 or round(32 * self.width) < 4:
-            raise ValueError(f"width must be >= 0.125 (at least 4 base channels), got {self.width!r}")
+            raise InputError(f"width must be >= 0.125 (at least 4 base channels), got {self.width!r}")
         if self.reduction < 1:
-            raise ValueError(f"reduction must be >= 1, got {self.reduction!r}")
+            raise InputError(f"reduction must be >= 1, got {self.reduction!r}")
         if not self.kernel_sizes or any(k < 1 or k % 2 == 0 for k in self.kernel_sizes):
-            raise ValueError(f"kernel_sizes must be odd and positive, got {self.kernel_sizes!r}")
+            raise InputError(f"kernel_sizes must be odd and positive, got {self.kernel_sizes!r}")
         if self.iterations < 0:
-            raise ValueError(f"iterations must be >= 0, got {self.iterations!r}")
+            raise InputError(f"iterations must be >= 0, got {self.iterations!r}")
         if self.refinement_mode not in ("authors", "clean"):
-            raise ValueError(f"refinement_mode must be 'authors' or 'clean', got {self.refinement_mode!r}")
+            raise InputError(f"refinement_mode must be 'authors' or 'clean', got {self.refinement_mode!r}")
         object.__setattr__(self, "kernel_sizes", tuple(int(k) for k in self.kernel_sizes))
 
     def replace(self, **changes: Any) -> SemAttNetConfig:

@@ -26,6 +26,7 @@ from torch import nn
 from torch.utils.data import DataLoader, Dataset, Subset
 from tqdm import tqdm
 
+from semattnet._errors import DataError, InputError
 from semattnet._utils import distributed as dist_utils
 from semattnet._utils.atomic import atomic_path
 from semattnet._utils.device import autocast
@@ -84,9 +85,9 @@ class Trainer:
             cfg = TrainConfig.from_dict(state["train_config"] | {"out": str(cfg.out)})
         self.cfg = cfg
         if not cfg.data:
-            raise ValueError("no data root given (--data)")
+            raise InputError("no data root given (--data)")
         if cfg.sync_bn and self.device.type != "cuda":
-            raise ValueError(_SYNC_BN_CPU)
+            raise InputError(_SYNC_BN_CPU)
         self.pos = _Position()
         torch.manual_seed(cfg.seed)
         random.seed(cfg.seed)
@@ -119,7 +120,7 @@ class Trainer:
                                  num_workers=cfg.workers, drop_last=True, pin_memory=self.device.type == "cuda",
                                  persistent_workers=False)  # fmt: skip
         if len(self.loader) == 0:
-            raise ValueError(
+            raise DataError(
                 f"{len(self.train_set)} training frames per process is fewer than one batch of {cfg.batch_size}"
             )
         self.val_loader = self._val_loader()
@@ -168,7 +169,7 @@ class Trainer:
                             refinement_mode=cfg.refinement_mode)  # fmt: skip
         if cfg.stage != "backbone":
             if init_weights and not cfg.init:
-                raise ValueError(f"stage {cfg.stage!r} starts from the previous stage's checkpoint: pass --init PATH")
+                raise InputError(f"stage {cfg.stage!r} starts from the previous stage's checkpoint: pass --init PATH")
             if init_weights:
                 ckpt = load_checkpoint(cfg.init)  # type: ignore[arg-type]
                 is_backbone = not any(k.startswith("backbone.") for k in ckpt.state_dict)

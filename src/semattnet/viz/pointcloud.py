@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from semattnet._errors import InputError
+
 __all__ = ["birds_eye_view"]
 
 #: Colour of the overlaid LiDAR scan (RGB).
@@ -76,18 +78,18 @@ def birds_eye_view(
     """
     h, w = (int(s) for s in size)
     if h <= 0 or w <= 0:
-        raise ValueError(f"birds_eye_view: size must be positive (height, width), got {size}")
+        raise InputError(f"birds_eye_view: size must be positive (height, width), got {size}")
     if z_range[1] <= z_range[0]:
-        raise ValueError(f"birds_eye_view: z_range must be (near, far) with far > near, got {z_range}")
+        raise InputError(f"birds_eye_view: z_range must be (near, far) with far > near, got {z_range}")
     if x_range is None:
         half = (z_range[1] - z_range[0]) * w / h / 2
         x_range = (-half, half)
     if x_range[1] <= x_range[0]:
-        raise ValueError(f"birds_eye_view: x_range must be (left, right) with right > left, got {x_range}")
+        raise InputError(f"birds_eye_view: x_range must be (left, right) with right > left, got {x_range}")
     xyz = np.asarray(getattr(cloud, "xyz", cloud), dtype=np.float64)[:, :3]
     rgb = getattr(cloud, "rgb", None)
     if color not in ("rgb", "height"):
-        raise ValueError(f"birds_eye_view: color must be 'rgb' or 'height', got {color!r}")
+        raise InputError(f"birds_eye_view: color must be 'rgb' or 'height', got {color!r}")
     colors = np.asarray(rgb, dtype=np.uint8) if color == "rgb" and rgb is not None else None
     if colors is None:
         colors = _height_colors(xyz[:, 1], height_range)

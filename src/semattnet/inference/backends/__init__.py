@@ -27,6 +27,7 @@ import os
 import torch
 from torch import nn
 
+from semattnet._errors import InputError
 from semattnet.inference.backends._base import InferenceEngine, output_from_arrays
 from semattnet.inference.backends.torch_engine import TorchEngine
 
@@ -52,13 +53,13 @@ def choose_backend(device: torch.device | str = "cpu", size: tuple[int, int] | N
 
 def _check(backend: str, precision: str, size: tuple[int, int] | None) -> None:
     if backend not in (*BACKENDS, "auto"):
-        raise ValueError(f"unknown backend {backend!r}; choose one of auto, {', '.join(BACKENDS)}")
+        raise InputError(f"unknown backend {backend!r}; choose one of auto, {', '.join(BACKENDS)}")
     if precision not in PRECISIONS:
-        raise ValueError(f"unknown precision {precision!r}; choose one of {', '.join(PRECISIONS)}")
+        raise InputError(f"unknown precision {precision!r}; choose one of {', '.join(PRECISIONS)}")
     if backend in ("openvino", "onnxruntime") and size is None:
-        raise ValueError(f"the {backend} backend compiles for one input size: pass size=(H, W)")
+        raise InputError(f"the {backend} backend compiles for one input size: pass size=(H, W)")
     if backend == "onnxruntime" and precision != "f32":
-        raise ValueError("the onnxruntime backend runs float32 only")
+        raise InputError("the onnxruntime backend runs float32 only")
 
 
 def optimize_for_inference(

@@ -11,6 +11,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from semattnet._errors import InputError, MissingDependencyError
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.refinement import RefinementInputs, propagate_refinement
 
@@ -26,7 +27,7 @@ def import_backend(module: str, extra: str) -> ModuleType:
     try:
         return importlib.import_module(module)
     except ImportError:
-        raise ImportError(f"the {module} backend needs {module}: pip install 'semattnet[{extra}]'") from None
+        raise MissingDependencyError(f"the {module} backend needs {module}: pip install 'semattnet[{extra}]'") from None
 
 
 class InferenceEngine(nn.Module):
@@ -52,7 +53,7 @@ class InferenceEngine(nn.Module):
     def check_size(self, rgb: torch.Tensor) -> None:
         """Refuse inputs of another size than the one the engine was compiled for."""
         if self.size is not None and tuple(rgb.shape[-2:]) != tuple(self.size):
-            raise ValueError(
+            raise InputError(
                 f"this {self.backend} engine was compiled for {self.size[0]}x{self.size[1]} inputs, got "
                 f"{rgb.shape[-2]}x{rgb.shape[-1]}; build one per size (optimize_for_inference(..., size=))"
             )
@@ -74,10 +75,10 @@ def output_from_arrays(
     heads = {k: v for k, v in tensors.items() if k.startswith(HEADS_PREFIX)}
     unknown = set(tensors) - set(_FIELDS) - set(heads)
     if unknown:
-        raise ValueError(f"unknown output names {sorted(unknown)}; expected some of {_FIELDS}")
+        raise InputError(f"unknown output names {sorted(unknown)}; expected some of {_FIELDS}")
     if heads:
         if iterations is None:
-            raise ValueError("refinement heads without the number of propagation iterations")
+            raise InputError("refinement heads without the number of propagation iterations")
         with torch.inference_mode():
             tensors["refined_s2_depth"], tensors["refined_depth"] = propagate_refinement(
                 RefinementInputs.from_dict(heads, HEADS_PREFIX), iterations

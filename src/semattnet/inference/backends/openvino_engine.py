@@ -26,7 +26,8 @@ def _one_of(names: set[str], known: set[str], prefix: str = "\0") -> str:
     """The one name of a model port that we know or that starts with ``prefix`` (IR tensors carry several names)."""
     matches = sorted(n for n in names if n in known or n.startswith(prefix))
     if len(matches) != 1:
-        raise ValueError(f"cannot tell which port {sorted(names)} is; expected one of {sorted(known)}")
+        # our own export names the ports: a mismatch is a bug (or an unsupported OpenVINO), not bad input
+        raise RuntimeError(f"cannot tell which port {sorted(names)} is; expected one of {sorted(known)}")
     return matches[0]
 
 

@@ -7,6 +7,8 @@ import math
 import torch
 import torch.nn.functional as F
 
+from semattnet._errors import InputError
+
 __all__ = ["kernel_size", "taps", "window"]
 
 
@@ -14,7 +16,7 @@ def kernel_size(affinity: torch.Tensor) -> int:
     kk = affinity.shape[1]
     k = math.isqrt(kk)
     if k * k != kk or k % 2 == 0:
-        raise ValueError(f"affinity must have k*k channels for an odd k, got {kk}")
+        raise InputError(f"affinity must have k*k channels for an odd k, got {kk}")
     return k
 
 
