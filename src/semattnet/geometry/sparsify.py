@@ -28,8 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from semattnet._errors import InputError
-from semattnet.data.io import DataError
+from semattnet._errors import DataError, InputError
 
 __all__ = ["beam_ids", "elevation_deg", "keep_beams", "keep_random", "keep_row_bands"]
 

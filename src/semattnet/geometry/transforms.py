@@ -15,18 +15,19 @@ import numpy as np
 
 from semattnet._errors import InputError
 
-__all__ = ["check_rigid", "check_rotation", "invert_T", "make_T", "transform_points"]
+__all__ = ["check_rigid", "check_rotation", "invert_T", "is_tensor", "make_T", "transform_points"]
 
 Array = Any  # np.ndarray or torch.Tensor
 
 
-def _is_torch(x: object) -> bool:
+def is_tensor(x: object) -> bool:
+    """Whether ``x`` is a torch tensor (checked without importing torch; NumPy otherwise)."""
     return type(x).__module__.split(".")[0] == "torch"
 
 
 def _swap_last(x: Array) -> Array:
     """Transpose of the last two axes, for NumPy arrays and torch tensors."""
-    return x.transpose(-1, -2) if _is_torch(x) else np.swapaxes(x, -1, -2)
+    return x.transpose(-1, -2) if is_tensor(x) else np.swapaxes(x, -1, -2)
 
 
 def make_T(R: Array, t: Array) -> Array:
@@ -39,7 +40,7 @@ def make_T(R: Array, t: Array) -> Array:
     Returns:
         (4, 4) transform, same kind (NumPy/torch) and dtype as ``R`` (float64 for NumPy integer input).
     """
-    if _is_torch(R):
+    if is_tensor(R):
         import torch
 
         T = torch.eye(4, dtype=R.dtype, device=R.device)
@@ -80,7 +81,7 @@ def transform_points(T: Array, xyz: Array) -> Array:
     """
     if xyz.shape[-1] < 3:
         raise InputError(f"points must have at least 3 columns (x, y, z), got shape {tuple(xyz.shape)}")
-    if _is_torch(xyz):
+    if is_tensor(xyz):
         import torch
 
         T = torch.as_tensor(T, dtype=xyz.dtype, device=xyz.device)
@@ -101,7 +102,7 @@ def check_rigid(T: Array, tol: float = 1e-3) -> str | None:
 
     Checks shape (4, 4), finiteness, last row ``[0, 0, 0, 1]``, ``R^T R = I`` and ``det R = +1`` to ``tol``.
     """
-    T = np.asarray(T.detach().cpu() if _is_torch(T) else T, dtype=np.float64)
+    T = np.asarray(T.detach().cpu() if is_tensor(T) else T, dtype=np.float64)
     if T.shape != (4, 4):
         return f"expected a 4x4 matrix, got shape {T.shape}"
     if not np.all(np.isfinite(T)):
