@@ -22,6 +22,7 @@ test-all: setup
 lint: setup
 	$(BIN)/ruff check src tests benchmarks hubconf.py
 	$(BIN)/ruff format --check src tests benchmarks hubconf.py
+	$(BIN)/mypy
 
 bench: setup
 	$(BIN)/semattnet bench

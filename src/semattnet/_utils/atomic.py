@@ -44,7 +44,7 @@ def clean_stale_temps(path: str | os.PathLike[str]) -> list[Path]:
     gone, and the older ``.NAME.XXXXXXXX*`` form); returns what was removed."""
     path = Path(path)
     pattern = re.compile(rf"^\.{re.escape(path.name)}\.(?:p(\d+)\.)?[a-z0-9_]{{8}}(?:\.[A-Za-z0-9]+)?$")
-    removed = []
+    removed: list[Path] = []
     try:
         entries = list(path.parent.iterdir())
     except OSError:

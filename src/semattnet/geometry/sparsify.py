@@ -155,6 +155,7 @@ def _beam_ids_from_depth(d: np.ndarray, K: np.ndarray, T_cam_lidar: np.ndarray, 
 
     cloud = depth_to_points(d, K).transform(invert_T(np.asarray(T_cam_lidar, dtype=np.float64)), "lidar")
     ids = np.full(d.shape, -1, dtype=np.int64)
+    assert cloud.uv is not None  # depth_to_points keeps every point's pixel
     uv = cloud.uv.astype(np.int64)
     ids[uv[:, 1], uv[:, 0]] = _beams_by_elevation(cloud.xyz, num_beams, origin_height=0.2)
     return ids

@@ -49,10 +49,10 @@ def make_T(R: Array, t: Array) -> Array:
         return T
     R = np.asarray(R)
     dtype = R.dtype if np.issubdtype(R.dtype, np.floating) else np.float64
-    T = np.eye(4, dtype=dtype)
-    T[:3, :3] = R
-    T[:3, 3] = np.asarray(t, dtype=dtype).reshape(3)
-    return T
+    out = np.eye(4, dtype=dtype)
+    out[:3, :3] = R
+    out[:3, 3] = np.asarray(t, dtype=dtype).reshape(3)
+    return out
 
 
 def invert_T(T: Array) -> Array:

@@ -21,7 +21,9 @@ __all__ = ["birds_eye_view"]
 LIDAR_COLOR = (255, 0, 255)
 
 
-def _cells(xyz: np.ndarray, size: tuple[int, int], x_range: tuple[float, float], z_range: tuple[float, float]):  # type: ignore[no-untyped-def]
+def _cells(
+    xyz: np.ndarray, size: tuple[int, int], x_range: tuple[float, float], z_range: tuple[float, float]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(row, col, keep) of each point (module doc's pixel rule)."""
     h, w = size
     x, z = xyz[:, 0].astype(np.float64), xyz[:, 2].astype(np.float64)
@@ -39,7 +41,13 @@ def _height_colors(y: np.ndarray, height_range: tuple[float, float]) -> np.ndarr
     return (colormaps["viridis"](t)[:, :3] * 255 + 0.5).astype(np.uint8)
 
 
-def _paint(canvas: np.ndarray, xyz: np.ndarray, colors: np.ndarray, x_range, z_range) -> None:  # type: ignore[no-untyped-def]
+def _paint(
+    canvas: np.ndarray,
+    xyz: np.ndarray,
+    colors: np.ndarray,
+    x_range: tuple[float, float],
+    z_range: tuple[float, float],
+) -> None:
     row, col, keep = _cells(xyz, canvas.shape[:2], x_range, z_range)
     flat = row[keep] * canvas.shape[1] + col[keep]
     y, colors = xyz[keep, 1], colors[keep]

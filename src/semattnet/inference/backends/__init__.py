@@ -28,7 +28,7 @@ import torch
 from torch import nn
 
 from semattnet._errors import InputError
-from semattnet.inference.backends._base import InferenceEngine, output_from_arrays
+from semattnet.inference.backends._base import InferenceEngine, LogFn, output_from_arrays
 from semattnet.inference.backends.torch_engine import TorchEngine
 
 __all__ = ["BACKENDS", "InferenceEngine", "available_backends", "choose_backend", "optimize_for_inference",
@@ -71,7 +71,7 @@ def optimize_for_inference(
     device: torch.device | str = "cpu",
     cache_dir: str | os.PathLike[str] | None = None,
     inplace: bool = False,
-    log=None,  # type: ignore[no-untyped-def]
+    log: LogFn | None = None,
 ) -> InferenceEngine:
     """``model`` ready to run: ``engine(rgb=, semantic=, sparse=)`` -> ``DepthCompletionOutput``.
 
@@ -84,7 +84,8 @@ def optimize_for_inference(
     """
     _check(backend, precision, size)
     backend = choose_backend(device, size) if backend == "auto" else backend
-    needs_semantic = getattr(model, "config", None) is None or model.config.branches == 3
+    config = getattr(model, "config", None)
+    needs_semantic = config is None or config.branches == 3
     model = model.eval()
     if backend == "torch":
         return TorchEngine(model.to(device), precision, needs_semantic, inplace)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import importlib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import fields
 from types import ModuleType
 
@@ -15,7 +15,10 @@ from semattnet._errors import InputError, MissingDependencyError
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.refinement import RefinementInputs, propagate_refinement
 
-__all__ = ["HEADS_PREFIX", "ExportedGraphEngine", "InferenceEngine", "import_backend", "output_from_arrays"]
+__all__ = ["HEADS_PREFIX", "ExportedGraphEngine", "InferenceEngine", "LogFn", "import_backend", "output_from_arrays"]
+
+#: A progress logger the backends call with one line of text (e.g. ``print`` or ``logger.info``).
+LogFn = Callable[[str], object]
 
 _FIELDS = tuple(f.name for f in fields(DepthCompletionOutput))
 #: Name prefix of the refinement heads an exported graph returns (see :func:`output_from_arrays`).
@@ -103,5 +106,9 @@ class ExportedGraphEngine(InferenceEngine):
     ) -> DepthCompletionOutput:
         self.check_size(rgb)
         given = {"rgb": rgb, "semantic": semantic, "sparse": sparse}
-        arrays = self.run_graph({name: given[name].detach().cpu().float().numpy() for name in self.input_names})
+        missing = [name for name in self.input_names if given[name] is None]
+        if missing:
+            raise InputError(f"this {self.backend} engine's graph needs {', '.join(missing)}; got None")
+        feeds = {name: t.detach().cpu().float().numpy() for name in self.input_names if (t := given[name]) is not None}
+        arrays = self.run_graph(feeds)
         return output_from_arrays({n: torch.from_numpy(a).to(rgb.device) for n, a in arrays.items()}, self.iterations)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import torch
 import torch.nn.functional as F
@@ -20,7 +21,9 @@ def kernel_size(affinity: torch.Tensor) -> int:
     return k
 
 
-def taps(k: int, dilation: int, height: int, width: int):  # type: ignore[no-untyped-def]
+def taps(
+    k: int, dilation: int, height: int, width: int
+) -> Iterator[tuple[int, tuple[slice, slice], tuple[slice, slice]]]:
     """For every non-centre tap t: (t, destination slices, source slices) with dst = src + o_t."""
     r = k // 2
     for t in range(k * k):
