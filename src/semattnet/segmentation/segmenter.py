@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import os
 import pickle
+import re
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -177,9 +178,9 @@ def _torchvision(arch: str, weights: Path, device: torch.device) -> Network:
     net = ctor(weights=None, weights_backbone=None, num_classes=classes, aux_loss=aux)
     try:
         net.load_state_dict(state)
-    except RuntimeError as err:
-        first = str(err).strip().splitlines()[0]
-        raise DataError(f"{weights}: does not fit torchvision's {arch}: {first}") from None
+    except RuntimeError as err:  # torch lists the missing / unexpected keys over several lines
+        detail = re.sub(r"^Error\(s\) in loading state_dict for \S+:\s*", "", " ".join(str(err).split()))
+        raise DataError(f"{weights}: does not fit torchvision's {arch}: {detail[:300]}") from None
     return net.to(device).eval()
 
 
