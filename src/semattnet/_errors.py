@@ -32,7 +32,7 @@ class InputError(SemAttNetError, TypeError):
     Also a ``TypeError``, so code that caught the type errors of a wrong argument keeps working."""
 
 
-class MissingDependencyError(SemAttNetError, ImportError):
+class MissingDependencyError(ImportError, SemAttNetError):
     """An optional dependency the request needs is not installed; the message says what to install.
 
-    Also an ``ImportError``, so code that caught the import failure keeps working."""
+    An ``ImportError`` first (so ``name=`` and ``path=`` work as for ImportError), and a SemAttNetError."""

@@ -48,6 +48,8 @@ def test_error_roots_keep_their_builtin_bases() -> None:
     """``except TypeError`` / ``except ImportError`` code keeps catching the argument / dependency errors."""
     assert issubclass(semattnet.InputError, TypeError) and issubclass(semattnet.MissingDependencyError, ImportError)
     assert semattnet.data.io.DataError is semattnet.DataError is semattnet.data.DataError
+    missing = semattnet.MissingDependencyError("needs onnx: pip install onnx", name="onnx")
+    assert missing.name == "onnx" and str(missing) == "needs onnx: pip install onnx"
 
 
 def test_moved_scan_file_names_keep_working_at_their_old_place() -> None:

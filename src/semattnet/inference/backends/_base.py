@@ -30,7 +30,8 @@ def import_backend(module: str, extra: str) -> ModuleType:
     try:
         return importlib.import_module(module)
     except ImportError:
-        raise MissingDependencyError(f"the {module} backend needs {module}: pip install 'semattnet[{extra}]'") from None
+        msg = f"the {module} backend needs {module}: pip install 'semattnet[{extra}]'"
+        raise MissingDependencyError(msg, name=module) from None
 
 
 class InferenceEngine(nn.Module):
