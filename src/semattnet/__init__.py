@@ -10,7 +10,7 @@ The names below are the stable public API.
 
 import sys as _sys
 
-from semattnet._errors import SemAttNetError
+from semattnet._errors import DataError, InputError, MissingDependencyError, SemAttNetError
 from semattnet.data import palette
 from semattnet.inference import DepthCompleter, crop_padding, pad_to_multiple
 from semattnet.models import (
@@ -39,8 +39,11 @@ __version__ = "0.1.0"
 _sys.modules[__name__ + ".palette"] = palette
 
 __all__ = [
+    "DataError",
     "DepthCompleter",
     "DepthCompletionOutput",
+    "InputError",
+    "MissingDependencyError",
     "SemAttNet",
     "SemAttNetBackbone",
     "SemAttNetConfig",

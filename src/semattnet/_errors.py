@@ -7,6 +7,7 @@ checkpoint, an option that means nothing) derives from :class:`SemAttNetError`, 
 
 - :class:`DataError`: a data file is missing, unreadable or not in the expected encoding.
 - :class:`InputError`: an argument (a tensor, an array, an option) is not what the function accepts.
+- :class:`MissingDependencyError`: an optional dependency that the request needs is not installed.
 
 More specific classes live with the code that raises them and derive from these (for example
 ``semattnet.data.palette.UnknownColorError``, ``semattnet.weights.CheckpointError``).
@@ -14,7 +15,7 @@ More specific classes live with the code that raises them and derive from these 
 
 from __future__ import annotations
 
-__all__ = ["DataError", "InputError", "SemAttNetError"]
+__all__ = ["DataError", "InputError", "MissingDependencyError", "SemAttNetError"]
 
 
 class SemAttNetError(ValueError):
@@ -29,3 +30,9 @@ class InputError(SemAttNetError, TypeError):
     """An argument (tensor, array, option value or combination) that the function does not accept.
 
     Also a ``TypeError``, so code that caught the type errors of a wrong argument keeps working."""
+
+
+class MissingDependencyError(ImportError, SemAttNetError):
+    """An optional dependency the request needs is not installed; the message says what to install.
+
+    An ``ImportError`` first (so ``name=`` and ``path=`` work as for ImportError), and a SemAttNetError."""

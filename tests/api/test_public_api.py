@@ -33,9 +33,31 @@ def test_palette_alias() -> None:
         "semattnet.weights.StateDictMismatchError",
         "semattnet.weights.UnsafeCheckpointError",
         "semattnet.evaluation.SubmissionError",
+        "semattnet.DataError",
+        "semattnet.InputError",
+        "semattnet.MissingDependencyError",
     ],
 )
 def test_errors_share_one_root(path: str) -> None:
     module, name = path.rsplit(".", 1)
     cls = getattr(importlib.import_module(module), name)
     assert issubclass(cls, SemAttNetError) and issubclass(cls, ValueError)
+
+
+def test_error_roots_keep_their_builtin_bases() -> None:
+    """``except TypeError`` / ``except ImportError`` code keeps catching the argument / dependency errors."""
+    assert issubclass(semattnet.InputError, TypeError) and issubclass(semattnet.MissingDependencyError, ImportError)
+    assert semattnet.data.io.DataError is semattnet.DataError is semattnet.data.DataError
+    missing = semattnet.MissingDependencyError("needs onnx: pip install onnx", name="onnx")
+    assert missing.name == "onnx" and str(missing) == "needs onnx: pip install onnx"
+
+
+def test_moved_scan_file_names_keep_working_at_their_old_place() -> None:
+    import semattnet.data.scans as scans
+    import semattnet.geometry as geometry
+
+    for name in ("project_scan_file", "ProjectionSummary"):
+        with pytest.warns(DeprecationWarning, match=f"moved to semattnet.data.scans.{name}"):
+            assert getattr(geometry, name) is getattr(scans, name)
+    with pytest.raises(AttributeError):
+        geometry.no_such_name  # noqa: B018

@@ -13,6 +13,7 @@ import torch
 from click.testing import CliRunner
 from torch import nn
 
+from semattnet import DataError, InputError
 from semattnet.cli import main
 from semattnet.data.io import read_image, write_image
 from semattnet.data.palette import IGNORE_ID, UNKNOWN_COLOR, colors_to_ids
@@ -203,5 +204,27 @@ def test_torchvision_spec(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> No
     s = load_segmenter(f"torchvision:deeplabv3_resnet50:{weights}", "cpu")
     assert built == {"weights": None, "weights_backbone": None, "num_classes": 19, "aux": False}  # no download
     assert (s(np.zeros((1, 8, 8, 3), dtype=np.uint8)) == 18).all()
-    with pytest.raises(ValueError, match="no architecture 'nope'"):
+    with pytest.raises(InputError, match="no architecture 'nope'"):
         load_segmenter(f"torchvision:nope:{weights}", "cpu")
+    partial = tmp_path / "partial.pth"
+    torch.save({k: v for k, v in trained.state_dict().items() if not k.startswith("backbone.")}, partial)
+    with pytest.raises(DataError, match=r"partial.pth: does not fit torchvision's deeplabv3_resnet50: .*Missing key"):
+        load_segmenter(f"torchvision:deeplabv3_resnet50:{partial}", "cpu")
+    # a pickle that would run code: torch.load(weights_only=True) refuses it, and the bare
+    # pickle.UnpicklingError it raises becomes a DataError (one line in the CLI), the code never runs
+    marker = tmp_path / "ran"
+    evil = tmp_path / "evil.pth"
+    torch.save({"model": _OpensAFile(marker)}, evil)
+    with pytest.raises(DataError, match=r"evil.pth: not a loadable \(weights-only\) PyTorch state dict"):
+        load_segmenter(f"torchvision:deeplabv3_resnet50:{evil}", "cpu")
+    assert not marker.exists()
+
+
+class _OpensAFile:
+    """Unpickling this would call ``open(path, "w")``: a stand-in for code a pickle could run."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def __reduce__(self) -> tuple[object, tuple[str, str]]:
+        return open, (str(self.path), "w")

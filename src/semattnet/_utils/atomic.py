@@ -16,7 +16,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["atomic_path", "clean_stale_temps", "fsync_dir", "new_file_mode"]
+__all__ = ["atomic_path", "clean_stale_temps", "fsync_dir", "new_file_mode", "pid_alive"]
 
 
 def new_file_mode() -> int:
@@ -26,7 +26,8 @@ def new_file_mode() -> int:
     return 0o666 & ~mask
 
 
-def _pid_alive(pid: int) -> bool:
+def pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (ours counts; one of another user counts too)."""
     if pid == os.getpid():
         return True
     try:
@@ -43,14 +44,14 @@ def clean_stale_temps(path: str | os.PathLike[str]) -> list[Path]:
     gone, and the older ``.NAME.XXXXXXXX*`` form); returns what was removed."""
     path = Path(path)
     pattern = re.compile(rf"^\.{re.escape(path.name)}\.(?:p(\d+)\.)?[a-z0-9_]{{8}}(?:\.[A-Za-z0-9]+)?$")
-    removed = []
+    removed: list[Path] = []
     try:
         entries = list(path.parent.iterdir())
     except OSError:
         return removed
     for entry in entries:
         m = pattern.match(entry.name)
-        if m is None or not entry.is_file() or (m.group(1) and _pid_alive(int(m.group(1)))):
+        if m is None or not entry.is_file() or (m.group(1) and pid_alive(int(m.group(1)))):
             continue
         try:
             entry.unlink()

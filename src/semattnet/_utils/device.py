@@ -12,6 +12,8 @@ import time
 
 import torch
 
+from semattnet._errors import InputError
+
 __all__ = ["AMP_DTYPES", "amp_dtype", "autocast", "now", "resolve_device", "synchronize"]
 
 #: ``--amp`` names and the autocast type each selects (``none``: float32, no autocast).
@@ -26,7 +28,7 @@ def resolve_device(name: str | torch.device = "auto") -> torch.device:
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     device = torch.device(name)
     if device.type == "cuda" and not torch.cuda.is_available():
-        raise ValueError(f"device {name!r} requested but CUDA is not available; use --device cpu or auto")
+        raise InputError(f"device {name!r} requested but CUDA is not available; use --device cpu or auto")
     return device
 
 
@@ -39,7 +41,7 @@ def amp_dtype(amp: str) -> torch.dtype | None:
     True
     """
     if amp not in AMP_DTYPES:
-        raise ValueError(f"amp must be one of {sorted(AMP_DTYPES)}, got {amp!r}")
+        raise InputError(f"amp must be one of {sorted(AMP_DTYPES)}, got {amp!r}")
     return AMP_DTYPES[amp]
 
 

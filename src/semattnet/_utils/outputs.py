@@ -84,11 +84,11 @@ def check_no_input_overlap(
 
 def _clean_stale_stages(out: Path) -> None:
     """Remove stage folders a killed run left in ``out`` (named with a process id that is gone)."""
-    from semattnet._utils.atomic import _pid_alive
+    from semattnet._utils.atomic import pid_alive
 
     for entry in out.glob(f"{STAGE_PREFIX}*"):
         pid = entry.name[len(STAGE_PREFIX) :].split(".")[0]
-        if entry.is_dir() and pid.isdigit() and not _pid_alive(int(pid)):
+        if entry.is_dir() and pid.isdigit() and not pid_alive(int(pid)):
             shutil.rmtree(entry, ignore_errors=True)
 
 

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import errno
 import os
-import pickle
+import sys
+import traceback
+from importlib import metadata
+from typing import Any
 
 import click
 
@@ -39,20 +42,50 @@ def os_error_message(exc: OSError) -> str:
     return " ".join(text.split()) or os.strerror(exc.errno or 0)
 
 
-class _Group(click.Group):
-    """Turns the library's bad-input errors (a missing or corrupt file, a wrong size, an
-    unsafe checkpoint, an existing output) and operating-system errors (a read-only folder,
-    a full disk, a path below a regular file) into one-line CLI errors, for every command."""
+#: Exit status of a command that failed on a bug of semattnet (``EX_SOFTWARE`` of sysexits.h).
+BUG_EXIT_CODE = 70
 
-    def invoke(self, ctx: click.Context):  # type: ignore[no-untyped-def]
+
+def bug_report_line(exc: BaseException) -> str:
+    """The line printed under the traceback of an unexpected exception: a bug, and where to report it."""
+    where = "the semattnet issue tracker"
+    try:
+        urls = metadata.metadata("semattnet").get_all("Project-URL") or []
+    except metadata.PackageNotFoundError:  # running from a source tree that is not installed
+        urls = []
+    for entry in urls:
+        label, _, url = entry.partition(",")
+        if label.strip().lower() in ("issues", "bug tracker", "tracker", "bugs"):
+            where = url.strip()
+    return (
+        f"semattnet {__version__}: {type(exc).__name__} is a bug in semattnet, not a problem with your input; "
+        f"please report it at {where} with the traceback above and the command you ran"
+    )
+
+
+class _Group(click.Group):
+    """Error handling for every command.
+
+    The library's bad-input errors (:class:`~semattnet.SemAttNetError`: a missing or corrupt file, a
+    wrong size, an unsafe checkpoint, an option that means nothing) and operating-system errors (a
+    read-only folder, a full disk, a path below a regular file, an existing output) become one-line
+    CLI errors (exit status 1). Any other exception is a bug: its traceback is printed, then a line
+    saying so and where to report it (exit status :data:`BUG_EXIT_CODE`).
+    """
+
+    def invoke(self, ctx: click.Context) -> Any:
         try:
             return super().invoke(ctx)
         except (click.ClickException, click.exceptions.Exit, click.exceptions.Abort):
             raise
-        except (SemAttNetError, ValueError, pickle.UnpicklingError) as exc:
+        except SemAttNetError as exc:  # includes UnsafeCheckpointError, the one UnpicklingError of ours
             raise click.ClickException(str(exc) or type(exc).__name__) from None
         except OSError as exc:
             raise click.ClickException(os_error_message(exc)) from None
+        except Exception as exc:
+            traceback.print_exc(file=sys.stderr)
+            click.echo(bug_report_line(exc), err=True)
+            ctx.exit(BUG_EXIT_CODE)
 
 
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})

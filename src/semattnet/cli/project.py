@@ -67,7 +67,7 @@ def project(scan: Path, calib_dir: Path | None, camera: str, rig: Path | None, K
             size: str | None, deskew_oxts: Path | None, scan_period: float, out: Path,
             overwrite: bool) -> None:  # fmt: skip
     """Project a LiDAR scan into a camera: a KITTI-encoded 16-bit sparse depth map (depth * 256)."""
-    from semattnet.geometry.scan import project_scan_file
+    from semattnet.data.scans import project_scan_file
 
     summary = project_scan_file(scan, out, calib_dir=calib_dir, camera=camera, rig=rig, K=_numbers(K, "--K"),
                                 T=_numbers(T, "--T"), image_size=_size(size), deskew_oxts=deskew_oxts,

@@ -1,7 +1,9 @@
-"""Data: KITTI depth completion loaders, transforms, PNG I/O and synthetic KITTI-like scenes."""
+"""Data: KITTI depth completion loaders, transforms, PNG I/O, scan -> PNG projection and synthetic KITTI-like scenes."""
 
-from semattnet.data.io import DataError, read_depth, read_image, read_intrinsics, write_depth, write_image
+from semattnet._errors import DataError
+from semattnet.data.io import read_depth, read_image, read_intrinsics, write_depth, write_image
 from semattnet.data.kitti import FrameFiles, KittiDepthCompletion, find_frames
+from semattnet.data.scans import ProjectionSummary, project_scan_file
 from semattnet.data.synthetic.scenes import CITYSCAPES_PALETTE, SyntheticFrame, make_frame
 from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.data.transforms import EvalTransform, Sample, TrainTransform
@@ -12,11 +14,13 @@ __all__ = [
     "EvalTransform",
     "FrameFiles",
     "KittiDepthCompletion",
+    "ProjectionSummary",
     "Sample",
     "SyntheticFrame",
     "TrainTransform",
     "find_frames",
     "make_frame",
+    "project_scan_file",
     "read_depth",
     "read_image",
     "read_intrinsics",

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from semattnet._errors import SemAttNetError
+from semattnet._errors import DataError, InputError
 
 __all__ = [
     "IGNORE_ID",
@@ -69,7 +69,7 @@ LABEL_TO_TRAIN: dict[int, int] = {
 }  # fmt: skip
 
 
-class UnknownColorError(SemAttNetError):
+class UnknownColorError(DataError):
     """A semantic map holds colours outside the palette."""
 
 
@@ -84,7 +84,7 @@ def label_ids_to_train_ids(label_ids: np.ndarray) -> np.ndarray:
     """Map a Cityscapes labelId image to trainIds (uint8, 255 where not a training class)."""
     ids = np.asarray(label_ids)
     if ids.size and (ids.min() < 0 or ids.max() > 255):
-        raise ValueError(f"labelIds must lie in 0..255, got {ids.min()}..{ids.max()}")
+        raise InputError(f"labelIds must lie in 0..255, got {ids.min()}..{ids.max()}")
     return _lut_label_to_train()[ids.astype(np.int64)]
 
 
@@ -94,7 +94,7 @@ def ids_to_colors(train_ids: np.ndarray) -> np.ndarray:
     bad = (ids != IGNORE_ID) & ((ids < 0) | (ids >= NUM_CLASSES))
     if bad.any():
         found = sorted(set(ids[bad].tolist()))[:5]
-        raise ValueError(f"trainIds must be 0..{NUM_CLASSES - 1} or {IGNORE_ID}, found {found}")
+        raise InputError(f"trainIds must be 0..{NUM_CLASSES - 1} or {IGNORE_ID}, found {found}")
     table = np.concatenate([PALETTE, np.array([UNKNOWN_COLOR], dtype=np.uint8)])
     return table[np.where(ids == IGNORE_ID, NUM_CLASSES, ids).astype(np.int64)]
 
@@ -108,7 +108,7 @@ def colors_to_ids(colors: np.ndarray, allow_unknown: bool = True, source: str = 
     """
     rgb = np.asarray(colors)
     if rgb.ndim != 3 or rgb.shape[-1] != 3 or rgb.dtype != np.uint8:
-        raise ValueError(f"{source}: expected an (H, W, 3) uint8 colour image, got {rgb.dtype} {rgb.shape}")
+        raise DataError(f"{source}: expected an (H, W, 3) uint8 colour image, got {rgb.dtype} {rgb.shape}")
     code = (rgb[..., 0].astype(np.int32) << 16) | (rgb[..., 1].astype(np.int32) << 8) | rgb[..., 2]
     keys = (PALETTE[:, 0].astype(np.int32) << 16) | (PALETTE[:, 1].astype(np.int32) << 8) | PALETTE[:, 2]
     order = np.argsort(keys)

@@ -29,6 +29,8 @@ from dataclasses import dataclass, field
 
 import torch
 
+from semattnet._errors import DataError, InputError
+
 __all__ = ["LEADERBOARD", "KittiMetrics", "fill_holes_kitti", "image_metrics"]
 
 #: Names, units and scale of the official metrics (internal values are metres and 1/m).
@@ -74,7 +76,7 @@ def image_metrics(
     Images without any ground-truth pixel get NaN (and are skipped by :class:`KittiMetrics`).
     """
     if pred.shape != gt.shape:
-        raise ValueError(f"prediction {tuple(pred.shape)} and ground truth {tuple(gt.shape)} differ in shape")
+        raise InputError(f"prediction {tuple(pred.shape)} and ground truth {tuple(gt.shape)} differ in shape")
     pred, gt = pred.detach().double(), gt.detach().double()
     if fill_holes:
         pred = fill_holes_kitti(pred)
@@ -165,7 +167,7 @@ class KittiMetrics:
         """Means over images: ``rmse_mm``, ``mae_mm``, ``irmse_per_km``, ``imae_per_km`` (the
         leaderboard), the same in metres (``rmse`` ...), the extras, and ``images``."""
         if self._count == 0:
-            raise ValueError("no image with ground truth was scored")
+            raise DataError("no image with ground truth was scored")
         mean = {k: v / self._count for k, v in self._sums.items()}
         out = {"images": float(self._count)}
         for k, (_, unit, scale) in LEADERBOARD.items():

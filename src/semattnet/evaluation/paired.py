@@ -37,6 +37,8 @@ from typing import Any
 
 import numpy as np
 
+from semattnet._errors import InputError
+
 __all__ = ["ALPHA", "MIN_SEED_UNITS", "bootstrap_ci", "compare", "differences", "sign_flip_p", "verdict"]
 
 #: Significance level of the verdicts.
@@ -57,15 +59,15 @@ def differences(
         ``(d, seeds, images)`` with ``d`` of shape (seeds, images).
 
     Raises:
-        ValueError: no common seed, or a seed whose two image sets differ (not paired).
+        InputError: no common seed, or a seed whose two image sets differ (not paired).
     """
     seeds = sorted(set(worse) & set(better))
     if not seeds:
-        raise ValueError("the two models have no seed in common")
+        raise InputError("the two models have no seed in common")
     images = sorted(worse[seeds[0]])
     for s in seeds:
         if sorted(worse[s]) != images or sorted(better[s]) != images:
-            raise ValueError(f"seed {s}: the two models were scored on different images")
+            raise InputError(f"seed {s}: the two models were scored on different images")
     d = np.array([[worse[s][i] - better[s][i] for i in images] for s in seeds], dtype=np.float64)
     return d, seeds, images
 
@@ -84,7 +86,7 @@ def sign_flip_p(units: np.ndarray, *, exact_max: int = 16, draws: int = 20_000, 
     u = np.asarray(units, dtype=np.float64).ravel()
     n = u.size
     if n == 0:
-        raise ValueError("no units to test")
+        raise InputError("no units to test")
     observed = abs(u.mean())
     tol = 1e-12 * max(1.0, float(np.abs(u).max()))
     if n <= exact_max:
@@ -108,7 +110,7 @@ def bootstrap_ci(d: np.ndarray, *, level: float = 0.95, draws: int = 4000, seed:
     """
     d = np.asarray(d, dtype=np.float64)
     if d.ndim != 2 or d.size == 0:
-        raise ValueError(f"expected a non-empty (seeds, images) array, got shape {d.shape}")
+        raise InputError(f"expected a non-empty (seeds, images) array, got shape {d.shape}")
     rng = np.random.default_rng(seed)
     n_seeds, n_images = d.shape
     reps = np.empty(draws)
@@ -139,7 +141,7 @@ def compare(d: np.ndarray, seeds: Sequence[int], *, alpha: float = ALPHA, seed: 
     """
     d = np.asarray(d, dtype=np.float64)
     if d.ndim != 2 or d.shape[0] != len(seeds):
-        raise ValueError(f"expected shape ({len(seeds)}, images), got {d.shape}")
+        raise InputError(f"expected shape ({len(seeds)}, images), got {d.shape}")
     per_seed = d.mean(axis=1)
     by_seed = len(seeds) >= MIN_SEED_UNITS
     p = sign_flip_p(per_seed if by_seed else d.ravel(), seed=seed)

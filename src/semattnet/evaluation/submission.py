@@ -64,11 +64,11 @@ def _check_replaceable(out: Path, zip_path: Path, expected: dict[str, tuple[int,
 
 def _clean_stale_stages(out: Path) -> None:
     """Remove the temporary folders (``.OUT.pPID.*``) of killed submissions."""
-    from semattnet._utils.atomic import _pid_alive
+    from semattnet._utils.atomic import pid_alive
 
     for entry in out.parent.glob(f".{out.name}.p*"):
         pid = entry.name[len(out.name) + 2 :].split(".")[0]
-        if entry.is_dir() and pid.isdigit() and not _pid_alive(int(pid)):
+        if entry.is_dir() and pid.isdigit() and not pid_alive(int(pid)):
             shutil.rmtree(entry, ignore_errors=True)
 
 

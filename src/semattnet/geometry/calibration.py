@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from semattnet._utils.documents import read_document
-from semattnet.data.io import DataError
+from semattnet._errors import DataError
 
 from .transforms import check_rigid, check_rotation, make_T
 

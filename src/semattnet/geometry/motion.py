@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from semattnet.data.io import DataError
+from semattnet._errors import DataError
 
 __all__ = ["VehicleMotion", "deskew_scan", "read_oxts_motion"]
 

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from semattnet._errors import DataError
 from semattnet._utils.atomic import atomic_path
-from semattnet.data.io import DataError
 
 from .projection import PointCloud
 

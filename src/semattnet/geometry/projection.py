@@ -23,9 +23,10 @@ from typing import Any
 
 import numpy as np
 
-from semattnet.data.io import DataError
+from semattnet._errors import DataError
 
-from .transforms import _is_torch, transform_points
+from .transforms import is_tensor as _is_torch  # a short local name for the public transforms.is_tensor
+from .transforms import transform_points
 
 __all__ = [
     "PointCloud",

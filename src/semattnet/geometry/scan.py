@@ -1,4 +1,5 @@
-"""One LiDAR scan file -> one KITTI-encoded sparse depth map (what ``semattnet project`` runs).
+"""One LiDAR scan -> one sparse depth map (``semattnet project`` writes it with
+:func:`semattnet.data.scans.project_scan_file`).
 
 The calibration comes from one of three sources (exactly one must be given):
 
@@ -14,41 +15,20 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from semattnet.data.io import DataError
+from semattnet._errors import DataError
 
 from .calibration import RigCalibration, read_kitti_calibration, read_rig_json
 from .motion import deskew_scan, read_oxts_motion
-from .pointcloud_io import read_points
 from .projection import project_points
 from .transforms import check_rigid
 
-__all__ = ["ProjectionSummary", "load_rig", "project_scan", "project_scan_file"]
+__all__ = ["DEFAULT_SCAN_PERIOD", "load_rig", "project_scan"]
 
 #: Seconds per Velodyne revolution when the drive's timestamps are not at hand (KITTI: ~0.103 s).
 DEFAULT_SCAN_PERIOD = 0.1
-
-
-@dataclass(frozen=True)
-class ProjectionSummary:
-    """What :func:`project_scan_file` did: ``points`` read, ``projected`` pixels with depth (the nearest point
-    wins a pixel), their ``density``
-    (fraction of the image's pixels), the written ``path`` and the ``depth`` map (H, W) metres."""
-
-    path: Path
-    points: int
-    projected: int
-    density: float
-    depth: np.ndarray
-
-    def describe(self) -> str:
-        h, w = self.depth.shape
-        density = f"{100 * self.density:.2f} % of {w}x{h}"
-        return f"{self.path}: {self.points} points read, {self.projected} projected into pixels (density {density})"
 
 
 def _rig_from_numbers(K: Sequence[float], T: Sequence[float], image_size: Sequence[int] | None) -> RigCalibration:
@@ -111,38 +91,3 @@ def project_scan(
         motion = read_oxts_motion(oxts)
         points = deskew_scan(points, motion.velocity, motion.yaw_rate, scan_period)
     return project_points(points, calib.K, calib.T_cam_lidar, calib.image_size, name=name)
-
-
-def project_scan_file(
-    scan: str | os.PathLike[str],
-    out: str | os.PathLike[str],
-    *,
-    calib_dir: str | os.PathLike[str] | None = None,
-    camera: str | int = "02",
-    rig: str | os.PathLike[str] | None = None,
-    K: Sequence[float] | None = None,
-    T: Sequence[float] | None = None,
-    image_size: Sequence[int] | None = None,
-    deskew_oxts: str | os.PathLike[str] | None = None,
-    scan_period: float = DEFAULT_SCAN_PERIOD,
-    overwrite: bool = False,
-) -> ProjectionSummary:
-    """Read ``scan`` (any :func:`read_points` format), project it with the calibration from :func:`load_rig`
-    and write ``out`` as a KITTI 16-bit depth PNG (depth * 256, 0 = none).
-
-    Raises:
-        FileExistsError: ``out`` exists and ``overwrite`` is False (checked before reading anything).
-        DataError: bad scan, calibration or OXTS file; the message names the file.
-    """
-    from semattnet.data.io import write_depth
-
-    out = Path(out)
-    if out.exists() and not overwrite:
-        raise FileExistsError(f"{out} exists; refusing to overwrite (pass --overwrite)")
-    calib = load_rig(calib_dir, camera, rig, K, T, image_size)
-    points = read_points(scan)
-    depth = project_scan(points, calib, deskew_oxts, scan_period, name=str(scan))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_depth(out, depth, overwrite=overwrite)
-    projected = int(np.count_nonzero(depth))
-    return ProjectionSummary(out, int(points.shape[0]), projected, projected / depth.size, depth)

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from semattnet.data.io import DataError
+from semattnet._errors import DataError, InputError
 
 __all__ = ["beam_ids", "elevation_deg", "keep_beams", "keep_random", "keep_row_bands"]
 
@@ -75,7 +75,7 @@ def beam_ids(points: np.ndarray, num_beams: int = 64, method: str = "auto", orig
     if points.ndim != 2 or points.shape[1] < 3 or len(points) == 0:
         raise DataError(f"beam_ids: points must be a non-empty (N, 3|4) array, got shape {points.shape}")
     if method not in ("auto", "order", "elevation"):
-        raise ValueError(f"method must be 'auto', 'order' or 'elevation', got {method!r}")
+        raise InputError(f"method must be 'auto', 'order' or 'elevation', got {method!r}")
     if method != "elevation":
         ids = _beams_by_order(points)
         if ids[-1] + 1 == num_beams:
@@ -98,7 +98,7 @@ def keep_beams(
         (M, 3|4) the kept points, in their original order.
     """
     if keep <= 0 or num_beams % keep:
-        raise ValueError(f"keep must divide num_beams={num_beams}, got {keep}")
+        raise InputError(f"keep must divide num_beams={num_beams}, got {keep}")
     ids = beam_ids(points, num_beams, method) if beams is None else np.asarray(beams)
     return np.asarray(points)[ids % (num_beams // keep) == 0]
 
@@ -116,7 +116,7 @@ def keep_random(data: np.ndarray, ratio: float, seed: int = 0, kind: str = "auto
         The kept points (in original order) or a copy of the map with the dropped pixels set to 0.
     """
     if not 0.0 <= ratio <= 1.0:
-        raise ValueError(f"ratio must be in [0, 1], got {ratio}")
+        raise InputError(f"ratio must be in [0, 1], got {ratio}")
     a = np.asarray(data)
     if kind == "auto":
         kind = "points" if a.ndim == 2 and a.shape[1] in (3, 4) else "map"
@@ -126,7 +126,7 @@ def keep_random(data: np.ndarray, ratio: float, seed: int = 0, kind: str = "auto
         idx = np.sort(rng.choice(n, size=round(ratio * n), replace=False))
         return a[idx]
     if kind != "map" or a.ndim != 2:
-        raise ValueError(f"kind must be 'points' or 'map' (an (H, W) array), got {kind!r} with shape {a.shape}")
+        raise InputError(f"kind must be 'points' or 'map' (an (H, W) array), got {kind!r} with shape {a.shape}")
     flat = np.flatnonzero(a > 0)
     drop = rng.choice(flat, size=len(flat) - round(ratio * len(flat)), replace=False)
     out = a.copy()
@@ -155,6 +155,7 @@ def _beam_ids_from_depth(d: np.ndarray, K: np.ndarray, T_cam_lidar: np.ndarray, 
 
     cloud = depth_to_points(d, K).transform(invert_T(np.asarray(T_cam_lidar, dtype=np.float64)), "lidar")
     ids = np.full(d.shape, -1, dtype=np.int64)
+    assert cloud.uv is not None  # depth_to_points keeps every point's pixel
     uv = cloud.uv.astype(np.int64)
     ids[uv[:, 1], uv[:, 0]] = _beams_by_elevation(cloud.xyz, num_beams, origin_height=0.2)
     return ids
@@ -182,10 +183,10 @@ def keep_row_bands(
         (H, W) float32 copy with the pixels of the dropped beams set to 0.
     """
     if keep <= 0 or num_beams % keep:
-        raise ValueError(f"keep must divide num_beams={num_beams}, got {keep}")
+        raise InputError(f"keep must divide num_beams={num_beams}, got {keep}")
     d = _as_numpy_map(sparse)
     if (K is None) != (T_cam_lidar is None):
-        raise ValueError("pass both K and T_cam_lidar, or neither")
+        raise InputError("pass both K and T_cam_lidar, or neither")
     valid = d > 0
     if not valid.any():
         return d.copy()

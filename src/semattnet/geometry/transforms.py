@@ -13,18 +13,21 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["check_rigid", "check_rotation", "invert_T", "make_T", "transform_points"]
+from semattnet._errors import InputError
+
+__all__ = ["check_rigid", "check_rotation", "invert_T", "is_tensor", "make_T", "transform_points"]
 
 Array = Any  # np.ndarray or torch.Tensor
 
 
-def _is_torch(x: object) -> bool:
+def is_tensor(x: object) -> bool:
+    """Whether ``x`` is a torch tensor (checked without importing torch; NumPy otherwise)."""
     return type(x).__module__.split(".")[0] == "torch"
 
 
 def _swap_last(x: Array) -> Array:
     """Transpose of the last two axes, for NumPy arrays and torch tensors."""
-    return x.transpose(-1, -2) if _is_torch(x) else np.swapaxes(x, -1, -2)
+    return x.transpose(-1, -2) if is_tensor(x) else np.swapaxes(x, -1, -2)
 
 
 def make_T(R: Array, t: Array) -> Array:
@@ -37,7 +40,7 @@ def make_T(R: Array, t: Array) -> Array:
     Returns:
         (4, 4) transform, same kind (NumPy/torch) and dtype as ``R`` (float64 for NumPy integer input).
     """
-    if _is_torch(R):
+    if is_tensor(R):
         import torch
 
         T = torch.eye(4, dtype=R.dtype, device=R.device)
@@ -46,10 +49,10 @@ def make_T(R: Array, t: Array) -> Array:
         return T
     R = np.asarray(R)
     dtype = R.dtype if np.issubdtype(R.dtype, np.floating) else np.float64
-    T = np.eye(4, dtype=dtype)
-    T[:3, :3] = R
-    T[:3, 3] = np.asarray(t, dtype=dtype).reshape(3)
-    return T
+    out = np.eye(4, dtype=dtype)
+    out[:3, :3] = R
+    out[:3, 3] = np.asarray(t, dtype=dtype).reshape(3)
+    return out
 
 
 def invert_T(T: Array) -> Array:
@@ -77,8 +80,8 @@ def transform_points(T: Array, xyz: Array) -> Array:
         (N, 3) or (N, 3+k) points in frame ``a``, dtype of ``xyz`` for floating input.
     """
     if xyz.shape[-1] < 3:
-        raise ValueError(f"points must have at least 3 columns (x, y, z), got shape {tuple(xyz.shape)}")
-    if _is_torch(xyz):
+        raise InputError(f"points must have at least 3 columns (x, y, z), got shape {tuple(xyz.shape)}")
+    if is_tensor(xyz):
         import torch
 
         T = torch.as_tensor(T, dtype=xyz.dtype, device=xyz.device)
@@ -99,7 +102,7 @@ def check_rigid(T: Array, tol: float = 1e-3) -> str | None:
 
     Checks shape (4, 4), finiteness, last row ``[0, 0, 0, 1]``, ``R^T R = I`` and ``det R = +1`` to ``tol``.
     """
-    T = np.asarray(T.detach().cpu() if _is_torch(T) else T, dtype=np.float64)
+    T = np.asarray(T.detach().cpu() if is_tensor(T) else T, dtype=np.float64)
     if T.shape != (4, 4):
         return f"expected a 4x4 matrix, got shape {T.shape}"
     if not np.all(np.isfinite(T)):

@@ -15,6 +15,7 @@ from typing import NamedTuple
 import torch
 from torch import nn
 
+from semattnet._errors import InputError
 from semattnet.models.branches import ColorGuidedBranch, DepthGuidedBranch, SemanticGuidedBranch
 from semattnet.models.checks import check_inputs
 from semattnet.models.confidence_fusion import confidence_fusion
@@ -78,6 +79,7 @@ class SemAttNetBackbone(ColorGuidedBranch, SemanticGuidedBranch, DepthGuidedBran
             heads.append(self.segment_decoder_layer6[1])
         with torch.no_grad():
             for bn in heads:
+                assert isinstance(bn, nn.BatchNorm2d)  # the heads end in (BatchNorm, ReLU)
                 bn.weight[0] = scale
                 bn.bias[0] = shift
 
@@ -98,7 +100,8 @@ class SemAttNetBackbone(ColorGuidedBranch, SemanticGuidedBranch, DepthGuidedBran
         if sg is None:
             fused, (w_cg, w_dg) = confidence_fusion((cg.depth, dg.depth), (cg.conf, dg.conf))
             w_sg = None
-            s1 = (cg.feature_s1, dg.feature_s1)
+            s1: tuple[torch.Tensor, ...] = (cg.feature_s1, dg.feature_s1)
+            s2: tuple[torch.Tensor, ...]
             s2 = (cg.decoder[2], dg.feature_s2)
         else:
             fused, (w_cg, w_sg, w_dg) = confidence_fusion((cg.depth, sg.depth, dg.depth), (cg.conf, sg.conf, dg.conf))
@@ -120,5 +123,5 @@ class SemAttNetBackbone(ColorGuidedBranch, SemanticGuidedBranch, DepthGuidedBran
     ) -> DepthCompletionOutput:
         """Complete depth. Inputs: RGB 0..255, colour-coded semantic map 0..255, sparse metres."""
         if sparse is None:
-            raise ValueError("sparse depth is required")
+            raise InputError("sparse depth is required")
         return self.forward_features(rgb, semantic, sparse).output

@@ -9,6 +9,7 @@ its state dict no longer has the ``bn`` keys, so keep the original for checkpoin
 from __future__ import annotations
 
 import copy
+from typing import TypeVar
 
 from torch import nn
 from torch.nn.utils.fusion import fuse_conv_bn_eval
@@ -21,8 +22,11 @@ __all__ = ["fold_batchnorm"]
 _CONVS = (nn.Conv2d, nn.ConvTranspose2d)
 
 
-def _fused(conv: nn.Module, bn: nn.BatchNorm2d) -> nn.Module:
-    return fuse_conv_bn_eval(conv, bn, transpose=isinstance(conv, nn.ConvTranspose2d))  # type: ignore[arg-type]
+_Conv = TypeVar("_Conv", bound=nn.Conv2d | nn.ConvTranspose2d)
+
+
+def _fused(conv: _Conv, bn: nn.BatchNorm2d) -> _Conv:
+    return fuse_conv_bn_eval(conv, bn, transpose=isinstance(conv, nn.ConvTranspose2d))
 
 
 def fold_batchnorm(model: nn.Module, inplace: bool = False) -> nn.Module:
@@ -39,8 +43,9 @@ def fold_batchnorm(model: nn.Module, inplace: bool = False) -> nn.Module:
         if isinstance(module, nn.Sequential):
             children = list(module)
             for i in range(len(children) - 1):
-                if isinstance(children[i], _CONVS) and isinstance(children[i + 1], nn.BatchNorm2d):
-                    module[i] = _fused(children[i], children[i + 1])
+                first, second = children[i], children[i + 1]
+                if isinstance(first, _CONVS) and isinstance(second, nn.BatchNorm2d):
+                    module[i] = _fused(first, second)
                     module[i + 1] = nn.Identity()
                     folds += 1
         elif isinstance(module, BasicBlock):

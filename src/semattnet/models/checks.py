@@ -5,6 +5,7 @@ from __future__ import annotations
 import torch
 
 from semattnet.models._tracing import is_tracing
+from semattnet._errors import InputError
 
 __all__ = ["SIZE_MULTIPLE", "check_inputs"]
 
@@ -15,7 +16,7 @@ SIZE_MULTIPLE = 32
 def check_inputs(
     rgb: torch.Tensor, semantic: torch.Tensor | None, sparse: torch.Tensor, *, need_semantic: bool
 ) -> None:
-    """Raise ``ValueError`` unless the inputs are what SemAttNet expects.
+    """Raise :class:`~semattnet.InputError` unless the inputs are what SemAttNet expects.
 
     Expected: ``rgb`` (B, 3, H, W) 0..255, ``semantic`` (B, 3, H, W) colour-coded 0..255,
     ``sparse`` (B, 1, H, W) metres with 0 = missing; float tensors of one size, H and W
@@ -25,27 +26,27 @@ def check_inputs(
     named = [("rgb", rgb, 3), ("sparse", sparse, 1)]
     if need_semantic:
         if semantic is None:
-            raise ValueError("semantic is required by this model (three-branch); got None")
+            raise InputError("semantic is required by this model (three-branch); got None")
         named.insert(1, ("semantic", semantic, 3))
     for name, t, channels in named:
         if not isinstance(t, torch.Tensor):
-            raise ValueError(f"{name} must be a torch.Tensor, got {type(t).__name__}")
+            raise InputError(f"{name} must be a torch.Tensor, got {type(t).__name__}")
         if t.dim() != 4:
-            raise ValueError(f"{name} must be (B, {channels}, H, W), got shape {tuple(t.shape)}")
+            raise InputError(f"{name} must be (B, {channels}, H, W), got shape {tuple(t.shape)}")
         if t.shape[1] != channels:
-            raise ValueError(f"{name} must have {channels} channel(s), got shape {tuple(t.shape)}")
+            raise InputError(f"{name} must have {channels} channel(s), got shape {tuple(t.shape)}")
         if not t.is_floating_point():
-            raise ValueError(f"{name} must be a floating-point tensor, got {t.dtype}")
+            raise InputError(f"{name} must be a floating-point tensor, got {t.dtype}")
     b, _, h, w = rgb.shape
     for name, t, _ in named[1:]:
         if (t.shape[0], t.shape[2], t.shape[3]) != (b, h, w):
-            raise ValueError(
+            raise InputError(
                 f"{name} has shape {tuple(t.shape)} but rgb has {tuple(rgb.shape)}: batch and size must match"
             )
         if t.device != rgb.device:
-            raise ValueError(f"{name} is on {t.device} but rgb is on {rgb.device}")
+            raise InputError(f"{name} is on {t.device} but rgb is on {rgb.device}")
     if h % SIZE_MULTIPLE or w % SIZE_MULTIPLE or h == 0 or w == 0:
-        raise ValueError(
+        raise InputError(
             f"input size {h}x{w} is not a positive multiple of {SIZE_MULTIPLE} in both dimensions; "
             "pad with semattnet.pad_to_multiple (and crop the outputs back)"
         )
@@ -53,6 +54,6 @@ def check_inputs(
         return
     for name, t, _ in named:
         if not bool(torch.isfinite(t).all()):
-            raise ValueError(f"{name} contains NaN or infinite values")
+            raise InputError(f"{name} contains NaN or infinite values")
     if bool((sparse < 0).any()):
-        raise ValueError("sparse depth contains negative values; depth is in metres with 0 = missing")
+        raise InputError("sparse depth contains negative values; depth is in metres with 0 = missing")

@@ -71,9 +71,9 @@ class SemAttNetConfig:
 
     def __post_init__(self) -> None:
         if self.branches not in (2, 3):
-            raise ValueError(f"branches must be 2 (CG + DG) or 3 (CG + SG + DG), got {self.branches!r}")
+            raise InputError(f"branches must be 2 (CG + DG) or 3 (CG + SG + DG), got {self.branches!r}")
         if self.fusion not in FEATURE_FUSION_MODES:
-            raise ValueError(f"fusion must be one of {FEATURE_FUSION_MODES}, got {self.fusion!r}")
+            raise InputError(f"fusion must be one of {FEATURE_FUSION_MODES}, got {self.fusion!r}")
         _in_range("width", self.width, integer=False)  # >= 0.125: at least 4 base channels
         _in_range("reduction", self.reduction)
         if not isinstance(self.kernel_sizes, tuple | list) or not 1 <= len(self.kernel_sizes) <= MAX_KERNELS:
@@ -81,10 +81,10 @@ class SemAttNetConfig:
         for k in self.kernel_sizes:
             _in_range("kernel_sizes", k)
         if any(k % 2 == 0 for k in self.kernel_sizes):
-            raise ValueError(f"kernel_sizes must be odd and positive, got {self.kernel_sizes!r}")
+            raise InputError(f"kernel_sizes must be odd and positive, got {self.kernel_sizes!r}")
         _in_range("iterations", self.iterations)
         if self.refinement_mode not in ("authors", "clean"):
-            raise ValueError(f"refinement_mode must be 'authors' or 'clean', got {self.refinement_mode!r}")
+            raise InputError(f"refinement_mode must be 'authors' or 'clean', got {self.refinement_mode!r}")
         object.__setattr__(self, "kernel_sizes", tuple(int(k) for k in self.kernel_sizes))
 
     def replace(self, **changes: Any) -> SemAttNetConfig:

@@ -16,6 +16,7 @@ from typing import Literal
 import torch
 from torch import nn
 
+from semattnet._errors import InputError
 from semattnet.models.attention import SAMMAFB
 
 __all__ = ["FEATURE_FUSION_MODES", "FusionMode", "fuse_features", "make_fusion_block"]
@@ -30,7 +31,7 @@ def make_fusion_block(mode: FusionMode, channels: int, reduction: int = 16) -> n
         return SAMMAFB(channels, reduction)
     if mode in ("concat", "add"):
         return nn.Identity()
-    raise ValueError(f"unknown feature fusion {mode!r}; choose one of {FEATURE_FUSION_MODES}")
+    raise InputError(f"unknown feature fusion {mode!r}; choose one of {FEATURE_FUSION_MODES}")
 
 
 def fuse_features(mode: FusionMode, block: nn.Module, features: Sequence[torch.Tensor]) -> torch.Tensor:

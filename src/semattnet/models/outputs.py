@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, fields
+from typing import Any
 
 import torch
 
@@ -44,8 +46,9 @@ class DepthCompletionOutput:
         """The tensors that are present, by attribute name."""
         return {f.name: v for f in fields(self) if (v := getattr(self, f.name)) is not None}
 
-    def map(self, fn) -> DepthCompletionOutput:  # type: ignore[no-untyped-def]
+    def map(self, fn: Callable[[torch.Tensor], torch.Tensor]) -> DepthCompletionOutput:
         """A copy with ``fn`` applied to every tensor (e.g. cropping, ``.cpu()``)."""
-        return DepthCompletionOutput(
-            **{f.name: (None if (v := getattr(self, f.name)) is None else fn(v)) for f in fields(self)}
-        )
+        mapped: dict[str, Any] = {
+            f.name: (None if (v := getattr(self, f.name)) is None else fn(v)) for f in fields(self)
+        }
+        return DepthCompletionOutput(**mapped)

@@ -35,6 +35,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from semattnet.models._tracing import is_tracing
+from semattnet._errors import InputError
 from semattnet.models.config import RefinementMode
 from semattnet.models.layers import convbn, convbnrelu
 from semattnet.models.propagation import (
@@ -96,7 +97,7 @@ def run_cspn_stage(
     keep = 1.0 - mask
     blended: torch.Tensor | None = None
     if impl not in ("auto", "pytorch", "naive"):
-        raise ValueError(f"impl must be auto, pytorch or naive, got {impl!r}")
+        raise InputError(f"impl must be auto, pytorch or naive, got {impl!r}")
     fused = impl == "auto" and _can_fuse(start, h0, mask, sparse, *affinities)
     for i, affinity in enumerate(affinities):
         if fused:  # one compiled pass per step (inference on the CPU)

@@ -7,6 +7,7 @@ import dataclasses
 import torch
 from torch import nn
 
+from semattnet._errors import InputError
 from semattnet.models.backbone import SemAttNetBackbone
 from semattnet.models.config import SemAttNetConfig
 from semattnet.models.outputs import DepthCompletionOutput
@@ -31,7 +32,7 @@ class SemAttNet(AtrousCSPNRefinement, nn.Module):
         nn.Module.__init__(self)
         self.config = config = config if config is not None else SemAttNetConfig()
         if not config.refine:
-            raise ValueError("SemAttNet is the refined model; use SemAttNetBackbone for refine=False")
+            raise InputError("SemAttNet is the refined model; use SemAttNetBackbone for refine=False")
         self.backbone = SemAttNetBackbone(config)
         c1, c2 = self.backbone.feature_channels
         self._build_refinement(c1, c2, config.kernel_sizes, config.iterations, config.refinement_mode)
@@ -53,6 +54,6 @@ class SemAttNet(AtrousCSPNRefinement, nn.Module):
         run this part in another runtime and the propagation in PyTorch's fused kernel.
         """
         if sparse is None:
-            raise ValueError("sparse depth is required")
+            raise InputError("sparse depth is required")
         out, feature_s1, feature_s2 = self.backbone.forward_features(rgb, semantic, sparse)
         return out, self.refinement_inputs(out.fused_depth, sparse, feature_s1, feature_s2)

@@ -25,6 +25,7 @@ from typing import Any
 
 import torch
 
+from semattnet._errors import DataError, InputError, MissingDependencyError
 from semattnet.data.palette import NUM_CLASSES, TRAIN_CLASSES
 
 __all__ = ["HF_SEGMENTERS", "HFSegmenterRecord", "cityscapes_indices", "load_hf_network", "resolve_hf_source"]
@@ -106,12 +107,12 @@ def resolve_hf_source(rest: str) -> tuple[str, str | None]:
     if rest in HF_SEGMENTERS:
         return HF_SEGMENTERS[rest].repo, None
     if not rest:
-        raise ValueError("hf: expected hf:ORG/NAME, hf:PATH or hf:default")
+        raise InputError("hf: expected hf:ORG/NAME, hf:PATH or hf:default")
     if Path(rest).expanduser().is_dir():
         return str(Path(rest).expanduser()), None
     repo, _, rev = rest.partition("@")
     if not re.fullmatch(r"[\w.-]+/[\w.-]+", repo):
-        raise ValueError(f"hf:{rest}: not a local folder nor a Hub id ORG/NAME[@REVISION]")
+        raise InputError(f"hf:{rest}: not a local folder nor a Hub id ORG/NAME[@REVISION]")
     return repo, rev or None
 
 
@@ -119,7 +120,7 @@ def _load_model(source: str, revision: str | None) -> Any:
     try:
         import transformers
     except ImportError:
-        raise ValueError(f"hf: segmenters need transformers: {INSTALL_HINT}") from None
+        raise MissingDependencyError(f"hf: segmenters need transformers: {INSTALL_HINT}") from None
     from semattnet.weights.download import is_offline
 
     kw = {"revision": revision, "local_files_only": is_offline()}
@@ -132,7 +133,7 @@ def _load_model(source: str, revision: str | None) -> Any:
     except (OSError, ValueError, KeyError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         offline = " (offline mode: only the local Hugging Face cache is used)" if is_offline() else ""
-        raise ValueError(f"hf:{source}: cannot load the model{offline}: {first}") from None
+        raise DataError(f"hf:{source}: cannot load the model{offline}: {first}") from None
 
 
 def _class_maps(out: Any) -> torch.Tensor:
@@ -148,14 +149,15 @@ def load_hf_network(rest: str, device: torch.device | str = "cpu") -> Callable[[
     """The network of ``hf:<rest>``: normalised (B, 3, H, W) RGB -> (B, 19, h, w) Cityscapes trainId scores.
 
     Raises:
-        ValueError: transformers missing, the model cannot be loaded, or none of its labels is a Cityscapes class.
+        MissingDependencyError: transformers is not installed.
+        DataError: the model cannot be loaded, or none of its labels is a Cityscapes class.
     """
     source, revision = resolve_hf_source(rest)
     model = _load_model(source, revision).to(device).eval()
     groups = cityscapes_indices(model.config.id2label)
     if not any(groups):
         labels = ", ".join(list(model.config.id2label.values())[:8])
-        raise ValueError(f"hf:{rest}: none of its labels ({labels}, ...) is a Cityscapes class")
+        raise DataError(f"hf:{rest}: none of its labels ({labels}, ...) is a Cityscapes class")
     missing = [TRAIN_CLASSES[t][0] for t, g in enumerate(groups) if not g]
     if missing:
         warnings.warn(f"hf:{rest}: no class for {', '.join(missing)}; those are never predicted", stacklevel=2)

@@ -25,6 +25,8 @@ Logits are resized bilinearly to the image size before the arg-max. Only ``hf:``
 from __future__ import annotations
 
 import os
+import pickle
+import re
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +37,7 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
+from semattnet._errors import DataError, InputError, MissingDependencyError
 from semattnet._utils.device import resolve_device
 from semattnet.data.io import read_image, write_image
 from semattnet.data.palette import IGNORE_ID, NUM_CLASSES, ids_to_colors, label_ids_to_train_ids
@@ -87,7 +90,7 @@ class Segmenter:
     def __call__(self, images: np.ndarray) -> np.ndarray:
         images = np.asarray(images)
         if images.ndim != 4 or images.shape[-1] != 3:
-            raise ValueError(f"{self.name}: expected (B, H, W, 3) images, got {images.shape}")
+            raise InputError(f"{self.name}: expected (B, H, W, 3) images, got {images.shape}")
         b, h, w = images.shape[:3]
         if self.network is None:
             return np.full((b, h, w), IGNORE_ID, dtype=np.uint8)
@@ -110,13 +113,13 @@ class Segmenter:
             ids = F.interpolate(ids.float(), size=size, mode="nearest").long()[:, 0]
             bad = (ids != IGNORE_ID) & ((ids < 0) | (ids >= NUM_CLASSES))
             if bool(bad.any()):
-                raise ValueError(f"{self.name}: returned class ids outside 0..{NUM_CLASSES - 1} and {IGNORE_ID}")
+                raise DataError(f"{self.name}: returned class ids outside 0..{NUM_CLASSES - 1} and {IGNORE_ID}")
             return ids.to(torch.uint8).cpu().numpy()
         if out.dim() != 4:
-            raise ValueError(f"{self.name}: expected (B, C, H, W) logits, got shape {tuple(out.shape)}")
+            raise DataError(f"{self.name}: expected (B, C, H, W) logits, got shape {tuple(out.shape)}")
         classes = out.shape[1]
         if classes not in (NUM_CLASSES, 34):
-            raise ValueError(
+            raise DataError(
                 f"{self.name}: returned {classes} classes; expected 19 (Cityscapes trainIds) or 34 (labelIds)"
             )
         ids = F.interpolate(out.float(), size=size, mode="bilinear", align_corners=False).argmax(dim=1)
@@ -128,7 +131,7 @@ def _torchscript(path: Path, device: torch.device) -> Network:
     try:
         module = torch.jit.load(str(path), map_location=device)
     except Exception as err:
-        raise ValueError(f"{path}: not a loadable TorchScript file ({type(err).__name__})") from None
+        raise DataError(f"{path}: not a loadable TorchScript file ({type(err).__name__})") from None
     return module.eval()
 
 
@@ -136,14 +139,14 @@ def _onnx(path: Path, device: torch.device) -> Network:
     try:
         import onnxruntime as ort
     except ImportError:
-        raise ValueError(f"{path}: ONNX models need onnxruntime (pip install onnxruntime)") from None
+        raise MissingDependencyError(f"{path}: ONNX models need onnxruntime (pip install onnxruntime)") from None
     providers = ["CPUExecutionProvider"]
     if device.type == "cuda" and "CUDAExecutionProvider" in ort.get_available_providers():
         providers.insert(0, "CUDAExecutionProvider")
     try:
         session = ort.InferenceSession(str(path), providers=providers)
     except Exception as err:
-        raise ValueError(f"{path}: not a loadable ONNX model ({err})") from None
+        raise DataError(f"{path}: not a loadable ONNX model ({err})") from None
     name = session.get_inputs()[0].name
 
     def run(x: torch.Tensor) -> torch.Tensor:
@@ -156,21 +159,29 @@ def _torchvision(arch: str, weights: Path, device: torch.device) -> Network:
     try:
         from torchvision.models import segmentation
     except ImportError:
-        raise ValueError("torchvision models need torchvision (pip install torchvision)") from None
+        raise MissingDependencyError("torchvision models need torchvision (pip install torchvision)") from None
     ctor = getattr(segmentation, arch, None)
     if ctor is None or arch.startswith("_"):
-        raise ValueError(f"torchvision.models.segmentation has no architecture {arch!r}")
-    state = torch.load(str(weights), map_location="cpu", weights_only=True)
+        raise InputError(f"torchvision.models.segmentation has no architecture {arch!r}")
+    try:  # weights_only: a pickle that names code is refused (pickle.UnpicklingError), never run
+        state = torch.load(str(weights), map_location="cpu", weights_only=True)
+    except (pickle.UnpicklingError, RuntimeError, EOFError) as err:
+        first = (str(err).strip().splitlines() or [type(err).__name__])[0]
+        raise DataError(f"{weights}: not a loadable (weights-only) PyTorch state dict: {first}") from None
     for key in ("model", "state_dict"):
         if isinstance(state, dict) and isinstance(state.get(key), dict):
             state = state[key]
     if not isinstance(state, dict):
-        raise ValueError(f"{weights}: expected a state dict")
+        raise DataError(f"{weights}: expected a state dict")
     head = [k for k in state if k.startswith("classifier.") and k.endswith("weight")]
     classes = int(state[sorted(head)[-1]].shape[0]) if head else NUM_CLASSES
     aux = any(k.startswith("aux_classifier.") for k in state)
     net = ctor(weights=None, weights_backbone=None, num_classes=classes, aux_loss=aux)
-    net.load_state_dict(state)
+    try:
+        net.load_state_dict(state)
+    except RuntimeError as err:  # torch lists the missing / unexpected keys over several lines
+        detail = re.sub(r"^Error\(s\) in loading state_dict for \S+:\s*", "", " ".join(str(err).split()))
+        raise DataError(f"{weights}: does not fit torchvision's {arch}: {detail[:300]}") from None
     return net.to(device).eval()
 
 
@@ -192,21 +203,21 @@ def load_segmenter(
     if spec.startswith("torchvision:"):
         parts = spec.split(":", 2)
         if len(parts) != 3 or not parts[1] or not parts[2]:
-            raise ValueError(f"{spec!r}: expected torchvision:ARCH:WEIGHTS, e.g. torchvision:deeplabv3_resnet50:w.pth")
+            raise InputError(f"{spec!r}: expected torchvision:ARCH:WEIGHTS, e.g. torchvision:deeplabv3_resnet50:w.pth")
         weights = Path(parts[2])
         if not weights.is_file():
-            raise ValueError(f"{weights}: no such weights file")
+            raise DataError(f"{weights}: no such weights file")
         return Segmenter(_torchvision(parts[1], weights, dev), spec, dev, mean, std, input_size)
     path = Path(spec)
     if not path.is_file():
-        raise ValueError(
+        raise DataError(
             f"{spec}: no such model file (expected .onnx, TorchScript, torchvision:ARCH:WEIGHTS, hf:... or unknown)"
         )
     if path.suffix.lower() == ".onnx":
         return Segmenter(_onnx(path, dev), spec, dev, mean, std, input_size)
     if path.suffix.lower() in _TORCHSCRIPT_SUFFIXES:
         return Segmenter(_torchscript(path, dev), spec, dev, mean, std, input_size)
-    raise ValueError(
+    raise DataError(
         f"{spec}: unknown model format {path.suffix!r} (expected .onnx or {', '.join(_TORCHSCRIPT_SUFFIXES)})"
     )
 
@@ -258,12 +269,12 @@ def segment_folder(
     """
     images, out = Path(images), Path(out)
     if not images.is_dir():
-        raise ValueError(f"{images}: not a folder of images")
+        raise DataError(f"{images}: not a folder of images")
     if batch_size < 1:
-        raise ValueError(f"batch_size must be at least 1, got {batch_size}")
+        raise InputError(f"batch_size must be at least 1, got {batch_size}")
     files = _images(images, out.resolve())
     if not files:
-        raise ValueError(f"{images}: no {'/'.join(IMAGE_SUFFIXES)} images found")
+        raise DataError(f"{images}: no {'/'.join(IMAGE_SUFFIXES)} images found")
     targets = [out / f.relative_to(images).with_suffix(".png") for f in files]
     todo = [(f, t) for f, t in zip(files, targets, strict=True) if overwrite or not t.exists()]
     written = 0

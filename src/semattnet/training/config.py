@@ -14,6 +14,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+from semattnet._errors import InputError
+
 __all__ = ["STAGES", "TrainConfig"]
 
 Stage = Literal["backbone", "refine-init", "full"]
@@ -99,16 +101,16 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         if self.stage not in STAGES:
-            raise ValueError(f"stage must be one of {STAGES}, got {self.stage!r}")
+            raise InputError(f"stage must be one of {STAGES}, got {self.stage!r}")
         for key, value in _STAGE_DEFAULTS[self.stage].items():
             if getattr(self, key) is None:
                 setattr(self, key, value)
         if self.stage == "full" and self.head_lr is None:
             self.head_lr = self.lr
         if self.amp not in ("none", "bf16", "fp16"):
-            raise ValueError(f"amp must be none, bf16 or fp16, got {self.amp!r}")
+            raise InputError(f"amp must be none, bf16 or fp16, got {self.amp!r}")
         if self.lr_schedule not in ("plateau", "cosine"):
-            raise ValueError(f"lr_schedule must be plateau or cosine, got {self.lr_schedule!r}")
+            raise InputError(f"lr_schedule must be plateau or cosine, got {self.lr_schedule!r}")
         self.betas = tuple(self.betas)  # type: ignore[assignment]
         if self.depth_head_init is not None:
             self.depth_head_init = tuple(self.depth_head_init)  # type: ignore[assignment]
@@ -117,7 +119,7 @@ class TrainConfig:
         if self.random_crop_height is None:
             self.random_crop_height = min(320, self.crop[0])
         if self.random_crop_height > self.crop[0]:
-            raise ValueError(f"random_crop_height {self.random_crop_height} exceeds the crop height {self.crop[0]}")
+            raise InputError(f"random_crop_height {self.random_crop_height} exceeds the crop height {self.crop[0]}")
         self._validate()
 
     def _validate(self) -> None:
@@ -125,7 +127,7 @@ class TrainConfig:
 
         def check(name: str, ok: bool, want: str) -> None:
             if not ok:
-                raise ValueError(f"{name} must be {want}, got {getattr(self, name)!r}")
+                raise InputError(f"{name} must be {want}, got {getattr(self, name)!r}")
 
         def finite(x: object) -> bool:
             return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
@@ -165,7 +167,7 @@ class TrainConfig:
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = set(data) - known
         if unknown:
-            raise ValueError(f"unknown training option(s) {sorted(unknown)}")
+            raise InputError(f"unknown training option(s) {sorted(unknown)}")
         return cls(**data)
 
     def save(self, path: str | Path) -> None:
@@ -182,7 +184,7 @@ class TrainConfig:
             key, sep, raw = pair.partition("=")
             key = key.strip().replace("-", "_")
             if not sep or key not in data:
-                raise ValueError(f"bad override {pair!r}: expected key=value with key in {sorted(data)}")
+                raise InputError(f"bad override {pair!r}: expected key=value with key in {sorted(data)}")
             try:
                 value = json.loads(raw)
             except json.JSONDecodeError:

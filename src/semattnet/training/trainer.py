@@ -25,6 +25,7 @@ import torch
 from torch import nn
 from torch.utils.data import DataLoader, Dataset, Subset
 
+from semattnet._errors import DataError, InputError
 from semattnet._utils import distributed as dist_utils
 from semattnet._utils.atomic import atomic_path
 from semattnet._utils.device import autocast
@@ -32,8 +33,10 @@ from semattnet._utils.progress import progress
 from semattnet.data.kitti import KittiDepthCompletion
 from semattnet.data.transforms import EvalTransform, TrainTransform
 from semattnet.evaluation.evaluate import evaluate_model
+from semattnet.models.backbone import SemAttNetBackbone
 from semattnet.models.layers import set_gradient_checkpointing
 from semattnet.models.registry import build_model
+from semattnet.models.semattnet import SemAttNet
 from semattnet.training.config import TrainConfig
 from semattnet.training.losses import semattnet_loss
 from semattnet.weights.checkpoint import CheckpointError, load_checkpoint, load_weights
@@ -55,8 +58,10 @@ def _atomic_torch_save(obj: Any, path: Path) -> None:
         torch.save(obj, tmp)
 
 
-def _unwrap(model: nn.Module) -> nn.Module:
-    return model.module if isinstance(model, nn.parallel.DistributedDataParallel) else model
+def _unwrap(model: nn.Module) -> SemAttNet | SemAttNetBackbone:
+    inner = model.module if isinstance(model, nn.parallel.DistributedDataParallel) else model
+    assert isinstance(inner, SemAttNet | SemAttNetBackbone)  # what _build_model builds
+    return inner
 
 
 @dataclass
@@ -84,9 +89,9 @@ class Trainer:
             cfg = TrainConfig.from_dict(state["train_config"] | {"out": str(cfg.out)})
         self.cfg = cfg
         if not cfg.data:
-            raise ValueError("no data root given (--data)")
+            raise InputError("no data root given (--data)")
         if cfg.sync_bn and self.device.type != "cuda":
-            raise ValueError(_SYNC_BN_CPU)
+            raise InputError(_SYNC_BN_CPU)
         self.pos = _Position()
         torch.manual_seed(cfg.seed)
         random.seed(cfg.seed)
@@ -119,7 +124,7 @@ class Trainer:
                                  num_workers=cfg.workers, drop_last=True, pin_memory=self.device.type == "cuda",
                                  persistent_workers=False)  # fmt: skip
         if len(self.loader) == 0:
-            raise ValueError(
+            raise DataError(
                 f"{len(self.train_set)} training frames per process is fewer than one batch of {cfg.batch_size}"
             )
         self.val_loader = self._val_loader()
@@ -127,10 +132,11 @@ class Trainer:
     def _build_optimisation(self) -> None:
         """Adam over the stage's parameter groups, the learning-rate schedule and the AMP grad scaler."""
         cfg = self.cfg
+        assert cfg.epochs is not None and cfg.patience is not None  # TrainConfig fills them from the stage
         self.optimizer = torch.optim.Adam(self._param_groups(), betas=cfg.betas, weight_decay=cfg.weight_decay)
         self.scheduler: Any
         if cfg.lr_schedule == "cosine":  # per step, to zero at the last step
-            total = cfg.max_steps or cfg.epochs * len(self.loader)  # type: ignore[operator]
+            total = cfg.max_steps or cfg.epochs * len(self.loader)
             self.scheduler = torch.optim.lr_scheduler.LambdaLR(
                 self.optimizer, lambda step: 0.5 * (1.0 + math.cos(math.pi * min(step, total) / total))
             )
@@ -166,11 +172,11 @@ class Trainer:
         name = "semattnet_backbone" if cfg.stage == "backbone" else "semattnet"
         model = build_model(name, width=cfg.width, branches=cfg.branches, fusion=cfg.fusion,
                             refinement_mode=cfg.refinement_mode)  # fmt: skip
-        if cfg.stage != "backbone":
+        if isinstance(model, SemAttNet):  # the refine-init and full stages
             if init_weights and not cfg.init:
-                raise ValueError(f"stage {cfg.stage!r} starts from the previous stage's checkpoint: pass --init PATH")
-            if init_weights:
-                ckpt = load_checkpoint(cfg.init)  # type: ignore[arg-type]
+                raise InputError(f"stage {cfg.stage!r} starts from the previous stage's checkpoint: pass --init PATH")
+            if init_weights and cfg.init:
+                ckpt = load_checkpoint(cfg.init)
                 is_backbone = not any(k.startswith("backbone.") for k in ckpt.state_dict)
                 load_weights(model.backbone if is_backbone else model, ckpt)
                 self.log(f"initialised from {cfg.init} ({'backbone' if is_backbone else 'full model'})")
@@ -182,7 +188,7 @@ class Trainer:
                     p.requires_grad_(False)
         elif cfg.init:
             load_weights(model, load_checkpoint(cfg.init))
-        elif cfg.depth_head_init is not None:
+        elif cfg.depth_head_init is not None and isinstance(model, SemAttNetBackbone):
             model.init_depth_heads(*cfg.depth_head_init)
         if cfg.grad_checkpointing:
             set_gradient_checkpointing(model, True)
@@ -211,7 +217,9 @@ class Trainer:
     def _set_train_mode(self) -> None:
         self.model.train()
         if self.cfg.stage == "refine-init":  # frozen backbone: its BN statistics stay fixed too
-            _unwrap(self.model).backbone.eval()
+            model = _unwrap(self.model)
+            assert isinstance(model, SemAttNet)  # refine-init trains the refined model
+            model.backbone.eval()
 
     # ----------------------------------------------------------------------------- state
     def _state(self) -> dict[str, Any]:
@@ -301,6 +309,7 @@ class Trainer:
     def fit(self) -> dict[str, Any]:
         """Run (or finish) the stage; returns the final position and last validation result."""
         last_val: dict[str, float] | None = None
+        assert self.cfg.epochs is not None  # TrainConfig fills it from the stage
         while self.pos.epoch < self.cfg.epochs:
             finished_epoch = self._train_epoch()
             if not finished_epoch:  # max_steps reached mid-epoch
@@ -323,6 +332,7 @@ class Trainer:
     def _train_epoch(self) -> bool:
         """Train from the current position to the end of the epoch (or ``max_steps``); True if it ended."""
         cfg, epoch = self.cfg, self.pos.epoch
+        assert cfg.batch_size is not None  # TrainConfig fills it from the stage
         self.sampler.set_epoch(epoch)
         self.train_set.set_epoch(epoch)
         self.sampler.start_at(self.pos.batch * cfg.batch_size)

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from semattnet._errors import InputError
+
 __all__ = ["DEPTH_CMAP", "DEPTH_MAX_M", "colorize_depth", "confidence_image", "error_map", "write_depth_pictures"]
 
 #: Fixed scale of every depth picture: matplotlib's "turbo" from 0 to 80 m (KITTI's range);
@@ -67,7 +69,7 @@ def write_depth_pictures(
     if not files:
         raise DataError(f"{pred}: no PNG predictions")
     if vmax <= 0 or not np.isfinite(vmax):
-        raise ValueError(f"vmax must be a finite positive depth in metres, got {vmax}")
+        raise InputError(f"vmax must be a finite positive depth in metres, got {vmax}")
     names = [f"{f.stem}{s}" for f in files for s in (("_color.png", "_error.png") if gt else ("_color.png",))]
     check_no_input_overlap([pred, gt], out_dir=out, out_files=[out / n for n in names])
     refuse_existing([out / n for n in names], overwrite)

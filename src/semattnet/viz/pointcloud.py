@@ -13,13 +13,17 @@ from typing import Any
 
 import numpy as np
 
+from semattnet._errors import InputError
+
 __all__ = ["birds_eye_view"]
 
 #: Colour of the overlaid LiDAR scan (RGB).
 LIDAR_COLOR = (255, 0, 255)
 
 
-def _cells(xyz: np.ndarray, size: tuple[int, int], x_range: tuple[float, float], z_range: tuple[float, float]):  # type: ignore[no-untyped-def]
+def _cells(
+    xyz: np.ndarray, size: tuple[int, int], x_range: tuple[float, float], z_range: tuple[float, float]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(row, col, keep) of each point (module doc's pixel rule)."""
     h, w = size
     x, z = xyz[:, 0].astype(np.float64), xyz[:, 2].astype(np.float64)
@@ -37,7 +41,13 @@ def _height_colors(y: np.ndarray, height_range: tuple[float, float]) -> np.ndarr
     return (colormaps["viridis"](t)[:, :3] * 255 + 0.5).astype(np.uint8)
 
 
-def _paint(canvas: np.ndarray, xyz: np.ndarray, colors: np.ndarray, x_range, z_range) -> None:  # type: ignore[no-untyped-def]
+def _paint(
+    canvas: np.ndarray,
+    xyz: np.ndarray,
+    colors: np.ndarray,
+    x_range: tuple[float, float],
+    z_range: tuple[float, float],
+) -> None:
     row, col, keep = _cells(xyz, canvas.shape[:2], x_range, z_range)
     flat = row[keep] * canvas.shape[1] + col[keep]
     y, colors = xyz[keep, 1], colors[keep]
@@ -76,18 +86,18 @@ def birds_eye_view(
     """
     h, w = (int(s) for s in size)
     if h <= 0 or w <= 0:
-        raise ValueError(f"birds_eye_view: size must be positive (height, width), got {size}")
+        raise InputError(f"birds_eye_view: size must be positive (height, width), got {size}")
     if z_range[1] <= z_range[0]:
-        raise ValueError(f"birds_eye_view: z_range must be (near, far) with far > near, got {z_range}")
+        raise InputError(f"birds_eye_view: z_range must be (near, far) with far > near, got {z_range}")
     if x_range is None:
         half = (z_range[1] - z_range[0]) * w / h / 2
         x_range = (-half, half)
     if x_range[1] <= x_range[0]:
-        raise ValueError(f"birds_eye_view: x_range must be (left, right) with right > left, got {x_range}")
+        raise InputError(f"birds_eye_view: x_range must be (left, right) with right > left, got {x_range}")
     xyz = np.asarray(getattr(cloud, "xyz", cloud), dtype=np.float64)[:, :3]
     rgb = getattr(cloud, "rgb", None)
     if color not in ("rgb", "height"):
-        raise ValueError(f"birds_eye_view: color must be 'rgb' or 'height', got {color!r}")
+        raise InputError(f"birds_eye_view: color must be 'rgb' or 'height', got {color!r}")
     colors = np.asarray(rgb, dtype=np.uint8) if color == "rgb" and rgb is not None else None
     if colors is None:
         colors = _height_colors(xyz[:, 1], height_range)

@@ -27,7 +27,8 @@ import os
 import torch
 from torch import nn
 
-from semattnet.inference.backends._base import InferenceEngine, output_from_arrays
+from semattnet._errors import InputError
+from semattnet.inference.backends._base import InferenceEngine, LogFn, output_from_arrays
 from semattnet.inference.backends.torch_engine import TorchEngine
 
 __all__ = ["BACKENDS", "InferenceEngine", "available_backends", "choose_backend", "needs_semantic",
@@ -64,13 +65,13 @@ def choose_backend(device: torch.device | str = "cpu", size: tuple[int, int] | N
 
 def _check(backend: str, precision: str, size: tuple[int, int] | None) -> None:
     if backend not in (*BACKENDS, "auto"):
-        raise ValueError(f"unknown backend {backend!r}; choose one of auto, {', '.join(BACKENDS)}")
+        raise InputError(f"unknown backend {backend!r}; choose one of auto, {', '.join(BACKENDS)}")
     if precision not in PRECISIONS:
-        raise ValueError(f"unknown precision {precision!r}; choose one of {', '.join(PRECISIONS)}")
+        raise InputError(f"unknown precision {precision!r}; choose one of {', '.join(PRECISIONS)}")
     if backend in ("openvino", "onnxruntime") and size is None:
-        raise ValueError(f"the {backend} backend compiles for one input size: pass size=(H, W)")
+        raise InputError(f"the {backend} backend compiles for one input size: pass size=(H, W)")
     if backend == "onnxruntime" and precision != "f32":
-        raise ValueError("the onnxruntime backend runs float32 only")
+        raise InputError("the onnxruntime backend runs float32 only")
 
 
 def optimize_for_inference(
@@ -82,7 +83,7 @@ def optimize_for_inference(
     device: torch.device | str = "cpu",
     cache_dir: str | os.PathLike[str] | None = None,
     inplace: bool = False,
-    log=None,  # type: ignore[no-untyped-def]
+    log: LogFn | None = None,
 ) -> InferenceEngine:
     """``model`` ready to run: ``engine(rgb=, semantic=, sparse=)`` -> ``DepthCompletionOutput``.
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import importlib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import fields
 from types import ModuleType
 
@@ -11,10 +11,14 @@ import numpy as np
 import torch
 from torch import nn
 
+from semattnet._errors import InputError, MissingDependencyError
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.refinement import RefinementInputs, propagate_refinement
 
-__all__ = ["HEADS_PREFIX", "ExportedGraphEngine", "InferenceEngine", "import_backend", "output_from_arrays"]
+__all__ = ["HEADS_PREFIX", "ExportedGraphEngine", "InferenceEngine", "LogFn", "import_backend", "output_from_arrays"]
+
+#: A progress logger the backends call with one line of text (e.g. ``print`` or ``logger.info``).
+LogFn = Callable[[str], object]
 
 _FIELDS = tuple(f.name for f in fields(DepthCompletionOutput))
 #: Name prefix of the refinement heads an exported graph returns (see :func:`output_from_arrays`).
@@ -26,7 +30,8 @@ def import_backend(module: str, extra: str) -> ModuleType:
     try:
         return importlib.import_module(module)
     except ImportError:
-        raise ImportError(f"the {module} backend needs {module}: pip install 'semattnet[{extra}]'") from None
+        msg = f"the {module} backend needs {module}: pip install 'semattnet[{extra}]'"
+        raise MissingDependencyError(msg, name=module) from None
 
 
 class InferenceEngine(nn.Module):
@@ -52,7 +57,7 @@ class InferenceEngine(nn.Module):
     def check_size(self, rgb: torch.Tensor) -> None:
         """Refuse inputs of another size than the one the engine was compiled for."""
         if self.size is not None and tuple(rgb.shape[-2:]) != tuple(self.size):
-            raise ValueError(
+            raise InputError(
                 f"this {self.backend} engine was compiled for {self.size[0]}x{self.size[1]} inputs, got "
                 f"{rgb.shape[-2]}x{rgb.shape[-1]}; build one per size (optimize_for_inference(..., size=))"
             )
@@ -74,10 +79,10 @@ def output_from_arrays(
     heads = {k: v for k, v in tensors.items() if k.startswith(HEADS_PREFIX)}
     unknown = set(tensors) - set(_FIELDS) - set(heads)
     if unknown:
-        raise ValueError(f"unknown output names {sorted(unknown)}; expected some of {_FIELDS}")
+        raise InputError(f"unknown output names {sorted(unknown)}; expected some of {_FIELDS}")
     if heads:
         if iterations is None:
-            raise ValueError("refinement heads without the number of propagation iterations")
+            raise InputError("refinement heads without the number of propagation iterations")
         with torch.inference_mode():
             tensors["refined_s2_depth"], tensors["refined_depth"] = propagate_refinement(
                 RefinementInputs.from_dict(heads, HEADS_PREFIX), iterations
@@ -102,5 +107,9 @@ class ExportedGraphEngine(InferenceEngine):
     ) -> DepthCompletionOutput:
         self.check_size(rgb)
         given = {"rgb": rgb, "semantic": semantic, "sparse": sparse}
-        arrays = self.run_graph({name: given[name].detach().cpu().float().numpy() for name in self.input_names})
+        missing = [name for name in self.input_names if given[name] is None]
+        if missing:
+            raise InputError(f"this {self.backend} engine's graph needs {', '.join(missing)}; got None")
+        feeds = {name: t.detach().cpu().float().numpy() for name in self.input_names if (t := given[name]) is not None}
+        arrays = self.run_graph(feeds)
         return output_from_arrays({n: torch.from_numpy(a).to(rgb.device) for n, a in arrays.items()}, self.iterations)

@@ -18,6 +18,7 @@ import torch
 from torch import nn
 
 from semattnet._utils.version import library_version
+from semattnet.inference.backends._base import LogFn
 from semattnet.weights.download import get_cache_dir
 from semattnet.weights.export import export_onnx
 from semattnet.weights.gate import tensor_digest
@@ -47,7 +48,7 @@ def engine_dir(key: str, cache_dir: str | os.PathLike[str] | None = None) -> Pat
     return path
 
 
-def cached_onnx(model: nn.Module, size: tuple[int, int], folder: Path, log=None) -> Path:  # type: ignore[no-untyped-def]
+def cached_onnx(model: nn.Module, size: tuple[int, int], folder: Path, log: LogFn | None = None) -> Path:
     """``folder/model.onnx``, exported (BatchNorm folded) unless it is already there.
 
     The graph stops before the CSPN++ propagation (``export_onnx(propagation=False)``): the

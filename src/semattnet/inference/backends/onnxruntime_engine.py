@@ -8,7 +8,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from semattnet.inference.backends._base import ExportedGraphEngine, import_backend
+from semattnet.inference.backends._base import ExportedGraphEngine, LogFn, import_backend
 from semattnet.inference.backends._export_cache import cached_onnx, engine_dir, engine_key, propagation_steps
 
 __all__ = ["OnnxRuntimeEngine"]
@@ -20,7 +20,7 @@ class OnnxRuntimeEngine(ExportedGraphEngine):
     backend = "onnxruntime"
 
     def __init__(self, model: nn.Module, size: tuple[int, int], needs_semantic: bool,
-                 cache_dir: str | os.PathLike[str] | None = None, log=None) -> None:  # type: ignore[no-untyped-def]  # fmt: skip
+                 cache_dir: str | os.PathLike[str] | None = None, log: LogFn | None = None) -> None:  # fmt: skip
         super().__init__(size, "f32", needs_semantic)
         ort = import_backend("onnxruntime", "onnx")
         folder = engine_dir(engine_key(model, size), cache_dir)

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from semattnet.inference.backends._base import HEADS_PREFIX, ExportedGraphEngine, import_backend
+from semattnet.inference.backends._base import HEADS_PREFIX, ExportedGraphEngine, LogFn, import_backend
 from semattnet.inference.backends._export_cache import cached_onnx, engine_dir, engine_key, propagation_steps
 from semattnet.models.outputs import DepthCompletionOutput
 
@@ -26,7 +26,8 @@ def _one_of(names: set[str], known: set[str], prefix: str = "\0") -> str:
     """The one name of a model port that we know or that starts with ``prefix`` (IR tensors carry several names)."""
     matches = sorted(n for n in names if n in known or n.startswith(prefix))
     if len(matches) != 1:
-        raise ValueError(f"cannot tell which port {sorted(names)} is; expected one of {sorted(known)}")
+        # our own export names the ports: a mismatch is a bug (or an unsupported OpenVINO), not bad input
+        raise RuntimeError(f"cannot tell which port {sorted(names)} is; expected one of {sorted(known)}")
     return matches[0]
 
 
@@ -36,7 +37,7 @@ class OpenVinoEngine(ExportedGraphEngine):
     backend = "openvino"
 
     def __init__(self, model: nn.Module, size: tuple[int, int], needs_semantic: bool, precision: str = "f32",
-                 cache_dir: str | os.PathLike[str] | None = None, log=None) -> None:  # type: ignore[no-untyped-def]  # fmt: skip
+                 cache_dir: str | os.PathLike[str] | None = None, log: LogFn | None = None) -> None:  # fmt: skip
         super().__init__(size, precision, needs_semantic)
         ov = import_backend("openvino", "openvino")
         folder = engine_dir(engine_key(model, size, extra=f"openvino-{ov.__version__}"), cache_dir)

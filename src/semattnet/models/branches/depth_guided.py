@@ -43,6 +43,8 @@ class DepthGuidedBranch:
 
     depth_conv_init: nn.Sequential
     decoder_layer0: nn.Sequential
+    decoder_layer1: nn.Sequential  # decoder_layer1..5 are set in a loop (setattr)
+    decoder_layer5: nn.Sequential
     decoder_layer6: nn.Sequential
     _dg_fusion: FusionMode
 

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import torch
 import torch.nn.functional as F
+
+from semattnet._errors import InputError
 
 __all__ = ["kernel_size", "taps", "window"]
 
@@ -14,11 +17,13 @@ def kernel_size(affinity: torch.Tensor) -> int:
     kk = affinity.shape[1]
     k = math.isqrt(kk)
     if k * k != kk or k % 2 == 0:
-        raise ValueError(f"affinity must have k*k channels for an odd k, got {kk}")
+        raise InputError(f"affinity must have k*k channels for an odd k, got {kk}")
     return k
 
 
-def taps(k: int, dilation: int, height: int, width: int):  # type: ignore[no-untyped-def]
+def taps(
+    k: int, dilation: int, height: int, width: int
+) -> Iterator[tuple[int, tuple[slice, slice], tuple[slice, slice]]]:
     """For every non-centre tap t: (t, destination slices, source slices) with dst = src + o_t."""
     r = k // 2
     for t in range(k * k):

@@ -35,13 +35,13 @@ class _ShiftAffinity(torch.autograd.Function):
     """
 
     @staticmethod
-    def forward(ctx, affinity: torch.Tensor, dilation: int) -> torch.Tensor:  # type: ignore[override]
+    def forward(ctx, affinity: torch.Tensor, dilation: int) -> torch.Tensor:
         ctx.dilation = dilation
         return _shift_windows(affinity, dilation, adjoint=False)
 
     @staticmethod
     @torch.autograd.function.once_differentiable
-    def backward(ctx, grad: torch.Tensor):  # type: ignore[no-untyped-def, override]
+    def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor, None]:
         return _shift_windows(grad, ctx.dilation, adjoint=True), None
 
 
@@ -77,7 +77,7 @@ class _ShiftedPropagation(torch.autograd.Function):
     """
 
     @staticmethod
-    def forward(ctx, shifted: torch.Tensor, h: torch.Tensor, h0: torch.Tensor, dilation: int) -> torch.Tensor:  # type: ignore[override]
+    def forward(ctx, shifted: torch.Tensor, h: torch.Tensor, h0: torch.Tensor, dilation: int) -> torch.Tensor:
         k = math.isqrt(shifted.shape[1])
         c = (k * k) // 2
         height, width = h.shape[-2:]
@@ -90,12 +90,14 @@ class _ShiftedPropagation(torch.autograd.Function):
 
     @staticmethod
     @torch.autograd.function.once_differentiable
-    def backward(ctx, grad: torch.Tensor):  # type: ignore[no-untyped-def, override]
+    def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor | None, torch.Tensor | None, torch.Tensor | None, None]:
         shifted, h, h0 = ctx.saved_tensors
         k = math.isqrt(shifted.shape[1])
         c = (k * k) // 2
         height, width = h.shape[-2:]
-        grad_shifted = grad_h = grad_h0 = None
+        grad_shifted: torch.Tensor | None = None
+        grad_h: torch.Tensor | None = None
+        grad_h0: torch.Tensor | None = None
         if ctx.needs_input_grad[0]:
             grad_shifted = torch.zeros_like(shifted)
             grad_shifted[:, c] = (grad * h0).sum(dim=1)

@@ -1,0 +1,225 @@
+"""The package's structure rules (issue 22's acceptance), read from the source with ``ast``.
+
+One error root; at most a handful of bare ``raise ValueError``/``TypeError`` (each with its reason);
+no module imports another module's private names; ``geometry`` does not depend on ``data``; no file
+over 500 lines and no function over 60 lines.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib
+import inspect
+import pkgutil
+from collections.abc import Iterator
+from functools import cache
+from pathlib import Path
+
+import pytest
+
+import semattnet
+from semattnet import SemAttNetError
+
+SRC = Path(semattnet.__file__).resolve().parent
+MAX_BARE_RAISES = 5
+MAX_FILE_LINES = 500
+MAX_FUNCTION_LINES = 60
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(SRC.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+@cache
+def _sources() -> dict[str, tuple[Path, ast.Module]]:
+    """Every module of the package: dotted name -> (file, syntax tree)."""
+    out = {}
+    for path in sorted(SRC.rglob("*.py")):
+        out[_module_name(path)] = (path, ast.parse(path.read_text(encoding="utf-8"), filename=str(path)))
+    return out
+
+
+def _is_package(name: str) -> bool:
+    return _sources()[name][0].name == "__init__.py"
+
+
+def _resolve(module: str, node: ast.ImportFrom) -> str:
+    """The absolute module a ``from ... import`` in ``module`` reads from."""
+    if node.level == 0:
+        return node.module or ""
+    package = module if _is_package(module) else module.rpartition(".")[0]
+    for _ in range(node.level - 1):
+        package = package.rpartition(".")[0]
+    return f"{package}.{node.module}" if node.module else package
+
+
+def _imports(module: str, tree: ast.AST) -> Iterator[tuple[ast.stmt, str, list[str]]]:
+    """(node, imported module, imported names) for every import statement, at any depth."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            yield node, _resolve(module, node), [a.name for a in node.names]
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                yield node, alias.name, []
+
+
+def _private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def _where(module: str, node: ast.AST) -> str:
+    return f"{_sources()[module][0].relative_to(SRC.parent)}:{getattr(node, 'lineno', 0)}"
+
+
+def test_the_source_tree_is_found() -> None:
+    assert len(_sources()) > 80 and "semattnet._errors" in _sources()
+
+
+# (a) one error root --------------------------------------------------------------------------------
+
+
+def _all_modules() -> Iterator[object]:
+    for info in pkgutil.walk_packages([str(SRC)], prefix="semattnet."):
+        if info.name.endswith("__main__"):  # running them would start the CLI
+            continue
+        try:
+            yield importlib.import_module(info.name)
+        except ImportError as exc:  # an optional dependency (onnxruntime, openvino, ...) is absent
+            if (getattr(exc, "name", None) or "").startswith("semattnet"):
+                raise
+
+
+def test_every_exception_class_derives_from_the_root() -> None:
+    found, outside = [], []
+    for mod in _all_modules():
+        for _, cls in inspect.getmembers(mod, inspect.isclass):
+            if cls.__module__ != mod.__name__ or not issubclass(cls, BaseException) or issubclass(cls, Warning):
+                continue
+            found.append(cls)
+            if not issubclass(cls, SemAttNetError):
+                outside.append(f"{cls.__module__}.{cls.__qualname__} (bases: {[b.__name__ for b in cls.__bases__]})")
+    assert len(found) >= 8, found  # the test sees the package's error classes at all
+    assert not outside, "exception classes outside SemAttNetError:\n" + "\n".join(outside)
+
+
+# (b) bare ValueError / TypeError -------------------------------------------------------------------
+
+
+def _bare_raises() -> Iterator[tuple[str, ast.Raise]]:
+    for module, (_, tree) in _sources().items():
+        for node in ast.walk(tree):
+            if not isinstance(node, ast.Raise) or node.exc is None:
+                continue
+            exc = node.exc.func if isinstance(node.exc, ast.Call) else node.exc
+            if isinstance(exc, ast.Name) and exc.id in ("ValueError", "TypeError"):
+                yield module, node
+
+
+def test_at_most_a_few_bare_value_or_type_errors_each_with_a_reason() -> None:
+    raises = list(_bare_raises())
+    listing = "\n".join(_where(m, n) for m, n in raises)
+    assert len(raises) <= MAX_BARE_RAISES, f"{len(raises)} bare raise ValueError/TypeError:\n{listing}"
+    for module, node in raises:
+        lines = _sources()[module][0].read_text(encoding="utf-8").splitlines()
+        near = lines[node.lineno - 2 : node.lineno]  # the raise line and the one above it
+        assert any("#" in line for line in near), f"{_where(module, node)}: a bare raise needs a comment saying why"
+
+
+def test_the_bare_raise_detector_sees_raises() -> None:
+    tree = ast.parse("def f():\n    raise ValueError('x')\n\ndef g():\n    raise TypeError\n")
+    kinds = [n.exc for n in ast.walk(tree) if isinstance(n, ast.Raise)]
+    assert len(kinds) == 2  # the walk above sees call and bare-name forms alike
+
+
+# (c) no private names across modules ---------------------------------------------------------------
+
+
+def _private_imports() -> Iterator[str]:
+    modules = _sources()
+    for module, (_, tree) in modules.items():
+        bound: dict[str, str] = {}  # local name -> semattnet module it refers to
+        for node, target, _ in _imports(module, tree):
+            if not target.startswith("semattnet") or target == module:
+                continue
+            if isinstance(node, ast.Import):
+                for alias in node.names:
+                    bound[alias.asname or alias.name.split(".")[0]] = alias.name if alias.asname else "semattnet"
+                continue
+            for alias in node.names:
+                if f"{target}.{alias.name}" in modules:  # a submodule, not a name
+                    bound[alias.asname or alias.name] = f"{target}.{alias.name}"
+                elif _private(alias.name):
+                    yield f"{_where(module, node)}: from {target} import {alias.name}"
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and _private(node.attr):
+                target = bound.get(node.value.id)
+                if target is not None and f"{target}.{node.attr}" not in modules:
+                    yield f"{_where(module, node)}: {node.value.id}.{node.attr} (a private name of {target})"
+
+
+def test_no_module_imports_another_modules_private_names() -> None:
+    found = sorted(set(_private_imports()))
+    assert not found, "private names used across modules:\n" + "\n".join(found)
+
+
+# (d) geometry does not depend on data ---------------------------------------------------------------
+
+
+def _compat_alias(tree: ast.Module, node: ast.stmt) -> bool:
+    """Whether ``node`` sits in a package's module-level ``__getattr__`` (a lazy alias for a moved name)."""
+    hooks = [f for f in tree.body if isinstance(f, ast.FunctionDef) and f.name == "__getattr__"]
+    return any(node in ast.walk(f) for f in hooks)
+
+
+def test_geometry_imports_nothing_from_data() -> None:
+    found = []
+    for module, (path, tree) in _sources().items():
+        if not module.startswith("semattnet.geometry"):
+            continue
+        for node, target, _ in _imports(module, tree):
+            if target == "semattnet.data" or target.startswith("semattnet.data."):
+                if not (path.name == "__init__.py" and _compat_alias(tree, node)):
+                    found.append(f"{_where(module, node)}: imports {target}")
+    assert not found, "\n".join(found)
+
+
+# (e), (f) sizes -------------------------------------------------------------------------------------
+
+
+def test_no_file_over_500_lines() -> None:
+    long = {
+        str(p.relative_to(SRC.parent)): n
+        for p, _ in _sources().values()
+        if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_FILE_LINES
+    }
+    assert not long, f"files over {MAX_FILE_LINES} lines: {long}"
+
+
+def test_no_function_over_60_lines() -> None:
+    long = []
+    for module, (_, tree) in _sources().items():
+        for node in ast.walk(tree):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                n = (node.end_lineno or node.lineno) - node.lineno + 1
+                if n > MAX_FUNCTION_LINES:
+                    long.append(f"{_where(module, node)} {node.name}: {n} lines")
+    assert not long, f"functions over {MAX_FUNCTION_LINES} lines:\n" + "\n".join(long)
+
+
+@pytest.mark.parametrize(
+    ("source", "expected"),
+    [
+        ("from semattnet.x import _y\n", ["from semattnet.x import _y"]),
+        ("from semattnet.x import y, __version__\n", []),
+    ],
+)
+def test_the_private_import_rule_on_examples(source: str, expected: list[str]) -> None:
+    tree = ast.parse(source)
+    got = [
+        f"from {target} import {n}"
+        for _, target, names in _imports("semattnet._errors", tree)
+        for n in names
+        if _private(n)
+    ]
+    assert got == expected
