@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from semattnet._utils.documents import read_document
 from semattnet._errors import DataError
+from semattnet._utils.documents import read_document
 
 from .transforms import check_rigid, check_rotation, make_T
 

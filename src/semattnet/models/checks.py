@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import torch
 
-from semattnet.models._tracing import is_tracing
 from semattnet._errors import InputError
+from semattnet.models._tracing import is_tracing
 
 __all__ = ["SIZE_MULTIPLE", "check_inputs"]
 

@@ -34,8 +34,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from semattnet.models._tracing import is_tracing
 from semattnet._errors import InputError
+from semattnet.models._tracing import is_tracing
 from semattnet.models.config import RefinementMode
 from semattnet.models.layers import convbn, convbnrelu
 from semattnet.models.propagation import (

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from semattnet._errors import InputError
 from semattnet._utils.atomic import atomic_path
 from semattnet.geometry.cameras import KITTI_K
 
@@ -255,7 +256,7 @@ def write_viewer(
     from html import escape
 
     if not frames:
-        raise ValueError("the viewer needs at least one frame")
+        raise InputError("the viewer needs at least one frame")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     _write_plotly(out)

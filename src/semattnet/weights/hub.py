@@ -144,10 +144,8 @@ def from_pretrained(
         return _from_url(src, load)
     if src in list_pretrained():
         return _from_entry(get_weights(src), load)
-    raise InputError(
-        f"{src!r} is not a known weights name ({', '.join(list_pretrained())}), an existing file or folder, "
-        "or a URL (http(s)://, file://, gdrive://<id>, hf://owner/repo)"
-    )
+    raise InputError(f"{src!r} is not a known weights name ({', '.join(list_pretrained())}), an existing file or "
+                     "folder, or a URL (http(s)://, file://, gdrive://<id>, hf://owner/repo)")  # fmt: skip
 
 
 def _from_url(src: str, load: _Load) -> nn.Module:

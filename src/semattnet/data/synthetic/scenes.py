@@ -141,8 +141,7 @@ def make_frame(
     """Generate one scene, deterministic in ``seed`` (and ``style``).
 
     Args:
-        height: image height (any; KITTI's raw frames are about 375 x 1242).
-        width: image width.
+        height: image height (any; KITTI's raw frames are about 375 x 1242). width: image width.
         seed: random seed.
         shadow: add a hard shadow band across the scene (random, p = 0.5, when None).
         size_of_kitti: scale the intrinsics so the field of view is KITTI's at this width.
@@ -163,8 +162,7 @@ def make_frame(
     sun = sun_direction(rng)
     exposure = rng.uniform(0.7, 1.15)
     light = sunlight(view, boxes, sun, exposure)
-    if shadow is None:
-        shadow = bool(rng.random() < 0.5)
+    shadow = bool(rng.random() < 0.5) if shadow is None else shadow
     band = (0.0, 0.0)
     if shadow:
         light, band = overpass(view, light, rng)
