@@ -7,8 +7,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
+from semattnet._utils.progress import progress as progress_bar
 from semattnet.data import layout
 from semattnet.data.io import DataError
 from semattnet.data.kitti import find_frames, load_frame
@@ -59,7 +59,7 @@ def check_tree(
         rep.problems += [f"{name}: missing {', '.join(map(str, paths))}" for name, paths in missing]
         chosen = frames if sample is None or sample >= len(frames) else [
             frames[int(i)] for i in np.linspace(0, len(frames) - 1, sample)]  # fmt: skip
-        for f in tqdm(chosen, desc=f"checking {split}", disable=not progress, leave=False):
+        for f in progress_bar(chosen, desc=f"checking {split}", enabled=progress, leave=False):
             try:
                 loaded = load_frame(f)
                 rep.sparse_valid.append(float((loaded.sparse > 0).mean()))

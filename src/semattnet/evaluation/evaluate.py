@@ -15,11 +15,11 @@ from typing import Any
 import torch
 from torch import nn
 from torch.utils.data import DataLoader, Subset
-from tqdm import tqdm
 
 from semattnet._utils import distributed as dist_utils
 from semattnet._utils.device import autocast
 from semattnet._utils.outputs import check_no_input_overlap, write_text
+from semattnet._utils.progress import progress as progress_bar
 from semattnet.data.frames import Frame
 from semattnet.data.io import DataError, clamp_for_png, quantize_depth, read_depth
 from semattnet.data.kitti import KittiDepthCompletion, load_frame
@@ -54,7 +54,7 @@ def score_folders(pred_dir: str | Path, gt_dir: str | Path, fill_holes: bool = T
                         f"without prediction: {only_g[:5]}{' ...' if len(only_g) > 5 else ''}")  # fmt: skip
     metrics = KittiMetrics(fill_holes=fill_holes, min_gt=min_gt)
     bad = []
-    for name in tqdm(sorted(gts), desc="scoring", disable=not progress, leave=False):
+    for name in progress_bar(sorted(gts), desc="scoring", enabled=progress, leave=False):
         pred, gt = read_depth(preds[name]), read_depth(gts[name])
         if pred.shape != gt.shape:
             bad.append(
@@ -96,7 +96,7 @@ def _score_local(model: nn.Module, loader: DataLoader, device: torch.device, amp
     was_training = model.training
     model.eval()
     with torch.inference_mode():
-        for batch in tqdm(loader, desc="evaluating", disable=not (progress and dist_utils.is_main()), leave=False):
+        for batch in progress_bar(loader, desc="evaluating", enabled=progress and dist_utils.is_main(), leave=False):
             x = {k: batch[k].to(device, non_blocking=True) for k in ("rgb", "semantic", "sparse")}
             with autocast(device, amp):
                 out = model(**x)

@@ -11,11 +11,11 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from semattnet._errors import SemAttNetError
 from semattnet._utils.atomic import atomic_path, fsync_dir
 from semattnet._utils.outputs import check_no_input_overlap
+from semattnet._utils.progress import progress as progress_bar
 from semattnet.data.io import clamp_for_png, read_depth, write_depth
 from semattnet.data.kitti import KittiDepthCompletion
 from semattnet.inference.completer import DepthCompleter
@@ -150,7 +150,7 @@ def write_submission(
     expected = {f.sparse.name: read_depth(f.sparse).shape for f in ds.frames}
 
     def predictions() -> Iterable[tuple[str, np.ndarray]]:
-        for i in tqdm(range(len(ds)), desc="test split", leave=False):
+        for i in progress_bar(range(len(ds)), desc="test split", leave=False):
             x = ds[i]
             res = completer.run(x["rgb"][None], x["semantic"][None], x["sparse"][None])
             yield ds.frames[i].sparse.name, res.depth[0, 0].cpu().numpy()

@@ -25,8 +25,7 @@ import numpy as np
 
 from semattnet._errors import DataError
 
-from .transforms import is_tensor as _is_torch  # a short local name for the public transforms.is_tensor
-from .transforms import transform_points
+from .transforms import is_tensor, transform_points
 
 __all__ = [
     "PointCloud",
@@ -43,9 +42,9 @@ def _check_points(points: Any, name: str) -> None:
         raise DataError(f"{name}: points must be (N, 3) or (N, 4), got shape {tuple(points.shape)}")
     if points.shape[0] == 0:
         raise DataError(f"{name}: no points")
-    finite = points[:, :3].isfinite().all() if _is_torch(points) else np.isfinite(points[:, :3]).all()
+    finite = points[:, :3].isfinite().all() if is_tensor(points) else np.isfinite(points[:, :3]).all()
     if not bool(finite):
-        bad = int((~(points[:, :3].isfinite() if _is_torch(points) else np.isfinite(points[:, :3]))).any(1).sum())
+        bad = int((~(points[:, :3].isfinite() if is_tensor(points) else np.isfinite(points[:, :3]))).any(1).sum())
         raise DataError(f"{name}: {bad} of {points.shape[0]} points have NaN or infinite coordinates")
 
 
@@ -63,8 +62,8 @@ def points_to_pixels(points: Any, K: Any, T_cam_lidar: Any, R_rect: Any = None) 
         ``uv`` (N, 2) pixels (u = column, v = row) and ``z`` (N,) metres; NumPy float64 or torch (dtype of points).
         Points with ``z <= 0`` get meaningless ``uv``; filter on ``z`` first.
     """
-    xyz = transform_points(T_cam_lidar, points[:, :3] if _is_torch(points) else np.asarray(points)[:, :3])
-    if _is_torch(xyz):
+    xyz = transform_points(T_cam_lidar, points[:, :3] if is_tensor(points) else np.asarray(points)[:, :3])
+    if is_tensor(xyz):
         import torch
 
         K = torch.as_tensor(K, dtype=xyz.dtype, device=xyz.device)
@@ -78,7 +77,7 @@ def points_to_pixels(points: Any, K: Any, T_cam_lidar: Any, R_rect: Any = None) 
     safe = z + (z == 0) * 1e-12
     u = (K[0, 0] * xyz[:, 0] + K[0, 1] * xyz[:, 1]) / safe + K[0, 2]
     v = K[1, 1] * xyz[:, 1] / safe + K[1, 2]
-    stack = __import__("torch").stack if _is_torch(xyz) else np.stack
+    stack = __import__("torch").stack if is_tensor(xyz) else np.stack
     return stack([u, v], 1), z
 
 
@@ -129,7 +128,7 @@ def project_points(
     front = z > min_depth
     if not bool(front.any()):
         raise DataError(f"{name}: no point in front of the camera (all {len(z)} have depth <= {min_depth} m)")
-    if _is_torch(points):
+    if is_tensor(points):
         return _zbuffer_torch(uv, z, front, W, H, max_depth)
     col, row, inside = pixel_indices(uv, (W, H))
     keep = front & inside
@@ -199,7 +198,7 @@ class PointCloud:
 
 def _as_map(a: Any, what: str, ndim: int = 2) -> np.ndarray:
     """NumPy (H, W[, C]) from an array/tensor, squeezing leading singleton axes ((1, H, W), (1, 1, H, W))."""
-    a = a.detach().cpu().numpy() if _is_torch(a) else np.asarray(a)
+    a = a.detach().cpu().numpy() if is_tensor(a) else np.asarray(a)
     while a.ndim > ndim and a.shape[0] == 1:
         a = a[0]
     if a.ndim != ndim:
@@ -256,7 +255,7 @@ def depth_to_points(
         :class:`PointCloud` of the selected pixels in row-major order (xyz float32 metres, uv pixels).
     """
     d = _as_map(depth, "depth").astype(np.float32)
-    K = np.asarray(K.detach().cpu() if _is_torch(K) else K, dtype=np.float64)
+    K = np.asarray(K.detach().cpu() if is_tensor(K) else K, dtype=np.float64)
     keep = select_pixels(d, max_depth, top_crop, mask)
     v, u = np.nonzero(keep)
     z = d[v, u].astype(np.float64)

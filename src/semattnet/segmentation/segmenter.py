@@ -35,10 +35,10 @@ from typing import Any
 import numpy as np
 import torch
 import torch.nn.functional as F
-from tqdm import tqdm
 
 from semattnet._errors import DataError, InputError, MissingDependencyError
 from semattnet._utils.device import resolve_device
+from semattnet._utils.progress import progress as progress_bar
 from semattnet.data.io import read_image, write_image
 from semattnet.data.palette import IGNORE_ID, NUM_CLASSES, ids_to_colors, label_ids_to_train_ids
 
@@ -278,8 +278,8 @@ def segment_folder(
     targets = [out / f.relative_to(images).with_suffix(".png") for f in files]
     todo = [(f, t) for f, t in zip(files, targets, strict=True) if overwrite or not t.exists()]
     written = 0
-    with tqdm(total=len(files), initial=len(files) - len(todo), desc="segmenting", unit="image",
-              disable=not progress, dynamic_ncols=True) as bar:  # fmt: skip
+    with progress_bar(total=len(files), initial=len(files) - len(todo), desc="segmenting", unit="image",
+                  enabled=progress, dynamic_ncols=True) as bar:  # fmt: skip
         for batch in _batches(((f, t, read_image(f)) for f, t in todo), batch_size):
             ids = segmenter(np.stack([img for _, _, img in batch]))
             for (_, target, _), m in zip(batch, ids, strict=True):

@@ -7,7 +7,7 @@ from semattnet._errors import SemAttNetError
 __all__ = ["ChecksumError", "DownloadError", "OfflineError"]
 
 
-class DownloadError(SemAttNetError, OSError):
+class DownloadError(OSError, SemAttNetError):
     """A file could not be fetched (every URL failed).
 
     Also an ``OSError`` (a failed transfer is an I/O failure), so ``except OSError`` keeps catching it."""

@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from semattnet._errors import InputError
-from semattnet.data.io import DEPTH_SCALE
+from semattnet.data.io import quantize_depth
 from semattnet.geometry.cameras import KITTI_IMAGE_SIZE, KITTI_K
 
 from .layout import Box, make_boxes
@@ -125,11 +125,6 @@ def _ground_truth(depth: np.ndarray, K: np.ndarray, rng: np.random.Generator) ->
     return np.where(eligible & (rng.random((height, width)) < p), depth, 0.0)
 
 
-def _quantise(d: np.ndarray) -> np.ndarray:
-    """Depth as a KITTI uint16 PNG stores it (1/256 m steps), as float32 metres."""
-    return (np.round(d * DEPTH_SCALE) / DEPTH_SCALE).astype(np.float32)
-
-
 def make_frame(
     height: int = 352,
     width: int = 1216,
@@ -178,8 +173,8 @@ def make_frame(
     return SyntheticFrame(
         rgb=rgb,
         semantic=LABEL_COLOURS[label],
-        sparse=_quantise(scan.sparse),
-        gt=_quantise(gt),
+        sparse=quantize_depth(scan.sparse),
+        gt=quantize_depth(gt),
         depth=depth.astype(np.float32),
         labels=label,
         K=K,

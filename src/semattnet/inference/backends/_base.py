@@ -13,7 +13,7 @@ from torch import nn
 
 from semattnet._errors import InputError, MissingDependencyError
 from semattnet.models.outputs import DepthCompletionOutput
-from semattnet.models.refinement import RefinementInputs, propagate_refinement
+from semattnet.models.refinement import HEADS_PREFIX, RefinementInputs, propagate_refinement  # one home of the prefix
 
 __all__ = ["HEADS_PREFIX", "ExportedGraphEngine", "InferenceEngine", "LogFn", "import_backend", "output_from_arrays"]
 
@@ -21,8 +21,6 @@ __all__ = ["HEADS_PREFIX", "ExportedGraphEngine", "InferenceEngine", "LogFn", "i
 LogFn = Callable[[str], object]
 
 _FIELDS = tuple(f.name for f in fields(DepthCompletionOutput))
-#: Name prefix of the refinement heads an exported graph returns (see :func:`output_from_arrays`).
-HEADS_PREFIX = "refinement."
 
 
 def import_backend(module: str, extra: str) -> ModuleType:
