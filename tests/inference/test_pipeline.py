@@ -126,10 +126,12 @@ def test_predict_checks_everything_before_loading_the_model(tmp_path: Path, monk
         write_image(out / "b_color.png", np.zeros((2, 2, 3), np.uint8))
     else:
         (tmp_path / "sparse" / "b.png").write_bytes(b"not a png")
+    weights = tmp_path / "never-read.safetensors"  # exists (the option checks that), never loaded
+    weights.write_bytes(b"x")
     args = [
         "predict",
         "--weights",
-        "some-name",
+        weights,
         "--rgb",
         tmp_path / "rgb",
         "--sparse",
@@ -150,8 +152,12 @@ def test_evaluate_checks_before_loading_the_model(tree: Path, tmp_path: Path, mo
     monkeypatch.setattr(cli_evaluate, "model_from_options", _no_model)
     (tmp_path / "ev").mkdir()
     (tmp_path / "ev" / "old.txt").write_text("x")
-    result = CliRunner().invoke(main, ["evaluate", "--weights", "some-name", "--data", str(tree), "--out",
+    weights = tmp_path / "never-read.safetensors"  # exists (the option checks that), never loaded
+    weights.write_bytes(b"x")
+    result = CliRunner().invoke(main, ["evaluate", "--weights", str(weights), "--data", str(tree), "--out",
                                        str(tmp_path / "ev"), "--workers", "0"])  # fmt: skip
     assert result.exit_code == 1 and "not empty" in result.output and "the model was loaded" not in result.output
-    result = CliRunner().invoke(main, ["evaluate", "--weights", "some-name", "--data", str(tmp_path), "--workers", "0"])
+    result = CliRunner().invoke(
+        main, ["evaluate", "--weights", str(weights), "--data", str(tmp_path), "--workers", "0"]
+    )
     assert result.exit_code == 1 and "no val_select frames" in result.output, result.output

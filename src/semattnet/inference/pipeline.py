@@ -1,13 +1,14 @@
 """The one frame loop: frames from any :class:`~semattnet.data.frames.FrameSource`, through a completer,
 into output sinks (:mod:`semattnet.inference.sinks`). What ``semattnet predict`` runs for folders and
-KITTI raw drives, and what writes ``evaluate``'s predictions.
+KITTI raw drives, and what writes ``evaluate``'s predictions. For example::
 
-    >>> from semattnet.baselines import ClassicalCompleter                              # doctest: +SKIP
-    >>> from semattnet.data.sources import FolderSource
-    >>> from semattnet.inference.sinks import default_sinks
-    >>> source = FolderSource.pair("rgb/", "sparse/")
-    >>> check_frames(source, default_sinks(), "out")       # every input decoded, every output checked
-    >>> complete_frames(source, ClassicalCompleter(), default_sinks(), "out", checked=True)
+    from semattnet.baselines import ClassicalCompleter
+    from semattnet.data.sources import FolderSource
+    from semattnet.inference.sinks import default_sinks
+
+    source = FolderSource.pair("rgb/", "sparse/")
+    check_frames(source, default_sinks(), "out")       # every input decoded, every output checked
+    complete_frames(source, ClassicalCompleter(), default_sinks(), "out", checked=True)
 
 The output policy (:mod:`semattnet._utils.outputs`): no output over or inside an input (the folder of
 an input file counts), none existing unless ``overwrite``, every input decoded: all before any work
