@@ -110,3 +110,18 @@ def test_intrinsics(tmp_path: Path) -> None:
     (tmp_path / "bad.txt").write_text("1 2 3")
     with pytest.raises(DataError, match="9 numbers"):
         read_intrinsics(tmp_path / "bad.txt")
+
+
+def test_read_intrinsics_is_the_calibration_readers_P_rect(tmp_path) -> None:
+    """One reader of KITTI calibration files: K from read_intrinsics is P_rect's left 3x3 as geometry reads it,
+    and a file with only P_rect rows (no R_rect / S_rect, as the synthetic trees write) still works."""
+    from semattnet.geometry import read_projection
+
+    calib = SAMPLE / "kitti_raw/2011_09_26/calib_cam_to_cam.txt"
+    P = read_projection(calib, "02")
+    assert P.shape == (3, 4) and P[0, 3] != 0  # the baseline column is kept there
+    np.testing.assert_array_equal(read_intrinsics(calib, "02"), P[:, :3])
+    (tmp_path / "c.txt").write_text("P_rect_02: 700 0 600 45 0 700 180 0 0 0 1 0\n")
+    assert read_intrinsics(tmp_path / "c.txt", "02")[0, 2] == 600
+    with pytest.raises(DataError, match="P_rect_03"):
+        read_intrinsics(tmp_path / "c.txt", "03")

@@ -222,28 +222,21 @@ def read_intrinsics(path: str | os.PathLike[str], camera: str | None = None) -> 
     """A 3x3 camera matrix from a KITTI file.
 
     ``val_selection_cropped``/``test`` intrinsics files hold 9 numbers; a raw-data
-    ``calib_cam_to_cam.txt`` holds ``P_rect_0X`` rows (pass ``camera="02"``): ``K = P_rect_0X[:, :3]``
-    (its last column is the stereo baseline, an extrinsic: see :mod:`semattnet.geometry.calibration`,
-    whose :func:`~semattnet.geometry.read_cam_to_cam` reads the whole rig and needs ``R_rect``/``S_rect``
-    too, which the synthetic trees do not write).
+    ``calib_cam_to_cam.txt`` holds ``P_rect_0X`` rows (pass ``camera="02"``): ``K = P_rect_0X[:, :3]``,
+    read by the one KITTI calibration reader, :func:`semattnet.geometry.calibration.read_projection`
+    (which keeps the last column, the stereo baseline, for those who need it).
     """
     path = Path(path)
+    if camera is not None:
+        from semattnet.geometry.calibration import read_projection
+
+        return read_projection(path, camera)[:, :3].copy()
     if not path.is_file():
         raise DataError(f"{path}: file not found")
-    text = path.read_text()
     try:
-        if camera is None:
-            values = [float(v) for v in text.split()]
-            if len(values) != 9:
-                raise DataError(f"{path}: expected 9 numbers (a 3x3 matrix), found {len(values)}")
-            return np.array(values, dtype=np.float64).reshape(3, 3)
-        for line in text.splitlines():
-            key, _, rest = line.partition(":")
-            if key.strip() == f"P_rect_{camera}":
-                p = np.array([float(v) for v in rest.split()], dtype=np.float64).reshape(3, 4)
-                return p[:, :3]
+        values = [float(v) for v in path.read_text().split()]
     except ValueError as exc:
-        if isinstance(exc, DataError):
-            raise
         raise DataError(f"{path}: malformed numbers: {exc}") from None
-    raise DataError(f"{path}: no P_rect_{camera} entry")
+    if len(values) != 9:
+        raise DataError(f"{path}: expected 9 numbers (a 3x3 matrix), found {len(values)}")
+    return np.array(values, dtype=np.float64).reshape(3, 3)

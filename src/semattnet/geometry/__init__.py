@@ -21,6 +21,7 @@ from .calibration import (
     RigCalibration,
     read_cam_to_cam,
     read_kitti_calibration,
+    read_projection,
     read_rig_json,
     read_velo_to_cam,
 )
@@ -55,6 +56,7 @@ __all__ = [
     "read_kitti_calibration",
     "read_oxts_motion",
     "read_points",
+    "read_projection",
     "read_rig_json",
     "read_velo_to_cam",
     "select_pixels",

@@ -35,6 +35,7 @@ __all__ = [
     "RigCalibration",
     "read_cam_to_cam",
     "read_kitti_calibration",
+    "read_projection",
     "read_rig_json",
     "read_velo_to_cam",
 ]
@@ -134,6 +135,20 @@ def _check_K(K: np.ndarray, what: str, path: Path) -> np.ndarray:
     if not (K[0, 0] > 0 and K[1, 1] > 0 and np.allclose(K[2], [0, 0, 1]) and K[1, 0] == 0):
         raise DataError(f"{path}: {what} is not a pinhole camera matrix (need fx, fy > 0, last row 0 0 1)")
     return K
+
+
+def read_projection(path: str | os.PathLike[str], camera: str = "02") -> np.ndarray:
+    """The (3, 4) rectified projection ``P_rect_<camera>`` of a KITTI ``calib_cam_to_cam.txt``, pixels, alone:
+    ``K = P[:, :3]``, ``P[:, 3]`` = ``K @ t`` the offset from the rectified cam0 (the stereo baseline). Unlike
+    :func:`read_cam_to_cam` it needs no ``R_rect`` / ``S_rect`` (files written for intrinsics only have none).
+
+    Raises:
+        DataError: missing file or key, malformed numbers, or not a pinhole matrix.
+    """
+    path = Path(path)
+    P = _get(_read_kv(path), f"P_rect_{camera}", (3, 4), path)
+    _check_K(P[:, :3], f"P_rect_{camera}", path)
+    return P
 
 
 def read_cam_to_cam(path: str | os.PathLike[str]) -> dict[str, CameraCalibration]:
