@@ -1,4 +1,4 @@
-"""``semattnet predict --bag``: byte-identical to ``--kitti-raw``, ``--bag-out`` and ``--rerun`` read back, bad input."""
+"""``semattnet predict --bag``: byte-identical to ``--kitti-raw``; ``--bag-out``, ``--rerun`` read back; bad input."""
 
 from __future__ import annotations
 
@@ -63,8 +63,8 @@ def test_bag_out_and_rerun_read_back(sample: dict[str, Path], tmp_path: Path) ->
     from PIL import Image
 
     bag_out, rrd, out = tmp_path / "pred_mcap", tmp_path / "run.rrd", tmp_path / "out"
-    res = CliRunner().invoke(main, ["predict", "--bag", str(sample["mcap"]), *TOPICS, "--method", "classical",
-                                    "--out", str(out), "--bag-out", str(bag_out), "--rerun", str(rrd), "--stream"])  # fmt: skip
+    args = ["--out", str(out), "--bag-out", str(bag_out), "--rerun", str(rrd), "--stream"]
+    res = CliRunner().invoke(main, ["predict", "--bag", str(sample["mcap"]), *TOPICS, "--method", "classical", *args])
     assert res.exit_code == 0, res.output
     assert "(read ahead)" in res.output
     with open_bag(sample["mcap"]) as reader:  # the input's header stamps and frame ids
