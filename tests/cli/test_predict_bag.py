@@ -122,6 +122,8 @@ def test_bad_input_is_one_line_and_leaves_nothing(sample: dict[str, Path], tmp_p
     assert res.exit_code == 2 and "--image-topic and --points-topic" in res.output
     res = _invoke(["--rgb", bag, "--sparse", bag, "--image-topic", T.image, "--out", str(out)])
     assert res.exit_code == 2 and "--image-topic needs --bag" in res.output
+    res = _invoke([*base, *TOPICS, "--semantic-topic", T.image, "--segment", "x"])
+    assert res.exit_code == 2 and "--semantic-topic or --segment, not both" in res.output
     res = _invoke(["--bag", bag, "--list-topics"])
     assert res.exit_code == 0 and "sensor_msgs/msg/PointCloud2" in res.output
     (tmp_path / "exists.rrd").write_text("x")

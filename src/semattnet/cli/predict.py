@@ -192,6 +192,8 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
         raise click.UsageError("--frames and --deskew need --kitti-raw")
     if bag["bag"] is not None and semantic is not None:
         raise click.UsageError("--semantic is for --rgb/--kitti-raw; a bag's semantic maps come with --semantic-topic")
+    if bag["semantic_topic"] is not None and segment_spec is not None:
+        raise click.UsageError("give --semantic-topic or --segment, not both")
     if not files_only and report:
         raise click.UsageError("--report needs --rgb/--sparse (not yet --kitti-raw or --bag)")
     if files_only and intrinsics is None and (bag["bag_out"] or bag["rerun_file"] or bag["rerun_spawn"]):

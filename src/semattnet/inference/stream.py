@@ -155,7 +155,7 @@ class StageTimes:
         rows.append(f"{'per frame':<14}{s['per_frame_median_ms']:>11.1f}")
         rows.append(f"{s['frames']} frame(s) in {s['wall_s']:.2f} s{' (read ahead)' if s['overlapped'] else ''}: "
                     f"{s['throughput_hz']:.2f} frames/s against a sensor period of {1e3 * period:.1f} ms "
-                    f"({1 / period:.1f} Hz): {s['realtime_factor']:.2f}x real time, {verdict}")  # fmt: skip
+                    f"({1 / period:.1f} Hz): {s['realtime_factor']:.2g}x real time, {verdict}")  # fmt: skip
         return "\n".join(rows)
 
     def to_json(self) -> str:
@@ -262,13 +262,13 @@ def completions(source: FrameSource, completer: Any, names: Sequence[str] | None
     timer.notes.setdefault("segmentation", "no segmenter run")
     timer.notes.setdefault("projection", "inside read/decode (the source does not split it)")
     current = [""]
-    timer.begin()
     try:
         if prefetch > 0:
             frames: Generator[Frame, None, None] = _prefetched(source, names, semantic, timer, prefetch)
         else:
             frames = (_read_frame(source, name, semantic, timer) for name in names)
         with closing(frames), _timed_propagation(completer, timer, current):
+            timer.begin()  # after the engine is built; the reader starts with the first frame
             for frame in frames:
                 current[0] = frame.name
                 with timer.time(frame.name, "network"):
