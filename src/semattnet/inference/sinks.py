@@ -86,7 +86,7 @@ class Prediction:
         key = (float(max_depth), int(top_crop))
         if key not in self._clouds:
             camera = getattr(self.frame.calib, "camera", None)
-            name = f"cam{camera}" if camera else "cam"
+            name = (f"cam{camera}" if str(camera).isdigit() else str(camera)) if camera else "cam"  # KITTI "02"
             self._clouds[key] = depth_to_points(self.stored, self.frame.K, rgb=self.frame.rgb,
                                                 confidence=self.completion.confidence, max_depth=max_depth,
                                                 top_crop=top_crop, frame=name)  # fmt: skip
