@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import click
 
 from semattnet.cli._group import main
-from semattnet.cli._options import COUNT, POSITIVE_FLOAT, backend_option, weights_option
+from semattnet.cli._options import COUNT, NONNEGATIVE_FLOAT, POSITIVE_FLOAT, backend_option, weights_option
 
 
 def _completer(method: str, checkpoint: Path | None, weights: str | None, device: str, amp: str,  # type: ignore[no-untyped-def]
@@ -47,6 +48,73 @@ def _intrinsics(text: str | None):  # type: ignore[no-untyped-def]
 
 _INPUT = click.Path(exists=True, path_type=Path)
 
+#: The options of a ROS bag input and of the robot outputs (``--bag-out``, ``--rerun``) and ``--stream``.
+_BAG_OPTIONS = [
+    click.option("--bag", type=_INPUT, default=None,
+                 help="A ROS 1 .bag, a ROS 2 bag folder or a .db3 / .mcap file (instead of --rgb/--sparse)."),
+    click.option("--image-topic", default=None, help="With --bag: sensor_msgs/Image or CompressedImage topic."),
+    click.option("--points-topic", default=None, help="With --bag: sensor_msgs/PointCloud2 topic (x, y, z)."),
+    click.option("--camera-info-topic", default=None,
+                 help="With --bag: sensor_msgs/CameraInfo topic [the bag's only one]."),
+    click.option("--rig", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+                 help="With --bag: rig JSON (K, T_cam_lidar, image_size) overriding CameraInfo and /tf_static."),
+    click.option("--semantic-topic", default=None,
+                 help="With --bag: colour-coded semantic images, paired with the images by stamp."),
+    click.option("--max-skew", type=NONNEGATIVE_FLOAT, default=None,
+                 help="With --bag: seconds between an image and its scan at most [half the scan period]."),
+    click.option("--list-topics", is_flag=True, help="With --bag: print the bag's topics and exit."),
+    click.option("--bag-out", type=click.Path(path_type=Path), default=None,
+                 help="Also write a ROS 2 bag (MCAP; ROS 1 for .bag): depth 32FC1, coloured cloud, CameraInfo."),
+    click.option("--rerun", "rerun_file", type=click.Path(dir_okay=False, path_type=Path), default=None,
+                 help="Also write a Rerun recording FILE.rrd.  [extra: rerun]"),
+    click.option("--rerun-spawn", is_flag=True, help="Stream the frames to a spawned Rerun viewer."),
+    click.option("--stream", is_flag=True,
+                 help="Read, project and segment the next frames in a background thread while one is completed."),
+]  # fmt: skip
+
+
+def _bag_options(f):  # type: ignore[no-untyped-def]
+    for option in reversed(_BAG_OPTIONS):
+        f = option(f)
+    return f
+
+
+def _check_inputs(rgb: Path | None, sparse: Path | None, kitti_raw: Path | None, bag: dict) -> None:  # type: ignore[type-arg]
+    """Exactly one input kind, and the options each needs."""
+    folder = rgb is not None or sparse is not None
+    if folder + (kitti_raw is not None) + (bag["bag"] is not None) != 1 or (folder and None in (rgb, sparse)):
+        raise click.UsageError("give --rgb and --sparse, or --kitti-raw, or --bag")
+    bag_only = [k for k in ("image_topic", "points_topic", "camera_info_topic", "rig", "semantic_topic", "max_skew")
+                if bag[k] is not None] + (["list_topics"] if bag["list_topics"] else [])  # fmt: skip
+    if bag["bag"] is None and bag_only:
+        raise click.UsageError(f"--{bag_only[0].replace('_', '-')} needs --bag")
+    if bag["bag"] is not None and not bag["list_topics"] and None in (bag["image_topic"], bag["points_topic"]):
+        raise click.UsageError("--bag needs --image-topic and --points-topic (see --list-topics)")
+
+
+def _source(rgb, sparse, kitti_raw, frames, camera, semantic, deskew, K, bag):  # type: ignore[no-untyped-def]
+    """The frame source the options name."""
+    from semattnet.data.sources import BagSource, FolderSource, RawDriveSource
+
+    if bag["bag"] is not None:
+        return BagSource(bag["bag"], bag["image_topic"], bag["points_topic"], bag["camera_info_topic"], bag["rig"],
+                         bag["max_skew"], bag["semantic_topic"], log=click.echo)  # fmt: skip
+    if kitti_raw is not None:
+        return RawDriveSource(kitti_raw, frames, camera, semantic, deskew)
+    return FolderSource.pair(rgb, sparse, semantic, K=K)
+
+
+def _robot_sinks(bag: dict, max_depth: float, timer):  # type: ignore[no-untyped-def,type-arg]
+    """``latency.json`` and, as asked, the bag and the Rerun recording."""
+    from semattnet.inference.sinks import BagSink, LatencySink, RerunSink
+
+    sinks = [LatencySink(timer=timer)]
+    if bag["bag_out"] is not None:
+        sinks.append(BagSink(target=bag["bag_out"], max_depth=max_depth))
+    if bag["rerun_file"] is not None or bag["rerun_spawn"]:
+        sinks.append(RerunSink(target=bag["rerun_file"], spawn=bag["rerun_spawn"], max_depth=max_depth))
+    return sinks
+
 
 @main.command()
 @weights_option
@@ -66,12 +134,13 @@ _INPUT = click.Path(exists=True, path_type=Path)
     "segment_spec",
     default=None,
     metavar="SPEC",
-    help="With --kitti-raw: segment each image with this model (see `semattnet segment --model`).",
+    help="With --kitti-raw or --bag: segment each image with this model (see `semattnet segment --model`).",
 )
-@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path))
+@_bag_options
+@click.option("--out", default=None, type=click.Path(file_okay=False, path_type=Path), help="Output folder [required].")
 @click.option("--npy", is_flag=True, help="Also write float32 .npy depth.")
 @click.option("--panel", is_flag=True, help="Also write the per-branch panel (with --kitti-raw: a bird's-eye view).")
-@click.option("--ply", is_flag=True, help="With --kitti-raw: also write the prediction as a binary PLY point cloud.")
+@click.option("--ply", is_flag=True, help="With --kitti-raw or --bag: also write a binary PLY point cloud.")
 @click.option(
     "--max-depth",
     type=POSITIVE_FLOAT,
@@ -94,34 +163,52 @@ _INPUT = click.Path(exists=True, path_type=Path)
               help="With --report: camera intrinsics for the 3D view ('kitti': KITTI's camera 02).")  # fmt: skip
 def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, sparse: Path | None,
             kitti_raw: Path | None, frames: str | None, camera: str, semantic: Path | None, segment_spec: str | None,
-            out: Path, npy: bool, panel: bool, ply: bool, max_depth: float, top_crop: int, deskew: bool, device: str,
-            amp: str, backend: str, overwrite: bool, method: str, report: bool,
-            intrinsics: str | None) -> None:  # fmt: skip
-    """Complete depth for one frame, folders of frames (any size) or a KITTI raw drive."""
+            out: Path | None, npy: bool, panel: bool, ply: bool, max_depth: float, top_crop: int, deskew: bool,
+            device: str, amp: str, backend: str, overwrite: bool, method: str, report: bool,
+            intrinsics: str | None, **bag: Any) -> None:  # fmt: skip
+    """Complete depth for one frame, folders of frames (any size), a KITTI raw drive or a ROS bag.
+
+    Prints a per-stage latency table at the end and writes it to OUT/latency.json."""
     from semattnet._utils.distributed import launch_rank, process_group
-    from semattnet.data.sources import FolderSource, RawDriveSource, SemanticMaps
+    from semattnet.data.sources import SemanticMaps
     from semattnet.inference.pipeline import check_frames, complete_frames
     from semattnet.inference.sinks import default_sinks
+    from semattnet.inference.stream import StageTimes
 
-    if (kitti_raw is None) == (rgb is None and sparse is None) or (kitti_raw is None and None in (rgb, sparse)):
-        raise click.UsageError("give --rgb and --sparse, or --kitti-raw")
-    if kitti_raw is None and (ply or segment_spec or frames or deskew):
-        raise click.UsageError("--ply, --segment, --frames and --deskew need --kitti-raw")
-    if kitti_raw is not None and report:
-        raise click.UsageError("--report needs --rgb/--sparse (not yet --kitti-raw)")
+    _check_inputs(rgb, sparse, kitti_raw, bag)
+    if bag["list_topics"]:
+        from semattnet.data.bags import format_topics, list_topics
+
+        click.echo(format_topics(list_topics(bag["bag"])))
+        return
+    if out is None:
+        raise click.UsageError("Missing option '--out'.")
+    files_only = kitti_raw is None and bag["bag"] is None
+    if files_only and (ply or segment_spec):
+        raise click.UsageError("--ply and --segment need --kitti-raw or --bag")
+    if kitti_raw is None and (frames or deskew):
+        raise click.UsageError("--frames and --deskew need --kitti-raw")
+    if bag["bag"] is not None and semantic is not None:
+        raise click.UsageError("--semantic is for --rgb/--kitti-raw; a bag's semantic maps come with --semantic-topic")
+    if bag["semantic_topic"] is not None and segment_spec is not None:
+        raise click.UsageError("give --semantic-topic or --segment, not both")
+    if not files_only and report:
+        raise click.UsageError("--report needs --rgb/--sparse (not yet --kitti-raw or --bag)")
+    if files_only and intrinsics is None and (bag["bag_out"] or bag["rerun_file"] or bag["rerun_spawn"]):
+        raise click.UsageError("--bag-out and --rerun need the intrinsics: --bag, --kitti-raw, or --K")
     _check_method(method, checkpoint, weights)
     K = _intrinsics(intrinsics)
-    maps = SemanticMaps(segment_spec, folder=semantic is not None)
-    sinks = default_sinks(npy, panel, ply, max_depth, top_crop)
+    maps = SemanticMaps(segment_spec, folder=semantic is not None or bag["semantic_topic"] is not None)
+    timer = StageTimes()
+    sinks = default_sinks(npy, panel, ply, max_depth, top_crop) + _robot_sinks(bag, max_depth, timer)
     with process_group():
-        if kitti_raw is not None:
-            source = RawDriveSource(kitti_raw, frames, camera, semantic, deskew)
-        else:
-            source = FolderSource.pair(rgb, sparse, semantic, K=K)  # type: ignore[arg-type]
+        source = _source(rgb, sparse, kitti_raw, frames, camera, semantic, deskew, K, bag)
         check_frames(source, sinks, out, overwrite=overwrite)  # every input and output, before the model
         completer = _completer(method, checkpoint, weights, device, amp, backend)
         complete_frames(source, completer, sinks, out, overwrite=overwrite, log=click.echo, semantic=maps,
-                        checked=True)  # fmt: skip
+                        checked=True, timer=timer, prefetch=2 if bag["stream"] else 0)  # fmt: skip
+    if launch_rank() == 0:
+        click.echo(timer.table())
     if report and launch_rank() == 0:  # under torchrun: once, after every rank's frames are in place
         from semattnet.viz.viewer import write_prediction_report
 

@@ -39,6 +39,9 @@ class Frame:
         calib: the calibration that projected them (a :class:`semattnet.geometry.RigCalibration`), or None.
         gt: (H, W) float32 ground-truth depth in metres (0 = none), or None.
         paths: the files it was read from, by role (``rgb``, ``sparse``, ``semantic``, ``gt``, ``scan``, ...).
+        meta: what else the source knows that some sinks need, by key (e.g. a bag frame's ``stamp_ns``: the
+            image's header stamp in integer nanoseconds, ``frame_id``, ``lidar_frame_id``, ``camera_info``);
+            empty for sources that know nothing more. Sinks must treat every key as optional.
     """
 
     name: str
@@ -51,6 +54,7 @@ class Frame:
     calib: Any = None
     gt: np.ndarray | None = None
     paths: Mapping[str, Path] = field(default_factory=dict)
+    meta: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         where = self.paths.get("rgb", self.name)

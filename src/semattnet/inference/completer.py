@@ -19,6 +19,7 @@ cropped back, so any size works, KITTI's 1242x375 included.
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -151,3 +152,19 @@ class DepthCompleter:
                        torch.from_numpy(np.ascontiguousarray(sparse, dtype=np.float32))[None, None])  # fmt: skip
         out = out.map(lambda t: t.cpu())
         return Completion(depth=out.depth[0, 0].numpy(), output=out)
+
+    def stream(self, source: Any, semantic: Any = None, *, timer: Any = None, prefetch: int = 2,
+               names: Any = None) -> Iterator[tuple[Any, Completion]]:  # fmt: skip
+        """``(frame, completion)`` for every frame of ``source`` (a :class:`~semattnet.data.frames.FrameSource`;
+        ``names``: some of its frames), in order, while the next ``prefetch`` frames are read, decoded, projected
+        and segmented in a background thread (bounded: at most ``prefetch`` frames ahead).
+
+        ``semantic``: a :class:`~semattnet.data.sources.SemanticMaps` (default: the fallback map when the model
+        needs one). ``timer``: a :class:`~semattnet.inference.stream.StageTimes` that gets every stage's time
+        (``timer.table()`` afterwards). The loop is :func:`semattnet.inference.stream.completions`, the one that
+        ``complete_frames`` writes from."""
+        from semattnet.data.sources.semantic import SemanticMaps
+        from semattnet.inference.stream import completions
+
+        maps = (semantic if semantic is not None else SemanticMaps()).bind(self)
+        yield from completions(source, self, names, maps, timer, prefetch)

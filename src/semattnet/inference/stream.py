@@ -1,0 +1,278 @@
+"""Frames through a completer with per-stage times, optionally read ahead in a background thread.
+
+:func:`completions` is the inside of the one frame loop (:func:`semattnet.inference.pipeline.complete_frames`
+writes what it yields; :meth:`semattnet.inference.DepthCompleter.stream` yields it): each frame is read
+(and decoded), projected, given its semantic map (:class:`~semattnet.data.sources.SemanticMaps`), completed,
+and every stage is timed into a :class:`StageTimes`. With ``prefetch=N`` the reading, projection and
+segmentation of the next frames run in a background thread while the current frame is completed and
+written; at most ``N`` frames are read ahead of the one the loop holds (a semaphore), so memory stays bounded.
+
+Stages (:data:`STAGES`): ``read`` (read and decode), ``projection`` (LiDAR scan into the image), ``segmentation``
+(the semantic map, when one is computed), ``network``, ``propagation``, ``writing`` (every sink).
+
+* A source splits ``read`` from ``projection`` by offering ``read(name)`` (raw inputs, decoded) and
+  ``assemble(raw)`` (the :class:`~semattnet.data.frames.Frame`, scan projected), as
+  :class:`~semattnet.data.sources.BagSource` does; for other sources ``load`` is timed as ``read``.
+* ``network`` vs ``propagation``: for a :class:`~semattnet.inference.DepthCompleter` on the ``torch`` engine
+  the model's CSPN++ propagation (``propagation``, the fused kernel) is timed inside the engine call and
+  ``network`` is the rest of the call (padding, backbone, refinement heads, copies). The exported engines
+  (``openvino``, ``onnxruntime``) and the classical baseline are not split: their whole call is ``network``.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import queue
+import threading
+import time
+from collections.abc import Generator, Iterator, Sequence
+from contextlib import closing, contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from semattnet.data.frames import Frame, FrameSource
+
+__all__ = ["DEFAULT_SENSOR_PERIOD_S", "LATENCY_FILE", "STAGES", "StageTimes", "completions", "cpu_name"]
+
+#: The stages timed, in order.
+STAGES = ("read", "projection", "segmentation", "network", "propagation", "writing")
+_LABELS = {"read": "read/decode"}
+#: The sensor period assumed when the frames' stamps cannot say (a 10 Hz LiDAR), seconds.
+DEFAULT_SENSOR_PERIOD_S = 0.1
+#: Where ``semattnet predict`` writes the table, in its ``--out``.
+LATENCY_FILE = "latency.json"
+
+
+def cpu_name() -> str:
+    """The CPU's model name (``/proc/cpuinfo``), else what :mod:`platform` says."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+class StageTimes:
+    """Seconds per stage per frame (thread-safe), the loop's wall time and the sensor period.
+
+    A stage timed inside another (``propagation`` inside ``network``) is subtracted from the outer one, so
+    the stages add up to the time spent. ``notes``: stage -> why it has no times (shown in the table).
+    """
+
+    def __init__(self) -> None:
+        self.times: dict[str, dict[str, float]] = {}
+        self.stamps: dict[str, float] = {}
+        self.notes: dict[str, str] = {}
+        self.wall_s = 0.0
+        self.overlapped = False
+        self._lock = threading.Lock()
+        self._local = threading.local()
+        self._start: float | None = None
+
+    def add(self, name: str, stage: str, seconds: float) -> None:
+        with self._lock:
+            per = self.times.setdefault(name, {})
+            per[stage] = per.get(stage, 0.0) + float(seconds)
+
+    @contextmanager
+    def time(self, name: str, stage: str) -> Iterator[None]:
+        """Time the block as ``stage`` of frame ``name`` (less the stages timed inside it, same thread)."""
+        stack = self._local.__dict__.setdefault("stack", [])
+        stack.append(0.0)
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            total = time.perf_counter() - t0
+            inner = stack.pop()
+            if stack:
+                stack[-1] += total
+            self.add(name, stage, total - inner)
+
+    def stamp(self, name: str, seconds: float | None) -> None:
+        """Record frame ``name``'s sensor time (seconds), for the sensor period."""
+        if seconds is not None:
+            with self._lock:
+                self.stamps[name] = float(seconds)
+
+    def begin(self) -> None:
+        self._start = time.perf_counter()
+
+    def end(self) -> None:
+        if self._start is not None:
+            self.wall_s += time.perf_counter() - self._start
+            self._start = None
+
+    @property
+    def frames(self) -> int:
+        return len(self.times)
+
+    @property
+    def sensor_period_s(self) -> float:
+        """Median spacing of the frames' distinct stamps, else :data:`DEFAULT_SENSOR_PERIOD_S`."""
+        s = np.unique(np.array(list(self.stamps.values()), dtype=np.float64))
+        d = np.diff(s)
+        return float(np.median(d)) if len(d) and np.median(d) > 0 else DEFAULT_SENSOR_PERIOD_S
+
+    def stage(self, stage: str) -> np.ndarray:
+        """Seconds of ``stage``, one per frame that ran it."""
+        with self._lock:
+            return np.array([t[stage] for t in self.times.values() if stage in t], dtype=np.float64)
+
+    def summary(self) -> dict[str, Any]:
+        """Median and p95 per stage (ms), the sum of medians, wall time, throughput and the sensor period."""
+        stages: dict[str, Any] = {}
+        for s in STAGES:
+            v = self.stage(s)
+            stages[s] = ({"median_ms": 1e3 * float(np.median(v)), "p95_ms": 1e3 * float(np.percentile(v, 95)),
+                          "frames": len(v)} if len(v) else {"note": self.notes.get(s, "not run")})  # fmt: skip
+        per_frame = [sum(t.values()) for t in self.times.values()]
+        period = self.sensor_period_s
+        fps = self.frames / self.wall_s if self.wall_s > 0 else 0.0
+        return {"frames": self.frames, "stages": stages,
+                "sum_of_stages_s": float(sum(per_frame)), "wall_s": self.wall_s, "overlapped": self.overlapped,
+                "per_frame_median_ms": 1e3 * float(np.median(per_frame)) if per_frame else 0.0,
+                "throughput_hz": fps, "sensor_period_s": period, "realtime_factor": fps * period,
+                "cpu": cpu_name()}  # fmt: skip
+
+    def table(self) -> str:
+        """The per-stage latency table (what ``semattnet predict`` prints)."""
+        s = self.summary()
+        rows = [f"{'stage':<14}{'median ms':>11}{'p95 ms':>10}"]
+        for stage, r in s["stages"].items():
+            label = _LABELS.get(stage, stage)
+            if "median_ms" in r:
+                rows.append(f"{label:<14}{r['median_ms']:>11.1f}{r['p95_ms']:>10.1f}")
+            else:
+                rows.append(f"{label:<14}{'-':>11}{'-':>10}  ({r['note']})")
+        period = s["sensor_period_s"]
+        verdict = "keeps up" if s["realtime_factor"] >= 1 else "falls behind"
+        rows.append(f"{'per frame':<14}{s['per_frame_median_ms']:>11.1f}")
+        rows.append(f"{s['frames']} frame(s) in {s['wall_s']:.2f} s{' (read ahead)' if s['overlapped'] else ''}: "
+                    f"{s['throughput_hz']:.2f} frames/s against a sensor period of {1e3 * period:.1f} ms "
+                    f"({1 / period:.1f} Hz): {s['realtime_factor']:.2g}x real time, {verdict}")  # fmt: skip
+        return "\n".join(rows)
+
+    def to_json(self) -> str:
+        return json.dumps(self.summary(), indent=2) + "\n"
+
+
+def _read_frame(source: FrameSource, name: str, semantic: Any, timer: StageTimes) -> Frame:
+    """One frame read (and projected, when the source splits it) and given its semantic map, timed."""
+    if hasattr(source, "read") and hasattr(source, "assemble"):
+        with timer.time(name, "read"):
+            raw = source.read(name)
+        with timer.time(name, "projection"):
+            frame = source.assemble(raw)
+    else:
+        with timer.time(name, "read"):
+            frame = source.load(name)
+    segments = semantic is not None and semantic.needed and semantic.segmenter is not None
+    if segments and frame.semantic is None:
+        with timer.time(name, "segmentation"):
+            frame = semantic.fill(frame)
+    elif semantic is not None:
+        frame = semantic.fill(frame)
+    timer.stamp(name, frame.timestamp)
+    return frame
+
+
+_DONE = object()
+
+
+def _prefetched(source: FrameSource, names: Sequence[str], semantic: Any, timer: StageTimes,
+                depth: int) -> Iterator[Frame]:  # fmt: skip
+    """The frames of ``names`` in order, read in a background thread at most ``depth`` frames ahead."""
+    slots, items, stop = threading.Semaphore(depth), queue.Queue(), threading.Event()  # type: ignore[var-annotated]
+
+    def work() -> None:
+        try:
+            for name in names:
+                while not slots.acquire(timeout=0.05):
+                    if stop.is_set():
+                        return
+                if stop.is_set():
+                    return
+                items.put(_read_frame(source, name, semantic, timer))
+            items.put(_DONE)
+        except BaseException as exc:  # handed to the loop, raised there
+            items.put(exc)
+
+    thread = threading.Thread(target=work, name="semattnet-prefetch", daemon=True)
+    thread.start()
+    try:
+        while (item := items.get()) is not _DONE:
+            if isinstance(item, BaseException):
+                raise item
+            slots.release()  # the loop holds this frame now: the reader may start one more
+            yield item
+    finally:
+        stop.set()
+        thread.join()
+
+
+@contextmanager
+def _timed_propagation(completer: Any, timer: StageTimes, current: list[str]) -> Iterator[None]:
+    """While active, a ``torch``-engine :class:`DepthCompleter`'s propagation is timed as ``propagation``."""
+    net = None
+    if getattr(completer, "backend", None) == "torch" and hasattr(completer, "engine"):
+        net = getattr(completer.engine(None), "net", None)
+    if net is None or not callable(getattr(net, "propagation", None)):
+        why = "not split from network by this engine" if hasattr(completer, "engine") else "the method has none"
+        timer.notes.setdefault("propagation", why)
+        yield
+        return
+    import torch
+
+    inner, thread = net.propagation, threading.get_ident()
+
+    def propagation(inputs: Any) -> Any:
+        if threading.get_ident() != thread:
+            return inner(inputs)
+        cuda = inputs.depth.device.type == "cuda"
+        if cuda:
+            torch.cuda.synchronize(inputs.depth.device)
+        with timer.time(current[0], "propagation"):
+            out = inner(inputs)
+            if cuda:
+                torch.cuda.synchronize(inputs.depth.device)
+        return out
+
+    net.propagation = propagation
+    try:
+        yield
+    finally:
+        del net.propagation  # the model's own method again
+
+
+def completions(source: FrameSource, completer: Any, names: Sequence[str] | None = None, semantic: Any = None,
+                timer: StageTimes | None = None, prefetch: int = 0) -> Iterator[tuple[Frame, Any]]:  # fmt: skip
+    """``(frame, completion)`` for each of ``names`` (default: all of ``source``), in order, every stage timed
+    into ``timer``; ``prefetch`` > 0 reads that many frames ahead in a background thread (module doc).
+    ``semantic``: a bound :class:`~semattnet.data.sources.SemanticMaps` (None: frames as the source gives them).
+    The time between yields (what the caller does with a frame, e.g. writing) counts in the wall time."""
+    timer = timer if timer is not None else StageTimes()
+    names = list(source.names if names is None else names)
+    timer.overlapped = prefetch > 0
+    timer.notes.setdefault("segmentation", "no segmenter run")
+    timer.notes.setdefault("projection", "inside read/decode (the source does not split it)")
+    current = [""]
+    try:
+        if prefetch > 0:
+            frames: Generator[Frame, None, None] = _prefetched(source, names, semantic, timer, prefetch)
+        else:
+            frames = (_read_frame(source, name, semantic, timer) for name in names)
+        with closing(frames), _timed_propagation(completer, timer, current):
+            timer.begin()  # after the engine is built; the reader starts with the first frame
+            for frame in frames:
+                current[0] = frame.name
+                with timer.time(frame.name, "network"):
+                    completion = completer(frame.rgb, frame.sparse, frame.semantic)
+                yield frame, completion
+    finally:
+        timer.end()
