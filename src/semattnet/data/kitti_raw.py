@@ -158,9 +158,8 @@ class RawDrive:
                             f"the calibration says {w}x{h} for camera {self.camera}")  # fmt: skip
         if self.deskew:
             motion = read_oxts_motion(self.oxts_dir / f"{name}.txt")
-            i = int(name)
-            ok = self.periods is not None and i < len(self.periods) and 0.05 < self.periods[i] < 0.2
-            points = deskew_scan(
-                points, motion.velocity, motion.yaw_rate, self.periods[i] if ok else DEFAULT_SCAN_PERIOD
-            )
+            i, period = int(name), DEFAULT_SCAN_PERIOD
+            if self.periods is not None and i < len(self.periods) and 0.05 < self.periods[i] < 0.2:
+                period = self.periods[i]
+            points = deskew_scan(points, motion.velocity, motion.yaw_rate, period)
         return RawFrame(name, int(name), image, points, self.calib, image_path, scan_path)
