@@ -15,10 +15,14 @@ import os
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from semattnet.data.io import DataError, read_image
+
+if TYPE_CHECKING:  # a run-time import would be a cycle
+    from semattnet.geometry.calibration import RigCalibration
 
 __all__ = ["RawDrive", "RawFrame", "parse_frames", "scan_periods"]
 
@@ -33,7 +37,7 @@ class RawFrame:
     index: int
     image: np.ndarray
     points: np.ndarray
-    calib: object  # semattnet.geometry.RigCalibration (kept untyped to avoid an import cycle)
+    calib: RigCalibration  # imported for the type checker only (a run-time import would be a cycle)
     image_path: Path
     scan_path: Path
 
