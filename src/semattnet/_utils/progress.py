@@ -33,7 +33,7 @@ def progress(
     force: bool | None = None,
     file: IO[str] | None = None,
     **kwargs: Any,
-) -> tqdm:  # type: ignore[type-arg]
+) -> tqdm:
     """A ``tqdm`` bar over ``iterable`` (or a manual one with ``total=``), shown only where it belongs.
 
     Args:

@@ -103,8 +103,8 @@ def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, spli
         raise click.UsageError("--save-predictions and --pictures need --out")
     if (checkpoint is None) == (weights is None):
         model_from_options(checkpoint, weights)  # the usage error, before any work
-    # a path, or the loader of --weights: called after the split and --out are checked
-    model = checkpoint if weights is None else partial(model_from_options, None, weights)
+    # a path, or the loader of --weights (exactly one is set here): called after the split and --out are checked
+    model = partial(model_from_options, None, weights) if checkpoint is None else checkpoint
     res = evaluate_checkpoint(model, data_root, split, out, device, batch_size, amp, workers,
                               save_predictions, pictures, max_frames, overwrite, backend=backend)  # fmt: skip
     from semattnet._utils.distributed import launch_rank

@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 import warnings
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -169,6 +170,7 @@ def clamp_for_png(depth: Any, name: str = "prediction") -> Any:
 
     ``depth``: a NumPy array or a torch tensor (returned as the same type, same device).
     """
+    xp: ModuleType  # torch or numpy: the same calls on either
     if type(depth).__module__.split(".")[0] == "torch":
         import torch as xp
     else:

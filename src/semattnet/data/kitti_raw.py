@@ -15,10 +15,14 @@ import os
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from semattnet.data.io import DataError, read_image
+
+if TYPE_CHECKING:  # a run-time import would be a cycle
+    from semattnet.geometry.calibration import RigCalibration
 
 __all__ = ["RawDrive", "RawFrame", "parse_frames", "scan_periods"]
 
@@ -33,7 +37,7 @@ class RawFrame:
     index: int
     image: np.ndarray
     points: np.ndarray
-    calib: object  # semattnet.geometry.RigCalibration (kept untyped to avoid an import cycle)
+    calib: RigCalibration  # imported for the type checker only (a run-time import would be a cycle)
     image_path: Path
     scan_path: Path
 
@@ -158,9 +162,8 @@ class RawDrive:
                             f"the calibration says {w}x{h} for camera {self.camera}")  # fmt: skip
         if self.deskew:
             motion = read_oxts_motion(self.oxts_dir / f"{name}.txt")
-            i = int(name)
-            ok = self.periods is not None and i < len(self.periods) and 0.05 < self.periods[i] < 0.2
-            points = deskew_scan(
-                points, motion.velocity, motion.yaw_rate, self.periods[i] if ok else DEFAULT_SCAN_PERIOD
-            )
+            i, period = int(name), DEFAULT_SCAN_PERIOD
+            if self.periods is not None and i < len(self.periods) and 0.05 < self.periods[i] < 0.2:
+                period = self.periods[i]
+            points = deskew_scan(points, motion.velocity, motion.yaw_rate, period)
         return RawFrame(name, int(name), image, points, self.calib, image_path, scan_path)

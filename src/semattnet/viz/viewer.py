@@ -30,13 +30,16 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from string import Template
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from semattnet._errors import InputError
 from semattnet._utils.atomic import atomic_path
 from semattnet.geometry.cameras import KITTI_K
+
+if TYPE_CHECKING:
+    from semattnet.geometry import PointCloud
 
 __all__ = [
     "ViewerFrame",
@@ -89,7 +92,7 @@ def cloud_stride(height: int, width: int, max_points: int = MAX_POINTS) -> int:
     return s
 
 
-def cloud_points(depth: np.ndarray, K: np.ndarray, stride: int, rgb: np.ndarray | None = None):  # type: ignore[no-untyped-def]
+def cloud_points(depth: np.ndarray, K: np.ndarray, stride: int, rgb: np.ndarray | None = None) -> PointCloud:
     """The :class:`~semattnet.geometry.PointCloud` of the valid pixels of ``depth`` on the grid ``[::stride]`` x2."""
     from semattnet.geometry import depth_to_points
 
@@ -202,6 +205,7 @@ def _frame_cloud(b: _Builder, f: ViewerFrame, labels: dict[str, str], max_points
     keep = slice(None, None, max(1, math.ceil(len(lidar) / max_points)))
     for key, xyz in (("cloud_xyz", pred.xyz), ("lidar_xyz", lidar.xyz[keep])):
         b.array(key, np.clip(np.round(xyz * 100.0), -32768, 32767).astype("<i2"), "i16")
+    assert pred.rgb is not None  # cloud_points was given the colours
     b.array("cloud_rgb", pred.rgb, "u8")
     name = labels.get(method, method).split(" (")[0]
     note = (f"{name}: {len(pred)} points (a pixel grid of step {stride}), "

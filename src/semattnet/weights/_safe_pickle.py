@@ -30,6 +30,7 @@ import re
 import struct
 import sys
 import types
+from collections.abc import Callable
 from typing import Any
 
 import torch
@@ -206,7 +207,8 @@ def _guarded(op: str, base: Any, target: Any) -> Any:
 
 
 _BASE = pickle._Unpickler  # the Python implementation: its opcode table can be guarded
-_DISPATCH = dict(_BASE.dispatch)
+# The handlers receive this module's Unpickler (typeshed types the table with the C pickle.Unpickler).
+_DISPATCH: dict[int, Callable[[Any], None]] = dict(_BASE.dispatch)
 _OPCODE_NAME = {ord(o.code): o.name for o in pickletools.opcodes}
 for _op, _target in (
     (pickle.BUILD, lambda u: u.stack[-2]),

@@ -41,9 +41,10 @@ def _named_outputs(
     model: nn.Module, inputs: dict[str, torch.Tensor | None], propagation: bool
 ) -> dict[str, torch.Tensor]:
     """The model's outputs by name; without ``propagation``, the network part and the refinement heads."""
-    if propagation or not hasattr(model, "forward_network"):
+    forward_network = getattr(model, "forward_network", None)  # refining models only
+    if propagation or forward_network is None:
         return model(**inputs).to_dict()
-    out, heads = model.forward_network(**inputs)
+    out, heads = forward_network(**inputs)
     return {**out.to_dict(), **heads.to_dict()}
 
 
@@ -52,7 +53,8 @@ def _prepare(
 ) -> tuple[_Flat, tuple[torch.Tensor, ...], list[str]]:
     h, w = size
     model = fold_batchnorm(model).cpu().float()
-    semantic = getattr(model, "config", None) is None or model.config.branches == 3
+    config = getattr(model, "config", None)
+    semantic = config is None or config.branches == 3
     g = torch.Generator().manual_seed(0)
     rgb = torch.rand(1, 3, h, w, generator=g) * 255
     sparse = torch.rand(1, 1, h, w, generator=g) * 80 * (torch.rand(1, 1, h, w, generator=g) < 0.05)

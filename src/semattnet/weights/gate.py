@@ -374,7 +374,7 @@ def _update(h: Any, where: str, obj: Any) -> None:
     if isinstance(obj, torch.Tensor):
         t = obj.detach().to("cpu").contiguous().reshape(-1)
         h.update(f"{where}|{t.dtype}|{tuple(obj.shape)}\n".encode())
-        h.update(memoryview(t.view(torch.uint8).numpy()) if t.numel() else b"")
+        h.update(t.view(torch.uint8).numpy().data if t.numel() else b"")  # .data: the array's memoryview
     elif isinstance(obj, Mapping):
         for k in sorted(obj, key=str):
             _update(h, f"{where}/{k}", obj[k])

@@ -31,7 +31,7 @@ def _weights_rows() -> list[tuple[str, ...]]:
     from semattnet.weights.download import read_pins
 
     pins = read_pins()
-    rows = []
+    rows: list[tuple[str, ...]] = []
     for name in list_pretrained():
         w = get_weights(name)
         pinned = pins.get(f"{w.name}/{w.file_name}", {}).get("sha256")

@@ -86,8 +86,6 @@ def _download_http(url: str, part: Path, progress: bool) -> None:
     try:
         from huggingface_hub.file_download import http_get
     except ImportError:
-        http_get = None
-    if http_get is None:
         _download_http_pooch(url, part, progress)
         return
     # No expected_size: http_get checks the body against Content-Length itself; the published size
@@ -127,7 +125,7 @@ def _download_http_pooch(url: str, part: Path, progress: bool) -> None:
 def _silent_tqdm() -> type:
     from tqdm.auto import tqdm
 
-    class _Silent(tqdm):  # type: ignore[misc,valid-type]
+    class _Silent(tqdm):
         def __init__(self, *args: Any, **kwargs: Any) -> None:
             kwargs["disable"] = True
             super().__init__(*args, **kwargs)

@@ -157,6 +157,7 @@ def decode_pointcloud2(msg: Any, topic: str) -> np.ndarray:
     data = np.ascontiguousarray(np.asarray(msg.data, dtype=np.uint8).reshape(-1))
     rows = np.ascontiguousarray(_rows(data, h, int(msg.row_step), w * step, topic, "PointCloud2"))
     pts = rows.reshape(-1).view(dtype) if rows.size else np.zeros(0, dtype)
+    assert dtype.fields is not None and dtype.names is not None  # a structured dtype (_point_dtype)
     xyz_types = [dtype.fields[n][0] for n in ("x", "y", "z")]
     out_type = np.float32 if all(t.itemsize == 4 for t in xyz_types) else np.float64
     cols = [pts[n].astype(out_type) for n in dtype.names]

@@ -97,6 +97,7 @@ def pointcloud2_message(ts: Any, fields: dict[str, np.ndarray], stamp_ns: int, f
     if len(n) != 1:
         raise InputError(f"PointCloud2 fields must have one length, got { ({k: len(v) for k, v in cols.items()}) }")
     dtype = np.dtype([(k, v.dtype.newbyteorder("<")) for k, v in cols.items()])
+    assert dtype.fields is not None  # a structured dtype
     arr = np.empty(n.pop(), dtype)
     for k, v in cols.items():
         arr[k] = v

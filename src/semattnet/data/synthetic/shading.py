@@ -3,6 +3,9 @@ an optional overpass band, 6 % image noise and a sky gradient."""
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from typing import Any
+
 import numpy as np
 
 from .layout import CAM_HEIGHT, Box, road_half_width, window
@@ -18,8 +21,8 @@ def convex_hull(points: np.ndarray) -> np.ndarray:
     if len(pts) <= 2:
         return np.array(pts)
 
-    def half(seq):  # type: ignore[no-untyped-def]
-        out: list = []  # type: ignore[type-arg]
+    def half(seq: Iterable[tuple[Any, ...]]) -> list[tuple[Any, ...]]:
+        out: list[tuple[Any, ...]] = []
         for p in seq:
             while (
                 len(out) >= 2
