@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from semattnet.cli._dataset import dataset_option
 from semattnet.cli._group import main
 from semattnet.cli._options import COUNT, POSITIVE_FLOAT, backend_option, weights_option
 
@@ -60,6 +61,10 @@ _INPUT = click.Path(exists=True, path_type=Path)
     default=None,
     help="A KITTI raw drive folder RAW_ROOT/DATE/DATE_drive_NNNN_sync (instead of --rgb/--sparse).",
 )
+@dataset_option("With --data: the dataset whose root --data is.")
+@click.option("--data", "data_root", type=click.Path(exists=True, file_okay=False, path_type=Path), default=None,
+              help="A dataset root (with --dataset; instead of --rgb/--sparse): the frames of --split.")  # fmt: skip
+@click.option("--split", default=None, help="With --data: the split [the dataset's evaluation split].")
 @click.option("--frames", default=None, help="With --kitti-raw: indices, a range a-b or a comma list (default all).")
 @click.option("--camera", type=click.Choice(["2", "3"]), default="2", show_default=True, help="With --kitti-raw.")
 @click.option("--semantic", type=_INPUT, default=None, help="PNG file or folder of colour-coded semantic maps.")
@@ -95,19 +100,23 @@ _INPUT = click.Path(exists=True, path_type=Path)
 @click.option("--K", "intrinsics", default=None, metavar="fx,fy,cx,cy|kitti",
               help="With --report: camera intrinsics for the 3D view ('kitti': KITTI's camera 02).")  # fmt: skip
 def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, sparse: Path | None,
-            kitti_raw: Path | None, frames: str | None, camera: str, semantic: Path | None, segment_spec: str | None,
+            kitti_raw: Path | None, dataset: str, data_root: Path | None, split: str | None, frames: str | None,
+            camera: str, semantic: Path | None, segment_spec: str | None,
             out: Path, npy: bool, panel: bool, ply: bool, max_depth: float, top_crop: int, deskew: bool, device: str,
             amp: str, backend: str, overwrite: bool, method: str, report: bool,
             intrinsics: str | None) -> None:  # fmt: skip
-    """Complete depth for one frame, folders of frames (any size) or a KITTI raw drive."""
+    """Complete depth for one frame, folders of frames (any size), a KITTI raw drive or a dataset's split."""
     from semattnet._utils.distributed import launch_rank, process_group
     from semattnet.data.sources import FolderSource, RawDriveSource, SemanticMaps
     from semattnet.inference.pipeline import check_frames, complete_frames
     from semattnet.inference.sinks import default_sinks
 
-    if (kitti_raw is None) == (rgb is None and sparse is None) or (kitti_raw is None and None in (rgb, sparse)):
-        raise click.UsageError("give --rgb and --sparse, or --kitti-raw")
-    if kitti_raw is None and (ply or segment_spec or frames or deskew):
+    if data_root is not None:
+        if kitti_raw is not None or rgb is not None or sparse is not None or report or ply or frames or deskew:
+            raise click.UsageError("--data takes none of --rgb, --sparse, --kitti-raw, --report, --ply, --frames")
+    elif (kitti_raw is None) == (rgb is None and sparse is None) or (kitti_raw is None and None in (rgb, sparse)):
+        raise click.UsageError("give --rgb and --sparse, --kitti-raw, or --data (with --dataset)")
+    if kitti_raw is None and data_root is None and (ply or segment_spec or frames or deskew):
         raise click.UsageError("--ply, --segment, --frames and --deskew need --kitti-raw")
     if kitti_raw is not None and report:
         raise click.UsageError("--report needs --rgb/--sparse (not yet --kitti-raw)")
@@ -116,7 +125,11 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
     maps = SemanticMaps(segment_spec, folder=semantic is not None)
     sinks = default_sinks(npy, panel, ply, max_depth, top_crop)
     with process_group():
-        if kitti_raw is not None:
+        if data_root is not None:
+            from semattnet.data.datasets import get_dataset
+
+            source = get_dataset(dataset).source(data_root, split, semantic_root=semantic)
+        elif kitti_raw is not None:
             source = RawDriveSource(kitti_raw, frames, camera, semantic, deskew)
         else:
             source = FolderSource.pair(rgb, sparse, semantic, K=K)  # type: ignore[arg-type]
