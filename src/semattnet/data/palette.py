@@ -178,7 +178,8 @@ def ids_to_colors(train_ids: np.ndarray, palette: str | Palette = "cityscapes") 
     bad = ~unknown & ((ids < first) | (ids >= first + n))
     if bad.any():
         found = sorted(set(ids[bad].tolist()))[:5]
-        raise ValueError(f"{pal.title} ids must be {first}..{first + n - 1} or {IGNORE_ID}, found {found}")
+        kind = "trainIds" if pal.name == "cityscapes" else f"{pal.title} ids"
+        raise ValueError(f"{kind} must be {first}..{first + n - 1} or {IGNORE_ID}, found {found}")
     table = np.concatenate([pal.colors, np.array([UNKNOWN_COLOR], dtype=np.uint8)])
     return table[np.where(unknown, n, ids - first)]
 
@@ -187,9 +188,11 @@ def _codes(rgb: np.ndarray) -> np.ndarray:
     return (rgb[..., 0].astype(np.int32) << 16) | (rgb[..., 1].astype(np.int32) << 8) | rgb[..., 2]
 
 
-def _fits(code: np.ndarray, pal: Palette) -> bool:
+def _fits(code: np.ndarray, stray: np.ndarray, pal: Palette) -> bool:
+    """Every colour is one of ``pal``'s (or unknown) and every stray one a class colour of ``pal``."""
     unknown_code = (UNKNOWN_COLOR[0] << 16) | (UNKNOWN_COLOR[1] << 8) | UNKNOWN_COLOR[2]
-    return bool(np.isin(code, np.append(_codes(pal.colors), unknown_code)).all())
+    classes = _codes(pal.colors)
+    return bool(np.isin(code, np.append(classes, unknown_code)).all() and np.isin(code[stray], classes).all())
 
 
 def colors_to_ids(colors: np.ndarray, allow_unknown: bool = True, source: str = "semantic map",
@@ -213,7 +216,7 @@ def colors_to_ids(colors: np.ndarray, allow_unknown: bool = True, source: str = 
     unknown_code = (UNKNOWN_COLOR[0] << 16) | (UNKNOWN_COLOR[1] << 8) | UNKNOWN_COLOR[2]
     stray = ~found & ((code != unknown_code) | (not allow_unknown))
     if stray.any():
-        other = [p for p in PALETTES.values() if p.name != pal.name and _fits(code, p)]
+        other = [p for p in PALETTES.values() if p.name != pal.name and _fits(code, stray, p)]
         if other:
             raise PaletteMismatchError(f"{source}: the colours are the {other[0].title} palette, but the "
                                        f"{pal.title} palette was expected (the model's training palette)")  # fmt: skip

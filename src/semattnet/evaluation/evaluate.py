@@ -29,7 +29,7 @@ from semattnet.data.sources.kitti_split import prediction_name
 from semattnet.evaluation.metrics import KittiMetrics
 from semattnet.evaluation.split import eval_dataset, prepare_out
 from semattnet.inference.completer import Completion, DepthCompleter
-from semattnet.inference.padding import crop_padding, pad_to_multiple
+from semattnet.inference.padding import crop_padding
 from semattnet.inference.pipeline import write_prediction
 from semattnet.inference.sharding import agree, gather_rows, on_main, process_group, shared_stage
 from semattnet.inference.sinks import DepthPngSink, PanelSink, Sink, output_files
@@ -84,8 +84,9 @@ def evaluate_model(
 ) -> KittiMetrics:
     """Score ``model`` over ``loader`` (batches from :class:`KittiDepthCompletion`), all ranks.
 
-    ``metrics``: a fresh accumulator of the dataset's protocol (default :class:`KittiMetrics`, the devkit's);
-    inputs are padded to the model's multiple of 32 and the outputs cropped back (scored on the protocol's crop).
+    ``metrics``: a fresh accumulator of the dataset's protocol (default :class:`KittiMetrics`, the devkit's).
+    Items that carry a ``pad`` (padded to the model's multiple of 32 by
+    :class:`~semattnet.data.datasets.frames.FrameDataset`) are scored and written on the crop without it.
 
     ``quantize`` scores what a KITTI 16-bit PNG of the prediction holds (clamped, 1/256 m steps,
     holes kept as 0 for the devkit to fill), i.e. exactly what ``semattnet metrics`` and the benchmark see.
@@ -105,12 +106,11 @@ def _score_local(model: nn.Module, loader: DataLoader, device: torch.device, amp
     model.eval()
     with torch.inference_mode():
         for batch in tqdm(loader, desc="evaluating", disable=not (progress and dist_utils.is_main()), leave=False):
-            x = {k: pad_to_multiple(batch[k].to(device, non_blocking=True)) for k in ("rgb", "semantic", "sparse")}
-            pad = x["rgb"][1]
+            x = {k: batch[k].to(device, non_blocking=True) for k in ("rgb", "semantic", "sparse")}
             with autocast(device, amp):
-                out = model(**{k: v[0] for k, v in x.items()})
-            if any(pad):
-                out = out.map(partial(crop_padding, pad=pad))
+                out = model(**x)
+            if "pad" in batch:  # padded to multiples of 32 by the dataset: score and write the protocol's crop
+                out, batch = _unpad(out, batch)
             if "gt" in batch:
                 pred = out.depth.float()
                 if quantize:
@@ -120,6 +120,16 @@ def _score_local(model: nn.Module, loader: DataLoader, device: torch.device, amp
                 on_batch(batch, out)
     model.train(was_training)
     return metrics
+
+
+def _unpad(out: Any, batch: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
+    """Outputs and images of a batch whose items carry their ``pad`` (top, bottom, left, right), cropped back."""
+    pad = tuple(int(v) for v in batch["pad"][0].tolist())
+    if not any(pad):
+        return out, batch
+    crop = partial(crop_padding, pad=pad)
+    images = {k: crop(batch[k]) for k in ("rgb", "semantic", "sparse", "gt") if k in batch}
+    return out.map(crop), batch | images
 
 
 def _as_png(pred: torch.Tensor, names: list[str]) -> torch.Tensor:

@@ -7,6 +7,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+import torch
 from torch.utils.data import Dataset
 
 from semattnet._errors import DataError
@@ -46,14 +47,19 @@ def draw_samples(gt: np.ndarray, count: int, rng: np.random.Generator, valid: fl
     return out.reshape(gt.shape)
 
 
+def padding(size: tuple[int, int], multiple: int = SIZE_MULTIPLE) -> tuple[int, int, int, int]:
+    """(top, bottom, left, right) of :func:`semattnet.inference.padding.pad_to_multiple` for an (H, W) frame."""
+    ph, pw = (-size[0]) % multiple, (-size[1]) % multiple
+    return ph, 0, pw // 2, pw - pw // 2
+
+
 def pad_sample(sample: Sample, multiple: int = SIZE_MULTIPLE) -> Sample:
     """Pad to multiples of ``multiple`` as :func:`semattnet.inference.padding.pad_to_multiple` does (rows at
     the top, columns split left/right), with 0 everywhere (gt 0: the padding carries no loss, no metric)."""
-    h, w = sample.size
-    ph, pw = (-h) % multiple, (-w) % multiple
-    if not (ph or pw):
+    top, _, left, right = padding(sample.size, multiple)
+    if not (top or left or right):
         return sample
-    widths = ((ph, 0), (pw // 2, pw - pw // 2))
+    widths = ((top, 0), (left, right))
 
     def pad(a: np.ndarray | None) -> np.ndarray | None:
         return None if a is None else np.pad(a, widths + ((0, 0),) * (a.ndim - 2))
@@ -61,8 +67,8 @@ def pad_sample(sample: Sample, multiple: int = SIZE_MULTIPLE) -> Sample:
     K = None
     if sample.K is not None:
         K = sample.K.copy()
-        K[0, 2] += pw // 2
-        K[1, 2] += ph
+        K[0, 2] += left
+        K[1, 2] += top
     return Sample(pad(sample.rgb), pad(sample.semantic), pad(sample.sparse), pad(sample.gt), K)  # type: ignore[arg-type]
 
 
@@ -96,8 +102,10 @@ class FrameRef:
 
 class FrameDataset(Dataset):
     """Items like :class:`~semattnet.data.kitti.KittiDepthCompletion`'s (``rgb``, ``semantic``, ``sparse``,
-    ``gt``, ``K``, ``name``, ``index``) from ``source``; a frame without a semantic map gets the
-    ``unknown`` map. Random choices of item ``i`` in epoch ``e``: ``numpy.random.default_rng([seed, e, i])``."""
+    ``gt``, ``K``, ``name``, ``index``) from ``source``, padded to the model's multiple of 32 (zeros, gt 0)
+    with ``pad`` = (top, bottom, left, right) (evaluation crops it back: metrics and predictions on the
+    protocol's crop); a frame without a semantic map gets the ``unknown`` map. Random choices of item ``i``
+    in epoch ``e``: ``numpy.random.default_rng([seed, e, i])``."""
 
     def __init__(self, source: IndexedSource, transform: Transform | None = None, seed: int = 0) -> None:
         self.source, self.transform, self.seed, self.epoch = source, transform, seed, 0
@@ -118,7 +126,9 @@ class FrameDataset(Dataset):
         sample = self.load(index)
         if self.transform is not None:
             sample = self.transform(sample, np.random.default_rng([self.seed, self.epoch, index]))
-        return sample.to_tensors() | {"name": self.frames[index].name, "index": index}
+        pad = padding(sample.size)
+        extra = {"name": self.frames[index].name, "index": index, "pad": torch.tensor(pad)}
+        return pad_sample(sample).to_tensors() | extra
 
 
 def frame_sample(frame: Frame) -> Sample:

@@ -35,8 +35,10 @@ MAX_MEDIAN_M = 100.0  # a median depth above this is millimetres, not metres
 
 
 def _read(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    import h5py
-
+    try:
+        import h5py
+    except ImportError:
+        raise DataError(f"{path}: reading NYU v2 HDF5 files needs h5py: pip install 'semattnet[nyu]'") from None
     try:
         with h5py.File(path, "r") as f:
             missing = [k for k in ("rgb", "depth") if k not in f]
