@@ -1,5 +1,7 @@
-"""Data: KITTI depth completion loaders, transforms, PNG I/O and synthetic KITTI-like scenes."""
+"""Data: the dataset registry (KITTI depth completion, NYU Depth v2, VOID), KITTI loaders, transforms,
+PNG I/O and synthetic KITTI-like scenes."""
 
+from semattnet.data.datasets import DATASETS, DatasetSpec, get_dataset
 from semattnet.data.io import DataError, read_depth, read_image, read_intrinsics, write_depth, write_image
 from semattnet.data.kitti import FrameFiles, KittiDepthCompletion, find_frames
 from semattnet.data.synthetic.scenes import CITYSCAPES_PALETTE, SyntheticFrame, make_frame
@@ -8,7 +10,9 @@ from semattnet.data.transforms import EvalTransform, Sample, TrainTransform
 
 __all__ = [
     "CITYSCAPES_PALETTE",
+    "DATASETS",
     "DataError",
+    "DatasetSpec",
     "EvalTransform",
     "FrameFiles",
     "KittiDepthCompletion",
@@ -16,6 +20,7 @@ __all__ = [
     "SyntheticFrame",
     "TrainTransform",
     "find_frames",
+    "get_dataset",
     "make_frame",
     "read_depth",
     "read_image",

@@ -244,9 +244,7 @@ def evaluate_checkpoint(
     with process_group():
         ds, frames, out = _plan(data, split, raw_root, semantic_root, max_frames, out_dir, overwrite, inputs, dataset)
         completer, label = _completer(checkpoint, device, amp, backend)  # after every check
-        spec = get_dataset(dataset)
-        if completer.needs_semantic and getattr(ds, "palette", "cityscapes"):  # None: no maps, the fallback
-            check_palette(completer.palette, getattr(ds, "palette", "cityscapes"), f"{data} ({spec.name} maps)")
+        spec = _check_maps(completer, ds, data, dataset)
         loader = DataLoader(Subset(ds, range(frames)), batch_size=batch_size, num_workers=workers,
                             sampler=dist_utils.ShardSampler(frames))  # fmt: skip
         engine = completer.engine(tuple(ds[0]["rgb"].shape[-2:])) if frames else completer.model
@@ -266,6 +264,14 @@ def evaluate_checkpoint(
                 if dist_utils.is_main():
                     _write_scores(stage, metrics, {"checkpoint": label, "dataset": spec.name, "split": split} | result)
     return {"metrics": metrics, "result": result}
+
+
+def _check_maps(completer: DepthCompleter, ds: Any, data: str | Path, dataset: str) -> Any:
+    """The dataset's entry, once its maps' palette is the model's (a dataset without maps: any)."""
+    spec, palette = get_dataset(dataset), getattr(ds, "palette", "cityscapes")
+    if completer.needs_semantic and palette:
+        check_palette(completer.palette, palette, f"{data} ({spec.name} maps)")
+    return spec
 
 
 def _plan(data: str | Path, split: str, raw_root: str | Path | None, semantic_root: str | Path | None,
