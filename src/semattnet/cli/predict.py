@@ -115,7 +115,7 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
         if kitti_raw is not None or rgb is not None or sparse is not None or report or ply or frames or deskew:
             raise click.UsageError("--data takes none of --rgb, --sparse, --kitti-raw, --report, --ply, --frames")
     elif (kitti_raw is None) == (rgb is None and sparse is None) or (kitti_raw is None and None in (rgb, sparse)):
-        raise click.UsageError("give --rgb and --sparse, --kitti-raw, or --data (with --dataset)")
+        raise click.UsageError("give --rgb and --sparse, or --kitti-raw (or --data with --dataset)")
     if kitti_raw is None and data_root is None and (ply or segment_spec or frames or deskew):
         raise click.UsageError("--ply, --segment, --frames and --deskew need --kitti-raw")
     if kitti_raw is not None and report:
