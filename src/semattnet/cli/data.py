@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from semattnet.cli._dataset import dataset_option
 from semattnet.cli._group import main
 from semattnet.cli._options import COUNT, POSITIVE_INT, SIZE, parse_size
 from semattnet.data.synthetic.scenes import SCENE_STYLES
@@ -71,11 +72,13 @@ def data() -> None:
     help="Semantic maps [ROOT/semantic or ROOT/semantics].",
 )
 @click.option("--sample", type=POSITIVE_INT, default=None, help="Decode at most N frames per split [all].")
-def data_check(roots: tuple[Path, ...], raw_root: Path | None, semantic_root: Path | None, sample: int | None) -> None:
-    """Check KITTI depth completion trees; exits 1 if anything is missing, unpaired or broken."""
-    from semattnet.data.check import check_trees
+@dataset_option("The layout to check.")
+def data_check(roots: tuple[Path, ...], raw_root: Path | None, semantic_root: Path | None, sample: int | None,
+               dataset: str) -> None:  # fmt: skip
+    """Check dataset trees (KITTI depth completion by default); exits 1 if anything is missing, unpaired or broken."""
+    from semattnet.data.datasets import get_dataset
 
-    if check_trees(roots, raw_root, semantic_root, sample, log=click.echo):
+    if get_dataset(dataset).check(roots, raw_root, semantic_root, sample, log=click.echo):
         raise SystemExit(1)
 
 
@@ -94,14 +97,24 @@ def data_check(roots: tuple[Path, ...], raw_root: Path | None, semantic_root: Pa
               help="Download cache [$SEMATTNET_CACHE or the user cache].")  # fmt: skip
 @click.option("--delete-archives", is_flag=True, help="Delete each downloaded archive once it is unpacked.")
 @click.option("--check/--no-check", default=True, show_default=True, help="Run `data check` on OUT at the end.")
+@dataset_option("What to download (nyuv2, void: their archives into OUT; --what is KITTI's).")
+@click.option("--accept-license", is_flag=True, help="Accept the dataset's terms (nyuv2, void; printed first).")
 def data_download(what: str, out_dir: Path, accept_kitti_license: bool, dry_run: bool, mirror: str | None,
                   semantic_archive: str | None, cache_dir: Path | None, delete_archives: bool,
-                  check: bool) -> None:  # fmt: skip
-    """Download KITTI depth completion and the raw drives it needs into the loader layout; exits 1 on problems."""
-    from semattnet.data.download import download_kitti
+                  check: bool, dataset: str, accept_license: bool) -> None:  # fmt: skip
+    """Download a dataset (KITTI depth completion and the raw drives it needs by default) into the loader
+    layout; exits 1 on problems."""
+    from semattnet.data.download import download_dataset, download_kitti
     from semattnet.weights.download import DownloadError
 
     try:
+        if dataset != "kitti-dc":
+            problems = download_dataset(dataset, out_dir, accept_license=accept_license, dry_run=dry_run,
+                                        mirror=mirror, cache_dir=cache_dir, delete_archives=delete_archives,
+                                        check=check, log=click.echo)  # fmt: skip
+            if problems:
+                raise SystemExit(1)
+            return
         problems = download_kitti(out_dir, what, accept_license=accept_kitti_license, dry_run=dry_run,
                                   mirror=mirror, semantic_archive=semantic_archive, cache_dir=cache_dir,
                                   delete_archives=delete_archives, check=check, log=click.echo)  # fmt: skip

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from semattnet.cli._dataset import dataset_option
 from semattnet.cli._group import main
 from semattnet.cli._options import (
     COUNT,
@@ -52,7 +53,9 @@ def metrics(
 @main.command()
 @weights_option
 @click.option("--data", "data_root", required=True, type=click.Path(exists=True, file_okay=False, path_type=Path))
-@click.option("--split", type=click.Choice(["val_select", "val"]), default="val_select", show_default=True)
+@dataset_option("The dataset and its protocol (split, crop, depth range, metrics).")
+@click.option("--split", type=click.Choice(["val_select", "val", "test"]), default=None,
+              help="[val_select for kitti-dc; test for nyuv2 and void]")  # fmt: skip
 @click.option(
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
@@ -84,16 +87,18 @@ def metrics(
 @click.option("--max-frames", type=POSITIVE_INT, default=None)
 @click.option("--overwrite", is_flag=True)
 @backend_option
-def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, split: str, out: Path | None,
+def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, dataset: str, split: str | None,
+             out: Path | None,
              sparsity: tuple[str, ...], method: str, save_predictions: bool, pictures: int, device: str,
              batch_size: int, amp: str, workers: int, max_frames: int | None, overwrite: bool,
              backend: str) -> None:  # fmt: skip
-    """Evaluate a checkpoint on a KITTI (or synthetic) split with the official metrics, or sweep sparser inputs."""
+    """Evaluate a checkpoint on a split with its dataset's metrics (KITTI: the devkit's), or sweep sparser inputs."""
+    split = _split(dataset, split)
     if sparsity:
         _one_process("evaluate --sparsity")
         if out is None:
             raise click.UsageError("--sparsity needs --out")
-        _sweep(checkpoint, weights, data_root, split, out, sparsity, method, device, max_frames, overwrite)
+        _sweep(checkpoint, weights, data_root, split, out, sparsity, method, device, max_frames, overwrite, dataset)
         return
     from semattnet.evaluation.evaluate import evaluate_checkpoint
 
@@ -106,7 +111,8 @@ def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, spli
     # a path, or the loader of --weights (exactly one is set here): called after the split and --out are checked
     model = partial(model_from_options, None, weights) if checkpoint is None else checkpoint
     res = evaluate_checkpoint(model, data_root, split, out, device, batch_size, amp, workers,
-                              save_predictions, pictures, max_frames, overwrite, backend=backend)  # fmt: skip
+                              save_predictions, pictures, max_frames, overwrite, backend=backend,
+                              dataset=dataset)  # fmt: skip
     from semattnet._utils.distributed import launch_rank
 
     if launch_rank() != 0:  # under torchrun: every rank holds the merged metrics; rank 0 reports them
@@ -114,6 +120,20 @@ def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, spli
     click.echo(res["metrics"].table())
     if out is not None:
         click.echo(f"wrote {out / 'metrics.json'} and {out / 'per_image.csv'}")
+
+
+def _split(dataset: str, split: str | None) -> str:
+    """The split to score: the dataset's evaluation split by default; KITTI scores val_select or val only."""
+    from semattnet.data.datasets import get_dataset
+
+    spec = get_dataset(dataset)
+    if dataset == "kitti-dc" and split == "test":
+        raise click.BadParameter("kitti-dc's test split has no ground truth (use `semattnet submit`)",
+                                 param_hint="--split")  # fmt: skip
+    try:
+        return spec.check_split(split)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="--split") from None
 
 
 def _one_process(command: str) -> None:
@@ -124,7 +144,7 @@ def _one_process(command: str) -> None:
 
 def _sweep(checkpoint: Path | None, weights: str | None, data_root: Path, split: str, out: Path,
            sparsity: tuple[str, ...], method: str, device: str, max_frames: int | None,
-           overwrite: bool) -> None:  # fmt: skip
+           overwrite: bool, dataset: str = "kitti-dc") -> None:  # fmt: skip
     from semattnet.evaluation.sparsity import format_sweep, parse_settings, sweep_model
 
     settings = parse_settings(sparsity)  # fail on a bad setting before loading anything
@@ -133,7 +153,7 @@ def _sweep(checkpoint: Path | None, weights: str | None, data_root: Path, split:
     if method == "semattnet" and (checkpoint is None) == (weights is None):
         model_from_options(checkpoint, weights)  # the usage error, before any work
     model = partial(model_from_options, checkpoint, weights, "cpu") if method == "semattnet" else None
-    rows = sweep_model(data_root, split, settings, model, out, device, max_frames, overwrite)
+    rows = sweep_model(data_root, split, settings, model, out, device, max_frames, overwrite, dataset=dataset)
     click.echo(format_sweep(rows))
     click.echo(f"wrote {out / 'sparsity.csv'}, {out / 'sparsity.json'} and {out / 'sparsity.png'}")
 

@@ -7,6 +7,7 @@ from typing import Any
 
 import click
 
+from semattnet.cli._dataset import dataset_option
 from semattnet.cli._group import main
 from semattnet.cli._options import COUNT, NONNEGATIVE_FLOAT, POSITIVE_FLOAT, backend_option, weights_option
 
@@ -79,11 +80,13 @@ def _bag_options(f):  # type: ignore[no-untyped-def]
     return f
 
 
-def _check_inputs(rgb: Path | None, sparse: Path | None, kitti_raw: Path | None, bag: dict) -> None:  # type: ignore[type-arg]
+def _check_inputs(rgb: Path | None, sparse: Path | None, kitti_raw: Path | None, data_root: Path | None,
+                  bag: dict) -> None:  # type: ignore[type-arg]  # fmt: skip
     """Exactly one input kind, and the options each needs."""
     folder = rgb is not None or sparse is not None
-    if folder + (kitti_raw is not None) + (bag["bag"] is not None) != 1 or (folder and None in (rgb, sparse)):
-        raise click.UsageError("give --rgb and --sparse, or --kitti-raw, or --bag")
+    kinds = folder + (kitti_raw is not None) + (bag["bag"] is not None) + (data_root is not None)
+    if kinds != 1 or (folder and None in (rgb, sparse)):
+        raise click.UsageError("give --rgb and --sparse, or --kitti-raw, or --bag, or --data (with --dataset)")
     bag_only = [k for k in ("image_topic", "points_topic", "camera_info_topic", "rig", "semantic_topic", "max_skew")
                 if bag[k] is not None] + (["list_topics"] if bag["list_topics"] else [])  # fmt: skip
     if bag["bag"] is None and bag_only:
@@ -92,10 +95,15 @@ def _check_inputs(rgb: Path | None, sparse: Path | None, kitti_raw: Path | None,
         raise click.UsageError("--bag needs --image-topic and --points-topic (see --list-topics)")
 
 
-def _source(rgb, sparse, kitti_raw, frames, camera, semantic, deskew, K, bag):  # type: ignore[no-untyped-def]
-    """The frame source the options name."""
+def _source(rgb, sparse, kitti_raw, frames, camera, semantic, deskew, K, bag, data):  # type: ignore[no-untyped-def]
+    """The frame source the options name; ``data``: (dataset name, root or None, split)."""
     from semattnet.data.sources import BagSource, FolderSource, RawDriveSource
 
+    dataset, data_root, split = data
+    if data_root is not None:
+        from semattnet.data.datasets import get_dataset
+
+        return get_dataset(dataset).source(data_root, split, semantic_root=semantic)
     if bag["bag"] is not None:
         return BagSource(bag["bag"], bag["image_topic"], bag["points_topic"], bag["camera_info_topic"], bag["rig"],
                          bag["max_skew"], bag["semantic_topic"], log=click.echo)  # fmt: skip
@@ -126,6 +134,10 @@ def _robot_sinks(bag: dict, max_depth: float, timer):  # type: ignore[no-untyped
     default=None,
     help="A KITTI raw drive folder RAW_ROOT/DATE/DATE_drive_NNNN_sync (instead of --rgb/--sparse).",
 )
+@dataset_option("With --data: the dataset whose root --data is.")
+@click.option("--data", "data_root", type=click.Path(exists=True, file_okay=False, path_type=Path), default=None,
+              help="A dataset root (with --dataset; instead of --rgb/--sparse): the frames of --split.")  # fmt: skip
+@click.option("--split", default=None, help="With --data: the split [the dataset's evaluation split].")
 @click.option("--frames", default=None, help="With --kitti-raw: indices, a range a-b or a comma list (default all).")
 @click.option("--camera", type=click.Choice(["2", "3"]), default="2", show_default=True, help="With --kitti-raw.")
 @click.option("--semantic", type=_INPUT, default=None, help="PNG file or folder of colour-coded semantic maps.")
@@ -175,7 +187,8 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
     from semattnet.inference.sinks import default_sinks
     from semattnet.inference.stream import StageTimes
 
-    _check_inputs(rgb, sparse, kitti_raw, bag)
+    data = (bag.pop("dataset"), bag.pop("data_root"), bag.pop("split"))
+    _check_inputs(rgb, sparse, kitti_raw, data[1], bag)
     if bag["list_topics"]:
         from semattnet.data.bags import format_topics, list_topics
 
@@ -183,8 +196,8 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
         return
     if out is None:
         raise click.UsageError("Missing option '--out'.")
-    files_only = kitti_raw is None and bag["bag"] is None
-    if files_only and (ply or segment_spec):
+    files_only = kitti_raw is None and bag["bag"] is None and data[1] is None
+    if (files_only or data[1] is not None) and (ply or segment_spec):
         raise click.UsageError("--ply and --segment need --kitti-raw or --bag")
     if kitti_raw is None and (frames or deskew):
         raise click.UsageError("--frames and --deskew need --kitti-raw")
@@ -193,7 +206,7 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
     if bag["semantic_topic"] is not None and segment_spec is not None:
         raise click.UsageError("give --semantic-topic or --segment, not both")
     if not files_only and report:
-        raise click.UsageError("--report needs --rgb/--sparse (not yet --kitti-raw or --bag)")
+        raise click.UsageError("--report needs --rgb/--sparse (not yet --kitti-raw, --bag or --data)")
     if files_only and intrinsics is None and (bag["bag_out"] or bag["rerun_file"] or bag["rerun_spawn"]):
         raise click.UsageError("--bag-out and --rerun need the intrinsics: --bag, --kitti-raw, or --K")
     _check_method(method, checkpoint, weights)
@@ -202,7 +215,7 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
     timer = StageTimes()
     sinks = default_sinks(npy, panel, ply, max_depth, top_crop) + _robot_sinks(bag, max_depth, timer)
     with process_group():
-        source = _source(rgb, sparse, kitti_raw, frames, camera, semantic, deskew, K, bag)
+        source = _source(rgb, sparse, kitti_raw, frames, camera, semantic, deskew, K, bag, data)
         check_frames(source, sinks, out, overwrite=overwrite)  # every input and output, before the model
         completer = _completer(method, checkpoint, weights, device, amp, backend)
         complete_frames(source, completer, sinks, out, overwrite=overwrite, log=click.echo, semantic=maps,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from semattnet.cli._dataset import dataset_option
 from semattnet.cli._group import main
 from semattnet.cli._options import (
     COUNT,
@@ -22,6 +23,7 @@ from semattnet.cli._options import (
 @click.option(
     "--data", "data_root", type=click.Path(file_okay=False), help="KITTI depth completion root (or a synth tree)."
 )
+@dataset_option("The dataset (its reader, augmentation, metrics, palette); not kitti-dc: its recipe is the start.")
 @click.option("--out", type=click.Path(file_okay=False), default=None, help="Run folder [runs/<stage>].")
 @click.option("--init", "--init-weights", "init", multiple=True, callback=one_value(WEIGHTS_SPEC),
               metavar="NAME|PATH|URL", help="Weights to start from: the previous stage's checkpoint, or released "
@@ -47,7 +49,7 @@ from semattnet.cli._options import (
 @click.option(
     "--set", "overrides", multiple=True, metavar="KEY=VALUE", help="Any TrainConfig field, e.g. --set val_every=2."
 )
-def train(stage: str, data_root: str | None, out: str | None, init: str | None,
+def train(stage: str, data_root: str | None, dataset: str, out: str | None, init: str | None,
           config_file: str | None, resume: bool, overwrite: bool,
           epochs: int | None, batch_size: int | None, lr: float | None, width: float | None, crop: str | None,
           amp: str | None, device: str | None, workers: int | None, max_steps: int | None,
@@ -63,7 +65,12 @@ def train(stage: str, data_root: str | None, out: str | None, init: str | None,
             raise click.UsageError("--resume needs --out (the run folder)")
         cfg = TrainConfig(out=out)
     else:
-        base = TrainConfig.load(config_file).to_dict() if config_file else {"stage": stage}
+        from semattnet.data.datasets import get_dataset
+
+        recipe = get_dataset(dataset).recipe if dataset != "kitti-dc" else {}
+        base = TrainConfig.load(config_file).to_dict() if config_file else {"stage": stage, **recipe}
+        if not config_file or dataset != "kitti-dc":
+            base["dataset"] = dataset
         given = {"stage": stage if not config_file else base["stage"], "data": data_root, "init": init,
                  "epochs": epochs, "batch_size": batch_size, "lr": lr, "width": width, "amp": amp,
                  "device": device, "workers": workers, "max_steps": max_steps,

@@ -1,6 +1,8 @@
-"""Data: KITTI depth completion loaders, transforms, PNG I/O, scan -> PNG projection and synthetic KITTI-like scenes."""
+"""Data: the dataset registry (KITTI depth completion, NYU Depth v2, VOID), KITTI loaders, transforms,
+PNG I/O and synthetic KITTI-like scenes."""
 
 from semattnet._errors import DataError
+from semattnet.data.datasets import DATASETS, DatasetSpec, get_dataset
 from semattnet.data.io import read_depth, read_image, read_intrinsics, write_depth, write_image
 from semattnet.data.kitti import FrameFiles, KittiDepthCompletion, find_frames
 from semattnet.data.scans import ProjectionSummary, project_scan_file
@@ -10,7 +12,9 @@ from semattnet.data.transforms import EvalTransform, Sample, TrainTransform
 
 __all__ = [
     "CITYSCAPES_PALETTE",
+    "DATASETS",
     "DataError",
+    "DatasetSpec",
     "EvalTransform",
     "FrameFiles",
     "KittiDepthCompletion",
@@ -19,6 +23,7 @@ __all__ = [
     "SyntheticFrame",
     "TrainTransform",
     "find_frames",
+    "get_dataset",
     "make_frame",
     "project_scan_file",
     "read_depth",

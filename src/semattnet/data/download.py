@@ -24,6 +24,7 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import tarfile
 import zipfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -38,8 +39,11 @@ __all__ = [
     "LicenseNotAcceptedError",
     "PlannedFile",
     "UnsafeArchiveError",
+    "download_dataset",
     "download_kitti",
     "drives_for",
+    "extract_archive",
+    "extract_tar",
     "extract_zip",
     "parse_what",
     "plan_part",
@@ -180,6 +184,45 @@ def extract_zip(
     return written, skipped
 
 
+def extract_tar(path: str | Path, dest: str | Path, strip: Sequence[str] = ()) -> tuple[int, int]:
+    """Unpack a (compressed) tar archive into ``dest`` as :func:`extract_zip` does: members checked before
+    anything is written (absolute paths, ``..``, links refused), files already there with their size skipped."""
+    path, dest = Path(path), Path(dest)
+    try:
+        tf = tarfile.open(path)
+    except tarfile.TarError as exc:
+        raise DataError(f"{path}: not a tar archive ({exc})") from None
+    with tf:
+        infos = tf.getmembers()
+        for info in infos:
+            if info.issym() or info.islnk() or info.isdev():
+                raise UnsafeArchiveError(f"{path}: refusing member {info.name!r} (a link or device); nothing unpacked")
+        members = [(info, _strip(_safe_member(info.name, path), strip)) for info in infos if info.isfile()]
+        dest.mkdir(parents=True, exist_ok=True)
+        written = skipped = 0
+        for info, rel in members:
+            if not rel.parts:
+                continue
+            out = dest.joinpath(*rel.parts)
+            if out.is_file() and out.stat().st_size == info.size:
+                skipped += 1
+                continue
+            out.parent.mkdir(parents=True, exist_ok=True)
+            tmp = out.with_name(f".{out.name}.part")
+            src = tf.extractfile(info)
+            assert src is not None
+            with src, open(tmp, "wb") as dst:
+                shutil.copyfileobj(src, dst, 1 << 20)
+            os.replace(tmp, out)
+            written += 1
+    return written, skipped
+
+
+def extract_archive(path: str | Path, dest: str | Path, strip: Sequence[str] = ()) -> tuple[int, int]:
+    """:func:`extract_zip` or :func:`extract_tar`, by the file's content."""
+    return extract_zip(path, dest, strip) if zipfile.is_zipfile(path) else extract_tar(path, dest, strip)
+
+
 # ----------------------------------------------------------------------------- the command
 
 
@@ -251,3 +294,62 @@ def download_kitti(
 
     raw, sem = out / "kitti_raw", out / str(kf.SEMANTIC_MAPS["target"])
     return check_trees([out], raw if raw.is_dir() else None, sem if sem.is_dir() else None, log=log)
+
+
+def download_dataset(
+    dataset: str,
+    out: str | Path,
+    *,
+    accept_license: bool = False,
+    dry_run: bool = False,
+    mirror: str | None = None,
+    cache_dir: str | Path | None = None,
+    delete_archives: bool = False,
+    check: bool = True,
+    progress: bool = True,
+    log: Log = print,
+) -> int:
+    """``data download --dataset NYUV2|VOID``: each archive of the entry (:mod:`semattnet.data.datasets`)
+    through :func:`semattnet.weights.download.fetch` (``MIRROR/FILE`` when ``mirror`` is given: an
+    ``https://`` or ``file://`` prefix; sha256 pinned on first use; resumable), unpacked into ``out``, then
+    checked (``data check --dataset``). Returns the number of problems the check found.
+
+    Raises:
+        LicenseNotAcceptedError: ``accept_license`` is false (a dry run only prints the terms).
+        semattnet.weights.DownloadError: a download failed (resume by running again).
+    """
+    from semattnet.data.datasets import get_dataset
+
+    spec, out = get_dataset(dataset), Path(out)
+    if spec.name == "kitti-dc":
+        return download_kitti(out, accept_license=accept_license, dry_run=dry_run, mirror=mirror,
+                              cache_dir=cache_dir, delete_archives=delete_archives, check=check,
+                              progress=progress, log=log)  # fmt: skip
+    log(f"{spec.title}: {spec.licence}")
+    if not accept_license and not dry_run:
+        raise LicenseNotAcceptedError(f"{spec.name}: {spec.licence} -- pass --accept-license to accept the terms")
+    for a in spec.archives:
+        url = mirror.rstrip("/") + "/" + a.file if mirror else a.url
+        if url is None:
+            log(f"  {a.file}: no URL recorded for {spec.name} (the authors share it by a link): "
+                f"download it by hand and pass --mirror file:///FOLDER/HOLDING/IT, or an HTTP mirror")  # fmt: skip
+            continue
+        if dry_run:
+            log(f"  {url}  [{a.size or 'size unknown'}]  -> {out}")
+            continue
+        _get_archive(url, a, out, cache_dir, progress, delete_archives, log)
+    if dry_run or not check:
+        return 0
+    return spec.check([out], log=log)
+
+
+def _get_archive(url: str, archive: object, out: Path, cache_dir: str | Path | None, progress: bool,
+                 delete: bool, log: Log) -> None:  # fmt: skip
+    from semattnet.weights.download import fetch
+
+    local = fetch(url, cache_dir=cache_dir, file_name=url.rsplit("/", 1)[-1] or None, progress=progress)
+    written, skipped = extract_archive(local, out, getattr(archive, "strip", ()))
+    again = f" ({skipped} already there)" if skipped else ""
+    log(f"  {local.name}: {written} files unpacked into {out}{again}")
+    if delete:
+        local.unlink()

@@ -118,8 +118,9 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     return np.asarray(img, dtype=np.uint8)
 
 
-def read_semantic(path: str | os.PathLike[str]) -> np.ndarray:
-    """A colour-coded semantic map as (H, W, 3) uint8, checked against the Cityscapes palette.
+def read_semantic(path: str | os.PathLike[str], palette: str = "cityscapes") -> np.ndarray:
+    """A colour-coded semantic map as (H, W, 3) uint8, checked against ``palette`` (Cityscapes by default;
+    see :data:`semattnet.data.palette.PALETTES`).
 
     Raises:
         DataError: missing/corrupt file or not 8-bit colour.
@@ -128,7 +129,7 @@ def read_semantic(path: str | os.PathLike[str]) -> np.ndarray:
     from semattnet.data.palette import colors_to_ids
 
     colors = read_image(path)
-    colors_to_ids(colors, allow_unknown=True, source=str(path))
+    colors_to_ids(colors, allow_unknown=True, source=str(path), palette=palette)
     return colors
 
 

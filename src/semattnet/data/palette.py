@@ -1,4 +1,4 @@
-"""Cityscapes semantic palette: the colour code of the semantic maps SemAttNet reads.
+"""Semantic palettes: the colour codes of the semantic maps SemAttNet reads (Cityscapes, the default; NYU-40).
 
 The authors' KITTI maps are colour-coded with the Cityscapes 19-class *trainId* palette (their
 segmenter was trained on Cityscapes and fine-tuned on KITTI semantics). The model sees the colour
@@ -8,9 +8,17 @@ refuses anything else and says which colours it found.
 Ids: ``trainId`` 0-18 (what segmentation networks predict), 255 = ignore / unknown; Cityscapes
 ``labelId`` 0-33 (what the ``*_labelIds.png`` ground truth holds) maps onto trainIds with
 :func:`label_ids_to_train_ids`.
+
+Other palettes (:data:`PALETTES`, one home): ``nyu40``, the 40 classes of Gupta et al. (CVPR 2013) that
+NYU Depth v2's labelled frames map to, coloured as ScanNet's ``create_color_palette`` (the colour code
+of the indoor literature); id 0 (unlabelled) is :data:`UNKNOWN_COLOR`. A model records the palette it was
+trained with (:attr:`semattnet.models.SemAttNetConfig.palette`); maps of another palette are refused
+(:func:`colors_to_ids` with ``palette=``, which names the palette the colours do fit).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -20,11 +28,17 @@ __all__ = [
     "IGNORE_ID",
     "LABEL_TO_TRAIN",
     "NUM_CLASSES",
+    "NYU40_CLASSES",
     "PALETTE",
+    "PALETTES",
     "TRAIN_CLASSES",
     "UNKNOWN_COLOR",
+    "Palette",
+    "PaletteMismatchError",
     "UnknownColorError",
+    "check_palette",
     "colors_to_ids",
+    "get_palette",
     "ids_to_colors",
     "label_ids_to_train_ids",
     "one_hot",
@@ -69,8 +83,74 @@ LABEL_TO_TRAIN: dict[int, int] = {
 }  # fmt: skip
 
 
+#: NYU-40 classes (Gupta et al.; ids 1..40, 0 = unlabelled) with ScanNet's colours.
+NYU40_CLASSES: tuple[tuple[str, tuple[int, int, int]], ...] = (
+    ("wall", (174, 199, 232)), ("floor", (152, 223, 138)), ("cabinet", (31, 119, 180)), ("bed", (255, 187, 120)),
+    ("chair", (188, 189, 34)), ("sofa", (140, 86, 75)), ("table", (255, 152, 150)), ("door", (214, 39, 40)),
+    ("window", (197, 176, 213)), ("bookshelf", (148, 103, 189)), ("picture", (196, 156, 148)),
+    ("counter", (23, 190, 207)), ("blinds", (178, 76, 76)), ("desk", (247, 182, 210)), ("shelves", (66, 188, 102)),
+    ("curtain", (219, 219, 141)), ("dresser", (140, 57, 197)), ("pillow", (202, 185, 52)), ("mirror", (51, 176, 203)),
+    ("floor mat", (200, 54, 131)), ("clothes", (92, 193, 61)), ("ceiling", (78, 71, 183)), ("books", (172, 114, 82)),
+    ("refrigerator", (255, 127, 14)), ("television", (91, 163, 138)), ("paper", (153, 98, 156)),
+    ("towel", (140, 153, 101)), ("shower curtain", (158, 218, 229)), ("box", (100, 125, 154)),
+    ("whiteboard", (178, 127, 135)), ("person", (120, 185, 128)), ("night stand", (146, 111, 194)),
+    ("toilet", (44, 160, 44)), ("sink", (112, 128, 144)), ("lamp", (96, 207, 209)), ("bathtub", (227, 119, 194)),
+    ("bag", (213, 92, 176)), ("otherstructure", (94, 106, 211)), ("otherfurniture", (82, 84, 163)),
+    ("otherprop", (100, 85, 144)),
+)  # fmt: skip
+
+
 class UnknownColorError(DataError):
     """A semantic map holds colours outside the palette."""
+
+
+class PaletteMismatchError(UnknownColorError):
+    """Semantic maps of one palette given to a model trained with another."""
+
+
+@dataclass(frozen=True)
+class Palette:
+    """A class-to-colour code: ``classes`` in id order (id ``i`` is ``classes[i - first_id]``); ids outside
+    are unknown (:data:`UNKNOWN_COLOR`)."""
+
+    name: str
+    title: str
+    classes: tuple[tuple[str, tuple[int, int, int]], ...]
+    first_id: int = 0
+
+    @property
+    def colors(self) -> np.ndarray:
+        """(N, 3) uint8 colours in id order."""
+        return np.array([c for _, c in self.classes], dtype=np.uint8).reshape(-1, 3)
+
+    @property
+    def num_classes(self) -> int:
+        return len(self.classes)
+
+
+#: Every palette by name; ``cityscapes`` is the default (the authors' KITTI maps).
+PALETTES: dict[str, Palette] = {
+    "cityscapes": Palette("cityscapes", "Cityscapes", TRAIN_CLASSES),
+    "nyu40": Palette("nyu40", "NYU-40", NYU40_CLASSES, first_id=1),
+}
+
+
+def get_palette(name: str | Palette) -> Palette:
+    """The palette called ``name`` (see :data:`PALETTES`)."""
+    if isinstance(name, Palette):
+        return name
+    if name not in PALETTES:
+        from semattnet._errors import InputError
+
+        raise InputError(f"palette: unknown palette {name!r}; choose one of {', '.join(PALETTES)}")
+    return PALETTES[name]
+
+
+def check_palette(model_palette: str, maps_palette: str, where: str = "semantic maps") -> None:
+    """Refuse maps of ``maps_palette`` for a model trained with ``model_palette`` (one line)."""
+    if get_palette(model_palette).name != get_palette(maps_palette).name:
+        raise PaletteMismatchError(f"{where}: {get_palette(maps_palette).title} palette, but the model was trained "
+                                   f"with the {get_palette(model_palette).title} palette")  # fmt: skip
 
 
 def _lut_label_to_train() -> np.ndarray:
@@ -88,43 +168,65 @@ def label_ids_to_train_ids(label_ids: np.ndarray) -> np.ndarray:
     return _lut_label_to_train()[ids.astype(np.int64)]
 
 
-def ids_to_colors(train_ids: np.ndarray) -> np.ndarray:
-    """Colour-code an (H, W) trainId map: (H, W, 3) uint8; 255 (ignore) becomes :data:`UNKNOWN_COLOR`."""
-    ids = np.asarray(train_ids)
-    bad = (ids != IGNORE_ID) & ((ids < 0) | (ids >= NUM_CLASSES))
+def ids_to_colors(train_ids: np.ndarray, palette: str | Palette = "cityscapes") -> np.ndarray:
+    """Colour-code an (H, W) id map: (H, W, 3) uint8; 255 (ignore) becomes :data:`UNKNOWN_COLOR` (for
+    ``nyu40``: ids 1..40, and 0 = unlabelled too)."""
+    pal = get_palette(palette)
+    ids = np.asarray(train_ids).astype(np.int64)
+    n, first = pal.num_classes, pal.first_id
+    unknown = (ids == IGNORE_ID) | ((ids == 0) & (first == 1))
+    bad = ~unknown & ((ids < first) | (ids >= first + n))
     if bad.any():
         found = sorted(set(ids[bad].tolist()))[:5]
-        raise InputError(f"trainIds must be 0..{NUM_CLASSES - 1} or {IGNORE_ID}, found {found}")
-    table = np.concatenate([PALETTE, np.array([UNKNOWN_COLOR], dtype=np.uint8)])
-    return table[np.where(ids == IGNORE_ID, NUM_CLASSES, ids).astype(np.int64)]
+        kind = "trainIds" if pal.name == "cityscapes" else f"{pal.title} ids"
+        raise InputError(f"{kind} must be {first}..{first + n - 1} or {IGNORE_ID}, found {found}")
+    table = np.concatenate([pal.colors, np.array([UNKNOWN_COLOR], dtype=np.uint8)])
+    return table[np.where(unknown, n, ids - first)]
 
 
-def colors_to_ids(colors: np.ndarray, allow_unknown: bool = True, source: str = "semantic map") -> np.ndarray:
-    """Invert :func:`ids_to_colors`: (H, W, 3) uint8 -> (H, W) uint8 trainIds (255 = unknown colour).
+def _codes(rgb: np.ndarray) -> np.ndarray:
+    return (rgb[..., 0].astype(np.int32) << 16) | (rgb[..., 1].astype(np.int32) << 8) | rgb[..., 2]
+
+
+def _fits(code: np.ndarray, stray: np.ndarray, pal: Palette) -> bool:
+    """Every colour is one of ``pal``'s (or unknown) and every stray one a class colour of ``pal``."""
+    unknown_code = (UNKNOWN_COLOR[0] << 16) | (UNKNOWN_COLOR[1] << 8) | UNKNOWN_COLOR[2]
+    classes = _codes(pal.colors)
+    return bool(np.isin(code, np.append(classes, unknown_code)).all() and np.isin(code[stray], classes).all())
+
+
+def colors_to_ids(colors: np.ndarray, allow_unknown: bool = True, source: str = "semantic map",
+                  palette: str | Palette = "cityscapes") -> np.ndarray:  # fmt: skip
+    """Invert :func:`ids_to_colors`: (H, W, 3) uint8 -> (H, W) uint8 ids (255 = unknown colour).
 
     Colours must match exactly (a resampled or JPEG-compressed map does not). Raises
     :class:`UnknownColorError` naming ``source``, the stray colours and their pixel counts, if any
-    pixel is neither a palette colour nor (when ``allow_unknown``) :data:`UNKNOWN_COLOR`.
+    pixel is neither a colour of ``palette`` nor (when ``allow_unknown``) :data:`UNKNOWN_COLOR`; when
+    the colours fit another palette of :data:`PALETTES`, :class:`PaletteMismatchError` says so.
     """
+    pal = get_palette(palette)
     rgb = np.asarray(colors)
     if rgb.ndim != 3 or rgb.shape[-1] != 3 or rgb.dtype != np.uint8:
         raise DataError(f"{source}: expected an (H, W, 3) uint8 colour image, got {rgb.dtype} {rgb.shape}")
-    code = (rgb[..., 0].astype(np.int32) << 16) | (rgb[..., 1].astype(np.int32) << 8) | rgb[..., 2]
-    keys = (PALETTE[:, 0].astype(np.int32) << 16) | (PALETTE[:, 1].astype(np.int32) << 8) | PALETTE[:, 2]
+    code, keys = _codes(rgb), _codes(pal.colors)
     order = np.argsort(keys)
-    pos = np.clip(np.searchsorted(keys[order], code), 0, NUM_CLASSES - 1)
+    pos = np.clip(np.searchsorted(keys[order], code), 0, pal.num_classes - 1)
     found = keys[order][pos] == code
-    ids = np.where(found, order[pos], IGNORE_ID).astype(np.uint8)
+    ids = np.where(found, order[pos] + pal.first_id, IGNORE_ID).astype(np.uint8)
     unknown_code = (UNKNOWN_COLOR[0] << 16) | (UNKNOWN_COLOR[1] << 8) | UNKNOWN_COLOR[2]
     stray = ~found & ((code != unknown_code) | (not allow_unknown))
     if stray.any():
+        other = [p for p in PALETTES.values() if p.name != pal.name and _fits(code, stray, p)]
+        if other:
+            raise PaletteMismatchError(f"{source}: the colours are the {other[0].title} palette, but the "
+                                       f"{pal.title} palette was expected (the model's training palette)")  # fmt: skip
         values, counts = np.unique(code[stray], return_counts=True)
         top = np.argsort(-counts)[:5]
         listed = ", ".join(
             f"({v >> 16}, {(v >> 8) & 255}, {v & 255}) x{c}" for v, c in zip(values[top], counts[top], strict=True)
         )
         raise UnknownColorError(
-            f"{source}: {int(stray.sum())} pixels in {len(values)} colour(s) outside the Cityscapes palette: "
+            f"{source}: {int(stray.sum())} pixels in {len(values)} colour(s) outside the {pal.title} palette: "
             f"{listed}{' ...' if len(values) > 5 else ''}"
         )
     return ids

@@ -20,13 +20,16 @@ from semattnet._utils import distributed as dist_utils
 from semattnet._utils.device import autocast
 from semattnet._utils.outputs import check_no_input_overlap, write_text
 from semattnet._utils.progress import progress as progress_bar
+from semattnet.data.datasets import get_dataset
 from semattnet.data.frames import Frame
 from semattnet.data.io import DataError, clamp_for_png, quantize_depth, read_depth
-from semattnet.data.kitti import KittiDepthCompletion, load_frame
+from semattnet.data.kitti import KittiDepthCompletion
+from semattnet.data.palette import check_palette
 from semattnet.data.sources.kitti_split import prediction_name
 from semattnet.evaluation.metrics import KittiMetrics
 from semattnet.evaluation.split import eval_dataset, prepare_out
 from semattnet.inference.completer import Completion, DepthCompleter
+from semattnet.inference.padding import crop_padding
 from semattnet.inference.pipeline import write_prediction
 from semattnet.inference.sharding import agree, gather_rows, on_main, process_group, shared_stage
 from semattnet.inference.sinks import DepthPngSink, PanelSink, Sink, output_files
@@ -77,22 +80,28 @@ def evaluate_model(
     fill_holes: bool = True,
     min_gt: float = 0.0,
     quantize: bool = False,
+    metrics: Callable[[], KittiMetrics] | None = None,
 ) -> KittiMetrics:
     """Score ``model`` over ``loader`` (batches from :class:`KittiDepthCompletion`), all ranks.
+
+    ``metrics``: a fresh accumulator of the dataset's protocol (default :class:`KittiMetrics`, the devkit's).
+    Items that carry a ``pad`` (padded to the model's multiple of 32 by
+    :class:`~semattnet.data.datasets.frames.FrameDataset`) are scored and written on the crop without it.
 
     ``quantize`` scores what a KITTI 16-bit PNG of the prediction holds (clamped, 1/256 m steps,
     holes kept as 0 for the devkit to fill), i.e. exactly what ``semattnet metrics`` and the benchmark see.
     """
-    metrics = _score_local(model, loader, device, amp, progress, on_batch, fill_holes, min_gt, quantize)
-    metrics.reduce()
+    scores = _score_local(model, loader, device, amp, progress, on_batch, fill_holes, min_gt, quantize, metrics)
+    scores.reduce()
+    return scores
     return metrics
 
 
 def _score_local(model: nn.Module, loader: DataLoader, device: torch.device, amp: str, progress: bool,
                  on_batch: Callable[[dict[str, Any], Any], None] | None, fill_holes: bool, min_gt: float,
-                 quantize: bool) -> KittiMetrics:  # fmt: skip
+                 quantize: bool, make_metrics: Callable[[], KittiMetrics] | None = None) -> KittiMetrics:  # fmt: skip
     """:func:`evaluate_model` on this rank's batches only (no collective)."""
-    metrics = KittiMetrics(fill_holes=fill_holes, min_gt=min_gt)
+    metrics = make_metrics() if make_metrics is not None else KittiMetrics(fill_holes=fill_holes, min_gt=min_gt)
     was_training = model.training
     model.eval()
     with torch.inference_mode():
@@ -100,6 +109,8 @@ def _score_local(model: nn.Module, loader: DataLoader, device: torch.device, amp
             x = {k: batch[k].to(device, non_blocking=True) for k in ("rgb", "semantic", "sparse")}
             with autocast(device, amp):
                 out = model(**x)
+            if "pad" in batch:  # padded to multiples of 32 by the dataset: score and write the protocol's crop
+                out, batch = _unpad(out, batch)
             if "gt" in batch:
                 pred = out.depth.float()
                 if quantize:
@@ -109,6 +120,16 @@ def _score_local(model: nn.Module, loader: DataLoader, device: torch.device, amp
                 on_batch(batch, out)
     model.train(was_training)
     return metrics
+
+
+def _unpad(out: Any, batch: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
+    """Outputs and images of a batch whose items carry their ``pad`` (top, bottom, left, right), cropped back."""
+    pad = tuple(int(v) for v in batch["pad"][0].tolist())
+    if not any(pad):
+        return out, batch
+    crop = partial(crop_padding, pad=pad)
+    images = {k: crop(batch[k]) for k in ("rgb", "semantic", "sparse", "gt") if k in batch}
+    return out.map(crop), batch | images
 
 
 def _as_png(pred: torch.Tensor, names: list[str]) -> torch.Tensor:
@@ -201,6 +222,7 @@ def evaluate_checkpoint(
     raw_root: str | Path | None = None,
     semantic_root: str | Path | None = None,
     backend: str = "torch",
+    dataset: str = "kitti-dc",
 ) -> dict[str, Any]:
     """Run a checkpoint (a path, a loaded model, or a function that loads one: called after the split
     and the output folder are checked) over a split and score it; optionally write predictions and
@@ -214,16 +236,20 @@ def evaluate_checkpoint(
     Under ``torchrun`` (same arguments on every rank; ``cuda:LOCAL_RANK`` on GPUs) rank ``r`` of ``W``
     scores frames ``r, r + W, ...`` (each frame once); the metrics are summed over the ranks and the
     per-image rows gathered in the split's order, so the files are those of one process.
+
+    ``dataset``: the protocol (:mod:`semattnet.data.datasets`: ``kitti-dc``, ``nyuv2``, ``void``): its split,
+    metrics and semantic palette (maps of another palette than the model's are refused).
     """
     inputs = [data, raw_root, semantic_root, checkpoint if isinstance(checkpoint, str | Path) else None]
     with process_group():
-        ds, frames, out = _plan(data, split, raw_root, semantic_root, max_frames, out_dir, overwrite, inputs)
+        ds, frames, out = _plan(data, split, raw_root, semantic_root, max_frames, out_dir, overwrite, inputs, dataset)
         completer, label = _completer(checkpoint, device, amp, backend)  # after every check
+        spec = _check_maps(completer, ds, data, dataset)
         loader = DataLoader(Subset(ds, range(frames)), batch_size=batch_size, num_workers=workers,
                             sampler=dist_utils.ShardSampler(frames))  # fmt: skip
         engine = completer.engine(tuple(ds[0]["rgb"].shape[-2:])) if frames else completer.model
         score = partial(_score_local, engine, loader, completer.device, amp, True,
-                        fill_holes=True, min_gt=0.0, quantize=True)  # fmt: skip
+                        fill_holes=True, min_gt=0.0, quantize=True, make_metrics=spec.metrics)  # fmt: skip
         if out is None:
             metrics = _merge(agree(score, None), ds)
             return {"metrics": metrics, "result": metrics.compute() if metrics.per_image else {}}
@@ -236,19 +262,27 @@ def evaluate_checkpoint(
             if result:
                 expected += ["metrics.json", "per_image.csv"]
                 if dist_utils.is_main():
-                    _write_scores(stage, metrics, {"checkpoint": label, "split": split} | result)
+                    _write_scores(stage, metrics, {"checkpoint": label, "dataset": spec.name, "split": split} | result)
     return {"metrics": metrics, "result": result}
+
+
+def _check_maps(completer: DepthCompleter, ds: Any, data: str | Path, dataset: str) -> Any:
+    """The dataset's entry, once its maps' palette is the model's (a dataset without maps: any)."""
+    spec, palette = get_dataset(dataset), getattr(ds, "palette", "cityscapes")
+    if completer.needs_semantic and palette:
+        check_palette(completer.palette, palette, f"{data} ({spec.name} maps)")
+    return spec
 
 
 def _plan(data: str | Path, split: str, raw_root: str | Path | None, semantic_root: str | Path | None,
           max_frames: int | None, out_dir: str | Path | None, overwrite: bool,
-          inputs: list[Any]) -> tuple[KittiDepthCompletion, int, Path | None]:  # fmt: skip
+          inputs: list[Any], dataset: str = "kitti-dc") -> tuple[KittiDepthCompletion, int, Path | None]:  # fmt: skip
     """Every check before the model is loaded: the output folder (rank 0), the split indexed and the
     frames to score decoded (each rank its share). Returns the dataset, the frame count and ``out``."""
     out = on_main(prepare_out, Path(out_dir), overwrite, inputs) if out_dir is not None else None
-    ds = eval_dataset(data, split, raw_root, semantic_root)
+    ds = eval_dataset(data, split, raw_root, semantic_root, dataset)
     frames = min(len(ds), max_frames) if max_frames else len(ds)
-    agree(lambda: [load_frame(ds.frames[i]) for i in dist_utils.ShardSampler(frames)])
+    agree(lambda: [ds.load(i) for i in dist_utils.ShardSampler(frames)])
     return ds, frames, out
 
 

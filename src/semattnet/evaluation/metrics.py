@@ -20,6 +20,11 @@ PENet and SemAttNet reuse), over valid pixels p with error e = pred - gt:
 * ``silog``: sqrt(mean d^2 - (mean d)^2) * 100 with d = ln pred - ln gt.
 
 :class:`KittiMetrics` accumulates per-image values on any device and reduces across DDP ranks.
+
+Other protocols (:func:`range_metrics`, :class:`RangeMetrics`: NYU Depth v2 and VOID) score a depth range
+without hole filling, as NLSPN / CompletionFormer (NYU) and KBNet (VOID) compute them: the prediction is
+clamped to ``clamp``, pixels count where gt > 1e-4 m and ``min_depth <= gt <= max_depth``, the inverse of a
+prediction <= 1e-4 m is 0; REL = mean |e| / gt, delta_k = fraction with max(gt/pred, pred/gt) < 1.25^k.
 """
 
 from __future__ import annotations
@@ -31,11 +36,18 @@ import torch
 
 from semattnet._errors import DataError, InputError
 
-__all__ = ["LEADERBOARD", "KittiMetrics", "fill_holes_kitti", "image_metrics"]
+__all__ = ["LEADERBOARD", "TABLE_COLUMNS", "KittiMetrics", "RangeMetrics", "fill_holes_kitti", "image_metrics",
+           "range_metrics"]  # fmt: skip
 
 #: Names, units and scale of the official metrics (internal values are metres and 1/m).
 LEADERBOARD = {"rmse": ("RMSE", "mm", 1000.0), "mae": ("MAE", "mm", 1000.0),
                "irmse": ("iRMSE", "1/km", 1000.0), "imae": ("iMAE", "1/km", 1000.0)}  # fmt: skip
+#: Column title and scale of each key of :meth:`KittiMetrics.compute` a table may show.
+TABLE_COLUMNS = {"rmse_mm": ("RMSE [mm]", 1.0), "mae_mm": ("MAE [mm]", 1.0), "irmse_per_km": ("iRMSE [1/km]", 1.0),
+                 "imae_per_km": ("iMAE [1/km]", 1.0), "rmse": ("RMSE [m]", 1.0), "mae": ("MAE [m]", 1.0),
+                 "abs_rel": ("REL", 1.0), "delta1": ("d<1.25", 1.0), "delta2": ("d<1.25^2", 1.0),
+                 "delta3": ("d<1.25^3", 1.0)}  # fmt: skip
+_VALID_GT = 1e-4  # NLSPN's t_valid: gt at or below it counts as missing
 EXTRAS = ("delta1", "delta2", "delta3", "abs_rel", "sq_rel", "log10", "silog")
 _INVALID = -1.0  # the devkit's depth for pixels without a prediction
 
@@ -113,6 +125,40 @@ def image_metrics(
     return out
 
 
+def range_metrics(pred: torch.Tensor, gt: torch.Tensor, min_depth: float = 0.0, max_depth: float = math.inf,
+                  clamp: tuple[float, float] | None = None) -> dict[str, torch.Tensor]:  # fmt: skip
+    """Per-image metrics (same keys as :func:`image_metrics`) of (B, 1, H, W) or (B, H, W) depths in
+    metres over gt > 1e-4 within ``[min_depth, max_depth]``, the prediction clamped to ``clamp`` first and
+    never hole-filled (NLSPN's ``metric.py``; KBNet's ``eval_utils``). Images without such a pixel get NaN."""
+    if pred.shape != gt.shape:
+        raise ValueError(f"prediction {tuple(pred.shape)} and ground truth {tuple(gt.shape)} differ in shape")
+    pred, gt = pred.detach().double(), gt.detach().double()
+    if clamp is not None:
+        pred = pred.clamp(*clamp)
+    b = gt.shape[0]
+    pred, gt = pred.reshape(b, -1), gt.reshape(b, -1)
+    mask = (gt > _VALID_GT) & (gt >= min_depth) & (gt <= max_depth)
+    n = mask.sum(1).double()
+
+    def mean(x: torch.Tensor) -> torch.Tensor:
+        return torch.where(n > 0, (x * mask).sum(1) / n.clamp_min(1), torch.full_like(n, math.nan))
+
+    err = pred - gt
+    pred_inv = torch.where(pred > _VALID_GT, 1.0 / pred.clamp_min(_VALID_GT), torch.zeros_like(pred))
+    inv_err = pred_inv - 1.0 / torch.where(mask, gt, torch.ones_like(gt))
+    gt_s, p = torch.where(mask, gt, torch.ones_like(gt)), pred.clamp_min(1e-8)
+    ratio = torch.maximum(gt_s / p, p / gt_s)
+    log_diff = torch.log(pred.clamp_min(1e-3)) - torch.log(gt_s)
+    return {
+        "rmse": mean(err**2).sqrt(), "mae": mean(err.abs()), "irmse": mean(inv_err**2).sqrt(),
+        "imae": mean(inv_err.abs()), "delta1": mean((ratio < 1.25).double()),
+        "delta2": mean((ratio < 1.25**2).double()), "delta3": mean((ratio < 1.25**3).double()),
+        "abs_rel": mean(err.abs() / gt_s), "sq_rel": mean((err / gt_s) ** 2),
+        "log10": mean((torch.log10(pred.clamp_min(1e-3)) - torch.log10(gt_s)).abs()),
+        "silog": (mean(log_diff**2) - mean(log_diff) ** 2).clamp_min(0).sqrt() * 100, "valid_pixels": n,
+    }  # fmt: skip
+
+
 @dataclass
 class KittiMetrics:
     """Streaming per-image KITTI metrics.
@@ -139,7 +185,7 @@ class KittiMetrics:
     per_image: list[dict[str, float | str]] = field(default_factory=list)
 
     def update(self, pred: torch.Tensor, gt: torch.Tensor, names: list[str] | None = None) -> dict[str, torch.Tensor]:
-        values = image_metrics(pred, gt, self.fill_holes, self.min_gt)
+        values = self.image_metrics(pred, gt)
         ok = ~torch.isnan(values["rmse"])
         for k, v in values.items():
             self._sums[k] = self._sums.get(k, 0.0) + float(v[ok].sum())
@@ -150,6 +196,10 @@ class KittiMetrics:
                 row.update({k: float(v[i]) for k, v in values.items()})
                 self.per_image.append(row)
         return values
+
+    def image_metrics(self, pred: torch.Tensor, gt: torch.Tensor) -> dict[str, torch.Tensor]:
+        """The per-image values of one batch (:func:`image_metrics`, the devkit's rule)."""
+        return image_metrics(pred, gt, self.fill_holes, self.min_gt)
 
     def reduce(self) -> None:
         """Sum the accumulators over DDP ranks (call on every rank before :meth:`compute`)."""
@@ -178,8 +228,37 @@ class KittiMetrics:
     def table(self) -> str:
         """The leaderboard metrics as a small text table."""
         r = self.compute()
+        if getattr(self, "columns", None):
+            cols = [TABLE_COLUMNS[k] for k in self.columns]  # type: ignore[attr-defined]
+            head = " | ".join(name.rjust(13) for name, _ in cols)
+            vals = " | ".join(f"{r[k] * scale:13.4f}" for k, (_, scale) in zip(self.columns, cols, strict=True))  # type: ignore[attr-defined]
+            return f"{head}\n{vals}\n({int(r['images'])} images)"
         head = " | ".join(f"{name} [{unit}]".rjust(13) for name, unit, _ in LEADERBOARD.values())
         vals = " | ".join(
             f"{r[f'{k}_' + ('mm' if u == 'mm' else 'per_km')]:13.3f}" for k, (_, u, _) in LEADERBOARD.items()
         )
         return f"{head}\n{vals}\n({int(r['images'])} images)"
+
+
+@dataclass
+class RangeMetrics(KittiMetrics):
+    """:class:`KittiMetrics` under a range protocol (:func:`range_metrics`): NYU Depth v2 (0.1-10 m, clamp
+    0..10, NLSPN) or VOID (0.2-5 m, clamp 0.2..5, KBNet). ``columns``: the keys of :meth:`compute` that
+    :meth:`table` shows (:data:`TABLE_COLUMNS`).
+
+    Example:
+        >>> import torch
+        >>> gt = torch.tensor([[[[1.0, 2.0], [4.0, 20.0]]]])   # 20 m: outside NYU's 10 m range
+        >>> m = RangeMetrics(min_depth=0.1, max_depth=10.0, clamp=(0.0, 10.0))
+        >>> _ = m.update(gt * 1.1, gt)
+        >>> round(m.compute()["abs_rel"], 6), m.compute()["delta1"]
+        (0.1, 1.0)
+    """
+
+    min_depth: float = 0.0
+    max_depth: float = math.inf
+    clamp: tuple[float, float] | None = None
+    columns: tuple[str, ...] = ("rmse", "abs_rel", "delta1", "delta2", "delta3", "mae")
+
+    def image_metrics(self, pred: torch.Tensor, gt: torch.Tensor) -> dict[str, torch.Tensor]:
+        return range_metrics(pred, gt, self.min_depth, self.max_depth, self.clamp)

@@ -19,7 +19,6 @@ import numpy as np
 import torch
 
 from semattnet._errors import SemAttNetError
-from semattnet.evaluation.metrics import KittiMetrics
 from semattnet.evaluation.split import eval_dataset, prepare_out
 from semattnet.geometry.sparsify import keep_random, keep_row_bands
 from semattnet.inference.backends import needs_semantic
@@ -76,9 +75,13 @@ def thin(sparse: np.ndarray, setting: str, seed: int = 0) -> np.ndarray:
 
 
 def _score_setting(ds: Any, setting: str, completers: dict[str, Callable[..., Any]], seed: int,
-                   max_frames: int | None) -> list[dict[str, Any]]:  # fmt: skip
-    """One row per method for one setting: mean density of the thinned input and the four metrics."""
-    metrics = {name: KittiMetrics(keep_per_image=False) for name in completers}
+                   max_frames: int | None, dataset: str = "kitti-dc") -> list[dict[str, Any]]:  # fmt: skip
+    """One row per method for one setting: mean density of the thinned input and the four metrics
+    (under ``dataset``'s protocol: KITTI's devkit, NYU's or VOID's range)."""
+    from semattnet.data.datasets import get_dataset
+
+    spec = get_dataset(dataset)
+    metrics = {name: spec.metrics(keep_per_image=False) for name in completers}
     densities = []
     for i in range(min(len(ds), max_frames or len(ds))):
         s = ds.load(i)
@@ -159,8 +162,8 @@ def run_sparsity_sweep(
 
 
 def _sweep(ds: Any, out: Path, settings: list[str], completers: dict[str, Callable[..., Any]], seed: int,
-           max_frames: int | None) -> list[dict[str, Any]]:  # fmt: skip
-    rows = [row for setting in settings for row in _score_setting(ds, setting, completers, seed, max_frames)]
+           max_frames: int | None, dataset: str = "kitti-dc") -> list[dict[str, Any]]:  # fmt: skip
+    rows = [row for setting in settings for row in _score_setting(ds, setting, completers, seed, max_frames, dataset)]
     _write_tables(out, rows)
     plot_sweep(rows, out / "sparsity.png")
     return rows
@@ -175,6 +178,7 @@ def sweep_model(
     device: str = "auto",
     max_frames: int | None = None,
     overwrite: bool = False,
+    dataset: str = "kitti-dc",
 ) -> list[dict[str, Any]]:
     """:func:`run_sparsity_sweep` of ``model`` (as ``semattnet``; skipped when None; a function that loads
     it is called after the split and ``out_dir`` are checked) beside the classical baseline (as ``classical``)."""
@@ -182,14 +186,14 @@ def sweep_model(
     from semattnet.inference.completer import DepthCompleter
 
     settings = parse_settings(settings)
-    ds = eval_dataset(data_root, split)
+    ds = eval_dataset(data_root, split, dataset=dataset)
     out = prepare_out(Path(out_dir), overwrite)
     completers: dict[str, Callable[..., Any]] = {}
     if model is not None:
         net = model if isinstance(model, torch.nn.Module) else model()
         completers["semattnet"] = DepthCompleter(net, device=device)
     completers["classical"] = ClassicalCompleter()
-    return _sweep(ds, out, settings, completers, 0, max_frames)
+    return _sweep(ds, out, settings, completers, 0, max_frames, dataset)
 
 
 def format_sweep(rows: list[dict]) -> str:

@@ -14,9 +14,14 @@ __all__ = ["eval_dataset", "prepare_out"]
 
 
 def eval_dataset(data: str | Path, split: str, raw_root: str | Path | None = None,
-                 semantic_root: str | Path | None = None) -> KittiDepthCompletion:  # fmt: skip
+                 semantic_root: str | Path | None = None,
+                 dataset: str = "kitti-dc") -> KittiDepthCompletion:  # fmt: skip
     """The split as the benchmark scores it: val_select at full size, val cropped to 352x1216
-    (small synthetic trees: full frames)."""
+    (small synthetic trees: full frames); another ``dataset`` (:mod:`semattnet.data.datasets`) as its protocol says."""
+    if dataset != "kitti-dc":
+        from semattnet.data.datasets import get_dataset
+
+        return get_dataset(dataset).dataset(data, split, semantic_root=semantic_root)
     ds = KittiDepthCompletion(data, split, raw_root, semantic_root,
                               transform=EvalTransform(None if split == "val_select" else (352, 1216)))  # fmt: skip
     if split == "val" and min(ds.load(0).size) < 352:

@@ -85,6 +85,8 @@ class DepthCompleter:
         self.amp = amp_dtype(amp)
         self.backend = backend
         self.needs_semantic = needs_semantic(model)
+        #: The semantic palette the model was trained with (its config's; Cityscapes when it records none).
+        self.palette: str = getattr(getattr(model, "config", None), "palette", "cityscapes")
         self._source = model.to(self.device).eval()
         self._inplace = inplace
         self._engines: dict[tuple[int, int] | None, nn.Module] = {}

@@ -142,6 +142,7 @@ def complete_frames(
         if not checked:
             check_frames(source, sinks, out, overwrite=overwrite, inputs=inputs)
         maps = agree((semantic or SemanticMaps()).bind, completer)
+        maps.check_palette(completer, source)
         expected = output_files(source.names, sinks)
         depth_sink = next((s for s in sinks if isinstance(s, DepthPngSink)), None)
         log = rank_log(log)

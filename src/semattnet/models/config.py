@@ -58,6 +58,8 @@ class SemAttNetConfig:
         refinement_mode: ``"authors"`` (default) reproduces the in-place aliasing of the released
             code, which the released weights were trained with; ``"clean"`` is the plain reading of
             the paper. See :mod:`semattnet.models.refinement`.
+        palette: the semantic palette the model was trained with (:data:`semattnet.data.palette.PALETTES`):
+            ``"cityscapes"`` (the authors' KITTI maps; checkpoints that record none load as this) or ``"nyu40"``.
     """
 
     branches: Literal[2, 3] = 3
@@ -68,6 +70,7 @@ class SemAttNetConfig:
     kernel_sizes: tuple[int, ...] = (3, 5, 7)
     iterations: int = 6
     refinement_mode: RefinementMode = "authors"
+    palette: str = "cityscapes"
 
     def __post_init__(self) -> None:
         if self.branches not in (2, 3):
@@ -85,6 +88,10 @@ class SemAttNetConfig:
         _in_range("iterations", self.iterations)
         if self.refinement_mode not in ("authors", "clean"):
             raise InputError(f"refinement_mode must be 'authors' or 'clean', got {self.refinement_mode!r}")
+        from semattnet.data.palette import PALETTES
+
+        if self.palette not in PALETTES:
+            raise InputError(f"palette must be one of {tuple(PALETTES)}, got {self.palette!r}")
         object.__setattr__(self, "kernel_sizes", tuple(int(k) for k in self.kernel_sizes))
 
     def replace(self, **changes: Any) -> SemAttNetConfig:

@@ -35,7 +35,10 @@ class TrainConfig:
 
     Attributes:
         stage: ``backbone``, ``refine-init`` or ``full``.
-        data: KITTI depth completion root (or a ``semattnet synth`` tree).
+        data: KITTI depth completion root (or a ``semattnet synth`` tree), or the root of ``dataset``.
+        dataset: ``kitti-dc`` (default), ``nyuv2`` or ``void`` (:mod:`semattnet.data.datasets`): its reader,
+            augmentation, validation metrics and semantic palette (recorded in the model config);
+            ``semattnet train --dataset`` also starts from its recipe (epochs, batch, lr, schedule).
         raw_root, semantic_root: optional separate roots (see :class:`KittiDepthCompletion`).
         out: run folder (checkpoints, logs, curves).
         init: checkpoint of the previous stage (required for refine-init and full).
@@ -63,6 +66,7 @@ class TrainConfig:
 
     stage: Stage = "backbone"
     data: str = ""
+    dataset: str = "kitti-dc"
     raw_root: str | None = None
     semantic_root: str | None = None
     out: str = "runs/semattnet"
@@ -121,6 +125,9 @@ class TrainConfig:
         if self.random_crop_height > self.crop[0]:
             raise InputError(f"random_crop_height {self.random_crop_height} exceeds the crop height {self.crop[0]}")
         self._validate()
+        from semattnet.data.datasets import get_dataset
+
+        get_dataset(self.dataset)  # a one-line error listing the names
 
     def _validate(self) -> None:
         """Refuse numbers that cannot train: NaN/inf or non-positive rates, zero or negative counts."""

@@ -30,8 +30,9 @@ from semattnet._utils import distributed as dist_utils
 from semattnet._utils.atomic import atomic_path
 from semattnet._utils.device import autocast
 from semattnet._utils.progress import progress
+from semattnet.data.datasets import get_dataset
 from semattnet.data.kitti import KittiDepthCompletion
-from semattnet.data.transforms import EvalTransform, TrainTransform
+from semattnet.data.transforms import EvalTransform
 from semattnet.evaluation.evaluate import evaluate_model
 from semattnet.models.backbone import SemAttNetBackbone
 from semattnet.models.layers import set_gradient_checkpointing
@@ -111,10 +112,9 @@ class Trainer:
     def _build_data(self) -> None:
         """The training set, its resumable sampler and loader, and the validation loader."""
         cfg = self.cfg
-        self.train_set = KittiDepthCompletion(
-            cfg.data, "train", cfg.raw_root, cfg.semantic_root, seed=cfg.seed,
-            transform=TrainTransform(tuple(cfg.crop), cfg.random_crop_height or cfg.crop[0], cfg.flip, cfg.jitter),  # type: ignore[arg-type]
-        )  # fmt: skip
+        self.train_set = get_dataset(cfg.dataset).dataset(cfg.data, "train", train=True, seed=cfg.seed,
+                                                          raw_root=cfg.raw_root, semantic_root=cfg.semantic_root,
+                                                          config=cfg)  # fmt: skip
         self.sampler = dist_utils.ResumableSampler(len(self.train_set), seed=cfg.seed)
         # The loader's own generator: starting an epoch's iterator must not draw from the global RNG,
         # or a resumed run (which starts a new iterator mid-epoch) would diverge from an uninterrupted one.
@@ -171,7 +171,7 @@ class Trainer:
         cfg = self.cfg
         name = "semattnet_backbone" if cfg.stage == "backbone" else "semattnet"
         model = build_model(name, width=cfg.width, branches=cfg.branches, fusion=cfg.fusion,
-                            refinement_mode=cfg.refinement_mode)  # fmt: skip
+                            refinement_mode=cfg.refinement_mode, palette=get_dataset(cfg.dataset).palette)  # fmt: skip
         if isinstance(model, SemAttNet):  # the refine-init and full stages
             if init_weights and not cfg.init:
                 raise InputError(f"stage {cfg.stage!r} starts from the previous stage's checkpoint: pass --init PATH")
@@ -207,8 +207,11 @@ class Trainer:
         cfg = self.cfg
         if not cfg.val_split:
             return None
-        ds: Dataset = KittiDepthCompletion(cfg.data, cfg.val_split, cfg.raw_root, cfg.semantic_root,
-                                           transform=EvalTransform(tuple(cfg.crop)))  # type: ignore[arg-type]  # fmt: skip
+        if cfg.dataset == "kitti-dc":
+            ds: Dataset = KittiDepthCompletion(cfg.data, cfg.val_split, cfg.raw_root, cfg.semantic_root,
+                                               transform=EvalTransform(tuple(cfg.crop)))  # type: ignore[arg-type]  # fmt: skip
+        else:  # the protocol's frames; evaluate_model pads them to multiples of 32
+            ds = get_dataset(cfg.dataset).dataset(cfg.data, cfg.val_split, semantic_root=cfg.semantic_root)
         if cfg.val_max_frames:
             ds = Subset(ds, range(min(cfg.val_max_frames, len(ds))))  # type: ignore[arg-type]
         return DataLoader(ds, batch_size=1, sampler=dist_utils.ShardSampler(len(ds)), num_workers=cfg.workers,  # type: ignore[arg-type]
@@ -300,7 +303,8 @@ class Trainer:
     def validate(self) -> dict[str, float] | None:
         if self.val_loader is None:
             return None
-        result = evaluate_model(self.model, self.val_loader, self.device, self.cfg.amp).compute()
+        result = evaluate_model(self.model, self.val_loader, self.device, self.cfg.amp,
+                                metrics=get_dataset(self.cfg.dataset).metrics).compute()  # fmt: skip
         self._write_row({"epoch": self.pos.epoch, "step": self.pos.step, "split": self.cfg.val_split} | result)
         self.log(f"epoch {self.pos.epoch}: {self.cfg.val_split} RMSE {result['rmse_mm']:.1f} mm, "
                  f"MAE {result['mae_mm']:.1f} mm")  # fmt: skip

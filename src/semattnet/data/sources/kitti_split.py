@@ -19,6 +19,8 @@ class KittiSplitSource(IndexedSource):
     Args: as :class:`KittiDepthCompletion` (``root``, ``split``, ``raw_root``, ``semantic_root``);
     ``max_frames`` keeps the first frames only."""
 
+    palette = "cityscapes"
+
     def __init__(self, root: str | os.PathLike[str], split: str = "val_select",
                  raw_root: str | os.PathLike[str] | None = None, semantic_root: str | os.PathLike[str] | None = None,
                  max_frames: int | None = None) -> None:  # fmt: skip

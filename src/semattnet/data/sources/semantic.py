@@ -39,6 +39,20 @@ class SemanticMaps:
             self.segmenter = load_segmenter(self.segmenter, getattr(completer, "device", "auto"))
         return self
 
+    def check_palette(self, completer: Any, source: Any) -> None:
+        """Refuse maps of another palette than the one ``completer``'s model was trained with (one line;
+        :func:`semattnet.data.palette.check_palette`): a segmenter's maps are Cityscapes-coloured, a source's
+        are its ``palette`` (None: it gives none, and the fallback map fits every palette)."""
+        from semattnet.data.palette import check_palette
+
+        if not self.needed:
+            return
+        palette = "cityscapes" if self.segmenter is not None else getattr(source, "palette", None)
+        palette = palette or ("cityscapes" if self.folder else None)
+        if palette is not None:
+            where = "the segmenter's maps" if self.segmenter is not None else f"{type(source).__name__} maps"
+            check_palette(getattr(completer, "palette", "cityscapes"), palette, where)
+
     def fill(self, frame: Frame) -> Frame:
         """``frame`` with the semantic map the completer gets."""
         from semattnet.data.palette import ids_to_colors, unknown_map

@@ -1,0 +1,18 @@
+"""The ``--dataset NAME`` option every data command takes (:mod:`semattnet.data.datasets`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import click
+
+from semattnet.data.datasets import DATASETS, DEFAULT_DATASET
+
+__all__ = ["dataset_option"]
+
+
+def dataset_option(help_text: str = "The dataset and its protocol.") -> Callable[[Any], Any]:
+    """``--dataset`` (default ``kitti-dc``; an unknown name lists the valid ones)."""
+    return click.option("--dataset", type=click.Choice(list(DATASETS)), default=DEFAULT_DATASET,
+                        show_default=True, help=help_text)  # fmt: skip

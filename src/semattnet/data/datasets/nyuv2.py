@@ -1,0 +1,153 @@
+"""NYU Depth v2 in the sparse-to-dense HDF5 layout (Ma & Karaman, ICRA 2018; used by NLSPN, CompletionFormer).
+
+Layout: ``ROOT/train/<scene>/<NNNNN>.h5`` (about 48k frames) and ``ROOT/val/official/<NNNNN>.h5`` (the 654
+test frames of the official split). Each file holds ``rgb`` uint8 (3, 480, 640) and ``depth`` float32
+(480, 640) in metres (the in-painted Kinect depth, dense); an optional ``label`` (480, 640) integer map of
+NYU-40 ids (0 = unlabelled) becomes the frame's semantic map in the NYU-40 palette.
+
+Protocol (NLSPN's): image resized to 320x240 (bilinear; depth and labels nearest), centre-cropped to 304x228,
+500 depth samples drawn among gt > 1e-4 m (seeded per frame: :func:`~.frames.frame_seed` of its name, so a
+test frame always gets the same points and two frames get different ones), depth range 0.1-10 m.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from semattnet._errors import DataError
+from semattnet.data.datasets.frames import MissingSplitError, draw_samples, frame_seed
+from semattnet.data.frames import Frame, IndexedSource
+
+__all__ = ["NYU_K", "NYU_SPLITS", "NyuV2Source", "protocol_K", "read_nyu_h5"]
+
+#: Kinect colour intrinsics at 640x480 (fx, fy, cx, cy), as NLSPN's ``nyu.py``.
+NYU_K = (5.1885790117450188e02, 5.1946961112127485e02, 3.2558244941119034e02, 2.5373616633400465e02)
+#: Split name -> folder below ROOT.
+NYU_SPLITS = {"train": "train", "test": "val/official"}
+RESIZED = (240, 320)  # H, W after the resize
+CROP = (228, 304)  # H, W of the centre crop
+SAMPLES = 500
+MAX_MEDIAN_M = 100.0  # a median depth above this is millimetres, not metres
+
+
+def _read(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    try:
+        import h5py
+    except ImportError:
+        raise DataError(f"{path}: reading NYU v2 HDF5 files needs h5py: pip install 'semattnet[nyu]'") from None
+    try:
+        with h5py.File(path, "r") as f:
+            missing = [k for k in ("rgb", "depth") if k not in f]
+            if missing:
+                raise DataError(f"{path}: missing HDF5 key(s) {missing}; found {sorted(f.keys())} "
+                                "(expected 'rgb' and 'depth', the sparse-to-dense layout)")  # fmt: skip
+            rgb, depth = f["rgb"][()], f["depth"][()]
+            label = f["label"][()] if "label" in f else None
+    except OSError as exc:
+        raise DataError(f"{path}: not a readable HDF5 file ({exc})") from None
+    return rgb, depth, label
+
+
+def read_nyu_h5(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(H, W, 3) uint8 rgb, (H, W) float32 depth in metres and the optional label map of one file, checked.
+
+    Raises:
+        DataError: unreadable file, missing keys, wrong dtypes or shapes, depth apparently in millimetres.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: file not found")
+    rgb, depth, label = _read(path)
+    if rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[0] != 3:
+        raise DataError(f"{path}: 'rgb' must be uint8 (3, H, W), got {rgb.dtype} {rgb.shape}")
+    if depth.dtype not in (np.float32, np.float64) or depth.shape != rgb.shape[1:]:
+        raise DataError(f"{path}: 'depth' must be float32 {rgb.shape[1:]} metres, got {depth.dtype} {depth.shape}")
+    valid = depth[np.isfinite(depth) & (depth > 0)]
+    if valid.size and float(np.median(valid)) > MAX_MEDIAN_M:
+        raise DataError(f"{path}: 'depth' median {float(np.median(valid)):.1f} is above {MAX_MEDIAN_M:g}: "
+                        "millimetres? expected metres")  # fmt: skip
+    if label is not None and (label.shape != depth.shape or not np.issubdtype(label.dtype, np.integer)):
+        raise DataError(f"{path}: 'label' must be integer {depth.shape} NYU-40 ids, got {label.dtype} {label.shape}")
+    if label is not None and label.size and (label.min() < 0 or label.max() > 40):
+        raise DataError(f"{path}: 'label' must hold NYU-40 ids 0..40, found {label.min()}..{label.max()}")
+    depth = np.where(np.isfinite(depth), depth, 0).astype(np.float32)
+    return np.ascontiguousarray(rgb.transpose(1, 2, 0)), depth, label
+
+
+def _resize(a: np.ndarray, nearest: bool) -> np.ndarray:
+    from PIL import Image
+
+    h, w = RESIZED
+    mode = Image.Resampling.NEAREST if nearest else Image.Resampling.BILINEAR
+    if a.ndim == 3:
+        return np.asarray(Image.fromarray(a).resize((w, h), mode))
+    return np.asarray(Image.fromarray(a.astype(np.float32), mode="F").resize((w, h), mode), dtype=np.float32)
+
+
+def _crop(a: np.ndarray) -> np.ndarray:
+    top, left = (RESIZED[0] - CROP[0]) // 2, (RESIZED[1] - CROP[1]) // 2
+    return a[top : top + CROP[0], left : left + CROP[1]]
+
+
+def protocol_K() -> np.ndarray:
+    """The intrinsics of the resized, cropped frame."""
+    s = RESIZED[1] / 640.0
+    fx, fy, cx, cy = NYU_K
+    top, left = (RESIZED[0] - CROP[0]) // 2, (RESIZED[1] - CROP[1]) // 2
+    return np.array([[fx * s, 0, cx * s - left], [0, fy * s, cy * s - top], [0, 0, 1]], dtype=np.float64)
+
+
+class NyuV2Source(IndexedSource):
+    """The frames of ``split`` (``train`` or ``test``) under ``root``, in the protocol's 304x228 crop, with
+    ground truth, ``samples`` depth samples per frame (seeded per frame with ``seed``) and, from a file's
+    ``label`` key or a ``semantic_root`` folder of NYU-40 colour PNGs named ``NAME.png``, semantic maps.
+
+    Raises:
+        MissingSplitError: the split's folder is absent. DataError: it holds no ``.h5`` file.
+    """
+
+    palette = "nyu40"
+
+    def __init__(self, root: str | os.PathLike[str], split: str = "test", samples: int = SAMPLES, seed: int = 0,
+                 semantic_root: str | os.PathLike[str] | None = None,
+                 max_frames: int | None = None) -> None:  # fmt: skip
+        from semattnet.data.datasets import check_split
+
+        self.root, self.split = Path(root), check_split("nyuv2", split)
+        folder = self.root / NYU_SPLITS[self.split]
+        if not folder.is_dir():
+            raise MissingSplitError(f"{folder}: split folder not found (expected {folder}/"
+                                    f"{'<scene>/' if self.split == 'train' else ''}<NNNNN>.h5)")  # fmt: skip
+        files = sorted(folder.glob("*/*.h5" if self.split == "train" else "*.h5"))
+        if not files:
+            raise DataError(f"{folder}: no .h5 files")
+        files = files[:max_frames] if max_frames else files
+        self.files = {(f"{f.parent.name}_{f.stem}" if self.split == "train" else f.stem): f for f in files}
+        self.names: Sequence[str] = list(self.files)
+        self.samples, self.seed = samples, seed
+        self.semantic_root = Path(semantic_root) if semantic_root is not None else None
+
+    def load(self, name: str) -> Frame:
+        from semattnet.data.io import read_semantic
+        from semattnet.data.palette import ids_to_colors
+
+        path = self.files[name]
+        rgb, depth, label = read_nyu_h5(path)
+        rgb, gt = _crop(_resize(rgb, False)), _crop(_resize(depth, True))
+        paths = {"rgb": path, "gt": path, "sparse": path}
+        sem = None
+        if label is not None:
+            sem = ids_to_colors(_crop(_resize(label.astype(np.uint8), True)), palette="nyu40")
+        elif self.semantic_root is not None:
+            paths["semantic"] = self.semantic_root / f"{name}.png"
+            sem = read_semantic(paths["semantic"], palette="nyu40")
+        sparse = draw_samples(gt, self.samples, np.random.default_rng(frame_seed(name, self.seed)))
+        return Frame(name, np.ascontiguousarray(rgb), sparse, sem, K=protocol_K(), gt=np.ascontiguousarray(gt),
+                     paths=paths)  # fmt: skip
+
+    def inputs(self) -> list[Path]:
+        return [self.root, *([self.semantic_root] if self.semantic_root is not None else [])]

@@ -1,0 +1,136 @@
+"""VOID (Wong et al., RA-L 2020; github.com/alexklwong/void-dataset): indoor and outdoor scenes, sparse depth
+from visual-inertial odometry at three densities (``void_150``, ``void_500``, ``void_1500`` points per frame).
+
+Layout (the release's): ``void_NNN/{train,test}_{image,sparse_depth,validity_map,ground_truth,intrinsics}.txt``
+list one path per frame (relative to the folder holding ``void_NNN``, to ``void_NNN`` itself, or absolute);
+images are 640x480 RGB PNGs, sparse depth and ground truth 16-bit PNGs in 1/256 m (KITTI's encoding), the
+validity map a PNG whose non-zero pixels mark the sparse points, intrinsics a 3x3 matrix as ``.npy`` or text
+(``K.txt``, 9 numbers). Evaluation (KBNet's): predictions clamped to 0.2-5.0 m, pixels with gt in that range.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from semattnet._errors import DataError
+from semattnet.data.frames import Frame, IndexedSource
+
+__all__ = ["VOID_ROLES", "VOID_VARIANTS", "VoidSource", "read_void_intrinsics"]
+
+#: The list files of a split, by role (``{split}_{role}.txt``); the first three are required.
+VOID_ROLES = ("image", "sparse_depth", "ground_truth", "validity_map", "intrinsics")
+VOID_VARIANTS = ("void_1500", "void_500", "void_150")
+MAX_MEDIAN_M = 100.0
+
+
+def read_void_intrinsics(path: Path) -> np.ndarray:
+    """A (3, 3) matrix from ``.npy`` or text (9 numbers), naming the file on any fault."""
+    if not path.is_file():
+        raise DataError(f"{path}: file not found")
+    try:
+        K = np.load(path, allow_pickle=False) if path.suffix == ".npy" else np.loadtxt(path)
+    except (ValueError, OSError) as exc:
+        raise DataError(f"{path}: not a 3x3 intrinsics matrix ({exc})") from None
+    if np.asarray(K).size != 9:
+        raise DataError(f"{path}: expected a 3x3 intrinsics matrix, got shape {np.asarray(K).shape}")
+    return np.asarray(K, dtype=np.float64).reshape(3, 3)
+
+
+def _read_validity(path: Path) -> np.ndarray:
+    from PIL import Image
+
+    if not path.is_file():
+        raise DataError(f"{path}: file not found")
+    try:
+        with Image.open(path) as img:
+            return np.asarray(img)
+    except Exception as exc:  # PIL raises many types on corrupt files
+        raise DataError(f"{path}: not a readable validity map PNG ({type(exc).__name__}: {exc})") from None
+
+
+def _folder(root: Path) -> Path:
+    """``root`` itself when it holds list files, else its first ``void_NNN`` (1500 first)."""
+    if any(root.glob("*_image.txt")):
+        return root
+    return next((root / v for v in VOID_VARIANTS if (root / v).is_dir()), root)
+
+
+def _resolve(entry: str, lists: Path) -> Path:
+    p = Path(entry)
+    if p.is_absolute():
+        return p
+    candidates = [lists.parent / p, lists / p, lists.parent.parent / p]
+    return next((c for c in candidates if c.exists()), candidates[0])
+
+
+def _read_list(path: Path, lists: Path) -> list[Path]:
+    return [_resolve(line.strip(), lists) for line in path.read_text().splitlines() if line.strip()]
+
+
+class VoidSource(IndexedSource):
+    """The frames of ``split`` (``train`` or ``test``) of a VOID folder (``void_1500``, or a release folder
+    holding it), with ground truth and intrinsics; ``semantic_root``: Cityscapes-coloured maps ``NAME.png``
+    (e.g. written by ``semattnet segment``), else frames have none (the segmenter or the fallback fills them).
+
+    Raises:
+        MissingSplitError: no list file of the split. DataError: a required list file is missing, the lists
+        disagree in length, or an entry names a missing file.
+    """
+
+    palette: str | None = None  # "cityscapes" when it reads maps from semantic_root
+
+    def __init__(self, root: str | os.PathLike[str], split: str = "test",
+                 semantic_root: str | os.PathLike[str] | None = None,
+                 max_frames: int | None = None) -> None:  # fmt: skip
+        from semattnet.data.datasets import check_split
+        from semattnet.data.datasets.frames import MissingSplitError
+
+        self.split = check_split("void", split)
+        self.lists = _folder(Path(root))
+        files = {r: self.lists / f"{self.split}_{r}.txt" for r in VOID_ROLES}
+        if not any(p.is_file() for p in files.values()):
+            raise MissingSplitError(f"{files['image']}: split list not found (the VOID {self.split} split)")
+        for role in VOID_ROLES[:3]:
+            if not files[role].is_file():
+                raise DataError(f"{files[role]}: split file not found (VOID lists {', '.join(VOID_ROLES[:3])})")
+        entries = {r: _read_list(p, self.lists) for r, p in files.items() if p.is_file()}
+        counts = {r: len(v) for r, v in entries.items()}
+        if len(set(counts.values())) > 1:
+            raise DataError(f"{self.lists}: the {self.split} lists differ in length: "
+                            + ", ".join(f"{files[r].name} {n}" for r, n in counts.items()))  # fmt: skip
+        n = min(counts["image"], max_frames or counts["image"])
+        self.frames = [{r: v[i] for r, v in entries.items()} for i in range(n)]
+        self.names: Sequence[str] = [f"{f['image'].parent.parent.name}_{f['image'].stem}" for f in self.frames]
+        self.by_name = dict(zip(self.names, self.frames, strict=True))
+        self.semantic_root = Path(semantic_root) if semantic_root is not None else None
+        self.palette = "cityscapes" if self.semantic_root is not None else None
+
+    def load(self, name: str) -> Frame:
+        from semattnet.data.io import read_depth, read_image, read_semantic
+
+        f = self.by_name[name]
+        rgb, sparse, gt = read_image(f["image"]), read_depth(f["sparse_depth"]), read_depth(f["ground_truth"])
+        valid = gt[gt > 0]
+        if valid.size and float(np.median(valid)) > MAX_MEDIAN_M:
+            raise DataError(f"{f['ground_truth']}: median depth {float(np.median(valid)):.1f} m is above "
+                            f"{MAX_MEDIAN_M:g} m: millimetres? expected 1/256 m units")  # fmt: skip
+        if "validity_map" in f:
+            validity = _read_validity(f["validity_map"])
+            if validity.shape[:2] != sparse.shape:
+                raise DataError(f"{f['validity_map']}: {validity.shape[1]}x{validity.shape[0]}, the sparse map "
+                                f"{sparse.shape[1]}x{sparse.shape[0]}")  # fmt: skip
+            sparse = np.where(validity.reshape(sparse.shape[0], sparse.shape[1], -1).max(-1) > 0, sparse, 0)
+        K = read_void_intrinsics(f["intrinsics"]) if "intrinsics" in f else None
+        paths = {"rgb": f["image"], "sparse": f["sparse_depth"], "gt": f["ground_truth"]}
+        sem = None
+        if self.semantic_root is not None:
+            paths["semantic"] = self.semantic_root / f"{name}.png"
+            sem = read_semantic(paths["semantic"])
+        return Frame(name, rgb, sparse.astype(np.float32), sem, K=K, gt=gt, paths=paths)
+
+    def inputs(self) -> list[Path]:
+        return [self.lists, *([self.semantic_root] if self.semantic_root is not None else [])]
