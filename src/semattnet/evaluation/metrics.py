@@ -131,7 +131,7 @@ def range_metrics(pred: torch.Tensor, gt: torch.Tensor, min_depth: float = 0.0, 
     metres over gt > 1e-4 within ``[min_depth, max_depth]``, the prediction clamped to ``clamp`` first and
     never hole-filled (NLSPN's ``metric.py``; KBNet's ``eval_utils``). Images without such a pixel get NaN."""
     if pred.shape != gt.shape:
-        raise ValueError(f"prediction {tuple(pred.shape)} and ground truth {tuple(gt.shape)} differ in shape")
+        raise InputError(f"prediction {tuple(pred.shape)} and ground truth {tuple(gt.shape)} differ in shape")
     pred, gt = pred.detach().double(), gt.detach().double()
     if clamp is not None:
         pred = pred.clamp(*clamp)
