@@ -12,7 +12,7 @@ from semattnet.cli._group import main
 from semattnet.cli._options import COUNT, NONNEGATIVE_FLOAT, POSITIVE_FLOAT, backend_option, weights_option
 
 
-def _completer(method: str, checkpoint: Path | None, weights: str | None, device: str, amp: str,  # type: ignore[no-untyped-def]
+def _completer(method: str, checkpoint: Path | None, weights: str | None, device: str, amp: str,
                backend: str = "torch"):  # fmt: skip
     """The completer the options name: the classical baseline or the model of --checkpoint / --weights."""
     from semattnet._utils.distributed import process_device
@@ -37,7 +37,7 @@ def _check_method(method: str, checkpoint: Path | None, weights: str | None) -> 
         raise click.UsageError("give --checkpoint or --weights, not both")
 
 
-def _intrinsics(text: str | None):  # type: ignore[no-untyped-def]
+def _intrinsics(text: str | None):
     """--K as a (3, 3) matrix, or None."""
     from semattnet.viz.viewer import parse_intrinsics
 
@@ -74,14 +74,14 @@ _BAG_OPTIONS = [
 ]  # fmt: skip
 
 
-def _bag_options(f):  # type: ignore[no-untyped-def]
+def _bag_options(f):
     for option in reversed(_BAG_OPTIONS):
         f = option(f)
     return f
 
 
 def _check_inputs(rgb: Path | None, sparse: Path | None, kitti_raw: Path | None, data_root: Path | None,
-                  bag: dict) -> None:  # type: ignore[type-arg]  # fmt: skip
+                  bag: dict[str, Any]) -> None:  # fmt: skip
     """Exactly one input kind, and the options each needs."""
     folder = rgb is not None or sparse is not None
     kinds = folder + (kitti_raw is not None) + (bag["bag"] is not None) + (data_root is not None)
@@ -95,7 +95,7 @@ def _check_inputs(rgb: Path | None, sparse: Path | None, kitti_raw: Path | None,
         raise click.UsageError("--bag needs --image-topic and --points-topic (see --list-topics)")
 
 
-def _source(rgb, sparse, kitti_raw, frames, camera, semantic, deskew, K, bag, data):  # type: ignore[no-untyped-def]
+def _source(rgb, sparse, kitti_raw, frames, camera, semantic, deskew, K, bag, data):
     """The frame source the options name; ``data``: (dataset name, root or None, split)."""
     from semattnet.data.sources import BagSource, FolderSource, RawDriveSource
 
@@ -112,11 +112,11 @@ def _source(rgb, sparse, kitti_raw, frames, camera, semantic, deskew, K, bag, da
     return FolderSource.pair(rgb, sparse, semantic, K=K)
 
 
-def _robot_sinks(bag: dict, max_depth: float, timer):  # type: ignore[no-untyped-def,type-arg]
+def _robot_sinks(bag: dict[str, Any], max_depth: float, timer: Any) -> list[Any]:
     """``latency.json`` and, as asked, the bag and the Rerun recording."""
     from semattnet.inference.sinks import BagSink, LatencySink, RerunSink
 
-    sinks = [LatencySink(timer=timer)]
+    sinks: list[Any] = [LatencySink(timer=timer)]
     if bag["bag_out"] is not None:
         sinks.append(BagSink(target=bag["bag_out"], max_depth=max_depth))
     if bag["rerun_file"] is not None or bag["rerun_spawn"]:
@@ -225,7 +225,7 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
     if report and launch_rank() == 0:  # under torchrun: once, after every rank's frames are in place
         from semattnet.viz.viewer import write_prediction_report
 
-        write_prediction_report(out, list(source.frames.values()), K=K, log=click.echo)  # type: ignore[attr-defined]
+        write_prediction_report(out, list(source.frames.values()), K=K, log=click.echo)
 
 
 @main.command()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,9 +36,9 @@ class SplitReport:
 
 
 def check_tree(
-    root: str | Path,
-    raw_root: str | Path | None = None,
-    semantic_root: str | Path | None = None,
+    root: str | os.PathLike[str],
+    raw_root: str | os.PathLike[str] | None = None,
+    semantic_root: str | os.PathLike[str] | None = None,
     sample: int | None = None,
     progress: bool = True,
 ) -> list[SplitReport]:
@@ -73,9 +74,9 @@ def check_tree(
 
 
 def check_trees(
-    roots: Sequence[str | Path],
-    raw_root: str | Path | None = None,
-    semantic_root: str | Path | None = None,
+    roots: Sequence[str | os.PathLike[str]],
+    raw_root: str | os.PathLike[str] | None = None,
+    semantic_root: str | os.PathLike[str] | None = None,
     sample: int | None = None,
     log: Callable[[str], None] = print,
 ) -> int:

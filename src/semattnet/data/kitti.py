@@ -8,6 +8,7 @@ counts it in :attr:`KittiDepthCompletion.skipped`.
 
 from __future__ import annotations
 
+import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,6 +40,10 @@ class FrameFiles:
     intrinsics_camera: str | None = None  # set when intrinsics is a raw calib_cam_to_cam.txt
 
 
+#: What a split finder returns: the frames found, and (name, missing or wrong files) per bad frame.
+_Found = tuple[list[FrameFiles], list[tuple[str, list[Any]]]]
+
+
 def _first_existing(candidates: list[Path]) -> Path:
     for p in candidates:
         if p.is_file():
@@ -61,8 +66,9 @@ def _raw_roots(root: Path, raw_root: Path | None) -> list[Path]:
     return [Path(raw_root)] if raw_root is not None else _existing_first([root / "kitti_raw", root / "raw"])
 
 
-def _find_train_val(root: Path, split: str, raw_root: Path | None, semantic_root: Path | None):  # type: ignore[no-untyped-def]
-    frames, problems = [], []
+def _find_train_val(root: Path, split: str, raw_root: Path | None, semantic_root: Path | None) -> _Found:
+    frames: list[FrameFiles] = []
+    problems: list[tuple[str, list[Any]]] = []
     velo = (root / "data_depth_velodyne" / split).glob("*/proj_depth/velodyne_raw/image_0[23]/*.png")
     gts = set((root / "data_depth_annotated" / split).glob("*/proj_depth/groundtruth/image_0[23]/*.png"))
     raws, sems = _raw_roots(root, raw_root), _semantic_roots(root, semantic_root)
@@ -85,12 +91,13 @@ def _find_train_val(root: Path, split: str, raw_root: Path | None, semantic_root
     return frames, problems
 
 
-def _find_selection(root: Path, split: str, semantic_root: Path | None):  # type: ignore[no-untyped-def]
+def _find_selection(root: Path, split: str, semantic_root: Path | None) -> _Found:
     base = root / layout.SELECTION / (layout.VAL_SELECT_DIR if split == "val_select" else layout.TEST_DIR)
     sem_dirs = _existing_first([base / n for n in layout.SEMANTIC_DIR_NAMES])
     if semantic_root is not None:
         sem_dirs = [Path(semantic_root), Path(semantic_root) / base.name, *sem_dirs]
-    frames, problems = [], []
+    frames: list[FrameFiles] = []
+    problems: list[tuple[str, list[Any]]] = []
     velo_files = sorted((base / "velodyne_raw").glob("*.png"))
     for sparse in velo_files:
         if split == "val_select":
@@ -117,10 +124,10 @@ def _find_selection(root: Path, split: str, semantic_root: Path | None):  # type
 
 
 def find_frames(
-    root: str | Path,
+    root: str | os.PathLike[str],
     split: str,
-    raw_root: str | Path | None = None,
-    semantic_root: str | Path | None = None,
+    raw_root: str | os.PathLike[str] | None = None,
+    semantic_root: str | os.PathLike[str] | None = None,
 ) -> tuple[list[FrameFiles], list[tuple[str, list[Path | str]]]]:
     """Index a split: the complete frames, and (frame, missing files) for the incomplete ones."""
     if split not in layout.SPLITS:
@@ -184,10 +191,10 @@ class KittiDepthCompletion(Dataset):
 
     def __init__(
         self,
-        root: str | Path,
+        root: str | os.PathLike[str],
         split: str,
-        raw_root: str | Path | None = None,
-        semantic_root: str | Path | None = None,
+        raw_root: str | os.PathLike[str] | None = None,
+        semantic_root: str | os.PathLike[str] | None = None,
         transform: Transform | None = None,
         on_missing: OnMissing = "error",
         seed: int = 0,

@@ -124,7 +124,8 @@ def _score_local(model: nn.Module, loader: DataLoader, device: torch.device, amp
 
 def _unpad(out: Any, batch: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
     """Outputs and images of a batch whose items carry their ``pad`` (top, bottom, left, right), cropped back."""
-    pad = tuple(int(v) for v in batch["pad"][0].tolist())
+    top, bottom, left, right = (int(v) for v in batch["pad"][0].tolist())
+    pad = (top, bottom, left, right)
     if not any(pad):
         return out, batch
     crop = partial(crop_padding, pad=pad)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -13,8 +14,8 @@ from semattnet.data.transforms import EvalTransform
 __all__ = ["eval_dataset", "prepare_out"]
 
 
-def eval_dataset(data: str | Path, split: str, raw_root: str | Path | None = None,
-                 semantic_root: str | Path | None = None,
+def eval_dataset(data: str | os.PathLike[str], split: str, raw_root: str | os.PathLike[str] | None = None,
+                 semantic_root: str | os.PathLike[str] | None = None,
                  dataset: str = "kitti-dc") -> KittiDepthCompletion:  # fmt: skip
     """The split as the benchmark scores it: val_select at full size, val cropped to 352x1216
     (small synthetic trees: full frames); another ``dataset`` (:mod:`semattnet.data.datasets`) as its protocol says."""

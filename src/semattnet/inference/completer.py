@@ -129,7 +129,7 @@ class DepthCompleter:
         sem_p = pad_to_multiple(semantic)[0] if semantic is not None else None
         with torch.inference_mode(), torch.autocast(self.device.type, dtype=self.amp or torch.float32,
                                                     enabled=self.amp is not None):  # fmt: skip
-            engine = self.engine(tuple(rgb_p.shape[-2:]))
+            engine = self.engine((int(rgb_p.shape[-2]), int(rgb_p.shape[-1])))
             out = engine(rgb=rgb_p.to(self.device), semantic=None if sem_p is None else sem_p.to(self.device),
                          sparse=sparse_p.to(self.device))  # fmt: skip
         return out.map(lambda t: crop_padding(t.float(), pad))

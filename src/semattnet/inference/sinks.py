@@ -262,16 +262,18 @@ def _stamp_ns(frame: Frame, index: int) -> int:
 class _StagedTarget(RunSink):
     """A run output at ``target``, written into a hidden folder beside it and moved into place at commit."""
 
-    target: Path
+    target: Path | None
 
     def targets(self) -> list[Path]:
-        return [Path(self.target)]
+        return [] if self.target is None else [Path(self.target)]
 
     def _begin(self, overwrite: bool) -> Path:
         import tempfile
 
         from semattnet._utils.distributed import world_size
 
+        if self.target is None:
+            raise InputError("a staged run output needs a target path")
         if world_size() > 1:
             raise InputError(f"{self.target}: a bag or Rerun recording is written by one process (not under torchrun)")
         target = Path(self.target)
@@ -284,6 +286,7 @@ class _StagedTarget(RunSink):
         from semattnet._utils.atomic import fsync_dir
         from semattnet._utils.outputs import refuse_existing
 
+        assert self.target is not None  # _begin refused a missing target
         target = Path(self.target)
         try:
             refuse_existing([target], self._overwrite)
@@ -310,10 +313,11 @@ class BagSink(_StagedTarget):
     from ``K``), stamped with the input's header stamp and frame id (``meta``; else ``timestamp`` and
     ``camera``)."""
 
-    target: Path = Path("prediction_bag")
+    target: Path | None = Path("prediction_bag")
     fmt: str | None = None
     prefix: str = "/semattnet"
     max_depth: float | None = None
+    _writer: Any = field(default=None, init=False, repr=False)  # the open BagWriter, between open and finish
 
     def open(self, overwrite: bool = False) -> None:
         from semattnet.data.bags import BagWriter
@@ -333,7 +337,8 @@ class BagSink(_StagedTarget):
 
     def finish(self, stage: Path) -> None:
         writer, self._writer = self._writer, None
-        writer.close()  # the bag is complete in the hidden folder
+        if writer is not None:
+            writer.close()  # the bag is complete in the hidden folder
 
     def abort(self) -> None:
         writer, self._writer = getattr(self, "_writer", None), None
@@ -359,6 +364,7 @@ class RerunSink(_StagedTarget):
     target: Path | None = None
     spawn: bool = False
     max_depth: float | None = None
+    _log: Any = field(default=None, init=False, repr=False)  # the open RerunLogger, between open and finish
 
     def targets(self) -> list[Path]:
         return [] if self.target is None else [Path(self.target)]

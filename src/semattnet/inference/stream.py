@@ -186,7 +186,7 @@ _DONE = object()
 
 
 def _prefetched(source: FrameSource, names: Sequence[str], semantic: Any, timer: StageTimes,
-                depth: int) -> Iterator[Frame]:  # fmt: skip
+                depth: int) -> Generator[Frame, None, None]:  # fmt: skip
     """The frames of ``names`` in order, read in a background thread at most ``depth`` frames ahead."""
     slots, items, stop = threading.Semaphore(depth), queue.Queue(), threading.Event()  # type: ignore[var-annotated]
 
