@@ -115,6 +115,17 @@ def _pcd_header(raw: bytes, path: Path) -> tuple[dict[str, list[str]], int]:
     return header, pos
 
 
+def _check_pcd_counts(header: dict[str, list[str]], counts: list[str], size: int, path: Path) -> None:
+    """POINTS in [0, file size] (a point takes at least a byte) and each COUNT >= 1, before any allocation."""
+    try:
+        n, per = int(header["POINTS"][0]), [int(c) for c in counts]
+    except (ValueError, IndexError):
+        raise DataError(f"{path}: PCD POINTS / COUNT are not integers ({header['POINTS']} / {counts})") from None
+    if not 0 <= n <= size or min(per, default=1) < 1:
+        raise DataError(f"{path}: PCD POINTS {n} / COUNT {' '.join(counts)} out of range "
+                        f"(POINTS in [0, {size}] for this file's size, each COUNT >= 1)")  # fmt: skip
+
+
 def _read_pcd(path: Path) -> np.ndarray:
     raw = path.read_bytes()
     header, start = _pcd_header(raw, path)
@@ -122,6 +133,7 @@ def _read_pcd(path: Path) -> np.ndarray:
     counts = header.get("COUNT", ["1"] * len(fields))
     if not len(fields) == len(sizes) == len(types) == len(counts):
         raise DataError(f"{path}: PCD FIELDS, SIZE, TYPE and COUNT have different lengths")
+    _check_pcd_counts(header, counts, len(raw), path)
     try:
         n = int(header["POINTS"][0])
         spec = zip(fields, sizes, types, counts, strict=True)
@@ -156,6 +168,23 @@ def _read_pcd(path: Path) -> np.ndarray:
     return _finish(np.stack([cols["x"], cols["y"], cols["z"]], 1), inten, path)
 
 
+def _read_npy(path: Path) -> np.ndarray:
+    """A plain numeric (N, 3|4) ``.npy`` array (no pickles, no structured or text dtypes, no ``.npz``)."""
+    try:
+        a = np.load(path, allow_pickle=False, mmap_mode="r")
+    except (ValueError, OSError, EOFError) as exc:
+        raise DataError(
+            f"{path}: not a readable .npy array: {str(exc).splitlines()[0] if str(exc) else exc!r}"
+        ) from None
+    if not isinstance(a, np.ndarray):
+        raise DataError(f"{path}: not a single .npy array (an .npz archive?)")
+    if a.dtype.kind not in "fiu" or a.dtype.fields is not None:
+        raise DataError(f"{path}: expected a numeric array of x y z [intensity], got dtype {a.dtype}")
+    if a.size == 0:
+        raise DataError(f"{path}: empty point cloud (no points)")
+    return _from_columns(np.asarray(a, dtype=np.float64), path)
+
+
 def read_points(path: str | os.PathLike[str]) -> np.ndarray:
     """Read a scan/point cloud (format by suffix, see the module doc).
 
@@ -175,13 +204,7 @@ def read_points(path: str | os.PathLike[str]) -> np.ndarray:
     if suffix == ".bin":
         return _read_bin(path)
     if suffix == ".npy":
-        try:
-            a = np.load(path, allow_pickle=False)
-        except (ValueError, OSError) as exc:
-            raise DataError(f"{path}: not a readable .npy array: {exc}") from None
-        if a.size == 0:
-            raise DataError(f"{path}: empty point cloud (no points)")
-        return _from_columns(np.asarray(a, dtype=np.float64), path)
+        return _read_npy(path)
     if suffix in (".txt", ".csv", ".xyz"):
         return _read_text(path)
     if suffix == ".ply":

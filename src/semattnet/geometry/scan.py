@@ -19,6 +19,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from semattnet._errors import DataError
+from semattnet._utils.bounds import check_image_size
 
 from .calibration import RigCalibration, read_kitti_calibration, read_rig_json
 from .motion import deskew_scan, read_oxts_motion
@@ -36,17 +37,20 @@ def _rig_from_numbers(K: Sequence[float], T: Sequence[float], image_size: Sequen
         raise DataError(f"K needs 4 numbers fx,fy,cx,cy; got {len(K)}")
     if len(T) != 16:
         raise DataError(f"T_cam_lidar needs 16 numbers (4x4 row-major); got {len(T)}")
-    if image_size is None or len(image_size) != 2 or min(image_size) <= 0:
+    if image_size is None or len(image_size) != 2:
         raise DataError(f"the image size (width, height) is required with K and T; got {image_size}")
+    size = check_image_size(*image_size, "--size")
     fx, fy, cx, cy = (float(v) for v in K)
-    if not (fx > 0 and fy > 0):
-        raise DataError(f"K: fx and fy must be positive, got {fx}, {fy}")
+    if not all(np.isfinite([fx, fy, cx, cy])) or not (fx > 0 and fy > 0):
+        raise DataError(f"--K: fx, fy must be finite and positive and cx, cy finite; got {fx}, {fy}, {cx}, {cy}")
     T_cam_lidar = np.asarray(T, dtype=np.float64).reshape(4, 4)
+    if not np.all(np.isfinite(T_cam_lidar)):
+        raise DataError("--T: T_cam_lidar has NaN or infinite entries")
     why = check_rigid(T_cam_lidar)
     if why:
         raise DataError(f"T_cam_lidar is not a rigid transform: {why}")
     K3 = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], dtype=np.float64)
-    return RigCalibration(K3, T_cam_lidar, (int(image_size[0]), int(image_size[1])), source="command line")
+    return RigCalibration(K3, T_cam_lidar, size, source="command line")
 
 
 def load_rig(
