@@ -10,9 +10,9 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from semattnet._errors import DataError
+from semattnet._errors import DataError, InputError
 
-__all__ = ["MAX_IMAGE_PIXELS", "MAX_IMAGE_SIDE", "check_image_size"]
+__all__ = ["MAX_IMAGE_PIXELS", "MAX_IMAGE_SIDE", "check_image_size", "check_pinhole"]
 
 #: Largest width or height accepted, checked before decoding or allocating (KITTI: 1242).
 MAX_IMAGE_SIDE = 16384
@@ -46,3 +46,15 @@ def check_image_size(width: Any, height: Any, where: str) -> tuple[int, int]:
 def _short(value: Any) -> str:
     text = str(value)
     return text if len(text) <= 24 else f"{text[:20]}...({len(text)} characters)"
+
+
+def check_pinhole(fx: float, fy: float, cx: float, cy: float, where: str = "--K") -> None:
+    """Refuse intrinsics that mean nothing: NaN / infinite entries or non-positive focal lengths.
+
+    Raises:
+        InputError: one line naming ``where`` (the option or file and field) and the values.
+    """
+    vals = (fx, fy, cx, cy)
+    if not all(math.isfinite(v) for v in vals) or not (fx > 0 and fy > 0):
+        raise InputError(f"{where}: fx, fy must be finite and positive and cx, cy finite; got "
+                         f"{', '.join(f'{v:g}' for v in vals)}")  # fmt: skip

@@ -19,7 +19,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from semattnet._errors import DataError
-from semattnet._utils.bounds import check_image_size
+from semattnet._utils.bounds import check_image_size, check_pinhole
 
 from .calibration import RigCalibration, read_kitti_calibration, read_rig_json
 from .motion import deskew_scan, read_oxts_motion
@@ -41,8 +41,7 @@ def _rig_from_numbers(K: Sequence[float], T: Sequence[float], image_size: Sequen
         raise DataError(f"the image size (width, height) is required with K and T; got {image_size}")
     size = check_image_size(*image_size, "--size")
     fx, fy, cx, cy = (float(v) for v in K)
-    if not all(np.isfinite([fx, fy, cx, cy])) or not (fx > 0 and fy > 0):
-        raise DataError(f"--K: fx, fy must be finite and positive and cx, cy finite; got {fx}, {fy}, {cx}, {cy}")
+    check_pinhole(fx, fy, cx, cy, "--K")
     T_cam_lidar = np.asarray(T, dtype=np.float64).reshape(4, 4)
     if not np.all(np.isfinite(T_cam_lidar)):
         raise DataError("--T: T_cam_lidar has NaN or infinite entries")
@@ -88,10 +87,19 @@ def project_scan(
     name: str = "points",
 ) -> np.ndarray:
     """(H, W) float32 sparse depth (metres, 0 = none) of LiDAR-frame ``points`` in ``calib``'s camera,
-    optionally deskewed with the OXTS packet ``oxts`` first (see :func:`deskew_scan`)."""
+    optionally deskewed with the OXTS packet ``oxts`` first (see :func:`deskew_scan`).
+
+    Raises:
+        DataError: no point lands inside the image (a wrong calibration or scan: the map would be empty).
+    """
     if calib.image_size is None:
         raise DataError(f"{calib.source or name}: the calibration does not give the image size")
     if oxts is not None:
         motion = read_oxts_motion(oxts)
         points = deskew_scan(points, motion.velocity, motion.yaw_rate, scan_period)
-    return project_points(points, calib.K, calib.T_cam_lidar, calib.image_size, name=name)
+    depth = project_points(points, calib.K, calib.T_cam_lidar, calib.image_size, name=name)
+    if not depth.any():
+        w, h = calib.image_size
+        raise DataError(f"{name}: none of its {len(points)} points projects in front of the camera inside the "
+                        f"{w}x{h} image; check the calibration ({calib.source or 'T_cam_lidar, K'})")  # fmt: skip
+    return depth

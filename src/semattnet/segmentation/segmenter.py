@@ -186,6 +186,15 @@ def _torchvision(arch: str, weights: Path, device: torch.device) -> Network:
     return net.to(device).eval()
 
 
+def _check_normalisation(mean: Sequence[float], std: Sequence[float]) -> None:
+    for name, vals in (("--mean", mean), ("--std", std)):
+        v = np.asarray(vals, dtype=np.float64)
+        if v.shape != (3,) or not np.all(np.isfinite(v)):
+            raise InputError(f"{name}: expected three finite numbers R,G,B; got {list(vals)}")
+    if not all(float(x) > 0 for x in std):
+        raise InputError(f"--std: every value must be positive (the image is divided by it); got {list(std)}")
+
+
 def load_segmenter(
     spec: str,
     device: str | torch.device = "auto",
@@ -193,7 +202,13 @@ def load_segmenter(
     std: Sequence[float] = IMAGENET_STD,
     input_size: tuple[int, int] | None = None,
 ) -> Segmenter:
-    """Build a :class:`Segmenter` from a SPEC (module docstring)."""
+    """Build a :class:`Segmenter` from a SPEC (module docstring).
+
+    Raises:
+        InputError: ``mean`` / ``std`` not three finite numbers, a ``std`` that is not positive (a division
+            by zero), a bad device.
+    """
+    _check_normalisation(mean, std)
     dev = resolve_device(device)
     if spec == "unknown":
         return Segmenter(None, spec, dev)
