@@ -24,7 +24,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from semattnet._errors import SemAttNetError
-from semattnet._utils.atomic import atomic_path, fsync_dir
+from semattnet._utils.atomic import atomic_path, disk_full_error, fsync_dir, is_disk_full
 
 __all__ = [
     "STAGE_PREFIX",
@@ -126,13 +126,21 @@ def _clean_stale_stages(out: Path) -> None:
 def staged_outputs(out: str | os.PathLike[str], overwrite: bool = False) -> Iterator[Path]:
     """Yield a hidden folder inside ``out``; write the outputs there (same relative names). When
     the block succeeds every file moves into ``out`` (refusing existing ones unless ``overwrite``,
-    checked before the first move); when it raises, or the process dies, ``out`` is unchanged."""
+    checked before the first move); when it raises, or the process dies, ``out`` is unchanged (a folder
+    it created is removed again; a full disk raises :func:`~semattnet._utils.atomic.disk_full_error`)."""
     out = Path(out)
+    created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
     _clean_stale_stages(out)
     stage = Path(tempfile.mkdtemp(prefix=f"{STAGE_PREFIX}{os.getpid()}.", dir=out))
     try:
-        yield stage
+        try:
+            yield stage
+        except OSError as exc:
+            if not is_disk_full(exc) or exc.filename == str(out):
+                raise
+            staged = sum(p.stat().st_size for p in stage.rglob("*") if p.is_file())
+            raise disk_full_error(out, staged + 1) from None
         files = sorted(p for p in stage.rglob("*") if p.is_file())
         refuse_existing((out / p.relative_to(stage) for p in files), overwrite)
         for p in files:
@@ -142,6 +150,8 @@ def staged_outputs(out: str | os.PathLike[str], overwrite: bool = False) -> Iter
         fsync_dir(out)
     finally:
         shutil.rmtree(stage, ignore_errors=True)
+        if created and out.is_dir() and not any(out.iterdir()):
+            out.rmdir()  # a failed run leaves no empty folder it made
 
 
 def write_text(path: str | os.PathLike[str], text: str, overwrite: bool = False) -> Path:

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
 from semattnet._errors import DataError, InputError
+from semattnet._utils.atomic import disk_full_error, is_disk_full
 from semattnet._utils.download import fetch
 from semattnet._utils.outputs import mark_tree
 from semattnet.data import kitti_files as kf
@@ -186,7 +187,7 @@ def _plan(path: Path, dest: Path, items: Sequence[tuple[object, PurePosixPath, i
 
 def _write(opener: Callable[[object], object], todo: Sequence[tuple[object, Path]]) -> int:
     """Copy each member to a ``.part`` file next to its target, then move it into place; a failure
-    (a full disk) removes the ``.part`` and raises :class:`OSError` naming the target."""
+    (a full disk) removes the ``.part`` and raises :class:`OSError` naming the target and the space needed."""
     for member, out in todo:
         out.parent.mkdir(parents=True, exist_ok=True)
         tmp = out.with_name(f".{out.name}.part")
@@ -196,7 +197,9 @@ def _write(opener: Callable[[object], object], todo: Sequence[tuple[object, Path
             os.replace(tmp, out)
         except OSError as exc:
             tmp.unlink(missing_ok=True)
-            raise OSError(exc.errno, f"{out}: unpacking failed ({exc.strerror or exc})") from None
+            if is_disk_full(exc):
+                raise disk_full_error(out, getattr(member, "file_size", getattr(member, "size", None))) from None
+            raise
     return len(todo)
 
 
