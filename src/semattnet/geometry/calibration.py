@@ -98,7 +98,11 @@ def _read_kv(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     if not path.is_file():
         raise DataError(f"{path}: calibration file not found")
     out: dict[str, np.ndarray] = {}
-    for n, line in enumerate(path.read_text().splitlines(), 1):
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{path}: not a text calibration file (byte {exc.start} is not UTF-8)") from None
+    for n, line in enumerate(text.splitlines(), 1):
         if not line.strip():
             continue
         key, sep, rest = line.partition(":")

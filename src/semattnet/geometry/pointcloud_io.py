@@ -60,7 +60,11 @@ def _read_bin(path: Path) -> np.ndarray:
 
 
 def _read_text(path: Path) -> np.ndarray:
-    lines = [ln for ln in path.read_text().splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{path}: not a text point cloud (byte {exc.start} is not UTF-8)") from None
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     if lines:
         try:
             [float(v) for v in lines[0].replace(",", " ").split()]
@@ -77,11 +81,28 @@ def _read_text(path: Path) -> np.ndarray:
     return _from_columns(np.array(rows, dtype=np.float64), path)
 
 
+def _check_ply_counts(path: Path) -> None:
+    """Every ``element NAME COUNT`` of the header at most the file's size (an element takes at least a
+    byte), checked before plyfile allocates COUNT rows."""
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        head = f.read(1 << 16)
+    end = head.find(b"end_header")
+    for line in (head[:end] if end >= 0 else head).split(b"\n"):
+        words = line.split()
+        if len(words) == 3 and words[0] == b"element":
+            count = words[2].decode("ascii", "replace")
+            if not count.isdigit() or int(count) > size:
+                raise DataError(f"{path}: PLY element {words[1].decode('ascii', 'replace')!r} count {count[:24]} is "
+                                f"out of range (0..{size} for this file's size)")  # fmt: skip
+
+
 def _read_ply(path: Path) -> np.ndarray:
     try:
         from plyfile import PlyData
     except ImportError:
         raise DataError(f"{path}: reading PLY needs plyfile (pip install plyfile)") from None
+    _check_ply_counts(path)
     try:
         ply = PlyData.read(str(path))
         v = ply["vertex"].data
@@ -172,7 +193,7 @@ def _read_npy(path: Path) -> np.ndarray:
     """A plain numeric (N, 3|4) ``.npy`` array (no pickles, no structured or text dtypes, no ``.npz``)."""
     try:
         a = np.load(path, allow_pickle=False, mmap_mode="r")
-    except (ValueError, OSError, EOFError) as exc:
+    except Exception as exc:  # numpy's header parser raises ValueError, SyntaxError, TokenError, ...
         raise DataError(
             f"{path}: not a readable .npy array: {str(exc).splitlines()[0] if str(exc) else exc!r}"
         ) from None
