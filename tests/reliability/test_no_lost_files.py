@@ -168,3 +168,18 @@ def test_predict_overwrite_replaces_nothing_when_a_late_frame_fails(tmp_path: Pa
     assert len(calls) == 3
     assert sorted(p.name for p in out.iterdir()) == ["f0.png", "f1.png", "f2.png"]
     assert all((out / f"{n}.png").read_bytes() == b"previous " + n.encode() for n in Source.names)
+
+
+def test_sweeps_and_metrics_never_write_into_their_inputs(tmp_path: Path) -> None:
+    from semattnet.data.synthetic.tree import write_synthetic_kitti
+    from semattnet.evaluation.sparsity import sweep_model
+
+    root = tmp_path / "kitti"
+    write_synthetic_kitti(root, 2, (32, 64), eval_frames=2, workers=1)
+    before = sorted(p for p in root.rglob("*"))
+    with pytest.raises(OutputError, match="input folder"):
+        sweep_model(root, "val_select", ["keep=1"], None, root / "sweep")
+    assert sorted(p for p in root.rglob("*")) == before
+    pred = next(root.rglob("*.png"))
+    code, output = _invoke("metrics", pred.parent, pred.parent, "--json", pred, "--overwrite")
+    assert code == 1 and "would replace the input" in output and pred.read_bytes()[:4] == b"\x89PNG", output
