@@ -293,7 +293,8 @@ def read_rig_json(path: str | os.PathLike[str]) -> RigCalibration:
     why = check_rigid(vals["T_cam_lidar"])
     if why:
         raise DataError(f"{path}: T_cam_lidar is not a rigid transform: {why}")
-    size = check_image_size(*vals["image_size"], f"{path}: image_size")
+    w, h = vals["image_size"]
+    size = check_image_size(w, h, f"{path}: image_size")
     name = doc.get("camera")
     return RigCalibration(vals["K"], vals["T_cam_lidar"], size, None if name is None else str(name),
                           source=str(path))  # fmt: skip

@@ -39,7 +39,7 @@ def _rig_from_numbers(K: Sequence[float], T: Sequence[float], image_size: Sequen
         raise DataError(f"T_cam_lidar needs 16 numbers (4x4 row-major); got {len(T)}")
     if image_size is None or len(image_size) != 2:
         raise DataError(f"the image size (width, height) is required with K and T; got {image_size}")
-    size = check_image_size(*image_size, "--size")
+    size = check_image_size(image_size[0], image_size[1], "--size")
     fx, fy, cx, cy = (float(v) for v in K)
     check_pinhole(fx, fy, cx, cy, "--K")
     T_cam_lidar = np.asarray(T, dtype=np.float64).reshape(4, 4)
