@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
+from semattnet._errors import InputError
 from semattnet.baselines.classical import complete_classical
 from semattnet.data.io import read_depth
 from semattnet.evaluation.metrics import KittiMetrics
@@ -38,13 +39,15 @@ def test_real_frame_filled_bounded_and_scored(camera: str) -> None:
     assert all(g < t for g, t in zip(got, THRESHOLDS[camera], strict=True)), got
 
 
-def test_batch_images_are_independent_and_nonfinite_input_is_ignored() -> None:
+def test_batch_images_are_independent_and_nonfinite_input_is_refused() -> None:
     a = torch.zeros(1, 1, 30, 40)
     a[..., 10::3, ::2] = 5.0
     b = torch.zeros(1, 1, 30, 40)
     b[..., 12::3, ::2] = 20.0
-    b[..., 0, 0] = float("nan")
     out = complete_classical(torch.cat([a, b, torch.zeros_like(a)]))
     assert torch.allclose(out[0], torch.full_like(out[0], 5.0))
     assert torch.allclose(out[1], torch.full_like(out[1], 20.0))
     assert out[2].eq(0).all()
+    b[..., 0, 0] = float("nan")  # as the model: refused, not treated as missing
+    with pytest.raises(InputError, match="NaN or infinite"):
+        complete_classical(torch.cat([a, b]))

@@ -9,14 +9,52 @@ before the call returns, so a power cut leaves either the old or the new content
 
 from __future__ import annotations
 
+import errno
 import os
 import re
+import shutil
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["atomic_path", "clean_stale_temps", "fsync_dir", "new_file_mode", "pid_alive"]
+__all__ = [
+    "atomic_path",
+    "clean_stale_temps",
+    "disk_full_error",
+    "fsync_dir",
+    "is_disk_full",
+    "new_file_mode",
+    "pid_alive",
+]
+
+#: errno values of a full disk or an exhausted quota.
+_FULL = {errno.ENOSPC, errno.EDQUOT}
+
+
+def is_disk_full(exc: BaseException) -> bool:
+    """Whether ``exc`` is an :class:`OSError` of a full disk (ENOSPC) or quota (EDQUOT)."""
+    return isinstance(exc, OSError) and exc.errno in _FULL
+
+
+def _mib(n: int) -> str:
+    return f"{n / 2**20:.1f} MiB" if n >= 2**20 else f"{n / 2**10:.1f} KiB"
+
+
+def disk_full_error(path: str | os.PathLike[str], needed: int | None = None) -> OSError:
+    """The one-line :class:`OSError` (ENOSPC) for a write of ``path`` that filled the disk: names the path,
+    the space free on its file system and ``needed`` (bytes the write needed at least, when known)."""
+    probe = Path(path)
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    try:
+        free: int | None = shutil.disk_usage(probe).free
+    except OSError:
+        free = None
+    facts = ([f"{_mib(free)} free"] if free is not None else []) + (
+        [f"at least {_mib(needed)} needed"] if needed else [])  # fmt: skip
+    detail = f" ({', '.join(facts)})" if facts else ""
+    return OSError(errno.ENOSPC, f"no space left on the device{detail}; nothing was written", str(path))
 
 
 def new_file_mode() -> int:
@@ -87,7 +125,8 @@ def fsync_dir(folder: str | os.PathLike[str]) -> None:
 def atomic_path(path: str | os.PathLike[str], suffix: str = "", fsync: bool = True) -> Iterator[Path]:
     """Yield a temporary path in ``path``'s folder; on success it replaces ``path`` in one step.
 
-    If the block raises, ``path`` keeps its previous content and the temporary file is removed;
+    If the block raises, ``path`` keeps its previous content and the temporary file is removed (a full
+    disk raises :func:`disk_full_error` naming ``path``);
     after a kill the temporary file is removed by the next write of ``path``. The new file gets
     the umask's mode (or the replaced file's mode); with ``fsync`` it is on disk on return.
     """
@@ -108,6 +147,11 @@ def atomic_path(path: str | os.PathLike[str], suffix: str = "", fsync: bool = Tr
         os.replace(tmp, path)
         if fsync:
             fsync_dir(path.parent)
+    except OSError as exc:
+        if not is_disk_full(exc) or exc.filename == str(path):
+            raise
+        size = os.path.getsize(tmp) if os.path.exists(tmp) else 0
+        raise disk_full_error(path, size + 1) from None
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)

@@ -6,12 +6,16 @@
 3. Multi-file outputs are staged in a hidden folder inside the output folder and moved into
    place only when every file was written: an error (a corrupt frame) or a kill writes nothing.
    Stage folders a kill left behind are removed by the next staged write into the same folder.
-4. Single files are written atomically (:func:`semattnet._utils.atomic.atomic_path`): umask mode,
+4. Generated trees (``synth``, ``data download``) carry a marker, :data:`TREE_MARKER`, written as
+   "started" first and rewritten as "complete" last: a tree whose marker is not complete was cut short
+   (a kill, a full disk) and ``data check`` refuses it (:func:`incomplete_tree`).
+5. Single files are written atomically (:func:`semattnet._utils.atomic.atomic_path`): umask mode,
    fsynced, orphaned temporary files cleaned on the next write of the same target.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import tempfile
@@ -20,12 +24,15 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from semattnet._errors import SemAttNetError
-from semattnet._utils.atomic import atomic_path, fsync_dir
+from semattnet._utils.atomic import atomic_path, disk_full_error, fsync_dir, is_disk_full
 
 __all__ = [
     "STAGE_PREFIX",
+    "TREE_MARKER",
     "OutputError",
     "check_no_input_overlap",
+    "incomplete_tree",
+    "mark_tree",
     "refuse_existing",
     "staged_outputs",
     "write_text",
@@ -33,6 +40,9 @@ __all__ = [
 
 #: Hidden staging folders inside an output folder: ``.semattnet-stage.XXXXXXXX``.
 STAGE_PREFIX = ".semattnet-stage."
+
+#: The completion marker of a generated tree (JSON: generator, complete, resume).
+TREE_MARKER = ".semattnet-tree.json"
 
 
 class OutputError(SemAttNetError):
@@ -53,33 +63,53 @@ def refuse_existing(paths: Iterable[str | os.PathLike[str]], overwrite: bool) ->
         raise FileExistsError(f"{existing[0]} exists{more}; pass --overwrite (overwrite=True) to replace it")
 
 
+def _inode(path: Path) -> tuple[int, int] | None:
+    """(device, inode) of ``path`` (symlinks followed), None when it does not exist."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino
+
+
 def check_no_input_overlap(
     inputs: Iterable[str | os.PathLike[str] | None],
     out_dir: str | os.PathLike[str] | None = None,
     out_files: Iterable[str | os.PathLike[str]] = (),
 ) -> None:
-    """Refuse ``out_dir`` equal to or inside an input folder, and any of ``out_files`` that resolves
-    to an input file or to an existing file inside an input folder (symlinks are followed).
+    """Refuse ``out_dir`` equal to or inside an input folder, and any of ``out_files`` that is an
+    input file (by resolved path and by inode, as :func:`os.path.samefile`: hard links count) or an
+    existing file inside an input folder (symlinks are followed). Holds with ``overwrite=True`` too.
 
     Raises:
         OutputError: naming the output and the input it collides with.
     """
-    folders, files = [], set()
+    folders: list[Path] = []
+    files: dict[Path | tuple[int, int], Path] = {}
     for item in inputs:
         if item is None:
             continue
         p = _resolve(item)
-        (folders.append(p) if p.is_dir() else files.add(p))
+        if p.is_dir():
+            folders.append(p)
+        else:
+            files[p] = p
+            if (ino := _inode(p)) is not None:
+                files[ino] = p
     if out_dir is not None:
-        o = _resolve(out_dir)
+        o, o_ino = _resolve(out_dir), _inode(Path(out_dir))
         for folder in folders:
-            if o == folder or o.is_relative_to(folder):
+            if o == folder or o.is_relative_to(folder) or (o_ino is not None and o_ino == _inode(folder)):
                 raise OutputError(f"output folder {out_dir} is the input folder {folder} or inside it; "
                                   "choose an --out outside the inputs")  # fmt: skip
     for f in out_files:
         r = _resolve(f)
-        if r in files or (r.exists() and any(r.is_relative_to(folder) for folder in folders)):
-            raise OutputError(f"output {f} would replace the input {r}; choose another output path")
+        ino = _inode(r)
+        hit = files.get(r) or (files.get(ino) if ino is not None else None)
+        if hit is None and ino is not None and any(r.is_relative_to(folder) for folder in folders):
+            hit = r
+        if hit is not None:
+            raise OutputError(f"output {f} would replace the input {hit}; choose another output path")
 
 
 def _clean_stale_stages(out: Path) -> None:
@@ -96,13 +126,21 @@ def _clean_stale_stages(out: Path) -> None:
 def staged_outputs(out: str | os.PathLike[str], overwrite: bool = False) -> Iterator[Path]:
     """Yield a hidden folder inside ``out``; write the outputs there (same relative names). When
     the block succeeds every file moves into ``out`` (refusing existing ones unless ``overwrite``,
-    checked before the first move); when it raises, or the process dies, ``out`` is unchanged."""
+    checked before the first move); when it raises, or the process dies, ``out`` is unchanged (a folder
+    it created is removed again; a full disk raises :func:`~semattnet._utils.atomic.disk_full_error`)."""
     out = Path(out)
+    created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
     _clean_stale_stages(out)
     stage = Path(tempfile.mkdtemp(prefix=f"{STAGE_PREFIX}{os.getpid()}.", dir=out))
     try:
-        yield stage
+        try:
+            yield stage
+        except OSError as exc:
+            if not is_disk_full(exc) or exc.filename == str(out):
+                raise
+            staged = sum(p.stat().st_size for p in stage.rglob("*") if p.is_file())
+            raise disk_full_error(out, staged + 1) from None
         files = sorted(p for p in stage.rglob("*") if p.is_file())
         refuse_existing((out / p.relative_to(stage) for p in files), overwrite)
         for p in files:
@@ -112,6 +150,8 @@ def staged_outputs(out: str | os.PathLike[str], overwrite: bool = False) -> Iter
         fsync_dir(out)
     finally:
         shutil.rmtree(stage, ignore_errors=True)
+        if created and out.is_dir() and not any(out.iterdir()):
+            out.rmdir()  # a failed run leaves no empty folder it made
 
 
 def write_text(path: str | os.PathLike[str], text: str, overwrite: bool = False) -> Path:
@@ -121,3 +161,32 @@ def write_text(path: str | os.PathLike[str], text: str, overwrite: bool = False)
     with atomic_path(path, suffix=path.suffix) as tmp:
         tmp.write_text(text)
     return path
+
+
+def mark_tree(root: str | os.PathLike[str], generator: str, complete: bool, resume: str = "") -> Path:
+    """Write ``root``/:data:`TREE_MARKER` atomically: call with ``complete=False`` before the first
+    file of a generated tree and with ``complete=True`` after the last; ``resume`` says how to finish
+    a tree that was cut short (e.g. the command to run again)."""
+    root = Path(root)
+    root.mkdir(parents=True, exist_ok=True)
+    doc = {"generator": generator, "complete": complete, "resume": resume}
+    with atomic_path(root / TREE_MARKER, suffix=".json") as tmp:
+        tmp.write_text(json.dumps(doc))
+    return root / TREE_MARKER
+
+
+def incomplete_tree(root: str | os.PathLike[str]) -> str | None:
+    """A one-line message when ``root`` holds a generated tree whose marker is not "complete" (a
+    generator was killed or failed), else None (complete, or not a tree we generated)."""
+    marker = Path(root) / TREE_MARKER
+    if not marker.is_file():
+        return None
+    try:
+        doc = json.loads(marker.read_text())
+        if doc.get("complete") is True:
+            return None
+        generator, resume = str(doc.get("generator", "?")), str(doc.get("resume", ""))
+    except (OSError, ValueError, AttributeError):
+        generator, resume = "?", ""
+    how = f"; to finish it: {resume}" if resume else "; generate it again"
+    return f"{root}: incomplete tree (the {generator} that wrote it was interrupted; {marker} is not complete){how}"

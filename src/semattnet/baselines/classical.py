@@ -25,6 +25,7 @@ import torch.nn.functional as F
 
 from semattnet._errors import InputError
 from semattnet.inference.completer import Completion
+from semattnet.models.checks import check_has_points, check_sparse_depth
 
 __all__ = ["ClassicalCompleter", "complete_classical"]
 
@@ -135,11 +136,16 @@ def complete_classical(sparse: torch.Tensor, max_depth: float = 100.0) -> torch.
 
     Returns dense depth of the same shape: every pixel of an image with at least one measurement is
     filled, within ``[min, max]`` of that image's valid input (capped at ``max_depth``); an image
-    without any measurement stays 0.
+    without any measurement stays 0 (the per-frame :class:`ClassicalCompleter` refuses it).
+
+    Raises:
+        InputError: NaN / infinite, negative or too large depth
+            (:func:`semattnet.models.checks.check_sparse_depth`, as the model).
     """
     if sparse.dim() != 4 or sparse.shape[1] != 1:
         raise InputError(f"sparse must be (B, 1, H, W), got {tuple(sparse.shape)}")
-    d = torch.nan_to_num(sparse.float(), nan=0.0, posinf=0.0, neginf=0.0).clamp(0, max_depth)
+    check_sparse_depth(sparse)  # NaN / inf / negative / too far: refused as the model refuses them
+    d = sparse.float().clamp(0, max_depth)
     valid = d > 0
     inv = torch.where(d > 0, max_depth + 1.0 - d, torch.zeros_like(d))  # near = large, valid > 0
     inv = _dilate_by_depth(d, inv)
@@ -164,6 +170,8 @@ class ClassicalCompleter:
     needs_semantic = False
 
     def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
-        dense = complete_classical(torch.from_numpy(np.ascontiguousarray(sparse, dtype=np.float32))[None, None])
+        t = torch.from_numpy(np.ascontiguousarray(sparse, dtype=np.float32))
+        check_has_points(t)
+        dense = complete_classical(t[None, None])
         depth = dense[0, 0].numpy()
         return Completion(depth=depth)

@@ -28,8 +28,10 @@ def _completer(method: str, checkpoint: Path | None, weights: str | None, device
 
 
 def _check_method(method: str, checkpoint: Path | None, weights: str | None) -> None:
-    """The model options agree (checked before any work)."""
+    """The model options agree (checked before any work): no option that would be ignored."""
     if method == "classical":
+        if checkpoint is not None or weights is not None:
+            raise click.UsageError("--method classical uses no model: drop --checkpoint / --weights")
         return
     if checkpoint is None and weights is None:
         raise click.UsageError("--checkpoint or --weights is required (or --method classical)")
@@ -39,10 +41,13 @@ def _check_method(method: str, checkpoint: Path | None, weights: str | None) -> 
 
 def _intrinsics(text: str | None):
     """--K as a (3, 3) matrix, or None."""
+    from semattnet._errors import SemAttNetError
     from semattnet.viz.viewer import parse_intrinsics
 
     try:
         return parse_intrinsics(text) if text else None
+    except SemAttNetError as exc:
+        raise click.BadParameter(str(exc), param_hint="--K") from None
     except ValueError:
         raise click.BadParameter(f"expected fx,fy,cx,cy or kitti, got {text!r}", param_hint="--K") from None
 
@@ -210,6 +215,10 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
     if files_only and intrinsics is None and (bag["bag_out"] or bag["rerun_file"] or bag["rerun_spawn"]):
         raise click.UsageError("--bag-out and --rerun need the intrinsics: --bag, --kitti-raw, or --K")
     _check_method(method, checkpoint, weights)
+    if method != "classical":
+        from semattnet._utils.device import resolve_device
+
+        resolve_device(device)  # a bad --device: one line, before any work
     K = _intrinsics(intrinsics)
     maps = SemanticMaps(segment_spec, folder=semantic is not None or bag["semantic_topic"] is not None)
     timer = StageTimes()

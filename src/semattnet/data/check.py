@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from semattnet._utils.outputs import incomplete_tree
 from semattnet._utils.progress import progress as progress_bar
 from semattnet.data import layout
 from semattnet.data.io import DataError
@@ -81,11 +82,17 @@ def check_trees(
     log: Callable[[str], None] = print,
 ) -> int:
     """:func:`check_tree` for each root, reported through ``log``; returns the number of problems
-    (a root without any KITTI file counts as one). At most 20 problems are listed per split."""
+    (a root without any KITTI file counts as one, so does a generated tree that was cut short:
+    :func:`semattnet._utils.outputs.incomplete_tree`). At most 20 problems are listed per split."""
     bad = 0
     for root in roots:
-        reports = check_tree(root, raw_root, semantic_root, sample)
         log(f"{root}:")
+        cut = incomplete_tree(root)
+        if cut is not None:
+            log(f"  {cut}")
+            bad += 1
+            continue
+        reports = check_tree(root, raw_root, semantic_root, sample)
         if not reports:
             log("  no KITTI depth completion files found")
             bad += 1

@@ -31,11 +31,14 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
 from semattnet._errors import DataError, InputError
+from semattnet._utils.atomic import disk_full_error, is_disk_full
 from semattnet._utils.download import fetch
+from semattnet._utils.outputs import mark_tree
 from semattnet.data import kitti_files as kf
 
 __all__ = [
     "WHAT",
+    "ArchiveConflictError",
     "LicenseNotAcceptedError",
     "PlannedFile",
     "UnsafeArchiveError",
@@ -144,6 +147,62 @@ def _strip(rel: PurePosixPath, strip: Sequence[str]) -> PurePosixPath:
     return rel
 
 
+class ArchiveConflictError(DataError):
+    """Files in the target folder that an archive would replace but that it did not write."""
+
+
+#: How to finish a download that was cut short (files already unpacked are kept and skipped).
+_RESUME = "run the same data download command again (it resumes)"
+
+
+def _plan(path: Path, dest: Path, items: Sequence[tuple[object, PurePosixPath, int]]) -> tuple[list, int]:
+    """The members to write as (member, target) and the count already there (a file of the member's
+    size: what an earlier run of ours wrote, as every file is moved into place complete).
+
+    Raises:
+        UnsafeArchiveError: a member resolves outside ``dest`` (through a symlink in the tree).
+        ArchiveConflictError: targets that exist with other sizes or as folders (never replaced).
+    """
+    base = dest.resolve()
+    todo, conflicts, skipped = [], [], 0
+    for member, rel, size in items:
+        out = dest.joinpath(*rel.parts)
+        if not out.parent.resolve().is_relative_to(base):
+            raise UnsafeArchiveError(f"{path}: member {rel} leaves {dest}; nothing unpacked")
+        if out.is_symlink():
+            conflicts.append(out)  # never written through nor replaced
+        elif out.is_file() and out.stat().st_size == size:
+            skipped += 1
+        elif out.exists():
+            conflicts.append(out)
+        else:
+            todo.append((member, out))
+    if conflicts:
+        more = f" (and {len(conflicts) - 3} more)" if len(conflicts) > 3 else ""
+        names = ", ".join(str(c) for c in conflicts[:3])
+        msg = f"{len(conflicts)} file(s) where members unpack were not written by this archive: {names}{more}"
+        raise ArchiveConflictError(f"{path}: {msg}; move them away and run again; nothing unpacked")
+    return todo, skipped
+
+
+def _write(opener: Callable[[object], object], todo: Sequence[tuple[object, Path]]) -> int:
+    """Copy each member to a ``.part`` file next to its target, then move it into place; a failure
+    (a full disk) removes the ``.part`` and raises :class:`OSError` naming the target and the space needed."""
+    for member, out in todo:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_name(f".{out.name}.part")
+        try:
+            with opener(member) as src, open(tmp, "wb") as dst:  # type: ignore[attr-defined]
+                shutil.copyfileobj(src, dst, 1 << 20)
+            os.replace(tmp, out)
+        except OSError as exc:
+            tmp.unlink(missing_ok=True)
+            if is_disk_full(exc):
+                raise disk_full_error(out, getattr(member, "file_size", getattr(member, "size", None))) from None
+            raise
+    return len(todo)
+
+
 def extract_zip(
     path: str | Path, dest: str | Path, strip: Sequence[str] = (), keep: Sequence[str] = ()
 ) -> tuple[int, int]:
@@ -155,6 +214,7 @@ def extract_zip(
 
     Raises:
         UnsafeArchiveError: a member has an absolute path or ``..`` (checked before anything is written).
+        ArchiveConflictError: files the archive did not write sit where members unpack (nothing written).
     """
     path, dest = Path(path), Path(dest)
     try:
@@ -163,30 +223,17 @@ def extract_zip(
         raise DataError(f"{path}: not a zip archive ({exc})") from None
     with zf:
         members = [(info, _strip(_safe_member(info.filename, path), strip)) for info in zf.infolist()]
+        items = [(info, rel, info.file_size) for info, rel in members
+                 if not info.is_dir() and rel.parts and (not keep or set(keep) & set(rel.parts[:-1]))]  # fmt: skip
         dest.mkdir(parents=True, exist_ok=True)
-        base = dest.resolve()
-        written = skipped = 0
-        for info, rel in members:
-            if info.is_dir() or not rel.parts or (keep and not set(keep) & set(rel.parts[:-1])):
-                continue
-            out = dest.joinpath(*rel.parts)
-            if not out.resolve().is_relative_to(base):
-                raise UnsafeArchiveError(f"{path}: member {info.filename!r} leaves {dest}")
-            if out.is_file() and out.stat().st_size == info.file_size:
-                skipped += 1
-                continue
-            out.parent.mkdir(parents=True, exist_ok=True)
-            tmp = out.with_name(f".{out.name}.part")
-            with zf.open(info) as src, open(tmp, "wb") as dst:
-                shutil.copyfileobj(src, dst, 1 << 20)
-            os.replace(tmp, out)
-            written += 1
-    return written, skipped
+        todo, skipped = _plan(path, dest, items)
+        return _write(zf.open, todo), skipped  # type: ignore[arg-type]
 
 
 def extract_tar(path: str | Path, dest: str | Path, strip: Sequence[str] = ()) -> tuple[int, int]:
     """Unpack a (compressed) tar archive into ``dest`` as :func:`extract_zip` does: members checked before
-    anything is written (absolute paths, ``..``, links refused), files already there with their size skipped."""
+    anything is written (absolute paths, ``..``, links refused, files we did not write never replaced),
+    files already there with their size skipped."""
     path, dest = Path(path), Path(dest)
     try:
         tf = tarfile.open(path)
@@ -199,23 +246,8 @@ def extract_tar(path: str | Path, dest: str | Path, strip: Sequence[str] = ()) -
                 raise UnsafeArchiveError(f"{path}: refusing member {info.name!r} (a link or device); nothing unpacked")
         members = [(info, _strip(_safe_member(info.name, path), strip)) for info in infos if info.isfile()]
         dest.mkdir(parents=True, exist_ok=True)
-        written = skipped = 0
-        for info, rel in members:
-            if not rel.parts:
-                continue
-            out = dest.joinpath(*rel.parts)
-            if out.is_file() and out.stat().st_size == info.size:
-                skipped += 1
-                continue
-            out.parent.mkdir(parents=True, exist_ok=True)
-            tmp = out.with_name(f".{out.name}.part")
-            src = tf.extractfile(info)
-            assert src is not None
-            with src, open(tmp, "wb") as dst:
-                shutil.copyfileobj(src, dst, 1 << 20)
-            os.replace(tmp, out)
-            written += 1
-    return written, skipped
+        todo, skipped = _plan(path, dest, [(info, rel, info.size) for info, rel in members if rel.parts])
+        return _write(tf.extractfile, todo), skipped  # type: ignore[arg-type]
 
 
 def extract_archive(path: str | Path, dest: str | Path, strip: Sequence[str] = ()) -> tuple[int, int]:
@@ -277,6 +309,8 @@ def download_kitti(
     if not accept_license and not dry_run:
         raise LicenseNotAcceptedError(f"{kf.KITTI_LICENSE} -- pass --accept-kitti-license to accept it")
     log(kf.KITTI_LICENSE)
+    if not dry_run:
+        mark_tree(out, "data download", False, resume=_RESUME)
     for part in parts:
         files, note = plan_part(part, out, mirror, semantic_archive)
         log(f"{part}:")
@@ -288,6 +322,8 @@ def download_kitti(
                 log("  " + str(kf.SEMANTIC_MAPS["instructions"]))
             else:
                 _get(f, cache_dir, progress, delete_archives, log)
+    if not dry_run:
+        mark_tree(out, "data download", True)
     if dry_run or not check:
         return 0
     from semattnet.data.check import check_trees
@@ -328,6 +364,8 @@ def download_dataset(
     log(f"{spec.title}: {spec.licence}")
     if not accept_license and not dry_run:
         raise LicenseNotAcceptedError(f"{spec.name}: {spec.licence} -- pass --accept-license to accept the terms")
+    if not dry_run:
+        mark_tree(out, "data download", False, resume=_RESUME)
     for a in spec.archives:
         url = mirror.rstrip("/") + "/" + a.file if mirror else a.url
         if url is None:
@@ -338,6 +376,8 @@ def download_dataset(
             log(f"  {url}  [{a.size or 'size unknown'}]  -> {out}")
             continue
         _get_archive(url, a, out, cache_dir, progress, delete_archives, log)
+    if not dry_run:
+        mark_tree(out, "data download", True)
     if dry_run or not check:
         return 0
     return spec.check([out], log=log)

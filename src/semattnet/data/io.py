@@ -17,6 +17,7 @@ from PIL import Image, UnidentifiedImageError
 
 from semattnet._errors import DataError
 from semattnet._utils.atomic import atomic_path
+from semattnet._utils.bounds import MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE
 
 __all__ = [
     "DEPTH_SCALE",
@@ -45,13 +46,6 @@ MAX_DEPTH_VALUE = 65535
 #: Depths a KITTI 16-bit PNG can hold: (0, 255.996] m; 0 means "no measurement / no prediction".
 MIN_DEPTH_M = 1.0 / DEPTH_SCALE
 MAX_DEPTH_M = MAX_DEPTH_VALUE / DEPTH_SCALE
-
-
-#: Largest width or height accepted, checked in the header before decoding (KITTI: 1242).
-MAX_IMAGE_SIDE = 16384
-#: Largest width x height accepted (64 Mpx, ~256 MB as RGB): bigger headers are refused as
-#: decompression bombs before any pixel is decoded.
-MAX_IMAGE_PIXELS = 64 * 1024 * 1024
 
 
 def _check_header(path: Path, img: Image.Image) -> None:

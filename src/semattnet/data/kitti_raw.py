@@ -24,7 +24,7 @@ from semattnet.data.io import DataError, read_image
 if TYPE_CHECKING:  # a run-time import would be a cycle
     from semattnet.geometry.calibration import RigCalibration
 
-__all__ = ["RawDrive", "RawFrame", "parse_frames", "scan_periods"]
+__all__ = ["MAX_FRAME_INDEX", "FrameRangeError", "RawDrive", "RawFrame", "parse_frames", "scan_periods"]
 
 
 @dataclass(frozen=True)
@@ -42,29 +42,52 @@ class RawFrame:
     scan_path: Path
 
 
-def parse_frames(spec: str | int | Sequence[int] | None) -> list[int] | None:
-    """Frame indices from ``"a-b"`` (inclusive), ``"1,3,5"``, ``"5"``, an int or a list; None stays None (all)."""
+#: Largest frame index :func:`parse_frames` accepts without a drive to bound it (KITTI drives: < 5200).
+MAX_FRAME_INDEX = 10_000_000
+
+
+def parse_frames(spec: str | int | Sequence[int] | None, limit: int | None = None) -> list[int] | None:
+    """Frame indices from ``"a-b"`` (inclusive), ``"1,3,5"``, ``"5"``, an int or a list; None stays None (all).
+
+    ``limit``: indices must be below it (a drive's largest frame index + 1; default
+    :data:`MAX_FRAME_INDEX`), checked on a range's ends before it is expanded.
+    """
     if spec is None:
         return None
     if isinstance(spec, int):
-        return [spec]
+        return _bounded([spec], limit, spec)
     if not isinstance(spec, str):
-        return [int(i) for i in spec]
-    out: list[int] = []
+        return _bounded([int(i) for i in spec], limit, spec)
+    spans: list[tuple[int, int]] = []
     try:
         for part in (p.strip() for p in spec.split(",") if p.strip()):
-            if "-" in part:
-                a, b = (int(v) for v in part.split("-", 1))
-                if b < a:
-                    raise ValueError  # caught below: reported as the DataError of a bad spec
-                out.extend(range(a, b + 1))
-            else:
-                out.append(int(part))
+            a, b = (int(v) for v in part.split("-", 1)) if "-" in part else (int(part), int(part))
+            if b < a:
+                raise ValueError  # caught below: reported as the DataError of a bad spec
+            spans.append((a, b))
     except ValueError:
         raise DataError(f"frames: expected a range a-b or a comma list, e.g. 0-10 or 1,3,5; got {spec!r}") from None
-    if not out or min(out) < 0:
+    if not spans or min(a for a, _ in spans) < 0:
         raise DataError(f"frames: no valid (non-negative) index in {spec!r}")
-    return out
+    _bounded([b for _, b in spans], limit, spec)  # before any range is expanded
+    return [i for a, b in spans for i in range(a, b + 1)]
+
+
+class FrameRangeError(DataError):
+    """A frame index beyond the bound :func:`parse_frames` was given (``index``: the largest asked for)."""
+
+    def __init__(self, message: str, index: int) -> None:
+        super().__init__(message)
+        self.index = index
+
+
+def _bounded(indices: list[int], limit: int | None, spec: object) -> list[int]:
+    top = MAX_FRAME_INDEX if limit is None else limit
+    if indices and max(indices) >= top:
+        what = "the drive's frame count" if limit is not None else "MAX_FRAME_INDEX"
+        raise FrameRangeError(f"frames: index {max(indices)} in {str(spec)[:40]!r} is beyond {what} ({top})",
+                              max(indices))  # fmt: skip
+    return indices
 
 
 def _seconds(stamp: str) -> float:
@@ -132,11 +155,14 @@ class RawDrive:
         Raises:
             DataError: an index with no image or no scan (the message lists what the drive has).
         """
-        indices = parse_frames(frames)
+        by_index = {int(n): n for n in self.names}
+        try:
+            indices = parse_frames(frames, max(by_index, default=-1) + 1)
+            missing = [i for i in indices if i not in by_index] if indices is not None else []
+        except FrameRangeError as exc:
+            indices, missing = [], [exc.index]
         if indices is None:
             return list(self.names)
-        by_index = {int(n): n for n in self.names}
-        missing = [i for i in indices if i not in by_index]
         if missing:
             have = f"{self.names[0]}..{self.names[-1]}" if len(self.names) > 1 else self.names[0]
             missed = ", ".join(map(str, missing[:5]))

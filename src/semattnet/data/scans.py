@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from semattnet._utils.outputs import check_no_input_overlap
 from semattnet.data.io import write_depth
 from semattnet.geometry import load_rig, project_scan, read_points
 from semattnet.geometry.scan import DEFAULT_SCAN_PERIOD
@@ -57,10 +58,12 @@ def project_scan_file(
     and write ``out`` as a KITTI 16-bit depth PNG (depth * 256, 0 = none).
 
     Raises:
+        OutputError: ``out`` is one of the input files (even with ``overwrite``).
         FileExistsError: ``out`` exists and ``overwrite`` is False (checked before reading anything).
         DataError: bad scan, calibration or OXTS file; the message names the file.
     """
     out = Path(out)
+    check_no_input_overlap([scan, rig, deskew_oxts, calib_dir], out_files=[out])
     if out.exists() and not overwrite:
         raise FileExistsError(f"{out} exists; refusing to overwrite (pass --overwrite)")
     calib = load_rig(calib_dir, camera, rig, K, T, image_size)

@@ -157,7 +157,7 @@ def run_sparsity_sweep(
     """
     settings = parse_settings(settings)
     ds = eval_dataset(data_root, split)
-    out = prepare_out(Path(out_dir), overwrite)
+    out = prepare_out(Path(out_dir), overwrite, [data_root])  # never inside the data
     return _sweep(ds, out, settings, completers, seed, max_frames)
 
 
@@ -187,7 +187,7 @@ def sweep_model(
 
     settings = parse_settings(settings)
     ds = eval_dataset(data_root, split, dataset=dataset)
-    out = prepare_out(Path(out_dir), overwrite)
+    out = prepare_out(Path(out_dir), overwrite, [data_root])  # never inside the data
     completers: dict[str, Callable[..., Any]] = {}
     if model is not None:
         net = model if isinstance(model, torch.nn.Module) else model()

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from semattnet._errors import DataError
+from semattnet._utils.bounds import check_image_size
 from semattnet._utils.documents import read_document
 
 from .transforms import check_rigid, check_rotation, make_T
@@ -97,7 +98,11 @@ def _read_kv(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     if not path.is_file():
         raise DataError(f"{path}: calibration file not found")
     out: dict[str, np.ndarray] = {}
-    for n, line in enumerate(path.read_text().splitlines(), 1):
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{path}: not a text calibration file (byte {exc.start} is not UTF-8)") from None
+    for n, line in enumerate(text.splitlines(), 1):
         if not line.strip():
             continue
         key, sep, rest = line.partition(":")
@@ -132,6 +137,8 @@ def _check_R(R: np.ndarray, what: str, path: Path) -> np.ndarray:
 
 
 def _check_K(K: np.ndarray, what: str, path: Path) -> np.ndarray:
+    if not np.all(np.isfinite(K)):
+        raise DataError(f"{path}: {what} has NaN or infinite entries")
     if not (K[0, 0] > 0 and K[1, 1] > 0 and np.allclose(K[2], [0, 0, 1]) and K[1, 0] == 0):
         raise DataError(f"{path}: {what} is not a pinhole camera matrix (need fx, fy > 0, last row 0 0 1)")
     return K
@@ -174,9 +181,7 @@ def read_cam_to_cam(path: str | os.PathLike[str]) -> dict[str, CameraCalibration
         K = _check_K(P[:, :3].copy(), f"P_rect_{cam}", path)
         R = _check_R(_get(kv, f"R_rect_{cam}", (3, 3), path), f"R_rect_{cam}", path)
         w, h = _get(kv, f"S_rect_{cam}", (2,), path)
-        if w <= 0 or h <= 0 or w != int(w) or h != int(h):
-            raise DataError(f"{path}: S_rect_{cam} must be two positive integers (width height), got {w} {h}")
-        out[cam] = CameraCalibration(cam, K, P, R, (int(w), int(h)))
+        out[cam] = CameraCalibration(cam, K, P, R, check_image_size(w, h, f"{path}: S_rect_{cam}"))
     return out
 
 
@@ -280,7 +285,7 @@ def read_rig_json(path: str | os.PathLike[str]) -> RigCalibration:
             raise DataError(f"{path}: missing key {key!r}")
         try:
             vals[key] = np.array(doc[key], dtype=np.float64)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):  # OverflowError: an integer of 400 digits
             raise DataError(f"{path}: {key!r} is not a numeric array") from None
         if vals[key].shape != shape or not np.all(np.isfinite(vals[key])):
             raise DataError(f"{path}: {key!r} must be finite numbers of shape {shape}, got {vals[key].shape}")
@@ -289,8 +294,7 @@ def read_rig_json(path: str | os.PathLike[str]) -> RigCalibration:
     if why:
         raise DataError(f"{path}: T_cam_lidar is not a rigid transform: {why}")
     w, h = vals["image_size"]
-    if w <= 0 or h <= 0 or w != int(w) or h != int(h):
-        raise DataError(f"{path}: image_size must be two positive integers [width, height], got {[w, h]}")
+    size = check_image_size(w, h, f"{path}: image_size")
     name = doc.get("camera")
-    return RigCalibration(vals["K"], vals["T_cam_lidar"], (int(w), int(h)), None if name is None else str(name),
+    return RigCalibration(vals["K"], vals["T_cam_lidar"], size, None if name is None else str(name),
                           source=str(path))  # fmt: skip

@@ -60,7 +60,11 @@ def _read_bin(path: Path) -> np.ndarray:
 
 
 def _read_text(path: Path) -> np.ndarray:
-    lines = [ln for ln in path.read_text().splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{path}: not a text point cloud (byte {exc.start} is not UTF-8)") from None
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     if lines:
         try:
             [float(v) for v in lines[0].replace(",", " ").split()]
@@ -77,11 +81,28 @@ def _read_text(path: Path) -> np.ndarray:
     return _from_columns(np.array(rows, dtype=np.float64), path)
 
 
+def _check_ply_counts(path: Path) -> None:
+    """Every ``element NAME COUNT`` of the header at most the file's size (an element takes at least a
+    byte), checked before plyfile allocates COUNT rows."""
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        head = f.read(1 << 16)
+    end = head.find(b"end_header")
+    for line in (head[:end] if end >= 0 else head).split(b"\n"):
+        words = line.split()
+        if len(words) == 3 and words[0] == b"element":
+            count = words[2].decode("ascii", "replace")
+            if not count.isdigit() or int(count) > size:
+                raise DataError(f"{path}: PLY element {words[1].decode('ascii', 'replace')!r} count {count[:24]} is "
+                                f"out of range (0..{size} for this file's size)")  # fmt: skip
+
+
 def _read_ply(path: Path) -> np.ndarray:
     try:
         from plyfile import PlyData
     except ImportError:
         raise DataError(f"{path}: reading PLY needs plyfile (pip install plyfile)") from None
+    _check_ply_counts(path)
     try:
         ply = PlyData.read(str(path))
         v = ply["vertex"].data
@@ -115,6 +136,17 @@ def _pcd_header(raw: bytes, path: Path) -> tuple[dict[str, list[str]], int]:
     return header, pos
 
 
+def _check_pcd_counts(header: dict[str, list[str]], counts: list[str], size: int, path: Path) -> None:
+    """POINTS in [0, file size] (a point takes at least a byte) and each COUNT >= 1, before any allocation."""
+    try:
+        n, per = int(header["POINTS"][0]), [int(c) for c in counts]
+    except (ValueError, IndexError):
+        raise DataError(f"{path}: PCD POINTS / COUNT are not integers ({header['POINTS']} / {counts})") from None
+    if not 0 <= n <= size or min(per, default=1) < 1:
+        raise DataError(f"{path}: PCD POINTS {n} / COUNT {' '.join(counts)} out of range "
+                        f"(POINTS in [0, {size}] for this file's size, each COUNT >= 1)")  # fmt: skip
+
+
 def _read_pcd(path: Path) -> np.ndarray:
     raw = path.read_bytes()
     header, start = _pcd_header(raw, path)
@@ -122,6 +154,7 @@ def _read_pcd(path: Path) -> np.ndarray:
     counts = header.get("COUNT", ["1"] * len(fields))
     if not len(fields) == len(sizes) == len(types) == len(counts):
         raise DataError(f"{path}: PCD FIELDS, SIZE, TYPE and COUNT have different lengths")
+    _check_pcd_counts(header, counts, len(raw), path)
     try:
         n = int(header["POINTS"][0])
         spec = zip(fields, sizes, types, counts, strict=True)
@@ -156,6 +189,23 @@ def _read_pcd(path: Path) -> np.ndarray:
     return _finish(np.stack([cols["x"], cols["y"], cols["z"]], 1), inten, path)
 
 
+def _read_npy(path: Path) -> np.ndarray:
+    """A plain numeric (N, 3|4) ``.npy`` array (no pickles, no structured or text dtypes, no ``.npz``)."""
+    try:
+        a = np.load(path, allow_pickle=False, mmap_mode="r")
+    except Exception as exc:  # numpy's header parser raises ValueError, SyntaxError, TokenError, ...
+        raise DataError(
+            f"{path}: not a readable .npy array: {str(exc).splitlines()[0] if str(exc) else exc!r}"
+        ) from None
+    if not isinstance(a, np.ndarray):
+        raise DataError(f"{path}: not a single .npy array (an .npz archive?)")
+    if a.dtype.kind not in "fiu" or a.dtype.fields is not None:
+        raise DataError(f"{path}: expected a numeric array of x y z [intensity], got dtype {a.dtype}")
+    if a.size == 0:
+        raise DataError(f"{path}: empty point cloud (no points)")
+    return _from_columns(np.asarray(a, dtype=np.float64), path)
+
+
 def read_points(path: str | os.PathLike[str]) -> np.ndarray:
     """Read a scan/point cloud (format by suffix, see the module doc).
 
@@ -175,13 +225,7 @@ def read_points(path: str | os.PathLike[str]) -> np.ndarray:
     if suffix == ".bin":
         return _read_bin(path)
     if suffix == ".npy":
-        try:
-            a = np.load(path, allow_pickle=False)
-        except (ValueError, OSError) as exc:
-            raise DataError(f"{path}: not a readable .npy array: {exc}") from None
-        if a.size == 0:
-            raise DataError(f"{path}: empty point cloud (no points)")
-        return _from_columns(np.asarray(a, dtype=np.float64), path)
+        return _read_npy(path)
     if suffix in (".txt", ".csv", ".xyz"):
         return _read_text(path)
     if suffix == ".ply":

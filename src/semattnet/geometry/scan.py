@@ -19,6 +19,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from semattnet._errors import DataError
+from semattnet._utils.bounds import check_image_size, check_pinhole
 
 from .calibration import RigCalibration, read_kitti_calibration, read_rig_json
 from .motion import deskew_scan, read_oxts_motion
@@ -36,17 +37,19 @@ def _rig_from_numbers(K: Sequence[float], T: Sequence[float], image_size: Sequen
         raise DataError(f"K needs 4 numbers fx,fy,cx,cy; got {len(K)}")
     if len(T) != 16:
         raise DataError(f"T_cam_lidar needs 16 numbers (4x4 row-major); got {len(T)}")
-    if image_size is None or len(image_size) != 2 or min(image_size) <= 0:
+    if image_size is None or len(image_size) != 2:
         raise DataError(f"the image size (width, height) is required with K and T; got {image_size}")
+    size = check_image_size(image_size[0], image_size[1], "--size")
     fx, fy, cx, cy = (float(v) for v in K)
-    if not (fx > 0 and fy > 0):
-        raise DataError(f"K: fx and fy must be positive, got {fx}, {fy}")
+    check_pinhole(fx, fy, cx, cy, "--K")
     T_cam_lidar = np.asarray(T, dtype=np.float64).reshape(4, 4)
+    if not np.all(np.isfinite(T_cam_lidar)):
+        raise DataError("--T: T_cam_lidar has NaN or infinite entries")
     why = check_rigid(T_cam_lidar)
     if why:
         raise DataError(f"T_cam_lidar is not a rigid transform: {why}")
     K3 = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], dtype=np.float64)
-    return RigCalibration(K3, T_cam_lidar, (int(image_size[0]), int(image_size[1])), source="command line")
+    return RigCalibration(K3, T_cam_lidar, size, source="command line")
 
 
 def load_rig(
@@ -84,10 +87,19 @@ def project_scan(
     name: str = "points",
 ) -> np.ndarray:
     """(H, W) float32 sparse depth (metres, 0 = none) of LiDAR-frame ``points`` in ``calib``'s camera,
-    optionally deskewed with the OXTS packet ``oxts`` first (see :func:`deskew_scan`)."""
+    optionally deskewed with the OXTS packet ``oxts`` first (see :func:`deskew_scan`).
+
+    Raises:
+        DataError: no point lands inside the image (a wrong calibration or scan: the map would be empty).
+    """
     if calib.image_size is None:
         raise DataError(f"{calib.source or name}: the calibration does not give the image size")
     if oxts is not None:
         motion = read_oxts_motion(oxts)
         points = deskew_scan(points, motion.velocity, motion.yaw_rate, scan_period)
-    return project_points(points, calib.K, calib.T_cam_lidar, calib.image_size, name=name)
+    depth = project_points(points, calib.K, calib.T_cam_lidar, calib.image_size, name=name)
+    if not depth.any():
+        w, h = calib.image_size
+        raise DataError(f"{name}: none of its {len(points)} points projects in front of the camera inside the "
+                        f"{w}x{h} image; check the calibration ({calib.source or 'T_cam_lidar, K'})")  # fmt: skip
+    return depth

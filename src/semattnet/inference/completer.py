@@ -32,6 +32,7 @@ from semattnet._errors import InputError
 from semattnet._utils.device import amp_dtype, resolve_device
 from semattnet.inference.backends import needs_semantic, optimize_for_inference
 from semattnet.inference.padding import crop_padding, pad_to_multiple
+from semattnet.models.checks import check_has_points, check_sparse_depth
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.weights.checkpoint import load_model
 
@@ -123,7 +124,13 @@ class DepthCompleter:
         return self.engine(None) if self.backend == "torch" else self._source
 
     def run(self, rgb: torch.Tensor, semantic: torch.Tensor | None, sparse: torch.Tensor) -> DepthCompletionOutput:
-        """Batched tensors (B, C, H, W) of any H, W -> outputs at the same size."""
+        """Batched tensors (B, C, H, W) of any H, W -> outputs at the same size.
+
+        Raises:
+            InputError: NaN / infinite, negative or too large sparse depth (checked here too, as exported
+                backends skip the model's own checks).
+        """
+        check_sparse_depth(sparse)
         rgb_p, pad = pad_to_multiple(rgb)
         sparse_p, _ = pad_to_multiple(sparse)
         sem_p = pad_to_multiple(semantic)[0] if semantic is not None else None
@@ -147,11 +154,14 @@ class DepthCompleter:
         if semantic is not None and np.asarray(semantic).shape != rgb.shape:
             raise InputError(f"semantic must be {rgb.shape}, got {np.asarray(semantic).shape}")
 
+        depth_in = torch.from_numpy(np.ascontiguousarray(sparse, dtype=np.float32))
+        check_sparse_depth(depth_in)
+        check_has_points(depth_in)
+
         def image(a: np.ndarray) -> torch.Tensor:
             return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32)).permute(2, 0, 1)[None]
 
-        out = self.run(image(rgb), None if semantic is None else image(semantic),
-                       torch.from_numpy(np.ascontiguousarray(sparse, dtype=np.float32))[None, None])  # fmt: skip
+        out = self.run(image(rgb), None if semantic is None else image(semantic), depth_in[None, None])
         out = out.map(lambda t: t.cpu())
         return Completion(depth=out.depth[0, 0].numpy(), output=out)
 

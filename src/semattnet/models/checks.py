@@ -7,10 +7,33 @@ import torch
 from semattnet._errors import InputError
 from semattnet.models._tracing import is_tracing
 
-__all__ = ["SIZE_MULTIPLE", "check_inputs"]
+__all__ = ["MAX_INPUT_DEPTH_M", "SIZE_MULTIPLE", "check_has_points", "check_inputs", "check_sparse_depth"]
 
 #: H and W must be multiples of this (five stride-2 stages).
 SIZE_MULTIPLE = 32
+#: Largest input depth accepted, metres: the home of this bound for the model and the classical
+#: completer. LiDARs reach ~300 m and KITTI's 16-bit PNGs hold 256 m; larger values are unit errors
+#: (millimetres given as metres) or garbage.
+MAX_INPUT_DEPTH_M = 1000.0
+
+
+def check_sparse_depth(sparse: torch.Tensor, name: str = "sparse") -> None:
+    """Refuse NaN / infinite, negative or implausibly large (> :data:`MAX_INPUT_DEPTH_M`) depth, with the
+    same one-line :class:`~semattnet.InputError` for the model and the classical completer."""
+    if not bool(torch.isfinite(sparse).all()):
+        raise InputError(f"{name} contains NaN or infinite values; depth is in metres with 0 = missing")
+    if bool((sparse < 0).any()):
+        raise InputError(f"{name} depth contains negative values; depth is in metres with 0 = missing")
+    top = float(sparse.max()) if sparse.numel() else 0.0
+    if top > MAX_INPUT_DEPTH_M:
+        bound = f"{MAX_INPUT_DEPTH_M:g} m (semattnet.models.checks.MAX_INPUT_DEPTH_M)"
+        raise InputError(f"{name} depth reaches {top:.6g} m, above {bound}; depth is in metres, not millimetres")
+
+
+def check_has_points(sparse: torch.Tensor, name: str = "sparse") -> None:
+    """Refuse a frame whose sparse map has no valid point (every pixel 0): a completion of it means nothing."""
+    if not bool((sparse > 0).any()):
+        raise InputError(f"{name} has no valid depth point (every pixel is 0 = missing); nothing to complete")
 
 
 def check_inputs(
@@ -20,7 +43,7 @@ def check_inputs(
 
     Expected: ``rgb`` (B, 3, H, W) 0..255, ``semantic`` (B, 3, H, W) colour-coded 0..255,
     ``sparse`` (B, 1, H, W) metres with 0 = missing; float tensors of one size, H and W
-    multiples of 32, finite values, no negative depth. Use
+    multiples of 32, finite values, depth in [0, :data:`MAX_INPUT_DEPTH_M`]. Use
     :func:`semattnet.pad_to_multiple` to run on other sizes.
     """
     named = [("rgb", rgb, 3), ("sparse", sparse, 1)]
@@ -52,8 +75,7 @@ def check_inputs(
         )
     if is_tracing():
         return
-    for name, t, _ in named:
+    for name, t, _ in named[:-1]:
         if not bool(torch.isfinite(t).all()):
             raise InputError(f"{name} contains NaN or infinite values")
-    if bool((sparse < 0).any()):
-        raise InputError("sparse depth contains negative values; depth is in metres with 0 = missing")
+    check_sparse_depth(sparse)

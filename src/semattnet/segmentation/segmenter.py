@@ -38,6 +38,7 @@ import torch.nn.functional as F
 
 from semattnet._errors import DataError, InputError, MissingDependencyError
 from semattnet._utils.device import resolve_device
+from semattnet._utils.outputs import check_no_input_overlap
 from semattnet._utils.progress import progress as progress_bar
 from semattnet.data.io import read_image, write_image
 from semattnet.data.palette import IGNORE_ID, NUM_CLASSES, ids_to_colors, label_ids_to_train_ids
@@ -185,6 +186,15 @@ def _torchvision(arch: str, weights: Path, device: torch.device) -> Network:
     return net.to(device).eval()
 
 
+def _check_normalisation(mean: Sequence[float], std: Sequence[float]) -> None:
+    for name, vals in (("--mean", mean), ("--std", std)):
+        v = np.asarray(vals, dtype=np.float64)
+        if v.shape != (3,) or not np.all(np.isfinite(v)):
+            raise InputError(f"{name}: expected three finite numbers R,G,B; got {list(vals)}")
+    if not all(float(x) > 0 for x in std):
+        raise InputError(f"--std: every value must be positive (the image is divided by it); got {list(std)}")
+
+
 def load_segmenter(
     spec: str,
     device: str | torch.device = "auto",
@@ -192,7 +202,13 @@ def load_segmenter(
     std: Sequence[float] = IMAGENET_STD,
     input_size: tuple[int, int] | None = None,
 ) -> Segmenter:
-    """Build a :class:`Segmenter` from a SPEC (module docstring)."""
+    """Build a :class:`Segmenter` from a SPEC (module docstring).
+
+    Raises:
+        InputError: ``mean`` / ``std`` not three finite numbers, a ``std`` that is not positive (a division
+            by zero), a bad device.
+    """
+    _check_normalisation(mean, std)
     dev = resolve_device(device)
     if spec == "unknown":
         return Segmenter(None, spec, dev)
@@ -276,6 +292,7 @@ def segment_folder(
     if not files:
         raise DataError(f"{images}: no {'/'.join(IMAGE_SUFFIXES)} images found")
     targets = [out / f.relative_to(images).with_suffix(".png") for f in files]
+    check_no_input_overlap(files, out_files=targets)  # --out == --images would replace PNG images
     todo = [(f, t) for f, t in zip(files, targets, strict=True) if overwrite or not t.exists()]
     written = 0
     with progress_bar(total=len(files), initial=len(files) - len(todo), desc="segmenting", unit="image",

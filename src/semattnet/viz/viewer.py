@@ -102,10 +102,17 @@ def cloud_points(depth: np.ndarray, K: np.ndarray, stride: int, rgb: np.ndarray 
 
 
 def parse_intrinsics(text: str) -> np.ndarray:
-    """``"fx,fy,cx,cy"`` or ``"kitti"`` (KITTI's camera 02) -> (3, 3) K."""
+    """``"fx,fy,cx,cy"`` or ``"kitti"`` (KITTI's camera 02) -> (3, 3) K.
+
+    Raises:
+        ValueError: not four numbers; InputError (a ValueError) for NaN / inf / non-positive focal lengths.
+    """
     if text.strip().lower() == "kitti":
         return KITTI_K.copy()
+    from semattnet._utils.bounds import check_pinhole
+
     fx, fy, cx, cy = (float(v) for v in text.split(","))
+    check_pinhole(fx, fy, cx, cy, "--K")
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 
 

@@ -14,6 +14,7 @@ a model and names every missing, unexpected or mis-shaped key.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import pickle
@@ -29,7 +30,7 @@ import torch
 from torch import nn
 
 from semattnet._errors import SemAttNetError
-from semattnet._utils.atomic import atomic_path
+from semattnet._utils.atomic import atomic_path, disk_full_error
 from semattnet.models.config import SemAttNetConfig
 from semattnet.weights._safe_pickle import (
     InertObject,
@@ -349,5 +350,12 @@ def save_safetensors(ckpt: Checkpoint | Mapping[str, torch.Tensor], path: str | 
     tensors = {k: v.detach().contiguous() for k, v in sd.items()}
     meta[DIGEST_KEY] = tensor_digest(tensors)  # verified by load_checkpoint: catches corrupt tensor bytes
     with atomic_path(path) as tmp:
-        save_file(tensors, str(tmp), metadata=meta)
+        try:
+            save_file(tensors, str(tmp), metadata=meta)
+        except Exception as exc:  # safetensors reports I/O errors as its own SafetensorError
+            if "os error 28" in str(exc) or "No space left" in str(exc):
+                raise disk_full_error(path, sum(t.numel() * t.element_size() for t in tensors.values())) from None
+            if isinstance(exc, OSError) or "I/O error" not in str(exc):
+                raise
+            raise OSError(errno.EIO, f"could not write the file: {exc}", str(path)) from None
     return path

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from semattnet._errors import InputError
+from semattnet._utils.atomic import disk_full_error, is_disk_full
 from semattnet._utils.download.cache import (
     ENV_OFFLINE,
     announce_pin,
@@ -117,6 +118,10 @@ def fetch_target(root: Path, t: Target, progress: bool) -> tuple[Path, str]:
             except ChecksumError as exc:
                 checksum_failed = True
                 failures.append(f"{url}: {exc}")
+            except OSError as exc:
+                if is_disk_full(exc):
+                    raise  # another mirror would fill the disk too
+                failures.append(f"{url}: {type(exc).__name__}: {exc}")
             except Exception as exc:  # any library's network or HTTP error: try the next mirror
                 failures.append(f"{url}: {type(exc).__name__}: {exc}")
         remove_empty_dirs(dest.parent, root)
@@ -138,7 +143,11 @@ def _download_verified(root: Path, url: str, t: Target, progress: bool) -> str:
     staging.mkdir(parents=True, exist_ok=True)
     try:
         tmp = download_to(url, staging, t.dest.name, progress)
-    except BaseException:
+    except BaseException as exc:
+        if is_disk_full(exc):  # a .part that filled the disk is no use: remove it, say how much is needed
+            (staging / f"{t.dest.name}.part").unlink(missing_ok=True)
+            remove_empty_dirs(staging, root)
+            raise disk_full_error(t.dest, t.size_bytes) from None
         remove_empty_dirs(staging, root)  # a non-empty .part stays, to be resumed
         raise
     try:

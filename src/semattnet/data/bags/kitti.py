@@ -180,8 +180,10 @@ def write_kitti_bag(drive_dir: str | os.PathLike[str], out: str | os.PathLike[st
     Raises:
         DataError: a missing drive, camera, frame or calibration file (naming it). FileExistsError: ``out`` exists.
     """
+    from semattnet._utils.outputs import check_no_input_overlap
     from semattnet.data.kitti_raw import RawDrive
 
+    check_no_input_overlap([drive_dir, Path(drive_dir).parent], out_files=[out])
     drive = RawDrive(drive_dir, camera)
     names = drive.names_for(frames)
     imu = drive.drive_dir.parent / "calib_imu_to_velo.txt"

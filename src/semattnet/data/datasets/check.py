@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from semattnet._errors import DataError
+from semattnet._utils.outputs import incomplete_tree
 from semattnet.data.check import SplitReport
 from semattnet.data.datasets.frames import MissingSplitError
 
@@ -48,6 +49,11 @@ def check_sources(spec: Any, roots: Sequence[str | os.PathLike[str]], semantic_r
     bad = 0
     for root in roots:
         log(f"{root} ({spec.name}):")
+        cut = incomplete_tree(root)
+        if cut is not None:
+            log(f"  {cut}")
+            bad += 1
+            continue
         found = False
         for split in spec.splits:
             try:

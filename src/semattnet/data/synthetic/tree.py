@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from semattnet._utils.outputs import incomplete_tree, mark_tree
 from semattnet.data import layout
 from semattnet.data.io import write_depth as _write_depth
 from semattnet.data.io import write_image as _write_image
@@ -105,7 +106,8 @@ def write_synthetic_kitti(
     0.5 (exactly half of each split); otherwise each frame is shadowed with that probability.
     ``style`` is a scene style of :data:`~semattnet.data.synthetic.scenes.SCENE_STYLES`.
 
-    Returns the manifest (also written to ``out/scenes.json``).
+    Returns the manifest (also written to ``out/scenes.json``). The tree's completion marker
+    (:data:`semattnet._utils.outputs.TREE_MARKER`) is written first as "started" and last as "complete".
 
     Raises:
         FileExistsError: ``out`` holds files and ``overwrite`` is not set.
@@ -114,6 +116,9 @@ def write_synthetic_kitti(
     check_style(style)
     out = Path(out)
     if out.exists() and any(out.iterdir()) and not overwrite:
+        cut = incomplete_tree(out)
+        if cut is not None:
+            raise FileExistsError(cut)
         raise FileExistsError(f"{out} is not empty; pass overwrite=True (--overwrite) to write into it")
     height, width = size
     n_eval = max(2, frames // 5) if eval_frames is None else eval_frames
@@ -127,6 +132,7 @@ def write_synthetic_kitti(
 
         for sub in ("data_depth_velodyne", "data_depth_annotated", "kitti_raw", "semantic", layout.SELECTION):
             shutil.rmtree(out / sub, ignore_errors=True)
+    mark_tree(out, "synth", False, resume=f"run synth again into {out} with --overwrite (overwrite=True)")
     workers = workers if workers is not None else min(len(jobs), os.cpu_count() or 1)
     if workers > 1:
         with ProcessPoolExecutor(workers) as pool:
@@ -139,4 +145,5 @@ def write_synthetic_kitti(
                 "counts": {s: sum(e["split"] == s for e in entries) for s in layout.SPLITS},
                 "frames": [{k: v for k, v in e.items() if k != "K"} for e in entries]}  # fmt: skip
     (out / "scenes.json").write_text(json.dumps(manifest, indent=1))
+    mark_tree(out, "synth", True)
     return manifest

@@ -1,0 +1,60 @@
+"""Bounds checked before anything is allocated from a size read in a file or an option: one home per kind.
+
+Image sizes (PNG headers, a calibration's ``S_rect``, a rig's ``image_size``, ``--size``) are bounded
+here; frame ranges by the drive's frame count (:func:`semattnet.data.kitti_raw.parse_frames`); point
+counts by the file's length (:mod:`semattnet.geometry.pointcloud_io`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from semattnet._errors import DataError, InputError
+
+__all__ = ["MAX_IMAGE_PIXELS", "MAX_IMAGE_SIDE", "check_image_size", "check_pinhole"]
+
+#: Largest width or height accepted, checked before decoding or allocating (KITTI: 1242).
+MAX_IMAGE_SIDE = 16384
+#: Largest width x height accepted (64 Mpx, ~256 MB as RGB): bigger sizes are refused as
+#: decompression bombs before any pixel is decoded or any map allocated.
+MAX_IMAGE_PIXELS = 64 * 1024 * 1024
+
+
+def check_image_size(width: Any, height: Any, where: str) -> tuple[int, int]:
+    """(width, height) as ints when both are whole numbers in [1, :data:`MAX_IMAGE_SIDE`] and their
+    product at most :data:`MAX_IMAGE_PIXELS`.
+
+    Args:
+        where: names the file and field (``"calib.txt: S_rect_02"``), the message's start.
+
+    Raises:
+        DataError: anything else (zero, negative, fractional, NaN, inf, 401 digits), in one line.
+    """
+    try:
+        w, h = (float(v) for v in (width, height))
+    except (TypeError, ValueError, OverflowError):
+        w = h = math.nan
+    if not all(math.isfinite(v) and v >= 1 and v == int(v) for v in (w, h)):
+        raise DataError(f"{where} must be two positive integers (width, height), got {_short(width)} {_short(height)}")
+    if w > MAX_IMAGE_SIDE or h > MAX_IMAGE_SIDE or w * h > MAX_IMAGE_PIXELS:
+        raise DataError(f"{where}: {int(w)}x{int(h)} is above the limit of {MAX_IMAGE_SIDE} a side "
+                        f"and {MAX_IMAGE_PIXELS} pixels in all (semattnet._utils.bounds)")  # fmt: skip
+    return int(w), int(h)
+
+
+def _short(value: Any) -> str:
+    text = str(value)
+    return text if len(text) <= 24 else f"{text[:20]}...({len(text)} characters)"
+
+
+def check_pinhole(fx: float, fy: float, cx: float, cy: float, where: str = "--K") -> None:
+    """Refuse intrinsics that mean nothing: NaN / infinite entries or non-positive focal lengths.
+
+    Raises:
+        InputError: one line naming ``where`` (the option or file and field) and the values.
+    """
+    vals = (fx, fy, cx, cy)
+    if not all(math.isfinite(v) for v in vals) or not (fx > 0 and fy > 0):
+        raise InputError(f"{where}: fx, fy must be finite and positive and cx, cy finite; got "
+                         f"{', '.join(f'{v:g}' for v in vals)}")  # fmt: skip
