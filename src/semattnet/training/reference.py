@@ -4,7 +4,7 @@ Rebuilt from their recipe (not their code): plain Adam (the single-tensor loop: 
 no ``fused``), the model with its BatchNorm layers as they are and their pad-and-sum
 propagation under autograd (``propagation_impl="naive"``), a fresh ``zero_grad()`` that zeroes
 the gradients in place (``set_to_none=False``, PyTorch < 2.0's default, which their code ran),
-and every tensor of the batch copied to the device (``.to(device)``; a copy on CUDA). Same model,
+and every tensor of the batch copied to the device each step (``.to(device)``: a copy on CUDA). Same model,
 loss (eq. 14, :func:`~semattnet.training.losses.semattnet_loss`) and batch as ours
 (:func:`our_step`, what :class:`~semattnet.training.trainer.Trainer` runs).
 """
@@ -46,7 +46,7 @@ def make_adam(params: Iterable[Any], device: torch.device, **kwargs: Any) -> tor
 def authors_step(model: nn.Module, optimizer: torch.optim.Optimizer, batch: Mapping[str, torch.Tensor],
                  device: torch.device, branch_weight: float = 0.0) -> float:  # fmt: skip
     """One step as the authors train: batch copied to the device, naive propagation, ``zero_grad()`` in place."""
-    batch = {k: v.to(device, copy=True) for k, v in batch.items()}
+    batch = {k: v.to(device) for k, v in batch.items()}
     impl = getattr(model, "propagation_impl", None)
     if impl is not None:
         model.propagation_impl = "naive"
