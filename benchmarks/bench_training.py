@@ -68,9 +68,12 @@ def child(variant: str, batch: int, size: tuple[int, int], width: float, device:
     params = sum(p.numel() for p in net.parameters())
     h, w = size
     g = torch.Generator().manual_seed(0)
-    data = {"rgb": torch.rand(batch, 3, h, w, generator=g) * 255, "semantic": torch.rand(batch, 3, h, w, generator=g) * 255,
-            "sparse": torch.rand(batch, 1, h, w, generator=g) * 80 * (torch.rand(batch, 1, h, w, generator=g) < 0.05),
-            "gt": torch.rand(batch, 1, h, w, generator=g) * 80 * (torch.rand(batch, 1, h, w, generator=g) < 0.16)}  # fmt: skip
+
+    def rand(channels: int, scale: float, density: float = 1.0) -> torch.Tensor:
+        x = torch.rand(batch, channels, h, w, generator=g) * scale
+        return x * (torch.rand(batch, channels, h, w, generator=g) < density) if density < 1 else x
+
+    data = {"rgb": rand(3, 255), "semantic": rand(3, 255), "sparse": rand(1, 80, 0.05), "gt": rand(1, 80, 0.16)}
     if variant == "ours+ckpt":
         set_activation_checkpointing(net)
     if variant == "ours+cl":

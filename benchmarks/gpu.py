@@ -54,8 +54,9 @@ def frame(batch: int, size: tuple[int, int], device: torch.device, seed: int = 0
     """Random inputs in the model's units (colours 0..255, 5 % sparse depth in metres)."""
     h, w = size
     g = torch.Generator().manual_seed(seed)
-    x = {"rgb": torch.rand(batch, 3, h, w, generator=g) * 255, "semantic": torch.rand(batch, 3, h, w, generator=g) * 255,
-         "sparse": torch.rand(batch, 1, h, w, generator=g) * 80 * (torch.rand(batch, 1, h, w, generator=g) < 0.05)}  # fmt: skip
+    rgb, semantic = (torch.rand(batch, 3, h, w, generator=g) * 255 for _ in range(2))
+    sparse = torch.rand(batch, 1, h, w, generator=g) * 80 * (torch.rand(batch, 1, h, w, generator=g) < 0.05)
+    x = {"rgb": rgb, "semantic": semantic, "sparse": sparse}
     return {k: v.to(device) for k, v in x.items()}
 
 
@@ -94,7 +95,8 @@ def build(name: str, model: torch.nn.Module, device: torch.device, size: tuple[i
         with torch.inference_mode():
             out, heads = network(**x)
             s2, refined = propagate(heads, engine.net.config.iterations)
-            return DepthCompletionOutput(**(out.to_dict() | {"refined_s2_depth": s2.clone(), "refined_depth": refined.clone()}))
+            refinement = {"refined_s2_depth": s2.clone(), "refined_depth": refined.clone()}  # out of the graph pool
+            return DepthCompletionOutput(**(out.to_dict() | refinement))
 
     return run
 
@@ -162,7 +164,7 @@ def training_step(device: torch.device, batch: int, checkpointing: bool, size: t
     return {"seconds": result["median_s"], "samples_per_s": batch / result["median_s"], "peak_mib": result["peak_mib"]}
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:  # noqa: C901 - one linear script
+def run(args: argparse.Namespace) -> dict[str, Any]:
     import semattnet
     from semattnet.models.refinement import propagate_refinement
 
@@ -195,7 +197,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:  # noqa: C901 - one linear 
             elif step["step"] == "propagation":
                 rows["propagation"] = _propagation(model, x1, device, args.repeats, propagate_refinement)
             elif step["step"] == "training":
-                rows.setdefault("training", []).append(label | training_step(device, step["batch"], step["checkpointing"]))
+                measured = training_step(device, step["batch"], step["checkpointing"])
+                rows.setdefault("training", []).append(label | measured)
         except Exception as e:  # a failing backend is a result, not the end of the script
             rows.setdefault("failed", []).append(label | {"error": f"{type(e).__name__}: {e}".splitlines()[0]})
         print(json.dumps(label), f"{time.monotonic() - start:.0f} s", flush=True)
