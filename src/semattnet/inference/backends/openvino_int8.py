@@ -36,6 +36,12 @@ KEEP_FLOAT: tuple[str, ...] = (
 )
 
 
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 def quantized_ir(ov: Any, core: Any, xml: Path, calibration: Calibration, log=None) -> Path:  # type: ignore[no-untyped-def]
     """``<folder of xml>/int8-<calibration.key>/model.xml``: the IR ``xml`` quantised on ``calibration``
     (computed once; later calls return the cached file)."""
@@ -59,6 +65,7 @@ def quantized_ir(ov: Any, core: Any, xml: Path, calibration: Calibration, log=No
     staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
     try:
         ov.save_model(quantized, str(staging / "model.xml"), compress_to_fp16=False)
+        staging.chmod(0o777 & ~_umask())  # a plain folder's mode, not mkdtemp's 0o700
         os.replace(staging, target)  # another process may have finished first: then keep its copy
     except OSError:
         if not out.is_file():
