@@ -1,4 +1,4 @@
-"""Accuracy cost of the reduced-precision modes on a trained model, next to their speed.
+"""Accuracy cost of the reduced-precision modes (bf16, int8) on a trained model, next to their speed.
 
 Completes the held-out scenes of a synthetic tree with a trained checkpoint through every
 installed inference engine (:func:`semattnet.inference.backends.optimize_for_inference`) in
@@ -7,6 +7,9 @@ inference precision, the propagation in PyTorch float32), and reports for each t
 metrics, the largest per-pixel difference from eager float32 and the time per frame. On CUDA the
 torch fast mode is float16 autocast. bf16 is only worth it on CPUs with native bf16 instructions
 (:func:`semattnet._utils.cpu.has_native_bf16`); elsewhere it is reported but emulated and slow.
+With ``nncf`` installed, OpenVINO int8 too (NNCF post-training quantisation, calibrated on the
+first ``--calibration-frames`` scenes of the tree's *training* split, never on the held-out ones).
+``benchmarks/bench_int8_accuracy.py`` is this script.
 Typical use, after `semattnet demo`:
 
     python benchmarks/bench_fast_mode_accuracy.py semattnet-demo/runs/semattnet/full/checkpoints/last.pt \\
@@ -16,6 +19,7 @@ Typical use, after `semattnet demo`:
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import tempfile
 import time
 from pathlib import Path
@@ -25,6 +29,7 @@ import torch
 
 from semattnet._utils.cpu import cpu_summary
 from semattnet.apps.experiment import HeldOut, load_held_out, score
+from semattnet.data.sources import KittiSplitSource
 from semattnet.inference.backends import available_backends, optimize_for_inference
 from semattnet.weights.checkpoint import load_model
 
@@ -47,6 +52,7 @@ def main() -> None:
     p.add_argument("checkpoint", type=Path)
     p.add_argument("data", type=Path, help="a synthetic tree (semattnet synth / demo) with scenes.json")
     p.add_argument("--device", default="cpu")
+    p.add_argument("--calibration-frames", type=int, default=32, help="training scenes the int8 engine calibrates on")
     args = p.parse_args()
     device = torch.device(args.device)
     model = load_model(args.checkpoint).eval()
@@ -54,21 +60,26 @@ def main() -> None:
     size = tuple(held.samples[0]["rgb"].shape[-2:])
     backends = ["torch"] + ([b for b in available_backends() if b == "openvino"] if device.type == "cpu" else [])
     rows = {}
+    int8 = importlib.util.find_spec("nncf") is not None
+    calibration = KittiSplitSource(args.data, "train", max_frames=args.calibration_frames)
     with tempfile.TemporaryDirectory() as cache:
         for backend in backends:
-            for precision in ("f32", "bf16"):
+            for precision in ("f32", "bf16", *(("int8",) if int8 and backend == "openvino" else ())):
                 engine = optimize_for_inference(model, backend=backend, size=size, precision=precision,
-                                                device=device, cache_dir=cache)  # fmt: skip
+                                                device=device, cache_dir=cache, calibration=calibration,
+                                                calibration_frames=args.calibration_frames)  # fmt: skip
                 rows[f"{backend} {precision}"] = _complete(engine, held, device)
     ref = rows["torch f32"][0]
     print(f"{cpu_summary()}; {len(held.names)} held-out scenes at {size[0]}x{size[1]}")
     header = ("engine", "RMSE mm", "MAE mm", "iRMSE", "iMAE", "max |d| vs torch f32", "ms/frame")
     print("  ".join(header))
+    base = score(ref, held)["all"]
     for name, (preds, sec) in rows.items():
         m = score(preds, held)["all"]
+        change = max(abs(m[k] / base[k] - 1) for k in ("rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km"))
         diff = max(float(np.abs(preds[n] - ref[n]).max()) for n in held.names)
         print(f"{name:14s} {m['rmse_mm']:8.1f} {m['mae_mm']:7.1f} {m['irmse_per_km']:7.2f} {m['imae_per_km']:6.2f} "
-              f"{diff:9.4f} m {sec * 1e3:9.1f}")  # fmt: skip
+              f"{diff:9.4f} m {sec * 1e3:9.1f}   largest metric change {100 * change:.2f} %")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ convolution on the same device.
 from __future__ import annotations
 
 import functools
+import importlib.util
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
@@ -260,13 +261,16 @@ def _inference_candidates(
 def _backend_candidates(
     net: nn.Module, x: dict[str, torch.Tensor], dev: torch.device, fast_dtype: torch.dtype | None
 ) -> dict[str, Callable[[], Any]]:
-    """Every installed inference backend at this size (float32; also bf16 where the CPU has it natively)."""
+    """Every installed inference backend at this size (float32; also bf16 where the CPU has it natively;
+    int8 for OpenVINO with nncf installed, calibrated on synthetic scenes: a row, never a default)."""
     size = tuple(x["rgb"].shape[-2:])
     runs: dict[str, Callable[[], Any]] = {}
     for backend in available_backends():
-        if backend != "torch" and dev.type != "cpu":
+        usable = dev.type == "cuda" if backend == "tensorrt" else backend == "torch" or dev.type == "cpu"
+        if not usable:
             continue
         precisions = ["f32"] + (["bf16"] if backend != "onnxruntime" and fast_dtype is torch.bfloat16 else [])
+        precisions += ["int8"] if backend == "openvino" and importlib.util.find_spec("nncf") is not None else []
         for precision in precisions:
             engine = optimize_for_inference(net, backend=backend, size=size, precision=precision, device=dev)
             runs[f"full model, backend {backend} ({precision})"] = functools.partial(engine, **x)

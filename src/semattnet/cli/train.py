@@ -46,6 +46,8 @@ from semattnet.cli._options import (
 @click.option("--device", default=None, help="auto, cpu or cuda.")
 @click.option("--workers", type=COUNT, default=None, help="Data loading processes [4].")
 @click.option("--max-steps", type=COUNT, default=None, help="Stop after N steps in total.")
+@click.option("--activation-checkpointing", is_flag=True, default=None,
+              help="Recompute each branch in the backward pass: less memory, one more forward.")  # fmt: skip
 @click.option(
     "--set", "overrides", multiple=True, metavar="KEY=VALUE", help="Any TrainConfig field, e.g. --set val_every=2."
 )
@@ -53,7 +55,7 @@ def train(stage: str, data_root: str | None, dataset: str, out: str | None, init
           config_file: str | None, resume: bool, overwrite: bool,
           epochs: int | None, batch_size: int | None, lr: float | None, width: float | None, crop: str | None,
           amp: str | None, device: str | None, workers: int | None, max_steps: int | None,
-          overrides: tuple[str, ...]) -> None:  # fmt: skip
+          activation_checkpointing: bool | None, overrides: tuple[str, ...]) -> None:  # fmt: skip
     """Train one stage of the paper's recipe (works under torchrun for DDP)."""
     from semattnet.training.config import TrainConfig
     from semattnet.training.trainer import train as run_training
@@ -74,6 +76,7 @@ def train(stage: str, data_root: str | None, dataset: str, out: str | None, init
         given = {"stage": stage if not config_file else base["stage"], "data": data_root, "init": init,
                  "epochs": epochs, "batch_size": batch_size, "lr": lr, "width": width, "amp": amp,
                  "device": device, "workers": workers, "max_steps": max_steps,
+                 "activation_checkpointing": activation_checkpointing or None,
                  "crop": list(parse_size(crop)) if crop else None}  # fmt: skip
         base.update({k: v for k, v in given.items() if v is not None})
         base["out"] = out or base.get("out") or f"runs/{base['stage']}"

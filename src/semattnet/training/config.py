@@ -58,6 +58,8 @@ class TrainConfig:
             that many frames (all by default); ``val_split=""`` disables it.
         amp: ``none``, ``bf16`` or ``fp16`` autocast (propagation always in float32).
         grad_checkpointing: recompute ResNet blocks in backward to save activation memory.
+        activation_checkpointing: recompute each branch (encoder and decoder) in backward
+            (:mod:`semattnet.training.checkpointing`): far less activation memory, one more forward.
         sync_bn: SyncBatchNorm across processes.
         save_every: also checkpoint every N optimiser steps (0 = at epoch ends only).
         keep_last: periodic checkpoints kept besides ``last.pt`` and ``best.pt``.
@@ -94,6 +96,7 @@ class TrainConfig:
     val_max_frames: int | None = None
     amp: Literal["none", "bf16", "fp16"] = "none"
     grad_checkpointing: bool = False
+    activation_checkpointing: bool = False
     sync_bn: bool = False
     workers: int = 4
     seed: int = 0
@@ -159,7 +162,8 @@ class TrainConfig:
             "betas", len(self.betas) == 2 and all(finite(b) and 0 <= b < 1 for b in self.betas), "two numbers in [0, 1)"
         )
         check("branch_weights", all(finite(w) and w >= 0 for w in self.branch_weights), "finite numbers >= 0")
-        check("sync_bn", isinstance(self.sync_bn, bool), "true or false")
+        for name in ("sync_bn", "activation_checkpointing"):
+            check(name, isinstance(getattr(self, name), bool), "true or false")
 
     def branch_weight(self, epoch: int) -> float:
         if self.stage != "backbone" or not self.branch_weights:

@@ -28,7 +28,6 @@ from torch.utils.data import DataLoader, Dataset, Subset
 from semattnet._errors import DataError, InputError
 from semattnet._utils import distributed as dist_utils
 from semattnet._utils.atomic import atomic_path
-from semattnet._utils.device import autocast
 from semattnet._utils.progress import progress
 from semattnet.data.datasets import get_dataset
 from semattnet.data.kitti import KittiDepthCompletion
@@ -38,8 +37,9 @@ from semattnet.models.backbone import SemAttNetBackbone
 from semattnet.models.layers import set_gradient_checkpointing
 from semattnet.models.registry import build_model
 from semattnet.models.semattnet import SemAttNet
+from semattnet.training.checkpointing import set_activation_checkpointing
 from semattnet.training.config import TrainConfig
-from semattnet.training.losses import semattnet_loss
+from semattnet.training.reference import make_adam, our_step
 from semattnet.weights.checkpoint import CheckpointError, load_checkpoint, load_weights
 from semattnet.weights.gate import DIGEST_KEY, tensor_digest
 
@@ -133,7 +133,7 @@ class Trainer:
         """Adam over the stage's parameter groups, the learning-rate schedule and the AMP grad scaler."""
         cfg = self.cfg
         assert cfg.epochs is not None and cfg.patience is not None  # TrainConfig fills them from the stage
-        self.optimizer = torch.optim.Adam(self._param_groups(), betas=cfg.betas, weight_decay=cfg.weight_decay)
+        self.optimizer = make_adam(self._param_groups(), self.device, betas=cfg.betas, weight_decay=cfg.weight_decay)
         self.scheduler: Any
         if cfg.lr_schedule == "cosine":  # per step, to zero at the last step
             total = cfg.max_steps or cfg.epochs * len(self.loader)
@@ -192,6 +192,8 @@ class Trainer:
             model.init_depth_heads(*cfg.depth_head_init)
         if cfg.grad_checkpointing:
             set_gradient_checkpointing(model, True)
+        if cfg.activation_checkpointing:
+            set_activation_checkpointing(model, True)
         return model.to(self.device)
 
     def _param_groups(self) -> list[dict[str, Any]]:
@@ -365,15 +367,8 @@ class Trainer:
 
     def _step(self, batch: dict[str, Any], branch_weight: float) -> float:
         """One optimiser step on ``batch`` (eq. 14 loss, AMP-aware); returns the loss."""
-        x = {k: batch[k].to(self.device, non_blocking=True) for k in ("rgb", "semantic", "sparse")}
-        gt = batch["gt"].to(self.device, non_blocking=True)
-        with autocast(self.device, self.cfg.amp):
-            out = self.model(**x)
-        loss = semattnet_loss(out.map(lambda t: t.float()), gt, branch_weight)
-        self.optimizer.zero_grad(set_to_none=True)
-        self.scaler.scale(loss).backward()
-        self.scaler.step(self.optimizer)
-        self.scaler.update()
+        loss = our_step(self.model, self.optimizer, batch, self.device, branch_weight, self.cfg.amp,
+                        self.scaler if self.scaler.is_enabled() else None)  # fmt: skip
         if self.cfg.lr_schedule == "cosine":
             self.scheduler.step()
         self.pos.batch += 1

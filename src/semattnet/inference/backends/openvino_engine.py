@@ -4,12 +4,15 @@ The IR (``model.xml``/``.bin``) and OpenVINO's compiled-blob cache live beside t
 (``<cache>/engines/<key>/``), so a later process only loads them. Precision: ``f32`` (the
 default; ``INFERENCE_PRECISION_HINT=f32``, outputs within 1e-4 relative of eager PyTorch) or
 ``bf16`` (OpenVINO's own default on CPUs with native bfloat16: several times faster there, at a
-measured accuracy cost; never chosen automatically).
+measured accuracy cost; never chosen automatically) or ``int8`` (the IR quantised by NNCF on
+calibration frames, :mod:`semattnet.inference.backends.openvino_int8`; the layers left float32
+run in f32; only when asked for).
 """
 
 from __future__ import annotations
 
 import os
+from typing import Any
 
 import numpy as np
 import torch
@@ -17,6 +20,8 @@ from torch import nn
 
 from semattnet.inference.backends._base import HEADS_PREFIX, ExportedGraphEngine, LogFn, import_backend
 from semattnet.inference.backends._export_cache import cached_onnx, engine_dir, engine_key, propagation_steps
+from semattnet.inference.backends.calibration import DEFAULT_CALIBRATION_FRAMES, resolve_calibration
+from semattnet.inference.backends.openvino_int8 import quantized_ir
 from semattnet.models.outputs import DepthCompletionOutput
 
 __all__ = ["OpenVinoEngine"]
@@ -37,7 +42,8 @@ class OpenVinoEngine(ExportedGraphEngine):
     backend = "openvino"
 
     def __init__(self, model: nn.Module, size: tuple[int, int], needs_semantic: bool, precision: str = "f32",
-                 cache_dir: str | os.PathLike[str] | None = None, log: LogFn | None = None) -> None:  # fmt: skip
+                 cache_dir: str | os.PathLike[str] | None = None, log: LogFn | None = None,
+                 calibration: Any = None, calibration_frames: int = DEFAULT_CALIBRATION_FRAMES) -> None:  # fmt: skip
         super().__init__(size, precision, needs_semantic)
         ov = import_backend("openvino", "openvino")
         folder = engine_dir(engine_key(model, size, extra=f"openvino-{ov.__version__}"), cache_dir)
@@ -48,8 +54,11 @@ class OpenVinoEngine(ExportedGraphEngine):
             # IR first (float32 weights: no fp16 compression), so later processes skip the ONNX file
             ov.save_model(core.read_model(str(onnx_path)), str(xml), compress_to_fp16=False)
             onnx_path.unlink()  # only an intermediate here: the IR holds the same weights
-        config = {"PERFORMANCE_HINT": "LATENCY", "INFERENCE_PRECISION_HINT": precision,
-                  "INFERENCE_NUM_THREADS": torch.get_num_threads(), "CACHE_DIR": str(folder / "blobs")}  # fmt: skip
+        if precision == "int8":  # the quantised IR (cached per calibration); its float layers in f32
+            xml = quantized_ir(ov, core, xml, resolve_calibration(calibration, size, calibration_frames), log)
+        hint = "f32" if precision == "int8" else precision
+        config = {"PERFORMANCE_HINT": "LATENCY", "INFERENCE_PRECISION_HINT": hint,
+                  "INFERENCE_NUM_THREADS": torch.get_num_threads(), "CACHE_DIR": str(xml.parent / "blobs")}  # fmt: skip
         self.compiled = core.compile_model(str(xml), "CPU", config)
         self.request = self.compiled.create_infer_request()
         self.input_names = [_one_of(i.get_names(), {"rgb", "semantic", "sparse"}) for i in self.compiled.inputs]

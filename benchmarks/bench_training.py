@@ -1,0 +1,216 @@
+"""Training cost: one step of our trainer against one of the authors' recipe, each in its own process.
+
+Same model (SemAttNet, ``--width``), loss (eq. 14) and batch (random, ``--size``); variants:
+
+* ``authors``: :func:`semattnet.training.reference.authors_step` (plain single-tensor Adam, naive
+  propagation under autograd, ``zero_grad()`` in place, the batch copied to the device);
+* ``ours``: :func:`semattnet.training.reference.our_step` (what the trainer runs: fused Adam,
+  shifted propagation with its hand-written backward, ``set_to_none``, no batch copies);
+* ``ours+ckpt``: the same with activation checkpointing of the branches;
+* ``ours+cl`` (``--channels-last``): ours with the model and batch in ``channels_last``.
+
+Every (variant, batch) runs in a fresh process (peak memory is the child's RSS high-water mark,
+``resource.getrusage(RUSAGE_SELF).ru_maxrss``, or CUDA's ``max_memory_allocated``), the variants
+taken in turns (``--rounds`` times); a child whose RSS passes ``--max-gb`` is stopped and reported
+as not fitting. Per-sample memory is the batch-2 peak minus the batch-1 peak, or, when batch 2
+does not fit, the batch-1 peak minus the fixed part (weights, gradients and Adam's two moments,
+4 x 4 bytes per parameter, plus the process before the model), an extrapolation the table says
+it is. ``--dry-run`` prints and checks the plan without running it.
+
+    python benchmarks/bench_training.py [--size 320x1216] [--width 1.0] [--batches 1,2] [--rounds 1]
+                                        [--device cpu] [--max-gb 20] [--json out.json] [--dry-run]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+VARIANTS = ("authors", "ours", "ours+ckpt")
+MEMORY_GB = (24, 48, 80)
+
+
+def plan(variants: tuple[str, ...], batches: tuple[int, ...], rounds: int) -> list[tuple[str, int]]:
+    """(variant, batch) in the order they run: per batch, every variant in turn, ``rounds`` times."""
+    return [(v, b) for b in batches for _ in range(rounds) for v in variants]
+
+
+def check_plan(steps: list[tuple[str, int]], variants: tuple[str, ...], batches: tuple[int, ...]) -> None:
+    """Every variant at every batch, the authors' reference first in each turn."""
+    for b in batches:
+        ran = [v for v, bb in steps if bb == b]
+        assert set(ran) == set(variants) and ran[0] == "authors", f"batch {b}: {ran}"
+        assert all(ran.count(v) == ran.count("authors") for v in variants), f"batch {b}: unequal turns {ran}"
+
+
+def child(variant: str, batch: int, size: tuple[int, int], width: float, device: str, steps: int,
+          warmup: int) -> dict[str, Any]:  # fmt: skip
+    """One variant in this process: median seconds per step and peak memory (MiB)."""
+    import torch
+
+    from semattnet._utils.device import now
+    from semattnet.models.registry import build_model
+    from semattnet.training.checkpointing import set_activation_checkpointing
+    from semattnet.training.reference import authors_adam, authors_step, make_adam, our_step
+
+    dev = torch.device(device)
+    before = _rss_mib()
+    torch.manual_seed(0)
+    net = build_model("semattnet", width=width).to(dev).train()
+    params = sum(p.numel() for p in net.parameters())
+    h, w = size
+    g = torch.Generator().manual_seed(0)
+
+    def rand(channels: int, scale: float, density: float = 1.0) -> torch.Tensor:
+        x = torch.rand(batch, channels, h, w, generator=g) * scale
+        return x * (torch.rand(batch, channels, h, w, generator=g) < density) if density < 1 else x
+
+    data = {"rgb": rand(3, 255), "semantic": rand(3, 255), "sparse": rand(1, 80, 0.05), "gt": rand(1, 80, 0.16)}
+    if variant == "ours+ckpt":
+        set_activation_checkpointing(net)
+    if variant == "ours+cl":
+        net = net.to(memory_format=torch.channels_last)
+        data = {k: v.contiguous(memory_format=torch.channels_last) for k, v in data.items()}
+    if variant == "authors":
+        opt = authors_adam(net.parameters(), lr=1e-4)
+        step = lambda: authors_step(net, opt, data, dev)  # noqa: E731
+    else:
+        data = {k: v.to(dev) for k, v in data.items()}
+        opt = make_adam(net.parameters(), dev, lr=1e-4)
+        step = lambda: our_step(net, opt, data, dev).item()  # noqa: E731
+    if dev.type == "cuda":
+        torch.cuda.reset_peak_memory_stats(dev)
+    times = []
+    for i in range(warmup + steps):
+        t0 = now(dev)
+        step()
+        if i >= warmup:
+            times.append(now(dev) - t0)
+    peak = torch.cuda.max_memory_allocated(dev) / 2**20 if dev.type == "cuda" else _peak_rss_mib()
+    return {"variant": variant, "batch": batch, "seconds": statistics.median(times), "peak_mib": peak,
+            "before_mib": before if dev.type == "cpu" else 0.0, "params": params}  # fmt: skip
+
+
+def _rss_mib() -> float:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def _peak_rss_mib() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB on Linux
+
+
+def _run_child(args: argparse.Namespace, variant: str, batch: int) -> dict[str, Any] | None:
+    """The child process of one (variant, batch); None if it passed ``--max-gb`` (stopped) or failed."""
+    cmd = [sys.executable, __file__, "--child", variant, "--batches", str(batch), "--size", args.size,
+           "--width", str(args.width), "--device", args.device, "--steps", str(args.steps),
+           "--warmup", str(args.warmup)]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
+    status = Path(f"/proc/{proc.pid}/status")
+    while proc.poll() is None:
+        try:
+            rss = next(int(ln.split()[1]) for ln in status.read_text().splitlines() if ln.startswith("VmRSS:"))
+        except (OSError, StopIteration):
+            rss = 0
+        if rss > args.max_gb * 2**20:
+            proc.kill()
+            proc.wait()
+            print(f"  {variant} batch {batch}: stopped above {args.max_gb} GB RSS (does not fit)", flush=True)
+            return None
+        time.sleep(0.2)
+    out = proc.stdout.read() if proc.stdout else ""
+    if proc.returncode != 0:
+        print(f"  {variant} batch {batch}: failed (exit {proc.returncode})", flush=True)
+        return None
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def summarise(results: list[dict[str, Any]], variants: tuple[str, ...]) -> list[str]:
+    """The table: medians per (variant, batch), ratios to the authors', per-sample memory, batches that fit."""
+    lines = [f"{'variant':12s} {'batch':>5s} {'s/step':>8s} {'x authors':>9s} {'peak GiB':>9s} {'mem/authors':>11s}"]
+    med: dict[tuple[str, int], tuple[float, float]] = {}
+    for v in variants:
+        for b in sorted({r["batch"] for r in results}):
+            rs = [r for r in results if r["variant"] == v and r["batch"] == b]
+            if rs:
+                med[v, b] = (statistics.median(r["seconds"] for r in rs), statistics.median(r["peak_mib"] for r in rs))
+    for (v, b), (sec, peak) in med.items():
+        ref = med.get(("authors", b))
+        speed = f"{ref[0] / sec:9.2f}" if ref else " " * 9
+        mem = f"{peak / ref[1]:11.2f}" if ref else " " * 11
+        lines.append(f"{v:12s} {b:5d} {sec:8.2f} {speed} {peak / 1024:9.2f} {mem}")
+    lines += ["", f"{'variant':12s} {'GiB/sample':>10s} {'fixed GiB':>9s} " + " ".join(f"{g:>4d}GB" for g in MEMORY_GB)]
+    for v in variants:
+        fit = _per_sample(results, med, v)
+        if fit is not None:
+            per, fixed, how = fit
+            fits = " ".join(f"{max(0, int((g * 1e9 / 2**20 - fixed) // per)):6d}" for g in MEMORY_GB)
+            lines.append(f"{v:12s} {per / 1024:10.2f} {fixed / 1024:9.2f} {fits}   ({how})")
+    return lines
+
+
+def _per_sample(results: list[dict[str, Any]], med: dict[tuple[str, int], tuple[float, float]],
+                v: str) -> tuple[float, float, str] | None:  # fmt: skip
+    """(MiB per sample, fixed MiB, how it was obtained) of variant ``v``."""
+    if (v, 1) in med and (v, 2) in med:
+        per = med[v, 2][1] - med[v, 1][1]
+        return per, med[v, 1][1] - per, "measured: batch 2 - batch 1"
+    one = [r for r in results if r["variant"] == v and r["batch"] == 1]
+    if not one:
+        return None
+    fixed = one[0]["before_mib"] + 16 * one[0]["params"] / 2**20  # weights, grads, two Adam moments
+    return med[v, 1][1] - fixed, fixed, "extrapolated from batch 1: peak - weights/grads/Adam"
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--size", default="320x1216")
+    p.add_argument("--width", type=float, default=1.0)
+    p.add_argument("--batches", default="1,2")
+    p.add_argument("--rounds", type=int, default=1)
+    p.add_argument("--steps", type=int, default=1, help="timed steps per process (median)")
+    p.add_argument("--warmup", type=int, default=1, help="untimed steps before (allocates Adam's state)")
+    p.add_argument("--device", default="cpu")
+    p.add_argument("--max-gb", type=float, default=20.0, help="stop a child whose RSS passes this")
+    p.add_argument("--channels-last", action="store_true", help="also measure ours in channels_last")
+    p.add_argument("--json", type=Path, default=None)
+    p.add_argument("--dry-run", action="store_true")
+    p.add_argument("--child", default=None, help=argparse.SUPPRESS)
+    args = p.parse_args(argv)
+    size = tuple(int(v) for v in args.size.lower().split("x"))
+    batches = tuple(int(b) for b in args.batches.split(","))
+    if args.child:
+        print(json.dumps(child(args.child, batches[0], size, args.width, args.device, args.steps, args.warmup)))  # type: ignore[arg-type]
+        return 0
+    variants = VARIANTS + (("ours+cl",) if args.channels_last else ())
+    steps = plan(variants, batches, args.rounds)
+    check_plan(steps, variants, batches)
+    print(f"plan: {len(steps)} processes at {size[0]}x{size[1]}, width {args.width}, {args.device}: "
+          + ", ".join(f"{v}@{b}" for v, b in steps), flush=True)  # fmt: skip
+    if args.dry_run:
+        return 0
+    print(f"load before: {os.getloadavg()}", flush=True)
+    results = []
+    for v, b in steps:
+        r = _run_child(args, v, b)
+        if r is not None:
+            print(f"  {v} batch {b}: {r['seconds']:.2f} s/step, peak {r['peak_mib'] / 1024:.2f} GiB", flush=True)
+            results.append(r)
+    print("\n".join(summarise(results, variants)))
+    if args.json:
+        args.json.write_text(json.dumps({"args": vars(args) | {"json": str(args.json)}, "results": results}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,131 @@
+"""Calibration frames of the int8 engine: what NNCF's post-training quantisation measures ranges on.
+
+A calibration is given to ``optimize_for_inference(..., precision="int8", calibration=...)`` as
+
+* ``None`` (the default): :data:`DEFAULT_CALIBRATION_FRAMES` synthetic scenes
+  (:func:`semattnet.data.synthetic.make_frame`, seeds 0, 1, ...) at the engine's size;
+* a :class:`~semattnet.data.frames.FrameSource` (``semattnet.data.sources``: a folder, a KITTI split,
+  a raw drive), or any sequence of :class:`~semattnet.data.frames.Frame`;
+* a folder path: ``rgb/`` + ``sparse/`` (+ ``semantic/``) subfolders paired by name
+  (:class:`~semattnet.data.sources.FolderSource`), else a KITTI (or ``semattnet synth``) root whose
+  ``val_select`` split is used (:class:`~semattnet.data.sources.KittiSplitSource`).
+
+Frames are cropped to the engine's size as KITTI's evaluation crop does (bottom rows, centred
+columns; zero-padded at the top when smaller); a frame without a semantic map gets the
+``unknown`` fallback map (:func:`semattnet.data.palette.unknown_map`). The cache key of a
+calibration is its description for synthetic scenes (they are a function of the seed and the
+library version, which the engine key holds) and the sha256 of the frames' arrays otherwise.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from semattnet._errors import InputError
+
+__all__ = ["DEFAULT_CALIBRATION_FRAMES", "Calibration", "fit_to_size", "resolve_calibration"]
+
+#: Synthetic scenes calibrated on when the user gives no frames (and the most frames used from a source).
+DEFAULT_CALIBRATION_FRAMES = 8
+
+
+def fit_to_size(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """(H, W, ...) -> (h, w, ...) of ``size``: the bottom rows and centred columns, zeros above when smaller."""
+    h, w = size
+    rows, cols = image.shape[:2]
+    left = max(0, (cols - w) // 2)
+    crop = image[max(0, rows - h) :, left : left + w]
+    out = np.zeros((h, w, *image.shape[2:]), dtype=image.dtype)
+    out[h - crop.shape[0] :, : crop.shape[1]] = crop
+    return out
+
+
+def _feed(rgb: np.ndarray, semantic: np.ndarray | None, sparse: np.ndarray, size: tuple[int, int]) -> dict[str, Any]:
+    """One frame as the graph's named (1, C, H, W) float32 inputs (colours 0..255, sparse metres)."""
+    from semattnet.data.palette import unknown_map
+
+    semantic = unknown_map(*rgb.shape[:2]) if semantic is None else semantic
+
+    def chw(a: np.ndarray) -> np.ndarray:
+        a = fit_to_size(np.asarray(a), size).astype(np.float32)
+        return np.ascontiguousarray((a[..., None] if a.ndim == 2 else a).transpose(2, 0, 1)[None])
+
+    return {"rgb": chw(rgb), "semantic": chw(semantic), "sparse": chw(sparse)}
+
+
+@dataclass
+class Calibration:
+    """The calibration frames of one engine: a cache ``key`` and the named inputs, made when needed."""
+
+    key: str
+    description: str
+    _make: Any = field(repr=False)
+    _feeds: list[dict[str, np.ndarray]] | None = field(default=None, repr=False)
+
+    def feeds(self) -> list[dict[str, np.ndarray]]:
+        """Every calibration frame as the graph's named float32 inputs."""
+        if self._feeds is None:
+            self._feeds = self._make()
+        return self._feeds  # type: ignore[return-value]
+
+
+def _synthetic(size: tuple[int, int], count: int) -> Calibration:
+    def make() -> list[dict[str, np.ndarray]]:
+        from semattnet.data.synthetic import make_frame
+
+        frames = (make_frame(size[0], size[1], seed=s) for s in range(count))
+        return [_feed(f.rgb, f.semantic, f.sparse, size) for f in frames]
+
+    what = f"synthetic scenes, seeds 0..{count - 1}, {size[0]}x{size[1]}"
+    return Calibration(hashlib.sha256(what.encode()).hexdigest()[:16], what, make)
+
+
+def _from_frames(frames: Sequence[Any], size: tuple[int, int], what: str) -> Calibration:
+    feeds = [_feed(f.rgb, f.semantic, f.sparse, size) for f in frames]
+    if not feeds:
+        raise InputError(f"calibration: {what} holds no frames; give at least one (or None for synthetic scenes)")
+    digest = hashlib.sha256()
+    for feed in feeds:
+        for name in sorted(feed):
+            digest.update(name.encode() + feed[name].tobytes())
+    return Calibration(digest.hexdigest()[:16], f"{len(feeds)} frames of {what}", lambda: feeds, feeds)
+
+
+def _source_of_folder(path: Path) -> Any:
+    from semattnet.data.sources import FolderSource, KittiSplitSource
+
+    if not path.is_dir():
+        raise InputError(f"calibration: {path} is not a folder (expected rgb/ + sparse/ subfolders or a KITTI root)")
+    if (path / "rgb").is_dir() and (path / "sparse").is_dir():
+        semantic = path / "semantic" if (path / "semantic").is_dir() else None
+        return FolderSource.pair(path / "rgb", path / "sparse", semantic)
+    return KittiSplitSource(path, "val_select")
+
+
+def resolve_calibration(
+    calibration: Any, size: tuple[int, int], count: int = DEFAULT_CALIBRATION_FRAMES
+) -> Calibration:
+    """The :class:`Calibration` of what the user gave (module docstring); at most ``count`` frames."""
+    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+        raise InputError(f"calibration_frames: expected a whole number >= 1, got {count!r}")
+    if calibration is None:
+        return _synthetic(size, count)
+    if isinstance(calibration, str | os.PathLike):
+        calibration = _source_of_folder(Path(calibration))
+    names = getattr(calibration, "names", None)
+    if names is not None and hasattr(calibration, "load"):  # a FrameSource: load only the frames used
+        frames = [calibration.load(n) for n in list(names)[:count]]
+        return _from_frames(frames, size, type(calibration).__name__)
+    if isinstance(calibration, Sequence) and all(hasattr(f, "rgb") and hasattr(f, "sparse") for f in calibration):
+        return _from_frames(list(calibration)[:count], size, "the given frames")
+    raise InputError(
+        "calibration: expected None, a FrameSource, a sequence of Frames or a folder path, "
+        f"got {type(calibration).__name__}"
+    )

@@ -1,0 +1,45 @@
+"""The CSPN++ propagation for CUDA: :func:`semattnet.models.refinement.propagate_refinement` through
+``torch.compile``.
+
+The fused C++ kernel serves float32 CPU inference only; on CUDA the eager path is the shifted
+form (one in-place multiply-add per tap and step: 2 x 3 x 6 steps x up to 49 taps, each a small
+kernel launch). Under ``torch.compile`` the same function takes its recorded form
+(:func:`semattnet.models.propagation.export.propagate_functional`, chosen by
+:func:`semattnet.models._tracing.is_tracing`), which Inductor fuses into a few Triton kernels.
+Compiled once per input size and iteration count (``dynamic=False``); on the CPU the same
+compilation works but takes minutes on 2 cores, so the tests check the recorded form through
+TorchScript tracing (:func:`traced_propagation`), which takes the same code path.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+
+import torch
+
+from semattnet.models.refinement import RefinementInputs, propagate_refinement
+
+__all__ = ["compiled_propagation", "traced_propagation"]
+
+Propagation = Callable[[RefinementInputs, int], tuple[torch.Tensor, torch.Tensor]]
+
+
+@functools.cache
+def compiled_propagation(mode: str | None = None) -> Propagation:
+    """``propagate_refinement`` compiled by Inductor (``mode``: e.g. ``"max-autotune-no-cudagraphs"``)."""
+    return torch.compile(propagate_refinement, dynamic=False, mode=mode)  # type: ignore[return-value]
+
+
+def traced_propagation(inputs: RefinementInputs, iterations: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The recorded form of ``propagate_refinement`` (what ``torch.compile`` compiles), run through
+    TorchScript tracing: the CPU-cheap check of the compiled path's code."""
+    flat = inputs.to_dict()
+    names = list(flat)
+
+    def run(*tensors: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return propagate_refinement(RefinementInputs.from_dict(dict(zip(names, tensors, strict=True))), iterations)
+
+    with torch.no_grad():
+        traced = torch.jit.trace(run, tuple(flat.values()), check_trace=False)
+        return traced(*flat.values())

@@ -1,0 +1,75 @@
+"""int8 OpenVINO IR by NNCF post-training quantisation (``optimize_for_inference(..., precision="int8")``).
+
+The float32 IR of the network (the cached export, without the CSPN++ propagation, which stays
+float32 in the fused kernel) is quantised once per calibration with ``nncf.quantize``: NNCF runs
+the calibration frames (:mod:`semattnet.inference.backends.calibration`) through it, sets the
+ranges of 8-bit weights (per channel, symmetric) and activations, and inserts FakeQuantize
+nodes, which OpenVINO's CPU plugin executes as int8 convolutions (VNNI where the CPU has it).
+The quantised IR is cached beside the float32 one, under ``int8-<calibration key>/``; writes are
+staged in a temporary folder and renamed into place, so a killed run leaves no partial IR.
+
+``KEEP_FLOAT``: the layers left in float32 (NNCF's ``ignored_scope``), chosen by measurement on a
+trained checkpoint (``benchmarks/bench_int8_accuracy.py``): the stems, whose inputs are raw
+sparse depth in metres (an 8-bit grid over 0..80 m would be 0.3 m coarse), and the refinement
+heads, whose affinities and masks the propagation multiplies 36 times.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from semattnet.inference.backends._base import import_backend
+from semattnet.inference.backends.calibration import Calibration
+
+__all__ = ["KEEP_FLOAT", "quantized_ir"]
+
+#: Regular expressions over the IR's node names of the layers kept in float32 (module docstring).
+KEEP_FLOAT: tuple[str, ...] = (
+    r".*conv_init.*",  # the branch stems: raw sparse depth (and colours) in
+    r".*iter_guide_layer.*",  # the affinity heads of both propagation stages
+    r".*kernel_conf_layer.*",
+    r".*mask_layer.*",
+)
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def quantized_ir(ov: Any, core: Any, xml: Path, calibration: Calibration, log=None) -> Path:  # type: ignore[no-untyped-def]
+    """``<folder of xml>/int8-<calibration.key>/model.xml``: the IR ``xml`` quantised on ``calibration``
+    (computed once; later calls return the cached file)."""
+    target = xml.parent / f"int8-{calibration.key}"
+    out = target / "model.xml"
+    if out.is_file():
+        return out
+    nncf = import_backend("nncf", "openvino")
+    if log is not None:
+        log(f"quantising to int8 on {calibration.description} (once; cached in {target}) ...")
+    model = core.read_model(str(xml))
+    names = [next(n for n in port.get_names() if n in ("rgb", "semantic", "sparse")) for port in model.inputs]
+    feeds = [{n: feed[n] for n in names} for feed in calibration.feeds()]
+    quantized = nncf.quantize(
+        model,
+        nncf.Dataset(feeds),
+        preset=nncf.QuantizationPreset.MIXED,  # asymmetric activations: ReLU outputs and raw inputs are not centred
+        subset_size=len(feeds),
+        ignored_scope=nncf.IgnoredScope(patterns=list(KEEP_FLOAT), validate=False),
+    )
+    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    try:
+        ov.save_model(quantized, str(staging / "model.xml"), compress_to_fp16=False)
+        staging.chmod(0o777 & ~_umask())  # a plain folder's mode, not mkdtemp's 0o700
+        os.replace(staging, target)  # another process may have finished first: then keep its copy
+    except OSError:
+        if not out.is_file():
+            raise
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return out

@@ -1,0 +1,83 @@
+"""The authors' training step, kept as the naive reference of ``benchmarks/bench_training.py``.
+
+Rebuilt from their recipe (not their code): plain Adam (the single-tensor loop: no ``foreach``,
+no ``fused``), the model with its BatchNorm layers as they are and their pad-and-sum
+propagation under autograd (``propagation_impl="naive"``), a fresh ``zero_grad()`` that zeroes
+the gradients in place (``set_to_none=False``, PyTorch < 2.0's default, which their code ran),
+and every tensor of the batch copied to the device each step (``.to(device)``: a copy on CUDA). Same model,
+loss (eq. 14, :func:`~semattnet.training.losses.semattnet_loss`) and batch as ours
+(:func:`our_step`, what :class:`~semattnet.training.trainer.Trainer` runs).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+import torch
+from torch import nn
+
+from semattnet._utils.device import autocast
+from semattnet.training.losses import semattnet_loss
+
+__all__ = ["authors_adam", "authors_step", "make_adam", "our_step"]
+
+_INPUTS = ("rgb", "semantic", "sparse")
+
+
+def authors_adam(params: Iterable[Any], lr: float, betas: tuple[float, float] = (0.9, 0.99),
+                 weight_decay: float = 1e-6) -> torch.optim.Adam:  # fmt: skip
+    """The authors' optimiser: ``torch.optim.Adam`` in its single-tensor form."""
+    return torch.optim.Adam(params, lr=lr, betas=betas, weight_decay=weight_decay, foreach=False, fused=False)
+
+
+def make_adam(params: Iterable[Any], device: torch.device, **kwargs: Any) -> torch.optim.Adam:
+    """Our optimiser: the same Adam, fused (one kernel over all parameters) where PyTorch has it for
+    ``device`` (CUDA, and the CPU since PyTorch 2.4), else ``foreach`` (multi-tensor)."""
+    params = list(params)
+    if device.type in ("cuda", "cpu"):
+        try:
+            return torch.optim.Adam(params, fused=True, **kwargs)
+        except (RuntimeError, TypeError):  # an old PyTorch without the fused kernel for this device
+            pass
+    return torch.optim.Adam(params, foreach=True, **kwargs)
+
+
+def authors_step(model: nn.Module, optimizer: torch.optim.Optimizer, batch: Mapping[str, torch.Tensor],
+                 device: torch.device, branch_weight: float = 0.0) -> float:  # fmt: skip
+    """One step as the authors train: batch copied to the device, naive propagation, ``zero_grad()`` in place."""
+    batch = {k: v.to(device) for k, v in batch.items()}
+    impl = getattr(model, "propagation_impl", None)
+    if impl is not None:
+        model.propagation_impl = "naive"
+    try:
+        out = model(**{k: batch[k] for k in _INPUTS})
+        loss = semattnet_loss(out, batch["gt"], branch_weight)
+        optimizer.zero_grad(set_to_none=False)
+        loss.backward()
+        optimizer.step()
+    finally:
+        if impl is not None:
+            model.propagation_impl = impl
+    return loss.item()
+
+
+def our_step(model: nn.Module, optimizer: torch.optim.Optimizer, batch: Mapping[str, torch.Tensor],
+             device: torch.device, branch_weight: float = 0.0, amp: str = "none",
+             scaler: torch.amp.GradScaler | None = None) -> torch.Tensor:  # fmt: skip
+    """One step of our trainer: the batch moved (not copied) to the device, the shifted propagation
+    with its hand-written backward, gradients set to ``None``, AMP-aware; returns the loss tensor."""
+    x = {k: batch[k].to(device, non_blocking=True) for k in _INPUTS}
+    gt = batch["gt"].to(device, non_blocking=True)
+    with autocast(device, amp):
+        out = model(**x)
+    loss = semattnet_loss(out.map(lambda t: t.float()), gt, branch_weight)
+    optimizer.zero_grad(set_to_none=True)
+    if scaler is None:
+        loss.backward()
+        optimizer.step()
+    else:
+        scaler.scale(loss).backward()
+        scaler.step(optimizer)
+        scaler.update()
+    return loss
