@@ -188,7 +188,7 @@ def _per_image(preds: Mapping[str, np.ndarray], held: HeldOut) -> dict[str, dict
     for n, pred in preds.items():
         m.update(torch.from_numpy(pred)[None, None], torch.from_numpy(held.gts[n])[None, None], names=[n])
     keys = {k: (f"{k}_{'mm' if unit == 'mm' else 'per_km'}", scale) for k, (_, unit, scale) in LEADERBOARD.items()}
-    return {str(row["name"]): {key: float(row[k]) * scale for k, (key, scale) in keys.items()}  # type: ignore[arg-type]
+    return {str(row["name"]): {key: float(row[k]) * scale for k, (key, scale) in keys.items()}
             for row in m.per_image}  # fmt: skip
 
 
@@ -214,7 +214,7 @@ class _Run:
         self.log(f"{name} ({_variant(name)[0]}), seed {seed} ...")
         t0 = time.perf_counter()
         metrics, per_image = self.train_and_score(name, seed)
-        record = {"schema": _RESULT_SCHEMA, "protocol": self.settings.protocol(),
+        record: dict[str, Any] = {"schema": _RESULT_SCHEMA, "protocol": self.settings.protocol(),
                   **{k: {g: metrics[g][k] for g in GROUPS} for k in ("rmse_mm", "mae_mm")},
                   "metrics": metrics, "per_image": per_image, "seconds": time.perf_counter() - t0}  # fmt: skip
         with atomic_path(path, suffix=".json") as tmp:

@@ -223,8 +223,8 @@ def _bench_inference(
 
 
 def _inference_candidates(
-    net: nn.Module,
-    fast_net: nn.Module,
+    net: Any,  # SemAttNet (its propagation_impl / backbone attributes, unknown to nn.Module's type)
+    fast_net: Any,
     x: dict[str, torch.Tensor],
     parts: tuple[str, ...],
     fast_dtype: torch.dtype | None,
@@ -240,7 +240,7 @@ def _inference_candidates(
             net.propagation_impl = "auto"
 
     def fast_full() -> Any:
-        with torch.autocast(dev.type, dtype=fast_dtype):  # type: ignore[arg-type]
+        with torch.autocast(dev.type, dtype=fast_dtype):
             return fast_net(**x)
 
     candidates: dict[str, Callable[[], Any]] = {}
@@ -263,7 +263,7 @@ def _backend_candidates(
 ) -> dict[str, Callable[[], Any]]:
     """Every installed inference backend at this size (float32; also bf16 where the CPU has it natively;
     int8 for OpenVINO with nncf installed, calibrated on synthetic scenes: a row, never a default)."""
-    size = tuple(x["rgb"].shape[-2:])
+    size = (int(x["rgb"].shape[-2]), int(x["rgb"].shape[-1]))
     runs: dict[str, Callable[[], Any]] = {}
     for backend in available_backends():
         usable = dev.type == "cuda" if backend == "tensorrt" else backend == "torch" or dev.type == "cpu"
@@ -315,7 +315,7 @@ def _bench_training(bench: _Bench, train_size: tuple[int, int], model: nn.Module
 
 
 def _time_training_step(
-    bench: _Bench, tnet: nn.Module, impl: str, checkpointing: bool, xt: dict[str, torch.Tensor], gt: torch.Tensor
+    bench: _Bench, tnet: Any, impl: str, checkpointing: bool, xt: dict[str, torch.Tensor], gt: torch.Tensor
 ) -> tuple[float, float]:
     """Median seconds and peak MiB of a training step of ``tnet`` with that propagation and checkpointing."""
     tnet.propagation_impl = impl

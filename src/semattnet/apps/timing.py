@@ -7,7 +7,7 @@ import contextlib
 import statistics
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import torch
 from torch import nn
@@ -81,14 +81,14 @@ def count_macs(model: nn.Module, inputs: dict[str, torch.Tensor]) -> float:
     total = [0]
 
     def conv_hook(m: nn.Module, args: tuple[torch.Tensor, ...], out: torch.Tensor) -> None:
-        w = m.weight
+        w = cast(torch.Tensor, m.weight)
         if isinstance(m, nn.ConvTranspose2d):  # every input pixel meets the whole kernel
             total[0] += args[0].numel() * w.shape[1] * w.shape[2] * w.shape[3]
         else:
             total[0] += out.numel() * w.shape[1] * w.shape[2] * w.shape[3]
 
     def linear_hook(m: nn.Module, args: tuple[torch.Tensor, ...], out: torch.Tensor) -> None:
-        total[0] += out.numel() * m.weight.shape[1]
+        total[0] += out.numel() * cast(torch.Tensor, m.weight).shape[1]
 
     handles = [
         m.register_forward_hook(conv_hook) for m in model.modules() if isinstance(m, nn.Conv2d | nn.ConvTranspose2d)

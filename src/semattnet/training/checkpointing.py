@@ -28,13 +28,20 @@ __all__ = ["BRANCH_METHODS", "set_activation_checkpointing"]
 BRANCH_METHODS: tuple[str, ...] = ("_color_guided", "_semantic_guided", "_depth_guided")
 
 
+def _count(m: nn.Module) -> torch.Tensor:
+    """A tracking BatchNorm's batch counter (a tensor whenever ``track_running_stats`` is on)."""
+    count = m.num_batches_tracked
+    assert isinstance(count, torch.Tensor)
+    return count
+
+
 @contextlib.contextmanager
 def _frozen_running_stats(module: nn.Module) -> Iterator[None]:
     """BatchNorm as in the forward, but the running statistics left as they are: momentum 0 (the
     update ``(1 - 0) * running + 0 * batch`` is exact) and the batch counter restored. (Turning
     ``track_running_stats`` off would change what autograd saves, which checkpointing refuses.)"""
     norms = [m for m in module.modules() if isinstance(m, nn.BatchNorm2d | nn.SyncBatchNorm) and m.track_running_stats]
-    saved = [(m.momentum, m.num_batches_tracked.clone()) for m in norms]
+    saved = [(m.momentum, _count(m).clone()) for m in norms]
     for m in norms:
         m.momentum = 0.0
     try:
@@ -43,7 +50,7 @@ def _frozen_running_stats(module: nn.Module) -> Iterator[None]:
         with torch.no_grad():
             for m, (momentum, count) in zip(norms, saved, strict=True):
                 m.momentum = momentum
-                m.num_batches_tracked.copy_(count)
+                _count(m).copy_(count)
 
 
 class _Checkpointed:

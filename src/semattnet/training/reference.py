@@ -43,7 +43,7 @@ def make_adam(params: Iterable[Any], device: torch.device, **kwargs: Any) -> tor
     return torch.optim.Adam(params, foreach=True, **kwargs)
 
 
-def authors_step(model: nn.Module, optimizer: torch.optim.Optimizer, batch: Mapping[str, torch.Tensor],
+def authors_step(model: Any, optimizer: torch.optim.Optimizer, batch: Mapping[str, torch.Tensor],
                  device: torch.device, branch_weight: float = 0.0) -> float:  # fmt: skip
     """One step as the authors train: batch copied to the device, naive propagation, ``zero_grad()`` in place."""
     batch = {k: v.to(device) for k, v in batch.items()}

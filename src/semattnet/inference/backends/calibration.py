@@ -73,7 +73,7 @@ class Calibration:
         """Every calibration frame as the graph's named float32 inputs."""
         if self._feeds is None:
             self._feeds = self._make()
-        return self._feeds  # type: ignore[return-value]
+        return self._feeds
 
 
 def _synthetic(size: tuple[int, int], count: int) -> Calibration:

@@ -28,7 +28,7 @@ Propagation = Callable[[RefinementInputs, int], tuple[torch.Tensor, torch.Tensor
 @functools.cache
 def compiled_propagation(mode: str | None = None) -> Propagation:
     """``propagate_refinement`` compiled by Inductor (``mode``: e.g. ``"max-autotune-no-cudagraphs"``)."""
-    return torch.compile(propagate_refinement, dynamic=False, mode=mode)  # type: ignore[return-value]
+    return torch.compile(propagate_refinement, dynamic=False, mode=mode)
 
 
 def traced_propagation(inputs: RefinementInputs, iterations: int) -> tuple[torch.Tensor, torch.Tensor]:

@@ -42,7 +42,7 @@ def _umask() -> int:
     return mask
 
 
-def quantized_ir(ov: Any, core: Any, xml: Path, calibration: Calibration, log=None) -> Path:  # type: ignore[no-untyped-def]
+def quantized_ir(ov: Any, core: Any, xml: Path, calibration: Calibration, log=None) -> Path:
     """``<folder of xml>/int8-<calibration.key>/model.xml``: the IR ``xml`` quantised on ``calibration``
     (computed once; later calls return the cached file)."""
     target = xml.parent / f"int8-{calibration.key}"

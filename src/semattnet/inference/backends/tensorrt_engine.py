@@ -9,6 +9,8 @@ TensorRT pick float16 kernels for the network. Not measured on a GPU in this pro
 
 from __future__ import annotations
 
+from typing import Any
+
 import torch
 from torch import nn
 
@@ -21,7 +23,7 @@ from semattnet.models.outputs import DepthCompletionOutput
 __all__ = ["TensorRTEngine", "network_outputs"]
 
 
-def network_outputs(net: nn.Module, rgb: torch.Tensor, semantic: torch.Tensor | None,
+def network_outputs(net: Any, rgb: torch.Tensor, semantic: torch.Tensor | None,
                     sparse: torch.Tensor) -> dict[str, torch.Tensor]:  # fmt: skip
     """The network part's outputs by name (the backbone's maps and the ``refinement.*`` heads)."""
     out, heads = net.forward_network(rgb=rgb, semantic=semantic, sparse=sparse)

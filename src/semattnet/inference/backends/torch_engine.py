@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 from contextlib import nullcontext
+from typing import Any
 
 import torch
 from torch import nn
@@ -34,7 +35,7 @@ class TorchEngine(InferenceEngine):
     def __init__(self, model: nn.Module, precision: str = "f32", needs_semantic: bool = True,
                  inplace: bool = False, compile_propagation: bool | None = None) -> None:  # fmt: skip
         super().__init__(None, precision, needs_semantic)
-        self.net = fold_batchnorm(model, inplace=inplace).eval()
+        self.net: Any = fold_batchnorm(model, inplace=inplace).eval()  # SemAttNet(Backbone): forward_network, config
         on_cuda = any(p.is_cuda for p in self.net.parameters())
         refines = hasattr(self.net, "forward_network")
         self.compile_propagation = refines and (on_cuda if compile_propagation is None else compile_propagation)
