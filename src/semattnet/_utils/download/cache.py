@@ -127,10 +127,12 @@ def update_pins(root: Path, key: str, record: dict[str, Any] | None) -> None:
             tmp.write_text(json.dumps(pins, indent=2, sort_keys=True) + "\n")
 
 
-def pin_record(path: Path, sha: str, origin: str, trust: str) -> dict[str, Any]:
-    """The pin of ``path``: sha256, size, mtime, origin and trust (``given``, ``first-use``, ``pinned``, ...)."""
+def pin_record(path: Path, sha: str, origin: str, trust: str, written: bool = False) -> dict[str, Any]:
+    """The pin of ``path``: sha256, size, mtime, origin, trust (``given``, ``first-use``, ``pinned``, ...) and
+    ``written`` (this library wrote the file and hashed it as it wrote it)."""
     st = path.stat()
     return {
+        "written": written,
         "sha256": sha,
         "size": st.st_size,
         "mtime_ns": st.st_mtime_ns,
@@ -143,8 +145,10 @@ def pin_record(path: Path, sha: str, origin: str, trust: str) -> dict[str, Any]:
 def verify_cached(root: Path, path: Path, expected: str | None, origin: str = "", *, announce: bool = True) -> str:
     """Check a cached file against ``expected`` or its pin and return its sha256.
 
-    The hash is recomputed unless size and modification time equal the recorded ones. A file
-    without any record (e.g. placed by hand for offline use) is pinned now.
+    The hash is recomputed on every call, unless this library wrote the file itself and recorded its
+    digest then (``written``) and its size and modification time are still the recorded ones: a
+    file placed or changed by anyone else is hashed again. A file without any record (e.g. placed by
+    hand for offline use) is pinned now.
 
     Raises:
         ChecksumError: the file does not match.
@@ -152,7 +156,7 @@ def verify_cached(root: Path, path: Path, expected: str | None, origin: str = ""
     key = cache_key(root, path)
     rec = read_pins(root).get(key)
     st = path.stat()
-    if rec and rec.get("size") == st.st_size and rec.get("mtime_ns") == st.st_mtime_ns:
+    if rec and rec.get("written") is True and rec.get("size") == st.st_size and rec.get("mtime_ns") == st.st_mtime_ns:
         if expected is None or rec.get("sha256") == expected:
             return str(rec["sha256"])
     digest = sha256_file(path)

@@ -129,6 +129,15 @@ def fetch_target(root: Path, t: Target, progress: bool) -> tuple[Path, str]:
         raise cls(f"could not fetch {t.label}: " + " | ".join(failures))
 
 
+def refuse_web_page(path: Path, url: str) -> None:
+    """A server that answers 200 with an HTML page (a login wall, a quota notice, an error page) sent no
+    weights and no archive: the download is refused and never pinned."""
+    with open(path, "rb") as f:
+        head = f.read(512).lstrip().lower()
+    if head.startswith((b"<!doctype html", b"<html", b"<head", b"<?xml")):
+        raise DownloadError(f"{url}: the server sent a web page, not the file (not pinned; check the URL or mirror)")
+
+
 def _stale(root: Path, dest: Path, expected: str | None) -> bool:
     try:
         verify_cached(root, dest, expected)
@@ -154,6 +163,7 @@ def _download_verified(root: Path, url: str, t: Target, progress: bool) -> str:
         size = tmp.stat().st_size
         if t.size_bytes is not None and size != t.size_bytes:
             raise ChecksumError(f"{t.dest.name}: got {size} bytes, expected {t.size_bytes} (truncated download?)")
+        refuse_web_page(tmp, url)
         digest = sha256_file(tmp)
         key = cache_key(root, t.dest)
         pinned = read_pins(root).get(key, {}).get("sha256")
@@ -171,7 +181,7 @@ def _download_verified(root: Path, url: str, t: Target, progress: bool) -> str:
     finally:
         remove_empty_dirs(staging, root)
     trust = "given" if t.sha256 else ("first-use" if not pinned else "pinned")
-    update_pins(root, key, pin_record(t.dest, digest, url, trust))
+    update_pins(root, key, pin_record(t.dest, digest, url, trust, written=True))
     if not want:
         announce_pin(t.dest, digest, root)
     return digest
