@@ -14,6 +14,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+from semattnet.training.losses import LOSSES
+
 __all__ = ["STAGES", "TrainConfig"]
 
 Stage = Literal["backbone", "refine-init", "full"]
@@ -57,6 +59,8 @@ class TrainConfig:
         save_every: also checkpoint every N optimiser steps (0 = at epoch ends only).
         keep_last: periodic checkpoints kept besides ``last.pt`` and ``best.pt``.
         max_steps: stop after N steps in total (0 = run all epochs).
+        loss: ``l2`` (the paper's masked L2) or ``l1+l2`` (masked L1 + L2 per term; not the paper's,
+            used by the demo's reference checkpoint).
     """
 
     stage: Stage = "backbone"
@@ -96,6 +100,7 @@ class TrainConfig:
     max_steps: int = 0
     log_every: int = 10
     device: str = "auto"
+    loss: str = "l2"
 
     def __post_init__(self) -> None:
         if self.stage not in STAGES:
@@ -151,6 +156,7 @@ class TrainConfig:
         )
         check("branch_weights", all(finite(w) and w >= 0 for w in self.branch_weights), "finite numbers >= 0")
         check("sync_bn", isinstance(self.sync_bn, bool), "true or false")
+        check("loss", self.loss in LOSSES, f"one of {LOSSES}")
 
     def branch_weight(self, epoch: int) -> float:
         if self.stage != "backbone" or not self.branch_weights:

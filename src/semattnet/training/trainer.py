@@ -355,7 +355,7 @@ class Trainer:
         gt = batch["gt"].to(self.device, non_blocking=True)
         with autocast(self.device, self.cfg.amp):
             out = self.model(**x)
-        loss = semattnet_loss(out.map(lambda t: t.float()), gt, branch_weight)
+        loss = semattnet_loss(out.map(lambda t: t.float()), gt, branch_weight, self.cfg.loss)
         self.optimizer.zero_grad(set_to_none=True)
         self.scaler.scale(loss).backward()
         self.scaler.step(self.optimizer)
