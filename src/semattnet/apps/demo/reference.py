@@ -263,6 +263,8 @@ def recipe_notes(recipe: dict[str, Any]) -> list[str]:
         f"authors' stage 2 gives the head the larger rate), {r['full_steps']} full-model steps (backbone at a "
         "quarter of the base rate).",
         "Reference deviations from the paper: the loss is L1 + L2 per term (the paper's is L2 alone, which weights "
-        "far pixels most), cosine schedules, a few thousand scenes' worth of steps instead of 160 epochs of KITTI, "
-        f"and the weights ship quantised ({REFERENCE_STORAGE}).",
+        "far pixels most), cosine schedules instead of ReduceLROnPlateau, "
+        f"{r['backbone_steps'] + r['refine_init_steps'] + r['full_steps']} steps of batch {r['batch_size']} on "
+        f"{r['size'][0]}x{r['size'][1]} synthetic scenes instead of 60 + 5 + 95 epochs of 352x1216 KITTI crops, "
+        f"width {r['width']:g}, and the weights ship quantised ({REFERENCE_STORAGE}).",
     ]
