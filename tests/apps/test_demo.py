@@ -29,7 +29,7 @@ def test_short_demo_writes_report(demo_run) -> None:  # type: ignore[no-untyped-
     result, lines = demo_run
     out = result.out_dir
     assert lines[-1].startswith("done in") and str(result.report_html.resolve()) in lines[-1]
-    assert set(result.metrics) == {"sparse", "classical", "semattnet", "two_branch"}
+    assert set(result.metrics) == {"sparse", "classical", "semattnet", "two_branch", "reference"}
     for method, groups in result.metrics.items():
         assert set(groups) == {"all", "shadowed", "unshadowed"}, method
         assert groups["all"]["images"] == 4 and groups["shadowed"]["images"] == 2
@@ -43,6 +43,7 @@ def test_short_demo_writes_report(demo_run) -> None:  # type: ignore[no-untyped-
     assert "| Classical completion |" in md and "RMSE shadowed [mm]" in md
     images = [line.split("](")[1].rstrip(")") for line in md.splitlines() if line.startswith("![")]
     assert len(images) == 8  # 2 comparisons, 2 branch panels, 4 training curves
+    assert "Reference checkpoint (shipped, demo_reference.safetensors.gz)" in md and "Live recipe" in md
     for rel in images:
         assert (out / rel).is_file(), rel
     for run in ("semattnet", "two_branch"):
@@ -107,7 +108,7 @@ def test_results_json_schema(demo_run) -> None:  # type: ignore[no-untyped-def]
     assert result.results_json == result.out_dir / "results.json"
     assert doc["schema"] == "semattnet.demo.results/1" and doc["seeds"] == [0, 1]
     assert doc["units"] == {"rmse": "mm", "mae": "mm", "irmse": "1/km", "imae": "1/km"}
-    assert set(doc["methods"]) == {"sparse", "classical", "semattnet", "two_branch"}
+    assert set(doc["methods"]) == {"sparse", "classical", "semattnet", "two_branch", "reference"}
     for method, rec in doc["methods"].items():
         assert isinstance(rec["label"], str)
         assert set(rec["per_seed"]) == {"0", "1"}
@@ -129,7 +130,15 @@ def test_results_json_schema(demo_run) -> None:  # type: ignore[no-untyped-def]
     wins = doc["comparisons"]["semattnet_better_than"]
     assert set(wins) == {"classical", "two_branch"} and set(wins["classical"]) == {"rmse", "mae", "irmse", "imae"}
     assert wins["classical"]["mae"] == (sem["all"]["mae"] < doc["methods"]["classical"]["all"]["mae"])
-    assert len(doc["comparisons"]["verdicts"]) == 2
+    assert len(doc["comparisons"]["verdicts"]) == 4  # SemAttNet and the reference, each against two
+    ref, methods = doc["reference"], doc["methods"]
+    assert ref["file"] == "demo_reference.safetensors.gz" and ref["bytes"] < 5_000_000 and len(ref["sha256"]) == 64
+    assert "--train-reference" in ref["command"] and ref["recipe"]["loss"] == "l1+l2"
+    assert methods["reference"]["per_seed"]["0"] == methods["reference"]["per_seed"]["1"]  # not trained here
+    assert doc["comparisons"]["reference_better_than"]["classical"]["rmse"] == (
+        methods["reference"]["all"]["rmse"] < methods["classical"]["all"]["rmse"]
+    )
+    assert doc["recipe"]["live"] and doc["recipe"]["reference"]
 
 
 def test_report_shows_every_seed_and_the_verdicts(demo_run) -> None:  # type: ignore[no-untyped-def]
@@ -139,6 +148,8 @@ def test_report_shows_every_seed_and_the_verdicts(demo_run) -> None:  # type: ig
     for seed in (0, 1):
         assert f"|   SemAttNet, seed {seed} |" in md and f"|   Two-branch ablation, seed {seed} |" in md
     assert "SemAttNet (mean of seeds 0, 1) vs Classical completion: better on" in md
+    assert "SemAttNet reference checkpoint (shipped) vs Two-branch ablation (CG + DG, SAMMAFB, CSPN++) (mean of " in md
+    assert "| SemAttNet reference checkpoint (shipped, trained once for longer; not trained by this run) |" in md
 
 
 def test_demo_viewer_in_chromium(demo_run) -> None:  # type: ignore[no-untyped-def]
@@ -159,7 +170,8 @@ def test_demo_viewer_in_chromium(demo_run) -> None:  # type: ignore[no-untyped-d
         wait_ready(page)
         values = hover_pixel(page, int(u), int(v))
         assert values["gt"] == pytest.approx(gt[v, u], abs=0.01)
-        assert {"lidar", "depth_semattnet", "depth_two_branch", "depth_classical", "out_color_conf"} <= set(values)
+        assert {"lidar", "depth_semattnet", "depth_two_branch", "depth_classical", "depth_reference",
+                "out_color_conf"} <= set(values)  # fmt: skip
         layers = page.eval_on_selector_all("#layers input", "xs => xs.map((x) => x.value)")
         assert {"rgb", "semantic", "out_color_depth", "out_fused_depth", "error_semattnet"} <= set(layers)
         counts = page.evaluate("document.getElementById('cloud').data.map((t) => t.x.length)")
@@ -170,27 +182,27 @@ def test_demo_viewer_in_chromium(demo_run) -> None:  # type: ignore[no-untyped-d
 def test_step_plan_equal_steps_or_equal_time(monkeypatch) -> None:  # type: ignore[no-untyped-def]
     """Equal steps (the paper's protocol): both models get the same counts, filling the budget together;
     equal time: each model gets half the budget, so the cheaper one takes more steps."""
-    from semattnet.apps import demo
+    from semattnet.apps.demo import recipe as demo
 
     times = {3: (0.25, 0.5), 2: (0.125, 0.25)}  # seconds per (backbone, full) step: three- and two-branch
-    monkeypatch.setattr(demo, "_step_times", lambda s, device, overrides: times[overrides["branches"]])
-    monkeypatch.setattr(demo, "_OVERHEAD", 1.0)
+    monkeypatch.setattr(demo, "step_times", lambda s, device, overrides: times[overrides["branches"]])
+    monkeypatch.setattr(demo, "OVERHEAD", 1.0)
     s = demo.DemoSettings(minutes=1.0, backbone_share=0.5, seeds=(0,), steps=None)
-    plan = demo._step_plan(s, torch.device("cpu"))
+    plan = demo.step_plan(s, torch.device("cpu"))
     assert plan["semattnet"] == plan["two_branch"] == (80, 40)  # 30 s / (0.25 + 0.125), 30 s / (0.5 + 0.25)
     spent = sum(
         n_bb * times[b][0] + n_full * times[b][1] for (n_bb, n_full), b in zip(plan.values(), (3, 2), strict=True)
     )
     assert spent == pytest.approx(60.0)
-    plan = demo._step_plan(
+    plan = demo.step_plan(
         demo.DemoSettings(minutes=1.0, backbone_share=0.5, equal_steps=False, seeds=(0,), steps=None),
         torch.device("cpu"),
     )
     assert plan == {"semattnet": (60, 30), "two_branch": (120, 60)}
-    two_seeds = demo._step_plan(demo.DemoSettings(minutes=1.0, backbone_share=0.5, steps=None), torch.device("cpu"))
+    two_seeds = demo.step_plan(demo.DemoSettings(minutes=1.0, backbone_share=0.5, steps=None), torch.device("cpu"))
     assert two_seeds["semattnet"] == (40, 20)  # the default trains two seeds; the budget covers both
-    monkeypatch.setattr(demo, "_OVERHEAD", 2.0)  # real steps cost more than bare ones: fewer fit
-    assert demo._step_plan(demo.DemoSettings(minutes=1.0, backbone_share=0.5, steps=None), torch.device("cpu"))[
+    monkeypatch.setattr(demo, "OVERHEAD", 2.0)  # real steps cost more than bare ones: fewer fit
+    assert demo.step_plan(demo.DemoSettings(minutes=1.0, backbone_share=0.5, steps=None), torch.device("cpu"))[
         "semattnet"
     ] == (
         20,

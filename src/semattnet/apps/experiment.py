@@ -132,39 +132,52 @@ def train_variant(
     device: torch.device,
     refine: bool = True,
     log: Callable[[str], None] = print,
+    refine_init_steps: int = 0,
+    head_lr_factor: float = 1.0,
+    loss: str = "l2",
     **model: Any,
 ) -> Path:
     """Train one variant (``model``: ``branches``, ``fusion``) and return its final checkpoint.
 
     Backbone stage for ``backbone_steps`` (heads started at street scale, cosine schedule), then,
-    if ``refine``, the full model for ``full_steps`` (backbone at lr / 4, CSPN++ heads at lr).
+    if ``refine``: the refinement initialisation for ``refine_init_steps`` when > 0 (the authors'
+    stage 2a: backbone frozen, CSPN++ head at ``lr * head_lr_factor``), then the full model for
+    ``full_steps`` (backbone at lr / 4, CSPN++ head at ``lr * head_lr_factor``). ``loss``: see
+    :func:`~semattnet.training.losses.semattnet_loss`.
     """
     common: dict[str, Any] = {
         "data": str(data), "width": width, "batch_size": batch_size, "crop": size, "workers": 0,
         "epochs": 10**6, "lr_schedule": "cosine", "val_split": "val_select", "seed": seed,
-        "device": str(device), "log_every": 1, **model,
+        "device": str(device), "log_every": 1, "loss": loss, **model,
     }  # fmt: skip
     train(TrainConfig(stage="backbone", out=str(run_dir / "backbone"), lr=lr, max_steps=backbone_steps,
                       depth_head_init=(10.0, 15.0), **common), log=log)  # fmt: skip
     last = run_dir / "backbone" / "checkpoints" / "last.pt"
     if not refine:
         return last
-    train(TrainConfig(stage="full", out=str(run_dir / "full"), init=str(last), lr=lr / 4, head_lr=lr,
-                      max_steps=full_steps, **common), log=log)  # fmt: skip
+    if refine_init_steps > 0:
+        train(TrainConfig(stage="refine-init", out=str(run_dir / "refine_init"), init=str(last),
+                          lr=lr * head_lr_factor, max_steps=refine_init_steps, **common), log=log)  # fmt: skip
+        last = run_dir / "refine_init" / "checkpoints" / "last.pt"
+    train(TrainConfig(stage="full", out=str(run_dir / "full"), init=str(last), lr=lr / 4,
+                      head_lr=lr * head_lr_factor, max_steps=full_steps, **common), log=log)  # fmt: skip
     return run_dir / "full" / "checkpoints" / "last.pt"
 
 
 def complete_held_out(
-    checkpoint: Path,
+    checkpoint: Path | torch.nn.Module,
     held: HeldOut,
     device: torch.device,
     semantic: Callable[[torch.Tensor], torch.Tensor] | None = None,
 ) -> dict[str, dict[str, np.ndarray]]:
-    """Every output of the checkpoint's model on every held-out scene: name -> output -> (H, W).
+    """Every output of the checkpoint's model (or of a model) on every held-out scene: name -> output -> (H, W).
 
     ``semantic`` optionally replaces each scene's semantic map (e.g. the no-segmenter fallback).
     """
-    completer = DepthCompleter.from_checkpoint(checkpoint, device=device)
+    if isinstance(checkpoint, torch.nn.Module):
+        completer = DepthCompleter(checkpoint, device=device)
+    else:
+        completer = DepthCompleter.from_checkpoint(checkpoint, device=device)
     out = {}
     for n, smp in zip(held.names, held.samples, strict=True):
         sem = smp["semantic"][None] if semantic is None else semantic(smp["semantic"][None])

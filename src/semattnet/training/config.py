@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from semattnet._errors import InputError
+from semattnet.training.losses import LOSSES
 
 __all__ = ["STAGES", "TrainConfig"]
 
@@ -64,6 +65,8 @@ class TrainConfig:
         save_every: also checkpoint every N optimiser steps (0 = at epoch ends only).
         keep_last: periodic checkpoints kept besides ``last.pt`` and ``best.pt``.
         max_steps: stop after N steps in total (0 = run all epochs).
+        loss: ``l2`` (the paper's masked L2) or ``l1+l2`` (masked L1 + L2 per term; not the paper's,
+            used by the demo's reference checkpoint).
     """
 
     stage: Stage = "backbone"
@@ -105,6 +108,7 @@ class TrainConfig:
     max_steps: int = 0
     log_every: int = 10
     device: str = "auto"
+    loss: str = "l2"
 
     def __post_init__(self) -> None:
         if self.stage not in STAGES:
@@ -164,6 +168,7 @@ class TrainConfig:
         check("branch_weights", all(finite(w) and w >= 0 for w in self.branch_weights), "finite numbers >= 0")
         for name in ("sync_bn", "activation_checkpointing"):
             check(name, isinstance(getattr(self, name), bool), "true or false")
+        check("loss", self.loss in LOSSES, f"one of {LOSSES}")
 
     def branch_weight(self, epoch: int) -> float:
         if self.stage != "backbone" or not self.branch_weights:

@@ -64,20 +64,20 @@ def authors_step(model: Any, optimizer: torch.optim.Optimizer, batch: Mapping[st
 
 def our_step(model: nn.Module, optimizer: torch.optim.Optimizer, batch: Mapping[str, torch.Tensor],
              device: torch.device, branch_weight: float = 0.0, amp: str = "none",
-             scaler: torch.amp.GradScaler | None = None) -> torch.Tensor:  # fmt: skip
+             scaler: torch.amp.GradScaler | None = None, loss: str = "l2") -> torch.Tensor:  # fmt: skip
     """One step of our trainer: the batch moved (not copied) to the device, the shifted propagation
     with its hand-written backward, gradients set to ``None``, AMP-aware; returns the loss tensor."""
     x = {k: batch[k].to(device, non_blocking=True) for k in _INPUTS}
     gt = batch["gt"].to(device, non_blocking=True)
     with autocast(device, amp):
         out = model(**x)
-    loss = semattnet_loss(out.map(lambda t: t.float()), gt, branch_weight)
+    loss_value = semattnet_loss(out.map(lambda t: t.float()), gt, branch_weight, loss)
     optimizer.zero_grad(set_to_none=True)
     if scaler is None:
-        loss.backward()
+        loss_value.backward()
         optimizer.step()
     else:
-        scaler.scale(loss).backward()
+        scaler.scale(loss_value).backward()
         scaler.step(optimizer)
         scaler.update()
-    return loss
+    return loss_value

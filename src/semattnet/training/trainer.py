@@ -368,7 +368,7 @@ class Trainer:
     def _step(self, batch: dict[str, Any], branch_weight: float) -> float:
         """One optimiser step on ``batch`` (eq. 14 loss, AMP-aware); returns the loss."""
         loss = our_step(self.model, self.optimizer, batch, self.device, branch_weight, self.cfg.amp,
-                        self.scaler if self.scaler.is_enabled() else None)  # fmt: skip
+                        self.scaler if self.scaler.is_enabled() else None, self.cfg.loss)  # fmt: skip
         if self.cfg.lr_schedule == "cosine":
             self.scheduler.step()
         self.pos.batch += 1

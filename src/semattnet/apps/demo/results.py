@@ -1,0 +1,136 @@
+"""The demo's numbers: means over seeds, the report's table, the comparisons and ``results.json``."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from semattnet.apps.demo.recipe import LABELS, MODELS, REFERENCE_KEY, Trained
+
+__all__ = [
+    "COMPARED",
+    "METRICS",
+    "RESULTS_SCHEMA",
+    "comparisons",
+    "machine",
+    "mean_over_seeds",
+    "record",
+    "verdict_sentences",
+    "with_seed_rows",
+    "write_results",
+]
+
+RESULTS_SCHEMA = "semattnet.demo.results/1"
+#: The demo's comparisons: SemAttNet against each of these, on these metrics (issue 16's bar).
+COMPARED: dict[str, tuple[str, ...]] = {"classical": ("rmse", "mae", "irmse", "imae"), "two_branch": ("rmse", "mae")}
+METRICS = ("rmse", "mae", "irmse", "imae")
+_NAMES = {"rmse": "RMSE", "mae": "MAE", "irmse": "iRMSE", "imae": "iMAE"}
+#: results.json metric name -> key of :meth:`KittiMetrics.compute`.
+_RESULT_KEYS = {"rmse": "rmse_mm", "mae": "mae_mm", "irmse": "irmse_per_km", "imae": "imae_per_km", "images": "images"}
+
+
+def mean_over_seeds(
+    per_seed: dict[int, dict[str, dict[str, dict[str, float]]]],
+) -> dict[str, dict[str, dict[str, float]]]:
+    """method -> group -> metric: the mean over seeds of each number."""
+    first = next(iter(per_seed.values()))
+    return {
+        method: {
+            group: {k: float(np.mean([run[method][group][k] for run in per_seed.values()])) for k in values}
+            for group, values in groups.items()
+        }
+        for method, groups in first.items()
+    }
+
+
+def with_seed_rows(
+    metrics: dict[str, dict[str, dict[str, float]]], per_seed: dict[int, dict[str, dict[str, dict[str, float]]]]
+) -> tuple[dict[str, dict[str, dict[str, float]]], dict[str, str]]:
+    """The report's table: every method (learned ones: mean over seeds), then each learned model's seeds."""
+    if len(per_seed) < 2:
+        return metrics, dict(LABELS)
+    table, labels = {}, {}
+    for method, groups in metrics.items():
+        learned = method in {k for k, _, _ in MODELS}
+        table[method] = groups
+        labels[method] = LABELS[method] + (f", mean of {len(per_seed)} seeds" if learned else "")
+        for seed, run in per_seed.items() if learned else ():
+            table[f"{method}@seed{seed}"] = run[method]
+            labels[f"{method}@seed{seed}"] = f"  {LABELS[method].split(' (')[0]}, seed {seed}"
+    return table, labels
+
+
+def comparisons(metrics: dict[str, dict[str, dict[str, float]]], ours: str = "semattnet") -> dict[str, dict[str, bool]]:
+    """other method -> metric -> whether ``ours``'s held-out mean (over seeds) is lower (better)."""
+    mine = record(metrics[ours])["all"]
+    return {other: {k: mine[k] < record(metrics[other])["all"][k] for k in METRICS} for other in COMPARED}
+
+
+def verdict_sentences(comparison: dict[str, dict[str, bool]], seeds: list[int], ours: str = "semattnet") -> list[str]:
+    """One plain sentence per compared method: where ``ours`` is better and where it is not."""
+    out, which = [], f"seed{'s' if len(seeds) > 1 else ''} {', '.join(map(str, seeds))}"
+    who = "SemAttNet reference checkpoint (shipped)" if ours == REFERENCE_KEY else f"SemAttNet (mean of {which})"
+    for other, wins in comparison.items():
+        vs = LABELS[other] + (f" (mean of {which})" if ours == REFERENCE_KEY and other == "two_branch" else "")
+        better = [_NAMES[k] for k in METRICS if wins[k]]
+        worse = [_NAMES[k] for k in METRICS if not wins[k]]
+        text = f"{who} vs {vs}: "
+        text += f"better on {', '.join(better)}" if better else "better on no metric"
+        out.append(text + (f"; not better on {', '.join(worse)}." if worse else "."))
+    return out
+
+
+def record(groups: dict[str, dict[str, float]]) -> dict[str, dict[str, float]]:
+    """group -> results.json metric names (leaderboard units) of :meth:`KittiMetrics.compute`'s output."""
+    return {g: {k: v[src] for k, src in _RESULT_KEYS.items() if src in v} for g, v in groups.items()}
+
+
+def machine() -> dict[str, Any]:
+    """CPU model (from /proc/cpuinfo where there is one), core count, torch and Python versions."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.lower().startswith(("model name", "hardware")):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {"cpu": cpu, "cores": os.cpu_count(), "torch": torch.__version__, "python": platform.python_version(),
+            "platform": platform.platform()}  # fmt: skip
+
+
+def write_results(
+    path: Path,
+    per_seed: dict[int, dict[str, dict[str, dict[str, float]]]],
+    metrics: dict[str, dict[str, dict[str, float]]],
+    trained: Trained,
+    setup: dict[str, Any],
+) -> Path:
+    """Write ``results.json`` (schema in :mod:`semattnet.apps.demo`)."""
+    methods = {
+        m: {"label": LABELS[m], **record(metrics[m]),
+            "per_seed": {str(seed): record(run[m]) for seed, run in per_seed.items()}}
+        for m in metrics
+    }  # fmt: skip
+    comparisons_doc = {"semattnet_better_than": setup["comparisons"], "verdicts": setup["verdicts"]}
+    if "reference" in setup:
+        comparisons_doc["reference_better_than"] = setup["reference"]["comparisons"]
+    doc = {
+        "schema": RESULTS_SCHEMA,
+        "units": {"rmse": "mm", "mae": "mm", "irmse": "1/km", "imae": "1/km"},
+        "seeds": setup["seeds"], "methods": methods, "steps": trained.steps,
+        "wall_seconds": {"total": setup["seconds"], "models": {k: round(v, 1) for k, v in trained.seconds.items()}},
+        "machine": {**machine(), "device": setup["device"], "torch_threads": setup["torch_threads"]},
+        "held_out": setup["held_out"], "settings": setup["settings"], "recipe": setup["recipe"],
+        "comparisons": comparisons_doc,
+    }  # fmt: skip
+    if "reference" in setup:
+        doc["reference"] = {k: v for k, v in setup["reference"].items() if k != "comparisons"}
+    path.write_text(json.dumps(doc, indent=2) + "\n")
+    return path
