@@ -133,7 +133,7 @@ def dequantise(tensors: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
     return sd
 
 
-def encode_reference(model: nn.Module, info: dict[str, Any], levels: int) -> bytes:
+def encode_reference(model: Any, info: dict[str, Any], levels: int) -> bytes:  # a SemAttNet (its .config)
     """The file's bytes: :func:`quantise`'s tensors with the config and ``info``, gzip-compressed."""
     from safetensors.torch import save
 

@@ -76,7 +76,7 @@ def run_demo(
     figures = figs.figures(out / "pictures", held, preds, trained)
     viewer = figs.viewer(out, held, preds, trained, s.viewer_frames)
     seconds = time.perf_counter() - t_start
-    setup = {
+    setup: dict[str, Any] = {
         "device": str(device), "torch_threads": torch.get_num_threads(), "seconds": round(seconds, 1),
         "held_out": {"frames": len(held.names), "shadowed": sum(held.shadowed.values())},
         "settings": asdict(s), "steps": trained.steps, "seeds": list(s.training_seeds()),
