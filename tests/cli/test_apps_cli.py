@@ -22,7 +22,8 @@ def test_demo_cli(tmp_path: Path) -> None:
     assert result.exit_code == 0, result.output
     assert "Report: " in result.output and (tmp_path / "report.html").is_file()
     metrics = json.loads((tmp_path / "metrics.json").read_text())["metrics"]
-    assert set(metrics) == {"sparse", "classical", "two_branch", "semattnet"}
+    # the live models, the baselines and the shipped reference checkpoint (scored on the same held-out scenes)
+    assert set(metrics) == {"sparse", "classical", "two_branch", "semattnet", "reference"}
     again = CliRunner().invoke(main, args)  # never overwrites a previous report silently
     assert again.exit_code != 0 and "--overwrite" in again.output
     bad = CliRunner().invoke(main, [*args[:-4], "--steps", "x", "--overwrite"])
