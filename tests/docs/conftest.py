@@ -13,7 +13,7 @@ import pytest
 from tests.docs._blocks import REPO, shim_bin
 
 #: What the pages' examples find in their working folder (the pages say which names they use).
-WORKSPACE_NOTE = "data/kitti (tiny synthetic tree), model.safetensors (width 0.125), frames/, RAW_ROOT/"
+WORKSPACE_NOTE = "data/kitti (tiny synthetic tree), model.safetensors (width 0.125), frames/, RAW_ROOT/, VOID_ROOT/"
 
 
 def _tiny_model(path: Path) -> None:
@@ -56,6 +56,9 @@ def docs_workspace(tmp_path_factory: pytest.TempPathFactory) -> Path:
     _tiny_model(root / "model.safetensors")
     _frames(root / "data" / "kitti", root)
     shutil.copytree(REPO / "tests" / "data" / "kitti_sample" / "kitti_raw", root / "RAW_ROOT")
+    from tests.data._datasets import make_void
+
+    make_void(root / "VOID_ROOT", train=2, test=2, h=64, w=96)  # VOID's folders and list files, tiny
     return root
 
 

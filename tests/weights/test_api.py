@@ -15,6 +15,7 @@ import torch
 
 import semattnet
 from semattnet.weights import (
+    DownloadError,
     OfflineError,
     PretrainedWeights,
     from_pretrained,
@@ -189,8 +190,12 @@ def test_malicious_pickle_over_http_is_refused(server: Server, cache: Path, tmp_
 
 def test_not_a_checkpoint_is_refused_and_removed(server: Server, cache: Path) -> None:
     url = server.add("/w/page.pth.tar", b"<html>quota exceeded</html>")
-    with pytest.raises(CheckpointError, match="not a readable"):
+    with pytest.raises(DownloadError, match="sent a web page"):  # refused by the cache before the gate
         from_pretrained(url)
+    assert cache_files(cache) == []
+    bin_url = server.add("/w/junk.pth.tar", b"\x00\x01 not a checkpoint at all")
+    with pytest.raises(CheckpointError, match="not a readable"):  # not a page, but no checkpoint either
+        from_pretrained(bin_url)
     assert cache_files(cache) == []
 
 
