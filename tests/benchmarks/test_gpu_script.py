@@ -49,6 +49,7 @@ def test_gpu_dry_run_checks_its_plan(gpu: ModuleType, capsys) -> None:  # type: 
         gpu.check_plan(steps, 900)  # over the 8 minutes
 
 
+@pytest.mark.slow  # the whole script's CPU path: ~35 s on 2 cores; the dry run checks its plan by default
 def test_gpu_parity_and_latency_on_cpu(gpu: ModuleType, model: torch.nn.Module) -> None:
     cpu = torch.device("cpu")
     x = gpu.frame(1, (64, 96), cpu)
