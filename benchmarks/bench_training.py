@@ -44,11 +44,11 @@ def plan(variants: tuple[str, ...], batches: tuple[int, ...], rounds: int) -> li
 
 
 def check_plan(steps: list[tuple[str, int]], variants: tuple[str, ...], batches: tuple[int, ...]) -> None:
-    """Every variant at every batch, the authors' reference first in each turn."""
+    """Every variant at every batch, the first variant (the authors' reference when measured) first in each turn."""
     for b in batches:
         ran = [v for v, bb in steps if bb == b]
-        assert set(ran) == set(variants) and ran[0] == "authors", f"batch {b}: {ran}"
-        assert all(ran.count(v) == ran.count("authors") for v in variants), f"batch {b}: unequal turns {ran}"
+        assert set(ran) == set(variants) and ran[0] == variants[0], f"batch {b}: {ran}"
+        assert all(ran.count(v) == ran.count(variants[0]) for v in variants), f"batch {b}: unequal turns {ran}"
 
 
 def child(variant: str, batch: int, size: tuple[int, int], width: float, device: str, steps: int,
@@ -149,6 +149,7 @@ def summarise(results: list[dict[str, Any]], variants: tuple[str, ...]) -> list[
         speed = f"{ref[0] / sec:9.2f}" if ref else " " * 9
         mem = f"{peak / ref[1]:11.2f}" if ref else " " * 11
         lines.append(f"{v:12s} {b:5d} {sec:8.2f} {speed} {peak / 1024:9.2f} {mem}")
+    lines += _against_ours(med)
     lines += ["", f"{'variant':12s} {'GiB/sample':>10s} {'fixed GiB':>9s} " + " ".join(f"{g:>4d}GB" for g in MEMORY_GB)]
     for v in variants:
         fit = _per_sample(results, med, v)
@@ -157,6 +158,14 @@ def summarise(results: list[dict[str, Any]], variants: tuple[str, ...]) -> list[
             fits = " ".join(f"{max(0, int((g * 1e9 / 2**20 - fixed) // per)):6d}" for g in MEMORY_GB)
             lines.append(f"{v:12s} {per / 1024:10.2f} {fixed / 1024:9.2f} {fits}   ({how})")
     return lines
+
+
+def _against_ours(med: dict[tuple[str, int], tuple[float, float]]) -> list[str]:
+    """Activation checkpointing against ours without, per batch: step time and peak memory ratios."""
+    rows = [f"{'ours+ckpt / ours':16s} batch {b}: step time {med['ours+ckpt', b][0] / med['ours', b][0]:.2f}x, "
+            f"peak memory {med['ours+ckpt', b][1] / med['ours', b][1]:.2f}x"
+            for b in sorted({b for _, b in med}) if ("ours", b) in med and ("ours+ckpt", b) in med]  # fmt: skip
+    return ["", *rows] if rows else []
 
 
 def _per_sample(results: list[dict[str, Any]], med: dict[tuple[str, int], tuple[float, float]],
@@ -182,6 +191,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--warmup", type=int, default=1, help="untimed steps before (allocates Adam's state)")
     p.add_argument("--device", default="cpu")
     p.add_argument("--max-gb", type=float, default=20.0, help="stop a child whose RSS passes this")
+    p.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated, in the order of each turn")
     p.add_argument("--channels-last", action="store_true", help="also measure ours in channels_last")
     p.add_argument("--json", type=Path, default=None)
     p.add_argument("--dry-run", action="store_true")
@@ -192,7 +202,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.child:
         print(json.dumps(child(args.child, batches[0], size, args.width, args.device, args.steps, args.warmup)))  # type: ignore[arg-type]
         return 0
-    variants = VARIANTS + (("ours+cl",) if args.channels_last else ())
+    variants = tuple(args.variants.split(",")) + (("ours+cl",) if args.channels_last else ())
+    if not set(variants) <= {*VARIANTS, "ours+cl"}:
+        p.error(f"--variants: expected some of {', '.join(VARIANTS)}, got {args.variants!r}")
     steps = plan(variants, batches, args.rounds)
     check_plan(steps, variants, batches)
     print(f"plan: {len(steps)} processes at {size[0]}x{size[1]}, width {args.width}, {args.device}: "

@@ -110,3 +110,9 @@ def test_bench_training_dry_run_and_one_child(capsys) -> None:  # type: ignore[n
     table = "\n".join(bench.summarise(fake, ("authors",)))
     # 500 MiB per sample, 1000 MiB fixed: 24 GB = 22888 MiB -> 43 samples
     assert "0.49" in table and "43" in table and "measured" in table
+    pair = [{"variant": v, "batch": 2, "seconds": t, "peak_mib": m, "before_mib": 100.0, "params": 10**6}
+            for v, t, m in (("ours", 10.0, 4000.0), ("ours+ckpt", 13.0, 1800.0))]  # fmt: skip
+    table = "\n".join(bench.summarise(pair, ("ours", "ours+ckpt")))
+    assert "ours+ckpt / ours batch 2: step time 1.30x, peak memory 0.45x" in " ".join(table.split())
+    assert bench.main(["--dry-run", "--variants", "ours,ours+ckpt", "--batches", "4"]) == 0
+    assert "2 processes" in capsys.readouterr().out

@@ -29,6 +29,7 @@ def weights(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return save_safetensors(model.state_dict(), tmp_path_factory.mktemp("w") / "tiny.safetensors")
 
 
+@pytest.mark.slow  # ~1 min (three torchrun launches); predict's two-process tests run by default
 def test_evaluate_two_processes_equals_one(tree: Path, weights: Path, tmp_path: Path) -> None:
     common = ("evaluate", "--checkpoint", weights, "--data", tree, "--device", "cpu", "--workers", "0",
               "--save-predictions", "--pictures", "3")  # fmt: skip

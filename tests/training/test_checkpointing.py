@@ -11,7 +11,7 @@ from click.testing import CliRunner
 
 import semattnet
 from semattnet.cli import main
-from semattnet.training.checkpointing import _Checkpointed, set_activation_checkpointing
+from semattnet.training.checkpointing import BranchCheckpointing, set_activation_checkpointing
 from semattnet.training.config import TrainConfig
 from semattnet.training.losses import semattnet_loss
 from semattnet.training.reference import authors_adam, authors_step, make_adam, our_step
@@ -49,12 +49,29 @@ def test_checkpointing_keeps_loss_gradients_and_bn_statistics() -> None:
 def test_checkpointing_is_inert_outside_training_and_can_be_undone() -> None:
     net = _model()
     set_activation_checkpointing(net)
-    assert isinstance(net.backbone.__dict__["_color_guided"], _Checkpointed)
+    assert isinstance(net.backbone.branch_runner, BranchCheckpointing)
     net.eval().propagation_impl = "pytorch"  # (not the fused kernel: no compilation here)
     with torch.no_grad():  # no checkpoint without autograd (it would warn and do nothing useful)
         net(**random_inputs(b=1, h=32, w=64))
     assert set_activation_checkpointing(net, False) == 3
-    assert "_color_guided" not in net.backbone.__dict__
+    assert net.backbone.branch_runner is None
+
+
+def test_the_branch_runner_hook_sees_every_branch_and_is_not_replaced() -> None:
+    net = _model()
+    seen: list[str] = []
+
+    def runner(branch, *inputs):  # type: ignore[no-untyped-def]
+        seen.append(branch.__name__)
+        return branch(*inputs)
+
+    net.backbone.branch_runner = runner
+    net.eval().propagation_impl = "pytorch"
+    with torch.no_grad():
+        net(**random_inputs(b=1, h=32, w=64))
+    assert seen == ["_color_guided", "_semantic_guided", "_depth_guided"]
+    with pytest.raises(semattnet.SemAttNetError, match="already has a branch_runner"):
+        set_activation_checkpointing(net)
 
 
 def test_our_step_and_the_authors_step_compute_the_same_loss() -> None:

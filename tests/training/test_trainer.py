@@ -53,6 +53,7 @@ def test_loss_falls(tree: Path, tmp_path: Path, steps: int) -> None:
     assert (tmp_path / "curves.png").is_file() and (tmp_path / "config.json").is_file()
 
 
+@pytest.mark.slow  # ~2 min: 100 one-step epochs, each ending in a checkpoint; test_loss_falls[60] runs by default
 def test_overfits_one_sample(tmp_path: Path) -> None:
     data = tmp_path / "one"
     write_synthetic_kitti(data, frames=1, size=(64, 128), seed=1, eval_frames=0, workers=1)

@@ -10,7 +10,8 @@ checkpoints load with ``strict=True``.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import torch
 from torch import nn
@@ -52,6 +53,11 @@ class SemAttNetBackbone(ColorGuidedBranch, SemanticGuidedBranch, DepthGuidedBran
         torch.Size([1, 1, 64, 64])
     """
 
+    #: Runs each branch (encoder + decoder) as ``branch_runner(branch, *inputs)``; None calls the
+    #: branch directly. The hook for wrapping whole branches, e.g. activation checkpointing
+    #: (:func:`semattnet.training.checkpointing.set_activation_checkpointing`).
+    branch_runner: Callable[..., Any] | None = None
+
     def __init__(self, config: SemAttNetConfig | None = None) -> None:
         nn.Module.__init__(self)
         self.config = config = config if config is not None else SemAttNetConfig(refine=False)
@@ -89,14 +95,18 @@ class SemAttNetBackbone(ColorGuidedBranch, SemanticGuidedBranch, DepthGuidedBran
         w = self.config.widths
         return self.config.branches * w.base[1], (self.config.branches - 1) * w.base[2] + w.dg[2]
 
+    def run_branch(self, branch: Callable[..., Any], *inputs: Any) -> Any:
+        """``branch(*inputs)``, through :attr:`branch_runner` when one is set."""
+        return branch(*inputs) if self.branch_runner is None else self.branch_runner(branch, *inputs)
+
     def forward_features(
         self, rgb: torch.Tensor, semantic: torch.Tensor | None, sparse: torch.Tensor
     ) -> BackboneFeatures:
         three = self.config.branches == 3
         check_inputs(rgb, semantic, sparse, need_semantic=three)
-        cg = self._color_guided(rgb, sparse)
-        sg = self._semantic_guided(semantic, sparse, cg) if three else None  # type: ignore[arg-type]
-        dg = self._depth_guided(sparse, cg, sg)
+        cg = self.run_branch(self._color_guided, rgb, sparse)
+        sg = self.run_branch(self._semantic_guided, semantic, sparse, cg) if three else None
+        dg = self.run_branch(self._depth_guided, sparse, cg, sg)
         if sg is None:
             fused, (w_cg, w_dg) = confidence_fusion((cg.depth, dg.depth), (cg.conf, dg.conf))
             w_sg = None

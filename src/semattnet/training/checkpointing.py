@@ -20,12 +20,10 @@ import torch
 import torch.utils.checkpoint
 from torch import nn
 
+from semattnet._errors import InputError
 from semattnet.models.backbone import SemAttNetBackbone
 
-__all__ = ["BRANCH_METHODS", "set_activation_checkpointing"]
-
-#: The backbone's branch methods (``SemAttNetBackbone.forward_features`` calls them) that are checkpointed.
-BRANCH_METHODS: tuple[str, ...] = ("_color_guided", "_semantic_guided", "_depth_guided")
+__all__ = ["BranchCheckpointing", "set_activation_checkpointing"]
 
 
 def _count(m: nn.Module) -> torch.Tensor:
@@ -53,32 +51,33 @@ def _frozen_running_stats(module: nn.Module) -> Iterator[None]:
                 _count(m).copy_(count)
 
 
-class _Checkpointed:
-    """A branch method that, in training with autograd on, runs under non-reentrant checkpointing."""
+class BranchCheckpointing:
+    """A :attr:`SemAttNetBackbone.branch_runner`: in training with autograd on, each branch runs
+    under non-reentrant checkpointing (BatchNorm statistics updated once); otherwise directly."""
 
-    def __init__(self, module: nn.Module, fn: Callable[..., Any]) -> None:
-        self.module, self.fn = module, fn
+    def __init__(self, module: nn.Module) -> None:
+        self.module = module
 
-    def __call__(self, *args: Any) -> Any:
+    def __call__(self, branch: Callable[..., Any], *inputs: Any) -> Any:
         if not (self.module.training and torch.is_grad_enabled()):
-            return self.fn(*args)
+            return branch(*inputs)
         return torch.utils.checkpoint.checkpoint(
-            self.fn, *args, use_reentrant=False,
+            branch, *inputs, use_reentrant=False,
             context_fn=lambda: (contextlib.nullcontext(), _frozen_running_stats(self.module)),
         )  # fmt: skip
 
 
 def set_activation_checkpointing(model: nn.Module, enabled: bool = True) -> int:
     """Checkpoint (or stop checkpointing) every branch of every backbone in ``model``; returns the
-    number of branches changed. Works on a model, its DDP wrapper or a full SemAttNet."""
+    number of branches changed. Works on a model, its DDP wrapper or a full SemAttNet. Refuses to
+    replace a :attr:`~SemAttNetBackbone.branch_runner` it did not set."""
     changed = 0
     for backbone in (m for m in model.modules() if isinstance(m, SemAttNetBackbone)):
-        for name in BRANCH_METHODS:
-            method = getattr(type(backbone), name)  # a missing name fails here, loudly
-            if enabled and name not in backbone.__dict__:
-                object.__setattr__(backbone, name, _Checkpointed(backbone, method.__get__(backbone)))
-                changed += 1
-            elif not enabled and name in backbone.__dict__:
-                del backbone.__dict__[name]
-                changed += 1
+        runner = backbone.branch_runner
+        if runner is not None and not isinstance(runner, BranchCheckpointing):
+            raise InputError(f"set_activation_checkpointing: the backbone already has a branch_runner ({runner!r})")
+        if enabled == (runner is not None):
+            continue
+        backbone.branch_runner = BranchCheckpointing(backbone) if enabled else None
+        changed += backbone.config.branches
     return changed
