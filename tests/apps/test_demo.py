@@ -43,7 +43,8 @@ def test_short_demo_writes_report(demo_run) -> None:  # type: ignore[no-untyped-
     assert "| Classical completion |" in md and "RMSE shadowed [mm]" in md
     images = [line.split("](")[1].rstrip(")") for line in md.splitlines() if line.startswith("![")]
     assert len(images) == 8  # 2 comparisons, 2 branch panels, 4 training curves
-    assert "Reference checkpoint (shipped, demo_reference.safetensors.gz)" in md and "Live recipe" in md
+    assert "Reference checkpoints (shipped, demo_reference_seedS.safetensors.gz, one per training seed 0, 1)" in md
+    assert "Live recipe" in md
     for rel in images:
         assert (out / rel).is_file(), rel
     for run in ("semattnet", "two_branch"):
@@ -106,7 +107,7 @@ def test_results_json_schema(demo_run) -> None:  # type: ignore[no-untyped-def]
     result, _ = demo_run
     doc = json.loads(result.results_json.read_text())
     assert result.results_json == result.out_dir / "results.json"
-    assert doc["schema"] == "semattnet.demo.results/1" and doc["seeds"] == [0, 1]
+    assert doc["schema"] == "semattnet.demo.results/2" and doc["seeds"] == [0, 1]
     assert doc["units"] == {"rmse": "mm", "mae": "mm", "irmse": "1/km", "imae": "1/km"}
     assert set(doc["methods"]) == {"sparse", "classical", "semattnet", "two_branch", "reference"}
     for method, rec in doc["methods"].items():
@@ -132,9 +133,17 @@ def test_results_json_schema(demo_run) -> None:  # type: ignore[no-untyped-def]
     assert wins["classical"]["mae"] == (sem["all"]["mae"] < doc["methods"]["classical"]["all"]["mae"])
     assert len(doc["comparisons"]["verdicts"]) == 4  # SemAttNet and the reference, each against two
     ref, methods = doc["reference"], doc["methods"]
-    assert ref["file"] == "demo_reference.safetensors.gz" and ref["bytes"] < 5_000_000 and len(ref["sha256"]) == 64
-    assert "--train-reference" in ref["command"] and ref["recipe"]["loss"] == "l1+l2"
-    assert methods["reference"]["per_seed"]["0"] == methods["reference"]["per_seed"]["1"]  # not trained here
+    assert ref["seeds"] == [0, 1] and [f["seed"] for f in ref["files"]] == [0, 1]
+    for f in ref["files"]:
+        assert f["file"] == f"demo_reference_seed{f['seed']}.safetensors.gz" and f["bytes"] < 5_000_000
+        assert len(f["sha256"]) == 64 and set(f["own_validation"]) == {"reference", "classical"}
+    assert "--train-reference" in ref["command"] and ref["recipe"]["loss"] == "l1+l2" and "seed" not in ref["recipe"]
+    shipped = methods["reference"]  # two checkpoints (training seeds 0, 1): the headline is their mean
+    assert shipped["per_seed"]["0"] != shipped["per_seed"]["1"]
+    assert shipped["all"]["mae"] == pytest.approx(
+        (shipped["per_seed"]["0"]["all"]["mae"] + shipped["per_seed"]["1"]["all"]["mae"]) / 2
+    )
+    assert methods["classical"]["per_seed"]["0"] == methods["classical"]["per_seed"]["1"]  # not trained
     assert doc["comparisons"]["reference_better_than"]["classical"]["rmse"] == (
         methods["reference"]["all"]["rmse"] < methods["classical"]["all"]["rmse"]
     )
@@ -148,8 +157,15 @@ def test_report_shows_every_seed_and_the_verdicts(demo_run) -> None:  # type: ig
     for seed in (0, 1):
         assert f"|   SemAttNet, seed {seed} |" in md and f"|   Two-branch ablation, seed {seed} |" in md
     assert "SemAttNet (mean of seeds 0, 1) vs Classical completion: better on" in md
-    assert "SemAttNet reference checkpoint (shipped) vs Two-branch ablation (CG + DG, SAMMAFB, CSPN++) (mean of " in md
-    assert "| SemAttNet reference checkpoint (shipped, trained once for longer; not trained by this run) |" in md
+    assert (
+        "SemAttNet reference checkpoints (shipped, mean of seeds 0, 1) vs Two-branch ablation (CG + DG, SAMMAFB, "
+        "CSPN++) (mean of seeds 0, 1): better on" in md
+    )
+    assert (
+        "| SemAttNet reference checkpoints (shipped, trained once for longer; not trained by this run), "
+        "mean of 2 seeds |" in md
+    )
+    assert "|   SemAttNet reference checkpoints, seed 1 |" in md
 
 
 def test_demo_viewer_in_chromium(demo_run) -> None:  # type: ignore[no-untyped-def]

@@ -65,16 +65,19 @@ def test_bad_reference_files_are_refused_with_the_name(tmp_path: Path) -> None:
         ref.load_reference(tmp_path / "missing.gz")
 
 
-def test_the_shipped_reference_is_small_loads_and_records_its_recipe() -> None:
-    assert ref.REFERENCE_PATH.is_file(), "the repository ships the demo's reference checkpoint"
-    assert ref.REFERENCE_PATH.stat().st_size < 5_000_000
-    model, info = ref.load_reference()
+@pytest.mark.parametrize("seed", ref.REFERENCE_SEEDS)
+def test_the_shipped_references_are_small_load_and_record_their_recipe(seed: int) -> None:
+    path = ref.reference_path(seed)
+    assert path.is_file(), "the repository ships one reference checkpoint per seed of REFERENCE_SEEDS"
+    assert path.stat().st_size < 5_000_000 and ref.shipped_references()[seed] == path
+    model, info = ref.load_reference(path)
     assert model.config.branches == 3 and model.config.refine and model.config.width == info["recipe"]["width"]
-    assert info["recipe"] == dataclasses.asdict(ref.REFERENCE_RECIPE) | {"size": list(ref.REFERENCE_RECIPE.size)}
+    recipe = dataclasses.replace(ref.REFERENCE_RECIPE, seed=seed)
+    assert info["recipe"] == dataclasses.asdict(recipe) | {"size": list(recipe.size)}
     assert info["command"] == ref.REFERENCE_COMMAND and info["levels"] in ref.LEVELS
     assert set(info["val"]) == {"reference", "classical"}
     notes = ref.recipe_notes(info["recipe"])
-    assert "data seed 1000" in notes[0] and "L1 + L2" in notes[1]
+    assert "data seed 1000" in notes[0] and "L1 + L2" in notes[1] and "seed 0, 1" in notes[0]
 
 
 def test_train_reference_tiny_recipe(tmp_path: Path) -> None:

@@ -7,19 +7,19 @@ two-branch ablation (no semantic branch) for the same number of optimiser steps 
 protocol; ``DemoSettings.equal_steps``), once per training seed (two by default), through the
 real training engine (backbone stage, then the full model with CSPN++),
 scores both on held-out scenes with the KITTI metrics beside the sparse input, a classical
-non-learned completion and the shipped reference checkpoint (SemAttNet trained once, longer, on
-other scenes: :mod:`semattnet.apps.demo.reference`; ``semattnet demo --train-reference``
-rebuilds it), and writes ``report.md`` and ``report.html`` with the table (each learned
-model's mean and every seed), a plain verdict per comparison, per-branch panels, error maps and
-training curves, ``viewer.html`` (the interactive viewer of the held-out scenes,
-:mod:`semattnet.viz.viewer`) and ``results.json``. No download; about 6 minutes on a 2-core
-AVX-512 CPU (measured; see docs/guides/demo.md).
+non-learned completion and the shipped reference checkpoints (SemAttNet trained once, longer, on
+other scenes, one file per training seed: :mod:`semattnet.apps.demo.reference`;
+``semattnet demo --train-reference`` rebuilds them), and writes ``report.md`` and
+``report.html`` with the table (each learned model's mean and every seed), a plain verdict per
+comparison, per-branch panels, error maps and training curves, ``viewer.html`` (the interactive
+viewer of the held-out scenes, :mod:`semattnet.viz.viewer`) and ``results.json``. No download;
+3.7 minutes measured on a quiet 2-core AVX-512 CPU (see docs/guides/demo.md).
 
-``results.json`` (schema ``semattnet.demo.results/1``; units: RMSE and MAE in mm, iRMSE and
+``results.json`` (schema ``semattnet.demo.results/2``; units: RMSE and MAE in mm, iRMSE and
 iMAE in 1/km, as KITTI's leaderboard)::
 
     {
-      "schema": "semattnet.demo.results/1",
+      "schema": "semattnet.demo.results/2",
       "units": {"rmse": "mm", "mae": "mm", "irmse": "1/km", "imae": "1/km"},
       "seeds": [0, 1],                    # training seeds; the scenes come from settings.seed
       "methods": {                        # sparse, classical, two_branch, semattnet, reference
@@ -38,16 +38,18 @@ iMAE in 1/km, as KITTI's leaderboard)::
       "settings": {...},                  # DemoSettings as a dict
       "recipe": {"live": ["how the live models train, how that differs from the paper", ...],
                  "reference": ["how the reference was trained, its deviations", ...]},
-      "reference": {"label": .., "file": .., "bytes": n, "sha256": .., "storage": .., "command": ..,
-                    "recipe": {...}, "recipe_notes": [...], "train_seconds": s, "trained_on": "cpu",
-                    "own_validation": {"reference": {...}, "classical": {...}}},
+      "reference": {"label": .., "seeds": [0, 1], "storage": .., "command": .., "recipe": {...},
+                    "recipe_notes": [...],
+                    "files": [{"seed": 0, "file": .., "bytes": n, "sha256": .., "train_seconds": s,
+                               "trained_on": "cpu", "own_validation": {"reference": {...}, "classical": {...}}}]},
       "comparisons": {"semattnet_better_than": {"classical": {"rmse": true, ...}, "two_branch": {...}},
                       "reference_better_than": {...},   # the shipped reference, same form
                       "verdicts": ["SemAttNet (mean of seeds 0, 1) vs ...: better on ...; not better on ..."]}
     }
 
-The baselines and the reference do not depend on the training seed: their ``per_seed`` entries
-repeat the same numbers. Without a reference file (or ``DemoSettings(reference=False)``) the
+The baselines do not depend on the training seed: their ``per_seed`` entries repeat the same
+numbers. The reference's ``per_seed`` is keyed by its own training seeds (``reference.seeds``).
+Without a reference file (or ``DemoSettings(reference=False)``) the
 ``reference`` method, block and comparison are absent.
 
 Modules: :mod:`~semattnet.apps.demo.recipe` (settings, models, step plan, training),

@@ -75,7 +75,9 @@ def _scene_figures(
     tiles = [("RGB", rgb), ("ground truth", colorize_depth(gt))]
     for method in _shown_methods(preds):
         rmse = score({n: preds[method][n]}, held)["all"]["rmse_mm"]
-        short = "SemAttNet reference (shipped)" if method == REFERENCE_KEY else LABELS[method].split(" (")[0]
+        short = (
+            "SemAttNet reference (shipped, first seed)" if method == REFERENCE_KEY else LABELS[method].split(" (")[0]
+        )
         tiles.append((f"{short}: depth, RMSE {rmse / 1000:.2f} m", colorize_depth(preds[method][n])))
         tiles.append((f"{short}: error", error_map(preds[method][n], gt)))
     save_panel(tiles, pictures / f"compare_{kind}.png", columns=2)

@@ -32,7 +32,7 @@ class DemoSettings:
     """What the demo generates and trains.
 
     ``steps`` gives the (backbone, full) optimiser steps of each model and seed; the default
-    (136, 80) is about 6 minutes of training for both models and both seeds on a 2-core AVX-512
+    (136, 80) is about 3.5 minutes of training for both models and both seeds on a quiet 2-core AVX-512
     CPU (numbers differ between CPUs: float arithmetic, hence training trajectories, does). With
     ``steps=None`` they come from ``minutes`` instead, the training budget of both models and all
     seeds together, split ``backbone_share`` : rest between the backbone stage and the full model,
@@ -83,7 +83,7 @@ REFERENCE_KEY = "reference"
 LABELS: dict[str, str] = {
     "sparse": "Sparse input",
     "classical": "Classical completion",
-    REFERENCE_KEY: "SemAttNet reference checkpoint (shipped, trained once for longer; not trained by this run)",
+    REFERENCE_KEY: "SemAttNet reference checkpoints (shipped, trained once for longer; not trained by this run)",
     **{key: label for key, label, _ in MODELS},
 }
 

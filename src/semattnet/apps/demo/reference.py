@@ -1,10 +1,11 @@
-"""The demo's shipped reference checkpoint: SemAttNet trained once, longer, on other synthetic scenes.
+"""The demo's shipped reference checkpoints: SemAttNet trained once, longer, on other synthetic scenes (one per seed).
 
 ``semattnet demo`` evaluates it beside the models it trains live (labelled "reference" in the
 report and ``results.json``). ``semattnet demo --train-reference`` retrains it with
 :data:`REFERENCE_RECIPE` (training scenes from their own data seed, so none of the demo's
-held-out scenes is seen) and writes the file it ships:
-``semattnet/apps/assets/demo_reference.safetensors.gz``.
+held-out scenes is seen), once per training seed of :data:`REFERENCE_SEEDS`, and writes the
+files it ships: ``semattnet/apps/assets/demo_reference_seed{S}.safetensors.gz``
+(:func:`reference_path`). The demo reports the mean over these seeds and every seed.
 
 Storage (to stay under 5 MB at width 1/8, the narrowest width the model config accepts):
 :data:`REFERENCE_STORAGE`. The metadata holds the model config, the recipe, the command, the
@@ -36,8 +37,10 @@ from semattnet.weights.checkpoint import load_checkpoint, load_weights
 __all__ = [
     "REFERENCE_COMMAND",
     "REFERENCE_FORMAT",
+    "REFERENCE_NAME",
     "REFERENCE_PATH",
     "REFERENCE_RECIPE",
+    "REFERENCE_SEEDS",
     "REFERENCE_STORAGE",
     "ReferenceError",
     "ReferenceRecipe",
@@ -49,14 +52,33 @@ __all__ = [
     "package_reference",
     "quantise",
     "recipe_notes",
+    "reference_path",
     "save_reference",
+    "shipped_references",
     "train_reference",
 ]
 
-#: The shipped file (inside the installed package; listed in the wheel).
-REFERENCE_PATH = Path(__file__).resolve().parent.parent / "assets" / "demo_reference.safetensors.gz"
+#: The training seeds of the shipped reference checkpoints (one file each; the demo shows their mean).
+REFERENCE_SEEDS: tuple[int, ...] = (0, 1)
+_ASSETS = Path(__file__).resolve().parent.parent / "assets"
+#: The file name of one seed's reference checkpoint.
+REFERENCE_NAME = "demo_reference_seed{seed}.safetensors.gz"
+
+
+def reference_path(seed: int, folder: Path | None = None) -> Path:
+    """The reference checkpoint of training seed ``seed``: in ``folder``, else the shipped one (in the package)."""
+    return (folder if folder is not None else _ASSETS) / REFERENCE_NAME.format(seed=seed)
+
+
+def shipped_references() -> dict[int, Path]:
+    """Seed -> shipped file, for the seeds of :data:`REFERENCE_SEEDS` whose file is present."""
+    return {seed: reference_path(seed) for seed in REFERENCE_SEEDS if reference_path(seed).is_file()}
+
+
+#: The first seed's shipped file (inside the installed package; listed in the wheel).
+REFERENCE_PATH = reference_path(REFERENCE_SEEDS[0])
 REFERENCE_FORMAT = "semattnet-demo-reference/1"
-#: The one command that rebuilds :data:`REFERENCE_PATH` (from a source checkout: writes into the package).
+#: The one command that rebuilds every file of :data:`REFERENCE_SEEDS` (copy them into the package to ship).
 REFERENCE_COMMAND = "semattnet demo --train-reference --out demo-reference-run"
 
 
@@ -77,7 +99,9 @@ class ReferenceError(DataError):
 class ReferenceRecipe:
     """How the reference checkpoint is trained: the paper's three stages in miniature (backbone;
     refinement initialisation with the backbone frozen and the head at ``head_lr_factor`` x lr;
-    full model, backbone at lr / 4), L1 + L2 loss (not the paper's L2), cosine schedules."""
+    full model, backbone at lr / 4), L1 + L2 loss (not the paper's L2), cosine schedules.
+    ``seed`` is the training seed (batch order, augmentation, initialisation); the scenes come
+    from ``data_seed`` for every training seed."""
 
     data_seed: int = 1000
     train_frames: int = 400
@@ -186,8 +210,8 @@ def train_reference(
     log: Callable[[str], None] = print,
 ) -> Path:
     """Train the reference checkpoint in ``work`` (data and runs) and write it to ``target``
-    (default :data:`REFERENCE_PATH`); returns ``target``."""
-    target = Path(target) if target is not None else REFERENCE_PATH
+    (default: the shipped file of ``recipe.seed``); returns ``target``."""
+    target = Path(target) if target is not None else reference_path(recipe.seed)
     start = time.perf_counter()
     r = recipe
     log(f"reference: {r.train_frames} training scenes (data seed {r.data_seed}) at {r.size[0]}x{r.size[1]} ...")
@@ -255,7 +279,8 @@ def recipe_notes(recipe: dict[str, Any]) -> list[str]:
         return []
     r = recipe
     return [
-        f"Reference checkpoint (shipped, {REFERENCE_PATH.name}): trained once with `{REFERENCE_COMMAND}` on "
+        f"Reference checkpoints (shipped, {REFERENCE_NAME.format(seed='S')}, one per training seed "
+        f"{', '.join(map(str, REFERENCE_SEEDS))}): trained once with `{REFERENCE_COMMAND}` on "
         f"{r['train_frames']} other synthetic scenes (data seed {r['data_seed']}: none of the held-out scenes), "
         f"{r['size'][0]}x{r['size'][1]}, width {r['width']}, batch {r['batch_size']}: the paper's three stages in "
         f"miniature: {r['backbone_steps']} backbone steps, {r['refine_init_steps']} refinement-initialisation steps "

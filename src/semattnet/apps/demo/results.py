@@ -17,6 +17,7 @@ __all__ = [
     "COMPARED",
     "METRICS",
     "RESULTS_SCHEMA",
+    "Runs",
     "comparisons",
     "machine",
     "mean_over_seeds",
@@ -26,7 +27,7 @@ __all__ = [
     "write_results",
 ]
 
-RESULTS_SCHEMA = "semattnet.demo.results/1"
+RESULTS_SCHEMA = "semattnet.demo.results/2"
 #: The demo's comparisons: SemAttNet against each of these, on these metrics (issue 16's bar).
 COMPARED: dict[str, tuple[str, ...]] = {"classical": ("rmse", "mae", "irmse", "imae"), "two_branch": ("rmse", "mae")}
 METRICS = ("rmse", "mae", "irmse", "imae")
@@ -35,33 +36,33 @@ _NAMES = {"rmse": "RMSE", "mae": "MAE", "irmse": "iRMSE", "imae": "iMAE"}
 _RESULT_KEYS = {"rmse": "rmse_mm", "mae": "mae_mm", "irmse": "irmse_per_km", "imae": "imae_per_km", "images": "images"}
 
 
-def mean_over_seeds(
-    per_seed: dict[int, dict[str, dict[str, dict[str, float]]]],
-) -> dict[str, dict[str, dict[str, float]]]:
-    """method -> group -> metric: the mean over seeds of each number."""
-    first = next(iter(per_seed.values()))
-    return {
-        method: {
-            group: {k: float(np.mean([run[method][group][k] for run in per_seed.values()])) for k in values}
-            for group, values in groups.items()
-        }
-        for method, groups in first.items()
-    }
+#: method -> seed -> group -> KITTI metrics (:meth:`KittiMetrics.compute`'s keys): every score of a demo run.
+Runs = dict[str, dict[int, dict[str, dict[str, float]]]]
+
+
+def mean_over_seeds(runs: dict[int, dict[str, dict[str, float]]]) -> dict[str, dict[str, float]]:
+    """group -> metric: the mean over seeds of one method's numbers (seed -> group -> metric)."""
+    first = next(iter(runs.values()))
+    return {group: {k: float(np.mean([run[group][k] for run in runs.values()])) for k in values}
+            for group, values in first.items()}  # fmt: skip
+
+
+def _learned() -> set[str]:
+    """Methods with per-seed rows: the live models and the reference checkpoints."""
+    return {k for k, _, _ in MODELS} | {REFERENCE_KEY}
 
 
 def with_seed_rows(
-    metrics: dict[str, dict[str, dict[str, float]]], per_seed: dict[int, dict[str, dict[str, dict[str, float]]]]
+    metrics: dict[str, dict[str, dict[str, float]]], runs: Runs
 ) -> tuple[dict[str, dict[str, dict[str, float]]], dict[str, str]]:
     """The report's table: every method (learned ones: mean over seeds), then each learned model's seeds."""
-    if len(per_seed) < 2:
-        return metrics, dict(LABELS)
     table, labels = {}, {}
     for method, groups in metrics.items():
-        learned = method in {k for k, _, _ in MODELS}
+        seeds = runs[method] if method in _learned() and len(runs[method]) > 1 else {}
         table[method] = groups
-        labels[method] = LABELS[method] + (f", mean of {len(per_seed)} seeds" if learned else "")
-        for seed, run in per_seed.items() if learned else ():
-            table[f"{method}@seed{seed}"] = run[method]
+        labels[method] = LABELS[method] + (f", mean of {len(seeds)} seeds" if seeds else "")
+        for seed, run in seeds.items():
+            table[f"{method}@seed{seed}"] = run
             labels[f"{method}@seed{seed}"] = f"  {LABELS[method].split(' (')[0]}, seed {seed}"
     return table, labels
 
@@ -72,12 +73,24 @@ def comparisons(metrics: dict[str, dict[str, dict[str, float]]], ours: str = "se
     return {other: {k: mine[k] < record(metrics[other])["all"][k] for k in METRICS} for other in COMPARED}
 
 
-def verdict_sentences(comparison: dict[str, dict[str, bool]], seeds: list[int], ours: str = "semattnet") -> list[str]:
-    """One plain sentence per compared method: where ``ours`` is better and where it is not."""
-    out, which = [], f"seed{'s' if len(seeds) > 1 else ''} {', '.join(map(str, seeds))}"
-    who = "SemAttNet reference checkpoint (shipped)" if ours == REFERENCE_KEY else f"SemAttNet (mean of {which})"
+def _mean_of(seeds: list[int]) -> str:
+    """ "mean of seeds 0, 1", or "seed 0" for one."""
+    return f"mean of seeds {', '.join(map(str, seeds))}" if len(seeds) > 1 else f"seed {seeds[0]}"
+
+
+def verdict_sentences(
+    comparison: dict[str, dict[str, bool]],
+    seeds: list[int],
+    ours: str = "semattnet",
+    ours_seeds: list[int] | None = None,
+) -> list[str]:
+    """One plain sentence per compared method: where ``ours`` (its mean over ``ours_seeds``, by default
+    the live ``seeds``) is better and where it is not."""
+    live, mine = _mean_of(seeds), _mean_of(ours_seeds or seeds)
+    who = f"SemAttNet reference checkpoints (shipped, {mine})" if ours == REFERENCE_KEY else f"SemAttNet ({live})"
+    out = []
     for other, wins in comparison.items():
-        vs = LABELS[other] + (f" (mean of {which})" if ours == REFERENCE_KEY and other == "two_branch" else "")
+        vs = LABELS[other] + (f" ({live})" if ours == REFERENCE_KEY and other == "two_branch" else "")
         better = [_NAMES[k] for k in METRICS if wins[k]]
         worse = [_NAMES[k] for k in METRICS if not wins[k]]
         text = f"{who} vs {vs}: "
@@ -107,7 +120,7 @@ def machine() -> dict[str, Any]:
 
 def write_results(
     path: Path,
-    per_seed: dict[int, dict[str, dict[str, dict[str, float]]]],
+    runs: Runs,
     metrics: dict[str, dict[str, dict[str, float]]],
     trained: Trained,
     setup: dict[str, Any],
@@ -115,7 +128,7 @@ def write_results(
     """Write ``results.json`` (schema in :mod:`semattnet.apps.demo`)."""
     methods = {
         m: {"label": LABELS[m], **record(metrics[m]),
-            "per_seed": {str(seed): record(run[m]) for seed, run in per_seed.items()}}
+            "per_seed": {str(seed): record(run) for seed, run in runs[m].items()}}
         for m in metrics
     }  # fmt: skip
     comparisons_doc = {"semattnet_better_than": setup["comparisons"], "verdicts": setup["verdicts"]}

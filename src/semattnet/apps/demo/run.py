@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -31,6 +32,8 @@ from semattnet.baselines.classical import complete_classical
 from semattnet.viz.report import write_report
 
 __all__ = ["DemoResult", "make_empty", "run_demo", "train_reference_run"]
+
+MODELS_KEYS = tuple(key for key, _, _ in MODELS)
 
 
 @dataclass
@@ -66,11 +69,13 @@ def run_demo(
     base = _baselines(held)
     trained = train_models(s, device, out, held, log)  # [3/5] and [4/5]
     reference = _reference(s, held, device, log)
-    if reference is not None:
-        base[REFERENCE_KEY] = reference[0]
     order = ("sparse", "classical", *reversed([k for k, _, _ in MODELS]), *([REFERENCE_KEY] if reference else []))
-    per_seed = {seed: {m: score((base | preds)[m], held) for m in order} for seed, preds in trained.per_seed.items()}
-    metrics = mean_over_seeds(per_seed)
+    runs = {m: {seed: score(preds[m], held) for seed, preds in trained.per_seed.items()} for m in MODELS_KEYS}
+    runs |= {m: dict.fromkeys(trained.per_seed, score(base[m], held)) for m in base}  # the same for every seed
+    if reference is not None:
+        runs[REFERENCE_KEY] = {seed: score(preds, held) for seed, preds in reference[0].items()}
+        base[REFERENCE_KEY] = next(iter(reference[0].values()))  # pictures and viewer: the first seed's
+    metrics = {m: mean_over_seeds(runs[m]) for m in order}
     log("[5/5] writing pictures, the report and the viewer ...")
     preds = base | trained.per_seed[s.training_seeds()[0]]
     figures = figs.figures(out / "pictures", held, preds, trained)
@@ -87,14 +92,15 @@ def run_demo(
     notes = list(RECIPE_NOTES)
     if reference is not None:
         setup["reference"] = reference[1] | {"comparisons": comparisons(metrics, REFERENCE_KEY)}
-        setup["verdicts"] += verdict_sentences(setup["reference"]["comparisons"], setup["seeds"], REFERENCE_KEY)
+        setup["verdicts"] += verdict_sentences(setup["reference"]["comparisons"], setup["seeds"], REFERENCE_KEY,
+                                               reference[1]["seeds"])  # fmt: skip
         setup["recipe"]["reference"] = reference[1]["recipe_notes"]
         notes += reference[1]["recipe_notes"]
     (out / "metrics.json").write_text(json.dumps({"metrics": metrics, "setup": setup}, indent=2) + "\n")
-    results = write_results(out / "results.json", per_seed, metrics, trained, setup)
+    results = write_results(out / "results.json", runs, metrics, trained, setup)
     links = [("Interactive viewer of the held-out scenes (hover for depths, layers, 3D point cloud)", "viewer.html"),
              ("All numbers as JSON", "results.json")]  # fmt: skip
-    table, labels = with_seed_rows(metrics, per_seed)
+    table, labels = with_seed_rows(metrics, runs)
     md, html = write_report(out, table, labels, figures, setup | {"verdicts": setup["verdicts"] + notes}, links=links)
     _summarise(metrics, order, seconds, html, log)
     return DemoResult(out, md, html, metrics, trained.steps, seconds, viewer, results)
@@ -102,35 +108,48 @@ def run_demo(
 
 def _reference(
     s: DemoSettings, held: HeldOut, device: torch.device, log: Callable[[str], None]
-) -> tuple[dict[str, np.ndarray], dict[str, Any]] | None:
-    """The shipped reference's refined depths on the held-out scenes and what results.json records of it."""
-    if not s.reference:
+) -> tuple[dict[int, dict[str, np.ndarray]], dict[str, Any]] | None:
+    """Per training seed, the shipped reference's refined depths on the held-out scenes, and what
+    results.json records of the files (None when disabled or when no file is shipped)."""
+    files = ref.shipped_references() if s.reference else {}
+    if not files:
+        if s.reference:
+            log(f"(no reference checkpoint in {ref.REFERENCE_PATH.parent}: skipped; `{ref.REFERENCE_COMMAND}`)")
         return None
-    path = ref.REFERENCE_PATH
-    if not path.is_file():
-        log(f"(no reference checkpoint at {path}: skipped; `{ref.REFERENCE_COMMAND}` makes one)")
-        return None
-    log(f"[4/5] completing the held-out scenes with the shipped reference checkpoint ({path.name}) ...")
-    model, info = ref.load_reference(path)
-    preds = {n: o["refined_depth"] for n, o in complete_held_out(model, held, device).items()}
+    preds: dict[int, dict[str, np.ndarray]] = {}
+    records: list[dict[str, Any]] = []
+    info: dict[str, Any] = {}
+    for seed, path in files.items():
+        log(f"[4/5] completing the held-out scenes with the shipped reference checkpoint ({path.name}) ...")
+        model, info = ref.load_reference(path)
+        preds[seed] = {n: o["refined_depth"] for n, o in complete_held_out(model, held, device).items()}
+        records.append({"seed": seed, "file": path.name, "bytes": path.stat().st_size,
+                        "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
+                        "train_seconds": info.get("train_seconds"), "trained_on": info.get("machine"),
+                        "own_validation": info.get("val")})  # fmt: skip
+    recipe = {k: v for k, v in info.get("recipe", {}).items() if k != "seed"}
     record = {
-        "label": LABELS[REFERENCE_KEY], "file": path.name, "bytes": path.stat().st_size,
-        "sha256": hashlib.sha256(path.read_bytes()).hexdigest(), "storage": ref.REFERENCE_STORAGE,
-        "command": info.get("command", ref.REFERENCE_COMMAND), "recipe": info.get("recipe", {}),
-        "recipe_notes": ref.recipe_notes(info.get("recipe", {})), "train_seconds": info.get("train_seconds"),
-        "trained_on": info.get("machine"), "own_validation": info.get("val"),
+        "label": LABELS[REFERENCE_KEY], "seeds": list(files), "files": records, "storage": ref.REFERENCE_STORAGE,
+        "command": info.get("command", ref.REFERENCE_COMMAND), "recipe": recipe,
+        "recipe_notes": ref.recipe_notes(info.get("recipe", {})),
     }  # fmt: skip
     return preds, record
 
 
 def train_reference_run(
-    out_dir: str | Path, overwrite: bool = False, device: str = "auto", log: Callable[[str], None] = print
-) -> Path:
-    """``semattnet demo --train-reference``: train the reference checkpoint in ``out_dir`` (refused if
-    it holds files, unless ``overwrite``) and write ``out_dir/demo_reference.safetensors.gz``."""
+    out_dir: str | Path,
+    overwrite: bool = False,
+    device: str = "auto",
+    log: Callable[[str], None] = print,
+    seeds: tuple[int, ...] = ref.REFERENCE_SEEDS,
+) -> list[Path]:
+    """``semattnet demo --train-reference``: train one reference checkpoint per seed in ``out_dir``
+    (refused if it holds files, unless ``overwrite``), writing ``out_dir/demo_reference_seed{S}.safetensors.gz``."""
     out = Path(out_dir)
     make_empty(out, overwrite)
-    return ref.train_reference(out, out / ref.REFERENCE_PATH.name, device=resolve_device(device), log=log)
+    recipes = [dataclasses.replace(ref.REFERENCE_RECIPE, seed=seed) for seed in seeds]
+    return [ref.train_reference(out / f"seed{r.seed}", ref.reference_path(r.seed, out), r,
+                                device=resolve_device(device), log=log) for r in recipes]  # fmt: skip
 
 
 def make_empty(out: Path, overwrite: bool) -> None:
