@@ -12,8 +12,9 @@ Same model (SemAttNet, ``--width``), loss (eq. 14) and batch (random, ``--size``
 Every (variant, batch) runs in a fresh process (peak memory is the child's RSS high-water mark,
 ``resource.getrusage(RUSAGE_SELF).ru_maxrss``, or CUDA's ``max_memory_allocated``), the variants
 taken in turns (``--rounds`` times); a child whose RSS passes ``--max-gb`` is stopped and reported
-as not fitting. Per-sample memory is the batch-2 peak minus the batch-1 peak, or, when batch 2
-does not fit, the batch-1 peak minus the fixed part (weights, gradients and Adam's two moments,
+as not fitting. Per-sample memory is the slope of the peak between the smallest and the largest
+batch measured (batch 2 - batch 1 by default), or, with batch 1 alone, the batch-1 peak minus the
+fixed part (weights, gradients and Adam's two moments,
 4 x 4 bytes per parameter, plus the process before the model), an extrapolation the table says
 it is. ``--dry-run`` prints and checks the plan without running it.
 
@@ -170,10 +171,13 @@ def _against_ours(med: dict[tuple[str, int], tuple[float, float]]) -> list[str]:
 
 def _per_sample(results: list[dict[str, Any]], med: dict[tuple[str, int], tuple[float, float]],
                 v: str) -> tuple[float, float, str] | None:  # fmt: skip
-    """(MiB per sample, fixed MiB, how it was obtained) of variant ``v``."""
-    if (v, 1) in med and (v, 2) in med:
-        per = med[v, 2][1] - med[v, 1][1]
-        return per, med[v, 1][1] - per, "measured: batch 2 - batch 1"
+    """(MiB per sample, fixed MiB, how it was obtained) of variant ``v``: from its smallest and largest
+    measured batches, else extrapolated from batch 1."""
+    batches = sorted(b for vv, b in med if vv == v)
+    if len(batches) >= 2:
+        lo, hi = batches[0], batches[-1]
+        per = (med[v, hi][1] - med[v, lo][1]) / (hi - lo)
+        return per, med[v, lo][1] - lo * per, f"measured: (batch {hi} - batch {lo}) / {hi - lo}"
     one = [r for r in results if r["variant"] == v and r["batch"] == 1]
     if not one:
         return None
