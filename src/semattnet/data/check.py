@@ -15,7 +15,7 @@ from semattnet.data import layout
 from semattnet.data.io import DataError
 from semattnet.data.kitti import find_frames, load_frame
 
-__all__ = ["SplitReport", "check_tree", "check_trees"]
+__all__ = ["SplitReport", "check_roots", "check_tree", "check_trees", "log_report"]
 
 
 @dataclass
@@ -74,6 +74,37 @@ def check_tree(
     return reports
 
 
+def log_report(rep: SplitReport, log: Callable[[str], None]) -> int:
+    """Log one split's summary and at most 20 of its problems; returns the number of problems."""
+    log("  " + rep.summary())
+    for problem in rep.problems[:20]:
+        log(f"    - {problem}")
+    if len(rep.problems) > 20:
+        log(f"    ... {len(rep.problems) - 20} more")
+    return len(rep.problems)
+
+
+def check_roots(
+    roots: Sequence[str | os.PathLike[str]],
+    check_root: Callable[[str | os.PathLike[str]], int],
+    log: Callable[[str], None] = print,
+    heading: Callable[[str | os.PathLike[str]], str] = lambda root: f"{root}:",
+) -> int:
+    """Log ``heading(root)`` and run ``check_root`` (which logs and returns its problem count) on each
+    root; a generated tree that was cut short (:func:`semattnet._utils.outputs.incomplete_tree`)
+    counts as one problem and is not read further. Returns the total."""
+    bad = 0
+    for root in roots:
+        log(heading(root))
+        cut = incomplete_tree(root)
+        if cut is not None:
+            log(f"  {cut}")
+            bad += 1
+            continue
+        bad += check_root(root)
+    return bad
+
+
 def check_trees(
     roots: Sequence[str | os.PathLike[str]],
     raw_root: str | os.PathLike[str] | None = None,
@@ -84,23 +115,12 @@ def check_trees(
     """:func:`check_tree` for each root, reported through ``log``; returns the number of problems
     (a root without any KITTI file counts as one, so does a generated tree that was cut short:
     :func:`semattnet._utils.outputs.incomplete_tree`). At most 20 problems are listed per split."""
-    bad = 0
-    for root in roots:
-        log(f"{root}:")
-        cut = incomplete_tree(root)
-        if cut is not None:
-            log(f"  {cut}")
-            bad += 1
-            continue
+
+    def one(root: str | os.PathLike[str]) -> int:
         reports = check_tree(root, raw_root, semantic_root, sample)
         if not reports:
             log("  no KITTI depth completion files found")
-            bad += 1
-        for rep in reports:
-            log("  " + rep.summary())
-            for problem in rep.problems[:20]:
-                log(f"    - {problem}")
-            if len(rep.problems) > 20:
-                log(f"    ... {len(rep.problems) - 20} more")
-            bad += len(rep.problems)
-    return bad
+            return 1
+        return sum(log_report(rep, log) for rep in reports)
+
+    return check_roots(roots, one, log)

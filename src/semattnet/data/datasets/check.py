@@ -9,8 +9,7 @@ from typing import Any
 import numpy as np
 
 from semattnet._errors import DataError
-from semattnet._utils.outputs import incomplete_tree
-from semattnet.data.check import SplitReport
+from semattnet.data.check import SplitReport, check_roots, log_report
 from semattnet.data.datasets.frames import MissingSplitError
 
 __all__ = ["check_sources", "check_split_source"]
@@ -34,27 +33,12 @@ def check_split_source(source: Any, split: str, sample: int | None = None) -> Sp
     return rep
 
 
-def _log_report(rep: SplitReport, log: Callable[[str], None]) -> int:
-    log("  " + rep.summary())
-    for problem in rep.problems[:20]:
-        log(f"    - {problem}")
-    if len(rep.problems) > 20:
-        log(f"    ... {len(rep.problems) - 20} more")
-    return len(rep.problems)
-
-
 def check_sources(spec: Any, roots: Sequence[str | os.PathLike[str]], semantic_root: Any = None,
                   sample: int | None = None, log: Callable[[str], None] = print) -> int:  # fmt: skip
     """Every split of ``spec`` found under each root; a root without any counts as one problem."""
-    bad = 0
-    for root in roots:
-        log(f"{root} ({spec.name}):")
-        cut = incomplete_tree(root)
-        if cut is not None:
-            log(f"  {cut}")
-            bad += 1
-            continue
-        found = False
+
+    def one(root: str | os.PathLike[str]) -> int:
+        bad, found = 0, False
         for split in spec.splits:
             try:
                 source = spec.source(root, split, semantic_root=semantic_root)
@@ -66,8 +50,10 @@ def check_sources(spec: Any, roots: Sequence[str | os.PathLike[str]], semantic_r
                 bad += 1
                 continue
             found = True
-            bad += _log_report(check_split_source(source, split, sample), log)
+            bad += log_report(check_split_source(source, split, sample), log)
         if not found:
             log(f"  no {spec.title} files found (expected {spec.layout})")
             bad += 1
-    return bad
+        return bad
+
+    return check_roots(roots, one, log, heading=lambda root: f"{root} ({spec.name}):")
