@@ -12,6 +12,7 @@ import json
 import os
 import shutil
 import signal
+import zipfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -222,7 +223,8 @@ def test_predict_refuses_options_it_would_ignore(tmp_path: Path, extra: list[str
     assert code == 2 and named in msg and "only mean" in msg and not (tmp_path / "o").exists(), msg
 
 
-@pytest.mark.parametrize(("extra", "named"), [(["--scan-period", "0.2"], "--scan-period"), (["--camera", "3"], "--camera")])
+@pytest.mark.parametrize(("extra", "named"), [(["--scan-period", "0.2"], "--scan-period"),
+                                              (["--camera", "3"], "--camera")])  # fmt: skip
 def test_project_refuses_options_it_would_ignore(tmp_path: Path, extra: list[str], named: str) -> None:
     code, msg = _cli(tmp_path, "project", "--points", _scan(tmp_path), "--rig", _rig(tmp_path), "--out",
                      tmp_path / "o.png", *extra)  # fmt: skip
@@ -319,3 +321,98 @@ def test_a_mirror_that_is_not_a_url_is_refused_first(tmp_path: Path, mirror: str
     code, msg = _cli(tmp_path, "data", "download", "--dataset", "void", "--accept-license", "--mirror", mirror,
                      "--out", tmp_path / "o", "--cache-dir", tmp_path / "cache")  # fmt: skip
     assert code == 1 and "--mirror" in msg and not (tmp_path / "o").exists(), msg
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device", "folder"])
+def test_a_pretrained_folder_with_a_special_config_is_refused(tmp_path: Path, kind: str) -> None:
+    import semattnet
+    from tests.inference._raw_sample import tiny_checkpoint
+
+    tiny_checkpoint(tmp_path / "pre" / "model.safetensors")
+    _special(tmp_path / "pre" / "config.json", kind)
+    msg = _one_line(lambda: semattnet.from_pretrained(tmp_path / "pre"))
+    assert "config.json" in msg and "not a regular" in msg, msg
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device"])
+def test_a_file_url_of_a_special_file_is_refused(tmp_path: Path, kind: str) -> None:
+    from semattnet.weights import fetch
+
+    src = _special(tmp_path / "remote.bin", kind)
+    assert "not a regular" in _one_line(lambda: fetch(src.as_uri(), cache_dir=tmp_path / "cache", progress=False))
+    assert not [p for p in (tmp_path / "cache").rglob("*.part")]
+
+
+# ----------------------------------------------------------------------------- outputs
+
+
+@pytest.mark.parametrize("kind", ["fifo", "hardlink-into-gt"])
+def test_metrics_json_never_replaces_a_special_file_or_an_input(tmp_path: Path, kind: str) -> None:
+    from semattnet.data.io import write_depth
+
+    for d in ("pred", "gt"):
+        write_depth(tmp_path / d / "a.png", np.full((4, 6), 5.0))
+    json_path = tmp_path / "m.json"
+    os.mkfifo(json_path) if kind == "fifo" else os.link(tmp_path / "gt" / "a.png", json_path)
+    code, msg = _cli(tmp_path, "metrics", tmp_path / "pred", tmp_path / "gt", "--json", json_path, "--overwrite")
+    assert code == 1 and "m.json" in msg, msg
+    assert json_path.is_fifo() if kind == "fifo" else json_path.stat().st_nlink == 2
+
+
+def test_visualize_never_replaces_a_hard_link_to_its_ground_truth(tmp_path: Path) -> None:
+    from semattnet.data.io import write_depth
+
+    for d in ("pred", "gt"):
+        write_depth(tmp_path / d / "a.png", np.full((4, 6), 5.0))
+    (tmp_path / "o").mkdir()
+    os.link(tmp_path / "gt" / "a.png", tmp_path / "o" / "a_color.png")
+    code, msg = _cli(tmp_path, "visualize", "--pred", tmp_path / "pred", "--gt", tmp_path / "gt", "--out",
+                     tmp_path / "o", "--overwrite")  # fmt: skip
+    assert code == 1 and "would replace the input" in msg and (tmp_path / "o" / "a_color.png").stat().st_nlink == 2
+
+
+@pytest.mark.parametrize("where", ["data", "data/run", "semantic"])
+def test_train_never_writes_its_run_into_the_data(tmp_path: Path, where: str) -> None:
+    from semattnet.training.config import TrainConfig
+    from semattnet.training.trainer import train
+
+    for d in ("data", "semantic"):
+        (tmp_path / d).mkdir()
+        (tmp_path / d / "keep.txt").write_text(d)
+    cfg = TrainConfig(data=str(tmp_path / "data"), semantic_root=str(tmp_path / "semantic"), out=str(tmp_path / where))
+    assert "input folder" in _one_line(lambda: train(cfg, overwrite=True))
+    assert sorted(p.name for p in (tmp_path / "data").iterdir()) == ["keep.txt"]
+
+
+def _void_zip(path: Path, write: Callable[[zipfile.ZipFile], None]) -> Path:
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zf:
+        write(zf)
+    return path
+
+
+def _link(zf: zipfile.ZipFile) -> None:
+    info = zipfile.ZipInfo("void/lnk")
+    info.external_attr, info.create_system = 0o120777 << 16, 3
+    zf.writestr(info, "/etc/passwd")
+
+
+def _twice(zf: zipfile.ZipFile) -> None:
+    zf.writestr("void/a.txt", "1")
+    with pytest.warns(UserWarning, match="Duplicate"):
+        zf.writestr("void/a.txt", "22")
+
+
+def _bomb(zf: zipfile.ZipFile) -> None:
+    with zf.open("void/bomb.bin", "w") as f:
+        for _ in range(72):  # 72 MiB of zeros in ~70 KiB
+            f.write(bytes(1 << 20))
+
+
+@pytest.mark.parametrize("write", [_link, _twice, _bomb], ids=["symlink", "duplicate", "bomb"])
+def test_hostile_dataset_archives_unpack_nothing(tmp_path: Path, write: Callable[[zipfile.ZipFile], None]) -> None:
+    from semattnet.data.download import UnsafeArchiveError, extract_zip
+
+    archive = _void_zip(tmp_path / "a.zip", write)
+    msg = _one_line(lambda: extract_zip(archive, tmp_path / "dest"), UnsafeArchiveError)
+    assert "a.zip" in msg and "nothing unpacked" in msg
+    assert not [p for p in (tmp_path / "dest").rglob("*") if p.is_file()]
