@@ -28,7 +28,7 @@ from urllib.request import url2pathname
 
 from semattnet._errors import InputError
 from semattnet._utils.bounds import regular_file
-from semattnet._utils.download.errors import DownloadError
+from semattnet._utils.download.errors import DownloadError, NotAFileError
 
 __all__ = ["check_file_name", "default_file_name", "download_to", "gdrive_id", "url_scheme"]
 
@@ -76,7 +76,7 @@ def download_to(url: str, staging: Path, name: str, progress: bool) -> Path:
         _download_http(url, part, progress)
         return part
     if scheme == "file":
-        src = regular_file(url2pathname(unquote(urlparse(url).path)), f"file of {url}", DownloadError)
+        src = regular_file(url2pathname(unquote(urlparse(url).path)), f"file (from {url})", NotAFileError)
         part = staging / f"{name}.part"
         shutil.copyfile(src, part)
         return part
