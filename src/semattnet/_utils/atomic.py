@@ -128,9 +128,12 @@ def atomic_path(path: str | os.PathLike[str], suffix: str = "", fsync: bool = Tr
     If the block raises, ``path`` keeps its previous content and the temporary file is removed (a full
     disk raises :func:`disk_full_error` naming ``path``);
     after a kill the temporary file is removed by the next write of ``path``. The new file gets
-    the umask's mode (or the replaced file's mode); with ``fsync`` it is on disk on return.
+    the umask's mode (or the replaced file's mode); with ``fsync`` it is on disk on return. A ``path`` that
+    is a FIFO, a device or a socket (``--json /dev/null`` as root) is never replaced: :class:`FileExistsError`.
     """
     path = Path(path)
+    if not path.is_symlink() and path.exists() and not path.is_file() and not path.is_dir():
+        raise FileExistsError(f"{path} is a FIFO, device or socket, not a regular file; refusing to replace it")
     path.parent.mkdir(parents=True, exist_ok=True)
     clean_stale_temps(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.p{os.getpid()}.", suffix=suffix, dir=path.parent)

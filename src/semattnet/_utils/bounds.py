@@ -8,11 +8,13 @@ counts by the file's length (:mod:`semattnet.geometry.pointcloud_io`).
 from __future__ import annotations
 
 import math
+import stat
+from pathlib import Path
 from typing import Any
 
-from semattnet._errors import DataError, InputError
+from semattnet._errors import DataError, InputError, SemAttNetError
 
-__all__ = ["MAX_IMAGE_PIXELS", "MAX_IMAGE_SIDE", "check_image_size", "check_pinhole"]
+__all__ = ["MAX_IMAGE_PIXELS", "MAX_IMAGE_SIDE", "check_image_size", "check_pinhole", "regular_file"]
 
 #: Largest width or height accepted, checked before decoding or allocating (KITTI: 1242).
 MAX_IMAGE_SIDE = 16384
@@ -58,3 +60,21 @@ def check_pinhole(fx: float, fy: float, cx: float, cy: float, where: str = "--K"
     if not all(math.isfinite(v) for v in vals) or not (fx > 0 and fy > 0):
         raise InputError(f"{where}: fx, fy must be finite and positive and cx, cy finite; got "
                          f"{', '.join(f'{v:g}' for v in vals)}")  # fmt: skip
+
+
+def regular_file(path: Any, what: str = "file", error: type[SemAttNetError] = DataError) -> Path:
+    """``path`` (a :class:`~pathlib.Path`) when it is a regular file (symlinks followed); otherwise one line
+    saying what it is: missing, a folder, or a FIFO / device / socket (a read would block or never end).
+
+    Raises:
+        ``error`` (default :class:`DataError`), naming ``path`` and ``what`` was expected.
+    """
+    path = Path(path)
+    try:
+        mode = path.stat().st_mode
+    except OSError:
+        raise error(f"{path}: {what} not found") from None
+    if stat.S_ISREG(mode):
+        return path
+    kind = "a folder" if stat.S_ISDIR(mode) else "a FIFO" if stat.S_ISFIFO(mode) else "a device or socket"
+    raise error(f"{path}: is {kind}, not a regular {what}")

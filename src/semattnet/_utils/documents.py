@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import json
 import os
-from pathlib import Path
 from typing import Any
 
 from semattnet._errors import DataError, SemAttNetError
+from semattnet._utils.bounds import regular_file
 
 __all__ = ["MAX_DOCUMENT_BYTES", "MAX_NESTING", "loads_json", "loads_yaml", "read_document"]
 
@@ -102,7 +102,7 @@ def read_document(
 ) -> Any:
     """Parse the JSON (or, for ``.yaml`` / ``.yml``, YAML) file ``path`` under the bounds above;
     its size is checked before it is read."""
-    path = Path(path)
+    path = regular_file(path, "document", error)
     try:
         size = path.stat().st_size
         if size > max_bytes:

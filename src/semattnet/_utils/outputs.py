@@ -108,8 +108,19 @@ def check_no_input_overlap(
         hit = files.get(r) or (files.get(ino) if ino is not None else None)
         if hit is None and ino is not None and any(r.is_relative_to(folder) for folder in folders):
             hit = r
+        if hit is None and ino is not None and folders and r.stat().st_nlink > 1:
+            hit = _linked_input(ino, folders)  # a hard link to a file inside an input folder
         if hit is not None:
             raise OutputError(f"output {f} would replace the input {hit}; choose another output path")
+
+
+def _linked_input(ino: tuple[int, int], folders: list[Path]) -> Path | None:
+    """The file under ``folders`` with inode ``ino`` (only looked for when an output is a hard link)."""
+    for folder in folders:
+        for p in folder.rglob("*"):
+            if p.is_file() and _inode(p) == ino:
+                return p
+    return None
 
 
 def _clean_stale_stages(out: Path) -> None:

@@ -19,7 +19,7 @@ _ADVICE = {
     errno.EACCES: "check the folder's permissions or choose another --out",
     errno.EPERM: "check the folder's permissions or choose another --out",
     errno.EROFS: "the file system is read-only: choose another --out",
-    errno.ENOSPC: "the disk is full: free space or choose another --out",
+    errno.ENOSPC: "the disk is full: free space or write elsewhere (--out, or --cache-dir for downloads)",
     errno.EDQUOT: "the disk quota is exceeded: free space or choose another --out",
     errno.ENOTDIR: "a part of the path is a file, not a folder: choose another path",
     errno.EEXIST: "it exists: pass --overwrite or choose another path",

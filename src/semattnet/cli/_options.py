@@ -51,6 +51,17 @@ POSITIVE_FLOAT = FiniteFloat(0.0, low_open=True)
 NONNEGATIVE_FLOAT = FiniteFloat(0.0)
 
 
+def require_with(needs: str, present: bool, *names: str) -> None:
+    """Refuse options the user gave (not defaults) that only mean something with ``needs`` when it is absent:
+    an option that would be silently ignored is a usage error (exit 2) naming both."""
+    ctx = click.get_current_context()
+    given = [n for n in names if ctx.get_parameter_source(n) not in (None, click.core.ParameterSource.DEFAULT)]
+    if given and not present:
+        flags = {p.name: p.opts[0] for p in ctx.command.params}
+        shown = ", ".join(flags.get(n, n) for n in given)
+        raise click.UsageError(f"{shown} only mean(s) something with {needs}; {needs} is not given")
+
+
 def parse_size(text: str, option: str | None = None, order: str = "HxW") -> tuple[int, int]:
     """``"96x320"`` -> ``(96, 320)``; both sides must be whole numbers in 1..MAX_SIDE."""
     try:

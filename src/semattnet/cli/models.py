@@ -34,13 +34,10 @@ def models(params: bool) -> None:
 @weights_option
 def info(checkpoint: Path | None, weights: str | None) -> None:
     """Show what a checkpoint (or --weights) holds (never runs code from it)."""
-    from semattnet.weights.checkpoint import CheckpointError, config_from_state_dict, load_checkpoint
+    from semattnet.weights.checkpoint import config_from_state_dict, load_checkpoint
 
     ckpt = load_checkpoint(_source(checkpoint, weights))
-    try:
-        cfg = ckpt.config or config_from_state_dict(ckpt.state_dict)
-    except CheckpointError as exc:
-        raise CheckpointError(f"{ckpt.path}: {exc}") from None
+    cfg = ckpt.config or config_from_state_dict(ckpt.state_dict, ckpt.path)
     n = sum(v.numel() for k, v in ckpt.state_dict.items() if not k.endswith("num_batches_tracked"))
     click.echo(f"file:        {ckpt.path}  ({ckpt.format})")
     click.echo(f"entries:     {len(ckpt.state_dict)} tensors, {n:,d} values")

@@ -9,7 +9,14 @@ import click
 
 from semattnet.cli._dataset import dataset_option
 from semattnet.cli._group import main
-from semattnet.cli._options import COUNT, NONNEGATIVE_FLOAT, POSITIVE_FLOAT, backend_option, weights_option
+from semattnet.cli._options import (
+    COUNT,
+    NONNEGATIVE_FLOAT,
+    POSITIVE_FLOAT,
+    backend_option,
+    require_with,
+    weights_option,
+)
 
 
 def _completer(method: str, checkpoint: Path | None, weights: str | None, device: str, amp: str,
@@ -206,6 +213,9 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
         raise click.UsageError("--ply and --segment need --kitti-raw or --bag")
     if kitti_raw is None and (frames or deskew):
         raise click.UsageError("--frames and --deskew need --kitti-raw")
+    require_with("--kitti-raw", kitti_raw is not None, "camera")
+    require_with("--report, --bag-out or --rerun", report or bool(bag["bag_out"] or bag["rerun_file"]
+                                                                  or bag["rerun_spawn"]), "intrinsics")  # fmt: skip
     if bag["bag"] is not None and semantic is not None:
         raise click.UsageError("--semantic is for --rgb/--kitti-raw; a bag's semantic maps come with --semantic-topic")
     if bag["semantic_topic"] is not None and segment_spec is not None:

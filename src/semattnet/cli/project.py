@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from semattnet.cli._group import main
-from semattnet.cli._options import POSITIVE_FLOAT, parse_size
+from semattnet.cli._options import POSITIVE_FLOAT, parse_size, require_with
 
 
 def _numbers(text: str | None, option: str) -> list[float] | None:
@@ -69,6 +69,8 @@ def project(scan: Path, calib_dir: Path | None, camera: str, rig: Path | None, K
     """Project a LiDAR scan into a camera: a KITTI-encoded 16-bit sparse depth map (depth * 256)."""
     from semattnet.data.scans import project_scan_file
 
+    require_with("--deskew-oxts", deskew_oxts is not None, "scan_period")
+    require_with("--calib-dir", calib_dir is not None, "camera")
     summary = project_scan_file(scan, out, calib_dir=calib_dir, camera=camera, rig=rig, K=_numbers(K, "--K"),
                                 T=_numbers(T, "--T"), image_size=_size(size), deskew_oxts=deskew_oxts,
                                 scan_period=scan_period,

@@ -24,6 +24,7 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import stat
 import tarfile
 import zipfile
 from collections.abc import Callable, Sequence
@@ -42,6 +43,7 @@ __all__ = [
     "LicenseNotAcceptedError",
     "PlannedFile",
     "UnsafeArchiveError",
+    "check_mirror",
     "download_dataset",
     "download_kitti",
     "drives_for",
@@ -109,11 +111,23 @@ def _url(prefix: str, archive: kf.KittiArchive) -> str:
     return prefix.rstrip("/") + "/" + archive.path
 
 
+def check_mirror(mirror: str | None) -> str | None:
+    """``mirror`` when it is an ``http(s)://`` or ``file://`` URL prefix (or None).
+
+    Raises:
+        InputError: anything else, naming ``--mirror`` (a bare path or text would be taken for a weights name).
+    """
+    if mirror is not None and not re.match(r"^(https?|file)://[^\s]*$", mirror):
+        raise InputError(f"--mirror: expected an http(s):// or file:// URL prefix (a local folder: "
+                         f"file:///path/to/it), got {mirror!r}")  # fmt: skip
+    return mirror
+
+
 def plan_part(
     part: str, root: str | Path, mirror: str | None = None, semantic_archive: str | None = None
 ) -> tuple[list[PlannedFile], str]:
     """The files of one part (see :data:`WHAT`) and a note on where the list came from."""
-    root, prefix = Path(root), mirror or kf.KITTI_PREFIX
+    root, prefix = Path(root), check_mirror(mirror) or kf.KITTI_PREFIX
     if part == "depth-completion":
         archives = list(kf.DEPTH_COMPLETION_ARCHIVES)
         return [PlannedFile(part, _url(prefix, a), root / a.target, a.size, a) for a in archives], ""
@@ -203,6 +217,35 @@ def _write(opener: Callable[[object], object], todo: Sequence[tuple[object, Path
     return len(todo)
 
 
+#: A dataset archive's member above this many bytes may not inflate more than MAX_ARCHIVE_RATIO : 1, nor may
+#: all members together inflate beyond that ratio of the archive (image and scan data compress < 10:1).
+ARCHIVE_RATIO_FLOOR = 64 * 1024 * 1024
+MAX_ARCHIVE_RATIO = 100
+
+
+def _refuse_bombs(path: Path, sizes: Sequence[tuple[str, int, int]]) -> None:
+    """(name, inflated, compressed) of each member: a zip bomb is refused before anything is written."""
+    for name, full, packed in sizes:
+        if full > ARCHIVE_RATIO_FLOOR and full > MAX_ARCHIVE_RATIO * max(packed, 1):
+            raise UnsafeArchiveError(f"{path}: member {name!r} inflates {packed} bytes to {full} (more than "
+                                     f"{MAX_ARCHIVE_RATIO}:1); refusing a zip bomb; nothing unpacked")  # fmt: skip
+    total, limit = sum(s[1] for s in sizes), MAX_ARCHIVE_RATIO * path.stat().st_size + ARCHIVE_RATIO_FLOOR
+    if total > limit:
+        raise UnsafeArchiveError(f"{path}: members inflate to {total} bytes, more than the {limit} accepted for "
+                                 f"this archive's size; refusing a bomb; nothing unpacked")  # fmt: skip
+
+
+def _refuse_links_and_duplicates(zf: zipfile.ZipFile, path: Path) -> None:
+    """Symlink members (Unix mode in ``external_attr``) and a name given twice are refused, as in tar."""
+    seen: set[str] = set()
+    for info in zf.infolist():
+        if stat.S_ISLNK(info.external_attr >> 16):
+            raise UnsafeArchiveError(f"{path}: refusing member {info.filename!r} (a symbolic link); nothing unpacked")
+        if info.filename in seen:
+            raise UnsafeArchiveError(f"{path}: member {info.filename!r} is in the archive twice; nothing unpacked")
+        seen.add(info.filename)
+
+
 def extract_zip(
     path: str | Path, dest: str | Path, strip: Sequence[str] = (), keep: Sequence[str] = ()
 ) -> tuple[int, int]:
@@ -222,6 +265,8 @@ def extract_zip(
     except zipfile.BadZipFile as exc:
         raise DataError(f"{path}: not a zip archive ({exc})") from None
     with zf:
+        _refuse_links_and_duplicates(zf, path)
+        _refuse_bombs(path, [(i.filename, i.file_size, i.compress_size) for i in zf.infolist()])
         members = [(info, _strip(_safe_member(info.filename, path), strip)) for info in zf.infolist()]
         items = [(info, rel, info.file_size) for info, rel in members
                  if not info.is_dir() and rel.parts and (not keep or set(keep) & set(rel.parts[:-1]))]  # fmt: skip
@@ -244,6 +289,7 @@ def extract_tar(path: str | Path, dest: str | Path, strip: Sequence[str] = ()) -
         for info in infos:
             if info.issym() or info.islnk() or info.isdev():
                 raise UnsafeArchiveError(f"{path}: refusing member {info.name!r} (a link or device); nothing unpacked")
+        _refuse_bombs(path, [("(all members)", sum(i.size for i in infos if i.isfile()), path.stat().st_size)])
         members = [(info, _strip(_safe_member(info.name, path), strip)) for info in infos if info.isfile()]
         dest.mkdir(parents=True, exist_ok=True)
         todo, skipped = _plan(path, dest, [(info, rel, info.size) for info, rel in members if rel.parts])
@@ -357,6 +403,7 @@ def download_dataset(
     from semattnet.data.datasets import get_dataset
 
     spec, out = get_dataset(dataset), Path(out)
+    check_mirror(mirror)
     if spec.name == "kitti-dc":
         return download_kitti(out, accept_license=accept_license, dry_run=dry_run, mirror=mirror,
                               cache_dir=cache_dir, delete_archives=delete_archives, check=check,

@@ -17,7 +17,7 @@ from PIL import Image, UnidentifiedImageError
 
 from semattnet._errors import DataError
 from semattnet._utils.atomic import atomic_path
-from semattnet._utils.bounds import MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE
+from semattnet._utils.bounds import MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, regular_file
 
 __all__ = [
     "DEPTH_SCALE",
@@ -59,9 +59,7 @@ def _check_header(path: Path, img: Image.Image) -> None:
 
 
 def _open(path: str | os.PathLike[str]) -> Image.Image:
-    path = Path(path)
-    if not path.is_file():
-        raise DataError(f"{path}: file not found")
+    path = regular_file(path, "PNG file")
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error", Image.DecompressionBombWarning)
@@ -197,10 +195,22 @@ def write_depth(
     path: str | os.PathLike[str], depth: np.ndarray, overwrite: bool = False, compress_level: int = 6
 ) -> Path:
     """Write (H, W) metres as a KITTI 16-bit PNG, atomically; refuses to overwrite by default.
-    A uint16 array is taken as already encoded (:func:`encode_depth`) and written as is."""
+    A uint16 array is taken as already encoded (:func:`encode_depth`) and written as is.
+
+    Raises:
+        DataError: NaN / infinite, negative or deeper than :data:`MAX_DEPTH_M` metres (what the PNG cannot
+            hold; apply :func:`clamp_for_png` to predictions first), naming ``path``.
+    """
     depth = np.asarray(depth)
     if depth.ndim != 2:
         raise DataError(f"{path}: depth must be (H, W), got shape {depth.shape}")
+    if depth.dtype != np.uint16:
+        d = np.asarray(depth, dtype=np.float64)
+        finite = bool(np.all(np.isfinite(d)))
+        if d.size and not (finite and d.min() >= 0 and np.round(d.max() * DEPTH_SCALE) <= MAX_DEPTH_VALUE):
+            bad = d[~np.isfinite(d)] if not finite else d[(d < 0) | (d > MAX_DEPTH_M)]
+            raise DataError(f"{path}: depth to write has {bad.size} value(s) like {bad.flat[0]:g} m; a KITTI "
+                            f"16-bit PNG holds 0 (none) to {MAX_DEPTH_M:.2f} m (clamp_for_png clamps)")  # fmt: skip
     values = depth if depth.dtype == np.uint16 else encode_depth(depth)
     return _atomic_save(Image.fromarray(values), Path(path), overwrite, compress_level)
 

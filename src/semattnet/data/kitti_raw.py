@@ -66,9 +66,10 @@ def parse_frames(spec: str | int | Sequence[int] | None, limit: int | None = Non
                 raise ValueError  # caught below: reported as the DataError of a bad spec
             spans.append((a, b))
     except ValueError:
-        raise DataError(f"frames: expected a range a-b or a comma list, e.g. 0-10 or 1,3,5; got {spec!r}") from None
+        raise DataError(f"frames (--frames): expected a range a-b or a comma list, e.g. 0-10 or 1,3,5; "
+                        f"got {spec!r}") from None  # fmt: skip
     if not spans or min(a for a, _ in spans) < 0:
-        raise DataError(f"frames: no valid (non-negative) index in {spec!r}")
+        raise DataError(f"frames (--frames): no valid (non-negative) index in {spec!r}")
     _bounded([b for _, b in spans], limit, spec)  # before any range is expanded
     return [i for a, b in spans for i in range(a, b + 1)]
 

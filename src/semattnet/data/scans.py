@@ -14,8 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
+from semattnet._errors import DataError
 from semattnet._utils.outputs import check_no_input_overlap
-from semattnet.data.io import write_depth
+from semattnet.data.io import MAX_DEPTH_M, write_depth
 from semattnet.geometry import load_rig, project_scan, read_points
 from semattnet.geometry.scan import DEFAULT_SCAN_PERIOD
 
@@ -69,6 +70,9 @@ def project_scan_file(
     calib = load_rig(calib_dir, camera, rig, K, T, image_size)
     points = read_points(scan)
     depth = project_scan(points, calib, deskew_oxts, scan_period, name=str(scan))
+    if (deep := int((depth > MAX_DEPTH_M).sum())) > 0:
+        raise DataError(f"{scan}: {deep} point(s) project deeper than {MAX_DEPTH_M:.2f} m (up to {depth.max():g} m), "
+                        "more than a KITTI 16-bit PNG holds; crop the scan or check its units (metres)")  # fmt: skip
     out.parent.mkdir(parents=True, exist_ok=True)
     write_depth(out, depth, overwrite=overwrite)
     projected = int(np.count_nonzero(depth))

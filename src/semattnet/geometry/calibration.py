@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from semattnet._errors import DataError
-from semattnet._utils.bounds import check_image_size
+from semattnet._utils.bounds import check_image_size, regular_file
 from semattnet._utils.documents import read_document
 
 from .transforms import check_rigid, check_rotation, make_T
@@ -94,9 +94,7 @@ class RigCalibration:
 
 def _read_kv(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     """``key: numbers`` lines of a KITTI calibration file as float64 vectors (text keys skipped)."""
-    path = Path(path)
-    if not path.is_file():
-        raise DataError(f"{path}: calibration file not found")
+    path = regular_file(path, "calibration file")
     out: dict[str, np.ndarray] = {}
     try:
         text = path.read_text(encoding="utf-8")
@@ -273,9 +271,7 @@ def read_rig_json(path: str | os.PathLike[str]) -> RigCalibration:
     Raises:
         DataError: unreadable file, missing key, wrong shape, non-finite numbers, non-rigid ``T_cam_lidar``.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise DataError(f"{path}: rig file not found")
+    path = regular_file(path, "rig file")
     doc = read_document(path)  # JSON or YAML, bounded in size and nesting, no YAML aliases
     if not isinstance(doc, dict):
         raise DataError(f"{path}: expected an object with keys K, T_cam_lidar, image_size")

@@ -16,13 +16,18 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from semattnet._errors import DataError
+from semattnet._errors import DataError, InputError
+from semattnet._utils.bounds import regular_file
 
-__all__ = ["VehicleMotion", "deskew_scan", "read_oxts_motion"]
+#: Largest speed component (m/s) and yaw rate (rad/s) an OXTS packet may give: far beyond any car
+#: (KITTI: < 30 m/s, < 1 rad/s); bigger or non-finite values are a corrupt packet, not motion.
+MAX_SPEED_MPS = 100.0
+MAX_YAW_RATE = 10.0
+
+__all__ = ["MAX_SPEED_MPS", "MAX_YAW_RATE", "VehicleMotion", "deskew_scan", "read_oxts_motion"]
 
 
 @dataclass(frozen=True)
@@ -40,18 +45,22 @@ def read_oxts_motion(path: str | os.PathLike[str]) -> VehicleMotion:
     Velodyne axes are nearly aligned in KITTI (both x forward, y left, z up), so these serve in the LiDAR frame.
 
     Raises:
-        DataError: missing file, fewer than 23 numbers, or malformed numbers.
+        DataError: missing file, fewer than 23 numbers, malformed numbers, or a velocity / yaw rate that is
+            NaN, infinite or beyond :data:`MAX_SPEED_MPS` / :data:`MAX_YAW_RATE` (the message names the file).
     """
-    path = Path(path)
-    if not path.is_file():
-        raise DataError(f"{path}: OXTS file not found")
+    path = regular_file(path, "OXTS file")
     try:
         vals = [float(v) for v in path.read_text().split()]
-    except ValueError as exc:
+    except (ValueError, UnicodeDecodeError) as exc:
         raise DataError(f"{path}: malformed numbers: {exc}") from None
     if len(vals) < 23:
         raise DataError(f"{path}: expected 30 OXTS fields, found {len(vals)}")
-    return VehicleMotion(np.array(vals[8:11], dtype=np.float64), float(vals[22]))
+    velocity, yaw_rate = np.array(vals[8:11], dtype=np.float64), float(vals[22])
+    if not (np.all(np.abs(velocity) <= MAX_SPEED_MPS) and abs(yaw_rate) <= MAX_YAW_RATE):  # False for NaN too
+        raise DataError(f"{path}: OXTS velocity (vf, vl, vu) = {', '.join(f'{v:g}' for v in velocity)} m/s and "
+                        f"yaw rate wu = {yaw_rate:g} rad/s must be finite, at most {MAX_SPEED_MPS:g} m/s and "
+                        f"{MAX_YAW_RATE:g} rad/s")  # fmt: skip
+    return VehicleMotion(velocity, yaw_rate)
 
 
 def deskew_scan(
@@ -67,6 +76,12 @@ def deskew_scan(
     Returns:
         (N, 3|4) compensated points, same dtype as ``points``.
     """
+    vel = np.asarray(velocity, dtype=np.float64).reshape(-1)
+    if vel.shape != (3,) or not np.all(np.isfinite(vel)) or not np.isfinite(yaw_rate):
+        raise InputError(f"deskew_scan: velocity must be 3 finite numbers and yaw_rate finite, "
+                         f"got {vel} and {yaw_rate}")  # fmt: skip
+    if not (np.isfinite(scan_period) and scan_period > 0):
+        raise InputError(f"deskew_scan: scan_period must be a positive number of seconds, got {scan_period}")
     pts = np.asarray(points)
     xyz = pts[:, :3].astype(np.float64)
     dt = -np.arctan2(xyz[:, 1], xyz[:, 0]) / (2 * np.pi) * float(scan_period)
@@ -76,5 +91,5 @@ def deskew_scan(
     out[:, 0] = c * xyz[:, 0] - s * xyz[:, 1]
     out[:, 1] = s * xyz[:, 0] + c * xyz[:, 1]
     out[:, 2] = xyz[:, 2]
-    out[:, :3] += np.asarray(velocity, dtype=np.float64).reshape(1, 3) * dt[:, None]
+    out[:, :3] += vel.reshape(1, 3) * dt[:, None]
     return out

@@ -19,6 +19,7 @@ import numpy as np
 
 from semattnet._errors import DataError
 from semattnet._utils.atomic import atomic_path
+from semattnet._utils.bounds import regular_file
 
 from .projection import PointCloud
 
@@ -145,6 +146,12 @@ def _check_pcd_counts(header: dict[str, list[str]], counts: list[str], size: int
     if not 0 <= n <= size or min(per, default=1) < 1:
         raise DataError(f"{path}: PCD POINTS {n} / COUNT {' '.join(counts)} out of range "
                         f"(POINTS in [0, {size}] for this file's size, each COUNT >= 1)")  # fmt: skip
+    try:
+        wh = [int(header[k][0]) for k in ("WIDTH", "HEIGHT") if k in header]
+    except (ValueError, IndexError):
+        raise DataError(f"{path}: PCD WIDTH / HEIGHT are not integers") from None
+    if len(wh) == 2 and wh[0] * wh[1] != n:
+        raise DataError(f"{path}: PCD WIDTH x HEIGHT = {wh[0]} x {wh[1]} does not match POINTS {n}")
 
 
 def _read_pcd(path: Path) -> np.ndarray:
@@ -218,9 +225,7 @@ def read_points(path: str | os.PathLike[str]) -> np.ndarray:
     Raises:
         DataError: missing file, unknown suffix, wrong size or shape, no points, NaN/infinite coordinates.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise DataError(f"{path}: point cloud file not found")
+    path = regular_file(path, "point cloud file")
     suffix = path.suffix.lower()
     if suffix == ".bin":
         return _read_bin(path)

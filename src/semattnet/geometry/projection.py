@@ -23,12 +23,14 @@ from typing import Any
 
 import numpy as np
 
-from semattnet._errors import DataError
+from semattnet._errors import DataError, InputError
+from semattnet._utils.bounds import check_pinhole
 
 from .transforms import is_tensor, transform_points
 
 __all__ = [
     "PointCloud",
+    "check_intrinsics",
     "depth_to_points",
     "pixel_indices",
     "points_to_pixels",
@@ -93,6 +95,18 @@ def pixel_indices(uv: np.ndarray, image_size: tuple[int, int]) -> tuple[np.ndarr
     return np.where(inside, col, -1).astype(np.int64), np.where(inside, row, -1).astype(np.int64), inside
 
 
+def check_intrinsics(K: Any, where: str) -> np.ndarray:
+    """``K`` as a (3, 3) float64 array when it is a pinhole matrix with finite entries and positive focal
+    lengths; otherwise an :class:`~semattnet.InputError` naming ``where``."""
+    k = np.asarray(K.detach().cpu() if is_tensor(K) else K, dtype=np.float64)
+    if k.shape != (3, 3):
+        raise InputError(f"{where}: K must be (3, 3), got shape {k.shape}")
+    if not np.all(np.isfinite(k)):
+        raise InputError(f"{where}: K has NaN or infinite entries")
+    check_pinhole(k[0, 0], k[1, 1], k[0, 2], k[1, 2], f"{where}: K")
+    return k
+
+
 def project_points(
     points: Any,
     K: Any,
@@ -124,6 +138,7 @@ def project_points(
     W, H = (int(s) for s in image_size)
     if W <= 0 or H <= 0:
         raise DataError(f"{name}: image_size must be positive (width, height), got {image_size}")
+    check_intrinsics(K, "project_points")
     uv, z = points_to_pixels(points, K, T_cam_lidar, R_rect)
     front = z > min_depth
     if not bool(front.any()):
@@ -255,7 +270,9 @@ def depth_to_points(
         :class:`PointCloud` of the selected pixels in row-major order (xyz float32 metres, uv pixels).
     """
     d = _as_map(depth, "depth").astype(np.float32)
-    K = np.asarray(K.detach().cpu() if is_tensor(K) else K, dtype=np.float64)
+    K = check_intrinsics(K, "depth_to_points")
+    if not np.all(np.isfinite(d)):
+        raise InputError("depth_to_points: depth contains NaN or infinite values (0 means no depth)")
     keep = select_pixels(d, max_depth, top_crop, mask)
     v, u = np.nonzero(keep)
     z = d[v, u].astype(np.float64)

@@ -34,9 +34,9 @@ DEFAULT_SCAN_PERIOD = 0.1
 
 def _rig_from_numbers(K: Sequence[float], T: Sequence[float], image_size: Sequence[int] | None) -> RigCalibration:
     if len(K) != 4:
-        raise DataError(f"K needs 4 numbers fx,fy,cx,cy; got {len(K)}")
+        raise DataError(f"--K: K needs 4 numbers fx,fy,cx,cy; got {len(K)}")
     if len(T) != 16:
-        raise DataError(f"T_cam_lidar needs 16 numbers (4x4 row-major); got {len(T)}")
+        raise DataError(f"--T: T_cam_lidar needs 16 numbers (4x4 row-major); got {len(T)}")
     if image_size is None or len(image_size) != 2:
         raise DataError(f"the image size (width, height) is required with K and T; got {image_size}")
     size = check_image_size(image_size[0], image_size[1], "--size")
@@ -47,7 +47,7 @@ def _rig_from_numbers(K: Sequence[float], T: Sequence[float], image_size: Sequen
         raise DataError("--T: T_cam_lidar has NaN or infinite entries")
     why = check_rigid(T_cam_lidar)
     if why:
-        raise DataError(f"T_cam_lidar is not a rigid transform: {why}")
+        raise DataError(f"--T: T_cam_lidar is not a rigid transform: {why}")
     K3 = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], dtype=np.float64)
     return RigCalibration(K3, T_cam_lidar, size, source="command line")
 

@@ -66,6 +66,21 @@ class Completion:
         return torch.stack([c[0, 0].float().cpu() for c in confs]).amax(0).numpy()
 
 
+def _check_colour_range(name: str, a: np.ndarray | None) -> None:
+    """``rgb`` / ``semantic`` hold 0..255 colours: NaN, infinite or out-of-range values are refused in one line."""
+    if a is None or np.asarray(a).size == 0:
+        return
+    try:
+        v = np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must hold numbers 0..255, got dtype {np.asarray(a).dtype}") from None
+    if not np.all(np.isfinite(v)):
+        raise InputError(f"{name} contains NaN or infinite values")
+    lo, hi = float(v.min()), float(v.max())
+    if lo < 0 or hi > 255:
+        raise InputError(f"{name} must hold colours 0..255, got values in [{lo:g}, {hi:g}]")
+
+
 class DepthCompleter:
     """A model ready for inference on NumPy frames of any size.
 
@@ -154,6 +169,8 @@ class DepthCompleter:
         if semantic is not None and np.asarray(semantic).shape != rgb.shape:
             raise InputError(f"semantic must be {rgb.shape}, got {np.asarray(semantic).shape}")
 
+        for name, a in (("rgb", rgb), ("semantic", semantic)):
+            _check_colour_range(name, a)
         depth_in = torch.from_numpy(np.ascontiguousarray(sparse, dtype=np.float32))
         check_sparse_depth(depth_in)
         check_has_points(depth_in)

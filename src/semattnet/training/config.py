@@ -191,7 +191,13 @@ class TrainConfig:
 
     @classmethod
     def load(cls, path: str | Path) -> TrainConfig:
-        return cls.from_dict(json.loads(Path(path).read_text()))
+        """A config.json, bounded (size, nesting, a regular file: :func:`semattnet._utils.documents.read_document`)."""
+        from semattnet._utils.documents import read_document
+
+        data = read_document(path, error=InputError)
+        if not isinstance(data, dict):
+            raise InputError(f"{path}: expected a JSON object of training options, got {type(data).__name__}")
+        return cls.from_dict(data)
 
     def with_overrides(self, pairs: list[str]) -> TrainConfig:
         """Apply ``key=value`` strings (values parsed as JSON when possible)."""

@@ -75,7 +75,7 @@ def weights_config(
     """
     given = recorded or ckpt.config
     try:
-        inferred = config_from_state_dict(ckpt.state_dict)
+        inferred = config_from_state_dict(ckpt.state_dict, source or ckpt.path)
     except CheckpointError:
         if given is None:
             raise

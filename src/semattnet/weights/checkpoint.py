@@ -286,8 +286,12 @@ def load_weights(model: nn.Module, state_dict: Mapping[str, torch.Tensor] | Chec
     return report
 
 
-def config_from_state_dict(sd: Mapping[str, torch.Tensor]) -> SemAttNetConfig:
-    """Infer the architecture of a SemAttNet state dict (ours or the authors')."""
+def config_from_state_dict(
+    sd: Mapping[str, torch.Tensor], source: str | os.PathLike[str] | None = None
+) -> SemAttNetConfig:
+    """Infer the architecture of a SemAttNet state dict (ours or the authors'); ``source`` (the file) starts
+    the message of a :class:`CheckpointError`."""
+    where = f"{source}: " if source is not None else ""
     sd = filter_state_dict(sd)
     refine = any(k.startswith("backbone.") for k in sd)
     bb = {k.removeprefix("backbone."): v for k, v in sd.items() if not refine or k.startswith("backbone.")}
@@ -295,7 +299,7 @@ def config_from_state_dict(sd: Mapping[str, torch.Tensor]) -> SemAttNetConfig:
     need += [] if "cbam_192.ChannelGate.mlp.1.weight" in bb else ["depth_layer3.conv1.weight"]
     absent = [k for k in need if k not in bb or bb[k].dim() < 2]
     if absent:
-        raise CheckpointError(f"not a SemAttNet state dict: no {absent[0]} ({len(sd)} tensors)")
+        raise CheckpointError(f"{where}not a SemAttNet state dict: no {absent[0]} ({len(sd)} tensors)")
     base = bb["rgb_conv_init.0.weight"].shape[0]
     branches = 3 if "segment_conv_init.0.weight" in bb else 2
     if "cbam_192.ChannelGate.mlp.1.weight" in bb:
@@ -310,7 +314,7 @@ def config_from_state_dict(sd: Mapping[str, torch.Tensor]) -> SemAttNetConfig:
         cfg = SemAttNetConfig(branches=branches, fusion=fusion, refine=refine, width=base / 32)  # type: ignore[arg-type]
         return cfg.replace(kernel_sizes=kernel_sizes) if kernel_sizes else cfg
     except ValueError as exc:
-        raise CheckpointError(f"not a SemAttNet state dict that can be built: {exc}") from None
+        raise CheckpointError(f"{where}not a SemAttNet state dict that can be built: {exc}") from None
 
 
 def load_model(path: str | os.PathLike[str], device: str | torch.device = "cpu", **overrides: Any) -> nn.Module:
@@ -342,7 +346,7 @@ def save_safetensors(ckpt: Checkpoint | Mapping[str, torch.Tensor], path: str | 
             meta["epoch"] = str(ckpt.epoch)
         if ckpt.args is not None:
             meta["args"] = json.dumps(ckpt.args, default=_json_default, sort_keys=True)
-        cfg = ckpt.config or config_from_state_dict(sd)
+        cfg = ckpt.config or config_from_state_dict(sd, ckpt.path)
     else:
         sd, meta, cfg = dict(ckpt), {}, config_from_state_dict(ckpt)
     meta["config"] = json.dumps(cfg.to_dict())

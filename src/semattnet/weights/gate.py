@@ -50,6 +50,7 @@ from typing import Any, BinaryIO
 import torch
 
 from semattnet._errors import SemAttNetError
+from semattnet._utils.bounds import regular_file
 from semattnet._utils.documents import loads_json
 from semattnet.weights._safe_pickle import UnsafeCheckpointError
 
@@ -125,9 +126,7 @@ def inspect_weights_file(path: str | Path) -> Inspected:
         CheckpointError: not a checkpoint, malformed, truncated or corrupt (CRC).
         UnsafeCheckpointError: a TorchScript archive.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise CheckpointError(f"{path}: no such checkpoint file")
+    path = regular_file(path, "checkpoint file", CheckpointError)
     size = path.stat().st_size
     with open(path, "rb") as f:
         head = f.read(512)

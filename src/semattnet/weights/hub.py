@@ -26,6 +26,7 @@ from torch import nn
 
 from semattnet._errors import InputError
 from semattnet._utils.atomic import atomic_path
+from semattnet._utils.bounds import regular_file
 from semattnet._utils.documents import read_document
 from semattnet._utils.download import (
     OfflineError,
@@ -227,6 +228,9 @@ def _read_config(folder: Path) -> tuple[str, SemAttNetConfig]:
 def _from_folder(folder: Path, load: _Load, entry: PretrainedWeights | None = None) -> nn.Module:
     """A saved folder: its ``config.json`` (or the registry record it came from) and ``model.safetensors``."""
     weights = folder / WEIGHTS_NAME
+    for name in (WEIGHTS_NAME, CONFIG_NAME):  # present but a FIFO / device / folder: never skipped silently
+        if (folder / name).exists() and not (folder / name).is_file():
+            regular_file(folder / name, name, CheckpointError)
     if not weights.is_file():
         present = sorted(p.name for p in folder.iterdir()) if folder.is_dir() else []
         raise CheckpointError(f"{folder}: no {WEIGHTS_NAME} (found: {', '.join(present) or 'nothing'})")

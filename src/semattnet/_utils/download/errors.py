@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from semattnet._errors import SemAttNetError
+from semattnet._errors import InputError, SemAttNetError
 
-__all__ = ["ChecksumError", "DownloadError", "OfflineError"]
+__all__ = ["ChecksumError", "DownloadError", "NotAFileError", "OfflineError"]
 
 
 class DownloadError(OSError, SemAttNetError):
@@ -19,3 +19,7 @@ class ChecksumError(DownloadError):
 
 class OfflineError(DownloadError):
     """Offline mode is on and the file is not in the cache."""
+
+
+class NotAFileError(InputError):
+    """A ``file://`` URL naming a FIFO, a device or a folder (a copy would block or never end): not retried."""

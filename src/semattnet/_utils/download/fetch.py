@@ -30,7 +30,7 @@ from semattnet._utils.download.cache import (
     update_pins,
     verify_cached,
 )
-from semattnet._utils.download.errors import ChecksumError, DownloadError, OfflineError
+from semattnet._utils.download.errors import ChecksumError, DownloadError, NotAFileError, OfflineError
 from semattnet._utils.download.hf import fetch_hf
 from semattnet._utils.download.transports import check_file_name, default_file_name, download_to, url_scheme
 
@@ -118,6 +118,8 @@ def fetch_target(root: Path, t: Target, progress: bool) -> tuple[Path, str]:
             except ChecksumError as exc:
                 checksum_failed = True
                 failures.append(f"{url}: {exc}")
+            except NotAFileError:
+                raise  # a bad URL (a file:// URL of a FIFO or device): no mirror or retry changes it
             except OSError as exc:
                 if is_disk_full(exc):
                     raise  # another mirror would fill the disk too

@@ -27,7 +27,8 @@ from urllib.parse import unquote, urlparse
 from urllib.request import url2pathname
 
 from semattnet._errors import InputError
-from semattnet._utils.download.errors import DownloadError
+from semattnet._utils.bounds import regular_file
+from semattnet._utils.download.errors import DownloadError, NotAFileError
 
 __all__ = ["check_file_name", "default_file_name", "download_to", "gdrive_id", "url_scheme"]
 
@@ -75,7 +76,7 @@ def download_to(url: str, staging: Path, name: str, progress: bool) -> Path:
         _download_http(url, part, progress)
         return part
     if scheme == "file":
-        src = Path(url2pathname(unquote(urlparse(url).path)))
+        src = regular_file(url2pathname(unquote(urlparse(url).path)), f"file (from {url})", NotAFileError)
         part = staging / f"{name}.part"
         shutil.copyfile(src, part)
         return part
