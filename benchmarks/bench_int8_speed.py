@@ -23,24 +23,16 @@ from typing import Any
 import torch
 
 import semattnet
+from semattnet.apps.benchmark import random_frame
 from semattnet.apps.timing import interleaved
 from semattnet.inference.backends import optimize_for_inference
-
-
-def frame(size: tuple[int, int]) -> dict[str, torch.Tensor]:
-    """A random KITTI-like input: colours and semantic colours 0..255, 5 % LiDAR pixels up to 80 m."""
-    h, w = size
-    g = torch.Generator().manual_seed(0)
-    rgb, semantic = torch.rand(1, 3, h, w, generator=g) * 255, torch.rand(1, 3, h, w, generator=g) * 255
-    sparse = torch.rand(1, 1, h, w, generator=g) * 80 * (torch.rand(1, 1, h, w, generator=g) < 0.05)
-    return {"rgb": rgb, "semantic": semantic, "sparse": sparse}
 
 
 def measure(size: tuple[int, int], width: float, precisions: tuple[str, ...], repeats: int) -> dict[str, Any]:
     """Median seconds per frame of the naive reference and each OpenVINO precision, and their differences."""
     torch.manual_seed(0)
     net = semattnet.build_model("semattnet", width=width).eval()
-    x = frame(size)
+    x = random_frame(size, torch.device("cpu"))
 
     def naive() -> Any:
         net.propagation_impl = "naive"

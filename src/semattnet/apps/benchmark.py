@@ -44,6 +44,7 @@ __all__ = [
     "fast_mode_dtype",
     "interleaved",
     "peak_memory",
+    "random_frame",
     "run_benchmark",
     "timeit",
 ]
@@ -76,7 +77,8 @@ class BenchResult:
         return asdict(self)
 
 
-def _frame(size: tuple[int, int], device: torch.device) -> dict[str, torch.Tensor]:
+def random_frame(size: tuple[int, int], device: torch.device) -> dict[str, torch.Tensor]:
+    """A fixed random KITTI-like input (seed 0): colours and semantic colours 0..255, 5 % LiDAR pixels up to 80 m."""
     h, w = size
     g = torch.Generator().manual_seed(0)
     x = {"rgb": torch.rand(1, 3, h, w, generator=g) * 255, "semantic": torch.rand(1, 3, h, w, generator=g) * 255,
@@ -129,7 +131,7 @@ def run_benchmark(
     log("\n".join(bench.res.header()))
     if "propagation" in parts:
         _bench_propagation(bench, size)
-    x = _frame(size, dev)
+    x = random_frame(size, dev)
     if any(p in parts for p in ("backbone", "full", "fast", "backends")):
         net = model if model is not None else build_model("semattnet", width=width)
         _bench_inference(bench, net.to(dev).eval(), x, parts, fast_dtype)
@@ -302,7 +304,7 @@ _TRAIN_VARIANTS = (
 def _bench_training(bench: _Bench, train_size: tuple[int, int], model: nn.Module | None, width: float) -> None:
     """Rows: one training step (forward, loss, backward) per :data:`_TRAIN_VARIANTS`; notes: peak memory ratios."""
     th, tw = train_size
-    xt = _frame(train_size, bench.dev)
+    xt = random_frame(train_size, bench.dev)
     gt = torch.rand(1, 1, th, tw, device=bench.dev) * 80
     base: float | None = None
     for label, impl, checkpointing in _TRAIN_VARIANTS:

@@ -16,6 +16,7 @@ from semattnet.apps.experiment import HeldOut, complete_held_out, step_seconds, 
 __all__ = [
     "LABELS",
     "MODELS",
+    "MODEL_KEYS",
     "OVERHEAD",
     "RECIPE_NOTES",
     "REFERENCE_KEY",
@@ -75,6 +76,9 @@ MODELS: tuple[tuple[str, str, dict[str, Any]], ...] = (
     ("semattnet", "SemAttNet (CG + SG + DG, SAMMAFB, CSPN++)", {"branches": 3}),
     ("two_branch", "Two-branch ablation (CG + DG, SAMMAFB, CSPN++)", {"branches": 2}),
 )
+
+#: The result keys of the learned models, in :data:`MODELS`' order.
+MODEL_KEYS: tuple[str, ...] = tuple(key for key, _, _ in MODELS)
 
 #: The result key of the shipped reference checkpoint.
 REFERENCE_KEY = "reference"

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from semattnet.apps.demo.recipe import LABELS, MODELS, REFERENCE_KEY, Trained
+from semattnet.apps.demo.recipe import LABELS, MODEL_KEYS, REFERENCE_KEY, Trained
 
 __all__ = [
     "COMPARED",
@@ -49,7 +49,7 @@ def mean_over_seeds(runs: dict[int, dict[str, dict[str, float]]]) -> dict[str, d
 
 def _learned() -> set[str]:
     """Methods with per-seed rows: the live models and the reference checkpoints."""
-    return {k for k, _, _ in MODELS} | {REFERENCE_KEY}
+    return {*MODEL_KEYS, REFERENCE_KEY}
 
 
 def with_seed_rows(
@@ -74,7 +74,7 @@ def comparisons(metrics: dict[str, dict[str, dict[str, float]]], ours: str = "se
 
 
 def _mean_of(seeds: list[int]) -> str:
-    """ "mean of seeds 0, 1", or "seed 0" for one."""
+    """How a headline over ``seeds`` is named: mean of seeds 0, 1; or seed 0 for one."""
     return f"mean of seeds {', '.join(map(str, seeds))}" if len(seeds) > 1 else f"seed {seeds[0]}"
 
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import math
 import shutil
@@ -17,9 +16,10 @@ import numpy as np
 import torch
 
 from semattnet._utils.device import resolve_device
+from semattnet._utils.download import sha256_file
 from semattnet.apps.demo import figures as figs
 from semattnet.apps.demo import reference as ref
-from semattnet.apps.demo.recipe import LABELS, MODELS, RECIPE_NOTES, REFERENCE_KEY, DemoSettings, train_models
+from semattnet.apps.demo.recipe import LABELS, MODEL_KEYS, RECIPE_NOTES, REFERENCE_KEY, DemoSettings, train_models
 from semattnet.apps.demo.results import (
     comparisons,
     mean_over_seeds,
@@ -32,8 +32,6 @@ from semattnet.baselines.classical import complete_classical
 from semattnet.viz.report import write_report
 
 __all__ = ["DemoResult", "make_empty", "run_demo", "train_reference_run"]
-
-MODELS_KEYS = tuple(key for key, _, _ in MODELS)
 
 
 @dataclass
@@ -69,8 +67,8 @@ def run_demo(
     base = _baselines(held)
     trained = train_models(s, device, out, held, log)  # [3/5] and [4/5]
     reference = _reference(s, held, device, log)
-    order = ("sparse", "classical", *reversed([k for k, _, _ in MODELS]), *([REFERENCE_KEY] if reference else []))
-    runs = {m: {seed: score(preds[m], held) for seed, preds in trained.per_seed.items()} for m in MODELS_KEYS}
+    order = ("sparse", "classical", *reversed(MODEL_KEYS), *([REFERENCE_KEY] if reference else []))
+    runs = {m: {seed: score(preds[m], held) for seed, preds in trained.per_seed.items()} for m in MODEL_KEYS}
     runs |= {m: dict.fromkeys(trained.per_seed, score(base[m], held)) for m in base}  # the same for every seed
     if reference is not None:
         runs[REFERENCE_KEY] = {seed: score(preds, held) for seed, preds in reference[0].items()}
@@ -124,7 +122,7 @@ def _reference(
         model, info = ref.load_reference(path)
         preds[seed] = {n: o["refined_depth"] for n, o in complete_held_out(model, held, device).items()}
         records.append({"seed": seed, "file": path.name, "bytes": path.stat().st_size,
-                        "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
+                        "sha256": sha256_file(path),
                         "train_seconds": info.get("train_seconds"), "trained_on": info.get("machine"),
                         "own_validation": info.get("val")})  # fmt: skip
     recipe = {k: v for k, v in info.get("recipe", {}).items() if k != "seed"}
