@@ -148,4 +148,5 @@ def test_complete_frames_writes_latency_json(tmp_path: Path) -> None:
                     tmp_path / "out", log=lambda _: None, timer=times, prefetch=2)  # fmt: skip
     doc = json.loads((tmp_path / "out" / "latency.json").read_text())
     assert doc["frames"] == 3 and doc["stages"]["writing"]["frames"] == 3 and doc["overlapped"]
-    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["f0.png", "f1.png", "f2.png", "latency.json"]
+    names = sorted(p.name for p in (tmp_path / "out").iterdir())
+    assert names == ["f0.png", "f1.png", "f2.png", "frames.json", "latency.json"]

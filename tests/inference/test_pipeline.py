@@ -83,7 +83,7 @@ def test_every_source_goes_through_the_one_writer(tree: Path, tmp_path: Path, mo
         DepthPngSink, "save", lambda self, path, pred: (written.append(path.name), save(self, path, pred))
     )
     split = KittiSplitSource(tree, "val_select")
-    paths = complete_frames(split, ClassicalCompleter(), default_sinks(), tmp_path / "split", log=lambda s: None)
+    paths = complete_frames(split, ClassicalCompleter(), default_sinks(), tmp_path / "split", log=lambda s: None).paths
     assert [p.name for p in paths] == [f"{n}.png" for n in split.names] == written
     frame = split.load(split.names[0])
     assert frame.gt is not None and frame.K is not None and "gt" in frame.paths
@@ -138,6 +138,8 @@ def test_predict_checks_everything_before_loading_the_model(tmp_path: Path, monk
         tmp_path / "sparse",
         "--out",
         out,
+        "--on-error",
+        "stop",  # the default (skip) would skip the corrupt frame and load the model
     ]
     result = CliRunner().invoke(main, [str(a) for a in args])
     assert result.exit_code == 1 and "the model was loaded" not in result.output, result.output

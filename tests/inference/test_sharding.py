@@ -3,6 +3,7 @@ with two CPU processes writing exactly the files of one process."""
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -102,12 +103,18 @@ def assert_one_line_error(res: subprocess.CompletedProcess[str], logs: Path, ran
 
 
 def _latencies(*trees: dict[str, bytes]) -> None:
-    """Each run wrote its per-stage latency table (``latency.json``); taken out of the byte comparison."""
+    """Each run wrote its per-stage latency table (``latency.json``) and its journal (``frames.json``, with each
+    frame's times); taken out of the byte comparison, the journals' statuses and files compared instead."""
     import json
 
+    journals = []
     for tree in trees:
         table = json.loads(tree.pop("latency.json"))
         assert table["frames"] > 0, table
+        doc = json.loads(tree.pop("frames.json"))
+        assert doc["complete"] and not [k for k in tree if k.startswith(".frames.rank")], doc
+        journals.append([(e["name"], e["status"], e.get("files")) for e in doc["frames"]])
+    assert all(j == journals[0] for j in journals), journals
 
 
 def test_predict_two_processes_equals_one(tmp_path: Path) -> None:
@@ -135,10 +142,18 @@ def test_predict_two_processes_equals_one(tmp_path: Path) -> None:
 def test_predict_bad_frame_on_one_rank_stops_all(tmp_path: Path) -> None:
     rgb, sparse = _frames(tmp_path, count=4)
     (sparse / "f3.png").write_bytes(b"not a png")  # rank 1's frame
-    res = cli("predict", "--method", "classical", "--rgb", rgb, "--sparse", sparse, "--out", tmp_path / "out",
-              nproc=2, logs=tmp_path / "logs")  # fmt: skip
+    common = ("predict", "--method", "classical", "--rgb", rgb, "--sparse", sparse)
+    res = cli(*common, "--on-error", "stop", "--out", tmp_path / "out", nproc=2, logs=tmp_path / "logs")
     assert_one_line_error(res, tmp_path / "logs", 2, "f3.png")
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+    # skipped (the default): the other frames done, f3 named, one frames.json merged from both processes
+    res = cli(*common, "--out", tmp_path / "skip", nproc=2, logs=tmp_path / "logs2")
+    assert res.returncode == 0, res.stderr[-3000:]  # torchrun takes a non-zero status for a crash
+    doc = json.loads((tmp_path / "skip" / "frames.json").read_text())
+    assert [(e["name"], e["status"]) for e in doc["frames"]] == [("f0", "done"), ("f1", "done"), ("f2", "done"),
+                                                                  ("f3", "skipped")]  # fmt: skip
+    assert "f3.png" in doc["frames"][3]["reason"] and doc["complete"]
+    assert sorted(p.name for p in (tmp_path / "skip").iterdir() if p.name.startswith(".")) == []
 
 
 def test_predict_kitti_raw_two_processes_equals_one(tmp_path: Path) -> None:

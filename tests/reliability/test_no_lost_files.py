@@ -134,8 +134,9 @@ def test_archive_rerun_skips_what_it_wrote(tmp_path: Path) -> None:
     assert extract_zip(archive, tmp_path / "dest") == (0, 2)
 
 
-def test_predict_overwrite_replaces_nothing_when_a_late_frame_fails(tmp_path: Path) -> None:
+def test_predict_overwrite_keeps_whole_frames_when_a_late_frame_fails(tmp_path: Path) -> None:
     from semattnet.data.frames import Frame, IndexedSource
+    from semattnet.data.io import read_depth
     from semattnet.inference.completer import Completion
     from semattnet.inference.pipeline import complete_frames
     from semattnet.inference.sinks import DepthPngSink
@@ -166,8 +167,12 @@ def test_predict_overwrite_replaces_nothing_when_a_late_frame_fails(tmp_path: Pa
     with pytest.raises(RuntimeError, match="last frame"):
         complete_frames(Source(), completer, [DepthPngSink()], out, overwrite=True, log=lambda s: None)
     assert len(calls) == 3
-    assert sorted(p.name for p in out.iterdir()) == ["f0.png", "f1.png", "f2.png"]
-    assert all((out / f"{n}.png").read_bytes() == b"previous " + n.encode() for n in Source.names)
+    # the frames done before the error are replaced (each whole, as asked) and journaled; the failed one is not
+    assert sorted(p.name for p in out.iterdir()) == ["f0.png", "f1.png", "f2.png", "frames.json"]
+    assert (out / "f2.png").read_bytes() == b"previous f2"
+    assert all(read_depth(out / f"{n}.png")[4, 6] == 3.0 for n in ("f0", "f1"))
+    doc = json.loads((out / "frames.json").read_text())
+    assert not doc["complete"] and [e["status"] for e in doc["frames"]] == ["done", "done", "pending"]
 
 
 def test_sweeps_and_metrics_never_write_into_their_inputs(tmp_path: Path) -> None:

@@ -31,6 +31,7 @@ __all__ = [
     "TREE_MARKER",
     "OutputError",
     "check_no_input_overlap",
+    "clean_stale_stages",
     "incomplete_tree",
     "mark_tree",
     "refuse_existing",
@@ -123,7 +124,7 @@ def _linked_input(ino: tuple[int, int], folders: list[Path]) -> Path | None:
     return None
 
 
-def _clean_stale_stages(out: Path) -> None:
+def clean_stale_stages(out: Path) -> None:
     """Remove stage folders a killed run left in ``out`` (named with a process id that is gone)."""
     from semattnet._utils.atomic import pid_alive
 
@@ -142,7 +143,7 @@ def staged_outputs(out: str | os.PathLike[str], overwrite: bool = False) -> Iter
     out = Path(out)
     created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
-    _clean_stale_stages(out)
+    clean_stale_stages(out)
     stage = Path(tempfile.mkdtemp(prefix=f"{STAGE_PREFIX}{os.getpid()}.", dir=out))
     try:
         try:

@@ -83,7 +83,18 @@ _BAG_OPTIONS = [
     click.option("--rerun-spawn", is_flag=True, help="Stream the frames to a spawned Rerun viewer."),
     click.option("--stream", is_flag=True,
                  help="Read, project and segment the next frames in a background thread while one is completed."),
+    click.option("--rerun-serve", is_flag=True,
+                 help="Serve the frames to Rerun's web viewer in a browser as they are completed.  [extra: rerun]"),
+    click.option("--live", default=None, metavar="[HOST:]PORT",
+                 help="Serve the frames as they are completed over the Foxglove WebSocket protocol.  [extra: live]"),
+    click.option("--realtime", is_flag=True,
+                 help="Replay at the recorded rate: frames that come while the completer is busy are dropped."),
+    click.option("--speed", type=POSITIVE_FLOAT, default=None, help="With --realtime: replay this many times faster."),
 ]  # fmt: skip
+
+#: The options that do not change what a run writes: a resumed run may differ from the first in these only.
+_NOT_IDENTITY = {"resume", "overwrite", "on_error", "stream", "live", "rerun_serve", "rerun_spawn", "realtime",
+                 "speed", "list_topics", "out"}  # fmt: skip
 
 
 def _bag_options(f):
@@ -121,19 +132,51 @@ def _source(rgb, sparse, kitti_raw, frames, camera, semantic, deskew, K, bag, da
                          bag["max_skew"], bag["semantic_topic"], log=click.echo)  # fmt: skip
     if kitti_raw is not None:
         return RawDriveSource(kitti_raw, frames, camera, semantic, deskew)
-    return FolderSource.pair(rgb, sparse, semantic, K=K)
+    return FolderSource.pair(rgb, sparse, semantic, K=K, missing_ok=True)
 
 
 def _robot_sinks(bag: dict[str, Any], max_depth: float, timer: Any) -> list[Any]:
-    """``latency.json`` and, as asked, the bag and the Rerun recording."""
+    """``latency.json`` and, as asked, the bag, the Rerun recording or viewer and the live server."""
     from semattnet.inference.sinks import BagSink, LatencySink, RerunSink
 
     sinks: list[Any] = [LatencySink(timer=timer)]
     if bag["bag_out"] is not None:
         sinks.append(BagSink(target=bag["bag_out"], max_depth=max_depth))
-    if bag["rerun_file"] is not None or bag["rerun_spawn"]:
-        sinks.append(RerunSink(target=bag["rerun_file"], spawn=bag["rerun_spawn"], max_depth=max_depth))
+    if bag["rerun_file"] is not None or bag["rerun_spawn"] or bag["rerun_serve"]:
+        sinks.append(RerunSink(target=bag["rerun_file"], spawn=bag["rerun_spawn"], serve=bag["rerun_serve"],
+                               max_depth=max_depth, log=click.echo))  # fmt: skip
+    if bag["live"] is not None:
+        from semattnet.robotics.live import LiveSink
+
+        sinks.append(LiveSink(address=bag["live"], max_depth=max_depth, log=click.echo))
     return sinks
+
+
+def _identity(params: dict[str, Any]) -> dict[str, Any]:
+    """What a run is, for a resume to check: every option that changes the outputs (paths resolved, a
+    checkpoint by its SHA-256) and the package version."""
+    import semattnet
+    from semattnet._utils.download import sha256_file
+
+    run: dict[str, Any] = {"command": "predict", "version": semattnet.__version__}
+    for key, value in sorted(params.items()):
+        if key in _NOT_IDENTITY or value is None or value is False:
+            continue
+        if key in ("checkpoint", "weights") and Path(value).is_file():
+            value = f"sha256:{sha256_file(value)}"
+        run[key] = str(Path(value).resolve()) if isinstance(value, Path) else value
+    return run
+
+
+def _out_and_resume(out: Path | None, resume: str | None) -> tuple[Path, bool]:
+    """``--out OUT [--resume]`` or ``--resume OUT``: the output folder and whether to resume."""
+    if resume and out is not None and Path(resume).resolve() != out.resolve():
+        raise click.UsageError(f"--resume {resume} and --out {out} name two folders; give one")
+    if resume:
+        return Path(resume), True
+    if out is None:
+        raise click.UsageError("Missing option '--out'.")
+    return out, resume is not None
 
 
 @main.command()
@@ -180,6 +223,21 @@ def _robot_sinks(bag: dict[str, Any], max_depth: float, timer: Any) -> list[Any]
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
 @backend_option
 @click.option("--overwrite", is_flag=True, help="Replace existing outputs.")
+@click.option(
+    "--resume",
+    is_flag=False,
+    flag_value="",
+    default=None,
+    metavar="[OUT]",
+    help="Continue the killed or failed run in OUT (or --out): keep its completed frames, do the rest.",
+)
+@click.option(
+    "--on-error",
+    type=click.Choice(["skip", "stop"]),
+    default=None,
+    help="A frame that cannot be completed: skip it (named, counted; the default for several frames) "
+    "or stop the run (the default for one frame; the frames done are kept).",
+)
 @click.option("--method", type=click.Choice(["semattnet", "classical"]), default="semattnet", show_default=True,
               help="classical: the non-learned IP-Basic-style baseline (no checkpoint).")  # fmt: skip
 @click.option("--report", is_flag=True, help="Also write viewer.html: hover depths, layers, 3D view (with --K).")
@@ -190,15 +248,12 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
             out: Path | None, npy: bool, panel: bool, ply: bool, max_depth: float, top_crop: int, deskew: bool,
             device: str, amp: str, backend: str, overwrite: bool, method: str, report: bool,
             intrinsics: str | None, **bag: Any) -> None:  # fmt: skip
-    """Complete depth for one frame, folders of frames (any size), a KITTI raw drive or a ROS bag.
+    """Complete depth for one frame, folders of frames (any size), a KITTI split or raw drive, a dataset
+    or a ROS bag.
 
-    Prints a per-stage latency table at the end and writes it to OUT/latency.json."""
-    from semattnet._utils.distributed import launch_rank, process_group
-    from semattnet.data.sources import SemanticMaps
-    from semattnet.inference.pipeline import check_frames, complete_frames
-    from semattnet.inference.sinks import default_sinks
-    from semattnet.inference.stream import StageTimes
-
+    A frame that cannot be completed is skipped with one line (--on-error); OUT/frames.json records every
+    frame. Exit status: 0 when every frame was done, 3 when some were skipped, 4 when --realtime dropped
+    some (and none was skipped). Prints a per-stage latency table at the end and writes OUT/latency.json."""
     data = (bag.pop("dataset"), bag.pop("data_root"), bag.pop("split"))
     _check_inputs(rgb, sparse, kitti_raw, data[1], bag)
     if bag["list_topics"]:
@@ -206,45 +261,93 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
 
         click.echo(format_topics(list_topics(bag["bag"])))
         return
-    if out is None:
-        raise click.UsageError("Missing option '--out'.")
+    out, resuming = _out_and_resume(out, bag.pop("resume"))
+    _check_combinations(rgb, sparse, kitti_raw, data, frames, deskew, ply, segment_spec, semantic, report,
+                        intrinsics, bag)  # fmt: skip
+    if resuming and overwrite:
+        raise click.UsageError("give --resume or --overwrite, not both")
+    _check_method(method, checkpoint, weights)
+    if method != "classical":
+        from semattnet._utils.device import resolve_device
+
+        resolve_device(device)  # a bad --device: one line, before any work
+    run = _run_frames(click.get_current_context().params, out, resuming, overwrite, npy, panel, ply, max_depth,
+                      top_crop, (rgb, sparse, kitti_raw, frames, camera, semantic, deskew, data), segment_spec,
+                      intrinsics, (method, checkpoint, weights, device, amp, backend), bag)  # fmt: skip
+    if run is None:
+        return
+    import os
+
+    from semattnet._utils.distributed import launch_rank
+
+    if launch_rank() == 0:
+        click.echo(run.summary())
+    if (
+        run.exit_code and int(os.environ.get("WORLD_SIZE", "1")) == 1
+    ):  # torchrun takes any other status for a crash: frames.json tells
+        click.get_current_context().exit(run.exit_code)
+
+
+def _check_combinations(rgb: Path | None, sparse: Path | None, kitti_raw: Path | None, data: tuple, frames: str | None,
+                        deskew: bool, ply: bool, segment_spec: str | None, semantic: Path | None, report: bool,
+                        intrinsics: str | None, bag: dict[str, Any]) -> None:  # fmt: skip
+    """The options agree with the input kind (one line each, before any work)."""
     files_only = kitti_raw is None and bag["bag"] is None and data[1] is None
     if (files_only or data[1] is not None) and (ply or segment_spec):
         raise click.UsageError("--ply and --segment need --kitti-raw or --bag")
     if kitti_raw is None and (frames or deskew):
         raise click.UsageError("--frames and --deskew need --kitti-raw")
     require_with("--kitti-raw", kitti_raw is not None, "camera")
-    require_with("--report, --bag-out or --rerun", report or bool(bag["bag_out"] or bag["rerun_file"]
-                                                                  or bag["rerun_spawn"]), "intrinsics")  # fmt: skip
+    robot = bool(bag["bag_out"] or bag["rerun_file"] or bag["rerun_spawn"] or bag["rerun_serve"] or bag["live"])
+    require_with("--report, --bag-out, --rerun or --live", report or robot, "intrinsics")
     if bag["bag"] is not None and semantic is not None:
         raise click.UsageError("--semantic is for --rgb/--kitti-raw; a bag's semantic maps come with --semantic-topic")
     if bag["semantic_topic"] is not None and segment_spec is not None:
         raise click.UsageError("give --semantic-topic or --segment, not both")
     if not files_only and report:
         raise click.UsageError("--report needs --rgb/--sparse (not yet --kitti-raw, --bag or --data)")
-    if files_only and intrinsics is None and (bag["bag_out"] or bag["rerun_file"] or bag["rerun_spawn"]):
-        raise click.UsageError("--bag-out and --rerun need the intrinsics: --bag, --kitti-raw, or --K")
-    _check_method(method, checkpoint, weights)
-    if method != "classical":
-        from semattnet._utils.device import resolve_device
+    if files_only and intrinsics is None and robot:
+        raise click.UsageError("--bag-out, --rerun and --live need the intrinsics: --bag, --kitti-raw, or --K")
+    if bag["speed"] is not None and not bag["realtime"]:
+        raise click.UsageError("--speed needs --realtime")
+    if bag["realtime"] and bag["bag"] is None and kitti_raw is None:
+        raise click.UsageError("--realtime replays a recording: it needs --bag or --kitti-raw")
 
-        resolve_device(device)  # a bad --device: one line, before any work
+
+def _run_frames(params: dict[str, Any], out: Path, resuming: bool, overwrite: bool, npy: bool, panel: bool,
+                ply: bool, max_depth: float, top_crop: int, inputs: tuple, segment_spec: str | None,
+                intrinsics: str | None, model: tuple, bag: dict[str, Any]) -> Any:  # fmt: skip
+    """Check everything, load the completer, run the one frame loop; then the table (and the report)."""
+    from semattnet._utils.distributed import launch_rank, process_group
+    from semattnet.data.sources import SemanticMaps
+    from semattnet.inference.pipeline import check_frames, complete_frames
+    from semattnet.inference.sinks import default_sinks
+    from semattnet.inference.stream import StageTimes
+
+    rgb, sparse, kitti_raw, frames, camera, semantic, deskew, data = inputs
     K = _intrinsics(intrinsics)
     maps = SemanticMaps(segment_spec, folder=semantic is not None or bag["semantic_topic"] is not None)
     timer = StageTimes()
     sinks = default_sinks(npy, panel, ply, max_depth, top_crop) + _robot_sinks(bag, max_depth, timer)
+    realtime = (bag["speed"] or 1.0) if bag["realtime"] else None
     with process_group():
         source = _source(rgb, sparse, kitti_raw, frames, camera, semantic, deskew, K, bag, data)
-        check_frames(source, sinks, out, overwrite=overwrite)  # every input and output, before the model
-        completer = _completer(method, checkpoint, weights, device, amp, backend)
-        complete_frames(source, completer, sinks, out, overwrite=overwrite, log=click.echo, semantic=maps,
-                        checked=True, timer=timer, prefetch=2 if bag["stream"] else 0)  # fmt: skip
+        plan = check_frames(source, sinks, out, overwrite=overwrite, on_error=bag["on_error"], resume=resuming,
+                            run=_identity(params))  # every input and output, before the model  # fmt: skip
+        if plan.journal.kept:
+            click.echo(f"{out}: resuming: {len(plan.journal.kept)} of {len(source.names)} frame(s) already done")
+        completer = _completer(*model)
+        run = complete_frames(source, completer, sinks, out, overwrite=overwrite, log=click.echo, semantic=maps,
+                              checked=plan, timer=timer, prefetch=2 if bag["stream"] else 0,
+                              realtime=realtime)  # fmt: skip
     if launch_rank() == 0:
         click.echo(timer.table())
-    if report and launch_rank() == 0:  # under torchrun: once, after every rank's frames are in place
+    if params["report"] and launch_rank() == 0:  # under torchrun: once, after every rank's frames are in place
         from semattnet.viz.viewer import write_prediction_report
 
-        write_prediction_report(out, list(source.frames.values()), K=K, log=click.echo)
+        done = [source.frames[p.stem] for p in run.paths]
+        write_prediction_report(out, done, K=K, log=click.echo)
+    return run
 
 
 @main.command()

@@ -28,14 +28,16 @@ def _sparse_for(image: Path, sparse_dir: Path) -> Path | None:
     return None
 
 
-def pair_frames(rgb: Path, sparse: Path, semantic: Path | None = None) -> list[FramePaths]:
+def pair_frames(rgb: Path, sparse: Path, semantic: Path | None = None, missing_ok: bool = False) -> list[FramePaths]:
     """Pair image files with sparse (and semantic) files by name.
 
     ``rgb``/``sparse``/``semantic`` are either three files (one frame) or three folders. KITTI's
     ``val_selection_cropped`` names (``..._image_...`` / ``..._velodyne_raw_...``) pair too.
+    ``missing_ok``: an image without a partner is still a frame, whose missing file (named like the image)
+    fails when it is read: that frame's fault, not the run's (:mod:`semattnet.inference.pipeline`).
 
     Raises:
-        DataError: an image has no sparse (or semantic) partner, or the folder has no PNG.
+        DataError: an image has no sparse (or semantic) partner (unless ``missing_ok``), or the folder has no PNG.
     """
     rgb, sparse = Path(rgb), Path(sparse)
     semantic = Path(semantic) if semantic is not None else None
@@ -47,9 +49,11 @@ def pair_frames(rgb: Path, sparse: Path, semantic: Path | None = None) -> list[F
         sem = None if semantic is None else semantic / image.name
         if lidar is None or (sem is not None and not sem.is_file()):
             missing.append(image.name)
-            continue
+            if not missing_ok:
+                continue
+        lidar = lidar if lidar is not None else sparse / image.name
         frames.append(FramePaths(image.stem, image, lidar, sem))
-    if missing:
+    if missing and not missing_ok:
         raise DataError(f"{rgb}: no matching sparse/semantic file for {len(missing)} image(s), e.g. {missing[:3]}")
     if not frames:
         raise DataError(f"{rgb}: no PNG images")

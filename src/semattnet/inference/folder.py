@@ -36,14 +36,17 @@ def complete_folder(
     overwrite: bool = False,
     log: Callable[[str], None] = print,
     inputs: Sequence[str | Path | None] | None = None,
+    on_error: str = "stop",
 ) -> list[Path]:
     """Complete ``frames`` (see :func:`semattnet.data.pairing.pair_frames`) and write, per frame,
     ``NAME.png`` (KITTI 16-bit depth), ``NAME_color.png`` and optionally ``NAME.npy`` (float32
     metres) and ``NAME_panel.png`` (per-branch panel) into ``out``.
 
     The output policy (:mod:`semattnet._utils.outputs`): ``out`` may not be (inside) an input folder;
-    every input is decoded before any work; outputs are staged and appear only when all frames
-    succeeded, so a corrupt frame or a kill leaves ``out`` unchanged.
+    every input is decoded before any work; each frame's files appear atomically once it is done and are
+    recorded in ``out/frames.json``. ``on_error``: ``"stop"`` (a corrupt frame raises, the frames done
+    before it kept) or ``"skip"`` (it is skipped and noted in ``frames.json``); see
+    :func:`~semattnet.inference.pipeline.complete_frames`.
 
     ``inputs``: the paths the user gave (files or folders; ``predict`` passes --rgb/--sparse/--semantic):
     ``out`` may not be one of these folders or inside one. ``out`` may never be the folder of an input
@@ -57,4 +60,6 @@ def complete_folder(
         OutputError: ``out`` is an input folder or inside one.
     """
     source = FolderSource(frames, given=inputs or ())
-    return complete_frames(source, completer, default_sinks(npy, panel), out, overwrite=overwrite, log=log)
+    run = complete_frames(source, completer, default_sinks(npy, panel), out, overwrite=overwrite, log=log,
+                          on_error=on_error)  # fmt: skip
+    return run.paths

@@ -1,37 +1,66 @@
 """The one frame loop: frames from any :class:`~semattnet.data.frames.FrameSource`, through a completer,
-into output sinks (:mod:`semattnet.inference.sinks`). What ``semattnet predict`` runs for folders and
-KITTI raw drives, and what writes ``evaluate``'s predictions. For example::
+into output sinks (:mod:`semattnet.inference.sinks`). What ``semattnet predict`` runs for folders, KITTI
+splits and raw drives, bags and datasets, and what writes ``evaluate``'s predictions. For example::
 
     from semattnet.baselines import ClassicalCompleter
     from semattnet.data.sources import FolderSource
     from semattnet.inference.sinks import default_sinks
 
     source = FolderSource.pair("rgb/", "sparse/")
-    check_frames(source, default_sinks(), "out")       # every input decoded, every output checked
-    complete_frames(source, ClassicalCompleter(), default_sinks(), "out", checked=True)
+    plan = check_frames(source, default_sinks(), "out")    # every input decoded, every output checked
+    run = complete_frames(source, ClassicalCompleter(), default_sinks(), "out", checked=plan)
+    print(run.summary())                                   # "3 frame(s): 3 done"
+
+A long run survives its bad frames and its kills:
+
+* **Per-frame faults are the frame's.** A frame whose input cannot be read or completed (a corrupt file, a
+  LiDAR scan with no point in the image, an empty sparse map: :func:`~.stream.is_frame_fault`) is skipped
+  with one line naming it and why (``on_error="skip"``, the default for more than one frame), or stops the
+  run with the frames done so far kept (``"stop"``). Errors of the run (a full disk, a sink that fails, a
+  missing package) stop it at once.
+* **Every frame's outputs appear as it is done**, each file atomically, and the frame is recorded in
+  ``OUT/frames.json`` (:mod:`~.journal`) once they are all in place.
+* **Resume.** ``resume=True`` continues a killed or failed run in ``out``: the frames done, with every
+  output whole, are kept; the rest are done; the run outputs (a bag, a recording, ``latency.json``) are
+  written at the end over every frame, in order, so they equal those of an uninterrupted run.
 
 The output policy (:mod:`semattnet._utils.outputs`): no output over or inside an input (the folder of
-an input file counts), none existing unless ``overwrite``, every input decoded: all before any work
-(:func:`check_frames`, which the CLI runs before it loads a model). Outputs are staged and appear only
-when every frame succeeded. Under ``torchrun`` (same arguments on every rank) the frames are split over
-the processes and the files are those of one process (:mod:`semattnet.inference.sharding`).
+an input file counts), none existing unless ``overwrite`` (or ``resume``, in the run's own folder), every
+input decoded: all before any work (:func:`check_frames`, which the CLI runs before it loads a model).
+Under ``torchrun`` (same arguments on every rank) the frames are split over the processes and the files
+are those of one process (:mod:`semattnet.inference.sharding`).
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+import shutil
+import tempfile
+from collections import Counter
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 
-from semattnet._utils.distributed import is_main
-from semattnet._utils.outputs import OutputError, check_no_input_overlap, refuse_existing
+from semattnet._errors import DataError, InputError
+from semattnet._utils.atomic import disk_full_error, fsync_dir, is_disk_full
+from semattnet._utils.distributed import first_error, is_main, rank, world_size
+from semattnet._utils.outputs import (
+    STAGE_PREFIX,
+    OutputError,
+    check_no_input_overlap,
+    clean_stale_stages,
+    refuse_existing,
+)
 from semattnet.data.frames import Frame, FrameSource
+from semattnet.data.io import encode_depth, read_depth
 from semattnet.data.sources.semantic import SemanticMaps
 from semattnet.inference.completer import Completion
-from semattnet.inference.sharding import agree, on_main, process_group, rank_log, shard, shared_stage
+from semattnet.inference.journal import FRAMES_FILE, RunJournal, describe_counts
+from semattnet.inference.sharding import agree, gather_rows, on_main, process_group, rank_log, shard
 from semattnet.inference.sinks import (
     DepthPngSink,
     LatencySink,
@@ -41,9 +70,18 @@ from semattnet.inference.sinks import (
     output_files,
     predict_frame,
 )
-from semattnet.inference.stream import StageTimes, completions
+from semattnet.inference.stream import FrameFault, StageTimes, _read_frame, completions, is_frame_fault
 
-__all__ = ["Completer", "check_frames", "complete_frames", "write_prediction"]
+__all__ = [
+    "EXIT_DROPPED",
+    "EXIT_SKIPPED",
+    "Completer",
+    "FrameRun",
+    "RunPlan",
+    "check_frames",
+    "complete_frames",
+    "write_prediction",
+]
 
 PathLike = str | os.PathLike[str]
 
@@ -84,30 +122,256 @@ def _check_targets(targets: Sequence[Path], given: Sequence[Path], out: Path) ->
         raise OutputError(f"two outputs at one path ({', '.join(map(str, targets))}); choose distinct paths")
 
 
-def check_frames(source: FrameSource, sinks: Sequence[Sink], out: PathLike, *, overwrite: bool = False,
-                 inputs: Sequence[PathLike | None] = ()) -> None:  # fmt: skip
-    """Every check before any work (and before a model is loaded): the outputs (rank 0), then every input
-    of every frame decoded (each rank its share).
+def _policy(on_error: str | None, frames: int) -> str:
+    """``on_error`` as given, else ``skip`` for more than one frame and ``stop`` for one."""
+    if on_error is None:
+        return "skip" if frames > 1 else "stop"
+    if on_error not in ("skip", "stop"):
+        raise InputError(f"on_error must be 'skip' or 'stop', got {on_error!r}")
+    return on_error
 
-    ``inputs``: further paths the user gave (files or folders) that outputs must stay out of.
+
+@dataclass
+class RunPlan:
+    """What :func:`check_frames` decided: the run's :class:`~.journal.RunJournal` (with the frames a resume
+    keeps), the frames whose inputs failed the check (name -> reason; ``on_error="skip"``) and the policy."""
+
+    journal: RunJournal
+    faults: dict[str, str] = field(default_factory=dict)
+    on_error: str = "stop"
+    resume: bool = False
+
+
+def _check_inputs(source: FrameSource, names: Sequence[str], on_error: str) -> dict[str, str]:
+    """Decode the inputs of ``names``: ``stop`` raises the first fault, ``skip`` returns every faulty frame's
+    reason (frame by frame, in order)."""
+    if on_error == "stop":
+        source.check(names)
+        return {}
+    faults = {}
+    for name in names:
+        try:
+            source.check([name])
+        except Exception as exc:
+            if not is_frame_fault(exc):
+                raise
+            faults[name] = " ".join(str(exc).split())
+    return faults
+
+
+def check_frames(source: FrameSource, sinks: Sequence[Sink], out: PathLike, *, overwrite: bool = False,
+                 inputs: Sequence[PathLike | None] = (), on_error: str | None = None, resume: bool = False,
+                 run: Mapping[str, Any] | None = None) -> RunPlan:  # fmt: skip
+    """Every check before any work (and before a model is loaded): a resume's journal, the outputs (rank 0),
+    then every input of every frame to do decoded (each rank its share).
+
+    ``inputs``: further paths the user gave (files or folders) that outputs must stay out of. ``on_error``:
+    ``stop`` (the first faulty input raises), ``skip`` (faulty frames are noted and skipped) or None (``skip``
+    for more than one frame). ``resume``: continue the run in ``out`` (``run``: its identity, which must be the
+    one recorded there; the frames done, with every output whole, are kept).
 
     Raises:
-        FileExistsError: an output exists and ``overwrite`` is not set.
+        FileExistsError: an output exists and neither ``overwrite`` nor ``resume`` is set.
         OutputError: an output in or over an input.
-        DataError: an input is missing or corrupt (naming the file).
+        ResumeError: nothing to resume in ``out``, or a run with another identity.
+        DataError: an input is missing or corrupt (naming the file), with ``on_error="stop"``.
     """
+    out, policy = Path(out), _policy(on_error, len(source.names))
     with process_group():
-        on_main(_check_outputs, source, sinks, Path(out), overwrite, inputs)
-        agree(source.check, shard(source.names))
+        journal = agree(RunJournal, out, source.names, run, resume, rank(), world_size())
+        on_main(_check_outputs, source, sinks, out, overwrite or resume, inputs)
+        if not (overwrite or resume):
+            on_main(_refuse_earlier_run, out)
+        todo = [n for n in shard(source.names) if n not in journal.kept]
+        faults = agree(_check_inputs, source, todo, policy)
+        rows = [{"name": n, "status": "skipped", "reason": faults.get(n)} if n in faults else {"name": n,
+                "status": "done"} for n in shard(source.names)]  # fmt: skip
+        nothing = _nothing_done(gather_rows(rows, key=lambda e: source.names.index(e["name"])))
+        if nothing is not None:
+            raise nothing  # every input is bad: one line, before the model is loaded
+    return RunPlan(journal, faults, policy, resume)
 
 
-def write_prediction(stage: Path, frame: Frame, completion: Completion, sinks: Sequence[Sink]) -> Prediction:
+def _refuse_earlier_run(out: Path) -> None:
+    if (out / FRAMES_FILE).exists():
+        raise FileExistsError(f"{out / FRAMES_FILE} exists: {out} holds an earlier run; pass --resume to continue "
+                              "it or --overwrite to replace its outputs")  # fmt: skip
+
+
+def write_prediction(stage: Path, frame: Frame, completion: Completion, sinks: Sequence[Sink],
+                     stage_ms: Mapping[str, float] | None = None) -> Prediction:  # fmt: skip
     """The one writer: the hole / clamp rule and the quantisation once (:func:`~.sinks.predict_frame`),
-    then every sink, into ``stage``."""
+    then every sink, into ``stage``. ``stage_ms``: the frame's stage times so far (for the live view)."""
     pred = predict_frame(frame, completion)
+    pred.stage_ms = dict(stage_ms or {})
     for sink in sinks:
         sink.write(stage, pred)
     return pred
+
+
+#: ``semattnet predict``'s exit status when some frames were skipped (their inputs could not be completed).
+EXIT_SKIPPED = 3
+#: ... when no frame was skipped but ``--realtime`` dropped some (the completer was slower than the sensor).
+EXIT_DROPPED = 4
+
+
+@dataclass
+class FrameRun:
+    """What :func:`complete_frames` did: ``journal`` (every frame's status; ``frames.json``) and ``paths``,
+    the depth PNGs of the frames done (every rank's), in order."""
+
+    journal: RunJournal
+    paths: list[Path]
+
+    @property
+    def counts(self) -> dict[str, int]:
+        return self.journal.counts()
+
+    @property
+    def exit_code(self) -> int:
+        """0 when every frame was done, :data:`EXIT_SKIPPED` when some were skipped, else :data:`EXIT_DROPPED`
+        when ``realtime`` dropped some."""
+        c = self.counts
+        return EXIT_SKIPPED if c["skipped"] else EXIT_DROPPED if c["dropped"] else 0
+
+    def summary(self) -> str:
+        """One line (and one per skipped frame's reason, grouped): what the run did."""
+        lines = [f"{len(self.journal.names)} frame(s): {describe_counts(self.counts)}"]
+        reasons = Counter(_kind(r) for _, r in self.journal.reasons("skipped"))
+        lines += [f"  skipped x{n}: {why}" for why, n in reasons.most_common()]
+        return "\n".join(lines)
+
+
+def _kind(reason: str) -> str:
+    """What a skip reason says is wrong, without where (its last clause, up to a parenthesis): to group them."""
+    return reason.rsplit(": ", 1)[-1].split(" (", 1)[0]
+
+
+class _FrameLoop:
+    """One process's run: frames written into a hidden stage and moved into ``out`` one by one, each recorded
+    in the journal once its files are in place; frames a resume keeps are replayed into the run outputs (a bag,
+    a recording) in their place, so those cover every frame in order."""
+
+    def __init__(self, source: FrameSource, sinks: Sequence[Sink], out: Path, plan: RunPlan, timer: StageTimes,
+                 log: Callable[[str], None], semantic: SemanticMaps) -> None:  # fmt: skip
+        self.source, self.out, self.plan, self.timer, self.log = source, out, plan, timer, log
+        self.journal, self.semantic = plan.journal, semantic
+        self.runs = [s for s in sinks if isinstance(s, RunSink)]
+        self.files = [s for s in sinks if not isinstance(s, RunSink)]
+        self.sinks = sinks
+        self.replays = [s for s in self.runs if s.replays]
+        self.depth_sink = next((s for s in sinks if isinstance(s, DepthPngSink)), None)
+        self.names = shard(source.names)
+        self.waiting = [n for n in self.names if n in self.journal.kept or n in plan.faults]
+        self.position = {n: i for i, n in enumerate(self.names)}
+        self.created = not out.exists()
+
+    def todo(self) -> list[str]:
+        return [n for n in self.names if n not in self.journal.kept and n not in self.plan.faults]
+
+    def catch_up(self, name: str | None) -> None:
+        """The kept and check-faulted frames before ``name`` (None: all that are left), in order."""
+        last = len(self.names) if name is None else self.position[name]
+        while self.waiting and self.position[self.waiting[0]] < last:
+            other = self.waiting.pop(0)
+            if other in self.plan.faults:
+                self.note(FrameFault(other, "skipped", self.plan.faults[other]))
+            else:
+                self.replay(other)
+
+    def note(self, fault: FrameFault) -> None:
+        """A frame not completed: journaled, one line."""
+        self.catch_up(fault.name)
+        self.journal.mark(fault.name, fault.status, fault.reason)
+        self.journal.save(force=False)
+        self.log(f"{fault.name}: {fault.status}: {fault.reason}")
+
+    def replay(self, name: str) -> None:
+        """A frame kept from an earlier run: its times into the table, its stored depth into the run outputs."""
+        for stage, ms in self.journal.frames[name].get("stage_ms", {}).items():
+            self.timer.add(name, stage, ms / 1e3)
+        if not self.replays or self.depth_sink is None:
+            return
+        frame = _read_frame(self.source, name, self.semantic, StageTimes())
+        stored = read_depth(self.out / str(self.depth_sink.path(name)))
+        pred = Prediction(frame, Completion(stored), stored, encode_depth(stored), stored)
+        for sink in self.replays:
+            sink.write(self.out, pred)
+
+    def write(self, stage: Path, frame: Frame, completion: Completion) -> None:
+        """A completed frame: every sink, the frame's files moved into place, then journaled."""
+        self.catch_up(frame.name)
+        with self.timer.time(frame.name, "writing"):
+            stage_ms = {k: 1e3 * v for k, v in self.timer.times.get(frame.name, {}).items()}
+            write_prediction(stage, frame, completion, self.sinks, stage_ms)
+            files = output_files([frame.name], self.files)
+            for rel in files:
+                (self.out / rel).parent.mkdir(parents=True, exist_ok=True)
+                os.replace(stage / rel, self.out / rel)
+            fsync_dir(self.out)
+        self.journal.done(frame.name, files, {k: 1e3 * v for k, v in self.timer.times[frame.name].items()})
+        self.journal.save(force=False)
+        self.log(_line(frame, self.out, self.depth_sink))
+
+    def finish(self, stage: Path) -> None:
+        """Every frame seen: the run outputs completed (rank 0's ``latency.json``) and moved into place."""
+        self.catch_up(None)
+        self.timer.not_done = {k: v for k, v in self.journal.counts().items() if k in ("skipped", "dropped")}
+        for s in self.runs:
+            if not isinstance(s, LatencySink) or is_main():
+                s.finish(stage)
+        for rel in [f for s in self.runs for f in s.files()] if is_main() else []:
+            if (stage / rel).is_file():
+                os.replace(stage / rel, self.out / rel)
+
+    def forget(self) -> None:
+        """After a run error: keep the journal when a frame is done, else leave no trace of this run."""
+        if self.journal.counts()["done"]:
+            try:
+                self.journal.save()
+            except OSError:  # a full disk: the journal keeps its last save (those frames are redone on resume)
+                pass
+            return
+        self.journal.path.unlink(missing_ok=True)
+        if self.created and self.out.is_dir() and not any(self.out.iterdir()):
+            self.out.rmdir()
+
+
+@contextmanager
+def _frame_stage(out: Path) -> Iterator[Path]:
+    """A hidden folder in ``out`` (this process's) that each frame is written into before it moves into place;
+    removed at the end (one a kill left is removed by the next run). A full disk: the one-line error."""
+    out.mkdir(parents=True, exist_ok=True)
+    clean_stale_stages(out)
+    stage = Path(tempfile.mkdtemp(prefix=f"{STAGE_PREFIX}{os.getpid()}.", dir=out))
+    try:
+        yield stage
+    except OSError as exc:
+        if not is_disk_full(exc) or exc.filename == str(out):
+            raise
+        staged = sum(p.stat().st_size for p in stage.rglob("*") if p.is_file())
+        raise disk_full_error(out, staged + 1) from None
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+
+
+def _run_frames(loop: _FrameLoop, completer: Completer, maps: SemanticMaps, prefetch: int,
+                realtime: float | None, overwrite: bool) -> None:  # fmt: skip
+    """The frames of this process through the completer into ``loop`` (the run outputs opened before and
+    finished after; aborted on any error)."""
+    try:
+        with _frame_stage(loop.out) as stage:
+            for s in loop.runs:
+                s.open(overwrite)
+            for frame, completion in completions(loop.source, completer, loop.todo(), maps, loop.timer, prefetch,
+                                                 report=loop.note, stop_on_fault=loop.plan.on_error == "stop",
+                                                 realtime=realtime):  # fmt: skip
+                loop.write(stage, frame, completion)
+            loop.finish(stage)
+    except BaseException:
+        for s in loop.runs:
+            s.abort()
+        raise
 
 
 def complete_frames(
@@ -120,50 +384,95 @@ def complete_frames(
     log: Callable[[str], None] = print,
     inputs: Sequence[PathLike | None] = (),
     semantic: SemanticMaps | None = None,
-    checked: bool = False,
+    checked: bool | RunPlan = False,
     timer: StageTimes | None = None,
     prefetch: int = 0,
-) -> list[Path]:
+    on_error: str | None = None,
+    resume: bool = False,
+    run: Mapping[str, Any] | None = None,
+    realtime: float | None = None,
+) -> FrameRun:
     """Complete every frame of ``source`` with ``completer`` and write what ``sinks`` say into ``out``.
 
-    ``semantic``: how frames without a semantic map get one (default: the fallback map for completers
-    that need one). ``checked``: :func:`check_frames` already ran with these arguments (else it runs first).
-    ``timer``: record per-stage times there (:class:`~.stream.StageTimes`; ``writing`` is every sink);
-    ``prefetch`` > 0: read, project and segment that many frames ahead in a background thread
-    (:func:`~.stream.completions`). :class:`~.sinks.RunSink` outputs (a bag, a recording) are opened
-    before the first frame and put in place with the per-frame files, only when every frame succeeded.
+    Each frame's files appear in ``out`` (atomically) as soon as it is completed and are recorded in
+    ``out/frames.json`` (:mod:`~.journal`). A frame whose input cannot be read or completed (its fault:
+    :func:`~.stream.is_frame_fault`) is skipped with one logged line (``on_error="skip"``, the default for more
+    than one frame) or stops the run (``"stop"``), the frames done so far kept. Errors of the run (a full disk,
+    a failing sink) stop it at once; the frames done stay, resumable. ``resume``: continue the run in ``out``
+    (``run``: its identity; see :func:`check_frames`), keeping its done frames; the run outputs then cover all.
+
+    ``semantic``: how frames without a semantic map get one (default: the fallback map for completers that
+    need one). ``checked``: the :class:`RunPlan` of :func:`check_frames` run with these arguments (``True``: it
+    ran, with nothing to skip or keep; ``False``: it runs now). ``timer``: per-stage times
+    (:class:`~.stream.StageTimes`; ``writing`` is every sink). ``prefetch`` > 0: read, project and segment
+    that many frames ahead in a background thread; ``realtime``: replay at the sensor pace, that many times
+    faster, dropping frames that come while the completer is busy (:func:`~.stream.completions`).
+    :class:`~.sinks.RunSink` outputs (a bag, a recording, ``latency.json``) are put in place at the end.
 
     Returns:
-        The depth PNGs (of the first :class:`~.sinks.DepthPngSink`) of every frame, all ranks.
+        The :class:`FrameRun`: every frame's status, the depth PNGs of the frames done (all ranks).
     """
     out, timer = Path(out), timer if timer is not None else StageTimes()
-    runs = [s for s in sinks if isinstance(s, RunSink)]
     with process_group():
-        if not checked:
-            check_frames(source, sinks, out, overwrite=overwrite, inputs=inputs)
+        if isinstance(checked, RunPlan):
+            plan = checked
+        elif checked:
+            journal = RunJournal(out, source.names, run, False, rank(), world_size())
+            plan = RunPlan(journal, {}, _policy(on_error, len(source.names)))
+        else:
+            plan = check_frames(source, sinks, out, overwrite=overwrite, inputs=inputs, on_error=on_error,
+                                resume=resume, run=run)  # fmt: skip
         maps = agree((semantic or SemanticMaps()).bind, completer)
         maps.check_palette(completer, source)
-        expected = output_files(source.names, sinks)
-        depth_sink = next((s for s in sinks if isinstance(s, DepthPngSink)), None)
-        log = rank_log(log)
+        loop = _FrameLoop(source, sinks, out, plan, timer, rank_log(log), maps)
+        error = None
         try:
-            with shared_stage(out, overwrite, expected) as stage:
-                for s in runs:
-                    s.open(overwrite)
-                for frame, completion in completions(source, completer, shard(source.names), maps, timer, prefetch):
-                    with timer.time(frame.name, "writing"):
-                        write_prediction(stage, frame, completion, sinks)
-                    log(_line(frame, out, depth_sink))
-                for s in runs:
-                    if not isinstance(s, LatencySink) or is_main():  # one latency.json, rank 0's
-                        s.finish(stage)
-        except BaseException:
-            for s in runs:
-                s.abort()
-            raise
-        for s in runs:
-            s.commit()
-    return [out / p for name in source.names if depth_sink is not None and (p := depth_sink.path(name))]
+            _run_frames(loop, completer, maps, prefetch, realtime, overwrite or plan.resume)
+        except BaseException as exc:
+            loop.forget()
+            if not isinstance(exc, Exception):
+                raise  # Ctrl-C: the frames done are journaled, resumable
+            error = exc
+        first = first_error(error)
+        if first is not None:
+            raise first
+        return _close(loop)
+
+
+def _nothing_done(entries: Sequence[Mapping[str, Any]]) -> DataError | None:
+    """The run's error when no frame could be completed (every one skipped): nothing to keep."""
+    if not entries or any(e["status"] == "done" for e in entries):
+        return None
+    bad = [e for e in entries if e["status"] != "pending"]
+    counts = describe_counts(Counter(e["status"] for e in entries))
+    first = f"; the first: {bad[0]['name']}: {bad[0].get('reason', '')}" if bad else ""
+    return DataError(f"no frame could be completed ({counts}){first}")
+
+
+def _close(loop: _FrameLoop) -> FrameRun:
+    """The run outputs put in place and the journal complete (every process's entries, in ``frames.json``);
+    a run in which no frame could be completed leaves nothing and raises instead."""
+    journal, names = loop.journal, loop.source.names
+    position = {n: i for i, n in enumerate(names)}
+    entries = gather_rows([journal.frames[n] for n in loop.names], key=lambda e: position[e["name"]])
+    nothing = _nothing_done(entries)
+    if nothing is not None:
+        for s in loop.runs:
+            s.abort()
+        loop.forget()
+        raise nothing
+    for s in loop.runs:
+        s.commit()
+    wall = loop.timer.wall_s
+    if world_size() == 1:
+        journal.save(complete=True, wall_s=wall)
+    elif is_main():
+        journal.merge(entries, complete=True, wall_s=wall)
+    for e in entries:
+        journal.frames[e["name"]] = e
+    depth = loop.depth_sink
+    paths = [loop.out / p for e in entries if e["status"] == "done" and depth and (p := depth.path(e["name"]))]
+    return FrameRun(journal, paths)
 
 
 def _line(frame: Frame, out: Path, depth_sink: Any) -> str:

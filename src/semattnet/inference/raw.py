@@ -47,6 +47,7 @@ def complete_kitti_raw(
     deskew: bool = False,
     overwrite: bool = False,
     log: Callable[[str], None] = print,
+    on_error: str = "stop",
 ) -> list[Path]:
     """Complete frames of a KITTI raw drive (see :class:`semattnet.data.kitti_raw.RawDrive`) into ``out``.
 
@@ -66,11 +67,14 @@ def complete_kitti_raw(
         OutputError: ``out`` is the drive or semantic folder, or inside one.
         DataError: missing/corrupt drive files or frames, naming them.
 
-    Outputs are staged (:func:`semattnet._utils.outputs.staged_outputs`): they appear in ``out`` only
-    when every frame succeeded; a corrupt frame or a kill leaves ``out`` unchanged. Under ``torchrun``
+    Each frame's files appear atomically once it is done, recorded in ``out/frames.json``; ``on_error``:
+    ``"stop"`` (a corrupt frame raises, the frames done before it kept) or ``"skip"`` (noted and skipped;
+    :func:`~semattnet.inference.pipeline.complete_frames`). Under ``torchrun``
     the frames are split over the processes, with the files of one process (:mod:`.sharding`).
     """
     maps = SemanticMaps(segmenter, folder=semantic is not None)
     source = RawDriveSource(drive_dir, frames, camera, semantic, deskew)
     sinks = default_sinks(npy, panel, ply, max_depth, top_crop)
-    return complete_frames(source, completer, sinks, out, overwrite=overwrite, log=log, semantic=maps)
+    run = complete_frames(source, completer, sinks, out, overwrite=overwrite, log=log, semantic=maps,
+                          on_error=on_error)  # fmt: skip
+    return run.paths

@@ -24,7 +24,7 @@ import os
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -74,6 +74,7 @@ class Prediction:
     depth: np.ndarray
     png: np.ndarray
     stored: np.ndarray
+    stage_ms: dict[str, float] = field(default_factory=dict)  # the frame's stage times so far (the loop's)
     _clouds: dict[tuple[float, int], Any] = field(default_factory=dict, repr=False)
 
     def cloud(self, max_depth: float, top_crop: int) -> Any:
@@ -206,7 +207,10 @@ class RunSink(Sink):
 
     ``files()``: its outputs inside the output folder (written into the stage by :meth:`finish`);
     ``targets()``: its outputs elsewhere (checked like every output: never over or inside an input, none
-    existing unless ``overwrite``)."""
+    existing unless ``overwrite``). ``replays``: whether a resumed run hands it the frames kept from the
+    earlier run (their stored depth, in their place), so that its output covers every frame."""
+
+    replays: ClassVar[bool] = True
 
     def path(self, name: str) -> str | None:
         return None
@@ -239,6 +243,7 @@ class LatencySink(RunSink):
 
     timer: Any = None
     name: str = "latency.json"
+    replays: ClassVar[bool] = False  # the loop adds the kept frames' recorded times to the timer
 
     def files(self) -> list[str]:
         return [self.name]
@@ -257,6 +262,19 @@ def _stamp_ns(frame: Frame, index: int) -> int:
     if frame.timestamp is not None:
         return round(frame.timestamp * 1e9)
     return index * 100_000_000
+
+
+def _clean_stale_targets(target: Path) -> None:
+    """Remove the hidden folders that killed runs left beside ``target`` (their process is gone)."""
+    import shutil
+
+    from semattnet._utils.atomic import pid_alive
+
+    prefix = f".{target.name}.semattnet-stage."
+    for entry in target.parent.glob(f"{prefix}*"):
+        pid = entry.name[len(prefix) :].split(".")[0]
+        if entry.is_dir() and pid.isdigit() and not pid_alive(int(pid)):
+            shutil.rmtree(entry, ignore_errors=True)
 
 
 class _StagedTarget(RunSink):
@@ -278,6 +296,7 @@ class _StagedTarget(RunSink):
             raise InputError(f"{self.target}: a bag or Rerun recording is written by one process (not under torchrun)")
         target = Path(self.target)
         target.parent.mkdir(parents=True, exist_ok=True)
+        _clean_stale_targets(target)
         self._overwrite, self._count = overwrite, 0
         self._dir = Path(tempfile.mkdtemp(prefix=f".{target.name}.semattnet-stage.{os.getpid()}.", dir=target.parent))
         return self._dir / target.name
@@ -364,6 +383,8 @@ class RerunSink(_StagedTarget):
     target: Path | None = None
     spawn: bool = False
     max_depth: float | None = None
+    serve: bool = False  # serve the frames to a web viewer (the URL goes to ``log``)
+    log: Any = None
     _log: Any = field(default=None, init=False, repr=False)  # the open RerunLogger, between open and finish
 
     def targets(self) -> list[Path]:
@@ -374,7 +395,11 @@ class RerunSink(_StagedTarget):
 
         path = self._begin(overwrite) if self.target is not None else None
         self._count = 0
-        self._log = RerunLogger(path, spawn=self.spawn, max_depth=self.max_depth)
+        extra = {"serve": True} if self.serve else {}
+        self._log = RerunLogger(path, spawn=self.spawn, max_depth=self.max_depth, **extra)
+        url = getattr(self._log, "url", None)
+        if self.serve and url and self.log is not None:
+            self.log(f"Rerun web viewer: {url}")
 
     def write(self, stage: Path, pred: Prediction) -> None:
         frame = pred.frame

@@ -26,8 +26,9 @@ import platform
 import queue
 import threading
 import time
-from collections.abc import Generator, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterator, Sequence
 from contextlib import closing, contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +36,16 @@ import numpy as np
 
 from semattnet.data.frames import Frame, FrameSource
 
-__all__ = ["DEFAULT_SENSOR_PERIOD_S", "LATENCY_FILE", "STAGES", "StageTimes", "completions", "cpu_name"]
+__all__ = [
+    "DEFAULT_SENSOR_PERIOD_S",
+    "LATENCY_FILE",
+    "STAGES",
+    "FrameFault",
+    "StageTimes",
+    "completions",
+    "cpu_name",
+    "is_frame_fault",
+]
 
 #: The stages timed, in order.
 STAGES = ("read", "projection", "segmentation", "network", "propagation", "writing")
@@ -70,6 +80,8 @@ class StageTimes:
         self.notes: dict[str, str] = {}
         self.wall_s = 0.0
         self.overlapped = False
+        self.queue_most: int | None = None  # --realtime: the most frames and notes the sensor thread held
+        self.not_done: dict[str, int] = {}  # frames skipped / dropped, by status (the loop sets it)
         self._lock = threading.Lock()
         self._local = threading.local()
         self._start: float | None = None
@@ -93,6 +105,11 @@ class StageTimes:
             if stack:
                 stack[-1] += total
             self.add(name, stage, total - inner)
+
+    def discard(self, name: str) -> None:
+        """Forget frame ``name``'s times (a frame that was not completed)."""
+        with self._lock:
+            self.times.pop(name, None)
 
     def stamp(self, name: str, seconds: float | None) -> None:
         """Record frame ``name``'s sensor time (seconds), for the sensor period."""
@@ -138,7 +155,7 @@ class StageTimes:
                 "sum_of_stages_s": float(sum(per_frame)), "wall_s": self.wall_s, "overlapped": self.overlapped,
                 "per_frame_median_ms": 1e3 * float(np.median(per_frame)) if per_frame else 0.0,
                 "throughput_hz": fps, "sensor_period_s": period, "realtime_factor": fps * period,
-                "cpu": cpu_name()}  # fmt: skip
+                "not_done": dict(self.not_done), "queue_most": self.queue_most, "cpu": cpu_name()}  # fmt: skip
 
     def table(self) -> str:
         """The per-stage latency table (what ``semattnet predict`` prints)."""
@@ -156,10 +173,36 @@ class StageTimes:
         rows.append(f"{s['frames']} frame(s) in {s['wall_s']:.2f} s{' (read ahead)' if s['overlapped'] else ''}: "
                     f"{s['throughput_hz']:.2f} frames/s against a sensor period of {1e3 * period:.1f} ms "
                     f"({1 / period:.1f} Hz): {s['realtime_factor']:.2g}x real time, {verdict}")  # fmt: skip
+        if any(s["not_done"].values()):
+            held = f"; the sensor queue held {s['queue_most']} at most" if s["queue_most"] is not None else ""
+            rows.append("not completed: " + ", ".join(f"{n} {k}" for k, n in s["not_done"].items() if n) + held)
         return "\n".join(rows)
 
     def to_json(self) -> str:
         return json.dumps(self.summary(), indent=2) + "\n"
+
+
+def is_frame_fault(exc: BaseException) -> bool:
+    """Whether ``exc``, raised while one frame was read or completed, is that frame's fault (a corrupt or
+    missing input, no LiDAR point in the image, an empty sparse map) rather than the run's (a missing
+    package, a full disk, a bug): a :class:`~semattnet.DataError` or :class:`~semattnet.InputError`."""
+    from semattnet._errors import DataError, InputError, MissingDependencyError
+
+    return isinstance(exc, DataError | InputError) and not isinstance(exc, MissingDependencyError)
+
+
+@dataclass(frozen=True)
+class FrameFault:
+    """A frame the loop did not complete: ``status`` ``skipped`` (its fault, ``reason`` the error's line),
+    ``dropped`` (``realtime``: a newer frame arrived first) or ``failed`` (the fault that stops the run)."""
+
+    name: str
+    status: str
+    reason: str
+
+
+def _reason(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 def _read_frame(source: FrameSource, name: str, semantic: Any, timer: StageTimes) -> Frame:
@@ -182,11 +225,36 @@ def _read_frame(source: FrameSource, name: str, semantic: Any, timer: StageTimes
     return frame
 
 
+@dataclass(frozen=True)
+class _Failed:
+    """A frame whose reading raised its own fault (:func:`is_frame_fault`)."""
+
+    name: str
+    error: BaseException
+
+
+@dataclass(frozen=True)
+class _Crash:
+    """An error of the run raised in the reader thread, re-raised by the loop."""
+
+    error: BaseException
+
+
+def _attempt(source: FrameSource, name: str, semantic: Any, timer: StageTimes) -> Frame | _Failed:
+    """:func:`_read_frame`, a frame's own fault returned instead of raised."""
+    try:
+        return _read_frame(source, name, semantic, timer)
+    except Exception as exc:
+        if not is_frame_fault(exc):
+            raise
+        return _Failed(name, exc)
+
+
 _DONE = object()
 
 
 def _prefetched(source: FrameSource, names: Sequence[str], semantic: Any, timer: StageTimes,
-                depth: int) -> Generator[Frame, None, None]:  # fmt: skip
+                depth: int) -> Generator[Frame | _Failed, None, None]:  # fmt: skip
     """The frames of ``names`` in order, read in a background thread at most ``depth`` frames ahead."""
     slots, items, stop = threading.Semaphore(depth), queue.Queue(), threading.Event()  # type: ignore[var-annotated]
 
@@ -198,7 +266,7 @@ def _prefetched(source: FrameSource, names: Sequence[str], semantic: Any, timer:
                         return
                 if stop.is_set():
                     return
-                items.put(_read_frame(source, name, semantic, timer))
+                items.put(_attempt(source, name, semantic, timer))
             items.put(_DONE)
         except BaseException as exc:  # handed to the loop, raised there
             items.put(exc)
@@ -214,6 +282,82 @@ def _prefetched(source: FrameSource, names: Sequence[str], semantic: Any, timer:
     finally:
         stop.set()
         thread.join()
+
+
+class _Mailbox:
+    """What the sensor thread hands the loop: the newest frame (one at most; an untaken older one is dropped
+    and noted) and, in order, the notes (faults, drops) that go first."""
+
+    def __init__(self) -> None:
+        self.cond = threading.Condition()
+        self.frame: Frame | None = None
+        self.notes: list[Any] = []
+        self.finished = False
+        self.most_held = 0
+
+    def post(self, item: Any) -> None:
+        with self.cond:
+            if isinstance(item, Frame):
+                if self.frame is not None:
+                    why = f"frame {item.name} arrived while the completer was busy (--realtime keeps the newest)"
+                    self.notes.append(FrameFault(self.frame.name, "dropped", why))
+                self.frame = item
+            else:
+                self.notes.append(item)
+            self.most_held = max(self.most_held, len(self.notes) + (self.frame is not None))
+            self.cond.notify()
+
+    def close(self) -> None:
+        with self.cond:
+            self.finished = True
+            self.cond.notify()
+
+    def take(self) -> Any:
+        """The next note, else the newest frame, waiting for one; ``_DONE`` when the sensor is done."""
+        with self.cond:
+            while self.frame is None and not self.notes and not self.finished:
+                self.cond.wait()
+            if self.notes:
+                return self.notes.pop(0)
+            frame, self.frame = self.frame, None
+            return frame if frame is not None else _DONE
+
+
+def _paced(source: FrameSource, names: Sequence[str], semantic: Any, timer: StageTimes,
+           speed: float) -> Generator[Any, None, None]:  # fmt: skip
+    """The frames at their sensor pace (``timestamp``, else :data:`DEFAULT_SENSOR_PERIOD_S` apart, ``speed``
+    times faster): a thread reads each frame and hands it over at its time; when the loop is still busy the
+    newest frame wins and the older one is dropped (a ``dropped`` :class:`FrameFault`). Bounded: one frame
+    waiting, one being read, one being completed."""
+    box, stop = _Mailbox(), threading.Event()
+
+    def work() -> None:
+        start, first = time.monotonic(), None
+        try:
+            for i, name in enumerate(names):
+                item = _attempt(source, name, semantic, timer)
+                if isinstance(item, Frame):
+                    t = item.timestamp if item.timestamp is not None else i * DEFAULT_SENSOR_PERIOD_S
+                    first = t if first is None else first
+                    if stop.wait(max(0.0, start + (t - first) / speed - time.monotonic())):
+                        return
+                box.post(item)
+        except BaseException as exc:
+            box.post(_Crash(exc))
+        finally:
+            box.close()
+
+    thread = threading.Thread(target=work, name="semattnet-sensor", daemon=True)
+    thread.start()
+    try:
+        while (item := box.take()) is not _DONE:
+            if isinstance(item, _Crash):
+                raise item.error
+            yield item
+    finally:
+        stop.set()
+        thread.join()
+        timer.queue_most = box.most_held
 
 
 @contextmanager
@@ -250,29 +394,65 @@ def _timed_propagation(completer: Any, timer: StageTimes, current: list[str]) ->
         del net.propagation  # the model's own method again
 
 
+def _frames(source: FrameSource, names: Sequence[str], semantic: Any, timer: StageTimes, prefetch: int,
+            realtime: float | None) -> Generator[Any, None, None]:  # fmt: skip
+    """The reader the options ask for: paced (``realtime``), read ahead (``prefetch``) or in line."""
+    if realtime is not None:
+        return _paced(source, names, semantic, timer, realtime)
+    if prefetch > 0:
+        return _prefetched(source, names, semantic, timer, prefetch)
+    return (_attempt(source, name, semantic, timer) for name in names)
+
+
 def completions(source: FrameSource, completer: Any, names: Sequence[str] | None = None, semantic: Any = None,
-                timer: StageTimes | None = None, prefetch: int = 0) -> Iterator[tuple[Frame, Any]]:  # fmt: skip
+                timer: StageTimes | None = None, prefetch: int = 0, *,
+                report: Callable[[FrameFault], None] | None = None, stop_on_fault: bool = True,
+                realtime: float | None = None) -> Iterator[tuple[Frame, Any]]:  # fmt: skip
     """``(frame, completion)`` for each of ``names`` (default: all of ``source``), in order, every stage timed
     into ``timer``; ``prefetch`` > 0 reads that many frames ahead in a background thread (module doc).
     ``semantic``: a bound :class:`~semattnet.data.sources.SemanticMaps` (None: frames as the source gives them).
-    The time between yields (what the caller does with a frame, e.g. writing) counts in the wall time."""
+    The time between yields (what the caller does with a frame, e.g. writing) counts in the wall time.
+
+    A frame's own fault (:func:`is_frame_fault`, raised reading or completing it) goes to ``report`` as a
+    :class:`FrameFault` and the loop goes on, or (``stop_on_fault``, or no ``report``) is raised after a
+    ``failed`` report. ``realtime``: replay at the frames' sensor pace, that many times faster (1.0: as
+    recorded); frames that arrive while the completer is busy are dropped (reported ``dropped``)."""
     timer = timer if timer is not None else StageTimes()
     names = list(source.names if names is None else names)
-    timer.overlapped = prefetch > 0
+    timer.overlapped = prefetch > 0 or realtime is not None
     timer.notes.setdefault("segmentation", "no segmenter run")
     timer.notes.setdefault("projection", "inside read/decode (the source does not split it)")
     current = [""]
+
+    def fault(name: str, exc: BaseException) -> None:
+        timer.discard(name)
+        if report is not None:
+            report(FrameFault(name, "failed" if stop_on_fault else "skipped", _reason(exc)))
+        if stop_on_fault or report is None:
+            raise exc
+
     try:
-        if prefetch > 0:
-            frames: Generator[Frame, None, None] = _prefetched(source, names, semantic, timer, prefetch)
-        else:
-            frames = (_read_frame(source, name, semantic, timer) for name in names)
+        frames = _frames(source, names, semantic, timer, prefetch, realtime)
         with closing(frames), _timed_propagation(completer, timer, current):
             timer.begin()  # after the engine is built; the reader starts with the first frame
-            for frame in frames:
-                current[0] = frame.name
-                with timer.time(frame.name, "network"):
-                    completion = completer(frame.rgb, frame.sparse, frame.semantic)
-                yield frame, completion
+            for item in frames:
+                if isinstance(item, FrameFault):  # dropped by the pace
+                    timer.discard(item.name)
+                    if report is not None:
+                        report(item)
+                    continue
+                if isinstance(item, _Failed):
+                    fault(item.name, item.error)
+                    continue
+                current[0] = item.name
+                try:
+                    with timer.time(item.name, "network"):
+                        completion = completer(item.rgb, item.sparse, item.semantic)
+                except Exception as exc:
+                    if not is_frame_fault(exc):
+                        raise
+                    fault(item.name, exc)
+                    continue
+                yield item, completion
     finally:
         timer.end()

@@ -29,10 +29,12 @@ class FolderSource(IndexedSource):
 
     @classmethod
     def pair(cls, rgb: str | os.PathLike[str], sparse: str | os.PathLike[str],
-             semantic: str | os.PathLike[str] | None = None, K: np.ndarray | None = None) -> FolderSource:  # fmt: skip
-        """The frames of ``rgb``/``sparse``/``semantic`` (three files or three folders), paired by name."""
+             semantic: str | os.PathLike[str] | None = None, K: np.ndarray | None = None,
+             missing_ok: bool = False) -> FolderSource:  # fmt: skip
+        """The frames of ``rgb``/``sparse``/``semantic`` (three files or three folders), paired by name
+        (``missing_ok``: an image without a partner is a frame that fails when read; see ``pair_frames``)."""
         sem = Path(semantic) if semantic is not None else None
-        return cls(pair_frames(Path(rgb), Path(sparse), sem), K, given=(rgb, sparse, semantic))
+        return cls(pair_frames(Path(rgb), Path(sparse), sem, missing_ok), K, given=(rgb, sparse, semantic))
 
     def load(self, name: str) -> Frame:
         f = self.frames[name]
