@@ -116,10 +116,21 @@ def test_semantic_topic_paired_by_stamp(tmp_path: Path) -> None:
     assert frames[0].sparse[12, 16] == np.float32(5.0)
 
 
-def test_semantic_topic_too_far_is_one_line(tmp_path: Path) -> None:
-    rig, _ = _semantic_bag(tmp_path / "b", [0, 0, 30])
-    with pytest.raises(DataError, match=r"1 image\(s\) have no /cam/semantic semantic image within 20.0 ms "
-                                        r"\(first: image 2, nearest 30.0 ms apart\)"):  # fmt: skip
-        BagSource(tmp_path / "b", "/cam/image", "/lidar", rig=rig, semantic_topic="/cam/semantic", max_skew=0.02)
+def test_semantic_topic_too_far_fails_that_frame_only(tmp_path: Path) -> None:
+    rig, sems = _semantic_bag(tmp_path / "b", [0, 0, 30])
+    logged: list[str] = []
+    source = BagSource(tmp_path / "b", "/cam/image", "/lidar", rig=rig, semantic_topic="/cam/semantic", max_skew=0.02,
+                       log=logged.append)  # fmt: skip
+    assert source.names == ["0000000000", "0000000001", "0000000002"]
+    assert "semantic maps from /cam/semantic (1 image(s) without one within 20.0 ms)" in logged[0]
+    with pytest.raises(DataError) as err:
+        source.load("0000000002")
+    assert str(err.value) == (f"{tmp_path / 'b'}: /cam/image image 2: no /cam/semantic semantic image within "
+                              "20.0 ms (nearest 30.0 ms apart)")  # fmt: skip
+    assert np.array_equal(source.load("0000000001").semantic, sems[1])
+    (tmp_path / "c").mkdir()
+    rig, _ = _semantic_bag(tmp_path / "c" / "b", [30, 30, 30])  # none near enough: nothing to complete
+    with pytest.raises(DataError, match=r"no /cam/semantic semantic image within 20.0 ms of any /cam/image image"):
+        BagSource(tmp_path / "c" / "b", "/cam/image", "/lidar", rig=rig, semantic_topic="/cam/semantic", max_skew=0.02)
     with pytest.raises(DataError, match=r"no topic '/cam/nope'"):
         BagSource(tmp_path / "b", "/cam/image", "/lidar", rig=rig, semantic_topic="/cam/nope")
