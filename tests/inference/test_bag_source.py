@@ -81,8 +81,9 @@ def test_tf_static_calibration_and_random_access(bags: dict[str, Path]) -> None:
     assert source.inputs()[0] == bags["mcap"]
 
 
-def _semantic_bag(path: Path, offsets_ms: list[int]) -> tuple[Path, list[np.ndarray]]:
-    """A 24x32 bag: 3 images, 3 scans, CameraInfo, and semantic colour images ``offsets_ms`` after each image."""
+def _semantic_bag(path: Path, offsets_ms: list[int], bad: int | None = None) -> tuple[Path, list[np.ndarray]]:
+    """A 24x32 bag: 3 images, 3 scans, CameraInfo, and semantic colour images ``offsets_ms`` after each image
+    (semantic message ``bad`` in an unsupported encoding)."""
     from semattnet.data.bags import CameraInfoData, MessageWriter
     from semattnet.data.bags.encode import camera_info_message, image_message, pointcloud2_message
 
@@ -98,7 +99,10 @@ def _semantic_bag(path: Path, offsets_ms: list[int]) -> tuple[Path, list[np.ndar
             out.write("/cam/camera_info", t, camera_info_message(out.ts, info, t, "cam"))
             out.write("/lidar", t, pointcloud2_message(out.ts, pts, t, "lidar"))
             ts = t + offsets_ms[i] * 10**6
-            out.write("/cam/semantic", ts, image_message(out.ts, sems[i], ts, "cam"))
+            sem = image_message(out.ts, sems[i], ts, "cam")
+            if i == bad:
+                sem.encoding = "16UC1"
+            out.write("/cam/semantic", ts, sem)
     rig = path.parent / "rig.json"
     T_cam_lidar = [[0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]]
     rig.write_text(json.dumps({"K": K.tolist(), "T_cam_lidar": T_cam_lidar, "image_size": [32, 24]}))
@@ -134,3 +138,15 @@ def test_semantic_topic_too_far_fails_that_frame_only(tmp_path: Path) -> None:
         BagSource(tmp_path / "c" / "b", "/cam/image", "/lidar", rig=rig, semantic_topic="/cam/semantic", max_skew=0.02)
     with pytest.raises(DataError, match=r"no topic '/cam/nope'"):
         BagSource(tmp_path / "b", "/cam/image", "/lidar", rig=rig, semantic_topic="/cam/nope")
+
+
+def test_undecodable_semantic_image_fails_its_frame_only(tmp_path: Path) -> None:
+    rig, sems = _semantic_bag(tmp_path / "b", [0, 2, -1], bad=1)
+    source = BagSource(tmp_path / "b", "/cam/image", "/lidar", rig=rig, semantic_topic="/cam/semantic")
+    assert np.array_equal(source.load("0000000000").semantic, sems[0])
+    for _ in range(2):  # asked again (check, then load): the same error
+        with pytest.raises(DataError) as err:
+            source.load("0000000001")
+        assert str(err.value) == (f"{tmp_path / 'b'}: /cam/image image 1: /cam/semantic message 1: unsupported image "
+                                  "encoding '16UC1' (semattnet reads rgb8, bgr8, mono8)")  # fmt: skip
+    assert np.array_equal(source.load("0000000002").semantic, sems[2])
