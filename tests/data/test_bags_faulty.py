@@ -3,6 +3,7 @@ DataError, and the frames after it still load, reading the bag forward once (ROS
 
 from __future__ import annotations
 
+import contextlib
 import struct
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -119,6 +120,24 @@ def test_check_frame_by_frame(bags: dict[str, tuple[Path, Path, dict[int, str]]]
         source.check(source.names)  # several names: the first bad frame's error
 
 
+def test_check_behind_a_read_ahead_reads_once(bags: dict[str, tuple[Path, Path, dict[int, str]]],
+                                              opens: list[Path]) -> None:  # fmt: skip
+    """A reader two frames ahead and check([name]) behind it share one pass (the last few outcomes are kept)."""
+    path, _, bad = bags["mcap"]
+    source = BagSource(path, IMAGE_TOPIC, POINTS_TOPIC)
+    opens.clear()
+    failed = {}
+    for k, name in enumerate(source.names):
+        for ahead in source.names[k : k + 3]:
+            with contextlib.suppress(DataError):
+                source.read(ahead)
+        try:
+            source.check([name])
+        except DataError as exc:
+            failed[k] = str(exc)
+    assert opens == [path] and set(failed) == set(bad) - {FAULTS["empty_scan"][0]}
+
+
 def test_a_broken_bag_is_not_read_again_for_each_later_frame(bags: dict[str, tuple[Path, Path, dict[int, str]]],
                                                             opens: list[Path]) -> None:  # fmt: skip
     """A bag-level error mid-pass (a truncated file) fails every later frame without re-reading the bag."""
@@ -131,17 +150,18 @@ def test_a_broken_bag_is_not_read_again_for_each_later_frame(bags: dict[str, tup
 
         def __iter__(self) -> Iterator[BagPair | BagFailure]:
             for item in pairs:
-                if item.index == 3:
+                if item.index == 6:
                     raise DataError(f"{clean_path}: cannot read the bag (truncated or corrupt?): boom")
                 yield item
 
     source.pairs = Dying()  # type: ignore[assignment]
     opens.clear()
-    source.load("0000000002")
-    for name in ("0000000003", "0000000005", "0000000007"):
+    source.load("0000000005")
+    for name in ("0000000006", "0000000007", "0000000006"):
         with pytest.raises(DataError, match="boom"):
             source.load(name)
     assert len(opens) == 1
+    assert source.load("0000000002").name == "0000000002" and len(opens) == 1  # one of the last few: kept
     assert source.load("0000000000").name == "0000000000" and len(opens) == 2  # an earlier frame: read again
 
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 import threading
+from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -47,6 +48,10 @@ class BagSource(IndexedSource):
             still read forward.
     """
 
+    #: Outcomes (decoded frames or their errors) kept after reading, so that asking again for one of the last
+    #: few frames (``check([name])`` behind a read-ahead of two frames, then ``load``) does not restart the bag.
+    keep = 4
+
     def __init__(self, path: str | os.PathLike[str], image_topic: str, points_topic: str,
                  camera_info_topic: str | None = None, rig: Any = None, max_skew: float | None = None,
                  semantic_topic: str | None = None, log: Callable[[str], None] | None = None) -> None:  # fmt: skip
@@ -61,10 +66,10 @@ class BagSource(IndexedSource):
             self.semantic_pairing = self._pair_semantic(semantic_topic, max_skew)
         self._lock = threading.Lock()
         self._pairs_it: Iterator[BagPair | BagFailure] | None = None
-        self._last: BagPair | BagFailure | None = None
+        self._recent: deque[BagPair | BagFailure] = deque(maxlen=self.keep)
         self._broken: DataError | None = None
         self._sem_it: Iterator[tuple[int, np.ndarray | DataError]] | None = None
-        self._sem_last: tuple[int, np.ndarray | DataError] | None = None
+        self._sem_recent: deque[tuple[int, np.ndarray | DataError]] = deque(maxlen=self.keep)
         if log is not None:
             log(self.describe())
 
@@ -143,32 +148,42 @@ class BagSource(IndexedSource):
             p = self.semantic_pairing
             raise DataError(f"{where}: no {self.semantic_topic} semantic image within {p.max_skew_ns / 1e6:.1f} ms "
                             f"(nearest {p.skew_ns[i] / 1e6:.1f} ms apart)")  # fmt: skip
-        if self._sem_last is None or self._sem_last[0] != j:
-            if self._sem_it is None or (self._sem_last is not None and self._sem_last[0] > j):
-                self._sem_it = self._semantic_images()
-            self._sem_last = next(((k, image) for k, image in self._sem_it if k == j), None)
-            if self._sem_last is None:
-                self._sem_it = None
-                raise DataError(f"{self.path}: {self.semantic_topic} message {j} missing (truncated bag?)")
-        image = self._sem_last[1]
+        image = self._semantic_message(j)
         if isinstance(image, DataError):
             raise DataError(f"{where}: {image}")
         return image
 
+    def _semantic_message(self, j: int) -> np.ndarray | DataError:
+        """Semantic message ``j``: one of the last few read, else read forward (from the start for an earlier)."""
+        hit = [image for k, image in self._sem_recent if k == j]
+        if hit:
+            return hit[0]
+        if self._sem_it is None or (self._sem_recent and self._sem_recent[-1][0] > j):
+            self._sem_it = self._semantic_images()
+            self._sem_recent.clear()
+        found = next(((k, image) for k, image in self._sem_it if k == j), None)
+        if found is None:
+            self._sem_it = None
+            raise DataError(f"{self.path}: {self.semantic_topic} message {j} missing (truncated bag?)")
+        self._sem_recent.append(found)
+        return found[1]
+
     def _advance(self, i: int) -> BagPair | BagFailure:
-        """Image ``i``'s outcome: the bag read forward by one iterator (again from the start only for an earlier
-        image); the last outcome is kept, so ``check([name])`` then ``load(name)`` reads it once."""
-        pos = -1 if self._last is None else self._last.index
-        if self._last is not None and pos == i:
-            return self._last
+        """Image ``i``'s outcome: the bag read forward by one iterator (again from the start only for an image
+        before the last :attr:`keep` read), so ``check([name])`` then ``load(name)`` reads it once."""
+        hit = [item for item in self._recent if item.index == i]
+        if hit:
+            return hit[0]
+        pos = self._recent[-1].index if self._recent else -1
         if pos > i or (self._pairs_it is None and self._broken is None):
-            self._pairs_it, self._last, self._broken = iter(self.pairs), None, None
+            self._pairs_it, self._broken = iter(self.pairs), None
+            self._recent.clear()
         if self._broken is not None:  # the bag itself failed before image i: no point reading it again
             raise self._broken
         assert self._pairs_it is not None
         try:
             for item in self._pairs_it:
-                self._last = item
+                self._recent.append(item)
                 if item.index == i:
                     return item
             self._broken = DataError(f"{self.path}: {self.pairs.image_topic} ends before image {i} (truncated bag?)")
