@@ -13,6 +13,8 @@ from PIL import Image
 from semattnet._errors import DataError
 from semattnet.cli import main
 from semattnet.data.bags import (
+    BagFailure,
+    BagPair,
     BagPairs,
     BagTopics,
     NoTransformError,
@@ -164,7 +166,12 @@ def test_dropped_images_are_counted(tmp_path: Path, frame) -> None:  # type: ign
     assert pairs.pairing.match.tolist() == [0, 1, -1]
     assert (pairs.pairing.dropped_images, pairs.pairing.unused_scans) == (1, 1)
     assert "1 dropped" in pairs.pairing.describe()
-    assert [p.index for p in pairs] == [0, 1]
+    got = list(pairs)  # every image: the one without a scan is a failure, not left out
+    assert [p.index for p in got] == [0, 1, 2] and len(pairs) == 3
+    assert [type(p) for p in got] == [BagPair, BagPair, BagFailure]
+    assert isinstance(got[2], BagFailure) and got[2].name == "0000000002"
+    assert str(got[2].error) == (f"{tmp_path / 'b.bag'}: {T.image} image 2: no {T.points} scan within 50.0 ms "
+                                 "(nearest 700.0 ms apart)")  # fmt: skip
 
 
 @pytest.mark.parametrize("fmt", list(FORMATS))

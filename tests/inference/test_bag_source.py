@@ -81,8 +81,9 @@ def test_tf_static_calibration_and_random_access(bags: dict[str, Path]) -> None:
     assert source.inputs()[0] == bags["mcap"]
 
 
-def _semantic_bag(path: Path, offsets_ms: list[int]) -> tuple[Path, list[np.ndarray]]:
-    """A 24x32 bag: 3 images, 3 scans, CameraInfo, and semantic colour images ``offsets_ms`` after each image."""
+def _semantic_bag(path: Path, offsets_ms: list[int], bad: int | None = None) -> tuple[Path, list[np.ndarray]]:
+    """A 24x32 bag: 3 images, 3 scans, CameraInfo, and semantic colour images ``offsets_ms`` after each image
+    (semantic message ``bad`` in an unsupported encoding)."""
     from semattnet.data.bags import CameraInfoData, MessageWriter
     from semattnet.data.bags.encode import camera_info_message, image_message, pointcloud2_message
 
@@ -98,7 +99,10 @@ def _semantic_bag(path: Path, offsets_ms: list[int]) -> tuple[Path, list[np.ndar
             out.write("/cam/camera_info", t, camera_info_message(out.ts, info, t, "cam"))
             out.write("/lidar", t, pointcloud2_message(out.ts, pts, t, "lidar"))
             ts = t + offsets_ms[i] * 10**6
-            out.write("/cam/semantic", ts, image_message(out.ts, sems[i], ts, "cam"))
+            sem = image_message(out.ts, sems[i], ts, "cam")
+            if i == bad:
+                sem.encoding = "16UC1"
+            out.write("/cam/semantic", ts, sem)
     rig = path.parent / "rig.json"
     T_cam_lidar = [[0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]]
     rig.write_text(json.dumps({"K": K.tolist(), "T_cam_lidar": T_cam_lidar, "image_size": [32, 24]}))
@@ -116,10 +120,33 @@ def test_semantic_topic_paired_by_stamp(tmp_path: Path) -> None:
     assert frames[0].sparse[12, 16] == np.float32(5.0)
 
 
-def test_semantic_topic_too_far_is_one_line(tmp_path: Path) -> None:
-    rig, _ = _semantic_bag(tmp_path / "b", [0, 0, 30])
-    with pytest.raises(DataError, match=r"1 image\(s\) have no /cam/semantic semantic image within 20.0 ms "
-                                        r"\(first: image 2, nearest 30.0 ms apart\)"):  # fmt: skip
-        BagSource(tmp_path / "b", "/cam/image", "/lidar", rig=rig, semantic_topic="/cam/semantic", max_skew=0.02)
+def test_semantic_topic_too_far_fails_that_frame_only(tmp_path: Path) -> None:
+    rig, sems = _semantic_bag(tmp_path / "b", [0, 0, 30])
+    logged: list[str] = []
+    source = BagSource(tmp_path / "b", "/cam/image", "/lidar", rig=rig, semantic_topic="/cam/semantic", max_skew=0.02,
+                       log=logged.append)  # fmt: skip
+    assert source.names == ["0000000000", "0000000001", "0000000002"]
+    assert "semantic maps from /cam/semantic (1 image(s) without one within 20.0 ms)" in logged[0]
+    with pytest.raises(DataError) as err:
+        source.load("0000000002")
+    assert str(err.value) == (f"{tmp_path / 'b'}: /cam/image image 2: no /cam/semantic semantic image within "
+                              "20.0 ms (nearest 30.0 ms apart)")  # fmt: skip
+    assert np.array_equal(source.load("0000000001").semantic, sems[1])
+    (tmp_path / "c").mkdir()
+    rig, _ = _semantic_bag(tmp_path / "c" / "b", [30, 30, 30])  # none near enough: nothing to complete
+    with pytest.raises(DataError, match=r"no /cam/semantic semantic image within 20.0 ms of any /cam/image image"):
+        BagSource(tmp_path / "c" / "b", "/cam/image", "/lidar", rig=rig, semantic_topic="/cam/semantic", max_skew=0.02)
     with pytest.raises(DataError, match=r"no topic '/cam/nope'"):
         BagSource(tmp_path / "b", "/cam/image", "/lidar", rig=rig, semantic_topic="/cam/nope")
+
+
+def test_undecodable_semantic_image_fails_its_frame_only(tmp_path: Path) -> None:
+    rig, sems = _semantic_bag(tmp_path / "b", [0, 2, -1], bad=1)
+    source = BagSource(tmp_path / "b", "/cam/image", "/lidar", rig=rig, semantic_topic="/cam/semantic")
+    assert np.array_equal(source.load("0000000000").semantic, sems[0])
+    for _ in range(2):  # asked again (check, then load): the same error
+        with pytest.raises(DataError) as err:
+            source.load("0000000001")
+        assert str(err.value) == (f"{tmp_path / 'b'}: /cam/image image 1: /cam/semantic message 1: unsupported image "
+                                  "encoding '16UC1' (semattnet reads rgb8, bgr8, mono8)")  # fmt: skip
+    assert np.array_equal(source.load("0000000002").semantic, sems[2])

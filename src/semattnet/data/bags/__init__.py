@@ -4,7 +4,8 @@ Reading needs no ROS installation (``rosbags``, extra ``ros``); Rerun needs ``re
 Both are imported on first use; a missing one is a one-line :class:`MissingExtraError` with the install hint.
 
 - Reading: :func:`list_topics`, :class:`BagPairs` (image + nearest scan + calibration from ``CameraInfo`` and
-  ``/tf_static``, or a rig file), the decoders of :mod:`.decode`, :class:`TransformTree`.
+  ``/tf_static``, or a rig file; a :class:`BagFailure` for an image without a good pair), the decoders of
+  :mod:`.decode`, :class:`TransformTree`.
 - Writing: :func:`write_kitti_bag` / :func:`write_sensor_bag` (images, scans, CameraInfo, ``/tf_static``),
   :class:`BagWriter` (completed depth 32FC1, coloured cloud, CameraInfo per frame).
 - Rerun: :class:`RerunLogger`.
@@ -23,11 +24,12 @@ from .kitti import BagTopics, SensorRecord, WrittenBag, kitti_stamps_ns, write_k
 from .pairing import StampPairing, pair_stamps
 from .reader import TopicRow, format_topics, list_topics, open_bag
 from .rerun_log import RerunLogger
-from .source import BagPair, BagPairs
+from .source import BagFailure, BagPair, BagPairs
 from .tf import NoTransformError, TransformTree
 from .writer import BagWriter, MessageWriter, bag_format
 
 __all__ = [
+    "BagFailure",
     "BagPair",
     "BagPairs",
     "BagTopics",

@@ -29,6 +29,7 @@ __all__ = [
     "format_topics",
     "is_ros1",
     "list_topics",
+    "message_errors",
     "open_bag",
     "read_transforms",
     "topic_connections",
@@ -70,6 +71,20 @@ def bag_errors(path: str | os.PathLike[str]) -> Iterator[None]:
     except errors as exc:
         why = " ".join(str(exc).split()) or type(exc).__name__
         raise DataError(f"{path}: cannot read the bag (truncated or corrupt?): {why[:200]}") from None
+
+
+@contextmanager
+def message_errors(where: str) -> Iterator[None]:
+    """Turn the failures of deserialising one corrupt message into one :class:`DataError` line naming ``where``
+    (e.g. ``BAG: TOPIC image 3``), so the caller can fail that message alone (semattnet's errors pass through)."""
+    errors: tuple[type[BaseException], ...] = (*_reader_errors(), ValueError, TypeError, AttributeError)
+    try:
+        yield
+    except SemAttNetError:
+        raise
+    except errors as exc:
+        why = " ".join(str(exc).split()) or type(exc).__name__
+        raise DataError(f"{where}: cannot deserialise the message: {why[:200]}") from None
 
 
 def is_ros1(path: str | os.PathLike[str]) -> bool:

@@ -2,23 +2,27 @@
 
 :class:`BagPairs` checks everything it can before the first frame (topics and types, the pairing, the
 calibration: ``CameraInfo`` + ``/tf_static``, or a rig that overrides both) in one pass over the headers,
-then yields :class:`BagPair` in image order in a second pass, holding only the scans that images still
-to come need (memory stays bounded by the stamp skew, not by the bag's length).
+then yields, in a second pass, one outcome per image of the image topic, in order: a :class:`BagPair`, or a
+:class:`BagFailure` carrying that image's one-line :class:`~semattnet._errors.DataError` (no scan within the
+max skew, an undecodable image or scan, an image size the calibration disagrees with). A bad message fails
+only the images that need it and never ends the pass. It holds only the scans that images still to come need
+(memory stays bounded by the stamp skew, not by the bag's length).
 
     >>> pairs = BagPairs("drive.mcap", "/kitti/camera_color_left/image_raw", "/kitti/velo/pointcloud")  # doctest: +SKIP
     >>> print(pairs.pairing.describe())                                                                # doctest: +SKIP
     >>> for p in pairs:                                                                                # doctest: +SKIP
-    ...     sparse = project_points(p.points, p.K, p.T_cam_lidar, p.image_size)
+    ...     if isinstance(p, BagPair):
+    ...         sparse = project_points(p.points, p.K, p.T_cam_lidar, p.image_size)
 """
 
 from __future__ import annotations
 
 import os
 from collections import Counter, deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -34,9 +38,18 @@ from .decode import (
     header_stamp_frame,
 )
 from .pairing import StampPairing, pair_stamps
-from .reader import TF_STATIC_TOPIC, open_bag, read_transforms, topic_connections
+from .reader import TF_STATIC_TOPIC, message_errors, open_bag, read_transforms, topic_connections
 
-__all__ = ["CAMERA_INFO_TYPE", "IMAGE_TYPES", "POINTS_TYPE", "BagPair", "BagPairs", "rig_camera_info"]
+__all__ = [
+    "CAMERA_INFO_TYPE",
+    "IMAGE_TYPES",
+    "POINTS_TYPE",
+    "BagFailure",
+    "BagPair",
+    "BagPairs",
+    "decode_message",
+    "rig_camera_info",
+]
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 POINTS_TYPE = "sensor_msgs/msg/PointCloud2"
@@ -54,6 +67,7 @@ class BagPair:
         frame_id: the camera (optical) frame; lidar_frame_id: the scan's frame.
         K: (3, 3) intrinsics, pixels. image_size: (width, height). T_cam_lidar: (4, 4) LiDAR -> camera.
         camera_info: the CameraInfo to write back with outputs (made from the rig when the bag has none).
+        scan_index: the scan's index in the points topic.
     """
 
     name: str
@@ -68,11 +82,35 @@ class BagPair:
     image_size: tuple[int, int]
     T_cam_lidar: np.ndarray
     camera_info: CameraInfoData
+    scan_index: int = -1
 
     @property
     def calibration(self) -> RigCalibration:
         """The pair's calibration as :class:`semattnet.geometry.RigCalibration` (for ``project_scan``)."""
         return RigCalibration(self.K, self.T_cam_lidar, self.image_size, self.frame_id or None, source=self.name)
+
+
+@dataclass(frozen=True)
+class BagFailure:
+    """An image of the bag that gives no pair: its ``name`` and ``index`` (as :class:`BagPair`'s) and ``error``,
+    the one-line :class:`DataError` naming the bag, the topic, the message index and what is wrong."""
+
+    name: str
+    index: int
+    error: DataError
+
+
+_T = TypeVar("_T")
+
+
+def decode_message(where: str, decode: Callable[[], _T]) -> _T | DataError:
+    """``decode()``, or the :class:`DataError` it raised (a message rosbags cannot deserialise becomes one
+    naming ``where``), returned rather than raised so that one bad message fails only its own frames."""
+    try:
+        with message_errors(where):
+            return decode()
+    except DataError as exc:
+        return exc
 
 
 def rig_camera_info(rig: RigCalibration, frame_id: str = "", stamp: int = 0) -> CameraInfoData:
@@ -100,9 +138,14 @@ class BagPairs:
         rectified: the images are rectified: intrinsics are CameraInfo's ``P[:, :3]`` (else its ``K``).
         tf_topic: where the static transforms are.
 
+    Iterating yields one :class:`BagPair` or :class:`BagFailure` per image of ``image_topic``, in order (module
+    doc); ``len`` is the number of images.
+
     Raises:
-        DataError: a missing topic or wrong type, no scan within ``max_skew`` of any image, no transform between
-            the LiDAR and camera frames, no CameraInfo, a truncated bag; naming the file and topic.
+        DataError: at construction, what is wrong with the whole bag: a missing topic or wrong type, a topic
+            without messages, no scan within ``max_skew`` of any image, no transform between the LiDAR and
+            camera frames, no CameraInfo; naming the file and topic. While iterating: a truncated or corrupt
+            bag (the pass ends); a bad message is a :class:`BagFailure`, not an exception.
     """
 
     def __init__(self, path: str | os.PathLike[str], image_topic: str, points_topic: str,
@@ -200,13 +243,34 @@ class BagPairs:
         return self._transforms[key]
 
     def __len__(self) -> int:
-        return self.pairing.paired
+        return len(self.image_stamps)
 
-    def _decode_image(self, reader: Any, conn: Any, raw: Any) -> np.ndarray:
-        msg = reader.deserialize(raw, conn.msgtype)
-        if conn.msgtype == IMAGE_TYPES[1]:
-            return decode_compressed_image(msg, conn.topic)
-        return decode_image(msg, conn.topic)
+    def no_scan_error(self, i: int) -> DataError:
+        """The error of image ``i`` that has no scan within the max skew."""
+        p = self.pairing
+        return DataError(f"{self.path}: {self.image_topic} image {i}: no {self.points_topic} scan within "
+                         f"{p.max_skew_ns / 1e6:.1f} ms (nearest {p.skew_ns[i] / 1e6:.1f} ms apart)")  # fmt: skip
+
+    def _decode_image(self, reader: Any, conn: Any, raw: Any, i: int) -> np.ndarray | DataError:
+        where = f"{self.path}: {conn.topic} image {i}"
+
+        def decode() -> np.ndarray:
+            msg = reader.deserialize(raw, conn.msgtype)
+            if conn.msgtype == IMAGE_TYPES[1]:
+                return decode_compressed_image(msg, where)
+            return decode_image(msg, where)
+
+        return decode_message(where, decode)
+
+    def _decode_scan(self, reader: Any, conn: Any, raw: Any, j: int) -> tuple[np.ndarray, int, str] | DataError:
+        where = f"{conn.topic} message {j}"  # the image that needs it names the bag
+
+        def decode() -> tuple[np.ndarray, int, str]:
+            msg = reader.deserialize(raw, conn.msgtype)
+            pts = decode_pointcloud2(msg, where)
+            return pts, int(self.scan_stamps[j]), str(msg.header.frame_id).lstrip("/")
+
+        return decode_message(where, decode)
 
     def _pair(self, i: int, image: np.ndarray, scan: tuple[np.ndarray, int, str]) -> BagPair:
         points, scan_stamp, lidar_frame = scan
@@ -219,14 +283,31 @@ class BagPairs:
                             f"the calibration says {size[0]}x{size[1]}")  # fmt: skip
         K = np.asarray(self.rig.K, dtype=np.float64) if self.rig is not None else info.intrinsics(self.rectified)
         return BagPair(f"{i:010d}", i, int(self.image_stamps[i]), scan_stamp, image, points, frame, lidar_frame, K,
-                       (int(size[0]), int(size[1])), self.T_cam_lidar(frame, lidar_frame), info)  # fmt: skip
+                       (int(size[0]), int(size[1])), self.T_cam_lidar(frame, lidar_frame), info,
+                       int(self.pairing.match[i]))  # fmt: skip
 
-    def __iter__(self) -> Iterator[BagPair]:
-        """Pass 2: decode images and the scans they need, yield pairs in image order."""
+    def _outcome(self, i: int, image: np.ndarray | DataError | None,
+                 scans: dict[int, tuple[np.ndarray, int, str] | DataError]) -> BagPair | BagFailure:  # fmt: skip
+        """Image ``i``'s pair, or its failure: no scan near enough, a bad image, a bad scan, a wrong size."""
+        j = int(self.pairing.match[i])
+        scan = scans.get(j) if j >= 0 else None
+        if image is None or scan is None:
+            return BagFailure(f"{i:010d}", i, self.no_scan_error(i))
+        if isinstance(image, DataError):
+            return BagFailure(f"{i:010d}", i, image)
+        if isinstance(scan, DataError):
+            return BagFailure(f"{i:010d}", i, DataError(f"{self.path}: {self.image_topic} image {i}: {scan}"))
+        try:
+            return self._pair(i, image, scan)
+        except DataError as exc:
+            return BagFailure(f"{i:010d}", i, exc)
+
+    def __iter__(self) -> Iterator[BagPair | BagFailure]:
+        """Pass 2: decode images and the scans they need; yield every image's outcome in image order."""
         match = self.pairing.match
         need = Counter(int(j) for j in match if j >= 0)
-        scans: dict[int, tuple[np.ndarray, int, str]] = {}
-        pending: deque[tuple[int, np.ndarray]] = deque()
+        scans: dict[int, tuple[np.ndarray, int, str] | DataError] = {}
+        pending: deque[tuple[int, np.ndarray | DataError | None]] = deque()
         n_img = n_scan = 0
         with open_bag(self.path) as reader:
             conns = [c for c in reader.connections if c.topic in (self.image_topic, self.points_topic)]
@@ -234,17 +315,15 @@ class BagPairs:
                 if conn.topic == self.points_topic:
                     j, n_scan = n_scan, n_scan + 1
                     if need[j]:
-                        msg = reader.deserialize(raw, conn.msgtype)
-                        pts = decode_pointcloud2(msg, conn.topic)
-                        scans[j] = (pts, int(self.scan_stamps[j]), str(msg.header.frame_id).lstrip("/"))
+                        scans[j] = self._decode_scan(reader, conn, raw, j)
                 else:
                     i, n_img = n_img, n_img + 1
-                    if match[i] >= 0:
-                        pending.append((i, self._decode_image(reader, conn, raw)))
-                while pending and int(match[pending[0][0]]) in scans:
+                    pending.append((i, self._decode_image(reader, conn, raw, i) if match[i] >= 0 else None))
+                while pending and (match[pending[0][0]] < 0 or int(match[pending[0][0]]) in scans):
                     i, image = pending.popleft()
+                    yield self._outcome(i, image, scans)
                     j = int(match[i])
-                    yield self._pair(i, image, scans[j])
-                    need[j] -= 1
-                    if need[j] == 0:
-                        del scans[j]
+                    if j >= 0:
+                        need[j] -= 1
+                        if need[j] == 0:
+                            del scans[j]

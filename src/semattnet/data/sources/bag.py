@@ -3,9 +3,12 @@
 :func:`semattnet.geometry.project_points` (exactly as :class:`~.kitti_raw.RawDriveSource` projects a
 KITTI scan).
 
-A bag is read front to back: loading frames in order (what the frame loop does) reads the bag once;
-asking for an earlier frame reads it again from the start. :meth:`BagSource.read` (decode) and
-:meth:`BagSource.assemble` (project) let :func:`semattnet.inference.stream.completions` time the two
+Every image of the image topic is a frame. One that cannot be completed (no scan within the max skew, an
+undecodable image or scan, no semantic image near enough, an empty scan) is that frame's fault: its
+``read``/``load``/``check`` raises its own one-line :class:`~semattnet._errors.DataError` and the frames after
+it still load. A bag is read front to back: loading (or checking) frames in order reads the bag once, a bad
+frame included; asking for an earlier frame reads it again from the start. :meth:`BagSource.read` (decode)
+and :meth:`BagSource.assemble` (project) let :func:`semattnet.inference.stream.completions` time the two
 stages apart; ``load`` is both.
 """
 
@@ -13,6 +16,7 @@ from __future__ import annotations
 
 import os
 import threading
+from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -20,52 +24,68 @@ from typing import Any
 import numpy as np
 
 from semattnet._errors import DataError
-from semattnet.data.bags import BagPair, BagPairs
+from semattnet.data.bags import BagFailure, BagPair, BagPairs, StampPairing
 from semattnet.data.frames import Frame, IndexedSource
 
 __all__ = ["BagSource"]
 
 
 class BagSource(IndexedSource):
-    """The paired frames of a bag (see :class:`~semattnet.data.bags.BagPairs` for the arguments and what is
-    checked at construction: topics, pairing, calibration). Frames are named by the image's index in its topic
-    (``0000000003``) and carry ``timestamp`` (the image's header stamp, seconds), ``points``, ``calib`` and
-    ``meta``: ``stamp_ns`` (int), ``frame_id``, ``lidar_frame_id``, ``scan_stamp_ns``, ``camera_info``
-    (a :class:`~semattnet.data.bags.CameraInfoData`, what the bag sink writes back).
+    """The frames of a bag, one per image of the image topic (see :class:`~semattnet.data.bags.BagPairs` for
+    the arguments and what is checked at construction: topics, pairing, calibration). Frames are named by the
+    image's index in its topic (``0000000003``) and carry ``timestamp`` (the image's header stamp, seconds),
+    ``points``, ``calib`` and ``meta``: ``stamp_ns`` (int), ``frame_id``, ``lidar_frame_id``, ``scan_stamp_ns``,
+    ``camera_info`` (a :class:`~semattnet.data.bags.CameraInfoData`, what the bag sink writes back).
 
     ``semantic_topic``: colour-coded semantic images (Cityscapes palette, ``sensor_msgs/Image`` or
     ``CompressedImage``), each image taking the one with the nearest stamp within ``max_skew`` (default: half
     their period). ``log``: where the pairing report goes (one line at construction).
 
     Raises:
-        DataError: what :class:`BagPairs` raises; an image without a semantic image near enough (naming the topic).
+        DataError: at construction, what :class:`BagPairs` raises (the whole bag is unusable), a semantic topic
+            that is missing, empty or near no paired image. Per frame (``read``, ``load``, ``check``): that
+            frame's own one line naming the bag, the topic, the message index and what is wrong; the next frames
+            still read forward.
     """
+
+    #: Outcomes (decoded frames or their errors) kept after reading, so that asking again for one of the last
+    #: few frames (``check([name])`` behind a read-ahead of two frames, then ``load``) does not restart the bag.
+    keep = 4
 
     def __init__(self, path: str | os.PathLike[str], image_topic: str, points_topic: str,
                  camera_info_topic: str | None = None, rig: Any = None, max_skew: float | None = None,
                  semantic_topic: str | None = None, log: Callable[[str], None] | None = None) -> None:  # fmt: skip
         self.path = Path(path)
         self.pairs = BagPairs(self.path, image_topic, points_topic, camera_info_topic, rig, max_skew)
-        self.indices = [int(i) for i in np.nonzero(self.pairs.pairing.match >= 0)[0]]
+        self.indices = list(range(len(self.pairs)))
         self.names = [f"{i:010d}" for i in self.indices]
         self._index = dict(zip(self.names, self.indices, strict=True))
         self.semantic_topic = semantic_topic
-        self.semantic_match: np.ndarray | None = None
+        self.semantic_pairing: StampPairing | None = None
         if semantic_topic is not None:
-            self.semantic_match = self._pair_semantic(semantic_topic, max_skew)
+            self.semantic_pairing = self._pair_semantic(semantic_topic, max_skew)
         self._lock = threading.Lock()
-        self._pairs_it: Iterator[BagPair] | None = None
-        self._pos = -1
-        self._sem_it: Iterator[tuple[int, np.ndarray]] | None = None
-        self._sem_last: tuple[int, np.ndarray] | None = None
+        self._pairs_it: Iterator[BagPair | BagFailure] | None = None
+        self._recent: deque[BagPair | BagFailure] = deque(maxlen=self.keep)
+        self._broken: DataError | None = None
+        self._sem_it: Iterator[tuple[int, np.ndarray | DataError]] | None = None
+        self._sem_recent: deque[tuple[int, np.ndarray | DataError]] = deque(maxlen=self.keep)
         if log is not None:
             log(self.describe())
 
+    @property
+    def semantic_match(self) -> np.ndarray | None:
+        """The semantic message index per image (-1: none near enough), or None without a semantic topic."""
+        return None if self.semantic_pairing is None else self.semantic_pairing.match
+
     def describe(self) -> str:
-        """The pairing report: paired, dropped images, unused scans (and the semantic images)."""
+        """The pairing report: paired, dropped images (frames that fail), unused scans (and the semantic images)."""
         text = f"{self.path}: {self.pairs.pairing.describe()}"
-        if self.semantic_topic is not None:
+        if self.semantic_pairing is not None:
+            p = self.semantic_pairing
             text += f"; semantic maps from {self.semantic_topic}"
+            if p.dropped_images:
+                text += f" ({p.dropped_images} image(s) without one within {p.max_skew_ns / 1e6:.1f} ms)"
         return text
 
     @property
@@ -73,7 +93,7 @@ class BagSource(IndexedSource):
         """The header stamps (ns) of the frames, in order."""
         return self.pairs.image_stamps[self.indices]
 
-    def _pair_semantic(self, topic: str, max_skew: float | None) -> np.ndarray:
+    def _pair_semantic(self, topic: str, max_skew: float | None) -> StampPairing:
         from semattnet.data.bags import header_stamp_frame, open_bag, pair_stamps
         from semattnet.data.bags.reader import topic_connections
         from semattnet.data.bags.source import IMAGE_TYPES
@@ -83,65 +103,115 @@ class BagSource(IndexedSource):
             stamps = [
                 header_stamp_frame(raw, not reader.is2)[0] or t for _, t, raw in reader.messages(connections=conns)
             ]
+        if not stamps:
+            raise DataError(f"{self.path}: topic {topic!r} has no message")
         skew = None if max_skew is None else round(max_skew * 1e9)
         p = pair_stamps(self.pairs.image_stamps, np.array(stamps, dtype=np.int64), skew)
-        missing = [i for i in self.indices if p.match[i] < 0]
-        if missing:
-            raise DataError(f"{self.path}: {len(missing)} image(s) have no {topic} semantic image within "
-                            f"{p.max_skew_ns / 1e6:.1f} ms (first: image {missing[0]}, nearest "
-                            f"{p.skew_ns[missing[0]] / 1e6:.1f} ms apart); raise the max skew")  # fmt: skip
-        return p.match
+        if not np.any((p.match >= 0) & (self.pairs.pairing.match >= 0)):
+            raise DataError(f"{self.path}: no {topic} semantic image within {p.max_skew_ns / 1e6:.1f} ms of any "
+                            f"{self.pairs.image_topic} image with a scan (nearest {p.skew_ns.min() / 1e6:.1f} ms "
+                            "apart); raise the max skew")  # fmt: skip
+        return p
 
-    def _semantic_images(self) -> Iterator[tuple[int, np.ndarray]]:
+    def _semantic_images(self) -> Iterator[tuple[int, np.ndarray | DataError]]:
+        """Every semantic message in order: the image, or the DataError of one that cannot be decoded."""
         from semattnet.data.bags import decode_compressed_image, decode_image, open_bag
         from semattnet.data.bags.reader import topic_connections
-        from semattnet.data.bags.source import IMAGE_TYPES
+        from semattnet.data.bags.source import IMAGE_TYPES, decode_message
         from semattnet.data.palette import colors_to_ids
 
         assert self.semantic_topic is not None
         with open_bag(self.path) as reader:
             conns = topic_connections(reader, self.semantic_topic, IMAGE_TYPES, self.path)
             for j, (conn, _, raw) in enumerate(reader.messages(connections=conns)):
-                msg = reader.deserialize(raw, conn.msgtype)
-                decode = decode_compressed_image if conn.msgtype == IMAGE_TYPES[1] else decode_image
-                image = decode(msg, conn.topic)
-                colors_to_ids(image, allow_unknown=True, source=f"{self.path}: {conn.topic} message {j}")
-                yield j, image
+                where = f"{conn.topic} message {j}"  # the frame that needs it names the bag
+
+                def decode(conn: Any = conn, raw: Any = raw, where: str = where) -> np.ndarray:
+                    msg = reader.deserialize(raw, conn.msgtype)
+                    image = (decode_compressed_image if conn.msgtype == IMAGE_TYPES[1] else decode_image)(msg, where)
+                    colors_to_ids(image, allow_unknown=True, source=where)
+                    return image
+
+                yield j, decode_message(where, decode)
 
     def _semantic(self, i: int) -> np.ndarray | None:
-        """The semantic image paired with image ``i`` (read forward, restarted when asked for an earlier one)."""
-        if self.semantic_match is None:
+        """The semantic image paired with image ``i`` (read forward, restarted when asked for an earlier one).
+
+        Raises:
+            DataError: none near enough, or it cannot be decoded; naming the bag, image ``i`` and the message.
+        """
+        if self.semantic_pairing is None:
             return None
-        j = int(self.semantic_match[i])
-        if self._sem_last is not None and self._sem_last[0] == j:
-            return self._sem_last[1]
-        if self._sem_it is None or (self._sem_last is not None and self._sem_last[0] > j):
+        where = f"{self.path}: {self.pairs.image_topic} image {i}"
+        j = int(self.semantic_pairing.match[i])
+        if j < 0:
+            p = self.semantic_pairing
+            raise DataError(f"{where}: no {self.semantic_topic} semantic image within {p.max_skew_ns / 1e6:.1f} ms "
+                            f"(nearest {p.skew_ns[i] / 1e6:.1f} ms apart)")  # fmt: skip
+        image = self._semantic_message(j)
+        if isinstance(image, DataError):
+            raise DataError(f"{where}: {image}")
+        return image
+
+    def _semantic_message(self, j: int) -> np.ndarray | DataError:
+        """Semantic message ``j``: one of the last few read, else read forward (from the start for an earlier)."""
+        hit = [image for k, image in self._sem_recent if k == j]
+        if hit:
+            return hit[0]
+        if self._sem_it is None or (self._sem_recent and self._sem_recent[-1][0] > j):
             self._sem_it = self._semantic_images()
-        for k, image in self._sem_it:
-            self._sem_last = (k, image)
-            if k == j:
-                return image
-        raise DataError(f"{self.path}: {self.semantic_topic} message {j} missing (truncated bag?)")
+            self._sem_recent.clear()
+        found = next(((k, image) for k, image in self._sem_it if k == j), None)
+        if found is None:
+            self._sem_it = None
+            raise DataError(f"{self.path}: {self.semantic_topic} message {j} missing (truncated bag?)")
+        self._sem_recent.append(found)
+        return found[1]
+
+    def _advance(self, i: int) -> BagPair | BagFailure:
+        """Image ``i``'s outcome: the bag read forward by one iterator (again from the start only for an image
+        before the last :attr:`keep` read), so ``check([name])`` then ``load(name)`` reads it once."""
+        hit = [item for item in self._recent if item.index == i]
+        if hit:
+            return hit[0]
+        pos = self._recent[-1].index if self._recent else -1
+        if pos > i or (self._pairs_it is None and self._broken is None):
+            self._pairs_it, self._broken = iter(self.pairs), None
+            self._recent.clear()
+        if self._broken is not None:  # the bag itself failed before image i: no point reading it again
+            raise self._broken
+        assert self._pairs_it is not None
+        try:
+            for item in self._pairs_it:
+                self._recent.append(item)
+                if item.index == i:
+                    return item
+            self._broken = DataError(f"{self.path}: {self.pairs.image_topic} ends before image {i} (truncated bag?)")
+        except DataError as exc:
+            self._broken = exc
+        self._pairs_it = None
+        raise self._broken
 
     def read(self, name: str) -> tuple[BagPair, np.ndarray | None]:
-        """Frame ``name``'s image and scan (decoded) with its semantic image, or None."""
+        """Frame ``name``'s image and scan (decoded) with its semantic image, or None.
+
+        Raises:
+            DataError: this frame's own error (module doc); the bag stays positioned for the next frames.
+        """
         i = self._index[name]
         with self._lock:
-            if self._pairs_it is None or self._pos >= i:
-                self._pairs_it, self._pos = iter(self.pairs), -1
-            for pair in self._pairs_it:
-                self._pos = pair.index
-                if pair.index == i:
-                    return pair, self._semantic(i)
-            self._pairs_it = None
-        raise DataError(f"{self.path}: {self.pairs.image_topic} image {i} missing (truncated bag?)")
+            item = self._advance(i)
+            if isinstance(item, BagFailure):
+                raise item.error
+            return item, self._semantic(i)
 
     def assemble(self, raw: tuple[BagPair, np.ndarray | None]) -> Frame:
         """The frame of what :meth:`read` returned: the scan projected into the image."""
         from semattnet.geometry import project_points
 
         p, semantic = raw
-        where = f"{self.path}: {self.pairs.points_topic} message {p.index}"
+        bag = self.pairs
+        where = f"{self.path}: {bag.image_topic} image {p.index}: {bag.points_topic} message {p.scan_index}"
         sparse = project_points(p.points, p.K, p.T_cam_lidar, p.image_size, name=where)
         meta = {"stamp_ns": p.stamp_ns, "frame_id": p.frame_id, "lidar_frame_id": p.lidar_frame_id,
                 "scan_stamp_ns": p.scan_stamp_ns, "camera_info": p.camera_info}  # fmt: skip
@@ -152,7 +222,9 @@ class BagSource(IndexedSource):
         return self.assemble(self.read(name))
 
     def check(self, names: Sequence[str] | None = None) -> None:
-        """Decode every image, scan and semantic image of ``names`` (default: all), in one pass."""
+        """Decode every image, scan and semantic image of ``names`` (default: all), in one pass; in order, one
+        name at a time (``check([name])``) reads the bag forward once too. Raises the first bad frame's
+        :class:`DataError` (the projection, e.g. an empty scan, is ``load``'s)."""
         for name in self.names if names is None else names:
             self.read(name)
 
