@@ -34,7 +34,7 @@ import numpy as np
 
 from semattnet._errors import InputError, MissingDependencyError
 from semattnet.data.frames import Frame
-from semattnet.inference.sinks import Prediction, RunSink, _camera_info, _stamp_ns
+from semattnet.inference.sinks import Prediction, RunSink
 
 __all__ = ["INSTALL_HINT", "LATENCY_SCHEMA", "LiveSink", "parse_address"]
 
@@ -166,6 +166,25 @@ def _transform(m: Any, stamp: Any, parent: str, child: str, T_parent_child: np.n
                           translation=m.Vector3(x=t[0], y=t[1], z=t[2]),
                           rotation=m.Quaternion(x=x, y=y, z=z, w=w))  # fmt: skip
     return m.FrameTransforms(transforms=[tf])
+
+
+def _stamp_ns(frame: Frame, index: int) -> int:
+    """A frame's sensor time in ns, as the bag and Rerun sinks stamp it: ``meta["stamp_ns"]``, else
+    ``timestamp``, else ``index`` x 0.1 s. (A copy of ``semattnet.inference.sinks._stamp_ns``, private there.)"""
+    if "stamp_ns" in frame.meta:
+        return int(frame.meta["stamp_ns"])
+    if frame.timestamp is not None:
+        return round(frame.timestamp * 1e9)
+    return index * 100_000_000
+
+
+def _camera_info(frame: Frame) -> Any:
+    """A distortion-free CameraInfo of a frame's ``K`` and size (as the bag sink makes it)."""
+    from semattnet.data.bags import CameraInfoData
+
+    K = np.asarray(frame.K, dtype=np.float64)
+    h, w = frame.size
+    return CameraInfoData(w, h, K, np.zeros(5), np.eye(3), np.hstack([K, np.zeros((3, 1))]), "plumb_bob", "camera")
 
 
 def _camera(frame: Frame) -> tuple[str, Any]:
