@@ -13,7 +13,9 @@ Per frame, on one timeline (``sensor_time``) stamped with the sensor time, in th
     world/completed/points        Points3D, the completed depth back-projected with its colours
 
 A file recording is written to a hidden temporary file beside the target and moved into place at
-:meth:`RerunLogger.close`; after an error inside the ``with`` block nothing is left.
+:meth:`RerunLogger.close`; after an error inside the ``with`` block nothing is left. ``serve=True`` streams
+the frames live to a browser instead of (or besides) the file: a gRPC server plus the web viewer that ships
+in the ``rerun-sdk`` wheel (:attr:`RerunLogger.url`).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import tempfile
 from pathlib import Path
 from types import TracebackType
 from typing import Any
+from urllib.parse import quote
 
 import numpy as np
 
@@ -55,24 +58,39 @@ def _rerun() -> Any:
 
 
 class RerunLogger:
-    """Log frames to a ``.rrd`` file (``path``) and/or a spawned viewer (``spawn``).
+    """Log frames to a ``.rrd`` file (``path``), a spawned viewer (``spawn``) and/or a served web viewer
+    (``serve``), in any combination.
 
     Args:
         path: the recording to write (staged, see the module doc); None: no file.
         spawn: start a Rerun viewer and stream to it as well.
         overwrite: replace an existing ``path`` (else :class:`FileExistsError` at once).
         max_depth: completed-cloud points deeper than this are left out, metres (None: all).
+        serve: host a gRPC server (the recording, buffered in memory up to 1 GiB for late viewers) and the
+            web viewer shipped in the ``rerun-sdk`` wheel (no internet needed); open :attr:`url` in a browser.
+            The gRPC server stops at :meth:`close`; the web viewer's HTTP server (which serves only the viewer's
+            files, on every interface) stays up until the process exits (rerun gives no handle to stop it).
+        grpc_port, web_port: their ports (Rerun's defaults 9876 and 9090; 0: a free port).
+        host: the interface the gRPC server listens on.
+
+    Attributes:
+        url: the web viewer connected to the stream (``http://HOST:WEB_PORT/?url=...``), None without ``serve``.
+        grpc_url: the stream (``rerun+http://HOST:GRPC_PORT/proxy``: ``rerun GRPC_URL`` connects a native
+            viewer), None without ``serve``.
     """
 
     def __init__(self, path: str | os.PathLike[str] | None = None, spawn: bool = False, overwrite: bool = False,
-                 app_id: str = "semattnet", max_depth: float | None = None) -> None:  # fmt: skip
-        if path is None and not spawn:
-            raise InputError("RerunLogger: give a .rrd path, spawn=True, or both")
+                 app_id: str = "semattnet", max_depth: float | None = None, serve: bool = False,
+                 grpc_port: int = 9876, web_port: int = 9090, host: str = "127.0.0.1") -> None:  # fmt: skip
+        if path is None and not spawn and not serve:
+            raise InputError("RerunLogger: give a .rrd path, spawn=True, serve=True, or several")
         self.path = None if path is None else Path(path)
         if self.path is not None and self.path.exists() and not overwrite:
             raise FileExistsError(f"{self.path} exists; refusing to overwrite (pass --overwrite / overwrite=True)")
         rr = _rerun()
         self.max_depth, self.frames = max_depth, 0
+        self.url: str | None = None
+        self.grpc_url: str | None = None
         self.rec = rr.RecordingStream(app_id)
         self._tmp: Path | None = None
         if self.path is not None:
@@ -80,13 +98,34 @@ class RerunLogger:
             fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.p{os.getpid()}.", suffix=".rrd", dir=self.path.parent)
             os.close(fd)
             self._tmp = Path(tmp)
-        if spawn:
-            self.rec.spawn(connect=self._tmp is None)
-        if spawn and self._tmp is not None:
-            self.rec.set_sinks(rr.FileSink(str(self._tmp)), rr.GrpcSink())
-        elif self._tmp is not None:
-            self.rec.save(str(self._tmp))
+        try:
+            self._set_sinks(rr, spawn, serve, host, grpc_port, web_port)
+        except BaseException:
+            self._finish(ok=False)
+            raise
         self._log_static(rr)
+
+    def _set_sinks(self, rr: Any, spawn: bool, serve: bool, host: str, grpc_port: int, web_port: int) -> None:
+        """The file, the spawned viewer and the served stream + web viewer, as asked."""
+        if spawn:
+            self.rec.spawn(connect=self._tmp is None and not serve)
+        if not serve:
+            if spawn and self._tmp is not None:
+                self.rec.set_sinks(rr.FileSink(str(self._tmp)), rr.GrpcSink())
+            elif self._tmp is not None:
+                self.rec.save(str(self._tmp))
+            return
+        grpc_port = _port(host, grpc_port, "the gRPC stream")
+        web_port = _port("0.0.0.0", web_port, "the web viewer")  # rerun's HTTP server binds every interface
+        server = rr.GrpcServerSink(host, grpc_port)
+        sinks = [rr.FileSink(str(self._tmp))] * (self._tmp is not None) + [rr.GrpcSink()] * spawn + [server]
+        self.rec.set_sinks(*sinks)
+        self.grpc_url = str(server.uri)
+        try:
+            rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=self.grpc_url)
+        except (RuntimeError, OSError) as e:
+            raise InputError(f"RerunLogger: cannot serve the web viewer on {web_port} ({_first_line(e)})") from None
+        self.url = f"http://{_url_host(host)}:{web_port}/?url={quote(self.grpc_url, safe='')}"
 
     def _log_static(self, rr: Any) -> None:
         self.rec.log("world", rr.ViewCoordinates.FLU, static=True)
@@ -150,6 +189,29 @@ class RerunLogger:
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:  # fmt: skip
         self._finish(ok=exc_type is None)
+
+
+def _port(host: str, port: int, what: str) -> int:
+    """``port``, checked free on ``host`` (rerun's gRPC server only logs a port in use), or a free one for 0."""
+    import socket
+
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family) as s:
+        try:
+            s.bind((host, int(port)))
+        except OSError as e:
+            raise InputError(f"RerunLogger: cannot serve {what} on {host}:{port} ({e.strerror or e})") from None
+        return int(s.getsockname()[1])
+
+
+def _url_host(host: str) -> str:
+    """The host to put in a URL: a wildcard address as 127.0.0.1 (this machine), IPv6 in brackets."""
+    host = "127.0.0.1" if host in ("0.0.0.0", "") else "[::1]" if host == "::" else host
+    return f"[{host}]" if ":" in host and not host.startswith("[") else host
+
+
+def _first_line(e: BaseException) -> str:
+    return (str(e).splitlines() or [type(e).__name__])[0]
 
 
 def read_rrd_frames(path: str | os.PathLike[str]) -> dict[str, list[int]]:

@@ -1,0 +1,311 @@
+"""A live view of completed frames: a Foxglove WebSocket server (``foxglove-sdk``, extra ``live``).
+
+``semattnet predict ... --live [HOST:]PORT`` serves each frame as it is completed; open the Foxglove app
+(desktop or https://app.foxglove.dev) and connect to ``ws://HOST:PORT``. Per frame, stamped with the
+input's sensor time and frame id (as :class:`~semattnet.inference.sinks.BagSink` stamps them):
+
+============================  =====================  ==================================================
+topic                         schema                 what
+============================  =====================  ==================================================
+``/semattnet/depth``          foxglove.RawImage      the completed depth as stored, ``32FC1`` metres, holes NaN
+``/semattnet/points``         foxglove.PointCloud    the coloured completed cloud (x, y, z float32, red,
+                                                     green, blue, alpha uint8) in the camera frame
+``/semattnet/calibration``    foxglove.CameraCalib.  K, P, size, distortion (``meta["camera_info"]`` or ``K``)
+``/semattnet/latency``        JSON                   ``{frame, stamp_ns, stages_ms: {stage: ms}}``
+``/tf``                       foxglove.FrameTransf.  camera <- LiDAR (``calib.T_cam_lidar``), when known
+``/input/image``              foxglove.RawImage      the input image, ``rgb8``
+``/input/sparse``             foxglove.RawImage      the sparse input, ``32FC1`` metres, holes NaN
+============================  =====================  ==================================================
+
+Each sink logs into its own :class:`foxglove.Context`, so two sinks in one process never mix. A message
+is built only when a client is subscribed to its channel: with no client :meth:`LiveSink.write` costs
+next to nothing, and the server drops the oldest messages of a slow client (it never blocks the loop).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from semattnet._errors import InputError, MissingDependencyError
+from semattnet.data.frames import Frame
+from semattnet.inference.sinks import Prediction, RunSink
+
+__all__ = ["INSTALL_HINT", "LATENCY_SCHEMA", "LiveSink", "parse_address"]
+
+INSTALL_HINT = "pip install 'semattnet[live]'"
+#: Topics by role; ``PREFIX`` is :attr:`LiveSink.prefix`.
+TOPICS = {
+    "depth": "PREFIX/depth",
+    "points": "PREFIX/points",
+    "calibration": "PREFIX/calibration",
+    "latency": "PREFIX/latency",
+    "tf": "/tf",
+    "rgb": "/input/image",
+    "sparse": "/input/sparse",
+}
+#: The JSON schema of the latency channel.
+LATENCY_SCHEMA = {
+    "title": "semattnet.Latency",
+    "type": "object",
+    "properties": {
+        "frame": {"type": "string"},
+        "stamp_ns": {"type": "integer"},
+        "stages_ms": {"type": "object", "additionalProperties": {"type": "number"}},
+    },
+}
+#: Messages kept per client before the oldest is dropped (a few frames of every channel).
+BACKLOG = 64
+
+
+def _foxglove() -> Any:
+    """``foxglove``, or a one-line :class:`MissingDependencyError` with the install hint."""
+    try:
+        import foxglove
+        import foxglove.channels
+    except ImportError:
+        raise MissingDependencyError(f"--live needs the optional package 'foxglove-sdk': {INSTALL_HINT}",
+                                     name="foxglove") from None  # fmt: skip
+    return foxglove
+
+
+def _messages() -> Any:
+    """The message classes: ``foxglove.messages`` (``foxglove.schemas`` in older releases)."""
+    import importlib
+
+    try:
+        return importlib.import_module("foxglove.messages")
+    except ImportError:
+        return importlib.import_module("foxglove.schemas")
+
+
+def _accepts(fn: Callable[..., Any], name: str) -> bool:
+    """Whether ``fn`` takes a keyword ``name`` (options the older foxglove-sdk releases lack)."""
+    import inspect
+
+    try:
+        return name in inspect.signature(fn).parameters
+    except (TypeError, ValueError):
+        return False
+
+
+def parse_address(address: str) -> tuple[str, int]:
+    """``"[HOST:]PORT"`` -> (host, port); host defaults to 127.0.0.1, ``[::1]:PORT`` for IPv6; port 0 = any free."""
+    text = str(address).strip()
+    host, sep, port = text.rpartition(":")
+    host = host.strip("[]") if sep else "127.0.0.1"
+    if not port.isdigit() or int(port) > 65535 or (sep and not host):
+        raise InputError(f"live address {address!r}: expected [HOST:]PORT with PORT 0-65535 (e.g. 127.0.0.1:8765)")
+    return host, int(port)
+
+
+def _timestamp(m: Any, stamp_ns: int) -> Any:
+    return m.Timestamp(stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000)
+
+
+def _image(m: Any, stamp: Any, frame_id: str, data: np.ndarray, encoding: str) -> Any:
+    """A RawImage of a (H, W) float32 map (``32FC1``) or an (H, W, 3) uint8 image (``rgb8``)."""
+    data = np.ascontiguousarray(data)
+    h, w = data.shape[:2]
+    return m.RawImage(timestamp=stamp, frame_id=frame_id, width=w, height=h, encoding=encoding,
+                      step=data.strides[0], data=data.tobytes())  # fmt: skip
+
+
+def _depth_image(m: Any, stamp: Any, frame_id: str, depth: np.ndarray) -> Any:
+    """``32FC1`` metres, little-endian, holes (<= 0) NaN (REP 118)."""
+    d = np.asarray(depth, dtype="<f4")
+    return _image(m, stamp, frame_id, np.where(d > 0, d, np.float32(np.nan)).astype("<f4"), "32FC1")
+
+
+#: The PointCloud layout: x, y, z float32 and red, green, blue, alpha uint8 (16 bytes a point).
+_CLOUD_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"),
+                         ("red", "u1"), ("green", "u1"), ("blue", "u1"), ("alpha", "u1")])  # fmt: skip
+
+
+def _cloud(m: Any, stamp: Any, frame_id: str, cloud: Any) -> Any:
+    """A foxglove PointCloud of a :class:`semattnet.geometry.PointCloud` (grey where it has no colours)."""
+    packed = np.zeros(len(cloud.xyz), _CLOUD_DTYPE)
+    for i, axis in enumerate("xyz"):
+        packed[axis] = cloud.xyz[:, i]
+    rgb = cloud.rgb if cloud.rgb is not None else np.full((len(cloud.xyz), 3), 200, np.uint8)
+    for i, channel in enumerate(("red", "green", "blue")):
+        packed[channel] = rgb[:, i]
+    packed["alpha"] = 255
+    T = m.PackedElementFieldNumericType
+    fields = [m.PackedElementField(name=name, offset=offset, type=T.Float32 if name in "xyz" else T.Uint8)
+              for name, (_, offset, *_) in (_CLOUD_DTYPE.fields or {}).items()]  # fmt: skip
+    pose = m.Pose(position=m.Vector3(x=0.0, y=0.0, z=0.0), orientation=m.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
+    return m.PointCloud(timestamp=stamp, frame_id=frame_id, pose=pose, point_stride=_CLOUD_DTYPE.itemsize,
+                        fields=fields, data=packed.tobytes())  # fmt: skip
+
+
+def _calibration(m: Any, stamp: Any, frame_id: str, info: Any) -> Any:
+    """A CameraCalibration of a :class:`semattnet.data.bags.CameraInfoData`."""
+
+    def flat(a: Any) -> list[float]:
+        return [float(v) for v in np.asarray(a, dtype=np.float64).ravel()]
+
+    return m.CameraCalibration(timestamp=stamp, frame_id=frame_id, width=int(info.width), height=int(info.height),
+                               distortion_model=str(info.distortion_model or "plumb_bob"), D=flat(info.D),
+                               K=flat(info.K), R=flat(info.R), P=flat(info.P))  # fmt: skip
+
+
+def _transform(m: Any, stamp: Any, parent: str, child: str, T_parent_child: np.ndarray) -> Any:
+    """FrameTransforms with one transform: ``child`` in ``parent`` (p_parent = T p_child)."""
+    from semattnet.data.bags.tf import matrix_to_quaternion
+
+    T = np.asarray(T_parent_child, dtype=np.float64)
+    x, y, z, w = matrix_to_quaternion(T[:3, :3])
+    t = [float(v) for v in T[:3, 3]]
+    tf = m.FrameTransform(timestamp=stamp, parent_frame_id=parent, child_frame_id=child,
+                          translation=m.Vector3(x=t[0], y=t[1], z=t[2]),
+                          rotation=m.Quaternion(x=x, y=y, z=z, w=w))  # fmt: skip
+    return m.FrameTransforms(transforms=[tf])
+
+
+def _stamp_ns(frame: Frame, index: int) -> int:
+    """A frame's sensor time in ns, as the bag and Rerun sinks stamp it: ``meta["stamp_ns"]``, else
+    ``timestamp``, else ``index`` x 0.1 s. (A copy of ``semattnet.inference.sinks._stamp_ns``, private there.)"""
+    if "stamp_ns" in frame.meta:
+        return int(frame.meta["stamp_ns"])
+    if frame.timestamp is not None:
+        return round(frame.timestamp * 1e9)
+    return index * 100_000_000
+
+
+def _camera_info(frame: Frame) -> Any:
+    """A distortion-free CameraInfo of a frame's ``K`` and size (as the bag sink makes it)."""
+    from semattnet.data.bags import CameraInfoData
+
+    K = np.asarray(frame.K, dtype=np.float64)
+    h, w = frame.size
+    return CameraInfoData(w, h, K, np.zeros(5), np.eye(3), np.hstack([K, np.zeros((3, 1))]), "plumb_bob", "camera")
+
+
+def _camera(frame: Frame) -> tuple[str, Any]:
+    """The camera frame id (``meta["frame_id"]``, else the CameraInfo's, else ``camera``) and the CameraInfo
+    (``meta["camera_info"]``, else one made from ``K``; None without either)."""
+    info = frame.meta.get("camera_info") or (_camera_info(frame) if frame.K is not None else None)
+    frame_id = frame.meta.get("frame_id") or getattr(info, "frame_id", "") or "camera"
+    return str(frame_id), info
+
+
+@dataclass
+class LiveSink(RunSink):
+    """``--live [HOST:]PORT``: serve each completed frame over the Foxglove WebSocket protocol (module doc).
+
+    Args:
+        address: ``[HOST:]PORT`` to listen on (port 0: a free port, see :attr:`port`).
+        max_depth: completed-cloud points deeper than this are left out, metres (None: all).
+        prefix: the topics of the outputs (``PREFIX/depth``, ...).
+    """
+
+    address: str = "127.0.0.1:8765"
+    max_depth: float | None = None
+    prefix: str = "/semattnet"
+    #: Frames kept from an earlier (resumed) run are not re-sent.
+    replays: ClassVar[bool] = False
+    _server: Any = field(default=None, init=False, repr=False)
+    _channels: dict[str, Any] = field(default_factory=dict, init=False, repr=False)
+    _context: Any = field(default=None, init=False, repr=False)  # kept alive: channels die with their context
+    _count: int = field(default=0, init=False, repr=False)
+
+    @property
+    def topics(self) -> dict[str, str]:
+        """Topic by role (:data:`TOPICS` with the prefix)."""
+        return {k: v.replace("PREFIX", self.prefix.rstrip("/")) for k, v in TOPICS.items()}
+
+    @property
+    def port(self) -> int:
+        """The port the server listens on (after :meth:`open`)."""
+        if self._server is None:
+            raise InputError("LiveSink.port: the server is not running (call open() first)")
+        return int(self._server.port)
+
+    @property
+    def url(self) -> str:
+        """``ws://HOST:PORT`` to connect the Foxglove app to (after :meth:`open`)."""
+        host = parse_address(self.address)[0]
+        return f"ws://{f'[{host}]' if ':' in host else host}:{self.port}"
+
+    def open(self, overwrite: bool = False) -> None:
+        """Start the server and advertise the channels (``overwrite`` means nothing here)."""
+        fg = _foxglove()
+        host, port = parse_address(self.address)
+        self._context = context = fg.Context()
+        kwargs = {"message_backlog_size": BACKLOG} if _accepts(fg.start_server, "message_backlog_size") else {}
+        try:
+            self._server = fg.start_server(name="semattnet", host=host, port=port, context=context, **kwargs)
+        except (RuntimeError, OSError) as e:
+            reason = str(e).removeprefix("FoxgloveError: ").splitlines()[0]
+            raise InputError(f"live address {self.address!r}: cannot serve there ({reason})") from None
+        ch, topics = fg.channels, self.topics
+        self._count = 0
+        self._channels = {
+            "depth": ch.RawImageChannel(topics["depth"], context=context),
+            "points": ch.PointCloudChannel(topics["points"], context=context),
+            "calibration": ch.CameraCalibrationChannel(topics["calibration"], context=context),
+            "latency": fg.Channel(topics["latency"], schema=LATENCY_SCHEMA, context=context),
+            "tf": ch.FrameTransformsChannel(topics["tf"], context=context),
+            "rgb": ch.RawImageChannel(topics["rgb"], context=context),
+            "sparse": ch.RawImageChannel(topics["sparse"], context=context),
+        }
+
+    def subscribed(self, role: str = "depth") -> bool:
+        """Whether a client is subscribed to ``role``'s channel (:data:`TOPICS`) now."""
+        channel = self._channels.get(role)
+        return channel is not None and bool(channel.has_sinks())
+
+    def _log(self, role: str, stamp_ns: int, build: Callable[[], Any]) -> None:
+        """Build and log a message on ``role``'s channel, only when a client subscribes to it."""
+        channel = self._channels[role]
+        if channel.has_sinks():
+            channel.log(build(), log_time=stamp_ns)
+
+    def write(self, stage: Path, pred: Prediction) -> None:
+        """Log one frame (module doc)."""
+        if self._server is None:
+            raise InputError("LiveSink.write: the server is not running (call open() first)")
+        frame, m = pred.frame, _messages()
+        stamp_ns = _stamp_ns(frame, self._count)
+        self._count += 1
+        stamp = _timestamp(m, stamp_ns)
+        frame_id, info = _camera(frame)
+        self._log("depth", stamp_ns, lambda: _depth_image(m, stamp, frame_id, pred.stored))
+        self._log("rgb", stamp_ns, lambda: _image(m, stamp, frame_id, np.asarray(frame.rgb, np.uint8), "rgb8"))
+        self._log("sparse", stamp_ns, lambda: _depth_image(m, stamp, frame_id, frame.sparse))
+        if frame.K is not None:
+            max_depth = math.inf if self.max_depth is None else float(self.max_depth)
+            self._log("points", stamp_ns, lambda: _cloud(m, stamp, frame_id, pred.cloud(max_depth, 0)))
+        if info is not None:
+            self._log("calibration", stamp_ns, lambda: _calibration(m, stamp, frame_id, info))
+        T = getattr(frame.calib, "T_cam_lidar", None)
+        if T is not None:
+            lidar = str(frame.meta.get("lidar_frame_id") or "lidar")
+            self._log("tf", stamp_ns, lambda: _transform(m, stamp, frame_id, lidar, T))
+        stages = {str(k): float(v) for k, v in (getattr(pred, "stage_ms", None) or {}).items()}
+        self._log("latency", stamp_ns, lambda: {"frame": frame.name, "stamp_ns": stamp_ns, "stages_ms": stages})
+
+    def _stop(self) -> None:
+        server, self._server = self._server, None
+        channels, self._channels, self._context = self._channels, {}, None
+        for channel in channels.values():
+            channel.close()
+        if server is not None:
+            server.stop()
+
+    def finish(self, stage: Path) -> None:
+        """Close the server."""
+        self._stop()
+
+    def abort(self) -> None:
+        """Close the server; never raises."""
+        try:
+            self._stop()
+        except Exception:  # the run is failing already; a server that will not stop must not hide why
+            pass

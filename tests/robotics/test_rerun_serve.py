@@ -1,0 +1,71 @@
+"""RerunLogger(serve=True): the gRPC stream and the bundled web viewer on local ports, with or without a file."""
+
+from __future__ import annotations
+
+import socket
+import time
+import urllib.request
+from pathlib import Path
+from urllib.parse import parse_qs, urlparse
+
+import numpy as np
+import pytest
+
+from semattnet._errors import InputError
+
+pytest.importorskip("rerun")
+
+K = np.array([[30.0, 0, 11.5], [0, 30.0, 7.5], [0, 0, 1]])
+STAMPS = [1_317_000_000_123_456_789, 1_317_000_000_223_456_789]
+
+
+def _refused(port: int) -> bool:
+    with socket.socket() as s:
+        return s.connect_ex(("127.0.0.1", port)) != 0
+
+
+def _log_frames(log: object) -> None:
+    for t in STAMPS:
+        log.log_frame(t, np.zeros((16, 24, 3), np.uint8), K, np.eye(4),  # type: ignore[attr-defined]
+                      depth=np.full((16, 24), 5.0, np.float32))  # fmt: skip
+
+
+def test_serve_web_viewer_and_grpc(tmp_path: Path) -> None:
+    """The viewer page answers 200 HTML (served from the wheel) with the stream's URL; the file is still written;
+    the gRPC port closes with the logger."""
+    from semattnet.data.bags import RerunLogger
+    from semattnet.data.bags.rerun_log import ENTITIES, read_rrd_frames
+
+    log = RerunLogger(tmp_path / "run.rrd", serve=True, grpc_port=0, web_port=0)
+    assert log.url is not None and log.grpc_url is not None
+    grpc = urlparse(log.grpc_url)
+    assert (grpc.scheme, grpc.hostname, grpc.path) == ("rerun+http", "127.0.0.1", "/proxy")
+    web = urlparse(log.url)
+    assert parse_qs(web.query)["url"] == [log.grpc_url]
+    _log_frames(log)
+    assert not _refused(int(grpc.port or 0))
+    with urllib.request.urlopen(log.url, timeout=10) as r:
+        assert r.status == 200 and r.headers["content-type"].startswith("text/html")
+        assert b"<html" in r.read().lower()
+    log.close()
+    assert read_rrd_frames(tmp_path / "run.rrd")[ENTITIES["depth"]] == STAMPS
+    deadline = time.monotonic() + 5
+    while not _refused(int(grpc.port or 0)):
+        assert time.monotonic() < deadline, "the gRPC server still listens after close()"
+        time.sleep(0.02)
+
+
+def test_serve_port_in_use_is_one_line() -> None:
+    """A gRPC or web port in use: one-line InputError naming it (rerun itself would only log it)."""
+    from semattnet.data.bags import RerunLogger
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        for kw in ({"grpc_port": port, "web_port": 0}, {"grpc_port": 0, "web_port": port}):
+            with pytest.raises(InputError, match=f"cannot serve .* on .*:{port} ") as e:
+                RerunLogger(serve=True, **kw)  # type: ignore[arg-type]
+            assert "\n" not in str(e.value)
+    with pytest.raises(InputError, match="serve=True"):
+        RerunLogger()
