@@ -70,7 +70,7 @@ from semattnet.inference.sinks import (
     output_files,
     predict_frame,
 )
-from semattnet.inference.stream import FrameFault, StageTimes, _read_frame, completions, is_frame_fault
+from semattnet.inference.stream import FrameFault, StageTimes, read_frame, completions, is_frame_fault
 
 __all__ = [
     "EXIT_DROPPED",
@@ -292,7 +292,7 @@ class _FrameLoop:
             self.timer.add(name, stage, ms / 1e3)
         if not self.replays or self.depth_sink is None:
             return
-        frame = _read_frame(self.source, name, self.semantic, StageTimes())
+        frame = read_frame(self.source, name, self.semantic, StageTimes())
         stored = read_depth(self.out / str(self.depth_sink.path(name)))
         pred = Prediction(frame, Completion(stored), stored, encode_depth(stored), stored)
         for sink in self.replays:

@@ -45,6 +45,7 @@ __all__ = [
     "completions",
     "cpu_name",
     "is_frame_fault",
+    "read_frame",
 ]
 
 #: The stages timed, in order.
@@ -205,7 +206,7 @@ def _reason(exc: BaseException) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 
 
-def _read_frame(source: FrameSource, name: str, semantic: Any, timer: StageTimes) -> Frame:
+def read_frame(source: FrameSource, name: str, semantic: Any, timer: StageTimes) -> Frame:
     """One frame read (and projected, when the source splits it) and given its semantic map, timed."""
     if hasattr(source, "read") and hasattr(source, "assemble"):
         with timer.time(name, "read"):
@@ -241,9 +242,9 @@ class _Crash:
 
 
 def _attempt(source: FrameSource, name: str, semantic: Any, timer: StageTimes) -> Frame | _Failed:
-    """:func:`_read_frame`, a frame's own fault returned instead of raised."""
+    """:func:`read_frame`, a frame's own fault returned instead of raised."""
     try:
-        return _read_frame(source, name, semantic, timer)
+        return read_frame(source, name, semantic, timer)
     except Exception as exc:
         if not is_frame_fault(exc):
             raise
