@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from semattnet.data.bags import RerunLogger
+from semattnet.robotics.rerun import RerunLogger
 
 ARGS = ["--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
         "--ignore-gpu-blocklist", "--disable-background-networking", "--no-first-run"]  # fmt: skip

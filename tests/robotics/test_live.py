@@ -18,12 +18,12 @@ import numpy as np
 import pytest
 
 from semattnet._errors import InputError, MissingDependencyError
-from semattnet.data.bags import CameraInfoData
 from semattnet.data.frames import Frame
 from semattnet.data.io import read_depth
 from semattnet.geometry import RigCalibration, make_T
 from semattnet.inference.completer import Completion
 from semattnet.inference.sinks import DepthPngSink, Prediction, predict_frame
+from semattnet.robotics.bags import CameraInfoData
 from semattnet.robotics.live import LiveSink
 
 pytest.importorskip("foxglove")
@@ -180,7 +180,7 @@ def _check_cloud(msg: Any, pred: Prediction) -> None:
 
 def _check_calibration(calib: Any, tf: Any) -> None:
     """The CameraInfo's K, P, D and size; the camera <- LiDAR transform."""
-    from semattnet.data.bags.tf import quaternion_to_matrix
+    from semattnet.robotics.bags.tf import quaternion_to_matrix
 
     assert (calib.width, calib.height, calib.distortion_model) == (W, H, "plumb_bob")
     np.testing.assert_allclose(np.reshape(calib.K, (3, 3)), K)

@@ -33,8 +33,7 @@ def _log_frames(log: object) -> None:
 def test_serve_web_viewer_and_grpc(tmp_path: Path) -> None:
     """The viewer page answers 200 HTML (served from the wheel) with the stream's URL; the file is still written;
     the gRPC port closes with the logger."""
-    from semattnet.data.bags import RerunLogger
-    from semattnet.data.bags.rerun_log import ENTITIES, read_rrd_frames
+    from semattnet.robotics.rerun import ENTITIES, RerunLogger, read_rrd_frames
 
     log = RerunLogger(tmp_path / "run.rrd", serve=True, grpc_port=0, web_port=0)
     assert log.url is not None and log.grpc_url is not None
@@ -57,7 +56,7 @@ def test_serve_web_viewer_and_grpc(tmp_path: Path) -> None:
 
 def test_serve_port_in_use_is_one_line() -> None:
     """A gRPC or web port in use: one-line InputError naming it (rerun itself would only log it)."""
-    from semattnet.data.bags import RerunLogger
+    from semattnet.robotics.rerun import RerunLogger
 
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))

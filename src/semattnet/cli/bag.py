@@ -27,7 +27,7 @@ from semattnet.cli.data import data
 def bag_from_kitti(drive_dir: Path, out: Path, fmt: str | None, camera: str, frames: str | None,
                    compressed: str | None, nan_points: int, overwrite: bool) -> None:  # fmt: skip
     """Write a ROS bag of a KITTI raw drive: images, Velodyne scans, CameraInfo and /tf_static."""
-    from semattnet.data.bags import write_kitti_bag
+    from semattnet.robotics.bags import write_kitti_bag
 
     written = write_kitti_bag(drive_dir, out, camera=camera, frames=frames, fmt=fmt, compressed=compressed,
                               nan_points=nan_points, overwrite=overwrite)  # fmt: skip
@@ -40,6 +40,6 @@ def bag_from_kitti(drive_dir: Path, out: Path, fmt: str | None, camera: str, fra
 @click.argument("bag", type=click.Path(exists=True, path_type=Path))
 def bag_topics(bag: Path) -> None:
     """List a bag's topics: name, message type, count and rate."""
-    from semattnet.data.bags import format_topics, list_topics
+    from semattnet.robotics.bags import format_topics, list_topics
 
     click.echo(format_topics(list_topics(bag)))

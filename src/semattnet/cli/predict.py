@@ -120,7 +120,8 @@ def _check_inputs(rgb: Path | None, sparse: Path | None, kitti_raw: Path | None,
 
 def _source(rgb, sparse, kitti_raw, frames, camera, semantic, deskew, K, bag, data):
     """The frame source the options name; ``data``: (dataset name, root or None, split)."""
-    from semattnet.data.sources import BagSource, FolderSource, RawDriveSource
+    from semattnet.data.sources import FolderSource, RawDriveSource
+    from semattnet.robotics import BagSource
 
     dataset, data_root, split = data
     if data_root is not None:
@@ -137,7 +138,8 @@ def _source(rgb, sparse, kitti_raw, frames, camera, semantic, deskew, K, bag, da
 
 def _robot_sinks(bag: dict[str, Any], max_depth: float, timer: Any) -> list[Any]:
     """``latency.json`` and, as asked, the bag, the Rerun recording or viewer and the live server."""
-    from semattnet.inference.sinks import BagSink, LatencySink, RerunSink
+    from semattnet.inference.sinks import LatencySink
+    from semattnet.robotics.sinks import BagSink, RerunSink
 
     sinks: list[Any] = [LatencySink(timer=timer)]
     if bag["bag_out"] is not None:
@@ -257,7 +259,7 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
     data = (bag.pop("dataset"), bag.pop("data_root"), bag.pop("split"))
     _check_inputs(rgb, sparse, kitti_raw, data[1], bag)
     if bag["list_topics"]:
-        from semattnet.data.bags import format_topics, list_topics
+        from semattnet.robotics.bags import format_topics, list_topics
 
         click.echo(format_topics(list_topics(bag["bag"])))
         return

@@ -70,7 +70,7 @@ from semattnet.inference.sinks import (
     output_files,
     predict_frame,
 )
-from semattnet.inference.stream import FrameFault, StageTimes, read_frame, completions, is_frame_fault
+from semattnet.inference.stream import FrameFault, StageTimes, completions, is_frame_fault, read_frame
 
 __all__ = [
     "EXIT_DROPPED",
@@ -184,8 +184,8 @@ def check_frames(source: FrameSource, sinks: Sequence[Sink], out: PathLike, *, o
             on_main(_refuse_earlier_run, out)
         todo = [n for n in shard(source.names) if n not in journal.kept]
         faults = agree(_check_inputs, source, todo, policy)
-        rows = [{"name": n, "status": "skipped", "reason": faults.get(n)} if n in faults else {"name": n,
-                "status": "done"} for n in shard(source.names)]  # fmt: skip
+        rows: list[Mapping[str, Any]] = [{"name": n, "status": "skipped", "reason": faults[n]} if n in faults
+                                         else {"name": n, "status": "done"} for n in shard(source.names)]  # fmt: skip
         nothing = _nothing_done(gather_rows(rows, key=lambda e: source.names.index(e["name"])))
         if nothing is not None:
             raise nothing  # every input is bad: one line, before the model is loaded
@@ -416,27 +416,32 @@ def complete_frames(
     with process_group():
         if isinstance(checked, RunPlan):
             plan = checked
-        elif checked:
-            journal = RunJournal(out, source.names, run, False, rank(), world_size())
-            plan = RunPlan(journal, {}, _policy(on_error, len(source.names)))
+        elif checked:  # checked by the caller, nothing to skip or keep
+            plan = RunPlan(RunJournal(out, source.names, run, False, rank(), world_size()), {},
+                           _policy(on_error, len(source.names)))  # fmt: skip
         else:
             plan = check_frames(source, sinks, out, overwrite=overwrite, inputs=inputs, on_error=on_error,
                                 resume=resume, run=run)  # fmt: skip
         maps = agree((semantic or SemanticMaps()).bind, completer)
         maps.check_palette(completer, source)
         loop = _FrameLoop(source, sinks, out, plan, timer, rank_log(log), maps)
-        error = None
-        try:
-            _run_frames(loop, completer, maps, prefetch, realtime, overwrite or plan.resume)
-        except BaseException as exc:
-            loop.forget()
-            if not isinstance(exc, Exception):
-                raise  # Ctrl-C: the frames done are journaled, resumable
-            error = exc
-        first = first_error(error)
+        first = first_error(_attempt_run(loop, completer, maps, prefetch, realtime, overwrite or plan.resume))
         if first is not None:
             raise first
         return _close(loop)
+
+
+def _attempt_run(loop: _FrameLoop, *args: Any) -> Exception | None:
+    """:func:`_run_frames`, its error returned (for every rank to agree on); on any error the frames done
+    stay journaled. Ctrl-C is raised at once."""
+    try:
+        _run_frames(loop, *args)
+    except BaseException as exc:
+        loop.forget()
+        if not isinstance(exc, Exception):
+            raise
+        return exc
+    return None
 
 
 def _nothing_done(entries: Sequence[Mapping[str, Any]]) -> DataError | None:

@@ -13,14 +13,13 @@ fusion confidence) and ``NAME_panel.png`` (per-branch panel, with a bird's-eye v
 LiDAR points are known). A sink may write into a sub-folder, rename frames, or write only some frames
 (``semattnet evaluate`` writes ``predictions/`` and the ``pictures/`` of the first frames this way).
 
-A :class:`RunSink` writes one output for the whole run instead (a bag, a Rerun recording, ``latency.json``):
-it is opened before the first frame, finished after the last one and put in place together with the
-per-frame files (:class:`BagSink`, :class:`RerunSink`, :class:`LatencySink`).
+A :class:`RunSink` writes one output for the whole run instead (``latency.json`` here; a bag, a Rerun
+recording and the live server in :mod:`semattnet.robotics.sinks`): it is opened before the first frame,
+fed each completed frame and finished after the last one (:class:`LatencySink`).
 """
 
 from __future__ import annotations
 
-import os
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,7 +33,6 @@ from semattnet.data.io import clamp_for_png, decode_depth, encode_depth, write_d
 from semattnet.inference.completer import Completion
 
 __all__ = [
-    "BagSink",
     "ColorPngSink",
     "DepthPngSink",
     "LatencySink",
@@ -42,7 +40,6 @@ __all__ = [
     "PanelSink",
     "PlySink",
     "Prediction",
-    "RerunSink",
     "RunSink",
     "Sink",
     "default_sinks",
@@ -253,176 +250,6 @@ class LatencySink(RunSink):
 
         if self.timer is not None:
             write_text(stage / self.name, self.timer.to_json(), overwrite=True)
-
-
-def _stamp_ns(frame: Frame, index: int) -> int:
-    """A frame's sensor time in ns: its ``meta["stamp_ns"]``, else its ``timestamp``, else ``index`` x 0.1 s."""
-    if "stamp_ns" in frame.meta:
-        return int(frame.meta["stamp_ns"])
-    if frame.timestamp is not None:
-        return round(frame.timestamp * 1e9)
-    return index * 100_000_000
-
-
-def _clean_stale_targets(target: Path) -> None:
-    """Remove the hidden folders that killed runs left beside ``target`` (their process is gone)."""
-    import shutil
-
-    from semattnet._utils.atomic import pid_alive
-
-    prefix = f".{target.name}.semattnet-stage."
-    for entry in target.parent.glob(f"{prefix}*"):
-        pid = entry.name[len(prefix) :].split(".")[0]
-        if entry.is_dir() and pid.isdigit() and not pid_alive(int(pid)):
-            shutil.rmtree(entry, ignore_errors=True)
-
-
-class _StagedTarget(RunSink):
-    """A run output at ``target``, written into a hidden folder beside it and moved into place at commit."""
-
-    target: Path | None
-
-    def targets(self) -> list[Path]:
-        return [] if self.target is None else [Path(self.target)]
-
-    def _begin(self, overwrite: bool) -> Path:
-        import tempfile
-
-        from semattnet._utils.distributed import world_size
-
-        if self.target is None:
-            raise InputError("a staged run output needs a target path")
-        if world_size() > 1:
-            raise InputError(f"{self.target}: a bag or Rerun recording is written by one process (not under torchrun)")
-        target = Path(self.target)
-        target.parent.mkdir(parents=True, exist_ok=True)
-        _clean_stale_targets(target)
-        self._overwrite, self._count = overwrite, 0
-        self._dir = Path(tempfile.mkdtemp(prefix=f".{target.name}.semattnet-stage.{os.getpid()}.", dir=target.parent))
-        return self._dir / target.name
-
-    def commit(self) -> None:
-        from semattnet._utils.atomic import fsync_dir
-        from semattnet._utils.outputs import refuse_existing
-
-        assert self.target is not None  # _begin refused a missing target
-        target = Path(self.target)
-        try:
-            refuse_existing([target], self._overwrite)
-            if target.is_dir() and not target.is_symlink():
-                os.replace(target, self._dir / ".replaced")
-            os.replace(self._dir / target.name, target)
-            fsync_dir(target.parent)
-        finally:
-            self.abort()
-
-    def abort(self) -> None:
-        import shutil
-
-        if getattr(self, "_dir", None) is not None:
-            shutil.rmtree(self._dir, ignore_errors=True)
-            self._dir = None  # type: ignore[assignment]
-
-
-@dataclass
-class BagSink(_StagedTarget):
-    """``--bag-out``: a ROS 2 bag (MCAP where rosbags writes it; ROS 1 for ``.bag``) by
-    :class:`semattnet.data.bags.BagWriter`: per frame the stored depth (the PNG's metres) as ``32FC1``
-    with holes NaN, the coloured cloud and the frame's CameraInfo (``meta["camera_info"]``, else one made
-    from ``K``), stamped with the input's header stamp and frame id (``meta``; else ``timestamp`` and
-    ``camera``)."""
-
-    target: Path | None = Path("prediction_bag")
-    fmt: str | None = None
-    prefix: str = "/semattnet"
-    max_depth: float | None = None
-    _writer: Any = field(default=None, init=False, repr=False)  # the open BagWriter, between open and finish
-
-    def open(self, overwrite: bool = False) -> None:
-        from semattnet.data.bags import BagWriter
-
-        self._writer = BagWriter(self._begin(overwrite), fmt=self.fmt, prefix=self.prefix,
-                                 max_depth=self.max_depth).open()  # fmt: skip
-
-    def write(self, stage: Path, pred: Prediction) -> None:
-        frame = pred.frame
-        if frame.K is None:
-            raise InputError(f"{frame.name}: the bag output needs the frame's intrinsics K, none given")
-        info = frame.meta.get("camera_info") or _camera_info(frame)
-        frame_id = frame.meta.get("frame_id") or info.frame_id or "camera"
-        depth = np.where(pred.stored > 0, pred.stored, np.nan).astype(np.float32)  # REP 118: holes NaN
-        self._writer.write(_stamp_ns(frame, self._count), frame_id, depth, info, rgb=frame.rgb, K=frame.K)
-        self._count += 1
-
-    def finish(self, stage: Path) -> None:
-        writer, self._writer = self._writer, None
-        if writer is not None:
-            writer.close()  # the bag is complete in the hidden folder
-
-    def abort(self) -> None:
-        writer, self._writer = getattr(self, "_writer", None), None
-        if writer is not None:  # still open: BagWriter removes its stage
-            writer.__exit__(RuntimeError, RuntimeError("aborted"), None)
-        super().abort()
-
-
-def _camera_info(frame: Frame) -> Any:
-    """A distortion-free CameraInfo of a frame's ``K`` and size."""
-    from semattnet.data.bags import CameraInfoData
-
-    K = np.asarray(frame.K, dtype=np.float64)
-    h, w = frame.size
-    return CameraInfoData(w, h, K, np.zeros(5), np.eye(3), np.hstack([K, np.zeros((3, 1))]), "plumb_bob", "camera")
-
-
-@dataclass
-class RerunSink(_StagedTarget):
-    """``--rerun FILE.rrd`` / ``--rerun-spawn``: per frame the camera, image, sparse input, stored depth, semantic
-    map, LiDAR points and completed cloud (:class:`semattnet.data.bags.RerunLogger`) at the frame's sensor time."""
-
-    target: Path | None = None
-    spawn: bool = False
-    max_depth: float | None = None
-    serve: bool = False  # serve the frames to a web viewer (the URL goes to ``log``)
-    log: Any = None
-    _log: Any = field(default=None, init=False, repr=False)  # the open RerunLogger, between open and finish
-
-    def targets(self) -> list[Path]:
-        return [] if self.target is None else [Path(self.target)]
-
-    def open(self, overwrite: bool = False) -> None:
-        from semattnet.data.bags import RerunLogger
-
-        path = self._begin(overwrite) if self.target is not None else None
-        self._count = 0
-        extra = {"serve": True} if self.serve else {}
-        self._log = RerunLogger(path, spawn=self.spawn, max_depth=self.max_depth, **extra)
-        url = getattr(self._log, "url", None)
-        if self.serve and url and self.log is not None:
-            self.log(f"Rerun web viewer: {url}")
-
-    def write(self, stage: Path, pred: Prediction) -> None:
-        frame = pred.frame
-        if frame.K is None:
-            raise InputError(f"{frame.name}: the Rerun recording needs the frame's intrinsics K, none given")
-        T = getattr(frame.calib, "T_cam_lidar", None)
-        self._log.log_frame(_stamp_ns(frame, self._count), frame.rgb, frame.K, np.eye(4) if T is None else T,
-                            sparse=frame.sparse, depth=pred.stored, semantic=frame.semantic,
-                            points=frame.points)  # fmt: skip
-        self._count += 1
-
-    def finish(self, stage: Path) -> None:
-        self._log.close()
-
-    def commit(self) -> None:
-        if self.target is not None:
-            super().commit()
-
-    def abort(self) -> None:
-        log, self._log = getattr(self, "_log", None), None
-        if log is not None:
-            log.__exit__(RuntimeError, RuntimeError("aborted"), None)
-        super().abort()
 
 
 def default_sinks(npy: bool = False, panel: bool = False, ply: bool = False, max_depth: float = 80.0,

@@ -1,27 +1,36 @@
-"""The project's robot I/O: ROS bags, Rerun and the live server.
+"""The project's robot I/O, in one room: ROS bags in and out, Rerun, and the live server.
 
+- :class:`BagSource` (:mod:`.source`): a ROS 1 / ROS 2 (sqlite3, MCAP) bag as frames, images paired with
+  scans by stamp, each scan projected as :class:`~semattnet.data.sources.RawDriveSource` does; a bad message
+  fails its frame only.
+- :mod:`.bags`: reading (pairing, decoding, ``/tf_static``) and writing bags (``rosbags``, extra ``ros``).
+- :mod:`.sinks`: :class:`BagSink` (``--bag-out``) and :class:`RerunSink` (``--rerun``, ``--rerun-spawn``,
+  ``--rerun-serve``; :class:`~.rerun.RerunLogger`, extra ``rerun``).
 - :class:`LiveSink` (:mod:`.live`): each completed frame served over the Foxglove WebSocket protocol
   (``semattnet predict --live``; ``foxglove-sdk``, extra ``live``).
-- ROS bags and Rerun recordings: :mod:`semattnet.data.bags`.
 
-Importing this package imports no optional dependency (and not torch): :class:`LiveSink` is loaded on
-first use.
+Importing this package imports no optional dependency (and not torch): each class is loaded on first use.
 """
 
 from __future__ import annotations
 
+import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from .live import LiveSink
+    from .rerun import RerunLogger
+    from .sinks import BagSink, RerunSink
+    from .source import BagSource
 
-__all__ = ["LiveSink"]
+__all__ = ["BagSink", "BagSource", "LiveSink", "RerunLogger", "RerunSink"]
+
+_HOMES = {"BagSink": ".sinks", "BagSource": ".source", "LiveSink": ".live", "RerunLogger": ".rerun",
+          "RerunSink": ".sinks"}  # fmt: skip
 
 
 def __getattr__(name: str) -> Any:
-    """Load :class:`LiveSink` on first access (it imports the inference sinks)."""
-    if name == "LiveSink":
-        from .live import LiveSink
-
-        return LiveSink
+    """Load a class on first access."""
+    if name in _HOMES:
+        return getattr(importlib.import_module(_HOMES[name], __name__), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -35,6 +35,7 @@ import numpy as np
 from semattnet._errors import InputError, MissingDependencyError
 from semattnet.data.frames import Frame
 from semattnet.inference.sinks import Prediction, RunSink
+from semattnet.robotics.sinks import camera_info, stamp_ns
 
 __all__ = ["INSTALL_HINT", "LATENCY_SCHEMA", "LiveSink", "parse_address"]
 
@@ -145,7 +146,7 @@ def _cloud(m: Any, stamp: Any, frame_id: str, cloud: Any) -> Any:
 
 
 def _calibration(m: Any, stamp: Any, frame_id: str, info: Any) -> Any:
-    """A CameraCalibration of a :class:`semattnet.data.bags.CameraInfoData`."""
+    """A CameraCalibration of a :class:`semattnet.robotics.bags.CameraInfoData`."""
 
     def flat(a: Any) -> list[float]:
         return [float(v) for v in np.asarray(a, dtype=np.float64).ravel()]
@@ -157,7 +158,7 @@ def _calibration(m: Any, stamp: Any, frame_id: str, info: Any) -> Any:
 
 def _transform(m: Any, stamp: Any, parent: str, child: str, T_parent_child: np.ndarray) -> Any:
     """FrameTransforms with one transform: ``child`` in ``parent`` (p_parent = T p_child)."""
-    from semattnet.data.bags.tf import matrix_to_quaternion
+    from semattnet.robotics.bags.tf import matrix_to_quaternion
 
     T = np.asarray(T_parent_child, dtype=np.float64)
     x, y, z, w = matrix_to_quaternion(T[:3, :3])
@@ -168,29 +169,10 @@ def _transform(m: Any, stamp: Any, parent: str, child: str, T_parent_child: np.n
     return m.FrameTransforms(transforms=[tf])
 
 
-def _stamp_ns(frame: Frame, index: int) -> int:
-    """A frame's sensor time in ns, as the bag and Rerun sinks stamp it: ``meta["stamp_ns"]``, else
-    ``timestamp``, else ``index`` x 0.1 s. (A copy of ``semattnet.inference.sinks._stamp_ns``, private there.)"""
-    if "stamp_ns" in frame.meta:
-        return int(frame.meta["stamp_ns"])
-    if frame.timestamp is not None:
-        return round(frame.timestamp * 1e9)
-    return index * 100_000_000
-
-
-def _camera_info(frame: Frame) -> Any:
-    """A distortion-free CameraInfo of a frame's ``K`` and size (as the bag sink makes it)."""
-    from semattnet.data.bags import CameraInfoData
-
-    K = np.asarray(frame.K, dtype=np.float64)
-    h, w = frame.size
-    return CameraInfoData(w, h, K, np.zeros(5), np.eye(3), np.hstack([K, np.zeros((3, 1))]), "plumb_bob", "camera")
-
-
 def _camera(frame: Frame) -> tuple[str, Any]:
     """The camera frame id (``meta["frame_id"]``, else the CameraInfo's, else ``camera``) and the CameraInfo
     (``meta["camera_info"]``, else one made from ``K``; None without either)."""
-    info = frame.meta.get("camera_info") or (_camera_info(frame) if frame.K is not None else None)
+    info = frame.meta.get("camera_info") or (camera_info(frame) if frame.K is not None else None)
     frame_id = frame.meta.get("frame_id") or getattr(info, "frame_id", "") or "camera"
     return str(frame_id), info
 
@@ -208,6 +190,7 @@ class LiveSink(RunSink):
     address: str = "127.0.0.1:8765"
     max_depth: float | None = None
     prefix: str = "/semattnet"
+    log: Any = None  # where the address to connect to is said once the server runs (e.g. ``print``)
     #: Frames kept from an earlier (resumed) run are not re-sent.
     replays: ClassVar[bool] = False
     _server: Any = field(default=None, init=False, repr=False)
@@ -255,6 +238,8 @@ class LiveSink(RunSink):
             "rgb": ch.RawImageChannel(topics["rgb"], context=context),
             "sparse": ch.RawImageChannel(topics["sparse"], context=context),
         }
+        if self.log is not None:
+            self.log(f"live view: {self.url} (Foxglove: Open connection, Foxglove WebSocket, this URL)")
 
     def subscribed(self, role: str = "depth") -> bool:
         """Whether a client is subscribed to ``role``'s channel (:data:`TOPICS`) now."""
@@ -272,24 +257,24 @@ class LiveSink(RunSink):
         if self._server is None:
             raise InputError("LiveSink.write: the server is not running (call open() first)")
         frame, m = pred.frame, _messages()
-        stamp_ns = _stamp_ns(frame, self._count)
+        t_ns = stamp_ns(frame, self._count)
         self._count += 1
-        stamp = _timestamp(m, stamp_ns)
+        stamp = _timestamp(m, t_ns)
         frame_id, info = _camera(frame)
-        self._log("depth", stamp_ns, lambda: _depth_image(m, stamp, frame_id, pred.stored))
-        self._log("rgb", stamp_ns, lambda: _image(m, stamp, frame_id, np.asarray(frame.rgb, np.uint8), "rgb8"))
-        self._log("sparse", stamp_ns, lambda: _depth_image(m, stamp, frame_id, frame.sparse))
+        self._log("depth", t_ns, lambda: _depth_image(m, stamp, frame_id, pred.stored))
+        self._log("rgb", t_ns, lambda: _image(m, stamp, frame_id, np.asarray(frame.rgb, np.uint8), "rgb8"))
+        self._log("sparse", t_ns, lambda: _depth_image(m, stamp, frame_id, frame.sparse))
         if frame.K is not None:
             max_depth = math.inf if self.max_depth is None else float(self.max_depth)
-            self._log("points", stamp_ns, lambda: _cloud(m, stamp, frame_id, pred.cloud(max_depth, 0)))
+            self._log("points", t_ns, lambda: _cloud(m, stamp, frame_id, pred.cloud(max_depth, 0)))
         if info is not None:
-            self._log("calibration", stamp_ns, lambda: _calibration(m, stamp, frame_id, info))
+            self._log("calibration", t_ns, lambda: _calibration(m, stamp, frame_id, info))
         T = getattr(frame.calib, "T_cam_lidar", None)
         if T is not None:
             lidar = str(frame.meta.get("lidar_frame_id") or "lidar")
-            self._log("tf", stamp_ns, lambda: _transform(m, stamp, frame_id, lidar, T))
+            self._log("tf", t_ns, lambda: _transform(m, stamp, frame_id, lidar, T))
         stages = {str(k): float(v) for k, v in (getattr(pred, "stage_ms", None) or {}).items()}
-        self._log("latency", stamp_ns, lambda: {"frame": frame.name, "stamp_ns": stamp_ns, "stages_ms": stages})
+        self._log("latency", t_ns, lambda: {"frame": frame.name, "stamp_ns": t_ns, "stages_ms": stages})
 
     def _stop(self) -> None:
         server, self._server = self._server, None

@@ -5,16 +5,14 @@
 * :class:`KittiSplitSource`: a KITTI depth-completion split (:mod:`semattnet.data.kitti`), with ground truth.
 * :class:`RawDriveSource`: a KITTI raw drive, each scan projected into the camera with
   :func:`semattnet.geometry.project_points`.
-* :class:`BagSource`: a ROS 1 / ROS 2 (sqlite3, MCAP) bag, images paired with scans by stamp, each scan
-  projected as :class:`RawDriveSource` does (needs the ``ros`` extra, imported on use).
+* A ROS bag: :class:`semattnet.robotics.BagSource` (the robot I/O lives in :mod:`semattnet.robotics`).
 * :class:`SemanticMaps`: the one choice of a frame's semantic map when its source has none (a segmenter,
   or the fallback map).
 """
 
-from semattnet.data.sources.bag import BagSource
 from semattnet.data.sources.folder import FolderSource
 from semattnet.data.sources.kitti_raw import RawDriveSource
 from semattnet.data.sources.kitti_split import KittiSplitSource
 from semattnet.data.sources.semantic import SemanticMaps
 
-__all__ = ["BagSource", "FolderSource", "KittiSplitSource", "RawDriveSource", "SemanticMaps"]
+__all__ = ["FolderSource", "KittiSplitSource", "RawDriveSource", "SemanticMaps"]

@@ -33,8 +33,7 @@ from semattnet._errors import InputError
 from semattnet._utils.atomic import new_file_mode
 from semattnet.data.palette import IGNORE_ID, TRAIN_CLASSES, UNKNOWN_COLOR, colors_to_ids
 from semattnet.geometry import depth_to_points, invert_T
-
-from .deps import import_extra
+from semattnet.robotics.bags.deps import import_extra
 
 __all__ = ["ENTITIES", "TIMELINE", "RerunLogger", "read_rrd_frames"]
 

@@ -10,9 +10,9 @@ import pytest
 from click.testing import CliRunner
 
 from semattnet.cli import main
-from semattnet.data.bags import BagTopics, SensorRecord, open_bag, write_sensor_bag
 from semattnet.data.kitti_raw import RawDrive
 from semattnet.geometry import read_kitti_calibration
+from semattnet.robotics.bags import BagTopics, SensorRecord, open_bag, write_sensor_bag
 from tests.inference._raw_sample import DRIVE, RAW_DATE
 
 pytest.importorskip("rosbags")
@@ -90,7 +90,7 @@ def test_bag_out_and_rerun_read_back(sample: dict[str, Path], tmp_path: Path) ->
         assert cloud.width > 0 and [f.name for f in cloud.fields] == ["x", "y", "z", "rgb"]
     assert heads[1][0] - heads[0][0] == 10**8
     pytest.importorskip("rerun")
-    from semattnet.data.bags.rerun_log import ENTITIES, read_rrd_frames
+    from semattnet.robotics.rerun import ENTITIES, read_rrd_frames
 
     frames = read_rrd_frames(rrd)
     for role, entity in ENTITIES.items():
@@ -132,9 +132,10 @@ def test_bad_input_is_one_line_and_leaves_nothing(sample: dict[str, Path], tmp_p
 
 
 def test_failed_frame_leaves_no_bag_and_no_recording(sample: dict[str, Path], tmp_path: Path) -> None:
-    from semattnet.data.sources import BagSource
     from semattnet.inference.pipeline import complete_frames
-    from semattnet.inference.sinks import BagSink, RerunSink, default_sinks
+    from semattnet.inference.sinks import default_sinks
+    from semattnet.robotics import BagSource
+    from semattnet.robotics.sinks import BagSink, RerunSink
 
     pytest.importorskip("rerun")
     calls = []

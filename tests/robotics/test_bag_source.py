@@ -12,12 +12,13 @@ from PIL import Image
 
 from semattnet._errors import DataError
 from semattnet.cli import main
-from semattnet.data.bags import BagTopics, SensorRecord, write_sensor_bag
 from semattnet.data.io import encode_depth
 from semattnet.data.kitti_raw import RawDrive
 from semattnet.data.palette import ids_to_colors
-from semattnet.data.sources import BagSource, RawDriveSource
+from semattnet.data.sources import RawDriveSource
 from semattnet.geometry import project_scan_file, read_kitti_calibration
+from semattnet.robotics import BagSource
+from semattnet.robotics.bags import BagTopics, SensorRecord, write_sensor_bag
 from tests.inference._raw_sample import DRIVE, RAW_DATE, SCAN
 
 pytest.importorskip("rosbags")
@@ -84,8 +85,8 @@ def test_tf_static_calibration_and_random_access(bags: dict[str, Path]) -> None:
 def _semantic_bag(path: Path, offsets_ms: list[int], bad: int | None = None) -> tuple[Path, list[np.ndarray]]:
     """A 24x32 bag: 3 images, 3 scans, CameraInfo, and semantic colour images ``offsets_ms`` after each image
     (semantic message ``bad`` in an unsupported encoding)."""
-    from semattnet.data.bags import CameraInfoData, MessageWriter
-    from semattnet.data.bags.encode import camera_info_message, image_message, pointcloud2_message
+    from semattnet.robotics.bags import CameraInfoData, MessageWriter
+    from semattnet.robotics.bags.encode import camera_info_message, image_message, pointcloud2_message
 
     K = np.array([[30.0, 0, 16], [0, 30.0, 12], [0, 0, 1]])
     info = CameraInfoData(32, 24, K, np.zeros(5), np.eye(3), np.hstack([K, np.zeros((3, 1))]), "plumb_bob", "cam")

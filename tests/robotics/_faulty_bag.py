@@ -31,8 +31,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from semattnet.data.bags import CameraInfoData, MessageWriter
-from semattnet.data.bags.encode import camera_info_message, header, image_message, pointcloud2_message, tf_message
+from semattnet.robotics.bags import CameraInfoData, MessageWriter
+from semattnet.robotics.bags.encode import camera_info_message, header, image_message, pointcloud2_message, tf_message
 
 __all__ = ["FAULTS", "FORMATS", "GOOD", "IMAGE_TOPIC", "N_FRAMES", "POINTS_TOPIC", "FaultyBag", "write_faulty_bag"]
 

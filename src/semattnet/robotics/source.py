@@ -1,5 +1,5 @@
 """A ROS bag (ROS 1, ROS 2 sqlite3 or MCAP) as frames: images paired with scans by
-:class:`~semattnet.data.bags.BagPairs`, each scan projected into the camera here with
+:class:`~semattnet.robotics.bags.BagPairs`, each scan projected into the camera here with
 :func:`semattnet.geometry.project_points` (exactly as :class:`~.kitti_raw.RawDriveSource` projects a
 KITTI scan).
 
@@ -24,18 +24,18 @@ from typing import Any
 import numpy as np
 
 from semattnet._errors import DataError
-from semattnet.data.bags import BagFailure, BagPair, BagPairs, StampPairing
 from semattnet.data.frames import Frame, IndexedSource
+from semattnet.robotics.bags import BagFailure, BagPair, BagPairs, StampPairing
 
 __all__ = ["BagSource"]
 
 
 class BagSource(IndexedSource):
-    """The frames of a bag, one per image of the image topic (see :class:`~semattnet.data.bags.BagPairs` for
+    """The frames of a bag, one per image of the image topic (see :class:`~semattnet.robotics.bags.BagPairs` for
     the arguments and what is checked at construction: topics, pairing, calibration). Frames are named by the
     image's index in its topic (``0000000003``) and carry ``timestamp`` (the image's header stamp, seconds),
     ``points``, ``calib`` and ``meta``: ``stamp_ns`` (int), ``frame_id``, ``lidar_frame_id``, ``scan_stamp_ns``,
-    ``camera_info`` (a :class:`~semattnet.data.bags.CameraInfoData`, what the bag sink writes back).
+    ``camera_info`` (a :class:`~semattnet.robotics.bags.CameraInfoData`, what the bag sink writes back).
 
     ``semantic_topic``: colour-coded semantic images (Cityscapes palette, ``sensor_msgs/Image`` or
     ``CompressedImage``), each image taking the one with the nearest stamp within ``max_skew`` (default: half
@@ -94,9 +94,9 @@ class BagSource(IndexedSource):
         return self.pairs.image_stamps[self.indices]
 
     def _pair_semantic(self, topic: str, max_skew: float | None) -> StampPairing:
-        from semattnet.data.bags import header_stamp_frame, open_bag, pair_stamps
-        from semattnet.data.bags.reader import topic_connections
-        from semattnet.data.bags.source import IMAGE_TYPES
+        from semattnet.robotics.bags import header_stamp_frame, open_bag, pair_stamps
+        from semattnet.robotics.bags.reader import topic_connections
+        from semattnet.robotics.bags.source import IMAGE_TYPES
 
         with open_bag(self.path) as reader:
             conns = topic_connections(reader, topic, IMAGE_TYPES, self.path)
@@ -115,10 +115,10 @@ class BagSource(IndexedSource):
 
     def _semantic_images(self) -> Iterator[tuple[int, np.ndarray | DataError]]:
         """Every semantic message in order: the image, or the DataError of one that cannot be decoded."""
-        from semattnet.data.bags import decode_compressed_image, decode_image, open_bag
-        from semattnet.data.bags.reader import topic_connections
-        from semattnet.data.bags.source import IMAGE_TYPES, decode_message
         from semattnet.data.palette import colors_to_ids
+        from semattnet.robotics.bags import decode_compressed_image, decode_image, open_bag
+        from semattnet.robotics.bags.reader import topic_connections
+        from semattnet.robotics.bags.source import IMAGE_TYPES, decode_message
 
         assert self.semantic_topic is not None
         with open_bag(self.path) as reader:

@@ -1,14 +1,14 @@
-"""Recorded robot data in and out: ROS 1 bags, ROS 2 bags (sqlite3, MCAP) and Rerun recordings.
+"""Recorded robot data in and out: ROS 1 bags and ROS 2 bags (sqlite3, MCAP).
 
-Reading needs no ROS installation (``rosbags``, extra ``ros``); Rerun needs ``rerun-sdk`` (extra ``rerun``).
-Both are imported on first use; a missing one is a one-line :class:`MissingExtraError` with the install hint.
+Reading needs no ROS installation (``rosbags``, extra ``ros``), imported on first use; a missing one is a
+one-line :class:`MissingExtraError` with the install hint.
 
 - Reading: :func:`list_topics`, :class:`BagPairs` (image + nearest scan + calibration from ``CameraInfo`` and
   ``/tf_static``, or a rig file; a :class:`BagFailure` for an image without a good pair), the decoders of
   :mod:`.decode`, :class:`TransformTree`.
 - Writing: :func:`write_kitti_bag` / :func:`write_sensor_bag` (images, scans, CameraInfo, ``/tf_static``),
   :class:`BagWriter` (completed depth 32FC1, coloured cloud, CameraInfo per frame).
-- Rerun: :class:`RerunLogger`.
+- Rerun: :class:`semattnet.robotics.rerun.RerunLogger`.
 """
 
 from .decode import (
@@ -23,7 +23,6 @@ from .deps import MissingExtraError
 from .kitti import BagTopics, SensorRecord, WrittenBag, kitti_stamps_ns, write_kitti_bag, write_sensor_bag
 from .pairing import StampPairing, pair_stamps
 from .reader import TopicRow, format_topics, list_topics, open_bag
-from .rerun_log import RerunLogger
 from .source import BagFailure, BagPair, BagPairs
 from .tf import NoTransformError, TransformTree
 from .writer import BagWriter, MessageWriter, bag_format
@@ -38,7 +37,6 @@ __all__ = [
     "MessageWriter",
     "MissingExtraError",
     "NoTransformError",
-    "RerunLogger",
     "SensorRecord",
     "StampPairing",
     "TopicRow",

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from semattnet._errors import DataError
-from semattnet.data.bags import (
+from semattnet.geometry import make_T
+from semattnet.robotics.bags import (
     NoTransformError,
     TransformTree,
     decode_compressed_image,
@@ -16,10 +17,9 @@ from semattnet.data.bags import (
     decode_pointcloud2,
     pair_stamps,
 )
-from semattnet.data.bags.deps import MissingExtraError, import_extra, rosbags_typestore
-from semattnet.data.bags.encode import compressed_image_message, image_message
-from semattnet.data.bags.tf import matrix_to_quaternion, quaternion_to_matrix
-from semattnet.geometry import make_T
+from semattnet.robotics.bags.deps import MissingExtraError, import_extra, rosbags_typestore
+from semattnet.robotics.bags.encode import compressed_image_message, image_message
+from semattnet.robotics.bags.tf import matrix_to_quaternion, quaternion_to_matrix
 
 pytest.importorskip("rosbags")
 

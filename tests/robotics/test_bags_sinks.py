@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from semattnet.data.bags import BagWriter, CameraInfoData, open_bag
 from semattnet.geometry import make_T
+from semattnet.robotics.bags import BagWriter, CameraInfoData, open_bag
 
 pytest.importorskip("rosbags")
 
@@ -82,8 +82,7 @@ def test_bag_writer_is_staged_and_refuses_existing(tmp_path: Path) -> None:
 
 def test_rerun_recording_loads_back(tmp_path: Path) -> None:
     pytest.importorskip("rerun")
-    from semattnet.data.bags import RerunLogger
-    from semattnet.data.bags.rerun_log import ENTITIES, read_rrd_frames
+    from semattnet.robotics.rerun import ENTITIES, RerunLogger, read_rrd_frames
 
     T_cam_lidar = make_T(np.array([[0.0, -1, 0], [0, 0, -1], [1, 0, 0]]), np.array([0.0, -0.1, -0.3]))
     path = tmp_path / "run.rrd"

@@ -1,7 +1,7 @@
 """NumPy -> ROS messages (rosbags message objects of a type store): the inverse of :mod:`.decode`.
 
 Every builder takes the rosbags type store ``ts`` (ROS 1 Noetic or ROS 2 Humble, from
-:func:`semattnet.data.bags.deps.rosbags_typestore`), a stamp in integer nanoseconds and a frame id.
+:func:`semattnet.robotics.bags.deps.rosbags_typestore`), a stamp in integer nanoseconds and a frame id.
 """
 
 from __future__ import annotations

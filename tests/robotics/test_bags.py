@@ -12,7 +12,9 @@ from PIL import Image
 
 from semattnet._errors import DataError
 from semattnet.cli import main
-from semattnet.data.bags import (
+from semattnet.data.kitti_raw import RawDrive
+from semattnet.geometry import project_points, project_scan_file, read_kitti_calibration
+from semattnet.robotics.bags import (
     BagFailure,
     BagPair,
     BagPairs,
@@ -23,8 +25,6 @@ from semattnet.data.bags import (
     list_topics,
     write_sensor_bag,
 )
-from semattnet.data.kitti_raw import RawDrive
-from semattnet.geometry import project_points, project_scan_file, read_kitti_calibration
 from tests._helpers import SAMPLE
 
 pytest.importorskip("rosbags")
