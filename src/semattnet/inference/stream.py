@@ -81,7 +81,7 @@ class StageTimes:
         self.notes: dict[str, str] = {}
         self.wall_s = 0.0
         self.overlapped = False
-        self.queue_most: int | None = None  # --realtime: the most frames and notes the sensor thread held
+        self.queue_most: int | None = None  # --realtime: the most frames waiting for the completer at once
         self.not_done: dict[str, int] = {}  # frames skipped / dropped, by status (the loop sets it)
         self._lock = threading.Lock()
         self._local = threading.local()
@@ -175,7 +175,7 @@ class StageTimes:
                     f"{s['throughput_hz']:.2f} frames/s against a sensor period of {1e3 * period:.1f} ms "
                     f"({1 / period:.1f} Hz): {s['realtime_factor']:.2g}x real time, {verdict}")  # fmt: skip
         if any(s["not_done"].values()):
-            held = f"; the sensor queue held {s['queue_most']} at most" if s["queue_most"] is not None else ""
+            held = f"; at most {s['queue_most']} frame(s) waited" if s["queue_most"] is not None else ""
             rows.append("not completed: " + ", ".join(f"{n} {k}" for k, n in s["not_done"].items() if n) + held)
         return "\n".join(rows)
 
@@ -305,7 +305,7 @@ class _Mailbox:
                 self.frame = item
             else:
                 self.notes.append(item)
-            self.most_held = max(self.most_held, len(self.notes) + (self.frame is not None))
+            self.most_held = max(self.most_held, int(self.frame is not None))  # frames waiting
             self.cond.notify()
 
     def close(self) -> None:
