@@ -65,10 +65,14 @@ def _read(path: Path) -> dict[str, Any] | None:
 
 
 def _difference(old: Mapping[str, Any], new: Mapping[str, Any]) -> str | None:
-    """The first key whose value differs between two run identities, as a phrase, or None."""
+    """The first option whose value differs between two run identities, as a phrase, or None."""
+
+    def said(value: Any) -> str:
+        return "not given" if value is None else "given" if value is True else repr(value)
+
     for key in sorted(set(old) | set(new)):
         if old.get(key) != new.get(key):
-            return f"{key} was {old.get(key)!r} in the first run, now {new.get(key)!r}"
+            return f"--{key.replace('_', '-')} was {said(old.get(key))} in the first run, now {said(new.get(key))}"
     return None
 
 

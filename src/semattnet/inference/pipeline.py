@@ -34,6 +34,7 @@ are those of one process (:mod:`semattnet.inference.sharding`).
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import tempfile
 from collections import Counter
@@ -179,9 +180,9 @@ def check_frames(source: FrameSource, sinks: Sequence[Sink], out: PathLike, *, o
     out, policy = Path(out), _policy(on_error, len(source.names))
     with process_group():
         journal = agree(RunJournal, out, source.names, run, resume, rank(), world_size())
-        on_main(_check_outputs, source, sinks, out, overwrite or resume, inputs)
-        if not (overwrite or resume):
+        if not (overwrite or resume):  # before the files it left are refused one by one: say --resume
             on_main(_refuse_earlier_run, out)
+        on_main(_check_outputs, source, sinks, out, overwrite or resume, inputs)
         todo = [n for n in shard(source.names) if n not in journal.kept]
         faults = agree(_check_inputs, source, todo, policy)
         rows: list[Mapping[str, Any]] = [{"name": n, "status": "skipped", "reason": faults[n]} if n in faults
@@ -243,8 +244,9 @@ class FrameRun:
 
 
 def _kind(reason: str) -> str:
-    """What a skip reason says is wrong, without where (its last clause, up to a parenthesis): to group them."""
-    return reason.rsplit(": ", 1)[-1].split(" (", 1)[0]
+    """What a skip reason says is wrong, without where (its last clause, parenthesised details left out, so a
+    colon inside them does not cut it): to group them."""
+    return re.sub(r" \([^()]*\)", "", reason).rsplit(": ", 1)[-1]
 
 
 class _FrameLoop:
@@ -265,6 +267,7 @@ class _FrameLoop:
         self.waiting = [n for n in self.names if n in self.journal.kept or n in plan.faults]
         self.position = {n: i for i, n in enumerate(self.names)}
         self.created = not out.exists()
+        timer.wall_s += self.journal.earlier_wall_s  # the table covers the kept frames' time too
 
     def todo(self) -> list[str]:
         return [n for n in self.names if n not in self.journal.kept and n not in self.plan.faults]
@@ -468,7 +471,7 @@ def _close(loop: _FrameLoop) -> FrameRun:
         raise nothing
     for s in loop.runs:
         s.commit()
-    wall = loop.timer.wall_s
+    wall = loop.timer.wall_s - journal.earlier_wall_s  # this run's share
     if world_size() == 1:
         journal.save(complete=True, wall_s=wall)
     elif is_main():
