@@ -69,7 +69,8 @@ class RerunLogger:
             web viewer shipped in the ``rerun-sdk`` wheel (no internet needed); open :attr:`url` in a browser.
             The gRPC server stops at :meth:`close`; the web viewer's HTTP server (which serves only the viewer's
             files, on every interface) stays up until the process exits (rerun gives no handle to stop it).
-        grpc_port, web_port: their ports (Rerun's defaults 9876 and 9090; 0: a free port).
+        grpc_port: the gRPC server's port (Rerun's default 9876; 0: a free port).
+        web_port: the web viewer's port (Rerun's default 9090; 0: a free port).
         host: the interface the gRPC server listens on.
 
     Attributes:
