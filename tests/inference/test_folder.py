@@ -41,6 +41,6 @@ def test_complete_folder_writes_and_refuses_overwrite(tmp_path: Path) -> None:
     assert depth.shape == (20, 30) and depth[0, 0] == pytest.approx(11.0)  # a measured pixel is kept
     assert np.load(out / "a.npy").dtype == np.float32 and (out / "a_color.png").is_file()
     before = (out / "a.png").read_bytes()
-    with pytest.raises(FileExistsError, match="pass --overwrite"):
+    with pytest.raises(FileExistsError, match="--overwrite"):
         complete_folder(ClassicalCompleter(), pair_frames(rgb, sparse), out)
     assert (out / "a.png").read_bytes() == before
