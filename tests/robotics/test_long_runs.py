@@ -122,7 +122,7 @@ def test_bad_frames_are_skipped_named_and_journaled(bags: dict[str, Any], tmp_pa
             assert entry["status"] == "skipped" and faulty.bad[i] in entry["reason"], entry
         else:
             assert entry["status"] == "done" and set(entry["files"]) == {f"{names[i]}.png", f"{names[i]}_color.png"}
-    assert "5 skipped" in res.output
+    assert "5 skipped" in res.output and "sensor period of 100.0 ms" in res.output  # from every frame's stamp
     for _, reason in FAULTS.values():  # the summary groups the reasons, each readable
         kind = reason.split(" (", 1)[0].rsplit(": ", 1)[-1]
         assert f"skipped x1: {kind}" in res.output, (kind, res.output)

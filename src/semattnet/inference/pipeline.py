@@ -268,6 +268,10 @@ class _FrameLoop:
         self.position = {n: i for i, n in enumerate(self.names)}
         self.created = not out.exists()
         timer.wall_s += self.journal.earlier_wall_s  # the table covers the kept frames' time too
+        stamps = getattr(source, "stamps_ns", None)  # the sensor period from every frame, not only those done
+        if stamps is not None and len(stamps) == len(source.names):
+            for name, ns in zip(source.names, stamps, strict=True):
+                timer.stamp(name, int(ns) / 1e9)
 
     def todo(self) -> list[str]:
         return [n for n in self.names if n not in self.journal.kept and n not in self.plan.faults]
