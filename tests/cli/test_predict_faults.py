@@ -50,7 +50,8 @@ def test_folder_with_bad_frames(tmp_path: Path) -> None:
     out = tmp_path / "out"
     res = _predict("--rgb", rgb, "--sparse", sparse, "--method", "classical", "--out", out)
     assert res.exit_code == 3, res.output
-    reasons = {"f2": "no valid depth point", "f3": "f3.png: not a readable PNG", "f4": "f4.png: PNG file not found"}
+    reasons = {"f2": "f2.png: sparse has no valid depth point", "f3": "f3.png: not a readable PNG",
+               "f4": "f4.png: PNG file not found"}  # fmt: skip
     for name, reason in reasons.items():
         assert reason in _skip_line(res.output, name), res.output
     assert "6 frame(s): 3 done, 3 skipped" in res.output

@@ -202,6 +202,12 @@ class FrameFault:
     reason: str
 
 
+def _input_of(frame: Frame) -> str:
+    """The file a completion fault comes from (the sparse map, the scan, the bag), for its line."""
+    paths = frame.paths
+    return str(paths.get("sparse") or paths.get("scan") or paths.get("bag") or "")
+
+
 def _reason(exc: BaseException) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 
@@ -425,11 +431,17 @@ def completions(source: FrameSource, completer: Any, names: Sequence[str] | None
     timer.notes.setdefault("projection", "inside read/decode (the source does not split it)")
     current = [""]
 
-    def fault(name: str, exc: BaseException) -> None:
+    def fault(name: str, exc: BaseException, where: str = "") -> None:
         timer.discard(name)
+        reason = _reason(exc)
+        reason = f"{where}: {reason}" if where and where not in reason else reason
         if report is not None:
-            report(FrameFault(name, "failed" if stop_on_fault else "skipped", _reason(exc)))
+            report(FrameFault(name, "failed" if stop_on_fault else "skipped", reason))
         if stop_on_fault or report is None:
+            if reason != _reason(exc):  # the file named: the same error, with where it comes from
+                from semattnet._errors import DataError
+
+                raise DataError(reason) from exc
             raise exc
 
     try:
@@ -452,7 +464,7 @@ def completions(source: FrameSource, completer: Any, names: Sequence[str] | None
                 except Exception as exc:
                     if not is_frame_fault(exc):
                         raise
-                    fault(item.name, exc)
+                    fault(item.name, exc, _input_of(item))
                     continue
                 yield item, completion
     finally:
