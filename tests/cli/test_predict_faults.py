@@ -5,7 +5,6 @@ and the exit status is 3."""
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 from typing import Any
 
@@ -68,14 +67,9 @@ def test_folder_with_bad_frames(tmp_path: Path) -> None:
 
 
 def test_kitti_raw_drive_with_a_bad_scan(tmp_path: Path) -> None:
-    from tests.inference._raw_sample import DRIVE, RAW_DATE
+    from tests.inference._raw_sample import three_frame_drive
 
-    date = tmp_path / RAW_DATE.name
-    shutil.copytree(RAW_DATE, date)
-    drive = date / DRIVE.name
-    for sub, ext in (("image_02", ".png"), ("velodyne_points", ".bin")):
-        for i in (6, 7):  # three frames: the bundled one and two copies
-            shutil.copy(drive / sub / "data" / f"0000000005{ext}", drive / sub / "data" / f"{i:010d}{ext}")
+    drive = three_frame_drive(tmp_path)  # frames 5, 6, 7
     scan = drive / "velodyne_points" / "data" / "0000000006.bin"
     scan.write_bytes(scan.read_bytes()[:1005])  # not a whole number of points
     out = tmp_path / "out"

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -157,14 +156,9 @@ def test_predict_bad_frame_on_one_rank_stops_all(tmp_path: Path) -> None:
 
 
 def test_predict_kitti_raw_two_processes_equals_one(tmp_path: Path) -> None:
-    from tests.inference._raw_sample import DRIVE, RAW_DATE
+    from tests.inference._raw_sample import three_frame_drive
 
-    date = tmp_path / RAW_DATE.name
-    shutil.copytree(RAW_DATE, date)
-    drive = date / DRIVE.name
-    for sub, ext in (("image_02", ".png"), ("velodyne_points", ".bin")):
-        for i in (6, 7):  # three frames: the bundled one and two copies
-            shutil.copy(drive / sub / "data" / f"0000000005{ext}", drive / sub / "data" / f"{i:010d}{ext}")
+    drive = three_frame_drive(tmp_path)  # frames 5, 6, 7
     common = ("predict", "--kitti-raw", drive, "--method", "classical", "--ply", "--top-crop", "100")
     one = cli(*common, "--out", tmp_path / "one")
     assert one.returncode == 0, one.stderr[-3000:]

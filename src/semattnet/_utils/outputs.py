@@ -35,6 +35,7 @@ __all__ = [
     "incomplete_tree",
     "mark_tree",
     "refuse_existing",
+    "stage_folder",
     "staged_outputs",
     "write_text",
 ]
@@ -124,14 +125,33 @@ def _linked_input(ino: tuple[int, int], folders: list[Path]) -> Path | None:
     return None
 
 
-def clean_stale_stages(out: Path) -> None:
-    """Remove stage folders a killed run left in ``out`` (named with a process id that is gone)."""
+def clean_stale_stages(folder: Path, prefix: str = STAGE_PREFIX) -> None:
+    """Remove the stage folders ``PREFIX<pid>.*`` in ``folder`` that a killed run left (their process is gone)."""
     from semattnet._utils.atomic import pid_alive
 
-    for entry in out.glob(f"{STAGE_PREFIX}*"):
-        pid = entry.name[len(STAGE_PREFIX) :].split(".")[0]
+    for entry in folder.glob(f"{prefix}*"):
+        pid = entry.name[len(prefix) :].split(".")[0]
         if entry.is_dir() and pid.isdigit() and not pid_alive(int(pid)):
             shutil.rmtree(entry, ignore_errors=True)
+
+
+@contextmanager
+def stage_folder(out: Path) -> Iterator[Path]:
+    """This process's hidden stage folder inside ``out`` (created, with the stale ones of killed runs removed
+    first), removed again on exit. A full disk inside the block is the one-line
+    :func:`~semattnet._utils.atomic.disk_full_error` naming ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    clean_stale_stages(out)
+    stage = Path(tempfile.mkdtemp(prefix=f"{STAGE_PREFIX}{os.getpid()}.", dir=out))
+    try:
+        yield stage
+    except OSError as exc:
+        if not is_disk_full(exc) or exc.filename == str(out):
+            raise
+        staged = sum(p.stat().st_size for p in stage.rglob("*") if p.is_file())
+        raise disk_full_error(out, staged + 1) from None
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
 
 
 @contextmanager
@@ -142,26 +162,17 @@ def staged_outputs(out: str | os.PathLike[str], overwrite: bool = False) -> Iter
     it created is removed again; a full disk raises :func:`~semattnet._utils.atomic.disk_full_error`)."""
     out = Path(out)
     created = not out.exists()
-    out.mkdir(parents=True, exist_ok=True)
-    clean_stale_stages(out)
-    stage = Path(tempfile.mkdtemp(prefix=f"{STAGE_PREFIX}{os.getpid()}.", dir=out))
     try:
-        try:
+        with stage_folder(out) as stage:
             yield stage
-        except OSError as exc:
-            if not is_disk_full(exc) or exc.filename == str(out):
-                raise
-            staged = sum(p.stat().st_size for p in stage.rglob("*") if p.is_file())
-            raise disk_full_error(out, staged + 1) from None
-        files = sorted(p for p in stage.rglob("*") if p.is_file())
-        refuse_existing((out / p.relative_to(stage) for p in files), overwrite)
-        for p in files:
-            target = out / p.relative_to(stage)
-            target.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(p, target)
-        fsync_dir(out)
+            files = sorted(p for p in stage.rglob("*") if p.is_file())
+            refuse_existing((out / p.relative_to(stage) for p in files), overwrite)
+            for p in files:
+                target = out / p.relative_to(stage)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(p, target)
+            fsync_dir(out)
     finally:
-        shutil.rmtree(stage, ignore_errors=True)
         if created and out.is_dir() and not any(out.iterdir()):
             out.rmdir()  # a failed run leaves no empty folder it made
 

@@ -35,11 +35,8 @@ from __future__ import annotations
 
 import os
 import re
-import shutil
-import tempfile
-from collections import Counter
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from collections import Counter, deque
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -47,15 +44,9 @@ from typing import Any, Protocol
 import numpy as np
 
 from semattnet._errors import DataError, InputError
-from semattnet._utils.atomic import disk_full_error, fsync_dir, is_disk_full
+from semattnet._utils.atomic import fsync_dir
 from semattnet._utils.distributed import first_error, is_main, rank, world_size
-from semattnet._utils.outputs import (
-    STAGE_PREFIX,
-    OutputError,
-    check_no_input_overlap,
-    clean_stale_stages,
-    refuse_existing,
-)
+from semattnet._utils.outputs import OutputError, check_no_input_overlap, refuse_existing, stage_folder
 from semattnet.data.frames import Frame, FrameSource
 from semattnet.data.io import encode_depth, read_depth
 from semattnet.data.sources.semantic import SemanticMaps
@@ -185,11 +176,11 @@ def check_frames(source: FrameSource, sinks: Sequence[Sink], out: PathLike, *, o
         on_main(_check_outputs, source, sinks, out, overwrite or resume, inputs)
         todo = [n for n in shard(source.names) if n not in journal.kept]
         faults = agree(_check_inputs, source, todo, policy)
-        rows: list[Mapping[str, Any]] = [{"name": n, "status": "skipped", "reason": faults[n]} if n in faults
-                                         else {"name": n, "status": "done"} for n in shard(source.names)]  # fmt: skip
-        nothing = _nothing_done(gather_rows(rows, key=lambda e: source.names.index(e["name"])))
-        if nothing is not None:
-            raise nothing  # every input is bad: one line, before the model is loaded
+        position = {n: i for i, n in enumerate(source.names)}
+        bad = gather_rows([{"name": n, "status": "skipped", "reason": r} for n, r in faults.items()],
+                          key=lambda e: position[e["name"]])  # fmt: skip
+        if bad and len(bad) == len(source.names):
+            raise _nothing_done(bad)  # every input is bad: one line, before the model is loaded
     return RunPlan(journal, faults, policy, resume)
 
 
@@ -264,7 +255,7 @@ class _FrameLoop:
         self.replays = [s for s in self.runs if s.replays]
         self.depth_sink = next((s for s in sinks if isinstance(s, DepthPngSink)), None)
         self.names = shard(source.names)
-        self.waiting = [n for n in self.names if n in self.journal.kept or n in plan.faults]
+        self.waiting = deque(n for n in self.names if n in self.journal.kept or n in plan.faults)
         self.position = {n: i for i, n in enumerate(self.names)}
         self.created = not out.exists()
         timer.wall_s += self.journal.earlier_wall_s  # the table covers the kept frames' time too
@@ -280,7 +271,7 @@ class _FrameLoop:
         """The kept and check-faulted frames before ``name`` (None: all that are left), in order."""
         last = len(self.names) if name is None else self.position[name]
         while self.waiting and self.position[self.waiting[0]] < last:
-            other = self.waiting.pop(0)
+            other = self.waiting.popleft()
             if other in self.plan.faults:
                 self.note(FrameFault(other, "skipped", self.plan.faults[other]))
             else:
@@ -344,30 +335,12 @@ class _FrameLoop:
             self.out.rmdir()
 
 
-@contextmanager
-def _frame_stage(out: Path) -> Iterator[Path]:
-    """A hidden folder in ``out`` (this process's) that each frame is written into before it moves into place;
-    removed at the end (one a kill left is removed by the next run). A full disk: the one-line error."""
-    out.mkdir(parents=True, exist_ok=True)
-    clean_stale_stages(out)
-    stage = Path(tempfile.mkdtemp(prefix=f"{STAGE_PREFIX}{os.getpid()}.", dir=out))
-    try:
-        yield stage
-    except OSError as exc:
-        if not is_disk_full(exc) or exc.filename == str(out):
-            raise
-        staged = sum(p.stat().st_size for p in stage.rglob("*") if p.is_file())
-        raise disk_full_error(out, staged + 1) from None
-    finally:
-        shutil.rmtree(stage, ignore_errors=True)
-
-
 def _run_frames(loop: _FrameLoop, completer: Completer, maps: SemanticMaps, prefetch: int,
                 realtime: float | None, overwrite: bool) -> None:  # fmt: skip
     """The frames of this process through the completer into ``loop`` (the run outputs opened before and
     finished after; aborted on any error)."""
     try:
-        with _frame_stage(loop.out) as stage:
+        with stage_folder(loop.out) as stage:  # each frame is written there, then moved into place
             for s in loop.runs:
                 s.open(overwrite)
             for frame, completion in completions(loop.source, completer, loop.todo(), maps, loop.timer, prefetch,
@@ -451,10 +424,8 @@ def _attempt_run(loop: _FrameLoop, *args: Any) -> Exception | None:
     return None
 
 
-def _nothing_done(entries: Sequence[Mapping[str, Any]]) -> DataError | None:
-    """The run's error when no frame could be completed (every one skipped): nothing to keep."""
-    if not entries or any(e["status"] == "done" for e in entries):
-        return None
+def _nothing_done(entries: Sequence[Mapping[str, Any]]) -> DataError:
+    """The run's error when none of ``entries`` (every frame's) could be completed: nothing to keep."""
     bad = [e for e in entries if e["status"] != "pending"]
     counts = describe_counts(Counter(e["status"] for e in entries))
     first = f"; the first: {bad[0]['name']}: {bad[0].get('reason', '')}" if bad else ""
@@ -467,12 +438,11 @@ def _close(loop: _FrameLoop) -> FrameRun:
     journal, names = loop.journal, loop.source.names
     position = {n: i for i, n in enumerate(names)}
     entries = gather_rows([journal.frames[n] for n in loop.names], key=lambda e: position[e["name"]])
-    nothing = _nothing_done(entries)
-    if nothing is not None:
+    if entries and not any(e["status"] == "done" for e in entries):
         for s in loop.runs:
             s.abort()
         loop.forget()
-        raise nothing
+        raise _nothing_done(entries)
     for s in loop.runs:
         s.commit()
     wall = loop.timer.wall_s - journal.earlier_wall_s  # this run's share

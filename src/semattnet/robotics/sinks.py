@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from semattnet._errors import InputError
+from semattnet._utils.outputs import clean_stale_stages
 from semattnet.data.frames import Frame
 from semattnet.inference.sinks import Prediction, RunSink
 
@@ -31,19 +32,6 @@ def stamp_ns(frame: Frame, index: int) -> int:
     if frame.timestamp is not None:
         return round(frame.timestamp * 1e9)
     return index * 100_000_000
-
-
-def _clean_stale_targets(target: Path) -> None:
-    """Remove the hidden folders that killed runs left beside ``target`` (their process is gone)."""
-    import shutil
-
-    from semattnet._utils.atomic import pid_alive
-
-    prefix = f".{target.name}.semattnet-stage."
-    for entry in target.parent.glob(f"{prefix}*"):
-        pid = entry.name[len(prefix) :].split(".")[0]
-        if entry.is_dir() and pid.isdigit() and not pid_alive(int(pid)):
-            shutil.rmtree(entry, ignore_errors=True)
 
 
 class _StagedTarget(RunSink):
@@ -65,7 +53,7 @@ class _StagedTarget(RunSink):
             raise InputError(f"{self.target}: a bag or Rerun recording is written by one process (not under torchrun)")
         target = Path(self.target)
         target.parent.mkdir(parents=True, exist_ok=True)
-        _clean_stale_targets(target)
+        clean_stale_stages(target.parent, f".{target.name}.semattnet-stage.")  # what killed runs left
         self._overwrite, self._count = overwrite, 0
         self._dir = Path(tempfile.mkdtemp(prefix=f".{target.name}.semattnet-stage.{os.getpid()}.", dir=target.parent))
         return self._dir / target.name
@@ -154,7 +142,7 @@ class RerunSink(_StagedTarget):
     max_depth: float | None = None
     serve: bool = False  # serve the frames to a web viewer (the URL goes to ``log``)
     log: Any = None
-    _log: Any = field(default=None, init=False, repr=False)  # the open RerunLogger, between open and finish
+    _logger: Any = field(default=None, init=False, repr=False)  # the open RerunLogger, between open and finish
 
     def targets(self) -> list[Path]:
         return [] if self.target is None else [Path(self.target)]
@@ -164,30 +152,29 @@ class RerunSink(_StagedTarget):
 
         path = self._begin(overwrite) if self.target is not None else None
         self._count = 0
-        self._log = RerunLogger(path, spawn=self.spawn, max_depth=self.max_depth, serve=self.serve)
-        url = getattr(self._log, "url", None)
-        if self.serve and url and self.log is not None:
-            self.log(f"Rerun web viewer: {url}")
+        self._logger = RerunLogger(path, spawn=self.spawn, max_depth=self.max_depth, serve=self.serve)
+        if self._logger.url is not None and self.log is not None:
+            self.log(f"Rerun web viewer: {self._logger.url}")
 
     def write(self, stage: Path, pred: Prediction) -> None:
         frame = pred.frame
         if frame.K is None:
             raise InputError(f"{frame.name}: the Rerun recording needs the frame's intrinsics K, none given")
         T = getattr(frame.calib, "T_cam_lidar", None)
-        self._log.log_frame(stamp_ns(frame, self._count), frame.rgb, frame.K, np.eye(4) if T is None else T,
-                            sparse=frame.sparse, depth=pred.stored, semantic=frame.semantic,
-                            points=frame.points)  # fmt: skip
+        self._logger.log_frame(stamp_ns(frame, self._count), frame.rgb, frame.K, np.eye(4) if T is None else T,
+                               sparse=frame.sparse, depth=pred.stored, semantic=frame.semantic,
+                               points=frame.points)  # fmt: skip
         self._count += 1
 
     def finish(self, stage: Path) -> None:
-        self._log.close()
+        self._logger.close()
 
     def commit(self) -> None:
         if self.target is not None:
             super().commit()
 
     def abort(self) -> None:
-        log, self._log = getattr(self, "_log", None), None
-        if log is not None:
-            log.__exit__(RuntimeError, RuntimeError("aborted"), None)
+        logger, self._logger = getattr(self, "_logger", None), None
+        if logger is not None:
+            logger.__exit__(RuntimeError, RuntimeError("aborted"), None)
         super().abort()

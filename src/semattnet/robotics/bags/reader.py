@@ -12,7 +12,7 @@ import sqlite3
 import struct
 import zlib
 from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -60,31 +60,28 @@ def _reader_errors() -> tuple[type[BaseException], ...]:
 
 
 @contextmanager
-def bag_errors(path: str | os.PathLike[str]) -> Iterator[None]:
+def _one_line(errors: tuple[type[BaseException], ...], what: str) -> Iterator[None]:
+    """``errors`` raised in the block as one :class:`DataError` line ``WHAT: WHY`` (semattnet's own pass)."""
+    try:
+        yield
+    except SemAttNetError:
+        raise
+    except errors as exc:
+        why = " ".join(str(exc).split()) or type(exc).__name__
+        raise DataError(f"{what}: {why[:200]}") from None
+
+
+def bag_errors(path: str | os.PathLike[str]) -> AbstractContextManager[None]:
     """Turn the failures of reading a truncated or corrupt bag into one :class:`DataError` line naming ``path``
     (semattnet's own errors pass through unchanged)."""
-    errors = _reader_errors()
-    try:
-        yield
-    except SemAttNetError:
-        raise
-    except errors as exc:
-        why = " ".join(str(exc).split()) or type(exc).__name__
-        raise DataError(f"{path}: cannot read the bag (truncated or corrupt?): {why[:200]}") from None
+    return _one_line(_reader_errors(), f"{path}: cannot read the bag (truncated or corrupt?)")
 
 
-@contextmanager
-def message_errors(where: str) -> Iterator[None]:
+def message_errors(where: str) -> AbstractContextManager[None]:
     """Turn the failures of deserialising one corrupt message into one :class:`DataError` line naming ``where``
     (e.g. ``BAG: TOPIC image 3``), so the caller can fail that message alone (semattnet's errors pass through)."""
-    errors: tuple[type[BaseException], ...] = (*_reader_errors(), ValueError, TypeError, AttributeError)
-    try:
-        yield
-    except SemAttNetError:
-        raise
-    except errors as exc:
-        why = " ".join(str(exc).split()) or type(exc).__name__
-        raise DataError(f"{where}: cannot deserialise the message: {why[:200]}") from None
+    errors = (*_reader_errors(), ValueError, TypeError, AttributeError)
+    return _one_line(errors, f"{where}: cannot deserialise the message")
 
 
 def is_ros1(path: str | os.PathLike[str]) -> bool:
