@@ -156,7 +156,7 @@ def _robot_sinks(bag: dict[str, Any], max_depth: float, timer: Any) -> list[Any]
 
 def _identity(params: dict[str, Any]) -> dict[str, Any]:
     """What a run is, for a resume to check: every option that changes the outputs (paths resolved, a
-    checkpoint by its SHA-256) and the package version."""
+    weights file by its SHA-256) and the package version."""
     import semattnet
     from semattnet._utils.download import sha256_file
 
@@ -164,7 +164,7 @@ def _identity(params: dict[str, Any]) -> dict[str, Any]:
     for key, value in sorted(params.items()):
         if key in _NOT_IDENTITY or value is None or value is False:
             continue
-        if key in ("checkpoint", "weights") and Path(value).is_file():
+        if key == "weights" and Path(value).is_file():  # a file by its digest (--checkpoint arrives here too)
             value = f"sha256:{sha256_file(value)}"
         run[key] = str(Path(value).resolve()) if isinstance(value, Path) else value
     return run
@@ -273,20 +273,15 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
         from semattnet._utils.device import resolve_device
 
         resolve_device(device)  # a bad --device: one line, before any work
-    run = _run_frames(click.get_current_context().params, out, resuming, overwrite, npy, panel, ply, max_depth,
-                      top_crop, (rgb, sparse, kitti_raw, frames, camera, semantic, deskew, data), segment_spec,
-                      intrinsics, (method, checkpoint, weights, device, amp, backend), bag)  # fmt: skip
-    if run is None:
-        return
+    run = _run_frames(click.get_current_context().params, out, resuming)
     import os
 
     from semattnet._utils.distributed import launch_rank
 
     if launch_rank() == 0:
         click.echo(run.summary())
-    if (
-        run.exit_code and int(os.environ.get("WORLD_SIZE", "1")) == 1
-    ):  # torchrun takes any other status for a crash: frames.json tells
+    launched = int(os.environ.get("WORLD_SIZE", "1")) > 1  # torchrun takes any other status for a crash
+    if run.exit_code and not launched:
         click.get_current_context().exit(run.exit_code)
 
 
@@ -316,35 +311,35 @@ def _check_combinations(rgb: Path | None, sparse: Path | None, kitti_raw: Path |
         raise click.UsageError("--realtime replays a recording: it needs --bag or --kitti-raw")
 
 
-def _run_frames(params: dict[str, Any], out: Path, resuming: bool, overwrite: bool, npy: bool, panel: bool,
-                ply: bool, max_depth: float, top_crop: int, inputs: tuple, segment_spec: str | None,
-                intrinsics: str | None, model: tuple, bag: dict[str, Any]) -> Any:  # fmt: skip
-    """Check everything, load the completer, run the one frame loop; then the table (and the report)."""
+def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
+    """Check everything, load the completer, run the one frame loop; then the table (and the report).
+    ``p``: every option of the command, by name."""
     from semattnet._utils.distributed import launch_rank, process_group
     from semattnet.data.sources import SemanticMaps
     from semattnet.inference.pipeline import check_frames, complete_frames
     from semattnet.inference.sinks import default_sinks
     from semattnet.inference.stream import StageTimes
 
-    rgb, sparse, kitti_raw, frames, camera, semantic, deskew, data = inputs
-    K = _intrinsics(intrinsics)
-    maps = SemanticMaps(segment_spec, folder=semantic is not None or bag["semantic_topic"] is not None)
+    K = _intrinsics(p["intrinsics"])
+    maps = SemanticMaps(p["segment_spec"], folder=p["semantic"] is not None or p["semantic_topic"] is not None)
     timer = StageTimes()
-    sinks = default_sinks(npy, panel, ply, max_depth, top_crop) + _robot_sinks(bag, max_depth, timer)
-    realtime = (bag["speed"] or 1.0) if bag["realtime"] else None
+    files = default_sinks(p["npy"], p["panel"], p["ply"], p["max_depth"], p["top_crop"])
+    sinks = files + _robot_sinks(p, p["max_depth"], timer)
+    realtime = (p["speed"] or 1.0) if p["realtime"] else None
+    inputs = (p["rgb"], p["sparse"], p["kitti_raw"], p["frames"], p["camera"], p["semantic"], p["deskew"], K)
     with process_group():
-        source = _source(rgb, sparse, kitti_raw, frames, camera, semantic, deskew, K, bag, data)
-        plan = check_frames(source, sinks, out, overwrite=overwrite, on_error=bag["on_error"], resume=resuming,
-                            run=_identity(params))  # every input and output, before the model  # fmt: skip
+        source = _source(*inputs, p, (p["dataset"], p["data_root"], p["split"]))
+        plan = check_frames(source, sinks, out, overwrite=p["overwrite"], on_error=p["on_error"], resume=resuming,
+                            run=_identity(p))  # every input and output, before the model  # fmt: skip
         if plan.journal.kept:
             click.echo(f"{out}: resuming: {len(plan.journal.kept)} of {len(source.names)} frame(s) already done")
-        completer = _completer(*model)
-        run = complete_frames(source, completer, sinks, out, overwrite=overwrite, log=click.echo, semantic=maps,
-                              checked=plan, timer=timer, prefetch=2 if bag["stream"] else 0,
+        completer = _completer(p["method"], None, p["weights"], p["device"], p["amp"], p["backend"])
+        run = complete_frames(source, completer, sinks, out, overwrite=p["overwrite"], log=click.echo,
+                              semantic=maps, checked=plan, timer=timer, prefetch=2 if p["stream"] else 0,
                               realtime=realtime)  # fmt: skip
     if launch_rank() == 0:
         click.echo(timer.table())
-    if params["report"] and launch_rank() == 0:  # under torchrun: once, after every rank's frames are in place
+    if p["report"] and launch_rank() == 0:  # under torchrun: once, after every rank's frames are in place
         from semattnet.viz.viewer import write_prediction_report
 
         done = [source.frames[p.stem] for p in run.paths]
