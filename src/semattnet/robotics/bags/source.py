@@ -257,11 +257,13 @@ class BagPairs:
         """The start of every error of image ``i``: ``BAG: IMAGE_TOPIC image I``."""
         return message_where(self.image_topic, i, self.path, "image")
 
+    def _nearest_index(self, i: int) -> int:
+        """The index of the CameraInfo message nearest in time to image ``i`` (there must be one)."""
+        return int(np.argmin(np.abs(self._info_stamps - self.image_stamps[i])))
+
     def _nearest_info(self, i: int) -> CameraInfoData | DataError | None:
         """The bag's CameraInfo nearest in time to image ``i`` (or its error), None without a CameraInfo topic."""
-        if not self.infos:
-            return None
-        return self.infos[int(np.argmin(np.abs(self._info_stamps - self.image_stamps[i])))]
+        return self.infos[self._nearest_index(i)] if self.infos else None
 
     def _camera_info(self, i: int) -> CameraInfoData:
         """The CameraInfo nearest in time to image ``i`` (from the rig when given).
@@ -335,8 +337,11 @@ class BagPairs:
         size = self.rig.image_size if self.rig is not None else info.image_size
         assert size is not None
         if image.shape[:2] != (size[1], size[0]):
-            raise DataError(f"{self._frame_where(i)} is {image.shape[1]}x{image.shape[0]}, "
-                            f"the calibration says {size[0]}x{size[1]}")  # fmt: skip
+            said = "the rig"
+            if self.rig is None:
+                said = message_where(str(self.camera_info_topic), self._nearest_index(i))
+            raise DataError(f"{self._frame_where(i)} is {image.shape[1]}x{image.shape[0]}, the calibration ({said}) "
+                            f"says {size[0]}x{size[1]}")  # fmt: skip
         K = np.asarray(self.rig.K, dtype=np.float64) if self.rig is not None else info.intrinsics(self.rectified)
         return BagPair(f"{i:010d}", i, int(self.image_stamps[i]), scan_stamp, image, points, frame, lidar_frame, K,
                        (int(size[0]), int(size[1])), self.T_cam_lidar(frame, lidar_frame), info,
