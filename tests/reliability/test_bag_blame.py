@@ -69,11 +69,12 @@ def _cloud(ts: Any, i: int, stamp: int) -> Any:
 def _bag(path: Path, *, fx: Callable[[int], float] = lambda i: 50.0, tf: Sequence[Edge] = GOOD_TF,
          cloud: Callable[[Any, int, int], Any] = _cloud,
          semantic: Callable[[int], np.ndarray] | None = None, image_height: Callable[[int], int] = lambda i: H,
-         ) -> Path:  # fmt: skip
-    """A 3-frame MCAP bag (10 Hz, each scan 2 ms after its image), a CameraInfo per image with focal length
+         fmt: str = "mcap") -> Path:  # fmt: skip
+    """A 3-frame bag in ``fmt`` (10 Hz, each scan 2 ms after its image), a CameraInfo per image with focal length
     ``fx(i)``, ``/tf_static`` of ``tf``, scans ``cloud(ts, i, stamp)``, semantic images ``semantic(i)``, images
     ``image_height(i)`` rows high (the CameraInfo says ``H``)."""
-    with MessageWriter(path, "mcap") as out:
+    path = path.with_suffix(".bag") if fmt == "ros1" else path
+    with MessageWriter(path, fmt) as out:
         out.write("/tf_static", T0, _tf(out.ts, tf))
         for i in range(N):
             t = T0 + i * 10**8
@@ -132,22 +133,28 @@ def test_a_bad_focal_length_in_every_camera_info_is_one_run_error(tmp_path: Path
     assert str(err.value) == f"{bag}: {INFO} message 0: CameraInfo {why}; no image has a usable CameraInfo"
 
 
-def test_a_bad_camera_info_fails_only_the_image_nearest_to_it(tmp_path: Path) -> None:
-    bag = _bag(tmp_path / "bag", fx=lambda i: float("nan") if i == 1 else 50.0)
+@pytest.mark.parametrize("fmt", ["ros1", "sqlite3", "mcap"])
+def test_a_bad_camera_info_fails_only_the_image_nearest_to_it(tmp_path: Path, fmt: str) -> None:
+    bag = _bag(tmp_path / "bag", fx=lambda i: float("nan") if i == 1 else 50.0, fmt=fmt)
     got = _outcomes(_source(bag))
     assert got == {0: "ok", 1: f"{bag}: {IMAGE} image 1: {INFO} message 1: CameraInfo focal length fx (K[0][0]) is NaN",
                    2: "ok"}  # fmt: skip
 
 
-def test_a_bad_number_elsewhere_in_camera_info_is_named() -> None:
+@pytest.mark.parametrize("ros1", [True, False])
+def test_a_bad_number_elsewhere_in_camera_info_is_named(ros1: bool) -> None:
     K = _K()
     info = CameraInfoData(W, H, K, np.zeros(5), np.eye(3), np.hstack([K, np.zeros((3, 1))]), "plumb_bob", "cam")
-    msg = camera_info_message(rosbags_typestore(False), info)
-    msg.d[2] = np.inf
+    msg = camera_info_message(rosbags_typestore(ros1), info)
+    D, P = (msg.D, msg.P) if ros1 else (msg.d, msg.p)
+    D[2] = np.inf
     with pytest.raises(DataError, match=r"^X: CameraInfo \(D\[2\]\) is infinite$"):
         decode_camera_info(msg, "X")
-    msg.d[2], msg.p[6] = 0.0, np.nan
+    D[2], P[6] = 0.0, np.nan
     with pytest.raises(DataError, match=r"^X: CameraInfo principal point cy \(P\[1\]\[2\]\) is NaN$"):
+        decode_camera_info(msg, "X")
+    P[6], P[0] = 24.0, 0.0
+    with pytest.raises(DataError, match=r"^X: CameraInfo focal length fx \(P\[0\]\[0\]\) is 0, not positive$"):
         decode_camera_info(msg, "X")
 
 
@@ -190,8 +197,9 @@ def test_a_quaternion_rounded_in_a_launch_file_is_accepted(tmp_path: Path) -> No
         assert set(_outcomes(_source(bag)).values()) == {"ok"}
 
 
-def test_the_command_stops_with_one_line_naming_tf_static(tmp_path: Path) -> None:
-    bag = _bag(tmp_path / "bag", tf=[("cam", "lidar", (0, 0, 0, 0), (0, 0.1, 0))])
+@pytest.mark.parametrize("fmt", ["ros1", "mcap"])
+def test_the_command_stops_with_one_line_naming_tf_static(tmp_path: Path, fmt: str) -> None:
+    bag = _bag(tmp_path / "bag", tf=[("cam", "lidar", (0, 0, 0, 0), (0, 0.1, 0))], fmt=fmt)
     res = _predict(bag, tmp_path / "out")
     assert res.exit_code == 1, res.output
     assert "no point in front of the camera" not in res.output and "skipped" not in res.output
