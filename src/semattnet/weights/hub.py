@@ -43,6 +43,7 @@ from semattnet._utils.download import (
     url_scheme,
     verify_cached,
 )
+from semattnet._utils.extras import require
 from semattnet._utils.version import library_version
 from semattnet.models.config import SemAttNetConfig
 from semattnet.models.registry import MODELS, arch_for
@@ -372,10 +373,7 @@ def push_to_hub(
     """
     if is_offline():
         raise OfflineError("offline mode (SEMATTNET_OFFLINE/HF_HUB_OFFLINE): not uploading")
-    try:
-        from huggingface_hub import HfApi
-    except ImportError as exc:
-        raise ImportError("push_to_hub needs huggingface_hub: pip install 'semattnet[hub]'") from exc
+    HfApi = require("huggingface_hub", "push_to_hub").HfApi
     api = HfApi(token=token)
     api.create_repo(repo_id, repo_type="model", private=private, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="semattnet-push-") as tmp:

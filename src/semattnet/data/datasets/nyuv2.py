@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from semattnet._errors import DataError
+from semattnet._utils.extras import require
 from semattnet.data.datasets.frames import MissingSplitError, draw_samples, frame_seed
 from semattnet.data.frames import Frame, IndexedSource
 
@@ -35,10 +36,7 @@ MAX_MEDIAN_M = 100.0  # a median depth above this is millimetres, not metres
 
 
 def _read(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    try:
-        import h5py
-    except ImportError:
-        raise DataError(f"{path}: reading NYU v2 HDF5 files needs h5py: pip install 'semattnet[nyu]'") from None
+    h5py = require("h5py", f"{path}: reading NYU v2 HDF5 files")
     try:
         with h5py.File(path, "r") as f:
             missing = [k for k in ("rgb", "depth") if k not in f]

@@ -18,7 +18,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from semattnet.inference.backends._base import HEADS_PREFIX, ExportedGraphEngine, LogFn, import_backend
+from semattnet._utils.extras import require
+from semattnet.inference.backends._base import HEADS_PREFIX, ExportedGraphEngine, LogFn
 from semattnet.inference.backends._export_cache import cached_onnx, engine_dir, engine_key, propagation_steps
 from semattnet.inference.backends.calibration import DEFAULT_CALIBRATION_FRAMES, resolve_calibration
 from semattnet.inference.backends.openvino_int8 import quantized_ir
@@ -45,7 +46,7 @@ class OpenVinoEngine(ExportedGraphEngine):
                  cache_dir: str | os.PathLike[str] | None = None, log: LogFn | None = None,
                  calibration: Any = None, calibration_frames: int = DEFAULT_CALIBRATION_FRAMES) -> None:  # fmt: skip
         super().__init__(size, precision, needs_semantic)
-        ov = import_backend("openvino", "openvino")
+        ov = require("openvino", "the openvino backend")
         folder = engine_dir(engine_key(model, size, extra=f"openvino-{ov.__version__}"), cache_dir)
         xml = folder / "model.xml"
         core = ov.Core()

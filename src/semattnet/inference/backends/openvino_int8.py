@@ -22,7 +22,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from semattnet.inference.backends._base import import_backend
+from semattnet._utils.extras import require
 from semattnet.inference.backends.calibration import Calibration
 
 __all__ = ["KEEP_FLOAT", "quantized_ir"]
@@ -49,7 +49,7 @@ def quantized_ir(ov: Any, core: Any, xml: Path, calibration: Calibration, log=No
     out = target / "model.xml"
     if out.is_file():
         return out
-    nncf = import_backend("nncf", "openvino")
+    nncf = require("nncf", "int8 quantisation")
     if log is not None:
         log(f"quantising to int8 on {calibration.description} (once; cached in {target}) ...")
     model = core.read_model(str(xml))

@@ -20,8 +20,9 @@ from pathlib import Path
 from typing import Any
 
 from semattnet._errors import DataError, SemAttNetError
+from semattnet._utils.extras import require
 
-from .deps import import_extra, rosbags_typestore
+from .deps import rosbags_typestore
 from .tf import TransformTree
 
 __all__ = [
@@ -55,10 +56,10 @@ class TopicRow:
 
 @functools.cache
 def _reader_errors() -> tuple[type[BaseException], ...]:
-    rosbag1 = import_extra("rosbags.rosbag1", "reading ROS bags")
-    rosbag2 = import_extra("rosbags.rosbag2", "reading ROS bags")
-    highlevel = import_extra("rosbags.highlevel", "reading ROS bags")
-    serde = import_extra("rosbags.serde", "reading ROS bags")
+    rosbag1 = require("rosbags.rosbag1", "reading ROS bags")
+    rosbag2 = require("rosbags.rosbag2", "reading ROS bags")
+    highlevel = require("rosbags.highlevel", "reading ROS bags")
+    serde = require("rosbags.serde", "reading ROS bags")
     return (highlevel.AnyReaderError, rosbag1.ReaderError, rosbag2.ReaderError, serde.SerdeError, sqlite3.Error,
             struct.error, EOFError, zlib.error, KeyError, IndexError, UnicodeDecodeError)  # fmt: skip
 
@@ -108,7 +109,7 @@ def open_bag(path: str | os.PathLike[str]) -> Iterator[Any]:
     Raises:
         DataError: ``path`` is missing, not a bag, truncated or corrupt.
     """
-    highlevel = import_extra("rosbags.highlevel", "reading ROS bags")
+    highlevel = require("rosbags.highlevel", "reading ROS bags")
     path = Path(path)
     if not path.exists():
         raise DataError(f"{path}: bag not found")
