@@ -15,6 +15,8 @@ from typing import Any
 import click
 import torch
 
+from semattnet._errors import SemAttNetError
+
 #: A count of at least one (frames, steps, repeats, batch size).
 POSITIVE_INT = click.IntRange(min=1)
 #: A count that may be zero (0 = "none" / "all", as each option's help says).
@@ -202,6 +204,39 @@ def model_from_options(checkpoint: Path | None, weights: str | None, device: str
     if spec is None:
         raise click.UsageError("--checkpoint or --weights is required (they are one option: --checkpoint is an alias)")
     return from_pretrained(spec, map_location=device)
+
+
+def precision_options(f: Any) -> Any:
+    """``--precision f32|bf16|int8`` and ``--calibration PATH`` (int8 only) of every command that runs a model."""
+    f = click.option(
+        "--calibration",
+        type=click.Path(exists=True, path_type=Path),
+        default=None,
+        help="With --precision int8: the frames NNCF measures value ranges on: a folder with rgb/ + sparse/ "
+        "(+ semantic/), or a KITTI / synth root (its val_select) [8 synthetic street scenes].",
+    )(f)
+    return click.option(
+        "--precision",
+        type=click.Choice(["f32", "bf16", "int8"]),
+        default=None,
+        help="The network's arithmetic: f32 [default], bf16 (faster only on CPUs with native bfloat16), int8 "
+        "(OpenVINO + NNCF: --backend openvino; quantised once per weights, size and calibration, then cached).",
+    )(f)
+
+
+def check_precision_options(method: str, amp: str, precision: str | None, calibration: Path | None,
+                            backend: str) -> None:  # fmt: skip
+    """``--precision`` / ``--calibration`` agree with the method, ``--amp`` and ``--backend`` (usage errors, before
+    any work)."""
+    from semattnet.inference.completer import check_precision
+
+    require_with("--precision int8", precision == "int8", "calibration")
+    if method == "classical" and precision is not None:
+        raise click.UsageError("--precision is the network's: --method classical runs none")
+    try:
+        check_precision(precision, amp, backend)
+    except SemAttNetError as exc:
+        raise click.UsageError(str(exc).replace("precision ", "--precision ", 1).replace("amp ", "--amp ")) from None
 
 
 #: ``--backend``: the inference engine of every command that runs a model (see ``optimize_for_inference``).

@@ -14,13 +14,15 @@ from semattnet.cli._options import (
     NONNEGATIVE_FLOAT,
     POSITIVE_FLOAT,
     backend_option,
+    check_precision_options,
+    precision_options,
     require_with,
     weights_option,
 )
 
 
 def _completer(method: str, checkpoint: Path | None, weights: str | None, device: str, amp: str,
-               backend: str = "torch"):  # fmt: skip
+               backend: str = "torch", precision: str | None = None, calibration: Path | None = None):  # fmt: skip
     """The completer the options name: the classical baseline or the model of --checkpoint / --weights."""
     from semattnet._utils.distributed import process_device
     from semattnet.baselines.classical import ClassicalCompleter
@@ -31,7 +33,8 @@ def _completer(method: str, checkpoint: Path | None, weights: str | None, device
         return ClassicalCompleter()
     _check_method(method, checkpoint, weights)
     model = model_from_options(checkpoint, weights, "cpu")
-    return DepthCompleter(model, device=process_device(device), amp=amp, backend=backend, inplace=True)
+    return DepthCompleter(model, device=process_device(device), amp=amp, backend=backend, inplace=True,
+                          precision=precision, calibration=calibration)  # fmt: skip
 
 
 def _check_method(method: str, checkpoint: Path | None, weights: str | None) -> None:
@@ -224,6 +227,7 @@ def _out_and_resume(out: Path | None, resume: str | None) -> tuple[Path, bool]:
 @click.option("--device", default="auto", show_default=True)
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
 @backend_option
+@precision_options
 @click.option("--overwrite", is_flag=True, help="Replace existing outputs.")
 @click.option(
     "--resume",
@@ -269,6 +273,7 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
     if resuming and overwrite:
         raise click.UsageError("give --resume or --overwrite, not both")
     _check_method(method, checkpoint, weights)
+    check_precision_options(method, amp, bag.pop("precision"), bag.pop("calibration"), backend)
     if method != "classical":
         from semattnet._utils.device import resolve_device
 
@@ -333,7 +338,8 @@ def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
                             run=_identity(p))  # every input and output, before the model  # fmt: skip
         if plan.journal.kept:
             click.echo(f"{out}: resuming: {len(plan.journal.kept)} of {len(source.names)} frame(s) already done")
-        completer = _completer(p["method"], None, p["weights"], p["device"], p["amp"], p["backend"])
+        completer = _completer(p["method"], None, p["weights"], p["device"], p["amp"], p["backend"], p["precision"],
+                               p["calibration"])  # fmt: skip
         run = complete_frames(source, completer, sinks, out, overwrite=p["overwrite"], log=click.echo,
                               semantic=maps, checked=plan, timer=timer, prefetch=2 if p["stream"] else 0,
                               realtime=realtime)  # fmt: skip
