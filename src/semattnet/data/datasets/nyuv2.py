@@ -23,7 +23,7 @@ from semattnet._errors import DataError
 from semattnet._utils.bounds import check_image_size, regular_file
 from semattnet.data.datasets.frames import MissingSplitError, draw_samples, frame_seed
 from semattnet.data.datasets.hdf5 import plain_dataset, read_bounded
-from semattnet.data.frames import Frame, IndexedSource
+from semattnet.data.frames import Frame, IndexedSource, unique_names
 
 __all__ = ["NYU_K", "NYU_SPLITS", "NyuV2Source", "protocol_K", "read_nyu_h5"]
 
@@ -143,7 +143,8 @@ class NyuV2Source(IndexedSource):
         if not files:
             raise DataError(f"{folder}: no .h5 files")
         files = files[:max_frames] if max_frames else files
-        self.files = {(f"{f.parent.name}_{f.stem}" if self.split == "train" else f.stem): f for f in files}
+        train = self.split == "train"
+        self.files = unique_names(((f"{f.parent.name}_{f.stem}" if train else f.stem, f) for f in files), folder)
         self.names: Sequence[str] = list(self.files)
         self.samples, self.seed = samples, seed
         self.semantic_root = Path(semantic_root) if semantic_root is not None else None

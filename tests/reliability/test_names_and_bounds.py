@@ -1,0 +1,119 @@
+"""Frame names stay unique, list files are read as untrusted text, and every number an option takes is
+bounded: each fault ends in one line naming the inputs or the option (exit 1 or 2), never a traceback, a
+silently dropped frame or a replaced input."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from semattnet._errors import DataError
+from semattnet.cli import main
+from semattnet.data.datasets import get_dataset
+from semattnet.data.frames import DuplicateFrameError
+from tests.data._datasets import make_void, nyu_frame, write_h5
+
+
+def run(*args: object) -> tuple[int, str]:
+    result = CliRunner().invoke(main, [str(a) for a in args])
+    return result.exit_code, result.output
+
+
+def one_line(output: str) -> str:
+    assert "Traceback" not in output and len(output.strip().splitlines()) == 1, output
+    return output.strip()
+
+
+# ---- unique frame names ------------------------------------------------------------------------------------
+
+
+def test_nyu_scene_and_file_names_that_join_alike_are_refused(tmp_path: Path) -> None:
+    pytest.importorskip("h5py")
+    rng = np.random.default_rng(0)
+    a = write_h5(tmp_path / "train" / "a_b" / "1.h5", nyu_frame(rng, 8, 8))
+    b = write_h5(tmp_path / "train" / "a" / "b_1.h5", nyu_frame(rng, 8, 8))
+    with pytest.raises(DuplicateFrameError, match="'a_b_1'") as exc:
+        get_dataset("nyuv2").source(tmp_path, "train")
+    assert str(a) in str(exc.value) and str(b) in str(exc.value) and "\n" not in str(exc.value)
+
+
+def _void_lists(folder: Path, images: list[str]) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    for role in ("image", "sparse_depth", "ground_truth"):
+        (folder / f"test_{role}.txt").write_text("".join(f"{i.replace('image', role)}\n" for i in images))
+    return folder
+
+
+def test_void_images_of_one_sequence_name_under_two_parents_are_refused(tmp_path: Path) -> None:
+    lists = _void_lists(tmp_path / "void_1500", ["/x/scene1/image/00000.png", "/y/scene1/image/00000.png"])
+    with pytest.raises(DuplicateFrameError, match="'scene1_00000'") as exc:
+        get_dataset("void").source(lists, "test")
+    assert "/x/scene1/image/00000.png" in str(exc.value) and "/y/scene1/image/00000.png" in str(exc.value)
+    code, out = run("predict", "--dataset", "void", "--data", lists, "--method", "classical", "--out", tmp_path / "o")
+    assert code == 1 and "both make the frame name 'scene1_00000'" in one_line(out)
+    assert not (tmp_path / "o").exists()
+
+
+def test_folder_frames_with_one_name_are_refused() -> None:
+    from semattnet.data.pairing import FramePaths
+    from semattnet.data.sources import FolderSource
+
+    frames = [FramePaths("f", Path("a/f.png"), Path("s/f.png")), FramePaths("f", Path("b/f.png"), Path("s/f.png"))]
+    with pytest.raises(DuplicateFrameError, match="a/f.png and b/f.png both make the frame name 'f'"):
+        FolderSource(frames)
+
+
+def test_raw_drive_frames_of_one_number_are_refused(tmp_path: Path) -> None:
+    from semattnet.data.kitti_raw import RawDrive
+    from tests.inference._raw_sample import three_frame_drive
+
+    drive = three_frame_drive(tmp_path)  # frames 5, 6, 7
+    image, scan = drive / "image_02" / "data", drive / "velodyne_points" / "data"
+    (image / "5.png").write_bytes((image / "0000000005.png").read_bytes())  # frame 5 twice
+    (scan / "5.bin").write_bytes((scan / "0000000005.bin").read_bytes())
+    with pytest.raises(DuplicateFrameError, match=r"0000000005\.png and 5\.png are both frame 5"):
+        RawDrive(drive).names_for("5-6")
+    assert len(RawDrive(drive).names_for(None)) == 4  # every frame, by its own name: nothing lost
+    (image / "5.png").rename(image / "five.png")
+    (scan / "5.bin").rename(scan / "five.bin")
+    with pytest.raises(DataError, match=r"five\.png: not a frame number"):
+        RawDrive(drive).names_for("5")
+
+
+# ---- list files ----------------------------------------------------------------------------------------------
+
+
+def test_empty_void_lists_are_an_error(tmp_path: Path) -> None:
+    lists = _void_lists(tmp_path / "void_1500", [])
+    code, out = run("predict", "--dataset", "void", "--data", lists, "--method", "classical", "--out", tmp_path / "o")
+    assert code == 1 and one_line(out).endswith(f"{lists / 'test_image.txt'}: lists no frames (one path per line expected)")
+
+
+def test_a_void_list_that_is_not_utf8_names_the_list(tmp_path: Path) -> None:
+    lists = _void_lists(tmp_path / "void_1500", ["/x/s/image/0.png"])
+    (lists / "test_sparse_depth.txt").write_bytes(b"/x/s/sparse_depth/\xff\xfe.png\n")
+    code, out = run("data", "check", "--dataset", "void", lists)
+    assert code == 1 and f"{lists / 'test_sparse_depth.txt'}: not a UTF-8 text list of paths" in out
+    assert "Traceback" not in out
+    (lists / "test_sparse_depth.txt").write_bytes(b"/x/s/sparse_depth/\x00.png\n")
+    with pytest.raises(DataError, match="test_sparse_depth.txt: line 1 holds a NUL character"):
+        get_dataset("void").source(lists, "test")
+
+
+def test_a_file_a_void_list_names_is_an_input_of_predict(tmp_path: Path) -> None:
+    root = make_void(tmp_path / "void", train=0, test=2, h=32, w=48) / "void_1500"
+    out = tmp_path / "out"
+    args = ("predict", "--dataset", "void", "--data", root, "--method", "classical", "--out", out)
+    assert run(*args)[0] == 0
+    src = get_dataset("void").source(root, "test")
+    assert set(src.listed_files()) <= set(src.inputs()) and len(src.listed_files()) == 2 * 4 + 1  # + one K.txt
+    victim = out / f"{src.names[0]}.png"  # the prediction of frame 0 becomes the listed sparse map of frame 0
+    sparse_list = root / "test_sparse_depth.txt"
+    sparse_list.write_text("\n".join([str(victim), *sparse_list.read_text().splitlines()[1:]]) + "\n")
+    before = victim.read_bytes()
+    code, output = run(*args, "--overwrite")
+    assert code == 1 and f"would replace the input {victim}" in one_line(output)
+    assert victim.read_bytes() == before
