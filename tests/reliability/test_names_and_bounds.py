@@ -89,7 +89,8 @@ def test_raw_drive_frames_of_one_number_are_refused(tmp_path: Path) -> None:
 def test_empty_void_lists_are_an_error(tmp_path: Path) -> None:
     lists = _void_lists(tmp_path / "void_1500", [])
     code, out = run("predict", "--dataset", "void", "--data", lists, "--method", "classical", "--out", tmp_path / "o")
-    assert code == 1 and one_line(out).endswith(f"{lists / 'test_image.txt'}: lists no frames (one path per line expected)")
+    expected = f"{lists / 'test_image.txt'}: lists no frames (one path per line expected)"
+    assert code == 1 and one_line(out).endswith(expected)
 
 
 def test_a_void_list_that_is_not_utf8_names_the_list(tmp_path: Path) -> None:
