@@ -6,12 +6,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import click
 import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from semattnet._errors import DataError
+from semattnet._errors import DataError, InputError
 from semattnet.cli import main
+from semattnet.cli._options import FiniteFloat
 from semattnet.data.datasets import get_dataset
 from semattnet.data.frames import DuplicateFrameError
 from tests.data._datasets import make_void, nyu_frame, write_h5
@@ -118,3 +120,146 @@ def test_a_file_a_void_list_names_is_an_input_of_predict(tmp_path: Path) -> None
     code, output = run(*args, "--overwrite")
     assert code == 1 and f"would replace the input {victim}" in one_line(output)
     assert victim.read_bytes() == before
+
+
+# ---- bounds on every number an option takes -----------------------------------------------------------------
+
+
+def _numeric_options() -> list[tuple[str, click.Parameter]]:
+    """Every option of every command (groups walked) whose type is a number."""
+    found: list[tuple[str, click.Parameter]] = []
+
+    def walk(cmd: click.Command, path: str) -> None:
+        if isinstance(cmd, click.Group):
+            for name, sub in cmd.commands.items():
+                walk(sub, f"{path} {name}".strip())
+            return
+        for p in cmd.params:
+            if isinstance(p.type, click.IntRange | click.FloatRange | FiniteFloat) or p.type in (
+                click.INT,
+                click.FLOAT,
+            ):
+                found.append((path, p))
+
+    walk(main, "")
+    return found
+
+
+def test_every_numeric_option_has_an_upper_bound() -> None:
+    options = _numeric_options()
+    names = {f"{cmd} {p.opts[0]}" for cmd, p in options}
+    expected = {"predict --max-skew", "predict --speed", "predict --max-depth", "predict --top-crop",
+                "project --scan-period", "data bag-from-kitti --nan-points", "train --lr", "train --width",
+                "train --batch-size", "train --workers", "evaluate --batch-size", "evaluate --max-frames"}  # fmt: skip
+    assert expected <= names
+    for cmd, p in options:
+        ctx = click.Context(click.Command(cmd))
+        huge = "1e300" if isinstance(p.type, FiniteFloat) else "2000000000"
+        with pytest.raises(click.BadParameter):
+            p.type.convert(huge, p, ctx)
+
+
+@pytest.mark.parametrize(
+    ("args", "option"),
+    [
+        (
+            [
+                "predict",
+                "--rgb",
+                "{t}",
+                "--sparse",
+                "{t}",
+                "--method",
+                "classical",
+                "--out",
+                "{t}/o",
+                "--max-depth",
+                "1e300",
+            ],
+            "--max-depth",
+        ),
+        (
+            ["data", "bag-from-kitti", "--drive", "{t}", "--out", "{t}/b.bag", "--nan-points", "2000000000"],
+            "--nan-points",
+        ),
+        (["train", "--data", "{t}", "--lr", "1e300"], "--lr"),
+        (["train", "--data", "{t}", "--width", "1e300"], "--width"),
+        (["evaluate", "--data", "{t}", "--method", "classical", "--batch-size", "2000000000"], "--batch-size"),
+        (["project", "--points", __file__, "--out", "{t}/x.png", "--scan-period", "1e300"], "--scan-period"),
+    ],
+)
+def test_huge_numbers_are_one_line_naming_the_option(tmp_path: Path, args: list[str], option: str) -> None:
+    code, out = run(*(a.format(t=tmp_path) for a in args))
+    assert code == 2 and option in out and "Traceback" not in out, out
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_max_skew_is_bounded_in_the_cli_and_the_library(tmp_path: Path) -> None:
+    code, out = run("predict", "--bag", tmp_path, "--image-topic", "/i", "--points-topic", "/p", "--method",
+                    "classical", "--out", tmp_path / "o", "--max-skew", "1e300")  # fmt: skip
+    assert code == 2 and "--max-skew" in out and "<= 3600" in out and "Traceback" not in out, out
+    from semattnet.robotics.bags.source import _skew_ns
+
+    for bad in (1e300, float("nan"), -1.0, float("inf")):
+        with pytest.raises(InputError, match="max_skew: must be a number of seconds in 0..3600"):
+            _skew_ns(bad)
+    assert _skew_ns(0.05) == 50_000_000
+
+
+def test_nan_points_are_bounded_in_the_library(tmp_path: Path) -> None:
+    pytest.importorskip("rosbags")
+    from semattnet.robotics.bags.kitti import write_sensor_bag
+
+    with pytest.raises(InputError, match="nan_points: must be a whole number in 0..1000000, got 2000000000"):
+        write_sensor_bag(tmp_path / "b.mcap", [], None, nan_points=2_000_000_000)  # type: ignore[arg-type]
+    assert not (tmp_path / "b.mcap").exists()
+
+
+def test_segment_with_the_classical_method_is_refused(tmp_path: Path) -> None:
+    """``--method classical`` reads no semantic map and runs no engine: --segment, --backend and --amp would
+    be ignored unread (a bogus spec or a pickle path passed, and nothing ran)."""
+    from tests.inference._raw_sample import DRIVE
+
+    pickle = tmp_path / "model.pkl"
+    pickle.write_bytes(b"\x80\x04K\x01.")
+    base = ["predict", "--kitti-raw", DRIVE, "--method", "classical", "--out", tmp_path / "o"]
+    for extra, option in ((["--segment", "bogus:spec"], "--segment"), (["--segment", pickle], "--segment"),
+                          (["--backend", "onnxruntime"], "--backend"), (["--amp", "bf16"], "--amp")):  # fmt: skip
+        code, out = run(*base, *extra)
+        assert code == 2 and f"{option} only mean(s) something with --method semattnet" in out, out
+    assert not (tmp_path / "o").exists()
+
+
+# ---- the engine cache is verified, not trusted ---------------------------------------------------------------
+
+
+def test_a_corrupt_cached_onnx_file_is_rebuilt(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    pytest.importorskip("onnxruntime")
+    pytest.importorskip("onnx")
+    from PIL import Image
+
+    from tests.inference._raw_sample import tiny_checkpoint
+
+    monkeypatch.setenv("SEMATTNET_CACHE", str(tmp_path / "cache"))
+    rng = np.random.default_rng(0)
+    Image.fromarray(rng.integers(0, 256, (64, 96, 3), dtype=np.uint8)).save(tmp_path / "rgb.png")
+    sparse = np.where(rng.random((64, 96)) < 0.1, rng.uniform(2, 40, (64, 96)), 0)
+    Image.fromarray(np.round(sparse * 256).astype(np.uint16)).save(tmp_path / "sparse.png")
+    ckpt = tiny_checkpoint(tmp_path / "tiny.safetensors")
+    args = ("predict", "--rgb", tmp_path / "rgb.png", "--sparse", tmp_path / "sparse.png", "--weights", ckpt,
+            "--backend", "onnxruntime", "--out", tmp_path / "out", "--overwrite")  # fmt: skip
+    assert run(*args)[0] == 0
+    first = (tmp_path / "out" / "rgb.png").read_bytes()
+    (cached,) = (tmp_path / "cache" / "engines").glob("*/model.onnx")
+    assert cached.with_name("model.onnx.sha256").read_text().strip() != ""
+    for damage in ("corrupt", "unrecorded"):
+        if damage == "corrupt":
+            cached.write_bytes(cached.read_bytes()[:100] + b"\0garbage")
+        else:
+            cached.with_name("model.onnx.sha256").unlink()  # e.g. a file left by an older release
+        code, out = run(*args)
+        assert code == 0 and f"{cached}: the cached file" in out and "building it again" in out, out
+        assert "Traceback" not in out and (tmp_path / "out" / "rgb.png").read_bytes() == first
+        assert cached.with_name("model.onnx.sha256").is_file()
+    code, out = run(*args)  # intact now: used as it is, no line
+    assert code == 0 and "building it again" not in out
