@@ -120,6 +120,11 @@ def test_a_file_a_void_list_names_is_an_input_of_predict(tmp_path: Path) -> None
     code, output = run(*args, "--overwrite")
     assert code == 1 and f"would replace the input {victim}" in one_line(output)
     assert victim.read_bytes() == before
+    sweep = ("evaluate", "--dataset", "void", "--data", root, "--method", "classical", "--sparsity", "keep=1",
+             "--out", out, "--overwrite")  # fmt: skip
+    code, output = run(*sweep)  # evaluate's outputs too: never in a folder holding a listed input
+    assert code == 1 and f"output folder {out} holds the input {victim}" in one_line(output)
+    assert victim.read_bytes() == before and not (out / "sparsity.json").exists()
 
 
 # ---- bounds on every number an option takes -----------------------------------------------------------------
