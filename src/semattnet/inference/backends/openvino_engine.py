@@ -20,7 +20,14 @@ from torch import nn
 
 from semattnet._utils.extras import require
 from semattnet.inference.backends._base import HEADS_PREFIX, ExportedGraphEngine, LogFn
-from semattnet.inference.backends._export_cache import cached_onnx, engine_dir, engine_key, propagation_steps
+from semattnet.inference.backends._export_cache import (
+    cached_onnx,
+    engine_dir,
+    engine_key,
+    intact,
+    propagation_steps,
+    record_digest,
+)
 from semattnet.inference.backends.calibration import DEFAULT_CALIBRATION_FRAMES, resolve_calibration
 from semattnet.inference.backends.openvino_int8 import quantized_ir
 from semattnet.models.outputs import DepthCompletionOutput
@@ -50,11 +57,14 @@ class OpenVinoEngine(ExportedGraphEngine):
         folder = engine_dir(engine_key(model, size, extra=f"openvino-{ov.__version__}"), cache_dir)
         xml = folder / "model.xml"
         core = ov.Core()
-        if not xml.is_file():
+        if not (intact(xml, log) and intact(xml.with_suffix(".bin"), log)):  # verified, not trusted
             onnx_path = cached_onnx(model, size, folder, log)
             # IR first (float32 weights: no fp16 compression), so later processes skip the ONNX file
             ov.save_model(core.read_model(str(onnx_path)), str(xml), compress_to_fp16=False)
-            onnx_path.unlink()  # only an intermediate here: the IR holds the same weights
+            for part in (xml, xml.with_suffix(".bin")):
+                record_digest(part)
+            for done in (onnx_path, onnx_path.with_name(f"{onnx_path.name}.sha256")):  # the IR holds the weights
+                done.unlink(missing_ok=True)
         if precision == "int8":  # the quantised IR (cached per calibration); its float layers in f32
             xml = quantized_ir(ov, core, xml, resolve_calibration(calibration, size, calibration_frames), log)
         hint = "f32" if precision == "int8" else precision

@@ -27,7 +27,8 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from semattnet._errors import DataError
+from semattnet._errors import DataError, InputError
+from semattnet._utils.bounds import MAX_SKEW_S
 from semattnet.geometry import RigCalibration, read_rig_json
 
 from .decode import (
@@ -129,6 +130,13 @@ def rig_camera_info(rig: RigCalibration, frame_id: str = "", stamp: int = 0) -> 
                           stamp)  # fmt: skip
 
 
+def _skew_ns(max_skew: float) -> int:
+    """``max_skew`` seconds as nanoseconds, when finite and in [0, :data:`~semattnet._utils.bounds.MAX_SKEW_S`]."""
+    if isinstance(max_skew, bool) or not isinstance(max_skew, int | float) or not 0 <= max_skew <= MAX_SKEW_S:
+        raise InputError(f"max_skew: must be a number of seconds in 0..{MAX_SKEW_S:g}, got {max_skew!r}")
+    return round(max_skew * 1e9)
+
+
 class BagPairs:
     """Image/scan pairs of one bag (see the module doc).
 
@@ -160,6 +168,7 @@ class BagPairs:
                  camera_info_topic: str | None = None, rig: str | os.PathLike[str] | RigCalibration | None = None,
                  max_skew: float | None = None, rectified: bool = True,
                  tf_topic: str = TF_STATIC_TOPIC) -> None:  # fmt: skip
+        skew = None if max_skew is None else _skew_ns(max_skew)  # a bad tolerance: before the bag is opened
         self.path, self.image_topic, self.points_topic = Path(path), image_topic, points_topic
         self.rig = read_rig_json(rig) if isinstance(rig, (str, os.PathLike)) else rig
         self.rectified = rectified
@@ -170,7 +179,6 @@ class BagPairs:
                 self.camera_info_topic = self._find_camera_info(reader)
             self._scan_headers(reader)
             self.tree = read_transforms(reader, self.path, tf_topic) if self.rig is None else None
-        skew = None if max_skew is None else round(max_skew * 1e9)
         self.pairing: StampPairing = pair_stamps(self.image_stamps, self.scan_stamps, skew)
         self._check_pairing()
         self._check_calibration()
