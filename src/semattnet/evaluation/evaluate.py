@@ -211,20 +211,24 @@ def _completion(result: Any, i: int) -> Completion:
     return Completion(depth)
 
 
-def _write_scores(out: Path, metrics: KittiMetrics, summary: dict[str, Any], spars: Sparsification) -> None:
+def _write_scores(out: Path, metrics: KittiMetrics, summary: dict[str, Any], spars: Sparsification) -> list[str]:
     """``metrics.json`` (the summary), ``per_image.csv`` (one row per frame) and, when the uncertainty was
-    scored, ``sparsification.png`` (its curves, :func:`semattnet.viz.curves.plot_sparsification`)."""
+    scored, ``sparsification.png`` (its curves, :func:`semattnet.viz.curves.plot_sparsification`), written
+    by rank 0 only. Returns their names (every rank)."""
+    names = ["metrics.json", "per_image.csv", *([SPARSIFICATION_PNG] if spars.frames else [])]
+    if not dist_utils.is_main():
+        return names
     (out / "metrics.json").write_text(json.dumps(summary, indent=2) + "\n")
     if spars.frames:
         from semattnet.viz.curves import plot_sparsification
 
-        plot_sparsification(
-            {Path(str(summary.get("checkpoint", "model"))).name: spars.curves()}, out / SPARSIFICATION_PNG
-        )
+        label = Path(str(summary.get("checkpoint", "model"))).name
+        plot_sparsification({label: spars.curves()}, out / SPARSIFICATION_PNG)
     with open(out / "per_image.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(metrics.per_image[0]))
         writer.writeheader()
         writer.writerows(metrics.per_image)
+    return names
 
 
 def evaluate_checkpoint(
@@ -252,10 +256,8 @@ def evaluate_checkpoint(
     the split's frame size).
 
     Writes into ``out_dir``: ``metrics.json``, ``per_image.csv``, ``predictions/`` (16-bit PNGs named
-    like the ground truth for val_select) and ``pictures/`` (branch panels of the first frames). The
-    per-pixel uncertainty (:mod:`semattnet.models.uncertainty`) is scored too: its AUSE and AURG for RMSE
-    and MAE in ``metrics.json`` (:mod:`semattnet.evaluation.sparsification`) and its sparsification curves
-    in ``sparsification.png``.
+    like the ground truth for val_select) and ``pictures/`` (branch panels of the first frames); the
+    uncertainty's AUSE / AURG (:mod:`semattnet.evaluation.sparsification`) and ``sparsification.png``.
 
     Under ``torchrun`` (same arguments on every rank; ``cuda:LOCAL_RANK`` on GPUs) rank ``r`` of ``W``
     scores frames ``r, r + W, ...`` (each frame once); the metrics are summed over the ranks and the
@@ -285,10 +287,8 @@ def evaluate_checkpoint(
             metrics = _merge(agree(score, writer), ds, spars)
             result = _result(metrics, spars)
             if result:
-                expected += ["metrics.json", "per_image.csv", *([SPARSIFICATION_PNG] if spars.frames else [])]
-                if dist_utils.is_main():
-                    summary = {"checkpoint": label, "dataset": spec.name, "split": split} | result
-                    _write_scores(stage, metrics, summary, spars)
+                expected += _write_scores(stage, metrics, {"checkpoint": label, "dataset": spec.name,
+                                                           "split": split} | result, spars)  # fmt: skip
     return {"metrics": metrics, "result": result, "sparsification": spars}
 
 
