@@ -92,13 +92,13 @@ def test_lidar_distance_is_exact_on_random_masks() -> None:
         np.testing.assert_allclose(got[b, 0].numpy(), brute, atol=1e-5)
 
 
-def test_anchor_term_on_a_ramp_is_the_distance() -> None:
-    # depth rises 1 m per column: the slope is 1 m/px everywhere, so r * g = r
+def test_anchor_term_on_a_ramp_is_one_plus_the_distance() -> None:
+    # depth rises 1 m per column: the slope is 1 m/px everywhere, so (r + 1) g = r + 1
     depth = torch.arange(6, dtype=torch.float32).view(1, 1, 1, 6).expand(1, 1, 4, 6) + 10
     torch.testing.assert_close(depth_slope(depth), torch.ones(1, 1, 4, 6))
     sparse = torch.zeros(1, 1, 4, 6)
     sparse[0, 0, 0, 0] = 10.0
-    torch.testing.assert_close(anchor_term(sparse, depth), lidar_distance(sparse))
+    torch.testing.assert_close(anchor_term(sparse, depth), lidar_distance(sparse) + 1)
 
 
 def test_combination_by_hand() -> None:
@@ -106,10 +106,10 @@ def test_combination_by_hand() -> None:
     # u = sqrt(2.75 + 0.25) = sqrt(3)
     out = _output([[10], [12], [14]], [[0.5], [0.25], [0.25]], refined=[12.0])
     torch.testing.assert_close(depth_uncertainty(out, _t(0.0)), _t(math.sqrt(3.0)))
-    # branches agreeing on a ramp (1 m per column), nothing refined: u = the anchor term = the distance
+    # branches agreeing on a ramp (1 m per column), nothing refined: u = the anchor term = distance + 1
     ramp = [[10.0, 11.0, 12.0, 13.0]] * 3
     out = _output(ramp, [[0.2] * 4, [0.3] * 4, [0.5] * 4], refined=ramp[0])
-    torch.testing.assert_close(depth_uncertainty(out, _t(10.0, 0, 0, 0)), _t(0.0, 1.0, 2.0, 3.0))
+    torch.testing.assert_close(depth_uncertainty(out, _t(10.0, 0, 0, 0)), _t(1.0, 2.0, 3.0, 4.0))
 
 
 @pytest.mark.parametrize("name", list_models())
@@ -144,10 +144,10 @@ def test_classical_proxy_by_hand() -> None:
     assert int(step.max()) >= 1
     # one measurement: the completion is flat, slope 0, so the proxy is 0 everywhere
     assert float(classical_uncertainty(sparse).abs().max()) == 0.0
-    # on a given ramp (1 m per column) the proxy is the distance to the point
+    # on a given ramp (1 m per column) the proxy is one plus the distance to the point
     ramp = torch.arange(9, dtype=torch.float32).view(1, 1, 1, 9).expand(1, 1, 5, 9) + 6
     rows, cols = np.mgrid[0:5, 0:9]
-    np.testing.assert_allclose(classical_uncertainty(sparse, ramp)[0, 0].numpy(), np.hypot(rows - 2, cols - 4),
+    np.testing.assert_allclose(classical_uncertainty(sparse, ramp)[0, 0].numpy(), np.hypot(rows - 2, cols - 4) + 1,
                                atol=1e-6)  # fmt: skip
 
 

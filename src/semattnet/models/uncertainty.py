@@ -8,10 +8,12 @@ stages (eq. 13) refine into ``D_r``. Three signals say where that prediction is 
   mixture of eq. 12 around its own mean ``D_f`` (zero where the branches agree);
 * the **refinement change** ``c = |D_r - D_f|``: how far propagation moved the fused depth (zero for
   the variants without refinement);
-* the **anchor term** ``a = r * g``: ``r`` the distance in pixels to the nearest LiDAR measurement
+* the **anchor term** ``a = (r + 1) g``: ``r`` the distance in pixels to the nearest LiDAR measurement
   (an exact Euclidean distance transform of the sparse input), ``g`` the local slope of the final
   depth in metres per pixel. To first order a pixel ``r`` pixels from its nearest measurement can be
-  wrong by ``r * g`` metres: the depth change between it and the anchor that constrains it.
+  wrong by the depth change between it and the anchor that constrains it, ``r g`` metres; the ``+ 1``
+  is the pixel's own footprint: even a measured pixel is wrong by ``g`` when a depth edge is placed
+  one pixel off (projection, interpolation), where most of the error of a completion lies.
 
 :func:`depth_uncertainty` combines them as ``u = sqrt(s^2 + c^2 + a^2)`` (independent error
 sources add in quadrature). The result is a disagreement measure in metres, not a calibrated
@@ -117,17 +119,18 @@ def depth_slope(depth: torch.Tensor) -> torch.Tensor:
 
 
 def anchor_term(sparse: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
-    """``r * g``: the distance ``r`` to the nearest measurement (pixels, :func:`lidar_distance`) times the
-    local slope ``g`` of ``depth`` (metres per pixel, :func:`depth_slope`), (B, 1, H, W) metres."""
-    return lidar_distance(sparse.to(depth.device)) * depth_slope(depth)
+    """``(r + 1) g``: the distance ``r`` to the nearest measurement (pixels, :func:`lidar_distance`) plus the
+    pixel's own footprint, times the local slope ``g`` of ``depth`` (metres per pixel, :func:`depth_slope`):
+    to first order the depth change between the pixel and the anchor that constrains it, (B, 1, H, W) metres."""
+    return (lidar_distance(sparse.to(depth.device)) + 1) * depth_slope(depth)
 
 
 def depth_uncertainty(output: DepthCompletionOutput, sparse: torch.Tensor) -> torch.Tensor:
     """The per-pixel uncertainty of ``output.depth`` in metres, (B, 1, H, W), from the outputs and the sparse input.
 
     ``u = sqrt(s^2 + c^2 + a^2)``: :func:`branch_spread` (the mixture of eq. 12), :func:`refinement_change`
-    (eq. 13) and :func:`anchor_term` (distance to the LiDAR times the local slope). A disagreement measure,
-    not a calibrated probability.
+    (eq. 13) and :func:`anchor_term` (one plus the distance to the LiDAR, times the local slope). A
+    disagreement measure, not a calibrated probability.
     """
     s = branch_spread(output)
     c = refinement_change(output)
