@@ -43,7 +43,7 @@ def test_short_demo_writes_report(demo_run) -> None:  # type: ignore[no-untyped-
     assert "| Classical completion |" in md and "RMSE shadowed [mm]" in md
     images = [line.split("](")[1].rstrip(")") for line in md.splitlines() if line.startswith("![")]
     assert len(images) == 9  # 2 comparisons, 2 branch panels, 4 training curves, the sparsification curves
-    assert "Uncertainty of Classical completion (AUSE / AURG of RMSE" in md
+    assert "Uncertainty of Classical completion, AUSE / AURG of RMSE" in md
     unc = json.loads((out / "results.json").read_text())["uncertainty"]
     assert set(unc) == {"classical", "semattnet", "two_branch", "reference"}
     for method, scores in unc.items():

@@ -59,7 +59,7 @@ def uncertainty_report(scores: dict[str, dict[str, Any]], pictures: Path) -> tup
     """The report's figure (caption, path) of the mean curves and one sentence per method with its AUSE / AURG."""
     from semattnet.viz.curves import plot_sparsification
 
-    short = {m: LABELS[m].split(" (")[0] + (" reference" if m == "reference" else "") for m in scores}
+    short = {m: LABELS[m].split(" (")[0] for m in scores}
     curves = {short[m]: {k: np.asarray(v) for k, v in s["curves"].items()} for m, s in scores.items()}
     plot_sparsification(curves, pictures / Path(UNCERTAINTY_FIGURE).name,
                         title="Sparsification on the held-out scenes (mean over seeds)")  # fmt: skip
@@ -69,7 +69,9 @@ def uncertainty_report(scores: dict[str, dict[str, Any]], pictures: Path) -> tup
                "mean over seeds (docs/guides/uncertainty.md)")  # fmt: skip
     lines = []
     for m, s in scores.items():
+        runs = list(s["per_seed"].values())
         seeds = "; ".join(f"seed {k}: {v['ause_rmse']:.3f} / {v['aurg_rmse']:.3f}" for k, v in s["per_seed"].items())
-        lines.append(f"Uncertainty of {short[m]} (AUSE / AURG of RMSE, mean over seeds): {s['ause_rmse']:.3f} / "
-                     f"{s['aurg_rmse']:.3f} ({seeds}); lower AUSE and higher AURG rank the errors better.")  # fmt: skip
+        how = f"mean over seeds ({seeds})" if any(r != runs[0] for r in runs) else "the same for every seed"
+        lines.append(f"Uncertainty of {short[m]}, AUSE / AURG of RMSE: {s['ause_rmse']:.3f} / {s['aurg_rmse']:.3f}, "
+                     f"{how}; lower AUSE and higher AURG rank the errors better.")  # fmt: skip
     return (caption, UNCERTAINTY_FIGURE), lines
