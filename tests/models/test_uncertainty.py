@@ -134,6 +134,8 @@ def test_completion_uncertainty_is_an_array_in_metres() -> None:
     assert result.uncertainty is not None
     assert result.uncertainty.shape == (20, 30) and result.uncertainty.dtype == np.float32
     np.testing.assert_array_equal(result.uncertainty, result.outputs["uncertainty"])
+    completer.compute_uncertainty = False  # switched off: the field stays None
+    assert completer(rgb, sparse, rgb).uncertainty is None
 
 
 def test_classical_proxy_by_hand() -> None:

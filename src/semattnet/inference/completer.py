@@ -113,6 +113,9 @@ class DepthCompleter:
         self.needs_semantic = needs_semantic(model)
         #: The semantic palette the model was trained with (its config's; Cityscapes when it records none).
         self.palette: str = getattr(getattr(model, "config", None), "palette", "cityscapes")
+        #: Whether :meth:`run` (and a call) sets the outputs' ``uncertainty``
+        #: (:func:`semattnet.models.uncertainty.depth_uncertainty`; about 60 ms of one CPU core at 375x1242).
+        self.compute_uncertainty = True
         self._source = model.to(self.device).eval()
         self._inplace = inplace
         self._engines: dict[tuple[int, int] | None, nn.Module] = {}
@@ -151,7 +154,7 @@ class DepthCompleter:
     def run(self, rgb: torch.Tensor, semantic: torch.Tensor | None, sparse: torch.Tensor) -> DepthCompletionOutput:
         """Batched tensors (B, C, H, W) of any H, W -> outputs at the same size, with their ``uncertainty``
         (:func:`semattnet.models.uncertainty.depth_uncertainty`: from the outputs every engine returns and
-        ``sparse``, so the same for every engine up to float rounding).
+        ``sparse``, so the same for every engine up to float rounding; not with ``compute_uncertainty = False``).
 
         Raises:
             InputError: NaN / infinite, negative or too large sparse depth (checked here too, as exported
@@ -167,6 +170,8 @@ class DepthCompleter:
             out = engine(rgb=rgb_p.to(self.device), semantic=None if sem_p is None else sem_p.to(self.device),
                          sparse=sparse_p.to(self.device))  # fmt: skip
         out = out.map(lambda t: crop_padding(t.float(), pad))
+        if not self.compute_uncertainty:
+            return out
         with torch.inference_mode():
             return with_uncertainty(out, sparse)
 
