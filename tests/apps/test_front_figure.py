@@ -14,6 +14,7 @@ from semattnet.apps.demo.recipe import DemoSettings
 from semattnet.apps.front_figure import WEIGHTS, make_front_figure
 
 
+@pytest.mark.slow  # two shipped models and the classical completion, swept and scored: about a minute on 2 cores
 def test_tiny_front_figure(tmp_path: Path) -> None:
     tiny = DemoSettings(train_frames=1, eval_frames=2, size=(64, 96))
     numbers = make_front_figure(tmp_path / "out", tmp_path / "work", ("beams=64", "keep=0.5"), demo=tiny,
