@@ -35,7 +35,7 @@ from semattnet.inference.padding import crop_padding, pad_to_multiple
 from semattnet.models.checks import check_has_points, check_sparse_depth
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.uncertainty import with_uncertainty
-from semattnet.weights.checkpoint import load_model
+from semattnet.weights.hub import load_model
 
 __all__ = ["Completion", "DepthCompleter"]
 
@@ -120,7 +120,7 @@ class DepthCompleter:
     @classmethod
     def from_checkpoint(cls, path: str | Path, device: str | torch.device = "auto", amp: str = "none",
                         backend: str = "torch") -> DepthCompleter:  # fmt: skip
-        """A completer for the weights file at ``path`` (see :func:`semattnet.weights.checkpoint.load_model`)."""
+        """A completer for the weights file at ``path`` (see :func:`semattnet.weights.load_model`)."""
         return cls(load_model(path), device, amp, backend, inplace=True)
 
     @classmethod
