@@ -299,7 +299,7 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
     out, resuming = _out_and_resume(out, bag.pop("resume"))
     _check_combinations(rgb, sparse, kitti_raw, data, frames, deskew, ply, segment_spec, semantic, report,
                         intrinsics, bag)  # fmt: skip
-    _check_uncertainty(ply, panel, bag)
+    _check_uncertainty(ply, panel, kitti_raw is not None or bag["bag"] is not None, bag)
     if resuming and overwrite:
         raise click.UsageError("give --resume or --overwrite, not both")
     _check_method(method, checkpoint, weights)
@@ -346,11 +346,13 @@ def _check_combinations(rgb: Path | None, sparse: Path | None, kitti_raw: Path |
         raise click.UsageError("--realtime replays a recording: it needs --bag or --kitti-raw")
 
 
-def _check_uncertainty(ply: bool, panel: bool, bag: dict[str, Any]) -> None:
-    """``--max-uncertainty`` only with an output that has a point cloud; with a bag or a Rerun recording, only
-    with ``--uncertainty`` (a resume rebuilds the kept frames' clouds from their stored uncertainty)."""
+def _check_uncertainty(ply: bool, panel: bool, lidar: bool, bag: dict[str, Any]) -> None:
+    """``--max-uncertainty`` only with an output that has a point cloud (``--panel``: its bird's-eye view, with
+    the LiDAR of ``--kitti-raw`` / ``--bag``); with a bag or a Rerun recording, only with ``--uncertainty`` (a
+    resume rebuilds the kept frames' clouds from their stored uncertainty)."""
     replayed = bool(bag["bag_out"] or bag["rerun_file"] or bag["rerun_spawn"] or bag["rerun_serve"])
-    require_with("--ply, --panel, --bag-out, --rerun or --live", ply or panel or replayed or bag["live"] is not None,
+    clouds = ply or (panel and lidar) or replayed or bag["live"] is not None
+    require_with("--ply, --panel (with --kitti-raw or --bag), --bag-out, --rerun or --live", clouds,
                  "max_uncertainty")  # fmt: skip
     if bag["max_uncertainty"] is not None and replayed and not bag["uncertainty"]:
         raise click.UsageError("--max-uncertainty with --bag-out or --rerun needs --uncertainty (a resumed run "

@@ -25,7 +25,7 @@ __all__ = ["MAX_ABSOLUTE_M", "MAX_RELATIVE_PERCENT", "UncertaintyLimit", "clean_
 #: The largest absolute limit, metres (about what a 16-bit PNG holds).
 MAX_ABSOLUTE_M = 255.0
 #: The largest relative limit, in percent of the depth.
-MAX_RELATIVE_PERCENT = 100.0
+MAX_RELATIVE_PERCENT = 1000.0
 
 
 def clean_uncertainty(uncertainty: np.ndarray, depth: np.ndarray, name: str = "prediction") -> np.ndarray:
