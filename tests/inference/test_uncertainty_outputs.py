@@ -29,14 +29,14 @@ H, W = 12, 20
 K = np.array([[20.0, 0, 9.5], [0, 20.0, 5.5], [0, 0, 1]])
 
 
-def _prediction(uncertainty: bool = True):
+def _prediction(uncertainty: bool = True, **frame_fields: object):
     rng = np.random.default_rng(3)
     depth = rng.uniform(2, 40, (H, W)).astype(np.float32)
     depth[0, :4] = 0  # holes
     unc = rng.uniform(0, 3, (H, W)).astype(np.float32)
     unc[1, 0], unc[1, 1], unc[1, 2] = 0.0, 1e-4, 1e6  # none, below one step, above the range
     sparse = np.where(rng.random((H, W)) < 0.2, depth, 0).astype(np.float32)
-    frame = Frame("f0", rng.integers(0, 256, (H, W, 3), dtype=np.uint8), sparse, K=K)
+    frame = Frame("f0", rng.integers(0, 256, (H, W, 3), dtype=np.uint8), sparse, K=K, **frame_fields)  # type: ignore[arg-type]
     return predict_frame(frame, Completion(depth, uncertainty=unc if uncertainty else None))
 
 
@@ -140,3 +140,48 @@ def test_viewer_has_an_uncertainty_layer(tmp_path: Path) -> None:
     assert len(layers) == 1 and layers[0].startswith("m: uncertainty (0 to ")
     assert any(v["key"] == "uncertainty" and v["unit"] == "m" for v in data(0)["values"])
     assert not any(layer["key"] == "uncertainty" for layer in data(1)["layers"])
+
+
+def test_birds_eye_view_of_the_panel_uses_the_limit(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The panel's bird's-eye view is drawn from the limited cloud; its depth tiles stay dense."""
+    import semattnet.viz.panels as panels
+    from semattnet.geometry import RigCalibration
+    from semattnet.inference.sinks import PanelSink
+
+    seen: dict[str, object] = {}
+
+    def bev(cloud, points, calib, shape, max_depth):  # type: ignore[no-untyped-def]
+        seen["points"] = len(cloud.xyz)
+        return np.zeros((*shape, 3), np.uint8)
+
+    def panel(path, rgb, semantic, sparse, outputs, gt=None, extra=()):  # type: ignore[no-untyped-def]
+        seen["depth"] = outputs["refined_depth"]
+
+    monkeypatch.setattr(panels, "birds_eye_tile", bev)
+    monkeypatch.setattr(panels, "branch_panel", panel)
+    pred = _prediction(points=np.zeros((5, 4), np.float32), calib=RigCalibration(K, np.eye(4), (W, H), "cam"))
+    limit = UncertaintyLimit(0.5)
+    PanelSink(max_uncertainty=limit).write(tmp_path, pred)
+    keep = pred.keep(limit)
+    assert keep is not None and seen["points"] == keep.sum() < (pred.stored > 0).sum()
+    np.testing.assert_array_equal(seen["depth"], pred.stored)
+
+
+def test_predict_report_shows_the_uncertainty(tmp_path: Path) -> None:
+    pytest.importorskip("plotly")
+    from click.testing import CliRunner
+
+    from semattnet.cli import main
+    from semattnet.data.io import write_depth, write_image
+
+    pred = _prediction()
+    (tmp_path / "rgb").mkdir()
+    (tmp_path / "sparse").mkdir()
+    write_image(tmp_path / "rgb" / "a.png", pred.frame.rgb)
+    write_depth(tmp_path / "sparse" / "a.png", pred.frame.sparse)
+    out = tmp_path / "out"
+    args = ["--rgb", tmp_path / "rgb", "--sparse", tmp_path / "sparse", "--method", "classical", "--out", out]
+    res = CliRunner().invoke(main, ["predict", *map(str, args), "--uncertainty", "--report"])
+    assert res.exit_code == 0, res.output
+    assert (out / "uncertainty" / "a.png").is_file()
+    assert '"key":"uncertainty"' in (out / "viewer" / "000.js").read_text()
