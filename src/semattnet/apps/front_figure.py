@@ -16,6 +16,7 @@ The numbers behind it go to ``sparsity-sweep.json`` beside the picture, so the d
 from __future__ import annotations
 
 import json
+import textwrap
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -90,18 +91,24 @@ def plot_front(rows: list[dict[str, Any]], curves: dict[str, Sparsification], pa
                    f"AURG {summary['aurg_rmse']:.3f}")  # fmt: skip
         right.plot(x, c["rmse_oracle"], ":", color=f"C{i}", lw=1)
     left.set(xscale="log", xlabel="input density (valid pixels)", ylabel="RMSE [m]", title="Sparser LiDAR")
+    left.xaxis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
     left.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{100 * v:g} %"))
+    left.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     right.set(xlabel="fraction of pixels removed, most uncertain first", ylabel="RMSE / RMSE of all pixels",
               title="Per-pixel uncertainty (dotted: oracle)", ylim=(0, None))  # fmt: skip
     for ax in (left, right):
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=6.5)
-    fig.text(0.5, 0.01, caption, ha="center", fontsize=7)
-    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    fig.text(0.5, 0.01, textwrap.fill(caption, 150), ha="center", fontsize=7)
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png")
     plt.close(fig)
     return path
+
+
+def _rmse_curves(s: Sparsification) -> dict[str, list[float]]:
+    return {k: [round(float(v), 5) for v in a] for k, a in s.curves().items() if k.startswith("rmse")}
 
 
 def make_front_figure(out: Path, work: Path, settings: tuple[str, ...] = SETTINGS, device: str = "cpu",
@@ -123,7 +130,8 @@ def make_front_figure(out: Path, work: Path, settings: tuple[str, ...] = SETTING
     out.mkdir(parents=True, exist_ok=True)
     plot_front(rows, curves, out / "sparsity-sweep.png", caption)
     numbers = {"command": FIGURE_COMMAND, "scenes": s.eval_frames, "size": list(s.size), "weights": WEIGHTS,
-               "sweep": rows, "uncertainty": {name: c.compute() for name, c in curves.items()}}  # fmt: skip
+               "sweep": rows, "uncertainty": {name: c.compute() for name, c in curves.items()},
+               "curves": {name: _rmse_curves(c) for name, c in curves.items()}}  # fmt: skip
     with atomic_path(out / "sparsity-sweep.json") as tmp:
         tmp.write_text(json.dumps(numbers, indent=1) + "\n")
     return numbers
