@@ -41,6 +41,7 @@ __all__ = [
     "get_palette",
     "ids_to_colors",
     "label_ids_to_train_ids",
+    "nyu894_to_nyu40",
     "one_hot",
     "unknown_map",
 ]
@@ -230,6 +231,17 @@ def colors_to_ids(colors: np.ndarray, allow_unknown: bool = True, source: str = 
             f"{listed}{' ...' if len(values) > 5 else ''}"
         )
     return ids
+
+
+def nyu894_to_nyu40(raw: np.ndarray) -> np.ndarray:
+    """NYU Depth v2's raw label ids (0..894, the labelled subset's ``labels``; 0 = unlabelled) -> NYU-40 ids
+    (uint8 0..40) by the published table (:mod:`semattnet.data.nyu40_map`, from ankurhanda/nyuv2-meta-data)."""
+    from semattnet.data.nyu40_map import NYU894_TO_40, RAW_CLASSES
+
+    ids = np.asarray(raw)
+    if ids.size and (ids.min() < 0 or ids.max() > RAW_CLASSES):
+        raise InputError(f"NYU raw label ids must lie in 0..{RAW_CLASSES}, got {ids.min()}..{ids.max()}")
+    return np.asarray(NYU894_TO_40, dtype=np.uint8)[ids.astype(np.int64)]
 
 
 def one_hot(train_ids: np.ndarray, num_classes: int = NUM_CLASSES) -> np.ndarray:

@@ -3,7 +3,8 @@
 Layout: ``ROOT/train/<scene>/<NNNNN>.h5`` (about 48k frames) and ``ROOT/val/official/<NNNNN>.h5`` (the 654
 test frames of the official split). Each file holds ``rgb`` uint8 (3, 480, 640) and ``depth`` float32
 (480, 640) in metres (the in-painted Kinect depth, dense); an optional ``label`` (480, 640) integer map of
-NYU-40 ids (0 = unlabelled) becomes the frame's semantic map in the NYU-40 palette.
+NYU-40 ids (0 = unlabelled), or of the labelled subset's raw ids 1..894 (any id above 40; mapped to NYU-40 by
+the published table, :mod:`semattnet.data.nyu40_map`), becomes the frame's semantic map in the NYU-40 palette.
 
 Protocol (NLSPN's): image resized to 320x240 (bilinear; depth and labels nearest), centre-cropped to 304x228,
 500 depth samples drawn among gt > 1e-4 m (seeded per frame: :func:`~.frames.frame_seed` of its name, so a
@@ -22,7 +23,7 @@ from semattnet._errors import DataError
 from semattnet.data.datasets.frames import MissingSplitError, draw_samples, frame_seed
 from semattnet.data.frames import Frame, IndexedSource
 
-__all__ = ["NYU_K", "NYU_SPLITS", "NyuV2Source", "protocol_K", "read_nyu_h5"]
+__all__ = ["NYU_K", "NYU_SPLITS", "NyuV2Source", "label_colors", "protocol_K", "read_nyu_h5"]
 
 #: Kinect colour intrinsics at 640x480 (fx, fy, cx, cy), as NLSPN's ``nyu.py``.
 NYU_K = (5.1885790117450188e02, 5.1946961112127485e02, 3.2558244941119034e02, 2.5373616633400465e02)
@@ -32,6 +33,7 @@ RESIZED = (240, 320)  # H, W after the resize
 CROP = (228, 304)  # H, W of the centre crop
 SAMPLES = 500
 MAX_MEDIAN_M = 100.0  # a median depth above this is millimetres, not metres
+RAW_LABELS = 894  # the labelled subset's raw class ids (semattnet.data.nyu40_map)
 
 
 def _read(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
@@ -72,8 +74,9 @@ def read_nyu_h5(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray, n
                         "millimetres? expected metres")  # fmt: skip
     if label is not None and (label.shape != depth.shape or not np.issubdtype(label.dtype, np.integer)):
         raise DataError(f"{path}: 'label' must be integer {depth.shape} NYU-40 ids, got {label.dtype} {label.shape}")
-    if label is not None and label.size and (label.min() < 0 or label.max() > 40):
-        raise DataError(f"{path}: 'label' must hold NYU-40 ids 0..40, found {label.min()}..{label.max()}")
+    if label is not None and label.size and (label.min() < 0 or label.max() > RAW_LABELS):
+        raise DataError(f"{path}: 'label' must hold NYU-40 ids 0..40 or raw NYU ids 0..{RAW_LABELS}, found "
+                        f"{label.min()}..{label.max()}")  # fmt: skip
     depth = np.where(np.isfinite(depth), depth, 0).astype(np.float32)
     return np.ascontiguousarray(rgb.transpose(1, 2, 0)), depth, label
 
@@ -91,6 +94,16 @@ def _resize(a: np.ndarray, nearest: bool) -> np.ndarray:
 def _crop(a: np.ndarray) -> np.ndarray:
     top, left = (RESIZED[0] - CROP[0]) // 2, (RESIZED[1] - CROP[1]) // 2
     return a[top : top + CROP[0], left : left + CROP[1]]
+
+
+def label_colors(label: np.ndarray) -> np.ndarray:
+    """A file's ``label`` map as the protocol frame's NYU-40 colours: NYU-40 ids (0..40) as they are; a map with
+    any id above 40 holds the labelled subset's raw ids (1..894), mapped to NYU-40 by the published table
+    (:func:`semattnet.data.palette.nyu894_to_nyu40`)."""
+    from semattnet.data.palette import ids_to_colors, nyu894_to_nyu40
+
+    ids = nyu894_to_nyu40(label) if label.size and int(label.max()) > 40 else label.astype(np.uint8)
+    return ids_to_colors(_crop(_resize(ids, True)), palette="nyu40")
 
 
 def protocol_K() -> np.ndarray:
@@ -133,7 +146,6 @@ class NyuV2Source(IndexedSource):
 
     def load(self, name: str) -> Frame:
         from semattnet.data.io import read_semantic
-        from semattnet.data.palette import ids_to_colors
 
         path = self.files[name]
         rgb, depth, label = read_nyu_h5(path)
@@ -141,7 +153,7 @@ class NyuV2Source(IndexedSource):
         paths = {"rgb": path, "gt": path, "sparse": path}
         sem = None
         if label is not None:
-            sem = ids_to_colors(_crop(_resize(label.astype(np.uint8), True)), palette="nyu40")
+            sem = label_colors(label)
         elif self.semantic_root is not None:
             paths["semantic"] = self.semantic_root / f"{name}.png"
             sem = read_semantic(paths["semantic"], palette="nyu40")
