@@ -23,7 +23,7 @@ from semattnet._errors import DataError
 from semattnet.data.datasets.frames import MissingSplitError, draw_samples, frame_seed
 from semattnet.data.frames import Frame, IndexedSource
 
-__all__ = ["NYU_K", "NYU_SPLITS", "NyuV2Source", "label_colors", "protocol_K", "read_nyu_h5"]
+__all__ = ["NYU_K", "NYU_SPLITS", "NyuV2Source", "check_root", "label_colors", "protocol_K", "read_nyu_h5"]
 
 #: Kinect colour intrinsics at 640x480 (fx, fy, cx, cy), as NLSPN's ``nyu.py``.
 NYU_K = (5.1885790117450188e02, 5.1946961112127485e02, 3.2558244941119034e02, 2.5373616633400465e02)
@@ -96,6 +96,17 @@ def _crop(a: np.ndarray) -> np.ndarray:
     return a[top : top + CROP[0], left : left + CROP[1]]
 
 
+def check_root(root: Path) -> None:
+    """A root one level too high (``nyu/`` holding ``nyudepthv2/``) is one line naming the folder to pass."""
+    folders = set(NYU_SPLITS.values())
+    if not root.is_dir() or any((root / f).is_dir() for f in folders):
+        return
+    below = sorted(c for c in root.iterdir() if c.is_dir() and any((c / f).is_dir() for f in folders))
+    if below:
+        raise DataError(f"{root}: not a NYU v2 root (no {' or '.join(sorted(folders))} inside), but {below[0]} is "
+                        f"one: pass {below[0]}")  # fmt: skip
+
+
 def label_colors(label: np.ndarray) -> np.ndarray:
     """A file's ``label`` map as the protocol frame's NYU-40 colours: NYU-40 ids (0..40) as they are; a map with
     any id above 40 holds the labelled subset's raw ids (1..894), mapped to NYU-40 by the published table
@@ -132,6 +143,7 @@ class NyuV2Source(IndexedSource):
 
         self.root, self.split = Path(root), check_split("nyuv2", split)
         folder = self.root / NYU_SPLITS[self.split]
+        check_root(self.root)
         if not folder.is_dir():
             raise MissingSplitError(f"{folder}: split folder not found (expected {folder}/"
                                     f"{'<scene>/' if self.split == 'train' else ''}<NNNNN>.h5)")  # fmt: skip

@@ -53,10 +53,21 @@ def _read_validity(path: Path) -> np.ndarray:
 
 
 def _folder(root: Path) -> Path:
-    """``root`` itself when it holds list files, else its first ``void_NNN`` (1500 first)."""
+    """``root`` itself when it holds list files, else its first ``void_NNN`` (1500 first); a root one level
+    too high (holding ``void_release/``) is one line naming the folder to pass."""
     if any(root.glob("*_image.txt")):
         return root
-    return next((root / v for v in VOID_VARIANTS if (root / v).is_dir()), root)
+    found = next((root / v for v in VOID_VARIANTS if (root / v).is_dir()), None)
+    if found is None and root.is_dir():
+        below = sorted(c for c in root.iterdir() if c.is_dir() and _holds_release(c))
+        if below:
+            raise DataError(f"{root}: no VOID list files nor {'/'.join(VOID_VARIANTS)} inside, but {below[0]} "
+                            f"holds them: pass {below[0]}")  # fmt: skip
+    return found or root
+
+
+def _holds_release(folder: Path) -> bool:
+    return any(folder.glob("*_image.txt")) or any((folder / v).is_dir() for v in VOID_VARIANTS)
 
 
 def _resolve(entry: str, lists: Path) -> Path:
