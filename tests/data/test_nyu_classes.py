@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from semattnet._errors import InputError
-from semattnet.data.nyu40_map import NYU894_TO_40, RAW_CLASSES
+from semattnet.data.nyu40_map import NYU894_TO_40, RAW_CLASSES, RAW_NAMES
 from semattnet.data.palette import NYU40_CLASSES, colors_to_ids, nyu894_to_nyu40
 
 # raw id, raw name (allClassName), NYU-40 class (className), read from classMapping40.mat at commit b92d15c
@@ -23,11 +23,11 @@ NAMES = [name for name, _ in NYU40_CLASSES]
 
 @pytest.mark.parametrize(("raw", "raw_name", "nyu40"), PUBLISHED)
 def test_a_handful_of_classes_match_the_published_table(raw: int, raw_name: str, nyu40: str) -> None:
-    assert NYU894_TO_40[raw] == NAMES.index(nyu40) + 1, raw_name
+    assert RAW_NAMES[raw - 1] == raw_name and NYU894_TO_40[raw] == NAMES.index(nyu40) + 1
 
 
 def test_table_shape_and_the_lookup() -> None:
-    assert len(NYU894_TO_40) == RAW_CLASSES + 1 == 895 and NYU894_TO_40[0] == 0
+    assert len(NYU894_TO_40) == RAW_CLASSES + 1 == 895 and NYU894_TO_40[0] == 0 and len(RAW_NAMES) == 894
     assert all(1 <= v <= 40 for v in NYU894_TO_40[1:])
     assert nyu894_to_nyu40(np.array([[0, 21], [894, 11]])).tolist() == [[0, 1], [NYU894_TO_40[894], 2]]
     with pytest.raises(InputError, match=r"0\.\.894"):

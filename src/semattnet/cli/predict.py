@@ -136,6 +136,12 @@ def _source(rgb, sparse, kitti_raw, frames, camera, semantic, deskew, K, bag, da
     return FolderSource.pair(rgb, sparse, semantic, K=K, missing_ok=True)
 
 
+def _eval_split(dataset: str) -> str:
+    from semattnet.data.datasets import get_dataset
+
+    return get_dataset(dataset).eval_split
+
+
 def _robot_sinks(bag: dict[str, Any], max_depth: float, timer: Any) -> list[Any]:
     """``latency.json`` and, as asked, the bag, the Rerun recording or viewer and the live server."""
     from semattnet.inference.sinks import LatencySink
@@ -203,7 +209,8 @@ def _out_and_resume(out: Path | None, resume: str | None) -> tuple[Path, bool]:
     "segment_spec",
     default=None,
     metavar="SPEC",
-    help="With --kitti-raw or --bag: segment each image with this model (see `semattnet segment --model`).",
+    help="With --kitti-raw or --bag: segment each image with this model (see `semattnet segment --model`); "
+    "with --data (nyuv2, void): the split's frames segmented once into a cache folder and reused.",
 )
 @_bag_options
 @click.option("--out", default=None, type=click.Path(file_okay=False, path_type=Path), help="Output folder [required].")
@@ -290,8 +297,10 @@ def _check_combinations(rgb: Path | None, sparse: Path | None, kitti_raw: Path |
                         intrinsics: str | None, bag: dict[str, Any]) -> None:  # fmt: skip
     """The options agree with the input kind (one line each, before any work)."""
     files_only = kitti_raw is None and bag["bag"] is None and data[1] is None
-    if (files_only or data[1] is not None) and (ply or segment_spec):
-        raise click.UsageError("--ply and --segment need --kitti-raw or --bag")
+    if files_only and (ply or segment_spec):
+        raise click.UsageError("--ply and --segment need --kitti-raw, --bag or --data")
+    if data[1] is not None and ply:
+        raise click.UsageError("--ply needs --kitti-raw or --bag")
     if kitti_raw is None and (frames or deskew):
         raise click.UsageError("--frames and --deskew need --kitti-raw")
     require_with("--kitti-raw", kitti_raw is not None, "camera")
@@ -322,11 +331,18 @@ def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
 
     K = _intrinsics(p["intrinsics"])
     maps = SemanticMaps(p["segment_spec"], folder=p["semantic"] is not None or p["semantic_topic"] is not None)
+    semantic = p["semantic"]
+    if p["data_root"] is not None and p["segment_spec"] is not None:  # the split's maps, cached: a folder
+        from semattnet.data.datasets.segment import segment_split
+
+        semantic = segment_split(p["dataset"], p["data_root"], (p["split"] or _eval_split(p["dataset"]),),
+                                 p["segment_spec"], p["device"], log=click.echo)  # fmt: skip
+        maps = SemanticMaps(None, folder=True)
     timer = StageTimes()
     files = default_sinks(p["npy"], p["panel"], p["ply"], p["max_depth"], p["top_crop"])
     sinks = files + _robot_sinks(p, p["max_depth"], timer)
     realtime = (p["speed"] or 1.0) if p["realtime"] else None
-    inputs = (p["rgb"], p["sparse"], p["kitti_raw"], p["frames"], p["camera"], p["semantic"], p["deskew"], K)
+    inputs = (p["rgb"], p["sparse"], p["kitti_raw"], p["frames"], p["camera"], semantic, p["deskew"], K)
     with process_group():
         source = _source(*inputs, p, (p["dataset"], p["data_root"], p["split"]))
         plan = check_frames(source, sinks, out, overwrite=p["overwrite"], on_error=p["on_error"], resume=resuming,

@@ -41,13 +41,15 @@ class SemanticMaps:
 
     def check_palette(self, completer: Any, source: Any) -> None:
         """Refuse maps of another palette than the one ``completer``'s model was trained with (one line;
-        :func:`semattnet.data.palette.check_palette`): a segmenter's maps are Cityscapes-coloured, a source's
-        are its ``palette`` (None: it gives none, and the fallback map fits every palette)."""
+        :func:`semattnet.data.palette.check_palette`): a segmenter's maps are of its ``palette`` (Cityscapes
+        unless it says otherwise), a source's of its ``palette`` (None: it gives none, and the fallback map fits
+        every palette)."""
         from semattnet.data.palette import check_palette
 
         if not self.needed:
             return
-        palette = "cityscapes" if self.segmenter is not None else getattr(source, "palette", None)
+        palette = getattr(self.segmenter, "palette", "cityscapes") if self.segmenter is not None else (
+            getattr(source, "palette", None))  # fmt: skip
         palette = palette or ("cityscapes" if self.folder else None)
         if palette is not None:
             where = "the segmenter's maps" if self.segmenter is not None else f"{type(source).__name__} maps"
@@ -60,7 +62,8 @@ class SemanticMaps:
         if not self.needed or frame.semantic is not None:
             return frame
         if self.segmenter is not None:
-            return frame.with_semantic(ids_to_colors(self.segmenter(frame.rgb[None])[0]))
+            palette = getattr(self.segmenter, "palette", "cityscapes")
+            return frame.with_semantic(ids_to_colors(self.segmenter(frame.rgb[None])[0], palette))
         if not self._warned:
             warnings.warn("no semantic maps given (--semantic or --segment): using the 'unknown' fallback map, "
                           "which costs accuracy", stacklevel=3)  # fmt: skip
