@@ -79,6 +79,10 @@ def metrics(
 @click.option("--segment", default=None, metavar="SPEC",
               help="nyuv2 / void: semantic maps from this segmenter (e.g. hf:indoor; see `semattnet segment`), "
               "segmented once into a cache folder and reused.")  # fmt: skip
+@click.option("--palette-mismatch", type=click.Choice(["refuse", "recolour", "fallback"]), default="refuse",
+              show_default=True, help="Maps of another palette than the model's (a KITTI model on nyuv2): refuse, "
+              "recolour the classes both palettes name (the rest unknown), or use the fallback map; "
+              "metrics.json's 'semantic' says which.")  # fmt: skip
 @click.option("--save-predictions", is_flag=True, help="Write 16-bit PNG predictions (needs --out).")
 @click.option(
     "--pictures", type=COUNT, default=0, show_default=True, help="Branch panels for the first N frames (needs --out)."
@@ -92,8 +96,8 @@ def metrics(
 @backend_option
 def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, dataset: str, split: str | None,
              out: Path | None,
-             sparsity: tuple[str, ...], method: str, segment: str | None, save_predictions: bool, pictures: int,
-             device: str,
+             sparsity: tuple[str, ...], method: str, segment: str | None, palette_mismatch: str,
+             save_predictions: bool, pictures: int, device: str,
              batch_size: int, amp: str, workers: int, max_frames: int | None, overwrite: bool,
              backend: str) -> None:  # fmt: skip
     """Evaluate a checkpoint on a split with its dataset's metrics (KITTI: the devkit's), or sweep sparser inputs."""
@@ -123,11 +127,13 @@ def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, data
         semantic = segment_split(dataset, data_root, (split,), segment, device, log=click.echo, max_frames=max_frames)
     res = evaluate_checkpoint(model, data_root, split, out, device, batch_size, amp, workers,
                               save_predictions, pictures, max_frames, overwrite, semantic_root=semantic,
-                              backend=backend, dataset=dataset)  # fmt: skip
+                              backend=backend, dataset=dataset, palette_mismatch=palette_mismatch)  # fmt: skip
     from semattnet._utils.distributed import launch_rank
 
     if launch_rank() != 0:  # under torchrun: every rank holds the merged metrics; rank 0 reports them
         return
+    if "semantic" in res:
+        click.echo(f"semantic maps: {res['semantic']['summary']}")
     click.echo(res["metrics"].table())
     if out is not None:
         click.echo(f"wrote {out / 'metrics.json'} and {out / 'per_image.csv'}")

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 from typing import Any
 
 from semattnet._errors import InputError
-from semattnet.data.frames import Frame
+from semattnet.data.frames import Frame, IndexedSource
 
-__all__ = ["SemanticMaps"]
+__all__ = ["MISMATCH_POLICIES", "CrossPaletteSource", "SemanticMaps"]
 
 
 class SemanticMaps:
@@ -69,3 +70,50 @@ class SemanticMaps:
                           "which costs accuracy", stacklevel=3)  # fmt: skip
             self._warned = True
         return frame.with_semantic(unknown_map(*frame.rgb.shape[:2]))
+
+
+#: ``--palette-mismatch`` policies: refuse (the default), recolour, fallback.
+MISMATCH_POLICIES = ("refuse", "recolour", "fallback")
+
+
+class CrossPaletteSource(IndexedSource):
+    """``source``'s frames with maps in ``palette`` (a model's) instead of the source's own: recoloured
+    (:func:`semattnet.data.palette.recolor`, ``recolour``: the classes both palettes name keep their meaning,
+    the rest become unknown) or replaced by the fallback map (``fallback``; also when no class maps)."""
+
+    def __init__(self, source: Any, palette: str, policy: str = "recolour") -> None:
+        from semattnet.data.palette import get_palette, palette_mapping
+
+        self.source, self.maps_palette = source, get_palette(source.palette).name
+        self.palette = get_palette(palette).name
+        self.kept = sorted(get_palette(self.maps_palette).classes[i - get_palette(self.maps_palette).first_id][0]
+                           for i in palette_mapping(self.maps_palette, self.palette))  # fmt: skip
+        self.policy = "recolour" if policy == "recolour" and self.kept else "fallback"
+        self.names = source.names
+
+    def load(self, name: str) -> Frame:
+        from semattnet.data.palette import recolor, unknown_map
+
+        frame = self.source.load(name)
+        if frame.semantic is None:
+            return frame
+        if self.policy == "fallback":
+            return frame.with_semantic(unknown_map(*frame.semantic.shape[:2]))
+        where = str(frame.paths.get("semantic", name)) if frame.paths else name
+        return frame.with_semantic(recolor(frame.semantic, self.maps_palette, self.palette, where))
+
+    def inputs(self) -> list[Path]:
+        return list(self.source.inputs())
+
+    def report(self) -> dict[str, Any]:
+        """What the frames' maps became (metrics.json's ``semantic``), with a one-line ``summary``."""
+        from semattnet.data.palette import get_palette
+
+        src, dst = get_palette(self.maps_palette).title, get_palette(self.palette).title
+        if self.policy == "recolour":
+            line = (f"{src} maps recoloured to the model's {dst} palette: {', '.join(self.kept)} kept, every other "
+                    "class unknown")  # fmt: skip
+        else:
+            line = f"{src} maps replaced by the fallback (unknown) map: the model was trained with {dst}"
+        return {"maps_palette": self.maps_palette, "model_palette": self.palette, "used": self.policy,
+                "classes_kept": self.kept if self.policy == "recolour" else [], "summary": line}  # fmt: skip
