@@ -6,7 +6,8 @@ test frames of the official split). Each file holds ``rgb`` uint8 (3, 480, 640) 
 NYU-40 ids (0 = unlabelled), or of the labelled subset's raw ids 1..894 (any id above 40; mapped to NYU-40 by
 the published table, :mod:`semattnet.data.nyu40_map`), becomes the frame's semantic map in the NYU-40 palette.
 
-Protocol (NLSPN's): image resized to 320x240 (bilinear; depth and labels nearest), centre-cropped to 304x228,
+Protocol (NLSPN's ``src/data/nyu.py``): image and depth resized to 320x240 (bilinear, torchvision's ``Resize``
+default; labels nearest), centre-cropped to 304x228,
 500 depth samples drawn among gt > 1e-4 m (seeded per frame: :func:`~.frames.frame_seed` of its name, so a
 test frame always gets the same points and two frames get different ones), depth range 0.1-10 m.
 """
@@ -161,7 +162,7 @@ class NyuV2Source(IndexedSource):
 
         path = self.files[name]
         rgb, depth, label = read_nyu_h5(path)
-        rgb, gt = _crop(_resize(rgb, False)), _crop(_resize(depth, True))
+        rgb, gt = _crop(_resize(rgb, False)), _crop(_resize(depth, False))
         paths = {"rgb": path, "gt": path, "sparse": path}
         sem = None
         if label is not None:
