@@ -13,6 +13,7 @@ the :class:`~semattnet.data.frames.FrameSource` that ``predict`` completes and t
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -178,7 +179,7 @@ _NYU = DatasetSpec(
 _VOID = DatasetSpec(
     "void", "VOID (visual-inertial odometry sparse depth)", "void_NNNN/{train,test}_{image,sparse_depth,"
     "validity_map,ground_truth,intrinsics}.txt + data/<sequence>/...", ("train", "test"), "train", "test", None,
-    (0.2, 5.0), (0.2, 5.0), None, "mm", ("mae_mm", "rmse_mm", "imae_per_km", "irmse_per_km"), "cityscapes",
+    (0.2, 5.0), (0.0, math.inf), None, "mm", ("mae_mm", "rmse_mm", "imae_per_km", "irmse_per_km"), "cityscapes",
     "VOID: see github.com/alexklwong/void-dataset (research use; cite Wong et al., RA-L 2020)",
     recipe={"epochs": 10, "batch_size": 8, "lr": 0.0001, "lr_schedule": "cosine", "crop": (480, 640),
             "val_split": "test"},

@@ -5,7 +5,8 @@ Layout (the release's): ``void_NNN/{train,test}_{image,sparse_depth,validity_map
 list one path per frame (relative to the folder holding ``void_NNN``, to ``void_NNN`` itself, or absolute);
 images are 640x480 RGB PNGs, sparse depth and ground truth 16-bit PNGs in 1/256 m (KITTI's encoding), the
 validity map a PNG whose non-zero pixels mark the sparse points, intrinsics a 3x3 matrix as ``.npy`` or text
-(``K.txt``, 9 numbers). Evaluation (KBNet's): predictions clamped to 0.2-5.0 m, pixels with gt in that range.
+(``K.txt``, 9 numbers). Evaluation (KBNet's ``src/kbnet.py``): pixels with gt in 0.2-5.0 m, the predictions as
+they are (not clamped to that range; KBNet bounds its network's output instead).
 """
 
 from __future__ import annotations
