@@ -148,6 +148,8 @@ def _load_model(source: str, revision: str | None) -> Any:
         universal = config.model_type in ("mask2former", "maskformer", "oneformer")
         kind = "Universal" if universal else "Semantic"
         auto = getattr(transformers, f"AutoModelFor{kind}Segmentation")
+        if int(transformers.__version__.split(".")[0]) >= 5:  # else 5.x wants the `kernels` package by default
+            kw["use_kernels"] = False
         return auto.from_pretrained(source, **kw)
     except (OSError, ValueError, KeyError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
