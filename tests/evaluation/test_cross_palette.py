@@ -61,3 +61,13 @@ def test_recolouring_reaches_the_model(setup: tuple[Path, Path]) -> None:
     src = CrossPaletteSource(get_dataset("nyuv2").source(setup[0], "test"), "cityscapes")
     ids = colors_to_ids(src.load("00001").semantic)  # Cityscapes colours now: wall kept, floor/cabinet/bed unknown
     assert set(np.unique(ids).tolist()) == {CITY["wall"], 255} and src.palette == "cityscapes"
+
+
+def test_predict_recolours_too(setup: tuple[Path, Path], tmp_path: Path) -> None:
+    root, ckpt = setup
+    args = ["predict", "--dataset", "nyuv2", "--data", root, "--checkpoint", ckpt, "--device", "cpu",
+            "--palette-mismatch", "recolour", "--out", tmp_path / "p"]  # fmt: skip
+    res = CliRunner().invoke(main, [str(a) for a in args])
+    assert res.exit_code == 0, res.output + repr(res.exception)
+    assert "semantic maps: NYU-40 maps recoloured to the model's Cityscapes palette: person, wall kept" in res.output
+    assert (tmp_path / "p" / "00001.png").is_file()

@@ -212,6 +212,9 @@ def _out_and_resume(out: Path | None, resume: str | None) -> tuple[Path, bool]:
     help="With --kitti-raw or --bag: segment each image with this model (see `semattnet segment --model`); "
     "with --data (nyuv2, void): the split's frames segmented once into a cache folder and reused.",
 )
+@click.option("--palette-mismatch", type=click.Choice(["refuse", "recolour", "fallback"]), default="refuse",
+              show_default=True, help="Maps of another palette than the model's: refuse, recolour the classes both "
+              "palettes name (the rest unknown), or use the fallback map (see evaluate).")  # fmt: skip
 @_bag_options
 @click.option("--out", default=None, type=click.Path(file_okay=False, path_type=Path), help="Output folder [required].")
 @click.option("--npy", is_flag=True, help="Also write float32 .npy depth.")
@@ -330,14 +333,15 @@ def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
     from semattnet.inference.stream import StageTimes
 
     K = _intrinsics(p["intrinsics"])
-    maps = SemanticMaps(p["segment_spec"], folder=p["semantic"] is not None or p["semantic_topic"] is not None)
+    folder, mismatch = p["semantic"] is not None or p["semantic_topic"] is not None, p["palette_mismatch"]
+    maps = SemanticMaps(p["segment_spec"], folder=folder, mismatch=mismatch)
     semantic = p["semantic"]
     if p["data_root"] is not None and p["segment_spec"] is not None:  # the split's maps, cached: a folder
         from semattnet.data.datasets.segment import segment_split
 
         semantic = segment_split(p["dataset"], p["data_root"], (p["split"] or _eval_split(p["dataset"]),),
                                  p["segment_spec"], p["device"], log=click.echo)  # fmt: skip
-        maps = SemanticMaps(None, folder=True)
+        maps = SemanticMaps(None, folder=True, mismatch=mismatch)
     timer = StageTimes()
     files = default_sinks(p["npy"], p["panel"], p["ply"], p["max_depth"], p["top_crop"])
     sinks = files + _robot_sinks(p, p["max_depth"], timer)
@@ -355,6 +359,8 @@ def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
                               realtime=realtime)  # fmt: skip
     if launch_rank() == 0:
         click.echo(timer.table())
+        if maps.note:
+            click.echo(f"semantic maps: {maps.note}")
     if p["report"] and launch_rank() == 0:  # under torchrun: once, after every rank's frames are in place
         from semattnet.viz.viewer import write_prediction_report
 
