@@ -83,13 +83,19 @@ def _nyu(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 
 
 def test_segment_caches_the_split_maps(ade_bed: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """predict --data --segment (the classical completer: no model) segments the split once; the maps are the
-    frames' (304x228, NYU-40) and a second run reuses them; the options that cannot go together are refused."""
+    """predict --data --segment (a tiny Cityscapes model, the maps recoloured for it) segments the split once;
+    the maps are the frames' (304x228, NYU-40) and a second run reuses them; options that cannot go together
+    are refused."""
+    import semattnet
     from semattnet.data.datasets import get_dataset
     from semattnet.training.config import TrainConfig
+    from semattnet.weights.checkpoint import save_safetensors
 
     root, spec = _nyu(tmp_path, monkeypatch), f"hf:{ade_bed}"
-    args = ["predict", "--dataset", "nyuv2", "--data", root, "--method", "classical", "--segment", spec]
+    ckpt = tmp_path / "city.safetensors"
+    save_safetensors(semattnet.build_model("semattnet_backbone", width=0.125).state_dict(), ckpt)
+    args = ["predict", "--dataset", "nyuv2", "--data", root, "--checkpoint", ckpt, "--device", "cpu", "--segment",
+            spec, "--palette-mismatch", "recolour"]  # fmt: skip
     assert "1 segmented, 0 reused" in _run(*args, "--out", tmp_path / "p1")
     assert "0 segmented, 1 reused" in _run(*args, "--out", tmp_path / "p2")
     (cache,) = (tmp_path / "cache" / "semantic").glob("nyuv2-*")

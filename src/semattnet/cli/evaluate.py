@@ -11,9 +11,11 @@ import click
 from semattnet.cli._dataset import dataset_option
 from semattnet.cli._group import main
 from semattnet.cli._options import (
+    BATCH_SIZE,
     COUNT,
-    NONNEGATIVE_FLOAT,
+    DEPTH_M_OR_ZERO,
     POSITIVE_INT,
+    WORKERS,
     backend_option,
     model_from_options,
     weights_option,
@@ -33,7 +35,7 @@ from semattnet.cli._options import (
 )
 @click.option(
     "--min-gt",
-    type=NONNEGATIVE_FLOAT,
+    type=DEPTH_M_OR_ZERO,
     default=0.0,
     show_default=True,
     help="Count gt > this (0.1 = the authors' variant).",
@@ -88,9 +90,9 @@ def metrics(
     "--pictures", type=COUNT, default=0, show_default=True, help="Branch panels for the first N frames (needs --out)."
 )
 @click.option("--device", default="auto", show_default=True)
-@click.option("--batch-size", type=POSITIVE_INT, default=1, show_default=True)
+@click.option("--batch-size", type=BATCH_SIZE, default=1, show_default=True)
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
-@click.option("--workers", type=COUNT, default=2, show_default=True)
+@click.option("--workers", type=WORKERS, default=2, show_default=True)
 @click.option("--max-frames", type=POSITIVE_INT, default=None)
 @click.option("--overwrite", is_flag=True)
 @backend_option

@@ -10,17 +10,20 @@ import click
 from semattnet.cli._dataset import dataset_option
 from semattnet.cli._group import main
 from semattnet.cli._options import (
-    COUNT,
-    NONNEGATIVE_FLOAT,
-    POSITIVE_FLOAT,
+    DEPTH_M,
+    PIXELS,
+    SECONDS,
+    SPEED,
     backend_option,
+    check_precision_options,
+    precision_options,
     require_with,
     weights_option,
 )
 
 
 def _completer(method: str, checkpoint: Path | None, weights: str | None, device: str, amp: str,
-               backend: str = "torch"):  # fmt: skip
+               backend: str = "torch", precision: str | None = None, calibration: Path | None = None):  # fmt: skip
     """The completer the options name: the classical baseline or the model of --checkpoint / --weights."""
     from semattnet._utils.distributed import process_device
     from semattnet.baselines.classical import ClassicalCompleter
@@ -31,7 +34,8 @@ def _completer(method: str, checkpoint: Path | None, weights: str | None, device
         return ClassicalCompleter()
     _check_method(method, checkpoint, weights)
     model = model_from_options(checkpoint, weights, "cpu")
-    return DepthCompleter(model, device=process_device(device), amp=amp, backend=backend, inplace=True)
+    return DepthCompleter(model, device=process_device(device), amp=amp, backend=backend, inplace=True,
+                          precision=precision, calibration=calibration)  # fmt: skip
 
 
 def _check_method(method: str, checkpoint: Path | None, weights: str | None) -> None:
@@ -39,6 +43,8 @@ def _check_method(method: str, checkpoint: Path | None, weights: str | None) -> 
     if method == "classical":
         if checkpoint is not None or weights is not None:
             raise click.UsageError("--method classical uses no model: drop --checkpoint / --weights")
+        # no semantic map, engine or precision: a spec, backend or --amp given with it would be ignored unread
+        require_with("--method semattnet", False, "segment_spec", "backend", "amp")
         return
     if checkpoint is None and weights is None:
         raise click.UsageError("--checkpoint or --weights is required (or --method classical)")
@@ -73,7 +79,7 @@ _BAG_OPTIONS = [
                  help="With --bag: rig JSON (K, T_cam_lidar, image_size) overriding CameraInfo and /tf_static."),
     click.option("--semantic-topic", default=None,
                  help="With --bag: colour-coded semantic images, paired with the images by stamp."),
-    click.option("--max-skew", type=NONNEGATIVE_FLOAT, default=None,
+    click.option("--max-skew", type=SECONDS, default=None,
                  help="With --bag: seconds between an image and its scan at most [half the scan period]."),
     click.option("--list-topics", is_flag=True, help="With --bag: print the bag's topics and exit."),
     click.option("--bag-out", type=click.Path(path_type=Path), default=None,
@@ -89,7 +95,7 @@ _BAG_OPTIONS = [
                  help="Serve the frames as they are completed over the Foxglove WebSocket protocol.  [extra: live]"),
     click.option("--realtime", is_flag=True,
                  help="Replay at the recorded rate: frames that come while the completer is busy are dropped."),
-    click.option("--speed", type=POSITIVE_FLOAT, default=None, help="With --realtime: replay this many times faster."),
+    click.option("--speed", type=SPEED, default=None, help="With --realtime: replay this many times faster."),
 ]  # fmt: skip
 
 #: The options that do not change what a run writes: a resumed run may differ from the first in these only.
@@ -222,18 +228,19 @@ def _out_and_resume(out: Path | None, resume: str | None) -> tuple[Path, bool]:
 @click.option("--ply", is_flag=True, help="With --kitti-raw or --bag: also write a binary PLY point cloud.")
 @click.option(
     "--max-depth",
-    type=POSITIVE_FLOAT,
+    type=DEPTH_M,
     default=80.0,
     show_default=True,
     help="PLY / bird's-eye view: drop deeper pixels, m.",
 )
 @click.option(
-    "--top-crop", type=COUNT, default=0, show_default=True, help="PLY / bird's-eye view: drop the top N rows (sky)."
+    "--top-crop", type=PIXELS, default=0, show_default=True, help="PLY / bird's-eye view: drop the top N rows (sky)."
 )
 @click.option("--deskew", is_flag=True, help="With --kitti-raw: ego-motion compensate scans with their OXTS data.")
 @click.option("--device", default="auto", show_default=True)
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
 @backend_option
+@precision_options
 @click.option("--overwrite", is_flag=True, help="Replace existing outputs.")
 @click.option(
     "--resume",
@@ -279,6 +286,7 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
     if resuming and overwrite:
         raise click.UsageError("give --resume or --overwrite, not both")
     _check_method(method, checkpoint, weights)
+    check_precision_options(method, amp, bag.pop("precision"), bag.pop("calibration"), backend)
     if method != "classical":
         from semattnet._utils.device import resolve_device
 
@@ -353,7 +361,8 @@ def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
                             run=_identity(p))  # every input and output, before the model  # fmt: skip
         if plan.journal.kept:
             click.echo(f"{out}: resuming: {len(plan.journal.kept)} of {len(source.names)} frame(s) already done")
-        completer = _completer(p["method"], None, p["weights"], p["device"], p["amp"], p["backend"])
+        completer = _completer(p["method"], None, p["weights"], p["device"], p["amp"], p["backend"], p["precision"],
+                               p["calibration"])  # fmt: skip
         run = complete_frames(source, completer, sinks, out, overwrite=p["overwrite"], log=click.echo,
                               semantic=maps, checked=plan, timer=timer, prefetch=2 if p["stream"] else 0,
                               realtime=realtime)  # fmt: skip
@@ -373,9 +382,7 @@ def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
 @click.option("--pred", required=True, type=click.Path(exists=True, path_type=Path), help="16-bit PNG file or folder.")
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path))
 @click.option("--gt", type=click.Path(exists=True, path_type=Path), default=None, help="Ground truth: adds error maps.")
-@click.option(
-    "--vmax", type=POSITIVE_FLOAT, default=80.0, show_default=True, help="Depth of the colour scale's top, metres."
-)
+@click.option("--vmax", type=DEPTH_M, default=80.0, show_default=True, help="Depth of the colour scale's top, metres.")
 @click.option("--overwrite", is_flag=True, help="Replace existing pictures.")
 def visualize(pred: Path, out: Path, gt: Path | None, vmax: float, overwrite: bool) -> None:
     """Colourise saved depth predictions (and error maps against ground truth)."""

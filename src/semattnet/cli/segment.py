@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from semattnet.cli._group import main
-from semattnet.cli._options import POSITIVE_INT, SIZE, parse_size, parse_triple
+from semattnet.cli._options import BATCH_SIZE, SIZE, parse_size, parse_triple
 
 
 @main.command()
@@ -19,7 +19,7 @@ from semattnet.cli._options import POSITIVE_INT, SIZE, parse_size, parse_triple
               help="Image tree, e.g. kitti_raw (searched recursively).")  # fmt: skip
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Semantic root; mirrors the image tree.")  # fmt: skip
-@click.option("--batch-size", type=POSITIVE_INT, default=4, show_default=True)
+@click.option("--batch-size", type=BATCH_SIZE, default=4, show_default=True)
 @click.option("--device", default="auto", show_default=True)
 @click.option("--mean", default="0.485,0.456,0.406", show_default=True, help="Input normalisation (RGB in [0, 1]).")
 @click.option("--std", default="0.229,0.224,0.225", show_default=True)

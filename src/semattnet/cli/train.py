@@ -7,11 +7,14 @@ import click
 from semattnet.cli._dataset import dataset_option
 from semattnet.cli._group import main
 from semattnet.cli._options import (
+    BATCH_SIZE,
     COUNT,
-    POSITIVE_FLOAT,
+    LEARNING_RATE,
     POSITIVE_INT,
     SIZE,
     WEIGHTS_SPEC,
+    WIDTH,
+    WORKERS,
     one_value,
     parse_size,
     weights_path,
@@ -41,13 +44,13 @@ from semattnet.cli._options import (
 @click.option("--resume", is_flag=True, help="Continue the run in --out exactly where it stopped.")
 @click.option("--overwrite", is_flag=True, help="Start over in a run folder that already holds a run.")
 @click.option("--epochs", type=POSITIVE_INT, default=None, help="[stage default: 60 / 5 / 95]")
-@click.option("--batch-size", type=POSITIVE_INT, default=None, help="Per process [stage default: 8 / 8 / 16].")
-@click.option("--lr", type=POSITIVE_FLOAT, default=None, help="[stage default]")
-@click.option("--width", type=POSITIVE_FLOAT, default=None, help="Model width multiplier [1.0].")
+@click.option("--batch-size", type=BATCH_SIZE, default=None, help="Per process [stage default: 8 / 8 / 16].")
+@click.option("--lr", type=LEARNING_RATE, default=None, help="[stage default]")
+@click.option("--width", type=WIDTH, default=None, help="Model width multiplier [1.0].")
 @click.option("--crop", type=SIZE, default=None, help="Training crop HxW [352x1216].")
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default=None)
 @click.option("--device", default=None, help="auto, cpu or cuda.")
-@click.option("--workers", type=COUNT, default=None, help="Data loading processes [4].")
+@click.option("--workers", type=WORKERS, default=None, help="Data loading processes [4].")
 @click.option("--max-steps", type=COUNT, default=None, help="Stop after N steps in total.")
 @click.option("--activation-checkpointing", is_flag=True, default=None,
               help="Recompute each branch in the backward pass: less memory, one more forward.")  # fmt: skip

@@ -28,7 +28,7 @@ from semattnet.data.kitti import KittiDepthCompletion
 from semattnet.data.palette import check_palette
 from semattnet.data.sources.kitti_split import prediction_name
 from semattnet.evaluation.metrics import KittiMetrics
-from semattnet.evaluation.split import eval_dataset, prepare_out
+from semattnet.evaluation.split import eval_dataset, prepare_out, refuse_listed_inputs
 from semattnet.inference.completer import Completion, DepthCompleter
 from semattnet.inference.padding import crop_padding
 from semattnet.inference.pipeline import write_prediction
@@ -298,6 +298,7 @@ def _plan(data: str | Path, split: str, raw_root: str | Path | None, semantic_ro
     frames to score decoded (each rank its share). Returns the dataset, the frame count and ``out``."""
     out = on_main(prepare_out, Path(out_dir), overwrite, inputs) if out_dir is not None else None
     ds = eval_dataset(data, split, raw_root, semantic_root, dataset)
+    refuse_listed_inputs(out, ds)
     frames = min(len(ds), max_frames) if max_frames else len(ds)
     agree(lambda: [ds.load(i) for i in dist_utils.ShardSampler(frames)])
     return ds, frames, out

@@ -34,7 +34,7 @@ from semattnet.inference.backends import needs_semantic, optimize_for_inference
 from semattnet.inference.padding import crop_padding, pad_to_multiple
 from semattnet.models.checks import check_has_points, check_sparse_depth
 from semattnet.models.outputs import DepthCompletionOutput
-from semattnet.weights.checkpoint import load_model
+from semattnet.weights.hub import load_model
 
 __all__ = ["Completion", "DepthCompleter"]
 
@@ -64,6 +64,23 @@ class Completion:
         confs = [c for c in (self.output.color_conf, self.output.semantic_conf, self.output.guided_conf)
                  if c is not None]  # fmt: skip
         return torch.stack([c[0, 0].float().cpu() for c in confs]).amax(0).numpy()
+
+
+def check_precision(precision: str | None, amp: str, backend: str) -> str | None:
+    """``precision`` (``f32``, ``bf16`` or ``int8``; ``None``: as ``amp`` says) checked against ``amp`` and ``backend``.
+
+    ``bf16`` is autocast with the ``torch`` backend and the engine's bfloat16 otherwise; ``int8`` is OpenVINO's
+    NNCF-quantised engine (``backend`` ``openvino`` or ``auto``).
+    """
+    if precision is None:
+        return None
+    if precision not in ("f32", "bf16", "int8"):
+        raise InputError(f"precision {precision!r}: choose f32, bf16 or int8")
+    if amp not in ("none", precision):
+        raise InputError(f"precision {precision!r} and amp {amp!r} disagree: give one (amp is the older name)")
+    if precision == "int8" and backend not in ("openvino", "auto"):
+        raise InputError(f"precision int8 runs on the openvino backend (NNCF), not {backend!r}: --backend openvino")
+    return precision
 
 
 def _check_colour_range(name: str, a: np.ndarray | None) -> None:
@@ -96,10 +113,13 @@ class DepthCompleter:
     """
 
     def __init__(self, model: nn.Module, device: str | torch.device = "auto", amp: str = "none",
-                 backend: str = "torch", inplace: bool = False) -> None:  # fmt: skip
+                 backend: str = "torch", inplace: bool = False, precision: str | None = None,
+                 calibration: Any = None) -> None:  # fmt: skip
         self.device = resolve_device(device)
-        self.amp = amp_dtype(amp)
-        self.backend = backend
+        self.precision = check_precision(precision, amp, backend)
+        self.amp = amp_dtype("bf16" if self.precision == "bf16" and backend == "torch" else amp)
+        self.backend = "openvino" if self.precision == "int8" and backend == "auto" else backend
+        self.calibration = calibration
         self.needs_semantic = needs_semantic(model)
         #: The semantic palette the model was trained with (its config's; Cityscapes when it records none).
         self.palette: str = getattr(getattr(model, "config", None), "palette", "cityscapes")
@@ -110,7 +130,7 @@ class DepthCompleter:
     @classmethod
     def from_checkpoint(cls, path: str | Path, device: str | torch.device = "auto", amp: str = "none",
                         backend: str = "torch") -> DepthCompleter:  # fmt: skip
-        """A completer for the weights file at ``path`` (see :func:`semattnet.weights.checkpoint.load_model`)."""
+        """A completer for the weights file at ``path`` (see :func:`semattnet.weights.load_model`)."""
         return cls(load_model(path), device, amp, backend, inplace=True)
 
     @classmethod
@@ -128,9 +148,11 @@ class DepthCompleter:
         key = size if fixed else None
         if key not in self._engines:
             precision = "bf16" if self.amp is torch.bfloat16 and self.backend != "torch" else "f32"
+            precision = self.precision if self.precision in ("int8", "bf16") and self.backend != "torch" else precision
             self._engines[key] = optimize_for_inference(self._source, backend=self.backend, size=key,
                                                         precision=precision, device=self.device,
-                                                        inplace=self._inplace and self.backend == "torch")  # fmt: skip
+                                                        inplace=self._inplace and self.backend == "torch",
+                                                        calibration=self.calibration)  # fmt: skip
         return self._engines[key]
 
     @property

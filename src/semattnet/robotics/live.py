@@ -32,14 +32,14 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from semattnet._errors import InputError, MissingDependencyError
+from semattnet._errors import InputError
+from semattnet._utils.extras import optional, require
 from semattnet.data.frames import Frame
 from semattnet.inference.sinks import Prediction, RunSink
 from semattnet.robotics.sinks import camera_info, stamp_ns
 
-__all__ = ["INSTALL_HINT", "LATENCY_SCHEMA", "LiveSink", "parse_address"]
+__all__ = ["LATENCY_SCHEMA", "LiveSink", "parse_address"]
 
-INSTALL_HINT = "pip install 'semattnet[live]'"
 #: Topics by role; ``PREFIX`` is :attr:`LiveSink.prefix`.
 TOPICS = {
     "depth": "PREFIX/depth",
@@ -66,23 +66,13 @@ BACKLOG = 64
 
 def _foxglove() -> Any:
     """``foxglove``, or a one-line :class:`MissingDependencyError` with the install hint."""
-    try:
-        import foxglove
-        import foxglove.channels
-    except ImportError:
-        raise MissingDependencyError(f"--live needs the optional package 'foxglove-sdk': {INSTALL_HINT}",
-                                     name="foxglove") from None  # fmt: skip
-    return foxglove
+    require("foxglove.channels", "--live")
+    return require("foxglove", "--live")
 
 
 def _messages() -> Any:
     """The message classes: ``foxglove.messages`` (``foxglove.schemas`` in older releases)."""
-    import importlib
-
-    try:
-        return importlib.import_module("foxglove.messages")
-    except ImportError:
-        return importlib.import_module("foxglove.schemas")
+    return optional("foxglove.messages") or require("foxglove.schemas", "--live")
 
 
 def _accepts(fn: Callable[..., Any], name: str) -> bool:

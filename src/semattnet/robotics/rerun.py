@@ -31,9 +31,9 @@ import numpy as np
 
 from semattnet._errors import InputError
 from semattnet._utils.atomic import new_file_mode
+from semattnet._utils.extras import require
 from semattnet.data.palette import IGNORE_ID, TRAIN_CLASSES, UNKNOWN_COLOR, colors_to_ids
 from semattnet.geometry import depth_to_points, invert_T
-from semattnet.robotics.bags.deps import import_extra
 
 __all__ = ["ENTITIES", "TIMELINE", "RerunLogger", "read_rrd_frames"]
 
@@ -53,7 +53,7 @@ ENTITIES = {
 
 
 def _rerun() -> Any:
-    return import_extra("rerun", "writing a Rerun recording")
+    return require("rerun", "writing a Rerun recording")
 
 
 class RerunLogger:
@@ -217,7 +217,7 @@ def _first_line(e: BaseException) -> str:
 def read_rrd_frames(path: str | os.PathLike[str]) -> dict[str, list[int]]:
     """Entity path (without the leading ``/``) -> the sorted sensor times (ns) it was logged at, of a ``.rrd``
     file; static-only entities map to an empty list. (For checking a recording; needs ``rerun-sdk``.)"""
-    chunk = import_extra("rerun.chunk", "reading a Rerun recording")
+    chunk = require("rerun.chunk", "reading a Rerun recording")
     store = chunk.RrdReader(str(path)).store()
     out: dict[str, list[int]] = {}
     for ch in store.stream():

@@ -25,13 +25,12 @@ from typing import Any
 
 import torch
 
-from semattnet._errors import DataError, InputError, MissingDependencyError
+from semattnet._errors import DataError, InputError
+from semattnet._utils.extras import require
 from semattnet.data.palette import NUM_CLASSES, TRAIN_CLASSES
 
 __all__ = ["HF_SEGMENTERS", "HFSegmenterRecord", "cityscapes_indices", "hf_palette", "load_hf_network",
            "resolve_hf_source"]  # fmt: skip
-
-INSTALL_HINT = "pip install 'semattnet[segment]' (or pip install 'transformers>=4.40')"
 
 
 @dataclass(frozen=True)
@@ -136,10 +135,7 @@ def resolve_hf_source(rest: str) -> tuple[str, str | None]:
 
 
 def _load_model(source: str, revision: str | None) -> Any:
-    try:
-        import transformers
-    except ImportError:
-        raise MissingDependencyError(f"hf: segmenters need transformers: {INSTALL_HINT}") from None
+    transformers = require("transformers", "hf: segmenters")
     from semattnet.weights.download import is_offline
 
     kw = {"revision": revision, "local_files_only": is_offline()}

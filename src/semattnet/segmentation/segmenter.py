@@ -37,8 +37,9 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from semattnet._errors import DataError, InputError, MissingDependencyError
+from semattnet._errors import DataError, InputError
 from semattnet._utils.device import resolve_device
+from semattnet._utils.extras import require
 from semattnet._utils.outputs import check_no_input_overlap
 from semattnet._utils.progress import progress as progress_bar
 from semattnet.data.io import read_image, write_image
@@ -155,10 +156,7 @@ def _torchscript(path: Path, device: torch.device) -> Network:
 
 
 def _onnx(path: Path, device: torch.device) -> Network:
-    try:
-        import onnxruntime as ort
-    except ImportError:
-        raise MissingDependencyError(f"{path}: ONNX models need onnxruntime (pip install onnxruntime)") from None
+    ort = require("onnxruntime", f"{path}: ONNX segmenters")
     providers = ["CPUExecutionProvider"]
     if device.type == "cuda" and "CUDAExecutionProvider" in ort.get_available_providers():
         providers.insert(0, "CUDAExecutionProvider")
@@ -175,10 +173,7 @@ def _onnx(path: Path, device: torch.device) -> Network:
 
 
 def _torchvision(arch: str, weights: Path, device: torch.device) -> Network:
-    try:
-        from torchvision.models import segmentation
-    except ImportError:
-        raise MissingDependencyError("torchvision models need torchvision (pip install torchvision)") from None
+    segmentation = require("torchvision.models.segmentation", "torchvision segmenters")
     ctor = getattr(segmentation, arch, None)
     if ctor is None or arch.startswith("_"):
         raise InputError(f"torchvision.models.segmentation has no architecture {arch!r}")

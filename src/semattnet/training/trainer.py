@@ -28,6 +28,7 @@ from torch.utils.data import DataLoader, Dataset, Subset
 from semattnet._errors import DataError, InputError
 from semattnet._utils import distributed as dist_utils
 from semattnet._utils.atomic import atomic_path
+from semattnet._utils.extras import optional
 from semattnet._utils.progress import progress
 from semattnet.data.datasets import get_dataset
 from semattnet.data.kitti import KittiDepthCompletion
@@ -158,10 +159,10 @@ class Trainer:
         """Create the run folder, write ``config.json``; a TensorBoard writer if tensorboard is installed."""
         self.out.mkdir(parents=True, exist_ok=True)
         self.cfg.save(self.out / "config.json")
-        try:  # optional: pip install tensorboard
-            from torch.utils.tensorboard import SummaryWriter
-        except ImportError:
+        if optional("tensorboard") is None:  # optional: pip install 'semattnet[tensorboard]'
             return None
+        from torch.utils.tensorboard import SummaryWriter
+
         return SummaryWriter(str(self.out / "tensorboard"))
 
     def log(self, msg: str) -> None:

@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from semattnet._errors import DataError
-from semattnet.data.frames import Frame, IndexedSource
+from semattnet._utils.bounds import regular_file
+from semattnet.data.frames import Frame, IndexedSource, unique_names
 
 __all__ = ["VOID_ROLES", "VOID_VARIANTS", "VoidSource", "read_void_intrinsics"]
 
@@ -80,7 +81,18 @@ def _resolve(entry: str, lists: Path) -> Path:
 
 
 def _read_list(path: Path, lists: Path) -> list[Path]:
-    return [_resolve(line.strip(), lists) for line in path.read_text().splitlines() if line.strip()]
+    """The entries of one list file, resolved; naming the file (and line) when it is not UTF-8 text of paths."""
+    try:
+        text = regular_file(path, "VOID list file").read_bytes().decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{path}: not a UTF-8 text list of paths (byte {exc.start}: {exc.reason})") from None
+    entries = []
+    for number, line in enumerate(text.splitlines(), 1):
+        if "\0" in line:
+            raise DataError(f"{path}: line {number} holds a NUL character, not a path")
+        if line.strip():
+            entries.append(_resolve(line.strip(), lists))
+    return entries
 
 
 class VoidSource(IndexedSource):
@@ -114,9 +126,12 @@ class VoidSource(IndexedSource):
         if len(set(counts.values())) > 1:
             raise DataError(f"{self.lists}: the {self.split} lists differ in length: "
                             + ", ".join(f"{files[r].name} {n}" for r, n in counts.items()))  # fmt: skip
+        if counts["image"] == 0:
+            raise DataError(f"{files['image']}: lists no frames (one path per line expected)")
         n = min(counts["image"], max_frames or counts["image"])
         self.frames = [{r: v[i] for r, v in entries.items()} for i in range(n)]
-        self.names: Sequence[str] = [f"{f['image'].parent.parent.name}_{f['image'].stem}" for f in self.frames]
+        named = ((f"{f['image'].parent.parent.name}_{f['image'].stem}", f["image"]) for f in self.frames)
+        self.names: Sequence[str] = list(unique_names(named, files["image"]))
         self.by_name = dict(zip(self.names, self.frames, strict=True))
         self.semantic_root = Path(semantic_root) if semantic_root is not None else None
         self.palette = "cityscapes" if self.semantic_root is not None else None
@@ -144,5 +159,12 @@ class VoidSource(IndexedSource):
             sem = read_semantic(paths["semantic"])
         return Frame(name, rgb, sparse.astype(np.float32), sem, K=K, gt=gt, paths=paths)
 
+    def listed_files(self) -> list[Path]:
+        """Every file the lists name for this source's frames (image, depth, validity, intrinsics)."""
+        return list(dict.fromkeys(p for f in self.frames for p in f.values()))
+
     def inputs(self) -> list[Path]:
-        return [self.lists, *([self.semantic_root] if self.semantic_root is not None else [])]
+        """The list folder, every file the lists name (they may lie anywhere: an output must not replace one)
+        and the semantic folder."""
+        semantic = [self.semantic_root] if self.semantic_root is not None else []
+        return [self.lists, *self.listed_files(), *semantic]

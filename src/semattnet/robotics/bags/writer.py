@@ -22,10 +22,11 @@ import numpy as np
 
 from semattnet._errors import InputError
 from semattnet._utils.atomic import fsync_dir
+from semattnet._utils.extras import require
 from semattnet.geometry import depth_to_points
 
 from .decode import CameraInfoData
-from .deps import import_extra, rosbags_typestore, writes_mcap
+from .deps import rosbags_typestore, writes_mcap
 from .encode import camera_info_message, depth_image_message, pack_rgb, pointcloud2_message
 
 __all__ = ["BAG_FORMATS", "BagWriter", "MessageWriter", "bag_format", "staged_bag"]
@@ -84,9 +85,9 @@ class MessageWriter:
         self.counts: dict[str, int] = {}
         self._conns: dict[str, Any] = {}
         if self.ros1:
-            self._writer = import_extra("rosbags.rosbag1", "writing ROS bags").Writer(self.path)
+            self._writer = require("rosbags.rosbag1", "writing ROS bags").Writer(self.path)
         else:
-            rosbag2 = import_extra("rosbags.rosbag2", "writing ROS bags")
+            rosbag2 = require("rosbags.rosbag2", "writing ROS bags")
             plugin = rosbag2.StoragePlugin.MCAP if self.fmt == "mcap" else rosbag2.StoragePlugin.SQLITE3
             self._writer = rosbag2.Writer(self.path, version=rosbag2.Writer.VERSION_LATEST, storage_plugin=plugin)
 
