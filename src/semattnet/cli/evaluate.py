@@ -137,6 +137,10 @@ def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, data
     if "semantic" in res:
         click.echo(f"semantic maps: {res['semantic']['summary']}")
     click.echo(res["metrics"].table())
+    r = res["result"]
+    if "ause_rmse" in r:
+        click.echo(f"uncertainty: AUSE RMSE {r['ause_rmse']:.4f}  MAE {r['ause_mae']:.4f}; "
+                   f"AURG RMSE {r['aurg_rmse']:.4f}  MAE {r['aurg_mae']:.4f} (docs/guides/uncertainty.md)")  # fmt: skip
     if out is not None:
         click.echo(f"wrote {out / 'metrics.json'} and {out / 'per_image.csv'}")
 

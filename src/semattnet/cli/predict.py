@@ -67,6 +67,23 @@ def _intrinsics(text: str | None):
 
 _INPUT = click.Path(exists=True, path_type=Path)
 
+
+class _MaxUncertainty(click.ParamType):
+    """``--max-uncertainty``: metres (``0.5``) or a percentage of the depth (``5%``), returned in a canonical
+    text (:class:`semattnet.inference.uncertainty.UncertaintyLimit`'s), which the run identity records."""
+
+    name = "METRES|PERCENT%"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> str:
+        from semattnet._errors import InputError
+        from semattnet.inference.uncertainty import UncertaintyLimit
+
+        try:
+            return str(UncertaintyLimit.parse(value))
+        except InputError as exc:
+            self.fail(str(exc), param, ctx)
+
+
 #: The options of a ROS bag input and of the robot outputs (``--bag-out``, ``--rerun``) and ``--stream``.
 _BAG_OPTIONS = [
     click.option("--bag", type=_INPUT, default=None,
@@ -148,21 +165,24 @@ def _eval_split(dataset: str) -> str:
     return get_dataset(dataset).eval_split
 
 
-def _robot_sinks(bag: dict[str, Any], max_depth: float, timer: Any) -> list[Any]:
-    """``latency.json`` and, as asked, the bag, the Rerun recording or viewer and the live server."""
+def _robot_sinks(bag: dict[str, Any], max_depth: float, timer: Any, limit: Any = None) -> list[Any]:
+    """``latency.json`` and, as asked, the bag, the Rerun recording or viewer and the live server (``limit``:
+    the :class:`~semattnet.inference.uncertainty.UncertaintyLimit` of their clouds, or None)."""
     from semattnet.inference.sinks import LatencySink
     from semattnet.robotics.sinks import BagSink, RerunSink
 
     sinks: list[Any] = [LatencySink(timer=timer)]
+    unc = bool(bag["uncertainty"])
     if bag["bag_out"] is not None:
-        sinks.append(BagSink(target=bag["bag_out"], max_depth=max_depth))
+        sinks.append(BagSink(target=bag["bag_out"], max_depth=max_depth, uncertainty=unc, max_uncertainty=limit))
     if bag["rerun_file"] is not None or bag["rerun_spawn"] or bag["rerun_serve"]:
         sinks.append(RerunSink(target=bag["rerun_file"], spawn=bag["rerun_spawn"], serve=bag["rerun_serve"],
-                               max_depth=max_depth, log=click.echo))  # fmt: skip
+                               max_depth=max_depth, log=click.echo, uncertainty=unc,
+                               max_uncertainty=limit))  # fmt: skip
     if bag["live"] is not None:
         from semattnet.robotics.live import LiveSink
 
-        sinks.append(LiveSink(address=bag["live"], max_depth=max_depth, log=click.echo))
+        sinks.append(LiveSink(address=bag["live"], max_depth=max_depth, log=click.echo, max_uncertainty=limit))
     return sinks
 
 
@@ -223,7 +243,20 @@ def _out_and_resume(out: Path | None, resume: str | None) -> tuple[Path, bool]:
               "palettes name (the rest unknown), or use the fallback map (see evaluate).")  # fmt: skip
 @_bag_options
 @click.option("--out", default=None, type=click.Path(file_okay=False, path_type=Path), help="Output folder [required].")
-@click.option("--npy", is_flag=True, help="Also write float32 .npy depth.")
+@click.option("--npy", is_flag=True, help="Also write float32 .npy depth (and uncertainty, with --uncertainty).")
+@click.option(
+    "--uncertainty",
+    is_flag=True,
+    help="Also write the per-pixel uncertainty: OUT/uncertainty/NAME.png (metres * 256, 0 = none), "
+    "in the bag (--bag-out) and the Rerun recording, and in the viewer (--report).",
+)
+@click.option(
+    "--max-uncertainty",
+    type=_MaxUncertainty(),
+    default=None,
+    help="Point clouds (--ply, bird's-eye view, --bag-out, --rerun, --live) leave out pixels whose "
+    "uncertainty exceeds METRES, or PERCENT% of their depth; depth maps stay dense.",
+)
 @click.option("--panel", is_flag=True, help="Also write the per-branch panel (with --kitti-raw: a bird's-eye view).")
 @click.option("--ply", is_flag=True, help="With --kitti-raw or --bag: also write a binary PLY point cloud.")
 @click.option(
@@ -283,6 +316,7 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
     out, resuming = _out_and_resume(out, bag.pop("resume"))
     _check_combinations(rgb, sparse, kitti_raw, data, frames, deskew, ply, segment_spec, semantic, report,
                         intrinsics, bag)  # fmt: skip
+    _check_uncertainty(ply, panel, kitti_raw is not None or bag["bag"] is not None, bag)
     if resuming and overwrite:
         raise click.UsageError("give --resume or --overwrite, not both")
     _check_method(method, checkpoint, weights)
@@ -317,6 +351,7 @@ def _check_combinations(rgb: Path | None, sparse: Path | None, kitti_raw: Path |
     require_with("--kitti-raw", kitti_raw is not None, "camera")
     robot = bool(bag["bag_out"] or bag["rerun_file"] or bag["rerun_spawn"] or bag["rerun_serve"] or bag["live"])
     require_with("--report, --bag-out, --rerun or --live", report or robot, "intrinsics")
+
     if bag["bag"] is not None and semantic is not None:
         raise click.UsageError("--semantic is for --rgb/--kitti-raw; a bag's semantic maps come with --semantic-topic")
     if bag["semantic_topic"] is not None and segment_spec is not None:
@@ -331,6 +366,19 @@ def _check_combinations(rgb: Path | None, sparse: Path | None, kitti_raw: Path |
         raise click.UsageError("--realtime replays a recording: it needs --bag or --kitti-raw")
 
 
+def _check_uncertainty(ply: bool, panel: bool, lidar: bool, bag: dict[str, Any]) -> None:
+    """``--max-uncertainty`` only with an output that has a point cloud (``--panel``: its bird's-eye view, with
+    the LiDAR of ``--kitti-raw`` / ``--bag``); with a bag or a Rerun recording, only with ``--uncertainty`` (a
+    resume rebuilds the kept frames' clouds from their stored uncertainty)."""
+    replayed = bool(bag["bag_out"] or bag["rerun_file"] or bag["rerun_spawn"] or bag["rerun_serve"])
+    clouds = ply or (panel and lidar) or replayed or bag["live"] is not None
+    require_with("--ply, --panel (with --kitti-raw or --bag), --bag-out, --rerun or --live", clouds,
+                 "max_uncertainty")  # fmt: skip
+    if bag["max_uncertainty"] is not None and replayed and not bag["uncertainty"]:
+        raise click.UsageError("--max-uncertainty with --bag-out or --rerun needs --uncertainty (a resumed run "
+                               "rebuilds the kept frames' clouds from OUT/uncertainty/)")  # fmt: skip
+
+
 def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
     """Check everything, load the completer, run the one frame loop; then the table (and the report).
     ``p``: every option of the command, by name."""
@@ -339,6 +387,7 @@ def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
     from semattnet.inference.pipeline import check_frames, complete_frames
     from semattnet.inference.sinks import default_sinks
     from semattnet.inference.stream import StageTimes
+    from semattnet.inference.uncertainty import UncertaintyLimit
 
     K = _intrinsics(p["intrinsics"])
     folder, mismatch = p["semantic"] is not None or p["semantic_topic"] is not None, p["palette_mismatch"]
@@ -351,8 +400,9 @@ def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
                                  p["segment_spec"], p["device"], log=click.echo)  # fmt: skip
         maps = SemanticMaps(None, folder=True, mismatch=mismatch)
     timer = StageTimes()
-    files = default_sinks(p["npy"], p["panel"], p["ply"], p["max_depth"], p["top_crop"])
-    sinks = files + _robot_sinks(p, p["max_depth"], timer)
+    limit = None if p["max_uncertainty"] is None else UncertaintyLimit.parse(p["max_uncertainty"])
+    files = default_sinks(p["npy"], p["panel"], p["ply"], p["max_depth"], p["top_crop"], p["uncertainty"], limit)
+    sinks = files + _robot_sinks(p, p["max_depth"], timer, limit)
     realtime = (p["speed"] or 1.0) if p["realtime"] else None
     inputs = (p["rgb"], p["sparse"], p["kitti_raw"], p["frames"], p["camera"], semantic, p["deskew"], K)
     with process_group():
