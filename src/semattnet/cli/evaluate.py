@@ -78,6 +78,13 @@ def metrics(
     show_default=True,
     help="With --sparsity: classical sweeps only the baseline (no model needed).",
 )
+@click.option("--segment", default=None, metavar="SPEC",
+              help="nyuv2 / void: semantic maps from this segmenter (e.g. hf:indoor; see `semattnet segment`), "
+              "segmented once into a cache folder and reused.")  # fmt: skip
+@click.option("--palette-mismatch", type=click.Choice(["refuse", "recolour", "fallback"]), default="refuse",
+              show_default=True, help="Maps of another palette than the model's (a KITTI model on nyuv2): refuse, "
+              "recolour the classes both palettes name (the rest unknown), or use the fallback map; "
+              "metrics.json's 'semantic' says which.")  # fmt: skip
 @click.option("--save-predictions", is_flag=True, help="Write 16-bit PNG predictions (needs --out).")
 @click.option(
     "--pictures", type=COUNT, default=0, show_default=True, help="Branch panels for the first N frames (needs --out)."
@@ -91,11 +98,14 @@ def metrics(
 @backend_option
 def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, dataset: str, split: str | None,
              out: Path | None,
-             sparsity: tuple[str, ...], method: str, save_predictions: bool, pictures: int, device: str,
+             sparsity: tuple[str, ...], method: str, segment: str | None, palette_mismatch: str,
+             save_predictions: bool, pictures: int, device: str,
              batch_size: int, amp: str, workers: int, max_frames: int | None, overwrite: bool,
              backend: str) -> None:  # fmt: skip
     """Evaluate a checkpoint on a split with its dataset's metrics (KITTI: the devkit's), or sweep sparser inputs."""
     split = _split(dataset, split)
+    if sparsity and segment:
+        raise click.UsageError("--segment is for the model's evaluation, not --sparsity")
     if sparsity:
         _one_process("evaluate --sparsity")
         if out is None:
@@ -112,13 +122,20 @@ def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, data
         model_from_options(checkpoint, weights)  # the usage error, before any work
     # a path, or the loader of --weights (exactly one is set here): called after the split and --out are checked
     model = partial(model_from_options, None, weights) if checkpoint is None else checkpoint
+    semantic = None
+    if segment is not None:
+        from semattnet.data.datasets.segment import segment_split
+
+        semantic = segment_split(dataset, data_root, (split,), segment, device, log=click.echo, max_frames=max_frames)
     res = evaluate_checkpoint(model, data_root, split, out, device, batch_size, amp, workers,
-                              save_predictions, pictures, max_frames, overwrite, backend=backend,
-                              dataset=dataset)  # fmt: skip
+                              save_predictions, pictures, max_frames, overwrite, semantic_root=semantic,
+                              backend=backend, dataset=dataset, palette_mismatch=palette_mismatch)  # fmt: skip
     from semattnet._utils.distributed import launch_rank
 
     if launch_rank() != 0:  # under torchrun: every rank holds the merged metrics; rank 0 reports them
         return
+    if "semantic" in res:
+        click.echo(f"semantic maps: {res['semantic']['summary']}")
     click.echo(res["metrics"].table())
     r = res["result"]
     if "ause_rmse" in r:

@@ -159,6 +159,12 @@ def _source(rgb, sparse, kitti_raw, frames, camera, semantic, deskew, K, bag, da
     return FolderSource.pair(rgb, sparse, semantic, K=K, missing_ok=True)
 
 
+def _eval_split(dataset: str) -> str:
+    from semattnet.data.datasets import get_dataset
+
+    return get_dataset(dataset).eval_split
+
+
 def _robot_sinks(bag: dict[str, Any], max_depth: float, timer: Any, limit: Any = None) -> list[Any]:
     """``latency.json`` and, as asked, the bag, the Rerun recording or viewer and the live server (``limit``:
     the :class:`~semattnet.inference.uncertainty.UncertaintyLimit` of their clouds, or None)."""
@@ -229,8 +235,12 @@ def _out_and_resume(out: Path | None, resume: str | None) -> tuple[Path, bool]:
     "segment_spec",
     default=None,
     metavar="SPEC",
-    help="With --kitti-raw or --bag: segment each image with this model (see `semattnet segment --model`).",
+    help="With --kitti-raw or --bag: segment each image with this model (see `semattnet segment --model`); "
+    "with --data (nyuv2, void): the split's frames segmented once into a cache folder and reused.",
 )
+@click.option("--palette-mismatch", type=click.Choice(["refuse", "recolour", "fallback"]), default="refuse",
+              show_default=True, help="Maps of another palette than the model's: refuse, recolour the classes both "
+              "palettes name (the rest unknown), or use the fallback map (see evaluate).")  # fmt: skip
 @_bag_options
 @click.option("--out", default=None, type=click.Path(file_okay=False, path_type=Path), help="Output folder [required].")
 @click.option("--npy", is_flag=True, help="Also write float32 .npy depth (and uncertainty, with --uncertainty).")
@@ -332,8 +342,10 @@ def _check_combinations(rgb: Path | None, sparse: Path | None, kitti_raw: Path |
                         intrinsics: str | None, bag: dict[str, Any]) -> None:  # fmt: skip
     """The options agree with the input kind (one line each, before any work)."""
     files_only = kitti_raw is None and bag["bag"] is None and data[1] is None
-    if (files_only or data[1] is not None) and (ply or segment_spec):
-        raise click.UsageError("--ply and --segment need --kitti-raw or --bag")
+    if files_only and (ply or segment_spec):
+        raise click.UsageError("--ply and --segment need --kitti-raw, --bag or --data")
+    if data[1] is not None and ply:
+        raise click.UsageError("--ply needs --kitti-raw or --bag")
     if kitti_raw is None and (frames or deskew):
         raise click.UsageError("--frames and --deskew need --kitti-raw")
     require_with("--kitti-raw", kitti_raw is not None, "camera")
@@ -378,13 +390,21 @@ def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
     from semattnet.inference.uncertainty import UncertaintyLimit
 
     K = _intrinsics(p["intrinsics"])
-    maps = SemanticMaps(p["segment_spec"], folder=p["semantic"] is not None or p["semantic_topic"] is not None)
+    folder, mismatch = p["semantic"] is not None or p["semantic_topic"] is not None, p["palette_mismatch"]
+    maps = SemanticMaps(p["segment_spec"], folder=folder, mismatch=mismatch)
+    semantic = p["semantic"]
+    if p["data_root"] is not None and p["segment_spec"] is not None:  # the split's maps, cached: a folder
+        from semattnet.data.datasets.segment import segment_split
+
+        semantic = segment_split(p["dataset"], p["data_root"], (p["split"] or _eval_split(p["dataset"]),),
+                                 p["segment_spec"], p["device"], log=click.echo)  # fmt: skip
+        maps = SemanticMaps(None, folder=True, mismatch=mismatch)
     timer = StageTimes()
     limit = None if p["max_uncertainty"] is None else UncertaintyLimit.parse(p["max_uncertainty"])
     files = default_sinks(p["npy"], p["panel"], p["ply"], p["max_depth"], p["top_crop"], p["uncertainty"], limit)
     sinks = files + _robot_sinks(p, p["max_depth"], timer, limit)
     realtime = (p["speed"] or 1.0) if p["realtime"] else None
-    inputs = (p["rgb"], p["sparse"], p["kitti_raw"], p["frames"], p["camera"], p["semantic"], p["deskew"], K)
+    inputs = (p["rgb"], p["sparse"], p["kitti_raw"], p["frames"], p["camera"], semantic, p["deskew"], K)
     with process_group():
         source = _source(*inputs, p, (p["dataset"], p["data_root"], p["split"]))
         plan = check_frames(source, sinks, out, overwrite=p["overwrite"], on_error=p["on_error"], resume=resuming,
@@ -398,6 +418,8 @@ def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
                               realtime=realtime)  # fmt: skip
     if launch_rank() == 0:
         click.echo(timer.table())
+        if maps.note:
+            click.echo(f"semantic maps: {maps.note}")
     if p["report"] and launch_rank() == 0:  # under torchrun: once, after every rank's frames are in place
         from semattnet.viz.viewer import write_prediction_report
 

@@ -27,6 +27,9 @@ from semattnet.cli._options import (
     "--data", "data_root", type=click.Path(file_okay=False), help="KITTI depth completion root (or a synth tree)."
 )
 @dataset_option("The dataset (its reader, augmentation, metrics, palette); not kitti-dc: its recipe is the start.")
+@click.option("--segment", "segment", default=None, metavar="SPEC",
+              help="nyuv2 / void: semantic maps from this segmenter (e.g. hf:indoor; see `semattnet segment`), "
+              "segmented once into a cache folder and reused.")  # fmt: skip
 @click.option("--out", type=click.Path(file_okay=False), default=None, help="Run folder [runs/<stage>].")
 @click.option("--init", "--init-weights", "init", multiple=True, callback=one_value(WEIGHTS_SPEC),
               metavar="NAME|PATH|URL", help="Weights to start from: the previous stage's checkpoint, or released "
@@ -54,7 +57,7 @@ from semattnet.cli._options import (
 @click.option(
     "--set", "overrides", multiple=True, metavar="KEY=VALUE", help="Any TrainConfig field, e.g. --set val_every=2."
 )
-def train(stage: str, data_root: str | None, dataset: str, out: str | None, init: str | None,
+def train(stage: str, data_root: str | None, dataset: str, segment: str | None, out: str | None, init: str | None,
           config_file: str | None, resume: bool, overwrite: bool,
           epochs: int | None, batch_size: int | None, lr: float | None, width: float | None, crop: str | None,
           amp: str | None, device: str | None, workers: int | None, max_steps: int | None,
@@ -79,7 +82,7 @@ def train(stage: str, data_root: str | None, dataset: str, out: str | None, init
         given = {"stage": stage if not config_file else base["stage"], "data": data_root, "init": init,
                  "epochs": epochs, "batch_size": batch_size, "lr": lr, "width": width, "amp": amp,
                  "device": device, "workers": workers, "max_steps": max_steps,
-                 "activation_checkpointing": activation_checkpointing or None,
+                 "activation_checkpointing": activation_checkpointing or None, "segment": segment,
                  "crop": list(parse_size(crop)) if crop else None}  # fmt: skip
         base.update({k: v for k, v in given.items() if v is not None})
         base["out"] = out or base.get("out") or f"runs/{base['stage']}"

@@ -16,6 +16,7 @@ import torch
 from torch import nn
 from torch.utils.data import DataLoader, Subset
 
+from semattnet._errors import InputError
 from semattnet._utils import distributed as dist_utils
 from semattnet._utils.device import autocast
 from semattnet._utils.outputs import check_no_input_overlap, write_text
@@ -248,6 +249,7 @@ def evaluate_checkpoint(
     semantic_root: str | Path | None = None,
     backend: str = "torch",
     dataset: str = "kitti-dc",
+    palette_mismatch: str = "refuse",
 ) -> dict[str, Any]:
     """Run a checkpoint (a path, a loaded model, or a function that loads one: called after the split
     and the output folder are checked) over a split and score it; optionally write predictions and
@@ -264,13 +266,13 @@ def evaluate_checkpoint(
     per-image rows gathered in the split's order, so the files are those of one process.
 
     ``dataset``: the protocol (:mod:`semattnet.data.datasets`: ``kitti-dc``, ``nyuv2``, ``void``): its split,
-    metrics and semantic palette (maps of another palette than the model's are refused).
-    """
+    metrics and palette: maps of another palette than the model's are refused unless ``palette_mismatch`` is
+    ``recolour`` / ``fallback`` (nyuv2, void; :class:`~semattnet.data.sources.semantic.CrossPaletteSource`)."""
     inputs = [data, raw_root, semantic_root, checkpoint if isinstance(checkpoint, str | Path) else None]
     with process_group():
         ds, frames, out = _plan(data, split, raw_root, semantic_root, max_frames, out_dir, overwrite, inputs, dataset)
         completer, label = _completer(checkpoint, device, amp, backend)  # after every check
-        spec = _check_maps(completer, ds, data, dataset)
+        spec, semantic = _check_maps(completer, ds, data, dataset, palette_mismatch)
         loader = DataLoader(Subset(ds, range(frames)), batch_size=batch_size, num_workers=workers,
                             sampler=dist_utils.ShardSampler(frames))  # fmt: skip
         engine = completer.engine(tuple(ds[0]["rgb"].shape[-2:])) if frames else completer.model
@@ -279,7 +281,7 @@ def evaluate_checkpoint(
                         quantize=True, make_metrics=spec.metrics, sparsification=spars)  # fmt: skip
         if out is None:
             metrics = _merge(agree(score, None), ds, spars)
-            return {"metrics": metrics, "result": _result(metrics, spars), "sparsification": spars}
+            return {"metrics": metrics, "result": _result(metrics, spars), "sparsification": spars, **semantic}
         writer = PredictionWriter(ds, split, out, save_predictions, pictures, frames)
         expected = writer.expected(frames)
         with shared_stage(out, overwrite, expected) as stage:  # all files appear together, or none
@@ -288,8 +290,8 @@ def evaluate_checkpoint(
             result = _result(metrics, spars)
             if result:
                 expected += _write_scores(stage, metrics, {"checkpoint": label, "dataset": spec.name,
-                                                           "split": split} | result, spars)  # fmt: skip
-    return {"metrics": metrics, "result": result, "sparsification": spars}
+                                                           "split": split, **semantic} | result, spars)  # fmt: skip
+    return {"metrics": metrics, "result": result, "sparsification": spars, **semantic}
 
 
 def _result(metrics: KittiMetrics, spars: Sparsification) -> dict[str, Any]:
@@ -298,12 +300,25 @@ def _result(metrics: KittiMetrics, spars: Sparsification) -> dict[str, Any]:
     return (metrics.compute() | spars.compute()) if metrics.per_image else {}
 
 
-def _check_maps(completer: DepthCompleter, ds: Any, data: str | Path, dataset: str) -> Any:
-    """The dataset's entry, once its maps' palette is the model's (a dataset without maps: any)."""
+def _check_maps(completer: DepthCompleter, ds: Any, data: str | Path, dataset: str,
+                mismatch: str = "refuse") -> tuple[Any, dict[str, Any]]:  # fmt: skip
+    """The dataset's entry, once its maps' palette is the model's (a dataset without maps: any), and ``{}``;
+    with another palette and ``mismatch`` ``recolour`` / ``fallback``: ``ds`` reads them converted, and
+    ``{"semantic": what they became}``."""
+    from semattnet.data.palette import get_palette
+
     spec, palette = get_dataset(dataset), getattr(ds, "palette", "cityscapes")
-    if completer.needs_semantic and palette:
+    if not (completer.needs_semantic and palette) or get_palette(palette).name == get_palette(completer.palette).name:
+        return spec, {}
+    if mismatch == "refuse":
         check_palette(completer.palette, palette, f"{data} ({spec.name} maps)")
-    return spec
+    if not hasattr(ds, "source"):
+        raise InputError(f"--palette-mismatch {mismatch}: only for nyuv2 and void (not {spec.name})")
+    from semattnet.data.sources.semantic import CrossPaletteSource
+
+    ds.source = CrossPaletteSource(ds.source, completer.palette, mismatch)
+    ds.palette = ds.source.palette
+    return spec, {"semantic": ds.source.report()}
 
 
 def _plan(data: str | Path, split: str, raw_root: str | Path | None, semantic_root: str | Path | None,

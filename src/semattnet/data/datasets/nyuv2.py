@@ -3,9 +3,11 @@
 Layout: ``ROOT/train/<scene>/<NNNNN>.h5`` (about 48k frames) and ``ROOT/val/official/<NNNNN>.h5`` (the 654
 test frames of the official split). Each file holds ``rgb`` uint8 (3, 480, 640) and ``depth`` float32
 (480, 640) in metres (the in-painted Kinect depth, dense); an optional ``label`` (480, 640) integer map of
-NYU-40 ids (0 = unlabelled) becomes the frame's semantic map in the NYU-40 palette.
+NYU-40 ids (0 = unlabelled), or of the labelled subset's raw ids 1..894 (any id above 40; mapped to NYU-40 by
+the published table, :mod:`semattnet.data.nyu40_map`), becomes the frame's semantic map in the NYU-40 palette.
 
-Protocol (NLSPN's): image resized to 320x240 (bilinear; depth and labels nearest), centre-cropped to 304x228,
+Protocol (NLSPN's ``src/data/nyu.py``): image and depth resized to 320x240 (bilinear, torchvision's ``Resize``
+default; labels nearest), centre-cropped to 304x228,
 500 depth samples drawn among gt > 1e-4 m (seeded per frame: :func:`~.frames.frame_seed` of its name, so a
 test frame always gets the same points and two frames get different ones), depth range 0.1-10 m.
 """
@@ -26,7 +28,7 @@ from semattnet.data.datasets.frames import MissingSplitError, draw_samples, fram
 from semattnet.data.datasets.hdf5 import plain_dataset, read_bounded
 from semattnet.data.frames import Frame, IndexedSource, unique_names
 
-__all__ = ["NYU_K", "NYU_SPLITS", "NyuV2Source", "protocol_K", "read_nyu_h5"]
+__all__ = ["NYU_K", "NYU_SPLITS", "NyuV2Source", "check_root", "label_colors", "protocol_K", "read_nyu_h5"]
 
 #: Kinect colour intrinsics at 640x480 (fx, fy, cx, cy), as NLSPN's ``nyu.py``.
 NYU_K = (5.1885790117450188e02, 5.1946961112127485e02, 3.2558244941119034e02, 2.5373616633400465e02)
@@ -36,6 +38,7 @@ RESIZED = (240, 320)  # H, W after the resize
 CROP = (228, 304)  # H, W of the centre crop
 SAMPLES = 500
 MAX_MEDIAN_M = 100.0  # a median depth above this is millimetres, not metres
+RAW_LABELS = 894  # the labelled subset's raw class ids (semattnet.data.nyu40_map)
 
 
 def _check_layout(path: Path, rgb: Any, depth: Any, label: Any) -> None:
@@ -87,8 +90,9 @@ def read_nyu_h5(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray, n
     if valid.size and float(np.median(valid)) > MAX_MEDIAN_M:
         raise DataError(f"{path}: 'depth' median {float(np.median(valid)):.1f} is above {MAX_MEDIAN_M:g}: "
                         "millimetres? expected metres")  # fmt: skip
-    if label is not None and label.size and (label.min() < 0 or label.max() > 40):
-        raise DataError(f"{path}: 'label' must hold NYU-40 ids 0..40, found {label.min()}..{label.max()}")
+    if label is not None and label.size and (label.min() < 0 or label.max() > RAW_LABELS):
+        raise DataError(f"{path}: 'label' must hold NYU-40 ids 0..40 or raw NYU ids 0..{RAW_LABELS}, found "
+                        f"{label.min()}..{label.max()}")  # fmt: skip
     depth = np.where(np.isfinite(depth), depth, 0).astype(np.float32)
     return np.ascontiguousarray(rgb.transpose(1, 2, 0)), depth, label
 
@@ -106,6 +110,27 @@ def _resize(a: np.ndarray, nearest: bool) -> np.ndarray:
 def _crop(a: np.ndarray) -> np.ndarray:
     top, left = (RESIZED[0] - CROP[0]) // 2, (RESIZED[1] - CROP[1]) // 2
     return a[top : top + CROP[0], left : left + CROP[1]]
+
+
+def check_root(root: Path) -> None:
+    """A root one level too high (``nyu/`` holding ``nyudepthv2/``) is one line naming the folder to pass."""
+    folders = set(NYU_SPLITS.values())
+    if not root.is_dir() or any((root / f).is_dir() for f in folders):
+        return
+    below = sorted(c for c in root.iterdir() if c.is_dir() and any((c / f).is_dir() for f in folders))
+    if below:
+        raise DataError(f"{root}: not a NYU v2 root (no {' or '.join(sorted(folders))} inside), but {below[0]} is "
+                        f"one: pass {below[0]}")  # fmt: skip
+
+
+def label_colors(label: np.ndarray) -> np.ndarray:
+    """A file's ``label`` map as the protocol frame's NYU-40 colours: NYU-40 ids (0..40) as they are; a map with
+    any id above 40 holds the labelled subset's raw ids (1..894), mapped to NYU-40 by the published table
+    (:func:`semattnet.data.palette.nyu894_to_nyu40`)."""
+    from semattnet.data.palette import ids_to_colors, nyu894_to_nyu40
+
+    ids = nyu894_to_nyu40(label) if label.size and int(label.max()) > 40 else label.astype(np.uint8)
+    return ids_to_colors(_crop(_resize(ids, True)), palette="nyu40")
 
 
 def protocol_K() -> np.ndarray:
@@ -134,6 +159,7 @@ class NyuV2Source(IndexedSource):
 
         self.root, self.split = Path(root), check_split("nyuv2", split)
         folder = self.root / NYU_SPLITS[self.split]
+        check_root(self.root)
         if not folder.is_dir():
             raise MissingSplitError(f"{folder}: split folder not found (expected {folder}/"
                                     f"{'<scene>/' if self.split == 'train' else ''}<NNNNN>.h5)")  # fmt: skip
@@ -149,15 +175,14 @@ class NyuV2Source(IndexedSource):
 
     def load(self, name: str) -> Frame:
         from semattnet.data.io import read_semantic
-        from semattnet.data.palette import ids_to_colors
 
         path = self.files[name]
         rgb, depth, label = read_nyu_h5(path)
-        rgb, gt = _crop(_resize(rgb, False)), _crop(_resize(depth, True))
+        rgb, gt = _crop(_resize(rgb, False)), _crop(_resize(depth, False))
         paths = {"rgb": path, "gt": path, "sparse": path}
         sem = None
         if label is not None:
-            sem = ids_to_colors(_crop(_resize(label.astype(np.uint8), True)), palette="nyu40")
+            sem = label_colors(label)
         elif self.semantic_root is not None:
             paths["semantic"] = self.semantic_root / f"{name}.png"
             sem = read_semantic(paths["semantic"], palette="nyu40")

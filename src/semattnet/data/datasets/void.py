@@ -5,7 +5,8 @@ Layout (the release's): ``void_NNN/{train,test}_{image,sparse_depth,validity_map
 list one path per frame (relative to the folder holding ``void_NNN``, to ``void_NNN`` itself, or absolute);
 images are 640x480 RGB PNGs, sparse depth and ground truth 16-bit PNGs in 1/256 m (KITTI's encoding), the
 validity map a PNG whose non-zero pixels mark the sparse points, intrinsics a 3x3 matrix as ``.npy`` or text
-(``K.txt``, 9 numbers). Evaluation (KBNet's): predictions clamped to 0.2-5.0 m, pixels with gt in that range.
+(``K.txt``, 9 numbers). Evaluation (KBNet's ``src/kbnet.py``): pixels with gt in 0.2-5.0 m, the predictions as
+they are (not clamped to that range; KBNet bounds its network's output instead).
 """
 
 from __future__ import annotations
@@ -54,10 +55,21 @@ def _read_validity(path: Path) -> np.ndarray:
 
 
 def _folder(root: Path) -> Path:
-    """``root`` itself when it holds list files, else its first ``void_NNN`` (1500 first)."""
+    """``root`` itself when it holds list files, else its first ``void_NNN`` (1500 first); a root one level
+    too high (holding ``void_release/``) is one line naming the folder to pass."""
     if any(root.glob("*_image.txt")):
         return root
-    return next((root / v for v in VOID_VARIANTS if (root / v).is_dir()), root)
+    found = next((root / v for v in VOID_VARIANTS if (root / v).is_dir()), None)
+    if found is None and root.is_dir():
+        below = sorted(c for c in root.iterdir() if c.is_dir() and _holds_release(c))
+        if below:
+            raise DataError(f"{root}: no VOID list files nor {'/'.join(VOID_VARIANTS)} inside, but {below[0]} "
+                            f"holds them: pass {below[0]}")  # fmt: skip
+    return found or root
+
+
+def _holds_release(folder: Path) -> bool:
+    return any(folder.glob("*_image.txt")) or any((folder / v).is_dir() for v in VOID_VARIANTS)
 
 
 def _resolve(entry: str, lists: Path) -> Path:
