@@ -9,7 +9,7 @@ the weights, then overrides, then a strict load): :func:`load_model`, :func:`fro
 Examples:
     >>> from semattnet import weights
     >>> weights.list_pretrained()
-    ['semattnet-kitti']
+    ['semattnet-kitti', 'semattnet-demo-ref-seed0', 'semattnet-demo-ref-seed1']
     >>> weights.get_weights("semattnet-kitti").paper_metrics["kitti/test"]["rmse_mm"]
     709.41
 
