@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -89,6 +89,8 @@ class BagSink(_StagedTarget):
     from ``K``), stamped with the input's header stamp and frame id (``meta``; else ``timestamp`` and
     ``camera``)."""
 
+    option: ClassVar[str] = "--bag-out"
+    kind: ClassVar[str] = "bag"
     target: Path | None = Path("prediction_bag")
     fmt: str | None = None
     prefix: str = "/semattnet"
@@ -137,6 +139,8 @@ class RerunSink(_StagedTarget):
     """``--rerun FILE.rrd`` / ``--rerun-spawn``: per frame the camera, image, sparse input, stored depth, semantic
     map, LiDAR points and completed cloud (:class:`semattnet.robotics.bags.RerunLogger`) at the frame's sensor time."""
 
+    option: ClassVar[str] = "--rerun"
+    kind: ClassVar[str] = "rrd"
     target: Path | None = None
     spawn: bool = False
     max_depth: float | None = None

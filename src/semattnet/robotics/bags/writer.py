@@ -51,18 +51,25 @@ def bag_format(path: str | os.PathLike[str], fmt: str | None = None) -> str:
 @contextmanager
 def staged_bag(path: str | os.PathLike[str], overwrite: bool = False) -> Iterator[Path]:
     """Yield a path in a hidden temporary folder beside ``path``; when the block succeeds it is moved to ``path``
-    in one rename (a previous file or folder there is replaced only with ``overwrite``), else removed.
+    in one rename (a previous bag there is replaced only with ``overwrite``, and only a bag we wrote: a ROS 2
+    bag folder carries :data:`~semattnet._utils.outputs.BAG_MARKER`), else removed. Stage folders of killed
+    runs beside ``path`` are removed first.
 
     Raises:
         FileExistsError: ``path`` exists and ``overwrite`` is False (checked first).
+        OutputError: ``path`` exists and is not a bag we wrote.
     """
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; refusing to overwrite (pass --overwrite / overwrite=True)")
+    from semattnet._utils.outputs import BAG_MARKER, Output, check_outputs, clean_stale_stages
+
+    check_outputs([], [Output("bag", path, "bag")], overwrite)
+    path = Path(os.path.abspath(path))  # "." has no name to stage under: its absolute path has
     path.parent.mkdir(parents=True, exist_ok=True)
+    clean_stale_stages(path.parent, f".{path.name}.p")
     stage = Path(tempfile.mkdtemp(prefix=f".{path.name}.p{os.getpid()}.", dir=path.parent))
     try:
         yield stage / path.name
+        if (stage / path.name).is_dir():
+            (stage / path.name / BAG_MARKER).write_text("written by semattnet\n")
         if path.is_dir() and not path.is_symlink():
             os.replace(path, stage / ".replaced")
         os.replace(stage / path.name, path)
@@ -125,8 +132,9 @@ class BagWriter:
         self.path, self.fmt = Path(path), bag_format(path, fmt)
         self.topics = {k: f"{prefix.rstrip('/')}/{k}" for k in ("depth", "points", "camera_info")}
         self.max_depth = max_depth
-        if self.path.exists() and not overwrite:  # at once, before any frame is computed
-            raise FileExistsError(f"{self.path} exists; refusing to overwrite (pass --overwrite / overwrite=True)")
+        from semattnet._utils.outputs import Output, check_outputs
+
+        check_outputs([], [Output("bag", self.path, "bag")], overwrite)  # at once, before any frame is computed
         self._stage = staged_bag(self.path, overwrite)
         self._out: MessageWriter | None = None
         self.frames = 0
