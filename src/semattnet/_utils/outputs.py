@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from semattnet._errors import SemAttNetError
-from semattnet._utils.atomic import atomic_path, disk_full_error, fsync_dir, is_disk_full
+from semattnet._utils.atomic import atomic_path, disk_full_error, fsync_dir, is_disk_full, is_named_disk_full
 
 __all__ = [
     "BAG_MARKER",
@@ -157,7 +157,7 @@ def stage_folder(out: Path) -> Iterator[Path]:
     try:
         yield stage
     except OSError as exc:
-        if not is_disk_full(exc) or exc.filename == str(out):
+        if not is_disk_full(exc) or exc.filename == str(out) or is_named_disk_full(exc):
             raise
         staged = sum(p.stat().st_size for p in stage.rglob("*") if p.is_file())
         raise disk_full_error(out, staged + 1) from None
@@ -262,6 +262,7 @@ KINDS: dict[str, tuple[str, Callable[[Path], bool]]] = {
     "rrd": ("a Rerun recording", _is_file(b"RRF")),
     "ply": ("a PLY file", _is_file(b"ply")),
     "png": ("a PNG image", _is_file(b"\x89PNG")),
+    "zip": ("a zip archive", _is_file(b"PK\x03\x04")),
     "safetensors": ("a safetensors file", lambda p: p.is_file() and _is_safetensors(p)),
 }
 

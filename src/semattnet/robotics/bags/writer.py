@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from semattnet._errors import InputError
-from semattnet._utils.atomic import fsync_dir
+from semattnet._utils.atomic import fsync_dir, full_disk_named
 from semattnet.geometry import depth_to_points
 
 from .decode import CameraInfoData
@@ -62,14 +62,15 @@ def staged_bag(path: str | os.PathLike[str], overwrite: bool = False) -> Iterato
     from semattnet._utils.outputs import BAG_MARKER, Output, check_outputs, clean_stale_stages
 
     check_outputs([], [Output("bag", path, "bag")], overwrite)
-    path = Path(os.path.abspath(path))  # "." has no name to stage under: its absolute path has
+    given, path = path, Path(os.path.abspath(path))  # "." has no name to stage under: its absolute path has
     path.parent.mkdir(parents=True, exist_ok=True)
     clean_stale_stages(path.parent, f".{path.name}.p")
     stage = Path(tempfile.mkdtemp(prefix=f".{path.name}.p{os.getpid()}.", dir=path.parent))
     try:
-        yield stage / path.name
-        if (stage / path.name).is_dir():
-            (stage / path.name / BAG_MARKER).write_text("written by semattnet\n")
+        with full_disk_named(given, stage):  # a full disk names the bag and the space
+            yield stage / path.name
+            if (stage / path.name).is_dir():
+                (stage / path.name / BAG_MARKER).write_text("written by semattnet\n")
         if path.is_dir() and not path.is_symlink():
             os.replace(path, stage / ".replaced")
         os.replace(stage / path.name, path)
