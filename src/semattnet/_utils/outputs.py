@@ -327,7 +327,8 @@ def _against_inputs(o: Output, r: Path, ins: dict[Path | tuple[int, int], tuple[
     ino = _inode(r)
     hit = ins.get(r) or (ins.get(ino) if ino is not None and not r.is_dir() else None)
     if hit is not None:
-        raise OutputError(f"{_named(o.option, o.path)} would replace the input {_named(*hit)}; choose another path")
+        what = "the input folder" if r.is_dir() else "the input"
+        raise OutputError(f"{_named(o.option, o.path)} would replace {what} {_named(*hit)}; choose another path")
     inside = next((ins[p] for p in r.parents if p in ins), None)
     if inside is not None:
         raise OutputError(f"{_named(o.option, o.path)} lies inside the input folder {_named(*inside)}; "

@@ -61,7 +61,9 @@ def staged_bag(path: str | os.PathLike[str], overwrite: bool = False) -> Iterato
     """
     from semattnet._utils.outputs import BAG_MARKER, Output, check_outputs, clean_stale_stages
 
-    check_outputs([], [Output("bag", path, "bag")], overwrite)
+    if Path(path).exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; refusing to overwrite (pass --overwrite / overwrite=True)")
+    check_outputs([], [Output("bag", path, "bag")], overwrite)  # only a bag of ours is replaced
     given, path = path, Path(os.path.abspath(path))  # "." has no name to stage under: its absolute path has
     path.parent.mkdir(parents=True, exist_ok=True)
     clean_stale_stages(path.parent, f".{path.name}.p")
@@ -135,7 +137,9 @@ class BagWriter:
         self.max_depth = max_depth
         from semattnet._utils.outputs import Output, check_outputs
 
-        check_outputs([], [Output("bag", self.path, "bag")], overwrite)  # at once, before any frame is computed
+        if self.path.exists() and not overwrite:  # at once, before any frame is computed
+            raise FileExistsError(f"{self.path} exists; refusing to overwrite (pass --overwrite / overwrite=True)")
+        check_outputs([], [Output("bag", self.path, "bag")], overwrite)  # only a bag of ours is replaced
         self._stage = staged_bag(self.path, overwrite)
         self._out: MessageWriter | None = None
         self.frames = 0
