@@ -273,3 +273,16 @@ def test_full_disk_under_a_recording_names_it(bag: Path, tmp_path: Path, small_f
                "--rerun", small_fs / "run.rrd")  # fmt: skip
     _full_disk_line(res, small_fs / "run.rrd")
     assert list(small_fs.iterdir()) == []
+
+
+def test_a_plain_write_that_fills_the_disk_names_the_output(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import errno
+
+    import semattnet.data.synthetic.tree as tree
+
+    def full(*args: object, **kwargs: object) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")  # what a plain write() says: no path
+
+    monkeypatch.setattr(tree, "write_synthetic_kitti", full)
+    code, output = _invoke("synth", "--out", tmp_path / "syn")
+    _refused(code, output, f"Error: {tmp_path / 'syn'}: no space left on the device (", "free")
