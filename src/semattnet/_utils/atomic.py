@@ -26,6 +26,7 @@ __all__ = [
     "full_disk_named",
     "is_disk_full",
     "new_file_mode",
+    "no_space_left",
     "pid_alive",
 ]
 
@@ -63,7 +64,7 @@ def is_named_disk_full(exc: BaseException) -> bool:
     return is_disk_full(exc) and bool(getattr(exc, "filename", None)) and "no space left on the device" in str(exc)
 
 
-def _no_space_left(path: Path) -> bool:
+def no_space_left(path: Path) -> bool:
     """Whether the file system that holds (or would hold) ``path`` has less than 1 MiB free."""
     while not path.exists() and path != path.parent:
         path = path.parent
@@ -85,7 +86,7 @@ def full_disk_named(path: str | os.PathLike[str], staged: str | os.PathLike[str]
         folder = Path(staged) if staged is not None else None
         name = getattr(exc, "filename", None)
         inner = is_named_disk_full(exc) and folder is not None and Path(str(name)).is_relative_to(folder)
-        if (is_named_disk_full(exc) and not inner) or not (is_disk_full(exc) or _no_space_left(Path(path))):
+        if (is_named_disk_full(exc) and not inner) or not (is_disk_full(exc) or no_space_left(Path(path))):
             raise
         size = sum(p.stat().st_size for p in folder.rglob("*") if p.is_file()) if folder and folder.is_dir() else 0
         raise disk_full_error(path, size or None) from None
