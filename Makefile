@@ -2,7 +2,7 @@
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup demo test test-all lint docs bench clean
+.PHONY: setup demo test test-all lint docs bench figures clean
 
 $(BIN)/semattnet: pyproject.toml scripts/setup.sh
 	VENV=$(VENV) bash scripts/setup.sh
@@ -29,6 +29,10 @@ docs: setup
 
 bench: setup
 	$(BIN)/semattnet bench
+
+# The README's and docs home's figure, from the trained weights shipped in the package (about 10 minutes).
+figures: setup
+	$(BIN)/python scripts/docs-figures.py --out docs
 
 clean:
 	rm -rf build dist site .pytest_cache .ruff_cache semattnet-demo

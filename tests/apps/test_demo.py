@@ -42,7 +42,15 @@ def test_short_demo_writes_report(demo_run) -> None:  # type: ignore[no-untyped-
     md = result.report_md.read_text()
     assert "| Classical completion |" in md and "RMSE shadowed [mm]" in md
     images = [line.split("](")[1].rstrip(")") for line in md.splitlines() if line.startswith("![")]
-    assert len(images) == 8  # 2 comparisons, 2 branch panels, 4 training curves
+    assert len(images) == 9  # 2 comparisons, 2 branch panels, 4 training curves, the sparsification curves
+    assert "Uncertainty of Classical completion, AUSE / AURG of RMSE" in md
+    unc = json.loads((out / "results.json").read_text())["uncertainty"]
+    assert set(unc) == {"classical", "semattnet", "two_branch", "reference"}
+    for method, scores in unc.items():
+        assert set(scores["per_seed"]) == {"0", "1"}, method
+        mean = np.mean([s["ause_rmse"] for s in scores["per_seed"].values()])
+        assert scores["ause_rmse"] == pytest.approx(mean) and np.isfinite(scores["aurg_mae"]), method
+        assert len(scores["curves"]["rmse_curve"]) == 100 and scores["curves"]["rmse_curve"][0] == pytest.approx(1)
     assert "Reference checkpoints (shipped, demo_reference_seedS.safetensors.gz, one per training seed 0, 1)" in md
     assert "Live recipe" in md
     for rel in images:

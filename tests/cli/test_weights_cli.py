@@ -65,9 +65,13 @@ def run(*args: str) -> str:
 def test_list_shows_the_registry() -> None:
     out = run("weights", "list")
     header = out.splitlines()[0].split()
-    assert header[:5] == ["name", "arch", "params", "file", "sha256"]
+    assert header[:6] == ["name", "arch", "params", "trained", "on", "file"]
     row = next(line for line in out.splitlines() if line.startswith("semattnet-kitti"))
     assert "unknown (pinned on first download)" in row and "709.41 mm" in row and "361.0 M" in row
+    assert "KITTI depth completion" in row
+    for seed in (0, 1):  # the trained weights shipped inside the package, with what they were trained on
+        row = next(line for line in out.splitlines() if line.startswith(f"semattnet-demo-ref-seed{seed} "))
+        assert "synthetic street scenes (demo)" in row and "5.7 M" in row and "synthetic/own-val" in row
 
 
 def test_fetch_prints_path_and_sha_then_list_shows_the_pin(served: str, weights_file: Path, tmp_path: Path) -> None:

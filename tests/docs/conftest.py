@@ -13,7 +13,10 @@ import pytest
 from tests.docs._blocks import REPO, shim_bin
 
 #: What the pages' examples find in their working folder (the pages say which names they use).
-WORKSPACE_NOTE = "data/kitti (tiny synthetic tree), model.safetensors (width 0.125), frames/, RAW_ROOT/, VOID_ROOT/"
+WORKSPACE_NOTE = (
+    "data/kitti (tiny synthetic tree), model.safetensors (width 0.125), frames/, RAW_ROOT/, VOID_ROOT/, "
+    "NYU_ROOT/ (one labelled test frame)"
+)
 
 
 def _tiny_model(path: Path) -> None:
@@ -59,6 +62,9 @@ def docs_workspace(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from tests.data._datasets import make_void
 
     make_void(root / "VOID_ROOT", train=2, test=2, h=64, w=96)  # VOID's folders and list files, tiny
+    from tests.data._datasets import make_nyu
+
+    make_nyu(root / "NYU_ROOT", train=0, test=1, label=True)  # one sparse-to-dense HDF5 frame, NYU-40 labels
     return root
 
 

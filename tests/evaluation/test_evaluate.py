@@ -58,6 +58,9 @@ def test_metrics_and_evaluate_agree(tree: Path, weights: Path, tmp_path: Path) -
     rows = (out / "per_image.csv").read_text().splitlines()
     assert len(rows) == 4 and rows[0].startswith("name,")
     assert len(list((out / "pictures").glob("*.png"))) == 1
+    # the uncertainty's sparsification scores and curves (semattnet.evaluation.sparsification)
+    assert {"ause_rmse", "aurg_rmse", "ause_mae", "aurg_mae"} <= set(ev) and ev["ause_rmse"] >= 0
+    assert (out / "sparsification.png").stat().st_size > 0
 
 
 def test_metrics_refuses_mismatched_folders(tree: Path, tmp_path: Path) -> None:

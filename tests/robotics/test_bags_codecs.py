@@ -7,7 +7,8 @@ from types import SimpleNamespace as NS
 import numpy as np
 import pytest
 
-from semattnet._errors import DataError
+from semattnet._errors import DataError, MissingDependencyError
+from semattnet._utils.extras import require
 from semattnet.geometry import make_T
 from semattnet.robotics.bags import (
     NoTransformError,
@@ -17,7 +18,7 @@ from semattnet.robotics.bags import (
     decode_pointcloud2,
     pair_stamps,
 )
-from semattnet.robotics.bags.deps import MissingExtraError, import_extra, rosbags_typestore
+from semattnet.robotics.bags.deps import rosbags_typestore
 from semattnet.robotics.bags.encode import compressed_image_message, image_message
 from semattnet.robotics.bags.tf import matrix_to_quaternion, quaternion_to_matrix
 
@@ -151,8 +152,8 @@ def test_pair_stamps_nearest_within_half_period() -> None:
 
 def test_missing_extra_is_one_line() -> None:
     with pytest.raises(
-        MissingExtraError, match=r"^writing X needs the optional package 'no_such_pkg_xyz': pip install"
+        MissingDependencyError, match=r"^writing X needs the optional package 'no_such_pkg_xyz': pip install"
     ):
-        import_extra("no_such_pkg_xyz.sub", "writing X")
-    with pytest.raises(MissingExtraError, match=r"pip install 'semattnet\[rerun\]'"):
-        import_extra("rerun.no_such_module_xyz", "logging")
+        require("no_such_pkg_xyz.sub", "writing X")
+    with pytest.raises(MissingDependencyError, match=r"pip install 'semattnet\[rerun\]'"):
+        require("rerun.no_such_module_xyz", "logging")

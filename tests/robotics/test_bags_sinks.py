@@ -91,7 +91,8 @@ def test_rerun_recording_loads_back(tmp_path: Path) -> None:
         for i, t in enumerate(STAMPS):
             sparse = np.where(_depth(i) > 4.5, 1.0, 0.0)
             log.log_frame(t, np.zeros((10, 16, 3), np.uint8), K, T_cam_lidar, sparse=sparse, depth=_depth(i),
-                          semantic=rng.integers(0, 19, (10, 16)), points=rng.normal(size=(30, 4)))  # fmt: skip
+                          semantic=rng.integers(0, 19, (10, 16)), points=rng.normal(size=(30, 4)),
+                          uncertainty=_depth(i) / 10, keep=_depth(i) > 4.5)  # fmt: skip
     frames = read_rrd_frames(path)
     for role, entity in ENTITIES.items():
         assert frames[entity] == STAMPS, role

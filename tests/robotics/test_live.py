@@ -51,7 +51,8 @@ def _prediction() -> Prediction:
     meta = {"stamp_ns": STAMP, "frame_id": "cam_left", "lidar_frame_id": "velo", "camera_info": info}
     calib = RigCalibration(K, T_CAM_LIDAR, (W, H), "left")
     frame = Frame("000042", rgb, sparse, K=K, calib=calib, meta=meta)
-    pred = predict_frame(frame, Completion(depth))
+    unc = rng.uniform(0, 2, (H, W)).astype(np.float32)
+    pred = predict_frame(frame, Completion(depth, uncertainty=unc))
     pred.stage_ms = {"complete": 12.5, "write": 0.25}  # type: ignore[attr-defined]  # optional; the loop adds it
     return pred
 
@@ -144,7 +145,7 @@ def test_live_frame_round_trip(sink: LiveSink, tmp_path: Path) -> None:
     other.finish(tmp_path)
     assert all(t == STAMP for t, _ in got.values())  # the log time is the sensor stamp
     msgs = {role: got[topic][1] for role, topic in sink.topics.items()}
-    for role in ("depth", "rgb", "sparse", "points", "calibration"):
+    for role in ("depth", "uncertainty", "rgb", "sparse", "points", "calibration"):
         assert _stamp_of(msgs[role]) == STAMP and msgs[role].frame_id == "cam_left", role
     DepthPngSink().write(tmp_path, pred)
     png = read_depth(tmp_path / "000042.png")  # the 16-bit PNG, decode_depth-ed
@@ -153,6 +154,9 @@ def test_live_frame_round_trip(sink: LiveSink, tmp_path: Path) -> None:
     assert (d.encoding, d.width, d.height, d.step) == ("32FC1", W, H, W * 4)
     np.testing.assert_array_equal(_image(d, "<f4", (H, W)), holes_nan)
     np.testing.assert_array_equal(_image(d, "<f4", (H, W)), np.where(pred.stored > 0, pred.stored, np.nan))
+    u, stored_u = msgs["uncertainty"], pred.uncertainty_stored  # as uncertainty/NAME.png stores it
+    assert stored_u is not None and (u.encoding, u.width, u.height, u.frame_id) == ("32FC1", W, H, "cam_left")
+    np.testing.assert_array_equal(_image(u, "<f4", (H, W)), np.where(stored_u > 0, stored_u, np.nan))
     assert msgs["rgb"].encoding == "rgb8" and np.array_equal(_image(msgs["rgb"], "u1", (H, W, 3)), pred.frame.rgb)
     sparse = pred.frame.sparse
     np.testing.assert_array_equal(_image(msgs["sparse"], "<f4", (H, W)), np.where(sparse > 0, sparse, np.nan))
@@ -191,6 +195,29 @@ def _check_calibration(calib: Any, tf: Any) -> None:
     np.testing.assert_allclose([t.translation.x, t.translation.y, t.translation.z], T_CAM_LIDAR[:3, 3])
     q = t.rotation
     np.testing.assert_allclose(quaternion_to_matrix((q.x, q.y, q.z, q.w)), T_CAM_LIDAR[:3, :3], atol=1e-12)
+
+
+def test_live_cloud_leaves_out_the_uncertain_pixels(tmp_path: Path) -> None:
+    """``max_uncertainty``: the points channel carries exactly the pixels whose stored uncertainty passes."""
+    from semattnet.inference.uncertainty import UncertaintyLimit
+
+    limit = UncertaintyLimit(1.0)
+    sink = LiveSink(address="127.0.0.1:0", max_uncertainty=limit)
+    sink.open()
+    pred = _prediction()
+    try:
+        with ws_client.connect(sink.url, subprotocols=SUBPROTOCOLS, open_timeout=5) as ws:
+            channels = _handshake(ws, set(sink.topics.values()))
+            _wait_for(lambda: all(sink.subscribed(r) for r in sink.topics), "the subscriptions")
+            sink.write(tmp_path, pred)
+            got = _receive(ws, channels, len(sink.topics))
+    finally:
+        sink.abort()
+    points = np.frombuffer(got[sink.topics["points"]][1].data, np.dtype([("xyz", "<f4", 3), ("rgba", "u1", 4)]))
+    keep = pred.keep(limit)
+    assert keep is not None and 0 < keep.sum() < (pred.stored > 0).sum()
+    np.testing.assert_array_equal(points["xyz"], pred.cloud(math.inf, 0, limit).xyz)
+    assert len(points) == keep.sum()
 
 
 def test_write_without_client_is_cheap(sink: LiveSink, tmp_path: Path) -> None:

@@ -254,12 +254,14 @@ def test_realtime_drops_the_frames_that_come_while_busy(tmp_path: Path) -> None:
     source, timer = BagSource(bag, IMAGE_TOPIC, POINTS_TOPIC), StageTimes()
     sinks = [*default_sinks(), LatencySink(timer=timer)]
     run = complete_frames(source, _Slow(0.05), sinks, out, log=lambda _: None, timer=timer, realtime=20.0)
-    # frames 5 ms apart, 50 ms a frame: while one is completed about ten come; only the newest is kept
+    # frames 5 ms apart (35 ms in all), 50 ms a frame: whichever frame is taken first, every later one but the
+    # last comes while it is completed and is replaced by the next; the newest is never replaced. (Which frame is
+    # taken first depends on when the loop's thread starts: on a loaded machine frame 1 may have replaced frame 0.)
     doc = _journal(out)
     statuses = _statuses(doc)
     dropped = [n for n, s in statuses.items() if s == "dropped"]
-    assert statuses[source.names[0]] == statuses[source.names[-1]] == "done"  # the first, and the newest wins
-    assert dropped and set(statuses.values()) == {"done", "dropped"}
+    assert statuses[source.names[-1]] == "done" and list(statuses.values()).count("done") <= 3, statuses
+    assert len(dropped) >= 5 and set(statuses.values()) == {"done", "dropped"}
     assert run.exit_code == EXIT_DROPPED and doc["counts"]["dropped"] == len(dropped)
     assert all("arrived while the completer was busy" in e["reason"] for e in doc["frames"] if e["name"] in dropped)
     latency = json.loads((out / "latency.json").read_text())

@@ -94,7 +94,7 @@ def test_bag_out_and_rerun_read_back(sample: dict[str, Path], tmp_path: Path) ->
 
     frames = read_rrd_frames(rrd)
     for role, entity in ENTITIES.items():
-        if role != "semantic":  # classical needs no semantic map: none is logged
+        if role not in ("semantic", "uncertainty"):  # classical needs no semantic map; no --uncertainty given
             assert frames[entity] == [h[0] for h in heads], role
 
 

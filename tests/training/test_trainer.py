@@ -20,6 +20,7 @@ from semattnet.models.registry import build_model
 from semattnet.training.config import TrainConfig
 from semattnet.training.trainer import Trainer, train
 from semattnet.weights.checkpoint import CheckpointError, load_checkpoint
+from semattnet.weights.hub import load_model
 from tests._helpers import random_inputs
 
 
@@ -137,7 +138,7 @@ def test_stage_chaining_and_frozen_backbone(tree: Path, tmp_path: Path) -> None:
 
 
 def test_weights_only_export_of_a_training_checkpoint(tree: Path, tmp_path: Path) -> None:
-    from semattnet.weights.checkpoint import load_model, save_safetensors
+    from semattnet.weights.checkpoint import save_safetensors
 
     train(tiny(tree, tmp_path / "run", max_steps=1, val_split=""), log=lambda m: None)
     ckpt = load_checkpoint(tmp_path / "run" / "checkpoints" / "last.pt")

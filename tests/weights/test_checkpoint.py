@@ -18,10 +18,10 @@ from semattnet.weights.checkpoint import (
     UnsafeCheckpointError,
     config_from_state_dict,
     load_checkpoint,
-    load_model,
     load_weights,
     save_safetensors,
 )
+from semattnet.weights.hub import load_model
 from tests._helpers import random_inputs
 
 

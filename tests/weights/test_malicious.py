@@ -17,7 +17,8 @@ import pytest
 import torch
 
 from semattnet.weights import from_pretrained
-from semattnet.weights.checkpoint import UnsafeCheckpointError, load_checkpoint, load_model
+from semattnet.weights.checkpoint import UnsafeCheckpointError, load_checkpoint
+from semattnet.weights.hub import load_model
 
 MARKER = "SEMATTNET_TS_MARKER"
 SRC = str(Path(__file__).resolve().parents[2] / "src")

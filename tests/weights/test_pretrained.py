@@ -27,7 +27,7 @@ def test_schema(name: str) -> None:
     assert w.urls, "at least one URL"
     for url in w.urls:
         scheme = urlparse(url).scheme
-        assert scheme in ("https", "http", "gdrive", "hf"), url
+        assert scheme in ("https", "http", "gdrive", "hf") or (scheme == "file" and w.format == "packed"), url
         if scheme == "gdrive":
             assert re.fullmatch(r"gdrive://[\w-]{10,}", url)
     assert w.file_name and "/" not in w.file_name

@@ -14,13 +14,19 @@ from typing import Any
 
 from semattnet._errors import DataError, InputError, SemAttNetError
 
-__all__ = ["MAX_IMAGE_PIXELS", "MAX_IMAGE_SIDE", "check_image_size", "check_pinhole", "regular_file"]
+__all__ = ["MAX_ADDED_POINTS", "MAX_IMAGE_PIXELS", "MAX_IMAGE_SIDE", "MAX_SKEW_S", "check_image_size", "check_pinhole",
+           "regular_file"]  # fmt: skip
 
 #: Largest width or height accepted, checked before decoding or allocating (KITTI: 1242).
 MAX_IMAGE_SIDE = 16384
 #: Largest width x height accepted (64 Mpx, ~256 MB as RGB): bigger sizes are refused as
 #: decompression bombs before any pixel is decoded or any map allocated.
 MAX_IMAGE_PIXELS = 64 * 1024 * 1024
+#: Most NaN points added to a scan for testing readers (``data bag-from-kitti --nan-points``); a KITTI
+#: scan has about 120,000 points.
+MAX_ADDED_POINTS = 1_000_000
+#: Largest tolerance between an image's stamp and its scan's, in seconds (``--max-skew``).
+MAX_SKEW_S = 3600.0
 
 
 def check_image_size(width: Any, height: Any, where: str) -> tuple[int, int]:

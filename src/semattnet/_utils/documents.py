@@ -14,6 +14,7 @@ from typing import Any
 
 from semattnet._errors import DataError, SemAttNetError
 from semattnet._utils.bounds import regular_file
+from semattnet._utils.extras import install_hint, optional
 
 __all__ = ["MAX_DOCUMENT_BYTES", "MAX_NESTING", "loads_json", "loads_yaml", "read_document"]
 
@@ -80,10 +81,9 @@ def loads_yaml(
         error: PyYAML missing, not YAML, an alias, too large or too deeply nested.
     """
     _check_size(text, str(where), error, max_bytes)
-    try:
-        import yaml
-    except ImportError:
-        raise error(f"{where}: reading YAML needs PyYAML (pip install pyyaml); or use JSON") from None
+    yaml = optional("yaml")
+    if yaml is None:
+        raise error(f"{where}: reading YAML needs PyYAML ({install_hint('yaml')}); or use JSON")
     try:
         level = 0
         for event in yaml.parse(text, Loader=yaml.SafeLoader):

@@ -26,8 +26,9 @@ import torch.nn.functional as F
 from semattnet._errors import InputError
 from semattnet.inference.completer import Completion
 from semattnet.models.checks import check_has_points, check_sparse_depth
+from semattnet.models.uncertainty import anchor_term
 
-__all__ = ["ClassicalCompleter", "complete_classical"]
+__all__ = ["FILL_STEPS", "ClassicalCompleter", "classical_fill_step", "classical_uncertainty", "complete_classical"]
 
 #: (far limit in metres, diamond radius): points nearer than the limit get that dilation radius.
 _DILATION_BANDS = ((15.0, 3), (30.0, 2), (float("inf"), 1))
@@ -131,6 +132,42 @@ def _dilate_by_depth(d: torch.Tensor, inv: torch.Tensor) -> torch.Tensor:
     return out
 
 
+#: The fill steps of :func:`classical_fill_step`, by number.
+FILL_STEPS = ("measured", "dilation", "closing", "top extension", "large-hole fill", "extrapolation")
+
+
+def _complete(sparse: torch.Tensor, max_depth: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """The completion and, per pixel, the first step that filled it (an index into :data:`FILL_STEPS`)."""
+    if sparse.dim() != 4 or sparse.shape[1] != 1:
+        raise InputError(f"sparse must be (B, 1, H, W), got {tuple(sparse.shape)}")
+    check_sparse_depth(sparse)  # NaN / inf / negative / too far: refused as the model refuses them
+    d = sparse.float().clamp(0, max_depth)
+    valid = d > 0
+    step = torch.where(valid, 0, len(FILL_STEPS) - 1)
+
+    def mark(x: torch.Tensor, k: int) -> None:
+        step.copy_(torch.where((x > 0) & (step > k), k, step))
+
+    inv = torch.where(d > 0, max_depth + 1.0 - d, torch.zeros_like(d))  # near = large, valid > 0
+    inv = _dilate_by_depth(d, inv)
+    mark(inv, 1)
+    inv = -_square(-_square(inv, _CLOSE), _CLOSE)  # closing
+    inv = _fill(inv, _square(inv, 7))
+    mark(inv, 2)
+    inv = _extend_top(inv)
+    mark(inv, 3)
+    for size in _LARGE_FILLS:
+        inv = _fill(inv, _square(inv, size))
+    mark(inv, 4)
+    inv = _extend_along(_extend_along(inv, -1), -2)
+    inv = _gauss5(_median5(inv))
+    big = torch.finfo(d.dtype).max
+    lo = torch.where(valid, d, torch.full_like(d, big)).amin(dim=(-2, -1), keepdim=True)
+    hi = d.amax(dim=(-2, -1), keepdim=True)
+    out = (max_depth + 1.0 - inv).clamp(lo, hi)
+    return torch.where(valid.any(dim=(-2, -1), keepdim=True), out, torch.zeros_like(out)), step
+
+
 def complete_classical(sparse: torch.Tensor, max_depth: float = 100.0) -> torch.Tensor:
     """Complete (B, 1, H, W) sparse depth in metres (0 = missing) without learning.
 
@@ -142,25 +179,30 @@ def complete_classical(sparse: torch.Tensor, max_depth: float = 100.0) -> torch.
         InputError: NaN / infinite, negative or too large depth
             (:func:`semattnet.models.checks.check_sparse_depth`, as the model).
     """
-    if sparse.dim() != 4 or sparse.shape[1] != 1:
-        raise InputError(f"sparse must be (B, 1, H, W), got {tuple(sparse.shape)}")
-    check_sparse_depth(sparse)  # NaN / inf / negative / too far: refused as the model refuses them
-    d = sparse.float().clamp(0, max_depth)
-    valid = d > 0
-    inv = torch.where(d > 0, max_depth + 1.0 - d, torch.zeros_like(d))  # near = large, valid > 0
-    inv = _dilate_by_depth(d, inv)
-    inv = -_square(-_square(inv, _CLOSE), _CLOSE)  # closing
-    inv = _fill(inv, _square(inv, 7))
-    inv = _extend_top(inv)
-    for size in _LARGE_FILLS:
-        inv = _fill(inv, _square(inv, size))
-    inv = _extend_along(_extend_along(inv, -1), -2)
-    inv = _gauss5(_median5(inv))
-    big = torch.finfo(d.dtype).max
-    lo = torch.where(valid, d, torch.full_like(d, big)).amin(dim=(-2, -1), keepdim=True)
-    hi = d.amax(dim=(-2, -1), keepdim=True)
-    out = (max_depth + 1.0 - inv).clamp(lo, hi)
-    return torch.where(valid.any(dim=(-2, -1), keepdim=True), out, torch.zeros_like(out))
+    return _complete(sparse, max_depth)[0]
+
+
+def classical_fill_step(sparse: torch.Tensor, max_depth: float = 100.0) -> torch.Tensor:
+    """(B, 1, H, W) int: the step of :func:`complete_classical` that first filled each pixel, an index into
+    :data:`FILL_STEPS` (0 measured, 1 dilation, ..., 5 extrapolation); a later step reaches farther."""
+    return _complete(sparse, max_depth)[1]
+
+
+def classical_uncertainty(sparse: torch.Tensor, depth: torch.Tensor | None = None,
+                          max_depth: float = 100.0) -> torch.Tensor:  # fmt: skip
+    """A per-pixel uncertainty of :func:`complete_classical` in metres, (B, 1, H, W), from its own construction.
+
+    Every filled pixel copies (a maximum, median or mean of) measurements up to ``r`` pixels away, ``r`` the
+    distance to the nearest measurement (:func:`semattnet.models.uncertainty.lidar_distance`): to first order
+    it is off by the depth change over that distance plus its own pixel, ``(r + 1) g``, ``g`` the local slope
+    of the completed ``depth`` in metres per pixel (:func:`semattnet.models.uncertainty.anchor_term`, the
+    model's anchor term). Measured on the demo's held-out scenes it ranks the errors better than the distance
+    alone or the fill step (:func:`classical_fill_step`); see ``docs/guides/uncertainty.md``. ``depth``: the
+    completion of ``sparse`` when already computed.
+    """
+    if depth is None:
+        depth = complete_classical(sparse, max_depth)
+    return anchor_term(sparse, depth)
 
 
 class ClassicalCompleter:
@@ -173,5 +215,5 @@ class ClassicalCompleter:
         t = torch.from_numpy(np.ascontiguousarray(sparse, dtype=np.float32))
         check_has_points(t)
         dense = complete_classical(t[None, None])
-        depth = dense[0, 0].numpy()
-        return Completion(depth=depth)
+        unc = classical_uncertainty(t[None, None], dense)
+        return Completion(depth=dense[0, 0].numpy(), uncertainty=unc[0, 0].numpy())

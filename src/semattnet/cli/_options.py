@@ -15,12 +15,24 @@ from typing import Any
 import click
 import torch
 
-#: A count of at least one (frames, steps, repeats, batch size).
-POSITIVE_INT = click.IntRange(min=1)
-#: A count that may be zero (0 = "none" / "all", as each option's help says).
-COUNT = click.IntRange(min=0)
+from semattnet._errors import SemAttNetError
+from semattnet._utils.bounds import MAX_SKEW_S
+
+#: Largest count any option takes (frames, steps, epochs, repeats): far above any real run, and below
+#: the sizes where a count would overflow an int64 or be allocated as a list.
+MAX_COUNT = 1_000_000_000
+#: A count of at least one (frames, steps, repeats), at most :data:`MAX_COUNT`.
+POSITIVE_INT = click.IntRange(min=1, max=MAX_COUNT)
+#: A count that may be zero (0 = "none" / "all", as each option's help says), at most :data:`MAX_COUNT`.
+COUNT = click.IntRange(min=0, max=MAX_COUNT)
+#: A batch size: every item of a batch is allocated at once.
+BATCH_SIZE = click.IntRange(min=1, max=4096)
+#: Data loading processes (0: in the main process).
+WORKERS = click.IntRange(min=0, max=256)
 #: Largest side accepted by size options (the same limit :mod:`semattnet.data.io` reads).
 MAX_SIDE = 16384
+#: Rows or columns of an image (``--top-crop``).
+PIXELS = click.IntRange(min=0, max=MAX_SIDE)
 
 
 class FiniteFloat(click.ParamType):
@@ -45,10 +57,27 @@ class FiniteFloat(click.ParamType):
         return x
 
 
-#: A strictly positive finite float (learning rates, widths, depths in metres, minutes).
-POSITIVE_FLOAT = FiniteFloat(0.0, low_open=True)
-#: A finite float >= 0.
-NONNEGATIVE_FLOAT = FiniteFloat(0.0)
+#: Largest float any option takes unless its own type says less: finite, and far from the float range's
+#: end (``1e300`` seconds times 1e9 nanoseconds is infinite).
+MAX_FLOAT = 1e9
+#: A strictly positive finite float, at most :data:`MAX_FLOAT`.
+POSITIVE_FLOAT = FiniteFloat(0.0, MAX_FLOAT, low_open=True)
+#: A finite float in [0, :data:`MAX_FLOAT`].
+NONNEGATIVE_FLOAT = FiniteFloat(0.0, MAX_FLOAT)
+#: A depth in metres: the largest depth a model accepts (``semattnet.models.checks.MAX_INPUT_DEPTH_M``).
+DEPTH_M = FiniteFloat(0.0, 1000.0, low_open=True)
+#: A depth threshold in metres that may be 0.
+DEPTH_M_OR_ZERO = FiniteFloat(0.0, 1000.0)
+#: Seconds between two stamps: at most ``semattnet._utils.bounds.MAX_SKEW_S`` (an hour).
+SECONDS = FiniteFloat(0.0, MAX_SKEW_S)
+#: A sensor's period in seconds: > 0, at most an hour.
+PERIOD = FiniteFloat(0.0, 3600.0, low_open=True)
+#: A replay speed factor.
+SPEED = FiniteFloat(0.0, 1000.0, low_open=True)
+#: A learning rate.
+LEARNING_RATE = FiniteFloat(0.0, 10.0, low_open=True)
+#: A model width multiplier: ``semattnet.models.config.RANGES["width"]``.
+WIDTH = FiniteFloat(0.125, 4.0)
 
 
 def require_with(needs: str, present: bool, *names: str) -> None:
@@ -208,6 +237,39 @@ def model_from_options(checkpoint: Path | None, weights: str | None, device: str
     if spec is None:
         raise click.UsageError("--checkpoint or --weights is required (they are one option: --checkpoint is an alias)")
     return from_pretrained(spec, map_location=device)
+
+
+def precision_options(f: Any) -> Any:
+    """``--precision f32|bf16|int8`` and ``--calibration PATH`` (int8 only) of every command that runs a model."""
+    f = click.option(
+        "--calibration",
+        type=click.Path(exists=True, path_type=Path),
+        default=None,
+        help="With --precision int8: the frames NNCF measures value ranges on: a folder with rgb/ + sparse/ "
+        "(+ semantic/), or a KITTI / synth root (its val_select) [8 synthetic street scenes].",
+    )(f)
+    return click.option(
+        "--precision",
+        type=click.Choice(["f32", "bf16", "int8"]),
+        default=None,
+        help="The network's arithmetic: f32 [default], bf16 (faster only on CPUs with native bfloat16), int8 "
+        "(OpenVINO + NNCF: --backend openvino; quantised once per weights, size and calibration, then cached).",
+    )(f)
+
+
+def check_precision_options(method: str, amp: str, precision: str | None, calibration: Path | None,
+                            backend: str) -> None:  # fmt: skip
+    """``--precision`` / ``--calibration`` agree with the method, ``--amp`` and ``--backend`` (usage errors, before
+    any work)."""
+    from semattnet.inference.completer import check_precision
+
+    require_with("--precision int8", precision == "int8", "calibration")
+    if method == "classical" and precision is not None:
+        raise click.UsageError("--precision is the network's: --method classical runs none")
+    try:
+        check_precision(precision, amp, backend)
+    except SemAttNetError as exc:
+        raise click.UsageError(str(exc).replace("precision ", "--precision ", 1).replace("amp ", "--amp ")) from None
 
 
 #: ``--backend``: the inference engine of every command that runs a model (see ``optimize_for_inference``).

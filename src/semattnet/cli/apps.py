@@ -14,6 +14,7 @@ from semattnet.cli._options import (
     POSITIVE_INT,
     SEEDS,
     SIZE,
+    WIDTH,
     model_from_options,
     parse_size,
     weights_input,
@@ -38,9 +39,7 @@ from semattnet.data.synthetic.scenes import SCENE_STYLES
 @click.option(
     "--eval-frames", type=POSITIVE_INT, default=16, show_default=True, help="Held-out scenes (half shadowed)."
 )
-@click.option(
-    "--width", type=POSITIVE_FLOAT, default=0.125, show_default=True, help="Model width multiplier (1.0 = paper)."
-)
+@click.option("--width", type=WIDTH, default=0.125, show_default=True, help="Model width multiplier (1.0 = paper).")
 @click.option("--steps", default=None,
               help="Steps per model and seed as BACKBONE,FULL  [default: 136,80: ~4 min on 2 cores]")  # fmt: skip
 @click.option("--equal-time", is_flag=True,
@@ -103,7 +102,7 @@ def demo(out_dir: Path, minutes: float | None, size: str, frames: int, eval_fram
 @click.option("--size", type=SIZE, default="96x320", help="Scene size HxW.")
 @click.option("--frames", type=POSITIVE_INT, default=200, help="Training scenes.")
 @click.option("--eval-frames", type=POSITIVE_INT, default=48, help="Held-out scenes (half shadowed).")
-@click.option("--width", type=POSITIVE_FLOAT, default=0.125, help="Model width multiplier.")
+@click.option("--width", type=WIDTH, default=0.125, help="Model width multiplier.")
 @click.option("--style", type=click.Choice(SCENE_STYLES), default="realistic", help="Synthetic scene style.")
 @click.option("--device", default="auto")
 def ablate(out_dir: Path, configs: str, seeds: tuple[int, ...], backbone_steps: int, full_steps: int, size: str,
@@ -126,7 +125,7 @@ def ablate(out_dir: Path, configs: str, seeds: tuple[int, ...], backbone_steps: 
 @click.option("--train-size", type=SIZE, default="320x1216", help="Crop size HxW for the training step.")
 @click.option("--device", default="auto", help="auto, cpu or cuda[:N].")
 @click.option("--repeats", type=POSITIVE_INT, default=3, help="Timed runs per measurement (median reported).")
-@click.option("--width", type=POSITIVE_FLOAT, default=1.0, help="Model width multiplier (1.0 = paper).")
+@click.option("--width", type=WIDTH, default=1.0, help="Model width multiplier (1.0 = paper).")
 @click.option("--parts", default="propagation,backbone,full,fast,backends,train",
               help="What to measure (backends: every installed inference backend).")  # fmt: skip
 @weights_option

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from semattnet._utils.bounds import MAX_ADDED_POINTS
 from semattnet.cli.data import data
 
 
@@ -21,7 +22,7 @@ from semattnet.cli.data import data
 @click.option("--frames", default=None, help="Frame indices, e.g. 0-10 or 1,3,5 [all].")
 @click.option("--compressed", type=click.Choice(["png", "jpeg"]), default=None,
               help="Also write the images as sensor_msgs/CompressedImage (IMAGE_TOPIC/compressed).")  # fmt: skip
-@click.option("--nan-points", type=click.IntRange(min=0), default=0, show_default=True,
+@click.option("--nan-points", type=click.IntRange(min=0, max=MAX_ADDED_POINTS), default=0, show_default=True,
               help="NaN points added to each scan (is_dense false), for testing readers.")  # fmt: skip
 @click.option("--overwrite", is_flag=True, help="Replace an existing bag.")
 def bag_from_kitti(drive_dir: Path, out: Path, fmt: str | None, camera: str, frames: str | None,

@@ -8,7 +8,7 @@ import click
 
 from semattnet.cli._dataset import dataset_option
 from semattnet.cli._group import main
-from semattnet.cli._options import COUNT, POSITIVE_INT, SIZE, parse_size
+from semattnet.cli._options import COUNT, MAX_COUNT, POSITIVE_INT, SIZE, parse_size
 from semattnet.data.synthetic.scenes import SCENE_STYLES
 
 
@@ -23,14 +23,17 @@ from semattnet.data.synthetic.scenes import SCENE_STYLES
 @click.option("--frames", type=POSITIVE_INT, default=100, show_default=True, help="Training frames.")
 @click.option(
     "--eval-frames",
-    type=click.IntRange(min=2),
+    type=click.IntRange(min=2, max=MAX_COUNT),
     default=None,
     help="Frames for each of val, val_select, test [frames/5, >= 2].",
 )
 @click.option("--size", type=SIZE, default="352x1216", show_default=True, help="Frame size HxW.")
 @click.option("--seed", type=COUNT, default=0, show_default=True)
 @click.option(
-    "--workers", type=POSITIVE_INT, default=None, help="Processes [all cores]; the output does not depend on it."
+    "--workers",
+    type=click.IntRange(min=1, max=256),
+    default=None,
+    help="Processes [all cores]; the output does not depend on it.",
 )
 @click.option("--overwrite", is_flag=True, help="Write into a non-empty folder, replacing a previous tree.")
 @click.option(

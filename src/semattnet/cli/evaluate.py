@@ -11,9 +11,11 @@ import click
 from semattnet.cli._dataset import dataset_option
 from semattnet.cli._group import main
 from semattnet.cli._options import (
+    BATCH_SIZE,
     COUNT,
-    NONNEGATIVE_FLOAT,
+    DEPTH_M_OR_ZERO,
     POSITIVE_INT,
+    WORKERS,
     backend_option,
     model_from_options,
     weights_option,
@@ -33,7 +35,7 @@ from semattnet.cli._options import (
 )
 @click.option(
     "--min-gt",
-    type=NONNEGATIVE_FLOAT,
+    type=DEPTH_M_OR_ZERO,
     default=0.0,
     show_default=True,
     help="Count gt > this (0.1 = the authors' variant).",
@@ -76,24 +78,34 @@ def metrics(
     show_default=True,
     help="With --sparsity: classical sweeps only the baseline (no model needed).",
 )
+@click.option("--segment", default=None, metavar="SPEC",
+              help="nyuv2 / void: semantic maps from this segmenter (e.g. hf:indoor; see `semattnet segment`), "
+              "segmented once into a cache folder and reused.")  # fmt: skip
+@click.option("--palette-mismatch", type=click.Choice(["refuse", "recolour", "fallback"]), default="refuse",
+              show_default=True, help="Maps of another palette than the model's (a KITTI model on nyuv2): refuse, "
+              "recolour the classes both palettes name (the rest unknown), or use the fallback map; "
+              "metrics.json's 'semantic' says which.")  # fmt: skip
 @click.option("--save-predictions", is_flag=True, help="Write 16-bit PNG predictions (needs --out).")
 @click.option(
     "--pictures", type=COUNT, default=0, show_default=True, help="Branch panels for the first N frames (needs --out)."
 )
 @click.option("--device", default="auto", show_default=True)
-@click.option("--batch-size", type=POSITIVE_INT, default=1, show_default=True)
+@click.option("--batch-size", type=BATCH_SIZE, default=1, show_default=True)
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
-@click.option("--workers", type=COUNT, default=2, show_default=True)
+@click.option("--workers", type=WORKERS, default=2, show_default=True)
 @click.option("--max-frames", type=POSITIVE_INT, default=None)
 @click.option("--overwrite", is_flag=True)
 @backend_option
 def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, dataset: str, split: str | None,
              out: Path | None,
-             sparsity: tuple[str, ...], method: str, save_predictions: bool, pictures: int, device: str,
+             sparsity: tuple[str, ...], method: str, segment: str | None, palette_mismatch: str,
+             save_predictions: bool, pictures: int, device: str,
              batch_size: int, amp: str, workers: int, max_frames: int | None, overwrite: bool,
              backend: str) -> None:  # fmt: skip
     """Evaluate a checkpoint on a split with its dataset's metrics (KITTI: the devkit's), or sweep sparser inputs."""
     split = _split(dataset, split)
+    if sparsity and segment:
+        raise click.UsageError("--segment is for the model's evaluation, not --sparsity")
     if sparsity:
         _one_process("evaluate --sparsity")
         if out is None:
@@ -110,14 +122,25 @@ def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, data
         model_from_options(checkpoint, weights)  # the usage error, before any work
     # a path, or the loader of --weights (exactly one is set here): called after the split and --out are checked
     model = partial(model_from_options, None, weights) if checkpoint is None else checkpoint
+    semantic = None
+    if segment is not None:
+        from semattnet.data.datasets.segment import segment_split
+
+        semantic = segment_split(dataset, data_root, (split,), segment, device, log=click.echo, max_frames=max_frames)
     res = evaluate_checkpoint(model, data_root, split, out, device, batch_size, amp, workers,
-                              save_predictions, pictures, max_frames, overwrite, backend=backend,
-                              dataset=dataset)  # fmt: skip
+                              save_predictions, pictures, max_frames, overwrite, semantic_root=semantic,
+                              backend=backend, dataset=dataset, palette_mismatch=palette_mismatch)  # fmt: skip
     from semattnet._utils.distributed import launch_rank
 
     if launch_rank() != 0:  # under torchrun: every rank holds the merged metrics; rank 0 reports them
         return
+    if "semantic" in res:
+        click.echo(f"semantic maps: {res['semantic']['summary']}")
     click.echo(res["metrics"].table())
+    r = res["result"]
+    if "ause_rmse" in r:
+        click.echo(f"uncertainty: AUSE RMSE {r['ause_rmse']:.4f}  MAE {r['ause_mae']:.4f}; "
+                   f"AURG RMSE {r['aurg_rmse']:.4f}  MAE {r['aurg_mae']:.4f} (docs/guides/uncertainty.md)")  # fmt: skip
     if out is not None:
         click.echo(f"wrote {out / 'metrics.json'} and {out / 'per_image.csv'}")
 

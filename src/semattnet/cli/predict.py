@@ -10,10 +10,13 @@ import click
 from semattnet.cli._dataset import dataset_option
 from semattnet.cli._group import main
 from semattnet.cli._options import (
-    COUNT,
-    NONNEGATIVE_FLOAT,
-    POSITIVE_FLOAT,
+    DEPTH_M,
+    PIXELS,
+    SECONDS,
+    SPEED,
     backend_option,
+    check_precision_options,
+    precision_options,
     require_with,
     weights_input,
     weights_option,
@@ -21,7 +24,7 @@ from semattnet.cli._options import (
 
 
 def _completer(method: str, checkpoint: Path | None, weights: str | None, device: str, amp: str,
-               backend: str = "torch"):  # fmt: skip
+               backend: str = "torch", precision: str | None = None, calibration: Path | None = None):  # fmt: skip
     """The completer the options name: the classical baseline or the model of --checkpoint / --weights."""
     from semattnet._utils.distributed import process_device
     from semattnet.baselines.classical import ClassicalCompleter
@@ -32,7 +35,8 @@ def _completer(method: str, checkpoint: Path | None, weights: str | None, device
         return ClassicalCompleter()
     _check_method(method, checkpoint, weights)
     model = model_from_options(checkpoint, weights, "cpu")
-    return DepthCompleter(model, device=process_device(device), amp=amp, backend=backend, inplace=True)
+    return DepthCompleter(model, device=process_device(device), amp=amp, backend=backend, inplace=True,
+                          precision=precision, calibration=calibration)  # fmt: skip
 
 
 def _check_method(method: str, checkpoint: Path | None, weights: str | None) -> None:
@@ -40,6 +44,8 @@ def _check_method(method: str, checkpoint: Path | None, weights: str | None) -> 
     if method == "classical":
         if checkpoint is not None or weights is not None:
             raise click.UsageError("--method classical uses no model: drop --checkpoint / --weights")
+        # no semantic map, engine or precision: a spec, backend or --amp given with it would be ignored unread
+        require_with("--method semattnet", False, "segment_spec", "backend", "amp")
         return
     if checkpoint is None and weights is None:
         raise click.UsageError("--checkpoint or --weights is required (or --method classical)")
@@ -62,6 +68,23 @@ def _intrinsics(text: str | None):
 
 _INPUT = click.Path(exists=True, path_type=Path)
 
+
+class _MaxUncertainty(click.ParamType):
+    """``--max-uncertainty``: metres (``0.5``) or a percentage of the depth (``5%``), returned in a canonical
+    text (:class:`semattnet.inference.uncertainty.UncertaintyLimit`'s), which the run identity records."""
+
+    name = "METRES|PERCENT%"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> str:
+        from semattnet._errors import InputError
+        from semattnet.inference.uncertainty import UncertaintyLimit
+
+        try:
+            return str(UncertaintyLimit.parse(value))
+        except InputError as exc:
+            self.fail(str(exc), param, ctx)
+
+
 #: The options of a ROS bag input and of the robot outputs (``--bag-out``, ``--rerun``) and ``--stream``.
 _BAG_OPTIONS = [
     click.option("--bag", type=_INPUT, default=None,
@@ -74,7 +97,7 @@ _BAG_OPTIONS = [
                  help="With --bag: rig JSON (K, T_cam_lidar, image_size) overriding CameraInfo and /tf_static."),
     click.option("--semantic-topic", default=None,
                  help="With --bag: colour-coded semantic images, paired with the images by stamp."),
-    click.option("--max-skew", type=NONNEGATIVE_FLOAT, default=None,
+    click.option("--max-skew", type=SECONDS, default=None,
                  help="With --bag: seconds between an image and its scan at most [half the scan period]."),
     click.option("--list-topics", is_flag=True, help="With --bag: print the bag's topics and exit."),
     click.option("--bag-out", type=click.Path(path_type=Path), default=None,
@@ -90,7 +113,7 @@ _BAG_OPTIONS = [
                  help="Serve the frames as they are completed over the Foxglove WebSocket protocol.  [extra: live]"),
     click.option("--realtime", is_flag=True,
                  help="Replay at the recorded rate: frames that come while the completer is busy are dropped."),
-    click.option("--speed", type=POSITIVE_FLOAT, default=None, help="With --realtime: replay this many times faster."),
+    click.option("--speed", type=SPEED, default=None, help="With --realtime: replay this many times faster."),
 ]  # fmt: skip
 
 #: The options that do not change what a run writes: a resumed run may differ from the first in these only.
@@ -137,21 +160,30 @@ def _source(rgb, sparse, kitti_raw, frames, camera, semantic, deskew, K, bag, da
     return FolderSource.pair(rgb, sparse, semantic, K=K, missing_ok=True)
 
 
-def _robot_sinks(bag: dict[str, Any], max_depth: float, timer: Any) -> list[Any]:
-    """``latency.json`` and, as asked, the bag, the Rerun recording or viewer and the live server."""
+def _eval_split(dataset: str) -> str:
+    from semattnet.data.datasets import get_dataset
+
+    return get_dataset(dataset).eval_split
+
+
+def _robot_sinks(bag: dict[str, Any], max_depth: float, timer: Any, limit: Any = None) -> list[Any]:
+    """``latency.json`` and, as asked, the bag, the Rerun recording or viewer and the live server (``limit``:
+    the :class:`~semattnet.inference.uncertainty.UncertaintyLimit` of their clouds, or None)."""
     from semattnet.inference.sinks import LatencySink
     from semattnet.robotics.sinks import BagSink, RerunSink
 
     sinks: list[Any] = [LatencySink(timer=timer)]
+    unc = bool(bag["uncertainty"])
     if bag["bag_out"] is not None:
-        sinks.append(BagSink(target=bag["bag_out"], max_depth=max_depth))
+        sinks.append(BagSink(target=bag["bag_out"], max_depth=max_depth, uncertainty=unc, max_uncertainty=limit))
     if bag["rerun_file"] is not None or bag["rerun_spawn"] or bag["rerun_serve"]:
         sinks.append(RerunSink(target=bag["rerun_file"], spawn=bag["rerun_spawn"], serve=bag["rerun_serve"],
-                               max_depth=max_depth, log=click.echo))  # fmt: skip
+                               max_depth=max_depth, log=click.echo, uncertainty=unc,
+                               max_uncertainty=limit))  # fmt: skip
     if bag["live"] is not None:
         from semattnet.robotics.live import LiveSink
 
-        sinks.append(LiveSink(address=bag["live"], max_depth=max_depth, log=click.echo))
+        sinks.append(LiveSink(address=bag["live"], max_depth=max_depth, log=click.echo, max_uncertainty=limit))
     return sinks
 
 
@@ -204,27 +236,45 @@ def _out_and_resume(out: Path | None, resume: str | None) -> tuple[Path, bool]:
     "segment_spec",
     default=None,
     metavar="SPEC",
-    help="With --kitti-raw or --bag: segment each image with this model (see `semattnet segment --model`).",
+    help="With --kitti-raw or --bag: segment each image with this model (see `semattnet segment --model`); "
+    "with --data (nyuv2, void): the split's frames segmented once into a cache folder and reused.",
 )
+@click.option("--palette-mismatch", type=click.Choice(["refuse", "recolour", "fallback"]), default="refuse",
+              show_default=True, help="Maps of another palette than the model's: refuse, recolour the classes both "
+              "palettes name (the rest unknown), or use the fallback map (see evaluate).")  # fmt: skip
 @_bag_options
 @click.option("--out", default=None, type=click.Path(file_okay=False, path_type=Path), help="Output folder [required].")
-@click.option("--npy", is_flag=True, help="Also write float32 .npy depth.")
+@click.option("--npy", is_flag=True, help="Also write float32 .npy depth (and uncertainty, with --uncertainty).")
+@click.option(
+    "--uncertainty",
+    is_flag=True,
+    help="Also write the per-pixel uncertainty: OUT/uncertainty/NAME.png (metres * 256, 0 = none), "
+    "in the bag (--bag-out) and the Rerun recording, and in the viewer (--report).",
+)
+@click.option(
+    "--max-uncertainty",
+    type=_MaxUncertainty(),
+    default=None,
+    help="Point clouds (--ply, bird's-eye view, --bag-out, --rerun, --live) leave out pixels whose "
+    "uncertainty exceeds METRES, or PERCENT% of their depth; depth maps stay dense.",
+)
 @click.option("--panel", is_flag=True, help="Also write the per-branch panel (with --kitti-raw: a bird's-eye view).")
 @click.option("--ply", is_flag=True, help="With --kitti-raw or --bag: also write a binary PLY point cloud.")
 @click.option(
     "--max-depth",
-    type=POSITIVE_FLOAT,
+    type=DEPTH_M,
     default=80.0,
     show_default=True,
     help="PLY / bird's-eye view: drop deeper pixels, m.",
 )
 @click.option(
-    "--top-crop", type=COUNT, default=0, show_default=True, help="PLY / bird's-eye view: drop the top N rows (sky)."
+    "--top-crop", type=PIXELS, default=0, show_default=True, help="PLY / bird's-eye view: drop the top N rows (sky)."
 )
 @click.option("--deskew", is_flag=True, help="With --kitti-raw: ego-motion compensate scans with their OXTS data.")
 @click.option("--device", default="auto", show_default=True)
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
 @backend_option
+@precision_options
 @click.option("--overwrite", is_flag=True, help="Replace existing outputs.")
 @click.option(
     "--resume",
@@ -267,9 +317,11 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
     out, resuming = _out_and_resume(out, bag.pop("resume"))
     _check_combinations(rgb, sparse, kitti_raw, data, frames, deskew, ply, segment_spec, semantic, report,
                         intrinsics, bag)  # fmt: skip
+    _check_uncertainty(ply, panel, kitti_raw is not None or bag["bag"] is not None, bag)
     if resuming and overwrite:
         raise click.UsageError("give --resume or --overwrite, not both")
     _check_method(method, checkpoint, weights)
+    check_precision_options(method, amp, bag.pop("precision"), bag.pop("calibration"), backend)
     if method != "classical":
         from semattnet._utils.device import resolve_device
 
@@ -291,13 +343,16 @@ def _check_combinations(rgb: Path | None, sparse: Path | None, kitti_raw: Path |
                         intrinsics: str | None, bag: dict[str, Any]) -> None:  # fmt: skip
     """The options agree with the input kind (one line each, before any work)."""
     files_only = kitti_raw is None and bag["bag"] is None and data[1] is None
-    if (files_only or data[1] is not None) and (ply or segment_spec):
-        raise click.UsageError("--ply and --segment need --kitti-raw or --bag")
+    if files_only and (ply or segment_spec):
+        raise click.UsageError("--ply and --segment need --kitti-raw, --bag or --data")
+    if data[1] is not None and ply:
+        raise click.UsageError("--ply needs --kitti-raw or --bag")
     if kitti_raw is None and (frames or deskew):
         raise click.UsageError("--frames and --deskew need --kitti-raw")
     require_with("--kitti-raw", kitti_raw is not None, "camera")
     robot = bool(bag["bag_out"] or bag["rerun_file"] or bag["rerun_spawn"] or bag["rerun_serve"] or bag["live"])
     require_with("--report, --bag-out, --rerun or --live", report or robot, "intrinsics")
+
     if bag["bag"] is not None and semantic is not None:
         raise click.UsageError("--semantic is for --rgb/--kitti-raw; a bag's semantic maps come with --semantic-topic")
     if bag["semantic_topic"] is not None and segment_spec is not None:
@@ -312,6 +367,19 @@ def _check_combinations(rgb: Path | None, sparse: Path | None, kitti_raw: Path |
         raise click.UsageError("--realtime replays a recording: it needs --bag or --kitti-raw")
 
 
+def _check_uncertainty(ply: bool, panel: bool, lidar: bool, bag: dict[str, Any]) -> None:
+    """``--max-uncertainty`` only with an output that has a point cloud (``--panel``: its bird's-eye view, with
+    the LiDAR of ``--kitti-raw`` / ``--bag``); with a bag or a Rerun recording, only with ``--uncertainty`` (a
+    resume rebuilds the kept frames' clouds from their stored uncertainty)."""
+    replayed = bool(bag["bag_out"] or bag["rerun_file"] or bag["rerun_spawn"] or bag["rerun_serve"])
+    clouds = ply or (panel and lidar) or replayed or bag["live"] is not None
+    require_with("--ply, --panel (with --kitti-raw or --bag), --bag-out, --rerun or --live", clouds,
+                 "max_uncertainty")  # fmt: skip
+    if bag["max_uncertainty"] is not None and replayed and not bag["uncertainty"]:
+        raise click.UsageError("--max-uncertainty with --bag-out or --rerun needs --uncertainty (a resumed run "
+                               "rebuilds the kept frames' clouds from OUT/uncertainty/)")  # fmt: skip
+
+
 def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
     """Check everything, load the completer, run the one frame loop; then the table (and the report).
     ``p``: every option of the command, by name."""
@@ -320,26 +388,39 @@ def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
     from semattnet.inference.pipeline import check_frames, complete_frames
     from semattnet.inference.sinks import default_sinks
     from semattnet.inference.stream import StageTimes
+    from semattnet.inference.uncertainty import UncertaintyLimit
 
     K = _intrinsics(p["intrinsics"])
-    maps = SemanticMaps(p["segment_spec"], folder=p["semantic"] is not None or p["semantic_topic"] is not None)
+    folder, mismatch = p["semantic"] is not None or p["semantic_topic"] is not None, p["palette_mismatch"]
+    maps = SemanticMaps(p["segment_spec"], folder=folder, mismatch=mismatch)
+    semantic = p["semantic"]
+    if p["data_root"] is not None and p["segment_spec"] is not None:  # the split's maps, cached: a folder
+        from semattnet.data.datasets.segment import segment_split
+
+        semantic = segment_split(p["dataset"], p["data_root"], (p["split"] or _eval_split(p["dataset"]),),
+                                 p["segment_spec"], p["device"], log=click.echo)  # fmt: skip
+        maps = SemanticMaps(None, folder=True, mismatch=mismatch)
     timer = StageTimes()
-    files = default_sinks(p["npy"], p["panel"], p["ply"], p["max_depth"], p["top_crop"])
-    sinks = files + _robot_sinks(p, p["max_depth"], timer)
+    limit = None if p["max_uncertainty"] is None else UncertaintyLimit.parse(p["max_uncertainty"])
+    files = default_sinks(p["npy"], p["panel"], p["ply"], p["max_depth"], p["top_crop"], p["uncertainty"], limit)
+    sinks = files + _robot_sinks(p, p["max_depth"], timer, limit)
     realtime = (p["speed"] or 1.0) if p["realtime"] else None
-    inputs = (p["rgb"], p["sparse"], p["kitti_raw"], p["frames"], p["camera"], p["semantic"], p["deskew"], K)
+    inputs = (p["rgb"], p["sparse"], p["kitti_raw"], p["frames"], p["camera"], semantic, p["deskew"], K)
     with process_group():
         source = _source(*inputs, p, (p["dataset"], p["data_root"], p["split"]))
         plan = check_frames(source, sinks, out, overwrite=p["overwrite"], on_error=p["on_error"], resume=resuming,
                             run=_identity(p), inputs=[weights_input(p["weights"])[1]])  # before the model  # fmt: skip
         if plan.journal.kept:
             click.echo(f"{out}: resuming: {len(plan.journal.kept)} of {len(source.names)} frame(s) already done")
-        completer = _completer(p["method"], None, p["weights"], p["device"], p["amp"], p["backend"])
+        completer = _completer(p["method"], None, p["weights"], p["device"], p["amp"], p["backend"], p["precision"],
+                               p["calibration"])  # fmt: skip
         run = complete_frames(source, completer, sinks, out, overwrite=p["overwrite"], log=click.echo,
                               semantic=maps, checked=plan, timer=timer, prefetch=2 if p["stream"] else 0,
                               realtime=realtime)  # fmt: skip
     if launch_rank() == 0:
         click.echo(timer.table())
+        if maps.note:
+            click.echo(f"semantic maps: {maps.note}")
     if p["report"] and launch_rank() == 0:  # under torchrun: once, after every rank's frames are in place
         from semattnet.viz.viewer import write_prediction_report
 
@@ -352,9 +433,7 @@ def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
 @click.option("--pred", required=True, type=click.Path(exists=True, path_type=Path), help="16-bit PNG file or folder.")
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path))
 @click.option("--gt", type=click.Path(exists=True, path_type=Path), default=None, help="Ground truth: adds error maps.")
-@click.option(
-    "--vmax", type=POSITIVE_FLOAT, default=80.0, show_default=True, help="Depth of the colour scale's top, metres."
-)
+@click.option("--vmax", type=DEPTH_M, default=80.0, show_default=True, help="Depth of the colour scale's top, metres.")
 @click.option("--overwrite", is_flag=True, help="Replace existing pictures.")
 def visualize(pred: Path, out: Path, gt: Path | None, vmax: float, overwrite: bool) -> None:
     """Colourise saved depth predictions (and error maps against ground truth)."""

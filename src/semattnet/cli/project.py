@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from semattnet.cli._group import main
-from semattnet.cli._options import POSITIVE_FLOAT, parse_size, require_with
+from semattnet.cli._options import PERIOD, parse_size, require_with
 
 
 def _numbers(text: str | None, option: str) -> list[float] | None:
@@ -56,7 +56,7 @@ _EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
 )
 @click.option(
     "--scan-period",
-    type=POSITIVE_FLOAT,
+    type=PERIOD,
     default=0.1,
     show_default=True,
     help="With --deskew-oxts: seconds per LiDAR revolution (KITTI: timestamps_end - timestamps_start).",

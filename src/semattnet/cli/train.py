@@ -7,11 +7,14 @@ import click
 from semattnet.cli._dataset import dataset_option
 from semattnet.cli._group import main
 from semattnet.cli._options import (
+    BATCH_SIZE,
     COUNT,
-    POSITIVE_FLOAT,
+    LEARNING_RATE,
     POSITIVE_INT,
     SIZE,
     WEIGHTS_SPEC,
+    WIDTH,
+    WORKERS,
     one_value,
     parse_size,
     weights_path,
@@ -24,6 +27,9 @@ from semattnet.cli._options import (
     "--data", "data_root", type=click.Path(file_okay=False), help="KITTI depth completion root (or a synth tree)."
 )
 @dataset_option("The dataset (its reader, augmentation, metrics, palette); not kitti-dc: its recipe is the start.")
+@click.option("--segment", "segment", default=None, metavar="SPEC",
+              help="nyuv2 / void: semantic maps from this segmenter (e.g. hf:indoor; see `semattnet segment`), "
+              "segmented once into a cache folder and reused.")  # fmt: skip
 @click.option("--out", type=click.Path(file_okay=False), default=None, help="Run folder [runs/<stage>].")
 @click.option("--init", "--init-weights", "init", multiple=True, callback=one_value(WEIGHTS_SPEC),
               metavar="NAME|PATH|URL", help="Weights to start from: the previous stage's checkpoint, or released "
@@ -38,20 +44,20 @@ from semattnet.cli._options import (
 @click.option("--resume", is_flag=True, help="Continue the run in --out exactly where it stopped.")
 @click.option("--overwrite", is_flag=True, help="Start over in a run folder that already holds a run.")
 @click.option("--epochs", type=POSITIVE_INT, default=None, help="[stage default: 60 / 5 / 95]")
-@click.option("--batch-size", type=POSITIVE_INT, default=None, help="Per process [stage default: 8 / 8 / 16].")
-@click.option("--lr", type=POSITIVE_FLOAT, default=None, help="[stage default]")
-@click.option("--width", type=POSITIVE_FLOAT, default=None, help="Model width multiplier [1.0].")
+@click.option("--batch-size", type=BATCH_SIZE, default=None, help="Per process [stage default: 8 / 8 / 16].")
+@click.option("--lr", type=LEARNING_RATE, default=None, help="[stage default]")
+@click.option("--width", type=WIDTH, default=None, help="Model width multiplier [1.0].")
 @click.option("--crop", type=SIZE, default=None, help="Training crop HxW [352x1216].")
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default=None)
 @click.option("--device", default=None, help="auto, cpu or cuda.")
-@click.option("--workers", type=COUNT, default=None, help="Data loading processes [4].")
+@click.option("--workers", type=WORKERS, default=None, help="Data loading processes [4].")
 @click.option("--max-steps", type=COUNT, default=None, help="Stop after N steps in total.")
 @click.option("--activation-checkpointing", is_flag=True, default=None,
               help="Recompute each branch in the backward pass: less memory, one more forward.")  # fmt: skip
 @click.option(
     "--set", "overrides", multiple=True, metavar="KEY=VALUE", help="Any TrainConfig field, e.g. --set val_every=2."
 )
-def train(stage: str, data_root: str | None, dataset: str, out: str | None, init: str | None,
+def train(stage: str, data_root: str | None, dataset: str, segment: str | None, out: str | None, init: str | None,
           config_file: str | None, resume: bool, overwrite: bool,
           epochs: int | None, batch_size: int | None, lr: float | None, width: float | None, crop: str | None,
           amp: str | None, device: str | None, workers: int | None, max_steps: int | None,
@@ -76,7 +82,7 @@ def train(stage: str, data_root: str | None, dataset: str, out: str | None, init
         given = {"stage": stage if not config_file else base["stage"], "data": data_root, "init": init,
                  "epochs": epochs, "batch_size": batch_size, "lr": lr, "width": width, "amp": amp,
                  "device": device, "workers": workers, "max_steps": max_steps,
-                 "activation_checkpointing": activation_checkpointing or None,
+                 "activation_checkpointing": activation_checkpointing or None, "segment": segment,
                  "crop": list(parse_size(crop)) if crop else None}  # fmt: skip
         base.update({k: v for k, v in given.items() if v is not None})
         base["out"] = out or base.get("out") or f"runs/{base['stage']}"

@@ -12,7 +12,7 @@ subclassing :class:`IndexedSource` and writing ``names``, ``load`` and ``inputs`
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
@@ -21,7 +21,7 @@ import numpy as np
 
 from semattnet._errors import DataError
 
-__all__ = ["Frame", "FrameSource", "IndexedSource"]
+__all__ = ["DuplicateFrameError", "Frame", "FrameSource", "IndexedSource", "unique_names"]
 
 
 @dataclass(frozen=True)
@@ -118,3 +118,23 @@ class IndexedSource:
 
     def inputs(self) -> list[Path]:
         raise NotImplementedError
+
+
+class DuplicateFrameError(DataError):
+    """Two inputs whose frames would get the same name (and so the same output files)."""
+
+
+def unique_names(items: Iterable[tuple[str, Any]], where: object) -> dict[str, Any]:
+    """``{name: item}`` of ``(name, item)`` pairs, in order, when no two share a name: a frame never
+    silently replaces another (nor its outputs).
+
+    Raises:
+        DuplicateFrameError: one line naming ``where``, the name and both items (their input files).
+    """
+    out: dict[str, Any] = {}
+    for name, item in items:
+        if name in out:
+            raise DuplicateFrameError(f"{where}: {out[name]} and {item} both make the frame name {name!r}; "
+                                      "rename one (each frame's outputs are named after it)")  # fmt: skip
+        out[name] = item
+    return out

@@ -156,7 +156,9 @@ class RawDrive:
         Raises:
             DataError: an index with no image or no scan (the message lists what the drive has).
         """
-        by_index = {int(n): n for n in self.names}
+        if frames is None:
+            return list(self.names)
+        by_index = self._by_index()
         try:
             indices = parse_frames(frames, max(by_index, default=-1) + 1)
             missing = [i for i in indices if i not in by_index] if indices is not None else []
@@ -170,6 +172,22 @@ class RawDrive:
             raise DataError(f"{self.drive_dir}: no image_{self.camera} image and scan for frame(s) {missed}; "
                             f"it has {len(self.names)} frame(s), {have}")  # fmt: skip
         return [by_index[i] for i in indices]
+
+    def _by_index(self) -> dict[int, str]:
+        """Frame number -> name; a name that is not a number, or two names of one number (``1``, ``01``),
+        refused naming the files (``--frames`` would pick one of them silently)."""
+        from semattnet.data.frames import DuplicateFrameError
+
+        by_index: dict[int, str] = {}
+        for name in self.names:
+            if not (name.isascii() and name.isdigit()):
+                raise DataError(f"{self.image_dir / name}.png: not a frame number (KITTI raw frames are numbered, "
+                                "0000000000.png ...); --frames selects by number")  # fmt: skip
+            if int(name) in by_index:
+                raise DuplicateFrameError(f"{self.image_dir}: {by_index[int(name)]}.png and {name}.png are both "
+                                          f"frame {int(name)}; rename one")  # fmt: skip
+            by_index[int(name)] = name
+        return by_index
 
     def select(self, frames: str | int | Sequence[int] | None = None) -> Iterator[RawFrame]:
         """The frames for ``frames`` (validated before the first is read)."""

@@ -41,7 +41,10 @@ __all__ = [
     "get_palette",
     "ids_to_colors",
     "label_ids_to_train_ids",
+    "nyu894_to_nyu40",
     "one_hot",
+    "palette_mapping",
+    "recolor",
     "unknown_map",
 ]
 
@@ -230,6 +233,40 @@ def colors_to_ids(colors: np.ndarray, allow_unknown: bool = True, source: str = 
             f"{listed}{' ...' if len(values) > 5 else ''}"
         )
     return ids
+
+
+def nyu894_to_nyu40(raw: np.ndarray) -> np.ndarray:
+    """NYU Depth v2's raw label ids (0..894, the labelled subset's ``labels``; 0 = unlabelled) -> NYU-40 ids
+    (uint8 0..40) by the published table (:mod:`semattnet.data.nyu40_map`, from ankurhanda/nyuv2-meta-data)."""
+    from semattnet.data.nyu40_map import NYU894_TO_40, RAW_CLASSES
+
+    ids = np.asarray(raw)
+    if ids.size and (ids.min() < 0 or ids.max() > RAW_CLASSES):
+        raise InputError(f"NYU raw label ids must lie in 0..{RAW_CLASSES}, got {ids.min()}..{ids.max()}")
+    return np.asarray(NYU894_TO_40, dtype=np.uint8)[ids.astype(np.int64)]
+
+
+def palette_mapping(source: str | Palette, target: str | Palette) -> dict[int, int]:
+    """Ids of ``source`` -> ids of ``target`` for the classes both palettes hold under one name (ignoring case,
+    spaces and ``_``): Cityscapes and NYU-40 share ``wall`` and ``person``; every other class has none."""
+    src, dst = get_palette(source), get_palette(target)
+
+    def norm(name: str) -> str:
+        return "".join(c for c in name.lower() if c.isalpha())
+
+    ids = {norm(name): i + dst.first_id for i, (name, _) in enumerate(dst.classes)}
+    return {i + src.first_id: ids[norm(n)] for i, (n, _) in enumerate(src.classes) if norm(n) in ids}
+
+
+def recolor(colors: np.ndarray, source: str | Palette, target: str | Palette,
+            where: str = "semantic map") -> np.ndarray:  # fmt: skip
+    """A map of ``source``'s colours in ``target``'s: classes of :func:`palette_mapping` keep their meaning,
+    every other pixel becomes :data:`UNKNOWN_COLOR` (what a model reads as "no class")."""
+    ids = colors_to_ids(colors, source=where, palette=source).astype(np.int64)
+    lut = np.full(256, IGNORE_ID, dtype=np.int64)
+    for a, b in palette_mapping(source, target).items():
+        lut[a] = b
+    return ids_to_colors(lut[ids], palette=target)
 
 
 def one_hot(train_ids: np.ndarray, num_classes: int = NUM_CLASSES) -> np.ndarray:

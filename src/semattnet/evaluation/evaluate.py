@@ -16,6 +16,7 @@ import torch
 from torch import nn
 from torch.utils.data import DataLoader, Subset
 
+from semattnet._errors import InputError
 from semattnet._utils import distributed as dist_utils
 from semattnet._utils.device import autocast
 from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs, write_text
@@ -27,15 +28,20 @@ from semattnet.data.kitti import KittiDepthCompletion
 from semattnet.data.palette import check_palette
 from semattnet.data.sources.kitti_split import prediction_name
 from semattnet.evaluation.metrics import KittiMetrics
-from semattnet.evaluation.split import eval_dataset, prepare_out
+from semattnet.evaluation.sparsification import Sparsification
+from semattnet.evaluation.split import eval_dataset, prepare_out, refuse_listed_inputs
 from semattnet.inference.completer import Completion, DepthCompleter
 from semattnet.inference.padding import crop_padding
 from semattnet.inference.pipeline import write_prediction
 from semattnet.inference.sharding import agree, gather_rows, on_main, process_group, shared_stage
 from semattnet.inference.sinks import DepthPngSink, PanelSink, Sink, output_files
 from semattnet.models.outputs import DepthCompletionOutput
+from semattnet.models.uncertainty import with_uncertainty
 
 __all__ = ["PredictionWriter", "evaluate_checkpoint", "evaluate_model", "score_folders", "score_folders_to_json"]
+
+#: The sparsification curves' picture in ``evaluate``'s output folder.
+SPARSIFICATION_PNG = "sparsification.png"
 
 
 def score_folders(pred_dir: str | Path, gt_dir: str | Path, fill_holes: bool = True, min_gt: float = 0.0,
@@ -99,8 +105,10 @@ def evaluate_model(
 
 def _score_local(model: nn.Module, loader: DataLoader, device: torch.device, amp: str, progress: bool,
                  on_batch: Callable[[dict[str, Any], Any], None] | None, fill_holes: bool, min_gt: float,
-                 quantize: bool, make_metrics: Callable[[], KittiMetrics] | None = None) -> KittiMetrics:  # fmt: skip
-    """:func:`evaluate_model` on this rank's batches only (no collective)."""
+                 quantize: bool, make_metrics: Callable[[], KittiMetrics] | None = None,
+                 sparsification: Sparsification | None = None) -> KittiMetrics:  # fmt: skip
+    """:func:`evaluate_model` on this rank's batches only (no collective); with ``sparsification``, each
+    output also gets its ``uncertainty`` (:func:`~semattnet.models.uncertainty.with_uncertainty`), scored there."""
     metrics = make_metrics() if make_metrics is not None else KittiMetrics(fill_holes=fill_holes, min_gt=min_gt)
     was_training = model.training
     model.eval()
@@ -111,11 +119,17 @@ def _score_local(model: nn.Module, loader: DataLoader, device: torch.device, amp
                 out = model(**x)
             if "pad" in batch:  # padded to multiples of 32 by the dataset: score and write the protocol's crop
                 out, batch = _unpad(out, batch)
+            scored = sparsification is not None and isinstance(out, DepthCompletionOutput)
+            if scored:
+                out = with_uncertainty(out.map(lambda t: t.float()), batch["sparse"].to(device))
             if "gt" in batch:
                 pred = out.depth.float()
                 if quantize:
                     pred = _as_png(pred, list(batch["name"]))
                 metrics.update(pred, batch["gt"].to(device), names=list(batch["name"]))
+                if scored and sparsification is not None and out.uncertainty is not None:
+                    for p, g, u in zip(pred, batch["gt"].to(device), out.uncertainty, strict=True):
+                        sparsification.add(p[0], g[0], u[0])
             if on_batch is not None:
                 on_batch(batch, out)
     model.train(was_training)
@@ -197,13 +211,24 @@ def _completion(result: Any, i: int) -> Completion:
     return Completion(depth)
 
 
-def _write_scores(out: Path, metrics: KittiMetrics, summary: dict[str, Any]) -> None:
-    """``metrics.json`` (the summary) and ``per_image.csv`` (one row per frame)."""
+def _write_scores(out: Path, metrics: KittiMetrics, summary: dict[str, Any], spars: Sparsification) -> list[str]:
+    """``metrics.json`` (the summary), ``per_image.csv`` (one row per frame) and, when the uncertainty was
+    scored, ``sparsification.png`` (its curves, :func:`semattnet.viz.curves.plot_sparsification`), written
+    by rank 0 only. Returns their names (every rank)."""
+    names = ["metrics.json", "per_image.csv", *([SPARSIFICATION_PNG] if spars.frames else [])]
+    if not dist_utils.is_main():
+        return names
     (out / "metrics.json").write_text(json.dumps(summary, indent=2) + "\n")
+    if spars.frames:
+        from semattnet.viz.curves import plot_sparsification
+
+        label = Path(str(summary.get("checkpoint", "model"))).name
+        plot_sparsification({label: spars.curves()}, out / SPARSIFICATION_PNG)
     with open(out / "per_image.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(metrics.per_image[0]))
         writer.writeheader()
         writer.writerows(metrics.per_image)
+    return names
 
 
 def evaluate_checkpoint(
@@ -223,6 +248,7 @@ def evaluate_checkpoint(
     semantic_root: str | Path | None = None,
     backend: str = "torch",
     dataset: str = "kitti-dc",
+    palette_mismatch: str = "refuse",
 ) -> dict[str, Any]:
     """Run a checkpoint (a path, a loaded model, or a function that loads one: called after the split
     and the output folder are checked) over a split and score it; optionally write predictions and
@@ -231,47 +257,67 @@ def evaluate_checkpoint(
     the split's frame size).
 
     Writes into ``out_dir``: ``metrics.json``, ``per_image.csv``, ``predictions/`` (16-bit PNGs named
-    like the ground truth for val_select) and ``pictures/`` (branch panels of the first frames).
+    like the ground truth for val_select) and ``pictures/`` (branch panels of the first frames); the
+    uncertainty's AUSE / AURG (:mod:`semattnet.evaluation.sparsification`) and ``sparsification.png``.
 
     Under ``torchrun`` (same arguments on every rank; ``cuda:LOCAL_RANK`` on GPUs) rank ``r`` of ``W``
     scores frames ``r, r + W, ...`` (each frame once); the metrics are summed over the ranks and the
     per-image rows gathered in the split's order, so the files are those of one process.
 
     ``dataset``: the protocol (:mod:`semattnet.data.datasets`: ``kitti-dc``, ``nyuv2``, ``void``): its split,
-    metrics and semantic palette (maps of another palette than the model's are refused).
-    """
+    metrics and palette: maps of another palette than the model's are refused unless ``palette_mismatch`` is
+    ``recolour`` / ``fallback`` (nyuv2, void; :class:`~semattnet.data.sources.semantic.CrossPaletteSource`)."""
     inputs = [data, raw_root, semantic_root, checkpoint if isinstance(checkpoint, str | Path) else None]
     with process_group():
         ds, frames, out = _plan(data, split, raw_root, semantic_root, max_frames, out_dir, overwrite, inputs, dataset)
         completer, label = _completer(checkpoint, device, amp, backend)  # after every check
-        spec = _check_maps(completer, ds, data, dataset)
+        spec, semantic = _check_maps(completer, ds, data, dataset, palette_mismatch)
         loader = DataLoader(Subset(ds, range(frames)), batch_size=batch_size, num_workers=workers,
                             sampler=dist_utils.ShardSampler(frames))  # fmt: skip
         engine = completer.engine(tuple(ds[0]["rgb"].shape[-2:])) if frames else completer.model
-        score = partial(_score_local, engine, loader, completer.device, amp, True,
-                        fill_holes=True, min_gt=0.0, quantize=True, make_metrics=spec.metrics)  # fmt: skip
+        spars = Sparsification()
+        score = partial(_score_local, engine, loader, completer.device, amp, True, fill_holes=True, min_gt=0.0,
+                        quantize=True, make_metrics=spec.metrics, sparsification=spars)  # fmt: skip
         if out is None:
-            metrics = _merge(agree(score, None), ds)
-            return {"metrics": metrics, "result": metrics.compute() if metrics.per_image else {}}
+            metrics = _merge(agree(score, None), ds, spars)
+            return {"metrics": metrics, "result": _result(metrics, spars), "sparsification": spars, **semantic}
         writer = PredictionWriter(ds, split, out, save_predictions, pictures, frames)
         expected = writer.expected(frames)
         with shared_stage(out, overwrite, expected) as stage:  # all files appear together, or none
             writer.out = stage
-            metrics = _merge(agree(score, writer), ds)
-            result = metrics.compute() if metrics.per_image else {}
+            metrics = _merge(agree(score, writer), ds, spars)
+            result = _result(metrics, spars)
             if result:
-                expected += ["metrics.json", "per_image.csv"]
-                if dist_utils.is_main():
-                    _write_scores(stage, metrics, {"checkpoint": label, "dataset": spec.name, "split": split} | result)
-    return {"metrics": metrics, "result": result}
+                expected += _write_scores(stage, metrics, {"checkpoint": label, "dataset": spec.name,
+                                                           "split": split, **semantic} | result, spars)  # fmt: skip
+    return {"metrics": metrics, "result": result, "sparsification": spars, **semantic}
 
 
-def _check_maps(completer: DepthCompleter, ds: Any, data: str | Path, dataset: str) -> Any:
-    """The dataset's entry, once its maps' palette is the model's (a dataset without maps: any)."""
+def _result(metrics: KittiMetrics, spars: Sparsification) -> dict[str, Any]:
+    """The metrics (empty without any frame with ground truth) and the uncertainty's AUSE / AURG
+    (:mod:`semattnet.evaluation.sparsification`: ``ause_rmse``, ``aurg_rmse``, ``ause_mae``, ``aurg_mae``)."""
+    return (metrics.compute() | spars.compute()) if metrics.per_image else {}
+
+
+def _check_maps(completer: DepthCompleter, ds: Any, data: str | Path, dataset: str,
+                mismatch: str = "refuse") -> tuple[Any, dict[str, Any]]:  # fmt: skip
+    """The dataset's entry, once its maps' palette is the model's (a dataset without maps: any), and ``{}``;
+    with another palette and ``mismatch`` ``recolour`` / ``fallback``: ``ds`` reads them converted, and
+    ``{"semantic": what they became}``."""
+    from semattnet.data.palette import get_palette
+
     spec, palette = get_dataset(dataset), getattr(ds, "palette", "cityscapes")
-    if completer.needs_semantic and palette:
+    if not (completer.needs_semantic and palette) or get_palette(palette).name == get_palette(completer.palette).name:
+        return spec, {}
+    if mismatch == "refuse":
         check_palette(completer.palette, palette, f"{data} ({spec.name} maps)")
-    return spec
+    if not hasattr(ds, "source"):
+        raise InputError(f"--palette-mismatch {mismatch}: only for nyuv2 and void (not {spec.name})")
+    from semattnet.data.sources.semantic import CrossPaletteSource
+
+    ds.source = CrossPaletteSource(ds.source, completer.palette, mismatch)
+    ds.palette = ds.source.palette
+    return spec, {"semantic": ds.source.report()}
 
 
 def _plan(data: str | Path, split: str, raw_root: str | Path | None, semantic_root: str | Path | None,
@@ -281,6 +327,7 @@ def _plan(data: str | Path, split: str, raw_root: str | Path | None, semantic_ro
     frames to score decoded (each rank its share). Returns the dataset, the frame count and ``out``."""
     out = on_main(prepare_out, Path(out_dir), overwrite, inputs) if out_dir is not None else None
     ds = eval_dataset(data, split, raw_root, semantic_root, dataset)
+    refuse_listed_inputs(out, ds)
     frames = min(len(ds), max_frames) if max_frames else len(ds)
     agree(lambda: [ds.load(i) for i in dist_utils.ShardSampler(frames)])
     return ds, frames, out
@@ -298,9 +345,11 @@ def _completer(checkpoint: str | Path | nn.Module | Callable[[], nn.Module], dev
     return DepthCompleter(model, device=device_, amp=amp, backend=backend), str(label)
 
 
-def _merge(metrics: KittiMetrics, ds: KittiDepthCompletion) -> KittiMetrics:
-    """``metrics`` summed over the ranks, with every rank's per-image rows in the split's order (collective)."""
+def _merge(metrics: KittiMetrics, ds: KittiDepthCompletion, spars: Sparsification) -> KittiMetrics:
+    """``metrics`` and ``spars`` summed over the ranks, with every rank's per-image rows in the split's order
+    (collective)."""
     metrics.reduce()
+    spars.reduce()
     position = {frame.name: i for i, frame in enumerate(ds.frames)}
     metrics.per_image = gather_rows(metrics.per_image, key=lambda row: position[str(row["name"])])
     return metrics

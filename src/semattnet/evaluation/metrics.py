@@ -243,7 +243,7 @@ class KittiMetrics:
 @dataclass
 class RangeMetrics(KittiMetrics):
     """:class:`KittiMetrics` under a range protocol (:func:`range_metrics`): NYU Depth v2 (0.1-10 m, clamp
-    0..10, NLSPN) or VOID (0.2-5 m, clamp 0.2..5, KBNet). ``columns``: the keys of :meth:`compute` that
+    0..10, NLSPN) or VOID (0.2-5 m, no clamp, KBNet). ``columns``: the keys of :meth:`compute` that
     :meth:`table` shows (:data:`TABLE_COLUMNS`).
 
     Example:

@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from semattnet._errors import SemAttNetError
-from semattnet.evaluation.split import eval_dataset, prepare_out
+from semattnet.evaluation.split import eval_dataset, prepare_out, refuse_listed_inputs
 from semattnet.geometry.sparsify import keep_random, keep_row_bands
 from semattnet.inference.backends import needs_semantic
 
@@ -158,6 +158,7 @@ def run_sparsity_sweep(
     settings = parse_settings(settings)
     ds = eval_dataset(data_root, split)
     out = prepare_out(Path(out_dir), overwrite, [data_root])  # never inside the data
+    refuse_listed_inputs(out, ds)
     return _sweep(ds, out, settings, completers, seed, max_frames)
 
 
@@ -188,6 +189,7 @@ def sweep_model(
     settings = parse_settings(settings)
     ds = eval_dataset(data_root, split, dataset=dataset)
     out = prepare_out(Path(out_dir), overwrite, [data_root])  # never inside the data
+    refuse_listed_inputs(out, ds)
     completers: dict[str, Callable[..., Any]] = {}
     if model is not None:
         net = model if isinstance(model, torch.nn.Module) else model()

@@ -7,11 +7,11 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs
+from semattnet._utils.outputs import Output, OutputError, check_no_input_overlap, check_outputs
 from semattnet.data.kitti import KittiDepthCompletion
 from semattnet.data.transforms import EvalTransform
 
-__all__ = ["eval_dataset", "prepare_out"]
+__all__ = ["eval_dataset", "prepare_out", "refuse_listed_inputs"]
 
 
 def eval_dataset(data: str | os.PathLike[str], split: str, raw_root: str | os.PathLike[str] | None = None,
@@ -39,3 +39,16 @@ def prepare_out(out: Path, overwrite: bool, inputs: Sequence[Any] = ()) -> Path:
         raise FileExistsError(f"{out} is not empty; pass --overwrite to replace its contents")
     out.mkdir(parents=True, exist_ok=True)
     return out
+
+
+def refuse_listed_inputs(out: Path | None, ds: Any) -> None:
+    """Refuse an ``out`` that holds a file the dataset ``ds`` reads by name from its lists (a VOID list may
+    name any path: ``VoidSource.listed_files``), so that ``--overwrite`` never replaces an input."""
+    listed = getattr(getattr(ds, "source", None), "listed_files", None)
+    if out is None or listed is None:
+        return
+    root = Path(out).resolve()
+    for path in listed():
+        if Path(path).resolve().is_relative_to(root):
+            raise OutputError(f"output folder {out} holds the input {path} (named by the dataset's lists); "
+                              "choose an --out outside the inputs")  # fmt: skip

@@ -20,6 +20,7 @@ import numpy as np
 from semattnet._errors import DataError
 from semattnet._utils.atomic import atomic_path
 from semattnet._utils.bounds import regular_file
+from semattnet._utils.extras import require
 
 from .projection import PointCloud
 
@@ -99,10 +100,7 @@ def _check_ply_counts(path: Path) -> None:
 
 
 def _read_ply(path: Path) -> np.ndarray:
-    try:
-        from plyfile import PlyData
-    except ImportError:
-        raise DataError(f"{path}: reading PLY needs plyfile (pip install plyfile)") from None
+    PlyData = require("plyfile", f"{path}: reading PLY").PlyData
     _check_ply_counts(path)
     try:
         ply = PlyData.read(str(path))

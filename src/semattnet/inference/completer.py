@@ -34,7 +34,8 @@ from semattnet.inference.backends import needs_semantic, optimize_for_inference
 from semattnet.inference.padding import crop_padding, pad_to_multiple
 from semattnet.models.checks import check_has_points, check_sparse_depth
 from semattnet.models.outputs import DepthCompletionOutput
-from semattnet.weights.checkpoint import load_model
+from semattnet.models.uncertainty import with_uncertainty
+from semattnet.weights.hub import load_model
 
 __all__ = ["Completion", "DepthCompleter"]
 
@@ -43,10 +44,19 @@ __all__ = ["Completion", "DepthCompleter"]
 class Completion:
     """A completed frame: ``depth`` (H, W) float32 metres (the final prediction, as the method returned
     it) and ``output``, the model's typed :class:`DepthCompletionOutput` ((1, 1, H, W) CPU tensors), or
-    None for a method without branches (the classical baseline)."""
+    None for a method without branches (the classical baseline); ``uncertainty`` the per-pixel
+    uncertainty of ``depth``, (H, W) float32 metres."""
 
     depth: np.ndarray
     output: DepthCompletionOutput | None = None
+    #: (H, W) float32 per-pixel uncertainty of ``depth`` in metres, or None when the method gives none:
+    #: ``output.uncertainty`` (:func:`semattnet.models.uncertainty.depth_uncertainty`) when not given;
+    #: the classical baseline's :func:`semattnet.baselines.classical.classical_uncertainty`.
+    uncertainty: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.uncertainty is None and self.output is not None and self.output.uncertainty is not None:
+            self.uncertainty = self.output.uncertainty[0, 0].float().cpu().numpy()
 
     @property
     def outputs(self) -> dict[str, np.ndarray]:
@@ -64,6 +74,23 @@ class Completion:
         confs = [c for c in (self.output.color_conf, self.output.semantic_conf, self.output.guided_conf)
                  if c is not None]  # fmt: skip
         return torch.stack([c[0, 0].float().cpu() for c in confs]).amax(0).numpy()
+
+
+def check_precision(precision: str | None, amp: str, backend: str) -> str | None:
+    """``precision`` (``f32``, ``bf16`` or ``int8``; ``None``: as ``amp`` says) checked against ``amp`` and ``backend``.
+
+    ``bf16`` is autocast with the ``torch`` backend and the engine's bfloat16 otherwise; ``int8`` is OpenVINO's
+    NNCF-quantised engine (``backend`` ``openvino`` or ``auto``).
+    """
+    if precision is None:
+        return None
+    if precision not in ("f32", "bf16", "int8"):
+        raise InputError(f"precision {precision!r}: choose f32, bf16 or int8")
+    if amp not in ("none", precision):
+        raise InputError(f"precision {precision!r} and amp {amp!r} disagree: give one (amp is the older name)")
+    if precision == "int8" and backend not in ("openvino", "auto"):
+        raise InputError(f"precision int8 runs on the openvino backend (NNCF), not {backend!r}: --backend openvino")
+    return precision
 
 
 def _check_colour_range(name: str, a: np.ndarray | None) -> None:
@@ -93,16 +120,24 @@ class DepthCompleter:
             or ``auto``; the fixed-size backends build (and cache on disk) one engine per padded
             frame size, so they pay off over many frames of one size.
         inplace: fold ``model`` itself instead of a copy (saves memory; ``from_checkpoint`` does).
+        precision: ``f32``, ``bf16`` or ``int8`` (:func:`check_precision`); ``None``: as ``amp`` says.
+        calibration: int8's calibration frames (a folder, a FrameSource or Frames; default: synthetic scenes).
     """
 
     def __init__(self, model: nn.Module, device: str | torch.device = "auto", amp: str = "none",
-                 backend: str = "torch", inplace: bool = False) -> None:  # fmt: skip
+                 backend: str = "torch", inplace: bool = False, precision: str | None = None,
+                 calibration: Any = None) -> None:  # fmt: skip
         self.device = resolve_device(device)
-        self.amp = amp_dtype(amp)
-        self.backend = backend
+        self.precision = check_precision(precision, amp, backend)
+        self.amp = amp_dtype("bf16" if self.precision == "bf16" and backend == "torch" else amp)
+        self.backend = "openvino" if self.precision == "int8" and backend == "auto" else backend
+        self.calibration = calibration
         self.needs_semantic = needs_semantic(model)
         #: The semantic palette the model was trained with (its config's; Cityscapes when it records none).
         self.palette: str = getattr(getattr(model, "config", None), "palette", "cityscapes")
+        #: Whether :meth:`run` (and a call) sets the outputs' ``uncertainty``
+        #: (:func:`semattnet.models.uncertainty.depth_uncertainty`; about 60 ms of one CPU core at 375x1242).
+        self.compute_uncertainty = True
         self._source = model.to(self.device).eval()
         self._inplace = inplace
         self._engines: dict[tuple[int, int] | None, nn.Module] = {}
@@ -110,7 +145,7 @@ class DepthCompleter:
     @classmethod
     def from_checkpoint(cls, path: str | Path, device: str | torch.device = "auto", amp: str = "none",
                         backend: str = "torch") -> DepthCompleter:  # fmt: skip
-        """A completer for the weights file at ``path`` (see :func:`semattnet.weights.checkpoint.load_model`)."""
+        """A completer for the weights file at ``path`` (see :func:`semattnet.weights.load_model`)."""
         return cls(load_model(path), device, amp, backend, inplace=True)
 
     @classmethod
@@ -128,9 +163,11 @@ class DepthCompleter:
         key = size if fixed else None
         if key not in self._engines:
             precision = "bf16" if self.amp is torch.bfloat16 and self.backend != "torch" else "f32"
+            precision = self.precision if self.precision in ("int8", "bf16") and self.backend != "torch" else precision
             self._engines[key] = optimize_for_inference(self._source, backend=self.backend, size=key,
                                                         precision=precision, device=self.device,
-                                                        inplace=self._inplace and self.backend == "torch")  # fmt: skip
+                                                        inplace=self._inplace and self.backend == "torch",
+                                                        calibration=self.calibration)  # fmt: skip
         return self._engines[key]
 
     @property
@@ -139,7 +176,9 @@ class DepthCompleter:
         return self.engine(None) if self.backend == "torch" else self._source
 
     def run(self, rgb: torch.Tensor, semantic: torch.Tensor | None, sparse: torch.Tensor) -> DepthCompletionOutput:
-        """Batched tensors (B, C, H, W) of any H, W -> outputs at the same size.
+        """Batched tensors (B, C, H, W) of any H, W -> outputs at the same size, with their ``uncertainty``
+        (:func:`semattnet.models.uncertainty.depth_uncertainty`: from the outputs every engine returns and
+        ``sparse``, so the same for every engine up to float rounding; not with ``compute_uncertainty = False``).
 
         Raises:
             InputError: NaN / infinite, negative or too large sparse depth (checked here too, as exported
@@ -154,7 +193,11 @@ class DepthCompleter:
             engine = self.engine((int(rgb_p.shape[-2]), int(rgb_p.shape[-1])))
             out = engine(rgb=rgb_p.to(self.device), semantic=None if sem_p is None else sem_p.to(self.device),
                          sparse=sparse_p.to(self.device))  # fmt: skip
-        return out.map(lambda t: crop_padding(t.float(), pad))
+        out = out.map(lambda t: crop_padding(t.float(), pad))
+        if not self.compute_uncertainty:
+            return out
+        with torch.inference_mode():
+            return with_uncertainty(out, sparse)
 
     def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
         """Complete one frame: ``rgb`` (H, W, 3) 0..255, ``sparse`` (H, W) metres (0 = none),

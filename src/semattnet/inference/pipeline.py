@@ -59,6 +59,7 @@ from semattnet.inference.sinks import (
     Prediction,
     RunSink,
     Sink,
+    UncertaintyPngSink,
     output_files,
     predict_frame,
 )
@@ -237,6 +238,7 @@ class _FrameLoop:
         self.sinks = sinks
         self.replays = [s for s in self.runs if s.replays]
         self.depth_sink = next((s for s in sinks if isinstance(s, DepthPngSink)), None)
+        self.uncertainty_sink = next((s for s in sinks if isinstance(s, UncertaintyPngSink)), None)
         self.names = shard(source.names)
         self.waiting = deque(n for n in self.names if n in self.journal.kept or n in plan.faults)
         self.position = {n: i for i, n in enumerate(self.names)}
@@ -268,7 +270,8 @@ class _FrameLoop:
         self.log(f"{fault.name}: {fault.status}: {fault.reason}")
 
     def replay(self, name: str) -> None:
-        """A frame kept from an earlier run: its times into the table, its stored depth into the run outputs."""
+        """A frame kept from an earlier run: its times into the table, its stored depth (and stored uncertainty,
+        when the run writes it) into the run outputs."""
         for stage, ms in self.journal.frames[name].get("stage_ms", {}).items():
             self.timer.add(name, stage, ms / 1e3)
         if not self.replays or self.depth_sink is None:
@@ -276,6 +279,9 @@ class _FrameLoop:
         frame = read_frame(self.source, name, self.semantic, StageTimes())
         stored = read_depth(self.out / str(self.depth_sink.path(name)))
         pred = Prediction(frame, Completion(stored), stored, encode_depth(stored), stored)
+        if self.uncertainty_sink is not None:
+            pred.uncertainty = read_depth(self.out / str(self.uncertainty_sink.path(name)))
+            pred.uncertainty_png = encode_depth(pred.uncertainty)
         for sink in self.replays:
             sink.write(self.out, pred)
 

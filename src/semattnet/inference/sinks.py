@@ -10,7 +10,11 @@ the PNG stores it; the ``.npy`` holds the clamped depth at full float precision.
 Files per frame ``NAME`` (names as ``semattnet predict`` has always written them): ``NAME.png`` (KITTI
 16-bit depth), ``NAME_color.png``, ``NAME.npy`` (float32 metres), ``NAME.ply`` (back-projected, with the
 fusion confidence) and ``NAME_panel.png`` (per-branch panel, with a bird's-eye view when the frame's
-LiDAR points are known). A sink may write into a sub-folder, rename frames, or write only some frames
+LiDAR points are known); with the uncertainty, ``uncertainty/NAME.png`` (its KITTI 16-bit encoding,
+:func:`semattnet.inference.uncertainty.encode_uncertainty`) and ``uncertainty/NAME.npy`` (float32 metres).
+The clouds (PLY, bird's-eye view, and the robot outputs) may leave out the pixels whose uncertainty
+exceeds an :class:`~semattnet.inference.uncertainty.UncertaintyLimit`; the depth maps stay dense.
+A sink may write into a sub-folder, rename frames, or write only some frames
 (``semattnet evaluate`` writes ``predictions/`` and the ``pictures/`` of the first frames this way).
 
 A :class:`RunSink` writes one output for the whole run instead (``latency.json`` here; a bag, a Rerun
@@ -31,6 +35,7 @@ from semattnet._errors import InputError
 from semattnet.data.frames import Frame
 from semattnet.data.io import clamp_for_png, decode_depth, encode_depth, write_depth, write_image
 from semattnet.inference.completer import Completion
+from semattnet.inference.uncertainty import UncertaintyLimit, clean_uncertainty, encode_uncertainty
 
 __all__ = [
     "ColorPngSink",
@@ -42,6 +47,8 @@ __all__ = [
     "Prediction",
     "RunSink",
     "Sink",
+    "UncertaintyNpySink",
+    "UncertaintyPngSink",
     "default_sinks",
     "fusion_confidence",
     "output_files",
@@ -64,7 +71,9 @@ class Prediction:
     """One completed frame as the sinks see it.
 
     ``depth``: (H, W) float32 metres after the hole / clamp rule (0 = hole); ``png``: its uint16 KITTI
-    encoding; ``stored``: the metres the PNG holds (1/256 m steps): what the PLY and the panel use."""
+    encoding; ``stored``: the metres the PNG holds (1/256 m steps): what the PLY and the panel use.
+    ``uncertainty``: (H, W) float32 metres, 0 at the holes (None when the method gives none);
+    ``uncertainty_png``: its uint16 encoding (:func:`~semattnet.inference.uncertainty.encode_uncertainty`)."""
 
     frame: Frame
     completion: Completion
@@ -72,30 +81,51 @@ class Prediction:
     png: np.ndarray
     stored: np.ndarray
     stage_ms: dict[str, float] = field(default_factory=dict)  # the frame's stage times so far (the loop's)
-    _clouds: dict[tuple[float, int], Any] = field(default_factory=dict, repr=False)
+    uncertainty: np.ndarray | None = None
+    uncertainty_png: np.ndarray | None = None
+    _clouds: dict[tuple[float, int, str], Any] = field(default_factory=dict, repr=False)
 
-    def cloud(self, max_depth: float, top_crop: int) -> Any:
+    @property
+    def uncertainty_stored(self) -> np.ndarray | None:
+        """The metres the uncertainty PNG holds (1/256 m steps; 0 = none), or None: what the limit tests."""
+        return None if self.uncertainty_png is None else decode_depth(self.uncertainty_png)
+
+    def keep(self, limit: UncertaintyLimit | None) -> np.ndarray | None:
+        """The pixels a cloud keeps under ``limit`` ((H, W) bool; None: no limit, every pixel)."""
+        if limit is None:
+            return None
+        u = self.uncertainty_stored
+        if u is None:
+            raise InputError(f"{self.frame.name}: --max-uncertainty: the method gives no per-pixel uncertainty")
+        return limit.keep(u, self.stored)
+
+    def cloud(self, max_depth: float, top_crop: int, limit: UncertaintyLimit | None = None) -> Any:
         """The stored depth back-projected (:func:`semattnet.geometry.depth_to_points`) with the image's
-        colours and the fusion confidence; needs the frame's intrinsics."""
+        colours and the fusion confidence, the pixels ``limit`` rejects left out; needs the frame's intrinsics."""
         from semattnet.geometry import depth_to_points
 
         if self.frame.K is None:
             raise InputError(f"{self.frame.name}: a point cloud needs the frame's intrinsics K (--K), none given")
-        key = (float(max_depth), int(top_crop))
+        key = (float(max_depth), int(top_crop), repr(limit))
         if key not in self._clouds:
             camera = getattr(self.frame.calib, "camera", None)
             name = (f"cam{camera}" if str(camera).isdigit() else str(camera)) if camera else "cam"  # KITTI "02"
             self._clouds[key] = depth_to_points(self.stored, self.frame.K, rgb=self.frame.rgb,
                                                 confidence=self.completion.confidence, max_depth=max_depth,
-                                                top_crop=top_crop, frame=name)  # fmt: skip
+                                                top_crop=top_crop, frame=name, mask=self.keep(limit))  # fmt: skip
         return self._clouds[key]
 
 
 def predict_frame(frame: Frame, completion: Completion) -> Prediction:
-    """The one hole / clamp rule and the one quantisation, applied once to a frame's prediction."""
+    """The one hole / clamp rule and the one quantisation, applied once to a frame's prediction (and to its
+    uncertainty, when it has one)."""
     depth = np.asarray(clamp_for_png(np.asarray(completion.depth), frame.name), dtype=np.float32)
     png = encode_depth(depth)
-    return Prediction(frame, completion, depth, png, decode_depth(png))
+    pred = Prediction(frame, completion, depth, png, decode_depth(png))
+    if completion.uncertainty is not None:
+        pred.uncertainty = clean_uncertainty(completion.uncertainty, depth, frame.name)
+        pred.uncertainty_png = encode_uncertainty(pred.uncertainty, depth)
+    return pred
 
 
 @dataclass
@@ -166,11 +196,45 @@ class PlySink(Sink):
     suffix: str = ".ply"
     max_depth: float = 80.0
     top_crop: int = 0
+    max_uncertainty: UncertaintyLimit | None = None  # the pixels above it left out
 
     def save(self, path: Path, pred: Prediction) -> None:
         from semattnet.geometry import write_ply
 
-        write_ply(path, pred.cloud(self.max_depth, self.top_crop), overwrite=True)
+        write_ply(path, pred.cloud(self.max_depth, self.top_crop, self.max_uncertainty), overwrite=True)
+
+
+def _uncertainty_of(pred: Prediction) -> tuple[np.ndarray, np.ndarray]:
+    """(float32 metres, uint16 encoding) of ``pred``'s uncertainty; a one-line error when the method has none."""
+    if pred.uncertainty is None or pred.uncertainty_png is None:
+        raise InputError(f"{pred.frame.name}: --uncertainty: the method gives no per-pixel uncertainty")
+    return pred.uncertainty, pred.uncertainty_png
+
+
+@dataclass
+class UncertaintyPngSink(Sink):
+    """``uncertainty/NAME.png``: the uncertainty in the KITTI 16-bit encoding (``metres * 256``, 0 = none:
+    a hole in the depth; :func:`~semattnet.inference.uncertainty.encode_uncertainty`)."""
+
+    folder: str = "uncertainty"
+
+    def save(self, path: Path, pred: Prediction) -> None:
+        write_depth(path, _uncertainty_of(pred)[1], overwrite=True)
+
+
+@dataclass
+class UncertaintyNpySink(Sink):
+    """``uncertainty/NAME.npy``: the uncertainty, float32 metres (0 at the holes), unquantised."""
+
+    suffix: str = ".npy"
+    folder: str = "uncertainty"
+
+    def save(self, path: Path, pred: Prediction) -> None:
+        from semattnet._utils.atomic import atomic_path
+
+        values = _uncertainty_of(pred)[0]
+        with atomic_path(path, suffix=".npy") as tmp:
+            np.save(tmp, values)
 
 
 @dataclass
@@ -181,6 +245,7 @@ class PanelSink(Sink):
     suffix: str = "_panel.png"
     max_depth: float = 80.0
     top_crop: int = 0
+    max_uncertainty: UncertaintyLimit | None = None  # the bird's-eye view leaves out the pixels above it
 
     def save(self, path: Path, pred: Prediction) -> None:
         from semattnet.viz.panels import birds_eye_tile, branch_panel
@@ -190,7 +255,7 @@ class PanelSink(Sink):
         outputs[final] = pred.stored  # the depth as stored
         extra = []
         if frame.points is not None and frame.calib is not None and frame.K is not None:
-            cloud = pred.cloud(self.max_depth, self.top_crop)
+            cloud = pred.cloud(self.max_depth, self.top_crop, self.max_uncertainty)
             bev = birds_eye_tile(cloud, frame.points, frame.calib, frame.size, self.max_depth)
             extra.append(("bird's-eye view (LiDAR in magenta)", bev))
         branch_panel(path, frame.rgb, frame.semantic, frame.sparse, outputs, gt=frame.gt, extra=extra)
@@ -256,12 +321,15 @@ class LatencySink(RunSink):
 
 
 def default_sinks(npy: bool = False, panel: bool = False, ply: bool = False, max_depth: float = 80.0,
-                  top_crop: int = 0) -> list[Sink]:  # fmt: skip
+                  top_crop: int = 0, uncertainty: bool = False,
+                  max_uncertainty: UncertaintyLimit | None = None) -> list[Sink]:  # fmt: skip
     """What ``semattnet predict`` writes: ``NAME.png`` and ``NAME_color.png``, then as asked ``NAME.ply``,
-    ``NAME.npy`` and ``NAME_panel.png``."""
+    ``NAME.npy``, ``NAME_panel.png`` and (``uncertainty``) ``uncertainty/NAME.png`` (and ``.npy`` with
+    ``npy``); ``max_uncertainty``: the PLY and the bird's-eye view leave out the pixels above it."""
     sinks: list[Sink] = [DepthPngSink(), ColorPngSink()]
-    sinks += [PlySink(max_depth=max_depth, top_crop=top_crop)] * ply + [NpySink()] * npy
-    return sinks + [PanelSink(max_depth=max_depth, top_crop=top_crop)] * panel
+    sinks += [PlySink(max_depth=max_depth, top_crop=top_crop, max_uncertainty=max_uncertainty)] * ply
+    sinks += [NpySink()] * npy + [UncertaintyPngSink()] * uncertainty + [UncertaintyNpySink()] * (uncertainty and npy)
+    return sinks + [PanelSink(max_depth=max_depth, top_crop=top_crop, max_uncertainty=max_uncertainty)] * panel
 
 
 def output_files(names: Sequence[str], sinks: Sequence[Sink]) -> list[str]:

@@ -25,6 +25,9 @@ class DepthCompletionOutput:
         refined_s2_depth: after the dilation-2 propagation stage (the authors' "coarse_depth");
             full model only.
         refined_depth: after both propagation stages (the final prediction); full model only.
+        uncertainty: per-pixel uncertainty of :attr:`depth` in metres
+            (:func:`semattnet.models.uncertainty.depth_uncertainty`); set by whoever holds the sparse input
+            (:meth:`semattnet.inference.DepthCompleter.run`), ``None`` straight out of a model.
     """
 
     color_depth: torch.Tensor
@@ -36,6 +39,7 @@ class DepthCompletionOutput:
     fused_depth: torch.Tensor
     refined_s2_depth: torch.Tensor | None = None
     refined_depth: torch.Tensor | None = None
+    uncertainty: torch.Tensor | None = None
 
     @property
     def depth(self) -> torch.Tensor:

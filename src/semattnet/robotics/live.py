@@ -8,8 +8,11 @@ input's sensor time and frame id (as :class:`~semattnet.inference.sinks.BagSink`
 topic                         schema                 what
 ============================  =====================  ==================================================
 ``/semattnet/depth``          foxglove.RawImage      the completed depth as stored, ``32FC1`` metres, holes NaN
+``/semattnet/uncertainty``    foxglove.RawImage      its per-pixel uncertainty as stored, ``32FC1`` metres,
+                                                     NaN where none (when the method gives one)
 ``/semattnet/points``         foxglove.PointCloud    the coloured completed cloud (x, y, z float32, red,
-                                                     green, blue, alpha uint8) in the camera frame
+                                                     green, blue, alpha uint8) in the camera frame, the
+                                                     pixels above ``max_uncertainty`` left out
 ``/semattnet/calibration``    foxglove.CameraCalib.  K, P, size, distortion (``meta["camera_info"]`` or ``K``)
 ``/semattnet/latency``        JSON                   ``{frame, stamp_ns, stages_ms: {stage: ms}}``
 ``/tf``                       foxglove.FrameTransf.  camera <- LiDAR (``calib.T_cam_lidar``), when known
@@ -32,17 +35,20 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from semattnet._errors import InputError, MissingDependencyError
+from semattnet._errors import InputError
+from semattnet._utils.extras import optional, require
 from semattnet.data.frames import Frame
+from semattnet.data.io import decode_depth
 from semattnet.inference.sinks import Prediction, RunSink
+from semattnet.inference.uncertainty import UncertaintyLimit
 from semattnet.robotics.sinks import camera_info, stamp_ns
 
-__all__ = ["INSTALL_HINT", "LATENCY_SCHEMA", "LiveSink", "parse_address"]
+__all__ = ["LATENCY_SCHEMA", "LiveSink", "parse_address"]
 
-INSTALL_HINT = "pip install 'semattnet[live]'"
 #: Topics by role; ``PREFIX`` is :attr:`LiveSink.prefix`.
 TOPICS = {
     "depth": "PREFIX/depth",
+    "uncertainty": "PREFIX/uncertainty",
     "points": "PREFIX/points",
     "calibration": "PREFIX/calibration",
     "latency": "PREFIX/latency",
@@ -66,23 +72,13 @@ BACKLOG = 64
 
 def _foxglove() -> Any:
     """``foxglove``, or a one-line :class:`MissingDependencyError` with the install hint."""
-    try:
-        import foxglove
-        import foxglove.channels
-    except ImportError:
-        raise MissingDependencyError(f"--live needs the optional package 'foxglove-sdk': {INSTALL_HINT}",
-                                     name="foxglove") from None  # fmt: skip
-    return foxglove
+    require("foxglove.channels", "--live")
+    return require("foxglove", "--live")
 
 
 def _messages() -> Any:
     """The message classes: ``foxglove.messages`` (``foxglove.schemas`` in older releases)."""
-    import importlib
-
-    try:
-        return importlib.import_module("foxglove.messages")
-    except ImportError:
-        return importlib.import_module("foxglove.schemas")
+    return optional("foxglove.messages") or require("foxglove.schemas", "--live")
 
 
 def _accepts(fn: Callable[..., Any], name: str) -> bool:
@@ -185,12 +181,14 @@ class LiveSink(RunSink):
         address: ``[HOST:]PORT`` to listen on (port 0: a free port, see :attr:`port`).
         max_depth: completed-cloud points deeper than this are left out, metres (None: all).
         prefix: the topics of the outputs (``PREFIX/depth``, ...).
+        max_uncertainty: completed-cloud points whose uncertainty exceeds it are left out (None: all).
     """
 
     address: str = "127.0.0.1:8765"
     max_depth: float | None = None
     prefix: str = "/semattnet"
     log: Any = None  # where the address to connect to is said once the server runs (e.g. ``print``)
+    max_uncertainty: UncertaintyLimit | None = None
     #: Frames kept from an earlier (resumed) run are not re-sent.
     replays: ClassVar[bool] = False
     _server: Any = field(default=None, init=False, repr=False)
@@ -231,6 +229,7 @@ class LiveSink(RunSink):
         self._count = 0
         self._channels = {
             "depth": ch.RawImageChannel(topics["depth"], context=context),
+            "uncertainty": ch.RawImageChannel(topics["uncertainty"], context=context),
             "points": ch.PointCloudChannel(topics["points"], context=context),
             "calibration": ch.CameraCalibrationChannel(topics["calibration"], context=context),
             "latency": fg.Channel(topics["latency"], schema=LATENCY_SCHEMA, context=context),
@@ -262,11 +261,15 @@ class LiveSink(RunSink):
         stamp = _timestamp(m, t_ns)
         frame_id, info = _camera(frame)
         self._log("depth", t_ns, lambda: _depth_image(m, stamp, frame_id, pred.stored))
+        unc_png = pred.uncertainty_png
+        if unc_png is not None:
+            self._log("uncertainty", t_ns, lambda: _depth_image(m, stamp, frame_id, decode_depth(unc_png)))
         self._log("rgb", t_ns, lambda: _image(m, stamp, frame_id, np.asarray(frame.rgb, np.uint8), "rgb8"))
         self._log("sparse", t_ns, lambda: _depth_image(m, stamp, frame_id, frame.sparse))
         if frame.K is not None:
             max_depth = math.inf if self.max_depth is None else float(self.max_depth)
-            self._log("points", t_ns, lambda: _cloud(m, stamp, frame_id, pred.cloud(max_depth, 0)))
+            limit = self.max_uncertainty
+            self._log("points", t_ns, lambda: _cloud(m, stamp, frame_id, pred.cloud(max_depth, 0, limit)))
         if info is not None:
             self._log("calibration", t_ns, lambda: _calibration(m, stamp, frame_id, info))
         T = getattr(frame.calib, "T_cam_lidar", None)

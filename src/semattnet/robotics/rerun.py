@@ -11,6 +11,8 @@ Per frame, on one timeline (``sensor_time``) stamped with the sensor time, in th
     world/camera/image/semantic   SegmentationImage of Cityscapes trainIds (AnnotationContext: class labels)
     world/lidar/points            Points3D, the scan
     world/completed/points        Points3D, the completed depth back-projected with its colours
+    uncertainty                   DepthImage, metres, the per-pixel uncertainty of the completed depth (when
+                                  given; outside the camera so that the 3D view does not back-project it)
 
 A file recording is written to a hidden temporary file beside the target and moved into place at
 :meth:`RerunLogger.close`; after an error inside the ``with`` block nothing is left. ``serve=True`` streams
@@ -31,9 +33,9 @@ import numpy as np
 
 from semattnet._errors import InputError
 from semattnet._utils.atomic import new_file_mode
+from semattnet._utils.extras import require
 from semattnet.data.palette import IGNORE_ID, TRAIN_CLASSES, UNKNOWN_COLOR, colors_to_ids
 from semattnet.geometry import depth_to_points, invert_T
-from semattnet.robotics.bags.deps import import_extra
 
 __all__ = ["ENTITIES", "TIMELINE", "RerunLogger", "read_rrd_frames"]
 
@@ -49,11 +51,12 @@ ENTITIES = {
     "semantic": "world/camera/image/semantic",
     "points": "world/lidar/points",
     "cloud": "world/completed/points",
+    "uncertainty": "uncertainty",
 }
 
 
 def _rerun() -> Any:
-    return import_extra("rerun", "writing a Rerun recording")
+    return require("rerun", "writing a Rerun recording")
 
 
 class RerunLogger:
@@ -138,10 +141,12 @@ class RerunLogger:
 
     def log_frame(self, stamp_ns: int, rgb: np.ndarray, K: np.ndarray, T_cam_lidar: np.ndarray, *,
                   sparse: np.ndarray | None = None, depth: np.ndarray | None = None,
-                  semantic: np.ndarray | None = None, points: np.ndarray | None = None) -> None:  # fmt: skip
+                  semantic: np.ndarray | None = None, points: np.ndarray | None = None,
+                  uncertainty: np.ndarray | None = None, keep: np.ndarray | None = None) -> None:  # fmt: skip
         """One frame at sensor time ``stamp_ns``: ``rgb`` (H, W, 3) uint8, ``K`` (3, 3), ``T_cam_lidar`` (4, 4);
-        optional ``sparse`` / ``depth`` (H, W) metres (0 = none), ``semantic`` (H, W) trainIds or (H, W, 3)
-        palette colours, ``points`` (N, 3|4) LiDAR frame."""
+        optional ``sparse`` / ``depth`` / ``uncertainty`` (H, W) metres (0 = none), ``semantic`` (H, W) trainIds
+        or (H, W, 3) palette colours, ``points`` (N, 3|4) LiDAR frame; ``keep`` (H, W) bool: the pixels of
+        ``depth`` the completed cloud keeps (default all)."""
         rr = _rerun()
         rgb = np.asarray(rgb, dtype=np.uint8)
         h, w = rgb.shape[:2]
@@ -164,8 +169,10 @@ class RerunLogger:
         if depth is not None:
             d = np.nan_to_num(np.asarray(depth, dtype=np.float32), nan=0.0)
             log(ENTITIES["depth"], rr.DepthImage(d, meter=1.0))
-            cloud = depth_to_points(d, K, rgb=rgb, max_depth=self.max_depth).transform(T_lidar_cam, "lidar")
+            cloud = depth_to_points(d, K, rgb=rgb, max_depth=self.max_depth, mask=keep).transform(T_lidar_cam, "lidar")
             log(ENTITIES["cloud"], rr.Points3D(cloud.xyz, colors=cloud.rgb))
+        if uncertainty is not None:
+            log(ENTITIES["uncertainty"], rr.DepthImage(np.nan_to_num(np.asarray(uncertainty, np.float32)), meter=1.0))
         self.frames += 1
 
     def close(self) -> None:
@@ -235,7 +242,7 @@ def _first_line(e: BaseException) -> str:
 def read_rrd_frames(path: str | os.PathLike[str]) -> dict[str, list[int]]:
     """Entity path (without the leading ``/``) -> the sorted sensor times (ns) it was logged at, of a ``.rrd``
     file; static-only entities map to an empty list. (For checking a recording; needs ``rerun-sdk``.)"""
-    chunk = import_extra("rerun.chunk", "reading a Rerun recording")
+    chunk = require("rerun.chunk", "reading a Rerun recording")
     store = chunk.RrdReader(str(path)).store()
     out: dict[str, list[int]] = {}
     for ch in store.stream():

@@ -21,6 +21,7 @@ from semattnet._errors import InputError
 from semattnet._utils.outputs import clean_stale_stages
 from semattnet.data.frames import Frame
 from semattnet.inference.sinks import Prediction, RunSink
+from semattnet.inference.uncertainty import UncertaintyLimit
 
 __all__ = ["BagSink", "RerunSink", "camera_info", "stamp_ns"]
 
@@ -95,7 +96,8 @@ class BagSink(_StagedTarget):
     :class:`semattnet.robotics.bags.BagWriter`: per frame the stored depth (the PNG's metres) as ``32FC1``
     with holes NaN, the coloured cloud and the frame's CameraInfo (``meta["camera_info"]``, else one made
     from ``K``), stamped with the input's header stamp and frame id (``meta``; else ``timestamp`` and
-    ``camera``)."""
+    ``camera``). ``uncertainty``: also the stored uncertainty as ``PREFIX/uncertainty`` ``32FC1`` (metres,
+    NaN where none); ``max_uncertainty``: the cloud leaves out the pixels above it (the images stay whole)."""
 
     option: ClassVar[str] = "--bag-out"
     kind: ClassVar[str] = "bag"
@@ -103,6 +105,8 @@ class BagSink(_StagedTarget):
     fmt: str | None = None
     prefix: str = "/semattnet"
     max_depth: float | None = None
+    uncertainty: bool = False
+    max_uncertainty: UncertaintyLimit | None = None
     _writer: Any = field(default=None, init=False, repr=False)  # the open BagWriter, between open and finish
 
     def open(self, overwrite: bool = False) -> None:
@@ -119,8 +123,10 @@ class BagSink(_StagedTarget):
         info = frame.meta.get("camera_info") or camera_info(frame)
         frame_id = frame.meta.get("frame_id") or info.frame_id or "camera"
         depth = np.where(pred.stored > 0, pred.stored, np.nan).astype(np.float32)  # REP 118: holes NaN
+        unc = _stored_uncertainty(pred) if self.uncertainty else None
         with self._full_disk():
-            self._writer.write(stamp_ns(frame, self._count), frame_id, depth, info, rgb=frame.rgb, K=frame.K)
+            self._writer.write(stamp_ns(frame, self._count), frame_id, depth, info, rgb=frame.rgb, K=frame.K,
+                               uncertainty=unc, keep=pred.keep(self.max_uncertainty))  # fmt: skip
         self._count += 1
 
     def finish(self, stage: Path) -> None:
@@ -140,6 +146,14 @@ class BagSink(_StagedTarget):
             super().abort()
 
 
+def _stored_uncertainty(pred: Prediction) -> np.ndarray:
+    """The uncertainty as its PNG stores it (metres, 0 = none); a one-line error when the method has none."""
+    u = pred.uncertainty_stored
+    if u is None:
+        raise InputError(f"{pred.frame.name}: --uncertainty: the method gives no per-pixel uncertainty")
+    return u
+
+
 def camera_info(frame: Frame) -> Any:
     """A distortion-free CameraInfo of a frame's ``K`` and size."""
     from semattnet.robotics.bags import CameraInfoData
@@ -152,7 +166,8 @@ def camera_info(frame: Frame) -> Any:
 @dataclass
 class RerunSink(_StagedTarget):
     """``--rerun FILE.rrd`` / ``--rerun-spawn``: per frame the camera, image, sparse input, stored depth, semantic
-    map, LiDAR points and completed cloud (:class:`semattnet.robotics.bags.RerunLogger`) at the frame's sensor time."""
+    map, LiDAR points and completed cloud (:class:`semattnet.robotics.bags.RerunLogger`) at the frame's sensor time;
+    ``uncertainty``: the stored uncertainty too; ``max_uncertainty``: the cloud leaves out the pixels above it."""
 
     option: ClassVar[str] = "--rerun"
     kind: ClassVar[str] = "rrd"
@@ -161,6 +176,8 @@ class RerunSink(_StagedTarget):
     max_depth: float | None = None
     serve: bool = False  # serve the frames to a web viewer (the URL goes to ``log``)
     log: Any = None
+    uncertainty: bool = False
+    max_uncertainty: UncertaintyLimit | None = None
     _logger: Any = field(default=None, init=False, repr=False)  # the open RerunLogger, between open and finish
 
     def targets(self) -> list[Path]:
@@ -181,10 +198,12 @@ class RerunSink(_StagedTarget):
         if frame.K is None:
             raise InputError(f"{frame.name}: the Rerun recording needs the frame's intrinsics K, none given")
         T = getattr(frame.calib, "T_cam_lidar", None)
+        unc = _stored_uncertainty(pred) if self.uncertainty else None
         with self._full_disk():
             self._logger.log_frame(stamp_ns(frame, self._count), frame.rgb, frame.K, np.eye(4) if T is None else T,
                                    sparse=frame.sparse, depth=pred.stored, semantic=frame.semantic,
-                                   points=frame.points)  # fmt: skip
+                                   points=frame.points, uncertainty=unc,
+                                   keep=pred.keep(self.max_uncertainty))  # fmt: skip
         self._count += 1
 
     def finish(self, stage: Path) -> None:

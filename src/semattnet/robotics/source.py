@@ -26,6 +26,7 @@ import numpy as np
 from semattnet._errors import DataError
 from semattnet.data.frames import Frame, IndexedSource
 from semattnet.robotics.bags import BagFailure, BagPair, BagPairs, StampPairing
+from semattnet.robotics.bags.reader import message_where
 
 __all__ = ["BagSource"]
 
@@ -124,7 +125,7 @@ class BagSource(IndexedSource):
         with open_bag(self.path) as reader:
             conns = topic_connections(reader, self.semantic_topic, IMAGE_TYPES, self.path)
             for j, (conn, _, raw) in enumerate(reader.messages(connections=conns)):
-                where = f"{conn.topic} message {j}"  # the frame that needs it names the bag
+                where = message_where(conn.topic, j)  # the frame that needs it names the bag
 
                 def decode(conn: Any = conn, raw: Any = raw, where: str = where) -> np.ndarray:
                     msg = reader.deserialize(raw, conn.msgtype)
@@ -134,15 +135,19 @@ class BagSource(IndexedSource):
 
                 yield j, decode_message(where, decode)
 
-    def _semantic(self, i: int) -> np.ndarray | None:
+    def _frame_where(self, i: int) -> str:
+        return message_where(self.pairs.image_topic, i, self.path, "image")
+
+    def _semantic(self, i: int, size: tuple[int, int]) -> np.ndarray | None:
         """The semantic image paired with image ``i`` (read forward, restarted when asked for an earlier one).
 
         Raises:
-            DataError: none near enough, or it cannot be decoded; naming the bag, image ``i`` and the message.
+            DataError: none near enough, it cannot be decoded or its size is not ``size`` (the image's, width by
+                height); naming the bag, image ``i`` and the message.
         """
         if self.semantic_pairing is None:
             return None
-        where = f"{self.path}: {self.pairs.image_topic} image {i}"
+        where = self._frame_where(i)
         j = int(self.semantic_pairing.match[i])
         if j < 0:
             p = self.semantic_pairing
@@ -151,6 +156,9 @@ class BagSource(IndexedSource):
         image = self._semantic_message(j)
         if isinstance(image, DataError):
             raise DataError(f"{where}: {image}")
+        if (image.shape[1], image.shape[0]) != size:
+            raise DataError(f"{where}: {message_where(str(self.semantic_topic), j)}: the semantic image is "
+                            f"{image.shape[1]}x{image.shape[0]}, the image {size[0]}x{size[1]}")  # fmt: skip
         return image
 
     def _semantic_message(self, j: int) -> np.ndarray | DataError:
@@ -164,7 +172,7 @@ class BagSource(IndexedSource):
         found = next(((k, image) for k, image in self._sem_it if k == j), None)
         if found is None:
             self._sem_it = None
-            raise DataError(f"{self.path}: {self.semantic_topic} message {j} missing (truncated bag?)")
+            raise DataError(f"{message_where(str(self.semantic_topic), j, self.path)} missing (truncated bag?)")
         self._sem_recent.append(found)
         return found[1]
 
@@ -203,7 +211,7 @@ class BagSource(IndexedSource):
             item = self._advance(i)
             if isinstance(item, BagFailure):
                 raise item.error
-            return item, self._semantic(i)
+            return item, self._semantic(i, (item.image.shape[1], item.image.shape[0]))
 
     def assemble(self, raw: tuple[BagPair, np.ndarray | None]) -> Frame:
         """The frame of what :meth:`read` returned: the scan projected into the image."""
@@ -211,10 +219,13 @@ class BagSource(IndexedSource):
 
         p, semantic = raw
         bag = self.pairs
-        where = f"{self.path}: {bag.image_topic} image {p.index}: {bag.points_topic} message {p.scan_index}"
+        where = f"{self._frame_where(p.index)}: {message_where(bag.points_topic, p.scan_index)}"
+        if p.dropped_points:  # named when nothing is left to project
+            where += f" ({p.dropped_points} point(s) with a NaN or infinite coordinate dropped)"
         sparse = project_points(p.points, p.K, p.T_cam_lidar, p.image_size, name=where)
         meta = {"stamp_ns": p.stamp_ns, "frame_id": p.frame_id, "lidar_frame_id": p.lidar_frame_id,
-                "scan_stamp_ns": p.scan_stamp_ns, "camera_info": p.camera_info}  # fmt: skip
+                "scan_stamp_ns": p.scan_stamp_ns, "camera_info": p.camera_info,
+                "dropped_points": p.dropped_points}  # fmt: skip
         return Frame(p.name, p.image, sparse, semantic, K=p.K, timestamp=p.stamp_ns / 1e9, points=p.points,
                      calib=p.calibration, paths={"bag": self.path}, meta=meta)  # fmt: skip
 

@@ -1,17 +1,17 @@
-"""Cityscapes segmenters from the Hugging Face Hub (``hf:`` specs of :func:`~semattnet.segmentation.load_segmenter`).
+"""Segmenters from the Hugging Face Hub (``hf:`` specs of :func:`~semattnet.segmentation.load_segmenter`).
 
 ``hf:ORG/NAME[@REVISION]`` loads a semantic-segmentation model with ``transformers``
 (``pip install 'semattnet[segment]'``): SegFormer, UperNet, DPT, BEiT ... (anything
 ``AutoModelForSemanticSegmentation`` reads, whose output has ``logits``) or Mask2Former / MaskFormer
 (``AutoModelForUniversalSegmentation``; per-class maps are the query class probabilities times the
-query masks). ``hf:PATH`` reads a local folder written by ``save_pretrained``; ``hf:default`` is
-:data:`HF_SEGMENTERS` ``["default"]``.
+query masks). ``hf:PATH`` reads a local folder written by ``save_pretrained``; ``hf:default`` (street scenes,
+Cityscapes) and ``hf:indoor`` (ADE20K, maps in NYU-40) are :data:`HF_SEGMENTERS` entries.
 
-The model's classes are matched to the 19 Cityscapes trainIds by the names in its config's
+For the Cityscapes palette the model's classes are matched to the 19 trainIds by the names in its config's
 ``id2label``, ignoring case, spaces, ``_`` and ``-``, plural ``s`` and common variants ("motorbike",
-"pedestrian", "on rails" ...). Classes that are not Cityscapes evaluation classes are dropped;
-trainIds the model does not know are never predicted. ``SEMATTNET_OFFLINE=1`` / ``HF_HUB_OFFLINE=1``:
-only the local Hugging Face cache is used.
+"pedestrian", "on rails" ...); for the NYU-40 palette, by :mod:`semattnet.segmentation.indoor`. Classes of
+neither are dropped; palette classes the model does not know are never predicted.
+``SEMATTNET_OFFLINE=1`` / ``HF_HUB_OFFLINE=1``: only the local Hugging Face cache is used.
 """
 
 from __future__ import annotations
@@ -25,23 +25,30 @@ from typing import Any
 
 import torch
 
-from semattnet._errors import DataError, InputError, MissingDependencyError
+from semattnet._errors import DataError, InputError
+from semattnet._utils.extras import require
 from semattnet.data.palette import NUM_CLASSES, TRAIN_CLASSES
 
-__all__ = ["HF_SEGMENTERS", "HFSegmenterRecord", "cityscapes_indices", "load_hf_network", "resolve_hf_source"]
-
-INSTALL_HINT = "pip install 'semattnet[segment]' (or pip install 'transformers>=4.40')"
+__all__ = ["HF_SEGMENTERS", "HFSegmenterRecord", "cityscapes_indices", "hf_palette", "load_hf_network",
+           "resolve_hf_source"]  # fmt: skip
 
 
 @dataclass(frozen=True)
 class HFSegmenterRecord:
-    """A recommended Cityscapes segmenter on the Hugging Face Hub."""
+    """A recommended segmenter on the Hugging Face Hub: ``val_miou`` on ``benchmark``; its maps in ``palette``."""
 
     repo: str
     description: str
     license: str
-    cityscapes_val_miou: float
+    val_miou: float
     metric_source: str
+    palette: str = "cityscapes"
+    benchmark: str = "Cityscapes val"
+
+    @property
+    def cityscapes_val_miou(self) -> float | None:
+        """``val_miou`` when the benchmark is Cityscapes val (the default record's number)."""
+        return self.val_miou if self.benchmark == "Cityscapes val" else None
 
 
 #: ``hf:<key>`` shortcuts.
@@ -53,11 +60,22 @@ HF_SEGMENTERS: Mapping[str, HFSegmenterRecord] = {
             "'other' on the model card: NVIDIA's SegFormer licence (NVIDIA Source Code License, research and "
             "non-commercial use only); see the model card before using the maps commercially"
         ),
-        cityscapes_val_miou=82.4,
+        val_miou=82.4,
         metric_source=(
             "SegFormer paper (Xie et al., NeurIPS 2021, arXiv:2105.15203): B5 at 1024x1024, single-scale "
             "Cityscapes val mIoU 82.4 %; 84.0 % with multi-scale and flip testing (the abstract's number)"
         ),
+    ),
+    "indoor": HFSegmenterRecord(
+        repo="nvidia/segformer-b5-finetuned-ade-640-640",
+        description="SegFormer-B5 fine-tuned on ADE20K (150 classes) at 640x640; its classes mapped to NYU-40 by "
+        "name (semattnet.segmentation.indoor)",
+        license="'other' on the model card: NVIDIA's SegFormer licence (research and non-commercial use only)",
+        val_miou=51.0,
+        metric_source="SegFormer paper (Xie et al., NeurIPS 2021, arXiv:2105.15203), Table 2: B5, ADE20K val "
+        "single-scale mIoU 51.0 % (51.8 % multi-scale); not a NYU-40 score",
+        palette="nyu40",
+        benchmark="ADE20K val",
     ),
 }
 
@@ -117,10 +135,7 @@ def resolve_hf_source(rest: str) -> tuple[str, str | None]:
 
 
 def _load_model(source: str, revision: str | None) -> Any:
-    try:
-        import transformers
-    except ImportError:
-        raise MissingDependencyError(f"hf: segmenters need transformers: {INSTALL_HINT}") from None
+    transformers = require("transformers", "hf: segmenters")
     from semattnet.weights.download import is_offline
 
     kw = {"revision": revision, "local_files_only": is_offline()}
@@ -129,6 +144,8 @@ def _load_model(source: str, revision: str | None) -> Any:
         universal = config.model_type in ("mask2former", "maskformer", "oneformer")
         kind = "Universal" if universal else "Semantic"
         auto = getattr(transformers, f"AutoModelFor{kind}Segmentation")
+        if int(transformers.__version__.split(".")[0]) >= 5:  # else 5.x wants the `kernels` package by default
+            kw["use_kernels"] = False
         return auto.from_pretrained(source, **kw)
     except (OSError, ValueError, KeyError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
@@ -145,22 +162,39 @@ def _class_maps(out: Any) -> torch.Tensor:
     return out.logits
 
 
-def load_hf_network(rest: str, device: torch.device | str = "cpu") -> Callable[[torch.Tensor], torch.Tensor]:
-    """The network of ``hf:<rest>``: normalised (B, 3, H, W) RGB -> (B, 19, h, w) Cityscapes trainId scores.
+def hf_palette(rest: str) -> str:
+    """The palette ``hf:<rest>`` writes by default: its :data:`HF_SEGMENTERS` record's, else ``cityscapes``."""
+    return HF_SEGMENTERS[rest].palette if rest in HF_SEGMENTERS else "cityscapes"
+
+
+def _groups(rest: str, id2label: Mapping[Any, str], palette: str) -> list[list[int]]:
+    """Per palette class, the model classes that mean it; warns of the classes none means."""
+    from semattnet.data.palette import get_palette
+    from semattnet.segmentation.indoor import nyu40_indices
+
+    pal = get_palette(palette)
+    groups = nyu40_indices(id2label) if pal.name == "nyu40" else cityscapes_indices(id2label)
+    if not any(groups):
+        labels = ", ".join(list(id2label.values())[:8])
+        raise DataError(f"hf:{rest}: none of its labels ({labels}, ...) is a {pal.title} class")
+    missing = [pal.classes[t][0] for t, g in enumerate(groups) if not g]
+    if missing:
+        warnings.warn(f"hf:{rest}: no class for {', '.join(missing)}; those are never predicted", stacklevel=3)
+    return groups
+
+
+def load_hf_network(rest: str, device: torch.device | str = "cpu",
+                    palette: str | None = None) -> Callable[[torch.Tensor], torch.Tensor]:  # fmt: skip
+    """The network of ``hf:<rest>``: normalised (B, 3, H, W) RGB -> (B, C, h, w) scores of ``palette``'s
+    classes (None: :func:`hf_palette`): C = 19 Cityscapes trainIds, or 40 NYU-40 ids 1..40 in order.
 
     Raises:
         MissingDependencyError: transformers is not installed.
-        DataError: the model cannot be loaded, or none of its labels is a Cityscapes class.
+        DataError: the model cannot be loaded, or none of its labels is a class of the palette.
     """
     source, revision = resolve_hf_source(rest)
     model = _load_model(source, revision).to(device).eval()
-    groups = cityscapes_indices(model.config.id2label)
-    if not any(groups):
-        labels = ", ".join(list(model.config.id2label.values())[:8])
-        raise DataError(f"hf:{rest}: none of its labels ({labels}, ...) is a Cityscapes class")
-    missing = [TRAIN_CLASSES[t][0] for t, g in enumerate(groups) if not g]
-    if missing:
-        warnings.warn(f"hf:{rest}: no class for {', '.join(missing)}; those are never predicted", stacklevel=2)
+    groups = _groups(rest, model.config.id2label, palette or hf_palette(rest))
 
     def run(x: torch.Tensor) -> torch.Tensor:
         scores = _class_maps(model(pixel_values=x))

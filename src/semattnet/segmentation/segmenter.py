@@ -1,24 +1,25 @@
 """Semantic maps for any frame: run a segmentation network the user supplies.
 
-SemAttNet reads colour-coded Cityscapes trainId maps (:mod:`semattnet.data.palette`). The authors only
-released precomputed maps for KITTI; :func:`segment_folder` makes them for any image tree with
-a network given by a SPEC (see :func:`load_segmenter`):
+SemAttNet reads colour-coded maps of a palette (:mod:`semattnet.data.palette`: Cityscapes trainIds for
+street scenes, NYU-40 for indoor ones). The authors only released precomputed maps for KITTI;
+:func:`segment_folder` makes them for any image tree with a network given by a SPEC (see :func:`load_segmenter`):
 
 * ``path/to/model.pt`` (or ``.ts``, ``.jit``, ``.torchscript``): a TorchScript module;
 * ``path/to/model.onnx``: an ONNX graph, run with onnxruntime (``pip install onnxruntime``);
 * ``torchvision:ARCH:WEIGHTS``: a torchvision segmentation architecture (e.g.
   ``deeplabv3_resnet50``) with a state-dict file (``pip install torchvision``);
-* ``hf:ORG/NAME``, ``hf:PATH`` or ``hf:default``: a Cityscapes-trained SegFormer / Mask2Former ...
-  through ``transformers`` (``pip install 'semattnet[segment]'``), its classes matched to trainIds
-  by name (:mod:`semattnet.segmentation.hf`; ``hf:default`` is SegFormer-B5, downloaded from the
-  Hugging Face Hub);
+* ``hf:ORG/NAME``, ``hf:PATH``, ``hf:default`` or ``hf:indoor``: a SegFormer / Mask2Former ...
+  through ``transformers`` (``pip install 'semattnet[segment]'``), its classes matched to the palette's
+  by name (:mod:`semattnet.segmentation.hf`; ``hf:default`` is SegFormer-B5 on Cityscapes, ``hf:indoor``
+  SegFormer-B5 on ADE20K mapped to NYU-40, both downloaded from the Hugging Face Hub);
 * ``unknown``: no network, every pixel gets :data:`~semattnet.data.palette.UNKNOWN_COLOR` (the
   fallback for frames without a segmenter; expect worse depth, see the README).
 
 The network takes (B, 3, H, W) float32 RGB, scaled to [0, 1] then normalised with ``mean`` /
 ``std`` (ImageNet's by default, what torchvision and most Cityscapes models expect), and returns
 logits (B, C, h, w) (a tensor, a tuple whose first item is one, or a dict with ``"out"``) with
-C = 19 (trainIds) or 34 (Cityscapes labelIds), or already-decided (B, h, w) integer trainIds.
+C = 19 (trainIds) or 34 (Cityscapes labelIds), or already-decided (B, h, w) integer trainIds; for the
+``nyu40`` palette C = 40 (ids 1..40) or 41 (0 = unlabelled first), or integer ids 0..40.
 Logits are resized bilinearly to the image size before the arg-max. Only ``hf:`` specs download.
 """
 
@@ -36,8 +37,9 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from semattnet._errors import DataError, InputError, MissingDependencyError
+from semattnet._errors import DataError, InputError
 from semattnet._utils.device import resolve_device
+from semattnet._utils.extras import require
 from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs
 from semattnet._utils.progress import progress as progress_bar
 from semattnet.data.io import read_image, write_image
@@ -57,12 +59,14 @@ IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 _TORCHSCRIPT_SUFFIXES = (".pt", ".pth", ".ts", ".jit", ".torchscript")
+NYU40 = 40  # classes of the nyu40 palette
 
 Network = Callable[[torch.Tensor], Any]
 
 
 class Segmenter:
-    """(B, H, W, 3) uint8 RGB images -> (B, H, W) uint8 Cityscapes trainIds (255 = unknown).
+    """(B, H, W, 3) uint8 RGB images -> (B, H, W) uint8 ids of ``palette`` (255 = unknown): Cityscapes trainIds,
+    or NYU-40 ids 1..40 (0 = unlabelled).
 
     Args:
         network: maps a normalised (B, 3, h, w) float32 tensor on ``device`` to the network's
@@ -71,6 +75,8 @@ class Segmenter:
         mean: per-channel mean subtracted after scaling to [0, 1].
         std: per-channel standard deviation divided by after subtracting ``mean``.
         input_size: run the network at this (h, w) (bilinear resize) instead of the image size.
+        palette: what the network's classes are: ``cityscapes`` (19 trainIds or 34 labelIds) or ``nyu40``
+            (40 classes, ids 1..40 in order; or 41 with 0 = unlabelled first).
     """
 
     def __init__(
@@ -81,8 +87,11 @@ class Segmenter:
         mean: Sequence[float] = IMAGENET_MEAN,
         std: Sequence[float] = IMAGENET_STD,
         input_size: tuple[int, int] | None = None,
+        palette: str = "cityscapes",
     ) -> None:
-        self.network, self.name = network, name
+        from semattnet.data.palette import get_palette
+
+        self.network, self.name, self.palette = network, name, get_palette(palette).name
         self.device = torch.device(device)
         self.mean = torch.tensor(mean, dtype=torch.float32).view(1, 3, 1, 1)
         self.std = torch.tensor(std, dtype=torch.float32).view(1, 3, 1, 1)
@@ -109,13 +118,16 @@ class Segmenter:
         elif isinstance(out, (tuple, list)):
             out = out[0]
         out = torch.as_tensor(out)
+        top = NUM_CLASSES - 1 if self.palette == "cityscapes" else NYU40
         if not out.is_floating_point():  # already class ids
             ids = out if out.dim() == 4 else out[:, None]
             ids = F.interpolate(ids.float(), size=size, mode="nearest").long()[:, 0]
-            bad = (ids != IGNORE_ID) & ((ids < 0) | (ids >= NUM_CLASSES))
+            bad = (ids != IGNORE_ID) & ((ids < 0) | (ids > top))
             if bool(bad.any()):
-                raise DataError(f"{self.name}: returned class ids outside 0..{NUM_CLASSES - 1} and {IGNORE_ID}")
+                raise DataError(f"{self.name}: returned class ids outside 0..{top} and {IGNORE_ID}")
             return ids.to(torch.uint8).cpu().numpy()
+        if self.palette == "nyu40":
+            return self._nyu40_ids(out, size)
         if out.dim() != 4:
             raise DataError(f"{self.name}: expected (B, C, H, W) logits, got shape {tuple(out.shape)}")
         classes = out.shape[1]
@@ -127,6 +139,13 @@ class Segmenter:
         ids_np = ids.cpu().numpy()
         return label_ids_to_train_ids(ids_np) if classes == 34 else ids_np.astype(np.uint8)
 
+    def _nyu40_ids(self, out: torch.Tensor, size: tuple[int, int]) -> np.ndarray:
+        if out.dim() != 4 or out.shape[1] not in (NYU40, NYU40 + 1):
+            raise DataError(f"{self.name}: expected (B, 40, H, W) NYU-40 scores (or 41 with unlabelled first), got "
+                            f"shape {tuple(out.shape)}")  # fmt: skip
+        ids = F.interpolate(out.float(), size=size, mode="bilinear", align_corners=False).argmax(dim=1)
+        return (ids + (1 if out.shape[1] == NYU40 else 0)).to(torch.uint8).cpu().numpy()
+
 
 def _torchscript(path: Path, device: torch.device) -> Network:
     try:
@@ -137,10 +156,7 @@ def _torchscript(path: Path, device: torch.device) -> Network:
 
 
 def _onnx(path: Path, device: torch.device) -> Network:
-    try:
-        import onnxruntime as ort
-    except ImportError:
-        raise MissingDependencyError(f"{path}: ONNX models need onnxruntime (pip install onnxruntime)") from None
+    ort = require("onnxruntime", f"{path}: ONNX segmenters")
     providers = ["CPUExecutionProvider"]
     if device.type == "cuda" and "CUDAExecutionProvider" in ort.get_available_providers():
         providers.insert(0, "CUDAExecutionProvider")
@@ -157,10 +173,7 @@ def _onnx(path: Path, device: torch.device) -> Network:
 
 
 def _torchvision(arch: str, weights: Path, device: torch.device) -> Network:
-    try:
-        from torchvision.models import segmentation
-    except ImportError:
-        raise MissingDependencyError("torchvision models need torchvision (pip install torchvision)") from None
+    segmentation = require("torchvision.models.segmentation", "torchvision segmenters")
     ctor = getattr(segmentation, arch, None)
     if ctor is None or arch.startswith("_"):
         raise InputError(f"torchvision.models.segmentation has no architecture {arch!r}")
@@ -201,8 +214,11 @@ def load_segmenter(
     mean: Sequence[float] = IMAGENET_MEAN,
     std: Sequence[float] = IMAGENET_STD,
     input_size: tuple[int, int] | None = None,
+    palette: str | None = None,
 ) -> Segmenter:
-    """Build a :class:`Segmenter` from a SPEC (module docstring).
+    """Build a :class:`Segmenter` from a SPEC (module docstring) whose ids are of ``palette`` (None: the spec's
+    own, :func:`~semattnet.segmentation.hf.hf_palette` for ``hf:``, else ``cityscapes``; an ``hf:`` model's
+    classes are matched to the palette's by name).
 
     Raises:
         InputError: ``mean`` / ``std`` not three finite numbers, a ``std`` that is not positive (a division
@@ -211,11 +227,13 @@ def load_segmenter(
     _check_normalisation(mean, std)
     dev = resolve_device(device)
     if spec == "unknown":
-        return Segmenter(None, spec, dev)
+        return Segmenter(None, spec, dev, palette=palette or "cityscapes")
     if spec.startswith("hf:"):
-        from semattnet.segmentation.hf import load_hf_network
+        from semattnet.segmentation.hf import hf_palette, load_hf_network
 
-        return Segmenter(load_hf_network(spec[3:], dev), spec, dev, mean, std, input_size)
+        pal = palette or hf_palette(spec[3:])
+        return Segmenter(load_hf_network(spec[3:], dev, pal), spec, dev, mean, std, input_size, pal)
+    pal = palette or "cityscapes"
     if spec.startswith("torchvision:"):
         parts = spec.split(":", 2)
         if len(parts) != 3 or not parts[1] or not parts[2]:
@@ -223,16 +241,16 @@ def load_segmenter(
         weights = Path(parts[2])
         if not weights.is_file():
             raise DataError(f"{weights}: no such weights file")
-        return Segmenter(_torchvision(parts[1], weights, dev), spec, dev, mean, std, input_size)
+        return Segmenter(_torchvision(parts[1], weights, dev), spec, dev, mean, std, input_size, pal)
     path = Path(spec)
     if not path.is_file():
         raise DataError(
             f"{spec}: no such model file (expected .onnx, TorchScript, torchvision:ARCH:WEIGHTS, hf:... or unknown)"
         )
     if path.suffix.lower() == ".onnx":
-        return Segmenter(_onnx(path, dev), spec, dev, mean, std, input_size)
+        return Segmenter(_onnx(path, dev), spec, dev, mean, std, input_size, pal)
     if path.suffix.lower() in _TORCHSCRIPT_SUFFIXES:
-        return Segmenter(_torchscript(path, dev), spec, dev, mean, std, input_size)
+        return Segmenter(_torchscript(path, dev), spec, dev, mean, std, input_size, pal)
     raise DataError(
         f"{spec}: unknown model format {path.suffix!r} (expected .onnx or {', '.join(_TORCHSCRIPT_SUFFIXES)})"
     )
@@ -303,7 +321,7 @@ def segment_folder(
         for batch in _batches(((f, t, read_image(f)) for f, t in todo), batch_size):
             ids = segmenter(np.stack([img for _, _, img in batch]))
             for (_, target, _), m in zip(batch, ids, strict=True):
-                write_image(target, ids_to_colors(m), overwrite=overwrite)
+                write_image(target, ids_to_colors(m, segmenter.palette), overwrite=overwrite)
             written += len(batch)
             bar.update(len(batch))
     return SegmentSummary(written=written, skipped=len(files) - len(todo), total=len(files))

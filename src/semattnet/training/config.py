@@ -41,6 +41,8 @@ class TrainConfig:
             augmentation, validation metrics and semantic palette (recorded in the model config);
             ``semattnet train --dataset`` also starts from its recipe (epochs, batch, lr, schedule).
         raw_root, semantic_root: optional separate roots (see :class:`KittiDepthCompletion`).
+        segment: a segmenter SPEC for ``nyuv2`` / ``void``: the train and validation frames segmented once into
+            a cached folder (:mod:`semattnet.data.datasets.segment`) that serves as ``semantic_root``.
         out: run folder (checkpoints, logs, curves).
         init: checkpoint of the previous stage (required for refine-init and full).
         width, refinement_mode, branches, fusion: model options (paper defaults).
@@ -74,6 +76,7 @@ class TrainConfig:
     dataset: str = "kitti-dc"
     raw_root: str | None = None
     semantic_root: str | None = None
+    segment: str | None = None
     out: str = "runs/semattnet"
     init: str | None = None
     width: float = 1.0
@@ -169,6 +172,7 @@ class TrainConfig:
         for name in ("sync_bn", "activation_checkpointing"):
             check(name, isinstance(getattr(self, name), bool), "true or false")
         check("loss", self.loss in LOSSES, f"one of {LOSSES}")
+        check("segment", self.segment is None or self.semantic_root is None, "null when semantic_root is set")
 
     def branch_weight(self, epoch: int) -> float:
         if self.stage != "backbone" or not self.branch_weights:

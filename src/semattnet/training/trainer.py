@@ -28,6 +28,7 @@ from torch.utils.data import DataLoader, Dataset, Subset
 from semattnet._errors import DataError, InputError
 from semattnet._utils import distributed as dist_utils
 from semattnet._utils.atomic import atomic_path
+from semattnet._utils.extras import optional
 from semattnet._utils.progress import progress
 from semattnet.data.datasets import get_dataset
 from semattnet.data.kitti import KittiDepthCompletion
@@ -112,8 +113,9 @@ class Trainer:
     def _build_data(self) -> None:
         """The training set, its resumable sampler and loader, and the validation loader."""
         cfg = self.cfg
+        self.semantic_root = self._segmented() if cfg.segment else cfg.semantic_root
         self.train_set = get_dataset(cfg.dataset).dataset(cfg.data, "train", train=True, seed=cfg.seed,
-                                                          raw_root=cfg.raw_root, semantic_root=cfg.semantic_root,
+                                                          raw_root=cfg.raw_root, semantic_root=self.semantic_root,
                                                           config=cfg)  # fmt: skip
         self.sampler = dist_utils.ResumableSampler(len(self.train_set), seed=cfg.seed)
         # The loader's own generator: starting an epoch's iterator must not draw from the global RNG,
@@ -157,10 +159,10 @@ class Trainer:
         """Create the run folder, write ``config.json``; a TensorBoard writer if tensorboard is installed."""
         self.out.mkdir(parents=True, exist_ok=True)
         self.cfg.save(self.out / "config.json")
-        try:  # optional: pip install tensorboard
-            from torch.utils.tensorboard import SummaryWriter
-        except ImportError:
+        if optional("tensorboard") is None:  # optional: pip install 'semattnet[tensorboard]'
             return None
+        from torch.utils.tensorboard import SummaryWriter
+
         return SummaryWriter(str(self.out / "tensorboard"))
 
     def log(self, msg: str) -> None:
@@ -213,11 +215,20 @@ class Trainer:
             ds: Dataset = KittiDepthCompletion(cfg.data, cfg.val_split, cfg.raw_root, cfg.semantic_root,
                                                transform=EvalTransform(tuple(cfg.crop)))  # type: ignore[arg-type]  # fmt: skip
         else:  # the protocol's frames; evaluate_model pads them to multiples of 32
-            ds = get_dataset(cfg.dataset).dataset(cfg.data, cfg.val_split, semantic_root=cfg.semantic_root)
+            ds = get_dataset(cfg.dataset).dataset(cfg.data, cfg.val_split, semantic_root=self.semantic_root)
         if cfg.val_max_frames:
             ds = Subset(ds, range(min(cfg.val_max_frames, len(ds))))  # type: ignore[arg-type]
         return DataLoader(ds, batch_size=1, sampler=dist_utils.ShardSampler(len(ds)), num_workers=cfg.workers,  # type: ignore[arg-type]
                           generator=torch.Generator().manual_seed(cfg.seed))  # fmt: skip
+
+    def _segmented(self) -> str:
+        """``--segment``: the cached maps of the train and validation frames (rank 0 segments the missing)."""
+        from semattnet.data.datasets.segment import segment_split
+
+        cfg = self.cfg
+        splits = ("train", *([cfg.val_split] if cfg.val_split and cfg.val_split != "train" else []))
+        return str(dist_utils.on_main(segment_split, cfg.dataset, cfg.data, splits, str(cfg.segment),
+                                      str(self.device), log=self.log))  # fmt: skip
 
     def _set_train_mode(self) -> None:
         self.model.train()

@@ -1,10 +1,13 @@
-"""Training curves from a run's ``log.csv``."""
+"""Training curves from a run's ``log.csv``; sparsification curves of a per-pixel uncertainty."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 
-__all__ = ["plot_training_curves"]
+import numpy as np
+
+__all__ = ["plot_sparsification", "plot_training_curves"]
 
 
 def plot_training_curves(csv_path: str | Path, out_path: str | Path) -> Path | None:
@@ -33,6 +36,46 @@ def plot_training_curves(csv_path: str | Path, out_path: str | Path) -> Path | N
         ax2.set_ylabel("RMSE (mm)")
         ax2.legend(loc="upper center")
     ax.legend(loc="upper right")
+    fig.tight_layout()
+    out_path = Path(out_path)
+    fig.savefig(out_path, dpi=100)
+    plt.close(fig)
+    return out_path
+
+
+def plot_sparsification(curves: Mapping[str, Mapping[str, np.ndarray]], out_path: str | Path,
+                        metrics: tuple[str, ...] = ("rmse", "mae"), title: str = "") -> Path:  # fmt: skip
+    """One panel per metric: each method's normalised sparsification curve (solid) and its oracle (dashed),
+    a random ordering's (the constant 1, dotted), AUSE and AURG in the legend.
+
+    ``curves``: method label -> :meth:`semattnet.evaluation.sparsification.Sparsification.curves`
+    (``{metric}_curve`` and ``{metric}_oracle``).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from semattnet.evaluation.sparsification import aurg, ause, fractions
+
+    fig, axes = plt.subplots(1, len(metrics), figsize=(5.5 * len(metrics), 4), squeeze=False)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for ax, metric in zip(axes[0], metrics, strict=True):
+        for k, (label, c) in enumerate(curves.items()):
+            if f"{metric}_curve" not in c:
+                continue
+            curve, oracle, colour = c[f"{metric}_curve"], c[f"{metric}_oracle"], colours[k % len(colours)]
+            r = fractions(len(curve))
+            ax.plot(r, curve, "-", color=colour,
+                    label=f"{label} (AUSE {ause(curve, oracle):.3f}, AURG {aurg(curve):.3f})")  # fmt: skip
+            ax.plot(r, oracle, "--", color=colour, alpha=0.7)
+        ax.axhline(1.0, color="grey", linestyle=":", label="random (expected)")
+        ax.set_xlabel("fraction of pixels removed (most uncertain first)")
+        ax.set_ylabel(f"{metric.upper()} of the rest / {metric.upper()} of all")
+        ax.set_title(f"{metric.upper()}: solid = uncertainty, dashed = oracle")
+        ax.legend(fontsize=7, loc="lower left")
+    if title:
+        fig.suptitle(title)
     fig.tight_layout()
     out_path = Path(out_path)
     fig.savefig(out_path, dpi=100)

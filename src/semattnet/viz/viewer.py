@@ -5,7 +5,8 @@
 - ``viewer.html``: the page. Hovering over the image lists the depth of every method, the
   LiDAR input and the ground truth at that pixel (and the fusion weights); radio buttons pick the
   layer shown (RGB, semantics, LiDAR, the colour-/semantic-/depth-guided depths, fusion weights,
-  fused and refined depth, each method's depth and error map); a Plotly 3D view shows the
+  fused and refined depth, each method's depth and error map, the per-pixel uncertainty when the
+  completion has one); a Plotly 3D view shows the
   predicted depth back-projected with the camera intrinsics next to the LiDAR points.
 - ``plotly.min.js``: Plotly's JavaScript from the ``plotly`` Python package, once per folder
   (no CDN: the page works offline from ``file://``).
@@ -68,7 +69,9 @@ class ViewerFrame:
     ``depths``: method -> completed depth (H, W) metres, 0 = none; ``outputs``: the intermediate
     arrays of ``outputs_of`` (keys as :class:`~semattnet.inference.completer.Completion` has
     them); ``K``: (3, 3) intrinsics (no 3D view without them); ``cloud_of``: the method whose
-    depth becomes the point cloud (default: the last of ``depths``).
+    depth becomes the point cloud (default: the last of ``depths``); ``uncertainty``: (H, W) metres, the
+    per-pixel uncertainty of that depth (0 = none; default ``outputs["uncertainty"]`` when present), shown
+    as a layer and read on hover.
     """
 
     name: str
@@ -82,6 +85,7 @@ class ViewerFrame:
     K: np.ndarray | None = None
     cloud_of: str | None = None
     note: str = ""
+    uncertainty: np.ndarray | None = None
 
 
 def cloud_stride(height: int, width: int, max_points: int = MAX_POINTS) -> int:
@@ -165,6 +169,18 @@ class _Builder:
         self.values.append({"key": key, "label": label, "scale": 1 / 255, "unit": "", "digits": 2,
                             "zero_is_empty": False})  # fmt: skip
 
+    def uncertainty(self, key: str, label: str, unc: np.ndarray) -> None:
+        """A per-pixel uncertainty (metres, 0 = none) on "magma" from 0 to its 99th percentile (named in the label)."""
+        from semattnet.viz.depth import colorize_depth
+
+        u = np.nan_to_num(np.asarray(unc, dtype=np.float32))
+        top = float(np.percentile(u[u > 0], 99)) if np.any(u > 0) else 1.0
+        top = max(top, 0.01)
+        self.layer(key, f"{label} (0 to {top:.2f} m)", colorize_depth(u, vmax=top, cmap="magma"))
+        self.array(key, np.where(u > 0, np.maximum(_cm(u), 1), 0).astype("<u2"), "u16")  # under 1 cm: 1 cm
+        self.values.append({"key": key, "label": label, "scale": 0.01, "unit": "m", "digits": 2,
+                            "zero_is_empty": True})  # fmt: skip
+
 
 def _frame_layers(b: _Builder, f: ViewerFrame, labels: dict[str, str]) -> None:
     """Inputs, ground truth, the intermediates of ``f.outputs_of``, each method's depth and error map."""
@@ -188,6 +204,10 @@ def _frame_layers(b: _Builder, f: ViewerFrame, labels: dict[str, str]) -> None:
         b.depth(f"depth_{method}", name, depth)
         if f.gt is not None:
             b.layer(f"error_{method}", f"{name}: error map", error_map(depth, f.gt))
+    unc = f.uncertainty if f.uncertainty is not None else f.outputs.get("uncertainty")
+    if unc is not None:
+        of = f.cloud_of or f.outputs_of or list(f.depths)[-1]
+        b.uncertainty("uncertainty", f"{labels.get(of, of).split(' (')[0]}: uncertainty", unc)
 
 
 def _overlay(sparse: np.ndarray) -> str:
@@ -295,19 +315,25 @@ def write_prediction_report(
     """The viewer for what :func:`semattnet.inference.complete_folder` wrote into ``out_dir``.
 
     ``frames``: the :class:`~semattnet.data.pairing.FramePaths` that were completed; each
-    prediction is read back from ``NAME.npy`` if written, else from ``NAME.png``. No ground
-    truth; the 3D view needs ``K`` (the frames' intrinsics).
+    prediction is read back from ``NAME.npy`` if written, else from ``NAME.png``, and its uncertainty
+    (``predict --uncertainty``) from ``uncertainty/NAME.npy`` or ``uncertainty/NAME.png`` when there.
+    No ground truth; the 3D view needs ``K`` (the frames' intrinsics).
     """
     from semattnet.data.io import read_depth, read_image
+
+    def read(stem: Path) -> np.ndarray | None:
+        npy, png = stem.with_name(stem.name + ".npy"), stem.with_name(stem.name + ".png")
+        return np.load(npy) if npy.is_file() else read_depth(png) if png.is_file() else None
 
     out = Path(out_dir)
     shown = []
     for fr in frames:
-        npy = out / f"{fr.name}.npy"
-        depth = np.load(npy) if npy.is_file() else read_depth(out / f"{fr.name}.png")
+        depth = read(out / fr.name)
+        if depth is None:
+            depth = read_depth(out / f"{fr.name}.png")  # missing: read_depth's one-line error
         sem = read_image(fr.semantic) if fr.semantic is not None else None
         shown.append(ViewerFrame(fr.name, read_image(fr.rgb), read_depth(fr.sparse), {"prediction": depth},
-                                 semantic=sem, K=K))  # fmt: skip
+                                 semantic=sem, K=K, uncertainty=read(out / "uncertainty" / fr.name)))  # fmt: skip
     page = write_viewer(out, shown, {"prediction": "Completed depth"}, title="semattnet predict: viewer")
     log(f"viewer: {page.resolve()}")
     return page

@@ -26,7 +26,6 @@ from semattnet.weights.checkpoint import (
     config_from_state_dict,
     filter_state_dict,
     load_checkpoint,
-    load_model,
     load_weights,
     save_safetensors,
 )
@@ -42,7 +41,16 @@ from semattnet.weights.download import (
     read_pins,
     sha256_file,
 )
-from semattnet.weights.hub import CONFIG_NAME, WEIGHTS_NAME, from_pretrained, hub_model, push_to_hub, save_pretrained
+from semattnet.weights.hub import (
+    CONFIG_NAME,
+    WEIGHTS_NAME,
+    from_pretrained,
+    hub_model,
+    load_model,
+    push_to_hub,
+    save_pretrained,
+)
+from semattnet.weights.packed import PACKED_FORMAT, read_packed, save_packed
 from semattnet.weights.pretrained import (
     FORMATS,
     PretrainedWeights,
@@ -58,6 +66,7 @@ __all__ = [
     "ENV_CACHE",
     "ENV_OFFLINE",
     "FORMATS",
+    "PACKED_FORMAT",
     "WEIGHTS_NAME",
     "Checkpoint",
     "CheckpointError",
@@ -84,8 +93,10 @@ __all__ = [
     "load_model",
     "load_weights",
     "push_to_hub",
+    "read_packed",
     "read_pins",
     "register_weights",
+    "save_packed",
     "save_pretrained",
     "save_safetensors",
     "sha256_file",

@@ -36,6 +36,7 @@ from typing import Any
 import torch
 
 from semattnet._errors import SemAttNetError
+from semattnet._utils.extras import optional
 
 __all__ = [
     "InertObject",
@@ -122,10 +123,9 @@ def _resolve_numpy(module: str, name: str) -> Any:
     if name == "dtype":
         return np.dtype
     for mod in ("numpy._core.multiarray", "numpy.core.multiarray"):
-        try:
-            return getattr(__import__(mod, fromlist=[name]), name)
-        except (ImportError, AttributeError):
-            continue
+        found = getattr(optional(mod), name, None)
+        if found is not None:
+            return found
     raise pickle.UnpicklingError(f"cannot resolve {module}.{name}")
 
 
@@ -138,12 +138,8 @@ _CODE_NAMES = {"eval", "exec", "system", "__import__", "popen", "compile", "geta
 
 def _torch_weights_only_allowed() -> dict[str, Any]:
     """The globals ``torch.load(weights_only=True)`` allows by default (tensor rebuilding, dtypes, ...)."""
-    try:
-        from torch._weights_only_unpickler import _get_allowed_globals
-
-        return dict(_get_allowed_globals())
-    except (ImportError, AttributeError):  # pragma: no cover - older or newer torch
-        return {}
+    allowed = getattr(optional("torch._weights_only_unpickler"), "_get_allowed_globals", None)
+    return dict(allowed()) if allowed is not None else {}  # {} on a torch without it
 
 
 def resolve_global(module: str, name: str, sink: set[str] | None = None) -> Any:

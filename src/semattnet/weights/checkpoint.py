@@ -31,6 +31,7 @@ from torch import nn
 
 from semattnet._errors import SemAttNetError
 from semattnet._utils.atomic import atomic_path, disk_full_error
+from semattnet._utils.documents import loads_json
 from semattnet.models.config import SemAttNetConfig
 from semattnet.weights._safe_pickle import (
     InertObject,
@@ -56,7 +57,6 @@ __all__ = [
     "config_from_state_dict",
     "filter_state_dict",
     "load_checkpoint",
-    "load_model",
     "load_weights",
     "save_safetensors",
 ]
@@ -74,7 +74,7 @@ class Checkpoint:
         path: the file read.
         state_dict: parameter and buffer tensors by name (a ``module.`` prefix is removed).
         format: ``"torch"`` (a pickled dict with a ``model``/``state_dict`` entry), ``"state_dict"``
-            (a pickled plain state dict) or ``"safetensors"``.
+            (a pickled plain state dict), ``"safetensors"`` or ``"packed"`` (:mod:`semattnet.weights.packed`).
         epoch: training epoch if recorded.
         args: the training arguments (authors' ``argparse.Namespace``) as a dict, if recorded.
         best_result: the authors' best validation result, as an inert record, if recorded.
@@ -143,6 +143,16 @@ def _load_safetensors(path: Path) -> Checkpoint:
     )
 
 
+def _load_packed(path: Path) -> Checkpoint:
+    """A packed file (:mod:`semattnet.weights.packed`): dequantised weights, its config and record."""
+    from semattnet.weights.packed import read_packed
+
+    sd, meta = read_packed(path)
+    info = loads_json(meta.get("info", "{}"), f"{path} (packed metadata 'info')", error=CheckpointError)
+    return Checkpoint(path=path, state_dict=sd, format="packed", config=_config_from_metadata(meta.get("config"), path),
+                      extra={"info": info, "levels": meta.get("levels")})  # fmt: skip
+
+
 _SAFE_GLOBALS_LOCK = threading.Lock()  # torch's safe-globals list is process-wide
 
 
@@ -192,6 +202,8 @@ def load_checkpoint(path: str | os.PathLike[str]) -> Checkpoint:
         info = inspect_weights_file(path)
         if info.format == "safetensors":
             return _load_safetensors(path)
+        if info.format == "packed":
+            return _load_packed(path)
         obj, neutralised = _load_pickle(info)
     except UnsafeCheckpointError as exc:
         msg = str(exc)
@@ -315,18 +327,6 @@ def config_from_state_dict(
         return cfg.replace(kernel_sizes=kernel_sizes) if kernel_sizes else cfg
     except ValueError as exc:
         raise CheckpointError(f"{where}not a SemAttNet state dict that can be built: {exc}") from None
-
-
-def load_model(path: str | os.PathLike[str], device: str | torch.device = "cpu", **overrides: Any) -> nn.Module:
-    """Build the model a checkpoint was made for and load its weights (strict), in eval mode.
-
-    Goes through :func:`semattnet.weights.builder.build_model_with_weights`: the config recorded
-    in the file (else inferred from its shapes), then ``overrides``, which may change only fields
-    that keep the shapes (e.g. ``refinement_mode="clean"``).
-    """
-    from semattnet.weights import builder
-
-    return builder.build_model_with_weights(load_checkpoint(path), overrides=overrides, device=device)
 
 
 def _json_default(o: Any) -> Any:

@@ -106,7 +106,8 @@ class Inspected:
 
     Attributes:
         path: the file.
-        format: ``"safetensors"``, ``"torch-zip"`` or ``"torch-legacy"``.
+        format: ``"safetensors"``, ``"torch-zip"``, ``"torch-legacy"`` or ``"packed"`` (a gzip stream,
+            read only by :func:`semattnet.weights.packed.read_packed`).
         protocol: pickle protocol of the object pickle (torch formats).
         globals: ``module.name`` of every global the object pickle names (torch formats).
         header: the parsed safetensors header (safetensors).
@@ -141,6 +142,8 @@ def inspect_weights_file(path: str | Path) -> Inspected:
         return _inspect_safetensors(path, size)
     if head[:1] == b"\x80":  # pickle PROTO: a legacy torch.save file starts with its magic number
         return _inspect_legacy(path, size)
+    if head.startswith(b"\x1f\x8b"):  # gzip: packed weights (semattnet.weights.packed checks the rest)
+        return Inspected(path=path, format="packed")
     raise CheckpointError(
         f"not a checkpoint: {path} is not a readable weights file, neither safetensors nor torch.save "
         f"(first bytes {head[:8]!r})"

@@ -43,6 +43,7 @@ from semattnet._utils.download import (
     url_scheme,
     verify_cached,
 )
+from semattnet._utils.extras import require
 from semattnet._utils.version import library_version
 from semattnet.models.config import SemAttNetConfig
 from semattnet.models.registry import MODELS, arch_for
@@ -56,9 +57,19 @@ from semattnet.weights.checkpoint import (
     save_safetensors,
 )
 from semattnet.weights.download import is_url, weights_target
+from semattnet.weights.packed import shipped_path
 from semattnet.weights.pretrained import PretrainedWeights, default_weights, get_weights, list_pretrained
 
-__all__ = ["CONFIG_NAME", "WEIGHTS_NAME", "from_pretrained", "hub_model", "push_to_hub", "save_pretrained"]
+__all__ = [
+    "CONFIG_NAME",
+    "WEIGHTS_NAME",
+    "from_pretrained",
+    "hub_model",
+    "load_model",
+    "packed_file",
+    "push_to_hub",
+    "save_pretrained",
+]
 
 CONFIG_NAME = "config.json"
 WEIGHTS_NAME = "model.safetensors"
@@ -149,6 +160,16 @@ def from_pretrained(
                      "folder, or a URL (http(s)://, file://, gdrive://<id>, hf://owner/repo)")  # fmt: skip
 
 
+def load_model(path: str | os.PathLike[str], device: str | torch.device = "cpu", **overrides: Any) -> nn.Module:
+    """The model of a weights file, a ``save_pretrained`` folder or a registry name, in eval mode.
+
+    :func:`from_pretrained` under its older name: the config recorded with the weights (else inferred
+    from their shapes), then ``overrides``, which may change only fields that keep the shapes (e.g.
+    ``refinement_mode="clean"``), then a strict load.
+    """
+    return from_pretrained(path, map_location=device, progress=False, **overrides)
+
+
 def _from_url(src: str, load: _Load) -> nn.Module:
     """A model from ``hf://`` (a saved folder or one file) or a downloaded file URL."""
     if url_scheme(src) == "hf":
@@ -160,6 +181,8 @@ def _from_url(src: str, load: _Load) -> nn.Module:
 
 
 def _from_entry(entry: PretrainedWeights, load: _Load) -> nn.Module:
+    if entry.format == "packed":
+        return load.build(load_checkpoint(packed_file(entry, load.sha256)), None, f"weights {entry.name!r}")
     root = get_cache_dir(load.cache_dir).resolve()
     if entry.format == "hf-folder":
         url = next((u for u in entry.urls if url_scheme(u) == "hf"), None)
@@ -168,6 +191,17 @@ def _from_entry(entry: PretrainedWeights, load: _Load) -> nn.Module:
         folder = fetch_hf(url, sha256=load.sha256 or entry.sha256, cache_dir=load.cache_dir)
         return _from_folder(folder, load, entry)
     return _from_download(root, weights_target(entry, load.sha256, root), entry, load)
+
+
+def packed_file(entry: PretrainedWeights, sha256: str | None = None) -> Path:
+    """The shipped file of a ``packed`` record, its sha256 checked (``sha256`` else the record's)."""
+    path = shipped_path(entry.file_name)
+    expected = sha256 or entry.sha256
+    if not path.is_file():
+        raise CheckpointError(f"weights {entry.name!r}: {path} is missing from the installed package; reinstall it")
+    if expected is not None and sha256_file(path) != expected:
+        raise CheckpointError(f"weights {entry.name!r}: {path} does not match its sha256 {expected}; reinstall")
+    return path
 
 
 def _from_download(root: Path, target: Any, entry: PretrainedWeights | None, load: _Load) -> nn.Module:
@@ -339,10 +373,7 @@ def push_to_hub(
     """
     if is_offline():
         raise OfflineError("offline mode (SEMATTNET_OFFLINE/HF_HUB_OFFLINE): not uploading")
-    try:
-        from huggingface_hub import HfApi
-    except ImportError as exc:
-        raise ImportError("push_to_hub needs huggingface_hub: pip install 'semattnet[hub]'") from exc
+    HfApi = require("huggingface_hub", "push_to_hub").HfApi
     api = HfApi(token=token)
     api.create_repo(repo_id, repo_type="model", private=private, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="semattnet-push-") as tmp:

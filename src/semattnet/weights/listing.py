@@ -37,7 +37,8 @@ def _weights_rows() -> list[tuple[str, ...]]:
         pinned = pins.get(f"{w.name}/{w.file_name}", {}).get("sha256")
         sha = w.sha256 or (f"{pinned} (pinned)" if pinned else _UNKNOWN_SHA)
         params = f"{w.num_params / 1e6:.1f} M" if w.num_params else "?"
-        rows.append((w.name, w.arch, params, w.file_name, sha, _licence(w.license), _rmse(dict(w.paper_metrics))))
+        rows.append((w.name, w.arch, params, w.trained_on or "-", w.file_name, sha, _licence(w.license),
+                     _rmse(dict(w.paper_metrics))))  # fmt: skip
     return rows
 
 
@@ -53,10 +54,12 @@ def resolve_weights_file(spec: str, progress: bool = True) -> Path:
     A folder (``save_pretrained`` output, ``hf://`` repository) gives its ``model.safetensors``.
     """
     from semattnet.weights.download import fetch
-    from semattnet.weights.hub import WEIGHTS_NAME
+    from semattnet.weights.hub import WEIGHTS_NAME, packed_file
 
     path = Path(spec).expanduser()
-    if spec in list_pretrained():
+    if spec in list_pretrained() and get_weights(spec).format == "packed":
+        path = packed_file(get_weights(spec))
+    elif spec in list_pretrained():
         path = fetch(get_weights(spec), progress=progress)
     elif "://" in spec:
         path = fetch(spec, progress=progress)
@@ -71,6 +74,7 @@ def resolve_weights_file(spec: str, progress: bool = True) -> Path:
 
 
 def weights_table() -> str:
-    """``semattnet weights list``: name, architecture, parameters, file, sha256 (or pin), licence, paper RMSE."""
-    header = ("name", "arch", "params", "file", "sha256", "licence", "paper RMSE")
+    """``semattnet weights list``: name, architecture, parameters, training data, file, sha256 (or pin),
+    licence, reported RMSE (the paper's for the authors' weights, the own validation scenes' for the demo's)."""
+    header = ("name", "arch", "params", "trained on", "file", "sha256", "licence", "reported RMSE")
     return _table(header, _weights_rows())

@@ -13,7 +13,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from semattnet._errors import InputError
+from semattnet._errors import InputError, MissingDependencyError
 from semattnet._utils.atomic import disk_full_error, is_disk_full
 from semattnet._utils.download.cache import (
     ENV_OFFLINE,
@@ -118,8 +118,8 @@ def fetch_target(root: Path, t: Target, progress: bool) -> tuple[Path, str]:
             except ChecksumError as exc:
                 checksum_failed = True
                 failures.append(f"{url}: {exc}")
-            except NotAFileError:
-                raise  # a bad URL (a file:// URL of a FIFO or device): no mirror or retry changes it
+            except (NotAFileError, MissingDependencyError):
+                raise  # a bad URL (a file:// URL of a FIFO or device), a missing package: no mirror changes it
             except OSError as exc:
                 if is_disk_full(exc):
                     raise  # another mirror would fill the disk too

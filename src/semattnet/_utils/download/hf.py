@@ -9,6 +9,7 @@ from typing import Any
 from semattnet._errors import InputError
 from semattnet._utils.download.cache import hf_cache_dir, is_offline, sha256_file
 from semattnet._utils.download.errors import ChecksumError, DownloadError, OfflineError
+from semattnet._utils.extras import require
 
 __all__ = ["fetch_hf", "parse_hf_url"]
 
@@ -41,10 +42,7 @@ def fetch_hf(
     ``cache_dir`` or ``$SEMATTNET_CACHE`` is set. ``sha256`` checks the named file, or
     ``model.safetensors`` of a folder.
     """
-    try:
-        import huggingface_hub
-    except ImportError as exc:
-        raise ImportError("hf:// URLs need huggingface_hub: pip install 'semattnet[hub]'") from exc
+    huggingface_hub = require("huggingface_hub", "hf:// URLs")
     repo_id, revision, filename = parse_hf_url(url)
     offline = is_offline()
     kwargs: dict[str, Any] = {"repo_id": repo_id, "revision": revision, "local_files_only": offline}

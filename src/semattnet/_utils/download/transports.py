@@ -29,6 +29,7 @@ from urllib.request import url2pathname
 from semattnet._errors import InputError
 from semattnet._utils.bounds import regular_file
 from semattnet._utils.download.errors import DownloadError, NotAFileError
+from semattnet._utils.extras import optional, require
 
 __all__ = ["check_file_name", "default_file_name", "download_to", "gdrive_id", "url_scheme"]
 
@@ -84,11 +85,11 @@ def download_to(url: str, staging: Path, name: str, progress: bool) -> Path:
 
 
 def _download_http(url: str, part: Path, progress: bool) -> None:
-    try:
-        from huggingface_hub.file_download import http_get
-    except ImportError:
+    hf_download = optional("huggingface_hub.file_download")
+    if hf_download is None:  # no resume without huggingface_hub: pooch
         _download_http_pooch(url, part, progress)
         return
+    http_get = hf_download.http_get
     # No expected_size: http_get checks the body against Content-Length itself; the published size
     # is checked afterwards, so that a wrong file is deleted instead of being kept for resuming.
     kwargs: dict[str, Any] = {"displayed_filename": part.name.removesuffix(".part")}
@@ -114,12 +115,7 @@ def _download_http(url: str, part: Path, progress: bool) -> None:
 
 
 def _download_http_pooch(url: str, part: Path, progress: bool) -> None:
-    try:
-        import pooch
-    except ImportError as exc:
-        raise ImportError(
-            "downloading over HTTP needs huggingface_hub (resumable) or pooch: pip install 'semattnet[hub]'"
-        ) from exc
+    pooch = require("pooch", "downloading over HTTP (huggingface_hub, resumable, or pooch)")
     pooch.HTTPDownloader(progressbar=progress)(url, str(part), None)
 
 
@@ -135,10 +131,7 @@ def _silent_tqdm() -> type:
 
 
 def _download_gdrive(file_id: str, output: Path, progress: bool) -> Path:
-    try:
-        import gdown
-    except ImportError as exc:
-        raise ImportError("downloading from Google Drive needs gdown: pip install 'semattnet[hub]'") from exc
+    gdown = require("gdown", "downloading from Google Drive")
     if not re.fullmatch(r"[\w-]+", file_id):
         raise InputError(f"invalid Google Drive file id {file_id!r}")
     result = gdown.download(id=file_id, output=str(output), quiet=not progress, resume=True)

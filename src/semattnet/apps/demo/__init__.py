@@ -11,7 +11,8 @@ non-learned completion and the shipped reference checkpoints (SemAttNet trained 
 other scenes, one file per training seed: :mod:`semattnet.apps.demo.reference`;
 ``semattnet demo --train-reference`` rebuilds them), and writes ``report.md`` and
 ``report.html`` with the table (each learned model's mean and every seed), a plain verdict per
-comparison, per-branch panels, error maps and training curves, ``viewer.html`` (the interactive
+comparison, per-branch panels, error maps, training curves and the sparsification curves of each
+method's per-pixel uncertainty (:mod:`semattnet.apps.demo.uncertainty`), ``viewer.html`` (the interactive
 viewer of the held-out scenes, :mod:`semattnet.viz.viewer`) and ``results.json``. No download;
 3.7 minutes measured on a quiet 2-core AVX-512 CPU (see docs/guides/demo.md).
 
@@ -44,7 +45,14 @@ iMAE in 1/km, as KITTI's leaderboard)::
                                "trained_on": "cpu", "own_validation": {"reference": {...}, "classical": {...}}}]},
       "comparisons": {"semattnet_better_than": {"classical": {"rmse": true, ...}, "two_branch": {...}},
                       "reference_better_than": {...},   # the shipped reference, same form
-                      "verdicts": ["SemAttNet (mean of seeds 0, 1) vs ...: better on ...; not better on ..."]}
+                      "verdicts": ["SemAttNet (mean of seeds 0, 1) vs ...: better on ...; not better on ..."]},
+      "uncertainty": {                    # classical, semattnet, two_branch, reference: the per-pixel
+        "semattnet": {                    # uncertainty's sparsification (semattnet.apps.demo.uncertainty)
+          "label": .., "ause_rmse": .., "aurg_rmse": .., "ause_mae": .., "aurg_mae": ..,  # mean over seeds
+          "per_seed": {"0": {"ause_rmse": .., ...}, "1": {...}},
+          "curves": {"rmse_curve": [100 values], "rmse_oracle": [...], "mae_curve": [...], "mae_oracle": [...]}
+        }, ...
+      }
     }
 
 The baselines do not depend on the training seed: their ``per_seed`` entries repeat the same
@@ -55,7 +63,8 @@ Without a reference file (or ``DemoSettings(reference=False)``) the
 Modules: :mod:`~semattnet.apps.demo.recipe` (settings, models, step plan, training),
 :mod:`~semattnet.apps.demo.reference` (the shipped checkpoint), :mod:`~semattnet.apps.demo.results`
 (means, comparisons, ``results.json``), :mod:`~semattnet.apps.demo.figures` (pictures, viewer),
-:mod:`~semattnet.apps.demo.run` (:func:`run_demo`).
+:mod:`~semattnet.apps.demo.uncertainty` (AUSE / AURG of the uncertainty), :mod:`~semattnet.apps.demo.run`
+(:func:`run_demo`).
 """
 
 from semattnet.apps.demo.recipe import DemoSettings

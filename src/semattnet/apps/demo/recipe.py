@@ -105,12 +105,14 @@ RECIPE_NOTES: tuple[str, ...] = (
 @dataclass
 class Trained:
     """Per learned model: its step counts, its run folder and its outputs on the held-out scenes
-    (of the first seed), its refined depths per seed, and its training wall time (all seeds)."""
+    (of the first seed), its refined depths and their uncertainty per seed, and its training wall time (all seeds)."""
 
     steps: dict[str, dict[str, int]] = field(default_factory=dict)
     runs: dict[str, Path] = field(default_factory=dict)
     outputs: dict[str, dict[str, dict[str, np.ndarray]]] = field(default_factory=dict)
     per_seed: dict[int, dict[str, dict[str, np.ndarray]]] = field(default_factory=dict)
+    #: seed -> model -> scene -> per-pixel uncertainty of the refined depth (metres)
+    uncertainty: dict[int, dict[str, dict[str, np.ndarray]]] = field(default_factory=dict)
     seconds: dict[str, float] = field(default_factory=dict)
 
 
@@ -164,6 +166,7 @@ def train_models(
             log(f"[4/5] completing the held-out scenes with {label} (seed {seed}) ...")
             outputs = complete_held_out(ckpt, held, device)
             trained.per_seed.setdefault(seed, {})[key] = {n: o["refined_depth"] for n, o in outputs.items()}
+            trained.uncertainty.setdefault(seed, {})[key] = {n: o["uncertainty"] for n, o in outputs.items()}
             if seed == seeds[0]:
                 trained.outputs[key] = outputs
         trained.seconds[key] = time.perf_counter() - start

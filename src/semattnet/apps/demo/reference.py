@@ -4,7 +4,7 @@
 report and ``results.json``). ``semattnet demo --train-reference`` retrains it with
 :data:`REFERENCE_RECIPE` (training scenes from their own data seed, so none of the demo's
 held-out scenes is seen), once per training seed of :data:`REFERENCE_SEEDS`, and writes the
-files it ships: ``semattnet/apps/assets/demo_reference_seed{S}.safetensors.gz``
+files it ships: ``semattnet/weights/assets/demo_reference_seed{S}.safetensors.gz``
 (:func:`reference_path`). The demo reports the mean over these seeds and every seed.
 
 Storage (to stay under 5 MB at width 1/8, the narrowest width the model config accepts):
@@ -14,10 +14,7 @@ machine and the scores on the reference's own validation scenes.
 
 from __future__ import annotations
 
-import gzip
-import json
 import time
-import zlib
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -27,12 +24,12 @@ import torch
 from torch import nn
 
 from semattnet._errors import DataError
-from semattnet._utils.atomic import atomic_path
 from semattnet.apps.experiment import HeldOut, complete_held_out, make_synthetic, score, train_variant
 from semattnet.baselines.classical import complete_classical
-from semattnet.models.config import SemAttNetConfig
 from semattnet.models.registry import build_model
 from semattnet.weights.checkpoint import load_checkpoint, load_weights
+from semattnet.weights.gate import CheckpointError
+from semattnet.weights.packed import PACKED_FORMAT, SHIPPED, dequantise, encode_packed, quantise, save_packed
 
 __all__ = [
     "REFERENCE_COMMAND",
@@ -60,7 +57,7 @@ __all__ = [
 
 #: The training seeds of the shipped reference checkpoints (one file each; the demo shows their mean).
 REFERENCE_SEEDS: tuple[int, ...] = (0, 1)
-_ASSETS = Path(__file__).resolve().parent.parent / "assets"
+_ASSETS = SHIPPED
 #: The file name of one seed's reference checkpoint.
 REFERENCE_NAME = "demo_reference_seed{seed}.safetensors.gz"
 
@@ -77,7 +74,7 @@ def shipped_references() -> dict[int, Path]:
 
 #: The first seed's shipped file (inside the installed package; listed in the wheel).
 REFERENCE_PATH = reference_path(REFERENCE_SEEDS[0])
-REFERENCE_FORMAT = "semattnet-demo-reference/1"
+REFERENCE_FORMAT = PACKED_FORMAT
 #: The one command that rebuilds every file of :data:`REFERENCE_SEEDS` (copy them into the package to ship).
 REFERENCE_COMMAND = "semattnet demo --train-reference --out demo-reference-run"
 
@@ -122,48 +119,9 @@ class ReferenceRecipe:
 REFERENCE_RECIPE = ReferenceRecipe()
 
 
-def quantise(state_dict: dict[str, torch.Tensor], levels: int = 127) -> dict[str, torch.Tensor]:
-    """Per output channel, ``levels`` steps per sign, for floating tensors of >= 2 dims (int8
-    ``q8/NAME`` + ``scale/NAME``), float16 for the other floating tensors (``f16/NAME``), the rest
-    as is (``raw/NAME``)."""
-    out: dict[str, torch.Tensor] = {}
-    for name, t in state_dict.items():
-        t = t.detach().cpu()
-        if t.is_floating_point() and t.dim() >= 2:
-            scale = t.float().reshape(t.shape[0], -1).abs().amax(1).clamp_min(1e-12) / float(levels)
-            q = torch.round(t.float() / scale.view(-1, *([1] * (t.dim() - 1)))).clamp(-levels, levels)
-            out[f"q8/{name}"], out[f"scale/{name}"] = q.to(torch.int8).contiguous(), scale.float()
-        elif t.is_floating_point():
-            out[f"f16/{name}"] = t.half().contiguous()
-        else:
-            out[f"raw/{name}"] = t.contiguous()
-    return out
-
-
-def dequantise(tensors: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """The float32 state dict of :func:`quantise`'s tensors."""
-    sd: dict[str, torch.Tensor] = {}
-    for key, t in tensors.items():
-        kind, _, name = key.partition("/")
-        if kind == "q8":
-            scale = tensors[f"scale/{name}"]
-            sd[name] = t.float() * scale.view(-1, *([1] * (t.dim() - 1)))
-        elif kind == "f16":
-            sd[name] = t.float()
-        elif kind == "raw":
-            sd[name] = t
-        elif kind != "scale":
-            raise ReferenceError(f"reference checkpoint: unexpected tensor {key!r}")
-    return sd
-
-
 def encode_reference(model: Any, info: dict[str, Any], levels: int) -> bytes:  # a SemAttNet (its .config)
-    """The file's bytes: :func:`quantise`'s tensors with the config and ``info``, gzip-compressed."""
-    from safetensors.torch import save
-
-    meta = {"format": REFERENCE_FORMAT, "config": json.dumps(model.config.to_dict()), "levels": str(levels),
-            "info": json.dumps(info)}  # fmt: skip
-    return gzip.compress(save(quantise(model.state_dict(), levels), metadata=meta), compresslevel=9, mtime=0)
+    """The file's bytes: the model packed (:func:`semattnet.weights.packed.encode_packed`) with ``info``."""
+    return encode_packed(model.state_dict(), model.config.to_dict(), info, levels)
 
 
 def choose_levels(model: nn.Module) -> int:
@@ -175,31 +133,23 @@ def choose_levels(model: nn.Module) -> int:
 
 
 def save_reference(model: nn.Module, path: Path, info: dict[str, Any], levels: int = 127) -> Path:
-    """Write ``model`` quantised at ``levels`` (:func:`quantise`), gzip-compressed, with its config and ``info``."""
-    blob = encode_reference(model, info, levels)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(blob)
-    return path
+    """Write ``model`` packed at ``levels`` (:func:`semattnet.weights.packed.save_packed`) with ``info``."""
+    return save_packed(model, path, info, levels)
 
 
 def load_reference(path: Path | None = None) -> tuple[nn.Module, dict[str, Any]]:
     """The reference model (eval mode, float32 on the CPU) and its recorded info (recipe, command, metrics)."""
-    from safetensors import SafetensorError
-    from safetensors.torch import load
-
     path = Path(path) if path is not None else REFERENCE_PATH
     try:
-        raw = gzip.decompress(path.read_bytes())
-        tensors = load(raw)
-        meta = json.loads(raw[8 : 8 + int.from_bytes(raw[:8], "little")]).get("__metadata__", {})
-    except (OSError, EOFError, zlib.error, SafetensorError, ValueError) as exc:
-        raise ReferenceError(f"{path}: not a readable demo reference checkpoint ({exc})") from None
-    if meta.get("format") != REFERENCE_FORMAT:
-        raise ReferenceError(f"{path}: expected format {REFERENCE_FORMAT!r}, got {meta.get('format')!r}")
-    model = build_model("semattnet", config=SemAttNetConfig(**json.loads(meta["config"])))
-    load_weights(model, dequantise(tensors))
-    return model.eval(), json.loads(meta.get("info", "{}"))
+        ckpt = load_checkpoint(path)
+        if ckpt.format != "packed":
+            raise CheckpointError(f"{path}: a {ckpt.format} checkpoint, not packed weights")
+    except CheckpointError as exc:
+        why = str(exc).removeprefix(f"{path}: ")
+        raise ReferenceError(f"{path}: not a readable demo reference checkpoint ({why})") from None
+    model = build_model("semattnet", config=ckpt.config)
+    load_weights(model, ckpt)
+    return model.eval(), dict(ckpt.extra.get("info") or {})
 
 
 def train_reference(

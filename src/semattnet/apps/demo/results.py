@@ -145,5 +145,7 @@ def write_results(
     }  # fmt: skip
     if "reference" in setup:
         doc["reference"] = {k: v for k, v in setup["reference"].items() if k != "comparisons"}
+    if "uncertainty" in setup:
+        doc["uncertainty"] = setup["uncertainty"]
     path.write_text(json.dumps(doc, indent=2) + "\n")
     return path

@@ -20,7 +20,16 @@ from semattnet._utils.download import sha256_file
 from semattnet._utils.outputs import mark_tree
 from semattnet.apps.demo import figures as figs
 from semattnet.apps.demo import reference as ref
-from semattnet.apps.demo.recipe import LABELS, MODEL_KEYS, RECIPE_NOTES, REFERENCE_KEY, DemoSettings, train_models
+from semattnet.apps.demo import uncertainty as unc
+from semattnet.apps.demo.recipe import (
+    LABELS,
+    MODEL_KEYS,
+    RECIPE_NOTES,
+    REFERENCE_KEY,
+    DemoSettings,
+    Trained,
+    train_models,
+)
 from semattnet.apps.demo.results import (
     comparisons,
     mean_over_seeds,
@@ -78,6 +87,8 @@ def run_demo(
     log("[5/5] writing pictures, the report and the viewer ...")
     preds = base | trained.per_seed[s.training_seeds()[0]]
     figures = figs.figures(out / "pictures", held, preds, trained)
+    unc_scores = _uncertainty(held, base, trained, reference)
+    unc_figure, unc_lines = unc.uncertainty_report(unc_scores, out / "pictures")
     viewer = figs.viewer(out, held, preds, trained, s.viewer_frames)
     seconds = time.perf_counter() - t_start
     setup: dict[str, Any] = {
@@ -88,7 +99,8 @@ def run_demo(
     }  # fmt: skip
     setup["comparisons"] = comparisons(metrics)
     setup["verdicts"] = verdict_sentences(setup["comparisons"], setup["seeds"])
-    notes = list(RECIPE_NOTES)
+    setup["uncertainty"] = unc_scores
+    notes = [*unc_lines, *RECIPE_NOTES]
     if reference is not None:
         setup["reference"] = reference[1] | {"comparisons": comparisons(metrics, REFERENCE_KEY)}
         setup["verdicts"] += verdict_sentences(setup["reference"]["comparisons"], setup["seeds"], REFERENCE_KEY,
@@ -100,7 +112,8 @@ def run_demo(
     links = [("Interactive viewer of the held-out scenes (hover for depths, layers, 3D point cloud)", "viewer.html"),
              ("All numbers as JSON", "results.json")]  # fmt: skip
     table, labels = with_seed_rows(metrics, runs)
-    md, html = write_report(out, table, labels, figures, setup | {"verdicts": setup["verdicts"] + notes}, links=links)
+    md, html = write_report(out, table, labels, [*figures, unc_figure], setup | {"verdicts": setup["verdicts"] + notes},
+                            links=links)  # fmt: skip
     _summarise(metrics, order, seconds, html, log)
     mark_tree(out, "demo", True)
     return DemoResult(out, md, html, metrics, trained.steps, seconds, viewer, results)
@@ -108,21 +121,24 @@ def run_demo(
 
 def _reference(
     s: DemoSettings, held: HeldOut, device: torch.device, log: Callable[[str], None]
-) -> tuple[dict[int, dict[str, np.ndarray]], dict[str, Any]] | None:
-    """Per training seed, the shipped reference's refined depths on the held-out scenes, and what
-    results.json records of the files (None when disabled or when no file is shipped)."""
+) -> tuple[dict[int, dict[str, np.ndarray]], dict[str, Any], dict[int, dict[str, np.ndarray]]] | None:
+    """Per training seed, the shipped reference's refined depths on the held-out scenes, what results.json
+    records of the files, and per seed the depths' uncertainty (None when disabled or when no file is shipped)."""
     files = ref.shipped_references() if s.reference else {}
     if not files:
         if s.reference:
             log(f"(no reference checkpoint in {ref.REFERENCE_PATH.parent}: skipped; `{ref.REFERENCE_COMMAND}`)")
         return None
     preds: dict[int, dict[str, np.ndarray]] = {}
+    uncs: dict[int, dict[str, np.ndarray]] = {}
     records: list[dict[str, Any]] = []
     info: dict[str, Any] = {}
     for seed, path in files.items():
         log(f"[4/5] completing the held-out scenes with the shipped reference checkpoint ({path.name}) ...")
         model, info = ref.load_reference(path)
-        preds[seed] = {n: o["refined_depth"] for n, o in complete_held_out(model, held, device).items()}
+        outputs = complete_held_out(model, held, device)
+        preds[seed] = {n: o["refined_depth"] for n, o in outputs.items()}
+        uncs[seed] = {n: o["uncertainty"] for n, o in outputs.items()}
         records.append({"seed": seed, "file": path.name, "bytes": path.stat().st_size,
                         "sha256": sha256_file(path),
                         "train_seconds": info.get("train_seconds"), "trained_on": info.get("machine"),
@@ -133,7 +149,27 @@ def _reference(
         "command": info.get("command", ref.REFERENCE_COMMAND), "recipe": recipe,
         "recipe_notes": ref.recipe_notes(info.get("recipe", {})),
     }  # fmt: skip
-    return preds, record
+    return preds, record, uncs
+
+
+def _uncertainty(
+    held: HeldOut,
+    base: dict[str, dict[str, np.ndarray]],
+    trained: Trained,
+    reference: tuple[dict[int, dict[str, np.ndarray]], dict[str, Any], dict[int, dict[str, np.ndarray]]] | None,
+) -> dict[str, dict[str, Any]]:
+    """AUSE / AURG of each method's uncertainty (:mod:`semattnet.apps.demo.uncertainty`): the classical
+    completion (the same for every seed), the live models per seed and the reference checkpoints per seed."""
+    seeds = list(trained.per_seed)
+    classical = unc.classical_uncertainties(held, base["classical"])
+    preds: unc.BySeed = {"classical": dict.fromkeys(seeds, base["classical"])}
+    uncs: unc.BySeed = {"classical": dict.fromkeys(seeds, classical)}
+    for key in MODEL_KEYS:
+        preds[key] = {seed: trained.per_seed[seed][key] for seed in seeds}
+        uncs[key] = {seed: trained.uncertainty[seed][key] for seed in seeds}
+    if reference is not None:
+        preds[REFERENCE_KEY], uncs[REFERENCE_KEY] = reference[0], reference[2]
+    return unc.score_uncertainty(preds, uncs, held)
 
 
 def train_reference_run(

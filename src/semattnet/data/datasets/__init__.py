@@ -13,6 +13,7 @@ the :class:`~semattnet.data.frames.FrameSource` that ``predict`` completes and t
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -25,6 +26,9 @@ __all__ = ["DATASETS", "DEFAULT_DATASET", "DatasetArchive", "DatasetSpec", "Unkn
 
 PathLike = str | os.PathLike[str]
 DEFAULT_DATASET = "kitti-dc"
+#: Where alexklwong/void-dataset's README (at b17f271) says the release zip is (OneDrive; its wget command).
+VOID_RELEASE_URL = ("https://yaleedu-my.sharepoint.com/:u:/g/personal/alex_wong_yale_edu/"
+                    "Ebwvk0Ji8HhNinmAcKI5vSkBEjJTIWlA8PXwKNQX_FvB7g?e=0Zqe7g&download=1")  # fmt: skip
 
 
 class UnknownDatasetError(InputError):
@@ -178,11 +182,11 @@ _NYU = DatasetSpec(
 _VOID = DatasetSpec(
     "void", "VOID (visual-inertial odometry sparse depth)", "void_NNNN/{train,test}_{image,sparse_depth,"
     "validity_map,ground_truth,intrinsics}.txt + data/<sequence>/...", ("train", "test"), "train", "test", None,
-    (0.2, 5.0), (0.2, 5.0), None, "mm", ("mae_mm", "rmse_mm", "imae_per_km", "irmse_per_km"), "cityscapes",
+    (0.2, 5.0), (0.0, math.inf), None, "mm", ("mae_mm", "rmse_mm", "imae_per_km", "irmse_per_km"), "cityscapes",
     "VOID: see github.com/alexklwong/void-dataset (research use; cite Wong et al., RA-L 2020)",
     recipe={"epochs": 10, "batch_size": 8, "lr": 0.0001, "lr_schedule": "cosine", "crop": (480, 640),
             "val_split": "test"},
-    archives=tuple(DatasetArchive(f"void_{n}.zip", None, (), None) for n in (150, 500, 1500)),
+    archives=(DatasetArchive("void_release.zip", VOID_RELEASE_URL, ("void_release",), None),),
     make_source=_void_source,
 )  # fmt: skip
 

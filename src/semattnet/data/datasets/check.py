@@ -38,7 +38,7 @@ def check_sources(spec: Any, roots: Sequence[str | os.PathLike[str]], semantic_r
     """Every split of ``spec`` found under each root; a root without any counts as one problem."""
 
     def one(root: str | os.PathLike[str]) -> int:
-        bad, found = 0, False
+        bad, found, said = 0, False, set()
         for split in spec.splits:
             try:
                 source = spec.source(root, split, semantic_root=semantic_root)
@@ -46,8 +46,10 @@ def check_sources(spec: Any, roots: Sequence[str | os.PathLike[str]], semantic_r
                 continue
             except DataError as exc:
                 found = True
-                log(f"  {split:10s} - {exc}")
-                bad += 1
+                if str(exc) not in said:  # one line for a fault of the root (every split's)
+                    log(f"  {split:10s} - {exc}")
+                    bad += 1
+                said.add(str(exc))
                 continue
             found = True
             bad += log_report(check_split_source(source, split, sample), log)

@@ -5,7 +5,8 @@ Layout (the release's): ``void_NNN/{train,test}_{image,sparse_depth,validity_map
 list one path per frame (relative to the folder holding ``void_NNN``, to ``void_NNN`` itself, or absolute);
 images are 640x480 RGB PNGs, sparse depth and ground truth 16-bit PNGs in 1/256 m (KITTI's encoding), the
 validity map a PNG whose non-zero pixels mark the sparse points, intrinsics a 3x3 matrix as ``.npy`` or text
-(``K.txt``, 9 numbers). Evaluation (KBNet's): predictions clamped to 0.2-5.0 m, pixels with gt in that range.
+(``K.txt``, 9 numbers). Evaluation (KBNet's ``src/kbnet.py``): pixels with gt in 0.2-5.0 m, the predictions as
+they are (not clamped to that range; KBNet bounds its network's output instead).
 """
 
 from __future__ import annotations
@@ -17,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from semattnet._errors import DataError
-from semattnet.data.frames import Frame, IndexedSource
+from semattnet._utils.bounds import regular_file
+from semattnet.data.frames import Frame, IndexedSource, unique_names
 
 __all__ = ["VOID_ROLES", "VOID_VARIANTS", "VoidSource", "read_void_intrinsics"]
 
@@ -53,10 +55,21 @@ def _read_validity(path: Path) -> np.ndarray:
 
 
 def _folder(root: Path) -> Path:
-    """``root`` itself when it holds list files, else its first ``void_NNN`` (1500 first)."""
+    """``root`` itself when it holds list files, else its first ``void_NNN`` (1500 first); a root one level
+    too high (holding ``void_release/``) is one line naming the folder to pass."""
     if any(root.glob("*_image.txt")):
         return root
-    return next((root / v for v in VOID_VARIANTS if (root / v).is_dir()), root)
+    found = next((root / v for v in VOID_VARIANTS if (root / v).is_dir()), None)
+    if found is None and root.is_dir():
+        below = sorted(c for c in root.iterdir() if c.is_dir() and _holds_release(c))
+        if below:
+            raise DataError(f"{root}: no VOID list files nor {'/'.join(VOID_VARIANTS)} inside, but {below[0]} "
+                            f"holds them: pass {below[0]}")  # fmt: skip
+    return found or root
+
+
+def _holds_release(folder: Path) -> bool:
+    return any(folder.glob("*_image.txt")) or any((folder / v).is_dir() for v in VOID_VARIANTS)
 
 
 def _resolve(entry: str, lists: Path) -> Path:
@@ -68,7 +81,18 @@ def _resolve(entry: str, lists: Path) -> Path:
 
 
 def _read_list(path: Path, lists: Path) -> list[Path]:
-    return [_resolve(line.strip(), lists) for line in path.read_text().splitlines() if line.strip()]
+    """The entries of one list file, resolved; naming the file (and line) when it is not UTF-8 text of paths."""
+    try:
+        text = regular_file(path, "VOID list file").read_bytes().decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{path}: not a UTF-8 text list of paths (byte {exc.start}: {exc.reason})") from None
+    entries = []
+    for number, line in enumerate(text.splitlines(), 1):
+        if "\0" in line:
+            raise DataError(f"{path}: line {number} holds a NUL character, not a path")
+        if line.strip():
+            entries.append(_resolve(line.strip(), lists))
+    return entries
 
 
 class VoidSource(IndexedSource):
@@ -102,9 +126,12 @@ class VoidSource(IndexedSource):
         if len(set(counts.values())) > 1:
             raise DataError(f"{self.lists}: the {self.split} lists differ in length: "
                             + ", ".join(f"{files[r].name} {n}" for r, n in counts.items()))  # fmt: skip
+        if counts["image"] == 0:
+            raise DataError(f"{files['image']}: lists no frames (one path per line expected)")
         n = min(counts["image"], max_frames or counts["image"])
         self.frames = [{r: v[i] for r, v in entries.items()} for i in range(n)]
-        self.names: Sequence[str] = [f"{f['image'].parent.parent.name}_{f['image'].stem}" for f in self.frames]
+        named = ((f"{f['image'].parent.parent.name}_{f['image'].stem}", f["image"]) for f in self.frames)
+        self.names: Sequence[str] = list(unique_names(named, files["image"]))
         self.by_name = dict(zip(self.names, self.frames, strict=True))
         self.semantic_root = Path(semantic_root) if semantic_root is not None else None
         self.palette = "cityscapes" if self.semantic_root is not None else None
@@ -132,5 +159,12 @@ class VoidSource(IndexedSource):
             sem = read_semantic(paths["semantic"])
         return Frame(name, rgb, sparse.astype(np.float32), sem, K=K, gt=gt, paths=paths)
 
+    def listed_files(self) -> list[Path]:
+        """Every file the lists name for this source's frames (image, depth, validity, intrinsics)."""
+        return list(dict.fromkeys(p for f in self.frames for p in f.values()))
+
     def inputs(self) -> list[Path]:
-        return [self.lists, *([self.semantic_root] if self.semantic_root is not None else [])]
+        """The list folder, every file the lists name (they may lie anywhere: an output must not replace one)
+        and the semantic folder."""
+        semantic = [self.semantic_root] if self.semantic_root is not None else []
+        return [self.lists, *self.listed_files(), *semantic]

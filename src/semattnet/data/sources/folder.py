@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from semattnet.data.frames import Frame, IndexedSource
+from semattnet.data.frames import Frame, IndexedSource, unique_names
 from semattnet.data.io import read_depth, read_image, read_semantic
 from semattnet.data.pairing import FramePaths, pair_frames
 
@@ -22,8 +22,9 @@ class FolderSource(IndexedSource):
 
     def __init__(self, frames: Sequence[FramePaths], K: np.ndarray | None = None,
                  given: Sequence[str | os.PathLike[str] | None] = ()) -> None:  # fmt: skip
+        rgb = unique_names(((f.name, f.rgb) for f in frames), "frames")
         self.frames = {f.name: f for f in frames}
-        self.names = [f.name for f in frames]
+        self.names = list(rgb)
         self.K = None if K is None else np.asarray(K, dtype=np.float64)
         self.given = [Path(p) for p in given if p is not None]
 

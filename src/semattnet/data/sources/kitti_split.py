@@ -6,7 +6,7 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from semattnet.data.frames import Frame, IndexedSource
+from semattnet.data.frames import Frame, IndexedSource, unique_names
 from semattnet.data.kitti import FrameFiles, KittiDepthCompletion, load_frame
 
 __all__ = ["KittiSplitSource", "prediction_name"]
@@ -27,8 +27,8 @@ class KittiSplitSource(IndexedSource):
         ds = KittiDepthCompletion(root, split, raw_root, semantic_root)
         self.split = ds.split
         self.files: list[FrameFiles] = ds.frames[:max_frames] if max_frames else list(ds.frames)
+        self.names = list(unique_names(((f.name, f.sparse) for f in self.files), root))
         self.by_name = {f.name: f for f in self.files}
-        self.names = [f.name for f in self.files]
         self.roots = [Path(p) for p in (root, raw_root, semantic_root) if p is not None]
 
     def load(self, name: str) -> Frame:

@@ -2,34 +2,23 @@
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable, Mapping
 from dataclasses import fields
-from types import ModuleType
 
 import numpy as np
 import torch
 from torch import nn
 
-from semattnet._errors import InputError, MissingDependencyError
+from semattnet._errors import InputError
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.refinement import HEADS_PREFIX, RefinementInputs, propagate_refinement  # one home of the prefix
 
-__all__ = ["HEADS_PREFIX", "ExportedGraphEngine", "InferenceEngine", "LogFn", "import_backend", "output_from_arrays"]
+__all__ = ["HEADS_PREFIX", "ExportedGraphEngine", "InferenceEngine", "LogFn", "output_from_arrays"]
 
 #: A progress logger the backends call with one line of text (e.g. ``print`` or ``logger.info``).
 LogFn = Callable[[str], object]
 
 _FIELDS = tuple(f.name for f in fields(DepthCompletionOutput))
-
-
-def import_backend(module: str, extra: str) -> ModuleType:
-    """Import a backend's package, or say which ``pip install 'semattnet[extra]'`` provides it."""
-    try:
-        return importlib.import_module(module)
-    except ImportError:
-        msg = f"the {module} backend needs {module}: pip install 'semattnet[{extra}]'"
-        raise MissingDependencyError(msg, name=module) from None
 
 
 class InferenceEngine(nn.Module):

@@ -5,6 +5,11 @@ the key is the sha256 of the weights (:func:`semattnet.weights.gate.tensor_diges
 architecture config, the input size and the versions of torch and semattnet, so changed weights
 or a new release never reuse a stale file. Files are written atomically, so a killed export leaves
 nothing that a later run could mistake for a finished one.
+
+The cache is verified, not trusted: each file written is recorded with its sha256 beside it
+(``model.onnx.sha256``), and checked before every use (:func:`intact`). A file that does not match its
+record (damaged on disk, edited, truncated) or has none (written by an older release, or by hand) is
+removed and built again, with one line saying so (the engine's ``log``, else stderr).
 """
 
 from __future__ import annotations
@@ -12,18 +17,21 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import sys
 from pathlib import Path
 
 import torch
 from torch import nn
 
+from semattnet._utils.atomic import atomic_path
+from semattnet._utils.download import sha256_file
 from semattnet._utils.version import library_version
 from semattnet.inference.backends._base import LogFn
 from semattnet.weights.download import get_cache_dir
 from semattnet.weights.export import export_onnx
 from semattnet.weights.gate import tensor_digest
 
-__all__ = ["cached_onnx", "engine_dir", "engine_key", "propagation_steps"]
+__all__ = ["cached_onnx", "engine_dir", "engine_key", "intact", "propagation_steps", "record_digest"]
 
 
 def engine_key(model: nn.Module, size: tuple[int, int], extra: str = "") -> str:
@@ -56,11 +64,46 @@ def cached_onnx(model: nn.Module, size: tuple[int, int], folder: Path, log: LogF
     several times faster than the same steps as hundreds of small graph operations.
     """
     path = folder / "model.onnx"
-    if not path.is_file():
+    if not intact(path, log):
         if log is not None:
             log(f"exporting the model to ONNX at {size[0]}x{size[1]} (once; cached in {folder}) ...")
         export_onnx(model, path, size=size, propagation=False)
+        record_digest(path)
     return path
+
+
+def _record(path: Path) -> Path:
+    return path.with_name(f"{path.name}.sha256")
+
+
+def record_digest(path: Path) -> None:
+    """Record ``path``'s sha256 beside it (``NAME.sha256``, written atomically) for :func:`intact`."""
+    with atomic_path(_record(path)) as tmp:
+        tmp.write_text(f"{sha256_file(path)}\n")
+
+
+def intact(path: Path, log: LogFn | None = None) -> bool:
+    """Whether the cached file ``path`` is there and matches its recorded sha256. A file without a record,
+    or not matching it, is removed (with its record) and one line says so: the caller builds it again."""
+    record = _record(path)
+    if not path.is_file():
+        record.unlink(missing_ok=True)
+        return False
+    try:
+        want: str | None = record.read_text().strip()
+    except (OSError, UnicodeDecodeError):
+        want = None
+    if want is not None and want == sha256_file(path):
+        return True
+    why = "has no recorded sha256" if want is None else "does not match its recorded sha256"
+    (log or _stderr)(f"{path}: the cached file {why}: building it again")
+    path.unlink(missing_ok=True)
+    record.unlink(missing_ok=True)
+    return False
+
+
+def _stderr(line: str) -> None:
+    print(line, file=sys.stderr)
 
 
 def propagation_steps(model: nn.Module) -> int | None:

@@ -8,7 +8,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from semattnet.inference.backends._base import ExportedGraphEngine, LogFn, import_backend
+from semattnet._utils.extras import require
+from semattnet.inference.backends._base import ExportedGraphEngine, LogFn
 from semattnet.inference.backends._export_cache import cached_onnx, engine_dir, engine_key, propagation_steps
 
 __all__ = ["OnnxRuntimeEngine"]
@@ -22,7 +23,7 @@ class OnnxRuntimeEngine(ExportedGraphEngine):
     def __init__(self, model: nn.Module, size: tuple[int, int], needs_semantic: bool,
                  cache_dir: str | os.PathLike[str] | None = None, log: LogFn | None = None) -> None:  # fmt: skip
         super().__init__(size, "f32", needs_semantic)
-        ort = import_backend("onnxruntime", "onnx")
+        ort = require("onnxruntime", "the onnxruntime backend")
         folder = engine_dir(engine_key(model, size), cache_dir)
         options = ort.SessionOptions()
         options.intra_op_num_threads = torch.get_num_threads()

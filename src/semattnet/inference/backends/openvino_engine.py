@@ -18,8 +18,16 @@ import numpy as np
 import torch
 from torch import nn
 
-from semattnet.inference.backends._base import HEADS_PREFIX, ExportedGraphEngine, LogFn, import_backend
-from semattnet.inference.backends._export_cache import cached_onnx, engine_dir, engine_key, propagation_steps
+from semattnet._utils.extras import require
+from semattnet.inference.backends._base import HEADS_PREFIX, ExportedGraphEngine, LogFn
+from semattnet.inference.backends._export_cache import (
+    cached_onnx,
+    engine_dir,
+    engine_key,
+    intact,
+    propagation_steps,
+    record_digest,
+)
 from semattnet.inference.backends.calibration import DEFAULT_CALIBRATION_FRAMES, resolve_calibration
 from semattnet.inference.backends.openvino_int8 import quantized_ir
 from semattnet.models.outputs import DepthCompletionOutput
@@ -45,15 +53,18 @@ class OpenVinoEngine(ExportedGraphEngine):
                  cache_dir: str | os.PathLike[str] | None = None, log: LogFn | None = None,
                  calibration: Any = None, calibration_frames: int = DEFAULT_CALIBRATION_FRAMES) -> None:  # fmt: skip
         super().__init__(size, precision, needs_semantic)
-        ov = import_backend("openvino", "openvino")
+        ov = require("openvino", "the openvino backend")
         folder = engine_dir(engine_key(model, size, extra=f"openvino-{ov.__version__}"), cache_dir)
         xml = folder / "model.xml"
         core = ov.Core()
-        if not xml.is_file():
+        if not (intact(xml, log) and intact(xml.with_suffix(".bin"), log)):  # verified, not trusted
             onnx_path = cached_onnx(model, size, folder, log)
             # IR first (float32 weights: no fp16 compression), so later processes skip the ONNX file
             ov.save_model(core.read_model(str(onnx_path)), str(xml), compress_to_fp16=False)
-            onnx_path.unlink()  # only an intermediate here: the IR holds the same weights
+            for part in (xml, xml.with_suffix(".bin")):
+                record_digest(part)
+            for done in (onnx_path, onnx_path.with_name(f"{onnx_path.name}.sha256")):  # the IR holds the weights
+                done.unlink(missing_ok=True)
         if precision == "int8":  # the quantised IR (cached per calibration); its float layers in f32
             xml = quantized_ir(ov, core, xml, resolve_calibration(calibration, size, calibration_frames), log)
         hint = "f32" if precision == "int8" else precision

@@ -22,7 +22,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from semattnet.inference.backends._base import import_backend
+from semattnet._utils.extras import require
+from semattnet.inference.backends._export_cache import intact, record_digest
 from semattnet.inference.backends.calibration import Calibration
 
 __all__ = ["KEEP_FLOAT", "quantized_ir"]
@@ -47,9 +48,10 @@ def quantized_ir(ov: Any, core: Any, xml: Path, calibration: Calibration, log=No
     (computed once; later calls return the cached file)."""
     target = xml.parent / f"int8-{calibration.key}"
     out = target / "model.xml"
-    if out.is_file():
+    if intact(out, log) and intact(out.with_suffix(".bin"), log):  # verified, not trusted
         return out
-    nncf = import_backend("nncf", "openvino")
+    shutil.rmtree(target, ignore_errors=True)  # a damaged or unrecorded copy: quantised again
+    nncf = require("nncf", "int8 quantisation")
     if log is not None:
         log(f"quantising to int8 on {calibration.description} (once; cached in {target}) ...")
     model = core.read_model(str(xml))
@@ -68,6 +70,8 @@ def quantized_ir(ov: Any, core: Any, xml: Path, calibration: Calibration, log=No
     staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.p{os.getpid()}.", dir=target.parent))
     try:
         ov.save_model(quantized, str(staging / "model.xml"), compress_to_fp16=False)
+        for part in ("model.xml", "model.bin"):
+            record_digest(staging / part)
         staging.chmod(0o777 & ~_umask())  # a plain folder's mode, not mkdtemp's 0o700
         os.replace(staging, target)  # another process may have finished first: then keep its copy
     except OSError:

@@ -15,7 +15,8 @@ import torch
 from torch import nn
 
 from semattnet._errors import InputError
-from semattnet.inference.backends._base import HEADS_PREFIX, InferenceEngine, import_backend, output_from_arrays
+from semattnet._utils.extras import require
+from semattnet.inference.backends._base import HEADS_PREFIX, InferenceEngine, output_from_arrays
 from semattnet.inference.backends._export_cache import propagation_steps
 from semattnet.models.bn_folding import fold_batchnorm
 from semattnet.models.outputs import DepthCompletionOutput
@@ -54,7 +55,7 @@ class TensorRTEngine(InferenceEngine):
         device = torch.device(device)
         if device.type != "cuda":
             raise InputError(f"device: the tensorrt backend runs on CUDA, got {device}")
-        trt = import_backend("torch_tensorrt", "tensorrt")
+        trt = require("torch_tensorrt", "the tensorrt backend")
         if not hasattr(model, "forward_network"):
             raise InputError("model: the tensorrt backend needs a refining SemAttNet (with forward_network)")
         net = fold_batchnorm(model).eval().to(device)

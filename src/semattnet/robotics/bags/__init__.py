@@ -1,7 +1,7 @@
 """Recorded robot data in and out: ROS 1 bags and ROS 2 bags (sqlite3, MCAP).
 
 Reading needs no ROS installation (``rosbags``, extra ``ros``), imported on first use; a missing one is a
-one-line :class:`MissingExtraError` with the install hint.
+one-line :class:`~semattnet.MissingDependencyError` with the install hint.
 
 - Reading: :func:`list_topics`, :class:`BagPairs` (image + nearest scan + calibration from ``CameraInfo`` and
   ``/tf_static``, or a rig file; a :class:`BagFailure` for an image without a good pair), the decoders of
@@ -19,7 +19,6 @@ from .decode import (
     decode_pointcloud2,
     header_stamp_frame,
 )
-from .deps import MissingExtraError
 from .kitti import BagTopics, SensorRecord, WrittenBag, kitti_stamps_ns, write_kitti_bag, write_sensor_bag
 from .pairing import StampPairing, pair_stamps
 from .reader import TopicRow, format_topics, list_topics, open_bag
@@ -35,7 +34,6 @@ __all__ = [
     "BagWriter",
     "CameraInfoData",
     "MessageWriter",
-    "MissingExtraError",
     "NoTransformError",
     "SensorRecord",
     "StampPairing",

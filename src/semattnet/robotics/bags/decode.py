@@ -18,6 +18,8 @@ from semattnet._errors import DataError
 
 __all__ = [
     "IMAGE_ENCODINGS",
+    "MAX_FOCAL_PER_PIXEL",
+    "MAX_POINT_COORDINATE_M",
     "POINTFIELD_DTYPES",
     "CameraInfoData",
     "decode_camera_info",
@@ -40,6 +42,11 @@ POINTFIELD_DTYPES: dict[int, str] = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4"
 
 #: Names of a per-point intensity field, first match wins (becomes the 4th column of the points).
 _INTENSITY_NAMES = ("intensity", "reflectance", "i")
+
+#: A LiDAR point farther than this along any axis (metres) is not a measurement: its scan is refused.
+MAX_POINT_COORDINATE_M = 1000.0
+#: A focal length above this many times the image's larger side (a field of view under 0.06 degrees) is refused.
+MAX_FOCAL_PER_PIXEL = 1000.0
 
 
 def stamp_ns(stamp: Any) -> int:
@@ -115,7 +122,12 @@ def decode_compressed_image(msg: Any, topic: str) -> np.ndarray:
 def _point_dtype(msg: Any, topic: str) -> tuple[np.dtype, dict[str, Any]]:
     """Structured dtype (itemsize ``point_step``) of a PointCloud2's x, y, z and intensity fields."""
     order = ">" if msg.is_bigendian else "<"
-    fields = {str(f.name): f for f in msg.fields}
+    listed = [str(f.name) for f in msg.fields]
+    fields = {name: f for name, f in zip(listed, msg.fields, strict=True)}
+    twice = [n for n in ("x", "y", "z", *_INTENSITY_NAMES) if listed.count(n) > 1]
+    if twice:
+        raise DataError(f"{topic}: PointCloud2 has {listed.count(twice[0])} fields named {twice[0]!r} (fields: "
+                        f"{', '.join(listed)}); which one holds the values is ambiguous")  # fmt: skip
     missing = [n for n in ("x", "y", "z") if n not in fields]
     if missing:
         have = ", ".join(fields) or "none"
@@ -147,10 +159,12 @@ def decode_pointcloud2(msg: Any, topic: str) -> np.ndarray:
 
     Any field layout with float32/float64 x, y, z: extra fields, padding, ``point_step`` larger than the fields,
     ``row_step`` padding, big-endian data. Points with a NaN or infinite coordinate are dropped (``is_dense``
-    false). float32 when x, y, z all are, else float64.
+    false: the ROS mark of a beam without a return). float32 when x, y, z all are, else float64.
 
     Raises:
-        DataError: no x/y/z field, an integer x/y/z, or fewer bytes than the header says; naming the topic.
+        DataError: no x/y/z field, a field read twice (two named ``x``), an integer x/y/z, fewer bytes than the
+            header says, or a finite coordinate beyond :data:`MAX_POINT_COORDINATE_M` (not a measurement);
+            naming the topic.
     """
     dtype, _ = _point_dtype(msg, topic)
     h, w, step = int(msg.height), int(msg.width), int(msg.point_step)
@@ -162,7 +176,14 @@ def decode_pointcloud2(msg: Any, topic: str) -> np.ndarray:
     out_type = np.float32 if all(t.itemsize == 4 for t in xyz_types) else np.float64
     cols = [pts[n].astype(out_type) for n in dtype.names]
     out = np.stack(cols, 1) if len(pts) else np.zeros((0, len(cols)), out_type)
-    return out[np.isfinite(out[:, :3]).all(1)]
+    out = out[np.isfinite(out[:, :3]).all(1)]
+    far = np.abs(out[:, :3]).max(1) > MAX_POINT_COORDINATE_M if len(out) else np.zeros(0, bool)
+    if far.any():
+        top = float(np.abs(out[far, :3]).max())
+        raise DataError(f"{topic}: PointCloud2 has {int(far.sum())} of {len(pts)} point(s) beyond "
+                        f"{MAX_POINT_COORDINATE_M:g} m (up to {top:.3g} m); a scan is in metres in the LiDAR's frame "
+                        "(semattnet.robotics.bags.decode.MAX_POINT_COORDINATE_M)")  # fmt: skip
+    return out
 
 
 @dataclass(frozen=True)
@@ -206,11 +227,41 @@ def _matrix(msg: Any, name: str, shape: tuple[int, int], topic: str) -> np.ndarr
     return arr.reshape(shape)
 
 
+def _intrinsics_set(name: str, M: np.ndarray, size: tuple[int, int], topic: str) -> bool:
+    """Whether ``M`` (K or P, finite) is set; a set one needs focal lengths that are positive and not absurd."""
+    if not np.any(M[:, :3]):
+        return False
+    for label, at in (("fx", (0, 0)), ("fy", (1, 1))):
+        value, cell = float(M[at]), f"{name}[{at[0]}][{at[1]}]"
+        if not value > 0:
+            raise DataError(f"{topic}: CameraInfo focal length {label} ({cell}) is {value:g}, not positive")
+        if value > MAX_FOCAL_PER_PIXEL * max(size):
+            raise DataError(f"{topic}: CameraInfo focal length {label} ({cell}) is {value:.3g} pixels, more than "
+                            f"{MAX_FOCAL_PER_PIXEL:g} times the image's {max(size)}-pixel side")  # fmt: skip
+    return True
+
+
+def _check_finite(matrices: dict[str, np.ndarray], topic: str) -> None:
+    """Refuse the first NaN or infinite entry of CameraInfo's matrices, naming it (``fx (K[0][0])``)."""
+    labels = {(0, 0): "focal length fx ", (1, 1): "focal length fy ", (0, 2): "principal point cx ",
+              (1, 2): "principal point cy "}  # fmt: skip
+    for name, M in matrices.items():
+        bad = np.argwhere(~np.isfinite(M))
+        if len(bad):
+            r, c = (int(v) for v in bad[0])
+            cell = f"{name}[{c}]" if name == "D" else f"{name}[{r}][{c}]"
+            label = labels.get((r, c), "") if name in ("K", "P") else ""
+            value = "NaN" if np.isnan(M[r, c]) else "infinite"
+            raise DataError(f"{topic}: CameraInfo {label}({cell}) is {value}")
+
+
 def decode_camera_info(msg: Any, topic: str) -> CameraInfoData:
     """:class:`CameraInfoData` of a ``sensor_msgs/CameraInfo`` (ROS 1 ``K``/``P`` or ROS 2 ``k``/``p``).
 
     Raises:
-        DataError: a zero image size or a matrix with neither a positive focal length in ``K`` nor in ``P``.
+        DataError: a zero image size, a NaN or infinite number in ``K``, ``P``, ``R`` or ``D``, a set ``K`` or ``P``
+            with a focal length that is not positive or above :data:`MAX_FOCAL_PER_PIXEL` times the image size,
+            or neither set (uncalibrated); ``topic`` starts the message (the caller's ``BAG: TOPIC message N``).
     """
     K, P = _matrix(msg, "K", (3, 3), topic), _matrix(msg, "P", (3, 4), topic)
     R = _matrix(msg, "R", (3, 3), topic)
@@ -218,7 +269,8 @@ def decode_camera_info(msg: Any, topic: str) -> CameraInfoData:
     w, h = int(msg.width), int(msg.height)
     if w <= 0 or h <= 0:
         raise DataError(f"{topic}: CameraInfo has no image size (width {w}, height {h})")
-    if not ((K[0, 0] > 0 and K[1, 1] > 0) or (P[0, 0] > 0 and P[1, 1] > 0)):
-        raise DataError(f"{topic}: CameraInfo is uncalibrated (K and P have no positive focal length)")
+    _check_finite({"K": K, "P": P, "R": R, "D": D.reshape(1, -1)}, topic)
+    if not (_intrinsics_set("K", K, (w, h), topic) | _intrinsics_set("P", P, (w, h), topic)):
+        raise DataError(f"{topic}: CameraInfo is uncalibrated (K and P are all zero)")
     return CameraInfoData(w, h, K, D, R, P, str(msg.distortion_model), str(msg.header.frame_id).lstrip("/"),
                           stamp_ns(msg.header.stamp))  # fmt: skip

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from semattnet._errors import DataError, InputError
+from semattnet._utils.bounds import MAX_ADDED_POINTS
 from semattnet.geometry import RigCalibration, invert_T, make_T, read_velo_to_cam
 
 from .decode import CameraInfoData
@@ -111,6 +112,8 @@ def write_sensor_bag(path: str | os.PathLike[str], records: Iterable[SensorRecor
     Raises:
         FileExistsError: ``path`` exists and not ``overwrite``. InputError: a bad record. Nothing is left on error.
     """
+    if isinstance(nan_points, bool) or not isinstance(nan_points, int) or not 0 <= nan_points <= MAX_ADDED_POINTS:
+        raise InputError(f"nan_points: must be a whole number in 0..{MAX_ADDED_POINTS}, got {nan_points!r}")
     topics = topics or BagTopics()
     fmt = bag_format(path, fmt)
     T_base_lidar = make_T(np.eye(3), np.array([0, 0, DEFAULT_LIDAR_HEIGHT])) if T_base_lidar is None else T_base_lidar

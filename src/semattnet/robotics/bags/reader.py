@@ -2,11 +2,13 @@
 ``AnyReader``, listing its topics, finding a topic's connections and reading ``/tf_static``.
 
 Every rosbags, sqlite3 or decoding failure of a truncated or corrupt bag becomes one
-:class:`~semattnet._errors.DataError` line naming the file (:func:`bag_errors`).
+:class:`~semattnet._errors.DataError` line naming the file (:func:`bag_errors`); every error about one message
+starts with :func:`message_where`'s ``BAG: TOPIC message N`` (:func:`message_errors` for the reading failures).
 """
 
 from __future__ import annotations
 
+import functools
 import os
 import sqlite3
 import struct
@@ -18,8 +20,9 @@ from pathlib import Path
 from typing import Any
 
 from semattnet._errors import DataError, SemAttNetError
+from semattnet._utils.extras import require
 
-from .deps import import_extra, rosbags_typestore
+from .deps import rosbags_typestore
 from .tf import TransformTree
 
 __all__ = [
@@ -30,6 +33,7 @@ __all__ = [
     "is_ros1",
     "list_topics",
     "message_errors",
+    "message_where",
     "open_bag",
     "read_transforms",
     "topic_connections",
@@ -50,11 +54,12 @@ class TopicRow:
     rate_hz: float | None
 
 
+@functools.cache
 def _reader_errors() -> tuple[type[BaseException], ...]:
-    rosbag1 = import_extra("rosbags.rosbag1", "reading ROS bags")
-    rosbag2 = import_extra("rosbags.rosbag2", "reading ROS bags")
-    highlevel = import_extra("rosbags.highlevel", "reading ROS bags")
-    serde = import_extra("rosbags.serde", "reading ROS bags")
+    rosbag1 = require("rosbags.rosbag1", "reading ROS bags")
+    rosbag2 = require("rosbags.rosbag2", "reading ROS bags")
+    highlevel = require("rosbags.highlevel", "reading ROS bags")
+    serde = require("rosbags.serde", "reading ROS bags")
     return (highlevel.AnyReaderError, rosbag1.ReaderError, rosbag2.ReaderError, serde.SerdeError, sqlite3.Error,
             struct.error, EOFError, zlib.error, KeyError, IndexError, UnicodeDecodeError)  # fmt: skip
 
@@ -77,9 +82,17 @@ def bag_errors(path: str | os.PathLike[str]) -> AbstractContextManager[None]:
     return _one_line(_reader_errors(), f"{path}: cannot read the bag (truncated or corrupt?)")
 
 
+def message_where(topic: str, index: int, path: str | os.PathLike[str] | None = None, noun: str = "message") -> str:
+    """The start of every error about one message of a bag: ``BAG: TOPIC message N`` (N counts from 0 in the
+    topic; ``noun`` "image" for the image topic, whose messages are the frames). Without ``path`` for a message
+    named inside the error of the frame that needs it (``BAG: /cam image 3: /lidar message 3: ...``)."""
+    return f"{'' if path is None else f'{path}: '}{topic} {noun} {index}"
+
+
 def message_errors(where: str) -> AbstractContextManager[None]:
     """Turn the failures of deserialising one corrupt message into one :class:`DataError` line naming ``where``
-    (e.g. ``BAG: TOPIC image 3``), so the caller can fail that message alone (semattnet's errors pass through)."""
+    (:func:`message_where`, e.g. ``BAG: TOPIC image 3``), so the caller can fail that message alone (semattnet's
+    errors pass through)."""
     errors = (*_reader_errors(), ValueError, TypeError, AttributeError)
     return _one_line(errors, f"{where}: cannot deserialise the message")
 
@@ -96,7 +109,7 @@ def open_bag(path: str | os.PathLike[str]) -> Iterator[Any]:
     Raises:
         DataError: ``path`` is missing, not a bag, truncated or corrupt.
     """
-    highlevel = import_extra("rosbags.highlevel", "reading ROS bags")
+    highlevel = require("rosbags.highlevel", "reading ROS bags")
     path = Path(path)
     if not path.exists():
         raise DataError(f"{path}: bag not found")
@@ -152,11 +165,19 @@ def format_topics(rows: Sequence[TopicRow]) -> str:
 
 
 def read_transforms(reader: Any, path: str | os.PathLike[str], topic: str = TF_STATIC_TOPIC) -> TransformTree:
-    """Every static transform of ``topic`` (none when the bag lacks it) as a :class:`TransformTree`."""
+    """Every static transform of ``topic`` (none when the bag lacks it) as a :class:`TransformTree`.
+
+    Raises:
+        DataError: a message that cannot be deserialised or holds a transform that is not one (a NaN or infinite
+            number, a quaternion far from unit length), naming the bag, the topic, the message and the frames.
+    """
     tree = TransformTree(f"{path}: {topic}")
     conns = [c for c in reader.connections if c.topic == topic]
     if not conns:  # (rosbags reads every topic when given no connection)
         return tree
-    for conn, _, raw in reader.messages(connections=conns):
-        tree.add_message(reader.deserialize(raw, conn.msgtype))
+    for k, (conn, _, raw) in enumerate(reader.messages(connections=conns)):
+        where = message_where(topic, k, path)
+        with message_errors(where):
+            msg = reader.deserialize(raw, conn.msgtype)
+        tree.add_message(msg, where)
     return tree

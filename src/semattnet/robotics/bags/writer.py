@@ -3,8 +3,9 @@
 :class:`MessageWriter` writes message objects to any of the three formats; :class:`BagWriter` is the output
 sink of completed frames: per frame the completed depth as ``sensor_msgs/Image`` ``32FC1`` in metres (holes
 NaN, REP 118), the coloured cloud as ``sensor_msgs/PointCloud2`` (x, y, z float32 and ``rgb`` packed as
-RViz reads it) in the camera frame, and the input's ``CameraInfo``, all stamped with the input image's
-header stamp and frame id, so ``ros2 bag play`` feeds RViz or Foxglove directly.
+RViz reads it) in the camera frame, the input's ``CameraInfo`` and, when given, the depth's per-pixel
+uncertainty as another ``32FC1`` image in metres (``PREFIX/uncertainty``, NaN where the depth has none), all
+stamped with the input image's header stamp and frame id, so ``ros2 bag play`` feeds RViz or Foxglove directly.
 """
 
 from __future__ import annotations
@@ -22,10 +23,11 @@ import numpy as np
 
 from semattnet._errors import InputError
 from semattnet._utils.atomic import fsync_dir, full_disk_named
+from semattnet._utils.extras import require
 from semattnet.geometry import depth_to_points
 
 from .decode import CameraInfoData
-from .deps import import_extra, rosbags_typestore, writes_mcap
+from .deps import rosbags_typestore, writes_mcap
 from .encode import camera_info_message, depth_image_message, pack_rgb, pointcloud2_message
 
 __all__ = ["BAG_FORMATS", "BagWriter", "MessageWriter", "bag_format", "staged_bag"]
@@ -94,9 +96,9 @@ class MessageWriter:
         self.counts: dict[str, int] = {}
         self._conns: dict[str, Any] = {}
         if self.ros1:
-            self._writer = import_extra("rosbags.rosbag1", "writing ROS bags").Writer(self.path)
+            self._writer = require("rosbags.rosbag1", "writing ROS bags").Writer(self.path)
         else:
-            rosbag2 = import_extra("rosbags.rosbag2", "writing ROS bags")
+            rosbag2 = require("rosbags.rosbag2", "writing ROS bags")
             plugin = rosbag2.StoragePlugin.MCAP if self.fmt == "mcap" else rosbag2.StoragePlugin.SQLITE3
             self._writer = rosbag2.Writer(self.path, version=rosbag2.Writer.VERSION_LATEST, storage_plugin=plugin)
 
@@ -125,15 +127,15 @@ class BagWriter:
     Args:
         path: the bag to create (a ROS 2 bag is a folder; ``.bag`` or ``fmt="ros1"`` writes ROS 1).
         overwrite: replace an existing ``path`` (else :class:`FileExistsError` before anything is written).
-        prefix: topics are ``PREFIX/depth`` (Image 32FC1), ``PREFIX/points`` (PointCloud2 x, y, z, rgb) and
-            ``PREFIX/camera_info``.
+        prefix: topics are ``PREFIX/depth`` (Image 32FC1), ``PREFIX/points`` (PointCloud2 x, y, z, rgb),
+            ``PREFIX/camera_info`` and, for frames written with an uncertainty, ``PREFIX/uncertainty`` (Image 32FC1).
         max_depth: cloud points deeper than this are left out (None: all), metres.
     """
 
     def __init__(self, path: str | os.PathLike[str], overwrite: bool = False, fmt: str | None = None,
                  prefix: str = "/semattnet", max_depth: float | None = None) -> None:  # fmt: skip
         self.path, self.fmt = Path(path), bag_format(path, fmt)
-        self.topics = {k: f"{prefix.rstrip('/')}/{k}" for k in ("depth", "points", "camera_info")}
+        self.topics = {k: f"{prefix.rstrip('/')}/{k}" for k in ("depth", "points", "camera_info", "uncertainty")}
         self.max_depth = max_depth
         from semattnet._utils.outputs import Output, check_outputs
 
@@ -158,9 +160,12 @@ class BagWriter:
         return self.__enter__()
 
     def write(self, stamp_ns: int, frame_id: str, depth: np.ndarray, camera_info: CameraInfoData,
-              rgb: np.ndarray | None = None, K: np.ndarray | None = None) -> None:  # fmt: skip
+              rgb: np.ndarray | None = None, K: np.ndarray | None = None, uncertainty: np.ndarray | None = None,
+              keep: np.ndarray | None = None) -> None:  # fmt: skip
         """One frame: ``depth`` (H, W) metres (<= 0 or NaN = hole), the input ``camera_info``, optional ``rgb``
-        (H, W, 3) uint8 colours for the cloud, ``K`` the depth's intrinsics (default: ``camera_info``'s ``P``)."""
+        (H, W, 3) uint8 colours for the cloud, ``K`` the depth's intrinsics (default: ``camera_info``'s ``P``),
+        ``uncertainty`` (H, W) metres (<= 0 or NaN = none) for the uncertainty topic, ``keep`` (H, W) bool: the
+        pixels the cloud keeps (default all; the depth image stays whole)."""
         if self._out is None:
             raise InputError(f"{self.path}: BagWriter.write outside its with-block")
         depth = np.asarray(depth, dtype=np.float32)
@@ -170,7 +175,13 @@ class BagWriter:
         ts, out = self._out.ts, self._out
         K = camera_info.intrinsics() if K is None else np.asarray(K, dtype=np.float64)
         out.write(self.topics["depth"], stamp_ns, depth_image_message(ts, depth, stamp_ns, frame_id))
-        cloud = depth_to_points(np.nan_to_num(depth, nan=0.0), K, rgb=rgb, max_depth=self.max_depth, frame=frame_id)
+        if uncertainty is not None:
+            unc = np.asarray(uncertainty, dtype=np.float32)
+            if unc.shape != depth.shape:
+                raise InputError(f"uncertainty: shape {unc.shape} differs from the depth's {depth.shape}")
+            out.write(self.topics["uncertainty"], stamp_ns, depth_image_message(ts, unc, stamp_ns, frame_id))
+        cloud = depth_to_points(np.nan_to_num(depth, nan=0.0), K, rgb=rgb, max_depth=self.max_depth, frame=frame_id,
+                                mask=keep)  # fmt: skip
         fields = {"x": cloud.xyz[:, 0], "y": cloud.xyz[:, 1], "z": cloud.xyz[:, 2]}
         if cloud.rgb is not None:
             fields["rgb"] = pack_rgb(cloud.rgb)
