@@ -23,8 +23,10 @@ __all__ = [
     "clean_stale_temps",
     "disk_full_error",
     "fsync_dir",
+    "full_disk_named",
     "is_disk_full",
     "new_file_mode",
+    "no_space_left",
     "pid_alive",
 ]
 
@@ -55,6 +57,39 @@ def disk_full_error(path: str | os.PathLike[str], needed: int | None = None) -> 
         [f"at least {_mib(needed)} needed"] if needed else [])  # fmt: skip
     detail = f" ({', '.join(facts)})" if facts else ""
     return OSError(errno.ENOSPC, f"no space left on the device{detail}; nothing was written", str(path))
+
+
+def is_named_disk_full(exc: BaseException) -> bool:
+    """Whether ``exc`` is already a :func:`disk_full_error` (naming its path and the space)."""
+    return is_disk_full(exc) and bool(getattr(exc, "filename", None)) and "no space left on the device" in str(exc)
+
+
+def no_space_left(path: Path) -> bool:
+    """Whether the file system that holds (or would hold) ``path`` has less than 1 MiB free."""
+    while not path.exists() and path != path.parent:
+        path = path.parent
+    try:
+        return shutil.disk_usage(path).free < 2**20
+    except OSError:
+        return False
+
+
+@contextmanager
+def full_disk_named(path: str | os.PathLike[str], staged: str | os.PathLike[str] | None = None) -> Iterator[None]:
+    """Inside the block, a full disk is the one-line :func:`disk_full_error` naming ``path`` (``staged``: the
+    folder whose size says what was written so far). Covers a bare ENOSPC without a path and the errors of
+    writers that hide it (a ``RuntimeError`` from a library's writer thread while the file system of ``path``
+    has no space left)."""
+    try:
+        yield
+    except (OSError, RuntimeError) as exc:
+        folder = Path(staged) if staged is not None else None
+        name = getattr(exc, "filename", None)
+        inner = is_named_disk_full(exc) and folder is not None and Path(str(name)).is_relative_to(folder)
+        if (is_named_disk_full(exc) and not inner) or not (is_disk_full(exc) or no_space_left(Path(path))):
+            raise
+        size = sum(p.stat().st_size for p in folder.rglob("*") if p.is_file()) if folder and folder.is_dir() else 0
+        raise disk_full_error(path, size or None) from None
 
 
 def new_file_mode() -> int:

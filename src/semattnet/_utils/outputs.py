@@ -1,5 +1,8 @@
 """The output policy every command (and the library functions behind them) follows.
 
+0. The one rule, :func:`check_outputs`: no output is, contains or lies inside an input, nor another output
+   of the same run (a folder the run writes named files into may hold its other outputs); ``overwrite``
+   replaces only what is recognisably an earlier output of ours (:data:`KINDS`), never a user's folder or file.
 1. Nothing existing is replaced unless ``overwrite=True`` (checked before any work).
 2. Outputs never go into an input: an output folder equal to or inside an input folder (the
    folder of an input file counts) and an output file that resolves to an input are refused.
@@ -19,18 +22,23 @@ import json
 import os
 import shutil
 import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 from semattnet._errors import SemAttNetError
-from semattnet._utils.atomic import atomic_path, disk_full_error, fsync_dir, is_disk_full
+from semattnet._utils.atomic import atomic_path, disk_full_error, fsync_dir, is_disk_full, is_named_disk_full
 
 __all__ = [
+    "BAG_MARKER",
+    "KINDS",
     "STAGE_PREFIX",
     "TREE_MARKER",
+    "Output",
     "OutputError",
     "check_no_input_overlap",
+    "check_outputs",
     "clean_stale_stages",
     "incomplete_tree",
     "mark_tree",
@@ -45,6 +53,9 @@ STAGE_PREFIX = ".semattnet-stage."
 
 #: The completion marker of a generated tree (JSON: generator, complete, resume).
 TREE_MARKER = ".semattnet-tree.json"
+
+#: The marker file inside a ROS 2 bag folder semattnet wrote: what lets ``--overwrite`` replace it.
+BAG_MARKER = ".semattnet-bag"
 
 
 class OutputError(SemAttNetError):
@@ -146,7 +157,7 @@ def stage_folder(out: Path) -> Iterator[Path]:
     try:
         yield stage
     except OSError as exc:
-        if not is_disk_full(exc) or exc.filename == str(out):
+        if not is_disk_full(exc) or exc.filename == str(out) or is_named_disk_full(exc):
             raise
         staged = sum(p.stat().st_size for p in stage.rglob("*") if p.is_file())
         raise disk_full_error(out, staged + 1) from None
@@ -213,3 +224,129 @@ def incomplete_tree(root: str | os.PathLike[str]) -> str | None:
         generator, resume = "?", ""
     how = f"; to finish it: {resume}" if resume else "; generate it again"
     return f"{root}: incomplete tree (the {generator} that wrote it was interrupted; {marker} is not complete){how}"
+
+
+def _head(path: Path, n: int = 16) -> bytes:
+    try:
+        with open(path, "rb") as f:
+            return f.read(n)
+    except OSError:
+        return b""
+
+
+def _is_safetensors(path: Path) -> bool:
+    head = _head(path, 9)
+    return len(head) == 9 and int.from_bytes(head[:8], "little") < path.stat().st_size and head[8:] == b"{"
+
+
+def _is_bag(path: Path) -> bool:
+    """A ROS 2 bag folder carrying :data:`BAG_MARKER`, or a ROS 1 ``.bag`` file."""
+    if path.is_dir():
+        return (path / BAG_MARKER).is_file() and (path / "metadata.yaml").is_file()
+    return _head(path, 13) == b"#ROSBAG V2.0\n"
+
+
+def _is_file(magic: bytes) -> Callable[[Path], bool]:
+    return lambda p: p.is_file() and _head(p, len(magic)) == magic
+
+
+#: What an existing output must be for ``overwrite`` to replace it, by kind: (what it is, the test).
+#: ``folder``: a folder the run writes named files into (it may exist; the files are outputs of their own);
+#: ``file``: one of those files (any regular file of that name, never a folder).
+KINDS: dict[str, tuple[str, Callable[[Path], bool]]] = {
+    "folder": ("a folder", Path.is_dir),
+    "file": ("a regular file", Path.is_file),
+    "tree": (f"a tree semattnet generated ({TREE_MARKER} in it)", lambda p: (p / TREE_MARKER).is_file()),
+    "bag": (f"a bag semattnet wrote ({BAG_MARKER} in it, or a ROS 1 .bag file)", _is_bag),
+    "json": ("a JSON file", lambda p: p.is_file() and _head(p, 64).lstrip()[:1] in (b"{", b"[")),
+    "rrd": ("a Rerun recording", _is_file(b"RRF")),
+    "ply": ("a PLY file", _is_file(b"ply")),
+    "png": ("a PNG image", _is_file(b"\x89PNG")),
+    "zip": ("a zip archive", _is_file(b"PK\x03\x04")),
+    "safetensors": ("a safetensors file", lambda p: p.is_file() and _is_safetensors(p)),
+}
+
+
+@dataclass(frozen=True)
+class Output:
+    """One output of a run for :func:`check_outputs`: the option that names it (``--bag-out``), its path and
+    its kind (a key of :data:`KINDS`: what an existing one must be for ``overwrite`` to replace it)."""
+
+    option: str
+    path: str | os.PathLike[str]
+    kind: str = "file"
+
+
+def _named(option: str, path: object) -> str:
+    return f"{option} {path}" if option else str(path)
+
+
+def check_outputs(inputs: Iterable[tuple[str, str | os.PathLike[str] | None]], outputs: Iterable[Output],
+                  overwrite: bool = False) -> None:  # fmt: skip
+    """The one output rule, checked before any work. ``inputs``: (option, path) pairs (None paths ignored).
+
+    * No output is an input (by resolved path or, hard links, by inode), lies inside an input, or contains one.
+    * No two outputs are one path, and none lies inside another (only inside a ``folder`` output).
+    * An existing output is refused unless ``overwrite``; with it, only one that is recognisably an earlier
+      output of ours (:data:`KINDS`): never a user's folder or file.
+
+    Raises:
+        OutputError: naming the output's option and path and the input or output it collides with.
+        FileExistsError: an output exists and not ``overwrite``.
+    """
+    outs = [(o, _resolve(o.path)) for o in outputs]
+    ins: dict[Path | tuple[int, int], tuple[str, Path]] = {}
+    for option, p in inputs:
+        if p is not None:
+            ins[_resolve(p)] = (option, Path(p))
+            if (ino := _inode(Path(p))) is not None and not Path(p).is_dir():
+                ins[ino] = (option, Path(p))
+    by_path: dict[Path, Output] = {}
+    for o, r in outs:
+        _against_inputs(o, r, ins)
+        if r in by_path:
+            raise OutputError(f"{_named(o.option, o.path)} and {_named(by_path[r].option, by_path[r].path)} are "
+                              "one path; choose distinct paths")  # fmt: skip
+        by_path[r] = o
+    for o, r in outs:
+        outer = next((by_path[p] for p in r.parents if p in by_path and by_path[p].kind != "folder"), None)
+        if outer is not None:
+            what = "the output folder" if o.kind == "folder" else "the output"
+            raise OutputError(f"{_named(outer.option, outer.path)} would replace {what} {_named(o.option, o.path)} "
+                              "(it holds it); choose distinct paths")  # fmt: skip
+    for (option, given), r in ((v, k) for k, v in ins.items() if isinstance(k, Path)):
+        holder = next((by_path[p] for p in r.parents if p in by_path), None)
+        if holder is not None:
+            raise OutputError(f"{_named(holder.option, holder.path)} holds the input {_named(option, given)}; "
+                              "choose an output path that holds no input")  # fmt: skip
+    _check_replaceable([o for o, _ in outs], overwrite)
+
+
+def _against_inputs(o: Output, r: Path, ins: dict[Path | tuple[int, int], tuple[str, Path]]) -> None:
+    """``o`` (resolved ``r``) is no input and lies inside none."""
+    ino = _inode(r)
+    hit = ins.get(r) or (ins.get(ino) if ino is not None and not r.is_dir() else None)
+    if hit is not None:
+        what = "the input folder" if r.is_dir() else "the input"
+        raise OutputError(f"{_named(o.option, o.path)} would replace {what} {_named(*hit)}; choose another path")
+    inside = next((ins[p] for p in r.parents if p in ins), None)
+    if inside is not None:
+        raise OutputError(f"{_named(o.option, o.path)} lies inside the input folder {_named(*inside)}; "
+                          "choose a path outside the inputs")  # fmt: skip
+
+
+def _check_replaceable(outs: list[Output], overwrite: bool) -> None:
+    """Existing outputs: none without ``overwrite``; with it, only those of their kind (a folder stays)."""
+    for o in outs:
+        p = Path(o.path)
+        if o.kind == "folder" and p.exists() and not p.is_dir():
+            raise OutputError(f"{_named(o.option, p)} is a file, not a folder; choose a folder path")
+    existing = [o for o in outs if o.kind != "folder" and (Path(o.path).exists() or Path(o.path).is_symlink())]
+    refuse_existing([o.path for o in existing], overwrite)
+    for o in existing:
+        what, test = KINDS[o.kind]
+        p = Path(o.path)
+        if not test(p) and not (p.is_dir() and not p.is_symlink() and not any(p.iterdir())):  # empty: nothing lost
+            raise OutputError(f"{_named(o.option, p)} exists and is not {what}; --overwrite replaces only an "
+                              "earlier output of semattnet, never a user's folder or file: move it or choose "
+                              "another path")  # fmt: skip

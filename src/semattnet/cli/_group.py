@@ -63,6 +63,26 @@ def bug_report_line(exc: BaseException) -> str:
     )
 
 
+#: The parameters that name a command's output, in the order a full disk without a path is blamed on them.
+_OUTPUT_PARAMS = ("out", "out_dir", "bag_out", "rerun_file", "json_path")
+
+
+class _Command(click.Command):
+    """A command whose full disk without a path (a plain write that filled it, a library's writer) is the
+    one-line :func:`~semattnet._utils.atomic.disk_full_error` naming the command's output (``--out``, ...)."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        from semattnet._utils.atomic import disk_full_error, is_disk_full
+
+        try:
+            return super().invoke(ctx)
+        except OSError as exc:
+            where = next((ctx.params[k] for k in _OUTPUT_PARAMS if ctx.params.get(k) is not None), None)
+            if not is_disk_full(exc) or getattr(exc, "filename", None) or where is None:
+                raise
+            raise disk_full_error(where) from None
+
+
 class _Group(click.Group):
     """Error handling for every command.
 
@@ -72,6 +92,9 @@ class _Group(click.Group):
     CLI errors (exit status 1). Any other exception is a bug: its traceback is printed, then a line
     saying so and where to report it (exit status :data:`BUG_EXIT_CODE`).
     """
+
+    command_class = _Command
+    group_class = type  # subgroups (``data``, ``weights``) are of this class too
 
     def invoke(self, ctx: click.Context) -> Any:
         try:

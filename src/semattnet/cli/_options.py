@@ -221,6 +221,12 @@ def weights_option(f: Any) -> Any:
     return option(f)
 
 
+def weights_input(weights: str | None) -> tuple[str, Path | None]:
+    """``--weights`` as an input of the output rule (``semattnet._utils.outputs.check_outputs``): its path when
+    it names a local file or folder (a name or URL reads a cached download, which no option can name)."""
+    return "--weights", Path(weights) if weights is not None and Path(weights).exists() else None
+
+
 def model_from_options(checkpoint: Path | None, weights: str | None, device: str = "cpu") -> torch.nn.Module:
     """The model of ``--weights`` (or, from older callers, ``checkpoint``), through the one builder."""
     from semattnet.weights import from_pretrained

@@ -17,6 +17,7 @@ from semattnet.cli._options import (
     WIDTH,
     model_from_options,
     parse_size,
+    weights_input,
     weights_option,
 )
 from semattnet.data.synthetic.scenes import SCENE_STYLES
@@ -135,10 +136,10 @@ def bench(size: str, train_size: str, device: str, repeats: int, width: float, p
           json_path: Path | None, overwrite: bool) -> None:  # fmt: skip
     """Latency, throughput and peak memory against the naive reference, in one process."""
     from semattnet._utils.device import resolve_device
-    from semattnet._utils.outputs import refuse_existing, write_text
+    from semattnet._utils.outputs import Output, check_outputs, write_text
     from semattnet.apps.benchmark import run_benchmark
 
-    refuse_existing([json_path] if json_path else [], overwrite)
+    check_outputs([weights_input(weights)], [Output("--json", json_path, "json")] if json_path else [], overwrite)
     model = model_from_options(None, weights) if weights is not None else None  # default: random weights
     chosen = tuple(p.strip() for p in parts.split(",") if p.strip())
     unknown = set(chosen) - {"propagation", "backbone", "full", "fast", "backends", "train"}

@@ -63,12 +63,12 @@ def convert(paths: tuple[Path, ...], weights: str | None, overwrite: bool) -> No
     src, dst = (None, paths[0]) if weights is not None else paths
     if src is not None and not src.is_file():
         raise click.BadParameter(f"{src}: no such file", param_hint="SRC")
-    from semattnet._utils.outputs import check_no_input_overlap
+    from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs
 
     source = _source(src, weights)  # --weights NAME|URL resolves to a (cached) file too
     check_no_input_overlap([source], out_files=[dst])
-    if dst.exists() and not overwrite:
-        raise click.ClickException(f"{dst} exists; pass --overwrite to replace it")
+    check_outputs([("SRC" if src is not None else "--weights", source)], [Output("DST", dst, "safetensors")],
+                  overwrite)  # fmt: skip
     ckpt = load_checkpoint(source)
     save_safetensors(ckpt, dst)
     click.echo(f"wrote {dst} ({len(ckpt.state_dict)} tensors, {dst.stat().st_size / 2**20:.1f} MiB)")

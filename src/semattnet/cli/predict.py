@@ -18,6 +18,7 @@ from semattnet.cli._options import (
     check_precision_options,
     precision_options,
     require_with,
+    weights_input,
     weights_option,
 )
 
@@ -408,7 +409,7 @@ def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
     with process_group():
         source = _source(*inputs, p, (p["dataset"], p["data_root"], p["split"]))
         plan = check_frames(source, sinks, out, overwrite=p["overwrite"], on_error=p["on_error"], resume=resuming,
-                            run=_identity(p))  # every input and output, before the model  # fmt: skip
+                            run=_identity(p), inputs=[weights_input(p["weights"])[1]])  # before the model  # fmt: skip
         if plan.journal.kept:
             click.echo(f"{out}: resuming: {len(plan.journal.kept)} of {len(source.names)} frame(s) already done")
         completer = _completer(p["method"], None, p["weights"], p["device"], p["amp"], p["backend"], p["precision"],

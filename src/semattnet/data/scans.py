@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from semattnet._errors import DataError
-from semattnet._utils.outputs import check_no_input_overlap
+from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs
 from semattnet.data.io import MAX_DEPTH_M, write_depth
 from semattnet.geometry import load_rig, project_scan, read_points
 from semattnet.geometry.scan import DEFAULT_SCAN_PERIOD
@@ -59,14 +59,15 @@ def project_scan_file(
     and write ``out`` as a KITTI 16-bit depth PNG (depth * 256, 0 = none).
 
     Raises:
-        OutputError: ``out`` is one of the input files (even with ``overwrite``).
+        OutputError: ``out`` is one of the input files or inside an input folder (even with ``overwrite``), or
+            exists and is not a PNG image.
         FileExistsError: ``out`` exists and ``overwrite`` is False (checked before reading anything).
         DataError: bad scan, calibration or OXTS file; the message names the file.
     """
     out = Path(out)
+    given = [("--points", scan), ("--rig", rig), ("--deskew-oxts", deskew_oxts), ("--calib-dir", calib_dir)]
+    check_outputs(given, [Output("--out", out, "png")], overwrite)
     check_no_input_overlap([scan, rig, deskew_oxts, calib_dir], out_files=[out])
-    if out.exists() and not overwrite:
-        raise FileExistsError(f"{out} exists; refusing to overwrite (pass --overwrite)")
     calib = load_rig(calib_dir, camera, rig, K, T, image_size)
     points = read_points(scan)
     depth = project_scan(points, calib, deskew_oxts, scan_period, name=str(scan))

@@ -19,7 +19,7 @@ from torch.utils.data import DataLoader, Subset
 from semattnet._errors import InputError
 from semattnet._utils import distributed as dist_utils
 from semattnet._utils.device import autocast
-from semattnet._utils.outputs import check_no_input_overlap, write_text
+from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs, write_text
 from semattnet._utils.progress import progress as progress_bar
 from semattnet.data.datasets import get_dataset
 from semattnet.data.frames import Frame
@@ -159,8 +159,7 @@ def score_folders_to_json(pred_dir: str | Path, gt_dir: str | Path, json_path: s
     file, never replacing an existing file unless ``overwrite`` (both checked before scoring)."""
     if json_path is not None:
         check_no_input_overlap([pred_dir, gt_dir], out_files=[json_path])
-        if Path(json_path).exists() and not overwrite:
-            raise FileExistsError(f"{json_path} exists; pass --overwrite to replace it")
+        check_outputs([("PRED", pred_dir), ("GT", gt_dir)], [Output("--json", json_path, "json")], overwrite)
     metrics = score_folders(pred_dir, gt_dir, fill_holes=fill_holes, min_gt=min_gt)
     if json_path is not None:
         write_text(json_path, json.dumps(metrics.compute(), indent=2) + "\n", overwrite=overwrite)

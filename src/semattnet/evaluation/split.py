@@ -7,7 +7,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from semattnet._utils.outputs import OutputError, check_no_input_overlap
+from semattnet._utils.outputs import Output, OutputError, check_no_input_overlap, check_outputs
 from semattnet.data.kitti import KittiDepthCompletion
 from semattnet.data.transforms import EvalTransform
 
@@ -34,6 +34,7 @@ def prepare_out(out: Path, overwrite: bool, inputs: Sequence[Any] = ()) -> Path:
     """Check ``out``: not inside an input; a non-empty folder needs ``overwrite`` (which replaces
     only the files the evaluation writes). Creates it."""
     check_no_input_overlap(inputs, out_dir=out)
+    check_outputs([("", p) for p in inputs], [Output("--out", out, "folder")], overwrite)
     if out.is_dir() and any(out.iterdir()) and not overwrite:
         raise FileExistsError(f"{out} is not empty; pass --overwrite to replace its contents")
     out.mkdir(parents=True, exist_ok=True)

@@ -14,7 +14,7 @@ import numpy as np
 
 from semattnet._errors import SemAttNetError
 from semattnet._utils.atomic import atomic_path, fsync_dir
-from semattnet._utils.outputs import check_no_input_overlap
+from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs, clean_stale_stages
 from semattnet._utils.progress import progress as progress_bar
 from semattnet.data.io import clamp_for_png, read_depth, write_depth
 from semattnet.data.kitti import KittiDepthCompletion
@@ -62,16 +62,6 @@ def _check_replaceable(out: Path, zip_path: Path, expected: dict[str, tuple[int,
                               "move them or choose another --out")  # fmt: skip
 
 
-def _clean_stale_stages(out: Path) -> None:
-    """Remove the temporary folders (``.OUT.pPID.*``) of killed submissions."""
-    from semattnet._utils.atomic import pid_alive
-
-    for entry in out.parent.glob(f".{out.name}.p*"):
-        pid = entry.name[len(out.name) + 2 :].split(".")[0]
-        if entry.is_dir() and pid.isdigit() and not pid_alive(int(pid)):
-            shutil.rmtree(entry, ignore_errors=True)
-
-
 def _write_checked(predictions: Iterable[tuple[str, np.ndarray]], tmp: Path,
                    expected: dict[str, tuple[int, int]]) -> None:  # fmt: skip
     """Write the predictions into ``tmp`` and check count, names, sizes and encoding."""
@@ -109,7 +99,7 @@ def write_submission_files(
     zip_path = out.with_suffix(".zip")
     _check_replaceable(out, zip_path, expected, overwrite)
     out.parent.mkdir(parents=True, exist_ok=True)
-    _clean_stale_stages(out)
+    clean_stale_stages(out.parent, f".{out.name}.p")  # the stage folders of killed submissions
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.p{os.getpid()}.", dir=out.parent))
     try:
         _write_checked(predictions, tmp, expected)
@@ -143,6 +133,9 @@ def write_submission(
     """
     check_no_input_overlap([data, semantic_root, checkpoint], out_dir=out)
     check_no_input_overlap([data, semantic_root, checkpoint], out_files=[Path(out).with_suffix(".zip")])
+    check_outputs([("--data", data), ("--semantic-root", semantic_root), ("--weights", checkpoint)],
+                  [Output("--out", out, "folder"), Output("--out", Path(out).with_suffix(".zip"), "zip")],
+                  overwrite)  # fmt: skip
     ds = KittiDepthCompletion(data, "test", semantic_root=semantic_root)
     if expected_frames is not None and len(ds) != expected_frames:
         raise SubmissionError(f"{data}: the test split has {len(ds)} frames, KITTI expects {expected_frames}")

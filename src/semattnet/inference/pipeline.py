@@ -46,7 +46,7 @@ import numpy as np
 from semattnet._errors import DataError, InputError
 from semattnet._utils.atomic import fsync_dir
 from semattnet._utils.distributed import first_error, is_main, rank, world_size
-from semattnet._utils.outputs import OutputError, check_no_input_overlap, refuse_existing, stage_folder
+from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs, stage_folder
 from semattnet.data.frames import Frame, FrameSource
 from semattnet.data.io import encode_depth, read_depth
 from semattnet.data.sources.semantic import SemanticMaps
@@ -87,32 +87,15 @@ class Completer(Protocol):
 
 def _check_outputs(source: FrameSource, sinks: Sequence[Sink], out: Path, overwrite: bool,
                    inputs: Sequence[PathLike | None]) -> None:  # fmt: skip
-    """No output in or over an input, the output folder not the folder of an input file, none existing
-    unless ``overwrite``."""
+    """The one output rule (:func:`~semattnet._utils.outputs.check_outputs`) over every output of the run: the
+    folder, each frame's files and the run outputs (a bag, a recording), before the first frame."""
     runs = [s for s in sinks if isinstance(s, RunSink)]
-    outputs = [out / p for p in output_files(source.names, sinks)] + [out / f for s in runs for f in s.files()]
-    targets = [t for s in runs for t in s.targets()]
+    names = [*output_files(source.names, sinks), *(f for s in runs for f in s.files())]
+    targets = [Output(s.option, t, s.kind) for s in runs for t in s.targets()]
     given = [*source.inputs(), *(Path(p) for p in inputs if p is not None)]
-    check_no_input_overlap(given, out_dir=out, out_files=[*outputs, *targets])
-    if out.resolve() in {p.resolve().parent for p in given if p.is_file()}:
-        raise OutputError(f"output folder {out} holds input files; choose an --out outside the inputs")
-    _check_targets(targets, given, out)
-    refuse_existing([*outputs, *targets], overwrite)
-
-
-def _check_targets(targets: Sequence[Path], given: Sequence[Path], out: Path) -> None:
-    """A run output (a bag, a recording) is not an input, nor inside an input folder, nor the output folder
-    or one above it, and no two are the same path."""
-    dirs = [p.resolve() for p in given if p.is_dir()]
-    for t in targets:
-        r = t.resolve()
-        inside = next((d for d in dirs if r == d or r.is_relative_to(d)), None)
-        if inside is not None:
-            raise OutputError(f"output {t} is the input {inside} or inside it; choose a path outside the inputs")
-        if out.resolve().is_relative_to(r):
-            raise OutputError(f"output {t} would replace the output folder {out}; choose another path")
-    if len({t.resolve() for t in targets}) < len(targets):
-        raise OutputError(f"two outputs at one path ({', '.join(map(str, targets))}); choose distinct paths")
+    outputs = [Output("--out", out, "folder"), *(Output("--out", out / n) for n in names), *targets]
+    check_outputs([("", p) for p in given], outputs, overwrite)
+    check_no_input_overlap(given, out_files=[o.path for o in outputs[1:]])  # and hard links into input folders
 
 
 def _policy(on_error: str | None, frames: int) -> str:

@@ -273,6 +273,9 @@ class RunSink(Sink):
     earlier run (their stored depth, in their place), so that its output covers every frame."""
 
     replays: ClassVar[bool] = True
+    #: The option that names ``targets()`` and what they are (a kind of :data:`semattnet._utils.outputs.KINDS`).
+    option: ClassVar[str] = "--out"
+    kind: ClassVar[str] = "file"
 
     def path(self, name: str) -> str | None:
         return None

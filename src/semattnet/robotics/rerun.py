@@ -184,7 +184,7 @@ class RerunLogger:
         if rec is None:
             return
         try:
-            rec.flush()
+            _flush(rec, self._tmp)
             rec.disconnect()
             if ok and self._tmp is not None and self.path is not None:
                 os.chmod(self._tmp, new_file_mode())
@@ -196,6 +196,24 @@ class RerunLogger:
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:  # fmt: skip
         self._finish(ok=exc_type is None)
+
+
+def _flush(rec: Any, file: Path | None) -> None:
+    """``rec.flush()``, waited for in steps: Rerun's file writer that died on a full disk never finishes a flush
+    (it would wait forever), so a timed-out step on a file system with no space left is a full disk."""
+    from semattnet._utils.atomic import no_space_left
+
+    while True:
+        try:
+            rec.flush(timeout_sec=5.0)
+            return
+        except RuntimeError as exc:
+            if "timed out" not in str(exc):
+                raise
+            if file is not None and no_space_left(file):
+                import errno
+
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC)) from None
 
 
 def _port(host: str, port: int, what: str) -> int:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -59,6 +59,14 @@ class _StagedTarget(RunSink):
         self._dir = Path(tempfile.mkdtemp(prefix=f".{target.name}.semattnet-stage.{os.getpid()}.", dir=target.parent))
         return self._dir / target.name
 
+    def _full_disk(self) -> Any:
+        """A full disk while the output is written: one line naming the target and the space."""
+        from contextlib import nullcontext
+
+        from semattnet._utils.atomic import full_disk_named
+
+        return nullcontext() if self.target is None else full_disk_named(self.target, getattr(self, "_dir", None))
+
     def commit(self) -> None:
         from semattnet._utils.atomic import fsync_dir
         from semattnet._utils.outputs import refuse_existing
@@ -91,6 +99,8 @@ class BagSink(_StagedTarget):
     ``camera``). ``uncertainty``: also the stored uncertainty as ``PREFIX/uncertainty`` ``32FC1`` (metres,
     NaN where none); ``max_uncertainty``: the cloud leaves out the pixels above it (the images stay whole)."""
 
+    option: ClassVar[str] = "--bag-out"
+    kind: ClassVar[str] = "bag"
     target: Path | None = Path("prediction_bag")
     fmt: str | None = None
     prefix: str = "/semattnet"
@@ -102,8 +112,9 @@ class BagSink(_StagedTarget):
     def open(self, overwrite: bool = False) -> None:
         from semattnet.robotics.bags import BagWriter
 
-        self._writer = BagWriter(self._begin(overwrite), fmt=self.fmt, prefix=self.prefix,
-                                 max_depth=self.max_depth).open()  # fmt: skip
+        path = self._begin(overwrite)
+        with self._full_disk():
+            self._writer = BagWriter(path, fmt=self.fmt, prefix=self.prefix, max_depth=self.max_depth).open()
 
     def write(self, stage: Path, pred: Prediction) -> None:
         frame = pred.frame
@@ -113,20 +124,26 @@ class BagSink(_StagedTarget):
         frame_id = frame.meta.get("frame_id") or info.frame_id or "camera"
         depth = np.where(pred.stored > 0, pred.stored, np.nan).astype(np.float32)  # REP 118: holes NaN
         unc = _stored_uncertainty(pred) if self.uncertainty else None
-        self._writer.write(stamp_ns(frame, self._count), frame_id, depth, info, rgb=frame.rgb, K=frame.K,
-                           uncertainty=unc, keep=pred.keep(self.max_uncertainty))  # fmt: skip
+        with self._full_disk():
+            self._writer.write(stamp_ns(frame, self._count), frame_id, depth, info, rgb=frame.rgb, K=frame.K,
+                               uncertainty=unc, keep=pred.keep(self.max_uncertainty))  # fmt: skip
         self._count += 1
 
     def finish(self, stage: Path) -> None:
         writer, self._writer = self._writer, None
         if writer is not None:
-            writer.close()  # the bag is complete in the hidden folder
+            with self._full_disk():
+                writer.close()  # the bag is complete in the hidden folder
 
     def abort(self) -> None:
         writer, self._writer = getattr(self, "_writer", None), None
-        if writer is not None:  # still open: BagWriter removes its stage
-            writer.__exit__(RuntimeError, RuntimeError("aborted"), None)
-        super().abort()
+        try:
+            if writer is not None:  # still open: BagWriter removes its stage
+                writer.__exit__(RuntimeError, RuntimeError("aborted"), None)
+        except Exception:  # closing a bag that failed (a full disk) fails again: the run's error stands
+            pass
+        finally:
+            super().abort()
 
 
 def _stored_uncertainty(pred: Prediction) -> np.ndarray:
@@ -152,6 +169,8 @@ class RerunSink(_StagedTarget):
     map, LiDAR points and completed cloud (:class:`semattnet.robotics.bags.RerunLogger`) at the frame's sensor time;
     ``uncertainty``: the stored uncertainty too; ``max_uncertainty``: the cloud leaves out the pixels above it."""
 
+    option: ClassVar[str] = "--rerun"
+    kind: ClassVar[str] = "rrd"
     target: Path | None = None
     spawn: bool = False
     max_depth: float | None = None
@@ -169,7 +188,8 @@ class RerunSink(_StagedTarget):
 
         path = self._begin(overwrite) if self.target is not None else None
         self._count = 0
-        self._logger = RerunLogger(path, spawn=self.spawn, max_depth=self.max_depth, serve=self.serve)
+        with self._full_disk():
+            self._logger = RerunLogger(path, spawn=self.spawn, max_depth=self.max_depth, serve=self.serve)
         if self._logger.url is not None and self.log is not None:
             self.log(f"Rerun web viewer: {self._logger.url}")
 
@@ -178,14 +198,17 @@ class RerunSink(_StagedTarget):
         if frame.K is None:
             raise InputError(f"{frame.name}: the Rerun recording needs the frame's intrinsics K, none given")
         T = getattr(frame.calib, "T_cam_lidar", None)
-        self._logger.log_frame(stamp_ns(frame, self._count), frame.rgb, frame.K, np.eye(4) if T is None else T,
-                               sparse=frame.sparse, depth=pred.stored, semantic=frame.semantic,
-                               points=frame.points, uncertainty=_stored_uncertainty(pred) if self.uncertainty else None,
-                               keep=pred.keep(self.max_uncertainty))  # fmt: skip
+        unc = _stored_uncertainty(pred) if self.uncertainty else None
+        with self._full_disk():
+            self._logger.log_frame(stamp_ns(frame, self._count), frame.rgb, frame.K, np.eye(4) if T is None else T,
+                                   sparse=frame.sparse, depth=pred.stored, semantic=frame.semantic,
+                                   points=frame.points, uncertainty=unc,
+                                   keep=pred.keep(self.max_uncertainty))  # fmt: skip
         self._count += 1
 
     def finish(self, stage: Path) -> None:
-        self._logger.close()
+        with self._full_disk():
+            self._logger.close()
 
     def commit(self) -> None:
         if self.target is not None:
@@ -193,6 +216,10 @@ class RerunSink(_StagedTarget):
 
     def abort(self) -> None:
         logger, self._logger = getattr(self, "_logger", None), None
-        if logger is not None:
-            logger.__exit__(RuntimeError, RuntimeError("aborted"), None)
-        super().abort()
+        try:
+            if logger is not None:
+                logger.__exit__(RuntimeError, RuntimeError("aborted"), None)
+        except Exception:  # a recording that failed (a full disk) fails again on close
+            pass
+        finally:
+            super().abort()

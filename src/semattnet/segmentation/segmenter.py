@@ -40,7 +40,7 @@ import torch.nn.functional as F
 from semattnet._errors import DataError, InputError
 from semattnet._utils.device import resolve_device
 from semattnet._utils.extras import require
-from semattnet._utils.outputs import check_no_input_overlap
+from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs
 from semattnet._utils.progress import progress as progress_bar
 from semattnet.data.io import read_image, write_image
 from semattnet.data.palette import IGNORE_ID, NUM_CLASSES, ids_to_colors, label_ids_to_train_ids
@@ -311,6 +311,9 @@ def segment_folder(
         raise DataError(f"{images}: no {'/'.join(IMAGE_SUFFIXES)} images found")
     targets = [out / f.relative_to(images).with_suffix(".png") for f in files]
     check_no_input_overlap(files, out_files=targets)  # --out == --images would replace PNG images
+    model = [("--model", Path(segmenter.name))] if Path(segmenter.name).is_file() else []
+    replaced = [Output("--out", t, "png") for t in targets if overwrite and t.exists()]  # only maps of ours
+    check_outputs([("--images", images), *model], [Output("--out", out, "folder"), *replaced], overwrite)
     todo = [(f, t) for f, t in zip(files, targets, strict=True) if overwrite or not t.exists()]
     written = 0
     with progress_bar(total=len(files), initial=len(files) - len(todo), desc="segmenting", unit="image",

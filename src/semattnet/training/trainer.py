@@ -453,10 +453,13 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
     Without ``resume`` the run folder must not hold a run yet (``overwrite`` starts over, see
     :func:`prepare_run_folder`); with ``resume`` the run continues exactly from ``last.pt``.
     """
-    from semattnet._utils.outputs import check_no_input_overlap
+    from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs
 
     # the run folder is never (inside) the data, nor is the --init checkpoint one of the run's files
     check_no_input_overlap([cfg.data or None, cfg.raw_root, cfg.semantic_root], out_dir=cfg.out)
+    init = cfg.init if cfg.init and Path(cfg.init).exists() else None
+    check_outputs([("--data", cfg.data or None), ("--raw-root", cfg.raw_root), ("--semantic-root", cfg.semantic_root),
+                   ("--init", init)], [Output("--out", cfg.out, "folder")])  # fmt: skip
     check_no_input_overlap([cfg.init if cfg.init and Path(cfg.init).exists() else None],
                            out_files=[Path(cfg.out) / f for f in RUN_FILES])  # fmt: skip
     if not resume:

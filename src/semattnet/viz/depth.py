@@ -61,7 +61,7 @@ def write_depth_pictures(
     with ``overwrite``; every input is read before anything is written and the pictures appear
     together (staged), so a corrupt file or a kill leaves ``out`` unchanged.
     """
-    from semattnet._utils.outputs import check_no_input_overlap, refuse_existing, staged_outputs
+    from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs, staged_outputs
     from semattnet.data.io import DataError, read_depth, write_image
 
     pred, out = Path(pred), Path(out)
@@ -72,7 +72,8 @@ def write_depth_pictures(
         raise InputError(f"vmax must be a finite positive depth in metres, got {vmax}")
     names = [f"{f.stem}{s}" for f in files for s in (("_color.png", "_error.png") if gt else ("_color.png",))]
     check_no_input_overlap([pred, gt], out_dir=out, out_files=[out / n for n in names])
-    refuse_existing([out / n for n in names], overwrite)
+    pictures = [Output("--out", out / n, "png") for n in names]  # --overwrite replaces pictures, nothing else
+    check_outputs([("--pred", pred), ("--gt", gt)], [Output("--out", out, "folder"), *pictures], overwrite)
 
     def read(f: Path) -> tuple[np.ndarray, np.ndarray | None]:
         return read_depth(f), None if gt is None else read_depth(gt if Path(gt).is_file() else Path(gt) / f.name)

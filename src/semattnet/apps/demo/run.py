@@ -17,6 +17,7 @@ import torch
 
 from semattnet._utils.device import resolve_device
 from semattnet._utils.download import sha256_file
+from semattnet._utils.outputs import mark_tree
 from semattnet.apps.demo import figures as figs
 from semattnet.apps.demo import reference as ref
 from semattnet.apps.demo import uncertainty as unc
@@ -114,6 +115,7 @@ def run_demo(
     md, html = write_report(out, table, labels, [*figures, unc_figure], setup | {"verdicts": setup["verdicts"] + notes},
                             links=links)  # fmt: skip
     _summarise(metrics, order, seconds, html, log)
+    mark_tree(out, "demo", True)
     return DemoResult(out, md, html, metrics, trained.steps, seconds, viewer, results)
 
 
@@ -182,17 +184,23 @@ def train_reference_run(
     out = Path(out_dir)
     make_empty(out, overwrite)
     recipes = [dataclasses.replace(ref.REFERENCE_RECIPE, seed=seed) for seed in seeds]
-    return [ref.train_reference(out / f"seed{r.seed}", ref.reference_path(r.seed, out), r,
-                                device=resolve_device(device), log=log) for r in recipes]  # fmt: skip
+    paths = [ref.train_reference(out / f"seed{r.seed}", ref.reference_path(r.seed, out), r,
+                                 device=resolve_device(device), log=log) for r in recipes]  # fmt: skip
+    mark_tree(out, "demo --train-reference", True)
+    return paths
 
 
 def make_empty(out: Path, overwrite: bool) -> None:
-    """Create ``out``; if it holds files, empty it when ``overwrite``, else refuse."""
+    """Create ``out`` with the demo's marker (:data:`~semattnet._utils.outputs.TREE_MARKER`); if it holds files,
+    empty it when ``overwrite`` and it is an earlier demo's folder (its marker), else refuse."""
+    from semattnet._utils.outputs import Output, check_outputs, mark_tree
+
     if out.exists() and any(out.iterdir()):
         if not overwrite:
             raise FileExistsError(f"{out} is not empty; pass --overwrite to replace it")
+        check_outputs([], [Output("--out", out, "tree")], overwrite)  # never a user's folder
         shutil.rmtree(out)
-    out.mkdir(parents=True, exist_ok=True)
+    mark_tree(out, "demo", False, resume="run the demo again with --overwrite")
 
 
 def _baselines(held: HeldOut) -> dict[str, dict[str, np.ndarray]]:

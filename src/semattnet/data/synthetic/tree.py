@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from semattnet._utils.outputs import incomplete_tree, mark_tree
+from semattnet._utils.outputs import Output, check_outputs, incomplete_tree, mark_tree
 from semattnet.data import layout
 from semattnet.data.io import write_depth as _write_depth
 from semattnet.data.io import write_image as _write_image
@@ -88,6 +88,17 @@ def _job(args: tuple[Path, str, int, int, int, int, bool | None, str]) -> dict[s
     return entry
 
 
+def _check_out(out: Path, overwrite: bool) -> None:
+    """A non-empty ``out`` needs ``overwrite``, and then must be a tree of ours (its marker): never a user's."""
+    if overwrite:
+        check_outputs([], [Output("--out", out, "tree")], overwrite)
+    elif out.exists() and any(out.iterdir()):
+        cut = incomplete_tree(out)
+        if cut is not None:
+            raise FileExistsError(cut)
+        raise FileExistsError(f"{out} is not empty; pass overwrite=True (--overwrite) to write into it")
+
+
 def write_synthetic_kitti(
     out: str | os.PathLike[str],
     frames: int = 100,
@@ -111,15 +122,12 @@ def write_synthetic_kitti(
 
     Raises:
         FileExistsError: ``out`` holds files and ``overwrite`` is not set.
+        OutputError: ``overwrite`` and ``out`` holds files but no tree of ours (no marker).
         InputError: unknown ``style``.
     """
     check_style(style)
     out = Path(out)
-    if out.exists() and any(out.iterdir()) and not overwrite:
-        cut = incomplete_tree(out)
-        if cut is not None:
-            raise FileExistsError(cut)
-        raise FileExistsError(f"{out} is not empty; pass overwrite=True (--overwrite) to write into it")
+    _check_out(out, overwrite)
     height, width = size
     n_eval = max(2, frames // 5) if eval_frames is None else eval_frames
     jobs = []

@@ -64,7 +64,10 @@ def quantized_ir(ov: Any, core: Any, xml: Path, calibration: Calibration, log=No
         subset_size=len(feeds),
         ignored_scope=nncf.IgnoredScope(patterns=list(KEEP_FLOAT), validate=False),
     )
-    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    from semattnet._utils.outputs import clean_stale_stages
+
+    clean_stale_stages(target.parent, f".{target.name}.p")  # what killed quantisations left
+    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.p{os.getpid()}.", dir=target.parent))
     try:
         ov.save_model(quantized, str(staging / "model.xml"), compress_to_fp16=False)
         for part in ("model.xml", "model.bin"):

@@ -182,11 +182,14 @@ def write_kitti_bag(drive_dir: str | os.PathLike[str], out: str | os.PathLike[st
 
     Raises:
         DataError: a missing drive, camera, frame or calibration file (naming it). FileExistsError: ``out`` exists.
+        OutputError: ``out`` is, holds or lies inside the drive or its calibration, or is not a bag we wrote.
     """
-    from semattnet._utils.outputs import check_no_input_overlap
+    from semattnet._utils.outputs import Output, check_outputs
     from semattnet.data.kitti_raw import RawDrive
 
-    check_no_input_overlap([drive_dir, Path(drive_dir).parent], out_files=[out])
+    calib = sorted(Path(drive_dir).parent.glob("calib_*.txt"))  # the drive's calibration, beside it
+    check_outputs([("--drive", drive_dir), *(("calibration", c) for c in calib)], [Output("--out", out, "bag")],
+                  overwrite)  # fmt: skip
     drive = RawDrive(drive_dir, camera)
     names = drive.names_for(frames)
     imu = drive.drive_dir.parent / "calib_imu_to_velo.txt"

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from semattnet._errors import InputError
-from semattnet._utils.atomic import fsync_dir
+from semattnet._utils.atomic import fsync_dir, full_disk_named
 from semattnet._utils.extras import require
 from semattnet.geometry import depth_to_points
 
@@ -53,18 +53,28 @@ def bag_format(path: str | os.PathLike[str], fmt: str | None = None) -> str:
 @contextmanager
 def staged_bag(path: str | os.PathLike[str], overwrite: bool = False) -> Iterator[Path]:
     """Yield a path in a hidden temporary folder beside ``path``; when the block succeeds it is moved to ``path``
-    in one rename (a previous file or folder there is replaced only with ``overwrite``), else removed.
+    in one rename (a previous bag there is replaced only with ``overwrite``, and only a bag we wrote: a ROS 2
+    bag folder carries :data:`~semattnet._utils.outputs.BAG_MARKER`), else removed. Stage folders of killed
+    runs beside ``path`` are removed first.
 
     Raises:
         FileExistsError: ``path`` exists and ``overwrite`` is False (checked first).
+        OutputError: ``path`` exists and is not a bag we wrote.
     """
-    path = Path(path)
-    if path.exists() and not overwrite:
+    from semattnet._utils.outputs import BAG_MARKER, Output, check_outputs, clean_stale_stages
+
+    if Path(path).exists() and not overwrite:
         raise FileExistsError(f"{path} exists; refusing to overwrite (pass --overwrite / overwrite=True)")
+    check_outputs([], [Output("bag", path, "bag")], overwrite)  # only a bag of ours is replaced
+    given, path = path, Path(os.path.abspath(path))  # "." has no name to stage under: its absolute path has
     path.parent.mkdir(parents=True, exist_ok=True)
+    clean_stale_stages(path.parent, f".{path.name}.p")
     stage = Path(tempfile.mkdtemp(prefix=f".{path.name}.p{os.getpid()}.", dir=path.parent))
     try:
-        yield stage / path.name
+        with full_disk_named(given, stage):  # a full disk names the bag and the space
+            yield stage / path.name
+            if (stage / path.name).is_dir():
+                (stage / path.name / BAG_MARKER).write_text("written by semattnet\n")
         if path.is_dir() and not path.is_symlink():
             os.replace(path, stage / ".replaced")
         os.replace(stage / path.name, path)
@@ -127,8 +137,11 @@ class BagWriter:
         self.path, self.fmt = Path(path), bag_format(path, fmt)
         self.topics = {k: f"{prefix.rstrip('/')}/{k}" for k in ("depth", "points", "camera_info", "uncertainty")}
         self.max_depth = max_depth
+        from semattnet._utils.outputs import Output, check_outputs
+
         if self.path.exists() and not overwrite:  # at once, before any frame is computed
             raise FileExistsError(f"{self.path} exists; refusing to overwrite (pass --overwrite / overwrite=True)")
+        check_outputs([], [Output("bag", self.path, "bag")], overwrite)  # only a bag of ours is replaced
         self._stage = staged_bag(self.path, overwrite)
         self._out: MessageWriter | None = None
         self.frames = 0
