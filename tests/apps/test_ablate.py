@@ -103,6 +103,7 @@ def test_seed_rules(tmp_path: Path) -> None:
     assert not any(tmp_path.iterdir())  # refused before any work
 
 
+@pytest.mark.slow  # ~15 s of training through the CLI; test_ablation_json_has_claims checks the claims by default
 def test_cli_claims_shortcut(ablated: tuple[Path, dict[str, Any], list[str]]) -> None:
     out, _, _ = ablated
     stamp = (out / "results" / "table2_b_seed0.json").stat().st_mtime_ns

@@ -89,7 +89,8 @@ def test_report_renders_in_chromium(demo_run, tmp_path: Path) -> None:  # type: 
     result, _ = demo_run
     url = result.report_html.resolve().as_uri()
     dom = _headless(browser, "--virtual-time-budget=5000", "--dump-dom", url).stdout
-    assert 'data-images="8/8"' in dom, dom[:500]  # every <img> decoded (set by the page's load handler)
+    n = result.report_html.read_text().count("<img ")
+    assert n == 9 and f'data-images="{n}/{n}"' in dom, dom[:500]  # every <img> decoded (the page's load handler)
     assert '<p class="broken">' not in dom
     shot = tmp_path / "report.png"
     _headless(browser, "--window-size=1200,2400", f"--screenshot={shot}", url)

@@ -155,6 +155,7 @@ def test_predict_bad_frame_on_one_rank_stops_all(tmp_path: Path) -> None:
     assert sorted(p.name for p in (tmp_path / "skip").iterdir() if p.name.startswith(".")) == []
 
 
+@pytest.mark.slow  # ~8 s; the folder case (test_predict_two_processes_equals_one) runs by default
 def test_predict_kitti_raw_two_processes_equals_one(tmp_path: Path) -> None:
     from tests.inference._raw_sample import three_frame_drive
 

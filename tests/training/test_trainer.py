@@ -69,6 +69,7 @@ def _state(path: Path) -> dict[str, torch.Tensor]:
     return load_checkpoint(path).state_dict
 
 
+@pytest.mark.slow  # ~25 s; tests/reliability/test_training_resume.py covers resume equality by default
 def test_exact_resume_after_sigkill(tree: Path, tmp_path: Path) -> None:
     common = ["train", "--data", str(tree), "--width", "0.125", "--crop", "64x128", "--batch-size", "2",
               "--workers", "0", "--epochs", "2", "--set", "save_every=3",
