@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 import torch
 from click.testing import CliRunner
 
@@ -15,6 +16,7 @@ import semattnet
 from semattnet.cli import main
 
 
+@pytest.mark.slow  # ~10 s; tests/apps/test_demo.py runs the demo by default
 def test_demo_cli(tmp_path: Path) -> None:
     args = ["demo", "--out", str(tmp_path), "--size", "64x128", "--frames", "6", "--eval-frames", "2",
             "--steps", "2,1", "--device", "cpu"]  # fmt: skip

@@ -138,6 +138,7 @@ def test_predict_two_processes_equals_one(tmp_path: Path) -> None:
     assert after == b  # untouched, no stage folder left behind
 
 
+@pytest.mark.slow  # ~8 s; one two-process run stays in the default suite
 def test_predict_bad_frame_on_one_rank_stops_all(tmp_path: Path) -> None:
     rgb, sparse = _frames(tmp_path, count=4)
     (sparse / "f3.png").write_bytes(b"not a png")  # rank 1's frame

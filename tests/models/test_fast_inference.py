@@ -98,6 +98,7 @@ def test_model_with_fused_kernel_matches_autograd_path() -> None:
     assert torch.allclose(fast, slow, rtol=1e-5, atol=1e-4)
 
 
+@pytest.mark.slow  # ~15 s; tests/inference/test_backends.py checks the ONNX engines by default
 def test_onnx_export_parity(tmp_path) -> None:  # type: ignore[no-untyped-def]
     ort = pytest.importorskip("onnxruntime")
     # Two propagation steps per kernel instead of six keep the graph (and the test) small.

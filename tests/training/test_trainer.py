@@ -102,6 +102,7 @@ def test_exact_resume_after_sigkill(tree: Path, tmp_path: Path) -> None:
     assert ea["scheduler"] == eb["scheduler"]
 
 
+@pytest.mark.slow  # ~10 s; tests/inference/test_sharding.py runs torchrun by default
 def test_torchrun_two_processes(tree: Path, tmp_path: Path) -> None:
     out = tmp_path / "ddp"
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", "-m",
