@@ -9,7 +9,6 @@ import os
 import subprocess
 import sys
 import zipfile
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -17,22 +16,6 @@ import pytest
 
 from semattnet._utils.atomic import atomic_path, disk_full_error, is_disk_full
 from semattnet._utils.outputs import staged_outputs
-
-
-@pytest.fixture
-def small_fs(tmp_path: Path) -> Iterator[Path]:
-    """A 256 KiB tmpfs at ``tmp_path/fs``."""
-    fs = tmp_path / "fs"
-    fs.mkdir()
-    if os.geteuid() != 0:
-        pytest.skip("mounting a small tmpfs needs root")
-    res = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(fs)], capture_output=True)
-    if res.returncode != 0:
-        pytest.skip(f"mount -t tmpfs failed: {res.stderr.decode(errors='replace').strip()}")
-    try:
-        yield fs
-    finally:
-        subprocess.run(["umount", "-l", str(fs)], check=False)
 
 
 def _leftovers(fs: Path) -> list[Path]:

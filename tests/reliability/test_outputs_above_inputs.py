@@ -10,7 +10,6 @@ import hashlib
 import os
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -226,22 +225,6 @@ def test_stale_stage_folders_go_wherever_a_run_stages(bag: Path, tmp_path: Path)
 
 
 # --- a full disk names the path and the space ----------------------------------------------------------------
-
-
-@pytest.fixture
-def small_fs(tmp_path: Path) -> Iterator[Path]:
-    """A 256 KiB tmpfs at ``tmp_path/fs`` (needs root and ``mount``)."""
-    fs = tmp_path / "fs"
-    fs.mkdir()
-    if os.geteuid() != 0:
-        pytest.skip("mounting a small tmpfs needs root")
-    res = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(fs)], capture_output=True)
-    if res.returncode != 0:
-        pytest.skip(f"mount -t tmpfs failed: {res.stderr.decode(errors='replace').strip()}")
-    try:
-        yield fs
-    finally:
-        subprocess.run(["umount", "-l", str(fs)], check=False)
 
 
 def _cli(*args: object, timeout: float = 300) -> subprocess.CompletedProcess[str]:
