@@ -1,17 +1,16 @@
 """SemAttNet: attention-based semantic-aware guided depth completion (Nazir et al., IEEE Access 2022).
 
 The package is laid out as the system is (see the README's "Architecture" section):
-:mod:`semattnet.models` (the network), :mod:`semattnet.weights` (checkpoints),
-:mod:`semattnet.data` (KITTI, synthetic scenes, PNG I/O, palette), :mod:`semattnet.segmentation`,
+:mod:`semattnet.models` (the network), :mod:`semattnet.weights` (checkpoints), :mod:`semattnet.palette`
+(class colours), :mod:`semattnet.data` (KITTI, synthetic scenes, PNG I/O), :mod:`semattnet.segmentation`,
 :mod:`semattnet.training`, :mod:`semattnet.evaluation`, :mod:`semattnet.inference`,
 :mod:`semattnet.baselines`, :mod:`semattnet.viz`, :mod:`semattnet.apps` and :mod:`semattnet.cli`.
 The names below are the stable public API.
 """
 
-import sys as _sys
-
+from semattnet import palette
 from semattnet._errors import DataError, InputError, MissingDependencyError, SemAttNetError
-from semattnet.data import palette
+from semattnet._utils.version import __version__
 from semattnet.inference import DepthCompleter, crop_padding, pad_to_multiple
 from semattnet.models import (
     DepthCompletionOutput,
@@ -31,12 +30,6 @@ from semattnet.weights import (
     push_to_hub,
     save_pretrained,
 )
-
-__version__ = "0.1.0"
-
-# `import semattnet.palette` / `from semattnet.palette import ...` keep working (the module is
-# semattnet.data.palette).
-_sys.modules[__name__ + ".palette"] = palette
 
 __all__ = [
     "DataError",

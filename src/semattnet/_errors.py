@@ -10,7 +10,7 @@ checkpoint, an option that means nothing) derives from :class:`SemAttNetError`, 
 - :class:`MissingDependencyError`: an optional dependency that the request needs is not installed.
 
 More specific classes live with the code that raises them and derive from these (for example
-``semattnet.data.palette.UnknownColorError``, ``semattnet.weights.CheckpointError``).
+``semattnet.palette.UnknownColorError``, ``semattnet.weights.CheckpointError``).
 """
 
 from __future__ import annotations

@@ -17,18 +17,19 @@ def test_top_level_names() -> None:
     assert set(semattnet.__all__) <= set(dir(semattnet))
 
 
-def test_palette_alias() -> None:
+def test_palette_is_its_own_module() -> None:
     from semattnet.palette import PALETTE, colors_to_ids
 
     assert PALETTE.shape == (19, 3) and callable(colors_to_ids)
-    assert importlib.import_module("semattnet.palette") is importlib.import_module("semattnet.data.palette")
+    assert semattnet.palette is importlib.import_module("semattnet.palette")
+    assert importlib.import_module("semattnet.palette").__file__.endswith("palette/__init__.py")
 
 
 @pytest.mark.parametrize(
     "path",
     [
         "semattnet.data.io.DataError",
-        "semattnet.data.palette.UnknownColorError",
+        "semattnet.palette.UnknownColorError",
         "semattnet.weights.CheckpointError",
         "semattnet.weights.StateDictMismatchError",
         "semattnet.weights.UnsafeCheckpointError",

@@ -11,7 +11,8 @@ import ast
 import importlib
 import inspect
 import pkgutil
-from collections.abc import Iterator
+import re
+from collections.abc import Iterable, Iterator, Mapping
 from functools import cache
 from pathlib import Path
 
@@ -163,25 +164,143 @@ def test_no_module_imports_another_modules_private_names() -> None:
     assert not found, "private names used across modules:\n" + "\n".join(found)
 
 
-# (d) geometry does not depend on data ---------------------------------------------------------------
+# (d) layers: the table of docs/concepts/architecture.md, enforced ------------------------------------
+
+ARCHITECTURE = Path(__file__).resolve().parents[2] / "docs" / "concepts" / "architecture.md"
+ROOT = "semattnet"
 
 
-def _compat_alias(tree: ast.Module, node: ast.stmt) -> bool:
-    """Whether ``node`` sits in a package's module-level ``__getattr__`` (a lazy alias for a moved name)."""
-    hooks = [f for f in tree.body if isinstance(f, ast.FunctionDef) and f.name == "__getattr__"]
-    return any(node in ast.walk(f) for f in hooks)
+def _layer_rows() -> list[list[str]]:
+    """The layers, lowest first: the parts named (in backticks) in each row of the "Layers" table."""
+    section = ARCHITECTURE.read_text(encoding="utf-8").split("\n## Layers\n", 1)[1].split("\n## ", 1)[0]
+    rows = [re.match(r"\|\s*(\d+)\s*\|([^|]*)\|", line) for line in section.splitlines()]
+    return [re.findall(r"`([\w.]+)`", m.group(2)) for m in rows if m]
 
 
-def test_geometry_imports_nothing_from_data() -> None:
-    found = []
-    for module, (path, tree) in _sources().items():
-        if not module.startswith("semattnet.geometry"):
+@cache
+def _layers() -> dict[str, int]:
+    """Part (a subpackage or top-level module, ``semattnet`` for the package itself) -> its layer."""
+    return {part: i for i, row in enumerate(_layer_rows()) for part in row}
+
+
+def _part(module: str) -> str:
+    return module.split(".")[1] if "." in module else ROOT
+
+
+def _targets(module: str, tree: ast.AST) -> Iterator[tuple[ast.stmt, str]]:
+    """(node, imported module of this package) for every import at any depth (``from p import m``: ``p.m``
+    when ``m`` is a module)."""
+    for node, target, names in _imports(module, tree):
+        for name in names or [""]:
+            full = f"{target}.{name}" if name and f"{target}.{name}" in _sources() else target
+            if full in _sources() and full != module:
+                yield node, full
+
+
+@cache
+def _module_graph() -> dict[str, dict[str, str]]:
+    """Module -> {imported module: where}."""
+    graph: dict[str, dict[str, str]] = {m: {} for m in _sources()}
+    for module, (_, tree) in _sources().items():
+        for node, target in _targets(module, tree):
+            graph[module].setdefault(target, _where(module, node))
+    return graph
+
+
+def _part_graph() -> dict[str, set[str]]:
+    graph: dict[str, set[str]] = {}
+    for module, targets in _module_graph().items():
+        graph.setdefault(_part(module), set()).update(_part(t) for t in targets if _part(t) != _part(module))
+    return graph
+
+
+def _cycles(graph: Mapping[str, Iterable[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one node (Tarjan's algorithm, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found: list[list[str]] = []
+    for root in sorted(graph):
+        if root in index:
             continue
-        for node, target, _ in _imports(module, tree):
-            if target == "semattnet.data" or target.startswith("semattnet.data."):
-                if not (path.name == "__init__.py" and _compat_alias(tree, node)):
-                    found.append(f"{_where(module, node)}: imports {target}")
-    assert not found, "\n".join(found)
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is None:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[node])
+                if low[node] == index[node]:
+                    component = stack[stack.index(node) :]
+                    del stack[stack.index(node) :]
+                    found += [sorted(component)] if len(component) > 1 else []
+            elif child not in index:
+                index[child] = low[child] = len(index)
+                stack.append(child)
+                work.append((child, iter(sorted(graph.get(child, ())))))
+            elif child in stack:
+                low[node] = min(low[node], index[child])
+    return found
+
+
+def test_every_part_is_in_exactly_one_layer() -> None:
+    named = [part for row in _layer_rows() for part in row]
+    parts = {_part(m) for m in _sources()}
+    assert len(named) == len(set(named)), f"named twice in the layer table: {sorted(named)}"
+    assert parts == set(named), f"not in the table: {sorted(parts - set(named))}; gone: {sorted(set(named) - parts)}"
+
+
+def test_no_import_runs_up_the_layers() -> None:
+    layers, found = _layers(), []
+    for module, targets in _module_graph().items():
+        for target, where in targets.items():
+            if layers[_part(target)] > layers[_part(module)]:
+                found.append(f"{where}: {_part(module)} (layer {layers[_part(module)]}) imports {target} "
+                             f"(layer {layers[_part(target)]})")  # fmt: skip
+    assert not found, "imports against docs/concepts/architecture.md's layers:\n" + "\n".join(found)
+
+
+def test_no_import_cycle_between_modules_or_parts() -> None:
+    graph = _module_graph()
+    found = [" <-> ".join(c) + "\n    " + "\n    ".join(f"{graph[a][b]}: {a} -> {b}" for a in c for b in c
+                                                      if b in graph[a]) for c in _cycles(graph)]  # fmt: skip
+    found += ["parts: " + " <-> ".join(c) for c in _cycles(_part_graph())]
+    assert not found, "import cycles:\n" + "\n".join(found)
+
+
+def _reduced(graph: Mapping[str, set[str]]) -> set[tuple[str, str]]:
+    """The edges of the transitive reduction of an acyclic graph (an edge no longer path implies)."""
+
+    def reach(start: str, skip: tuple[str, str]) -> set[str]:
+        seen: set[str] = set()
+        todo = [start]
+        while todo:
+            node = todo.pop()
+            for n in graph.get(node, set()):
+                if (node, n) != skip and n not in seen:
+                    seen.add(n)
+                    todo.append(n)
+        return seen
+
+    return {(a, b) for a in graph for b in graph[a] if b not in reach(a, (a, b))}
+
+
+def test_the_architecture_diagram_is_drawn_from_the_imports() -> None:
+    text = ARCHITECTURE.read_text(encoding="utf-8").split("\n## Layers\n", 1)[1].split("\n## ", 1)[0]
+    drawn = set(re.findall(r"^\s+([\w.]+) --> ([\w.]+)$", text, flags=re.M))
+    expected = _reduced(_part_graph())
+    lines = "\n".join(f"  {a} --> {b}" for a, b in sorted(expected, key=lambda e: (-_layers()[e[0]], e)))
+    assert drawn == expected, f"the diagram differs from the imports; draw:\n{lines}"
+
+
+def test_the_layer_rules_catch_what_they_should() -> None:
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert _cycles({"a": {"b"}, "b": set()}) == []
+    assert _reduced({"a": {"b", "c"}, "b": {"c"}, "c": set()}) == {("a", "b"), ("b", "c")}
+    assert _layers()["_errors"] == 0 and _layers()["cli"] > _layers()["inference"] > _layers()["data"]
 
 
 # (e), (f) sizes -------------------------------------------------------------------------------------

@@ -40,7 +40,7 @@ def test_nyu_frame_protocol(tmp_path: Path) -> None:
     # the K of the resized (x0.5) and centre-cropped (8 columns, 6 rows) frame
     assert a.K[0, 2] == pytest.approx(325.58244941119034 / 2 - 8) and a.K[1, 2] == pytest.approx(253.73616633 / 2 - 6)
     # labels -> NYU-40 colours (ids 1..4 in column bands)
-    from semattnet.data.palette import colors_to_ids
+    from semattnet.palette import colors_to_ids
 
     assert set(np.unique(colors_to_ids(a.semantic, palette="nyu40"))) == {1, 2, 3, 4}
     assert src.load("00001").semantic is not None and src.palette == "nyu40"
@@ -120,7 +120,7 @@ def test_data_check_reports_bad_frames(tmp_path: Path) -> None:
 
 def test_palettes_one_home_and_mismatch() -> None:
     import semattnet
-    from semattnet.data.palette import (
+    from semattnet.palette import (
         PALETTES,
         PaletteMismatchError,
         UnknownColorError,

@@ -17,7 +17,7 @@ from semattnet.cli import main
 from semattnet.data import kitti_files as kf
 from semattnet.data.download import UnsafeArchiveError, drives_for, extract_zip, parse_what
 from semattnet.data.io import read_image, write_image
-from semattnet.data.palette import ids_to_colors
+from semattnet.palette import ids_to_colors
 from tests._helpers import SAMPLE, online_cache
 
 DRIVE = "2011_09_26_drive_0035_sync"

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from semattnet._errors import InputError
-from semattnet.data.nyu40_map import NYU894_TO_40, RAW_CLASSES, RAW_NAMES
-from semattnet.data.palette import NYU40_CLASSES, colors_to_ids, nyu894_to_nyu40
+from semattnet.palette import NYU40_CLASSES, colors_to_ids, nyu894_to_nyu40
+from semattnet.palette.nyu40_map import NYU894_TO_40, RAW_CLASSES, RAW_NAMES
 
 # raw id, raw name (allClassName), NYU-40 class (className), read from classMapping40.mat at commit b92d15c
 PUBLISHED = [(21, "wall", "wall"), (11, "floor", "floor"), (4, "ceiling", "ceiling"), (5, "chair", "chair"),

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semattnet.data.palette import (
+from semattnet.palette import (
     IGNORE_ID,
     LABEL_TO_TRAIN,
     NUM_CLASSES,

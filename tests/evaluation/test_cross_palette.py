@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from semattnet.cli import main
-from semattnet.data.palette import NYU40_CLASSES, TRAIN_CLASSES, colors_to_ids, ids_to_colors, palette_mapping, recolor
+from semattnet.palette import NYU40_CLASSES, TRAIN_CLASSES, colors_to_ids, ids_to_colors, palette_mapping, recolor
 
 NYU = {name: i + 1 for i, (name, _) in enumerate(NYU40_CLASSES)}
 CITY = {name: i for i, (name, _) in enumerate(TRAIN_CLASSES)}

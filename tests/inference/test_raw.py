@@ -78,7 +78,7 @@ class _Recorder:
 
 def test_semantic_folder_fallback_and_confidence(tmp_path: Path) -> None:
     from semattnet.data.io import write_image
-    from semattnet.data.palette import UNKNOWN_COLOR
+    from semattnet.palette import UNKNOWN_COLOR
 
     rec = _Recorder()
     with pytest.warns(UserWarning, match="fallback"):
@@ -86,7 +86,7 @@ def test_semantic_folder_fallback_and_confidence(tmp_path: Path) -> None:
     assert rec.semantic.shape == (375, 1242, 3) and (rec.semantic == np.array(UNKNOWN_COLOR, np.uint8)).all()
     sem_dir = tmp_path / "sem"
     sem_dir.mkdir()
-    from semattnet.data.palette import ids_to_colors
+    from semattnet.palette import ids_to_colors
 
     # a semantic map must be palette-coloured (a photo or a JPEG-resaved map is refused)
     palette_map = ids_to_colors((np.arange(375 * 1242).reshape(375, 1242) // 5000 % 19).astype(np.uint8))
@@ -104,7 +104,7 @@ def test_semantic_folder_fallback_and_confidence(tmp_path: Path) -> None:
 
 
 def test_segmenter_spec_colours_the_semantic_map(tmp_path: Path) -> None:
-    from semattnet.data.palette import UNKNOWN_COLOR
+    from semattnet.palette import UNKNOWN_COLOR
 
     rec = _Recorder()
     with warnings.catch_warnings():

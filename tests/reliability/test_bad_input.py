@@ -14,7 +14,7 @@ from click.testing import CliRunner
 
 from semattnet.cli import main
 from semattnet.data.io import write_depth, write_image
-from semattnet.data.palette import ids_to_colors
+from semattnet.palette import ids_to_colors
 
 
 def _tree(root: Path) -> None:

@@ -14,9 +14,10 @@ from semattnet._errors import DataError
 from semattnet.cli import main
 from semattnet.data.io import encode_depth
 from semattnet.data.kitti_raw import RawDrive
-from semattnet.data.palette import ids_to_colors
+from semattnet.data.scans import project_scan_file
 from semattnet.data.sources import RawDriveSource
-from semattnet.geometry import project_scan_file, read_kitti_calibration
+from semattnet.geometry import read_kitti_calibration
+from semattnet.palette import ids_to_colors
 from semattnet.robotics import BagSource
 from semattnet.robotics.bags import BagTopics, SensorRecord, write_sensor_bag
 from tests.inference._raw_sample import DRIVE, RAW_DATE, SCAN

@@ -13,7 +13,8 @@ from PIL import Image
 from semattnet._errors import DataError
 from semattnet.cli import main
 from semattnet.data.kitti_raw import RawDrive
-from semattnet.geometry import project_points, project_scan_file, read_kitti_calibration
+from semattnet.data.scans import project_scan_file
+from semattnet.geometry import project_points, read_kitti_calibration
 from semattnet.robotics.bags import (
     BagFailure,
     BagPair,

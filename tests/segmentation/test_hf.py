@@ -12,7 +12,7 @@ from click.testing import CliRunner
 
 from semattnet.cli import main
 from semattnet.data.io import read_image, write_image
-from semattnet.data.palette import PALETTE, TRAIN_CLASSES
+from semattnet.palette import PALETTE, TRAIN_CLASSES
 from semattnet.segmentation import load_segmenter
 from semattnet.segmentation.hf import HF_SEGMENTERS, cityscapes_indices, resolve_hf_source
 

@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 from semattnet.cli import main
 from semattnet.data.io import read_image
-from semattnet.data.palette import NYU40_CLASSES, colors_to_ids
+from semattnet.palette import NYU40_CLASSES, colors_to_ids
 from semattnet.segmentation import load_segmenter
 from semattnet.segmentation.hf import HF_SEGMENTERS, hf_palette, resolve_hf_source
 from semattnet.segmentation.indoor import nyu40_class, nyu40_indices

@@ -16,7 +16,7 @@ from torch import nn
 from semattnet import DataError, InputError
 from semattnet.cli import main
 from semattnet.data.io import read_image, write_image
-from semattnet.data.palette import IGNORE_ID, UNKNOWN_COLOR, colors_to_ids
+from semattnet.palette import IGNORE_ID, UNKNOWN_COLOR, colors_to_ids
 from semattnet.segmentation.segmenter import Segmenter, load_segmenter, segment_folder
 
 

@@ -1,12 +1,12 @@
-"""The library version, read late (so that modules imported by ``semattnet/__init__`` may use it)."""
+"""The library version: one home, below every module that reports it (``semattnet.__version__`` is this)."""
 
 from __future__ import annotations
 
-__all__ = ["library_version"]
+__all__ = ["__version__", "library_version"]
+
+__version__ = "0.1.0"
 
 
 def library_version() -> str:
     """``semattnet.__version__``."""
-    from semattnet import __version__
-
     return __version__

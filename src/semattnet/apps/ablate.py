@@ -50,10 +50,10 @@ from semattnet.apps.experiment import (
     score,
     train_variant,
 )
-from semattnet.data.palette import unknown_map
 from semattnet.evaluation.metrics import LEADERBOARD, KittiMetrics
 from semattnet.evaluation.paired import compare, differences
 from semattnet.models.registry import MODELS, TABLE2
+from semattnet.palette import unknown_map
 from semattnet.segmentation.segmenter import Segmenter, segment_folder
 
 __all__ = ["CLAIMS", "CLAIM_CONFIGS", "CONFIGS", "SCHEMA", "AblationSettings", "run_ablation"]

@@ -11,8 +11,8 @@ from typing import Any
 
 import click
 
-from semattnet import __version__
 from semattnet._errors import SemAttNetError
+from semattnet._utils.version import __version__
 
 #: What to do about an operating-system error, by errno.
 _ADVICE = {

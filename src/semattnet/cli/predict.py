@@ -190,10 +190,10 @@ def _robot_sinks(bag: dict[str, Any], max_depth: float, timer: Any, limit: Any =
 def _identity(params: dict[str, Any]) -> dict[str, Any]:
     """What a run is, for a resume to check: every option that changes the outputs (paths resolved, a
     weights file by its SHA-256) and the package version."""
-    import semattnet
     from semattnet._utils.download import sha256_file
+    from semattnet._utils.version import __version__
 
-    run: dict[str, Any] = {"command": "predict", "version": semattnet.__version__}
+    run: dict[str, Any] = {"command": "predict", "version": __version__}
     for key, value in sorted(params.items()):
         if key in _NOT_IDENTITY or value is None or value is False:
             continue
@@ -384,8 +384,8 @@ def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
     """Check everything, load the completer, run the one frame loop; then the table (and the report).
     ``p``: every option of the command, by name."""
     from semattnet._utils.distributed import launch_rank, process_group
-    from semattnet.data.sources import SemanticMaps
     from semattnet.inference.pipeline import check_frames, complete_frames
+    from semattnet.inference.semantic import SemanticMaps
     from semattnet.inference.sinks import default_sinks
     from semattnet.inference.stream import StageTimes
     from semattnet.inference.uncertainty import UncertaintyLimit

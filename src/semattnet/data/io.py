@@ -112,13 +112,13 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
 
 def read_semantic(path: str | os.PathLike[str], palette: str = "cityscapes") -> np.ndarray:
     """A colour-coded semantic map as (H, W, 3) uint8, checked against ``palette`` (Cityscapes by default;
-    see :data:`semattnet.data.palette.PALETTES`).
+    see :data:`semattnet.palette.PALETTES`).
 
     Raises:
         DataError: missing/corrupt file or not 8-bit colour.
         UnknownColorError: pixels outside the palette (a resampled or JPEG-resaved map).
     """
-    from semattnet.data.palette import colors_to_ids
+    from semattnet.palette import colors_to_ids
 
     colors = read_image(path)
     colors_to_ids(colors, allow_unknown=True, source=str(path), palette=palette)

@@ -25,7 +25,6 @@ from semattnet.data.datasets import get_dataset
 from semattnet.data.frames import Frame
 from semattnet.data.io import DataError, clamp_for_png, quantize_depth, read_depth
 from semattnet.data.kitti import KittiDepthCompletion
-from semattnet.data.palette import check_palette
 from semattnet.data.sources.kitti_split import prediction_name
 from semattnet.evaluation.metrics import KittiMetrics
 from semattnet.evaluation.sparsification import Sparsification
@@ -37,6 +36,7 @@ from semattnet.inference.sharding import agree, gather_rows, on_main, process_gr
 from semattnet.inference.sinks import DepthPngSink, PanelSink, Sink, output_files
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.uncertainty import with_uncertainty
+from semattnet.palette import check_palette
 
 __all__ = ["PredictionWriter", "evaluate_checkpoint", "evaluate_model", "score_folders", "score_folders_to_json"]
 
@@ -220,10 +220,11 @@ def _write_scores(out: Path, metrics: KittiMetrics, summary: dict[str, Any], spa
         return names
     (out / "metrics.json").write_text(json.dumps(summary, indent=2) + "\n")
     if spars.frames:
+        from semattnet.evaluation.sparsification import figure_data
         from semattnet.viz.curves import plot_sparsification
 
         label = Path(str(summary.get("checkpoint", "model"))).name
-        plot_sparsification({label: spars.curves()}, out / SPARSIFICATION_PNG)
+        plot_sparsification({label: figure_data(spars.curves())}, out / SPARSIFICATION_PNG)
     with open(out / "per_image.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(metrics.per_image[0]))
         writer.writeheader()
@@ -304,7 +305,7 @@ def _check_maps(completer: DepthCompleter, ds: Any, data: str | Path, dataset: s
     """The dataset's entry, once its maps' palette is the model's (a dataset without maps: any), and ``{}``;
     with another palette and ``mismatch`` ``recolour`` / ``fallback``: ``ds`` reads them converted, and
     ``{"semantic": what they became}``."""
-    from semattnet.data.palette import get_palette
+    from semattnet.palette import get_palette
 
     spec, palette = get_dataset(dataset), getattr(ds, "palette", "cityscapes")
     if not (completer.needs_semantic and palette) or get_palette(palette).name == get_palette(completer.palette).name:

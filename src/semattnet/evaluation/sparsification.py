@@ -35,7 +35,17 @@ import torch
 
 from semattnet._errors import InputError
 
-__all__ = ["METRICS", "Sparsification", "aurg", "ause", "fractions", "oracle_curve", "sparsification_curve", "summary"]
+__all__ = [
+    "METRICS",
+    "Sparsification",
+    "aurg",
+    "ause",
+    "figure_data",
+    "fractions",
+    "oracle_curve",
+    "sparsification_curve",
+    "summary",
+]
 
 #: The metrics a curve can score: name -> per-pixel value from the error e (the mean of it, then ``root``).
 METRICS = ("rmse", "mae")
@@ -183,3 +193,10 @@ def summary(curves: Mapping[str, np.ndarray], metrics: tuple[str, ...] = METRICS
             out[f"ause_{m}"] = ause(curves[f"{m}_curve"], curves[f"{m}_oracle"])
             out[f"aurg_{m}"] = aurg(curves[f"{m}_curve"])
     return out
+
+
+def figure_data(curves: Mapping[str, np.ndarray], metrics: tuple[str, ...] = METRICS) -> dict[str, np.ndarray | float]:
+    """What :func:`semattnet.viz.curves.plot_sparsification` draws for one method: the mean curves, their
+    ``fractions`` (the x axis) and :func:`summary`'s AUSE / AURG."""
+    steps = len(next(iter(curves.values())))
+    return {**curves, "fractions": fractions(steps), **summary(curves, metrics)}

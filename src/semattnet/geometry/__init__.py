@@ -7,14 +7,10 @@ Frames: ``lidar``, ``cam0``, ``rect`` (rectified cam0), ``cam2``/``cam3`` (recti
 
 ``geometry`` reads scans and calibration files but writes no depth PNGs and imports nothing from
 :mod:`semattnet.data`: ``project_scan_file`` and ``ProjectionSummary`` (which write a KITTI PNG) moved
-to :mod:`semattnet.data.scans`; the old names here still work (with a ``DeprecationWarning``).
+to :mod:`semattnet.data.scans` (the layer table: docs/concepts/architecture.md).
 """
 
 from __future__ import annotations
-
-import importlib
-import warnings
-from typing import Any
 
 from .calibration import (
     CameraCalibration,
@@ -63,14 +59,3 @@ __all__ = [
     "transform_points",
     "write_ply",
 ]
-
-#: Names that moved out of geometry (they write files of :mod:`semattnet.data`) -> their new module.
-_MOVED = {"ProjectionSummary": "semattnet.data.scans", "project_scan_file": "semattnet.data.scans"}
-
-
-def __getattr__(name: str) -> Any:
-    """The moved names, loaded on first use (importing geometry loads nothing from data)."""
-    if name not in _MOVED:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    warnings.warn(f"semattnet.geometry.{name} moved to {_MOVED[name]}.{name}", DeprecationWarning, stacklevel=2)
-    return getattr(importlib.import_module(_MOVED[name]), name)

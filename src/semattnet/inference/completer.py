@@ -231,11 +231,11 @@ class DepthCompleter:
         ``names``: some of its frames), in order, while the next ``prefetch`` frames are read, decoded, projected
         and segmented in a background thread (bounded: at most ``prefetch`` frames ahead).
 
-        ``semantic``: a :class:`~semattnet.data.sources.SemanticMaps` (default: the fallback map when the model
+        ``semantic``: a :class:`~.semantic.SemanticMaps` (default: the fallback map when the model
         needs one). ``timer``: a :class:`~semattnet.inference.stream.StageTimes` that gets every stage's time
         (``timer.table()`` afterwards). The loop is :func:`semattnet.inference.stream.completions`, the one that
         ``complete_frames`` writes from."""
-        from semattnet.data.sources.semantic import SemanticMaps
+        from semattnet.inference.semantic import SemanticMaps
         from semattnet.inference.stream import completions
 
         maps = (semantic if semantic is not None else SemanticMaps()).bind(self)

@@ -49,9 +49,9 @@ from semattnet._utils.distributed import first_error, is_main, rank, world_size
 from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs, stage_folder
 from semattnet.data.frames import Frame, FrameSource
 from semattnet.data.io import encode_depth, read_depth
-from semattnet.data.sources.semantic import SemanticMaps
 from semattnet.inference.completer import Completion
 from semattnet.inference.journal import FRAMES_FILE, RunJournal, describe_counts
+from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sharding import agree, gather_rows, on_main, process_group, rank_log, shard
 from semattnet.inference.sinks import (
     DepthPngSink,

@@ -17,8 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from semattnet.data.sources.kitti_raw import RawDriveSource, project_frame
-from semattnet.data.sources.semantic import SemanticMaps
 from semattnet.inference.pipeline import Completer, complete_frames
+from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sinks import default_sinks, fusion_confidence, output_files
 
 __all__ = ["complete_kitti_raw", "fusion_confidence", "project_frame", "raw_output_paths"]

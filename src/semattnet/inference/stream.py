@@ -2,7 +2,7 @@
 
 :func:`completions` is the inside of the one frame loop (:func:`semattnet.inference.pipeline.complete_frames`
 writes what it yields; :meth:`semattnet.inference.DepthCompleter.stream` yields it): each frame is read
-(and decoded), projected, given its semantic map (:class:`~semattnet.data.sources.SemanticMaps`), completed,
+(and decoded), projected, given its semantic map (:class:`~.semantic.SemanticMaps`), completed,
 and every stage is timed into a :class:`StageTimes`. With ``prefetch=N`` the reading, projection and
 segmentation of the next frames run in a background thread while the current frame is completed and
 written; at most ``N`` frames are read ahead of the one the loop holds (a semaphore), so memory stays bounded.
@@ -417,7 +417,7 @@ def completions(source: FrameSource, completer: Any, names: Sequence[str] | None
                 realtime: float | None = None) -> Iterator[tuple[Frame, Any]]:  # fmt: skip
     """``(frame, completion)`` for each of ``names`` (default: all of ``source``), in order, every stage timed
     into ``timer``; ``prefetch`` > 0 reads that many frames ahead in a background thread (module doc).
-    ``semantic``: a bound :class:`~semattnet.data.sources.SemanticMaps` (None: frames as the source gives them).
+    ``semantic``: a bound :class:`~.semantic.SemanticMaps` (None: frames as the source gives them).
     The time between yields (what the caller does with a frame, e.g. writing) counts in the wall time.
 
     A frame's own fault (:func:`is_frame_fault`, raised reading or completing it) goes to ``report`` as a

@@ -58,7 +58,7 @@ class SemAttNetConfig:
         refinement_mode: ``"authors"`` (default) reproduces the in-place aliasing of the released
             code, which the released weights were trained with; ``"clean"`` is the plain reading of
             the paper. See :mod:`semattnet.models.refinement`.
-        palette: the semantic palette the model was trained with (:data:`semattnet.data.palette.PALETTES`):
+        palette: the semantic palette the model was trained with (:data:`semattnet.palette.PALETTES`):
             ``"cityscapes"`` (the authors' KITTI maps; checkpoints that record none load as this) or ``"nyu40"``.
     """
 
@@ -88,7 +88,7 @@ class SemAttNetConfig:
         _in_range("iterations", self.iterations)
         if self.refinement_mode not in ("authors", "clean"):
             raise InputError(f"refinement_mode must be 'authors' or 'clean', got {self.refinement_mode!r}")
-        from semattnet.data.palette import PALETTES
+        from semattnet.palette import PALETTES
 
         if self.palette not in PALETTES:
             raise InputError(f"palette must be one of {tuple(PALETTES)}, got {self.palette!r}")

@@ -34,8 +34,8 @@ import numpy as np
 from semattnet._errors import InputError
 from semattnet._utils.atomic import new_file_mode
 from semattnet._utils.extras import require
-from semattnet.data.palette import IGNORE_ID, TRAIN_CLASSES, UNKNOWN_COLOR, colors_to_ids
 from semattnet.geometry import depth_to_points, invert_T
+from semattnet.palette import IGNORE_ID, TRAIN_CLASSES, UNKNOWN_COLOR, colors_to_ids
 
 __all__ = ["ENTITIES", "TIMELINE", "RerunLogger", "read_rrd_frames"]
 

@@ -116,7 +116,7 @@ class BagSource(IndexedSource):
 
     def _semantic_images(self) -> Iterator[tuple[int, np.ndarray | DataError]]:
         """Every semantic message in order: the image, or the DataError of one that cannot be decoded."""
-        from semattnet.data.palette import colors_to_ids
+        from semattnet.palette import colors_to_ids
         from semattnet.robotics.bags import decode_compressed_image, decode_image, open_bag
         from semattnet.robotics.bags.reader import topic_connections
         from semattnet.robotics.bags.source import IMAGE_TYPES, decode_message

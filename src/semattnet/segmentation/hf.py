@@ -27,7 +27,7 @@ import torch
 
 from semattnet._errors import DataError, InputError
 from semattnet._utils.extras import require
-from semattnet.data.palette import NUM_CLASSES, TRAIN_CLASSES
+from semattnet.palette import NUM_CLASSES, TRAIN_CLASSES
 
 __all__ = ["HF_SEGMENTERS", "HFSegmenterRecord", "cityscapes_indices", "hf_palette", "load_hf_network",
            "resolve_hf_source"]  # fmt: skip
@@ -169,7 +169,7 @@ def hf_palette(rest: str) -> str:
 
 def _groups(rest: str, id2label: Mapping[Any, str], palette: str) -> list[list[int]]:
     """Per palette class, the model classes that mean it; warns of the classes none means."""
-    from semattnet.data.palette import get_palette
+    from semattnet.palette import get_palette
     from semattnet.segmentation.indoor import nyu40_indices
 
     pal = get_palette(palette)

@@ -1,4 +1,4 @@
-"""Segmenter classes -> the 40 NYU-40 classes (:data:`semattnet.data.palette.NYU40_CLASSES`), by name.
+"""Segmenter classes -> the 40 NYU-40 classes (:data:`semattnet.palette.NYU40_CLASSES`), by name.
 
 A model's ``id2label`` names (ignoring case, spaces, ``_``, ``-`` and a plural ``s``) are matched, in order:
 
@@ -6,7 +6,7 @@ A model's ``id2label`` names (ignoring case, spaces, ``_``, ``-`` and a plural `
 2. to :data:`NYU40_VARIANTS`: ADE20K names with an obvious NYU-40 counterpart that NYU's own raw names lack
    ("windowpane" -> window, "painting" -> picture, "chest of drawers" -> dresser ...);
 3. to one of NYU Depth v2's 894 raw class names, through the published 894 -> 40 table
-   (:mod:`semattnet.data.nyu40_map`): ADE20K's "stove" is NYU's raw "stove", an ``otherstructure``.
+   (:mod:`semattnet.palette.nyu40_map`): ADE20K's "stove" is NYU's raw "stove", an ``otherstructure``.
 
 Other classes (sky, road, tree ... in ADE20K) are dropped: a pixel gets the best of the classes that match.
 The resulting table for ADE20K's 150 classes is in ``docs/datasets/nyuv2.md``.
@@ -38,8 +38,8 @@ def _norm(name: str) -> str:
 
 @cache
 def _tables() -> tuple[dict[str, int], dict[str, int]]:
-    from semattnet.data.nyu40_map import NYU894_TO_40, RAW_NAMES
-    from semattnet.data.palette import NYU40_CLASSES
+    from semattnet.palette import NYU40_CLASSES
+    from semattnet.palette.nyu40_map import NYU894_TO_40, RAW_NAMES
 
     classes = {_norm(name): i + 1 for i, (name, _) in enumerate(NYU40_CLASSES)}
     raw: dict[str, int] = {}

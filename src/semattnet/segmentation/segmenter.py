@@ -1,6 +1,6 @@
 """Semantic maps for any frame: run a segmentation network the user supplies.
 
-SemAttNet reads colour-coded maps of a palette (:mod:`semattnet.data.palette`: Cityscapes trainIds for
+SemAttNet reads colour-coded maps of a palette (:mod:`semattnet.palette`: Cityscapes trainIds for
 street scenes, NYU-40 for indoor ones). The authors only released precomputed maps for KITTI;
 :func:`segment_folder` makes them for any image tree with a network given by a SPEC (see :func:`load_segmenter`):
 
@@ -12,7 +12,7 @@ street scenes, NYU-40 for indoor ones). The authors only released precomputed ma
   through ``transformers`` (``pip install 'semattnet[segment]'``), its classes matched to the palette's
   by name (:mod:`semattnet.segmentation.hf`; ``hf:default`` is SegFormer-B5 on Cityscapes, ``hf:indoor``
   SegFormer-B5 on ADE20K mapped to NYU-40, both downloaded from the Hugging Face Hub);
-* ``unknown``: no network, every pixel gets :data:`~semattnet.data.palette.UNKNOWN_COLOR` (the
+* ``unknown``: no network, every pixel gets :data:`~semattnet.palette.UNKNOWN_COLOR` (the
   fallback for frames without a segmenter; expect worse depth, see the README).
 
 The network takes (B, 3, H, W) float32 RGB, scaled to [0, 1] then normalised with ``mean`` /
@@ -43,7 +43,7 @@ from semattnet._utils.extras import require
 from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs
 from semattnet._utils.progress import progress as progress_bar
 from semattnet.data.io import read_image, write_image
-from semattnet.data.palette import IGNORE_ID, NUM_CLASSES, ids_to_colors, label_ids_to_train_ids
+from semattnet.palette import IGNORE_ID, NUM_CLASSES, ids_to_colors, label_ids_to_train_ids
 
 __all__ = [
     "IMAGENET_MEAN",
@@ -89,7 +89,7 @@ class Segmenter:
         input_size: tuple[int, int] | None = None,
         palette: str = "cityscapes",
     ) -> None:
-        from semattnet.data.palette import get_palette
+        from semattnet.palette import get_palette
 
         self.network, self.name, self.palette = network, name, get_palette(palette).name
         self.device = torch.device(device)

@@ -43,20 +43,19 @@ def plot_training_curves(csv_path: str | Path, out_path: str | Path) -> Path | N
     return out_path
 
 
-def plot_sparsification(curves: Mapping[str, Mapping[str, np.ndarray]], out_path: str | Path,
+def plot_sparsification(curves: Mapping[str, Mapping[str, np.ndarray | float]], out_path: str | Path,
                         metrics: tuple[str, ...] = ("rmse", "mae"), title: str = "") -> Path:  # fmt: skip
     """One panel per metric: each method's normalised sparsification curve (solid) and its oracle (dashed),
     a random ordering's (the constant 1, dotted), AUSE and AURG in the legend.
 
-    ``curves``: method label -> :meth:`semattnet.evaluation.sparsification.Sparsification.curves`
-    (``{metric}_curve`` and ``{metric}_oracle``).
+    ``curves``: method label -> :func:`semattnet.evaluation.sparsification.figure_data` (``fractions``,
+    ``{metric}_curve``, ``{metric}_oracle``, ``ause_{metric}``, ``aurg_{metric}``): the figure draws, the
+    evaluation computes.
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from semattnet.evaluation.sparsification import aurg, ause, fractions
 
     fig, axes = plt.subplots(1, len(metrics), figsize=(5.5 * len(metrics), 4), squeeze=False)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -65,9 +64,8 @@ def plot_sparsification(curves: Mapping[str, Mapping[str, np.ndarray]], out_path
             if f"{metric}_curve" not in c:
                 continue
             curve, oracle, colour = c[f"{metric}_curve"], c[f"{metric}_oracle"], colours[k % len(colours)]
-            r = fractions(len(curve))
-            ax.plot(r, curve, "-", color=colour,
-                    label=f"{label} (AUSE {ause(curve, oracle):.3f}, AURG {aurg(curve):.3f})")  # fmt: skip
+            r, areas = c["fractions"], f"AUSE {float(c[f'ause_{metric}']):.3f}, AURG {float(c[f'aurg_{metric}']):.3f}"
+            ax.plot(r, curve, "-", color=colour, label=f"{label} ({areas})")
             ax.plot(r, oracle, "--", color=colour, alpha=0.7)
         ax.axhline(1.0, color="grey", linestyle=":", label="random (expected)")
         ax.set_xlabel("fraction of pixels removed (most uncertain first)")

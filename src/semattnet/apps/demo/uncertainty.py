@@ -57,10 +57,11 @@ def score_uncertainty(preds: BySeed, uncertainty: BySeed, held: HeldOut) -> dict
 
 def uncertainty_report(scores: dict[str, dict[str, Any]], pictures: Path) -> tuple[tuple[str, str], list[str]]:
     """The report's figure (caption, path) of the mean curves and one sentence per method with its AUSE / AURG."""
+    from semattnet.evaluation.sparsification import figure_data
     from semattnet.viz.curves import plot_sparsification
 
     short = {m: LABELS[m].split(" (")[0] for m in scores}
-    curves = {short[m]: {k: np.asarray(v) for k, v in s["curves"].items()} for m, s in scores.items()}
+    curves = {short[m]: figure_data({k: np.asarray(v) for k, v in s["curves"].items()}) for m, s in scores.items()}
     plot_sparsification(curves, pictures / Path(UNCERTAINTY_FIGURE).name,
                         title="Sparsification on the held-out scenes (mean over seeds)")  # fmt: skip
     caption = ("Sparsification curves of each method's per-pixel uncertainty on the held-out scenes: the metric "

@@ -133,7 +133,7 @@ class FrameDataset(Dataset):
 
 def frame_sample(frame: Frame) -> Sample:
     """A :class:`Frame` as a :class:`Sample` (the unknown map when it has no semantic map)."""
-    from semattnet.data.palette import unknown_map
+    from semattnet.palette import unknown_map
 
     sem = frame.semantic if frame.semantic is not None else unknown_map(*frame.size)
     return Sample(frame.rgb, sem, frame.sparse, frame.gt, frame.K)

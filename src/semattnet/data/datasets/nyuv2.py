@@ -4,7 +4,7 @@ Layout: ``ROOT/train/<scene>/<NNNNN>.h5`` (about 48k frames) and ``ROOT/val/offi
 test frames of the official split). Each file holds ``rgb`` uint8 (3, 480, 640) and ``depth`` float32
 (480, 640) in metres (the in-painted Kinect depth, dense); an optional ``label`` (480, 640) integer map of
 NYU-40 ids (0 = unlabelled), or of the labelled subset's raw ids 1..894 (any id above 40; mapped to NYU-40 by
-the published table, :mod:`semattnet.data.nyu40_map`), becomes the frame's semantic map in the NYU-40 palette.
+the published table, :mod:`semattnet.palette.nyu40_map`), becomes the frame's semantic map in the NYU-40 palette.
 
 Protocol (NLSPN's ``src/data/nyu.py``): image and depth resized to 320x240 (bilinear, torchvision's ``Resize``
 default; labels nearest), centre-cropped to 304x228,
@@ -38,7 +38,7 @@ RESIZED = (240, 320)  # H, W after the resize
 CROP = (228, 304)  # H, W of the centre crop
 SAMPLES = 500
 MAX_MEDIAN_M = 100.0  # a median depth above this is millimetres, not metres
-RAW_LABELS = 894  # the labelled subset's raw class ids (semattnet.data.nyu40_map)
+RAW_LABELS = 894  # the labelled subset's raw class ids (semattnet.palette.nyu40_map)
 
 
 def _check_layout(path: Path, rgb: Any, depth: Any, label: Any) -> None:
@@ -126,8 +126,8 @@ def check_root(root: Path) -> None:
 def label_colors(label: np.ndarray) -> np.ndarray:
     """A file's ``label`` map as the protocol frame's NYU-40 colours: NYU-40 ids (0..40) as they are; a map with
     any id above 40 holds the labelled subset's raw ids (1..894), mapped to NYU-40 by the published table
-    (:func:`semattnet.data.palette.nyu894_to_nyu40`)."""
-    from semattnet.data.palette import ids_to_colors, nyu894_to_nyu40
+    (:func:`semattnet.palette.nyu894_to_nyu40`)."""
+    from semattnet.palette import ids_to_colors, nyu894_to_nyu40
 
     ids = nyu894_to_nyu40(label) if label.size and int(label.max()) > 40 else label.astype(np.uint8)
     return ids_to_colors(_crop(_resize(ids, True)), palette="nyu40")

@@ -58,7 +58,7 @@ def segment_split(dataset: str, root: PathLike, splits: tuple[str, ...], spec: s
 def _segment(todo: list[tuple[Any, str]], spec: str, palette: str, device: str, out: Path) -> None:
     from semattnet._utils.progress import progress
     from semattnet.data.io import write_image
-    from semattnet.data.palette import ids_to_colors
+    from semattnet.palette import ids_to_colors
     from semattnet.segmentation.segmenter import load_segmenter
 
     segmenter = load_segmenter(spec, device, palette=palette)

@@ -6,13 +6,13 @@
 * :class:`RawDriveSource`: a KITTI raw drive, each scan projected into the camera with
   :func:`semattnet.geometry.project_points`.
 * A ROS bag: :class:`semattnet.robotics.BagSource` (the robot I/O lives in :mod:`semattnet.robotics`).
-* :class:`SemanticMaps`: the one choice of a frame's semantic map when its source has none (a segmenter,
-  or the fallback map).
+
+A frame without a semantic map gets one from :class:`semattnet.inference.semantic.SemanticMaps` (a
+segmenter, or the fallback map), which knows the completer.
 """
 
 from semattnet.data.sources.folder import FolderSource
 from semattnet.data.sources.kitti_raw import RawDriveSource
 from semattnet.data.sources.kitti_split import KittiSplitSource
-from semattnet.data.sources.semantic import SemanticMaps
 
-__all__ = ["FolderSource", "KittiSplitSource", "RawDriveSource", "SemanticMaps"]
+__all__ = ["FolderSource", "KittiSplitSource", "RawDriveSource"]

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from semattnet.data.palette import TRAIN_CLASSES
+from semattnet.palette import TRAIN_CLASSES
 
 from .layout import Box, window
 

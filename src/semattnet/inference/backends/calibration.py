@@ -12,7 +12,7 @@ A calibration is given to ``optimize_for_inference(..., precision="int8", calibr
 
 Frames are cropped to the engine's size as KITTI's evaluation crop does (bottom rows, centred
 columns; zero-padded at the top when smaller); a frame without a semantic map gets the
-``unknown`` fallback map (:func:`semattnet.data.palette.unknown_map`). The cache key of a
+``unknown`` fallback map (:func:`semattnet.palette.unknown_map`). The cache key of a
 calibration is its description for synthetic scenes (they are a function of the seed and the
 library version, which the engine key holds) and the sha256 of the frames' arrays otherwise.
 """
@@ -49,7 +49,7 @@ def fit_to_size(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
 
 def _feed(rgb: np.ndarray, semantic: np.ndarray | None, sparse: np.ndarray, size: tuple[int, int]) -> dict[str, Any]:
     """One frame as the graph's named (1, C, H, W) float32 inputs (colours 0..255, sparse metres)."""
-    from semattnet.data.palette import unknown_map
+    from semattnet.palette import unknown_map
 
     semantic = unknown_map(*rgb.shape[:2]) if semantic is None else semantic
 

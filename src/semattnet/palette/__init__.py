@@ -237,8 +237,8 @@ def colors_to_ids(colors: np.ndarray, allow_unknown: bool = True, source: str = 
 
 def nyu894_to_nyu40(raw: np.ndarray) -> np.ndarray:
     """NYU Depth v2's raw label ids (0..894, the labelled subset's ``labels``; 0 = unlabelled) -> NYU-40 ids
-    (uint8 0..40) by the published table (:mod:`semattnet.data.nyu40_map`, from ankurhanda/nyuv2-meta-data)."""
-    from semattnet.data.nyu40_map import NYU894_TO_40, RAW_CLASSES
+    (uint8 0..40) by the published table (:mod:`semattnet.palette.nyu40_map`, from ankurhanda/nyuv2-meta-data)."""
+    from semattnet.palette.nyu40_map import NYU894_TO_40, RAW_CLASSES
 
     ids = np.asarray(raw)
     if ids.size and (ids.min() < 0 or ids.max() > RAW_CLASSES):

@@ -1,0 +1,85 @@
+"""The one place that decides a frame's semantic map when its source has none (a segmenter, the fallback
+map), for the completer at hand."""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+from semattnet._errors import InputError
+from semattnet.data.frames import Frame
+from semattnet.data.sources.semantic import CrossPalette
+
+__all__ = ["SemanticMaps"]
+
+
+class SemanticMaps:
+    """Fills the semantic map of frames whose source gave none, for a completer that needs one
+    (:func:`semattnet.inference.backends.needs_semantic`): from ``segmenter`` (a
+    :class:`semattnet.segmentation.Segmenter` or its SPEC, loaded on the completer's device when bound),
+    else the ``unknown`` fallback map (warned once: it costs accuracy). A frame's own map is kept; for a
+    completer that needs none the frame passes as it is.
+
+    ``folder``: whether the source reads semantic maps from a folder (a folder and a segmenter exclude
+    each other; checked here, before any work). ``mismatch``: maps of another palette than the model's are
+    refused (``refuse``), or converted (``recolour`` / ``fallback``: :class:`CrossPalette`; ``note`` then
+    says what they became). :meth:`bind` the completer before :meth:`fill`.
+    """
+
+    def __init__(self, segmenter: Any = None, folder: bool = False, mismatch: str = "refuse") -> None:
+        if folder and segmenter is not None:
+            raise InputError("semantic: give a semantic folder or a segmenter, not both")
+        self.segmenter, self.folder, self.needed = segmenter, folder, False
+        self.mismatch = mismatch
+        self.cross: CrossPalette | None = None
+        self.note: str | None = None
+        self._warned = False
+
+    def bind(self, completer: Any) -> SemanticMaps:
+        """Decide for ``completer``: whether it needs maps; a segmenter SPEC is loaded on its device."""
+        from semattnet.inference.backends import needs_semantic
+
+        self.needed = needs_semantic(completer)
+        if self.needed and isinstance(self.segmenter, str):
+            from semattnet.segmentation.segmenter import load_segmenter
+
+            self.segmenter = load_segmenter(self.segmenter, getattr(completer, "device", "auto"))
+        return self
+
+    def check_palette(self, completer: Any, source: Any) -> None:
+        """Refuse maps of another palette than the one ``completer``'s model was trained with (one line;
+        :func:`semattnet.palette.check_palette`): a segmenter's maps are of its ``palette`` (Cityscapes
+        unless it says otherwise), a source's of its ``palette`` (None: it gives none, and the fallback map fits
+        every palette)."""
+        from semattnet.palette import check_palette, get_palette
+
+        if not self.needed:
+            return
+        palette = getattr(self.segmenter, "palette", "cityscapes") if self.segmenter is not None else (
+            getattr(source, "palette", None))  # fmt: skip
+        palette = palette or ("cityscapes" if self.folder else None)
+        if palette is not None:
+            where = "the segmenter's maps" if self.segmenter is not None else f"{type(source).__name__} maps"
+            model = getattr(completer, "palette", "cityscapes")
+            if self.mismatch != "refuse" and get_palette(palette).name != get_palette(model).name:
+                self.cross = CrossPalette(palette, model, self.mismatch)
+                self.note = self.cross.report()["summary"]
+                return
+            check_palette(model, palette, where)
+
+    def fill(self, frame: Frame) -> Frame:
+        """``frame`` with the semantic map the completer gets."""
+        from semattnet.palette import ids_to_colors, unknown_map
+
+        if not self.needed:
+            return frame
+        if frame.semantic is None and self.segmenter is not None:
+            palette = getattr(self.segmenter, "palette", "cityscapes")
+            frame = frame.with_semantic(ids_to_colors(self.segmenter(frame.rgb[None])[0], palette))
+        if frame.semantic is not None:
+            return frame if self.cross is None else frame.with_semantic(self.cross.map(frame.semantic, frame.name))
+        if not self._warned:
+            warnings.warn("no semantic maps given (--semantic or --segment): using the 'unknown' fallback map, "
+                          "which costs accuracy", stacklevel=3)  # fmt: skip
+            self._warned = True
+        return frame.with_semantic(unknown_map(*frame.rgb.shape[:2]))
