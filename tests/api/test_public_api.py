@@ -53,12 +53,10 @@ def test_error_roots_keep_their_builtin_bases() -> None:
     assert missing.name == "onnx" and str(missing) == "needs onnx: pip install onnx"
 
 
-def test_moved_scan_file_names_keep_working_at_their_old_place() -> None:
+def test_scan_file_names_live_in_data_only() -> None:
+    """geometry sits below data in the layer table: the old aliases into data are gone."""
     import semattnet.data.scans as scans
     import semattnet.geometry as geometry
 
     for name in ("project_scan_file", "ProjectionSummary"):
-        with pytest.warns(DeprecationWarning, match=f"moved to semattnet.data.scans.{name}"):
-            assert getattr(geometry, name) is getattr(scans, name)
-    with pytest.raises(AttributeError):
-        geometry.no_such_name  # noqa: B018
+        assert hasattr(scans, name) and not hasattr(geometry, name)
