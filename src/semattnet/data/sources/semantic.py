@@ -8,6 +8,7 @@ from typing import Any
 
 from semattnet._errors import InputError
 from semattnet.data.frames import Frame, IndexedSource
+from semattnet.data.sources.registry import register_source
 
 __all__ = ["MISMATCH_POLICIES", "CrossPalette", "CrossPaletteSource", "SemanticMaps"]
 
@@ -123,6 +124,7 @@ class CrossPalette:
                 "classes_kept": self.kept if self.policy == "recolour" else [], "summary": line}  # fmt: skip
 
 
+@register_source("cross-palette", option="--palette-mismatch")
 class CrossPaletteSource(IndexedSource):
     """``source``'s frames with their maps converted for a model of ``palette`` (:class:`CrossPalette`)."""
 
