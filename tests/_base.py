@@ -10,13 +10,18 @@ A subclass must define the five kinds of test every public piece of numerics get
   why the function is not differentiable, with a test of that).
 
 It provides dtype-aware tolerances and a float64 gradcheck helper.
+
+:class:`RegistryTester` is the same idea over a registry (models, released weights, engines, datasets,
+sources, sinks): every registered entry runs through smoke, cardinality, exception and numerics tests, and an
+entry registered without a fixture in its suite fails, so a new entry is tested by being registered.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any, ClassVar
+from collections.abc import Callable, Mapping
+from typing import Any, ClassVar, Generic, TypeVar
 
+import pytest
 import torch
 
 REQUIRED = ("test_smoke", "test_cardinality", "test_exception", "test_numerics", "test_gradcheck")
@@ -56,3 +61,57 @@ class BaseTester:
         """``torch.autograd.gradcheck`` on float64 copies of ``inputs`` (those that require grad keep it)."""
         cast = [x.detach().double().requires_grad_(x.requires_grad) for x in inputs]
         return torch.autograd.gradcheck(fn, cast, **kwargs)
+
+
+REGISTRY_REQUIRED = ("test_smoke", "test_cardinality", "test_exception", "test_numerics")
+F = TypeVar("F")
+
+
+class RegistryTester(Generic[F]):
+    """A suite over one registry: subclass as ``class TestSinks(RegistryTester[SinkFixture])`` in
+    ``tests/registry/`` and define
+
+    * ``kind`` (what the entries are, for messages) and ``entries()`` (the registry's names, read at collection);
+    * ``fixtures``: name -> the entry's fixture (how to build it on tiny inputs and what to expect);
+    * ``test_smoke``, ``test_cardinality``, ``test_exception``, ``test_numerics``, each taking ``entry``: the
+      conftest there parametrises every test that takes ``entry`` over ``entries()``.
+
+    :meth:`fixture` fails a registered entry that has no fixture (naming the file to add it to), and
+    ``test_fixtures_match_the_registry`` fails on a missing or a stale fixture."""
+
+    required: ClassVar[tuple[str, ...]] = REGISTRY_REQUIRED
+    kind: ClassVar[str]
+    fixtures: ClassVar[Mapping[str, Any]]
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        missing = [name for name in cls.required if not callable(getattr(cls, name, None))]
+        missing += [name for name in ("kind", "fixtures") if not hasattr(cls, name)]
+        if cls.entries is RegistryTester.entries:
+            missing.append("entries")
+        if missing:
+            raise TypeError(f"{cls.__name__} must define {', '.join(missing)} (see tests/_base.py)")
+
+    @classmethod
+    def entries(cls) -> list[str]:
+        """The registered names this suite runs over."""
+        raise NotImplementedError
+
+    @classmethod
+    def marks(cls, name: str) -> tuple[pytest.MarkDecorator, ...]:
+        """Marks of ``name``'s tests (e.g. ``pytest.mark.slow`` for a slow entry); none by default."""
+        return ()
+
+    def fixture(self, name: str) -> F:
+        """``name``'s fixture; a registered entry without one fails here."""
+        if name not in self.fixtures:
+            where = type(self).__module__.replace(".", "/") + ".py"
+            pytest.fail(f"{self.kind} {name!r} is registered but has no fixture: add one to {where}")
+        fixture: F = self.fixtures[name]
+        return fixture
+
+    def test_fixtures_match_the_registry(self) -> None:
+        entries, fixtures = set(self.entries()), set(self.fixtures)
+        assert entries, f"no {self.kind} registered"
+        assert not entries - fixtures, f"registered {self.kind}(s) without a fixture: {sorted(entries - fixtures)}"
+        assert not fixtures - entries, f"fixtures of unregistered {self.kind}(s): {sorted(fixtures - entries)}"

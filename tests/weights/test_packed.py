@@ -13,9 +13,9 @@ from click.testing import CliRunner
 import semattnet
 from semattnet.cli import main
 from semattnet.models.registry import build_model
-from semattnet.weights import CheckpointError, PretrainedWeights, from_pretrained, get_weights, load_checkpoint
+from semattnet.weights import CheckpointError, load_checkpoint
 from semattnet.weights import packed as packed_mod
-from semattnet.weights.hub import load_model, packed_file, save_pretrained
+from semattnet.weights.hub import load_model, save_pretrained
 
 
 def _model() -> torch.nn.Module:
@@ -68,28 +68,6 @@ def test_a_stray_tensor_name_is_refused(tmp_path: Path) -> None:
     odd.write_bytes(gzip.compress(save({"q8/w": torch.zeros(2, 2, dtype=torch.int8)}, metadata=meta)))
     with pytest.raises(CheckpointError, match=r"odd\.gz: tensor 'q8/w' has no scale"):
         load_checkpoint(odd)
-
-
-@pytest.mark.parametrize("seed", [0, 1])
-def test_the_shipped_trained_weights_are_registry_names(seed: int) -> None:
-    name = f"semattnet-demo-ref-seed{seed}"
-    w = get_weights(name)
-    assert w.format == "packed" and packed_file(w).stat().st_size == w.size_bytes
-    model = from_pretrained(name)
-    assert model.config.width == 0.125 and model.config.branches == 3 and model.config.refine
-    assert sum(p.numel() for p in model.parameters()) == w.num_params
-    torch.manual_seed(1)
-    x = {"rgb": torch.rand(1, 3, 32, 64) * 255, "semantic": torch.rand(1, 3, 32, 64) * 255,
-         "sparse": torch.rand(1, 1, 32, 64) * 40 * (torch.rand(1, 1, 32, 64) < 0.1)}  # fmt: skip
-    with torch.no_grad():
-        assert torch.isfinite(model(**x).refined_depth).all()
-
-
-def test_a_shipped_file_that_does_not_match_its_sha256_is_refused() -> None:
-    w = get_weights("semattnet-demo-ref-seed0")
-    fake = PretrainedWeights(**{**w.to_dict(), "name": "tampered", "sha256": "0" * 64})
-    with pytest.raises(CheckpointError, match=r"weights 'tampered': .*does not match its sha256 0000"):
-        from_pretrained(fake)
 
 
 def test_load_model_takes_a_save_pretrained_folder_and_a_name(tmp_path: Path) -> None:

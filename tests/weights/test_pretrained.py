@@ -2,58 +2,13 @@
 
 from __future__ import annotations
 
-import re
-from urllib.parse import urlparse
-
 import pytest
-import torch
 
-from semattnet.models.registry import MODELS
-from semattnet.weights import FORMATS, PretrainedWeights, UnknownWeightsError, get_weights, list_pretrained
+from semattnet.weights import PretrainedWeights, UnknownWeightsError, get_weights, list_pretrained
 from semattnet.weights.pretrained import DEFAULT_WEIGHTS, default_weights, register_weights
 
 UNITS = ("_mm", "_m", "_per_km", "_pct")
 INPUT_KEYS = {"rgb", "semantic", "sparse", "size_multiple"}
-
-
-@pytest.mark.parametrize("name", list_pretrained())
-def test_schema(name: str) -> None:
-    w = get_weights(name)
-    assert isinstance(w, PretrainedWeights) and w.name == name
-    assert re.fullmatch(r"[a-z0-9]+(-[a-z0-9]+)*", name)
-    assert w.arch in MODELS
-    cfg = w.model_config()  # the overrides are valid config fields
-    assert cfg == MODELS[w.arch][1].replace(**w.config)
-    assert w.urls, "at least one URL"
-    for url in w.urls:
-        scheme = urlparse(url).scheme
-        assert scheme in ("https", "http", "gdrive", "hf") or (scheme == "file" and w.format == "packed"), url
-        if scheme == "gdrive":
-            assert re.fullmatch(r"gdrive://[\w-]{10,}", url)
-    assert w.file_name and "/" not in w.file_name
-    assert w.format in FORMATS
-    assert w.sha256 is None or re.fullmatch(r"[0-9a-f]{64}", w.sha256)
-    assert w.size_bytes is None or (isinstance(w.size_bytes, int) and w.size_bytes > 0)
-    assert w.license.strip()
-    assert w.sha256 is not None or "trust on first use" in w.notes  # say what happens without a checksum
-    for split, metrics in w.paper_metrics.items():
-        assert re.fullmatch(r"[a-z0-9]+/[a-z0-9-]+", split), split
-        for key, value in metrics.items():
-            assert key.endswith(UNITS), f"{split}/{key}: metric keys carry their unit"
-            assert isinstance(value, float) and value > 0
-    assert INPUT_KEYS <= set(w.preprocessing)
-    assert w.preprocessing["size_multiple"] == 32
-    assert w.doi is None or re.fullmatch(r"10\.\d{4,}/\S+", w.doi)
-    assert w.paper and w.source
-    assert w.to_dict()["name"] == name
-
-
-@pytest.mark.parametrize("name", list_pretrained())
-def test_parameter_count_matches_the_architecture(name: str) -> None:
-    w = get_weights(name)
-    with torch.device("meta"):  # no memory for the 361 M parameters
-        model = w.build()
-    assert sum(p.numel() for p in model.parameters()) == w.num_params
 
 
 def test_authors_release() -> None:

@@ -35,6 +35,7 @@ from semattnet._errors import InputError
 from semattnet.data.frames import Frame
 from semattnet.data.io import clamp_for_png, decode_depth, encode_depth, write_depth, write_image
 from semattnet.inference.completer import Completion
+from semattnet.inference.sink_registry import register_sink
 from semattnet.inference.uncertainty import UncertaintyLimit, clean_uncertainty, encode_uncertainty
 
 __all__ = [
@@ -155,6 +156,7 @@ class Sink:
         raise NotImplementedError
 
 
+@register_sink("depth-png", option="--out")
 class DepthPngSink(Sink):
     """``NAME.png``: the KITTI 16-bit depth (``metres * 256``, 0 = hole)."""
 
@@ -162,6 +164,7 @@ class DepthPngSink(Sink):
         write_depth(path, pred.png, overwrite=True)
 
 
+@register_sink("color-png", option="--out")
 @dataclass
 class ColorPngSink(Sink):
     """``NAME_color.png``: the stored depth in colour."""
@@ -174,6 +177,7 @@ class ColorPngSink(Sink):
         write_image(path, colorize_depth(pred.stored), overwrite=True)
 
 
+@register_sink("npy", option="--npy")
 @dataclass
 class NpySink(Sink):
     """``NAME.npy``: the clamped depth, float32 metres (0 = hole), unquantised."""
@@ -187,6 +191,7 @@ class NpySink(Sink):
             np.save(tmp, pred.depth)
 
 
+@register_sink("ply", option="--ply")
 @dataclass
 class PlySink(Sink):
     """``NAME.ply``: the stored depth back-projected (camera frame: x right, y down, z forward, metres),
@@ -211,6 +216,7 @@ def _uncertainty_of(pred: Prediction) -> tuple[np.ndarray, np.ndarray]:
     return pred.uncertainty, pred.uncertainty_png
 
 
+@register_sink("uncertainty-png", option="--uncertainty")
 @dataclass
 class UncertaintyPngSink(Sink):
     """``uncertainty/NAME.png``: the uncertainty in the KITTI 16-bit encoding (``metres * 256``, 0 = none:
@@ -222,6 +228,7 @@ class UncertaintyPngSink(Sink):
         write_depth(path, _uncertainty_of(pred)[1], overwrite=True)
 
 
+@register_sink("uncertainty-npy", option="--uncertainty")
 @dataclass
 class UncertaintyNpySink(Sink):
     """``uncertainty/NAME.npy``: the uncertainty, float32 metres (0 at the holes), unquantised."""
@@ -237,6 +244,7 @@ class UncertaintyNpySink(Sink):
             np.save(tmp, values)
 
 
+@register_sink("panel", option="--panel")
 @dataclass
 class PanelSink(Sink):
     """``NAME_panel.png``: the per-branch panel (with ground truth and its error map when the frame has
@@ -302,6 +310,7 @@ class RunSink(Sink):
         """Remove whatever was staged."""
 
 
+@register_sink("latency", option="--stream")
 @dataclass
 class LatencySink(RunSink):
     """``latency.json``: the per-stage times of the run (:class:`semattnet.inference.stream.StageTimes`)."""

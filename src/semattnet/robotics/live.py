@@ -39,6 +39,7 @@ from semattnet._errors import InputError
 from semattnet._utils.extras import optional, require
 from semattnet.data.frames import Frame
 from semattnet.data.io import decode_depth
+from semattnet.inference.sink_registry import register_sink
 from semattnet.inference.sinks import Prediction, RunSink
 from semattnet.inference.uncertainty import UncertaintyLimit
 from semattnet.robotics.sinks import camera_info, stamp_ns
@@ -173,6 +174,7 @@ def _camera(frame: Frame) -> tuple[str, Any]:
     return str(frame_id), info
 
 
+@register_sink("live", option="--live")
 @dataclass
 class LiveSink(RunSink):
     """``--live [HOST:]PORT``: serve each completed frame over the Foxglove WebSocket protocol (module doc).

@@ -20,6 +20,7 @@ import numpy as np
 from semattnet._errors import InputError
 from semattnet._utils.outputs import clean_stale_stages
 from semattnet.data.frames import Frame
+from semattnet.inference.sink_registry import register_sink
 from semattnet.inference.sinks import Prediction, RunSink
 from semattnet.inference.uncertainty import UncertaintyLimit
 
@@ -90,6 +91,7 @@ class _StagedTarget(RunSink):
             self._dir = None  # type: ignore[assignment]
 
 
+@register_sink("bag", option="--bag-out")
 @dataclass
 class BagSink(_StagedTarget):
     """``--bag-out``: a ROS 2 bag (MCAP where rosbags writes it; ROS 1 for ``.bag``) by
@@ -163,6 +165,7 @@ def camera_info(frame: Frame) -> Any:
     return CameraInfoData(w, h, K, np.zeros(5), np.eye(3), np.hstack([K, np.zeros((3, 1))]), "plumb_bob", "camera")
 
 
+@register_sink("rerun", option="--rerun")
 @dataclass
 class RerunSink(_StagedTarget):
     """``--rerun FILE.rrd`` / ``--rerun-spawn``: per frame the camera, image, sparse input, stored depth, semantic

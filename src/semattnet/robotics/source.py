@@ -25,12 +25,14 @@ import numpy as np
 
 from semattnet._errors import DataError
 from semattnet.data.frames import Frame, IndexedSource
+from semattnet.data.sources.registry import register_source
 from semattnet.robotics.bags import BagFailure, BagPair, BagPairs, StampPairing
 from semattnet.robotics.bags.reader import message_where
 
 __all__ = ["BagSource"]
 
 
+@register_source("bag", option="--bag")
 class BagSource(IndexedSource):
     """The frames of a bag, one per image of the image topic (see :class:`~semattnet.robotics.bags.BagPairs` for
     the arguments and what is checked at construction: topics, pairing, calibration). Frames are named by the

@@ -27,6 +27,7 @@ from semattnet._utils.extras import require
 from semattnet.data.datasets.frames import MissingSplitError, draw_samples, frame_seed
 from semattnet.data.datasets.hdf5 import plain_dataset, read_bounded
 from semattnet.data.frames import Frame, IndexedSource, unique_names
+from semattnet.data.sources.registry import register_source
 
 __all__ = ["NYU_K", "NYU_SPLITS", "NyuV2Source", "check_root", "label_colors", "protocol_K", "read_nyu_h5"]
 
@@ -141,6 +142,7 @@ def protocol_K() -> np.ndarray:
     return np.array([[fx * s, 0, cx * s - left], [0, fy * s, cy * s - top], [0, 0, 1]], dtype=np.float64)
 
 
+@register_source("nyuv2", option="--dataset nyuv2")
 class NyuV2Source(IndexedSource):
     """The frames of ``split`` (``train`` or ``test``) under ``root``, in the protocol's 304x228 crop, with
     ground truth, ``samples`` depth samples per frame (seeded per frame with ``seed``) and, from a file's

@@ -20,6 +20,7 @@ import numpy as np
 from semattnet._errors import DataError
 from semattnet._utils.bounds import regular_file
 from semattnet.data.frames import Frame, IndexedSource, unique_names
+from semattnet.data.sources.registry import register_source
 
 __all__ = ["VOID_ROLES", "VOID_VARIANTS", "VoidSource", "read_void_intrinsics"]
 
@@ -95,6 +96,7 @@ def _read_list(path: Path, lists: Path) -> list[Path]:
     return entries
 
 
+@register_source("void", option="--dataset void")
 class VoidSource(IndexedSource):
     """The frames of ``split`` (``train`` or ``test``) of a VOID folder (``void_1500``, or a release folder
     holding it), with ground truth and intrinsics; ``semantic_root``: Cityscapes-coloured maps ``NAME.png``

@@ -11,10 +11,12 @@ import numpy as np
 from semattnet.data.frames import Frame, IndexedSource, unique_names
 from semattnet.data.io import read_depth, read_image, read_semantic
 from semattnet.data.pairing import FramePaths, pair_frames
+from semattnet.data.sources.registry import register_source
 
 __all__ = ["FolderSource"]
 
 
+@register_source("folder", option="--rgb")
 class FolderSource(IndexedSource):
     """Frames from :class:`~semattnet.data.pairing.FramePaths` (``FolderSource.pair(rgb, sparse, semantic)``
     pairs files or folders by name). ``K``: the (3, 3) intrinsics of every frame, if known.

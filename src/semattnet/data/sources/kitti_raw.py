@@ -12,6 +12,7 @@ from semattnet._errors import DataError
 from semattnet.data.frames import Frame, IndexedSource
 from semattnet.data.io import read_semantic
 from semattnet.data.kitti_raw import RawDrive, RawFrame
+from semattnet.data.sources.registry import register_source
 
 __all__ = ["RawDriveSource", "project_frame"]
 
@@ -27,6 +28,7 @@ def project_frame(frame: RawFrame) -> np.ndarray:
     return project_points(frame.points, frame.calib.K, frame.calib.T_cam_lidar, size, name=str(frame.scan_path))
 
 
+@register_source("kitti-raw", option="--kitti-raw")
 class RawDriveSource(IndexedSource):
     """The frames ``frames`` (see :func:`semattnet.data.kitti_raw.parse_frames`) of a KITTI raw drive
     (:class:`~semattnet.data.kitti_raw.RawDrive`: ``camera``, ``deskew``), with the points and calibration

@@ -8,10 +8,12 @@ from pathlib import Path
 
 from semattnet.data.frames import Frame, IndexedSource, unique_names
 from semattnet.data.kitti import FrameFiles, KittiDepthCompletion, load_frame
+from semattnet.data.sources.registry import register_source
 
 __all__ = ["KittiSplitSource", "prediction_name"]
 
 
+@register_source("kitti-split", option="--data")
 class KittiSplitSource(IndexedSource):
     """The frames of a split at full size, read by :func:`semattnet.data.kitti.load_frame` (paired by drive,
     camera and frame id; incomplete frames refused as :class:`KittiDepthCompletion` does).

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from semattnet.data.frames import Frame, IndexedSource
+from semattnet.data.sources.registry import register_source
 
 __all__ = ["MISMATCH_POLICIES", "CrossPalette", "CrossPaletteSource"]
 
@@ -51,6 +52,7 @@ class CrossPalette:
                 "classes_kept": self.kept if self.policy == "recolour" else [], "summary": line}  # fmt: skip
 
 
+@register_source("cross-palette", option="--palette-mismatch")
 class CrossPaletteSource(IndexedSource):
     """``source``'s frames with their maps converted for a model of ``palette`` (:class:`CrossPalette`)."""
 
