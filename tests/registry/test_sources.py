@@ -44,7 +44,7 @@ def _folder_values(frame: Frame) -> None:
 
 
 def _cityscapes_maps(frame: Frame) -> None:
-    from semattnet.data.palette import colors_to_ids
+    from semattnet.palette import colors_to_ids
 
     assert frame.semantic is not None
     colors_to_ids(frame.semantic, palette="cityscapes")  # recoloured from NYU-40: every colour is Cityscapes'
