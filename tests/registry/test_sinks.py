@@ -1,4 +1,4 @@
-"""Every registered output sink (:data:`semattnet.inference.sink_registry.SINKS`, the robot ones included)
+"""Every registered output sink (:data:`semattnet.inference.sinks.SINKS`, the robot ones included)
 writes two tiny predictions: its outputs exist where it says, decode back to what the prediction holds, and a
 bad destination or a prediction it cannot write is refused."""
 
@@ -17,8 +17,7 @@ from semattnet._errors import InputError
 from semattnet.data.frames import Frame
 from semattnet.data.io import read_depth, read_image
 from semattnet.inference.completer import Completion
-from semattnet.inference.sink_registry import SINKS, list_sinks
-from semattnet.inference.sinks import Prediction, RunSink, Sink, predict_frame
+from semattnet.inference.sinks import SINKS, Prediction, RunSink, Sink, list_sinks, predict_frame
 from tests._base import RegistryTester
 from tests.registry._entries import import_all
 from tests.registry._trees import SIZE

@@ -24,7 +24,7 @@ fed each completed frame and finished after the last one (:class:`LatencySink`).
 
 from __future__ import annotations
 
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
@@ -32,13 +32,14 @@ from typing import Any, ClassVar
 import numpy as np
 
 from semattnet._errors import InputError
+from semattnet._utils.registry import Registry
 from semattnet.data.frames import Frame
 from semattnet.data.io import clamp_for_png, decode_depth, encode_depth, write_depth, write_image
 from semattnet.inference.completer import Completion
-from semattnet.inference.sink_registry import register_sink
 from semattnet.inference.uncertainty import UncertaintyLimit, clean_uncertainty, encode_uncertainty
 
 __all__ = [
+    "SINKS",
     "ColorPngSink",
     "DepthPngSink",
     "LatencySink",
@@ -52,8 +53,10 @@ __all__ = [
     "UncertaintyPngSink",
     "default_sinks",
     "fusion_confidence",
+    "list_sinks",
     "output_files",
     "predict_frame",
+    "register_sink",
 ]
 
 
@@ -154,6 +157,23 @@ class Sink:
 
     def save(self, path: Path, pred: Prediction) -> None:
         raise NotImplementedError
+
+
+#: Sink name -> :class:`~semattnet._utils.registry.Entry` (the class and the ``predict`` option asking for it).
+#: The robot sinks register from :mod:`semattnet.robotics` (which imports this layer, never the reverse), so
+#: they are listed once their modules are imported. Every registered sink runs through the suite in
+#: ``tests/registry/test_sinks.py``.
+SINKS: Registry[Sink] = Registry("sink")
+
+
+def register_sink(name: str, option: str | None = None) -> Callable[[type[Sink]], type[Sink]]:
+    """Enrol a :class:`Sink` subclass as ``name`` (``option``: the CLI option asking for it)."""
+    return SINKS.register(name, option)
+
+
+def list_sinks() -> list[str]:
+    """The registered sink names (the robot ones once :mod:`semattnet.robotics`' modules are imported)."""
+    return SINKS.names()
 
 
 @register_sink("depth-png", option="--out")

@@ -39,8 +39,7 @@ from semattnet._errors import InputError
 from semattnet._utils.extras import optional, require
 from semattnet.data.frames import Frame
 from semattnet.data.io import decode_depth
-from semattnet.inference.sink_registry import register_sink
-from semattnet.inference.sinks import Prediction, RunSink
+from semattnet.inference.sinks import Prediction, RunSink, register_sink
 from semattnet.inference.uncertainty import UncertaintyLimit
 from semattnet.robotics.sinks import camera_info, stamp_ns
 

@@ -20,8 +20,7 @@ import numpy as np
 from semattnet._errors import InputError
 from semattnet._utils.outputs import clean_stale_stages
 from semattnet.data.frames import Frame
-from semattnet.inference.sink_registry import register_sink
-from semattnet.inference.sinks import Prediction, RunSink
+from semattnet.inference.sinks import Prediction, RunSink, register_sink
 from semattnet.inference.uncertainty import UncertaintyLimit
 
 __all__ = ["BagSink", "RerunSink", "camera_info", "stamp_ns"]
