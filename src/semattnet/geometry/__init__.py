@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import importlib
 import warnings
-from typing import Any
 
 from .calibration import (
     CameraCalibration,
@@ -68,7 +67,7 @@ __all__ = [
 _MOVED = {"ProjectionSummary": "semattnet.data.scans", "project_scan_file": "semattnet.data.scans"}
 
 
-def __getattr__(name: str) -> Any:
+def __getattr__(name: str) -> object:
     """The moved names, loaded on first use (importing geometry loads nothing from data)."""
     if name not in _MOVED:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

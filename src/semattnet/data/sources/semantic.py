@@ -3,13 +3,30 @@
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
+
+import numpy as np
 
 from semattnet._errors import InputError
 from semattnet.data.frames import Frame, IndexedSource
 
-__all__ = ["MISMATCH_POLICIES", "CrossPalette", "CrossPaletteSource", "SemanticMaps"]
+__all__ = ["MISMATCH_POLICIES", "CrossPalette", "CrossPaletteSource", "MapSegmenter", "PaletteReport", "SemanticMaps"]
+
+#: A segmenter: (B, H, W, 3) uint8 images -> (B, H, W) uint8 class ids (a
+#: :class:`semattnet.segmentation.Segmenter`, whose ``palette`` names them; Cityscapes without one).
+MapSegmenter = Callable[[np.ndarray], np.ndarray]
+
+
+class PaletteReport(TypedDict):
+    """What :class:`CrossPalette` made of the frames' maps (``metrics.json``'s ``semantic``)."""
+
+    maps_palette: str
+    model_palette: str
+    used: str
+    classes_kept: list[str]
+    summary: str
 
 
 class SemanticMaps:
@@ -25,7 +42,8 @@ class SemanticMaps:
     says what they became). :meth:`bind` the completer before :meth:`fill`.
     """
 
-    def __init__(self, segmenter: Any = None, folder: bool = False, mismatch: str = "refuse") -> None:
+    def __init__(self, segmenter: MapSegmenter | str | None = None, folder: bool = False,
+                 mismatch: str = "refuse") -> None:  # fmt: skip
         if folder and segmenter is not None:
             raise InputError("semantic: give a semantic folder or a segmenter, not both")
         self.segmenter, self.folder, self.needed = segmenter, folder, False
@@ -34,7 +52,7 @@ class SemanticMaps:
         self.note: str | None = None
         self._warned = False
 
-    def bind(self, completer: Any) -> SemanticMaps:
+    def bind(self, completer: object) -> SemanticMaps:
         """Decide for ``completer``: whether it needs maps; a segmenter SPEC is loaded on its device."""
         from semattnet.inference.backends import needs_semantic
 
@@ -45,7 +63,7 @@ class SemanticMaps:
             self.segmenter = load_segmenter(self.segmenter, getattr(completer, "device", "auto"))
         return self
 
-    def check_palette(self, completer: Any, source: Any) -> None:
+    def check_palette(self, completer: object, source: object) -> None:
         """Refuse maps of another palette than the one ``completer``'s model was trained with (one line;
         :func:`semattnet.data.palette.check_palette`): a segmenter's maps are of its ``palette`` (Cityscapes
         unless it says otherwise), a source's of its ``palette`` (None: it gives none, and the fallback map fits
@@ -73,6 +91,8 @@ class SemanticMaps:
         if not self.needed:
             return frame
         if frame.semantic is None and self.segmenter is not None:
+            if isinstance(self.segmenter, str):  # bind loads it
+                raise InputError(f"semantic: segmenter {self.segmenter!r} is not loaded; bind the completer first")
             palette = getattr(self.segmenter, "palette", "cityscapes")
             frame = frame.with_semantic(ids_to_colors(self.segmenter(frame.rgb[None])[0], palette))
         if frame.semantic is not None:
@@ -101,7 +121,7 @@ class CrossPalette:
         self.kept = sorted(src.classes[i - src.first_id][0] for i in palette_mapping(src.name, self.palette))
         self.policy = "recolour" if policy == "recolour" and self.kept else "fallback"
 
-    def map(self, semantic: Any, where: str = "semantic map") -> Any:
+    def map(self, semantic: np.ndarray, where: str = "semantic map") -> np.ndarray:
         """One map converted."""
         from semattnet.data.palette import recolor, unknown_map
 
@@ -109,7 +129,7 @@ class CrossPalette:
             return unknown_map(*semantic.shape[:2])
         return recolor(semantic, self.maps_palette, self.palette, where)
 
-    def report(self) -> dict[str, Any]:
+    def report(self) -> PaletteReport:
         """What the frames' maps became (metrics.json's ``semantic``), with a one-line ``summary``."""
         from semattnet.data.palette import get_palette
 
@@ -126,7 +146,9 @@ class CrossPalette:
 class CrossPaletteSource(IndexedSource):
     """``source``'s frames with their maps converted for a model of ``palette`` (:class:`CrossPalette`)."""
 
-    def __init__(self, source: Any, palette: str, policy: str = "recolour") -> None:
+    def __init__(self, source: IndexedSource, palette: str, policy: str = "recolour") -> None:
+        if source.palette is None:
+            raise InputError(f"{type(source).__name__}: its frames have no semantic maps to convert to {palette}")
         self.source, self.cross = source, CrossPalette(source.palette, palette, policy)
         self.palette, self.names = self.cross.palette, source.names
 
@@ -140,5 +162,5 @@ class CrossPaletteSource(IndexedSource):
     def inputs(self) -> list[Path]:
         return list(self.source.inputs())
 
-    def report(self) -> dict[str, Any]:
+    def report(self) -> PaletteReport:
         return self.cross.report()
