@@ -7,8 +7,8 @@ module import time, so ``import semattnet`` works without either.
 
 from __future__ import annotations
 
-from functools import lru_cache
 from collections.abc import Mapping
+from functools import lru_cache
 from typing import Protocol
 
 from semattnet._utils.extras import require

@@ -114,7 +114,9 @@ def pointcloud2_message(ts: Typestore, fields: dict[str, np.ndarray], stamp_ns: 
                                                    is_dense=is_dense)  # fmt: skip
 
 
-def camera_info_message(ts: Typestore, info: CameraInfoData, stamp_ns: int | None = None, frame_id: str | None = None) -> object:
+def camera_info_message(
+    ts: Typestore, info: CameraInfoData, stamp_ns: int | None = None, frame_id: str | None = None
+) -> object:
     """``sensor_msgs/CameraInfo`` of :class:`CameraInfoData` (stamp and frame id from ``info`` unless given)."""
     cls = ts.types["sensor_msgs/msg/CameraInfo"]
     ros1 = "K" in vars(cls)["__dataclass_fields__"]
