@@ -67,10 +67,10 @@ def test_sparse_equals_project_cli_exactly(bags: dict[str, Path], fmt: str, tmp_
         assert np.array_equal(encode_depth(frame.sparse), np.asarray(Image.open(out)))
         assert np.array_equal(frame.sparse, raw.sparse) and np.array_equal(frame.rgb, raw.rgb)
         assert np.array_equal(frame.points, raw.points) and np.array_equal(frame.K, raw.K)
-        assert frame.meta["stamp_ns"] == T0 + i * 10**8 and frame.timestamp == pytest.approx((T0 + i * 10**8) / 1e9)
-        assert (frame.meta["frame_id"], frame.meta["lidar_frame_id"]) == ("camera_color_left", "velodyne")
-        assert frame.meta["scan_stamp_ns"] == T0 + i * 10**8 + 3 * 10**6
-        assert frame.meta["camera_info"].image_size == (1242, 375)
+        assert frame.meta.stamp_ns == T0 + i * 10**8 and frame.timestamp == pytest.approx((T0 + i * 10**8) / 1e9)
+        assert (frame.meta.frame_id, frame.meta.lidar_frame_id) == ("camera_color_left", "velodyne")
+        assert frame.meta.scan_stamp_ns == T0 + i * 10**8 + 3 * 10**6
+        assert frame.meta.camera_info is not None and frame.meta.camera_info.image_size == (1242, 375)
 
 
 def test_tf_static_calibration_and_random_access(bags: dict[str, Path]) -> None:

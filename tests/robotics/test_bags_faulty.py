@@ -90,7 +90,7 @@ def test_bad_frames_fail_alone_and_the_bag_is_read_once(bags: dict[str, tuple[Pa
         assert got.name == want.name == name
         for key in ("rgb", "sparse", "points", "K"):
             assert np.array_equal(getattr(got, key), getattr(want, key)), (name, key)
-        assert got.meta["stamp_ns"] == want.meta["stamp_ns"] and np.count_nonzero(got.sparse) > 100
+        assert got.meta.stamp_ns == want.meta.stamp_ns and np.count_nonzero(got.sparse) > 100
     assert opens == [path, clean_path]  # one forward pass each, through every bad frame
     assert np.array_equal(source.load("0000000002").sparse, clean.load("0000000002").sparse)  # backwards: again
 

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from semattnet._errors import InputError, MissingDependencyError
-from semattnet.data.frames import Frame
+from semattnet.data.frames import Frame, SensorMeta
 from semattnet.data.io import read_depth
 from semattnet.geometry import RigCalibration, make_T
 from semattnet.inference.completer import Completion
@@ -48,7 +48,7 @@ def _prediction() -> Prediction:
     depth[0, :5] = 0  # holes
     info = CameraInfoData(W, H, K, np.array([0.1, -0.05, 0, 0, 0.01]), np.eye(3), np.hstack([K, np.zeros((3, 1))]),
                           "plumb_bob", "cam_info_frame")  # fmt: skip
-    meta = {"stamp_ns": STAMP, "frame_id": "cam_left", "lidar_frame_id": "velo", "camera_info": info}
+    meta = SensorMeta(stamp_ns=STAMP, frame_id="cam_left", lidar_frame_id="velo", camera_info=info)
     calib = RigCalibration(K, T_CAM_LIDAR, (W, H), "left")
     frame = Frame("000042", rgb, sparse, K=K, calib=calib, meta=meta)
     unc = rng.uniform(0, 2, (H, W)).astype(np.float32)

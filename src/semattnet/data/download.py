@@ -169,7 +169,9 @@ class ArchiveConflictError(DataError):
 _RESUME = "run the same data download command again (it resumes)"
 
 
-def _plan(path: Path, dest: Path, items: Sequence[tuple[object, PurePosixPath, int]]) -> tuple[list, int]:
+def _plan(
+    path: Path, dest: Path, items: Sequence[tuple[object, PurePosixPath, int]]
+) -> tuple[list[tuple[object, Path]], int]:
     """The members to write as (member, target) and the count already there (a file of the member's
     size: what an earlier run of ours wrote, as every file is moved into place complete).
 
@@ -178,7 +180,9 @@ def _plan(path: Path, dest: Path, items: Sequence[tuple[object, PurePosixPath, i
         ArchiveConflictError: targets that exist with other sizes or as folders (never replaced).
     """
     base = dest.resolve()
-    todo, conflicts, skipped = [], [], 0
+    todo: list[tuple[object, Path]] = []
+    conflicts: list[Path] = []
+    skipped = 0
     for member, rel, size in items:
         out = dest.joinpath(*rel.parts)
         if not out.parent.resolve().is_relative_to(base):

@@ -15,13 +15,39 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Protocol, runtime_checkable
+from typing import Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
 from semattnet._errors import DataError
+from semattnet.geometry.calibration import RigCalibration
+from semattnet.geometry.cameras import CameraInfoData
 
-__all__ = ["DuplicateFrameError", "Frame", "FrameSource", "IndexedSource", "unique_names"]
+__all__ = ["DuplicateFrameError", "Frame", "FrameSource", "IndexedSource", "SensorMeta", "unique_names"]
+
+_T = TypeVar("_T")
+
+
+@dataclass(frozen=True)
+class SensorMeta:
+    """What a recording says about a frame beyond its images, that the robot sinks write back (a bag frame's
+    header stamp and frame ids, its CameraInfo); every field is optional (the defaults: the source does not say).
+
+    Attributes:
+        stamp_ns: the image's header stamp, integer nanoseconds, or None.
+        frame_id: the camera's optical frame id (``""``: unknown).
+        lidar_frame_id: the LiDAR's frame id (``""``: unknown).
+        scan_stamp_ns: the paired scan's header stamp, integer nanoseconds, or None.
+        camera_info: the camera's ``CameraInfo`` (:class:`~semattnet.geometry.cameras.CameraInfoData`), or None.
+        dropped_points: scan points left out for a NaN or infinite coordinate.
+    """
+
+    stamp_ns: int | None = None
+    frame_id: str = ""
+    lidar_frame_id: str = ""
+    scan_stamp_ns: int | None = None
+    camera_info: CameraInfoData | None = None
+    dropped_points: int = 0
 
 
 @dataclass(frozen=True)
@@ -36,12 +62,11 @@ class Frame:
         K: (3, 3) intrinsics of the image, pixels, or None when the source does not know them.
         timestamp: seconds (the source's clock), or None.
         points: (N, 3|4) LiDAR points the sparse map was projected from (LiDAR frame, metres), or None.
-        calib: the calibration that projected them (a :class:`semattnet.geometry.RigCalibration`), or None.
+        calib: the calibration that projected them, or None.
         gt: (H, W) float32 ground-truth depth in metres (0 = none), or None.
         paths: the files it was read from, by role (``rgb``, ``sparse``, ``semantic``, ``gt``, ``scan``, ...).
-        meta: what else the source knows that some sinks need, by key (e.g. a bag frame's ``stamp_ns``: the
-            image's header stamp in integer nanoseconds, ``frame_id``, ``lidar_frame_id``, ``camera_info``);
-            empty for sources that know nothing more. Sinks must treat every key as optional.
+        meta: what else the recording says (a bag frame's header stamp, frame ids, CameraInfo:
+            :class:`SensorMeta`); all defaults for sources that know nothing more.
     """
 
     name: str
@@ -51,10 +76,10 @@ class Frame:
     K: np.ndarray | None = None
     timestamp: float | None = None
     points: np.ndarray | None = None
-    calib: Any = None
+    calib: RigCalibration | None = None
     gt: np.ndarray | None = None
     paths: Mapping[str, Path] = field(default_factory=dict)
-    meta: Mapping[str, Any] = field(default_factory=dict)
+    meta: SensorMeta = field(default_factory=SensorMeta)
 
     def __post_init__(self) -> None:
         where = self.paths.get("rgb", self.name)
@@ -98,9 +123,11 @@ class FrameSource(Protocol):
 
 class IndexedSource:
     """Base of sources with random access by name: subclasses set ``names`` and write ``load`` and
-    ``inputs``; ``check`` loads every frame (override it when a cheaper full validation exists)."""
+    ``inputs``; ``check`` loads every frame (override it when a cheaper full validation exists).
+    ``palette``: the palette of the semantic maps its frames carry (None: it gives none)."""
 
     names: Sequence[str] = ()
+    palette: str | None = None
 
     def __len__(self) -> int:
         return len(self.names)
@@ -124,14 +151,14 @@ class DuplicateFrameError(DataError):
     """Two inputs whose frames would get the same name (and so the same output files)."""
 
 
-def unique_names(items: Iterable[tuple[str, Any]], where: object) -> dict[str, Any]:
+def unique_names(items: Iterable[tuple[str, _T]], where: object) -> dict[str, _T]:
     """``{name: item}`` of ``(name, item)`` pairs, in order, when no two share a name: a frame never
     silently replaces another (nor its outputs).
 
     Raises:
         DuplicateFrameError: one line naming ``where``, the name and both items (their input files).
     """
-    out: dict[str, Any] = {}
+    out: dict[str, _T] = {}
     for name, item in items:
         if name in out:
             raise DuplicateFrameError(f"{where}: {out[name]} and {item} both make the frame name {name!r}; "

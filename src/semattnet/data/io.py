@@ -237,7 +237,8 @@ def read_intrinsics(path: str | os.PathLike[str], camera: str | None = None) -> 
     if camera is not None:
         from semattnet.geometry.calibration import read_projection
 
-        return read_projection(path, camera)[:, :3].copy()
+        K: np.ndarray = read_projection(path, camera)[:, :3].copy()
+        return K
     if not path.is_file():
         raise DataError(f"{path}: file not found")
     try:

@@ -168,7 +168,7 @@ def _describe(problems: list[tuple[str, list[Path | str]]], limit: int = 5) -> s
     return shown + more
 
 
-class KittiDepthCompletion(Dataset):
+class KittiDepthCompletion(Dataset[dict[str, object]]):
     """KITTI depth completion samples as tensors in the model's units.
 
     Each item is a dict: ``rgb`` (3, H, W) 0..255, ``semantic`` (3, H, W) 0..255, ``sparse``

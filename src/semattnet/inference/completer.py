@@ -19,10 +19,10 @@ cropped back, so any size works, KITTI's 1242x375 included.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -31,49 +31,21 @@ from torch import nn
 from semattnet._errors import InputError
 from semattnet._utils.device import amp_dtype, resolve_device
 from semattnet.inference.backends import needs_semantic, optimize_for_inference
+from semattnet.inference.backends._base import InferenceEngine, StageHook
+from semattnet.inference.backends.calibration import CalibrationFrames
+from semattnet.inference.completion import Completer, Completion, StageTimed
 from semattnet.inference.padding import crop_padding, pad_to_multiple
 from semattnet.models.checks import check_has_points, check_sparse_depth
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.uncertainty import with_uncertainty
 from semattnet.weights.hub import load_model
 
-__all__ = ["Completion", "DepthCompleter"]
+if TYPE_CHECKING:
+    from semattnet.data.frames import Frame, FrameSource
+    from semattnet.inference.semantic import SemanticMaps
+    from semattnet.inference.stream import StageTimes
 
-
-@dataclass
-class Completion:
-    """A completed frame: ``depth`` (H, W) float32 metres (the final prediction, as the method returned
-    it) and ``output``, the model's typed :class:`DepthCompletionOutput` ((1, 1, H, W) CPU tensors), or
-    None for a method without branches (the classical baseline); ``uncertainty`` the per-pixel
-    uncertainty of ``depth``, (H, W) float32 metres."""
-
-    depth: np.ndarray
-    output: DepthCompletionOutput | None = None
-    #: (H, W) float32 per-pixel uncertainty of ``depth`` in metres, or None when the method gives none:
-    #: ``output.uncertainty`` (:func:`semattnet.models.uncertainty.depth_uncertainty`) when not given;
-    #: the classical baseline's :func:`semattnet.baselines.classical.classical_uncertainty`.
-    uncertainty: np.ndarray | None = None
-
-    def __post_init__(self) -> None:
-        if self.uncertainty is None and self.output is not None and self.output.uncertainty is not None:
-            self.uncertainty = self.output.uncertainty[0, 0].float().cpu().numpy()
-
-    @property
-    def outputs(self) -> dict[str, np.ndarray]:
-        """Every map as an (H, W) array by field name (``{"refined_depth": depth}`` without ``output``):
-        what the panels and the viewer draw."""
-        if self.output is None:
-            return {"refined_depth": np.asarray(self.depth, dtype=np.float32)}
-        return {k: v[0, 0].float().cpu().numpy() for k, v in self.output.to_dict().items()}
-
-    @property
-    def confidence(self) -> np.ndarray | None:
-        """(H, W) largest of the fusion weights of eq. 12 (the method's confidence), or None without branches."""
-        if self.output is None:
-            return None
-        confs = [c for c in (self.output.color_conf, self.output.semantic_conf, self.output.guided_conf)
-                 if c is not None]  # fmt: skip
-        return torch.stack([c[0, 0].float().cpu() for c in confs]).amax(0).numpy()
+__all__ = ["Completer", "Completion", "DepthCompleter", "StageHook", "StageTimed"]
 
 
 def check_precision(precision: str | None, amp: str, backend: str) -> str | None:
@@ -126,7 +98,7 @@ class DepthCompleter:
 
     def __init__(self, model: nn.Module, device: str | torch.device = "auto", amp: str = "none",
                  backend: str = "torch", inplace: bool = False, precision: str | None = None,
-                 calibration: Any = None) -> None:  # fmt: skip
+                 calibration: CalibrationFrames = None) -> None:  # fmt: skip
         self.device = resolve_device(device)
         self.precision = check_precision(precision, amp, backend)
         self.amp = amp_dtype("bf16" if self.precision == "bf16" and backend == "torch" else amp)
@@ -140,7 +112,7 @@ class DepthCompleter:
         self.compute_uncertainty = True
         self._source = model.to(self.device).eval()
         self._inplace = inplace
-        self._engines: dict[tuple[int, int] | None, nn.Module] = {}
+        self._engines: dict[tuple[int, int] | None, InferenceEngine] = {}
 
     @classmethod
     def from_checkpoint(cls, path: str | Path, device: str | torch.device = "auto", amp: str = "none",
@@ -150,14 +122,19 @@ class DepthCompleter:
 
     @classmethod
     def from_pretrained(cls, name_or_path: str | os.PathLike[str], device: str | torch.device = "auto",
-                        amp: str = "none", backend: str = "torch", **kwargs: Any) -> DepthCompleter:  # fmt: skip
+                        amp: str = "none", backend: str = "torch", *, sha256: str | None = None,
+                        cache_dir: str | os.PathLike[str] | None = None, progress: bool = True, arch: str | None = None,
+                        **overrides: object) -> DepthCompleter:  # fmt: skip
         """A completer for released weights by name, a local file or folder, or a URL
-        (:func:`semattnet.weights.from_pretrained`, which takes ``kwargs``: ``sha256``, ``cache_dir``, ...)."""
+        (:func:`semattnet.weights.from_pretrained`: ``sha256``, ``cache_dir``, ``progress``, ``arch``, and config
+        ``overrides``)."""
         from semattnet.weights import from_pretrained
 
-        return cls(from_pretrained(name_or_path, map_location="cpu", **kwargs), device, amp, backend, inplace=True)
+        model = from_pretrained(name_or_path, sha256=sha256, cache_dir=cache_dir, map_location="cpu", progress=progress,
+                                arch=arch, **overrides)  # fmt: skip
+        return cls(model, device, amp, backend, inplace=True)
 
-    def engine(self, size: tuple[int, int] | None = None) -> nn.Module:
+    def engine(self, size: tuple[int, int] | None = None) -> InferenceEngine:
         """The engine for padded inputs of ``size`` (built on first use; one for all sizes with ``torch``)."""
         fixed = self.backend in ("openvino", "onnxruntime") or (self.backend == "auto" and self.device.type == "cpu")
         key = size if fixed else None
@@ -169,6 +146,20 @@ class DepthCompleter:
                                                         inplace=self._inplace and self.backend == "torch",
                                                         calibration=self.calibration)  # fmt: skip
         return self._engines[key]
+
+    @contextmanager
+    def timing(self, hook: StageHook) -> Iterator[tuple[str, ...]]:
+        """While active, the stages the engine runs inside a call (the ``torch`` engine's ``propagation``) run
+        inside ``hook(stage)``; gives those stages (empty: this engine does not split its call)."""
+        engine = self.engine(None) if self.backend == "torch" else None
+        if engine is None or not engine.inner_stages:
+            yield ()
+            return
+        engine.on_stage = hook
+        try:
+            yield engine.inner_stages
+        finally:
+            engine.on_stage = None
 
     @property
     def model(self) -> nn.Module:
@@ -191,8 +182,9 @@ class DepthCompleter:
         with torch.inference_mode(), torch.autocast(self.device.type, dtype=self.amp or torch.float32,
                                                     enabled=self.amp is not None):  # fmt: skip
             engine = self.engine((int(rgb_p.shape[-2]), int(rgb_p.shape[-1])))
-            out = engine(rgb=rgb_p.to(self.device), semantic=None if sem_p is None else sem_p.to(self.device),
-                         sparse=sparse_p.to(self.device))  # fmt: skip
+            semantic_in = None if sem_p is None else sem_p.to(self.device)
+            out: DepthCompletionOutput = engine(rgb=rgb_p.to(self.device), semantic=semantic_in,
+                                                sparse=sparse_p.to(self.device))  # fmt: skip
         out = out.map(lambda t: crop_padding(t.float(), pad))
         if not self.compute_uncertainty:
             return out
@@ -225,8 +217,9 @@ class DepthCompleter:
         out = out.map(lambda t: t.cpu())
         return Completion(depth=out.depth[0, 0].numpy(), output=out)
 
-    def stream(self, source: Any, semantic: Any = None, *, timer: Any = None, prefetch: int = 2,
-               names: Any = None) -> Iterator[tuple[Any, Completion]]:  # fmt: skip
+    def stream(self, source: FrameSource, semantic: SemanticMaps | None = None, *,
+               timer: StageTimes | None = None, prefetch: int = 2,
+               names: Sequence[str] | None = None) -> Iterator[tuple[Frame, Completion]]:  # fmt: skip
         """``(frame, completion)`` for every frame of ``source`` (a :class:`~semattnet.data.frames.FrameSource`;
         ``names``: some of its frames), in order, while the next ``prefetch`` frames are read, decoded, projected
         and segmented in a background thread (bounded: at most ``prefetch`` frames ahead).

@@ -24,12 +24,21 @@ import time
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 from semattnet._errors import SemAttNetError
 from semattnet._utils.atomic import atomic_path
 
-__all__ = ["FRAMES_FILE", "SAVE_INTERVAL_S", "SCHEMA", "STATUSES", "ResumeError", "RunJournal", "describe_counts"]
+__all__ = [
+    "FRAMES_FILE",
+    "SAVE_INTERVAL_S",
+    "SCHEMA",
+    "STATUSES",
+    "FrameEntry",
+    "ResumeError",
+    "RunJournal",
+    "describe_counts",
+]
 
 #: The journal's name in the output folder.
 FRAMES_FILE = "frames.json"
@@ -43,6 +52,20 @@ SMALL_RUN = 500
 SAVE_INTERVAL_S = 1.0
 
 
+class _Entry(TypedDict):
+    name: str
+    status: str
+
+
+class FrameEntry(_Entry, total=False):
+    """One frame of the journal: ``name``, ``status`` (:data:`STATUSES`), and ``reason`` (not done) or ``files``
+    (relative path -> size in bytes) and ``stage_ms`` (stage -> milliseconds) (done)."""
+
+    reason: str
+    files: dict[str, int]
+    stage_ms: dict[str, float]
+
+
 class ResumeError(SemAttNetError):
     """A resume that cannot continue the run in its folder (no journal, another run's options or weights)."""
 
@@ -51,7 +74,7 @@ def _rank_file(rank: int) -> str:
     return f".frames.rank{rank}.json"
 
 
-def _read(path: Path) -> dict[str, Any] | None:
+def _read(path: Path) -> dict[str, object] | None:
     """A journal file's content, None when absent; a damaged one is a one-line :class:`ResumeError`."""
     if not path.is_file():
         return None
@@ -64,10 +87,10 @@ def _read(path: Path) -> dict[str, Any] | None:
     return doc
 
 
-def _difference(old: Mapping[str, Any], new: Mapping[str, Any]) -> str | None:
+def _difference(old: Mapping[str, object], new: Mapping[str, object]) -> str | None:
     """The first option whose value differs between two run identities, as a phrase, or None."""
 
-    def said(value: Any) -> str:
+    def said(value: object) -> str:
         return "not given" if value is None else "given" if value is True else repr(value)
 
     for key in sorted(set(old) | set(new)):
@@ -87,11 +110,11 @@ class RunJournal:
         ResumeError: ``resume`` without a journal in ``out``, or with another identity.
     """
 
-    def __init__(self, out: str | Path, names: Sequence[str], run: Mapping[str, Any] | None = None,
+    def __init__(self, out: str | Path, names: Sequence[str], run: Mapping[str, object] | None = None,
                  resume: bool = False, rank: int = 0, world: int = 1) -> None:  # fmt: skip
         self.out, self.names, self.run = Path(out), list(names), dict(run or {})
         self.rank, self.world = rank, world
-        self.frames: dict[str, dict[str, Any]] = {n: {"name": n, "status": "pending"} for n in self.names}
+        self.frames: dict[str, FrameEntry] = {n: {"name": n, "status": "pending"} for n in self.names}
         self.earlier_wall_s = 0.0
         self.kept: set[str] = set()
         self._saved_at = 0.0
@@ -111,27 +134,34 @@ class RunJournal:
             raise ResumeError(f"{self.out}: no {FRAMES_FILE} to resume from (not a semattnet predict folder, or "
                               "its run was killed before the first frame); run without --resume")  # fmt: skip
         for doc in found:
-            why = _difference(doc.get("run", {}), self.run)
+            run = doc.get("run", {})
+            why = _difference(run if isinstance(run, dict) else {}, self.run)
             if why is not None:
                 raise ResumeError(f"{self.out / FRAMES_FILE}: cannot resume: {why}; resume with the first run's "
                                   "options and weights, or choose a new --out")  # fmt: skip
-        self.earlier_wall_s = max(float(d.get("wall_s", 0.0)) for d in found)
+        self.earlier_wall_s = max(_seconds(d.get("wall_s", 0.0)) for d in found)
         for doc in found:
-            for entry in doc["frames"]:
-                if entry.get("status") == "done" and entry.get("name") in self.frames and self._whole(entry):
-                    self.frames[entry["name"]] = dict(entry)
-                    self.kept.add(entry["name"])
+            for entry in _list(doc["frames"]):
+                kept = self._kept(entry)
+                if kept is not None:
+                    self.frames[kept["name"]] = kept
+                    self.kept.add(kept["name"])
 
-    def _whole(self, entry: Mapping[str, Any]) -> bool:
-        """Every output file of a done frame is there with its recorded size."""
-        files = entry.get("files")
-        if not isinstance(files, dict):
-            return False
+    def _kept(self, entry: object) -> FrameEntry | None:
+        """A done frame of an earlier run with every output file there at its recorded size, else None."""
+        if not isinstance(entry, dict) or entry.get("status") != "done" or entry.get("name") not in self.frames:
+            return None
+        name, files, stage_ms = str(entry["name"]), entry.get("files"), entry.get("stage_ms", {})
+        if not isinstance(files, dict) or not isinstance(stage_ms, dict):
+            return None
         for rel, size in files.items():
-            p = self.out / rel
+            p = self.out / str(rel)
             if not p.is_file() or p.stat().st_size != size:
-                return False
-        return True
+                return None
+        kept: FrameEntry = {"name": name, "status": "done", "files": dict(files)}
+        if "stage_ms" in entry:
+            kept["stage_ms"] = dict(stage_ms)
+        return kept
 
     def done(self, name: str, files: Sequence[str], stage_ms: Mapping[str, float]) -> None:
         """Frame ``name``'s outputs (paths relative to ``out``, already in place) and its stage times."""
@@ -153,7 +183,7 @@ class RunJournal:
         """(name, reason) of the frames with ``status``, in order."""
         return [(n, e.get("reason", "")) for n, e in self.frames.items() if e["status"] == status]
 
-    def to_doc(self, complete: bool, wall_s: float = 0.0) -> dict[str, Any]:
+    def to_doc(self, complete: bool, wall_s: float = 0.0) -> dict[str, object]:
         return {"schema": SCHEMA, "complete": complete, "run": self.run, "counts": self.counts(),
                 "wall_s": round(self.earlier_wall_s + wall_s, 3),
                 "frames": [self.frames[n] for n in self.names]}  # fmt: skip
@@ -168,7 +198,7 @@ class RunJournal:
             tmp.write_text(json.dumps(self.to_doc(complete, wall_s), indent=1) + "\n")
         self._saved_at = now
 
-    def merge(self, entries: Sequence[dict[str, Any]], complete: bool, wall_s: float) -> None:
+    def merge(self, entries: Sequence[FrameEntry], complete: bool, wall_s: float) -> None:
         """Process 0 under ``torchrun``: every process's entries into ``frames.json``; the partial files go."""
         for e in entries:
             if e["status"] != "pending" or self.frames[e["name"]]["status"] == "pending":
@@ -177,6 +207,14 @@ class RunJournal:
         self.save(complete=complete, wall_s=wall_s)
         for r in range(keep):
             (self.out / _rank_file(r)).unlink(missing_ok=True)
+
+
+def _seconds(value: object) -> float:
+    return float(value) if isinstance(value, int | float | str) else 0.0
+
+
+def _list(value: object) -> list[object]:
+    return list(value) if isinstance(value, list) else []
 
 
 def describe_counts(counts: Mapping[str, int]) -> str:

@@ -39,7 +39,6 @@ from collections import Counter, deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
 
 import numpy as np
 
@@ -49,8 +48,8 @@ from semattnet._utils.distributed import first_error, is_main, rank, world_size
 from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs, stage_folder
 from semattnet.data.frames import Frame, FrameSource
 from semattnet.data.io import encode_depth, read_depth
-from semattnet.inference.completer import Completion
-from semattnet.inference.journal import FRAMES_FILE, RunJournal, describe_counts
+from semattnet.inference.completer import Completer, Completion
+from semattnet.inference.journal import FRAMES_FILE, FrameEntry, RunJournal, describe_counts
 from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sharding import agree, gather_rows, on_main, process_group, rank_log, shard
 from semattnet.inference.sinks import (
@@ -77,12 +76,6 @@ __all__ = [
 ]
 
 PathLike = str | os.PathLike[str]
-
-
-class Completer(Protocol):
-    """Anything called as ``completer(rgb, sparse, semantic)`` -> :class:`Completion`."""
-
-    def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion: ...
 
 
 def _check_outputs(source: FrameSource, sinks: Sequence[Sink], out: Path, overwrite: bool,
@@ -137,7 +130,7 @@ def _check_inputs(source: FrameSource, names: Sequence[str], on_error: str) -> d
 
 def check_frames(source: FrameSource, sinks: Sequence[Sink], out: PathLike, *, overwrite: bool = False,
                  inputs: Sequence[PathLike | None] = (), on_error: str | None = None, resume: bool = False,
-                 run: Mapping[str, Any] | None = None) -> RunPlan:  # fmt: skip
+                 run: Mapping[str, object] | None = None) -> RunPlan:  # fmt: skip
     """Every check before any work (and before a model is loaded): a resume's journal, the outputs (rank 0),
     then every input of every frame to do decoded (each rank its share).
 
@@ -161,8 +154,8 @@ def check_frames(source: FrameSource, sinks: Sequence[Sink], out: PathLike, *, o
         todo = [n for n in shard(source.names) if n not in journal.kept]
         faults = agree(_check_inputs, source, todo, policy)
         position = {n: i for i, n in enumerate(source.names)}
-        bad = gather_rows([{"name": n, "status": "skipped", "reason": r} for n, r in faults.items()],
-                          key=lambda e: position[e["name"]])  # fmt: skip
+        rows: list[FrameEntry] = [{"name": n, "status": "skipped", "reason": r} for n, r in faults.items()]
+        bad = gather_rows(rows, key=lambda e: position[e["name"]])
         if bad and len(bad) == len(source.names):
             raise _nothing_done(bad)  # every input is bad: one line, before the model is loaded
     return RunPlan(journal, faults, policy, resume)
@@ -324,17 +317,17 @@ class _FrameLoop:
             self.out.rmdir()
 
 
-def _run_frames(loop: _FrameLoop, completer: Completer, maps: SemanticMaps, prefetch: int,
-                realtime: float | None, overwrite: bool) -> None:  # fmt: skip
+def _run_frames(loop: _FrameLoop, completer: Completer, prefetch: int, realtime: float | None,
+                overwrite: bool) -> None:  # fmt: skip
     """The frames of this process through the completer into ``loop`` (the run outputs opened before and
     finished after; aborted on any error)."""
     try:
         with stage_folder(loop.out) as stage:  # each frame is written there, then moved into place
             for s in loop.runs:
                 s.open(overwrite)
-            for frame, completion in completions(loop.source, completer, loop.todo(), maps, loop.timer, prefetch,
-                                                 report=loop.note, stop_on_fault=loop.plan.on_error == "stop",
-                                                 realtime=realtime):  # fmt: skip
+            for frame, completion in completions(loop.source, completer, loop.todo(), loop.semantic, loop.timer,
+                                                 prefetch, report=loop.note, realtime=realtime,
+                                                 stop_on_fault=loop.plan.on_error == "stop"):  # fmt: skip
                 loop.write(stage, frame, completion)
             loop.finish(stage)
     except BaseException:
@@ -358,7 +351,7 @@ def complete_frames(
     prefetch: int = 0,
     on_error: str | None = None,
     resume: bool = False,
-    run: Mapping[str, Any] | None = None,
+    run: Mapping[str, object] | None = None,
     realtime: float | None = None,
 ) -> FrameRun:
     """Complete every frame of ``source`` with ``completer`` and write what ``sinks`` say into ``out``.
@@ -394,17 +387,18 @@ def complete_frames(
         maps = agree((semantic or SemanticMaps()).bind, completer)
         maps.check_palette(completer, source)
         loop = _FrameLoop(source, sinks, out, plan, timer, rank_log(log), maps)
-        first = first_error(_attempt_run(loop, completer, maps, prefetch, realtime, overwrite or plan.resume))
+        first = first_error(_attempt_run(loop, completer, prefetch, realtime, overwrite or plan.resume))
         if first is not None:
             raise first
         return _close(loop)
 
 
-def _attempt_run(loop: _FrameLoop, *args: Any) -> Exception | None:
+def _attempt_run(loop: _FrameLoop, completer: Completer, prefetch: int, realtime: float | None,
+                 overwrite: bool) -> Exception | None:  # fmt: skip
     """:func:`_run_frames`, its error returned (for every rank to agree on); on any error the frames done
     stay journaled. Ctrl-C is raised at once."""
     try:
-        _run_frames(loop, *args)
+        _run_frames(loop, completer, prefetch, realtime, overwrite)
     except BaseException as exc:
         loop.forget()
         if not isinstance(exc, Exception):
@@ -413,7 +407,7 @@ def _attempt_run(loop: _FrameLoop, *args: Any) -> Exception | None:
     return None
 
 
-def _nothing_done(entries: Sequence[Mapping[str, Any]]) -> DataError:
+def _nothing_done(entries: Sequence[FrameEntry]) -> DataError:
     """The run's error when none of ``entries`` (every frame's) could be completed: nothing to keep."""
     bad = [e for e in entries if e["status"] != "pending"]
     counts = describe_counts(Counter(e["status"] for e in entries))
@@ -446,7 +440,8 @@ def _close(loop: _FrameLoop) -> FrameRun:
     return FrameRun(journal, paths)
 
 
-def _line(frame: Frame, out: Path, depth_sink: Any) -> str:
+def _line(frame: Frame, out: Path, depth_sink: DepthPngSink | None) -> str:
     h, w = frame.size
-    target = f" -> {out / depth_sink.path(frame.name)}" if depth_sink is not None else ""
+    rel = depth_sink.path(frame.name) if depth_sink is not None else None
+    target = f" -> {out / rel}" if rel is not None else ""
     return f"{frame.name}: {np.count_nonzero(frame.sparse)} LiDAR pixels, {w}x{h}{target}"

@@ -4,11 +4,10 @@ map), for the completer at hand."""
 from __future__ import annotations
 
 import warnings
-from typing import Any
 
 from semattnet._errors import InputError
 from semattnet.data.frames import Frame
-from semattnet.data.sources.semantic import CrossPalette
+from semattnet.data.sources.semantic import CrossPalette, MapSegmenter
 
 __all__ = ["SemanticMaps"]
 
@@ -26,7 +25,8 @@ class SemanticMaps:
     says what they became). :meth:`bind` the completer before :meth:`fill`.
     """
 
-    def __init__(self, segmenter: Any = None, folder: bool = False, mismatch: str = "refuse") -> None:
+    def __init__(self, segmenter: MapSegmenter | str | None = None, folder: bool = False,
+                 mismatch: str = "refuse") -> None:  # fmt: skip
         if folder and segmenter is not None:
             raise InputError("semantic: give a semantic folder or a segmenter, not both")
         self.segmenter, self.folder, self.needed = segmenter, folder, False
@@ -35,7 +35,7 @@ class SemanticMaps:
         self.note: str | None = None
         self._warned = False
 
-    def bind(self, completer: Any) -> SemanticMaps:
+    def bind(self, completer: object) -> SemanticMaps:
         """Decide for ``completer``: whether it needs maps; a segmenter SPEC is loaded on its device."""
         from semattnet.inference.backends import needs_semantic
 
@@ -46,7 +46,7 @@ class SemanticMaps:
             self.segmenter = load_segmenter(self.segmenter, getattr(completer, "device", "auto"))
         return self
 
-    def check_palette(self, completer: Any, source: Any) -> None:
+    def check_palette(self, completer: object, source: object) -> None:
         """Refuse maps of another palette than the one ``completer``'s model was trained with (one line;
         :func:`semattnet.palette.check_palette`): a segmenter's maps are of its ``palette`` (Cityscapes
         unless it says otherwise), a source's of its ``palette`` (None: it gives none, and the fallback map fits
@@ -74,6 +74,8 @@ class SemanticMaps:
         if not self.needed:
             return frame
         if frame.semantic is None and self.segmenter is not None:
+            if isinstance(self.segmenter, str):  # bind loads it
+                raise InputError(f"semantic: segmenter {self.segmenter!r} is not loaded; bind the completer first")
             palette = getattr(self.segmenter, "palette", "cityscapes")
             frame = frame.with_semantic(ids_to_colors(self.segmenter(frame.rgb[None])[0], palette))
         if frame.semantic is not None:

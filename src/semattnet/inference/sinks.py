@@ -27,7 +27,7 @@ from __future__ import annotations
 from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
@@ -37,6 +37,11 @@ from semattnet.data.frames import Frame
 from semattnet.data.io import clamp_for_png, decode_depth, encode_depth, write_depth, write_image
 from semattnet.inference.completer import Completion
 from semattnet.inference.uncertainty import UncertaintyLimit, clean_uncertainty, encode_uncertainty
+from semattnet.models.outputs import DepthCompletionOutput
+
+if TYPE_CHECKING:  # geometry's point clouds and the stage times are imported where used
+    from semattnet.geometry import PointCloud
+    from semattnet.inference.stream import StageTimes
 
 __all__ = [
     "SINKS",
@@ -60,7 +65,7 @@ __all__ = [
 ]
 
 
-def fusion_confidence(output: Any) -> np.ndarray | None:
+def fusion_confidence(output: Completion | DepthCompletionOutput | None) -> np.ndarray | None:
     """(H, W) largest fusion weight across the branches (eq. 12), or None when the method has none (classical).
     ``output``: a :class:`Completion` or its :class:`DepthCompletionOutput` (or None)."""
     if output is None:
@@ -87,7 +92,7 @@ class Prediction:
     stage_ms: dict[str, float] = field(default_factory=dict)  # the frame's stage times so far (the loop's)
     uncertainty: np.ndarray | None = None
     uncertainty_png: np.ndarray | None = None
-    _clouds: dict[tuple[float, int, str], Any] = field(default_factory=dict, repr=False)
+    _clouds: dict[tuple[float, int, str], PointCloud] = field(default_factory=dict, repr=False)
 
     @property
     def uncertainty_stored(self) -> np.ndarray | None:
@@ -103,7 +108,7 @@ class Prediction:
             raise InputError(f"{self.frame.name}: --max-uncertainty: the method gives no per-pixel uncertainty")
         return limit.keep(u, self.stored)
 
-    def cloud(self, max_depth: float, top_crop: int, limit: UncertaintyLimit | None = None) -> Any:
+    def cloud(self, max_depth: float, top_crop: int, limit: UncertaintyLimit | None = None) -> PointCloud:
         """The stored depth back-projected (:func:`semattnet.geometry.depth_to_points`) with the image's
         colours and the fusion confidence, the pixels ``limit`` rejects left out; needs the frame's intrinsics."""
         from semattnet.geometry import depth_to_points
@@ -112,7 +117,7 @@ class Prediction:
             raise InputError(f"{self.frame.name}: a point cloud needs the frame's intrinsics K (--K), none given")
         key = (float(max_depth), int(top_crop), repr(limit))
         if key not in self._clouds:
-            camera = getattr(self.frame.calib, "camera", None)
+            camera = None if self.frame.calib is None else self.frame.calib.camera
             name = (f"cam{camera}" if str(camera).isdigit() else str(camera)) if camera else "cam"  # KITTI "02"
             self._clouds[key] = depth_to_points(self.stored, self.frame.K, rgb=self.frame.rgb,
                                                 confidence=self.completion.confidence, max_depth=max_depth,
@@ -278,9 +283,10 @@ class PanelSink(Sink):
     def save(self, path: Path, pred: Prediction) -> None:
         from semattnet.viz.panels import birds_eye_tile, branch_panel
 
-        frame, outputs = pred.frame, pred.completion.outputs
+        frame = pred.frame
+        outputs = pred.completion.outputs
         final = "refined_depth" if "refined_depth" in outputs else "fused_depth"
-        outputs[final] = pred.stored  # the depth as stored
+        outputs = {**outputs, final: pred.stored}  # the final map as stored
         extra = []
         if frame.points is not None and frame.calib is not None and frame.K is not None:
             cloud = pred.cloud(self.max_depth, self.top_crop, self.max_uncertainty)
@@ -335,7 +341,7 @@ class RunSink(Sink):
 class LatencySink(RunSink):
     """``latency.json``: the per-stage times of the run (:class:`semattnet.inference.stream.StageTimes`)."""
 
-    timer: Any = None
+    timer: StageTimes | None = None
     name: str = "latency.json"
     replays: ClassVar[bool] = False  # the loop adds the kept frames' recorded times to the timer
 

@@ -13,10 +13,12 @@ Stages (:data:`STAGES`): ``read`` (read and decode), ``projection`` (LiDAR scan 
 * A source splits ``read`` from ``projection`` by offering ``read(name)`` (raw inputs, decoded) and
   ``assemble(raw)`` (the :class:`~semattnet.data.frames.Frame`, scan projected), as
   :class:`~semattnet.data.sources.BagSource` does; for other sources ``load`` is timed as ``read``.
-* ``network`` vs ``propagation``: for a :class:`~semattnet.inference.DepthCompleter` on the ``torch`` engine
-  the model's CSPN++ propagation (``propagation``, the fused kernel) is timed inside the engine call and
-  ``network`` is the rest of the call (padding, backbone, refinement heads, copies). The exported engines
-  (``openvino``, ``onnxruntime``) and the classical baseline are not split: their whole call is ``network``.
+* ``network`` vs ``propagation``: a completer that times the stages inside its call
+  (:class:`~semattnet.inference.completer.StageTimed`) gets a hook that times them: for a
+  :class:`~semattnet.inference.DepthCompleter` on the ``torch`` engine the model's CSPN++ propagation
+  (``propagation``, the fused kernel) is timed inside the engine call and ``network`` is the rest of the call
+  (padding, backbone, refinement heads, copies). The exported engines (``openvino``, ``onnxruntime``) and the
+  classical baseline are not split: their whole call is ``network``.
 """
 
 from __future__ import annotations
@@ -27,20 +29,27 @@ import queue
 import threading
 import time
 from collections.abc import Callable, Generator, Iterator, Sequence
-from contextlib import closing, contextmanager
+from contextlib import AbstractContextManager, closing, contextmanager, nullcontext
 from dataclasses import dataclass
+from enum import Enum
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
 from semattnet.data.frames import Frame, FrameSource
+from semattnet.inference.completion import Completer, Completion, StageTimed
+
+if TYPE_CHECKING:
+    from semattnet.inference.semantic import SemanticMaps
 
 __all__ = [
     "DEFAULT_SENSOR_PERIOD_S",
     "LATENCY_FILE",
     "STAGES",
     "FrameFault",
+    "LatencySummary",
+    "StageSummary",
     "StageTimes",
     "completions",
     "cpu_name",
@@ -55,6 +64,32 @@ _LABELS = {"read": "read/decode"}
 DEFAULT_SENSOR_PERIOD_S = 0.1
 #: Where ``semattnet predict`` writes the table, in its ``--out``.
 LATENCY_FILE = "latency.json"
+
+
+class StageSummary(TypedDict, total=False):
+    """One stage of :meth:`StageTimes.summary`: ``median_ms``, ``p95_ms`` and ``frames``, or ``note`` (not run)."""
+
+    median_ms: float
+    p95_ms: float
+    frames: int
+    note: str
+
+
+class LatencySummary(TypedDict):
+    """:meth:`StageTimes.summary` (what ``latency.json`` holds)."""
+
+    frames: int
+    stages: dict[str, StageSummary]
+    sum_of_stages_s: float
+    wall_s: float
+    overlapped: bool
+    per_frame_median_ms: float
+    throughput_hz: float
+    sensor_period_s: float
+    realtime_factor: float
+    not_done: dict[str, int]
+    queue_most: int | None
+    cpu: str
 
 
 def cpu_name() -> str:
@@ -142,9 +177,9 @@ class StageTimes:
         with self._lock:
             return np.array([t[stage] for t in self.times.values() if stage in t], dtype=np.float64)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> LatencySummary:
         """Median and p95 per stage (ms), the sum of medians, wall time, throughput and the sensor period."""
-        stages: dict[str, Any] = {}
+        stages: dict[str, StageSummary] = {}
         for s in STAGES:
             v = self.stage(s)
             stages[s] = ({"median_ms": 1e3 * float(np.median(v)), "p95_ms": 1e3 * float(np.percentile(v, 95)),
@@ -164,10 +199,10 @@ class StageTimes:
         rows = [f"{'stage':<14}{'median ms':>11}{'p95 ms':>10}"]
         for stage, r in s["stages"].items():
             label = _LABELS.get(stage, stage)
-            if "median_ms" in r:
+            if "median_ms" in r and "p95_ms" in r:
                 rows.append(f"{label:<14}{r['median_ms']:>11.1f}{r['p95_ms']:>10.1f}")
             else:
-                rows.append(f"{label:<14}{'-':>11}{'-':>10}  ({r['note']})")
+                rows.append(f"{label:<14}{'-':>11}{'-':>10}  ({r.get('note', '')})")
         period = s["sensor_period_s"]
         verdict = "keeps up" if s["realtime_factor"] >= 1 else "falls behind"
         rows.append(f"{'per frame':<14}{s['per_frame_median_ms']:>11.1f}")
@@ -212,18 +247,17 @@ def _reason(exc: BaseException) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 
 
-def read_frame(source: FrameSource, name: str, semantic: Any, timer: StageTimes) -> Frame:
+def read_frame(source: FrameSource, name: str, semantic: SemanticMaps | None, timer: StageTimes) -> Frame:
     """One frame read (and projected, when the source splits it) and given its semantic map, timed."""
     if hasattr(source, "read") and hasattr(source, "assemble"):
         with timer.time(name, "read"):
             raw = source.read(name)
         with timer.time(name, "projection"):
-            frame = source.assemble(raw)
+            frame: Frame = source.assemble(raw)
     else:
         with timer.time(name, "read"):
             frame = source.load(name)
-    segments = semantic is not None and semantic.needed and semantic.segmenter is not None
-    if segments and frame.semantic is None:
+    if semantic is not None and semantic.needed and semantic.segmenter is not None and frame.semantic is None:
         with timer.time(name, "segmentation"):
             frame = semantic.fill(frame)
     elif semantic is not None:
@@ -247,7 +281,7 @@ class _Crash:
     error: BaseException
 
 
-def _attempt(source: FrameSource, name: str, semantic: Any, timer: StageTimes) -> Frame | _Failed:
+def _attempt(source: FrameSource, name: str, semantic: SemanticMaps | None, timer: StageTimes) -> Frame | _Failed:
     """:func:`read_frame`, a frame's own fault returned instead of raised."""
     try:
         return read_frame(source, name, semantic, timer)
@@ -257,13 +291,22 @@ def _attempt(source: FrameSource, name: str, semantic: Any, timer: StageTimes) -
         return _Failed(name, exc)
 
 
-_DONE = object()
+class _End(Enum):
+    """The end of a reader's frames."""
+
+    DONE = 0
 
 
-def _prefetched(source: FrameSource, names: Sequence[str], semantic: Any, timer: StageTimes,
+_DONE = _End.DONE
+#: What a reader hands the loop: a frame, a frame that failed to read, or one that was dropped.
+_Item = Frame | _Failed | FrameFault
+
+
+def _prefetched(source: FrameSource, names: Sequence[str], semantic: SemanticMaps | None, timer: StageTimes,
                 depth: int) -> Generator[Frame | _Failed, None, None]:  # fmt: skip
     """The frames of ``names`` in order, read in a background thread at most ``depth`` frames ahead."""
-    slots, items, stop = threading.Semaphore(depth), queue.Queue(), threading.Event()  # type: ignore[var-annotated]
+    slots, stop = threading.Semaphore(depth), threading.Event()
+    items: queue.Queue[Frame | _Failed | BaseException | _End] = queue.Queue()
 
     def work() -> None:
         try:
@@ -298,11 +341,11 @@ class _Mailbox:
     def __init__(self) -> None:
         self.cond = threading.Condition()
         self.frame: Frame | None = None
-        self.notes: list[Any] = []
+        self.notes: list[FrameFault | _Failed | _Crash] = []
         self.finished = False
         self.most_held = 0
 
-    def post(self, item: Any) -> None:
+    def post(self, item: Frame | FrameFault | _Failed | _Crash) -> None:
         with self.cond:
             if isinstance(item, Frame):
                 if self.frame is not None:
@@ -319,7 +362,7 @@ class _Mailbox:
             self.finished = True
             self.cond.notify()
 
-    def take(self) -> Any:
+    def take(self) -> Frame | FrameFault | _Failed | _Crash | _End:
         """The next note, else the newest frame, waiting for one; ``_DONE`` when the sensor is done."""
         with self.cond:
             while self.frame is None and not self.notes and not self.finished:
@@ -330,8 +373,8 @@ class _Mailbox:
             return frame if frame is not None else _DONE
 
 
-def _paced(source: FrameSource, names: Sequence[str], semantic: Any, timer: StageTimes,
-           speed: float) -> Generator[Any, None, None]:  # fmt: skip
+def _paced(source: FrameSource, names: Sequence[str], semantic: SemanticMaps | None, timer: StageTimes,
+           speed: float) -> Generator[_Item, None, None]:  # fmt: skip
     """The frames at their sensor pace (``timestamp``, else :data:`DEFAULT_SENSOR_PERIOD_S` apart, ``speed``
     times faster): a thread reads each frame and hands it over at its time; when the loop is still busy the
     newest frame wins and the older one is dropped (a ``dropped`` :class:`FrameFault`). Bounded: one frame
@@ -368,41 +411,26 @@ def _paced(source: FrameSource, names: Sequence[str], semantic: Any, timer: Stag
 
 
 @contextmanager
-def _timed_propagation(completer: Any, timer: StageTimes, current: list[str]) -> Iterator[None]:
-    """While active, a ``torch``-engine :class:`DepthCompleter`'s propagation is timed as ``propagation``."""
-    net = None
-    if getattr(completer, "backend", None) == "torch" and hasattr(completer, "engine"):
-        net = getattr(completer.engine(None), "net", None)
-    if net is None or not callable(getattr(net, "propagation", None)):
-        why = "not split from network by this engine" if hasattr(completer, "engine") else "the method has none"
-        timer.notes.setdefault("propagation", why)
+def _inner_stages(completer: Completer, timer: StageTimes, current: list[str]) -> Iterator[None]:
+    """While active, the stages a :class:`StageTimed` completer runs inside its call (a ``torch``-engine
+    :class:`DepthCompleter`'s ``propagation``) are timed as such, for the frame the loop completes."""
+    if not isinstance(completer, StageTimed):
+        timer.notes.setdefault("propagation", "the method has none")
         yield
         return
-    import torch
+    thread = threading.get_ident()
 
-    inner, thread = net.propagation, threading.get_ident()
+    def hook(stage: str) -> AbstractContextManager[object]:
+        return timer.time(current[0], stage) if threading.get_ident() == thread else nullcontext()
 
-    def propagation(inputs: Any) -> Any:
-        if threading.get_ident() != thread:
-            return inner(inputs)
-        cuda = inputs.depth.device.type == "cuda"
-        if cuda:
-            torch.cuda.synchronize(inputs.depth.device)
-        with timer.time(current[0], "propagation"):
-            out = inner(inputs)
-            if cuda:
-                torch.cuda.synchronize(inputs.depth.device)
-        return out
-
-    net.propagation = propagation
-    try:
+    with completer.timing(hook) as stages:
+        if "propagation" not in stages:
+            timer.notes.setdefault("propagation", "not split from network by this engine")
         yield
-    finally:
-        del net.propagation  # the model's own method again
 
 
-def _frames(source: FrameSource, names: Sequence[str], semantic: Any, timer: StageTimes, prefetch: int,
-            realtime: float | None) -> Generator[Any, None, None]:  # fmt: skip
+def _frames(source: FrameSource, names: Sequence[str], semantic: SemanticMaps | None, timer: StageTimes,
+            prefetch: int, realtime: float | None) -> Generator[_Item, None, None]:  # fmt: skip
     """The reader the options ask for: paced (``realtime``), read ahead (``prefetch``) or in line."""
     if realtime is not None:
         return _paced(source, names, semantic, timer, realtime)
@@ -411,10 +439,10 @@ def _frames(source: FrameSource, names: Sequence[str], semantic: Any, timer: Sta
     return (_attempt(source, name, semantic, timer) for name in names)
 
 
-def completions(source: FrameSource, completer: Any, names: Sequence[str] | None = None, semantic: Any = None,
-                timer: StageTimes | None = None, prefetch: int = 0, *,
+def completions(source: FrameSource, completer: Completer, names: Sequence[str] | None = None,
+                semantic: SemanticMaps | None = None, timer: StageTimes | None = None, prefetch: int = 0, *,
                 report: Callable[[FrameFault], None] | None = None, stop_on_fault: bool = True,
-                realtime: float | None = None) -> Iterator[tuple[Frame, Any]]:  # fmt: skip
+                realtime: float | None = None) -> Iterator[tuple[Frame, Completion]]:  # fmt: skip
     """``(frame, completion)`` for each of ``names`` (default: all of ``source``), in order, every stage timed
     into ``timer``; ``prefetch`` > 0 reads that many frames ahead in a background thread (module doc).
     ``semantic``: a bound :class:`~.semantic.SemanticMaps` (None: frames as the source gives them).
@@ -446,7 +474,7 @@ def completions(source: FrameSource, completer: Any, names: Sequence[str] | None
 
     try:
         frames = _frames(source, names, semantic, timer, prefetch, realtime)
-        with closing(frames), _timed_propagation(completer, timer, current):
+        with closing(frames), _inner_stages(completer, timer, current):
             timer.begin()  # after the engine is built; the reader starts with the first frame
             for item in frames:
                 if isinstance(item, FrameFault):  # dropped by the pace

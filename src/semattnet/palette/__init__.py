@@ -184,11 +184,13 @@ def ids_to_colors(train_ids: np.ndarray, palette: str | Palette = "cityscapes") 
         kind = "trainIds" if pal.name == "cityscapes" else f"{pal.title} ids"
         raise InputError(f"{kind} must be {first}..{first + n - 1} or {IGNORE_ID}, found {found}")
     table = np.concatenate([pal.colors, np.array([UNKNOWN_COLOR], dtype=np.uint8)])
-    return table[np.where(unknown, n, ids - first)]
+    colors: np.ndarray = table[np.where(unknown, n, ids - first)]
+    return colors
 
 
 def _codes(rgb: np.ndarray) -> np.ndarray:
-    return (rgb[..., 0].astype(np.int32) << 16) | (rgb[..., 1].astype(np.int32) << 8) | rgb[..., 2]
+    codes: np.ndarray = (rgb[..., 0].astype(np.int32) << 16) | (rgb[..., 1].astype(np.int32) << 8) | rgb[..., 2]
+    return codes
 
 
 def _fits(code: np.ndarray, stray: np.ndarray, pal: Palette) -> bool:
@@ -278,4 +280,4 @@ def one_hot(train_ids: np.ndarray, num_classes: int = NUM_CLASSES) -> np.ndarray
 
 def unknown_map(height: int, width: int) -> np.ndarray:
     """The no-segmenter fallback: an (H, W, 3) uint8 map of :data:`UNKNOWN_COLOR` everywhere."""
-    return np.broadcast_to(np.array(UNKNOWN_COLOR, dtype=np.uint8), (height, width, 3)).copy()
+    return np.full((height, width, 3), UNKNOWN_COLOR, dtype=np.uint8)

@@ -15,7 +15,7 @@ Importing this package imports no optional dependency (and not torch): each clas
 from __future__ import annotations
 
 import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from .live import LiveSink
@@ -29,7 +29,7 @@ _HOMES = {"BagSink": ".sinks", "BagSource": ".source", "LiveSink": ".live", "Rer
           "RerunSink": ".sinks"}  # fmt: skip
 
 
-def __getattr__(name: str) -> Any:
+def __getattr__(name: str) -> object:
     """Load a class on first access."""
     if name in _HOMES:
         return getattr(importlib.import_module(_HOMES[name], __name__), name)

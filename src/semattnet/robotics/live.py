@@ -13,7 +13,7 @@ topic                         schema                 what
 ``/semattnet/points``         foxglove.PointCloud    the coloured completed cloud (x, y, z float32, red,
                                                      green, blue, alpha uint8) in the camera frame, the
                                                      pixels above ``max_uncertainty`` left out
-``/semattnet/calibration``    foxglove.CameraCalib.  K, P, size, distortion (``meta["camera_info"]`` or ``K``)
+``/semattnet/calibration``    foxglove.CameraCalib.  K, P, size, distortion (``meta.camera_info`` or ``K``)
 ``/semattnet/latency``        JSON                   ``{frame, stamp_ns, stages_ms: {stage: ms}}``
 ``/tf``                       foxglove.FrameTransf.  camera <- LiDAR (``calib.T_cam_lidar``), when known
 ``/input/image``              foxglove.RawImage      the input image, ``rgb8``
@@ -31,7 +31,8 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from types import ModuleType
+from typing import TYPE_CHECKING, ClassVar, Protocol
 
 import numpy as np
 
@@ -39,9 +40,13 @@ from semattnet._errors import InputError
 from semattnet._utils.extras import optional, require
 from semattnet.data.frames import Frame
 from semattnet.data.io import decode_depth
+from semattnet.geometry.cameras import CameraInfoData
 from semattnet.inference.sinks import Prediction, RunSink, register_sink
 from semattnet.inference.uncertainty import UncertaintyLimit
 from semattnet.robotics.sinks import camera_info, stamp_ns
+
+if TYPE_CHECKING:
+    from semattnet.geometry import PointCloud
 
 __all__ = ["LATENCY_SCHEMA", "LiveSink", "parse_address"]
 
@@ -70,18 +75,18 @@ LATENCY_SCHEMA = {
 BACKLOG = 64
 
 
-def _foxglove() -> Any:
+def _foxglove() -> ModuleType:
     """``foxglove``, or a one-line :class:`MissingDependencyError` with the install hint."""
     require("foxglove.channels", "--live")
     return require("foxglove", "--live")
 
 
-def _messages() -> Any:
+def _messages() -> ModuleType:
     """The message classes: ``foxglove.messages`` (``foxglove.schemas`` in older releases)."""
     return optional("foxglove.messages") or require("foxglove.schemas", "--live")
 
 
-def _accepts(fn: Callable[..., Any], name: str) -> bool:
+def _accepts(fn: Callable[..., object], name: str) -> bool:
     """Whether ``fn`` takes a keyword ``name`` (options the older foxglove-sdk releases lack)."""
     import inspect
 
@@ -101,11 +106,11 @@ def parse_address(address: str) -> tuple[str, int]:
     return host, int(port)
 
 
-def _timestamp(m: Any, stamp_ns: int) -> Any:
+def _timestamp(m: ModuleType, stamp_ns: int) -> object:
     return m.Timestamp(stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000)
 
 
-def _image(m: Any, stamp: Any, frame_id: str, data: np.ndarray, encoding: str) -> Any:
+def _image(m: ModuleType, stamp: object, frame_id: str, data: np.ndarray, encoding: str) -> object:
     """A RawImage of a (H, W) float32 map (``32FC1``) or an (H, W, 3) uint8 image (``rgb8``)."""
     data = np.ascontiguousarray(data)
     h, w = data.shape[:2]
@@ -113,7 +118,7 @@ def _image(m: Any, stamp: Any, frame_id: str, data: np.ndarray, encoding: str) -
                       step=data.strides[0], data=data.tobytes())  # fmt: skip
 
 
-def _depth_image(m: Any, stamp: Any, frame_id: str, depth: np.ndarray) -> Any:
+def _depth_image(m: ModuleType, stamp: object, frame_id: str, depth: np.ndarray) -> object:
     """``32FC1`` metres, little-endian, holes (<= 0) NaN (REP 118)."""
     d = np.asarray(depth, dtype="<f4")
     return _image(m, stamp, frame_id, np.where(d > 0, d, np.float32(np.nan)).astype("<f4"), "32FC1")
@@ -124,7 +129,7 @@ _CLOUD_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"),
                          ("red", "u1"), ("green", "u1"), ("blue", "u1"), ("alpha", "u1")])  # fmt: skip
 
 
-def _cloud(m: Any, stamp: Any, frame_id: str, cloud: Any) -> Any:
+def _cloud(m: ModuleType, stamp: object, frame_id: str, cloud: PointCloud) -> object:
     """A foxglove PointCloud of a :class:`semattnet.geometry.PointCloud` (grey where it has no colours)."""
     packed = np.zeros(len(cloud.xyz), _CLOUD_DTYPE)
     for i, axis in enumerate("xyz"):
@@ -141,10 +146,10 @@ def _cloud(m: Any, stamp: Any, frame_id: str, cloud: Any) -> Any:
                         fields=fields, data=packed.tobytes())  # fmt: skip
 
 
-def _calibration(m: Any, stamp: Any, frame_id: str, info: Any) -> Any:
-    """A CameraCalibration of a :class:`semattnet.robotics.bags.CameraInfoData`."""
+def _calibration(m: ModuleType, stamp: object, frame_id: str, info: CameraInfoData) -> object:
+    """A CameraCalibration of a :class:`semattnet.geometry.cameras.CameraInfoData`."""
 
-    def flat(a: Any) -> list[float]:
+    def flat(a: np.ndarray) -> list[float]:
         return [float(v) for v in np.asarray(a, dtype=np.float64).ravel()]
 
     return m.CameraCalibration(timestamp=stamp, frame_id=frame_id, width=int(info.width), height=int(info.height),
@@ -152,7 +157,7 @@ def _calibration(m: Any, stamp: Any, frame_id: str, info: Any) -> Any:
                                K=flat(info.K), R=flat(info.R), P=flat(info.P))  # fmt: skip
 
 
-def _transform(m: Any, stamp: Any, parent: str, child: str, T_parent_child: np.ndarray) -> Any:
+def _transform(m: ModuleType, stamp: object, parent: str, child: str, T_parent_child: np.ndarray) -> object:
     """FrameTransforms with one transform: ``child`` in ``parent`` (p_parent = T p_child)."""
     from semattnet.robotics.bags.tf import matrix_to_quaternion
 
@@ -165,12 +170,31 @@ def _transform(m: Any, stamp: Any, parent: str, child: str, T_parent_child: np.n
     return m.FrameTransforms(transforms=[tf])
 
 
-def _camera(frame: Frame) -> tuple[str, Any]:
-    """The camera frame id (``meta["frame_id"]``, else the CameraInfo's, else ``camera``) and the CameraInfo
-    (``meta["camera_info"]``, else one made from ``K``; None without either)."""
-    info = frame.meta.get("camera_info") or (camera_info(frame) if frame.K is not None else None)
-    frame_id = frame.meta.get("frame_id") or getattr(info, "frame_id", "") or "camera"
+def _camera(frame: Frame) -> tuple[str, CameraInfoData | None]:
+    """The camera frame id (``meta.frame_id``, else the CameraInfo's, else ``camera``) and the CameraInfo
+    (``meta.camera_info``, else one made from ``K``; None without either)."""
+    info = frame.meta.camera_info or (camera_info(frame) if frame.K is not None else None)
+    frame_id = frame.meta.frame_id or (info.frame_id if info is not None else "") or "camera"
     return str(frame_id), info
+
+
+class _Server(Protocol):
+    """What the sink uses of a running foxglove server."""
+
+    @property
+    def port(self) -> int: ...
+
+    def stop(self) -> None: ...
+
+
+class _Channel(Protocol):
+    """What the sink uses of a foxglove channel."""
+
+    def has_sinks(self) -> bool: ...
+
+    def log(self, msg: object, *, log_time: int) -> None: ...
+
+    def close(self) -> None: ...
 
 
 @register_sink("live", option="--live")
@@ -188,13 +212,14 @@ class LiveSink(RunSink):
     address: str = "127.0.0.1:8765"
     max_depth: float | None = None
     prefix: str = "/semattnet"
-    log: Any = None  # where the address to connect to is said once the server runs (e.g. ``print``)
+    #: Where the address to connect to is said once the server runs (e.g. ``print``).
+    log: Callable[[str], object] | None = None
     max_uncertainty: UncertaintyLimit | None = None
     #: Frames kept from an earlier (resumed) run are not re-sent.
     replays: ClassVar[bool] = False
-    _server: Any = field(default=None, init=False, repr=False)
-    _channels: dict[str, Any] = field(default_factory=dict, init=False, repr=False)
-    _context: Any = field(default=None, init=False, repr=False)  # kept alive: channels die with their context
+    _server: _Server | None = field(default=None, init=False, repr=False)
+    _channels: dict[str, _Channel] = field(default_factory=dict, init=False, repr=False)
+    _context: object = field(default=None, init=False, repr=False)  # kept alive: channels die with their context
     _count: int = field(default=0, init=False, repr=False)
 
     @property
@@ -246,7 +271,7 @@ class LiveSink(RunSink):
         channel = self._channels.get(role)
         return channel is not None and bool(channel.has_sinks())
 
-    def _log(self, role: str, stamp_ns: int, build: Callable[[], Any]) -> None:
+    def _log(self, role: str, stamp_ns: int, build: Callable[[], object]) -> None:
         """Build and log a message on ``role``'s channel, only when a client subscribes to it."""
         channel = self._channels[role]
         if channel.has_sinks():
@@ -273,9 +298,9 @@ class LiveSink(RunSink):
             self._log("points", t_ns, lambda: _cloud(m, stamp, frame_id, pred.cloud(max_depth, 0, limit)))
         if info is not None:
             self._log("calibration", t_ns, lambda: _calibration(m, stamp, frame_id, info))
-        T = getattr(frame.calib, "T_cam_lidar", None)
+        T = None if frame.calib is None else frame.calib.T_cam_lidar
         if T is not None:
-            lidar = str(frame.meta.get("lidar_frame_id") or "lidar")
+            lidar = frame.meta.lidar_frame_id or "lidar"
             self._log("tf", t_ns, lambda: _transform(m, stamp, frame_id, lidar, T))
         stages = {str(k): float(v) for k, v in (getattr(pred, "stage_ms", None) or {}).items()}
         self._log("latency", t_ns, lambda: {"frame": frame.name, "stamp_ns": t_ns, "stages_ms": stages})

@@ -25,8 +25,8 @@ from __future__ import annotations
 import os
 import tempfile
 from pathlib import Path
-from types import TracebackType
-from typing import Any
+from types import ModuleType, TracebackType
+from typing import Protocol
 from urllib.parse import quote
 
 import numpy as np
@@ -55,7 +55,7 @@ ENTITIES = {
 }
 
 
-def _rerun() -> Any:
+def _rerun() -> ModuleType:
     return require("rerun", "writing a Rerun recording")
 
 
@@ -108,7 +108,7 @@ class RerunLogger:
             raise
         self._log_static(rr)
 
-    def _set_sinks(self, rr: Any, spawn: bool, serve: bool, host: str, grpc_port: int, web_port: int) -> None:
+    def _set_sinks(self, rr: ModuleType, spawn: bool, serve: bool, host: str, grpc_port: int, web_port: int) -> None:
         """The file, the spawned viewer and the served stream + web viewer, as asked."""
         if spawn:
             self.rec.spawn(connect=self._tmp is None and not serve)
@@ -130,7 +130,7 @@ class RerunLogger:
             raise InputError(f"RerunLogger: cannot serve the web viewer on {web_port} ({_first_line(e)})") from None
         self.url = f"http://{_url_host(host)}:{web_port}/?url={quote(self.grpc_url, safe='')}"
 
-    def _log_static(self, rr: Any) -> None:
+    def _log_static(self, rr: ModuleType) -> None:
         self.rec.log("world", rr.ViewCoordinates.FLU, static=True)
         labels = [rr.AnnotationInfo(id=i, label=name, color=c) for i, (name, c) in enumerate(TRAIN_CLASSES)]
         labels.append(rr.AnnotationInfo(id=IGNORE_ID, label="unknown", color=UNKNOWN_COLOR))
@@ -198,7 +198,11 @@ class RerunLogger:
         self._finish(ok=exc_type is None)
 
 
-def _flush(rec: Any, file: Path | None) -> None:
+class _Flushes(Protocol):
+    def flush(self, *, timeout_sec: float) -> None: ...
+
+
+def _flush(rec: _Flushes, file: Path | None) -> None:
     """``rec.flush()``, waited for in steps: Rerun's file writer that died on a full disk never finishes a flush
     (it would wait forever), so a timed-out step on a file system with no space left is a full disk."""
     from semattnet._utils.atomic import no_space_left

@@ -11,25 +11,32 @@ them the frames it keeps, in their place, so a resumed run's bag equals an unint
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
 from semattnet._errors import InputError
 from semattnet._utils.outputs import clean_stale_stages
 from semattnet.data.frames import Frame
+from semattnet.geometry.cameras import CameraInfoData
 from semattnet.inference.sinks import Prediction, RunSink, register_sink
 from semattnet.inference.uncertainty import UncertaintyLimit
+
+if TYPE_CHECKING:
+    from semattnet.robotics.bags import BagWriter
+    from semattnet.robotics.rerun import RerunLogger
 
 __all__ = ["BagSink", "RerunSink", "camera_info", "stamp_ns"]
 
 
 def stamp_ns(frame: Frame, index: int) -> int:
-    """A frame's sensor time in ns: its ``meta["stamp_ns"]``, else its ``timestamp``, else ``index`` x 0.1 s."""
-    if "stamp_ns" in frame.meta:
-        return int(frame.meta["stamp_ns"])
+    """A frame's sensor time in ns: its ``meta.stamp_ns``, else its ``timestamp``, else ``index`` x 0.1 s."""
+    if frame.meta.stamp_ns is not None:
+        return int(frame.meta.stamp_ns)
     if frame.timestamp is not None:
         return round(frame.timestamp * 1e9)
     return index * 100_000_000
@@ -59,7 +66,7 @@ class _StagedTarget(RunSink):
         self._dir = Path(tempfile.mkdtemp(prefix=f".{target.name}.semattnet-stage.{os.getpid()}.", dir=target.parent))
         return self._dir / target.name
 
-    def _full_disk(self) -> Any:
+    def _full_disk(self) -> AbstractContextManager[object]:
         """A full disk while the output is written: one line naming the target and the space."""
         from contextlib import nullcontext
 
@@ -95,7 +102,7 @@ class _StagedTarget(RunSink):
 class BagSink(_StagedTarget):
     """``--bag-out``: a ROS 2 bag (MCAP where rosbags writes it; ROS 1 for ``.bag``) by
     :class:`semattnet.robotics.bags.BagWriter`: per frame the stored depth (the PNG's metres) as ``32FC1``
-    with holes NaN, the coloured cloud and the frame's CameraInfo (``meta["camera_info"]``, else one made
+    with holes NaN, the coloured cloud and the frame's CameraInfo (``meta.camera_info``, else one made
     from ``K``), stamped with the input's header stamp and frame id (``meta``; else ``timestamp`` and
     ``camera``). ``uncertainty``: also the stored uncertainty as ``PREFIX/uncertainty`` ``32FC1`` (metres,
     NaN where none); ``max_uncertainty``: the cloud leaves out the pixels above it (the images stay whole)."""
@@ -108,7 +115,8 @@ class BagSink(_StagedTarget):
     max_depth: float | None = None
     uncertainty: bool = False
     max_uncertainty: UncertaintyLimit | None = None
-    _writer: Any = field(default=None, init=False, repr=False)  # the open BagWriter, between open and finish
+    #: The open BagWriter, between open and finish.
+    _writer: BagWriter | None = field(default=None, init=False, repr=False)
 
     def open(self, overwrite: bool = False) -> None:
         from semattnet.robotics.bags import BagWriter
@@ -121,10 +129,12 @@ class BagSink(_StagedTarget):
         frame = pred.frame
         if frame.K is None:
             raise InputError(f"{frame.name}: the bag output needs the frame's intrinsics K, none given")
-        info = frame.meta.get("camera_info") or camera_info(frame)
-        frame_id = frame.meta.get("frame_id") or info.frame_id or "camera"
+        info = frame.meta.camera_info or camera_info(frame)
+        frame_id = frame.meta.frame_id or info.frame_id or "camera"
         depth = np.where(pred.stored > 0, pred.stored, np.nan).astype(np.float32)  # REP 118: holes NaN
         unc = _stored_uncertainty(pred) if self.uncertainty else None
+        if self._writer is None:
+            raise InputError(f"{self.target}: the bag is not open (call open() first)")
         with self._full_disk():
             self._writer.write(stamp_ns(frame, self._count), frame_id, depth, info, rgb=frame.rgb, K=frame.K,
                                uncertainty=unc, keep=pred.keep(self.max_uncertainty))  # fmt: skip
@@ -155,10 +165,8 @@ def _stored_uncertainty(pred: Prediction) -> np.ndarray:
     return u
 
 
-def camera_info(frame: Frame) -> Any:
+def camera_info(frame: Frame) -> CameraInfoData:
     """A distortion-free CameraInfo of a frame's ``K`` and size."""
-    from semattnet.robotics.bags import CameraInfoData
-
     K = np.asarray(frame.K, dtype=np.float64)
     h, w = frame.size
     return CameraInfoData(w, h, K, np.zeros(5), np.eye(3), np.hstack([K, np.zeros((3, 1))]), "plumb_bob", "camera")
@@ -177,10 +185,11 @@ class RerunSink(_StagedTarget):
     spawn: bool = False
     max_depth: float | None = None
     serve: bool = False  # serve the frames to a web viewer (the URL goes to ``log``)
-    log: Any = None
+    log: Callable[[str], object] | None = None
     uncertainty: bool = False
     max_uncertainty: UncertaintyLimit | None = None
-    _logger: Any = field(default=None, init=False, repr=False)  # the open RerunLogger, between open and finish
+    #: The open RerunLogger, between open and finish.
+    _logger: RerunLogger | None = field(default=None, init=False, repr=False)
 
     def targets(self) -> list[Path]:
         return [] if self.target is None else [Path(self.target)]
@@ -191,16 +200,18 @@ class RerunSink(_StagedTarget):
         path = self._begin(overwrite) if self.target is not None else None
         self._count = 0
         with self._full_disk():
-            self._logger = RerunLogger(path, spawn=self.spawn, max_depth=self.max_depth, serve=self.serve)
-        if self._logger.url is not None and self.log is not None:
-            self.log(f"Rerun web viewer: {self._logger.url}")
+            self._logger = logger = RerunLogger(path, spawn=self.spawn, max_depth=self.max_depth, serve=self.serve)
+        if logger.url is not None and self.log is not None:
+            self.log(f"Rerun web viewer: {logger.url}")
 
     def write(self, stage: Path, pred: Prediction) -> None:
         frame = pred.frame
         if frame.K is None:
             raise InputError(f"{frame.name}: the Rerun recording needs the frame's intrinsics K, none given")
-        T = getattr(frame.calib, "T_cam_lidar", None)
+        T = None if frame.calib is None else frame.calib.T_cam_lidar
         unc = _stored_uncertainty(pred) if self.uncertainty else None
+        if self._logger is None:
+            raise InputError("the Rerun recording is not open (call open() first)")
         with self._full_disk():
             self._logger.log_frame(stamp_ns(frame, self._count), frame.rgb, frame.K, np.eye(4) if T is None else T,
                                    sparse=frame.sparse, depth=pred.stored, semantic=frame.semantic,
@@ -210,7 +221,8 @@ class RerunSink(_StagedTarget):
 
     def finish(self, stage: Path) -> None:
         with self._full_disk():
-            self._logger.close()
+            if self._logger is not None:
+                self._logger.close()
 
     def commit(self) -> None:
         if self.target is not None:

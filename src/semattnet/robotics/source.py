@@ -24,8 +24,9 @@ from typing import Any
 import numpy as np
 
 from semattnet._errors import DataError
-from semattnet.data.frames import Frame, IndexedSource
+from semattnet.data.frames import Frame, IndexedSource, SensorMeta
 from semattnet.data.sources.registry import register_source
+from semattnet.geometry import RigCalibration
 from semattnet.robotics.bags import BagFailure, BagPair, BagPairs, StampPairing
 from semattnet.robotics.bags.reader import message_where
 
@@ -37,8 +38,8 @@ class BagSource(IndexedSource):
     """The frames of a bag, one per image of the image topic (see :class:`~semattnet.robotics.bags.BagPairs` for
     the arguments and what is checked at construction: topics, pairing, calibration). Frames are named by the
     image's index in its topic (``0000000003``) and carry ``timestamp`` (the image's header stamp, seconds),
-    ``points``, ``calib`` and ``meta``: ``stamp_ns`` (int), ``frame_id``, ``lidar_frame_id``, ``scan_stamp_ns``,
-    ``camera_info`` (a :class:`~semattnet.robotics.bags.CameraInfoData`, what the bag sink writes back).
+    ``points``, ``calib`` and ``meta`` (a :class:`~semattnet.data.frames.SensorMeta`: ``stamp_ns``, ``frame_id``,
+    ``lidar_frame_id``, ``scan_stamp_ns``, ``camera_info`` (what the bag sink writes back), ``dropped_points``).
 
     ``semantic_topic``: colour-coded semantic images (Cityscapes palette, ``sensor_msgs/Image`` or
     ``CompressedImage``), each image taking the one with the nearest stamp within ``max_skew`` (default: half
@@ -56,8 +57,9 @@ class BagSource(IndexedSource):
     keep = 4
 
     def __init__(self, path: str | os.PathLike[str], image_topic: str, points_topic: str,
-                 camera_info_topic: str | None = None, rig: Any = None, max_skew: float | None = None,
-                 semantic_topic: str | None = None, log: Callable[[str], None] | None = None) -> None:  # fmt: skip
+                 camera_info_topic: str | None = None, rig: str | os.PathLike[str] | RigCalibration | None = None,
+                 max_skew: float | None = None, semantic_topic: str | None = None,
+                 log: Callable[[str], None] | None = None) -> None:  # fmt: skip
         self.path = Path(path)
         self.pairs = BagPairs(self.path, image_topic, points_topic, camera_info_topic, rig, max_skew)
         self.indices = list(range(len(self.pairs)))
@@ -225,9 +227,7 @@ class BagSource(IndexedSource):
         if p.dropped_points:  # named when nothing is left to project
             where += f" ({p.dropped_points} point(s) with a NaN or infinite coordinate dropped)"
         sparse = project_points(p.points, p.K, p.T_cam_lidar, p.image_size, name=where)
-        meta = {"stamp_ns": p.stamp_ns, "frame_id": p.frame_id, "lidar_frame_id": p.lidar_frame_id,
-                "scan_stamp_ns": p.scan_stamp_ns, "camera_info": p.camera_info,
-                "dropped_points": p.dropped_points}  # fmt: skip
+        meta = SensorMeta(p.stamp_ns, p.frame_id, p.lidar_frame_id, p.scan_stamp_ns, p.camera_info, p.dropped_points)
         return Frame(p.name, p.image, sparse, semantic, K=p.K, timestamp=p.stamp_ns / 1e9, points=p.points,
                      calib=p.calibration, paths={"bag": self.path}, meta=meta)  # fmt: skip
 

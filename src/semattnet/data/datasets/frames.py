@@ -100,7 +100,7 @@ class FrameRef:
     gt: Any = None
 
 
-class FrameDataset(Dataset):
+class FrameDataset(Dataset[dict[str, object]]):
     """Items like :class:`~semattnet.data.kitti.KittiDepthCompletion`'s (``rgb``, ``semantic``, ``sparse``,
     ``gt``, ``K``, ``name``, ``index``) from ``source``, padded to the model's multiple of 32 (zeros, gt 0)
     with ``pad`` = (top, bottom, left, right) (evaluation crops it back: metrics and predictions on the

@@ -25,7 +25,9 @@ def project_frame(frame: RawFrame) -> np.ndarray:
     size = frame.calib.image_size
     if size is None:  # a raw drive's calibration always has S_rect; say which file lacks it if not
         raise DataError(f"{frame.scan_path}: the drive's calibration gives no image size (S_rect_0X)")
-    return project_points(frame.points, frame.calib.K, frame.calib.T_cam_lidar, size, name=str(frame.scan_path))
+    depth: np.ndarray = project_points(frame.points, frame.calib.K, frame.calib.T_cam_lidar, size,
+                                       name=str(frame.scan_path))  # fmt: skip
+    return depth
 
 
 @register_source("kitti-raw", option="--kitti-raw")

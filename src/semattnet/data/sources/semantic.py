@@ -4,13 +4,31 @@ Which map a frame gets when its source has none is decided in :mod:`semattnet.in
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
+import numpy as np
+
+from semattnet._errors import InputError
 from semattnet.data.frames import Frame, IndexedSource
 from semattnet.data.sources.registry import register_source
 
-__all__ = ["MISMATCH_POLICIES", "CrossPalette", "CrossPaletteSource"]
+__all__ = ["MISMATCH_POLICIES", "CrossPalette", "CrossPaletteSource", "MapSegmenter", "PaletteReport"]
+
+#: A segmenter: (B, H, W, 3) uint8 images -> (B, H, W) uint8 class ids (a
+#: :class:`semattnet.segmentation.Segmenter`, whose ``palette`` names them; Cityscapes without one).
+MapSegmenter = Callable[[np.ndarray], np.ndarray]
+
+
+class PaletteReport(TypedDict):
+    """What :class:`CrossPalette` made of the frames' maps (``metrics.json``'s ``semantic``)."""
+
+    maps_palette: str
+    model_palette: str
+    used: str
+    classes_kept: list[str]
+    summary: str
 
 
 #: ``--palette-mismatch`` policies: refuse (the default), recolour, fallback.
@@ -30,7 +48,7 @@ class CrossPalette:
         self.kept = sorted(src.classes[i - src.first_id][0] for i in palette_mapping(src.name, self.palette))
         self.policy = "recolour" if policy == "recolour" and self.kept else "fallback"
 
-    def map(self, semantic: Any, where: str = "semantic map") -> Any:
+    def map(self, semantic: np.ndarray, where: str = "semantic map") -> np.ndarray:
         """One map converted."""
         from semattnet.palette import recolor, unknown_map
 
@@ -38,7 +56,7 @@ class CrossPalette:
             return unknown_map(*semantic.shape[:2])
         return recolor(semantic, self.maps_palette, self.palette, where)
 
-    def report(self) -> dict[str, Any]:
+    def report(self) -> PaletteReport:
         """What the frames' maps became (metrics.json's ``semantic``), with a one-line ``summary``."""
         from semattnet.palette import get_palette
 
@@ -56,7 +74,9 @@ class CrossPalette:
 class CrossPaletteSource(IndexedSource):
     """``source``'s frames with their maps converted for a model of ``palette`` (:class:`CrossPalette`)."""
 
-    def __init__(self, source: Any, palette: str, policy: str = "recolour") -> None:
+    def __init__(self, source: IndexedSource, palette: str, policy: str = "recolour") -> None:
+        if source.palette is None:
+            raise InputError(f"{type(source).__name__}: its frames have no semantic maps to convert to {palette}")
         self.source, self.cross = source, CrossPalette(source.palette, palette, policy)
         self.palette, self.names = self.cross.palette, source.names
 
@@ -70,5 +90,5 @@ class CrossPaletteSource(IndexedSource):
     def inputs(self) -> list[Path]:
         return list(self.source.inputs())
 
-    def report(self) -> dict[str, Any]:
+    def report(self) -> PaletteReport:
         return self.cross.report()

@@ -93,4 +93,5 @@ def road_half_width(boxes: list[Box]) -> float:
 def window(points: np.ndarray) -> np.ndarray:
     """Which points (N, 3) of a facade lie on a window (a grid of 1.2 x 1.2 m panes)."""
     wy, wz = np.mod(points[:, 1], 3.0), np.mod(points[:, 2] + points[:, 0], 2.5)
-    return (wy > 1.2) & (wy < 2.4) & (wz > 0.6) & (wz < 1.8)
+    on: np.ndarray = (wy > 1.2) & (wy < 2.4) & (wz > 0.6) & (wz < 1.8)
+    return on

@@ -89,7 +89,7 @@ class SyntheticFrame:
 
 def _intrinsics(height: int, width: int, size_of_kitti: bool) -> np.ndarray:
     """KITTI's intrinsics, scaled to KITTI's field of view at this width when ``size_of_kitti``."""
-    K = KITTI_K.copy()
+    K: np.ndarray = KITTI_K.copy()
     if size_of_kitti:
         kitti_w, kitti_h = KITTI_IMAGE_SIZE
         s = width / float(kitti_w)

@@ -99,7 +99,8 @@ def sunlight(view: View, boxes: list[Box], sun: np.ndarray, exposure: float) -> 
     lit = np.clip(-(normal @ sun), 0.0, 1.0)
     in_shadow = np.zeros(view.height * view.width, dtype=bool)
     in_shadow[view.ground] = ground_shadow(view.points[view.ground][:, [0, 2]], boxes, sun)
-    return exposure * (0.45 + 0.75 * lit * ~in_shadow)
+    shade: np.ndarray = exposure * (0.45 + 0.75 * lit * ~in_shadow)
+    return shade
 
 
 def overpass(view: View, light: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, tuple[float, float]]:

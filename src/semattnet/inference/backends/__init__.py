@@ -26,14 +26,13 @@ from __future__ import annotations
 
 import importlib.util
 import os
-from typing import Any
 
 import torch
 from torch import nn
 
 from semattnet._errors import InputError
 from semattnet.inference.backends._base import InferenceEngine, LogFn, output_from_arrays
-from semattnet.inference.backends.calibration import DEFAULT_CALIBRATION_FRAMES
+from semattnet.inference.backends.calibration import DEFAULT_CALIBRATION_FRAMES, CalibrationFrames
 from semattnet.inference.backends.torch_engine import TorchEngine
 
 __all__ = ["BACKENDS", "BACKEND_PRECISIONS", "PRECISIONS", "InferenceEngine", "available_backends", "choose_backend",
@@ -108,7 +107,7 @@ def optimize_for_inference(
     cache_dir: str | os.PathLike[str] | None = None,
     inplace: bool = False,
     log: LogFn | None = None,
-    calibration: Any = None,
+    calibration: CalibrationFrames = None,
     calibration_frames: int = DEFAULT_CALIBRATION_FRAMES,
     compile_propagation: bool | None = None,
 ) -> InferenceEngine:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from contextlib import AbstractContextManager
 from dataclasses import fields
 
 import numpy as np
@@ -13,10 +14,13 @@ from semattnet._errors import InputError
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.refinement import HEADS_PREFIX, RefinementInputs, propagate_refinement  # one home of the prefix
 
-__all__ = ["HEADS_PREFIX", "ExportedGraphEngine", "InferenceEngine", "LogFn", "output_from_arrays"]
+__all__ = ["HEADS_PREFIX", "ExportedGraphEngine", "InferenceEngine", "LogFn", "StageHook", "output_from_arrays"]
 
 #: A progress logger the backends call with one line of text (e.g. ``print`` or ``logger.info``).
 LogFn = Callable[[str], object]
+#: The timing hook of a stage an engine runs inside its call: ``hook(stage)`` is the context the stage runs in
+#: (e.g. :meth:`semattnet.inference.stream.StageTimes.time` of the current frame).
+StageHook = Callable[[str], AbstractContextManager[object]]
 
 _FIELDS = tuple(f.name for f in fields(DepthCompletionOutput))
 
@@ -33,9 +37,14 @@ class InferenceEngine(nn.Module):
         size: the (H, W) the engine was compiled for, or ``None`` for any size.
         precision: ``"f32"`` (the default; outputs within 1e-4 relative of the eager model) or ``"bf16"``.
         needs_semantic: whether ``semantic`` is required.
+        inner_stages: the stages run inside a call that go through ``on_stage`` when it is set (the ``torch``
+            engine's ``propagation``); empty when the call is not split.
+        on_stage: the timing hook of those stages (:data:`StageHook`), or None.
     """
 
     backend: str = "?"
+    inner_stages: tuple[str, ...] = ()
+    on_stage: StageHook | None = None
 
     def __init__(self, size: tuple[int, int] | None, precision: str, needs_semantic: bool) -> None:
         super().__init__()

@@ -21,16 +21,42 @@ from __future__ import annotations
 
 import hashlib
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Protocol, TypeAlias, TypeGuard
 
 import numpy as np
 
 from semattnet._errors import InputError
 
-__all__ = ["DEFAULT_CALIBRATION_FRAMES", "Calibration", "fit_to_size", "resolve_calibration"]
+if TYPE_CHECKING:
+    from semattnet.data.frames import FrameSource
+
+__all__ = ["DEFAULT_CALIBRATION_FRAMES", "Calibration", "CalibrationFrames", "fit_to_size", "resolve_calibration"]
+
+
+class CalibrationFrame(Protocol):
+    """What a calibration frame gives (a :class:`~semattnet.data.frames.Frame` does)."""
+
+    @property
+    def rgb(self) -> np.ndarray: ...
+
+    @property
+    def semantic(self) -> np.ndarray | None: ...
+
+    @property
+    def sparse(self) -> np.ndarray: ...
+
+
+#: What int8 calibrates on: a folder (``rgb/`` + ``sparse/``, or a KITTI root), a FrameSource, Frames, or None
+#: (synthetic scenes).
+CalibrationFrames: TypeAlias = "str | os.PathLike[str] | FrameSource | Sequence[CalibrationFrame] | None"
+
+
+def _is_frame(f: object) -> TypeGuard[CalibrationFrame]:
+    return hasattr(f, "rgb") and hasattr(f, "sparse")
+
 
 #: Synthetic scenes calibrated on when the user gives no frames (and the most frames used from a source).
 DEFAULT_CALIBRATION_FRAMES = 8
@@ -47,7 +73,9 @@ def fit_to_size(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     return out
 
 
-def _feed(rgb: np.ndarray, semantic: np.ndarray | None, sparse: np.ndarray, size: tuple[int, int]) -> dict[str, Any]:
+def _feed(
+    rgb: np.ndarray, semantic: np.ndarray | None, sparse: np.ndarray, size: tuple[int, int]
+) -> dict[str, np.ndarray]:
     """One frame as the graph's named (1, C, H, W) float32 inputs (colours 0..255, sparse metres)."""
     from semattnet.palette import unknown_map
 
@@ -66,7 +94,7 @@ class Calibration:
 
     key: str
     description: str
-    _make: Any = field(repr=False)
+    _make: Callable[[], list[dict[str, np.ndarray]]] = field(repr=False)
     _feeds: list[dict[str, np.ndarray]] | None = field(default=None, repr=False)
 
     def feeds(self) -> list[dict[str, np.ndarray]]:
@@ -87,7 +115,7 @@ def _synthetic(size: tuple[int, int], count: int) -> Calibration:
     return Calibration(hashlib.sha256(what.encode()).hexdigest()[:16], what, make)
 
 
-def _from_frames(frames: Sequence[Any], size: tuple[int, int], what: str) -> Calibration:
+def _from_frames(frames: Sequence[CalibrationFrame], size: tuple[int, int], what: str) -> Calibration:
     feeds = [_feed(f.rgb, f.semantic, f.sparse, size) for f in frames]
     if not feeds:
         raise InputError(f"calibration: {what} holds no frames; give at least one (or None for synthetic scenes)")
@@ -98,7 +126,7 @@ def _from_frames(frames: Sequence[Any], size: tuple[int, int], what: str) -> Cal
     return Calibration(digest.hexdigest()[:16], f"{len(feeds)} frames of {what}", lambda: feeds, feeds)
 
 
-def _source_of_folder(path: Path) -> Any:
+def _source_of_folder(path: Path) -> FrameSource:
     from semattnet.data.sources import FolderSource, KittiSplitSource
 
     if not path.is_dir():
@@ -110,7 +138,7 @@ def _source_of_folder(path: Path) -> Any:
 
 
 def resolve_calibration(
-    calibration: Any, size: tuple[int, int], count: int = DEFAULT_CALIBRATION_FRAMES
+    calibration: CalibrationFrames, size: tuple[int, int], count: int = DEFAULT_CALIBRATION_FRAMES
 ) -> Calibration:
     """The :class:`Calibration` of what the user gave (module docstring); at most ``count`` frames."""
     if isinstance(count, bool) or not isinstance(count, int) or count < 1:
@@ -119,12 +147,12 @@ def resolve_calibration(
         return _synthetic(size, count)
     if isinstance(calibration, str | os.PathLike):
         calibration = _source_of_folder(Path(calibration))
-    names = getattr(calibration, "names", None)
-    if names is not None and hasattr(calibration, "load"):  # a FrameSource: load only the frames used
-        frames = [calibration.load(n) for n in list(names)[:count]]
+    if not isinstance(calibration, Sequence) and hasattr(calibration, "load"):  # a FrameSource: the frames used
+        frames = [calibration.load(n) for n in list(calibration.names)[:count]]
         return _from_frames(frames, size, type(calibration).__name__)
-    if isinstance(calibration, Sequence) and all(hasattr(f, "rgb") and hasattr(f, "sparse") for f in calibration):
-        return _from_frames(list(calibration)[:count], size, "the given frames")
+    given = [f for f in calibration if _is_frame(f)] if isinstance(calibration, Sequence) else None
+    if given is not None and len(given) == len(calibration):
+        return _from_frames(given[:count], size, "the given frames")
     raise InputError(
         "calibration: expected None, a FrameSource, a sequence of Frames or a folder path, "
         f"got {type(calibration).__name__}"

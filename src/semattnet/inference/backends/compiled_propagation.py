@@ -42,4 +42,5 @@ def traced_propagation(inputs: RefinementInputs, iterations: int) -> tuple[torch
 
     with torch.no_grad():
         traced = torch.jit.trace(run, tuple(flat.values()), check_trace=False)
-        return traced(*flat.values())
+        out: tuple[torch.Tensor, torch.Tensor] = traced(*flat.values())
+        return out

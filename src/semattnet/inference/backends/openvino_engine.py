@@ -12,7 +12,6 @@ run in f32; only when asked for).
 from __future__ import annotations
 
 import os
-from typing import Any
 
 import numpy as np
 import torch
@@ -28,7 +27,11 @@ from semattnet.inference.backends._export_cache import (
     propagation_steps,
     record_digest,
 )
-from semattnet.inference.backends.calibration import DEFAULT_CALIBRATION_FRAMES, resolve_calibration
+from semattnet.inference.backends.calibration import (
+    DEFAULT_CALIBRATION_FRAMES,
+    CalibrationFrames,
+    resolve_calibration,
+)
 from semattnet.inference.backends.openvino_int8 import quantized_ir
 from semattnet.models.outputs import DepthCompletionOutput
 
@@ -51,7 +54,8 @@ class OpenVinoEngine(ExportedGraphEngine):
 
     def __init__(self, model: nn.Module, size: tuple[int, int], needs_semantic: bool, precision: str = "f32",
                  cache_dir: str | os.PathLike[str] | None = None, log: LogFn | None = None,
-                 calibration: Any = None, calibration_frames: int = DEFAULT_CALIBRATION_FRAMES) -> None:  # fmt: skip
+                 calibration: CalibrationFrames = None,
+                 calibration_frames: int = DEFAULT_CALIBRATION_FRAMES) -> None:  # fmt: skip
         super().__init__(size, precision, needs_semantic)
         ov = require("openvino", "the openvino backend")
         folder = engine_dir(engine_key(model, size, extra=f"openvino-{ov.__version__}"), cache_dir)
@@ -66,7 +70,7 @@ class OpenVinoEngine(ExportedGraphEngine):
             for done in (onnx_path, onnx_path.with_name(f"{onnx_path.name}.sha256")):  # the IR holds the weights
                 done.unlink(missing_ok=True)
         if precision == "int8":  # the quantised IR (cached per calibration); its float layers in f32
-            xml = quantized_ir(ov, core, xml, resolve_calibration(calibration, size, calibration_frames), log)
+            xml = quantized_ir(ov, xml, resolve_calibration(calibration, size, calibration_frames), log)
         hint = "f32" if precision == "int8" else precision
         config = {"PERFORMANCE_HINT": "LATENCY", "INFERENCE_PRECISION_HINT": hint,
                   "INFERENCE_NUM_THREADS": torch.get_num_threads(), "CACHE_DIR": str(xml.parent / "blobs")}  # fmt: skip

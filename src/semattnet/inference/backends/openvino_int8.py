@@ -20,9 +20,10 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Any
+from types import ModuleType
 
 from semattnet._utils.extras import require
+from semattnet.inference.backends._base import LogFn
 from semattnet.inference.backends._export_cache import intact, record_digest
 from semattnet.inference.backends.calibration import Calibration
 
@@ -43,8 +44,8 @@ def _umask() -> int:
     return mask
 
 
-def quantized_ir(ov: Any, core: Any, xml: Path, calibration: Calibration, log=None) -> Path:
-    """``<folder of xml>/int8-<calibration.key>/model.xml``: the IR ``xml`` quantised on ``calibration``
+def quantized_ir(ov: ModuleType, xml: Path, calibration: Calibration, log: LogFn | None = None) -> Path:
+    """``<folder of xml>/int8-<calibration.key>/model.xml``: the IR ``xml`` quantised on ``calibration`` by ``ov``
     (computed once; later calls return the cached file)."""
     target = xml.parent / f"int8-{calibration.key}"
     out = target / "model.xml"
@@ -54,7 +55,7 @@ def quantized_ir(ov: Any, core: Any, xml: Path, calibration: Calibration, log=No
     nncf = require("nncf", "int8 quantisation")
     if log is not None:
         log(f"quantising to int8 on {calibration.description} (once; cached in {target}) ...")
-    model = core.read_model(str(xml))
+    model = ov.Core().read_model(str(xml))
     names = [next(n for n in port.get_names() if n in ("rgb", "semantic", "sparse")) for port in model.inputs]
     feeds = [{n: feed[n] for n in names} for feed in calibration.feeds()]
     quantized = nncf.quantize(

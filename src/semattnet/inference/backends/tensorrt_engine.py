@@ -9,8 +9,6 @@ TensorRT pick float16 kernels for the network. Not measured on a GPU in this pro
 
 from __future__ import annotations
 
-from typing import Any
-
 import torch
 from torch import nn
 
@@ -20,11 +18,12 @@ from semattnet.inference.backends._base import HEADS_PREFIX, InferenceEngine, ou
 from semattnet.inference.backends._export_cache import propagation_steps
 from semattnet.models.bn_folding import fold_batchnorm
 from semattnet.models.outputs import DepthCompletionOutput
+from semattnet.models.semattnet import SemAttNet
 
 __all__ = ["TensorRTEngine", "network_outputs"]
 
 
-def network_outputs(net: Any, rgb: torch.Tensor, semantic: torch.Tensor | None,
+def network_outputs(net: SemAttNet, rgb: torch.Tensor, semantic: torch.Tensor | None,
                     sparse: torch.Tensor) -> dict[str, torch.Tensor]:  # fmt: skip
     """The network part's outputs by name (the backbone's maps and the ``refinement.*`` heads)."""
     out, heads = net.forward_network(rgb=rgb, semantic=semantic, sparse=sparse)
@@ -34,7 +33,7 @@ def network_outputs(net: Any, rgb: torch.Tensor, semantic: torch.Tensor | None,
 class _Network(nn.Module):
     """Positional inputs, a tuple of outputs in ``names`` order (what Torch-TensorRT compiles)."""
 
-    def __init__(self, net: nn.Module, names: list[str], semantic: bool) -> None:
+    def __init__(self, net: SemAttNet, names: list[str], semantic: bool) -> None:
         super().__init__()
         self.net, self.names, self.semantic = net, names, semantic
 
@@ -56,9 +55,9 @@ class TensorRTEngine(InferenceEngine):
         if device.type != "cuda":
             raise InputError(f"device: the tensorrt backend runs on CUDA, got {device}")
         trt = require("torch_tensorrt", "the tensorrt backend")
-        if not hasattr(model, "forward_network"):
-            raise InputError("model: the tensorrt backend needs a refining SemAttNet (with forward_network)")
         net = fold_batchnorm(model).eval().to(device)
+        if not isinstance(net, SemAttNet):
+            raise InputError("model: the tensorrt backend needs a refining SemAttNet (with forward_network)")
         h, w = size
         example = [torch.rand(1, 3, h, w, device=device) * 255] * (2 if needs_semantic else 1)
         example.append(torch.rand(1, 1, h, w, device=device) * 80)

@@ -11,8 +11,8 @@ On CUDA the propagation runs through ``torch.compile``
 from __future__ import annotations
 
 import dataclasses
-from contextlib import nullcontext
-from typing import Any
+from collections.abc import Iterator
+from contextlib import contextmanager, nullcontext
 
 import torch
 from torch import nn
@@ -21,6 +21,7 @@ from semattnet.inference.backends._base import InferenceEngine
 from semattnet.inference.backends.compiled_propagation import compiled_propagation
 from semattnet.models.bn_folding import fold_batchnorm
 from semattnet.models.outputs import DepthCompletionOutput
+from semattnet.models.semattnet import SemAttNet
 
 __all__ = ["TorchEngine"]
 
@@ -28,17 +29,42 @@ _CAST = {"bf16": torch.bfloat16, "fp16": torch.float16}
 
 
 class TorchEngine(InferenceEngine):
-    """Eager inference on a BN-folded copy of ``model`` (or ``model`` itself, folded, with ``inplace``)."""
+    """Eager inference on a BN-folded copy of ``model`` (or ``model`` itself, folded, with ``inplace``).
+
+    The refined model's ``propagation`` is an inner stage: with :attr:`on_stage` set, the call runs the network
+    and then the propagation inside ``on_stage("propagation")`` (CUDA synchronised on both sides), the same
+    arithmetic as the model's own forward."""
 
     backend = "torch"
 
     def __init__(self, model: nn.Module, precision: str = "f32", needs_semantic: bool = True,
                  inplace: bool = False, compile_propagation: bool | None = None) -> None:  # fmt: skip
         super().__init__(None, precision, needs_semantic)
-        self.net: Any = fold_batchnorm(model, inplace=inplace).eval()  # SemAttNet(Backbone): forward_network, config
+        self.net = fold_batchnorm(model, inplace=inplace).eval()
         on_cuda = any(p.is_cuda for p in self.net.parameters())
-        refines = hasattr(self.net, "forward_network")
-        self.compile_propagation = refines and (on_cuda if compile_propagation is None else compile_propagation)
+        self.inner_stages = ("propagation",) if self.refiner is not None else ()
+        self.compile_propagation = self.refiner is not None and (
+            on_cuda if compile_propagation is None else compile_propagation
+        )
+
+    @property
+    def refiner(self) -> SemAttNet | None:
+        """The model when it refines (network, then propagation), else None."""
+        return self.net if isinstance(self.net, SemAttNet) else None
+
+    @contextmanager
+    def _stage(self, stage: str, device: torch.device) -> Iterator[None]:
+        """The block inside :attr:`on_stage` (``stage``), CUDA synchronised before and at its end."""
+        if self.on_stage is None:
+            yield
+            return
+        cuda = device.type == "cuda"
+        if cuda:
+            torch.cuda.synchronize(device)
+        with self.on_stage(stage):
+            yield
+            if cuda:
+                torch.cuda.synchronize(device)
 
     def forward(
         self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
@@ -47,9 +73,13 @@ class TorchEngine(InferenceEngine):
         dtype = _CAST.get(self.precision)
         cast = torch.autocast(rgb.device.type, dtype=dtype) if dtype is not None else nullcontext()
         with torch.inference_mode(), cast:
-            if self.compile_propagation:  # network eagerly, the propagation (float32) compiled
-                out, heads = self.net.forward_network(rgb=rgb, semantic=semantic, sparse=sparse)
-                s2, refined = compiled_propagation()(heads, self.net.config.iterations)
+            out: DepthCompletionOutput
+            net = self.refiner
+            if net is not None and (self.compile_propagation or self.on_stage is not None):
+                out, heads = net.forward_network(rgb=rgb, semantic=semantic, sparse=sparse)
+                with self._stage("propagation", rgb.device):  # compiled: network eagerly, propagation (float32)
+                    s2, refined = (compiled_propagation()(heads, net.config.iterations) if self.compile_propagation
+                                   else net.propagation(heads))  # fmt: skip
                 out = dataclasses.replace(out, refined_s2_depth=s2, refined_depth=refined)
             else:
                 out = self.net(rgb=rgb, semantic=semantic, sparse=sparse)

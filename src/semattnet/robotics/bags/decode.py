@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import io
 import struct
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from semattnet._errors import DataError
+from semattnet.geometry.cameras import CameraInfoData  # its home (a frame's metadata carries it)
 
 __all__ = [
     "IMAGE_ENCODINGS",
@@ -184,38 +184,6 @@ def decode_pointcloud2(msg: Any, topic: str) -> np.ndarray:
                         f"{MAX_POINT_COORDINATE_M:g} m (up to {top:.3g} m); a scan is in metres in the LiDAR's frame "
                         "(semattnet.robotics.bags.decode.MAX_POINT_COORDINATE_M)")  # fmt: skip
     return out
-
-
-@dataclass(frozen=True)
-class CameraInfoData:
-    """The fields of a ``sensor_msgs/CameraInfo`` (what a bag sink writes back).
-
-    Attributes:
-        width, height: image size, pixels. K: (3, 3) intrinsics of the raw image. D: distortion coefficients.
-        R: (3, 3) rectification rotation. P: (3, 4) projection of the rectified image.
-        distortion_model: e.g. ``plumb_bob``. frame_id: the optical frame. stamp_ns: header stamp.
-    """
-
-    width: int
-    height: int
-    K: np.ndarray
-    D: np.ndarray
-    R: np.ndarray
-    P: np.ndarray
-    distortion_model: str = "plumb_bob"
-    frame_id: str = ""
-    stamp_ns: int = 0
-
-    @property
-    def image_size(self) -> tuple[int, int]:
-        """(width, height) pixels."""
-        return (self.width, self.height)
-
-    def intrinsics(self, rectified: bool = True) -> np.ndarray:
-        """(3, 3) intrinsics: ``P``'s left 3x3 for a rectified image (when ``P`` is set), else ``K``."""
-        if rectified and np.any(self.P[:, :3]):
-            return self.P[:, :3].copy()
-        return self.K.copy()
 
 
 def _matrix(msg: Any, name: str, shape: tuple[int, int], topic: str) -> np.ndarray:

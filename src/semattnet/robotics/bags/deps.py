@@ -7,19 +7,31 @@ module import time, so ``import semattnet`` works without either.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from functools import lru_cache
-from typing import Any
+from typing import Protocol
 
 from semattnet._utils.extras import require
 
-__all__ = ["rosbags_typestore", "writes_mcap"]
+__all__ = ["Typestore", "rosbags_typestore", "writes_mcap"]
 
 #: The ROS 1 ``tf2_msgs/TFMessage`` definition (rosbags' Noetic store lacks it).
 _TF_MESSAGE_MSG = "geometry_msgs/TransformStamped[] transforms"
 
 
+class Typestore(Protocol):
+    """What semattnet uses of a rosbags type store: its message classes by type name and the serialisers."""
+
+    @property
+    def types(self) -> Mapping[str, type]: ...
+
+    def serialize_ros1(self, message: object, typename: str) -> memoryview: ...
+
+    def serialize_cdr(self, message: object, typename: str) -> memoryview: ...
+
+
 @lru_cache(maxsize=2)
-def rosbags_typestore(ros1: bool) -> Any:
+def rosbags_typestore(ros1: bool) -> Typestore:
     """The rosbags type store used to write (and to read bags without embedded definitions): ROS 1 Noetic
     (plus ``tf2_msgs/TFMessage``) or ROS 2 Humble."""
     typesys = require("rosbags.typesys", "reading or writing ROS bags")

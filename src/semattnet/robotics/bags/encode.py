@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import io
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
 
 from semattnet._errors import InputError
 
 from .decode import CameraInfoData
+from .deps import Typestore
 
 __all__ = [
     "camera_info_message",
@@ -31,19 +31,19 @@ __all__ = [
 _FIELD_TYPES = {("i", 1): 1, ("u", 1): 2, ("i", 2): 3, ("u", 2): 4, ("i", 4): 5, ("u", 4): 6, ("f", 4): 7, ("f", 8): 8}
 
 
-def _time(ts: Any, ns: int) -> Any:
+def _time(ts: Typestore, ns: int) -> object:
     return ts.types["builtin_interfaces/msg/Time"](sec=int(ns) // 1_000_000_000, nanosec=int(ns) % 1_000_000_000)
 
 
-def header(ts: Any, stamp_ns: int, frame_id: str, seq: int = 0) -> Any:
+def header(ts: Typestore, stamp_ns: int, frame_id: str, seq: int = 0) -> object:
     """A ``std_msgs/Header`` (ROS 1 has a ``seq``, ROS 2 not)."""
     cls = ts.types["std_msgs/msg/Header"]
-    if "seq" in cls.__dataclass_fields__:
+    if "seq" in vars(cls)["__dataclass_fields__"]:
         return cls(seq=seq, stamp=_time(ts, stamp_ns), frame_id=frame_id)
     return cls(stamp=_time(ts, stamp_ns), frame_id=frame_id)
 
 
-def image_message(ts: Any, rgb: np.ndarray, stamp_ns: int, frame_id: str) -> Any:
+def image_message(ts: Typestore, rgb: np.ndarray, stamp_ns: int, frame_id: str) -> object:
     """``sensor_msgs/Image`` rgb8 of an (H, W, 3) uint8 image (``step = 3 W``)."""
     rgb = np.ascontiguousarray(rgb, dtype=np.uint8)
     if rgb.ndim != 3 or rgb.shape[2] != 3:
@@ -54,7 +54,7 @@ def image_message(ts: Any, rgb: np.ndarray, stamp_ns: int, frame_id: str) -> Any
                                              data=rgb.reshape(-1))  # fmt: skip
 
 
-def depth_image_message(ts: Any, depth: np.ndarray, stamp_ns: int, frame_id: str) -> Any:
+def depth_image_message(ts: Typestore, depth: np.ndarray, stamp_ns: int, frame_id: str) -> object:
     """``sensor_msgs/Image`` 32FC1 in metres (REP 118): pixels without depth (<= 0 or not finite) are NaN."""
     d = np.asarray(depth, dtype=np.float32)
     if d.ndim != 2:
@@ -66,7 +66,7 @@ def depth_image_message(ts: Any, depth: np.ndarray, stamp_ns: int, frame_id: str
                                              data=np.frombuffer(d.tobytes(), np.uint8))  # fmt: skip
 
 
-def compressed_image_message(ts: Any, rgb: np.ndarray, stamp_ns: int, frame_id: str, fmt: str = "png") -> Any:
+def compressed_image_message(ts: Typestore, rgb: np.ndarray, stamp_ns: int, frame_id: str, fmt: str = "png") -> object:
     """``sensor_msgs/CompressedImage`` of an (H, W, 3) uint8 image, ``fmt`` "png" (lossless) or "jpeg"."""
     from PIL import Image
 
@@ -85,8 +85,8 @@ def pack_rgb(rgb: np.ndarray) -> np.ndarray:
     return ((c[:, 0] << 16) | (c[:, 1] << 8) | c[:, 2]).astype("<u4").view("<f4")
 
 
-def pointcloud2_message(ts: Any, fields: dict[str, np.ndarray], stamp_ns: int, frame_id: str,
-                        is_dense: bool | None = None) -> Any:  # fmt: skip
+def pointcloud2_message(ts: Typestore, fields: dict[str, np.ndarray], stamp_ns: int, frame_id: str,
+                        is_dense: bool | None = None) -> object:  # fmt: skip
     """An unorganised (height 1) little-endian ``sensor_msgs/PointCloud2`` with one (N,) column per field,
     packed without padding in the given order (e.g. ``{"x": ..., "y": ..., "z": ..., "intensity": ...}``).
 
@@ -114,10 +114,12 @@ def pointcloud2_message(ts: Any, fields: dict[str, np.ndarray], stamp_ns: int, f
                                                    is_dense=is_dense)  # fmt: skip
 
 
-def camera_info_message(ts: Any, info: CameraInfoData, stamp_ns: int | None = None, frame_id: str | None = None) -> Any:
+def camera_info_message(
+    ts: Typestore, info: CameraInfoData, stamp_ns: int | None = None, frame_id: str | None = None
+) -> object:
     """``sensor_msgs/CameraInfo`` of :class:`CameraInfoData` (stamp and frame id from ``info`` unless given)."""
     cls = ts.types["sensor_msgs/msg/CameraInfo"]
-    ros1 = "K" in cls.__dataclass_fields__
+    ros1 = "K" in vars(cls)["__dataclass_fields__"]
     mats = {"D": info.D, "K": info.K, "R": info.R, "P": info.P}
     kw = {(k if ros1 else k.lower()): np.asarray(v, dtype=np.float64).reshape(-1) for k, v in mats.items()}
     roi = ts.types["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
@@ -126,7 +128,7 @@ def camera_info_message(ts: Any, info: CameraInfoData, stamp_ns: int | None = No
                binning_x=0, binning_y=0, roi=roi, **kw)  # fmt: skip
 
 
-def tf_message(ts: Any, transforms: Sequence[tuple[str, str, np.ndarray]], stamp_ns: int) -> Any:
+def tf_message(ts: Typestore, transforms: Sequence[tuple[str, str, np.ndarray]], stamp_ns: int) -> object:
     """``tf2_msgs/TFMessage`` of ``(parent, child, T_parent_child (4, 4))`` edges (``p_parent = T p_child``)."""
     from .tf import matrix_to_quaternion
 

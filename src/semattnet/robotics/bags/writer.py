@@ -94,7 +94,7 @@ class MessageWriter:
         self.ros1 = self.fmt == "ros1"
         self.ts = rosbags_typestore(self.ros1)
         self.counts: dict[str, int] = {}
-        self._conns: dict[str, Any] = {}
+        self._conns: dict[str, object] = {}  # rosbags connections, by topic (handed back to the writer)
         if self.ros1:
             self._writer = require("rosbags.rosbag1", "writing ROS bags").Writer(self.path)
         else:
@@ -208,7 +208,7 @@ class BagWriter:
         self.__exit__(None, None, None)
 
 
-def _current_exc() -> tuple[Any, Any, Any]:
+def _current_exc() -> tuple[type[BaseException] | None, BaseException | None, TracebackType | None]:
     import sys
 
     return sys.exc_info()

@@ -1,0 +1,70 @@
+"""What a completer gives and what the frame loop asks of one: :class:`Completion`, the :class:`Completer`
+protocol and :class:`StageTimed` (a completer that times its inner stages). Below both the completer and the
+stream, so that each can name them."""
+
+from __future__ import annotations
+
+from contextlib import AbstractContextManager
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+import torch
+
+from semattnet.inference.backends._base import StageHook
+from semattnet.models.outputs import DepthCompletionOutput
+
+__all__ = ["Completer", "Completion", "StageTimed"]
+
+
+@dataclass
+class Completion:
+    """A completed frame: ``depth`` (H, W) float32 metres (the final prediction, as the method returned
+    it) and ``output``, the model's typed :class:`DepthCompletionOutput` ((1, 1, H, W) CPU tensors), or
+    None for a method without branches (the classical baseline); ``uncertainty`` the per-pixel
+    uncertainty of ``depth``, (H, W) float32 metres."""
+
+    depth: np.ndarray
+    output: DepthCompletionOutput | None = None
+    #: (H, W) float32 per-pixel uncertainty of ``depth`` in metres, or None when the method gives none:
+    #: ``output.uncertainty`` (:func:`semattnet.models.uncertainty.depth_uncertainty`) when not given;
+    #: the classical baseline's :func:`semattnet.baselines.classical.classical_uncertainty`.
+    uncertainty: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.uncertainty is None and self.output is not None and self.output.uncertainty is not None:
+            self.uncertainty = self.output.uncertainty[0, 0].float().cpu().numpy()
+
+    @property
+    def outputs(self) -> dict[str, np.ndarray]:
+        """Every map as an (H, W) array by field name (``{"refined_depth": depth}`` without ``output``):
+        what the panels and the viewer draw."""
+        if self.output is None:
+            return {"refined_depth": np.asarray(self.depth, dtype=np.float32)}
+        return {k: v[0, 0].float().cpu().numpy() for k, v in self.output.to_dict().items()}
+
+    @property
+    def confidence(self) -> np.ndarray | None:
+        """(H, W) largest of the fusion weights of eq. 12 (the method's confidence), or None without branches."""
+        if self.output is None:
+            return None
+        confs = [c for c in (self.output.color_conf, self.output.semantic_conf, self.output.guided_conf)
+                 if c is not None]  # fmt: skip
+        return torch.stack([c[0, 0].float().cpu() for c in confs]).amax(0).numpy()
+
+
+class Completer(Protocol):
+    """Anything called as ``completer(rgb, sparse, semantic)`` -> :class:`Completion`: what the frame loop runs
+    (:class:`DepthCompleter`, :class:`semattnet.baselines.ClassicalCompleter`)."""
+
+    def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion: ...
+
+
+@runtime_checkable
+class StageTimed(Protocol):
+    """A completer that times the stages it runs inside a call (e.g. ``propagation``) through a hook."""
+
+    def timing(self, hook: StageHook) -> AbstractContextManager[tuple[str, ...]]:
+        """While active, the inner stages of every call run inside ``hook(stage)``; gives those stages (empty:
+        the call is not split)."""
+        ...
