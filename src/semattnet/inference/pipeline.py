@@ -325,7 +325,7 @@ class _FrameLoop:
 
 
 def _run_frames(loop: _FrameLoop, completer: Completer, maps: SemanticMaps, prefetch: int,
-                realtime: float | None, overwrite: bool) -> None:  # fmt: skip
+                realtime: float | None, overwrite: bool, batch_size: int = 1) -> None:  # fmt: skip
     """The frames of this process through the completer into ``loop`` (the run outputs opened before and
     finished after; aborted on any error)."""
     try:
@@ -334,7 +334,7 @@ def _run_frames(loop: _FrameLoop, completer: Completer, maps: SemanticMaps, pref
                 s.open(overwrite)
             for frame, completion in completions(loop.source, completer, loop.todo(), maps, loop.timer, prefetch,
                                                  report=loop.note, stop_on_fault=loop.plan.on_error == "stop",
-                                                 realtime=realtime):  # fmt: skip
+                                                 realtime=realtime, batch_size=batch_size):  # fmt: skip
                 loop.write(stage, frame, completion)
             loop.finish(stage)
     except BaseException:
@@ -360,6 +360,7 @@ def complete_frames(
     resume: bool = False,
     run: Mapping[str, Any] | None = None,
     realtime: float | None = None,
+    batch_size: int = 1,
 ) -> FrameRun:
     """Complete every frame of ``source`` with ``completer`` and write what ``sinks`` say into ``out``.
 
@@ -377,6 +378,8 @@ def complete_frames(
     that many frames ahead in a background thread; ``realtime``: replay at the sensor pace, that many times
     faster, dropping frames that come while the completer is busy (:func:`~.stream.completions`).
     :class:`~.sinks.RunSink` outputs (a bag, a recording, ``latency.json``) are put in place at the end.
+    ``batch_size`` > 1: up to that many consecutive frames of one size completed in one engine call (a
+    :class:`~.completer.DepthCompleter`, through its input checks; the same results up to float rounding).
 
     Returns:
         The :class:`FrameRun`: every frame's status, the depth PNGs of the frames done (all ranks).
@@ -394,7 +397,8 @@ def complete_frames(
         maps = agree((semantic or SemanticMaps()).bind, completer)
         maps.check_palette(completer, source)
         loop = _FrameLoop(source, sinks, out, plan, timer, rank_log(log), maps)
-        first = first_error(_attempt_run(loop, completer, maps, prefetch, realtime, overwrite or plan.resume))
+        first = first_error(_attempt_run(loop, completer, maps, prefetch, realtime, overwrite or plan.resume,
+                                         batch_size))  # fmt: skip
         if first is not None:
             raise first
         return _close(loop)
