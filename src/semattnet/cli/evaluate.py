@@ -118,7 +118,7 @@ def evaluate(weights: str | None, data_root: Path, dataset: str, split: str | No
             raise click.UsageError("--sparsity needs --out")
         _sweep(weights, data_root, split, out, sparsity, method, device, max_frames, overwrite, dataset)
         return
-    from semattnet.evaluation.evaluate import evaluate as evaluate_split
+    from semattnet.evaluation.evaluate import evaluate_split
 
     if method != "semattnet":
         raise click.UsageError("--method classical needs --sparsity")

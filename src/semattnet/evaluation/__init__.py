@@ -1,7 +1,7 @@
 """Evaluation: KITTI devkit metrics, scoring completers over a dataset's split (through the one frame loop) and
 prediction folders, test submissions, sparsification curves (AUSE / AURG) of a per-pixel uncertainty."""
 
-from semattnet.evaluation.evaluate import Evaluation, evaluate, score_folders
+from semattnet.evaluation.evaluate import Evaluation, evaluate_split, score_folders
 from semattnet.evaluation.metrics import KittiMetrics, fill_holes_kitti, image_metrics
 from semattnet.evaluation.protocols import eval_source, protocol_metrics
 from semattnet.evaluation.sink import MetricsSink
@@ -17,7 +17,7 @@ __all__ = [
     "aurg",
     "ause",
     "eval_source",
-    "evaluate",
+    "evaluate_split",
     "fill_holes_kitti",
     "image_metrics",
     "protocol_metrics",

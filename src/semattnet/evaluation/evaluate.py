@@ -37,7 +37,7 @@ from semattnet.inference.pipeline import Completer, check_frames, complete_frame
 from semattnet.inference.sharding import gather_rows, on_main, process_group, shared_stage
 from semattnet.inference.sinks import DepthPngSink, PanelSink, Sink, output_files
 
-__all__ = ["SPARSIFICATION_PNG", "Evaluation", "evaluate", "score_folders", "score_folders_to_json"]
+__all__ = ["SPARSIFICATION_PNG", "Evaluation", "evaluate_split", "score_folders", "score_folders_to_json"]
 
 PathLike = str | os.PathLike[str]
 #: The sparsification curves' picture in ``evaluate``'s output folder.
@@ -92,7 +92,7 @@ def score_folders_to_json(pred_dir: str | Path, gt_dir: str | Path, json_path: s
 
 @dataclass
 class Evaluation:
-    """What :func:`evaluate` found: ``metrics`` (every rank's, reduced; ``per_image`` rows in the split's order),
+    """What :func:`evaluate_split` found: ``metrics`` (every rank's, reduced; ``per_image`` rows in the split's order),
     ``result`` (the metrics and the uncertainty's AUSE / AURG; empty without any frame with ground truth),
     ``sparsification`` (its curves) and ``semantic`` (what maps of another palette became, or None)."""
 
@@ -102,7 +102,7 @@ class Evaluation:
     semantic: dict[str, object] | None = None
 
 
-def evaluate(
+def evaluate_split(
     completer: Completer | Callable[[], Completer],
     data: PathLike,
     split: str | None = None,

@@ -1,6 +1,6 @@
 """The trainer's validation pass: the model being trained, as it is (not folded for inference), over the
 validation loader's batches, scored with the dataset's metrics. ``semattnet evaluate`` scores a finished model
-through the one frame loop instead (:func:`semattnet.evaluation.evaluate`)."""
+through the one frame loop instead (:func:`semattnet.evaluation.evaluate_split`)."""
 
 from __future__ import annotations
 
