@@ -4,19 +4,16 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import torch
-from torch import nn
-from torch.utils.data import DataLoader
 
 from semattnet.data.io import MIN_DEPTH_M, clamp_for_png, read_depth
 from semattnet.data.pairing import FramePaths
 from semattnet.data.synthetic.tree import write_synthetic_kitti
-from semattnet.evaluation.evaluate import PredictionWriter, evaluate_model, score_folders
-from semattnet.evaluation.split import eval_dataset
+from semattnet.evaluation.evaluate import evaluate_split, score_folders
+from semattnet.evaluation.protocols import eval_source
 from semattnet.evaluation.submission import write_submission_files
 from semattnet.inference.completer import Completion
 from semattnet.inference.folder import complete_folder
@@ -76,31 +73,26 @@ def test_submission_keeps_and_reports_holes(tmp_path: Path) -> None:
     assert (read_depth(tmp_path / "s" / "0000000001.png") > 0).all()
 
 
-class _HoleyModel(nn.Module):
-    """Predicts the ground truth + 0.3 m with the hole pattern (NaN, -1 and 0)."""
-
-    def forward(self, rgb: torch.Tensor, semantic: torch.Tensor, sparse: torch.Tensor) -> SimpleNamespace:
-        base = torch.full_like(sparse, 9.0) + sparse.mean()
-        return SimpleNamespace(depth=torch.from_numpy(_with_holes(base.numpy())))
+def _holey(rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
+    """Predicts 9 m + the mean sparse depth with the hole pattern (NaN, -1 and 0)."""
+    return Completion(depth=_with_holes(np.full(sparse.shape, 9.0) + sparse.mean()))
 
 
 def test_evaluate_saved_and_quantized_scores_match_metrics(tmp_path: Path) -> None:
     root = tmp_path / "kitti"
     write_synthetic_kitti(root, 2, (48, 64), seed=3, eval_frames=2, workers=1)
-    ds = eval_dataset(root, "val_select")
     out = tmp_path / "eval"
-    writer = PredictionWriter(ds, "val_select", out, save_predictions=True, pictures=0)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        m = evaluate_model(_HoleyModel(), DataLoader(ds), torch.device("cpu"), progress=False, on_batch=writer,
-                           quantize=True)  # fmt: skip
-    assert any("hole" in str(w.message) and ds.frames[0].name in str(w.message) for w in caught)
+        m = evaluate_split(_holey, root, "val_select", out, save_predictions=True).metrics
+    first = eval_source("kitti-dc", root, "val_select").names[0]
+    assert any("hole" in str(w.message) and first in str(w.message) for w in caught)
     saved = sorted((out / "predictions").glob("*.png"))
     assert len(saved) == 2
     for p in saved:
         d = read_depth(p)
         assert np.array_equal(d == 0, _holes(d.shape))
-    gt_dir = ds.frames[0].gt.parent
+    gt_dir = root / "data_depth_selection/val_selection_cropped/groundtruth_depth"
     ref = score_folders(out / "predictions", gt_dir, progress=False).compute()
     got = m.compute()
     for k in ("rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km"):

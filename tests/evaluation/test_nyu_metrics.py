@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-from semattnet.data.datasets import get_dataset
 from semattnet.evaluation.metrics import RangeMetrics, range_metrics
+from semattnet.evaluation.protocols import protocol_metrics
 
 
 def _t(a: list) -> torch.Tensor:
@@ -59,7 +59,7 @@ def test_rel_and_delta_match_an_independent_implementation() -> None:
     gt = rng.uniform(0.0, 12.0, (4, 1, 20, 30))
     gt[rng.random(gt.shape) < 0.3] = 0.0
     pred = gt * rng.uniform(0.6, 1.5, gt.shape) + rng.normal(0, 0.2, gt.shape).clip(0, None)
-    m = get_dataset("nyuv2").metrics()
+    m = protocol_metrics("nyuv2")
     m.update(torch.from_numpy(pred), torch.from_numpy(gt))
     r = m.compute()
     rel, deltas = _reference_rel_delta(pred[:, 0], gt[:, 0], 0.1, 10.0)
@@ -69,7 +69,7 @@ def test_rel_and_delta_match_an_independent_implementation() -> None:
 
 
 def test_void_units_and_table() -> None:
-    m = get_dataset("void").metrics()
+    m = protocol_metrics("void")
     assert isinstance(m, RangeMetrics) and (m.min_depth, m.max_depth, m.clamp) == (0.2, 5.0, (0.0, math.inf))
     m.update(_t([[1.1, 2.0]]), _t([[1.0, 2.0]]))
     r = m.compute()

@@ -151,7 +151,7 @@ def test_evaluate_checks_before_loading_the_model(tree: Path, tmp_path: Path, mo
     import semattnet.cli.evaluate as cli_evaluate
     from semattnet.cli import main
 
-    monkeypatch.setattr(cli_evaluate, "model_from_options", _no_model)
+    monkeypatch.setattr(cli_evaluate, "_load_completer", _no_model)
     (tmp_path / "ev").mkdir()
     (tmp_path / "ev" / "old.txt").write_text("x")
     weights = tmp_path / "never-read.safetensors"  # exists (the option checks that), never loaded

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import json
 import textwrap
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -70,7 +70,7 @@ def uncertainty_curves(data_root: Path, completers: dict[str, Callable[..., Any]
     return found
 
 
-def plot_front(rows: list[dict[str, Any]], curves: dict[str, Sparsification], path: Path, caption: str) -> Path:
+def plot_front(rows: Sequence[Mapping[str, Any]], curves: dict[str, Sparsification], path: Path, caption: str) -> Path:
     """Two panels: RMSE against density (beams solid, random points dashed); sparsification curves (RMSE)."""
     import matplotlib
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 from functools import partial
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
@@ -17,10 +18,14 @@ from semattnet.cli._options import (
     POSITIVE_INT,
     WORKERS,
     backend_option,
-    model_from_options,
+    check_precision_options,
+    precision_options,
     weights_option,
-    weights_path,
 )
+
+if TYPE_CHECKING:
+    from semattnet.evaluation.evaluate import Evaluation
+    from semattnet.inference.completer import DepthCompleter
 
 
 @main.command()
@@ -92,52 +97,77 @@ def metrics(
 @click.option("--device", default="auto", show_default=True)
 @click.option("--batch-size", type=BATCH_SIZE, default=1, show_default=True)
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
-@click.option("--workers", type=WORKERS, default=2, show_default=True)
+@click.option("--workers", type=WORKERS, default=2, show_default=True, help="Frames read ahead in a background thread.")
 @click.option("--max-frames", type=POSITIVE_INT, default=None)
 @click.option("--overwrite", is_flag=True)
 @backend_option
-def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, dataset: str, split: str | None,
-             out: Path | None,
+@precision_options
+def evaluate(weights: str | None, data_root: Path, dataset: str, split: str | None, out: Path | None,
              sparsity: tuple[str, ...], method: str, segment: str | None, palette_mismatch: str,
-             save_predictions: bool, pictures: int, device: str,
-             batch_size: int, amp: str, workers: int, max_frames: int | None, overwrite: bool,
-             backend: str) -> None:  # fmt: skip
-    """Evaluate a checkpoint on a split with its dataset's metrics (KITTI: the devkit's), or sweep sparser inputs."""
+             save_predictions: bool, pictures: int, device: str, batch_size: int, amp: str, workers: int,
+             max_frames: int | None, overwrite: bool, backend: str, precision: str | None,
+             calibration: Path | None) -> None:  # fmt: skip
+    """Evaluate weights on a split with its dataset's metrics (KITTI: the devkit's), or sweep sparser inputs."""
     split = _split(dataset, split)
     if sparsity and segment:
         raise click.UsageError("--segment is for the model's evaluation, not --sparsity")
+    check_precision_options(method, amp, precision, calibration, backend)
     if sparsity:
         _one_process("evaluate --sparsity")
         if out is None:
             raise click.UsageError("--sparsity needs --out")
-        _sweep(checkpoint, weights, data_root, split, out, sparsity, method, device, max_frames, overwrite, dataset)
+        _sweep(weights, data_root, split, out, sparsity, method, device, max_frames, overwrite, dataset)
         return
-    from semattnet.evaluation.evaluate import evaluate_checkpoint
+    from semattnet.evaluation.evaluate import evaluate_split
 
     if method != "semattnet":
         raise click.UsageError("--method classical needs --sparsity")
     if (save_predictions or pictures) and out is None:
         raise click.UsageError("--save-predictions and --pictures need --out")
-    if (checkpoint is None) == (weights is None):
-        model_from_options(checkpoint, weights)  # the usage error, before any work
-    # a path, or the loader of --weights (exactly one is set here): called after the split and --out are checked
-    model = partial(model_from_options, None, weights) if checkpoint is None else checkpoint
+    spec = _required_weights(weights)
     semantic = None
     if segment is not None:
-        from semattnet.data.datasets.segment import segment_split
+        from semattnet.segmentation.datasets import segment_split
 
         semantic = segment_split(dataset, data_root, (split,), segment, device, log=click.echo, max_frames=max_frames)
-    res = evaluate_checkpoint(model, data_root, split, out, device, batch_size, amp, workers,
-                              save_predictions, pictures, max_frames, overwrite, semantic_root=semantic,
-                              backend=backend, dataset=dataset, palette_mismatch=palette_mismatch)  # fmt: skip
+    completer = partial(_load_completer, spec, device, amp, backend, precision, calibration)  # after every check
+    local = Path(spec) if Path(spec).exists() else None
+    res = evaluate_split(completer, data_root, split, out, dataset=dataset, batch_size=batch_size, prefetch=workers,
+                         save_predictions=save_predictions, pictures=pictures, max_frames=max_frames,
+                         overwrite=overwrite, semantic_root=semantic, palette_mismatch=palette_mismatch, label=spec,
+                         inputs=[local, calibration])  # fmt: skip
+    _report(res, out)
+
+
+def _required_weights(weights: str | None) -> str:
+    """``--weights`` (or its alias ``--checkpoint``), which the model's evaluation needs (a usage error)."""
+    if weights is None:
+        raise click.UsageError("--checkpoint or --weights is required (they are one option: --checkpoint is an alias)")
+    return weights
+
+
+def _load_completer(spec: str, device: str, amp: str, backend: str, precision: str | None,
+                    calibration: Path | None) -> DepthCompleter:  # fmt: skip
+    """The model of ``--weights`` (:func:`semattnet.weights.hub.load_model`) as a completer on this process's
+    device (``cuda:LOCAL_RANK`` under torchrun with CUDA)."""
+    from semattnet._utils.distributed import process_device
+    from semattnet.inference.completer import DepthCompleter
+    from semattnet.weights.hub import load_model
+
+    return DepthCompleter(load_model(spec), device=process_device(device), amp=amp, backend=backend, inplace=True,
+                          precision=precision, calibration=calibration)  # fmt: skip
+
+
+def _report(res: Evaluation, out: Path | None) -> None:
+    """The metrics table (and the uncertainty's scores), printed once: by rank 0 under torchrun."""
     from semattnet._utils.distributed import launch_rank
 
     if launch_rank() != 0:  # under torchrun: every rank holds the merged metrics; rank 0 reports them
         return
-    if "semantic" in res:
-        click.echo(f"semantic maps: {res['semantic']['summary']}")
-    click.echo(res["metrics"].table())
-    r = res["result"]
+    if res.semantic is not None:
+        click.echo(f"semantic maps: {res.semantic['summary']}")
+    click.echo(res.metrics.table())
+    r = res.result
     if "ause_rmse" in r:
         click.echo(f"uncertainty: AUSE RMSE {r['ause_rmse']:.4f}  MAE {r['ause_mae']:.4f}; "
                    f"AURG RMSE {r['aurg_rmse']:.4f}  MAE {r['aurg_mae']:.4f} (docs/guides/uncertainty.md)")  # fmt: skip
@@ -155,7 +185,7 @@ def _split(dataset: str, split: str | None) -> str:
                                  param_hint="--split")  # fmt: skip
     try:
         return spec.check_split(split)
-    except ValueError as exc:
+    except ValueError as exc:  # InputError: the split is not the dataset's
         raise click.BadParameter(str(exc), param_hint="--split") from None
 
 
@@ -165,17 +195,15 @@ def _one_process(command: str) -> None:
         raise click.UsageError(f"{command} runs in one process; start it without torchrun")
 
 
-def _sweep(checkpoint: Path | None, weights: str | None, data_root: Path, split: str, out: Path,
-           sparsity: tuple[str, ...], method: str, device: str, max_frames: int | None,
-           overwrite: bool, dataset: str = "kitti-dc") -> None:  # fmt: skip
+def _sweep(weights: str | None, data_root: Path, split: str, out: Path, sparsity: tuple[str, ...], method: str,
+           device: str, max_frames: int | None, overwrite: bool, dataset: str = "kitti-dc") -> None:  # fmt: skip
     from semattnet.evaluation.sparsity import format_sweep, parse_settings, sweep_model
+    from semattnet.weights.hub import load_model
 
     settings = parse_settings(sparsity)  # fail on a bad setting before loading anything
-    if method == "classical" and (checkpoint is not None or weights is not None):
+    if method == "classical" and weights is not None:
         raise click.UsageError("--method classical takes no --checkpoint / --weights")
-    if method == "semattnet" and (checkpoint is None) == (weights is None):
-        model_from_options(checkpoint, weights)  # the usage error, before any work
-    model = partial(model_from_options, checkpoint, weights, "cpu") if method == "semattnet" else None
+    model = partial(load_model, _required_weights(weights)) if method == "semattnet" else None
     rows = sweep_model(data_root, split, settings, model, out, device, max_frames, overwrite, dataset=dataset)
     click.echo(format_sweep(rows))
     click.echo(f"wrote {out / 'sparsity.csv'}, {out / 'sparsity.json'} and {out / 'sparsity.png'}")
@@ -194,15 +222,14 @@ def _sweep(checkpoint: Path | None, weights: str | None, data_root: Path, split:
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
 @click.option("--overwrite", is_flag=True)
 @backend_option
-def submit(checkpoint: Path | None, weights: str | None, data_root: Path, out: Path, expected_frames: int,
-           device: str, amp: str, overwrite: bool, backend: str) -> None:  # fmt: skip
+def submit(weights: str | None, data_root: Path, out: Path, expected_frames: int, device: str, amp: str,
+           overwrite: bool, backend: str) -> None:  # fmt: skip
     """Predict the KITTI test split and write the zip to upload (checked before zipping)."""
     from semattnet.evaluation.submission import write_submission
 
     _one_process("submit")
-    if (checkpoint is None) == (weights is None):
+    if weights is None:
         raise click.UsageError("give exactly one of --checkpoint or --weights")
-    checkpoint = checkpoint if checkpoint is not None else weights_path(weights)  # type: ignore[arg-type]
-    zip_path = write_submission(checkpoint, data_root, out, device, amp, expected_frames or None, overwrite,
+    zip_path = write_submission(weights, data_root, out, device, amp, expected_frames or None, overwrite,
                                 backend=backend)  # fmt: skip
     click.echo(f"wrote {out} and {zip_path}")

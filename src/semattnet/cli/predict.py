@@ -395,7 +395,7 @@ def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
     maps = SemanticMaps(p["segment_spec"], folder=folder, mismatch=mismatch)
     semantic = p["semantic"]
     if p["data_root"] is not None and p["segment_spec"] is not None:  # the split's maps, cached: a folder
-        from semattnet.data.datasets.segment import segment_split
+        from semattnet.segmentation.datasets import segment_split
 
         semantic = segment_split(p["dataset"], p["data_root"], (p["split"] or _eval_split(p["dataset"]),),
                                  p["segment_spec"], p["device"], log=click.echo)  # fmt: skip

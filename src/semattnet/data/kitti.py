@@ -19,6 +19,7 @@ from torch.utils.data import Dataset
 
 from semattnet._errors import InputError
 from semattnet.data import layout
+from semattnet.data.datasets.frames import MissingSplitError
 from semattnet.data.io import DataError, read_depth, read_image, read_intrinsics
 from semattnet.data.transforms import Sample, Transform
 
@@ -208,8 +209,8 @@ class KittiDepthCompletion(Dataset[dict[str, object]]):
         if self.skipped:
             warnings.warn(f"{root} ({split}): skipped {len(self.skipped)} incomplete frame(s): "
                           f"{_describe(self.skipped, 3)}", stacklevel=2)  # fmt: skip
-        if not self.frames:
-            raise DataError(f"{root}: no {split} frames found (is this the KITTI depth completion folder?)")
+        if not self.frames:  # no file of the split at all (an incomplete frame was refused above)
+            raise MissingSplitError(f"{root}: no {split} frames found (is this the KITTI depth completion folder?)")
         self.transform = transform
         self.seed = seed
         self.epoch = 0

@@ -1,45 +1,46 @@
-"""Scoring: a model over a data loader, a checkpoint over a KITTI split, prediction folders against ground truth.
+"""Scoring: a completer over a dataset's split through the one frame loop, prediction folders against ground truth.
 
-Every score goes through :class:`~semattnet.evaluation.metrics.KittiMetrics` (the devkit's rule).
+Every score goes through the protocol's metrics (:mod:`semattnet.evaluation.protocols`; KITTI's
+:class:`~semattnet.evaluation.metrics.KittiMetrics`, the devkit's rule).
 """
 
 from __future__ import annotations
 
 import csv
+import inspect
 import json
-from collections.abc import Callable
-from functools import partial
+import os
+import tempfile
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TypeGuard
 
 import torch
-from torch import nn
-from torch.utils.data import DataLoader, Subset
 
 from semattnet._errors import InputError
 from semattnet._utils import distributed as dist_utils
-from semattnet._utils.device import autocast
 from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs, write_text
 from semattnet._utils.progress import progress as progress_bar
 from semattnet.data.datasets import get_dataset
-from semattnet.data.frames import Frame
-from semattnet.data.io import DataError, clamp_for_png, quantize_depth, read_depth
-from semattnet.data.kitti import KittiDepthCompletion
-from semattnet.data.sources.kitti_split import prediction_name
+from semattnet.data.frames import IndexedSource
+from semattnet.data.io import DataError, read_depth
+from semattnet.data.sources.semantic import PaletteReport
 from semattnet.evaluation.metrics import KittiMetrics
+from semattnet.evaluation.protocols import eval_source, protocol_metrics
+from semattnet.evaluation.sink import MetricsSink
 from semattnet.evaluation.sparsification import Sparsification
-from semattnet.evaluation.split import eval_dataset, prepare_out, refuse_listed_inputs
-from semattnet.inference.completer import Completion, DepthCompleter
-from semattnet.inference.padding import crop_padding
-from semattnet.inference.pipeline import write_prediction
-from semattnet.inference.sharding import agree, gather_rows, on_main, process_group, shared_stage
+from semattnet.evaluation.split import prepare_out, refuse_listed_inputs
+from semattnet.inference.journal import FRAMES_FILE
+from semattnet.inference.pipeline import Completer, check_frames, complete_frames
+from semattnet.inference.semantic import SemanticMaps
+from semattnet.inference.sharding import gather_rows, on_main, process_group, shared_stage
 from semattnet.inference.sinks import DepthPngSink, PanelSink, Sink, output_files
-from semattnet.models.outputs import DepthCompletionOutput
-from semattnet.models.uncertainty import with_uncertainty
-from semattnet.palette import check_palette
 
-__all__ = ["PredictionWriter", "evaluate_checkpoint", "evaluate_model", "score_folders", "score_folders_to_json"]
+__all__ = ["SPARSIFICATION_PNG", "Evaluation", "evaluate_split", "score_folders", "score_folders_to_json"]
 
+PathLike = str | os.PathLike[str]
 #: The sparsification curves' picture in ``evaluate``'s output folder.
 SPARSIFICATION_PNG = "sparsification.png"
 
@@ -76,82 +77,6 @@ def score_folders(pred_dir: str | Path, gt_dir: str | Path, fill_holes: bool = T
     return metrics
 
 
-def evaluate_model(
-    model: nn.Module,
-    loader: DataLoader,
-    device: torch.device,
-    amp: str = "none",
-    progress: bool = True,
-    on_batch: Callable[[dict[str, Any], Any], None] | None = None,
-    fill_holes: bool = True,
-    min_gt: float = 0.0,
-    quantize: bool = False,
-    metrics: Callable[[], KittiMetrics] | None = None,
-) -> KittiMetrics:
-    """Score ``model`` over ``loader`` (batches from :class:`KittiDepthCompletion`), all ranks.
-
-    ``metrics``: a fresh accumulator of the dataset's protocol (default :class:`KittiMetrics`, the devkit's).
-    Items that carry a ``pad`` (padded to the model's multiple of 32 by
-    :class:`~semattnet.data.datasets.frames.FrameDataset`) are scored and written on the crop without it.
-
-    ``quantize`` scores what a KITTI 16-bit PNG of the prediction holds (clamped, 1/256 m steps,
-    holes kept as 0 for the devkit to fill), i.e. exactly what ``semattnet metrics`` and the benchmark see.
-    """
-    scores = _score_local(model, loader, device, amp, progress, on_batch, fill_holes, min_gt, quantize, metrics)
-    scores.reduce()
-    return scores
-    return metrics
-
-
-def _score_local(model: nn.Module, loader: DataLoader, device: torch.device, amp: str, progress: bool,
-                 on_batch: Callable[[dict[str, Any], Any], None] | None, fill_holes: bool, min_gt: float,
-                 quantize: bool, make_metrics: Callable[[], KittiMetrics] | None = None,
-                 sparsification: Sparsification | None = None) -> KittiMetrics:  # fmt: skip
-    """:func:`evaluate_model` on this rank's batches only (no collective); with ``sparsification``, each
-    output also gets its ``uncertainty`` (:func:`~semattnet.models.uncertainty.with_uncertainty`), scored there."""
-    metrics = make_metrics() if make_metrics is not None else KittiMetrics(fill_holes=fill_holes, min_gt=min_gt)
-    was_training = model.training
-    model.eval()
-    with torch.inference_mode():
-        for batch in progress_bar(loader, desc="evaluating", enabled=progress and dist_utils.is_main(), leave=False):
-            x = {k: batch[k].to(device, non_blocking=True) for k in ("rgb", "semantic", "sparse")}
-            with autocast(device, amp):
-                out = model(**x)
-            if "pad" in batch:  # padded to multiples of 32 by the dataset: score and write the protocol's crop
-                out, batch = _unpad(out, batch)
-            scored = sparsification is not None and isinstance(out, DepthCompletionOutput)
-            if scored:
-                out = with_uncertainty(out.map(lambda t: t.float()), batch["sparse"].to(device))
-            if "gt" in batch:
-                pred = out.depth.float()
-                if quantize:
-                    pred = _as_png(pred, list(batch["name"]))
-                metrics.update(pred, batch["gt"].to(device), names=list(batch["name"]))
-                if scored and sparsification is not None and out.uncertainty is not None:
-                    for p, g, u in zip(pred, batch["gt"].to(device), out.uncertainty, strict=True):
-                        sparsification.add(p[0], g[0], u[0])
-            if on_batch is not None:
-                on_batch(batch, out)
-    model.train(was_training)
-    return metrics
-
-
-def _unpad(out: Any, batch: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
-    """Outputs and images of a batch whose items carry their ``pad`` (top, bottom, left, right), cropped back."""
-    top, bottom, left, right = (int(v) for v in batch["pad"][0].tolist())
-    pad = (top, bottom, left, right)
-    if not any(pad):
-        return out, batch
-    crop = partial(crop_padding, pad=pad)
-    images = {k: crop(batch[k]) for k in ("rgb", "semantic", "sparse", "gt") if k in batch}
-    return out.map(crop), batch | images
-
-
-def _as_png(pred: torch.Tensor, names: list[str]) -> torch.Tensor:
-    """What the 16-bit PNGs of (B, 1, H, W) predictions hold: :func:`clamp_for_png`, then the one quantiser."""
-    return torch.stack([quantize_depth(clamp_for_png(p, name)) for p, name in zip(pred, names, strict=True)])
-
-
 def score_folders_to_json(pred_dir: str | Path, gt_dir: str | Path, json_path: str | Path | None = None,
                           overwrite: bool = False, fill_holes: bool = True,
                           min_gt: float = 0.0) -> KittiMetrics:  # fmt: skip
@@ -166,191 +91,172 @@ def score_folders_to_json(pred_dir: str | Path, gt_dir: str | Path, json_path: s
     return metrics
 
 
-class PredictionWriter:
-    """``on_batch`` callback of :func:`evaluate_model`: each frame of the batch, as a
-    :class:`~semattnet.data.frames.Frame` with its typed result, through the one writer
-    (:func:`semattnet.inference.pipeline.write_prediction`) into the sinks: ``predictions/`` (16-bit PNGs
-    named like the ground truth for val_select) and the panels of the first ``pictures`` frames in
-    ``pictures/NAME.png``."""
+@dataclass
+class Evaluation:
+    """What :func:`evaluate_split` found: ``metrics`` (every rank's, reduced; ``per_image`` rows in the split's order),
+    ``result`` (the metrics and the uncertainty's AUSE / AURG; empty without any frame with ground truth),
+    ``sparsification`` (its curves) and ``semantic`` (what maps of another palette became, or None)."""
 
-    def __init__(self, ds: KittiDepthCompletion, split: str, out: Path, save_predictions: bool, pictures: int,
-                 frames: int | None = None) -> None:  # fmt: skip
-        todo = ds.frames[: len(ds.frames) if frames is None else frames]
-        self.ds, self.out = ds, out
-        self.sinks: list[Sink] = []
-        if save_predictions:
-            rename = {f.name: prediction_name(split, f) for f in todo}
-            self.sinks.append(DepthPngSink(folder="predictions", rename=rename))
-        if pictures:
-            self.sinks.append(PanelSink(suffix=".png", folder="pictures", only={f.name for f in todo[:pictures]}))
-
-    def expected(self, frames: int) -> list[str]:
-        """The files written for the first ``frames`` frames, relative to ``out``."""
-        return output_files([f.name for f in self.ds.frames[:frames]], self.sinks)
-
-    def __call__(self, batch: dict[str, Any], result: Any) -> None:
-        for i, idx in enumerate(batch["index"].tolist()):
-            frame = self.ds.frames[idx]
-            if not any(sink.path(frame.name) for sink in self.sinks):
-                continue
-            write_prediction(self.out, _frame(batch, i, frame.name), _completion(result, i), self.sinks)
+    metrics: KittiMetrics
+    result: dict[str, float] = field(default_factory=dict)
+    sparsification: Sparsification = field(default_factory=Sparsification)
+    semantic: PaletteReport | None = None
 
 
-def _frame(batch: dict[str, Any], i: int, name: str) -> Frame:
-    """Item ``i`` of a :class:`KittiDepthCompletion` batch as a :class:`Frame` (images back to uint8)."""
-    rgb, sem = (batch[k][i].permute(1, 2, 0).clamp(0, 255).round().byte().numpy() for k in ("rgb", "semantic"))
-    gt = batch["gt"][i, 0].float().numpy() if "gt" in batch else None
-    return Frame(name, rgb, batch["sparse"][i, 0].float().numpy(), sem, gt=gt)
-
-
-def _completion(result: Any, i: int) -> Completion:
-    """Item ``i`` of a batched model result as a :class:`Completion` (typed when the model's output is)."""
-    depth = result.depth[i, 0].float().cpu().numpy()
-    if isinstance(result, DepthCompletionOutput):
-        return Completion(depth, result.map(lambda t: t[i : i + 1].float().cpu()))
-    return Completion(depth)
-
-
-def _write_scores(out: Path, metrics: KittiMetrics, summary: dict[str, Any], spars: Sparsification) -> list[str]:
-    """``metrics.json`` (the summary), ``per_image.csv`` (one row per frame) and, when the uncertainty was
-    scored, ``sparsification.png`` (its curves, :func:`semattnet.viz.curves.plot_sparsification`), written
-    by rank 0 only. Returns their names (every rank)."""
-    names = ["metrics.json", "per_image.csv", *([SPARSIFICATION_PNG] if spars.frames else [])]
-    if not dist_utils.is_main():
-        return names
-    (out / "metrics.json").write_text(json.dumps(summary, indent=2) + "\n")
-    if spars.frames:
-        from semattnet.evaluation.sparsification import figure_data
-        from semattnet.viz.curves import plot_sparsification
-
-        label = Path(str(summary.get("checkpoint", "model"))).name
-        plot_sparsification({label: figure_data(spars.curves())}, out / SPARSIFICATION_PNG)
-    with open(out / "per_image.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(metrics.per_image[0]))
-        writer.writeheader()
-        writer.writerows(metrics.per_image)
-    return names
-
-
-def evaluate_checkpoint(
-    checkpoint: str | Path | nn.Module | Callable[[], nn.Module],
-    data: str | Path,
-    split: str = "val_select",
-    out_dir: str | Path | None = None,
-    device: str = "auto",
+def evaluate_split(
+    completer: Completer | Callable[[], Completer],
+    data: PathLike,
+    split: str | None = None,
+    out_dir: PathLike | None = None,
+    *,
+    dataset: str = "kitti-dc",
     batch_size: int = 1,
-    amp: str = "none",
-    workers: int = 2,
+    prefetch: int = 0,
     save_predictions: bool = False,
     pictures: int = 0,
     max_frames: int | None = None,
     overwrite: bool = False,
-    raw_root: str | Path | None = None,
-    semantic_root: str | Path | None = None,
-    backend: str = "torch",
-    dataset: str = "kitti-dc",
+    raw_root: PathLike | None = None,
+    semantic_root: PathLike | None = None,
     palette_mismatch: str = "refuse",
-) -> dict[str, Any]:
-    """Run a checkpoint (a path, a loaded model, or a function that loads one: called after the split
-    and the output folder are checked) over a split and score it; optionally write predictions and
-    panels (through :mod:`semattnet.inference.sinks`). ``backend`` chooses the inference engine
-    (:func:`semattnet.inference.backends.optimize_for_inference`; fixed-size backends are built for
-    the split's frame size).
+    label: str | None = None,
+    inputs: Sequence[PathLike | None] = (),
+) -> Evaluation:
+    """Complete a split with ``completer`` through the one frame loop (:func:`~.pipeline.complete_frames`) and
+    score it with the dataset's metrics (:class:`~.sink.MetricsSink`); optionally write predictions and panels.
 
-    Writes into ``out_dir``: ``metrics.json``, ``per_image.csv``, ``predictions/`` (16-bit PNGs named
-    like the ground truth for val_select) and ``pictures/`` (branch panels of the first frames); the
-    uncertainty's AUSE / AURG (:mod:`semattnet.evaluation.sparsification`) and ``sparsification.png``.
+    ``completer``: a :class:`~semattnet.inference.DepthCompleter` (or any
+    :class:`~semattnet.inference.pipeline.Completer`, e.g. :class:`~semattnet.baselines.ClassicalCompleter`),
+    or a function without arguments that returns one, called only after every input and output check.
+    ``dataset``: the registry entry (:mod:`semattnet.data.datasets`: ``kitti-dc``, ``nyuv2``, ``void``) whose
+    split (default: its evaluation split), frames (:func:`~.protocols.eval_source`), metrics and palette apply
+    (``palette_mismatch``: :class:`~semattnet.inference.semantic.SemanticMaps`). ``batch_size`` / ``prefetch``: as
+    :func:`~semattnet.inference.pipeline.complete_frames`. ``label``: ``metrics.json``'s ``checkpoint`` (the
+    model's class by default); ``inputs``: further files (the weights) that outputs must stay out of.
 
-    Under ``torchrun`` (same arguments on every rank; ``cuda:LOCAL_RANK`` on GPUs) rank ``r`` of ``W``
-    scores frames ``r, r + W, ...`` (each frame once); the metrics are summed over the ranks and the
-    per-image rows gathered in the split's order, so the files are those of one process.
+    Writes into ``out_dir``, all together or nothing: ``metrics.json``, ``per_image.csv``, ``predictions/``
+    (16-bit PNGs named like the ground truth for val_select), ``pictures/`` (panels of the first ``pictures``
+    frames) and ``sparsification.png`` (the uncertainty's curves; AUSE / AURG in ``metrics.json``).
 
-    ``dataset``: the protocol (:mod:`semattnet.data.datasets`: ``kitti-dc``, ``nyuv2``, ``void``): its split,
-    metrics and palette: maps of another palette than the model's are refused unless ``palette_mismatch`` is
-    ``recolour`` / ``fallback`` (nyuv2, void; :class:`~semattnet.data.sources.semantic.CrossPaletteSource`)."""
-    inputs = [data, raw_root, semantic_root, checkpoint if isinstance(checkpoint, str | Path) else None]
+    Under ``torchrun`` (same arguments on every rank) each rank completes its share of the frames; metrics are
+    summed over the ranks and per-image rows gathered in the split's order: the files of one process."""
     with process_group():
-        ds, frames, out = _plan(data, split, raw_root, semantic_root, max_frames, out_dir, overwrite, inputs, dataset)
-        completer, label = _completer(checkpoint, device, amp, backend)  # after every check
-        spec, semantic = _check_maps(completer, ds, data, dataset, palette_mismatch)
-        loader = DataLoader(Subset(ds, range(frames)), batch_size=batch_size, num_workers=workers,
-                            sampler=dist_utils.ShardSampler(frames))  # fmt: skip
-        engine = completer.engine(tuple(ds[0]["rgb"].shape[-2:])) if frames else completer.model
-        spars = Sparsification()
-        score = partial(_score_local, engine, loader, completer.device, amp, True, fill_holes=True, min_gt=0.0,
-                        quantize=True, make_metrics=spec.metrics, sparsification=spars)  # fmt: skip
-        if out is None:
-            metrics = _merge(agree(score, None), ds, spars)
-            return {"metrics": metrics, "result": _result(metrics, spars), "sparsification": spars, **semantic}
-        writer = PredictionWriter(ds, split, out, save_predictions, pictures, frames)
-        expected = writer.expected(frames)
-        with shared_stage(out, overwrite, expected) as stage:  # all files appear together, or none
-            writer.out = stage
-            metrics = _merge(agree(score, writer), ds, spars)
-            result = _result(metrics, spars)
-            if result:
-                expected += _write_scores(stage, metrics, {"checkpoint": label, "dataset": spec.name,
-                                                           "split": split, **semantic} | result, spars)  # fmt: skip
-    return {"metrics": metrics, "result": result, "sparsification": spars, **semantic}
+        spec = get_dataset(dataset)
+        split = spec.check_split(split)
+        given = [data, raw_root, semantic_root, *inputs]
+        out = on_main(prepare_out, Path(out_dir), overwrite, given) if out_dir is not None else None
+        source = eval_source(spec, data, split, raw_root=raw_root, semantic_root=semantic_root, max_frames=max_frames)
+        refuse_listed_inputs(out, source)
+        scores = MetricsSink(metrics=protocol_metrics(spec))
+        sinks = [*(_file_sinks(source, save_predictions, pictures) if out is not None else []), scores]
+        expected = output_files(source.names, sinks)
+        with _stage(out, overwrite, expected) as stage:
+            plan = check_frames(source, sinks, stage, overwrite=True, inputs=given, on_error="stop")
+            model = _load(completer)  # after every check
+            maps = SemanticMaps(mismatch=palette_mismatch)
+            complete_frames(source, model, sinks, stage, checked=plan, semantic=maps, log=_quiet,
+                            prefetch=prefetch, batch_size=batch_size)  # fmt: skip
+            on_main(_forget_journal, stage)  # the output is all or nothing: no frame to resume
+            semantic = maps.cross.report() if maps.cross is not None else None
+            res = _merge(scores, source, semantic)
+            if out is not None and res.result:  # metrics.json's keys as before: "checkpoint" names the model
+                head = {"checkpoint": label or type(model).__name__, "dataset": spec.name, "split": split}
+                expected += _write_scores(stage, res, head | ({"semantic": semantic} if semantic else {}))
+    return res
 
 
-def _result(metrics: KittiMetrics, spars: Sparsification) -> dict[str, Any]:
-    """The metrics (empty without any frame with ground truth) and the uncertainty's AUSE / AURG
-    (:mod:`semattnet.evaluation.sparsification`: ``ause_rmse``, ``aurg_rmse``, ``ause_mae``, ``aurg_mae``)."""
-    return (metrics.compute() | spars.compute()) if metrics.per_image else {}
+def _load(completer: Completer | Callable[[], Completer]) -> Completer:
+    """``completer``, or what it returns when it is a function of no argument (a completer takes frames)."""
+    if _is_factory(completer):
+        return completer()
+    if _takes_frames(completer):
+        return completer
+    raise InputError(f"evaluate: {completer!r} is neither a completer (rgb, sparse, semantic) nor a function "
+                     "without arguments that returns one")  # fmt: skip
 
 
-def _check_maps(completer: DepthCompleter, ds: Any, data: str | Path, dataset: str,
-                mismatch: str = "refuse") -> tuple[Any, dict[str, Any]]:  # fmt: skip
-    """The dataset's entry, once its maps' palette is the model's (a dataset without maps: any), and ``{}``;
-    with another palette and ``mismatch`` ``recolour`` / ``fallback``: ``ds`` reads them converted, and
-    ``{"semantic": what they became}``."""
-    from semattnet.palette import get_palette
-
-    spec, palette = get_dataset(dataset), getattr(ds, "palette", "cityscapes")
-    if not (completer.needs_semantic and palette) or get_palette(palette).name == get_palette(completer.palette).name:
-        return spec, {}
-    if mismatch == "refuse":
-        check_palette(completer.palette, palette, f"{data} ({spec.name} maps)")
-    if not hasattr(ds, "source"):
-        raise InputError(f"--palette-mismatch {mismatch}: only for nyuv2 and void (not {spec.name})")
-    from semattnet.data.sources.semantic import CrossPaletteSource
-
-    ds.source = CrossPaletteSource(ds.source, completer.palette, mismatch)
-    ds.palette = ds.source.palette
-    return spec, {"semantic": ds.source.report()}
+def _required(f: Callable[..., object]) -> int | None:
+    """How many positional arguments ``f`` requires (None: no signature to read)."""
+    try:
+        params = inspect.signature(f).parameters.values()
+    except (TypeError, ValueError):  # a callable without a readable signature
+        return None
+    return sum(p.default is p.empty and p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD) for p in params)
 
 
-def _plan(data: str | Path, split: str, raw_root: str | Path | None, semantic_root: str | Path | None,
-          max_frames: int | None, out_dir: str | Path | None, overwrite: bool,
-          inputs: list[Any], dataset: str = "kitti-dc") -> tuple[KittiDepthCompletion, int, Path | None]:  # fmt: skip
-    """Every check before the model is loaded: the output folder (rank 0), the split indexed and the
-    frames to score decoded (each rank its share). Returns the dataset, the frame count and ``out``."""
-    out = on_main(prepare_out, Path(out_dir), overwrite, inputs) if out_dir is not None else None
-    ds = eval_dataset(data, split, raw_root, semantic_root, dataset)
-    refuse_listed_inputs(out, ds)
-    frames = min(len(ds), max_frames) if max_frames else len(ds)
-    agree(lambda: [ds.load(i) for i in dist_utils.ShardSampler(frames)])
-    return ds, frames, out
+def _is_factory(f: object) -> TypeGuard[Callable[[], Completer]]:
+    return callable(f) and _required(f) == 0
 
 
-def _completer(checkpoint: str | Path | nn.Module | Callable[[], nn.Module], device: str, amp: str,
-               backend: str) -> tuple[DepthCompleter, str]:  # fmt: skip
-    """The completer (on ``cuda:LOCAL_RANK`` under torchrun with CUDA) and how metrics.json names it;
-    ``checkpoint`` may be a function that loads the model (called only now, after every check)."""
-    device_ = dist_utils.process_device(device)
-    if isinstance(checkpoint, str | Path):
-        return DepthCompleter.from_checkpoint(checkpoint, device=device_, amp=amp, backend=backend), str(checkpoint)
-    model = checkpoint if isinstance(checkpoint, nn.Module) else checkpoint()
-    label = getattr(checkpoint, "label", None) or type(model).__name__
-    return DepthCompleter(model, device=device_, amp=amp, backend=backend), str(label)
+def _takes_frames(f: object) -> TypeGuard[Completer]:
+    return callable(f) and _required(f) != 0
 
 
-def _merge(metrics: KittiMetrics, ds: KittiDepthCompletion, spars: Sparsification) -> KittiMetrics:
-    """``metrics`` and ``spars`` summed over the ranks, with every rank's per-image rows in the split's order
-    (collective)."""
+def _quiet(line: str) -> None:
+    """The loop's per-frame lines are not printed: ``evaluate`` reports the metrics."""
+
+
+@contextmanager
+def _stage(out: Path | None, overwrite: bool, expected: list[str]) -> Iterator[Path]:
+    """Where the loop writes: the shared stage of ``out`` (moved into place when every rank succeeded, with
+    every ``expected`` file), or a scratch folder of this process without ``out``."""
+    if out is None:
+        with tempfile.TemporaryDirectory(prefix="semattnet-evaluate.") as scratch:
+            yield Path(scratch)
+        return
+    with shared_stage(out, overwrite, expected) as stage:
+        yield stage
+
+
+def _forget_journal(stage: Path) -> None:
+    for path in (stage / FRAMES_FILE, *stage.glob(".frames.rank*.json")):
+        path.unlink(missing_ok=True)
+
+
+def _file_sinks(source: IndexedSource, save_predictions: bool, pictures: int) -> list[Sink]:
+    """``predictions/`` (named by the source: the ground truth's name for KITTI's val_select) and the panels of
+    the first ``pictures`` frames in ``pictures/NAME.png``."""
+    sinks: list[Sink] = []
+    if save_predictions:
+        named = getattr(source, "prediction_name", None)
+        rename = {n: str(named(n)) if callable(named) else f"{n}.png" for n in source.names}
+        sinks.append(DepthPngSink(folder="predictions", rename=rename))
+    if pictures:
+        sinks.append(PanelSink(suffix=".png", folder="pictures", only=set(source.names[:pictures])))
+    return sinks
+
+
+def _merge(scores: MetricsSink, source: IndexedSource, semantic: PaletteReport | None) -> Evaluation:
+    """The sink's metrics and curves summed over the ranks, with every rank's per-image rows in the split's
+    order (collective), and the result: the metrics and the uncertainty's AUSE / AURG
+    (:mod:`semattnet.evaluation.sparsification`)."""
+    metrics, spars = scores.metrics, scores.sparsification
     metrics.reduce()
     spars.reduce()
-    position = {frame.name: i for i, frame in enumerate(ds.frames)}
+    position = {name: i for i, name in enumerate(source.names)}
     metrics.per_image = gather_rows(metrics.per_image, key=lambda row: position[str(row["name"])])
-    return metrics
+    result = (metrics.compute() | spars.compute()) if metrics.per_image else {}
+    return Evaluation(metrics, result, spars, semantic)
+
+
+def _write_scores(out: Path, res: Evaluation, summary: Mapping[str, object]) -> list[str]:
+    """``metrics.json`` (the summary), ``per_image.csv`` (one row per frame) and, when the uncertainty was
+    scored, ``sparsification.png`` (its curves, :func:`semattnet.viz.curves.plot_sparsification`), written
+    by rank 0 only. Returns their names (every rank)."""
+    spars = res.sparsification
+    names = ["metrics.json", "per_image.csv", *([SPARSIFICATION_PNG] if spars.frames else [])]
+    if not dist_utils.is_main():
+        return names
+    (out / "metrics.json").write_text(json.dumps({**summary, **res.result}, indent=2) + "\n")
+    if spars.frames:
+        from semattnet.evaluation.sparsification import figure_data
+        from semattnet.viz.curves import plot_sparsification
+
+        plot_sparsification(
+            {Path(str(summary["checkpoint"])).name: figure_data(spars.curves())}, out / SPARSIFICATION_PNG
+        )
+    with open(out / "per_image.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(res.metrics.per_image[0]))
+        writer.writeheader()
+        writer.writerows(res.metrics.per_image)
+    return names

@@ -13,19 +13,25 @@ import csv
 import json
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 import torch
 
 from semattnet._errors import SemAttNetError
+from semattnet.evaluation.protocols import protocol_metrics
 from semattnet.evaluation.split import eval_dataset, prepare_out, refuse_listed_inputs
 from semattnet.geometry.sparsify import keep_random, keep_row_bands
 from semattnet.inference.backends import needs_semantic
+from semattnet.inference.pipeline import Completer
+
+if TYPE_CHECKING:
+    from semattnet.data.datasets import SplitDataset
 
 __all__ = [
     "FIELDS",
     "SparsityError",
+    "SweepRow",
     "format_sweep",
     "parse_settings",
     "plot_sweep",
@@ -36,6 +42,18 @@ __all__ = [
 
 FIELDS = ("method", "setting", "density", "rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km")
 NUM_BEAMS = 64
+
+
+class SweepRow(TypedDict):
+    """One row of the sweep (:data:`FIELDS`): a method under a setting, the input's mean density, four metrics."""
+
+    method: str
+    setting: str
+    density: float
+    rmse_mm: float
+    mae_mm: float
+    irmse_per_km: float
+    imae_per_km: float
 
 
 class SparsityError(SemAttNetError):
@@ -74,14 +92,11 @@ def thin(sparse: np.ndarray, setting: str, seed: int = 0) -> np.ndarray:
     raise SparsityError(f"bad sparsity setting {setting!r}")
 
 
-def _score_setting(ds: Any, setting: str, completers: dict[str, Callable[..., Any]], seed: int,
-                   max_frames: int | None, dataset: str = "kitti-dc") -> list[dict[str, Any]]:  # fmt: skip
+def _score_setting(ds: SplitDataset, setting: str, completers: dict[str, Completer], seed: int,
+                   max_frames: int | None, dataset: str = "kitti-dc") -> list[SweepRow]:  # fmt: skip
     """One row per method for one setting: mean density of the thinned input and the four metrics
     (under ``dataset``'s protocol: KITTI's devkit, NYU's or VOID's range)."""
-    from semattnet.data.datasets import get_dataset
-
-    spec = get_dataset(dataset)
-    metrics = {name: spec.metrics(keep_per_image=False) for name in completers}
+    metrics = {name: protocol_metrics(dataset, keep_per_image=False) for name in completers}
     densities = []
     for i in range(min(len(ds), max_frames or len(ds))):
         s = ds.load(i)
@@ -95,12 +110,21 @@ def _score_setting(ds: Any, setting: str, completers: dict[str, Callable[..., An
     rows = []
     for name, m in metrics.items():
         r = m.compute()
-        rows.append({"method": name, "setting": setting, "density": float(np.mean(densities)),
-                     **{k: r[k] for k in FIELDS[3:]}})  # fmt: skip
+        rows.append(
+            SweepRow(
+                method=name,
+                setting=setting,
+                density=float(np.mean(densities)),
+                rmse_mm=r["rmse_mm"],
+                mae_mm=r["mae_mm"],
+                irmse_per_km=r["irmse_per_km"],
+                imae_per_km=r["imae_per_km"],
+            )
+        )
     return rows
 
 
-def _write_tables(out: Path, rows: list[dict[str, Any]]) -> None:
+def _write_tables(out: Path, rows: list[SweepRow]) -> None:
     (out / "sparsity.json").write_text(json.dumps(rows, indent=2) + "\n")
     with open(out / "sparsity.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(FIELDS))
@@ -108,7 +132,7 @@ def _write_tables(out: Path, rows: list[dict[str, Any]]) -> None:
         writer.writerows(rows)
 
 
-def plot_sweep(rows: list[dict[str, Any]], path: Path) -> Path:
+def plot_sweep(rows: list[SweepRow], path: Path) -> Path:
     """RMSE and MAE against input density (log x), one line per method and kind of setting."""
     import matplotlib
 
@@ -121,7 +145,8 @@ def plot_sweep(rows: list[dict[str, Any]], path: Path) -> Path:
     for ax, key, label in zip(axes, ("rmse_mm", "mae_mm"), ("RMSE [mm]", "MAE [mm]"), strict=True):
         for i, method in enumerate(methods):
             for kind, style in (("beams", "o-"), ("keep", "s--")):
-                pts = sorted((r["density"], r[key]) for r in rows if r["method"] == method
+                pts = sorted((r["density"], r["rmse_mm" if key == "rmse_mm" else "mae_mm"]) for r in rows
+                             if r["method"] == method
                              and r["setting"].startswith(kind))  # fmt: skip
                 if pts:
                     ax.plot(*zip(*pts, strict=True), style, color=f"C{i}", label=f"{method} ({kind})")
@@ -143,12 +168,12 @@ def run_sparsity_sweep(
     data_root: str | Path,
     split: str,
     settings: Iterable[str],
-    completers: dict[str, Callable[..., Any]],
+    completers: dict[str, Completer],
     out_dir: str | Path,
     seed: int = 0,
     max_frames: int | None = None,
     overwrite: bool = False,
-) -> list[dict[str, Any]]:
+) -> list[SweepRow]:
     """Score every completer (``name -> completer(rgb, sparse, semantic) -> Completion``) on every
     setting of ``settings`` (strings, see :func:`parse_settings`) over the frames of ``split``.
 
@@ -162,8 +187,8 @@ def run_sparsity_sweep(
     return _sweep(ds, out, settings, completers, seed, max_frames)
 
 
-def _sweep(ds: Any, out: Path, settings: list[str], completers: dict[str, Callable[..., Any]], seed: int,
-           max_frames: int | None, dataset: str = "kitti-dc") -> list[dict[str, Any]]:  # fmt: skip
+def _sweep(ds: SplitDataset, out: Path, settings: list[str], completers: dict[str, Completer], seed: int,
+           max_frames: int | None, dataset: str = "kitti-dc") -> list[SweepRow]:  # fmt: skip
     rows = [row for setting in settings for row in _score_setting(ds, setting, completers, seed, max_frames, dataset)]
     _write_tables(out, rows)
     plot_sweep(rows, out / "sparsity.png")
@@ -180,7 +205,7 @@ def sweep_model(
     max_frames: int | None = None,
     overwrite: bool = False,
     dataset: str = "kitti-dc",
-) -> list[dict[str, Any]]:
+) -> list[SweepRow]:
     """:func:`run_sparsity_sweep` of ``model`` (as ``semattnet``; skipped when None; a function that loads
     it is called after the split and ``out_dir`` are checked) beside the classical baseline (as ``classical``)."""
     from semattnet.baselines.classical import ClassicalCompleter
@@ -190,7 +215,7 @@ def sweep_model(
     ds = eval_dataset(data_root, split, dataset=dataset)
     out = prepare_out(Path(out_dir), overwrite, [data_root])  # never inside the data
     refuse_listed_inputs(out, ds)
-    completers: dict[str, Callable[..., Any]] = {}
+    completers: dict[str, Completer] = {}
     if model is not None:
         net = model if isinstance(model, torch.nn.Module) else model()
         completers["semattnet"] = DepthCompleter(net, device=device)
@@ -198,7 +223,7 @@ def sweep_model(
     return _sweep(ds, out, settings, completers, 0, max_frames, dataset)
 
 
-def format_sweep(rows: list[dict]) -> str:
+def format_sweep(rows: list[SweepRow]) -> str:
     """The sweep's rows as a text table (method, setting, density, the four metrics in KITTI units)."""
     lines = [f"{'method':>10} {'setting':>10} {'density':>8} {'RMSE':>8} {'MAE':>8} {'iRMSE':>7} {'iMAE':>6}"]
     for r in rows:

@@ -1,36 +1,32 @@
-"""What every scoring of a KITTI split starts with: the split as the benchmark scores it, and the output folder."""
+"""What every scoring of a split starts with: the split as the benchmark scores it, and the output folder."""
 
 from __future__ import annotations
 
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from semattnet._utils.outputs import Output, OutputError, check_no_input_overlap, check_outputs
-from semattnet.data.kitti import KittiDepthCompletion
-from semattnet.data.transforms import EvalTransform
+from semattnet.data.datasets import get_dataset
+
+if TYPE_CHECKING:
+    from semattnet.data.datasets import SplitDataset
 
 __all__ = ["eval_dataset", "prepare_out", "refuse_listed_inputs"]
 
-
-def eval_dataset(data: str | os.PathLike[str], split: str, raw_root: str | os.PathLike[str] | None = None,
-                 semantic_root: str | os.PathLike[str] | None = None,
-                 dataset: str = "kitti-dc") -> KittiDepthCompletion:  # fmt: skip
-    """The split as the benchmark scores it: val_select at full size, val cropped to 352x1216
-    (small synthetic trees: full frames); another ``dataset`` (:mod:`semattnet.data.datasets`) as its protocol says."""
-    if dataset != "kitti-dc":
-        from semattnet.data.datasets import get_dataset
-
-        return get_dataset(dataset).dataset(data, split, semantic_root=semantic_root)
-    ds = KittiDepthCompletion(data, split, raw_root, semantic_root,
-                              transform=EvalTransform(None if split == "val_select" else (352, 1216)))  # fmt: skip
-    if split == "val" and min(ds.load(0).size) < 352:
-        ds.transform = EvalTransform(None)
-    return ds
+PathLike = str | os.PathLike[str]
 
 
-def prepare_out(out: Path, overwrite: bool, inputs: Sequence[Any] = ()) -> Path:
+def eval_dataset(data: PathLike, split: str, raw_root: PathLike | None = None, semantic_root: PathLike | None = None,
+                 dataset: str = "kitti-dc") -> SplitDataset:  # fmt: skip
+    """The split as the registry entry's protocol scores it, as a torch Dataset
+    (:meth:`~semattnet.data.datasets.DatasetSpec.dataset`: KITTI's val_select at full size, its full val
+    cropped to 352x1216 unless the frames are smaller)."""
+    return get_dataset(dataset).dataset(data, split, raw_root=raw_root, semantic_root=semantic_root)
+
+
+def prepare_out(out: Path, overwrite: bool, inputs: Sequence[PathLike | None] = ()) -> Path:
     """Check ``out``: not inside an input; a non-empty folder needs ``overwrite`` (which replaces
     only the files the evaluation writes). Creates it."""
     check_no_input_overlap(inputs, out_dir=out)
@@ -41,7 +37,7 @@ def prepare_out(out: Path, overwrite: bool, inputs: Sequence[Any] = ()) -> Path:
     return out
 
 
-def refuse_listed_inputs(out: Path | None, ds: Any) -> None:
+def refuse_listed_inputs(out: Path | None, ds: object) -> None:
     """Refuse an ``out`` that holds a file the dataset ``ds`` reads by name from its lists (a VOID list may
     name any path: ``VoidSource.listed_files``), so that ``--overwrite`` never replaces an input."""
     listed = getattr(getattr(ds, "source", None), "listed_files", None)

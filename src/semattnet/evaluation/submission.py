@@ -19,6 +19,7 @@ from semattnet._utils.progress import progress as progress_bar
 from semattnet.data.io import clamp_for_png, read_depth, write_depth
 from semattnet.data.kitti import KittiDepthCompletion
 from semattnet.inference.completer import DepthCompleter
+from semattnet.weights.hub import load_model
 
 __all__ = ["KITTI_TEST_FRAMES", "SubmissionError", "write_submission", "write_submission_files"]
 
@@ -117,7 +118,7 @@ def write_submission_files(
 
 
 def write_submission(
-    checkpoint: str | Path,
+    weights: str | Path,
     data: str | Path,
     out: str | Path,
     device: str = "auto",
@@ -127,19 +128,21 @@ def write_submission(
     semantic_root: str | Path | None = None,
     backend: str = "torch",
 ) -> Path:
-    """Predict the test split (``test_depth_completion_anonymous``) and write a ready-to-upload zip.
+    """Predict the test split (``test_depth_completion_anonymous``) with ``weights`` (a file, folder, registry
+    name or URL: :func:`semattnet.weights.hub.load_model`) and write a ready-to-upload zip.
 
     ``expected_frames`` is KITTI's 1000; pass ``None`` to accept any count (e.g. synthetic data).
     """
-    check_no_input_overlap([data, semantic_root, checkpoint], out_dir=out)
-    check_no_input_overlap([data, semantic_root, checkpoint], out_files=[Path(out).with_suffix(".zip")])
-    check_outputs([("--data", data), ("--semantic-root", semantic_root), ("--weights", checkpoint)],
+    local = Path(weights) if Path(weights).exists() else None  # a name or URL reads a cached download
+    check_no_input_overlap([data, semantic_root, local], out_dir=out)
+    check_no_input_overlap([data, semantic_root, local], out_files=[Path(out).with_suffix(".zip")])
+    check_outputs([("--data", data), ("--semantic-root", semantic_root), ("--weights", local)],
                   [Output("--out", out, "folder"), Output("--out", Path(out).with_suffix(".zip"), "zip")],
                   overwrite)  # fmt: skip
     ds = KittiDepthCompletion(data, "test", semantic_root=semantic_root)
     if expected_frames is not None and len(ds) != expected_frames:
         raise SubmissionError(f"{data}: the test split has {len(ds)} frames, KITTI expects {expected_frames}")
-    completer = DepthCompleter.from_checkpoint(checkpoint, device=device, amp=amp, backend=backend)
+    completer = DepthCompleter(load_model(weights), device=device, amp=amp, backend=backend, inplace=True)
     expected = {f.sparse.name: read_depth(f.sparse).shape for f in ds.frames}
 
     def predictions() -> Iterable[tuple[str, np.ndarray]]:

@@ -21,6 +21,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -63,6 +64,11 @@ def check_precision(precision: str | None, amp: str, backend: str) -> str | None
     if precision == "int8" and backend not in ("openvino", "auto"):
         raise InputError(f"precision int8 runs on the openvino backend (NNCF), not {backend!r}: --backend openvino")
     return precision
+
+
+def _item(t: torch.Tensor, i: int) -> torch.Tensor:
+    """Item ``i`` of a batched (B, C, H, W) output, as a batch of one."""
+    return t[i : i + 1]
 
 
 def _check_colour_range(name: str, a: np.ndarray | None) -> None:
@@ -194,6 +200,17 @@ class DepthCompleter:
     def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
         """Complete one frame: ``rgb`` (H, W, 3) 0..255, ``sparse`` (H, W) metres (0 = none),
         ``semantic`` (H, W, 3) colour-coded 0..255 (required by three-branch models)."""
+        return self.complete_batch([(rgb, sparse, semantic)])[0]
+
+    def check_frame(
+        self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:
+        """The input checks of a call (shapes, colour ranges, sparse depth with points), then the frame as
+        (1, C, H, W) float32 tensors ``(rgb, semantic, sparse)``.
+
+        Raises:
+            InputError: the frame's own fault, naming what is wrong.
+        """
         rgb, sparse = np.asarray(rgb), np.asarray(sparse)
         if rgb.ndim != 3 or rgb.shape[2] != 3:
             raise InputError(f"rgb must be (H, W, 3), got {rgb.shape}")
@@ -213,9 +230,20 @@ class DepthCompleter:
         def image(a: np.ndarray) -> torch.Tensor:
             return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32)).permute(2, 0, 1)[None]
 
-        out = self.run(image(rgb), None if semantic is None else image(semantic), depth_in[None, None])
+        return image(rgb), None if semantic is None else image(semantic), depth_in[None, None]
+
+    def complete_batch(self, frames: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray | None]]) -> list[Completion]:
+        """Frames ``(rgb, sparse, semantic)`` of one size in one engine call, each checked as a call checks it
+        (:meth:`check_frame`): one :class:`Completion` per frame, in order (equal to one call per frame up to
+        float rounding)."""
+        inputs = [self.check_frame(*f) for f in frames]
+        if len({x[0].shape for x in inputs}) > 1 or len({x[1] is None for x in inputs}) > 1:
+            raise InputError("complete_batch: a batch's frames must have one size and all (or none) a semantic map")
+        semantic = [x[1] for x in inputs if x[1] is not None]
+        out = self.run(torch.cat([x[0] for x in inputs]), torch.cat(semantic) if semantic else None,
+                       torch.cat([x[2] for x in inputs]))  # fmt: skip
         out = out.map(lambda t: t.cpu())
-        return Completion(depth=out.depth[0, 0].numpy(), output=out)
+        return [Completion(out.depth[i, 0].numpy(), out.map(partial(_item, i=i))) for i in range(len(inputs))]
 
     def stream(self, source: FrameSource, semantic: SemanticMaps | None = None, *,
                timer: StageTimes | None = None, prefetch: int = 2,

@@ -318,7 +318,7 @@ class _FrameLoop:
 
 
 def _run_frames(loop: _FrameLoop, completer: Completer, prefetch: int, realtime: float | None,
-                overwrite: bool) -> None:  # fmt: skip
+                overwrite: bool, batch_size: int = 1) -> None:  # fmt: skip
     """The frames of this process through the completer into ``loop`` (the run outputs opened before and
     finished after; aborted on any error)."""
     try:
@@ -326,7 +326,7 @@ def _run_frames(loop: _FrameLoop, completer: Completer, prefetch: int, realtime:
             for s in loop.runs:
                 s.open(overwrite)
             for frame, completion in completions(loop.source, completer, loop.todo(), loop.semantic, loop.timer,
-                                                 prefetch, report=loop.note, realtime=realtime,
+                                                 prefetch, report=loop.note, realtime=realtime, batch_size=batch_size,
                                                  stop_on_fault=loop.plan.on_error == "stop"):  # fmt: skip
                 loop.write(stage, frame, completion)
             loop.finish(stage)
@@ -353,6 +353,7 @@ def complete_frames(
     resume: bool = False,
     run: Mapping[str, object] | None = None,
     realtime: float | None = None,
+    batch_size: int = 1,
 ) -> FrameRun:
     """Complete every frame of ``source`` with ``completer`` and write what ``sinks`` say into ``out``.
 
@@ -370,6 +371,8 @@ def complete_frames(
     that many frames ahead in a background thread; ``realtime``: replay at the sensor pace, that many times
     faster, dropping frames that come while the completer is busy (:func:`~.stream.completions`).
     :class:`~.sinks.RunSink` outputs (a bag, a recording, ``latency.json``) are put in place at the end.
+    ``batch_size`` > 1: up to that many consecutive frames of one size completed in one engine call (a
+    :class:`~.completer.DepthCompleter`, through its input checks; the same results up to float rounding).
 
     Returns:
         The :class:`FrameRun`: every frame's status, the depth PNGs of the frames done (all ranks).
@@ -387,18 +390,18 @@ def complete_frames(
         maps = agree((semantic or SemanticMaps()).bind, completer)
         maps.check_palette(completer, source)
         loop = _FrameLoop(source, sinks, out, plan, timer, rank_log(log), maps)
-        first = first_error(_attempt_run(loop, completer, prefetch, realtime, overwrite or plan.resume))
+        first = first_error(_attempt_run(loop, completer, prefetch, realtime, overwrite or plan.resume, batch_size))
         if first is not None:
             raise first
         return _close(loop)
 
 
 def _attempt_run(loop: _FrameLoop, completer: Completer, prefetch: int, realtime: float | None,
-                 overwrite: bool) -> Exception | None:  # fmt: skip
+                 overwrite: bool, batch_size: int = 1) -> Exception | None:  # fmt: skip
     """:func:`_run_frames`, its error returned (for every rank to agree on); on any error the frames done
     stay journaled. Ctrl-C is raised at once."""
     try:
-        _run_frames(loop, completer, prefetch, realtime, overwrite)
+        _run_frames(loop, completer, prefetch, realtime, overwrite, batch_size)
     except BaseException as exc:
         loop.forget()
         if not isinstance(exc, Exception):

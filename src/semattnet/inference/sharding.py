@@ -2,7 +2,7 @@
 
 Launched by ``torchrun --nproc_per_node N -m semattnet.cli predict|evaluate ...`` (or any script
 that calls :func:`~semattnet.inference.complete_folder`, :func:`~semattnet.inference.raw.complete_kitti_raw`
-or :func:`~semattnet.evaluation.evaluate_checkpoint` on every rank with the same arguments):
+or :func:`~semattnet.evaluation.evaluate_split` on every rank with the same arguments):
 
 * :func:`shard`: rank ``r`` of ``W`` takes frames ``r, r + W, r + 2W, ...`` of the full, ordered list.
 * :func:`on_main`: checks (existing outputs, outputs inside inputs) run once, on rank 0, before any

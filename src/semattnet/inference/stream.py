@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING, TypedDict
 import numpy as np
 
 from semattnet.data.frames import Frame, FrameSource
+from semattnet.inference.batching import BatchCompleter, complete_group, groups
 from semattnet.inference.completion import Completer, Completion, StageTimed
 
 if TYPE_CHECKING:
@@ -141,6 +142,14 @@ class StageTimes:
             if stack:
                 stack[-1] += total
             self.add(name, stage, total - inner)
+
+    def share(self, name: str, names: Sequence[str], stages: Sequence[str]) -> None:
+        """Share frame ``name``'s times of ``stages`` evenly over ``names`` (frames completed in one call)."""
+        with self._lock:
+            first = self.times.setdefault(name, {})
+            part = {s: first[s] / len(names) for s in stages if s in first}
+            for other in names:
+                self.times.setdefault(other, {}).update(part)
 
     def discard(self, name: str) -> None:
         """Forget frame ``name``'s times (a frame that was not completed)."""
@@ -439,10 +448,24 @@ def _frames(source: FrameSource, names: Sequence[str], semantic: SemanticMaps | 
     return (_attempt(source, name, semantic, timer) for name in names)
 
 
+def _complete_one(completer: Completer, group: Sequence[Frame], timer: StageTimes, current: list[str],
+                  fault: Callable[[Frame, Exception], None]) -> Iterator[tuple[Frame, Completion]]:  # fmt: skip
+    """The one frame of ``group`` through ``completer``, timed as ``network`` (``fault`` gets what it raised)."""
+    frame = group[0]
+    current[0] = frame.name
+    try:
+        with timer.time(frame.name, "network"):
+            completion = completer(frame.rgb, frame.sparse, frame.semantic)
+    except Exception as exc:
+        fault(frame, exc)
+        return
+    yield frame, completion
+
+
 def completions(source: FrameSource, completer: Completer, names: Sequence[str] | None = None,
                 semantic: SemanticMaps | None = None, timer: StageTimes | None = None, prefetch: int = 0, *,
                 report: Callable[[FrameFault], None] | None = None, stop_on_fault: bool = True,
-                realtime: float | None = None) -> Iterator[tuple[Frame, Completion]]:  # fmt: skip
+                realtime: float | None = None, batch_size: int = 1) -> Iterator[tuple[Frame, Completion]]:  # fmt: skip
     """``(frame, completion)`` for each of ``names`` (default: all of ``source``), in order, every stage timed
     into ``timer``; ``prefetch`` > 0 reads that many frames ahead in a background thread (module doc).
     ``semantic``: a bound :class:`~.semantic.SemanticMaps` (None: frames as the source gives them).
@@ -451,7 +474,8 @@ def completions(source: FrameSource, completer: Completer, names: Sequence[str] 
     A frame's own fault (:func:`is_frame_fault`, raised reading or completing it) goes to ``report`` as a
     :class:`FrameFault` and the loop goes on, or (``stop_on_fault``, or no ``report``) is raised after a
     ``failed`` report. ``realtime``: replay at the frames' sensor pace, that many times faster (1.0: as
-    recorded); frames that arrive while the completer is busy are dropped (reported ``dropped``)."""
+    recorded); frames that arrive while the completer is busy are dropped (reported ``dropped``). ``batch_size``:
+    frames of one size per engine call (:mod:`~semattnet.inference.batching`; not with ``realtime``)."""
     timer = timer if timer is not None else StageTimes()
     names = list(source.names if names is None else names)
     timer.overlapped = prefetch > 0 or realtime is not None
@@ -472,11 +496,18 @@ def completions(source: FrameSource, completer: Completer, names: Sequence[str] 
                 raise DataError(reason) from exc
             raise exc
 
+    def frame_fault(frame: Frame, exc: Exception) -> None:
+        if not is_frame_fault(exc):
+            raise exc
+        fault(frame.name, exc, _input_of(frame))
+
+    batched = batch_size > 1 and realtime is None
     try:
         frames = _frames(source, names, semantic, timer, prefetch, realtime)
         with closing(frames), _inner_stages(completer, timer, current):
             timer.begin()  # after the engine is built; the reader starts with the first frame
-            for item in frames:
+            for group in groups(frames, batch_size if batched else 1):
+                item = group[0]
                 if isinstance(item, FrameFault):  # dropped by the pace
                     timer.discard(item.name)
                     if report is not None:
@@ -485,15 +516,10 @@ def completions(source: FrameSource, completer: Completer, names: Sequence[str] 
                 if isinstance(item, _Failed):
                     fault(item.name, item.error)
                     continue
-                current[0] = item.name
-                try:
-                    with timer.time(item.name, "network"):
-                        completion = completer(item.rgb, item.sparse, item.semantic)
-                except Exception as exc:
-                    if not is_frame_fault(exc):
-                        raise
-                    fault(item.name, exc, _input_of(item))
-                    continue
-                yield item, completion
+                batch = [f for f in group if isinstance(f, Frame)]
+                if batched and isinstance(completer, BatchCompleter):
+                    yield from complete_group(completer, batch, timer, current, frame_fault)
+                else:
+                    yield from _complete_one(completer, batch, timer, current, frame_fault)
     finally:
         timer.end()

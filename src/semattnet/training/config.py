@@ -42,7 +42,7 @@ class TrainConfig:
             ``semattnet train --dataset`` also starts from its recipe (epochs, batch, lr, schedule).
         raw_root, semantic_root: optional separate roots (see :class:`KittiDepthCompletion`).
         segment: a segmenter SPEC for ``nyuv2`` / ``void``: the train and validation frames segmented once into
-            a cached folder (:mod:`semattnet.data.datasets.segment`) that serves as ``semantic_root``.
+            a cached folder (:mod:`semattnet.segmentation.datasets`) that serves as ``semantic_root``.
         out: run folder (checkpoints, logs, curves).
         init: checkpoint of the previous stage (required for refine-init and full).
         width, refinement_mode, branches, fusion: model options (paper defaults).

@@ -17,6 +17,7 @@ import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +34,7 @@ from semattnet._utils.progress import progress
 from semattnet.data.datasets import get_dataset
 from semattnet.data.kitti import KittiDepthCompletion
 from semattnet.data.transforms import EvalTransform
-from semattnet.evaluation.evaluate import evaluate_model
+from semattnet.evaluation.protocols import protocol_metrics
 from semattnet.models.backbone import SemAttNetBackbone
 from semattnet.models.layers import set_gradient_checkpointing
 from semattnet.models.registry import build_model
@@ -41,6 +42,7 @@ from semattnet.models.semattnet import SemAttNet
 from semattnet.training.checkpointing import set_activation_checkpointing
 from semattnet.training.config import TrainConfig
 from semattnet.training.reference import make_adam, our_step
+from semattnet.training.validation import validate_model
 from semattnet.weights.checkpoint import CheckpointError, load_checkpoint, load_weights
 from semattnet.weights.gate import DIGEST_KEY, tensor_digest
 
@@ -214,7 +216,7 @@ class Trainer:
         if cfg.dataset == "kitti-dc":
             ds: Dataset = KittiDepthCompletion(cfg.data, cfg.val_split, cfg.raw_root, cfg.semantic_root,
                                                transform=EvalTransform(tuple(cfg.crop)))  # type: ignore[arg-type]  # fmt: skip
-        else:  # the protocol's frames; evaluate_model pads them to multiples of 32
+        else:  # the protocol's frames, padded to multiples of 32 (validate_model crops them back)
             ds = get_dataset(cfg.dataset).dataset(cfg.data, cfg.val_split, semantic_root=self.semantic_root)
         if cfg.val_max_frames:
             ds = Subset(ds, range(min(cfg.val_max_frames, len(ds))))  # type: ignore[arg-type]
@@ -223,7 +225,7 @@ class Trainer:
 
     def _segmented(self) -> str:
         """``--segment``: the cached maps of the train and validation frames (rank 0 segments the missing)."""
-        from semattnet.data.datasets.segment import segment_split
+        from semattnet.segmentation.datasets import segment_split
 
         cfg = self.cfg
         splits = ("train", *([cfg.val_split] if cfg.val_split and cfg.val_split != "train" else []))
@@ -316,8 +318,8 @@ class Trainer:
     def validate(self) -> dict[str, float] | None:
         if self.val_loader is None:
             return None
-        result = evaluate_model(self.model, self.val_loader, self.device, self.cfg.amp,
-                                metrics=get_dataset(self.cfg.dataset).metrics).compute()  # fmt: skip
+        metrics = partial(protocol_metrics, self.cfg.dataset)
+        result = validate_model(self.model, self.val_loader, self.device, self.cfg.amp, metrics).compute()
         self._write_row({"epoch": self.pos.epoch, "step": self.pos.step, "split": self.cfg.val_split} | result)
         self.log(f"epoch {self.pos.epoch}: {self.cfg.val_split} RMSE {result['rmse_mm']:.1f} mm, "
                  f"MAE {result['mae_mm']:.1f} mm")  # fmt: skip

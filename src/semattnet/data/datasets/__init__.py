@@ -17,9 +17,20 @@ import math
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Protocol
 
 from semattnet._errors import InputError
+from semattnet.data.datasets.frames import check_split_in
+from semattnet.data.datasets.nyuv2 import NYU_SPLITS, NyuV2Source
+from semattnet.data.datasets.void import VOID_SPLITS, VoidSource
+from semattnet.data.frames import IndexedSource
+
+if TYPE_CHECKING:
+    from semattnet.data.datasets.frames import FrameDataset
+    from semattnet.data.kitti import KittiDepthCompletion
+
+    #: The torch Dataset of a split (:meth:`DatasetSpec.dataset`): dicts of tensors, ``load(i)`` the raw sample.
+    SplitDataset = KittiDepthCompletion | FrameDataset
 
 __all__ = ["DATASETS", "DEFAULT_DATASET", "DatasetArchive", "DatasetSpec", "UnknownDatasetError", "check_split",
            "get_dataset"]  # fmt: skip
@@ -76,101 +87,120 @@ class DatasetSpec:
     columns: tuple[str, ...]
     palette: str
     licence: str
-    recipe: dict[str, Any] = field(default_factory=dict)
+    recipe: dict[str, object] = field(default_factory=dict)
     archives: tuple[DatasetArchive, ...] = ()
-    make_source: Callable[..., Any] | None = field(default=None, repr=False)
+    make_source: Callable[..., IndexedSource] | None = field(default=None, repr=False)
 
     def check_split(self, split: str | None, train: bool = False) -> str:
         """``split`` (default: the train / eval split) if this dataset has it."""
-        split = split or (self.train_split if train else self.eval_split)
-        if split not in self.splits:
-            raise InputError(f"split: {self.name} has no split {split!r}; choose one of {', '.join(self.splits)}")
-        return split
+        return check_split_in(self.name, split or (self.train_split if train else self.eval_split), self.splits)
 
     def source(self, root: PathLike, split: str | None = None, *, semantic_root: PathLike | None = None,
-               raw_root: PathLike | None = None, max_frames: int | None = None, seed: int = 0) -> Any:  # fmt: skip
-        """The frames of ``split`` as a :class:`~semattnet.data.frames.FrameSource`."""
-        split = self.check_split(split)
-        if self.make_source is None:  # kitti-dc
-            from semattnet.data.sources import KittiSplitSource
+               raw_root: PathLike | None = None, max_frames: int | None = None,
+               seed: int = 0) -> IndexedSource:  # fmt: skip
+        """The frames of ``split`` as a :class:`~semattnet.data.frames.FrameSource` (full KITTI frames).
 
-            return KittiSplitSource(root, split, raw_root, semantic_root, max_frames)
-        kw = {"seed": seed} if self.sparse_samples else {}
-        return self.make_source(root, split, semantic_root=semantic_root, max_frames=max_frames, **kw)
+        Raises:
+            MissingSplitError: the split has no file under ``root`` (``data check`` skips it).
+        """
+        split = self.check_split(split)
+        if self.make_source is None:
+            raise InputError(f"dataset {self.name}: no frame reader registered")
+        return self.make_source(root, split, raw_root=raw_root, semantic_root=semantic_root, max_frames=max_frames,
+                                seed=seed)  # fmt: skip
+
+    def eval_crop(self, split: str, size: tuple[int, int]) -> tuple[int, int] | None:
+        """The (H, W) bottom crop the protocol scores frames of ``size`` in ``split`` at, or None (as they are):
+        KITTI's full ``val`` is cropped to 352x1216 (frames smaller than that, as in small synthetic trees, stay
+        whole); ``val_select`` and every other dataset's frames are scored as their source gives them."""
+        if self.name != "kitti-dc" or split == "val_select" or self.crop is None or min(size) < self.crop[0]:
+            return None
+        return None if size == self.crop else self.crop
 
     def dataset(self, root: PathLike, split: str | None = None, *, train: bool = False, seed: int = 0,
                 raw_root: PathLike | None = None, semantic_root: PathLike | None = None,
-                config: Any = None) -> Any:  # fmt: skip
+                config: TrainRecipe | None = None) -> SplitDataset:  # fmt: skip
         """The torch Dataset of ``split``: augmented for training (``train``; ``config`` a
         :class:`~semattnet.training.TrainConfig` for KITTI's crop and jitter), else as the protocol scores it
-        (the model's padding to multiples of 32 is the evaluation loop's; metrics on the protocol's crop)."""
+        (:meth:`eval_crop`; the model's padding to multiples of 32 is the evaluation loop's)."""
         split = self.check_split(split, train)
-        if self.make_source is None:
-            return _kitti_dataset(root, split, train, seed, raw_root, semantic_root, config)
+        if self.name == "kitti-dc":
+            return _kitti_dataset(self, root, split, train, seed, raw_root, semantic_root, config)
         from semattnet.data.datasets.frames import FrameDataset, IndoorTrainTransform
 
         transform = None
         if train:
             flip, jitter = (config.flip, config.jitter) if config is not None else (True, 0.1)
             transform = IndoorTrainTransform(self.sparse_samples, flip, jitter)
-        return FrameDataset(self.source(root, split, semantic_root=semantic_root, seed=seed), transform, seed)
-
-    def metrics(self, keep_per_image: bool = True) -> Any:
-        """A fresh accumulator of this protocol's metrics (:mod:`semattnet.evaluation.metrics`)."""
-        from semattnet.evaluation.metrics import KittiMetrics, RangeMetrics
-
-        if self.clamp is None:
-            return KittiMetrics(keep_per_image=keep_per_image)
-        return RangeMetrics(keep_per_image=keep_per_image, min_depth=self.depth_range[0],
-                            max_depth=self.depth_range[1], clamp=self.clamp, columns=self.columns)  # fmt: skip
+        source = self.source(root, split, semantic_root=semantic_root, seed=seed)
+        return FrameDataset(source, transform, seed)
 
     def check(self, roots: Sequence[PathLike], raw_root: PathLike | None = None,
               semantic_root: PathLike | None = None, sample: int | None = None,
               log: Callable[[str], None] = print) -> int:  # fmt: skip
-        """``data check``: every split found under each root decoded; returns the number of problems."""
-        if self.make_source is None:
-            from semattnet.data.check import check_trees
+        """``data check``: every split found under each root decoded; returns the number of problems
+        (:func:`semattnet.data.datasets.check.check_dataset`, the one loop for every dataset)."""
+        from semattnet.data.datasets.check import check_dataset
 
-            return check_trees(roots, raw_root, semantic_root, sample, log=log)
-        from semattnet.data.datasets.check import check_sources
-
-        return check_sources(self, roots, semantic_root, sample, log)
+        return check_dataset(self, roots, raw_root, semantic_root, sample, log)
 
 
-def _kitti_dataset(root: PathLike, split: str, train: bool, seed: int, raw_root: PathLike | None,
-                   semantic_root: PathLike | None, cfg: Any) -> Any:  # fmt: skip
+class TrainRecipe(Protocol):
+    """What :meth:`DatasetSpec.dataset` reads of a :class:`~semattnet.training.TrainConfig`."""
+
+    @property
+    def crop(self) -> tuple[int, int]: ...
+
+    @property
+    def random_crop_height(self) -> int | None: ...
+
+    @property
+    def flip(self) -> bool: ...
+
+    @property
+    def jitter(self) -> float: ...
+
+
+def _kitti_dataset(spec: DatasetSpec, root: PathLike, split: str, train: bool, seed: int, raw_root: PathLike | None,
+                   semantic_root: PathLike | None, cfg: TrainRecipe | None) -> SplitDataset:  # fmt: skip
     from semattnet.data.kitti import KittiDepthCompletion
-    from semattnet.data.transforms import TrainTransform
+    from semattnet.data.transforms import EvalTransform, TrainTransform
 
     if not train:
-        from semattnet.evaluation.split import eval_dataset
-
-        return eval_dataset(root, split, raw_root, semantic_root)
-    t = TrainTransform(tuple(cfg.crop), cfg.random_crop_height or cfg.crop[0], cfg.flip, cfg.jitter) if cfg else (
+        ds = KittiDepthCompletion(root, split, raw_root, semantic_root)
+        ds.transform = EvalTransform(spec.eval_crop(split, ds.load(0).size))
+        return ds
+    t = TrainTransform(cfg.crop, cfg.random_crop_height or cfg.crop[0], cfg.flip, cfg.jitter) if cfg else (
         TrainTransform())  # fmt: skip
     return KittiDepthCompletion(root, split, raw_root, semantic_root, seed=seed, transform=t)
 
 
-def _nyu_source(root: PathLike, split: str, **kw: Any) -> Any:
-    from semattnet.data.datasets.nyuv2 import NyuV2Source
+def _kitti_source(root: PathLike, split: str, *, raw_root: PathLike | None, semantic_root: PathLike | None,
+                  max_frames: int | None, seed: int) -> IndexedSource:  # fmt: skip
+    from semattnet.data.sources import KittiSplitSource
 
-    return NyuV2Source(root, split, **kw)
+    return KittiSplitSource(root, split, raw_root, semantic_root, max_frames)
 
 
-def _void_source(root: PathLike, split: str, **kw: Any) -> Any:
-    from semattnet.data.datasets.void import VoidSource
+def _nyu_source(root: PathLike, split: str, *, raw_root: PathLike | None, semantic_root: PathLike | None,
+                max_frames: int | None, seed: int) -> IndexedSource:  # fmt: skip
+    return NyuV2Source(root, split, semantic_root=semantic_root, max_frames=max_frames, seed=seed)
 
-    return VoidSource(root, split, **kw)
+
+def _void_source(root: PathLike, split: str, *, raw_root: PathLike | None, semantic_root: PathLike | None,
+                 max_frames: int | None, seed: int) -> IndexedSource:  # fmt: skip
+    return VoidSource(root, split, semantic_root=semantic_root, max_frames=max_frames)
 
 
 _KITTI = DatasetSpec(
     "kitti-dc", "KITTI depth completion", "data_depth_{velodyne,annotated,selection}/, kitti_raw/, semantic/",
     ("train", "val", "val_select", "test"), "train", "val_select", (352, 1216), (0.0, 255.0), None, None, "mm",
     ("rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km"), "cityscapes", "CC BY-NC-SA 3.0 (KITTI)",
+    make_source=_kitti_source,
 )  # fmt: skip
 _NYU = DatasetSpec(
     "nyuv2", "NYU Depth v2 (sparse-to-dense HDF5)", "train/<scene>/<NNNNN>.h5, val/official/<NNNNN>.h5",
-    ("train", "test"), "train", "test", (228, 304), (0.1, 10.0), (0.0, 10.0), 500, "m",
+    tuple(NYU_SPLITS), "train", "test", (228, 304), (0.1, 10.0), (0.0, 10.0), 500, "m",
     ("rmse", "abs_rel", "delta1", "delta2", "delta3", "mae", "irmse_per_km", "imae_per_km"), "nyu40",
     "NYU Depth v2: research use, cite Silberman et al. (ECCV 2012); the HDF5 conversion: Ma & Karaman",
     recipe={"epochs": 25, "batch_size": 12, "lr": 0.001, "lr_schedule": "cosine", "crop": (228, 304),
@@ -181,7 +211,7 @@ _NYU = DatasetSpec(
 )  # fmt: skip
 _VOID = DatasetSpec(
     "void", "VOID (visual-inertial odometry sparse depth)", "void_NNNN/{train,test}_{image,sparse_depth,"
-    "validity_map,ground_truth,intrinsics}.txt + data/<sequence>/...", ("train", "test"), "train", "test", None,
+    "validity_map,ground_truth,intrinsics}.txt + data/<sequence>/...", VOID_SPLITS, "train", "test", None,
     (0.2, 5.0), (0.0, math.inf), None, "mm", ("mae_mm", "rmse_mm", "imae_per_km", "irmse_per_km"), "cityscapes",
     "VOID: see github.com/alexklwong/void-dataset (research use; cite Wong et al., RA-L 2020)",
     recipe={"epochs": 10, "batch_size": 8, "lr": 0.0001, "lr_schedule": "cosine", "crop": (480, 640),

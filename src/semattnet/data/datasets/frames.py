@@ -3,27 +3,37 @@ evaluate and train (each dataset entry builds its source, and this wraps it)."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from pathlib import Path
 
 import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from semattnet._errors import DataError
+from semattnet._errors import DataError, InputError
 from semattnet.data.frames import Frame, IndexedSource
 from semattnet.data.transforms import Sample, Transform, color_jitter, hflip
 from semattnet.models.checks import SIZE_MULTIPLE
 
 __all__ = [
+    "CroppedSource",
     "FrameDataset",
     "FrameRef",
     "IndoorTrainTransform",
     "MissingSplitError",
+    "check_split_in",
     "draw_samples",
     "frame_seed",
     "pad_sample",
 ]
+
+
+def check_split_in(dataset: str, split: str, splits: Sequence[str]) -> str:
+    """``split`` if ``dataset`` has it (one of ``splits``), else the one-line error naming the choices."""
+    if split not in splits:
+        raise InputError(f"split: {dataset} has no split {split!r}; choose one of {', '.join(splits)}")
+    return split
 
 
 class MissingSplitError(DataError):
@@ -97,7 +107,7 @@ class FrameRef:
     """What evaluation needs of a frame's files: its name (``gt`` None: predictions are named ``NAME.png``)."""
 
     name: str
-    gt: Any = None
+    gt: Path | None = None
 
 
 class FrameDataset(Dataset[dict[str, object]]):
@@ -122,13 +132,13 @@ class FrameDataset(Dataset[dict[str, object]]):
         """The raw sample (numpy arrays, before any transform)."""
         return frame_sample(self.source.load(self.frames[index].name))
 
-    def __getitem__(self, index: int) -> dict[str, Any]:
+    def __getitem__(self, index: int) -> dict[str, object]:
         sample = self.load(index)
         if self.transform is not None:
             sample = self.transform(sample, np.random.default_rng([self.seed, self.epoch, index]))
         pad = padding(sample.size)
-        extra = {"name": self.frames[index].name, "index": index, "pad": torch.tensor(pad)}
-        return pad_sample(sample).to_tensors() | extra
+        item: dict[str, object] = {**pad_sample(sample).to_tensors()}
+        return item | {"name": self.frames[index].name, "index": index, "pad": torch.tensor(pad)}
 
 
 def frame_sample(frame: Frame) -> Sample:
@@ -137,3 +147,35 @@ def frame_sample(frame: Frame) -> Sample:
 
     sem = frame.semantic if frame.semantic is not None else unknown_map(*frame.size)
     return Sample(frame.rgb, sem, frame.sparse, frame.gt, frame.K)
+
+
+class CroppedSource(IndexedSource):
+    """``source``'s frames bottom-cropped to ``crop`` (H, W): the bottom rows and the centred columns, as
+    :func:`semattnet.data.transforms.bottom_crop` (intrinsics moved with the crop); what a protocol scores
+    (KITTI's full ``val`` at 352x1216: :meth:`~semattnet.data.datasets.DatasetSpec.eval_crop`)."""
+
+    def __init__(self, source: IndexedSource, crop: tuple[int, int]) -> None:
+        self.source, self.crop, self.names = source, crop, source.names
+        self.palette: str | None = getattr(source, "palette", None)
+
+    def load(self, name: str) -> Frame:
+        frame = self.source.load(name)
+        (h, w), (ch, cw) = frame.size, self.crop
+        if h < ch or w < cw:
+            raise DataError(f"{frame.paths.get('rgb', name)}: {w}x{h} is smaller than the crop {cw}x{ch}")
+        top, left = h - ch, (w - cw) // 2
+        win = (slice(top, top + ch), slice(left, left + cw))
+        K = None if frame.K is None else frame.K.copy()
+        if K is not None:
+            K[0, 2] -= left
+            K[1, 2] -= top
+        sem, gt = (None if a is None else a[win] for a in (frame.semantic, frame.gt))
+        return replace(frame, rgb=frame.rgb[win], sparse=frame.sparse[win], semantic=sem, gt=gt, K=K)
+
+    def inputs(self) -> list[Path]:
+        return self.source.inputs()
+
+    def prediction_name(self, name: str) -> str:
+        """The source's file name of a frame's prediction (``NAME.png`` when it names none)."""
+        named = getattr(self.source, "prediction_name", None)
+        return str(named(name)) if callable(named) else f"{name}.png"

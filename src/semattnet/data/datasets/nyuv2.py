@@ -24,7 +24,7 @@ import numpy as np
 from semattnet._errors import DataError
 from semattnet._utils.bounds import check_image_size, regular_file
 from semattnet._utils.extras import require
-from semattnet.data.datasets.frames import MissingSplitError, draw_samples, frame_seed
+from semattnet.data.datasets.frames import MissingSplitError, check_split_in, draw_samples, frame_seed
 from semattnet.data.datasets.hdf5 import plain_dataset, read_bounded
 from semattnet.data.frames import Frame, IndexedSource, unique_names
 from semattnet.data.sources.registry import register_source
@@ -157,9 +157,7 @@ class NyuV2Source(IndexedSource):
     def __init__(self, root: str | os.PathLike[str], split: str = "test", samples: int = SAMPLES, seed: int = 0,
                  semantic_root: str | os.PathLike[str] | None = None,
                  max_frames: int | None = None) -> None:  # fmt: skip
-        from semattnet.data.datasets import check_split
-
-        self.root, self.split = Path(root), check_split("nyuv2", split)
+        self.root, self.split = Path(root), check_split_in("nyuv2", split, tuple(NYU_SPLITS))
         folder = self.root / NYU_SPLITS[self.split]
         check_root(self.root)
         if not folder.is_dir():

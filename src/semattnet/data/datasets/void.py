@@ -19,8 +19,12 @@ import numpy as np
 
 from semattnet._errors import DataError
 from semattnet._utils.bounds import regular_file
+from semattnet.data.datasets.frames import MissingSplitError, check_split_in
 from semattnet.data.frames import Frame, IndexedSource, unique_names
 from semattnet.data.sources.registry import register_source
+
+#: The splits of VOID's release lists.
+VOID_SPLITS = ("train", "test")
 
 __all__ = ["VOID_ROLES", "VOID_VARIANTS", "VoidSource", "read_void_intrinsics"]
 
@@ -112,10 +116,8 @@ class VoidSource(IndexedSource):
     def __init__(self, root: str | os.PathLike[str], split: str = "test",
                  semantic_root: str | os.PathLike[str] | None = None,
                  max_frames: int | None = None) -> None:  # fmt: skip
-        from semattnet.data.datasets import check_split
-        from semattnet.data.datasets.frames import MissingSplitError
 
-        self.split = check_split("void", split)
+        self.split = check_split_in("void", split, VOID_SPLITS)
         self.lists = _folder(Path(root))
         files = {r: self.lists / f"{self.split}_{r}.txt" for r in VOID_ROLES}
         if not any(p.is_file() for p in files.values()):
