@@ -15,7 +15,8 @@ from semattnet.cli import main
 from semattnet.models.registry import build_model
 from semattnet.weights import CheckpointError, PretrainedWeights, from_pretrained, get_weights, load_checkpoint
 from semattnet.weights import packed as packed_mod
-from semattnet.weights.hub import load_model, packed_file, save_pretrained
+from semattnet.weights.hub import load_model, save_pretrained
+from semattnet.weights.resolve import packed_file
 
 
 def _model() -> torch.nn.Module:

@@ -19,7 +19,6 @@ from semattnet.cli._options import (
     backend_option,
     model_from_options,
     weights_option,
-    weights_path,
 )
 
 
@@ -96,7 +95,7 @@ def metrics(
 @click.option("--max-frames", type=POSITIVE_INT, default=None)
 @click.option("--overwrite", is_flag=True)
 @backend_option
-def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, dataset: str, split: str | None,
+def evaluate(weights: str | None, data_root: Path, dataset: str, split: str | None,
              out: Path | None,
              sparsity: tuple[str, ...], method: str, segment: str | None, palette_mismatch: str,
              save_predictions: bool, pictures: int, device: str,
@@ -110,7 +109,7 @@ def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, data
         _one_process("evaluate --sparsity")
         if out is None:
             raise click.UsageError("--sparsity needs --out")
-        _sweep(checkpoint, weights, data_root, split, out, sparsity, method, device, max_frames, overwrite, dataset)
+        _sweep(weights, data_root, split, out, sparsity, method, device, max_frames, overwrite, dataset)
         return
     from semattnet.evaluation.evaluate import evaluate_checkpoint
 
@@ -118,10 +117,10 @@ def evaluate(checkpoint: Path | None, weights: str | None, data_root: Path, data
         raise click.UsageError("--method classical needs --sparsity")
     if (save_predictions or pictures) and out is None:
         raise click.UsageError("--save-predictions and --pictures need --out")
-    if (checkpoint is None) == (weights is None):
-        model_from_options(checkpoint, weights)  # the usage error, before any work
-    # a path, or the loader of --weights (exactly one is set here): called after the split and --out are checked
-    model = partial(model_from_options, None, weights) if checkpoint is None else checkpoint
+    if weights is None:
+        model_from_options(weights)  # the usage error, before any work
+    # the loader of --weights: called after the split and --out are checked
+    model = partial(model_from_options, weights)
     semantic = None
     if segment is not None:
         from semattnet.data.datasets.segment import segment_split
@@ -165,17 +164,17 @@ def _one_process(command: str) -> None:
         raise click.UsageError(f"{command} runs in one process; start it without torchrun")
 
 
-def _sweep(checkpoint: Path | None, weights: str | None, data_root: Path, split: str, out: Path,
+def _sweep(weights: str | None, data_root: Path, split: str, out: Path,
            sparsity: tuple[str, ...], method: str, device: str, max_frames: int | None,
            overwrite: bool, dataset: str = "kitti-dc") -> None:  # fmt: skip
     from semattnet.evaluation.sparsity import format_sweep, parse_settings, sweep_model
 
     settings = parse_settings(sparsity)  # fail on a bad setting before loading anything
-    if method == "classical" and (checkpoint is not None or weights is not None):
+    if method == "classical" and weights is not None:
         raise click.UsageError("--method classical takes no --checkpoint / --weights")
-    if method == "semattnet" and (checkpoint is None) == (weights is None):
-        model_from_options(checkpoint, weights)  # the usage error, before any work
-    model = partial(model_from_options, checkpoint, weights, "cpu") if method == "semattnet" else None
+    if method == "semattnet" and weights is None:
+        model_from_options(weights)  # the usage error, before any work
+    model = partial(model_from_options, weights, "cpu") if method == "semattnet" else None
     rows = sweep_model(data_root, split, settings, model, out, device, max_frames, overwrite, dataset=dataset)
     click.echo(format_sweep(rows))
     click.echo(f"wrote {out / 'sparsity.csv'}, {out / 'sparsity.json'} and {out / 'sparsity.png'}")
@@ -194,15 +193,14 @@ def _sweep(checkpoint: Path | None, weights: str | None, data_root: Path, split:
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
 @click.option("--overwrite", is_flag=True)
 @backend_option
-def submit(checkpoint: Path | None, weights: str | None, data_root: Path, out: Path, expected_frames: int,
+def submit(weights: str | None, data_root: Path, out: Path, expected_frames: int,
            device: str, amp: str, overwrite: bool, backend: str) -> None:  # fmt: skip
     """Predict the KITTI test split and write the zip to upload (checked before zipping)."""
     from semattnet.evaluation.submission import write_submission
 
     _one_process("submit")
-    if (checkpoint is None) == (weights is None):
-        raise click.UsageError("give exactly one of --checkpoint or --weights")
-    checkpoint = checkpoint if checkpoint is not None else weights_path(weights)  # type: ignore[arg-type]
-    zip_path = write_submission(checkpoint, data_root, out, device, amp, expected_frames or None, overwrite,
+    if weights is None:
+        raise click.UsageError("give exactly one of --checkpoint or --weights (they are one option)")
+    zip_path = write_submission(weights, data_root, out, device, amp, expected_frames or None, overwrite,
                                 backend=backend)  # fmt: skip
     click.echo(f"wrote {out} and {zip_path}")

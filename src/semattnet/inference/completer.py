@@ -21,7 +21,6 @@ from __future__ import annotations
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -36,6 +35,7 @@ from semattnet.models.checks import check_has_points, check_sparse_depth
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.uncertainty import with_uncertainty
 from semattnet.weights.hub import load_model
+from semattnet.weights.resolve import resolve_weights
 
 __all__ = ["Completion", "DepthCompleter"]
 
@@ -143,19 +143,22 @@ class DepthCompleter:
         self._engines: dict[tuple[int, int] | None, nn.Module] = {}
 
     @classmethod
-    def from_checkpoint(cls, path: str | Path, device: str | torch.device = "auto", amp: str = "none",
+    def from_checkpoint(cls, path: str | os.PathLike[str], device: str | torch.device = "auto", amp: str = "none",
                         backend: str = "torch") -> DepthCompleter:  # fmt: skip
-        """A completer for the weights file at ``path`` (see :func:`semattnet.weights.load_model`)."""
+        """A completer for the weights at ``path``: a file, a ``save_pretrained`` folder, a registered name or a
+        URL, read by :func:`semattnet.weights.resolve_weights` (see :func:`semattnet.weights.load_model`)."""
         return cls(load_model(path), device, amp, backend, inplace=True)
 
     @classmethod
     def from_pretrained(cls, name_or_path: str | os.PathLike[str], device: str | torch.device = "auto",
-                        amp: str = "none", backend: str = "torch", **kwargs: Any) -> DepthCompleter:  # fmt: skip
-        """A completer for released weights by name, a local file or folder, or a URL
-        (:func:`semattnet.weights.from_pretrained`, which takes ``kwargs``: ``sha256``, ``cache_dir``, ...)."""
-        from semattnet.weights import from_pretrained
-
-        return cls(from_pretrained(name_or_path, map_location="cpu", **kwargs), device, amp, backend, inplace=True)
+                        amp: str = "none", backend: str = "torch", *, sha256: str | None = None,
+                        cache_dir: str | os.PathLike[str] | None = None, progress: bool = True,
+                        **overrides: object) -> DepthCompleter:  # fmt: skip
+        """A completer for released weights by name, a local file or folder, or a URL, read by
+        :func:`semattnet.weights.resolve_weights` (:func:`semattnet.weights.from_pretrained` explains
+        ``sha256``, ``cache_dir``, ``progress`` and the config ``overrides``)."""
+        resolved = resolve_weights(name_or_path, sha256=sha256, cache_dir=cache_dir, progress=progress)
+        return cls(resolved.build(overrides=overrides), device, amp, backend, inplace=True)
 
     def engine(self, size: tuple[int, int] | None = None) -> nn.Module:
         """The engine for padded inputs of ``size`` (built on first use; one for all sizes with ``torch``)."""
