@@ -100,7 +100,7 @@ class PretrainedWeights:
         file_name: name of the file in the cache.
         format: one of :data:`FORMATS`.
         sha256: hex digest of the file, or None when nobody published one (then the first download is
-            pinned, see :mod:`semattnet.weights.download`).
+            pinned, see :mod:`semattnet.cache`).
         size_bytes: exact file size if known, else None.
         num_params: number of parameters of the model the weights fit.
         license: the terms, in words.
