@@ -48,7 +48,7 @@ def replay(bag: Path, out: Path, speed: float = 1.0) -> dict[str, object]:
     from semattnet.baselines import ClassicalCompleter
     from semattnet.inference.pipeline import complete_frames
     from semattnet.inference.sinks import DepthPngSink, LatencySink
-    from semattnet.inference.stream import StageTimes
+    from semattnet.inference.timing import StageTimes
     from semattnet.robotics import BagSource
     from semattnet.robotics.bags import BagTopics
 
@@ -75,7 +75,7 @@ def replay(bag: Path, out: Path, speed: float = 1.0) -> dict[str, object]:
 
 
 def main() -> None:
-    from semattnet.inference.stream import cpu_name
+    from semattnet.inference.timing import cpu_name
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=300)

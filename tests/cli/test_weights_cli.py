@@ -156,3 +156,43 @@ def test_checkpoint_spelling_gives_the_same_and_twice_is_refused(served: str, tm
     assert both.exit_code == 2 and "exactly one of --checkpoint or --weights, not both" in both.output
     missing = CliRunner().invoke(main, ["bench", "--checkpoint", str(tmp_path / "none.pt")])
     assert missing.exit_code == 2 and "none.pt" in missing.output and "'--weights' / '--checkpoint'" in missing.output
+
+
+def test_predict_with_a_shipped_name_end_to_end(tmp_path: Path) -> None:
+    """``predict --weights semattnet-demo-ref-seed0``: the registry name, resolved once, completes a frame."""
+    import numpy as np
+
+    from semattnet.data.io import read_depth, write_depth, write_image
+
+    rng = np.random.default_rng(0)
+    write_image(tmp_path / "rgb" / "f.png", rng.integers(0, 256, (32, 64, 3), dtype=np.uint8))
+    write_image(tmp_path / "semantic" / "f.png", np.full((32, 64, 3), (128, 64, 128), np.uint8))
+    sparse = np.where(rng.random((32, 64)) < 0.1, rng.uniform(1, 50, (32, 64)), 0).astype(np.float32)
+    write_depth(tmp_path / "sparse" / "f.png", sparse)
+    out = tmp_path / "out"
+    run("predict", "--weights", "semattnet-demo-ref-seed0", "--rgb", str(tmp_path / "rgb"), "--sparse",
+        str(tmp_path / "sparse"), "--semantic", str(tmp_path / "semantic"), "--out", str(out))  # fmt: skip
+    depth = read_depth(out / "f.png")
+    assert depth.shape == (32, 64) and np.isfinite(depth).all() and (depth > 0).mean() > 0.9
+
+
+def test_info_reads_names_and_folders_with_their_config(tmp_path: Path) -> None:
+    shown = run("info", "semattnet-demo-ref-seed1")
+    assert "(packed)" in shown and '"width": 0.125' in shown
+    folder = semattnet.weights.save_pretrained(semattnet.build_model("semattnet", **CONFIG, refinement_mode="clean"),
+                                               tmp_path / "folder")  # fmt: skip
+    shown = run("info", str(folder))
+    assert "model.safetensors" in shown and '"refinement_mode": "clean"' in shown  # config.json, not dropped
+    bad = CliRunner().invoke(main, ["info", str(tmp_path / "nothing-here")])
+    assert bad.exit_code == 2 and "known: semattnet-kitti" in bad.output
+
+
+def test_bench_takes_precision_through_the_shared_options() -> None:
+    out = run("bench", "--parts", "backends", "--precision", "f32", "--size", "32x64", "--repeats", "1",
+              "--device", "cpu", "--width", "0.125")  # fmt: skip
+    rows = [line for line in out.splitlines() if "backend " in line]
+    assert rows and all("(f32)" in line for line in rows), out
+    for args, message in ((["--calibration", "."], "--calibration only mean(s) something with --precision int8"),
+                          (["--precision", "f32", "--parts", "full"], "backends is not in --parts")):  # fmt: skip
+        res = CliRunner().invoke(main, ["bench", *args])
+        assert res.exit_code == 2 and message in res.output, res.output

@@ -146,8 +146,8 @@ def test_palettes_one_home_and_mismatch() -> None:
 
 
 def test_download_nyu_through_a_file_mirror(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from semattnet.cache import read_pins
     from semattnet.data.download import download_dataset
-    from semattnet.weights.download import read_pins
     from tests._helpers import online_cache
 
     cache = online_cache(monkeypatch, tmp_path / "cache")

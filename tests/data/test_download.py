@@ -183,9 +183,9 @@ def test_parse_what_and_drive_source(tmp_path: Path) -> None:
 
 
 def test_error_classes_and_the_shared_cache() -> None:
+    import semattnet.cache as cache
     from semattnet import SemAttNetError
     from semattnet._errors import DataError, InputError
-    from semattnet._utils import download as cache
     from semattnet.data import download as kitti_download
     from semattnet.data.download import LicenseNotAcceptedError
 

@@ -110,7 +110,7 @@ def _rerun(path: Path, pred: Prediction) -> None:
 
 
 def _timer() -> object:
-    from semattnet.inference.stream import StageTimes
+    from semattnet.inference.timing import StageTimes
 
     timer = StageTimes()
     for name in NAMES:

@@ -85,7 +85,7 @@ def test_convert_on_a_full_disk(tmp_path: Path, small_fs: Path) -> None:
 
 
 def test_unpacking_and_downloading_on_a_full_disk(tmp_path: Path, small_fs: Path) -> None:
-    from semattnet._utils.download import fetch
+    from semattnet.cache import fetch
     from semattnet.data.download import extract_zip
 
     blob = np.random.default_rng(0).bytes(400_000)

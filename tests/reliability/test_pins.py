@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from semattnet._utils.download.cache import read_pins, verify_cached
-from semattnet._utils.download.errors import ChecksumError, DownloadError
+from semattnet.cache.errors import ChecksumError, DownloadError
+from semattnet.cache.store import read_pins, verify_cached
 from semattnet.weights import fetch
 
 

@@ -16,7 +16,8 @@ from semattnet.inference import DepthCompleter
 from semattnet.inference.completer import Completion
 from semattnet.inference.pipeline import complete_frames
 from semattnet.inference.sinks import DepthPngSink, LatencySink
-from semattnet.inference.stream import STAGES, StageTimes, completions
+from semattnet.inference.stream import completions
+from semattnet.inference.timing import STAGES, StageTimes
 
 SLEEP = 0.06
 

@@ -247,7 +247,7 @@ class _Slow:
 def test_realtime_drops_the_frames_that_come_while_busy(tmp_path: Path) -> None:
     from semattnet.inference.pipeline import EXIT_DROPPED, complete_frames
     from semattnet.inference.sinks import LatencySink, default_sinks
-    from semattnet.inference.stream import StageTimes
+    from semattnet.inference.timing import StageTimes
     from semattnet.robotics import BagSource
 
     bag, out = write_bag(tmp_path / "b_mcap", 8, 32, 48), tmp_path / "out"

@@ -133,7 +133,7 @@ def test_a_file_whose_recorded_config_contradicts_its_tensors(tmp_path: Path, ti
 def test_no_private_names_cross_modules_in_weights_and_the_cache() -> None:
     """``from semattnet.x import _name`` is forbidden between modules (one home, public names)."""
     offenders = []
-    for folder in ("weights", "_utils/download"):
+    for folder in ("weights", "cache"):
         for path in (REPO / "src" / "semattnet" / folder).glob("*.py"):
             for node in ast.walk(ast.parse(path.read_text())):
                 if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("semattnet"):

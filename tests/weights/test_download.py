@@ -205,21 +205,21 @@ def test_registry_name_and_bad_arguments(cache: Path) -> None:
 
 
 def test_errors_derive_from_the_root_and_stay_os_errors() -> None:
+    import semattnet.cache as cache_pkg
     from semattnet import SemAttNetError
-    from semattnet._utils import download as cache_pkg
     from semattnet.weights import UnknownWeightsError
 
     for cls in (DownloadError, ChecksumError, OfflineError):
         assert issubclass(cls, SemAttNetError) and issubclass(cls, OSError), cls
     assert issubclass(UnknownWeightsError, SemAttNetError)
-    assert cache_pkg.DownloadError is DownloadError  # one home (semattnet._utils.download), re-exported
-    assert fetch.__module__ == "semattnet.weights.download"  # the weights layer: registry names and records
+    assert cache_pkg.DownloadError is DownloadError  # one home (semattnet.cache), re-exported
+    assert fetch.__module__ == "semattnet.weights.resolve"  # the weights layer: registry names and records
     with pytest.raises(UnknownWeightsError):
         fetch("no-such-weights")
 
 
 def test_the_generic_cache_takes_urls_only(tmp_path: Path, cache: Path) -> None:
-    from semattnet._utils.download import fetch as fetch_url
+    from semattnet.cache import fetch as fetch_url
 
     src = tmp_path / "a.bin"
     src.write_bytes(BLOB)

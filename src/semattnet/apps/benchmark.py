@@ -20,6 +20,7 @@ import functools
 import importlib.util
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any
 
 import torch
@@ -120,8 +121,12 @@ def run_benchmark(
     train_size: tuple[int, int] = (320, 1216),
     model: nn.Module | None = None,
     log: Callable[[str], None] = print,
+    precision: str | None = None,
+    calibration: Path | None = None,
 ) -> BenchResult:
-    """Measure the parts asked for; ``model`` (a full SemAttNet) replaces random weights."""
+    """Measure the parts asked for; ``model`` (a full SemAttNet) replaces random weights. ``precision``
+    (``f32``, ``bf16``, ``int8``) keeps only the backends' rows of that arithmetic; ``calibration``: int8's
+    calibration frames (default: synthetic scenes)."""
     if model is not None and not hasattr(model, "backbone"):
         raise InputError("model: bench needs a full SemAttNet (with refinement), not a backbone checkpoint")
     dev = torch.device(device)
@@ -134,7 +139,7 @@ def run_benchmark(
     x = random_frame(size, dev)
     if any(p in parts for p in ("backbone", "full", "fast", "backends")):
         net = model if model is not None else build_model("semattnet", width=width)
-        _bench_inference(bench, net.to(dev).eval(), x, parts, fast_dtype)
+        _bench_inference(bench, net.to(dev).eval(), x, parts, fast_dtype, (precision, calibration))
     if "train" in parts:
         _bench_training(bench, train_size, model, width)
     for note in bench.res.notes:
@@ -197,7 +202,12 @@ def _bench_propagation(bench: _Bench, size: tuple[int, int]) -> None:
 
 
 def _bench_inference(
-    bench: _Bench, net: nn.Module, x: dict[str, torch.Tensor], parts: tuple[str, ...], fast_dtype: torch.dtype | None
+    bench: _Bench,
+    net: nn.Module,
+    x: dict[str, torch.Tensor],
+    parts: tuple[str, ...],
+    fast_dtype: torch.dtype | None,
+    arithmetic: tuple[str | None, Path | None] = (None, None),
 ) -> None:
     """Rows: backbone and full model, naive against ours (and the fast mode); notes: GMACs, GFLOP/s."""
     dev = bench.dev
@@ -207,7 +217,7 @@ def _bench_inference(
         f"{gmacs:.0f} GMACs per frame (convolutions); measured conv peak {peak:.0f} GFLOP/s (float32)"
     )
     fast_net = fold_batchnorm(net)
-    candidates = _inference_candidates(net, fast_net, x, parts, fast_dtype, dev)
+    candidates = _inference_candidates(net, fast_net, x, parts, fast_dtype, dev, arithmetic)
     with torch.inference_mode():
         outputs, peaks, last = _first_runs(candidates, dev)
         seconds = interleaved(candidates, dev, bench.repeats)
@@ -231,6 +241,7 @@ def _inference_candidates(
     parts: tuple[str, ...],
     fast_dtype: torch.dtype | None,
     dev: torch.device,
+    arithmetic: tuple[str | None, Path | None] = (None, None),
 ) -> dict[str, Callable[[], Any]]:
     """Row label -> forward pass to time; each kind's naive reference comes before ours."""
 
@@ -256,12 +267,17 @@ def _inference_candidates(
     if "fast" in parts:
         candidates[f"full model, fast ({str(fast_dtype).removeprefix('torch.')} autocast)"] = fast_full
     if "backends" in parts:
-        candidates.update(_backend_candidates(net, x, dev, fast_dtype))
+        candidates.update(_backend_candidates(net, x, dev, fast_dtype, *arithmetic))
     return candidates
 
 
 def _backend_candidates(
-    net: nn.Module, x: dict[str, torch.Tensor], dev: torch.device, fast_dtype: torch.dtype | None
+    net: nn.Module,
+    x: dict[str, torch.Tensor],
+    dev: torch.device,
+    fast_dtype: torch.dtype | None,
+    only: str | None = None,
+    calibration: Path | None = None,
 ) -> dict[str, Callable[[], Any]]:
     """Every installed inference backend at this size (float32; also bf16 where the CPU has it natively;
     int8 for OpenVINO with nncf installed, calibrated on synthetic scenes: a row, never a default)."""
@@ -273,8 +289,9 @@ def _backend_candidates(
             continue
         precisions = ["f32"] + (["bf16"] if backend != "onnxruntime" and fast_dtype is torch.bfloat16 else [])
         precisions += ["int8"] if backend == "openvino" and importlib.util.find_spec("nncf") is not None else []
-        for precision in precisions:
-            engine = optimize_for_inference(net, backend=backend, size=size, precision=precision, device=dev)
+        for precision in [p for p in precisions if only in (None, p)]:
+            engine = optimize_for_inference(net, backend=backend, size=size, precision=precision, device=dev,
+                                            calibration=calibration if precision == "int8" else None)  # fmt: skip
             runs[f"full model, backend {backend} ({precision})"] = functools.partial(engine, **x)
     return runs
 

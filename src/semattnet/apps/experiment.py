@@ -165,19 +165,20 @@ def train_variant(
 
 
 def complete_held_out(
-    checkpoint: Path | torch.nn.Module,
+    model: Path | torch.nn.Module,
     held: HeldOut,
     device: torch.device,
     semantic: Callable[[torch.Tensor], torch.Tensor] | None = None,
 ) -> dict[str, dict[str, np.ndarray]]:
-    """Every output of the checkpoint's model (or of a model) on every held-out scene: name -> output -> (H, W).
+    """Every output of ``model`` (or of the model of a weights file) on every held-out scene:
+    name -> output -> (H, W).
 
     ``semantic`` optionally replaces each scene's semantic map (e.g. the no-segmenter fallback).
     """
-    if isinstance(checkpoint, torch.nn.Module):
-        completer = DepthCompleter(checkpoint, device=device)
+    if isinstance(model, torch.nn.Module):
+        completer = DepthCompleter(model, device=device)
     else:
-        completer = DepthCompleter.from_checkpoint(checkpoint, device=device)
+        completer = DepthCompleter.from_checkpoint(model, device=device)
     out = {}
     for n, smp in zip(held.names, held.samples, strict=True):
         sem = smp["semantic"][None] if semantic is None else semantic(smp["semantic"][None])

@@ -6,17 +6,19 @@ a one-line error naming the option before any work starts.
 
 from __future__ import annotations
 
-import functools
-import inspect
 import math
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, TypeVar
 
 import click
 import torch
 
 from semattnet._errors import SemAttNetError
 from semattnet._utils.bounds import MAX_SKEW_S
+
+if TYPE_CHECKING:
+    from semattnet.weights.resolve import ResolvedWeights
 
 #: Largest count any option takes (frames, steps, epochs, repeats): far above any real run, and below
 #: the sizes where a count would overflow an int64 or be allocated as a list.
@@ -43,9 +45,9 @@ class FiniteFloat(click.ParamType):
     def __init__(self, low: float | None = None, high: float | None = None, low_open: bool = False) -> None:
         self.low, self.high, self.low_open = low, high, low_open
 
-    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> float:
+    def convert(self, value: object, param: click.Parameter | None, ctx: click.Context | None) -> float:
         try:
-            x = float(value)
+            x = float(value if isinstance(value, int | float) else str(value))
         except (TypeError, ValueError):
             self.fail(f"{value!r} is not a number", param, ctx)
         if not math.isfinite(x):
@@ -107,9 +109,9 @@ class SizeType(click.ParamType):
 
     name = "HxW"
 
-    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> str:
+    def convert(self, value: object, param: click.Parameter | None, ctx: click.Context | None) -> str:
         try:
-            parse_size(value)
+            parse_size(str(value))
         except click.BadParameter as exc:
             self.fail(exc.message, param, ctx)
         return str(value)
@@ -123,9 +125,9 @@ class SeedsType(click.ParamType):
 
     name = "SEEDS"
 
-    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> tuple[int, ...]:
-        if isinstance(value, tuple):
-            return value
+    def convert(self, value: object, param: click.Parameter | None, ctx: click.Context | None) -> tuple[int, ...]:
+        if isinstance(value, tuple):  # a default, already converted
+            return tuple(int(str(v)) for v in value)
         try:
             seeds = tuple(int(v) for v in str(value).split(","))
         except ValueError:
@@ -153,34 +155,32 @@ WEIGHTS_HELP = (
 )
 
 
-class WeightsSpec(click.ParamType):
-    """``NAME|PATH|URL``: an existing file or folder, a URL, or a registered weights name (checked, not fetched)."""
+class WeightsSpecType(click.ParamType):
+    """``NAME|PATH|URL``: checked by :func:`semattnet.weights.parse_weights_spec` (the one parser), not fetched."""
 
     name = "NAME|PATH|URL"
 
-    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> str:
-        from semattnet.weights.download import is_url
-        from semattnet.weights.pretrained import list_pretrained
+    def convert(self, value: object, param: click.Parameter | None, ctx: click.Context | None) -> str:
+        from semattnet.weights.resolve import WeightsSpecError, parse_weights_spec
 
-        text = str(value)
-        if is_url(text) or text in list_pretrained() or Path(text).expanduser().exists():
-            return text
-        self.fail(
-            f"{text!r} is not an existing file or folder, a URL (http(s)://, file://, gdrive://, hf://) or a "
-            f"registered weights name ({', '.join(list_pretrained())})",
-            param,
-            ctx,
-        )
+        try:
+            parse_weights_spec(str(value))
+        except WeightsSpecError as exc:
+            self.fail(str(exc), param, ctx)
+        return str(value)
 
 
-WEIGHTS_SPEC = WeightsSpec()
+WEIGHTS_SPEC = WeightsSpecType()
+
+_Callback = Callable[[click.Context, click.Parameter, tuple[str, ...]], str | None]
+_F = TypeVar("_F", bound=Callable[..., object])
 
 
-def one_value(spec: click.ParamType) -> Any:
+def one_value(spec: click.ParamType) -> _Callback:
     """The callback of an option with aliases, declared ``multiple`` (of plain text) only to see a second
     use (``--checkpoint A --weights B``): refuse that first, then check the one value with ``spec``."""
 
-    def callback(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]) -> Any:
+    def callback(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]) -> str | None:
         if len(values) > 1:
             primary, *aliases = param.opts
             names = " or ".join([*aliases, primary])
@@ -189,26 +189,14 @@ def one_value(spec: click.ParamType) -> Any:
                 ctx=ctx,
                 param=param,
             )
-        return spec.convert(values[0], param, ctx) if values else None
+        return str(spec.convert(values[0], param, ctx)) if values else None
 
     return callback
 
 
-def weights_option(f: Any) -> Any:
+def weights_option(f: _F) -> _F:
     """``--weights NAME|PATH|URL`` with ``--checkpoint`` as its alias: the one loader option of every command
-    that reads a model. The command receives it as ``weights`` (a str, or None).
-
-    Transitional: a command whose function still takes a ``checkpoint`` parameter (written for the two
-    options of before) receives ``checkpoint=None``; the value of either spelling arrives in ``weights``.
-    """
-    if "checkpoint" in inspect.signature(f).parameters:
-        body = f
-
-        @functools.wraps(body)
-        def f(*args: Any, **kwargs: Any) -> Any:
-            kwargs.setdefault("checkpoint", None)
-            return body(*args, **kwargs)
-
+    that reads a model. The command receives it as ``weights`` (a str, or None)."""
     option = click.option(
         "--weights",
         "--checkpoint",
@@ -227,19 +215,27 @@ def weights_input(weights: str | None) -> tuple[str, Path | None]:
     return "--weights", Path(weights) if weights is not None and Path(weights).exists() else None
 
 
-def model_from_options(checkpoint: Path | None, weights: str | None, device: str = "cpu") -> torch.nn.Module:
-    """The model of ``--weights`` (or, from older callers, ``checkpoint``), through the one builder."""
-    from semattnet.weights import from_pretrained
+def resolve_option(spec: str, param_hint: str = "--weights", progress: bool = True) -> ResolvedWeights:
+    """:func:`semattnet.weights.resolve_weights` with a spec that names nothing reported as a usage error of
+    ``param_hint`` (a corrupt or refused file is another SemAttNetError: a one-line error, not a usage error)."""
+    from semattnet.weights.resolve import WeightsSpecError, resolve_weights
 
-    if checkpoint is not None and weights is not None:
-        raise click.UsageError("give --checkpoint or --weights, not both")
-    spec = weights if weights is not None else checkpoint
-    if spec is None:
+    try:
+        return resolve_weights(spec, progress=progress)
+    except WeightsSpecError as exc:
+        raise click.BadParameter(str(exc), param_hint=param_hint) from None
+
+
+def model_from_options(weights: str | None, device: str = "cpu") -> torch.nn.Module:
+    """The model of ``--weights`` (``--checkpoint``), through :func:`semattnet.weights.from_pretrained`."""
+    from semattnet.weights.hub import from_pretrained
+
+    if weights is None:
         raise click.UsageError("--checkpoint or --weights is required (they are one option: --checkpoint is an alias)")
-    return from_pretrained(spec, map_location=device)
+    return from_pretrained(weights, map_location=device)
 
 
-def precision_options(f: Any) -> Any:
+def precision_options(f: _F) -> _F:
     """``--precision f32|bf16|int8`` and ``--calibration PATH`` (int8 only) of every command that runs a model."""
     f = click.option(
         "--calibration",
@@ -281,14 +277,3 @@ backend_option = click.option(
     help="Inference engine: torch (BN folded, fused propagation), openvino / onnxruntime (exported once per "
     "frame size, cached on disk; worth it over many frames) or auto.",
 )
-
-
-def weights_path(spec: str, param_hint: str = "--weights", progress: bool = True) -> Path:
-    """``resolve_weights_file`` with a bad name or path reported as a usage error of ``param_hint``."""
-    from semattnet.weights.listing import WeightsSpecError, resolve_weights_file
-    from semattnet.weights.pretrained import UnknownWeightsError
-
-    try:  # a corrupt or refused file is another SemAttNetError: a one-line error, not a usage error
-        return resolve_weights_file(spec, progress=progress)
-    except (WeightsSpecError, UnknownWeightsError) as exc:
-        raise click.BadParameter(str(exc).removeprefix(f"--weights {spec!r}: "), param_hint=param_hint) from None

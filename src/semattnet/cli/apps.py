@@ -15,8 +15,10 @@ from semattnet.cli._options import (
     SEEDS,
     SIZE,
     WIDTH,
+    check_precision_options,
     model_from_options,
     parse_size,
+    precision_options,
     weights_input,
     weights_option,
 )
@@ -132,20 +134,27 @@ def ablate(out_dir: Path, configs: str, seeds: tuple[int, ...], backbone_steps: 
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also write the results as JSON.")  # fmt: skip
 @click.option("--overwrite", is_flag=True, help="Replace an existing --json file.")
+@precision_options
 def bench(size: str, train_size: str, device: str, repeats: int, width: float, parts: str, weights: str | None,
-          json_path: Path | None, overwrite: bool) -> None:  # fmt: skip
-    """Latency, throughput and peak memory against the naive reference, in one process."""
+          json_path: Path | None, overwrite: bool, precision: str | None,
+          calibration: Path | None) -> None:  # fmt: skip
+    """Latency, throughput and peak memory against the naive reference, in one process. With --precision, the
+    backends' rows are those of that arithmetic only (int8: OpenVINO + NNCF, calibrated on --calibration)."""
     from semattnet._utils.device import resolve_device
     from semattnet._utils.outputs import Output, check_outputs, write_text
     from semattnet.apps.benchmark import run_benchmark
 
+    check_precision_options("semattnet", "none", precision, calibration, "auto")
+    if precision is not None and "backends" not in parts.split(","):
+        raise click.UsageError("--precision chooses the rows of --parts backends; backends is not in --parts")
     check_outputs([weights_input(weights)], [Output("--json", json_path, "json")] if json_path else [], overwrite)
-    model = model_from_options(None, weights) if weights is not None else None  # default: random weights
+    model = model_from_options(weights) if weights is not None else None  # default: random weights
     chosen = tuple(p.strip() for p in parts.split(",") if p.strip())
     unknown = set(chosen) - {"propagation", "backbone", "full", "fast", "backends", "train"}
     if unknown:
         raise click.BadParameter(f"unknown part(s) {sorted(unknown)}", param_hint="--parts")
     result = run_benchmark(parse_size(size), resolve_device(device), repeats, width, chosen,
-                           parse_size(train_size), model, log=click.echo)  # fmt: skip
+                           parse_size(train_size), model, log=click.echo, precision=precision,
+                           calibration=calibration)  # fmt: skip
     if json_path is not None:
         write_text(json_path, json.dumps(result.to_dict(), indent=2) + "\n", overwrite=overwrite)

@@ -107,8 +107,8 @@ def data_download(what: str, out_dir: Path, accept_kitti_license: bool, dry_run:
                   check: bool, dataset: str, accept_license: bool) -> None:  # fmt: skip
     """Download a dataset (KITTI depth completion and the raw drives it needs by default) into the loader
     layout; exits 1 on problems."""
+    from semattnet.cache import DownloadError
     from semattnet.data.download import download_dataset, download_kitti
-    from semattnet.weights.download import DownloadError
 
     try:
         if dataset != "kitti-dc":

@@ -229,7 +229,7 @@ def submit(weights: str | None, data_root: Path, out: Path, expected_frames: int
 
     _one_process("submit")
     if weights is None:
-        raise click.UsageError("give exactly one of --checkpoint or --weights")
+        raise click.UsageError("give exactly one of --checkpoint or --weights (they are one option)")
     zip_path = write_submission(weights, data_root, out, device, amp, expected_frames or None, overwrite,
                                 backend=backend)  # fmt: skip
     click.echo(f"wrote {out} and {zip_path}")

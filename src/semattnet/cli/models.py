@@ -4,20 +4,24 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from semattnet.cli._group import main
-from semattnet.cli._options import weights_option
+from semattnet.cli._options import WEIGHTS_SPEC, weights_option
+
+if TYPE_CHECKING:
+    from semattnet.weights.resolve import ResolvedWeights
 
 
-def _source(checkpoint: Path | None, weights: str | None) -> Path:
-    """The local file named by CHECKPOINT or ``--weights`` (exactly one of them)."""
-    from semattnet.cli._options import weights_path
+def _one_spec(given: str | None, weights: str | None, what: str) -> ResolvedWeights:
+    """The weights named by the positional ``what`` or ``--weights`` (exactly one of them), resolved."""
+    from semattnet.cli._options import resolve_option
 
-    if (checkpoint is None) == (weights is None):
-        raise click.UsageError("give a CHECKPOINT file or --weights NAME|PATH|URL (one of them)")
-    return checkpoint if checkpoint is not None else weights_path(weights)  # type: ignore[arg-type]
+    if (given is None) == (weights is None):
+        raise click.UsageError(f"give a {what} or --weights NAME|PATH|URL (one of them)")
+    return resolve_option(given, what) if given is not None else resolve_option(str(weights))
 
 
 @main.command()
@@ -30,14 +34,15 @@ def models(params: bool) -> None:
 
 
 @main.command()
-@click.argument("checkpoint", required=False, type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("source", required=False, metavar="[NAME|PATH|URL]", type=WEIGHTS_SPEC)
 @weights_option
-def info(checkpoint: Path | None, weights: str | None) -> None:
-    """Show what a checkpoint (or --weights) holds (never runs code from it)."""
+def info(source: str | None, weights: str | None) -> None:
+    """Show what weights hold: a file, a save_pretrained folder, a registered name or a URL (never runs code)."""
     from semattnet.weights.checkpoint import config_from_state_dict, load_checkpoint
 
-    ckpt = load_checkpoint(_source(checkpoint, weights))
-    cfg = ckpt.config or config_from_state_dict(ckpt.state_dict, ckpt.path)
+    resolved = _one_spec(source, weights, "NAME|PATH|URL")
+    ckpt = load_checkpoint(resolved.file)  # the file as it is (a downloaded pickle, not its converted copy)
+    cfg = resolved.config or ckpt.config or config_from_state_dict(ckpt.state_dict, ckpt.path)
     n = sum(v.numel() for k, v in ckpt.state_dict.items() if not k.endswith("num_batches_tracked"))
     click.echo(f"file:        {ckpt.path}  ({ckpt.format})")
     click.echo(f"entries:     {len(ckpt.state_dict)} tensors, {n:,d} values")
@@ -65,7 +70,7 @@ def convert(paths: tuple[Path, ...], weights: str | None, overwrite: bool) -> No
         raise click.BadParameter(f"{src}: no such file", param_hint="SRC")
     from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs
 
-    source = _source(src, weights)  # --weights NAME|URL resolves to a (cached) file too
+    source = _one_spec(str(src) if src is not None else None, weights, "SRC").file  # NAME|URL: a cached file
     check_no_input_overlap([source], out_files=[dst])
     check_outputs([("SRC" if src is not None else "--weights", source)], [Output("DST", dst, "safetensors")],
                   overwrite)  # fmt: skip

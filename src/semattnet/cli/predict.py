@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -22,10 +22,13 @@ from semattnet.cli._options import (
     weights_option,
 )
 
+if TYPE_CHECKING:
+    from semattnet.inference.pipeline import Completer
 
-def _completer(method: str, checkpoint: Path | None, weights: str | None, device: str, amp: str,
-               backend: str = "torch", precision: str | None = None, calibration: Path | None = None):  # fmt: skip
-    """The completer the options name: the classical baseline or the model of --checkpoint / --weights."""
+
+def _completer(method: str, weights: str | None, device: str, amp: str, backend: str = "torch",
+               precision: str | None = None, calibration: Path | None = None) -> Completer:  # fmt: skip
+    """The one completer the options name: the classical baseline or a DepthCompleter of --weights."""
     from semattnet._utils.distributed import process_device
     from semattnet.baselines.classical import ClassicalCompleter
     from semattnet.cli._options import model_from_options
@@ -33,24 +36,22 @@ def _completer(method: str, checkpoint: Path | None, weights: str | None, device
 
     if method == "classical":
         return ClassicalCompleter()
-    _check_method(method, checkpoint, weights)
-    model = model_from_options(checkpoint, weights, "cpu")
+    _check_method(method, weights)
+    model = model_from_options(weights, "cpu")
     return DepthCompleter(model, device=process_device(device), amp=amp, backend=backend, inplace=True,
                           precision=precision, calibration=calibration)  # fmt: skip
 
 
-def _check_method(method: str, checkpoint: Path | None, weights: str | None) -> None:
+def _check_method(method: str, weights: str | None) -> None:
     """The model options agree (checked before any work): no option that would be ignored."""
     if method == "classical":
-        if checkpoint is not None or weights is not None:
+        if weights is not None:
             raise click.UsageError("--method classical uses no model: drop --checkpoint / --weights")
         # no semantic map, engine or precision: a spec, backend or --amp given with it would be ignored unread
         require_with("--method semattnet", False, "segment_spec", "backend", "amp")
         return
-    if checkpoint is None and weights is None:
+    if weights is None:
         raise click.UsageError("--checkpoint or --weights is required (or --method classical)")
-    if checkpoint is not None and weights is not None:
-        raise click.UsageError("give --checkpoint or --weights, not both")
 
 
 def _intrinsics(text: str | None):
@@ -190,8 +191,8 @@ def _robot_sinks(bag: dict[str, Any], max_depth: float, timer: Any, limit: Any =
 def _identity(params: dict[str, Any]) -> dict[str, Any]:
     """What a run is, for a resume to check: every option that changes the outputs (paths resolved, a
     weights file by its SHA-256) and the package version."""
-    from semattnet._utils.download import sha256_file
     from semattnet._utils.version import __version__
+    from semattnet.cache import sha256_file
 
     run: dict[str, Any] = {"command": "predict", "version": __version__}
     for key, value in sorted(params.items()):
@@ -296,7 +297,7 @@ def _out_and_resume(out: Path | None, resume: str | None) -> tuple[Path, bool]:
 @click.option("--report", is_flag=True, help="Also write viewer.html: hover depths, layers, 3D view (with --K).")
 @click.option("--K", "intrinsics", default=None, metavar="fx,fy,cx,cy|kitti",
               help="With --report: camera intrinsics for the 3D view ('kitti': KITTI's camera 02).")  # fmt: skip
-def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, sparse: Path | None,
+def predict(weights: str | None, rgb: Path | None, sparse: Path | None,
             kitti_raw: Path | None, frames: str | None, camera: str, semantic: Path | None, segment_spec: str | None,
             out: Path | None, npy: bool, panel: bool, ply: bool, max_depth: float, top_crop: int, deskew: bool,
             device: str, amp: str, backend: str, overwrite: bool, method: str, report: bool,
@@ -320,7 +321,7 @@ def predict(checkpoint: Path | None, weights: str | None, rgb: Path | None, spar
     _check_uncertainty(ply, panel, kitti_raw is not None or bag["bag"] is not None, bag)
     if resuming and overwrite:
         raise click.UsageError("give --resume or --overwrite, not both")
-    _check_method(method, checkpoint, weights)
+    _check_method(method, weights)
     check_precision_options(method, amp, bag.pop("precision"), bag.pop("calibration"), backend)
     if method != "classical":
         from semattnet._utils.device import resolve_device
@@ -387,7 +388,7 @@ def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
     from semattnet.inference.pipeline import check_frames, complete_frames
     from semattnet.inference.semantic import SemanticMaps
     from semattnet.inference.sinks import default_sinks
-    from semattnet.inference.stream import StageTimes
+    from semattnet.inference.timing import StageTimes
     from semattnet.inference.uncertainty import UncertaintyLimit
 
     K = _intrinsics(p["intrinsics"])
@@ -412,7 +413,7 @@ def _run_frames(p: dict[str, Any], out: Path, resuming: bool) -> Any:
                             run=_identity(p), inputs=[weights_input(p["weights"])[1]])  # before the model  # fmt: skip
         if plan.journal.kept:
             click.echo(f"{out}: resuming: {len(plan.journal.kept)} of {len(source.names)} frame(s) already done")
-        completer = _completer(p["method"], None, p["weights"], p["device"], p["amp"], p["backend"], p["precision"],
+        completer = _completer(p["method"], p["weights"], p["device"], p["amp"], p["backend"], p["precision"],
                                p["calibration"])  # fmt: skip
         run = complete_frames(source, completer, sinks, out, overwrite=p["overwrite"], log=click.echo,
                               semantic=maps, checked=plan, timer=timer, prefetch=2 if p["stream"] else 0,

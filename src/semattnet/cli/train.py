@@ -17,7 +17,7 @@ from semattnet.cli._options import (
     WORKERS,
     one_value,
     parse_size,
-    weights_path,
+    resolve_option,
 )
 
 
@@ -55,7 +55,11 @@ from semattnet.cli._options import (
 @click.option("--activation-checkpointing", is_flag=True, default=None,
               help="Recompute each branch in the backward pass: less memory, one more forward.")  # fmt: skip
 @click.option(
-    "--set", "overrides", multiple=True, metavar="KEY=VALUE", help="Any TrainConfig field, e.g. --set val_every=2."
+    "--set",
+    "overrides",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="A TrainConfig field, e.g. --set val_every=2.",
 )
 def train(stage: str, data_root: str | None, dataset: str, segment: str | None, out: str | None, init: str | None,
           config_file: str | None, resume: bool, overwrite: bool,
@@ -67,7 +71,7 @@ def train(stage: str, data_root: str | None, dataset: str, segment: str | None, 
     from semattnet.training.trainer import train as run_training
 
     if init is not None:  # a name or URL goes through the download cache; a local file stays as it is
-        init = str(weights_path(init, "--init"))
+        init = str(resolve_option(init, "--init").file)
     if resume:
         if not out:
             raise click.UsageError("--resume needs --out (the run folder)")

@@ -12,7 +12,7 @@ What ``semattnet data download`` runs. Three parts, chosen with ``what``:
 * ``semantic``: the authors' semantic maps, from an archive the user names (their Google Drive
   link is not recorded, so it cannot be fetched automatically), into ``ROOT/semantic``.
 
-Every file goes through :func:`semattnet._utils.download.fetch` (resumable, atomic, checked against
+Every file goes through :func:`semattnet.cache.fetch` (resumable, atomic, checked against
 its pin: KITTI publishes no checksums, so the first download of each archive is pinned), then is
 unpacked safely (a member with an absolute path or ``..`` refuses the whole archive; files already
 unpacked with the right size are skipped, so a second run resumes) and finally
@@ -33,8 +33,8 @@ from pathlib import Path, PurePosixPath
 
 from semattnet._errors import DataError, InputError
 from semattnet._utils.atomic import disk_full_error, is_disk_full
-from semattnet._utils.download import fetch
 from semattnet._utils.outputs import mark_tree
+from semattnet.cache import fetch
 from semattnet.data import kitti_files as kf
 
 __all__ = [
@@ -353,7 +353,7 @@ def download_kitti(
     Raises:
         LicenseNotAcceptedError: ``accept_license`` is false (a dry run only prints the licence).
         UnsafeArchiveError: an archive tries to write outside its folder.
-        semattnet.weights.DownloadError (``semattnet._utils.download``): a download failed (resume by running again).
+        semattnet.cache.DownloadError: a download failed (resume by running again).
     """
     out, parts = Path(out), parse_what(what)
     if not accept_license and not dry_run:
@@ -396,13 +396,13 @@ def download_dataset(
     log: Log = print,
 ) -> int:
     """``data download --dataset NYUV2|VOID``: each archive of the entry (:mod:`semattnet.data.datasets`)
-    through :func:`semattnet.weights.download.fetch` (``MIRROR/FILE`` when ``mirror`` is given: an
+    through :func:`semattnet.cache.fetch` (``MIRROR/FILE`` when ``mirror`` is given: an
     ``https://`` or ``file://`` prefix; sha256 pinned on first use; resumable), unpacked into ``out``, then
     checked (``data check --dataset``). Returns the number of problems the check found.
 
     Raises:
         LicenseNotAcceptedError: ``accept_license`` is false (a dry run only prints the terms).
-        semattnet.weights.DownloadError: a download failed (resume by running again).
+        semattnet.cache.DownloadError: a download failed (resume by running again).
     """
     from semattnet.data.datasets import get_dataset
 
@@ -436,7 +436,7 @@ def download_dataset(
 
 def _get_archive(url: str, archive: object, out: Path, cache_dir: str | Path | None, progress: bool,
                  delete: bool, log: Log) -> None:  # fmt: skip
-    from semattnet.weights.download import fetch
+    from semattnet.cache import fetch
 
     local = fetch(url, cache_dir=cache_dir, file_name=url.rsplit("/", 1)[-1] or None, progress=progress)
     written, skipped = extract_archive(local, out, getattr(archive, "strip", ()))

@@ -5,7 +5,7 @@ from semattnet.inference.completer import Completion, DepthCompleter
 from semattnet.inference.folder import complete_folder
 from semattnet.inference.padding import crop_padding, pad_to_multiple
 from semattnet.inference.pipeline import check_frames, complete_frames
-from semattnet.inference.stream import StageTimes
+from semattnet.inference.timing import StageTimes
 
 __all__ = ["Completion", "DepthCompleter", "StageTimes", "check_frames", "complete_folder", "complete_frames",
            "crop_padding", "pad_to_multiple"]  # fmt: skip

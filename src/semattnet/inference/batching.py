@@ -30,7 +30,7 @@ class BatchCompleter(Protocol):
 
 
 class Timer(Protocol):
-    """What batching needs of :class:`~semattnet.inference.stream.StageTimes`."""
+    """What batching needs of :class:`~semattnet.inference.timing.StageTimes`."""
 
     def time(self, name: str, stage: str) -> AbstractContextManager[None]: ...
 

@@ -22,7 +22,6 @@ import os
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from functools import partial
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -40,11 +39,12 @@ from semattnet.models.checks import check_has_points, check_sparse_depth
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.uncertainty import with_uncertainty
 from semattnet.weights.hub import load_model
+from semattnet.weights.resolve import resolve_weights
 
 if TYPE_CHECKING:
     from semattnet.data.frames import Frame, FrameSource
     from semattnet.inference.semantic import SemanticMaps
-    from semattnet.inference.stream import StageTimes
+    from semattnet.inference.timing import StageTimes
 
 __all__ = ["Completer", "Completion", "DepthCompleter", "StageHook", "StageTimed"]
 
@@ -121,9 +121,10 @@ class DepthCompleter:
         self._engines: dict[tuple[int, int] | None, InferenceEngine] = {}
 
     @classmethod
-    def from_checkpoint(cls, path: str | Path, device: str | torch.device = "auto", amp: str = "none",
+    def from_checkpoint(cls, path: str | os.PathLike[str], device: str | torch.device = "auto", amp: str = "none",
                         backend: str = "torch") -> DepthCompleter:  # fmt: skip
-        """A completer for the weights file at ``path`` (see :func:`semattnet.weights.load_model`)."""
+        """A completer for the weights at ``path``: a file, a ``save_pretrained`` folder, a registered name or a
+        URL, read by :func:`semattnet.weights.resolve_weights` (see :func:`semattnet.weights.load_model`)."""
         return cls(load_model(path), device, amp, backend, inplace=True)
 
     @classmethod
@@ -131,14 +132,11 @@ class DepthCompleter:
                         amp: str = "none", backend: str = "torch", *, sha256: str | None = None,
                         cache_dir: str | os.PathLike[str] | None = None, progress: bool = True, arch: str | None = None,
                         **overrides: object) -> DepthCompleter:  # fmt: skip
-        """A completer for released weights by name, a local file or folder, or a URL
-        (:func:`semattnet.weights.from_pretrained`: ``sha256``, ``cache_dir``, ``progress``, ``arch``, and config
-        ``overrides``)."""
-        from semattnet.weights import from_pretrained
-
-        model = from_pretrained(name_or_path, sha256=sha256, cache_dir=cache_dir, map_location="cpu", progress=progress,
-                                arch=arch, **overrides)  # fmt: skip
-        return cls(model, device, amp, backend, inplace=True)
+        """A completer for released weights by name, a local file or folder, or a URL, read by
+        :func:`semattnet.weights.resolve_weights` (:func:`semattnet.weights.from_pretrained` explains
+        ``sha256``, ``cache_dir``, ``progress``, ``arch`` and the config ``overrides``)."""
+        resolved = resolve_weights(name_or_path, sha256=sha256, cache_dir=cache_dir, progress=progress)
+        return cls(resolved.build(arch, overrides=overrides), device, amp, backend, inplace=True)
 
     def engine(self, size: tuple[int, int] | None = None) -> InferenceEngine:
         """The engine for padded inputs of ``size`` (built on first use; one for all sizes with ``torch``)."""
@@ -253,7 +251,7 @@ class DepthCompleter:
         and segmented in a background thread (bounded: at most ``prefetch`` frames ahead).
 
         ``semantic``: a :class:`~.semantic.SemanticMaps` (default: the fallback map when the model
-        needs one). ``timer``: a :class:`~semattnet.inference.stream.StageTimes` that gets every stage's time
+        needs one). ``timer``: a :class:`~semattnet.inference.timing.StageTimes` that gets every stage's time
         (``timer.table()`` afterwards). The loop is :func:`semattnet.inference.stream.completions`, the one that
         ``complete_frames`` writes from."""
         from semattnet.inference.semantic import SemanticMaps

@@ -62,7 +62,8 @@ from semattnet.inference.sinks import (
     output_files,
     predict_frame,
 )
-from semattnet.inference.stream import FrameFault, StageTimes, completions, is_frame_fault, read_frame
+from semattnet.inference.stream import FrameFault, completions, is_frame_fault, read_frame
+from semattnet.inference.timing import StageTimes
 
 __all__ = [
     "EXIT_DROPPED",

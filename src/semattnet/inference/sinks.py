@@ -41,7 +41,7 @@ from semattnet.models.outputs import DepthCompletionOutput
 
 if TYPE_CHECKING:  # geometry's point clouds and the stage times are imported where used
     from semattnet.geometry import PointCloud
-    from semattnet.inference.stream import StageTimes
+    from semattnet.inference.timing import StageTimes
 
 __all__ = [
     "SINKS",
@@ -339,7 +339,7 @@ class RunSink(Sink):
 @register_sink("latency", option="--stream")
 @dataclass
 class LatencySink(RunSink):
-    """``latency.json``: the per-stage times of the run (:class:`semattnet.inference.stream.StageTimes`)."""
+    """``latency.json``: the per-stage times of the run (:class:`semattnet.inference.timing.StageTimes`)."""
 
     timer: StageTimes | None = None
     name: str = "latency.json"

@@ -3,12 +3,12 @@
 :func:`completions` is the inside of the one frame loop (:func:`semattnet.inference.pipeline.complete_frames`
 writes what it yields; :meth:`semattnet.inference.DepthCompleter.stream` yields it): each frame is read
 (and decoded), projected, given its semantic map (:class:`~.semantic.SemanticMaps`), completed,
-and every stage is timed into a :class:`StageTimes`. With ``prefetch=N`` the reading, projection and
+and every stage is timed into a :class:`~.timing.StageTimes`. With ``prefetch=N`` the reading, projection and
 segmentation of the next frames run in a background thread while the current frame is completed and
 written; at most ``N`` frames are read ahead of the one the loop holds (a semaphore), so memory stays bounded.
 
-Stages (:data:`STAGES`): ``read`` (read and decode), ``projection`` (LiDAR scan into the image), ``segmentation``
-(the semantic map, when one is computed), ``network``, ``propagation``, ``writing`` (every sink).
+Stages (:data:`~.timing.STAGES`): ``read`` (read and decode), ``projection`` (LiDAR scan into the image),
+``segmentation`` (the semantic map, when one is computed), ``network``, ``propagation``, ``writing`` (every sink).
 
 * A source splits ``read`` from ``projection`` by offering ``read(name)`` (raw inputs, decoded) and
   ``assemble(raw)`` (the :class:`~semattnet.data.frames.Frame`, scan projected), as
@@ -23,8 +23,6 @@ Stages (:data:`STAGES`): ``read`` (read and decode), ``projection`` (LiDAR scan 
 
 from __future__ import annotations
 
-import json
-import platform
 import queue
 import threading
 import time
@@ -32,199 +30,17 @@ from collections.abc import Callable, Generator, Iterator, Sequence
 from contextlib import AbstractContextManager, closing, contextmanager, nullcontext
 from dataclasses import dataclass
 from enum import Enum
-from pathlib import Path
-from typing import TYPE_CHECKING, TypedDict
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from semattnet.data.frames import Frame, FrameSource
 from semattnet.inference.batching import BatchCompleter, complete_group, groups
 from semattnet.inference.completion import Completer, Completion, StageTimed
+from semattnet.inference.timing import DEFAULT_SENSOR_PERIOD_S, StageTimes
 
 if TYPE_CHECKING:
     from semattnet.inference.semantic import SemanticMaps
 
-__all__ = [
-    "DEFAULT_SENSOR_PERIOD_S",
-    "LATENCY_FILE",
-    "STAGES",
-    "FrameFault",
-    "LatencySummary",
-    "StageSummary",
-    "StageTimes",
-    "completions",
-    "cpu_name",
-    "is_frame_fault",
-    "read_frame",
-]
-
-#: The stages timed, in order.
-STAGES = ("read", "projection", "segmentation", "network", "propagation", "writing")
-_LABELS = {"read": "read/decode"}
-#: The sensor period assumed when the frames' stamps cannot say (a 10 Hz LiDAR), seconds.
-DEFAULT_SENSOR_PERIOD_S = 0.1
-#: Where ``semattnet predict`` writes the table, in its ``--out``.
-LATENCY_FILE = "latency.json"
-
-
-class StageSummary(TypedDict, total=False):
-    """One stage of :meth:`StageTimes.summary`: ``median_ms``, ``p95_ms`` and ``frames``, or ``note`` (not run)."""
-
-    median_ms: float
-    p95_ms: float
-    frames: int
-    note: str
-
-
-class LatencySummary(TypedDict):
-    """:meth:`StageTimes.summary` (what ``latency.json`` holds)."""
-
-    frames: int
-    stages: dict[str, StageSummary]
-    sum_of_stages_s: float
-    wall_s: float
-    overlapped: bool
-    per_frame_median_ms: float
-    throughput_hz: float
-    sensor_period_s: float
-    realtime_factor: float
-    not_done: dict[str, int]
-    queue_most: int | None
-    cpu: str
-
-
-def cpu_name() -> str:
-    """The CPU's model name (``/proc/cpuinfo``), else what :mod:`platform` says."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
-
-
-class StageTimes:
-    """Seconds per stage per frame (thread-safe), the loop's wall time and the sensor period.
-
-    A stage timed inside another (``propagation`` inside ``network``) is subtracted from the outer one, so
-    the stages add up to the time spent. ``notes``: stage -> why it has no times (shown in the table).
-    """
-
-    def __init__(self) -> None:
-        self.times: dict[str, dict[str, float]] = {}
-        self.stamps: dict[str, float] = {}
-        self.notes: dict[str, str] = {}
-        self.wall_s = 0.0
-        self.overlapped = False
-        self.queue_most: int | None = None  # --realtime: the most frames waiting for the completer at once
-        self.not_done: dict[str, int] = {}  # frames skipped / dropped, by status (the loop sets it)
-        self._lock = threading.Lock()
-        self._local = threading.local()
-        self._start: float | None = None
-
-    def add(self, name: str, stage: str, seconds: float) -> None:
-        with self._lock:
-            per = self.times.setdefault(name, {})
-            per[stage] = per.get(stage, 0.0) + float(seconds)
-
-    @contextmanager
-    def time(self, name: str, stage: str) -> Iterator[None]:
-        """Time the block as ``stage`` of frame ``name`` (less the stages timed inside it, same thread)."""
-        stack = self._local.__dict__.setdefault("stack", [])
-        stack.append(0.0)
-        t0 = time.perf_counter()
-        try:
-            yield
-        finally:
-            total = time.perf_counter() - t0
-            inner = stack.pop()
-            if stack:
-                stack[-1] += total
-            self.add(name, stage, total - inner)
-
-    def share(self, name: str, names: Sequence[str], stages: Sequence[str]) -> None:
-        """Share frame ``name``'s times of ``stages`` evenly over ``names`` (frames completed in one call)."""
-        with self._lock:
-            first = self.times.setdefault(name, {})
-            part = {s: first[s] / len(names) for s in stages if s in first}
-            for other in names:
-                self.times.setdefault(other, {}).update(part)
-
-    def discard(self, name: str) -> None:
-        """Forget frame ``name``'s times (a frame that was not completed)."""
-        with self._lock:
-            self.times.pop(name, None)
-
-    def stamp(self, name: str, seconds: float | None) -> None:
-        """Record frame ``name``'s sensor time (seconds), for the sensor period."""
-        if seconds is not None:
-            with self._lock:
-                self.stamps[name] = float(seconds)
-
-    def begin(self) -> None:
-        self._start = time.perf_counter()
-
-    def end(self) -> None:
-        if self._start is not None:
-            self.wall_s += time.perf_counter() - self._start
-            self._start = None
-
-    @property
-    def frames(self) -> int:
-        return len(self.times)
-
-    @property
-    def sensor_period_s(self) -> float:
-        """Median spacing of the frames' distinct stamps, else :data:`DEFAULT_SENSOR_PERIOD_S`."""
-        s = np.unique(np.array(list(self.stamps.values()), dtype=np.float64))
-        d = np.diff(s)
-        return float(np.median(d)) if len(d) and np.median(d) > 0 else DEFAULT_SENSOR_PERIOD_S
-
-    def stage(self, stage: str) -> np.ndarray:
-        """Seconds of ``stage``, one per frame that ran it."""
-        with self._lock:
-            return np.array([t[stage] for t in self.times.values() if stage in t], dtype=np.float64)
-
-    def summary(self) -> LatencySummary:
-        """Median and p95 per stage (ms), the sum of medians, wall time, throughput and the sensor period."""
-        stages: dict[str, StageSummary] = {}
-        for s in STAGES:
-            v = self.stage(s)
-            stages[s] = ({"median_ms": 1e3 * float(np.median(v)), "p95_ms": 1e3 * float(np.percentile(v, 95)),
-                          "frames": len(v)} if len(v) else {"note": self.notes.get(s, "not run")})  # fmt: skip
-        per_frame = [sum(t.values()) for t in self.times.values()]
-        period = self.sensor_period_s
-        fps = self.frames / self.wall_s if self.wall_s > 0 else 0.0
-        return {"frames": self.frames, "stages": stages,
-                "sum_of_stages_s": float(sum(per_frame)), "wall_s": self.wall_s, "overlapped": self.overlapped,
-                "per_frame_median_ms": 1e3 * float(np.median(per_frame)) if per_frame else 0.0,
-                "throughput_hz": fps, "sensor_period_s": period, "realtime_factor": fps * period,
-                "not_done": dict(self.not_done), "queue_most": self.queue_most, "cpu": cpu_name()}  # fmt: skip
-
-    def table(self) -> str:
-        """The per-stage latency table (what ``semattnet predict`` prints)."""
-        s = self.summary()
-        rows = [f"{'stage':<14}{'median ms':>11}{'p95 ms':>10}"]
-        for stage, r in s["stages"].items():
-            label = _LABELS.get(stage, stage)
-            if "median_ms" in r and "p95_ms" in r:
-                rows.append(f"{label:<14}{r['median_ms']:>11.1f}{r['p95_ms']:>10.1f}")
-            else:
-                rows.append(f"{label:<14}{'-':>11}{'-':>10}  ({r.get('note', '')})")
-        period = s["sensor_period_s"]
-        verdict = "keeps up" if s["realtime_factor"] >= 1 else "falls behind"
-        rows.append(f"{'per frame':<14}{s['per_frame_median_ms']:>11.1f}")
-        rows.append(f"{s['frames']} frame(s) in {s['wall_s']:.2f} s{' (read ahead)' if s['overlapped'] else ''}: "
-                    f"{s['throughput_hz']:.2f} frames/s against a sensor period of {1e3 * period:.1f} ms "
-                    f"({1 / period:.1f} Hz): {s['realtime_factor']:.2g}x real time, {verdict}")  # fmt: skip
-        if any(s["not_done"].values()):
-            held = f"; at most {s['queue_most']} frame(s) waited" if s["queue_most"] is not None else ""
-            rows.append("not completed: " + ", ".join(f"{n} {k}" for k, n in s["not_done"].items() if n) + held)
-        return "\n".join(rows)
-
-    def to_json(self) -> str:
-        return json.dumps(self.summary(), indent=2) + "\n"
+__all__ = ["FrameFault", "completions", "is_frame_fault", "read_frame"]
 
 
 def is_frame_fault(exc: BaseException) -> bool:
@@ -384,7 +200,7 @@ class _Mailbox:
 
 def _paced(source: FrameSource, names: Sequence[str], semantic: SemanticMaps | None, timer: StageTimes,
            speed: float) -> Generator[_Item, None, None]:  # fmt: skip
-    """The frames at their sensor pace (``timestamp``, else :data:`DEFAULT_SENSOR_PERIOD_S` apart, ``speed``
+    """The frames at their sensor pace (``timestamp``, else :data:`~.timing.DEFAULT_SENSOR_PERIOD_S` apart, ``speed``
     times faster): a thread reads each frame and hands it over at its time; when the loop is still busy the
     newest frame wins and the older one is dropped (a ``dropped`` :class:`FrameFault`). Bounded: one frame
     waiting, one being read, one being completed."""

@@ -23,7 +23,7 @@ PathLike = str | os.PathLike[str]
 
 def semantic_cache(dataset: str, root: PathLike, spec: str, palette: str, cache_dir: PathLike | None = None) -> Path:
     """The cache folder of ``spec``'s maps of the frames under ``root`` (module docstring)."""
-    from semattnet._utils.download.cache import get_cache_dir
+    from semattnet.cache import get_cache_dir
 
     key = hashlib.sha256("\n".join([spec, palette, str(Path(root).resolve())]).encode()).hexdigest()[:16]
     return get_cache_dir(cache_dir) / "semantic" / f"{dataset}-{key}"

@@ -136,7 +136,7 @@ def resolve_hf_source(rest: str) -> tuple[str, str | None]:
 
 def _load_model(source: str, revision: str | None) -> Any:
     transformers = require("transformers", "hf: segmenters")
-    from semattnet.weights.download import is_offline
+    from semattnet.cache import is_offline
 
     kw = {"revision": revision, "local_files_only": is_offline()}
     try:

@@ -1,10 +1,12 @@
 """Weights: reading checkpoints without running their code, loading into models, conversion to
 safetensors, ONNX / TorchScript export, the released-weights registry and fetching them through the
-verified download cache (:mod:`semattnet._utils.download`).
+verified download cache (:mod:`semattnet.cache`, whose public names are also here).
 
-Every model with weights is built by one function, :func:`build_model_with_weights` (config from
-the weights, then overrides, then a strict load): :func:`load_model`, :func:`from_pretrained`,
-:meth:`PretrainedWeights.build` and ``torch.hub`` (:func:`hub_model`) all call it.
+Every weights spec (a registry name, a file, a ``save_pretrained`` folder, a URL) is read by one
+function, :func:`resolve_weights`. Every model with weights is built by one function,
+:func:`build_model_with_weights` (config from the weights, then overrides, then a strict load):
+:func:`load_model`, :func:`from_pretrained`, :meth:`PretrainedWeights.build` and ``torch.hub``
+(:func:`hub_model`) all call it.
 
 Examples:
     >>> from semattnet import weights
@@ -17,6 +19,17 @@ Downloads need the ``hub`` extra (``pip install 'semattnet[hub]'``: pooch, huggi
 local files and folders need nothing more.
 """
 
+from semattnet.cache import (
+    ENV_CACHE,
+    ENV_OFFLINE,
+    ChecksumError,
+    DownloadError,
+    OfflineError,
+    get_cache_dir,
+    is_offline,
+    read_pins,
+    sha256_file,
+)
 from semattnet.weights.builder import WeightsMismatchError, build_model_with_weights
 from semattnet.weights.checkpoint import (
     Checkpoint,
@@ -28,18 +41,6 @@ from semattnet.weights.checkpoint import (
     load_checkpoint,
     load_weights,
     save_safetensors,
-)
-from semattnet.weights.download import (
-    ENV_CACHE,
-    ENV_OFFLINE,
-    ChecksumError,
-    DownloadError,
-    OfflineError,
-    fetch,
-    get_cache_dir,
-    is_offline,
-    read_pins,
-    sha256_file,
 )
 from semattnet.weights.hub import (
     CONFIG_NAME,
@@ -60,6 +61,7 @@ from semattnet.weights.pretrained import (
     list_pretrained,
     register_weights,
 )
+from semattnet.weights.resolve import ResolvedWeights, WeightsSpecError, fetch, parse_weights_spec, resolve_weights
 
 __all__ = [
     "CONFIG_NAME",
@@ -74,10 +76,12 @@ __all__ = [
     "DownloadError",
     "OfflineError",
     "PretrainedWeights",
+    "ResolvedWeights",
     "StateDictMismatchError",
     "UnknownWeightsError",
     "UnsafeCheckpointError",
     "WeightsMismatchError",
+    "WeightsSpecError",
     "build_model_with_weights",
     "config_from_state_dict",
     "default_weights",
@@ -92,10 +96,12 @@ __all__ = [
     "load_checkpoint",
     "load_model",
     "load_weights",
+    "parse_weights_spec",
     "push_to_hub",
     "read_packed",
     "read_pins",
     "register_weights",
+    "resolve_weights",
     "save_packed",
     "save_pretrained",
     "save_safetensors",

@@ -60,15 +60,15 @@ class InertObject:
 
     _pickled_name = "?"
 
-    def __new__(cls, *args: Any, **kwargs: Any) -> InertObject:
+    def __new__(cls, *args: object, **kwargs: object) -> InertObject:
         return object.__new__(cls)
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
+    def __init__(self, *args: object, **kwargs: object) -> None:
         self.__dict__["_args"] = args
         if kwargs:
             self.__dict__["_kwargs"] = kwargs
 
-    def __setstate__(self, state: Any) -> None:
+    def __setstate__(self, state: object) -> None:
         if isinstance(state, tuple) and len(state) == 2 and isinstance(state[0], dict | type(None)):
             state = {**(state[0] or {}), **(state[1] or {})}
         if isinstance(state, dict):
@@ -81,7 +81,7 @@ class InertObject:
         return f"<inert {self._pickled_name} {shown}>"
 
 
-_SAFE: dict[tuple[str, str], Any] = {
+_SAFE: dict[tuple[str, str], object] = {
     ("collections", "OrderedDict"): __import__("collections").OrderedDict,
     ("builtins", "set"): set,
     ("builtins", "frozenset"): frozenset,
@@ -115,7 +115,7 @@ _DANGEROUS_ROOTS = {
 }  # fmt: skip
 
 
-def _resolve_numpy(module: str, name: str) -> Any:
+def _resolve_numpy(module: str, name: str) -> object:
     import numpy as np
 
     if name == "ndarray":
@@ -136,13 +136,13 @@ _CODE_NAMES = {"eval", "exec", "system", "__import__", "popen", "compile", "geta
                "loads", "apply"}  # fmt: skip
 
 
-def _torch_weights_only_allowed() -> dict[str, Any]:
+def _torch_weights_only_allowed() -> dict[str, object]:
     """The globals ``torch.load(weights_only=True)`` allows by default (tensor rebuilding, dtypes, ...)."""
     allowed = getattr(optional("torch._weights_only_unpickler"), "_get_allowed_globals", None)
     return dict(allowed()) if allowed is not None else {}  # {} on a torch without it
 
 
-def resolve_global(module: str, name: str, sink: set[str] | None = None) -> Any:
+def resolve_global(module: str, name: str, sink: set[str] | None = None) -> object:
     """The object a pickle may get for the global ``module.name``, under this module's policy.
 
     Data-rebuilding names resolve to the real objects; names that can run code raise
@@ -174,7 +174,7 @@ def resolve_global(module: str, name: str, sink: set[str] | None = None) -> Any:
     return type(name, (InertObject,), {"_pickled_name": qualname, "__module__": "semattnet.inert"})
 
 
-def _is_shared(obj: Any, named: dict[int, Any]) -> bool:
+def _is_shared(obj: object, named: dict[int, object]) -> bool:
     """Whether ``obj`` is an object of the calling process rather than one the pickle created: a
     global the pickle named (a class, function, module), or a built-in NumPy dtype singleton."""
     if id(obj) in named or isinstance(obj, type | types.ModuleType | types.FunctionType | types.BuiltinFunctionType):
@@ -239,14 +239,14 @@ class Unpickler(_BASE):
 
     def __init__(self, file: Any, **kwargs: Any) -> None:
         super().__init__(file, **kwargs)
-        self.named: dict[int, Any] = {}  # id -> every object find_class gave out (kept alive)
+        self.named: dict[int, object] = {}  # id -> every object find_class gave out (kept alive)
 
-    def find_class(self, module: str, name: str) -> Any:
+    def find_class(self, module: str, name: str) -> object:
         obj = resolve_global(module, name, self.sink)
         self.named[id(obj)] = obj
         return obj
 
-    def load(self) -> Any:
+    def load(self) -> object:
         try:
             return super().load()
         except (pickle.UnpicklingError, SemAttNetError):
@@ -282,7 +282,7 @@ def safe_pickle_module() -> tuple[types.SimpleNamespace, set[str]]:
     neutralised: set[str] = set()
     unpickler = type("Unpickler", (Unpickler,), {"sink": neutralised})
 
-    def load(file: Any, **kwargs: Any) -> Any:
+    def load(file: Any, **kwargs: Any) -> object:
         return unpickler(file, **kwargs).load()
 
     return types.SimpleNamespace(__name__="semattnet_safe_pickle", Unpickler=unpickler, load=load), neutralised

@@ -9,7 +9,7 @@ folders, URLs), :meth:`semattnet.weights.PretrainedWeights.build`, and ``torch.h
    ``config.json``) or in the file (safetensors metadata, a ``config`` entry), else inferred from
    the tensor shapes (:func:`~semattnet.weights.checkpoint.config_from_state_dict`). A recorded
    config whose shapes contradict the tensors is a one-line :class:`WeightsMismatchError`.
-2. **The caller's overrides.** Any field that keeps the shapes (``refinement_mode``,
+2. **The caller's overrides.** A field that keeps the shapes (``refinement_mode``,
    ``iterations``); an override of a shape field (:data:`SHAPE_FIELDS`) to another value than the
    weights have, e.g. ``width=0.5`` on width-1 weights, is a one-line :class:`WeightsMismatchError`.
    ``arch`` (an entry point's model name) must be of the weights' model class (full model vs
@@ -26,7 +26,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 import torch
 from torch import nn
@@ -55,7 +54,7 @@ class WeightsMismatchError(CheckpointError, StateDictMismatchError):
     """The weights do not fit what was asked: a contradicting override, record, config or entry point."""
 
 
-def _value(cfg: SemAttNetConfig, name: str) -> Any:
+def _value(cfg: SemAttNetConfig, name: str) -> object:
     """A shape field as the weights see it (``width``: the base channel count it gives)."""
     return round(32 * cfg.width) if name == "width" else getattr(cfg, name)
 
@@ -90,7 +89,7 @@ def weights_config(
     return given
 
 
-def _apply_overrides(cfg: SemAttNetConfig, overrides: Mapping[str, Any], source: str) -> SemAttNetConfig:
+def _apply_overrides(cfg: SemAttNetConfig, overrides: Mapping[str, object], source: str) -> SemAttNetConfig:
     """Step 2: ``cfg`` with ``overrides``; an override that changes a shape field is refused."""
     if not overrides:
         return cfg
@@ -122,7 +121,7 @@ def build_model_with_weights(
     *,
     config: SemAttNetConfig | None = None,
     arch: str | None = None,
-    overrides: Mapping[str, Any] | None = None,
+    overrides: Mapping[str, object] | None = None,
     device: str | torch.device | None = None,
     source: str | None = None,
 ) -> nn.Module:

@@ -87,10 +87,10 @@ class Checkpoint:
     state_dict: dict[str, torch.Tensor]
     format: str
     epoch: int | None = None
-    args: dict[str, Any] | None = None
-    best_result: Any = None
+    args: dict[str, object] | None = None
+    best_result: object = None
     config: SemAttNetConfig | None = None
-    extra: dict[str, Any] = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)  # whatever the file's top level holds besides weights
     neutralised: set[str] = field(default_factory=set)
 
 
@@ -109,9 +109,11 @@ def filter_state_dict(sd: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]
     return dict(sd)
 
 
-def _config_from_metadata(raw: Any, path: Path) -> SemAttNetConfig | None:
+def _config_from_metadata(raw: object, path: Path) -> SemAttNetConfig | None:
     if raw is None:
         return None
+    if not isinstance(raw, str | Mapping):
+        raise CheckpointError(f"{path}: invalid model config in checkpoint: a {type(raw).__name__}")
     try:
         data = json.loads(raw) if isinstance(raw, str) else dict(raw)
         if "kernel_sizes" in data:
@@ -171,7 +173,7 @@ def _allow_list(info: Inspected) -> tuple[list[Any], set[str]]:
     return pairs, neutralised
 
 
-def _load_pickle(info: Inspected) -> tuple[Any, set[str]]:
+def _load_pickle(info: Inspected) -> tuple[object, set[str]]:
     """Unpickle a torch file the gate accepted: ``weights_only=True`` with our allow-list for
     pickle protocols it supports (<= 3, what torch.save writes), else the safe unpickler."""
     if info.protocol <= 3:
@@ -219,7 +221,7 @@ def load_checkpoint(path: str | os.PathLike[str]) -> Checkpoint:
     return _checkpoint_from_object(obj, path, neutralised)
 
 
-def _checkpoint_from_object(obj: Any, path: Path, neutralised: set[str]) -> Checkpoint:
+def _checkpoint_from_object(obj: object, path: Path, neutralised: set[str]) -> Checkpoint:
     if isinstance(obj, Mapping) and obj and all(isinstance(v, torch.Tensor) for v in obj.values()):
         return Checkpoint(path=path, state_dict=filter_state_dict(obj), format="state_dict", neutralised=neutralised)
     if not isinstance(obj, Mapping):
@@ -329,7 +331,7 @@ def config_from_state_dict(
         raise CheckpointError(f"{where}not a SemAttNet state dict that can be built: {exc}") from None
 
 
-def _json_default(o: Any) -> Any:
+def _json_default(o: object) -> object:
     if isinstance(o, InertObject):
         return {k: v for k, v in vars(o).items() if not k.startswith("_")}
     return str(o)

@@ -45,7 +45,7 @@ import zipfile
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import BinaryIO
 
 import torch
 
@@ -117,7 +117,7 @@ class Inspected:
     format: str
     protocol: int = 0
     globals: set[str] = field(default_factory=set)
-    header: dict[str, Any] = field(default_factory=dict)
+    header: dict[str, object] = field(default_factory=dict)
 
 
 def inspect_weights_file(path: str | Path) -> Inspected:
@@ -164,7 +164,7 @@ def _is_tar(head: bytes) -> bool:
 # ----------------------------------------------------------------------------- safetensors
 
 
-def _read_safetensors_header(path: Path, size: int) -> tuple[dict[str, Any], int]:
+def _read_safetensors_header(path: Path, size: int) -> tuple[dict[str, object], int]:
     """The parsed header and its length; the tensor count is bounded before parsing."""
     with open(path, "rb") as f:
         (n,) = struct.unpack("<Q", f.read(8))
@@ -204,7 +204,7 @@ def _inspect_safetensors(path: Path, size: int) -> Inspected:
     return Inspected(path=path, format="safetensors", header=header)
 
 
-def _tensor_span(path: Path, name: str, entry: Any, data_size: int) -> tuple[int, int, str]:
+def _tensor_span(path: Path, name: str, entry: object, data_size: int) -> tuple[int, int, str]:
     if not isinstance(entry, dict) or set(entry) != {"dtype", "shape", "data_offsets"}:
         raise CheckpointError(f"{path}: safetensors entry {name!r} is malformed")
     dtype, shape, offsets = entry["dtype"], entry["shape"], entry["data_offsets"]
@@ -303,7 +303,7 @@ def _inspect_legacy(path: Path, size: int) -> Inspected:
 # ----------------------------------------------------------------------------- pickle disassembly
 
 
-def _pickle_ops(path: Path, f: BinaryIO) -> Iterator[tuple[str, Any, int]]:
+def _pickle_ops(path: Path, f: BinaryIO) -> Iterator[tuple[str, object, int]]:
     """``(name, argument, protocol the opcode needs)`` of one pickle's opcodes, at most :data:`MAX_PICKLE_OPS`."""
     try:
         for i, (op, arg, _) in enumerate(pickletools.genops(f)):
@@ -331,13 +331,13 @@ def _scan_pickle(path: Path, f: BinaryIO) -> tuple[int, set[str], list[int]]:
     last MARK (and memo gets) to read ``numel``.
     """
     protocol, names, sizes = 0, set(), []
-    memo: dict[Any, Any] = {}
-    window: list[Any] = []
-    last: Any = None
+    memo: dict[object, object] = {}
+    window: list[object] = []
+    last: object = None
     for op, arg, needs in _pickle_ops(path, f):
         protocol = max(protocol, needs)
         if op == "PROTO":
-            protocol = max(protocol, int(arg))
+            protocol = max(protocol, int(str(arg)))
         elif op in ("GLOBAL", "INST"):
             module, _, name = str(arg).partition(" ")
             names.add(f"{module}.{name}")
@@ -372,7 +372,7 @@ def _check_storage_sizes(path: Path, sizes: list[int], file_size: int) -> None:
 # ----------------------------------------------------------------------------- payload digest
 
 
-def _update(h: Any, where: str, obj: Any) -> None:
+def _update(h: hashlib._Hash, where: str, obj: object) -> None:
     if isinstance(obj, torch.Tensor):
         t = obj.detach().to("cpu").contiguous().reshape(-1)
         h.update(f"{where}|{t.dtype}|{tuple(obj.shape)}\n".encode())
@@ -385,7 +385,7 @@ def _update(h: Any, where: str, obj: Any) -> None:
             _update(h, f"{where}/{i}", v)
 
 
-def tensor_digest(obj: Any) -> str:
+def tensor_digest(obj: object) -> str:
     """sha256 of every tensor in ``obj`` (nested dicts, lists, tuples): path, dtype, shape and bytes.
 
     The :data:`DIGEST_KEY` entry of a top-level mapping is left out, so a checkpoint can carry it.
@@ -397,7 +397,7 @@ def tensor_digest(obj: Any) -> str:
     return h.hexdigest()
 
 
-def check_tensor_bounds(path: Path, obj: Any) -> None:
+def check_tensor_bounds(path: Path, obj: object) -> None:
     """Refuse ``path`` when the objects it built (walked as :func:`tensor_digest` walks them) nest
     deeper than :data:`MAX_OBJECT_DEPTH` or more than :data:`MAX_OBJECT_VISITS` times (cycles, shared
     containers), or hold a tensor view asking for more bytes than its storage has (zero strides,
@@ -429,7 +429,7 @@ def _check_view(path: Path, t: torch.Tensor) -> None:
         )
 
 
-def verify_digest(path: Path, obj: Any, expected: Any) -> None:
+def verify_digest(path: Path, obj: object, expected: object) -> None:
     """Refuse ``path`` when its objects are out of bounds (:func:`check_tensor_bounds`) or when
     ``expected`` (the stored digest, if any) does not match its tensors."""
     check_tensor_bounds(path, obj)

@@ -21,12 +21,15 @@ from __future__ import annotations
 import gzip
 import json
 import zlib
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 import torch
+from torch import nn
 
+from semattnet._errors import InputError
 from semattnet._utils.atomic import atomic_path
+from semattnet.models.config import SemAttNetConfig
 from semattnet.weights.gate import CheckpointError
 
 __all__ = [
@@ -94,7 +97,7 @@ def dequantise(tensors: dict[str, torch.Tensor], where: str = "packed weights") 
     return sd
 
 
-def encode_packed(state_dict: dict[str, torch.Tensor], config: dict[str, Any], info: dict[str, Any],
+def encode_packed(state_dict: dict[str, torch.Tensor], config: Mapping[str, object], info: Mapping[str, object],
                   levels: int = 127) -> bytes:  # fmt: skip
     """The bytes of a packed file: :func:`quantise`'s tensors with ``config`` and ``info``, gzip-compressed."""
     from safetensors.torch import save
@@ -103,10 +106,13 @@ def encode_packed(state_dict: dict[str, torch.Tensor], config: dict[str, Any], i
     return gzip.compress(save(quantise(state_dict, levels), metadata=meta), compresslevel=9, mtime=0)
 
 
-def save_packed(model: Any, path: str | Path, info: dict[str, Any], levels: int = 127) -> Path:
+def save_packed(model: nn.Module, path: str | Path, info: Mapping[str, object], levels: int = 127) -> Path:
     """Write ``model`` (a SemAttNet: its ``config`` and weights) packed at ``levels``, atomically."""
+    config = getattr(model, "config", None)
+    if not isinstance(config, SemAttNetConfig):
+        raise InputError(f"save_packed: the model has no SemAttNetConfig ({type(model).__name__})")
     path = Path(path)
-    blob = encode_packed(model.state_dict(), model.config.to_dict(), info, levels)
+    blob = encode_packed(model.state_dict(), config.to_dict(), info, levels)
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
         tmp.write_bytes(blob)

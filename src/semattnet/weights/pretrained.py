@@ -17,7 +17,9 @@ import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any, Literal
+from typing import Literal
+
+from torch import nn
 
 from semattnet._errors import InputError
 from semattnet.models.config import SemAttNetConfig
@@ -46,7 +48,7 @@ FORMATS = ("authors-pth", "torch", "safetensors", "hf-folder", "packed")
 WeightsFormat = Literal["authors-pth", "torch", "safetensors", "hf-folder", "packed"]
 
 #: The input contract of every model in this library (spec ARCHITECTURE.md "Inputs").
-_INPUTS: Mapping[str, Any] = MappingProxyType(
+_INPUTS: Mapping[str, object] = MappingProxyType(
     {
         "rgb": "float32 (B, 3, H, W), raw colour values 0..255, no normalisation",
         "semantic": (
@@ -98,7 +100,7 @@ class PretrainedWeights:
         file_name: name of the file in the cache.
         format: one of :data:`FORMATS`.
         sha256: hex digest of the file, or None when nobody published one (then the first download is
-            pinned, see :mod:`semattnet.weights.download`).
+            pinned, see :mod:`semattnet.cache`).
         size_bytes: exact file size if known, else None.
         num_params: number of parameters of the model the weights fit.
         license: the terms, in words.
@@ -119,12 +121,12 @@ class PretrainedWeights:
     file_name: str
     format: WeightsFormat
     license: str
-    config: Mapping[str, Any] = field(default_factory=dict)
+    config: Mapping[str, object] = field(default_factory=dict)
     sha256: str | None = None
     size_bytes: int | None = None
     num_params: int | None = None
     paper_metrics: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
-    preprocessing: Mapping[str, Any] = field(default_factory=lambda: _INPUTS)
+    preprocessing: Mapping[str, object] = field(default_factory=lambda: _INPUTS)
     paper: str = ""
     doi: str | None = None
     source: str = ""
@@ -148,12 +150,12 @@ class PretrainedWeights:
         base = model_config(self.arch)
         return base.replace(**self.config) if self.config else base
 
-    def build(self, **overrides: Any) -> Any:
+    def build(self, **overrides: object) -> nn.Module:
         """The untrained model these weights fit (``overrides`` change config fields), through
         :func:`semattnet.weights.builder.build_model_with_weights` without weights."""
         return builder.build_model_with_weights(None, config=self.model_config(), arch=self.arch, overrides=overrides)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         """Plain JSON-serialisable data (e.g. for a model card)."""
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         out["urls"] = list(self.urls)

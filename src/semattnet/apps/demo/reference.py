@@ -174,16 +174,16 @@ def train_reference(
 
 
 def package_reference(
-    checkpoint: Path,
+    weights: Path,
     held: HeldOut,
     target: Path,
     recipe: ReferenceRecipe = REFERENCE_RECIPE,
     train_seconds: float | None = None,
     log: Callable[[str], None] = print,
 ) -> Path:
-    """Quantise the trained ``checkpoint``, score what ships on ``held`` beside the classical
-    completion, and write it with its record to ``target``."""
-    trained = load_checkpoint(checkpoint)
+    """Quantise the trained ``weights`` (a training run's file), score what ships on ``held`` beside the
+    classical completion, and write it with its record to ``target``."""
+    trained = load_checkpoint(weights)
     model = build_model("semattnet", config=trained.config)
     load_weights(model, trained)
     levels = choose_levels(model)

@@ -16,7 +16,6 @@ import numpy as np
 import torch
 
 from semattnet._utils.device import resolve_device
-from semattnet._utils.download import sha256_file
 from semattnet._utils.outputs import mark_tree
 from semattnet.apps.demo import figures as figs
 from semattnet.apps.demo import reference as ref
@@ -39,6 +38,7 @@ from semattnet.apps.demo.results import (
 )
 from semattnet.apps.experiment import HeldOut, complete_held_out, make_synthetic, score
 from semattnet.baselines.classical import complete_classical
+from semattnet.cache import sha256_file
 from semattnet.viz.report import write_report
 
 __all__ = ["DemoResult", "make_empty", "run_demo", "train_reference_run"]

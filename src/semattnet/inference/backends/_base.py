@@ -19,7 +19,7 @@ __all__ = ["HEADS_PREFIX", "ExportedGraphEngine", "InferenceEngine", "LogFn", "S
 #: A progress logger the backends call with one line of text (e.g. ``print`` or ``logger.info``).
 LogFn = Callable[[str], object]
 #: The timing hook of a stage an engine runs inside its call: ``hook(stage)`` is the context the stage runs in
-#: (e.g. :meth:`semattnet.inference.stream.StageTimes.time` of the current frame).
+#: (e.g. :meth:`semattnet.inference.timing.StageTimes.time` of the current frame).
 StageHook = Callable[[str], AbstractContextManager[object]]
 
 _FIELDS = tuple(f.name for f in fields(DepthCompletionOutput))

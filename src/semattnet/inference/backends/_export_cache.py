@@ -24,10 +24,9 @@ import torch
 from torch import nn
 
 from semattnet._utils.atomic import atomic_path
-from semattnet._utils.download import sha256_file
 from semattnet._utils.version import library_version
+from semattnet.cache import get_cache_dir, sha256_file
 from semattnet.inference.backends._base import LogFn
-from semattnet.weights.download import get_cache_dir
 from semattnet.weights.export import export_onnx
 from semattnet.weights.gate import tensor_digest
 

@@ -18,15 +18,16 @@ import re
 import sys
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 from semattnet._utils.atomic import atomic_path
-from semattnet._utils.download.errors import ChecksumError, DownloadError
+from semattnet.cache.errors import ChecksumError, DownloadError
 
 __all__ = [
     "ENV_CACHE",
     "ENV_OFFLINE",
     "PINS_FILE",
+    "PinRecord",
     "announce_pin",
     "cache_key",
     "cache_lock",
@@ -46,6 +47,18 @@ ENV_CACHE = "SEMATTNET_CACHE"
 ENV_OFFLINE = "SEMATTNET_OFFLINE"
 PINS_FILE = "pins.json"
 _TRUE = ("1", "true", "yes", "on")
+
+
+class PinRecord(TypedDict, total=False):
+    """One file's entry in ``pins.json`` (see :func:`pin_record`)."""
+
+    written: bool
+    sha256: str
+    size: int
+    mtime_ns: int
+    origin: str
+    trust: str
+    verified: str
 
 
 def is_offline() -> bool:
@@ -90,7 +103,7 @@ def cache_key(root: Path, path: Path) -> str:
     return path.relative_to(root).as_posix()
 
 
-def read_pins(cache_dir: str | os.PathLike[str] | None = None) -> dict[str, dict[str, Any]]:
+def read_pins(cache_dir: str | os.PathLike[str] | None = None) -> dict[str, PinRecord]:
     """The pin records, keyed by the file's path relative to the cache."""
     path = pins_path(get_cache_dir(cache_dir))
     try:
@@ -114,7 +127,7 @@ def cache_lock(root: Path, name: str) -> Iterator[None]:
         yield
 
 
-def update_pins(root: Path, key: str, record: dict[str, Any] | None) -> None:
+def update_pins(root: Path, key: str, record: PinRecord | None) -> None:
     """Set (or, with None, remove) one pin record, atomically and under a lock."""
     with cache_lock(root, PINS_FILE):
         pins = read_pins(root)
@@ -127,19 +140,13 @@ def update_pins(root: Path, key: str, record: dict[str, Any] | None) -> None:
             tmp.write_text(json.dumps(pins, indent=2, sort_keys=True) + "\n")
 
 
-def pin_record(path: Path, sha: str, origin: str, trust: str, written: bool = False) -> dict[str, Any]:
+def pin_record(path: Path, sha: str, origin: str, trust: str, written: bool = False) -> PinRecord:
     """The pin of ``path``: sha256, size, mtime, origin, trust (``given``, ``first-use``, ``pinned``, ...) and
     ``written`` (this library wrote the file and hashed it as it wrote it)."""
     st = path.stat()
-    return {
-        "written": written,
-        "sha256": sha,
-        "size": st.st_size,
-        "mtime_ns": st.st_mtime_ns,
-        "origin": origin,
-        "trust": trust,
-        "verified": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-    }
+    now = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+    return PinRecord(written=written, sha256=sha, size=st.st_size, mtime_ns=st.st_mtime_ns, origin=origin,
+                     trust=trust, verified=now)  # fmt: skip
 
 
 def verify_cached(root: Path, path: Path, expected: str | None, origin: str = "", *, announce: bool = True) -> str:
@@ -154,18 +161,18 @@ def verify_cached(root: Path, path: Path, expected: str | None, origin: str = ""
         ChecksumError: the file does not match.
     """
     key = cache_key(root, path)
-    rec = read_pins(root).get(key)
+    rec = read_pins(root).get(key, PinRecord())
     st = path.stat()
-    if rec and rec.get("written") is True and rec.get("size") == st.st_size and rec.get("mtime_ns") == st.st_mtime_ns:
+    if rec.get("written") is True and rec.get("size") == st.st_size and rec.get("mtime_ns") == st.st_mtime_ns:
         if expected is None or rec.get("sha256") == expected:
-            return str(rec["sha256"])
+            return rec["sha256"]
     digest = sha256_file(path)
-    want = expected or (rec or {}).get("sha256")
+    want = expected or rec.get("sha256")
     if want and digest != want:
         source = "expected" if expected else "pinned"
         raise ChecksumError(f"{path}: sha256 {digest} does not match the {source} {want}; delete it to download again")
-    trust = "given" if expected else (rec or {}).get("trust", "first-use")
-    update_pins(root, key, pin_record(path, digest, (rec or {}).get("origin", origin), trust))
+    trust = "given" if expected else rec.get("trust", "first-use")
+    update_pins(root, key, pin_record(path, digest, rec.get("origin", origin), trust))
     if not want and announce:
         announce_pin(path, digest, root)
     return digest

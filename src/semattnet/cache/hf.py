@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
 
 from semattnet._errors import InputError
-from semattnet._utils.download.cache import hf_cache_dir, is_offline, sha256_file
-from semattnet._utils.download.errors import ChecksumError, DownloadError, OfflineError
 from semattnet._utils.extras import require
+from semattnet.cache.errors import ChecksumError, DownloadError, OfflineError
+from semattnet.cache.store import hf_cache_dir, is_offline, sha256_file
 
 __all__ = ["fetch_hf", "parse_hf_url"]
 
@@ -45,7 +44,7 @@ def fetch_hf(
     huggingface_hub = require("huggingface_hub", "hf:// URLs")
     repo_id, revision, filename = parse_hf_url(url)
     offline = is_offline()
-    kwargs: dict[str, Any] = {"repo_id": repo_id, "revision": revision, "local_files_only": offline}
+    kwargs: dict[str, str | bool | None] = {"repo_id": repo_id, "revision": revision, "local_files_only": offline}
     hf_cache = hf_cache_dir(cache_dir)
     if hf_cache is not None:
         kwargs["cache_dir"] = str(hf_cache)

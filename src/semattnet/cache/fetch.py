@@ -15,7 +15,9 @@ from pathlib import Path
 
 from semattnet._errors import InputError, MissingDependencyError
 from semattnet._utils.atomic import disk_full_error, is_disk_full
-from semattnet._utils.download.cache import (
+from semattnet.cache.errors import ChecksumError, DownloadError, NotAFileError, OfflineError
+from semattnet.cache.hf import fetch_hf
+from semattnet.cache.store import (
     ENV_OFFLINE,
     announce_pin,
     cache_key,
@@ -30,9 +32,7 @@ from semattnet._utils.download.cache import (
     update_pins,
     verify_cached,
 )
-from semattnet._utils.download.errors import ChecksumError, DownloadError, NotAFileError, OfflineError
-from semattnet._utils.download.hf import fetch_hf
-from semattnet._utils.download.transports import check_file_name, default_file_name, download_to, url_scheme
+from semattnet.cache.transports import check_file_name, default_file_name, download_to, url_scheme
 
 __all__ = ["Target", "check_sha256", "fetch", "fetch_target", "url_target"]
 

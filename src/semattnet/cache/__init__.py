@@ -3,7 +3,7 @@
 Split by concern:
 
 * :mod:`.errors` ``DownloadError`` (an ``OSError`` and a ``SemAttNetError``), ``ChecksumError``, ``OfflineError``;
-* :mod:`.cache` the cache folder, the offline switch, sha256, locks and the pin file (trust on first use);
+* :mod:`.store` the cache folder, the offline switch, sha256, locks and the pin file (trust on first use);
 * :mod:`.transports` http(s) (huggingface_hub, resumable; pooch without it), Google Drive (gdown), file://;
 * :mod:`.hf` ``hf://owner/repo[@revision][/file]`` through huggingface_hub;
 * :mod:`.fetch` one file: cache hit verified, miss downloaded into a temporary file, checked, moved in.
@@ -21,11 +21,15 @@ Cache layout (``$SEMATTNET_CACHE``, default ``platformdirs.user_cache_dir("semat
     huggingface/                           hf:// downloads when the cache is set explicitly
     .locks/                                inter-process locks
 
-Users reach this through :func:`semattnet.weights.fetch` (which also takes registry names) and
-``semattnet data download``.
+The public face of the cache for every layer above it (weights, data, segmentation, the engines'
+export cache, the demo); :func:`semattnet.weights.fetch` adds registry names, ``semattnet data download``
+the datasets' archives.
 """
 
-from semattnet._utils.download.cache import (
+from semattnet.cache.errors import ChecksumError, DownloadError, OfflineError
+from semattnet.cache.fetch import Target, check_sha256, fetch, fetch_target, url_target
+from semattnet.cache.hf import fetch_hf, parse_hf_url
+from semattnet.cache.store import (
     ENV_CACHE,
     ENV_OFFLINE,
     PINS_FILE,
@@ -40,10 +44,7 @@ from semattnet._utils.download.cache import (
     update_pins,
     verify_cached,
 )
-from semattnet._utils.download.errors import ChecksumError, DownloadError, OfflineError
-from semattnet._utils.download.fetch import Target, check_sha256, fetch, fetch_target, url_target
-from semattnet._utils.download.hf import fetch_hf, parse_hf_url
-from semattnet._utils.download.transports import url_scheme
+from semattnet.cache.transports import check_file_name, url_scheme
 
 __all__ = [
     "ENV_CACHE",
@@ -55,6 +56,7 @@ __all__ = [
     "Target",
     "cache_key",
     "cache_lock",
+    "check_file_name",
     "check_sha256",
     "fetch",
     "fetch_hf",

@@ -13,7 +13,7 @@
   with ``resume=True`` (gdown keeps and continues its own ``.part`` file).
 * ``file://``: a local copy (``shutil``), checked like a download.
 
-``hf://`` URLs are not a transport into the staging folder: see :mod:`semattnet._utils.download.hf`.
+``hf://`` URLs are not a transport into the staging folder: see :mod:`semattnet.cache.hf`.
 """
 
 from __future__ import annotations
@@ -22,14 +22,13 @@ import inspect
 import re
 import shutil
 from pathlib import Path
-from typing import Any
 from urllib.parse import unquote, urlparse
 from urllib.request import url2pathname
 
 from semattnet._errors import InputError
 from semattnet._utils.bounds import regular_file
-from semattnet._utils.download.errors import DownloadError, NotAFileError
 from semattnet._utils.extras import optional, require
+from semattnet.cache.errors import DownloadError, NotAFileError
 
 __all__ = ["check_file_name", "default_file_name", "download_to", "gdrive_id", "url_scheme"]
 
@@ -92,7 +91,7 @@ def _download_http(url: str, part: Path, progress: bool) -> None:
     http_get = hf_download.http_get
     # No expected_size: http_get checks the body against Content-Length itself; the published size
     # is checked afterwards, so that a wrong file is deleted instead of being kept for resuming.
-    kwargs: dict[str, Any] = {"displayed_filename": part.name.removesuffix(".part")}
+    kwargs: dict[str, object] = {"displayed_filename": part.name.removesuffix(".part")}
     if not progress and "tqdm_class" in inspect.signature(http_get).parameters:
         kwargs["tqdm_class"] = _silent_tqdm()
     resume = part.stat().st_size if part.exists() else 0
@@ -123,7 +122,7 @@ def _silent_tqdm() -> type:
     from tqdm.auto import tqdm
 
     class _Silent(tqdm):
-        def __init__(self, *args: Any, **kwargs: Any) -> None:
+        def __init__(self, *args: object, **kwargs: object) -> None:
             kwargs["disable"] = True
             super().__init__(*args, **kwargs)
 
