@@ -15,12 +15,13 @@ import os
 import random
 import shutil
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
+import numpy.typing as npt
 import torch
 from torch import nn
 from torch.utils.data import DataLoader, Dataset, Subset
@@ -40,11 +41,14 @@ from semattnet.models.registry import build_model
 from semattnet.models.semattnet import SemAttNet
 from semattnet.training.checkpointing import set_activation_checkpointing
 from semattnet.training.config import TrainConfig
-from semattnet.training.reference import make_adam, our_step
+from semattnet.training.reference import ParamGroup, make_adam, our_step
 from semattnet.weights.checkpoint import CheckpointError, load_checkpoint, load_weights
 from semattnet.weights.gate import DIGEST_KEY, tensor_digest
 
-__all__ = ["RUN_FILES", "Trainer", "prepare_run_folder", "train"]
+if TYPE_CHECKING:
+    from torch.utils.tensorboard import SummaryWriter
+
+__all__ = ["RUN_FILES", "TrainResult", "Trainer", "prepare_run_folder", "train"]
 
 _TRAIN_FORMAT = "semattnet-train-v1"
 #: What a run writes into its folder (``--overwrite`` removes exactly these, nothing else).
@@ -55,7 +59,45 @@ _SYNC_BN_CPU = (
 )
 
 
-def _atomic_torch_save(obj: Any, path: Path) -> None:
+class TrainResult(TypedDict):
+    """What :func:`train` returns: where the stage ended and its last validation result."""
+
+    epoch: int
+    step: int
+    best_rmse_mm: float
+    val: dict[str, float] | None
+
+
+class _RngStates(TypedDict, total=False):
+    torch: torch.Tensor
+    numpy: tuple[str, npt.NDArray[np.uint32], int, int, float] | dict[str, object]  # np.random.get_state()
+    python: tuple[object, ...]  # random.getstate()
+    cuda: list[torch.Tensor]  # only where CUDA is available
+
+
+class _ResumeState(TypedDict):
+    """What an exact resume restores from a training checkpoint (``last.pt``)."""
+
+    format: str
+    model: dict[str, torch.Tensor]
+    train_config: dict[str, object]
+    optimizer: dict[str, object]
+    scheduler: dict[str, object]
+    scaler: dict[str, object]
+    rng: _RngStates
+    epoch: int
+    batch_in_epoch: int
+    global_step: int
+    best_metric: float
+
+
+class _TrainState(_ResumeState):
+    """A training checkpoint besides its digest: the resume state and the model's config (for ``load_model``)."""
+
+    config: dict[str, object]
+
+
+def _atomic_torch_save(obj: object, path: Path) -> None:
     with atomic_path(path) as tmp:
         torch.save(obj, tmp)
 
@@ -136,7 +178,7 @@ class Trainer:
         cfg = self.cfg
         assert cfg.epochs is not None and cfg.patience is not None  # TrainConfig fills them from the stage
         self.optimizer = make_adam(self._param_groups(), self.device, betas=cfg.betas, weight_decay=cfg.weight_decay)
-        self.scheduler: Any
+        self.scheduler: torch.optim.lr_scheduler.LambdaLR | torch.optim.lr_scheduler.ReduceLROnPlateau
         if cfg.lr_schedule == "cosine":  # per step, to zero at the last step
             total = cfg.max_steps or cfg.epochs * len(self.loader)
             self.scheduler = torch.optim.lr_scheduler.LambdaLR(
@@ -155,7 +197,7 @@ class Trainer:
             self.model, device_ids=[self.device.index] if self.device.type == "cuda" else None
         )
 
-    def _open_run_folder(self) -> Any:
+    def _open_run_folder(self) -> SummaryWriter | None:
         """Create the run folder, write ``config.json``; a TensorBoard writer if tensorboard is installed."""
         self.out.mkdir(parents=True, exist_ok=True)
         self.cfg.save(self.out / "config.json")
@@ -198,7 +240,7 @@ class Trainer:
             set_activation_checkpointing(model, True)
         return model.to(self.device)
 
-    def _param_groups(self) -> list[dict[str, Any]]:
+    def _param_groups(self) -> list[ParamGroup]:
         model, cfg = self.model, self.cfg
         trainable = [(n, p) for n, p in model.named_parameters() if p.requires_grad]
         if cfg.stage != "full":
@@ -238,8 +280,8 @@ class Trainer:
             model.backbone.eval()
 
     # ----------------------------------------------------------------------------- state
-    def _state(self) -> dict[str, Any]:
-        rng = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
+    def _state(self) -> _TrainState:
+        rng: _RngStates = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
         if torch.cuda.is_available():
             rng["cuda"] = torch.cuda.get_rng_state_all()
         return {
@@ -258,16 +300,19 @@ class Trainer:
         }
 
     @staticmethod
-    def _read_state(path: Path) -> dict[str, Any]:
+    def _read_state(path: Path) -> _ResumeState:
         if not path.is_file():
             raise CheckpointError(f"{path}: nothing to resume from")
         ckpt = load_checkpoint(path)
-        state = dict(ckpt.extra) | {"model": ckpt.state_dict, "epoch": ckpt.epoch}
-        if state.get("format") != _TRAIN_FORMAT:
+        extra = ckpt.extra
+        if extra.get("format") != _TRAIN_FORMAT or ckpt.epoch is None:
             raise CheckpointError(f"{path}: not a semattnet training checkpoint (no optimiser state to resume)")
-        return state
+        return _ResumeState(format=extra["format"], model=ckpt.state_dict, train_config=extra["train_config"],
+                            optimizer=extra["optimizer"], scheduler=extra["scheduler"], scaler=extra["scaler"],
+                            rng=extra["rng"], epoch=ckpt.epoch, batch_in_epoch=extra["batch_in_epoch"],
+                            global_step=extra["global_step"], best_metric=extra["best_metric"])  # fmt: skip
 
-    def _restore(self, state: dict[str, Any]) -> None:
+    def _restore(self, state: _ResumeState) -> None:
         load_weights(_unwrap(self.model), state["model"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.scheduler.load_state_dict(state["scheduler"])
@@ -285,7 +330,7 @@ class Trainer:
         """Write ``last.pt`` (and ``best.pt`` / a numbered copy) atomically; rank 0 only."""
         if not self.main:
             return
-        state = self._state()
+        state: dict[str, object] = dict(self._state())
         state[DIGEST_KEY] = tensor_digest(state)  # load_checkpoint verifies it (resume, --init, predict, ...)
         _atomic_torch_save(state, self.ckpt_dir / "last.pt")
         if best:
@@ -297,7 +342,7 @@ class Trainer:
                 old.unlink()
 
     # ----------------------------------------------------------------------------- loop
-    def _write_row(self, row: dict[str, Any]) -> None:
+    def _write_row(self, row: Mapping[str, float | str]) -> None:
         if not self.main:
             return
         path = self.out / "log.csv"
@@ -307,7 +352,7 @@ class Trainer:
             w = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
             if new:
                 w.writeheader()
-            w.writerow({"time": f"{time.time():.1f}"} | row)
+            w.writerow({"time": f"{time.time():.1f}", **row})
         if self.tb is not None:
             for key in ("loss", "lr", "rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km"):
                 if row.get(key) not in (None, ""):
@@ -318,12 +363,12 @@ class Trainer:
             return None
         result = evaluate_model(self.model, self.val_loader, self.device, self.cfg.amp,
                                 metrics=get_dataset(self.cfg.dataset).metrics).compute()  # fmt: skip
-        self._write_row({"epoch": self.pos.epoch, "step": self.pos.step, "split": self.cfg.val_split} | result)
+        self._write_row({"epoch": self.pos.epoch, "step": self.pos.step, "split": self.cfg.val_split, **result})
         self.log(f"epoch {self.pos.epoch}: {self.cfg.val_split} RMSE {result['rmse_mm']:.1f} mm, "
                  f"MAE {result['mae_mm']:.1f} mm")  # fmt: skip
         return result
 
-    def fit(self) -> dict[str, Any]:
+    def fit(self) -> TrainResult:
         """Run (or finish) the stage; returns the final position and last validation result."""
         last_val: dict[str, float] | None = None
         assert self.cfg.epochs is not None  # TrainConfig fills it from the stage
@@ -344,7 +389,7 @@ class Trainer:
             from semattnet.viz.curves import plot_training_curves
 
             plot_training_curves(self.out / "log.csv", self.out / "curves.png")
-        return {"epoch": self.pos.epoch, "step": self.pos.step, "best_rmse_mm": self.pos.best, "val": last_val}
+        return TrainResult(epoch=self.pos.epoch, step=self.pos.step, best_rmse_mm=self.pos.best, val=last_val)
 
     def _train_epoch(self) -> bool:
         """Train from the current position to the end of the epoch (or ``max_steps``); True if it ended."""
@@ -365,8 +410,10 @@ class Trainer:
                 bar.update(1)
                 bar.set_postfix(loss=f"{loss:.3f}", lr=f"{self.optimizer.param_groups[0]['lr']:.2e}")
                 if self.pos.step % cfg.log_every == 0 or self.pos.batch == len(self.loader):
-                    self._write_row({"epoch": epoch, "step": self.pos.step, "split": "train", "loss": loss,
-                                     "lr": self.optimizer.param_groups[0]["lr"]})  # fmt: skip
+                    lr = self.optimizer.param_groups[0]["lr"]
+                    row: dict[str, float | str] = {"epoch": epoch, "step": self.pos.step, "split": "train",
+                                                   "loss": loss, "lr": lr}  # fmt: skip
+                    self._write_row(row)
                 if cfg.save_every and self.pos.step % cfg.save_every == 0:
                     self.save(periodic=True)
                 if cfg.max_steps and self.pos.step >= cfg.max_steps:
@@ -376,11 +423,11 @@ class Trainer:
                      f"loss {loss:.3f}, lr {self.optimizer.param_groups[0]['lr']:.2e}")  # fmt: skip
         return self.pos.batch >= len(self.loader)
 
-    def _step(self, batch: dict[str, Any], branch_weight: float) -> float:
+    def _step(self, batch: Mapping[str, torch.Tensor], branch_weight: float) -> float:
         """One optimiser step on ``batch`` (eq. 14 loss, AMP-aware); returns the loss."""
         loss = our_step(self.model, self.optimizer, batch, self.device, branch_weight, self.cfg.amp,
                         self.scaler if self.scaler.is_enabled() else None, self.cfg.loss)  # fmt: skip
-        if self.cfg.lr_schedule == "cosine":
+        if isinstance(self.scheduler, torch.optim.lr_scheduler.LambdaLR):  # cosine: per step
             self.scheduler.step()
         self.pos.batch += 1
         self.pos.step += 1
@@ -393,7 +440,7 @@ class Trainer:
             return False, last_val
         last_val = self.validate()
         rmse = last_val["rmse_mm"] if last_val else math.inf
-        if cfg.lr_schedule == "plateau":
+        if isinstance(self.scheduler, torch.optim.lr_scheduler.ReduceLROnPlateau):
             self.scheduler.step(rmse)
         best = rmse < self.pos.best
         self.pos.best = min(self.pos.best, rmse)
@@ -447,7 +494,7 @@ def prepare_run_folder(out: str | os.PathLike[str], overwrite: bool = False) -> 
 
 
 def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = print,
-          overwrite: bool = False) -> dict[str, Any]:  # fmt: skip
+          overwrite: bool = False) -> TrainResult:  # fmt: skip
     """Run one stage; joins/leaves the process group when launched by torchrun.
 
     Without ``resume`` the run folder must not hold a run yet (``overwrite`` starts over, see
