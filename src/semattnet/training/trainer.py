@@ -18,10 +18,9 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, TypedDict
+from typing import TYPE_CHECKING
 
 import numpy as np
-import numpy.typing as npt
 import torch
 from torch import nn
 from torch.utils.data import DataLoader, Dataset, Subset
@@ -42,6 +41,7 @@ from semattnet.models.semattnet import SemAttNet
 from semattnet.training.checkpointing import set_activation_checkpointing
 from semattnet.training.config import TrainConfig
 from semattnet.training.reference import ParamGroup, make_adam, our_step
+from semattnet.training.state import ResumeState, RngStates, TrainResult, TrainState
 from semattnet.weights.checkpoint import CheckpointError, load_checkpoint, load_weights
 from semattnet.weights.gate import DIGEST_KEY, tensor_digest
 
@@ -57,44 +57,6 @@ _SYNC_BN_CPU = (
     "sync_bn needs CUDA (NCCL); set sync_bn=false: on CPU each process keeps its own BatchNorm "
     "statistics (a multi-process CPU run averages gradients, not BatchNorm statistics)"
 )
-
-
-class TrainResult(TypedDict):
-    """What :func:`train` returns: where the stage ended and its last validation result."""
-
-    epoch: int
-    step: int
-    best_rmse_mm: float
-    val: dict[str, float] | None
-
-
-class _RngStates(TypedDict, total=False):
-    torch: torch.Tensor
-    numpy: tuple[str, npt.NDArray[np.uint32], int, int, float] | dict[str, object]  # np.random.get_state()
-    python: tuple[object, ...]  # random.getstate()
-    cuda: list[torch.Tensor]  # only where CUDA is available
-
-
-class _ResumeState(TypedDict):
-    """What an exact resume restores from a training checkpoint (``last.pt``)."""
-
-    format: str
-    model: dict[str, torch.Tensor]
-    train_config: dict[str, object]
-    optimizer: dict[str, object]
-    scheduler: dict[str, object]
-    scaler: dict[str, object]
-    rng: _RngStates
-    epoch: int
-    batch_in_epoch: int
-    global_step: int
-    best_metric: float
-
-
-class _TrainState(_ResumeState):
-    """A training checkpoint besides its digest: the resume state and the model's config (for ``load_model``)."""
-
-    config: dict[str, object]
 
 
 def _atomic_torch_save(obj: object, path: Path) -> None:
@@ -280,8 +242,8 @@ class Trainer:
             model.backbone.eval()
 
     # ----------------------------------------------------------------------------- state
-    def _state(self) -> _TrainState:
-        rng: _RngStates = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
+    def _state(self) -> TrainState:
+        rng: RngStates = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
         if torch.cuda.is_available():
             rng["cuda"] = torch.cuda.get_rng_state_all()
         return {
@@ -300,19 +262,19 @@ class Trainer:
         }
 
     @staticmethod
-    def _read_state(path: Path) -> _ResumeState:
+    def _read_state(path: Path) -> ResumeState:
         if not path.is_file():
             raise CheckpointError(f"{path}: nothing to resume from")
         ckpt = load_checkpoint(path)
         extra = ckpt.extra
         if extra.get("format") != _TRAIN_FORMAT or ckpt.epoch is None:
             raise CheckpointError(f"{path}: not a semattnet training checkpoint (no optimiser state to resume)")
-        return _ResumeState(format=extra["format"], model=ckpt.state_dict, train_config=extra["train_config"],
+        return ResumeState(format=extra["format"], model=ckpt.state_dict, train_config=extra["train_config"],
                             optimizer=extra["optimizer"], scheduler=extra["scheduler"], scaler=extra["scaler"],
                             rng=extra["rng"], epoch=ckpt.epoch, batch_in_epoch=extra["batch_in_epoch"],
                             global_step=extra["global_step"], best_metric=extra["best_metric"])  # fmt: skip
 
-    def _restore(self, state: _ResumeState) -> None:
+    def _restore(self, state: ResumeState) -> None:
         load_weights(_unwrap(self.model), state["model"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.scheduler.load_state_dict(state["scheduler"])
