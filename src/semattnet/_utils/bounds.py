@@ -8,9 +8,10 @@ counts by the file's length (:mod:`semattnet.geometry.pointcloud_io`).
 from __future__ import annotations
 
 import math
+import os
 import stat
 from pathlib import Path
-from typing import Any
+from typing import SupportsFloat
 
 from semattnet._errors import DataError, InputError, SemAttNetError
 
@@ -29,7 +30,7 @@ MAX_ADDED_POINTS = 1_000_000
 MAX_SKEW_S = 3600.0
 
 
-def check_image_size(width: Any, height: Any, where: str) -> tuple[int, int]:
+def check_image_size(width: SupportsFloat | str, height: SupportsFloat | str, where: str) -> tuple[int, int]:
     """(width, height) as ints when both are whole numbers in [1, :data:`MAX_IMAGE_SIDE`] and their
     product at most :data:`MAX_IMAGE_PIXELS`.
 
@@ -51,7 +52,7 @@ def check_image_size(width: Any, height: Any, where: str) -> tuple[int, int]:
     return int(w), int(h)
 
 
-def _short(value: Any) -> str:
+def _short(value: object) -> str:
     text = str(value)
     return text if len(text) <= 24 else f"{text[:20]}...({len(text)} characters)"
 
@@ -68,7 +69,7 @@ def check_pinhole(fx: float, fy: float, cx: float, cy: float, where: str = "--K"
                          f"{', '.join(f'{v:g}' for v in vals)}")  # fmt: skip
 
 
-def regular_file(path: Any, what: str = "file", error: type[SemAttNetError] = DataError) -> Path:
+def regular_file(path: str | os.PathLike[str], what: str = "file", error: type[SemAttNetError] = DataError) -> Path:
     """``path`` (a :class:`~pathlib.Path`) when it is a regular file (symlinks followed); otherwise one line
     saying what it is: missing, a folder, or a FIFO / device / socket (a read would block or never end).
 

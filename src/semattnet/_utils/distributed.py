@@ -15,7 +15,7 @@ import os
 import pickle
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, ParamSpec, TypeVar
 
 import torch
 import torch.distributed as dist
@@ -23,7 +23,11 @@ from torch.utils.data import Sampler
 
 from semattnet._errors import SemAttNetError
 
+if TYPE_CHECKING:
+    from _typeshed import SupportsRichComparison
+
 T = TypeVar("T")
+P = ParamSpec("P")
 
 __all__ = [
     "ResumableSampler",
@@ -130,41 +134,43 @@ def first_error(error: Exception | None) -> BaseException | None:
     return error if first == rank() else errors[first]  # our own keeps its traceback
 
 
-def agree(fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
+def agree(fn: Callable[P, T], *args: P.args, **kwargs: P.kwargs) -> T:
     """``fn(*args, **kwargs)`` on every rank; if it raised on any rank, every rank raises the error
     of the lowest such rank (collective: every rank must call it)."""
-    result, error = None, None
+    result: tuple[T] | None = None  # a 1-tuple: fn may return None
+    error = None
     try:
-        result = fn(*args, **kwargs)
+        result = (fn(*args, **kwargs),)
     except Exception as exc:
         error = exc
     first = first_error(error)
     if first is not None:
         raise first
-    return result  # type: ignore[return-value]
+    assert result is not None  # no rank failed, so fn returned here
+    return result[0]
 
 
-def on_main(fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
+def on_main(fn: Callable[P, T], *args: P.args, **kwargs: P.kwargs) -> T:
     """``fn(*args, **kwargs)`` on rank 0 only; every rank returns its result or raises its error
     (collective). The result must pickle."""
     if world_size() == 1:
         return fn(*args, **kwargs)
-    box: list[Any] = [None, None]
+    box: list[tuple[T] | BaseException | None] = [None]  # rank 0's (result,) or its error
+    local = None
     if is_main():
         try:
-            box[0] = fn(*args, **kwargs)
+            box[0] = (fn(*args, **kwargs),)
         except Exception as exc:
-            box[1] = exc
-    local = box[1]
-    if is_main():
-        box[1] = _portable(box[1])
+            local, box[0] = exc, _portable(exc)
     dist.broadcast_object_list(box, src=0)
-    if box[1] is not None:
-        raise local if local is not None else box[1]
-    return box[0]
+    got = box[0]
+    if isinstance(got, BaseException):
+        raise local if local is not None else got
+    assert got is not None  # rank 0 sent its result or its error
+    return got[0]
 
 
-def gather_rows(rows: list[T], key: Callable[[T], Any]) -> list[T]:
+def gather_rows(rows: list[T], key: Callable[[T], SupportsRichComparison]) -> list[T]:
     """Every rank's ``rows``, together and sorted by ``key``, on every rank (collective)."""
     if world_size() == 1:
         return sorted(rows, key=key)

@@ -10,21 +10,26 @@ from __future__ import annotations
 
 import json
 import os
-from typing import Any
+from typing import TypeAlias
 
 from semattnet._errors import DataError, SemAttNetError
 from semattnet._utils.bounds import regular_file
 from semattnet._utils.extras import install_hint, optional
 
-__all__ = ["MAX_DOCUMENT_BYTES", "MAX_NESTING", "loads_json", "loads_yaml", "read_document"]
+__all__ = ["JSON", "MAX_DOCUMENT_BYTES", "MAX_NESTING", "JSONObject", "loads_json", "loads_yaml", "read_document"]
 
 #: Largest JSON / YAML document read from a file (bytes).
 MAX_DOCUMENT_BYTES = 1 << 20
 #: Deepest nesting of lists / objects in such a document.
 MAX_NESTING = 32
 
+#: A parsed JSON (or safe-loaded YAML) value: the one type for documents read from files.
+JSON: TypeAlias = bool | int | float | str | list["JSON"] | dict[str, "JSON"] | None
+#: A parsed JSON object (what a ``config.json`` or a record must be at its top).
+JSONObject: TypeAlias = dict[str, JSON]
 
-def _depth(doc: Any) -> int:
+
+def _depth(doc: JSON) -> int:
     """Nesting depth of lists and dicts in ``doc`` (iterative: no recursion limit)."""
     deepest, stack = 0, [(doc, 1)]
     while stack:
@@ -48,7 +53,7 @@ def loads_json(
     error: type[SemAttNetError] = DataError,
     max_bytes: int = MAX_DOCUMENT_BYTES,
     max_depth: int = MAX_NESTING,
-) -> Any:
+) -> JSON:
     """``json.loads(text)`` refusing documents over ``max_bytes`` or nested deeper than ``max_depth``.
 
     Raises:
@@ -73,7 +78,7 @@ def loads_yaml(
     error: type[SemAttNetError] = DataError,
     max_bytes: int = MAX_DOCUMENT_BYTES,
     max_depth: int = MAX_NESTING,
-) -> Any:
+) -> JSON:
     """``yaml.safe_load(text)`` refusing aliases, documents over ``max_bytes`` and
     nesting deeper than ``max_depth`` (checked on the event stream, before anything is built).
 
@@ -99,7 +104,7 @@ def loads_yaml(
 
 def read_document(
     path: str | os.PathLike[str], *, error: type[SemAttNetError] = DataError, max_bytes: int = MAX_DOCUMENT_BYTES
-) -> Any:
+) -> JSON:
     """Parse the JSON (or, for ``.yaml`` / ``.yml``, YAML) file ``path`` under the bounds above;
     its size is checked before it is read."""
     path = regular_file(path, "document", error)

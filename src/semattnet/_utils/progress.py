@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Iterable
-from typing import IO, Any
+from typing import IO
 
 from tqdm import tqdm
 
@@ -27,12 +27,18 @@ def is_interactive(stream: IO[str] | None = None) -> bool:
 
 
 def progress(
-    iterable: Iterable[Any] | None = None,
+    iterable: Iterable[object] | None = None,
     *,
     enabled: bool = True,
     force: bool | None = None,
     file: IO[str] | None = None,
-    **kwargs: Any,
+    total: int | None = None,
+    initial: int = 0,
+    desc: str | None = None,
+    unit: str = "it",
+    leave: bool = True,
+    dynamic_ncols: bool = False,
+    mininterval: float = 0.1,
 ) -> tqdm:
     """A ``tqdm`` bar over ``iterable`` (or a manual one with ``total=``), shown only where it belongs.
 
@@ -41,8 +47,15 @@ def progress(
         enabled: False hides the bar whatever the stream (e.g. not the main process, ``progress=False``).
         force: True shows the bar even when ``file`` is not a terminal, False never; None: only on a terminal.
         file: the stream (default ``sys.stderr``).
-        **kwargs: passed to ``tqdm`` (``total``, ``desc``, ``unit``, ``leave``, ...).
+        total: the number of steps (None: ``len(iterable)`` where it has one).
+        initial: the steps already done (a resumed epoch).
+        desc: the bar's label.
+        unit: the name of one step.
+        leave: keep the finished bar on screen.
+        dynamic_ncols: follow the terminal's width.
+        mininterval: the least seconds between two refreshes.
     """
     stream = sys.stderr if file is None else file
     shown = enabled and (force if force is not None else is_interactive(stream))
-    return tqdm(iterable, file=stream, disable=not shown, **kwargs)
+    return tqdm(iterable, file=stream, disable=not shown, total=total, initial=initial, desc=desc, unit=unit,
+                leave=leave, dynamic_ncols=dynamic_ncols, mininterval=mininterval)  # fmt: skip

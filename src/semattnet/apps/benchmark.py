@@ -21,7 +21,7 @@ import importlib.util
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import torch
 from torch import nn
@@ -31,6 +31,7 @@ from semattnet._utils.cpu import cpu_summary
 from semattnet.inference.backends import available_backends, optimize_for_inference
 from semattnet.models.bn_folding import fold_batchnorm
 from semattnet.models.layers import set_gradient_checkpointing
+from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.propagation import cspn_affinity
 from semattnet.models.refinement import run_cspn_stage
 from semattnet.models.registry import build_model
@@ -51,12 +52,22 @@ __all__ = [
 ]
 
 
+class BenchRow(TypedDict):
+    """One measured row: seconds per run, peak memory, and against its naive reference (None for that one)."""
+
+    what: str
+    seconds: float
+    peak_mib: float
+    speedup: float | None
+    max_rel_diff: float | None
+
+
 @dataclass
 class BenchResult:
     device: str
     threads: int
     size: tuple[int, int]
-    rows: list[dict[str, Any]] = field(default_factory=list)
+    rows: list[BenchRow] = field(default_factory=list)
     cpu: str = field(default_factory=cpu_summary)
     notes: list[str] = field(default_factory=list)
 
@@ -66,7 +77,7 @@ class BenchResult:
                 f"CPU: {self.cpu}", head]  # fmt: skip
 
     @staticmethod
-    def row(r: dict[str, Any]) -> str:
+    def row(r: BenchRow) -> str:
         ratio = f"{r['speedup']:8.2f}" if r.get("speedup") else " " * 8
         diff = f"{r['max_rel_diff']:12.1e}" if r.get("max_rel_diff") is not None else " " * 12
         return f"{r['what']:52s} {r['seconds']:9.3f} {1 / r['seconds']:9.2f} {r['peak_mib']:9.0f} {ratio} {diff}"
@@ -74,7 +85,7 @@ class BenchResult:
     def table(self) -> str:
         return "\n".join(self.header() + [self.row(r) for r in self.rows] + self.notes)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         return asdict(self)
 
 
@@ -101,13 +112,13 @@ class _Bench:
     log: Callable[[str], None]
     #: Each part's tensors and models, held until the end, as when run_benchmark was one function:
     #: the later parts' peak memory is measured with them resident, as in the README's table.
-    kept: list[Any] = field(default_factory=list)
+    kept: list[object] = field(default_factory=list)
 
     def add(
         self, what: str, seconds: float, peak: float, speedup: float | None = None, diff: float | None = None
     ) -> None:
         """Append a row to the result and log it."""
-        row = {"what": what, "seconds": seconds, "peak_mib": peak, "speedup": speedup, "max_rel_diff": diff}
+        row = BenchRow(what=what, seconds=seconds, peak_mib=peak, speedup=speedup, max_rel_diff=diff)
         self.res.rows.append(row)
         self.log(self.res.row(row))
 
@@ -242,21 +253,21 @@ def _inference_candidates(
     fast_dtype: torch.dtype | None,
     dev: torch.device,
     arithmetic: tuple[str | None, Path | None] = (None, None),
-) -> dict[str, Callable[[], Any]]:
+) -> dict[str, Callable[[], DepthCompletionOutput]]:
     """Row label -> forward pass to time; each kind's naive reference comes before ours."""
 
-    def naive_full() -> Any:
+    def naive_full() -> DepthCompletionOutput:
         net.propagation_impl = "naive"
         try:
             return net(**x)
         finally:
             net.propagation_impl = "auto"
 
-    def fast_full() -> Any:
+    def fast_full() -> DepthCompletionOutput:
         with torch.autocast(dev.type, dtype=fast_dtype):
             return fast_net(**x)
 
-    candidates: dict[str, Callable[[], Any]] = {}
+    candidates: dict[str, Callable[[], DepthCompletionOutput]] = {}
     if "backbone" in parts:
         candidates["backbone, naive (BN layers)"] = lambda: net.backbone(**x)
         candidates["backbone, ours (BN folded)"] = lambda: fast_net.backbone(**x)
@@ -278,11 +289,11 @@ def _backend_candidates(
     fast_dtype: torch.dtype | None,
     only: str | None = None,
     calibration: Path | None = None,
-) -> dict[str, Callable[[], Any]]:
+) -> dict[str, Callable[[], DepthCompletionOutput]]:
     """Every installed inference backend at this size (float32; also bf16 where the CPU has it natively;
     int8 for OpenVINO with nncf installed, calibrated on synthetic scenes: a row, never a default)."""
     size = (int(x["rgb"].shape[-2]), int(x["rgb"].shape[-1]))
-    runs: dict[str, Callable[[], Any]] = {}
+    runs: dict[str, Callable[[], DepthCompletionOutput]] = {}
     for backend in available_backends():
         usable = dev.type == "cuda" if backend == "tensorrt" else backend == "torch" or dev.type == "cpu"
         if not usable:
@@ -297,8 +308,8 @@ def _backend_candidates(
 
 
 def _first_runs(
-    candidates: dict[str, Callable[[], Any]], dev: torch.device
-) -> tuple[dict[str, torch.Tensor], dict[str, float], Any]:
+    candidates: dict[str, Callable[[], DepthCompletionOutput]], dev: torch.device
+) -> tuple[dict[str, torch.Tensor], dict[str, float], DepthCompletionOutput | None]:
     """One run of each candidate (also the warm-up): its depth and its peak memory; and the last output."""
     outputs, peaks = {}, {}
     out = None

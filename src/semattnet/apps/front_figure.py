@@ -19,17 +19,19 @@ import json
 import textwrap
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
+from semattnet._errors import InputError
 from semattnet._utils.atomic import atomic_path
 from semattnet.apps.demo.recipe import DemoSettings
 from semattnet.apps.experiment import make_synthetic
 from semattnet.evaluation.sparsification import Sparsification
-from semattnet.evaluation.sparsity import run_sparsity_sweep
+from semattnet.evaluation.sparsity import SweepRow, run_sparsity_sweep
 from semattnet.evaluation.split import eval_dataset
 from semattnet.inference.backends import needs_semantic
+from semattnet.inference.completion import Completer
 
 __all__ = ["FIGURE_COMMAND", "SETTINGS", "WEIGHTS", "make_front_figure", "plot_front", "uncertainty_curves"]
 
@@ -44,18 +46,30 @@ WEIGHTS = {
 }
 
 
-def _completers(device: str) -> dict[str, Callable[..., Any]]:
+class FrontNumbers(TypedDict):
+    """What ``sparsity-sweep.json`` holds (and :func:`make_front_figure` returns)."""
+
+    command: str
+    scenes: int
+    size: list[int]
+    weights: dict[str, str]
+    sweep: list[SweepRow]  # rows of :func:`~semattnet.evaluation.sparsity.run_sparsity_sweep`
+    uncertainty: dict[str, dict[str, float]]  # method -> AUSE / AURG
+    curves: dict[str, dict[str, list[float]]]  # method -> RMSE sparsification curves
+
+
+def _completers(device: str) -> dict[str, Completer]:
     from semattnet.baselines.classical import ClassicalCompleter
     from semattnet.inference.completer import DepthCompleter
     from semattnet.weights import from_pretrained
 
-    found: dict[str, Callable[..., Any]] = {
+    found: dict[str, Completer] = {
         label: DepthCompleter(from_pretrained(name), device=device) for label, name in WEIGHTS.items()
     }
     return found | {"classical completion": ClassicalCompleter()}
 
 
-def uncertainty_curves(data_root: Path, completers: dict[str, Callable[..., Any]], split: str = "val_select",
+def uncertainty_curves(data_root: Path, completers: dict[str, Completer], split: str = "val_select",
                        max_frames: int | None = None) -> dict[str, Sparsification]:  # fmt: skip
     """Each completer's :class:`Sparsification` of its ``Completion.uncertainty`` over the frames of ``split``."""
     ds = eval_dataset(data_root, split)
@@ -66,6 +80,8 @@ def uncertainty_curves(data_root: Path, completers: dict[str, Callable[..., Any]
             continue
         for name, completer in completers.items():
             c = completer(s.rgb, s.sparse, s.semantic if needs_semantic(completer) else None)
+            if c.uncertainty is None:
+                raise InputError(f"{name}: gives no uncertainty to draw sparsification curves of")
             found[name].add(np.asarray(c.depth, np.float32), s.gt, c.uncertainty)
     return found
 
@@ -113,7 +129,7 @@ def _rmse_curves(s: Sparsification) -> dict[str, list[float]]:
 
 def make_front_figure(out: Path, work: Path, settings: tuple[str, ...] = SETTINGS, device: str = "cpu",
                       demo: DemoSettings | None = None,
-                      log: Callable[[str], object] = print) -> dict[str, Any]:  # fmt: skip
+                      log: Callable[[str], object] = print) -> FrontNumbers:  # fmt: skip
     """Write ``out/sparsity-sweep.png`` and ``out/sparsity-sweep.json`` from the demo's held-out scenes (made in
     ``work``); returns the numbers."""
     s = demo or DemoSettings()
@@ -129,9 +145,9 @@ def make_front_figure(out: Path, work: Path, settings: tuple[str, ...] = SETTING
                f"`{FIGURE_COMMAND}`.")  # fmt: skip
     out.mkdir(parents=True, exist_ok=True)
     plot_front(rows, curves, out / "sparsity-sweep.png", caption)
-    numbers = {"command": FIGURE_COMMAND, "scenes": s.eval_frames, "size": list(s.size), "weights": WEIGHTS,
-               "sweep": rows, "uncertainty": {name: c.compute() for name, c in curves.items()},
-               "curves": {name: _rmse_curves(c) for name, c in curves.items()}}  # fmt: skip
+    numbers = FrontNumbers(command=FIGURE_COMMAND, scenes=s.eval_frames, size=list(s.size), weights=WEIGHTS,
+                           sweep=rows, uncertainty={name: c.compute() for name, c in curves.items()},
+                           curves={name: _rmse_curves(c) for name, c in curves.items()})  # fmt: skip
     with atomic_path(out / "sparsity-sweep.json") as tmp:
         tmp.write_text(json.dumps(numbers, indent=1) + "\n")
     return numbers

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import contextlib
 import statistics
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
-from typing import Any, cast
+from typing import cast
 
 import torch
 from torch import nn
@@ -18,7 +18,7 @@ from semattnet._utils.device import now
 __all__ = ["conv_peak_gflops", "count_macs", "fast_mode_dtype", "interleaved", "peak_memory", "timeit"]
 
 
-def timeit(fn: Callable[[], Any], device: torch.device, repeats: int = 3, warmup: int = 1) -> float:
+def timeit(fn: Callable[[], object], device: torch.device, repeats: int = 3, warmup: int = 1) -> float:
     """Median seconds of ``fn()`` over ``repeats`` runs after ``warmup`` runs."""
     for _ in range(warmup):
         fn()
@@ -30,7 +30,7 @@ def timeit(fn: Callable[[], Any], device: torch.device, repeats: int = 3, warmup
     return statistics.median(times)
 
 
-def interleaved(fns: dict[str, Callable[[], Any]], device: torch.device, repeats: int = 3) -> dict[str, float]:
+def interleaved(fns: Mapping[str, Callable[[], object]], device: torch.device, repeats: int = 3) -> dict[str, float]:
     """Median seconds of each function, timed in turns (``a b c a b c ...``) so that slow drifts
     of the machine's speed affect all of them alike. Run each once before, as a warm-up."""
     times: dict[str, list[float]] = {k: [] for k in fns}

@@ -278,6 +278,15 @@ def _complete_one(completer: Completer, group: Sequence[Frame], timer: StageTime
     yield frame, completion
 
 
+def _start_timer(timer: StageTimes | None, overlapped: bool) -> StageTimes:
+    """``timer`` (a new one when None) set for a run whose reading overlaps the network or not."""
+    timer = timer if timer is not None else StageTimes()
+    timer.overlapped = overlapped
+    timer.notes.setdefault("segmentation", "no segmenter run")
+    timer.notes.setdefault("projection", "inside read/decode (the source does not split it)")
+    return timer
+
+
 def completions(source: FrameSource, completer: Completer, names: Sequence[str] | None = None,
                 semantic: SemanticMaps | None = None, timer: StageTimes | None = None, prefetch: int = 0, *,
                 report: Callable[[FrameFault], None] | None = None, stop_on_fault: bool = True,
@@ -292,11 +301,8 @@ def completions(source: FrameSource, completer: Completer, names: Sequence[str] 
     ``failed`` report. ``realtime``: replay at the frames' sensor pace, that many times faster (1.0: as
     recorded); frames that arrive while the completer is busy are dropped (reported ``dropped``). ``batch_size``:
     frames of one size per engine call (:mod:`~semattnet.inference.batching`; not with ``realtime``)."""
-    timer = timer if timer is not None else StageTimes()
+    timer = _start_timer(timer, prefetch > 0 or realtime is not None)
     names = list(source.names if names is None else names)
-    timer.overlapped = prefetch > 0 or realtime is not None
-    timer.notes.setdefault("segmentation", "no segmenter run")
-    timer.notes.setdefault("projection", "inside read/decode (the source does not split it)")
     current = [""]
 
     def fault(name: str, exc: BaseException, where: str = "") -> None:

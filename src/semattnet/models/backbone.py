@@ -11,7 +11,7 @@ checkpoints load with ``strict=True``.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import NamedTuple, Protocol, TypeVar
 
 import torch
 from torch import nn
@@ -24,6 +24,14 @@ from semattnet.models.config import SemAttNetConfig
 from semattnet.models.outputs import DepthCompletionOutput
 
 __all__ = ["BackboneFeatures", "SemAttNetBackbone"]
+
+F = TypeVar("F")
+
+
+class BranchRunner(Protocol):
+    """What :attr:`SemAttNetBackbone.branch_runner` holds: calls ``branch(*inputs)`` its own way."""
+
+    def __call__(self, branch: Callable[..., F], *inputs: object) -> F: ...
 
 
 class BackboneFeatures(NamedTuple):
@@ -56,7 +64,7 @@ class SemAttNetBackbone(ColorGuidedBranch, SemanticGuidedBranch, DepthGuidedBran
     #: Runs each branch (encoder + decoder) as ``branch_runner(branch, *inputs)``; None calls the
     #: branch directly. The hook for wrapping whole branches, e.g. activation checkpointing
     #: (:func:`semattnet.training.checkpointing.set_activation_checkpointing`).
-    branch_runner: Callable[..., Any] | None = None
+    branch_runner: BranchRunner | None = None
 
     def __init__(self, config: SemAttNetConfig | None = None) -> None:
         nn.Module.__init__(self)
@@ -95,7 +103,7 @@ class SemAttNetBackbone(ColorGuidedBranch, SemanticGuidedBranch, DepthGuidedBran
         w = self.config.widths
         return self.config.branches * w.base[1], (self.config.branches - 1) * w.base[2] + w.dg[2]
 
-    def run_branch(self, branch: Callable[..., Any], *inputs: Any) -> Any:
+    def run_branch(self, branch: Callable[..., F], *inputs: object) -> F:
         """``branch(*inputs)``, through :attr:`branch_runner` when one is set."""
         return branch(*inputs) if self.branch_runner is None else self.branch_runner(branch, *inputs)
 

@@ -33,10 +33,10 @@ RANGES: dict[str, tuple[float, float]] = {
 MAX_KERNELS = 8
 
 
-def _in_range(name: str, value: Any, integer: bool = True) -> None:
+def _in_range(name: str, value: object, integer: bool = True) -> None:
     lo, hi = RANGES[name]
-    number = isinstance(value, numbers.Integral if integer else numbers.Real) and math.isfinite(value)
-    if isinstance(value, bool) or not number or not lo <= value <= hi:
+    wanted = numbers.Integral if integer else numbers.Real
+    if isinstance(value, bool) or not (isinstance(value, wanted) and math.isfinite(value) and lo <= float(value) <= hi):
         kind = "an integer" if integer else "a number"
         raise InputError(f"{name} must be {kind} in [{lo:g}, {hi:g}], got {value!r}")
 
@@ -94,11 +94,11 @@ class SemAttNetConfig:
             raise InputError(f"palette must be one of {tuple(PALETTES)}, got {self.palette!r}")
         object.__setattr__(self, "kernel_sizes", tuple(int(k) for k in self.kernel_sizes))
 
-    def replace(self, **changes: Any) -> SemAttNetConfig:
+    def replace(self, **changes: Any) -> SemAttNetConfig:  # values from JSON / the CLI: __post_init__ checks them
         """A copy with some fields changed (validated)."""
         return dataclasses.replace(self, **changes)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         return dataclasses.asdict(self)
 
     @property

@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, fields
-from typing import Any
+from dataclasses import dataclass, fields, replace
 
 import torch
 
@@ -52,7 +51,5 @@ class DepthCompletionOutput:
 
     def map(self, fn: Callable[[torch.Tensor], torch.Tensor]) -> DepthCompletionOutput:
         """A copy with ``fn`` applied to every tensor (e.g. cropping, ``.cpu()``)."""
-        mapped: dict[str, Any] = {
-            f.name: (None if (v := getattr(self, f.name)) is None else fn(v)) for f in fields(self)
-        }
-        return DepthCompletionOutput(**mapped)
+        mapped = {f.name: fn(v) for f in fields(self) if (v := getattr(self, f.name)) is not None}
+        return replace(self, **mapped)

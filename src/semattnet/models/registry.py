@@ -14,7 +14,6 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
-from typing import Any
 
 from torch import nn
 
@@ -142,13 +141,13 @@ def arch_for(cfg: SemAttNetConfig) -> str:
     return "semattnet" if cfg.refine else "semattnet_backbone"  # a combination the paper did not name
 
 
-def _check_overrides(cfg: SemAttNetConfig, overrides: Mapping[str, Any]) -> None:
+def _check_overrides(cfg: SemAttNetConfig, overrides: Mapping[str, object]) -> None:
     unknown = set(overrides) - set(cfg.to_dict())
     if unknown:
         raise InputError(f"unknown config field(s) {sorted(unknown)}; fields: {sorted(cfg.to_dict())}")
 
 
-def build_model(name: str | None = None, config: SemAttNetConfig | None = None, **overrides: Any) -> nn.Module:
+def build_model(name: str | None = None, config: SemAttNetConfig | None = None, **overrides: object) -> nn.Module:
     """Build a registered model, optionally changing config fields.
 
     ``name`` selects the architecture and its base config; ``config`` replaces the base config and

@@ -21,7 +21,7 @@ import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Protocol, runtime_checkable
 
 import torch
 
@@ -110,7 +110,7 @@ def _train_id(label: str) -> int | None:
     return None
 
 
-def cityscapes_indices(id2label: Mapping[Any, str]) -> list[list[int]]:
+def cityscapes_indices(id2label: Mapping[int, str] | Mapping[str, str]) -> list[list[int]]:
     """For each trainId 0..18, the model class indices whose names mean it (often one, maybe none)."""
     found: list[list[int]] = [[] for _ in range(NUM_CLASSES)]
     for idx, label in sorted((int(k), v) for k, v in id2label.items()):
@@ -134,7 +134,37 @@ def resolve_hf_source(rest: str) -> tuple[str, str | None]:
     return repo, rev or None
 
 
-def _load_model(source: str, revision: str | None) -> Any:
+class _LabelledConfig(Protocol):
+    id2label: Mapping[int, str]
+
+
+@runtime_checkable
+class _MaskOutput(Protocol):
+    """A universal (mask classification) model's output: Mask2Former, MaskFormer, OneFormer."""
+
+    class_queries_logits: torch.Tensor
+    masks_queries_logits: torch.Tensor
+
+
+class _SemanticOutput(Protocol):
+    """A semantic segmentation model's output (SegFormer, ...)."""
+
+    logits: torch.Tensor
+
+
+class _HFModel(Protocol):
+    """The part of a ``transformers`` segmentation model that :func:`load_hf_network` uses."""
+
+    config: _LabelledConfig
+
+    def to(self, device: torch.device | str) -> _HFModel: ...
+
+    def eval(self) -> _HFModel: ...
+
+    def __call__(self, *, pixel_values: torch.Tensor) -> _MaskOutput | _SemanticOutput: ...
+
+
+def _load_model(source: str, revision: str | None) -> _HFModel:
     transformers = require("transformers", "hf: segmenters")
     from semattnet.cache import is_offline
 
@@ -153,11 +183,10 @@ def _load_model(source: str, revision: str | None) -> Any:
         raise DataError(f"hf:{source}: cannot load the model{offline}: {first}") from None
 
 
-def _class_maps(out: Any) -> torch.Tensor:
+def _class_maps(out: _MaskOutput | _SemanticOutput) -> torch.Tensor:
     """(B, C, h, w) per-class scores from a semantic or a universal (mask classification) output."""
-    cls = getattr(out, "class_queries_logits", None)
-    if cls is not None:
-        probs = cls.softmax(-1)[..., :-1]  # the last class is "no object"
+    if isinstance(out, _MaskOutput):
+        probs = out.class_queries_logits.softmax(-1)[..., :-1]  # the last class is "no object"
         return torch.einsum("bqc,bqhw->bchw", probs, out.masks_queries_logits.sigmoid())
     return out.logits
 
@@ -167,7 +196,7 @@ def hf_palette(rest: str) -> str:
     return HF_SEGMENTERS[rest].palette if rest in HF_SEGMENTERS else "cityscapes"
 
 
-def _groups(rest: str, id2label: Mapping[Any, str], palette: str) -> list[list[int]]:
+def _groups(rest: str, id2label: Mapping[int, str] | Mapping[str, str], palette: str) -> list[list[int]]:
     """Per palette class, the model classes that mean it; warns of the classes none means."""
     from semattnet.palette import get_palette
     from semattnet.segmentation.indoor import nyu40_indices

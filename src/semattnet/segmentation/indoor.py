@@ -17,7 +17,6 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from functools import cache
-from typing import Any
 
 __all__ = ["NYU40_VARIANTS", "nyu40_class", "nyu40_indices"]
 
@@ -62,7 +61,7 @@ def nyu40_class(label: str) -> int | None:
     return None
 
 
-def nyu40_indices(id2label: Mapping[Any, str]) -> list[list[int]]:
+def nyu40_indices(id2label: Mapping[int, str] | Mapping[str, str]) -> list[list[int]]:
     """For each NYU-40 id 1..40 (list position id - 1), the model class indices whose names mean it."""
     found: list[list[int]] = [[] for _ in range(40)]
     for idx, label in sorted((int(k), v) for k, v in id2label.items()):

@@ -31,7 +31,6 @@ import re
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
@@ -61,7 +60,9 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 _TORCHSCRIPT_SUFFIXES = (".pt", ".pth", ".ts", ".jit", ".torchscript")
 NYU40 = 40  # classes of the nyu40 palette
 
-Network = Callable[[torch.Tensor], Any]
+#: A segmentation network: normalised (B, 3, H, W) RGB -> logits or class ids (a tensor or array, or a
+#: dict with ``"out"`` or a tuple / list whose first item is one), checked by :class:`Segmenter`.
+Network = Callable[[torch.Tensor], object]
 
 
 class Segmenter:
@@ -112,12 +113,12 @@ class Segmenter:
             out = self.network(x)
         return self._to_ids(out, (h, w))
 
-    def _to_ids(self, out: Any, size: tuple[int, int]) -> np.ndarray:
-        if isinstance(out, dict):
-            out = out["out"]
-        elif isinstance(out, (tuple, list)):
-            out = out[0]
-        out = torch.as_tensor(out)
+    def _to_ids(self, raw: object, size: tuple[int, int]) -> np.ndarray:
+        if isinstance(raw, dict):
+            raw = raw["out"]
+        elif isinstance(raw, (tuple, list)):
+            raw = raw[0]
+        out = torch.as_tensor(raw)
         top = NUM_CLASSES - 1 if self.palette == "cityscapes" else NYU40
         if not out.is_floating_point():  # already class ids
             ids = out if out.dim() == 4 else out[:, None]

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Callable, Iterator
-from typing import Any
+from typing import TypeVar
 
 import torch
 import torch.utils.checkpoint
@@ -24,6 +24,8 @@ from semattnet._errors import InputError
 from semattnet.models.backbone import SemAttNetBackbone
 
 __all__ = ["BranchCheckpointing", "set_activation_checkpointing"]
+
+F = TypeVar("F")
 
 
 def _count(m: nn.Module) -> torch.Tensor:
@@ -58,7 +60,7 @@ class BranchCheckpointing:
     def __init__(self, module: nn.Module) -> None:
         self.module = module
 
-    def __call__(self, branch: Callable[..., Any], *inputs: Any) -> Any:
+    def __call__(self, branch: Callable[..., F], *inputs: object) -> F:
         if not (self.module.training and torch.is_grad_enabled()):
             return branch(*inputs)
         return torch.utils.checkpoint.checkpoint(

@@ -23,7 +23,7 @@ Stage = Literal["backbone", "refine-init", "full"]
 STAGES: tuple[str, ...] = ("backbone", "refine-init", "full")
 
 # Authors' values: per-stage epochs, batch, learning rates and plateau patience.
-_STAGE_DEFAULTS: dict[str, dict[str, Any]] = {
+_STAGE_DEFAULTS: dict[str, dict[str, float | None]] = {
     "backbone": {"epochs": 60, "batch_size": 8, "lr": 0.00128, "head_lr": None, "patience": 4},
     "refine-init": {"epochs": 5, "batch_size": 8, "lr": 0.00128, "head_lr": None, "patience": 8},
     "full": {"epochs": 95, "batch_size": 16, "lr": 0.0025298, "head_lr": 0.025298, "patience": 8},
@@ -179,11 +179,11 @@ class TrainConfig:
             return 0.0
         return self.branch_weights[min(epoch, len(self.branch_weights) - 1)]
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
+    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:  # values from JSON / the CLI: __post_init__ checks them
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = set(data) - known
         if unknown:

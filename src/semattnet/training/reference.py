@@ -12,44 +12,51 @@ loss (eq. 14, :func:`~semattnet.training.losses.semattnet_loss`) and batch as ou
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from typing import Any
 
 import torch
 from torch import nn
+from torch.optim.optimizer import ParamsT
 
 from semattnet._utils.device import autocast
+from semattnet.models.refinement import AtrousCSPNRefinement
 from semattnet.training.losses import semattnet_loss
 
-__all__ = ["authors_adam", "authors_step", "make_adam", "our_step"]
+__all__ = ["ParamGroup", "authors_adam", "authors_step", "make_adam", "our_step"]
+
+#: One parameter group of Adam: ``{"params": [...], "lr": ...}``.
+ParamGroup = dict[str, list[nn.Parameter] | float | None]
 
 _INPUTS = ("rgb", "semantic", "sparse")
 
 
-def authors_adam(params: Iterable[Any], lr: float, betas: tuple[float, float] = (0.9, 0.99),
+def authors_adam(params: ParamsT, lr: float, betas: tuple[float, float] = (0.9, 0.99),
                  weight_decay: float = 1e-6) -> torch.optim.Adam:  # fmt: skip
     """The authors' optimiser: ``torch.optim.Adam`` in its single-tensor form."""
     return torch.optim.Adam(params, lr=lr, betas=betas, weight_decay=weight_decay, foreach=False, fused=False)
 
 
-def make_adam(params: Iterable[Any], device: torch.device, **kwargs: Any) -> torch.optim.Adam:
+def make_adam(params: Iterable[torch.Tensor] | list[ParamGroup], device: torch.device, lr: float = 1e-3,
+              betas: tuple[float, float] = (0.9, 0.999), weight_decay: float = 0.0) -> torch.optim.Adam:  # fmt: skip
     """Our optimiser: the same Adam, fused (one kernel over all parameters) where PyTorch has it for
-    ``device`` (CUDA, and the CPU since PyTorch 2.4), else ``foreach`` (multi-tensor)."""
-    params = list(params)
+    ``device`` (CUDA, and the CPU since PyTorch 2.4), else ``foreach`` (multi-tensor). ``lr``,
+    ``betas`` and ``weight_decay`` are Adam's (and its defaults); parameter groups may set their own ``lr``."""
+    params = params if isinstance(params, list) else list(params)
     if device.type in ("cuda", "cpu"):
         try:
-            return torch.optim.Adam(params, fused=True, **kwargs)
+            return torch.optim.Adam(params, lr=lr, betas=betas, weight_decay=weight_decay, fused=True)
         except (RuntimeError, TypeError):  # an old PyTorch without the fused kernel for this device
             pass
-    return torch.optim.Adam(params, foreach=True, **kwargs)
+    return torch.optim.Adam(params, lr=lr, betas=betas, weight_decay=weight_decay, foreach=True)
 
 
-def authors_step(model: Any, optimizer: torch.optim.Optimizer, batch: Mapping[str, torch.Tensor],
+def authors_step(model: nn.Module, optimizer: torch.optim.Optimizer, batch: Mapping[str, torch.Tensor],
                  device: torch.device, branch_weight: float = 0.0) -> float:  # fmt: skip
     """One step as the authors train: batch copied to the device, naive propagation, ``zero_grad()`` in place."""
     batch = {k: v.to(device) for k, v in batch.items()}
-    impl = getattr(model, "propagation_impl", None)
-    if impl is not None:
-        model.propagation_impl = "naive"
+    refined = model if isinstance(model, AtrousCSPNRefinement) else None
+    impl = refined.propagation_impl if refined is not None else None
+    if refined is not None:
+        refined.propagation_impl = "naive"
     try:
         out = model(**{k: batch[k] for k in _INPUTS})
         loss = semattnet_loss(out, batch["gt"], branch_weight)
@@ -57,8 +64,8 @@ def authors_step(model: Any, optimizer: torch.optim.Optimizer, batch: Mapping[st
         loss.backward()
         optimizer.step()
     finally:
-        if impl is not None:
-            model.propagation_impl = impl
+        if refined is not None and impl is not None:
+            refined.propagation_impl = impl
     return loss.item()
 
 

@@ -15,11 +15,11 @@ import os
 import random
 import shutil
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -41,12 +41,16 @@ from semattnet.models.registry import build_model
 from semattnet.models.semattnet import SemAttNet
 from semattnet.training.checkpointing import set_activation_checkpointing
 from semattnet.training.config import TrainConfig
-from semattnet.training.reference import make_adam, our_step
+from semattnet.training.reference import ParamGroup, make_adam, our_step
+from semattnet.training.state import ResumeState, RngStates, TrainResult, TrainState
 from semattnet.training.validation import validate_model
 from semattnet.weights.checkpoint import CheckpointError, load_checkpoint, load_weights
 from semattnet.weights.gate import DIGEST_KEY, tensor_digest
 
-__all__ = ["RUN_FILES", "Trainer", "prepare_run_folder", "train"]
+if TYPE_CHECKING:
+    from torch.utils.tensorboard import SummaryWriter
+
+__all__ = ["RUN_FILES", "TrainResult", "Trainer", "prepare_run_folder", "train"]
 
 _TRAIN_FORMAT = "semattnet-train-v1"
 #: What a run writes into its folder (``--overwrite`` removes exactly these, nothing else).
@@ -57,7 +61,7 @@ _SYNC_BN_CPU = (
 )
 
 
-def _atomic_torch_save(obj: Any, path: Path) -> None:
+def _atomic_torch_save(obj: object, path: Path) -> None:
     with atomic_path(path) as tmp:
         torch.save(obj, tmp)
 
@@ -138,7 +142,7 @@ class Trainer:
         cfg = self.cfg
         assert cfg.epochs is not None and cfg.patience is not None  # TrainConfig fills them from the stage
         self.optimizer = make_adam(self._param_groups(), self.device, betas=cfg.betas, weight_decay=cfg.weight_decay)
-        self.scheduler: Any
+        self.scheduler: torch.optim.lr_scheduler.LambdaLR | torch.optim.lr_scheduler.ReduceLROnPlateau
         if cfg.lr_schedule == "cosine":  # per step, to zero at the last step
             total = cfg.max_steps or cfg.epochs * len(self.loader)
             self.scheduler = torch.optim.lr_scheduler.LambdaLR(
@@ -157,7 +161,7 @@ class Trainer:
             self.model, device_ids=[self.device.index] if self.device.type == "cuda" else None
         )
 
-    def _open_run_folder(self) -> Any:
+    def _open_run_folder(self) -> SummaryWriter | None:
         """Create the run folder, write ``config.json``; a TensorBoard writer if tensorboard is installed."""
         self.out.mkdir(parents=True, exist_ok=True)
         self.cfg.save(self.out / "config.json")
@@ -200,7 +204,7 @@ class Trainer:
             set_activation_checkpointing(model, True)
         return model.to(self.device)
 
-    def _param_groups(self) -> list[dict[str, Any]]:
+    def _param_groups(self) -> list[ParamGroup]:
         model, cfg = self.model, self.cfg
         trainable = [(n, p) for n, p in model.named_parameters() if p.requires_grad]
         if cfg.stage != "full":
@@ -240,8 +244,8 @@ class Trainer:
             model.backbone.eval()
 
     # ----------------------------------------------------------------------------- state
-    def _state(self) -> dict[str, Any]:
-        rng = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
+    def _state(self) -> TrainState:
+        rng: RngStates = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
         if torch.cuda.is_available():
             rng["cuda"] = torch.cuda.get_rng_state_all()
         return {
@@ -260,16 +264,19 @@ class Trainer:
         }
 
     @staticmethod
-    def _read_state(path: Path) -> dict[str, Any]:
+    def _read_state(path: Path) -> ResumeState:
         if not path.is_file():
             raise CheckpointError(f"{path}: nothing to resume from")
         ckpt = load_checkpoint(path)
-        state = dict(ckpt.extra) | {"model": ckpt.state_dict, "epoch": ckpt.epoch}
-        if state.get("format") != _TRAIN_FORMAT:
+        extra = ckpt.extra
+        if extra.get("format") != _TRAIN_FORMAT or ckpt.epoch is None:
             raise CheckpointError(f"{path}: not a semattnet training checkpoint (no optimiser state to resume)")
-        return state
+        return ResumeState(format=extra["format"], model=ckpt.state_dict, train_config=extra["train_config"],
+                            optimizer=extra["optimizer"], scheduler=extra["scheduler"], scaler=extra["scaler"],
+                            rng=extra["rng"], epoch=ckpt.epoch, batch_in_epoch=extra["batch_in_epoch"],
+                            global_step=extra["global_step"], best_metric=extra["best_metric"])  # fmt: skip
 
-    def _restore(self, state: dict[str, Any]) -> None:
+    def _restore(self, state: ResumeState) -> None:
         load_weights(_unwrap(self.model), state["model"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.scheduler.load_state_dict(state["scheduler"])
@@ -287,7 +294,7 @@ class Trainer:
         """Write ``last.pt`` (and ``best.pt`` / a numbered copy) atomically; rank 0 only."""
         if not self.main:
             return
-        state = self._state()
+        state: dict[str, object] = dict(self._state())
         state[DIGEST_KEY] = tensor_digest(state)  # load_checkpoint verifies it (resume, --init, predict, ...)
         _atomic_torch_save(state, self.ckpt_dir / "last.pt")
         if best:
@@ -299,7 +306,7 @@ class Trainer:
                 old.unlink()
 
     # ----------------------------------------------------------------------------- loop
-    def _write_row(self, row: dict[str, Any]) -> None:
+    def _write_row(self, row: Mapping[str, float | str]) -> None:
         if not self.main:
             return
         path = self.out / "log.csv"
@@ -309,7 +316,7 @@ class Trainer:
             w = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
             if new:
                 w.writeheader()
-            w.writerow({"time": f"{time.time():.1f}"} | row)
+            w.writerow({"time": f"{time.time():.1f}", **row})
         if self.tb is not None:
             for key in ("loss", "lr", "rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km"):
                 if row.get(key) not in (None, ""):
@@ -320,12 +327,13 @@ class Trainer:
             return None
         metrics = partial(protocol_metrics, self.cfg.dataset)
         result = validate_model(self.model, self.val_loader, self.device, self.cfg.amp, metrics).compute()
-        self._write_row({"epoch": self.pos.epoch, "step": self.pos.step, "split": self.cfg.val_split} | result)
+        row: dict[str, float | str] = {"epoch": self.pos.epoch, "step": self.pos.step, "split": self.cfg.val_split}
+        self._write_row(row | result)
         self.log(f"epoch {self.pos.epoch}: {self.cfg.val_split} RMSE {result['rmse_mm']:.1f} mm, "
                  f"MAE {result['mae_mm']:.1f} mm")  # fmt: skip
         return result
 
-    def fit(self) -> dict[str, Any]:
+    def fit(self) -> TrainResult:
         """Run (or finish) the stage; returns the final position and last validation result."""
         last_val: dict[str, float] | None = None
         assert self.cfg.epochs is not None  # TrainConfig fills it from the stage
@@ -346,7 +354,7 @@ class Trainer:
             from semattnet.viz.curves import plot_training_curves
 
             plot_training_curves(self.out / "log.csv", self.out / "curves.png")
-        return {"epoch": self.pos.epoch, "step": self.pos.step, "best_rmse_mm": self.pos.best, "val": last_val}
+        return TrainResult(epoch=self.pos.epoch, step=self.pos.step, best_rmse_mm=self.pos.best, val=last_val)
 
     def _train_epoch(self) -> bool:
         """Train from the current position to the end of the epoch (or ``max_steps``); True if it ended."""
@@ -367,8 +375,10 @@ class Trainer:
                 bar.update(1)
                 bar.set_postfix(loss=f"{loss:.3f}", lr=f"{self.optimizer.param_groups[0]['lr']:.2e}")
                 if self.pos.step % cfg.log_every == 0 or self.pos.batch == len(self.loader):
-                    self._write_row({"epoch": epoch, "step": self.pos.step, "split": "train", "loss": loss,
-                                     "lr": self.optimizer.param_groups[0]["lr"]})  # fmt: skip
+                    lr = self.optimizer.param_groups[0]["lr"]
+                    row: dict[str, float | str] = {"epoch": epoch, "step": self.pos.step, "split": "train",
+                                                   "loss": loss, "lr": lr}  # fmt: skip
+                    self._write_row(row)
                 if cfg.save_every and self.pos.step % cfg.save_every == 0:
                     self.save(periodic=True)
                 if cfg.max_steps and self.pos.step >= cfg.max_steps:
@@ -378,11 +388,11 @@ class Trainer:
                      f"loss {loss:.3f}, lr {self.optimizer.param_groups[0]['lr']:.2e}")  # fmt: skip
         return self.pos.batch >= len(self.loader)
 
-    def _step(self, batch: dict[str, Any], branch_weight: float) -> float:
+    def _step(self, batch: Mapping[str, torch.Tensor], branch_weight: float) -> float:
         """One optimiser step on ``batch`` (eq. 14 loss, AMP-aware); returns the loss."""
         loss = our_step(self.model, self.optimizer, batch, self.device, branch_weight, self.cfg.amp,
                         self.scaler if self.scaler.is_enabled() else None, self.cfg.loss)  # fmt: skip
-        if self.cfg.lr_schedule == "cosine":
+        if isinstance(self.scheduler, torch.optim.lr_scheduler.LambdaLR):  # cosine: per step
             self.scheduler.step()
         self.pos.batch += 1
         self.pos.step += 1
@@ -395,7 +405,7 @@ class Trainer:
             return False, last_val
         last_val = self.validate()
         rmse = last_val["rmse_mm"] if last_val else math.inf
-        if cfg.lr_schedule == "plateau":
+        if isinstance(self.scheduler, torch.optim.lr_scheduler.ReduceLROnPlateau):
             self.scheduler.step(rmse)
         best = rmse < self.pos.best
         self.pos.best = min(self.pos.best, rmse)
@@ -449,7 +459,7 @@ def prepare_run_folder(out: str | os.PathLike[str], overwrite: bool = False) -> 
 
 
 def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = print,
-          overwrite: bool = False) -> dict[str, Any]:  # fmt: skip
+          overwrite: bool = False) -> TrainResult:  # fmt: skip
     """Run one stage; joins/leaves the process group when launched by torchrun.
 
     Without ``resume`` the run folder must not hold a run yet (``overwrite`` starts over, see

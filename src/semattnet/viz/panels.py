@@ -4,12 +4,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from PIL import Image, ImageDraw
 
 from semattnet._errors import InputError
+
+if TYPE_CHECKING:
+    from semattnet.geometry.calibration import RigCalibration
+    from semattnet.geometry.projection import PointCloud
 from semattnet.viz.depth import colorize_depth, confidence_image, error_map
 
 __all__ = ["birds_eye_tile", "branch_panel", "save_panel"]
@@ -70,7 +74,8 @@ def branch_panel(
     return save_panel(tiles, path, columns=columns)
 
 
-def birds_eye_tile(cloud: Any, points: np.ndarray, calib: Any, shape: tuple[int, int], max_depth: float) -> np.ndarray:
+def birds_eye_tile(cloud: PointCloud, points: np.ndarray, calib: RigCalibration, shape: tuple[int, int],
+                   max_depth: float) -> np.ndarray:  # fmt: skip
     """A square bird's-eye view of ``cloud`` (ahead up to min(max_depth, 50) m) centred in an (H, W) tile, with
     the LiDAR ``points`` (LiDAR frame) that land in the image overlaid: in front of the camera and in a pixel
     by :func:`semattnet.geometry.projection.pixel_indices` (the projection's own rule)."""

@@ -9,11 +9,14 @@ highest one (smallest y) is drawn, as seen from above.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from semattnet._errors import InputError
+
+if TYPE_CHECKING:
+    from semattnet.geometry.projection import PointCloud
 
 __all__ = ["birds_eye_view"]
 
@@ -59,7 +62,7 @@ def _paint(
 
 
 def birds_eye_view(
-    cloud: Any,
+    cloud: PointCloud | np.ndarray,
     size: tuple[int, int] = (400, 400),
     x_range: tuple[float, float] | None = None,
     z_range: tuple[float, float] = (0.0, 40.0),

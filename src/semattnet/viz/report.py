@@ -10,11 +10,33 @@ from __future__ import annotations
 import html
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 from semattnet._utils.atomic import atomic_path
 
-__all__ = ["metrics_rows", "write_report"]
+__all__ = ["HeldOutCounts", "ReportSetup", "metrics_rows", "write_report"]
+
+
+class HeldOutCounts(TypedDict):
+    """The held-out scenes: how many, and how many of them with a shadow band."""
+
+    frames: int
+    shadowed: int
+
+
+class _ReportFacts(TypedDict):
+    device: str
+    torch_threads: int
+    seconds: float
+    held_out: HeldOutCounts
+
+
+class ReportSetup(_ReportFacts, total=False):
+    """The facts listed under the report's table; ``steps``: method -> stage -> steps, ``verdicts``: sentences."""
+
+    steps: dict[str, dict[str, int]]
+    verdicts: list[str]
+
 
 #: (metric key, column title) of the table; RMSE per group, the rest over all frames.
 _COLUMNS = (
@@ -52,7 +74,7 @@ def write_report(
     metrics: dict[str, dict[str, dict[str, float]]],
     labels: dict[str, str],
     figures: Sequence[tuple[str, str]],
-    setup: dict[str, Any],
+    setup: ReportSetup,
     title: str = "SemAttNet demo on synthetic scenes",
     links: Sequence[tuple[str, str]] = (),
 ) -> tuple[Path, Path]:
@@ -74,7 +96,7 @@ def write_report(
     return md_path, html_path
 
 
-def _facts(labels: dict[str, str], setup: dict[str, Any]) -> list[str]:
+def _facts(labels: dict[str, str], setup: ReportSetup) -> list[str]:
     """The sentences listed under the table: held-out scenes, device and time, steps, how metrics are computed."""
     facts = [
         f"Held-out scenes: {setup['held_out']['frames']} ({setup['held_out']['shadowed']} with a shadow band), "

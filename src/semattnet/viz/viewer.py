@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from string import Template
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -40,6 +40,7 @@ from semattnet._utils.atomic import atomic_path
 from semattnet.geometry.cameras import KITTI_K
 
 if TYPE_CHECKING:
+    from semattnet.data.pairing import FramePaths
     from semattnet.geometry import PointCloud
 
 __all__ = [
@@ -143,7 +144,7 @@ class _Builder:
 
     def __init__(self) -> None:
         self.layers: list[dict[str, str]] = []
-        self.values: list[dict[str, Any]] = []
+        self.values: list[dict[str, object]] = []
         self.arrays: list[dict[str, str]] = []
 
     def layer(self, key: str, label: str, img: np.ndarray) -> None:
@@ -220,7 +221,7 @@ def _overlay(sparse: np.ndarray) -> str:
     return _png(rgba)
 
 
-def _frame_cloud(b: _Builder, f: ViewerFrame, labels: dict[str, str], max_points: int) -> dict[str, Any]:
+def _frame_cloud(b: _Builder, f: ViewerFrame, labels: dict[str, str], max_points: int) -> dict[str, object]:
     """Add the predicted and LiDAR point clouds (cm, int16) to ``b``; the frame's ``cloud`` entries."""
     if f.K is None:
         return {"cloud": None, "cloud_note": "No 3D view: no camera intrinsics (give --K fx,fy,cx,cy or --K kitti)."}
@@ -242,7 +243,7 @@ def _frame_cloud(b: _Builder, f: ViewerFrame, labels: dict[str, str], max_points
                       "lidar_points": len(lidar.xyz[keep]), "note": note}, "cloud_note": ""}  # fmt: skip
 
 
-def _frame_data(f: ViewerFrame, labels: dict[str, str], max_points: int) -> dict[str, Any]:
+def _frame_data(f: ViewerFrame, labels: dict[str, str], max_points: int) -> dict[str, object]:
     """Everything the page needs of one frame (JSON-serialisable)."""
     b = _Builder()
     _frame_layers(b, f, labels)
@@ -308,7 +309,7 @@ def write_viewer(
 
 def write_prediction_report(
     out_dir: str | Path,
-    frames: Sequence[Any],
+    frames: Sequence[FramePaths],
     K: np.ndarray | None = None,
     log: Callable[[str], None] = print,
 ) -> Path:

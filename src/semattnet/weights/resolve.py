@@ -294,7 +294,7 @@ def read_folder_config(folder: Path) -> tuple[str, SemAttNetConfig]:
     if not isinstance(data, dict):
         raise CheckpointError(f"{path}: expected a JSON object")
     arch = data.get("arch", "semattnet")
-    if arch not in MODELS:
+    if not isinstance(arch, str) or arch not in MODELS:  # a list would fail as unhashable
         raise CheckpointError(f"{path}: unknown arch {arch!r}; available: {', '.join(MODELS)}")
     fields = {k: v for k, v in data.items() if k not in _META_KEYS}
     known = set(SemAttNetConfig().to_dict())

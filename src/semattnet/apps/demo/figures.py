@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import shutil
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -24,7 +24,7 @@ def _shown_methods(preds: dict[str, dict[str, np.ndarray]]) -> tuple[str, ...]:
     return tuple(m for m in ("classical", "two_branch", "semattnet", REFERENCE_KEY) if m in preds)
 
 
-def _intrinsics(sample: dict[str, Any]) -> np.ndarray | None:
+def _intrinsics(sample: Mapping[str, object]) -> np.ndarray | None:
     """The scene's (3, 3) intrinsics, None when the sample has none (NaN-filled)."""
     K = sample.get("K")
     K = None if K is None else np.asarray(K, dtype=np.float64).reshape(3, 3)

@@ -119,7 +119,7 @@ class ReferenceRecipe:
 REFERENCE_RECIPE = ReferenceRecipe()
 
 
-def encode_reference(model: Any, info: dict[str, Any], levels: int) -> bytes:  # a SemAttNet (its .config)
+def encode_reference(model: Any, info: dict[str, object], levels: int) -> bytes:  # a SemAttNet (its .config)
     """The file's bytes: the model packed (:func:`semattnet.weights.packed.encode_packed`) with ``info``."""
     return encode_packed(model.state_dict(), model.config.to_dict(), info, levels)
 
@@ -132,7 +132,7 @@ def choose_levels(model: nn.Module) -> int:
     raise ReferenceError(f"reference checkpoint: over {MAX_BYTES} bytes even at {LEVELS[-1]} levels")
 
 
-def save_reference(model: nn.Module, path: Path, info: dict[str, Any], levels: int = 127) -> Path:
+def save_reference(model: nn.Module, path: Path, info: dict[str, object], levels: int = 127) -> Path:
     """Write ``model`` packed at ``levels`` (:func:`semattnet.weights.packed.save_packed`) with ``info``."""
     return save_packed(model, path, info, levels)
 

@@ -6,17 +6,21 @@ import json
 import os
 import platform
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 import torch
 
 from semattnet.apps.demo.recipe import LABELS, MODEL_KEYS, REFERENCE_KEY, Trained
+from semattnet.viz.report import ReportSetup
 
 __all__ = [
     "COMPARED",
     "METRICS",
     "RESULTS_SCHEMA",
+    "DemoSetup",
+    "Machine",
+    "ReferenceRecord",
     "Runs",
     "comparisons",
     "machine",
@@ -28,6 +32,45 @@ __all__ = [
 ]
 
 RESULTS_SCHEMA = "semattnet.demo.results/2"
+
+
+class _ReferenceFacts(TypedDict):
+    label: str
+    seeds: list[int]
+    files: list[dict[str, object]]  # per seed: file, bytes, sha256, what its own record says
+    storage: str
+    command: str
+    recipe: dict[str, object]
+    recipe_notes: list[str]
+
+
+class ReferenceRecord(_ReferenceFacts, total=False):
+    """What the demo records of the shipped reference checkpoints (``results.json``'s ``reference``)."""
+
+    comparisons: dict[str, dict[str, bool]]
+
+
+class DemoSetup(ReportSetup, total=False):
+    """The demo's run: the report's facts and what ``metrics.json`` / ``results.json`` record besides the metrics."""
+
+    settings: dict[str, object]
+    seeds: list[int]
+    recipe: dict[str, list[str]]
+    comparisons: dict[str, dict[str, bool]]
+    uncertainty: dict[str, dict[str, object]]
+    reference: ReferenceRecord
+
+
+class Machine(TypedDict):
+    """The machine a run was made on."""
+
+    cpu: str
+    cores: int | None
+    torch: str
+    python: str
+    platform: str
+
+
 #: The demo's comparisons: SemAttNet against each of these, on these metrics (issue 16's bar).
 COMPARED: dict[str, tuple[str, ...]] = {"classical": ("rmse", "mae", "irmse", "imae"), "two_branch": ("rmse", "mae")}
 METRICS = ("rmse", "mae", "irmse", "imae")
@@ -104,7 +147,7 @@ def record(groups: dict[str, dict[str, float]]) -> dict[str, dict[str, float]]:
     return {g: {k: v[src] for k, src in _RESULT_KEYS.items() if src in v} for g, v in groups.items()}
 
 
-def machine() -> dict[str, Any]:
+def machine() -> Machine:
     """CPU model (from /proc/cpuinfo where there is one), core count, torch and Python versions."""
     cpu = platform.processor() or platform.machine()
     try:
@@ -114,8 +157,8 @@ def machine() -> dict[str, Any]:
                 break
     except OSError:
         pass
-    return {"cpu": cpu, "cores": os.cpu_count(), "torch": torch.__version__, "python": platform.python_version(),
-            "platform": platform.platform()}  # fmt: skip
+    return Machine(cpu=cpu, cores=os.cpu_count(), torch=torch.__version__, python=platform.python_version(),
+                   platform=platform.platform())  # fmt: skip
 
 
 def write_results(
@@ -123,7 +166,7 @@ def write_results(
     runs: Runs,
     metrics: dict[str, dict[str, dict[str, float]]],
     trained: Trained,
-    setup: dict[str, Any],
+    setup: DemoSetup,
 ) -> Path:
     """Write ``results.json`` (schema in :mod:`semattnet.apps.demo`)."""
     methods = {

@@ -30,6 +30,8 @@ from semattnet.apps.demo.recipe import (
     train_models,
 )
 from semattnet.apps.demo.results import (
+    DemoSetup,
+    ReferenceRecord,
     comparisons,
     mean_over_seeds,
     verdict_sentences,
@@ -91,7 +93,7 @@ def run_demo(
     unc_figure, unc_lines = unc.uncertainty_report(unc_scores, out / "pictures")
     viewer = figs.viewer(out, held, preds, trained, s.viewer_frames)
     seconds = time.perf_counter() - t_start
-    setup: dict[str, Any] = {
+    setup: DemoSetup = {
         "device": str(device), "torch_threads": torch.get_num_threads(), "seconds": round(seconds, 1),
         "held_out": {"frames": len(held.names), "shadowed": sum(held.shadowed.values())},
         "settings": asdict(s), "steps": trained.steps, "seeds": list(s.training_seeds()),
@@ -121,7 +123,7 @@ def run_demo(
 
 def _reference(
     s: DemoSettings, held: HeldOut, device: torch.device, log: Callable[[str], None]
-) -> tuple[dict[int, dict[str, np.ndarray]], dict[str, Any], dict[int, dict[str, np.ndarray]]] | None:
+) -> tuple[dict[int, dict[str, np.ndarray]], ReferenceRecord, dict[int, dict[str, np.ndarray]]] | None:
     """Per training seed, the shipped reference's refined depths on the held-out scenes, what results.json
     records of the files, and per seed the depths' uncertainty (None when disabled or when no file is shipped)."""
     files = ref.shipped_references() if s.reference else {}
@@ -131,7 +133,7 @@ def _reference(
         return None
     preds: dict[int, dict[str, np.ndarray]] = {}
     uncs: dict[int, dict[str, np.ndarray]] = {}
-    records: list[dict[str, Any]] = []
+    records: list[dict[str, object]] = []
     info: dict[str, Any] = {}
     for seed, path in files.items():
         log(f"[4/5] completing the held-out scenes with the shipped reference checkpoint ({path.name}) ...")
@@ -144,11 +146,11 @@ def _reference(
                         "train_seconds": info.get("train_seconds"), "trained_on": info.get("machine"),
                         "own_validation": info.get("val")})  # fmt: skip
     recipe = {k: v for k, v in info.get("recipe", {}).items() if k != "seed"}
-    record = {
-        "label": LABELS[REFERENCE_KEY], "seeds": list(files), "files": records, "storage": ref.REFERENCE_STORAGE,
-        "command": info.get("command", ref.REFERENCE_COMMAND), "recipe": recipe,
-        "recipe_notes": ref.recipe_notes(info.get("recipe", {})),
-    }  # fmt: skip
+    record = ReferenceRecord(
+        label=LABELS[REFERENCE_KEY], seeds=list(files), files=records, storage=ref.REFERENCE_STORAGE,
+        command=info.get("command", ref.REFERENCE_COMMAND), recipe=recipe,
+        recipe_notes=ref.recipe_notes(info.get("recipe", {})),
+    )  # fmt: skip
     return preds, record, uncs
 
 
@@ -156,8 +158,8 @@ def _uncertainty(
     held: HeldOut,
     base: dict[str, dict[str, np.ndarray]],
     trained: Trained,
-    reference: tuple[dict[int, dict[str, np.ndarray]], dict[str, Any], dict[int, dict[str, np.ndarray]]] | None,
-) -> dict[str, dict[str, Any]]:
+    reference: tuple[dict[int, dict[str, np.ndarray]], ReferenceRecord, dict[int, dict[str, np.ndarray]]] | None,
+) -> dict[str, dict[str, object]]:
     """AUSE / AURG of each method's uncertainty (:mod:`semattnet.apps.demo.uncertainty`): the classical
     completion (the same for every seed), the live models per seed and the reference checkpoints per seed."""
     seeds = list(trained.per_seed)
