@@ -25,7 +25,7 @@ from semattnet.weights import (
     get_weights,
     list_pretrained,
 )
-from semattnet.weights.hub import packed_file
+from semattnet.weights.resolve import packed_file
 from tests._base import RegistryTester
 from tests._helpers import random_inputs
 
