@@ -16,6 +16,7 @@ import torch
 
 from semattnet._errors import DataError, InputError
 from semattnet.data.datasets import DATASETS, get_dataset
+from semattnet.evaluation.protocols import protocol_metrics
 from tests._base import RegistryTester
 from tests.registry._trees import SIZE, corrupt, kitti_tree, nyu_tree, void_tree
 
@@ -91,7 +92,7 @@ class TestDatasets(RegistryTester[DatasetFixture]):
         assert np.array_equal(a.sparse, b.sparse) and np.array_equal(a.rgb, b.rgb)
         assert a.gt is not None
         gt = torch.from_numpy(a.gt)[None, None]
-        metrics = spec.metrics()
+        metrics = protocol_metrics(spec.name)
         metrics.update(gt, gt)
         errors = {k: v for k, v in metrics.compute().items() if any(s in k for s in ("rmse", "mae", "abs_rel"))}
         assert errors and all(v == pytest.approx(0.0, abs=1e-6) for v in errors.values()), errors
