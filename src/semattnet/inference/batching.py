@@ -43,7 +43,7 @@ def groups(items: Iterator[T], size: int) -> Iterator[list[T]]:
     first: tuple[int, int] | None = None
     for item in items:
         frame = item.size if isinstance(item, Frame) else None
-        if group and (frame is None or frame != first or len(group) == size):
+        if group and (frame is None or frame != first):
             yield group
             group = []
         if frame is None:
@@ -51,6 +51,9 @@ def groups(items: Iterator[T], size: int) -> Iterator[list[T]]:
             continue
         first = frame if not group else first
         group.append(item)
+        if len(group) == size:  # full: out at once, without reading the next item (read-ahead stays bounded)
+            yield group
+            group = []
     if group:
         yield group
 
