@@ -71,6 +71,9 @@ def with_options(options: Sequence[click.Parameter]) -> Callable[[_F], _F]:
     would: click collects them in the function's ``__click_params__``)."""
 
     def decorate(f: _F) -> _F:
+        if isinstance(f, click.Command):  # above @command: the command's own list, in order
+            f.params.extend(options)
+            return f
         params: list[click.Parameter] = vars(f).setdefault("__click_params__", [])
         params.extend(reversed(options))
         return f
