@@ -69,7 +69,7 @@ def test_learned_model_on_the_raw_drive(tmp_path: Path) -> None:
         (["--kitti-raw", str(DRIVE), "--frames", "x-y"], "expected a range a-b"),
         (["--kitti-raw", str(DRIVE), "--method", "semattnet"], "--checkpoint or --weights is required"),
         (["--kitti-raw", str(DRIVE), "--checkpoint", __file__, "--weights", "x"], "not both"),
-        (["--rgb", str(IMAGE_02), "--ply"], "give --rgb and --sparse, or --kitti-raw"),
+        (["--rgb", str(IMAGE_02), "--ply"], "--rgb and --sparse go together: give both"),
     ],
 )
 def test_bad_raw_options(tmp_path: Path, args: list[str], message: str) -> None:

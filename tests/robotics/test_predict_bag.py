@@ -121,7 +121,7 @@ def test_bad_input_is_one_line_and_leaves_nothing(sample: dict[str, Path], tmp_p
     res = _invoke(["--bag", bag, "--method", "classical", "--out", str(out)])
     assert res.exit_code == 2 and "--image-topic and --points-topic" in res.output
     res = _invoke(["--rgb", bag, "--sparse", bag, "--image-topic", T.image, "--out", str(out)])
-    assert res.exit_code == 2 and "--image-topic needs --bag" in res.output
+    assert res.exit_code == 2 and "--image-topic is an option of --bag, not of --rgb" in res.output
     res = _invoke([*base, *TOPICS, "--semantic-topic", T.image, "--segment", "x"])
     assert res.exit_code == 2 and "--semantic-topic or --segment, not both" in res.output
     res = _invoke(["--bag", bag, "--list-topics"])

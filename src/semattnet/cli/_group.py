@@ -67,7 +67,7 @@ def bug_report_line(exc: BaseException) -> str:
 _OUTPUT_PARAMS = ("out", "out_dir", "bag_out", "rerun_file", "json_path")
 
 
-class _Command(click.Command):
+class Command(click.Command):
     """A command whose full disk without a path (a plain write that filled it, a library's writer) is the
     one-line :func:`~semattnet._utils.atomic.disk_full_error` naming the command's output (``--out``, ...)."""
 
@@ -93,7 +93,7 @@ class _Group(click.Group):
     saying so and where to report it (exit status :data:`BUG_EXIT_CODE`).
     """
 
-    command_class = _Command
+    command_class = Command
     group_class = type  # subgroups (``data``, ``weights``) are of this class too
 
     def invoke(self, ctx: click.Context) -> Any:

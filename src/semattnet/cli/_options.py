@@ -16,9 +16,13 @@ import torch
 
 from semattnet._errors import SemAttNetError
 from semattnet._utils.bounds import MAX_SKEW_S
+from semattnet.cli._params import section
 
 if TYPE_CHECKING:
     from semattnet.weights.resolve import ResolvedWeights
+
+#: The heading of the options choosing and running the model, in a sectioned ``--help``.
+MODEL = "Model"
 
 #: Largest count any option takes (frames, steps, epochs, repeats): far above any real run, and below
 #: the sizes where a count would overflow an int64 or be allocated as a list.
@@ -201,6 +205,7 @@ def weights_option(f: _F) -> _F:
         "--weights",
         "--checkpoint",
         "weights",
+        cls=section(MODEL),
         multiple=True,
         callback=one_value(WEIGHTS_SPEC),
         metavar="NAME|PATH|URL",
@@ -239,6 +244,7 @@ def precision_options(f: _F) -> _F:
     """``--precision f32|bf16|int8`` and ``--calibration PATH`` (int8 only) of every command that runs a model."""
     f = click.option(
         "--calibration",
+        cls=section(MODEL),
         type=click.Path(exists=True, path_type=Path),
         default=None,
         help="With --precision int8: the frames NNCF measures value ranges on: a folder with rgb/ + sparse/ "
@@ -246,6 +252,7 @@ def precision_options(f: _F) -> _F:
     )(f)
     return click.option(
         "--precision",
+        cls=section(MODEL),
         type=click.Choice(["f32", "bf16", "int8"]),
         default=None,
         help="The network's arithmetic: f32 [default], bf16 (faster only on CPUs with native bfloat16), int8 "
@@ -271,6 +278,7 @@ def check_precision_options(method: str, amp: str, precision: str | None, calibr
 #: ``--backend``: the inference engine of every command that runs a model (see ``optimize_for_inference``).
 backend_option = click.option(
     "--backend",
+    cls=section(MODEL),
     type=click.Choice(["torch", "openvino", "onnxruntime", "auto"]),
     default="torch",
     show_default=True,
