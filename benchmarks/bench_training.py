@@ -1,9 +1,16 @@
-"""Training cost: one step of our trainer against one of the authors' recipe, each in its own process.
+"""Training cost: one step of our trainer against the authors' code and a reconstruction of their recipe,
+each in its own process.
 
-Same model (SemAttNet, ``--width``), loss (eq. 14) and batch (random, ``--size``); variants:
+Same weights (``authors_code.fill_weights``: equal in every process, by state-dict name), loss (eq. 14 on the
+refined depth) and batch (random, ``--size``); variants:
 
-* ``authors``: :func:`semattnet.training.reference.authors_step` (plain single-tensor Adam, naive
-  propagation under autograd, ``zero_grad()`` in place, the batch copied to the device);
+* ``authors-code`` (with ``--authors-src DIR``, a clone of https://github.com/danishnazir/SemAttNet; see
+  ``authors_code.py`` for how it is imported and what is shimmed): THEIR ``A_CSPN_plus_plus`` in train mode,
+  their forward, our eq. 14 on the depths it returns, stepped as their recipe does
+  (:func:`semattnet.training.reference.authors_step`: plain single-tensor Adam, ``zero_grad()`` in place,
+  the batch copied to the device);
+* ``recipe-reconstruction``: the same step on OUR model with the naive pad-and-sum propagation under
+  autograd (:func:`~semattnet.training.reference.authors_step`): a reconstruction of their recipe, not their code;
 * ``ours``: :func:`semattnet.training.reference.our_step` (what the trainer runs: fused Adam,
   shifted propagation with its hand-written backward, ``set_to_none``, no batch copies);
 * ``ours+ckpt``: the same with activation checkpointing of the branches;
@@ -13,13 +20,17 @@ Every (variant, batch) runs in a fresh process (peak memory is the child's RSS h
 ``resource.getrusage(RUSAGE_SELF).ru_maxrss``, or CUDA's ``max_memory_allocated``), the variants
 taken in turns (``--rounds`` times); a child whose RSS passes ``--max-gb`` is stopped and reported
 as not fitting. Per-sample memory is the slope of the peak between the smallest and the largest
-batch measured (batch 2 - batch 1 by default), or, with batch 1 alone, the batch-1 peak minus the
-fixed part (weights, gradients and Adam's two moments,
-4 x 4 bytes per parameter, plus the process before the model), an extrapolation the table says
+batch measured (with ``--batches 1,2``: batch 2 - batch 1), or, with batch 1 alone (the default),
+the batch-1 peak minus the fixed part (weights, gradients and Adam's two moments, 4 x 4 bytes per
+parameter, plus the process before the model), an extrapolation the table says
 it is. ``--dry-run`` prints and checks the plan without running it.
 
-    python benchmarks/bench_training.py [--size 320x1216] [--width 1.0] [--batches 1,2] [--rounds 1]
-                                        [--device cpu] [--max-gb 20] [--json out.json] [--dry-run]
+    python benchmarks/bench_training.py [--authors-src DIR] [--size 320x1216] [--width 1.0] [--batches 1]
+                                        [--rounds 1] [--device cpu] [--max-gb 20] [--json out.json] [--dry-run]
+
+The speed and memory ratios are to the first variant of each turn: ``authors-code`` when measured, else
+``recipe-reconstruction``. ``--width`` other than 1.0 only with the reconstruction (or a test's stand-in):
+their released model has one width.
 """
 
 from __future__ import annotations
@@ -35,7 +46,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-VARIANTS = ("authors", "ours", "ours+ckpt")
+VARIANTS = ("recipe-reconstruction", "ours", "ours+ckpt")
+#: THEIR model's step (``--authors-src``), put first in each turn when measured.
+AUTHORS_CODE = "authors-code"
 MEMORY_GB = (24, 48, 80)
 
 
@@ -45,27 +58,37 @@ def plan(variants: tuple[str, ...], batches: tuple[int, ...], rounds: int) -> li
 
 
 def check_plan(steps: list[tuple[str, int]], variants: tuple[str, ...], batches: tuple[int, ...]) -> None:
-    """Every variant at every batch, the first variant (the authors' reference when measured) first in each turn."""
+    """Every variant at every batch, the first variant (the reference of the ratios) first in each turn."""
     for b in batches:
         ran = [v for v, bb in steps if bb == b]
         assert set(ran) == set(variants) and ran[0] == variants[0], f"batch {b}: {ran}"
         assert all(ran.count(v) == ran.count(variants[0]) for v in variants), f"batch {b}: unequal turns {ran}"
 
 
+def _model(variant: str, size: tuple[int, int], width: float, authors_src: Path | None) -> Any:
+    """The variant's model on the CPU, filled by ``authors_code.fill_weights`` (the same weights in every process)."""
+    from authors_code import build_authors_model, fill_weights
+    from semattnet.models.registry import build_model
+
+    if variant == AUTHORS_CODE:
+        if authors_src is None:
+            raise SystemExit(f"{AUTHORS_CODE}: needs --authors-src DIR")
+        return build_authors_model(authors_src, size)
+    return fill_weights(build_model("semattnet", width=width))
+
+
 def child(variant: str, batch: int, size: tuple[int, int], width: float, device: str, steps: int,
-          warmup: int) -> dict[str, Any]:  # fmt: skip
+          warmup: int, authors_src: Path | None = None) -> dict[str, Any]:  # fmt: skip
     """One variant in this process: median seconds per step and peak memory (MiB)."""
     import torch
 
     from semattnet._utils.device import now
-    from semattnet.models.registry import build_model
     from semattnet.training.checkpointing import set_activation_checkpointing
     from semattnet.training.reference import authors_adam, authors_step, make_adam, our_step
 
     dev = torch.device(device)
     before = _rss_mib()
-    torch.manual_seed(0)
-    net = build_model("semattnet", width=width).to(dev).train()
+    net = _model(variant, size, width, authors_src).to(dev).train()
     params = sum(p.numel() for p in net.parameters())
     h, w = size
     g = torch.Generator().manual_seed(0)
@@ -80,7 +103,7 @@ def child(variant: str, batch: int, size: tuple[int, int], width: float, device:
     if variant == "ours+cl":
         net = net.to(memory_format=torch.channels_last)
         data = {k: v.contiguous(memory_format=torch.channels_last) for k, v in data.items()}
-    if variant == "authors":
+    if variant in (AUTHORS_CODE, "recipe-reconstruction"):  # their step (the latter: naive propagation in ours)
         opt = authors_adam(net.parameters(), lr=1e-4)
         step = lambda: authors_step(net, opt, data, dev)  # noqa: E731
     else:
@@ -116,6 +139,7 @@ def _run_child(args: argparse.Namespace, variant: str, batch: int) -> dict[str, 
     cmd = [sys.executable, __file__, "--child", variant, "--batches", str(batch), "--size", args.size,
            "--width", str(args.width), "--device", args.device, "--steps", str(args.steps),
            "--warmup", str(args.warmup)]  # fmt: skip
+    cmd += ["--authors-src", str(args.authors_src)] if args.authors_src else []
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
     status = Path(f"/proc/{proc.pid}/status")
     while proc.poll() is None:
@@ -137,8 +161,11 @@ def _run_child(args: argparse.Namespace, variant: str, batch: int) -> dict[str, 
 
 
 def summarise(results: list[dict[str, Any]], variants: tuple[str, ...]) -> list[str]:
-    """The table: medians per (variant, batch), ratios to the authors', per-sample memory, batches that fit."""
-    lines = [f"{'variant':12s} {'batch':>5s} {'s/step':>8s} {'x authors':>9s} {'peak GiB':>9s} {'mem/authors':>11s}"]
+    """The table: medians per (variant, batch), ratios to the reference (the first variant: ``authors-code`` or
+    ``recipe-reconstruction``), per-sample memory, batches that fit."""
+    ref_name = variants[0]
+    head = f"{'batch':>5s} {'s/step':>8s} {'x speed':>9s} {'peak GiB':>9s} {'x memory':>11s}"
+    lines = [f"ratios to {ref_name}", f"{'variant':21s} {head}"]
     med: dict[tuple[str, int], tuple[float, float]] = {}
     for v in variants:
         for b in sorted({r["batch"] for r in results}):
@@ -146,18 +173,18 @@ def summarise(results: list[dict[str, Any]], variants: tuple[str, ...]) -> list[
             if rs:
                 med[v, b] = (statistics.median(r["seconds"] for r in rs), statistics.median(r["peak_mib"] for r in rs))
     for (v, b), (sec, peak) in med.items():
-        ref = med.get(("authors", b))
+        ref = med.get((ref_name, b))
         speed = f"{ref[0] / sec:9.2f}" if ref else " " * 9
         mem = f"{peak / ref[1]:11.2f}" if ref else " " * 11
-        lines.append(f"{v:12s} {b:5d} {sec:8.2f} {speed} {peak / 1024:9.2f} {mem}")
+        lines.append(f"{v:21s} {b:5d} {sec:8.2f} {speed} {peak / 1024:9.2f} {mem}")
     lines += _against_ours(med)
-    lines += ["", f"{'variant':12s} {'GiB/sample':>10s} {'fixed GiB':>9s} " + " ".join(f"{g:>4d}GB" for g in MEMORY_GB)]
+    lines += ["", f"{'variant':21s} {'GiB/sample':>10s} {'fixed GiB':>9s} " + " ".join(f"{g:>4d}GB" for g in MEMORY_GB)]
     for v in variants:
         fit = _per_sample(results, med, v)
         if fit is not None:
             per, fixed, how = fit
             fits = " ".join(f"{max(0, int((g * 1e9 / 2**20 - fixed) // per)):6d}" for g in MEMORY_GB)
-            lines.append(f"{v:12s} {per / 1024:10.2f} {fixed / 1024:9.2f} {fits}   ({how})")
+            lines.append(f"{v:21s} {per / 1024:10.2f} {fixed / 1024:9.2f} {fits}   ({how})")
     return lines
 
 
@@ -189,7 +216,9 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--size", default="320x1216")
     p.add_argument("--width", type=float, default=1.0)
-    p.add_argument("--batches", default="1,2")
+    what = f"a clone of danishnazir/SemAttNet: adds the {AUTHORS_CODE} variant, first in each turn"
+    p.add_argument("--authors-src", type=Path, default=None, help=what)
+    p.add_argument("--batches", default="1")
     p.add_argument("--rounds", type=int, default=1)
     p.add_argument("--steps", type=int, default=1, help="timed steps per process (median)")
     p.add_argument("--warmup", type=int, default=1, help="untimed steps before (allocates Adam's state)")
@@ -204,10 +233,15 @@ def main(argv: list[str] | None = None) -> int:
     size = tuple(int(v) for v in args.size.lower().split("x"))
     batches = tuple(int(b) for b in args.batches.split(","))
     if args.child:
-        print(json.dumps(child(args.child, batches[0], size, args.width, args.device, args.steps, args.warmup)))  # type: ignore[arg-type]
+        print(json.dumps(child(args.child, batches[0], size, args.width, args.device, args.steps, args.warmup,  # type: ignore[arg-type]
+                               args.authors_src)))  # fmt: skip
         return 0
     variants = tuple(args.variants.split(",")) + (("ours+cl",) if args.channels_last else ())
-    if not set(variants) <= {*VARIANTS, "ours+cl"}:
+    if args.authors_src is not None and AUTHORS_CODE not in variants:
+        variants = (AUTHORS_CODE, *variants)
+    if AUTHORS_CODE in variants and args.authors_src is None:
+        p.error(f"--variants {AUTHORS_CODE} needs --authors-src DIR")
+    if not set(variants) <= {*VARIANTS, AUTHORS_CODE, "ours+cl"}:
         p.error(f"--variants: expected some of {', '.join(VARIANTS)}, got {args.variants!r}")
     steps = plan(variants, batches, args.rounds)
     check_plan(steps, variants, batches)
@@ -224,7 +258,7 @@ def main(argv: list[str] | None = None) -> int:
             results.append(r)
     print("\n".join(summarise(results, variants)))
     if args.json:
-        args.json.write_text(json.dumps({"args": vars(args) | {"json": str(args.json)}, "results": results}, indent=1))
+        args.json.write_text(json.dumps({"args": vars(args), "results": results}, indent=1, default=str))
     return 0
 
 

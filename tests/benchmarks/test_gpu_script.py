@@ -3,9 +3,6 @@ tiny size, the parity and timing code the GPU run uses; the compiled propagation
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
 from types import ModuleType
 
 import pytest
@@ -15,16 +12,7 @@ import semattnet
 from semattnet.inference.backends.compiled_propagation import compiled_propagation, traced_propagation
 from semattnet.models.refinement import propagate_refinement
 from tests._helpers import random_inputs
-
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _load(name: str) -> ModuleType:
-    spec = importlib.util.spec_from_file_location(f"bench_{name}", ROOT / "benchmarks" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
-    sys.modules[spec.name] = module  # type: ignore[union-attr]
-    spec.loader.exec_module(module)  # type: ignore[union-attr]
-    return module
+from tests.benchmarks._scripts import load_script as _load
 
 
 @pytest.fixture(scope="module")
@@ -100,14 +88,14 @@ def test_bench_training_dry_run_and_one_child(capsys) -> None:  # type: ignore[n
     bench = _load("bench_training")
     assert bench.main(["--dry-run", "--batches", "1,2", "--rounds", "2"]) == 0
     out = capsys.readouterr().out
-    assert "12 processes" in out and "authors@1, ours@1, ours+ckpt@1, authors@1" in out
+    assert "12 processes" in out and "recipe-reconstruction@1, ours@1, ours+ckpt@1, recipe-reconstruction@1" in out
     with pytest.raises(AssertionError):
-        bench.check_plan([("ours", 1), ("authors", 1), ("ours+ckpt", 1)], bench.VARIANTS, (1,))
+        bench.check_plan([("ours", 1), ("recipe-reconstruction", 1), ("ours+ckpt", 1)], bench.VARIANTS, (1,))
     r = bench.child("ours+ckpt", 1, (32, 64), 0.125, "cpu", steps=1, warmup=0)
     assert r["seconds"] > 0 and r["peak_mib"] > r["before_mib"] > 0 and r["params"] > 10**5
-    fake = [{"variant": "authors", "batch": b, "seconds": 2.0 * b, "peak_mib": 1000.0 + 500 * b, "before_mib": 100.0,
-             "params": 10**6} for b in (1, 2)]  # fmt: skip
-    table = "\n".join(bench.summarise(fake, ("authors",)))
+    fake = [{"variant": "recipe-reconstruction", "batch": b, "seconds": 2.0 * b, "peak_mib": 1000.0 + 500 * b,
+             "before_mib": 100.0, "params": 10**6} for b in (1, 2)]  # fmt: skip
+    table = "\n".join(bench.summarise(fake, ("recipe-reconstruction",)))
     # 500 MiB per sample, 1000 MiB fixed: 24 GB = 22888 MiB -> 43 samples
     assert "0.49" in table and "43" in table and "measured" in table
     pair = [{"variant": v, "batch": 2, "seconds": t, "peak_mib": m, "before_mib": 100.0, "params": 10**6}
