@@ -1,6 +1,8 @@
-"""The authors' training step, kept as the naive reference of ``benchmarks/bench_training.py``.
+"""A reconstruction of the authors' training step from their recipe (not their code): the naive reference of
+``benchmarks/bench_training.py`` (its ``recipe-reconstruction`` variant; the ``authors-code`` variant runs their
+own model from ``--authors-src``, with this step's optimiser and loss).
 
-Rebuilt from their recipe (not their code): plain Adam (the single-tensor loop: no ``foreach``,
+The reconstruction: plain Adam (the single-tensor loop: no ``foreach``,
 no ``fused``), the model with its BatchNorm layers as they are and their pad-and-sum
 propagation under autograd (``propagation_impl="naive"``), a fresh ``zero_grad()`` that zeroes
 the gradients in place (``set_to_none=False``, PyTorch < 2.0's default, which their code ran),
