@@ -70,11 +70,16 @@ def test_palette_mismatch_is_one_line(trees: dict[str, Path], tmp_path: Path) ->
 
     ckpt = tmp_path / "city.safetensors"  # a state dict: its config (no palette recorded) loads as cityscapes
     save_safetensors(semattnet.build_model("semattnet_backbone", width=0.125).state_dict(), ckpt)
-    for cmd in (["evaluate", "--workers", "0"], ["predict", "--out", tmp_path / "p"]):
+    sweep = ["evaluate", "--sparsity", "keep=1", "--out", tmp_path / "s"]
+    for cmd in (["evaluate", "--workers", "0"], ["predict", "--out", tmp_path / "p"], sweep):
         out = run(*cmd, "--dataset", "nyuv2", "--data", trees["nyuv2"], "--checkpoint", ckpt, code=1)
         assert "NYU-40 palette, but the model was trained with the Cityscapes palette" in out
         assert "Traceback" not in out and len(out.strip().splitlines()) == 1
-    assert not (tmp_path / "p").exists()
+    assert not (tmp_path / "p").exists() and not any((tmp_path / "s").iterdir())  # the sweep: no file, no stage
+    run(*sweep, "--overwrite", "--dataset", "nyuv2", "--data", trees["nyuv2"], "--checkpoint", ckpt,
+        "--palette-mismatch", "recolour")  # the sweep converts maps as evaluate does  # fmt: skip
+    rows = json.loads((tmp_path / "s" / "sparsity.json").read_text())
+    assert [r["method"] for r in rows] == ["semattnet", "classical"]
 
 
 def test_unknown_dataset_lists_the_valid_ones(trees: dict[str, Path]) -> None:

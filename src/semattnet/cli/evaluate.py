@@ -116,7 +116,8 @@ def evaluate(weights: str | None, data_root: Path, dataset: str, split: str | No
         _one_process("evaluate --sparsity")
         if out is None:
             raise click.UsageError("--sparsity needs --out")
-        _sweep(weights, data_root, split, out, sparsity, method, device, max_frames, overwrite, dataset)
+        _sweep(weights, data_root, split, out, sparsity, method, device, max_frames, overwrite, dataset,
+               palette_mismatch)  # fmt: skip
         return
     from semattnet.evaluation.evaluate import evaluate_split
 
@@ -196,7 +197,8 @@ def _one_process(command: str) -> None:
 
 
 def _sweep(weights: str | None, data_root: Path, split: str, out: Path, sparsity: tuple[str, ...], method: str,
-           device: str, max_frames: int | None, overwrite: bool, dataset: str = "kitti-dc") -> None:  # fmt: skip
+           device: str, max_frames: int | None, overwrite: bool, dataset: str = "kitti-dc",
+           palette_mismatch: str = "refuse") -> None:  # fmt: skip
     from semattnet.evaluation.sparsity import format_sweep, parse_settings, sweep_model
     from semattnet.weights.hub import load_model
 
@@ -204,7 +206,8 @@ def _sweep(weights: str | None, data_root: Path, split: str, out: Path, sparsity
     if method == "classical" and weights is not None:
         raise click.UsageError("--method classical takes no --checkpoint / --weights")
     model = partial(load_model, _required_weights(weights)) if method == "semattnet" else None
-    rows = sweep_model(data_root, split, settings, model, out, device, max_frames, overwrite, dataset=dataset)
+    rows = sweep_model(data_root, split, settings, model, out, device, max_frames, overwrite, dataset=dataset,
+                       palette_mismatch=palette_mismatch)  # fmt: skip
     click.echo(format_sweep(rows))
     click.echo(f"wrote {out / 'sparsity.csv'}, {out / 'sparsity.json'} and {out / 'sparsity.png'}")
 
@@ -230,6 +233,7 @@ def submit(weights: str | None, data_root: Path, out: Path, expected_frames: int
     _one_process("submit")
     if weights is None:
         raise click.UsageError("give exactly one of --checkpoint or --weights (they are one option)")
-    zip_path = write_submission(weights, data_root, out, device, amp, expected_frames or None, overwrite,
-                                backend=backend)  # fmt: skip
+    completer = partial(_load_completer, weights, device, amp, backend, None, None)  # after every check
+    local = Path(weights) if Path(weights).exists() else None  # a name or URL reads a cached download
+    zip_path = write_submission(completer, data_root, out, expected_frames or None, overwrite, inputs=[local])
     click.echo(f"wrote {out} and {zip_path}")

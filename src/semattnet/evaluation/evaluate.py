@@ -38,7 +38,8 @@ from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sharding import gather_rows, on_main, process_group, shared_stage
 from semattnet.inference.sinks import DepthPngSink, PanelSink, Sink, output_files
 
-__all__ = ["SPARSIFICATION_PNG", "Evaluation", "evaluate_split", "score_folders", "score_folders_to_json"]
+__all__ = ["SPARSIFICATION_PNG", "Evaluation", "evaluate_split", "resolve_completer", "score_folders",
+           "score_folders_to_json"]  # fmt: skip
 
 PathLike = str | os.PathLike[str]
 #: The sparsification curves' picture in ``evaluate``'s output folder.
@@ -152,7 +153,7 @@ def evaluate_split(
         expected = output_files(source.names, sinks)
         with _stage(out, overwrite, expected) as stage:
             plan = check_frames(source, sinks, stage, overwrite=True, inputs=given, on_error="stop")
-            model = _load(completer)  # after every check
+            model = resolve_completer(completer, "evaluate")  # after every check
             maps = SemanticMaps(mismatch=palette_mismatch)
             complete_frames(source, model, sinks, stage, checked=plan, semantic=maps, log=_quiet,
                             prefetch=prefetch, batch_size=batch_size)  # fmt: skip
@@ -165,13 +166,14 @@ def evaluate_split(
     return res
 
 
-def _load(completer: Completer | Callable[[], Completer]) -> Completer:
-    """``completer``, or what it returns when it is a function of no argument (a completer takes frames)."""
+def resolve_completer(completer: Completer | Callable[[], Completer], command: str = "evaluate") -> Completer:
+    """``completer``, or what it returns when it is a function of no argument (a completer takes frames): what
+    :func:`evaluate_split`, the sparsity sweep and the submission accept, resolved after every check."""
     if _is_factory(completer):
         return completer()
     if _takes_frames(completer):
         return completer
-    raise InputError(f"evaluate: {completer!r} is neither a completer (rgb, sparse, semantic) nor a function "
+    raise InputError(f"{command}: {completer!r} is neither a completer (rgb, sparse, semantic) nor a function "
                      "without arguments that returns one")  # fmt: skip
 
 

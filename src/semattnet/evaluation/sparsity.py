@@ -3,35 +3,41 @@
 Settings are strings: ``beams=N`` keeps every ``64 // N``-th line of the projected map
 (:func:`~semattnet.geometry.sparsify.keep_row_bands`, as the scan itself is not in the splits) and
 ``keep=R`` keeps a random fraction ``R`` of the valid pixels (:func:`~semattnet.geometry.sparsify.keep_random`,
-seeded per frame). Every method sees the same thinned inputs; every score goes through
-:class:`~semattnet.evaluation.metrics.KittiMetrics` (the devkit's rule).
+seeded per frame). Every method sees the same thinned inputs (:class:`ThinnedSource`). Each (setting, method)
+is one run of the one frame loop (:func:`~semattnet.inference.pipeline.complete_frames`) scored by its metrics
+sink (:class:`~semattnet.evaluation.sink.MetricsSink`: the protocol's metrics, KITTI's the devkit's rule, of
+the prediction as its 16-bit PNG stores it, like ``evaluate``).
 """
 
 from __future__ import annotations
 
 import csv
 import json
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, TypedDict
+from typing import TypedDict
 
 import numpy as np
 import torch
 
 from semattnet._errors import SemAttNetError
-from semattnet.evaluation.protocols import protocol_metrics
-from semattnet.evaluation.split import eval_dataset, prepare_out, refuse_listed_inputs
+from semattnet._utils.outputs import stage_folder
+from semattnet.data.frames import Frame, FrameSource, IndexedSource
+from semattnet.evaluation.protocols import eval_source, protocol_metrics
+from semattnet.evaluation.sink import MetricsSink
+from semattnet.evaluation.split import prepare_out, refuse_listed_inputs
 from semattnet.geometry.sparsify import keep_random, keep_row_bands
-from semattnet.inference.backends import needs_semantic
-from semattnet.inference.pipeline import Completer
-
-if TYPE_CHECKING:
-    from semattnet.data.datasets import SplitDataset
+from semattnet.inference.pipeline import Completer, check_frames, complete_frames
+from semattnet.inference.semantic import SemanticMaps
+from semattnet.inference.sinks import Prediction, Sink
 
 __all__ = [
     "FIELDS",
+    "InputDensity",
     "SparsityError",
     "SweepRow",
+    "ThinnedSource",
     "format_sweep",
     "parse_settings",
     "plot_sweep",
@@ -92,35 +98,67 @@ def thin(sparse: np.ndarray, setting: str, seed: int = 0) -> np.ndarray:
     raise SparsityError(f"bad sparsity setting {setting!r}")
 
 
-def _score_setting(ds: SplitDataset, setting: str, completers: dict[str, Completer], seed: int,
-                   max_frames: int | None, dataset: str = "kitti-dc") -> list[SweepRow]:  # fmt: skip
-    """One row per method for one setting: mean density of the thinned input and the four metrics
-    (under ``dataset``'s protocol: KITTI's devkit, NYU's or VOID's range)."""
-    metrics = {name: protocol_metrics(dataset, keep_per_image=False) for name in completers}
-    densities = []
-    for i in range(min(len(ds), max_frames or len(ds))):
-        s = ds.load(i)
-        sparse = thin(s.sparse, setting, seed=seed + i)
-        densities.append(float((sparse > 0).mean()))
-        gt = torch.from_numpy(s.gt)[None, None]
-        for name, completer in completers.items():
-            sem = s.semantic if needs_semantic(completer) else None
-            depth = completer(s.rgb, sparse, sem).depth
-            metrics[name].update(torch.from_numpy(np.asarray(depth, np.float32))[None, None], gt)
+class ThinnedSource(IndexedSource):
+    """``source``'s frames with their sparse maps thinned as ``setting`` says (:func:`thin`; one ``beams=N`` or
+    ``keep=R``): the frame at position ``i`` of ``source.names`` with the seed ``seed + i``, so every method and
+    every run sees the same points. The LiDAR points a frame carried are dropped (the thinned map no longer
+    holds them all); everything else, inputs and checks included, is ``source``'s."""
+
+    def __init__(self, source: FrameSource, setting: str, seed: int = 0) -> None:
+        parsed = parse_settings([setting])
+        if len(parsed) != 1:
+            raise SparsityError(f"ThinnedSource takes one setting (beams=N or keep=R), got {setting!r}")
+        self.setting = parsed[0]
+        self.source, self.seed, self.names = source, seed, list(source.names)
+        self.palette: str | None = getattr(source, "palette", None)
+        self.position = {name: i for i, name in enumerate(self.names)}
+
+    def load(self, name: str) -> Frame:
+        frame = self.source.load(name)
+        sparse = thin(frame.sparse, self.setting, seed=self.seed + self.position[name])
+        return replace(frame, sparse=np.asarray(sparse, np.float32), points=None)
+
+    def check(self, names: Sequence[str] | None = None) -> None:
+        self.source.check(names)
+
+    def inputs(self) -> list[Path]:
+        return self.source.inputs()
+
+
+@dataclass
+class InputDensity(Sink):
+    """Writes no file: the fraction of valid pixels of each completed frame's sparse input, in order."""
+
+    values: list[float] = field(default_factory=list)
+
+    def path(self, name: str) -> str | None:
+        return None
+
+    def write(self, stage: Path, pred: Prediction) -> None:
+        self.values.append(float((pred.frame.sparse > 0).mean()))
+
+
+def _quiet(line: str) -> None:
+    """The loop's per-frame lines are not printed: the sweep reports its table."""
+
+
+def _score_setting(source: FrameSource, setting: str, completers: dict[str, Completer], stage: Path, seed: int = 0,
+                   dataset: str = "kitti-dc", palette_mismatch: str = "refuse") -> list[SweepRow]:  # fmt: skip
+    """One row per method for one setting, each method through the one frame loop
+    (:func:`~semattnet.inference.pipeline.complete_frames`, into a run folder of ``stage``) on the same thinned
+    frames (:class:`ThinnedSource`): the mean density of the thinned input and the four metrics of what the
+    PNG stores (:class:`~.sink.MetricsSink`, under ``dataset``'s protocol: KITTI's devkit, NYU's or VOID's range)."""
+    thinned = ThinnedSource(source, setting, seed)
     rows = []
-    for name, m in metrics.items():
-        r = m.compute()
-        rows.append(
-            SweepRow(
-                method=name,
-                setting=setting,
-                density=float(np.mean(densities)),
-                rmse_mm=r["rmse_mm"],
-                mae_mm=r["mae_mm"],
-                irmse_per_km=r["irmse_per_km"],
-                imae_per_km=r["imae_per_km"],
-            )
-        )
+    for k, (name, completer) in enumerate(completers.items()):
+        scores = MetricsSink(metrics=protocol_metrics(dataset, keep_per_image=False))
+        density = InputDensity()
+        complete_frames(thinned, completer, [scores, density], stage / f"run{k}", checked=True, on_error="stop",
+                        log=_quiet, semantic=SemanticMaps(mismatch=palette_mismatch))  # fmt: skip
+        r = scores.metrics.compute()
+        rows.append(SweepRow(method=name, setting=setting, density=float(np.mean(density.values)),
+                             rmse_mm=r["rmse_mm"], mae_mm=r["mae_mm"], irmse_per_km=r["irmse_per_km"],
+                             imae_per_km=r["imae_per_km"]))  # fmt: skip
     return rows
 
 
@@ -173,23 +211,37 @@ def run_sparsity_sweep(
     seed: int = 0,
     max_frames: int | None = None,
     overwrite: bool = False,
+    dataset: str = "kitti-dc",
 ) -> list[SweepRow]:
     """Score every completer (``name -> completer(rgb, sparse, semantic) -> Completion``) on every
-    setting of ``settings`` (strings, see :func:`parse_settings`) over the frames of ``split``.
+    setting of ``settings`` (strings, see :func:`parse_settings`) over the frames of ``split`` (``dataset``'s
+    registry entry: the frames its protocol scores, :func:`~.protocols.eval_source`; ``max_frames``: the first).
 
-    Writes ``sparsity.csv``, ``sparsity.json`` (rows with :data:`FIELDS`) and ``sparsity.png`` into
-    ``out_dir``; returns the rows.
+    Each (setting, method) is one run of the frame loop on :class:`ThinnedSource` frames (seeded per frame
+    from ``seed``), scored as the 16-bit PNG stores the prediction (1/256 m steps, like ``evaluate``). Writes
+    ``sparsity.csv``, ``sparsity.json`` (rows with :data:`FIELDS`) and ``sparsity.png`` into ``out_dir``, and
+    nothing else (the runs' folders are a stage inside it, removed); returns the rows.
     """
+    return _sweep(data_root, split, settings, lambda: completers, out_dir, seed, max_frames, overwrite, dataset)
+
+
+def _sweep(data_root: str | Path, split: str, settings: Iterable[str], make: Callable[[], dict[str, Completer]],
+           out_dir: str | Path, seed: int, max_frames: int | None, overwrite: bool, dataset: str,
+           palette_mismatch: str = "refuse") -> list[SweepRow]:  # fmt: skip
+    """The sweep: settings, split and ``out_dir`` checked, every input decoded, then ``make()`` (the completers:
+    a model is loaded after every check), every (setting, method) run, the tables and the plot written."""
     settings = parse_settings(settings)
-    ds = eval_dataset(data_root, split)
+    source = eval_source(dataset, data_root, split, max_frames=max_frames)
     out = prepare_out(Path(out_dir), overwrite, [data_root])  # never inside the data
-    refuse_listed_inputs(out, ds)
-    return _sweep(ds, out, settings, completers, seed, max_frames)
-
-
-def _sweep(ds: SplitDataset, out: Path, settings: list[str], completers: dict[str, Completer], seed: int,
-           max_frames: int | None, dataset: str = "kitti-dc") -> list[SweepRow]:  # fmt: skip
-    rows = [row for setting in settings for row in _score_setting(ds, setting, completers, seed, max_frames, dataset)]
+    refuse_listed_inputs(out, source)
+    with stage_folder(out) as stage:  # the runs' folders (their journals): removed, whatever happens
+        check_frames(source, [], stage, overwrite=True, inputs=[data_root], on_error="stop")
+        completers = make()
+        rows = [
+            row
+            for setting in settings
+            for row in _score_setting(source, setting, completers, stage, seed, dataset, palette_mismatch)
+        ]
     _write_tables(out, rows)
     plot_sweep(rows, out / "sparsity.png")
     return rows
@@ -205,22 +257,24 @@ def sweep_model(
     max_frames: int | None = None,
     overwrite: bool = False,
     dataset: str = "kitti-dc",
+    palette_mismatch: str = "refuse",
 ) -> list[SweepRow]:
     """:func:`run_sparsity_sweep` of ``model`` (as ``semattnet``; skipped when None; a function that loads
-    it is called after the split and ``out_dir`` are checked) beside the classical baseline (as ``classical``)."""
-    from semattnet.baselines.classical import ClassicalCompleter
-    from semattnet.inference.completer import DepthCompleter
+    it is called after the split and ``out_dir`` are checked and every input decoded) beside the classical
+    baseline (as ``classical``). ``palette_mismatch``: the model with maps of another palette
+    (:class:`~semattnet.inference.semantic.SemanticMaps`)."""
 
-    settings = parse_settings(settings)
-    ds = eval_dataset(data_root, split, dataset=dataset)
-    out = prepare_out(Path(out_dir), overwrite, [data_root])  # never inside the data
-    refuse_listed_inputs(out, ds)
-    completers: dict[str, Completer] = {}
-    if model is not None:
-        net = model if isinstance(model, torch.nn.Module) else model()
-        completers["semattnet"] = DepthCompleter(net, device=device)
-    completers["classical"] = ClassicalCompleter()
-    return _sweep(ds, out, settings, completers, 0, max_frames, dataset)
+    def make() -> dict[str, Completer]:
+        from semattnet.baselines.classical import ClassicalCompleter
+        from semattnet.inference.completer import DepthCompleter
+
+        completers: dict[str, Completer] = {}
+        if model is not None:
+            net = model if isinstance(model, torch.nn.Module) else model()
+            completers["semattnet"] = DepthCompleter(net, device=device)
+        return completers | {"classical": ClassicalCompleter()}
+
+    return _sweep(data_root, split, settings, make, out_dir, 0, max_frames, overwrite, dataset, palette_mismatch)
 
 
 def format_sweep(rows: list[SweepRow]) -> str:

@@ -38,9 +38,10 @@ def prepare_out(out: Path, overwrite: bool, inputs: Sequence[PathLike | None] = 
 
 
 def refuse_listed_inputs(out: Path | None, ds: object) -> None:
-    """Refuse an ``out`` that holds a file the dataset ``ds`` reads by name from its lists (a VOID list may
-    name any path: ``VoidSource.listed_files``), so that ``--overwrite`` never replaces an input."""
-    listed = getattr(getattr(ds, "source", None), "listed_files", None)
+    """Refuse an ``out`` that holds a file the dataset ``ds`` (a source, or a Dataset or source wrapping one as
+    ``ds.source``) reads by name from its lists (a VOID list may name any path: ``VoidSource.listed_files``),
+    so that ``--overwrite`` never replaces an input."""
+    listed = getattr(ds, "listed_files", None) or getattr(getattr(ds, "source", None), "listed_files", None)
     if out is None or listed is None:
         return
     root = Path(out).resolve()

@@ -1,4 +1,4 @@
-"""KITTI test-server submissions: predict the test split, check every file, zip."""
+"""KITTI test-server submissions: complete the test split through the one frame loop, check every file, zip."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import shutil
 import tempfile
 import warnings
 import zipfile
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -17,12 +17,15 @@ from semattnet._utils.atomic import atomic_path, fsync_dir
 from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs, clean_stale_stages
 from semattnet._utils.progress import progress as progress_bar
 from semattnet.data.io import clamp_for_png, read_depth, write_depth
-from semattnet.data.kitti import KittiDepthCompletion
-from semattnet.inference.completer import DepthCompleter
-from semattnet.weights.hub import load_model
+from semattnet.data.sources import KittiSplitSource
+from semattnet.evaluation.evaluate import resolve_completer
+from semattnet.inference.journal import FRAMES_FILE
+from semattnet.inference.pipeline import Completer, check_frames, complete_frames
+from semattnet.inference.sinks import DepthPngSink
 
 __all__ = ["KITTI_TEST_FRAMES", "SubmissionError", "write_submission", "write_submission_files"]
 
+PathLike = str | os.PathLike[str]
 KITTI_TEST_FRAMES = 1000
 
 
@@ -43,7 +46,7 @@ def _read_back(folder: Path, names: list[str], expected: dict[str, tuple[int, in
     if holes:
         shown = ", ".join(f"{k} ({v})" for k, v in list(holes.items())[:5])
         warnings.warn(f"submission: {sum(holes.values())} hole(s) (0 = no prediction, filled by the devkit) in "
-                      f"{len(holes)} file(s): {shown}{' ...' if len(holes) > 5 else ''}", stacklevel=3)  # fmt: skip
+                      f"{len(holes)} file(s): {shown}{' ...' if len(holes) > 5 else ''}", stacklevel=4)  # fmt: skip
     return sum(holes.values())
 
 
@@ -63,9 +66,9 @@ def _check_replaceable(out: Path, zip_path: Path, expected: dict[str, tuple[int,
                               "move them or choose another --out")  # fmt: skip
 
 
-def _write_checked(predictions: Iterable[tuple[str, np.ndarray]], tmp: Path,
-                   expected: dict[str, tuple[int, int]]) -> None:  # fmt: skip
-    """Write the predictions into ``tmp`` and check count, names, sizes and encoding."""
+def _write_predictions(predictions: Iterable[tuple[str, np.ndarray]], tmp: Path,
+                       expected: dict[str, tuple[int, int]]) -> None:  # fmt: skip
+    """Write ``(file name, depth)`` pairs into ``tmp``, each a test frame's name and size."""
     for name, depth in predictions:
         if name not in expected:
             raise SubmissionError(f"unexpected prediction {name!r} (not a test frame)")
@@ -73,10 +76,16 @@ def _write_checked(predictions: Iterable[tuple[str, np.ndarray]], tmp: Path,
             raise SubmissionError(f"{name}: prediction is {depth.shape[1]}x{depth.shape[0]}, "
                                   f"the input is {expected[name][1]}x{expected[name][0]}")  # fmt: skip
         write_depth(tmp / name, clamp_for_png(depth, name))
+
+
+def _check_stage(tmp: Path, expected: dict[str, tuple[int, int]]) -> None:
+    """The stage holds exactly the test frames' PNGs (count and names), each reading back as 16-bit at its
+    frame's size (holes warned: :func:`_read_back`)."""
     written = sorted(p.name for p in tmp.glob("*.png"))
     if written != sorted(expected):
-        missing = sorted(set(expected) - set(written))
-        raise SubmissionError(f"{len(written)} predictions for {len(expected)} test frames; missing {missing[:5]}")
+        missing, extra = sorted(set(expected) - set(written)), sorted(set(written) - set(expected))
+        raise SubmissionError(f"{len(written)} predictions for {len(expected)} test frames; missing {missing[:5]}"
+                              + (f"; not test frames: {extra[:5]}" if extra else ""))  # fmt: skip
     _read_back(tmp, written, expected)
 
 
@@ -96,6 +105,13 @@ def write_submission_files(
         SubmissionError: any check fails (nothing is written).
         FileExistsError: ``out`` exists and ``overwrite`` is not set.
     """
+    return _publish(out, expected, overwrite, lambda tmp: _write_predictions(predictions, tmp, expected))
+
+
+def _publish(out: PathLike, expected: dict[str, tuple[int, int]], overwrite: bool,
+             fill: Callable[[Path], None]) -> Path:  # fmt: skip
+    """``fill`` a temporary folder beside ``out`` with the PNGs, check them (:func:`_check_stage`), then move it
+    into place as ``out`` and zip it: ``out`` and the zip appear only when every check passed."""
     out = Path(out)
     zip_path = out.with_suffix(".zip")
     _check_replaceable(out, zip_path, expected, overwrite)
@@ -103,7 +119,8 @@ def write_submission_files(
     clean_stale_stages(out.parent, f".{out.name}.p")  # the stage folders of killed submissions
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.p{os.getpid()}.", dir=out.parent))
     try:
-        _write_checked(predictions, tmp, expected)
+        fill(tmp)
+        _check_stage(tmp, expected)
         if out.exists():
             shutil.rmtree(out)  # only submission PNGs (checked above)
         os.replace(tmp, out)
@@ -118,37 +135,42 @@ def write_submission_files(
 
 
 def write_submission(
-    weights: str | Path,
-    data: str | Path,
-    out: str | Path,
-    device: str = "auto",
-    amp: str = "none",
+    completer: Completer | Callable[[], Completer],
+    data: PathLike,
+    out: PathLike,
     expected_frames: int | None = KITTI_TEST_FRAMES,
     overwrite: bool = False,
-    semantic_root: str | Path | None = None,
-    backend: str = "torch",
+    semantic_root: PathLike | None = None,
+    inputs: Sequence[PathLike | None] = (),
 ) -> Path:
-    """Predict the test split (``test_depth_completion_anonymous``) with ``weights`` (a file, folder, registry
-    name or URL: :func:`semattnet.weights.hub.load_model`) and write a ready-to-upload zip.
+    """Complete the test split (``test_depth_completion_anonymous``) with ``completer`` through the one frame
+    loop (:func:`~semattnet.inference.pipeline.complete_frames`) and write a ready-to-upload zip.
 
-    ``expected_frames`` is KITTI's 1000; pass ``None`` to accept any count (e.g. synthetic data).
+    ``completer``: a :class:`~semattnet.inference.DepthCompleter` (any
+    :class:`~semattnet.inference.pipeline.Completer`), or a function without arguments that returns one,
+    called only after every input and output check (as :func:`~.evaluate.evaluate_split`). Each prediction is
+    written as its frame's sparse file is named, into a stage that :func:`write_submission_files`' checks verify
+    before ``out`` and ``OUT.zip`` appear. ``expected_frames`` is KITTI's 1000; pass ``None`` to accept any
+    count (e.g. synthetic data). ``inputs``: further files (the weights) that outputs must stay out of.
     """
-    local = Path(weights) if Path(weights).exists() else None  # a name or URL reads a cached download
-    check_no_input_overlap([data, semantic_root, local], out_dir=out)
-    check_no_input_overlap([data, semantic_root, local], out_files=[Path(out).with_suffix(".zip")])
-    check_outputs([("--data", data), ("--semantic-root", semantic_root), ("--weights", local)],
-                  [Output("--out", out, "folder"), Output("--out", Path(out).with_suffix(".zip"), "zip")],
-                  overwrite)  # fmt: skip
-    ds = KittiDepthCompletion(data, "test", semantic_root=semantic_root)
-    if expected_frames is not None and len(ds) != expected_frames:
-        raise SubmissionError(f"{data}: the test split has {len(ds)} frames, KITTI expects {expected_frames}")
-    completer = DepthCompleter(load_model(weights), device=device, amp=amp, backend=backend, inplace=True)
-    expected = {f.sparse.name: read_depth(f.sparse).shape for f in ds.frames}
+    given = [data, semantic_root, *inputs]
+    zip_path = Path(out).with_suffix(".zip")
+    check_no_input_overlap(given, out_dir=out)
+    check_no_input_overlap(given, out_files=[zip_path])
+    check_outputs([("--data", data), ("--semantic-root", semantic_root), *(("--weights", p) for p in inputs)],
+                  [Output("--out", out, "folder"), Output("--out", zip_path, "zip")], overwrite)  # fmt: skip
+    source = KittiSplitSource(data, "test", semantic_root=semantic_root)
+    if expected_frames is not None and len(source) != expected_frames:
+        raise SubmissionError(f"{data}: the test split has {len(source)} frames, KITTI expects {expected_frames}")
+    rename = {name: source.by_name[name].sparse.name for name in source.names}  # KITTI's names: the sparse file's
+    expected = {rename[name]: read_depth(source.by_name[name].sparse).shape for name in source.names}
 
-    def predictions() -> Iterable[tuple[str, np.ndarray]]:
-        for i in progress_bar(range(len(ds)), desc="test split", leave=False):
-            x = ds[i]
-            res = completer.run(x["rgb"][None], x["semantic"][None], x["sparse"][None])
-            yield ds.frames[i].sparse.name, res.depth[0, 0].cpu().numpy()
+    def fill(stage: Path) -> None:
+        sinks = [DepthPngSink(rename=rename)]
+        plan = check_frames(source, sinks, stage, overwrite=True, inputs=given, on_error="stop")
+        model = resolve_completer(completer, "submit")  # after every check
+        with progress_bar(total=len(source), desc="test split", leave=False) as bar:
+            complete_frames(source, model, sinks, stage, checked=plan, log=lambda _: bar.update())
+        (stage / FRAMES_FILE).unlink(missing_ok=True)  # the run's journal: the stage holds the PNGs only
 
-    return write_submission_files(predictions(), out, expected, overwrite)
+    return _publish(out, expected, overwrite, fill)

@@ -1,0 +1,118 @@
+"""Evaluation has no frame loop of its own (issue 34): every module of ``semattnet.evaluation`` that completes
+frames does it through :func:`~semattnet.inference.pipeline.complete_frames`, read from the source with ``ast``.
+
+A private loop shows in one of four ways: a completer, engine or model called on inputs (``completer(rgb,
+...)``, ``engine.run(...)``), the loop's own parts used (``completions``, ``read_frame``, ``predict_frame``,
+``write_prediction``), frames walked by index (``range(len(ds))``), or frames loaded one by one inside a loop
+(``ds.load(i)`` in a ``for``, ``while`` or comprehension). A zero-argument call (``completer()``: a factory) and
+one ``source.load`` outside a loop (to read a size) are not loops.
+"""
+
+from __future__ import annotations
+
+import ast
+import textwrap
+from pathlib import Path
+
+import pytest
+
+import semattnet
+
+EVALUATION = Path(semattnet.__file__).resolve().parent / "evaluation"
+#: Names of what completes frames: a call of one of them on arguments runs frames outside the loop.
+COMPLETERS = ("completer", "engine", "model", "net")
+#: Calls of an engine or completer method on inputs.
+ENGINE_METHODS = ("run", "complete", "infer", "forward")
+#: The frame loop's own parts: using them is a second loop.
+LOOP_PARTS = ("completions", "read_frame", "predict_frame", "write_prediction")
+LOOPS = (ast.For, ast.AsyncFor, ast.While, ast.ListComp, ast.SetComp, ast.DictComp, ast.GeneratorExp)
+
+
+def _name(func: ast.expr) -> str:
+    return func.id if isinstance(func, ast.Name) else func.attr if isinstance(func, ast.Attribute) else ""
+
+
+def _is_range_len(node: ast.Call) -> bool:
+    """``range(...)`` over a length: ``range(len(ds))``, ``range(min(len(ds), n))``."""
+    return _name(node.func) == "range" and any(
+        isinstance(a, ast.Call) and _name(a.func) == "len" for arg in node.args for a in ast.walk(arg)
+    )
+
+
+def private_loops(source: str) -> list[str]:
+    """``line: what`` for each sign of a frame loop of its own in ``source`` (a module's text)."""
+    tree, found = ast.parse(source), []
+    in_loop = {id(n) for loop in ast.walk(tree) if isinstance(loop, LOOPS) for n in ast.walk(loop) if n is not loop}
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.Call):
+            continue
+        name, argued = _name(node.func), bool(node.args or node.keywords)
+        if argued and name in COMPLETERS:
+            found.append(f"{node.lineno}: calls {name}(...) on inputs")
+        elif argued and isinstance(node.func, ast.Attribute) and name in ENGINE_METHODS:
+            found.append(f"{node.lineno}: calls .{name}(...) on inputs")
+        elif name in LOOP_PARTS:
+            found.append(f"{node.lineno}: uses the loop's part {name}")
+        elif _is_range_len(node):
+            found.append(f"{node.lineno}: walks frames by index (range(len(...)))")
+        elif name == "load" and isinstance(node.func, ast.Attribute) and id(node) in in_loop:
+            found.append(f"{node.lineno}: loads frames one by one in a loop")
+    return sorted(found, key=lambda line: int(line.split(":")[0]))
+
+
+#: The sweep's and the submission's own loops before they ran through complete_frames (abridged).
+OLD_LOOPS = textwrap.dedent("""
+    def _score_setting(ds, setting, completers, seed, max_frames):
+        for i in range(min(len(ds), max_frames or len(ds))):
+            s = ds.load(i)
+            sparse = thin(s.sparse, setting, seed=seed + i)
+            for name, completer in completers.items():
+                depth = completer(s.rgb, sparse, None).depth
+
+    def predictions(ds, completer):
+        for i in progress_bar(range(len(ds)), desc="test split"):
+            x = ds[i]
+            yield completer.run(x["rgb"][None], x["semantic"][None], x["sparse"][None])
+
+    def by_parts(source, model):
+        return [c for _, c in completions(source, model)]
+
+    def loaded(source, names):
+        return [source.load(n) for n in names]
+""")
+
+#: What the scoring modules do instead: one loop, a factory called without arguments, one size read.
+THROUGH_THE_LOOP = textwrap.dedent("""
+    def evaluate(source, completer, sinks, stage):
+        model = completer() if callable(completer) else completer
+        size = source.load(source.names[0]).size
+        for k, (name, method) in enumerate(methods.items()):
+            complete_frames(source, method, sinks, stage / f"run{k}", checked=True)
+        return size
+""")
+
+
+def test_the_check_finds_each_kind_of_private_loop() -> None:
+    found = private_loops(OLD_LOOPS)
+    assert found == [
+        "3: walks frames by index (range(len(...)))",
+        "4: loads frames one by one in a loop",
+        "7: calls completer(...) on inputs",
+        "10: walks frames by index (range(len(...)))",
+        "12: calls .run(...) on inputs",
+        "15: uses the loop's part completions",
+        "18: loads frames one by one in a loop",
+    ]
+    assert private_loops(THROUGH_THE_LOOP) == []
+
+
+@pytest.mark.parametrize("path", sorted(EVALUATION.glob("*.py")), ids=lambda p: p.name)
+def test_no_evaluation_module_loops_over_frames(path: Path) -> None:
+    assert private_loops(path.read_text(encoding="utf-8")) == [], f"{path}: complete frames through complete_frames"
+
+
+@pytest.mark.parametrize("module", ["evaluate.py", "sparsity.py", "submission.py"])
+def test_the_scoring_modules_run_the_one_loop(module: str) -> None:
+    """What completes frames in ``evaluation`` calls ``complete_frames`` (and so is not a module without frames)."""
+    tree = ast.parse((EVALUATION / module).read_text(encoding="utf-8"))
+    assert any(isinstance(n, ast.Call) and _name(n.func) == "complete_frames" for n in ast.walk(tree)), module
