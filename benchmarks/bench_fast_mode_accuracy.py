@@ -31,7 +31,7 @@ from semattnet._utils.cpu import cpu_summary
 from semattnet.apps.experiment import HeldOut, load_held_out, score
 from semattnet.data.sources import KittiSplitSource
 from semattnet.inference.backends import available_backends, optimize_for_inference
-from semattnet.weights.checkpoint import load_model
+from semattnet.weights import load_model
 
 
 def _complete(engine, held: HeldOut, device: torch.device) -> tuple[dict[str, np.ndarray], float]:  # type: ignore[no-untyped-def]

@@ -4,7 +4,10 @@ calibration inputs, the precision rules, and the TensorRT backend's refusal with
 from __future__ import annotations
 
 import importlib.util
+import json
+import re
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 import pytest
@@ -114,3 +117,47 @@ def test_calibration_from_a_folder_of_files(tmp_path: Path) -> None:
 def test_quantised_ir_module_keeps_the_stems_and_heads_float() -> None:
     assert any("conv_init" in p for p in int8_module.KEEP_FLOAT)
     assert any("iter_guide" in p for p in int8_module.KEEP_FLOAT)
+    assert any("confidence_fusion" in p for p in int8_module.KEEP_FLOAT)
+
+
+@needs_int8  # ONNX export + OpenVINO conversion: 11 s on 2 loaded cores (no NNCF)
+def test_every_keep_float_pattern_names_layers_of_the_exported_ir(model: torch.nn.Module, tmp_path: Path) -> None:
+    """A renamed layer cannot silently leave the float32 set: each pattern matches a node (as NNCF matches)."""
+    import openvino as ov
+
+    optimize_for_inference(model, backend="openvino", size=SIZE, cache_dir=tmp_path)
+    ir = ov.Core().read_model(str(next(tmp_path.glob("engines/*/model.xml"))))
+    int8_module.name_layers(ir)
+    names = [op.get_friendly_name() for op in ir.get_ordered_ops()]
+    unmatched = [p for p in int8_module.KEEP_FLOAT if not any(re.match(p, n) for n in names)]
+    assert not unmatched, f"KEEP_FLOAT patterns that name no layer of the IR: {unmatched}"
+    fusion = [n for n in names if n.startswith("confidence_fusion/")]
+    assert sorted(fusion) == ["confidence_fusion/depths", "confidence_fusion/sum", "confidence_fusion/weighted"]
+    assert not [n for n in names if n.startswith("ConvolutionBackpropData")]  # every transposed conv named
+
+
+def _bench() -> ModuleType:
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_int8_accuracy.py"
+    spec = importlib.util.spec_from_file_location("bench_int8_accuracy", path)
+    module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+    spec.loader.exec_module(module)  # type: ignore[union-attr]
+    return module
+
+
+def test_int8_benchmark_dry_run(capsys: pytest.CaptureFixture[str]) -> None:
+    assert _bench().main(["--dry-run", "--scenes", "2"]) is None
+    out = capsys.readouterr().out
+    assert "2 scenes at (96, 320)" in out and "semattnet-demo-ref-seed1" in out and "synthetic scenes" in out
+
+
+@pytest.mark.slow  # two OpenVINO engines and an NNCF quantisation at 96x320: about a minute
+@needs_int8
+def test_int8_benchmark_on_two_scenes(tmp_path: Path) -> None:
+    out = tmp_path / "int8.json"
+    found = _bench().main(["--weights", "semattnet-demo-ref-seed0", "--scenes", "2", "--repeats", "1",
+                           "--calibration-frames", "2", "--speed-size", "64x96", "--json", str(out)])  # fmt: skip
+    assert found is not None and json.loads(out.read_text()) == found
+    r = found["weights"]["semattnet-demo-ref-seed0"]
+    assert set(r["change_pct"]) == {"rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km"}
+    assert 0 < r["max_pixel_change_m"] and r["speedup"] > 0 and found["scenes"] == 2
+    assert r["speed_at"]["speedup"] > 0 and found["speed_size"] == [64, 96]
