@@ -1,12 +1,24 @@
 from __future__ import annotations
 
 import os
+import signal
 from collections.abc import Iterator
 
 import pytest
 import torch
 
 from tests._helpers import REPO, random_inputs  # noqa: F401  (re-exported for old imports)
+
+
+@pytest.fixture(autouse=True)
+def _default_sigchld() -> Iterator[None]:
+    """SIGCHLD back to its default after each test. A DataLoader with workers installs torch's SIGCHLD handler
+    for the rest of the process; with it, three full runs here died in ``os.waitpid`` of a later test that
+    waits for its child (a kernel-forced SIGSEGV, si_code SI_KERNEL, while delivering that child's SIGCHLD to
+    the handler). A child's exit then reaches no handler in tests that do not run a DataLoader."""
+    yield
+    if signal.getsignal(signal.SIGCHLD) not in (signal.SIG_DFL, signal.SIG_IGN, None):
+        signal.signal(signal.SIGCHLD, signal.SIG_DFL)
 
 
 @pytest.fixture(autouse=True)
