@@ -116,7 +116,7 @@ def test_calibration_from_a_folder_of_files(tmp_path: Path) -> None:
 
 def test_quantised_ir_module_keeps_the_stems_and_heads_float() -> None:
     assert any("conv_init" in p for p in int8_module.KEEP_FLOAT)
-    assert any("iter_guide" in p for p in int8_module.KEEP_FLOAT)
+    assert any("refinement_heads" in p for p in int8_module.KEEP_FLOAT)
     assert any("confidence_fusion" in p for p in int8_module.KEEP_FLOAT)
 
 
@@ -134,6 +134,8 @@ def test_every_keep_float_pattern_names_layers_of_the_exported_ir(model: torch.n
     fusion = [n for n in names if n.startswith("confidence_fusion/")]
     assert sorted(fusion) == ["confidence_fusion/depths", "confidence_fusion/sum", "confidence_fusion/weighted"]
     assert not [n for n in names if n.startswith("ConvolutionBackpropData")]  # every transposed conv named
+    heads = [op for op in ir.get_ordered_ops() if op.get_friendly_name().startswith("refinement_heads/")]
+    assert sorted(op.get_type_name() for op in heads).count("Convolution") == 2  # one per stage, where they begin
 
 
 def _bench() -> ModuleType:

@@ -37,9 +37,10 @@ from torch import nn
 from semattnet._errors import InputError
 from semattnet.models._tracing import is_tracing
 from semattnet.models.config import RefinementMode
-from semattnet.models.layers import convbn, convbnrelu
+from semattnet.models.layers import convbn, convbnrelu, shared_input_heads
 from semattnet.models.propagation import (
     AffinityHead,
+    cspn_affinity,
     downsample_sparse,
     propagate_pad_and_sum,
     propagate_shifted,
@@ -151,10 +152,11 @@ class AtrousCSPNRefinement:
         self.att_12 = convbnrelu(2 * channels_s1, 2, kernel_size=3, padding=1)
 
     def _heads(self, feature: torch.Tensor, suffix: str) -> tuple[list[torch.Tensor], torch.Tensor, torch.Tensor]:
-        affinities = [getattr(self, f"iter_guide_layer{k}{suffix}")(feature) for k in self._kernel_sizes]
-        kernel_conf = torch.softmax(getattr(self, f"kernel_conf_layer{suffix}")(feature), dim=1)
-        mask = torch.sigmoid(getattr(self, f"mask_layer{suffix}")(feature))
-        return affinities, kernel_conf, mask
+        """The affinities (eq. 13), kernel confidences and mask of one stage, their convolutions run as one."""
+        guides: list[AffinityHead] = [getattr(self, f"iter_guide_layer{k}{suffix}") for k in self._kernel_sizes]
+        conf_head, mask_head = getattr(self, f"kernel_conf_layer{suffix}"), getattr(self, f"mask_layer{suffix}")
+        conf, mask, *raw = shared_input_heads(feature, [conf_head, mask_head, *(g.generate for g in guides)])
+        return [cspn_affinity(r) for r in raw], torch.softmax(conf, dim=1), torch.sigmoid(mask)
 
     def refinement_inputs(
         self, depth: torch.Tensor, sparse: torch.Tensor, feature_s1: torch.Tensor, feature_s2: torch.Tensor

@@ -40,10 +40,10 @@ KEEP_FLOAT: tuple[str, ...] = (
     r"/rgb_decoder_output/.*",  # the branch output heads: depth + confidence (transposed: name_layers)
     r"/segment_decoder_layer6/.*",
     r"/decoder_layer6/.*",
-    r".*iter_guide_layer.*",  # the affinity heads of both propagation stages
-    r".*kernel_conf_layer.*",
-    r".*mask_layer.*",
+    r"refinement_heads/.*",  # the affinity, kernel-confidence and mask heads of both stages (name_layers)
 )
+#: The graph outputs whose heads ``name_layers`` names ``refinement_heads/...``.
+_HEAD_OUTPUTS = ("refinement.affinities", "refinement.kernel_conf", "refinement.mask")
 
 
 def _umask() -> int:
@@ -56,6 +56,24 @@ def _consumers(op: Any) -> list[Any]:
     return [t.get_node() for port in op.outputs() for t in port.get_target_inputs()]
 
 
+def _name_heads(model: Any) -> None:
+    """``refinement_heads/<name>``: every node from a refinement head output back to its convolution (one
+    convolution per stage serves all the heads: :func:`semattnet.models.layers.shared_input_heads`)."""
+    todo = [out.get_node().input_value(0).get_node() for out in model.outputs
+            if any(n.startswith(_HEAD_OUTPUTS) for n in out.get_names())]  # fmt: skip
+    seen: set[str] = set()
+    while todo:
+        op = todo.pop()
+        name = op.get_friendly_name()
+        if name in seen or op.get_type_name() in ("Parameter", "Constant"):
+            continue
+        seen.add(name)
+        if not name.startswith("refinement_heads/"):
+            op.set_friendly_name(f"refinement_heads/{name}")
+        if op.get_type_name() != "Convolution":  # the heads' convolution is where they begin
+            todo.extend(op.input_value(i).get_node() for i in range(op.get_input_size()))
+
+
 def name_layers(model: Any) -> None:
     """Name the nodes of ``model`` (an ``ov.Model``) that :data:`KEEP_FLOAT` needs but the ONNX export leaves
     unnamed.
@@ -66,7 +84,10 @@ def name_layers(model: Any) -> None:
     * The confidence fusion (:func:`semattnet.models.confidence_fusion.confidence_fusion`, a function, not a
       module): the ``Multiply`` of the softmax weights by the concatenated branch depths, that ``Concat`` and the
       ``ReduceSum`` after it become ``confidence_fusion/{depths,weighted,sum}``.
+    * The refinement heads (one convolution per stage, then a split: not one module each) become
+      ``refinement_heads/<name>``.
     """
+    _name_heads(model)
     for op in model.get_ordered_ops():
         kind = op.get_type_name()
         if kind == "ConvolutionBackpropData" and "/" not in op.get_friendly_name():
