@@ -17,7 +17,7 @@ refined depth) and batch (random, ``--size``); variants:
 * ``ours+cl`` (``--channels-last``): ours with the model and batch in ``channels_last``.
 
 Every (variant, batch) runs in a fresh process (peak memory is the child's RSS high-water mark,
-``resource.getrusage(RUSAGE_SELF).ru_maxrss``, or CUDA's ``max_memory_allocated``), the variants
+``VmHWM`` in ``/proc/self/status``, or CUDA's ``max_memory_allocated``), the variants
 taken in turns (``--rounds`` times); a child whose RSS passes ``--max-gb`` is stopped and reported
 as not fitting. Per-sample memory is the slope of the peak between the smallest and the largest
 batch measured (with ``--batches 1,2``: batch 2 - batch 1), or, with batch 1 alone (the default),
@@ -26,7 +26,12 @@ parameter, plus the process before the model), an extrapolation the table says
 it is. ``--dry-run`` prints and checks the plan without running it.
 
     python benchmarks/bench_training.py [--authors-src DIR] [--size 320x1216] [--width 1.0] [--batches 1]
-                                        [--rounds 1] [--device cpu] [--max-gb 20] [--json out.json] [--dry-run]
+                                        [--rounds 1] [--device cpu] [--max-gb 20] [--profile] [--json out.json]
+                                        [--dry-run]
+
+``--profile`` runs one more step per child under ``torch.profiler`` (after the timing and the peak) and reports
+the convolutions' self CPU seconds: the same PyTorch calls in every variant, so the reference's step time over
+them bounds what any rewrite of the rest can reach.
 
 The speed and memory ratios are to the first variant of each turn: ``authors-code`` when measured, else
 ``recipe-reconstruction``. ``--width`` other than 1.0 only with the reconstruction (or a test's stand-in):
@@ -78,8 +83,9 @@ def _model(variant: str, size: tuple[int, int], width: float, authors_src: Path 
 
 
 def child(variant: str, batch: int, size: tuple[int, int], width: float, device: str, steps: int,
-          warmup: int, authors_src: Path | None = None) -> dict[str, Any]:  # fmt: skip
-    """One variant in this process: median seconds per step and peak memory (MiB)."""
+          warmup: int, authors_src: Path | None = None, profile: bool = False) -> dict[str, Any]:  # fmt: skip
+    """One variant in this process: median seconds per step and peak memory (MiB); with ``profile``, the
+    convolutions' share of one more step (:func:`conv_share`, after the peak is read)."""
     import torch
 
     from semattnet._utils.device import now
@@ -119,8 +125,9 @@ def child(variant: str, batch: int, size: tuple[int, int], width: float, device:
         if i >= warmup:
             times.append(now(dev) - t0)
     peak = torch.cuda.max_memory_allocated(dev) / 2**20 if dev.type == "cuda" else _peak_rss_mib()
-    return {"variant": variant, "batch": batch, "seconds": statistics.median(times), "peak_mib": peak,
-            "before_mib": before if dev.type == "cpu" else 0.0, "params": params}  # fmt: skip
+    out = {"variant": variant, "batch": batch, "seconds": statistics.median(times), "peak_mib": peak,
+           "before_mib": before if dev.type == "cpu" else 0.0, "params": params}  # fmt: skip
+    return {**out, **conv_share(step)} if profile and dev.type == "cpu" else out
 
 
 def _rss_mib() -> float:
@@ -131,7 +138,27 @@ def _rss_mib() -> float:
 
 
 def _peak_rss_mib() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB on Linux
+    """This process's resident high-water mark (``VmHWM``: since its ``exec``, unlike ``ru_maxrss``, which Linux
+    carries over from the parent)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB, where /proc has no VmHWM
+
+
+def conv_share(step: Any) -> dict[str, float]:
+    """One more ``step()`` under ``torch.profiler``: the self CPU seconds of the convolution operators (forward
+    and backward, every ``aten::*convolution*``) and of all operators. The convolutions are the same library
+    calls in every variant, so ``reference seconds / conv seconds`` bounds the speed-up of a variant that
+    keeps them."""
+    from torch.profiler import ProfilerActivity, profile
+
+    with profile(activities=[ProfilerActivity.CPU]) as prof:
+        step()
+    events = prof.key_averages()
+    total = sum(e.self_cpu_time_total for e in events) / 1e6
+    conv = sum(e.self_cpu_time_total for e in events if "convolution" in e.key) / 1e6
+    return {"conv_seconds": conv, "profiled_seconds": total}
 
 
 def _run_child(args: argparse.Namespace, variant: str, batch: int) -> dict[str, Any] | None:
@@ -140,6 +167,7 @@ def _run_child(args: argparse.Namespace, variant: str, batch: int) -> dict[str, 
            "--width", str(args.width), "--device", args.device, "--steps", str(args.steps),
            "--warmup", str(args.warmup)]  # fmt: skip
     cmd += ["--authors-src", str(args.authors_src)] if args.authors_src else []
+    cmd += ["--profile"] if args.profile else []
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
     status = Path(f"/proc/{proc.pid}/status")
     while proc.poll() is None:
@@ -177,7 +205,7 @@ def summarise(results: list[dict[str, Any]], variants: tuple[str, ...]) -> list[
         speed = f"{ref[0] / sec:9.2f}" if ref else " " * 9
         mem = f"{peak / ref[1]:11.2f}" if ref else " " * 11
         lines.append(f"{v:21s} {b:5d} {sec:8.2f} {speed} {peak / 1024:9.2f} {mem}")
-    lines += _against_ours(med)
+    lines += _against_ours(med) + _conv_bound(results, variants)
     lines += ["", f"{'variant':21s} {'GiB/sample':>10s} {'fixed GiB':>9s} " + " ".join(f"{g:>4d}GB" for g in MEMORY_GB)]
     for v in variants:
         fit = _per_sample(results, med, v)
@@ -194,6 +222,24 @@ def _against_ours(med: dict[tuple[str, int], tuple[float, float]]) -> list[str]:
             f"peak memory {med['ours+ckpt', b][1] / med['ours', b][1]:.2f}x"
             for b in sorted({b for _, b in med}) if ("ours", b) in med and ("ours+ckpt", b) in med]  # fmt: skip
     return ["", *rows] if rows else []
+
+
+def _conv_bound(results: list[dict[str, Any]], variants: tuple[str, ...]) -> list[str]:
+    """With ``--profile``: each variant's convolution seconds (the same library calls in every variant) and the
+    speed-up over the reference that a step made of nothing else would reach."""
+    prof = [r for r in results if "conv_seconds" in r]
+    if not prof:
+        return []
+    lines = ["", f"{'variant':21s} {'batch':>5s} {'conv s':>8s} {'other s':>8s} {'conv %':>7s} {'bound':>7s}"]
+    for r in prof:
+        ref = next((q for q in prof if q["variant"] == variants[0] and q["batch"] == r["batch"]), None)
+        bound = f"{ref['seconds'] / r['conv_seconds']:6.2f}x" if ref else ""
+        share = 100 * r["conv_seconds"] / r["profiled_seconds"]
+        other = r["profiled_seconds"] - r["conv_seconds"]
+        lines.append(
+            f"{r['variant']:21s} {r['batch']:5d} {r['conv_seconds']:8.2f} {other:8.2f} {share:6.1f}% {bound:>7s}"
+        )
+    return [*lines, "(one more step under torch.profiler, self CPU seconds; bound: reference s/step / conv s)"]
 
 
 def _per_sample(results: list[dict[str, Any]], med: dict[tuple[str, int], tuple[float, float]],
@@ -226,6 +272,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--max-gb", type=float, default=20.0, help="stop a child whose RSS passes this")
     p.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated, in the order of each turn")
     p.add_argument("--channels-last", action="store_true", help="also measure ours in channels_last")
+    p.add_argument(
+        "--profile",
+        action="store_true",
+        help="also time the convolutions of one more step (torch.profiler): their share and the bound",
+    )
     p.add_argument("--json", type=Path, default=None)
     p.add_argument("--dry-run", action="store_true")
     p.add_argument("--child", default=None, help=argparse.SUPPRESS)
@@ -234,7 +285,7 @@ def main(argv: list[str] | None = None) -> int:
     batches = tuple(int(b) for b in args.batches.split(","))
     if args.child:
         print(json.dumps(child(args.child, batches[0], size, args.width, args.device, args.steps, args.warmup,  # type: ignore[arg-type]
-                               args.authors_src)))  # fmt: skip
+                               args.authors_src, args.profile)))  # fmt: skip
         return 0
     variants = tuple(args.variants.split(",")) + (("ours+cl",) if args.channels_last else ())
     if args.authors_src is not None and AUTHORS_CODE not in variants:
