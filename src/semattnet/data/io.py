@@ -26,6 +26,7 @@ __all__ = [
     "MAX_IMAGE_PIXELS",
     "MAX_IMAGE_SIDE",
     "MIN_DEPTH_M",
+    "PNG_COMPRESS_LEVEL",
     "DataError",
     "clamp_for_png",
     "decode_depth",
@@ -183,7 +184,13 @@ def clamp_for_png(depth: Any, name: str = "prediction") -> Any:
     return xp.where(hole, xp.zeros_like(clamped), clamped)
 
 
-def _atomic_save(img: Image.Image, path: Path, overwrite: bool, compress_level: int = 6) -> Path:
+#: The zlib level of the PNGs we write. 3 (zlib's fast strategy) against PIL's default 6, measured on a 352x1216
+#: dense depth map: 37 ms instead of 194 ms at the same size (450 kB), and an 18 ms colour map at +32 % size.
+#: Writing at 6 cost 7-20 % of a frame in ``predict --stream`` (issue 36); the pixels are the same.
+PNG_COMPRESS_LEVEL = 3
+
+
+def _atomic_save(img: Image.Image, path: Path, overwrite: bool, compress_level: int = PNG_COMPRESS_LEVEL) -> Path:
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists; refusing to overwrite")
     with atomic_path(path, suffix=".png") as tmp:
@@ -192,7 +199,7 @@ def _atomic_save(img: Image.Image, path: Path, overwrite: bool, compress_level: 
 
 
 def write_depth(
-    path: str | os.PathLike[str], depth: np.ndarray, overwrite: bool = False, compress_level: int = 6
+    path: str | os.PathLike[str], depth: np.ndarray, overwrite: bool = False, compress_level: int = PNG_COMPRESS_LEVEL
 ) -> Path:
     """Write (H, W) metres as a KITTI 16-bit PNG, atomically; refuses to overwrite by default.
     A uint16 array is taken as already encoded (:func:`encode_depth`) and written as is.
@@ -216,7 +223,7 @@ def write_depth(
 
 
 def write_image(
-    path: str | os.PathLike[str], image: np.ndarray, overwrite: bool = False, compress_level: int = 6
+    path: str | os.PathLike[str], image: np.ndarray, overwrite: bool = False, compress_level: int = PNG_COMPRESS_LEVEL
 ) -> Path:
     """Write (H, W, 3) uint8 as an RGB PNG, atomically; refuses to overwrite by default."""
     image = np.asarray(image)
