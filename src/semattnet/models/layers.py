@@ -39,14 +39,14 @@ def shared_input_heads(x: torch.Tensor, heads: list[nn.Sequential]) -> list[torc
     function with the same gradients; one wide convolution runs several times faster than five
     narrow ones (1-48 output channels underfill the vector width).
     """
-    convs = [h[0] for h in heads]
-    if len(heads) < 2 or not all(type(c) is nn.Conv2d for c in convs) or not _same_geometry(convs):
+    convs = [h[0] for h in heads if type(h[0]) is nn.Conv2d]
+    if len(heads) < 2 or len(convs) != len(heads) or not _same_geometry(convs):
         return [h(x) for h in heads]
     first = convs[0]
     biases = [c.bias if c.bias is not None else c.weight.new_zeros(c.out_channels) for c in convs]
     bias = torch.cat(biases) if any(c.bias is not None for c in convs) else None
-    y = nn.functional.conv2d(x, torch.cat([c.weight for c in convs]), bias, first.stride, first.padding,
-                             first.dilation)  # fmt: skip
+    y = nn.functional.conv2d(x, torch.cat([c.weight for c in convs]), bias, first.stride,
+                             first.padding, first.dilation)  # fmt: skip
     parts = torch.split(y, [c.out_channels for c in convs], dim=1)
     return [head[1:](part) for head, part in zip(heads, parts, strict=True)]
 
