@@ -97,11 +97,16 @@ def test_bench_training_authors_code_variant(src: Path, capsys: pytest.CaptureFi
     assert "ratios to authors-code" in table and "ours 1 2.00 2.00 0.98 0.50" in table
 
 
-def test_bench_training_profile_bounds_the_speed_up_by_the_convolutions(src: Path) -> None:
-    """``--profile``: the convolutions' self seconds of one more step, and reference step time / them."""
+@pytest.mark.slow  # ~6 s: a training step under the profiler
+def test_bench_training_profile_times_the_convolutions_of_a_step() -> None:
     bench = load_script("bench_training")
     r = bench.child("ours", 1, (32, 64), WIDTH, "cpu", steps=1, warmup=0, profile=True)
     assert 0 < r["conv_seconds"] < r["profiled_seconds"]  # the step has convolutions and more
+
+
+def test_bench_training_profile_bounds_the_speed_up_by_the_convolutions() -> None:
+    """``--profile``: the convolutions' self seconds of one more step, and reference step time / them."""
+    bench = load_script("bench_training")
     runs = (("authors-code", 8.0, 5.0), ("ours", 6.0, 4.0))
     fake = [{"variant": v, "batch": 1, "seconds": s, "peak_mib": 1000.0, "before_mib": 100.0, "params": 10**6,
              "conv_seconds": c, "profiled_seconds": s} for v, s, c in runs]  # fmt: skip

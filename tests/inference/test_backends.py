@@ -91,6 +91,7 @@ def test_engines_run_the_network_in_the_graph_and_the_propagation_in_torch(tmp_p
         assert _rel(out.to_dict()[name], ref.to_dict()[name]) < 1e-4, name
 
 
+@pytest.mark.slow  # ~16 s (the unrolled propagation); the whole-model ONNX parity test exports it too (slow)
 def test_whole_model_export_keeps_the_propagation(model: torch.nn.Module, tmp_path: Path) -> None:
     onnx = pytest.importorskip("onnx")
     from semattnet.weights.export import export_onnx
