@@ -121,8 +121,9 @@ def _release_freed() -> float:
         ctypes.CDLL("libc.so.6").malloc_trim(0)
     except (OSError, AttributeError):  # not glibc: the freed pages may stay counted
         pass
-    status = Path("/proc/self/status").read_text().splitlines()
-    return next((int(ln.split()[1]) / 1024 for ln in status if ln.startswith("VmHWM:")), float("nan"))
+    from semattnet.apps.timing import status_mib
+
+    return status_mib("VmHWM")
 
 
 def _run_child(args: argparse.Namespace, variant: str) -> dict[str, Any] | None:

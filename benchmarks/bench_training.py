@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import resource
 import statistics
@@ -89,11 +90,12 @@ def child(variant: str, batch: int, size: tuple[int, int], width: float, device:
     import torch
 
     from semattnet._utils.device import now
+    from semattnet.apps.timing import status_mib
     from semattnet.training.checkpointing import set_activation_checkpointing
     from semattnet.training.reference import authors_adam, authors_step, make_adam, our_step
 
     dev = torch.device(device)
-    before = _rss_mib()
+    before = status_mib("VmRSS")
     net = _model(variant, size, width, authors_src).to(dev).train()
     params = sum(p.numel() for p in net.parameters())
     h, w = size
@@ -130,20 +132,13 @@ def child(variant: str, batch: int, size: tuple[int, int], width: float, device:
     return {**out, **conv_share(step)} if profile and dev.type == "cpu" else out
 
 
-def _rss_mib() -> float:
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    return float("nan")
-
-
 def _peak_rss_mib() -> float:
     """This process's resident high-water mark (``VmHWM``: since its ``exec``, unlike ``ru_maxrss``, which Linux
     carries over from the parent)."""
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1]) / 1024
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB, where /proc has no VmHWM
+    from semattnet.apps.timing import status_mib
+
+    peak = status_mib("VmHWM")
+    return peak if not math.isnan(peak) else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB, no /proc
 
 
 def conv_share(step: Any) -> dict[str, float]:
@@ -169,7 +164,7 @@ def _run_child(args: argparse.Namespace, variant: str, batch: int) -> dict[str, 
     cmd += ["--authors-src", str(args.authors_src)] if args.authors_src else []
     cmd += ["--profile"] if args.profile else []
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
-    status = Path(f"/proc/{proc.pid}/status")
+    status = Path(f"/proc/{proc.pid}/status")  # read here, not through semattnet: the parent imports no torch
     while proc.poll() is None:
         try:
             rss = next(int(ln.split()[1]) for ln in status.read_text().splitlines() if ln.startswith("VmRSS:"))

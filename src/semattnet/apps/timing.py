@@ -15,7 +15,7 @@ from torch import nn
 from semattnet._utils.cpu import has_native_bf16
 from semattnet._utils.device import now
 
-__all__ = ["conv_peak_gflops", "count_macs", "fast_mode_dtype", "interleaved", "peak_memory", "timeit"]
+__all__ = ["conv_peak_gflops", "count_macs", "fast_mode_dtype", "interleaved", "peak_memory", "status_mib", "timeit"]
 
 
 def timeit(fn: Callable[[], object], device: torch.device, repeats: int = 3, warmup: int = 1) -> float:
@@ -52,17 +52,24 @@ def peak_memory(device: torch.device) -> Iterator[dict[str, float]]:
         yield out
         out["peak_mib"] = torch.cuda.max_memory_allocated(device) / 2**20
         return
-    status = Path("/proc/self/status")
     try:
         Path("/proc/self/clear_refs").write_text("5")
-        ok = status.is_file()
+        ok = True
     except OSError:
         ok = False
     yield out
     if ok:
-        for line in status.read_text().splitlines():
-            if line.startswith("VmHWM:"):
-                out["peak_mib"] = int(line.split()[1]) / 1024
+        out["peak_mib"] = status_mib("VmHWM")
+
+
+def status_mib(field: str, pid: int | str = "self") -> float:
+    """A memory field of Linux's ``/proc/PID/status`` (``VmRSS``, ``VmHWM``: the resident set, its high-water
+    mark) in MiB; ``nan`` where the file or the field is missing."""
+    try:
+        lines = Path(f"/proc/{pid}/status").read_text().splitlines()
+    except OSError:
+        return float("nan")
+    return next((int(ln.split()[1]) / 1024 for ln in lines if ln.startswith(f"{field}:")), float("nan"))
 
 
 def fast_mode_dtype(device: torch.device) -> torch.dtype | None:

@@ -43,8 +43,9 @@ def shared_input_heads(x: torch.Tensor, heads: list[nn.Sequential]) -> list[torc
     if len(heads) < 2 or len(convs) != len(heads) or not _same_geometry(convs):
         return [h(x) for h in heads]
     first = convs[0]
-    biases = [c.bias if c.bias is not None else c.weight.new_zeros(c.out_channels) for c in convs]
-    bias = torch.cat(biases) if any(c.bias is not None for c in convs) else None
+    bias = None  # the training form has none; the folded form has all: zeros only for a mix
+    if any(c.bias is not None for c in convs):
+        bias = torch.cat([c.bias if c.bias is not None else c.weight.new_zeros(c.out_channels) for c in convs])
     y = nn.functional.conv2d(x, torch.cat([c.weight for c in convs]), bias, first.stride,
                              first.padding, first.dilation)  # fmt: skip
     parts = torch.split(y, [c.out_channels for c in convs], dim=1)
