@@ -160,6 +160,10 @@ def test_bench_smoke(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-
     assert "CPU: " in "\n".join(lines)
     for r in res.rows:
         assert r["seconds"] > 0
-        if r["max_rel_diff"] is not None and "fast" not in r["what"] and "bf16" not in r["what"]:
+        if r["max_rel_diff"] is None or "fast" in r["what"] or "bf16" in r["what"]:
+            continue
+        if "int8" in r["what"]:  # quantised, on random weights: bounded, not exact (bench_int8_accuracy: metrics)
+            assert r["max_rel_diff"] < 0.5, r
+        else:
             assert r["max_rel_diff"] < 1e-4, r
     assert any("GMACs" in n for n in res.notes) and "x naive" in "\n".join(lines)
