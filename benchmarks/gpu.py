@@ -166,7 +166,7 @@ def training_step(device: torch.device, batch: int, checkpointing: bool, size: t
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     import semattnet
-    from semattnet.models.refinement import propagate_refinement
+    from semattnet.models.refinement import refine
 
     device = torch.device("cuda")
     start, rows = time.monotonic(), {"gpu": torch.cuda.get_device_name(device), "torch": torch.__version__}
@@ -195,7 +195,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                     raise RuntimeError("the TensorRT engine is built for batch 1")
                 rows.setdefault("latency", []).append(label | latency(lambda: fn(**x), device, args.repeats))  # noqa: B023
             elif step["step"] == "propagation":
-                rows["propagation"] = _propagation(model, x1, device, args.repeats, propagate_refinement)
+                rows["propagation"] = _propagation(model, x1, device, args.repeats, refine)
             elif step["step"] == "training":
                 measured = training_step(device, step["batch"], step["checkpointing"])
                 rows.setdefault("training", []).append(label | measured)

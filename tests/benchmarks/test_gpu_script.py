@@ -10,7 +10,7 @@ import torch
 
 import semattnet
 from semattnet.inference.backends.compiled_propagation import compiled_propagation, traced_propagation
-from semattnet.models.refinement import propagate_refinement
+from semattnet.models.refinement import refine
 from tests._helpers import random_inputs
 from tests.benchmarks._scripts import load_script as _load
 
@@ -56,7 +56,7 @@ def test_gpu_parity_and_latency_on_cpu(gpu: ModuleType, model: torch.nn.Module) 
 def test_compiled_propagation_code_path_matches_the_reference(model: torch.nn.Module) -> None:
     with torch.inference_mode():
         _, heads = model.forward_network(**random_inputs(b=1, h=32, w=32))
-    naive = propagate_refinement(heads, 1, "naive")
+    naive = refine(heads, 1, "naive")
     traced = traced_propagation(heads, 1)  # the recorded form that torch.compile compiles
     for a, b in zip(traced, naive, strict=True):
         torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-5)
@@ -68,7 +68,7 @@ def test_compiled_propagation_on_cpu(model: torch.nn.Module) -> None:
     with torch.inference_mode():
         _, heads = model.forward_network(**random_inputs(b=1, h=64, w=96))
         got = compiled_propagation()(heads, 2)
-    for a, b in zip(got, propagate_refinement(heads, 2, "naive"), strict=True):
+    for a, b in zip(got, refine(heads, 2, "naive"), strict=True):
         torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-5)
 
 

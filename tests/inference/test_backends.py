@@ -82,7 +82,8 @@ def test_engines_run_the_network_in_the_graph_and_the_propagation_in_torch(tmp_p
     engine = optimize_for_inference(net, backend="onnxruntime", size=SIZE, cache_dir=tmp_path)
     outputs = [o.name for o in onnx.load(next((tmp_path / "engines").glob("*/model.onnx"))).graph.output]
     assert "refined_depth" not in outputs and "fused_depth" in outputs
-    assert {"refinement.att", "refinement.affinities.2", "refinement.mask_s2"} <= set(outputs)
+    assert {"refinement.att", "refinement.heads", "refinement.heads_s2"} <= set(outputs)
+    assert not any("affinities" in n or "mask" in n for n in outputs)  # no split, no normalisation in the graph
     x = random_inputs(b=1, h=SIZE[0], w=SIZE[1])
     with torch.inference_mode():
         ref = net(**x)
@@ -101,20 +102,50 @@ def test_whole_model_export_keeps_the_propagation(model: torch.nn.Module, tmp_pa
     assert "refined_depth" in outputs and not any(n.startswith("refinement.") for n in outputs)
 
 
-def test_refinement_inputs_round_trip_and_heads_need_iterations(model: torch.nn.Module) -> None:
+def test_refinement_heads_round_trip_and_need_the_propagation_settings(model: torch.nn.Module) -> None:
     from semattnet.inference.backends import output_from_arrays
-    from semattnet.models.refinement import RefinementInputs
+    from semattnet.models.refinement import PropagationSettings, RefinementHeads
 
     x = random_inputs(b=1, h=32, w=64)
     with torch.inference_mode():
         out, heads = model.forward_network(**x)
         ref = model(**x)
     flat = heads.to_dict()
-    assert sorted(k for k in flat if "affinities" in k) == [f"refinement.affinities{s}.{i}" for s in ("", "_s2")
-                                                           for i in range(3)]  # fmt: skip
-    back = RefinementInputs.from_dict(flat)
-    assert all(torch.equal(a, b) for a, b in zip(back.affinities, heads.affinities, strict=True)) and back.att is None
-    got = output_from_arrays({**out.to_dict(), **flat}, iterations=2)
+    assert sorted(flat) == ["refinement.depth", "refinement.heads", "refinement.heads_s2", "refinement.sparse"]
+    assert flat["refinement.heads"].shape[1] == 3 + 1 + 8 + 24 + 48  # confidences, mask, guidance of 3, 5, 7
+    back = RefinementHeads.from_dict(flat, (3, 5, 7))
+    assert torch.equal(back.heads, heads.heads) and back.att is None and back.kernel_sizes == (3, 5, 7)
+    got = output_from_arrays({**out.to_dict(), **flat}, PropagationSettings(2, (3, 5, 7)))
     assert _rel(got.refined_depth, ref.refined_depth) < 1e-5
-    with pytest.raises(ValueError, match="iterations"):
+    with pytest.raises(ValueError, match="propagation settings"):
         output_from_arrays({**out.to_dict(), **flat})
+    with pytest.raises(ValueError, match="84 channels, expected 35"):  # kernel sizes that do not fit the heads
+        output_from_arrays({**out.to_dict(), **flat}, PropagationSettings(2, (3, 5)))
+    with pytest.raises(ValueError, match="missing refinement.heads_s2"):
+        RefinementHeads.from_dict({k: v for k, v in flat.items() if k != "refinement.heads_s2"}, (3, 5, 7))
+
+
+@pytest.mark.parametrize("backend", [b for b in ("openvino", "onnxruntime", "torch") if b in available_backends()])
+def test_engines_reuse_their_affinity_buffers_and_results_stay_their_own(
+    model: torch.nn.Module, backend: str, tmp_path: Path
+) -> None:
+    """Each frame's affinities go into the same buffers (no fresh 180 MB a frame at 352x1216), and what a
+    call returned is not changed by the next call (nor are the runtime's output buffers kept)."""
+    from semattnet.models.propagation import cpu_kernel
+
+    engine = optimize_for_inference(model, backend=backend, size=SIZE, cache_dir=tmp_path)
+    x1, x2 = random_inputs(b=1, h=SIZE[0], w=SIZE[1], seed=1), random_inputs(b=1, h=SIZE[0], w=SIZE[1], seed=2)
+    with torch.inference_mode():
+        want1 = model(**x1)
+    out1 = engine(**x1)
+    kept = {k: v.clone() for k, v in out1.to_dict().items()}
+    workspace = engine.workspace if backend != "torch" else engine.refiner.propagation_workspace
+    pointers = {k: v.data_ptr() for k, v in workspace.items()}
+    out2 = engine(**x2)
+    for name, value in out1.to_dict().items():
+        assert torch.equal(value, kept[name]), name  # the second frame did not write into the first's output
+    assert _rel(out1.refined_depth, want1.refined_depth) < 1e-4
+    assert not torch.equal(out2.refined_depth, out1.refined_depth)
+    if cpu_kernel.available():
+        assert sorted(pointers) == ["s1.0", "s1.1", "s1.2", "s2.0", "s2.1", "s2.2"]
+        assert {k: v.data_ptr() for k, v in workspace.items()} == pointers

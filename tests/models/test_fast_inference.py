@@ -37,6 +37,26 @@ def test_fused_kernel_matches_pytorch_steps(k: int, dilation: int, channels: int
     assert torch.allclose(fused, h, rtol=1e-5, atol=1e-4), float((fused - h).abs().max())
 
 
+@needs_kernel
+@pytest.mark.parametrize("k", [3, 5, 7])
+def test_fused_normalisation_matches_eq13(k: int) -> None:
+    """normalize_affinity: cspn_affinity in one pass, also on a channel slice of stacked heads (B = 1 and 2)."""
+    g = torch.Generator().manual_seed(k)
+    stacked = torch.randn(2, 4 + k * k - 1, 7, 9, generator=g)
+    guide = stacked[:, 4:]  # as RefinementHeads.finish reads it: a view, not a copy
+    want = cspn_affinity(guide)
+    for b in (slice(0, 1), slice(0, 2)):
+        got = fused_propagation.normalize_affinity(guide[b])
+        assert got.shape == want[b].shape
+        torch.testing.assert_close(got, want[b], rtol=1e-6, atol=1e-6)
+    # by hand at one pixel: the centre is 1 - the sum of the normalised neighbours
+    one = fused_propagation.normalize_affinity(guide[:1, :, 3:4, 5:6].contiguous())[0, :, 0, 0]
+    raw = guide[0, :, 3, 5]
+    w = raw / raw.abs().sum()
+    half = (k * k - 1) // 2
+    torch.testing.assert_close(one, torch.cat((w[:half], (1 - w.sum()).view(1), w[half:])))
+
+
 @pytest.mark.parametrize(("k", "dilation"), [(3, 1), (5, 2), (7, 1)])
 def test_naive_reference_matches(k: int, dilation: int) -> None:
     from semattnet.models.propagation import propagate, propagate_pad_and_sum

@@ -1,4 +1,4 @@
-"""shared_input_heads: several conv-headed Sequentials on one input as one convolution, the same function."""
+"""stacked_heads: several conv-headed Sequentials on one input as one convolution, the same function."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import torch
 from torch import nn
 
 from semattnet.models.bn_folding import fold_batchnorm
-from semattnet.models.layers import convbn, shared_input_heads
+from semattnet.models.layers import convbn, stacked_heads
 
 
 def _heads(seed: int = 0) -> nn.ModuleList:
@@ -25,12 +25,11 @@ def _heads(seed: int = 0) -> nn.ModuleList:
 def test_training_matches_the_heads_one_by_one_outputs_gradients_and_running_stats() -> None:
     ours, ref = _heads(), _heads()
     x = torch.randn(2, 6, 9, 11)
-    got = shared_input_heads(x, list(ours))
-    want = [h(x) for h in ref]
-    for g, w in zip(got, want, strict=True):
-        torch.testing.assert_close(g, w, rtol=1e-5, atol=1e-5)
-    sum((o * torch.arange(o.numel()).view_as(o)).sum() for o in got).backward()
-    sum((o * torch.arange(o.numel()).view_as(o)).sum() for o in want).backward()
+    got = stacked_heads(x, list(ours))
+    want = torch.cat([h(x) for h in ref], dim=1)
+    torch.testing.assert_close(got, want, rtol=1e-5, atol=1e-5)
+    (got * torch.arange(got.numel()).view_as(got)).sum().backward()
+    (want * torch.arange(want.numel()).view_as(want)).sum().backward()
     for a, b in zip(ours.parameters(), ref.parameters(), strict=True):
         torch.testing.assert_close(a.grad, b.grad, rtol=1e-4, atol=1e-4)
     for a, b in zip(ours.buffers(), ref.buffers(), strict=True):
@@ -40,12 +39,11 @@ def test_training_matches_the_heads_one_by_one_outputs_gradients_and_running_sta
 def test_eval_and_folded_match_and_other_geometries_fall_back() -> None:
     heads = _heads().eval()
     x = torch.randn(1, 6, 8, 8)
-    want = [h(x) for h in heads]
+    want = torch.cat([h(x) for h in heads], dim=1)
     folded = fold_batchnorm(copy.deepcopy(heads))
-    for got in (shared_input_heads(x, list(heads)), shared_input_heads(x, list(folded))):
-        for g, w in zip(got, want, strict=True):
-            torch.testing.assert_close(g, w, rtol=1e-5, atol=1e-5)
+    for got in (stacked_heads(x, list(heads)), stacked_heads(x, list(folded))):
+        torch.testing.assert_close(got, want, rtol=1e-5, atol=1e-5)
     mixed = [*heads, convbn(6, 2, kernel_size=1, padding=0).eval()]  # another geometry: one by one
-    outs = shared_input_heads(x, mixed)
-    assert [o.shape[1] for o in outs] == [3, 1, 8, 2]
-    torch.testing.assert_close(outs[-1], mixed[-1](x))
+    outs = stacked_heads(x, mixed)
+    assert outs.shape[1] == 3 + 1 + 8 + 2
+    torch.testing.assert_close(outs[:, -2:], mixed[-1](x))

@@ -13,7 +13,7 @@ import torch
 import torch.utils.checkpoint
 from torch import nn
 
-__all__ = ["BasicBlock", "convbn", "convbnrelu", "deconvbnrelu", "set_gradient_checkpointing", "shared_input_heads"]
+__all__ = ["BasicBlock", "convbn", "convbnrelu", "deconvbnrelu", "set_gradient_checkpointing", "stacked_heads"]
 
 
 def convbn(in_ch: int, out_ch: int, kernel_size: int = 3, stride: int = 1, padding: int = 1) -> nn.Sequential:
@@ -29,27 +29,30 @@ def _same_geometry(convs: list[nn.Conv2d]) -> bool:
     return len(keys) == 1 and convs[0].groups == 1 and convs[0].padding_mode == "zeros"
 
 
-def shared_input_heads(x: torch.Tensor, heads: list[nn.Sequential]) -> list[torch.Tensor]:
-    """``[head(x) for head in heads]`` with the heads' first convolutions run as one.
+def stacked_heads(x: torch.Tensor, heads: list[nn.Sequential]) -> torch.Tensor:
+    """``torch.cat([head(x) for head in heads], dim=1)`` with the heads' first convolutions run as one.
 
     Heads that read the same tensor through convolutions of the same geometry (the CSPN++ guide,
     confidence and mask heads: 84 output channels in all at full resolution) are one convolution
-    with the weights stacked, split by channel, then each head's remaining layers (its BatchNorm,
-    or the ``Identity`` left by :func:`~semattnet.models.bn_folding.fold_batchnorm`). The same
-    function with the same gradients; one wide convolution runs several times faster than five
-    narrow ones (1-48 output channels underfill the vector width).
+    with the weights stacked; each head's remaining layers (its BatchNorm) then run on its own
+    channels. After :func:`~semattnet.models.bn_folding.fold_batchnorm` those are ``Identity``
+    and the convolution's output is the result: no split, no copy. The same function with the
+    same gradients; one wide convolution runs several times faster than five narrow ones (1-48
+    output channels underfill the vector width).
     """
     convs = [h[0] for h in heads if type(h[0]) is nn.Conv2d]
     if len(heads) < 2 or len(convs) != len(heads) or not _same_geometry(convs):
-        return [h(x) for h in heads]
+        return torch.cat([h(x) for h in heads], dim=1)
     first = convs[0]
     bias = None  # the training form has none; the folded form has all: zeros only for a mix
     if any(c.bias is not None for c in convs):
         bias = torch.cat([c.bias if c.bias is not None else c.weight.new_zeros(c.out_channels) for c in convs])
     y = nn.functional.conv2d(x, torch.cat([c.weight for c in convs]), bias, first.stride,
                              first.padding, first.dilation)  # fmt: skip
+    if all(type(m) is nn.Identity for h in heads for m in list(h)[1:]):
+        return y
     parts = torch.split(y, [c.out_channels for c in convs], dim=1)
-    return [head[1:](part) for head, part in zip(heads, parts, strict=True)]
+    return torch.cat([head[1:](part) for head, part in zip(heads, parts, strict=True)], dim=1)
 
 
 def convbnrelu(in_ch: int, out_ch: int, kernel_size: int = 3, stride: int = 1, padding: int = 1) -> nn.Sequential:

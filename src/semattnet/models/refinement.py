@@ -26,9 +26,9 @@ Parameter names are the authors' (``kernel_conf_layer``, ``mask_layer``,
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping, MutableMapping, Sequence
 from dataclasses import dataclass, fields
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import torch
 import torch.nn.functional as F
@@ -37,7 +37,7 @@ from torch import nn
 from semattnet._errors import InputError
 from semattnet.models._tracing import is_tracing
 from semattnet.models.config import RefinementMode
-from semattnet.models.layers import convbn, convbnrelu, shared_input_heads
+from semattnet.models.layers import convbn, convbnrelu, stacked_heads
 from semattnet.models.propagation import (
     AffinityHead,
     cspn_affinity,
@@ -50,16 +50,27 @@ from semattnet.models.propagation import cpu_kernel as fused_propagation
 
 __all__ = [
     "HEADS_PREFIX",
+    "HEAD_ORDER",
     "AtrousCSPNRefinement",
     "PropagationImpl",
+    "PropagationSettings",
+    "RefinementHeads",
     "RefinementInputs",
+    "Workspace",
+    "affinity_kernel",
     "propagate_refinement",
+    "refine",
     "run_cspn_stage",
 ]
 
 PropagationImpl = Literal["auto", "pytorch", "naive"]
+#: Buffers kept across frames by name (:meth:`RefinementHeads.finish`); what is read from them is
+#: valid until the next call with the same workspace.
+Workspace = MutableMapping[str, torch.Tensor]
 #: Name prefix of the refinement heads' tensors in flat dicts (exported graphs' outputs, :class:`RefinementInputs`).
 HEADS_PREFIX = "refinement."
+#: The heads of one stage, in the order their channels are stacked (:class:`RefinementHeads`).
+HEAD_ORDER = ("kernel_conf", "mask", "guidance of each kernel size")
 
 
 def _can_fuse(*tensors: torch.Tensor) -> bool:
@@ -135,6 +146,8 @@ class AtrousCSPNRefinement:
     att_12: nn.Sequential
     #: How to propagate (see :func:`run_cspn_stage`); ``"naive"`` is the authors' pattern.
     propagation_impl: PropagationImpl = "auto"
+    #: Affinity buffers kept across calls (:func:`refine`), set by inference engines on their copy; None: fresh ones.
+    propagation_workspace: Workspace | None = None
 
     def _build_refinement(
         self, channels_s1: int, channels_s2: int, kernel_sizes: Sequence[int], iterations: int, mode: RefinementMode
@@ -151,51 +164,41 @@ class AtrousCSPNRefinement:
         self.dimhalf_s2 = convbnrelu(channels_s2, channels_s1, kernel_size=1, padding=0)
         self.att_12 = convbnrelu(2 * channels_s1, 2, kernel_size=3, padding=1)
 
-    def _heads(self, feature: torch.Tensor, suffix: str) -> tuple[list[torch.Tensor], torch.Tensor, torch.Tensor]:
-        """The affinities (eq. 13), kernel confidences and mask of one stage, their convolutions run as one."""
+    def _stage_heads(self, feature: torch.Tensor, suffix: str) -> torch.Tensor:
+        """One stage's heads (:data:`HEAD_ORDER`), their convolutions run as one: (B, C, H, W) stacked."""
         guides: list[AffinityHead] = [getattr(self, f"iter_guide_layer{k}{suffix}") for k in self._kernel_sizes]
         conf_head, mask_head = getattr(self, f"kernel_conf_layer{suffix}"), getattr(self, f"mask_layer{suffix}")
-        conf, mask, *raw = shared_input_heads(feature, [conf_head, mask_head, *(g.generate for g in guides)])
-        return [cspn_affinity(r) for r in raw], torch.softmax(conf, dim=1), torch.sigmoid(mask)
+        return stacked_heads(feature, [conf_head, mask_head, *(g.generate for g in guides)])
 
-    def refinement_inputs(
+    def refinement_heads(
         self, depth: torch.Tensor, sparse: torch.Tensor, feature_s1: torch.Tensor, feature_s2: torch.Tensor
-    ) -> RefinementInputs:
-        """Every head of both stages: the network's part of the refinement (no propagation yet)."""
+    ) -> RefinementHeads:
+        """Every head of both stages as the convolutions leave them: the network's part of the refinement."""
         with torch.autocast(device_type=depth.device.type, enabled=False):
             depth, sparse = depth.float(), sparse.float()
             feature_s1, feature_s2 = feature_s1.float(), feature_s2.float()
-            sparse_s2, valid_s2 = downsample_sparse(sparse, 2)
-            affinities_s2, kernel_conf_s2, mask_s2 = self._heads(feature_s2, "_s2")
+            heads_s2 = self._stage_heads(feature_s2, "_s2")
             att = None
             if self._refinement_mode != "authors":
                 half = F.interpolate(self.dimhalf_s2(feature_s2), scale_factor=2.0, mode="nearest")
                 att = torch.softmax(self.att_12(torch.cat((feature_s1, half), dim=1)), dim=1)
-            affinities, kernel_conf, mask = self._heads(feature_s1, "")
-            valid = (sparse > 0).to(sparse.dtype)
-        return RefinementInputs(depth, sparse, sparse_s2, affinities_s2, kernel_conf_s2, mask_s2 * valid_s2,
-                                affinities, kernel_conf, mask * valid, att)  # fmt: skip
+            heads = self._stage_heads(feature_s1, "")
+        return RefinementHeads(depth, sparse, heads_s2, heads, self._kernel_sizes, att)
 
-    def propagation(self, inputs: RefinementInputs) -> tuple[torch.Tensor, torch.Tensor]:
+    def propagation(self, heads: RefinementHeads) -> tuple[torch.Tensor, torch.Tensor]:
         """Both propagation stages of :func:`propagate_refinement` with this model's settings."""
-        return propagate_refinement(inputs, self._iterations, self.propagation_impl)
-
-    def _refine(
-        self, depth: torch.Tensor, sparse: torch.Tensor, feature_s1: torch.Tensor, feature_s2: torch.Tensor
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Refine ``depth`` (B, 1, H, W); returns (after the dilation-2 stage, final)."""
-        return self.propagation(self.refinement_inputs(depth, sparse, feature_s1, feature_s2))
+        return refine(heads, self._iterations, self.propagation_impl, self.propagation_workspace)
 
 
 @dataclass
 class RefinementInputs:
-    """What the two propagation stages read; the network computes all of it before any propagation.
+    """What the two propagation stages read: :meth:`RefinementHeads.finish` of the network's heads.
 
     ``depth`` is the backbone's fused depth D (B, 1, H, W); ``*_s2`` belong to the dilation-2
     stage (half-resolution heads); ``mask*`` are the learned re-injection masks already multiplied
     by the validity of the sparse depth; ``att`` is the stage hand-over blend of the ``"clean"``
     mode (``None`` in the authors' mode). Engines that run the network elsewhere (OpenVINO, ONNX
-    Runtime) return these tensors and finish with :func:`propagate_refinement` in PyTorch.
+    Runtime) return the :class:`RefinementHeads` and finish with :func:`refine` in PyTorch.
     """
 
     depth: torch.Tensor
@@ -230,6 +233,102 @@ class RefinementInputs:
             )
             kwargs[f.name] = [tensors[k] for k in numbered] if numbered else tensors.get(f"{prefix}{f.name}")
         return cls(**kwargs)
+
+
+class PropagationSettings(NamedTuple):
+    """What finishing a model's :class:`RefinementHeads` needs: steps per kernel size, and the kernel sizes."""
+
+    iterations: int
+    kernel_sizes: tuple[int, ...]
+
+
+def affinity_kernel(guide: torch.Tensor, impl: PropagationImpl = "auto", workspace: Workspace | None = None,
+                    name: str = "") -> torch.Tensor:  # fmt: skip
+    """:func:`~semattnet.models.propagation.cspn_affinity` (eq. 13); in one pass of the compiled
+    kernel for float32 CPU inference (``impl="auto"``), equal to float rounding, written into
+    ``workspace[name]`` when a workspace is given (allocated there on the first call)."""
+    if not (impl == "auto" and _can_fuse(guide)):
+        return cspn_affinity(guide)
+    if workspace is None:
+        return fused_propagation.normalize_affinity(guide)
+    b, n, h, w = guide.shape
+    out = workspace.get(name)
+    if out is None or out.shape != (b, n + 1, h, w):
+        out = workspace[name] = torch.empty(b, n + 1, h, w)
+    return fused_propagation.normalize_affinity(guide, out)
+
+
+@dataclass
+class RefinementHeads:
+    """The refinement heads as the network's convolutions leave them, before eq. 13 and the softmax.
+
+    Per stage one tensor, the heads' channels stacked in :data:`HEAD_ORDER`: ``len(kernel_sizes)``
+    kernel-confidence logits, one mask logit, then the raw guidance of every kernel size
+    (``k*k - 1`` channels each). ``heads_s2`` is at half resolution (dilation-2 stage), ``heads``
+    at full resolution. This is what exported graphs return: one output per stage, no split and no
+    normalisation in the graph; :meth:`finish` does the rest. ``depth`` is the backbone's fused
+    depth D, ``sparse`` the input LiDAR depth, ``att`` the clean mode's stage blend (else None).
+    """
+
+    depth: torch.Tensor
+    sparse: torch.Tensor
+    heads_s2: torch.Tensor
+    heads: torch.Tensor
+    kernel_sizes: tuple[int, ...]
+    att: torch.Tensor | None = None
+
+    def split_sizes(self) -> list[int]:
+        """Channels of each head in a stage's stacked tensor (:data:`HEAD_ORDER`)."""
+        return [len(self.kernel_sizes), 1, *(k * k - 1 for k in self.kernel_sizes)]
+
+    def _stage(self, stacked: torch.Tensor, valid: torch.Tensor, impl: PropagationImpl, workspace: Workspace | None,
+               stage: str) -> tuple[Any, ...]:  # fmt: skip
+        sizes = self.split_sizes()
+        if stacked.shape[1] != sum(sizes):
+            raise InputError(f"refinement heads: {stacked.shape[1]} channels, expected {sum(sizes)} for kernel "
+                             f"sizes {self.kernel_sizes}")  # fmt: skip
+        conf, mask, *guides = torch.split(stacked, sizes, dim=1)
+        affinities = [affinity_kernel(g, impl, workspace, f"{stage}.{i}") for i, g in enumerate(guides)]
+        return affinities, torch.softmax(conf, dim=1), torch.sigmoid(mask) * valid
+
+    def finish(self, impl: PropagationImpl = "auto", workspace: Workspace | None = None) -> RefinementInputs:
+        """The affinities (eq. 13), kernel confidences (softmax) and masks (sigmoid, times the
+        validity of the sparse depth) of both stages.
+
+        ``workspace``: buffers the affinities of the compiled kernel are written into, kept by the
+        caller across frames (an engine's propagation); the result aliases them.
+        """
+        with torch.autocast(device_type=self.depth.device.type, enabled=False):
+            sparse = self.sparse.float()
+            sparse_s2, valid_s2 = downsample_sparse(sparse, 2)
+            affinities_s2, conf_s2, mask_s2 = self._stage(self.heads_s2.float(), valid_s2, impl, workspace, "s2")
+            valid = (sparse > 0).to(sparse.dtype)
+            affinities, conf, mask = self._stage(self.heads.float(), valid, impl, workspace, "s1")
+        return RefinementInputs(self.depth.float(), sparse, sparse_s2, affinities_s2, conf_s2, mask_s2,
+                                affinities, conf, mask, self.att)  # fmt: skip
+
+    def to_dict(self, prefix: str = HEADS_PREFIX) -> dict[str, torch.Tensor]:
+        """The tensors by name (``att`` only when set), e.g. for an exported graph's outputs."""
+        names = ("depth", "sparse", "heads_s2", "heads", "att")
+        return {f"{prefix}{n}": v for n in names if (v := getattr(self, n)) is not None}
+
+    @classmethod
+    def from_dict(cls, tensors: Mapping[str, torch.Tensor], kernel_sizes: Sequence[int],
+                  prefix: str = HEADS_PREFIX) -> RefinementHeads:  # fmt: skip
+        """The inverse of :meth:`to_dict` (other keys are ignored)."""
+        missing = [n for n in ("depth", "sparse", "heads_s2", "heads") if f"{prefix}{n}" not in tensors]
+        if missing:
+            raise InputError(f"refinement heads: missing {', '.join(prefix + n for n in missing)}")
+        t = {n: tensors[f"{prefix}{n}"] for n in ("depth", "sparse", "heads_s2", "heads")}
+        return cls(**t, kernel_sizes=tuple(kernel_sizes), att=tensors.get(f"{prefix}att"))
+
+
+def refine(
+    heads: RefinementHeads, iterations: int, impl: PropagationImpl = "auto", workspace: Workspace | None = None
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The heads finished (:meth:`RefinementHeads.finish`, into ``workspace`` if given) and propagated
+    (:func:`propagate_refinement`); the results never alias the workspace."""
+    return propagate_refinement(heads.finish(impl, workspace), iterations, impl)
 
 
 def propagate_refinement(

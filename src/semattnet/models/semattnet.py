@@ -11,7 +11,7 @@ from semattnet._errors import InputError
 from semattnet.models.backbone import SemAttNetBackbone
 from semattnet.models.config import SemAttNetConfig
 from semattnet.models.outputs import DepthCompletionOutput
-from semattnet.models.refinement import AtrousCSPNRefinement, RefinementInputs
+from semattnet.models.refinement import AtrousCSPNRefinement, RefinementHeads
 
 __all__ = ["SemAttNet"]
 
@@ -41,13 +41,13 @@ class SemAttNet(AtrousCSPNRefinement, nn.Module):
         self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
     ) -> DepthCompletionOutput:
         """Complete and refine depth. Inputs: RGB 0..255, semantic colours 0..255, sparse metres."""
-        out, inputs = self.forward_network(rgb, semantic, sparse)
-        refined_s2, refined = self.propagation(inputs)
+        out, heads = self.forward_network(rgb, semantic, sparse)
+        refined_s2, refined = self.propagation(heads)
         return dataclasses.replace(out, refined_s2_depth=refined_s2, refined_depth=refined)
 
     def forward_network(
         self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
-    ) -> tuple[DepthCompletionOutput, RefinementInputs]:
+    ) -> tuple[DepthCompletionOutput, RefinementHeads]:
         """Everything but the propagation: the backbone's output and the refinement heads.
 
         ``forward`` is ``forward_network`` followed by :meth:`propagation`; inference engines
@@ -56,4 +56,4 @@ class SemAttNet(AtrousCSPNRefinement, nn.Module):
         if sparse is None:
             raise InputError("sparse depth is required")
         out, feature_s1, feature_s2 = self.backbone.forward_features(rgb, semantic, sparse)
-        return out, self.refinement_inputs(out.fused_depth, sparse, feature_s1, feature_s2)
+        return out, self.refinement_heads(out.fused_depth, sparse, feature_s1, feature_s2)

@@ -80,8 +80,9 @@ def export_onnx(
 
     ``propagation=False`` (refining models) leaves the CSPN++ propagation out: the graph ends at
     the backbone's outputs and the refinement heads (outputs named ``refinement.*``, see
-    :class:`~semattnet.models.refinement.RefinementInputs`), which our inference engines finish
-    with the fused propagation kernel. The default writes the whole model, for deployment.
+    :class:`~semattnet.models.refinement.RefinementHeads`: per stage one stacked convolution output),
+    which our inference engines finish and propagate with the fused kernels. The default writes the
+    whole model, for deployment.
     """
     flat, example, names = _prepare(model, size, propagation)
     path = Path(path)

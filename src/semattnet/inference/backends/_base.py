@@ -12,7 +12,7 @@ from torch import nn
 
 from semattnet._errors import InputError
 from semattnet.models.outputs import DepthCompletionOutput
-from semattnet.models.refinement import HEADS_PREFIX, RefinementInputs, propagate_refinement  # one home of the prefix
+from semattnet.models.refinement import HEADS_PREFIX, PropagationSettings, RefinementHeads, Workspace, refine
 
 __all__ = ["HEADS_PREFIX", "ExportedGraphEngine", "InferenceEngine", "LogFn", "StageHook", "output_from_arrays"]
 
@@ -63,13 +63,17 @@ class InferenceEngine(nn.Module):
 
 
 def output_from_arrays(
-    arrays: Mapping[str, np.ndarray | torch.Tensor], iterations: int | None = None
+    arrays: Mapping[str, np.ndarray | torch.Tensor],
+    settings: PropagationSettings | None = None,
+    workspace: Workspace | None = None,
 ) -> DepthCompletionOutput:
     """A typed output from named (B, 1, H, W) arrays (missing fields are ``None``).
 
-    Arrays named ``refinement.*`` are the refinement heads of a graph exported without its
-    propagation (:func:`semattnet.weights.export.export_onnx` with ``propagation=False``): both
-    CSPN++ stages then run here, ``iterations`` steps per kernel size, with the fused kernel.
+    Arrays named ``refinement.*`` are the :class:`~semattnet.models.refinement.RefinementHeads` of a
+    graph exported without its propagation (:func:`semattnet.weights.export.export_onnx` with
+    ``propagation=False``): they are finished and both CSPN++ stages run here with the fused kernel,
+    as ``settings`` (the model's steps per kernel size and kernel sizes) say; ``workspace`` keeps the
+    affinity buffers across calls (:func:`~semattnet.models.refinement.refine`).
     """
     tensors = {k: torch.as_tensor(np.asarray(v)) if not isinstance(v, torch.Tensor) else v for k, v in arrays.items()}
     heads = {k: v for k, v in tensors.items() if k.startswith(HEADS_PREFIX)}
@@ -77,25 +81,35 @@ def output_from_arrays(
     if unknown:
         raise InputError(f"unknown output names {sorted(unknown)}; expected some of {_FIELDS}")
     if heads:
-        if iterations is None:
-            raise InputError("refinement heads without the number of propagation iterations")
+        if settings is None:
+            raise InputError("refinement heads without the propagation settings (iterations, kernel sizes)")
         with torch.inference_mode():
-            tensors["refined_s2_depth"], tensors["refined_depth"] = propagate_refinement(
-                RefinementInputs.from_dict(heads, HEADS_PREFIX), iterations
+            tensors["refined_s2_depth"], tensors["refined_depth"] = refine(
+                RefinementHeads.from_dict(heads, settings.kernel_sizes, HEADS_PREFIX),
+                settings.iterations,
+                workspace=workspace,
             )
     return DepthCompletionOutput(**{name: tensors.get(name) for name in _FIELDS})  # type: ignore[arg-type]
 
 
 class ExportedGraphEngine(InferenceEngine):
     """An engine over the cached ONNX export (network only): subclasses set ``input_names``,
-    ``iterations`` (propagation steps, or None) and implement :meth:`run_graph`; the refinement
+    ``settings`` (the model's propagation, or None) and implement :meth:`run_graph`; the refinement
     heads the graph returns are finished here by :func:`output_from_arrays`."""
 
     input_names: list[str]
-    iterations: int | None
+    settings: PropagationSettings | None
+    #: the propagation's affinity buffers, reused from frame to frame (no page faults on 180 MB a frame)
+    workspace: Workspace
+
+    def __init__(self, size: tuple[int, int] | None, precision: str, needs_semantic: bool) -> None:
+        super().__init__(size, precision, needs_semantic)
+        self.workspace = {}
 
     def run_graph(self, feeds: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """Output name -> array of one run of the graph on named float32 inputs."""
+        """Output name -> array of one run of the graph on named float32 inputs (the ``refinement.*``
+        arrays may be the runtime's own buffers, valid until the next run: :meth:`forward` uses them
+        up before it returns)."""
         raise NotImplementedError
 
     def forward(
@@ -108,4 +122,5 @@ class ExportedGraphEngine(InferenceEngine):
             raise InputError(f"this {self.backend} engine's graph needs {', '.join(missing)}; got None")
         feeds = {name: t.detach().cpu().float().numpy() for name in self.input_names if (t := given[name]) is not None}
         arrays = self.run_graph(feeds)
-        return output_from_arrays({n: torch.from_numpy(a).to(rgb.device) for n, a in arrays.items()}, self.iterations)
+        tensors = {n: torch.from_numpy(a).to(rgb.device) for n, a in arrays.items()}
+        return output_from_arrays(tensors, self.settings, self.workspace)

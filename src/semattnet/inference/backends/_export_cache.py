@@ -27,10 +27,11 @@ from semattnet._utils.atomic import atomic_path
 from semattnet._utils.version import library_version
 from semattnet.cache import get_cache_dir, sha256_file
 from semattnet.inference.backends._base import LogFn
+from semattnet.models.refinement import PropagationSettings
 from semattnet.weights.export import export_onnx
 from semattnet.weights.gate import tensor_digest
 
-__all__ = ["cached_onnx", "engine_dir", "engine_key", "intact", "propagation_steps", "record_digest"]
+__all__ = ["cached_onnx", "engine_dir", "engine_key", "intact", "propagation_settings", "record_digest"]
 
 
 def engine_key(model: nn.Module, size: tuple[int, int], extra: str = "") -> str:
@@ -43,7 +44,7 @@ def engine_key(model: nn.Module, size: tuple[int, int], extra: str = "") -> str:
         "torch": torch.__version__,
         "semattnet": library_version(),
         "extra": extra,
-        "graph": "network-without-propagation/v2-shared-heads",  # the export form: a new form never reuses old files
+        "graph": "network-without-propagation/v3-stacked-heads",  # the export form: a new form never reuses old files
     }
     return hashlib.sha256(json.dumps(facts, sort_keys=True).encode()).hexdigest()[:24]
 
@@ -59,7 +60,7 @@ def cached_onnx(model: nn.Module, size: tuple[int, int], folder: Path, log: LogF
     """``folder/model.onnx``, exported (BatchNorm folded) unless it is already there.
 
     The graph stops before the CSPN++ propagation (``export_onnx(propagation=False)``): the
-    engines finish it with the fused kernel (:func:`propagation_steps` steps per kernel size),
+    engines finish it with the fused kernel (:func:`propagation_settings`),
     several times faster than the same steps as hundreds of small graph operations.
     """
     path = folder / "model.onnx"
@@ -105,7 +106,9 @@ def _stderr(line: str) -> None:
     print(line, file=sys.stderr)
 
 
-def propagation_steps(model: nn.Module) -> int | None:
-    """Propagation steps per kernel size of a refining model (what its engine runs after the graph), else None."""
+def propagation_settings(model: nn.Module) -> PropagationSettings | None:
+    """What a refining model's engine runs after the graph (steps per kernel size, kernel sizes), else None."""
     config = getattr(model, "config", None)
-    return config.iterations if config is not None and config.refine else None
+    if config is None or not config.refine:
+        return None
+    return PropagationSettings(int(config.iterations), tuple(int(k) for k in config.kernel_sizes))

@@ -1,5 +1,5 @@
-"""The CSPN++ propagation for CUDA: :func:`semattnet.models.refinement.propagate_refinement` through
-``torch.compile``.
+"""The CSPN++ propagation for CUDA: :func:`semattnet.models.refinement.refine` (the heads finished, then
+:func:`~semattnet.models.refinement.propagate_refinement`) through ``torch.compile``.
 
 The fused C++ kernel serves float32 CPU inference only; on CUDA the eager path is the shifted
 form (one in-place multiply-add per tap and step: 2 x 3 x 6 steps x up to 49 taps, each a small
@@ -18,27 +18,27 @@ from collections.abc import Callable
 
 import torch
 
-from semattnet.models.refinement import RefinementInputs, propagate_refinement
+from semattnet.models.refinement import RefinementHeads, refine
 
 __all__ = ["compiled_propagation", "traced_propagation"]
 
-Propagation = Callable[[RefinementInputs, int], tuple[torch.Tensor, torch.Tensor]]
+Propagation = Callable[[RefinementHeads, int], tuple[torch.Tensor, torch.Tensor]]
 
 
 @functools.cache
 def compiled_propagation(mode: str | None = None) -> Propagation:
-    """``propagate_refinement`` compiled by Inductor (``mode``: e.g. ``"max-autotune-no-cudagraphs"``)."""
-    return torch.compile(propagate_refinement, dynamic=False, mode=mode)
+    """``refine`` compiled by Inductor (``mode``: e.g. ``"max-autotune-no-cudagraphs"``)."""
+    return torch.compile(refine, dynamic=False, mode=mode)
 
 
-def traced_propagation(inputs: RefinementInputs, iterations: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """The recorded form of ``propagate_refinement`` (what ``torch.compile`` compiles), run through
+def traced_propagation(heads: RefinementHeads, iterations: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The recorded form of ``refine`` (what ``torch.compile`` compiles), run through
     TorchScript tracing: the CPU-cheap check of the compiled path's code."""
-    flat = inputs.to_dict()
+    flat = heads.to_dict()
     names = list(flat)
 
     def run(*tensors: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        return propagate_refinement(RefinementInputs.from_dict(dict(zip(names, tensors, strict=True))), iterations)
+        return refine(RefinementHeads.from_dict(dict(zip(names, tensors, strict=True)), heads.kernel_sizes), iterations)
 
     with torch.no_grad():
         traced = torch.jit.trace(run, tuple(flat.values()), check_trace=False)

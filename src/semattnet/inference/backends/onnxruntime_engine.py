@@ -10,7 +10,7 @@ from torch import nn
 
 from semattnet._utils.extras import require
 from semattnet.inference.backends._base import ExportedGraphEngine, LogFn
-from semattnet.inference.backends._export_cache import cached_onnx, engine_dir, engine_key, propagation_steps
+from semattnet.inference.backends._export_cache import cached_onnx, engine_dir, engine_key, propagation_settings
 
 __all__ = ["OnnxRuntimeEngine"]
 
@@ -33,7 +33,7 @@ class OnnxRuntimeEngine(ExportedGraphEngine):
         )
         self.input_names = [i.name for i in self.session.get_inputs()]
         self.output_names = [o.name for o in self.session.get_outputs()]
-        self.iterations = propagation_steps(model)
+        self.settings = propagation_settings(model)
 
     def run_graph(self, feeds: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         return dict(zip(self.output_names, self.session.run(self.output_names, feeds), strict=True))

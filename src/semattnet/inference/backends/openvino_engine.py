@@ -24,7 +24,7 @@ from semattnet.inference.backends._export_cache import (
     engine_dir,
     engine_key,
     intact,
-    propagation_steps,
+    propagation_settings,
     record_digest,
 )
 from semattnet.inference.backends.calibration import (
@@ -79,9 +79,12 @@ class OpenVinoEngine(ExportedGraphEngine):
         self.input_names = [_one_of(i.get_names(), {"rgb", "semantic", "sparse"}) for i in self.compiled.inputs]
         fields = set(DepthCompletionOutput.__dataclass_fields__)
         self.output_names = [_one_of(o.get_names(), fields, HEADS_PREFIX) for o in self.compiled.outputs]
-        self.iterations = propagation_steps(model)
+        self.settings = propagation_settings(model)
 
     def run_graph(self, feeds: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        result = self.request.infer([feeds[name] for name in self.input_names])
-        # copies: the request reuses its output buffers on the next call
-        return {name: result[port].copy() for name, port in zip(self.output_names, self.compiled.outputs, strict=True)}
+        # the request's own output buffers (share_outputs), which it reuses on the next call: copies of what the
+        # caller keeps (the typed output's maps), not of the refinement heads (~180 MB at 352x1216: a fresh copy
+        # a frame costs ~60 ms, mostly page faults), which forward uses up before it returns
+        result = self.request.infer([feeds[name] for name in self.input_names], share_outputs=True)
+        arrays = {name: result[port] for name, port in zip(self.output_names, self.compiled.outputs, strict=True)}
+        return {name: a if name.startswith(HEADS_PREFIX) else a.copy() for name, a in arrays.items()}

@@ -43,7 +43,7 @@ KEEP_FLOAT: tuple[str, ...] = (
     r"refinement_heads/.*",  # the affinity, kernel-confidence and mask heads of both stages (name_layers)
 )
 #: The graph outputs whose heads ``name_layers`` names ``refinement_heads/...``.
-_HEAD_OUTPUTS = ("refinement.affinities", "refinement.kernel_conf", "refinement.mask")
+_HEAD_OUTPUTS = ("refinement.heads",)  # and refinement.heads_s2
 
 
 def _umask() -> int:

@@ -15,7 +15,7 @@ from torch import nn
 from semattnet._errors import InputError
 from semattnet._utils.extras import require
 from semattnet.inference.backends._base import HEADS_PREFIX, InferenceEngine, output_from_arrays
-from semattnet.inference.backends._export_cache import propagation_steps
+from semattnet.inference.backends._export_cache import propagation_settings
 from semattnet.models.bn_folding import fold_batchnorm
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.semattnet import SemAttNet
@@ -67,7 +67,7 @@ class TensorRTEngine(InferenceEngine):
         precisions = {torch.float32} | ({torch.float16} if precision == "fp16" else set())
         self.graph = trt.compile(_Network(net, names, needs_semantic).eval(), ir="dynamo", inputs=example,
                                  enabled_precisions=precisions)  # fmt: skip
-        self.names, self.iterations = names, propagation_steps(model)
+        self.names, self.settings = names, propagation_settings(model)
 
     def forward(
         self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
@@ -76,4 +76,4 @@ class TensorRTEngine(InferenceEngine):
         inputs = (rgb, semantic, sparse) if self.needs_semantic else (rgb, sparse)
         with torch.inference_mode():
             arrays = dict(zip(self.names, self.graph(*inputs), strict=True))
-        return output_from_arrays({k: v.float() for k, v in arrays.items()}, self.iterations)
+        return output_from_arrays({k: v.float() for k, v in arrays.items()}, self.settings)

@@ -43,6 +43,8 @@ class TorchEngine(InferenceEngine):
         self.net = fold_batchnorm(model, inplace=inplace).eval()
         on_cuda = any(p.is_cuda for p in self.net.parameters())
         self.inner_stages = ("propagation",) if self.refiner is not None else ()
+        if self.refiner is not None:
+            self.refiner.propagation_workspace = {}  # the affinities of each frame in the same buffers
         self.compile_propagation = self.refiner is not None and (
             on_cuda if compile_propagation is None else compile_propagation
         )

@@ -8,6 +8,7 @@ in one pass over each row per step: the kernel is read in place (no shifted copy
 channel of ``h`` (the four polyphase sub-grids of the dilation-2 stage) reuses each kernel row
 while it is in cache, rows run in parallel, and the products are summed in the same order as
 :func:`~semattnet.models.propagation.shifted.propagate_shifted`, so the outputs agree to float rounding.
+:func:`normalize_affinity` turns the raw guidance into that kernel (eq. 13) in one pass.
 
 It is built with :func:`torch.utils.cpp_extension.load_inline` (needs a C++ compiler and the
 ``ninja`` package; the build is cached, ~30 s the first time). Without them, or for autograd,
@@ -23,12 +24,13 @@ import warnings
 
 import torch
 
-__all__ = ["available", "propagate_iterations"]
+__all__ = ["available", "normalize_affinity", "propagate_iterations"]
 
 _SOURCE = r"""
 #include <torch/extension.h>
 #include <ATen/Parallel.h>
 #include <algorithm>
+#include <cmath>
 #include <vector>
 
 // affinity (B, K*K, H, W); start, h0 (B, C, H, W); mask, sparse (B, 1, H, W); all float32, contiguous.
@@ -86,6 +88,44 @@ torch::Tensor propagate_iterations(torch::Tensor affinity, torch::Tensor start, 
   }
   return cur;
 }
+
+// guide (B, N, H, W) raw guidance of one kernel size (N = k*k - 1) -> (B, N + 1, H, W): eq. 13, each
+// weight g_t / sum_t |g_t| and the centre 1 - sum of the weights inserted at N / 2, one row at a time.
+// out (B, N + 1, H, W) float32, contiguous: written in place (a buffer reused across frames costs no page faults).
+torch::Tensor normalize_affinity(torch::Tensor guide, torch::Tensor out) {
+  const int64_t B = guide.size(0), N = guide.size(1), H = guide.size(2), W = guide.size(3);
+  const int64_t half = N / 2, plane = H * W;
+  TORCH_CHECK(out.is_contiguous() && out.size(0) == B && out.size(1) == N + 1 && out.size(2) == H &&
+              out.size(3) == W, "out must be a contiguous (B, N + 1, H, W) tensor");
+  const float* g = guide.data_ptr<float>();
+  float* o = out.data_ptr<float>();
+  at::parallel_for(0, B * H, 1, [&](int64_t begin, int64_t end) {
+    std::vector<float> norm(W), total(W);
+    for (int64_t row = begin; row < end; ++row) {
+      const int64_t b = row / H, y = row % H;
+      const float* gb = g + b * N * plane + y * W;
+      float* ob = o + b * (N + 1) * plane + y * W;
+      std::fill(norm.begin(), norm.end(), 0.0f);
+      std::fill(total.begin(), total.end(), 0.0f);
+      for (int64_t t = 0; t < N; ++t) {
+        const float* gr = gb + t * plane;
+        for (int64_t x = 0; x < W; ++x) norm[x] += std::abs(gr[x]);
+      }
+      for (int64_t t = 0; t < N; ++t) {
+        const float* gr = gb + t * plane;
+        float* orow = ob + (t < half ? t : t + 1) * plane;
+        for (int64_t x = 0; x < W; ++x) {
+          const float w = gr[x] / norm[x];
+          orow[x] = w;
+          total[x] += w;
+        }
+      }
+      float* centre = ob + half * plane;
+      for (int64_t x = 0; x < W; ++x) centre[x] = 1.0f - total[x];
+    }
+  });
+  return out;
+}
 """
 
 _lock = threading.Lock()
@@ -107,9 +147,9 @@ def _load() -> object | None:
             from torch.utils.cpp_extension import load_inline
 
             _module = load_inline(
-                name="semattnet_propagation_v1",
+                name="semattnet_propagation_v3",
                 cpp_sources=[_SOURCE],
-                functions=["propagate_iterations"],
+                functions=["propagate_iterations", "normalize_affinity"],
                 extra_cflags=["-O3", "-march=native", "-fno-math-errno"],
                 verbose=False,
             )
@@ -145,3 +185,22 @@ def propagate_iterations(
         raise RuntimeError(f"fused propagation unavailable: {_failed}")
     args = [t.contiguous().float() for t in (affinity, start, h0.expand_as(start), mask, sparse)]
     return module.propagate_iterations(*args, int(iterations), int(dilation))  # type: ignore[attr-defined]
+
+
+def normalize_affinity(guide: torch.Tensor, out: torch.Tensor | None = None) -> torch.Tensor:
+    """:func:`~semattnet.models.propagation.cspn_affinity` in one pass: (B, k*k - 1, H, W) raw guidance ->
+    (B, k*k, H, W) kernel, float32 on the CPU (equal to float rounding).
+
+    ``out``: a float32 (B, k*k, H, W) tensor to write into (returned), e.g. a buffer kept across frames:
+    writing a fresh 140 MB tensor costs about 10x more in page faults than the arithmetic.
+    """
+    module = _load()
+    if module is None:
+        raise RuntimeError(f"fused propagation unavailable: {_failed}")
+    b, n, h, w = guide.shape
+    if out is None:
+        out = torch.empty(b, n + 1, h, w)
+    elif out.shape != (b, n + 1, h, w) or out.dtype != torch.float32 or not out.is_contiguous():
+        raise ValueError(f"out must be a contiguous float32 {(b, n + 1, h, w)} tensor, got {tuple(out.shape)} "
+                         f"{out.dtype}")  # fmt: skip
+    return module.normalize_affinity(guide.contiguous().float(), out)  # type: ignore[attr-defined]
