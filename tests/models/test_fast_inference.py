@@ -38,6 +38,23 @@ def test_fused_kernel_matches_pytorch_steps(k: int, dilation: int, channels: int
 
 
 @needs_kernel
+@pytest.mark.parametrize(
+    ("k", "dilation", "channels", "h"), [(7, 1, 1, 37), (5, 2, 4, 23), (3, 1, 2, 5), (7, 2, 1, 61)]
+)
+def test_wavefront_equals_one_step_after_another_to_the_bit(k: int, dilation: int, channels: int, h: int) -> None:
+    """The kernel runs all steps band by band (rows go through every step while in cache); each row's
+    arithmetic must be that of whole steps run one after another, so the results are identical."""
+    aff, start, h0, mask, sparse = _inputs(k, channels, h=h, w=29, seed=h)
+    for iterations in (1, 2, 6):
+        stepped = start
+        for _ in range(iterations):
+            stepped = fused_propagation.propagate_iterations(aff, stepped, h0, mask, sparse, 1, dilation)
+        banded = fused_propagation.propagate_iterations(aff, start, h0, mask, sparse, iterations, dilation)
+        assert torch.equal(banded, stepped), (iterations, float((banded - stepped).abs().max()))
+    assert torch.equal(fused_propagation.propagate_iterations(aff, start, h0, mask, sparse, 0, dilation), start)
+
+
+@needs_kernel
 @pytest.mark.parametrize("k", [3, 5, 7])
 def test_fused_normalisation_matches_eq13(k: int) -> None:
     """normalize_affinity: cspn_affinity in one pass, also on a channel slice of stacked heads (B = 1 and 2)."""

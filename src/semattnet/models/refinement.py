@@ -253,8 +253,8 @@ def affinity_kernel(guide: torch.Tensor, impl: PropagationImpl = "auto", workspa
         return fused_propagation.normalize_affinity(guide)
     b, n, h, w = guide.shape
     out = workspace.get(name)
-    if out is None or out.shape != (b, n + 1, h, w):
-        out = workspace[name] = torch.empty(b, n + 1, h, w)
+    if out is None or out.shape != (b, h, n + 1, w):  # the kernel's layout (fused_propagation.rows_layout)
+        out = workspace[name] = torch.empty(b, h, n + 1, w)
     return fused_propagation.normalize_affinity(guide, out)
 
 
