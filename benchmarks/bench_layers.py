@@ -50,13 +50,27 @@ def layer_macs(model: Any) -> dict[str, int]:
     return macs
 
 
+def fused_names(model: Any) -> dict[str, str]:
+    """Other names a convolution's layer may have in the profile -> its name: OpenVINO fuses the bias ``Add``
+    into it, and a layer that ends at a graph output takes that output's name."""
+    names = {}
+    for op in model.get_ordered_ops():
+        if op.get_type_name() not in ("Convolution", "GroupConvolution", "ConvolutionBackpropData"):
+            continue
+        for after in (t.get_node() for t in op.output(0).get_target_inputs()):
+            if after.get_type_name() == "Add":
+                for name in (after.get_friendly_name(), *after.output(0).get_names()):
+                    names[name] = op.get_friendly_name()
+    return names
+
+
 def profile_graph(xml: Path, runs: int) -> tuple[list[float], dict[tuple[str, str, str], float], dict[str, int]]:
     """(wall seconds of each run, (name, type, kernel) -> median seconds, name -> MACs) of the IR ``xml``."""
     import openvino as ov
 
     core = ov.Core()
     model = core.read_model(str(xml))
-    macs = layer_macs(model)
+    macs, aliases = layer_macs(model), fused_names(model)
     config = {"PERFORMANCE_HINT": "LATENCY", "INFERENCE_PRECISION_HINT": "f32",
               "INFERENCE_NUM_THREADS": torch.get_num_threads(), "PERF_COUNT": True}  # fmt: skip
     compiled = core.compile_model(model, "CPU", config)
@@ -70,7 +84,8 @@ def profile_graph(xml: Path, runs: int) -> tuple[list[float], dict[tuple[str, st
         request.infer(feeds)
         walls.append(time.perf_counter() - t0)
         for p in request.get_profiling_info():
-            times[p.node_name, p.node_type, p.exec_type].append(p.real_time.total_seconds())
+            name = p.node_name if p.node_name in macs else aliases.get(p.node_name, p.node_name)
+            times[name, p.node_type, p.exec_type].append(p.real_time.total_seconds())
     return walls, {k: statistics.median(v) for k, v in times.items() if max(v) > 0}, macs
 
 

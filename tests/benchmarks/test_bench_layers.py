@@ -43,3 +43,20 @@ def test_the_script_on_a_tiny_model(capsys: pytest.CaptureFixture[str]) -> None:
     assert bench.main(["--size", "32x64", "--width", "0.25", "--runs", "2", "--top", "5"]) == 0
     out = capsys.readouterr().out
     assert "attainable" in out and "lost by type: " in out
+
+
+def test_a_convolution_fused_with_its_bias_at_an_output_keeps_its_macs() -> None:
+    """OpenVINO profiles a convolution + bias ending at a graph output under the output's name."""
+    ov = pytest.importorskip("openvino")
+    import openvino.opset13 as ops
+
+    bench = load_script("bench_layers")
+    x = ops.parameter([1, 8, 16, 16], name="x")
+    conv = ops.convolution(x, ops.constant(bench.np.ones((4, 8, 3, 3), "f4")), [1, 1], [1, 1], [1, 1], [1, 1])
+    biased = ops.add(conv, ops.constant(bench.np.ones((1, 4, 1, 1), "f4")))
+    conv.set_friendly_name("conv")
+    biased.set_friendly_name("conv/bias")
+    biased.output(0).set_names({"refinement.heads"})
+    model = ov.Model([biased], [x])
+    assert bench.fused_names(model) == {"conv/bias": "conv", "refinement.heads": "conv"}
+    assert bench.layer_macs(model) == {"conv": 4 * 16 * 16 * 8 * 9}  # counted once
