@@ -1,7 +1,7 @@
 """The whole ``predict --stream`` pipeline against the network alone, over the same frames, in one process.
 
     python benchmarks/bench_pipeline.py [--frames 20] [--size 352x1216] [--width 1.0] [--prefetch 2]
-                                        [--backend torch] [--rounds 2] [--json out.json]
+                                        [--backend torch] [--precision int8] [--rounds 2] [--json out.json]
 
 Writes a KITTI raw drive of ``--frames`` frames into a temporary folder: the bundled frame
 (``tests/data/kitti_sample``: a 1242x375 image and its 120k-point Velodyne scan) copied, the image resized
@@ -109,7 +109,8 @@ def _pipeline_pass(completer: Any, drive: Path, out: Path, prefetch: int) -> dic
             "latency": json.loads((out / LATENCY_FILE).read_text()), "table": timer.table()}  # fmt: skip
 
 
-def measure(drive: Path, work: Path, width: float, backend: str, prefetch: int, rounds: int) -> dict[str, Any]:
+def measure(drive: Path, work: Path, width: float, backend: str, prefetch: int, rounds: int,
+            precision: str | None = None) -> dict[str, Any]:  # fmt: skip
     """The network alone and the pipeline over the drive's frames, in turns; medians and the overhead."""
     import torch
 
@@ -122,7 +123,7 @@ def measure(drive: Path, work: Path, width: float, backend: str, prefetch: int, 
 
     torch.manual_seed(0)
     completer = DepthCompleter(semattnet.build_model("semattnet", width=width), device="cpu", backend=backend,
-                               inplace=True)  # fmt: skip
+                               inplace=True, precision=precision)  # fmt: skip
     source = RawDriveSource(drive)
     maps = SemanticMaps().bind(completer)
     frames = [read_frame(source, name, maps, StageTimes()) for name in source.names]
@@ -147,6 +148,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--width", type=float, default=1.0)
     p.add_argument("--prefetch", type=int, default=2, help="frames read ahead (predict --stream: 2)")
     p.add_argument("--backend", default="torch", help="as predict --backend (default torch)")
+    p.add_argument("--precision", default=None, help="as predict --precision (e.g. int8 with openvino)")
     p.add_argument("--rounds", type=int, default=2)
     p.add_argument("--json", type=Path, default=None)
     args = p.parse_args(argv)
@@ -158,11 +160,12 @@ def main(argv: list[str] | None = None) -> int:
         drive = make_drive(Path(tmp) / "raw", args.frames, (h, w))
         with warnings.catch_warnings():  # random weights: each frame's holes and clamps; the fallback semantic map
             warnings.simplefilter("ignore", UserWarning)
-            r = measure(drive, Path(tmp), args.width, args.backend, args.prefetch, args.rounds)
+            r = measure(drive, Path(tmp), args.width, args.backend, args.prefetch, args.rounds, args.precision)
     r |= {"cpu": cpu_summary(), "size": [h, w], "width": args.width, "backend": args.backend,
+          "precision": args.precision or "f32",
           "prefetch": args.prefetch, "load_after": os.getloadavg()}  # fmt: skip
-    print(f"CPU: {r['cpu']}; {r['frames']} frames at {h}x{w}, width {args.width}, backend {args.backend}, "
-          f"prefetch {args.prefetch}")  # fmt: skip
+    print(f"CPU: {r['cpu']}; {r['frames']} frames at {h}x{w}, width {args.width}, backend {args.backend} "
+          f"({r['precision']}), prefetch {args.prefetch}")  # fmt: skip
     print(f"network alone {r['fps_network']:.3f} frames/s, pipeline {r['fps_pipeline']:.3f} frames/s: overhead "
           f"{100 * r['overhead']:.1f} % ({100 * r['overhead_with_check']:.1f} % with the input check, "
           f"{r['check_s']:.2f} s)")  # fmt: skip

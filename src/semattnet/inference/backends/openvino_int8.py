@@ -58,7 +58,7 @@ def _consumers(op: Any) -> list[Any]:
 
 def _name_heads(model: Any) -> None:
     """``refinement_heads/<name>``: every node from a refinement head output back to its convolution (one
-    convolution per stage serves all the heads: :func:`semattnet.models.layers.shared_input_heads`)."""
+    convolution per stage serves all the heads: :func:`semattnet.models.layers.stacked_heads`)."""
     todo = [out.get_node().input_value(0).get_node() for out in model.outputs
             if any(n.startswith(_HEAD_OUTPUTS) for n in out.get_names())]  # fmt: skip
     seen: set[str] = set()
