@@ -66,6 +66,8 @@ def test_fused_normalisation_matches_eq13(k: int) -> None:
         got = fused_propagation.normalize_affinity(guide[b])
         assert got.shape == want[b].shape
         torch.testing.assert_close(got, want[b], rtol=1e-6, atol=1e-6)
+    with pytest.raises(ValueError, match="out must be a contiguous float32"):
+        fused_propagation.normalize_affinity(guide, torch.empty(2, k * k, 7, 9))  # the planar shape, not rows
     # by hand at one pixel: the centre is 1 - the sum of the normalised neighbours
     one = fused_propagation.normalize_affinity(guide[:1, :, 3:4, 5:6].contiguous())[0, :, 0, 0]
     raw = guide[0, :, 3, 5]

@@ -28,6 +28,8 @@ import warnings
 
 import torch
 
+from semattnet._errors import InputError
+
 __all__ = ["available", "normalize_affinity", "propagate_iterations", "rows_layout"]
 
 _SOURCE = r"""
@@ -233,7 +235,7 @@ def normalize_affinity(guide: torch.Tensor, out: torch.Tensor | None = None) -> 
     if out is None:
         out = torch.empty(b, h, n + 1, w)
     elif out.shape != (b, h, n + 1, w) or out.dtype != torch.float32 or not out.is_contiguous():
-        raise ValueError(f"out must be a contiguous float32 {(b, h, n + 1, w)} tensor, got {tuple(out.shape)} "
+        raise InputError(f"out must be a contiguous float32 {(b, h, n + 1, w)} tensor, got {tuple(out.shape)} "
                          f"{out.dtype}")  # fmt: skip
     module.normalize_affinity(guide.contiguous().float(), out)  # type: ignore[attr-defined]
     return out.transpose(1, 2)
