@@ -27,7 +27,7 @@ Parameter names are the authors' (``kernel_conf_layer``, ``mask_layer``,
 from __future__ import annotations
 
 from collections.abc import Mapping, MutableMapping, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any, Literal, NamedTuple
 
 import torch
@@ -50,7 +50,6 @@ from semattnet.models.propagation import cpu_kernel as fused_propagation
 
 __all__ = [
     "HEADS_PREFIX",
-    "HEAD_ORDER",
     "AtrousCSPNRefinement",
     "PropagationImpl",
     "PropagationSettings",
@@ -67,10 +66,8 @@ PropagationImpl = Literal["auto", "pytorch", "naive"]
 #: Buffers kept across frames by name (:meth:`RefinementHeads.finish`); what is read from them is
 #: valid until the next call with the same workspace.
 Workspace = MutableMapping[str, torch.Tensor]
-#: Name prefix of the refinement heads' tensors in flat dicts (exported graphs' outputs, :class:`RefinementInputs`).
+#: Name prefix of the refinement heads' tensors in flat dicts (exported graphs' outputs, :class:`RefinementHeads`).
 HEADS_PREFIX = "refinement."
-#: The heads of one stage, in the order their channels are stacked (:class:`RefinementHeads`).
-HEAD_ORDER = ("kernel_conf", "mask", "guidance of each kernel size")
 
 
 def _can_fuse(*tensors: torch.Tensor) -> bool:
@@ -165,7 +162,8 @@ class AtrousCSPNRefinement:
         self.att_12 = convbnrelu(2 * channels_s1, 2, kernel_size=3, padding=1)
 
     def _stage_heads(self, feature: torch.Tensor, suffix: str) -> torch.Tensor:
-        """One stage's heads (:data:`HEAD_ORDER`), their convolutions run as one: (B, C, H, W) stacked."""
+        """One stage's heads, their convolutions run as one: (B, C, H, W) stacked in the order of
+        :meth:`RefinementHeads.split_sizes`."""
         guides: list[AffinityHead] = [getattr(self, f"iter_guide_layer{k}{suffix}") for k in self._kernel_sizes]
         conf_head, mask_head = getattr(self, f"kernel_conf_layer{suffix}"), getattr(self, f"mask_layer{suffix}")
         return stacked_heads(feature, [conf_head, mask_head, *(g.generate for g in guides)])
@@ -212,28 +210,6 @@ class RefinementInputs:
     mask: torch.Tensor
     att: torch.Tensor | None = None
 
-    def to_dict(self, prefix: str = HEADS_PREFIX) -> dict[str, torch.Tensor]:
-        """Flat named tensors (lists numbered), e.g. for an exported graph's outputs."""
-        out: dict[str, torch.Tensor] = {}
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, list):
-                out.update({f"{prefix}{f.name}.{i}": v for i, v in enumerate(value)})
-            elif value is not None:
-                out[f"{prefix}{f.name}"] = value
-        return out
-
-    @classmethod
-    def from_dict(cls, tensors: Mapping[str, torch.Tensor], prefix: str = HEADS_PREFIX) -> RefinementInputs:
-        """The inverse of :meth:`to_dict` (other keys are ignored)."""
-        kwargs: dict[str, Any] = {}
-        for f in fields(cls):
-            numbered = sorted(
-                (k for k in tensors if k.startswith(f"{prefix}{f.name}.")), key=lambda k: int(k.rsplit(".", 1)[1])
-            )
-            kwargs[f.name] = [tensors[k] for k in numbered] if numbered else tensors.get(f"{prefix}{f.name}")
-        return cls(**kwargs)
-
 
 class PropagationSettings(NamedTuple):
     """What finishing a model's :class:`RefinementHeads` needs: steps per kernel size, and the kernel sizes."""
@@ -258,11 +234,15 @@ def affinity_kernel(guide: torch.Tensor, impl: PropagationImpl = "auto", workspa
     return fused_propagation.normalize_affinity(guide, out)
 
 
+#: The tensors every :class:`RefinementHeads` holds (``att`` only in the clean mode).
+_HEAD_TENSORS = ("depth", "sparse", "heads_s2", "heads")
+
+
 @dataclass
 class RefinementHeads:
     """The refinement heads as the network's convolutions leave them, before eq. 13 and the softmax.
 
-    Per stage one tensor, the heads' channels stacked in :data:`HEAD_ORDER`: ``len(kernel_sizes)``
+    Per stage one tensor, the heads' channels stacked in this order (:meth:`split_sizes`): ``len(kernel_sizes)``
     kernel-confidence logits, one mask logit, then the raw guidance of every kernel size
     (``k*k - 1`` channels each). ``heads_s2`` is at half resolution (dilation-2 stage), ``heads``
     at full resolution. This is what exported graphs return: one output per stage, no split and no
@@ -278,7 +258,7 @@ class RefinementHeads:
     att: torch.Tensor | None = None
 
     def split_sizes(self) -> list[int]:
-        """Channels of each head in a stage's stacked tensor (:data:`HEAD_ORDER`)."""
+        """Channels of each head in a stage's stacked tensor: kernel confidences, mask, guidance per kernel size."""
         return [len(self.kernel_sizes), 1, *(k * k - 1 for k in self.kernel_sizes)]
 
     def _stage(self, stacked: torch.Tensor, valid: torch.Tensor, impl: PropagationImpl, workspace: Workspace | None,
@@ -309,17 +289,16 @@ class RefinementHeads:
 
     def to_dict(self, prefix: str = HEADS_PREFIX) -> dict[str, torch.Tensor]:
         """The tensors by name (``att`` only when set), e.g. for an exported graph's outputs."""
-        names = ("depth", "sparse", "heads_s2", "heads", "att")
-        return {f"{prefix}{n}": v for n in names if (v := getattr(self, n)) is not None}
+        return {f"{prefix}{n}": v for n in (*_HEAD_TENSORS, "att") if (v := getattr(self, n)) is not None}
 
     @classmethod
     def from_dict(cls, tensors: Mapping[str, torch.Tensor], kernel_sizes: Sequence[int],
                   prefix: str = HEADS_PREFIX) -> RefinementHeads:  # fmt: skip
         """The inverse of :meth:`to_dict` (other keys are ignored)."""
-        missing = [n for n in ("depth", "sparse", "heads_s2", "heads") if f"{prefix}{n}" not in tensors]
+        missing = [n for n in _HEAD_TENSORS if f"{prefix}{n}" not in tensors]
         if missing:
             raise InputError(f"refinement heads: missing {', '.join(prefix + n for n in missing)}")
-        t = {n: tensors[f"{prefix}{n}"] for n in ("depth", "sparse", "heads_s2", "heads")}
+        t = {n: tensors[f"{prefix}{n}"] for n in _HEAD_TENSORS}
         return cls(**t, kernel_sizes=tuple(kernel_sizes), att=tensors.get(f"{prefix}att"))
 
 
