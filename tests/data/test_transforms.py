@@ -9,10 +9,21 @@ import pytest
 import torch
 from torch.utils.data import DataLoader
 
+from semattnet.data.datasets.frames import IndoorTrainTransform
 from semattnet.data.io import DataError
 from semattnet.data.kitti import KittiDepthCompletion
 from semattnet.data.synthetic.tree import write_synthetic_kitti
-from semattnet.data.transforms import EvalTransform, Sample, TrainTransform, bottom_crop, color_jitter, hflip
+from semattnet.data.transforms import (
+    EvalTransform,
+    Sample,
+    TrainTransform,
+    bottom_crop,
+    color_jitter,
+    drop_semantic,
+    hflip,
+)
+from semattnet.palette import UNKNOWN_COLOR
+from semattnet.training import TrainConfig
 
 
 def _coded_sample(h: int = 40, w: int = 70) -> Sample:
@@ -46,6 +57,36 @@ def test_flip_happens_about_half_the_time() -> None:
 
     flips = sum(flipped(i) for i in range(200))
     assert 70 < flips < 130
+
+
+def _is_fallback(semantic: np.ndarray) -> bool:
+    return bool(np.all(semantic == np.asarray(UNKNOWN_COLOR, dtype=semantic.dtype)))
+
+
+def test_semantic_dropout_replaces_the_map_by_the_fallback_at_its_share() -> None:
+    s = _coded_sample()
+    drops = [_is_fallback(drop_semantic(s, np.random.default_rng(i), 0.3).semantic) for i in range(400)]
+    assert 90 < sum(drops) < 150  # 120 expected
+    out = TrainTransform(crop=(32, 64), random_crop_height=24, jitter=0, semantic_dropout=1.0)(
+        s, np.random.default_rng(0)
+    )
+    assert _is_fallback(out.semantic) and out.semantic.shape == (24, 64, 3)
+    np.testing.assert_array_equal(out.rgb.astype(np.uint8)[..., 2], 128)  # only the semantic map changed
+    indoor = IndoorTrainTransform(samples=None, semantic_dropout=1.0)(s, np.random.default_rng(0))
+    assert _is_fallback(indoor.semantic[: s.size[0], : s.size[1]])
+
+
+def test_no_semantic_dropout_keeps_the_random_stream() -> None:
+    """A run without dropout draws nothing more: its augmentations are those of earlier versions."""
+    rng, reference = np.random.default_rng(3), np.random.default_rng(3)
+    assert drop_semantic(_coded_sample(), rng, 0.0).semantic is not None
+    assert rng.random() == reference.random()
+
+
+@pytest.mark.parametrize("share", [-0.1, 1.5, float("nan")])
+def test_train_config_refuses_a_semantic_dropout_outside_0_1(share: float) -> None:
+    with pytest.raises(ValueError, match="semantic_dropout"):
+        TrainConfig(semantic_dropout=share)
 
 
 def test_jitter_touches_rgb_only() -> None:

@@ -45,6 +45,7 @@ from semattnet.apps.experiment import (
     GROUPS,
     HeldOut,
     complete_held_out,
+    fallback_semantic,
     load_held_out,
     make_synthetic,
     score,
@@ -53,7 +54,6 @@ from semattnet.apps.experiment import (
 from semattnet.evaluation.metrics import LEADERBOARD, KittiMetrics
 from semattnet.evaluation.paired import compare, differences
 from semattnet.models.registry import MODELS, TABLE2
-from semattnet.palette import unknown_map
 from semattnet.segmentation.segmenter import Segmenter, segment_folder
 
 __all__ = ["CLAIMS", "CLAIM_CONFIGS", "CONFIGS", "SCHEMA", "AblationSettings", "run_ablation"]
@@ -117,12 +117,6 @@ def _variant(name: str) -> tuple[str, dict[str, Any]]:
         raise InputError(f"unknown configuration {name!r}; choose from {', '.join(CONFIGS)}")
     description, cfg = MODELS[name]
     return description, {"branches": cfg.branches, "fusion": cfg.fusion, "refine": cfg.refine}
-
-
-def _blank(semantic: torch.Tensor) -> torch.Tensor:
-    """The no-segmenter fallback map (:func:`unknown_map`) in place of a batch of semantic maps."""
-    height, width = semantic.shape[-2:]
-    return torch.from_numpy(unknown_map(height, width)).permute(2, 0, 1).to(semantic.dtype).expand_as(semantic)
 
 
 def _stats(values: list[float]) -> dict[str, float]:
@@ -246,7 +240,7 @@ class _Run:
         if name == NO_SEMANTICS:  # trained on fallback maps written beside the real ones, tested on them too
             blank_root = data / "semantic_unknown"
             segment_folder(Segmenter(None, "unknown"), data / "kitti_raw", blank_root, progress=False)
-            extra["semantic_root"], semantic = str(blank_root), _blank
+            extra["semantic_root"], semantic = str(blank_root), fallback_semantic
         refine = opts["refine"]
         ckpt = train_variant(
             self.out / "runs" / name / f"seed{seed}", data,

@@ -24,6 +24,7 @@ from semattnet.data.transforms import EvalTransform
 from semattnet.evaluation.metrics import KittiMetrics
 from semattnet.inference.completer import DepthCompleter
 from semattnet.models.registry import build_model
+from semattnet.palette import unknown_map
 from semattnet.training.config import TrainConfig
 from semattnet.training.losses import semattnet_loss
 from semattnet.training.trainer import train
@@ -135,6 +136,7 @@ def train_variant(
     refine_init_steps: int = 0,
     head_lr_factor: float = 1.0,
     loss: str = "l2",
+    semantic_dropout: float = 0.0,
     **model: Any,
 ) -> Path:
     """Train one variant (``model``: ``branches``, ``fusion``) and return its final checkpoint.
@@ -143,12 +145,14 @@ def train_variant(
     if ``refine``: the refinement initialisation for ``refine_init_steps`` when > 0 (the authors'
     stage 2a: backbone frozen, CSPN++ head at ``lr * head_lr_factor``), then the full model for
     ``full_steps`` (backbone at lr / 4, CSPN++ head at ``lr * head_lr_factor``). ``loss``: see
-    :func:`~semattnet.training.losses.semattnet_loss`.
+    :func:`~semattnet.training.losses.semattnet_loss`. ``semantic_dropout``: the share of training frames
+    given the fallback semantic map (:class:`~semattnet.training.TrainConfig`).
     """
     common: dict[str, Any] = {
         "data": str(data), "width": width, "batch_size": batch_size, "crop": size, "workers": 0,
         "epochs": 10**6, "lr_schedule": "cosine", "val_split": "val_select", "seed": seed,
-        "device": str(device), "log_every": 1, "loss": loss, **model,
+        "device": str(device), "log_every": 1, "loss": loss,
+        "semantic_dropout": semantic_dropout, **model,
     }  # fmt: skip
     train(TrainConfig(stage="backbone", out=str(run_dir / "backbone"), lr=lr, max_steps=backbone_steps,
                       depth_head_init=(10.0, 15.0), **common), log=log)  # fmt: skip
@@ -162,6 +166,12 @@ def train_variant(
     train(TrainConfig(stage="full", out=str(run_dir / "full"), init=str(last), lr=lr / 4,
                       head_lr=lr * head_lr_factor, max_steps=full_steps, **common), log=log)  # fmt: skip
     return run_dir / "full" / "checkpoints" / "last.pt"
+
+
+def fallback_semantic(semantic: torch.Tensor) -> torch.Tensor:
+    """The no-segmenter fallback map (:func:`~semattnet.palette.unknown_map`) in place of a batch of semantic maps."""
+    height, width = semantic.shape[-2:]
+    return torch.from_numpy(unknown_map(height, width)).permute(2, 0, 1).to(semantic.dtype).expand_as(semantic)
 
 
 def complete_held_out(

@@ -2,7 +2,8 @@
 
 Training: bottom crop to 352x1216 (rows from the bottom, columns centred), joint horizontal
 flip (p = 0.5), colour jitter on RGB only (brightness, contrast, saturation factors each
-U[0.9, 1.1], in random order), then a random vertical crop to 320 rows. The semantic map and
+U[0.9, 1.1], in random order), then a random vertical crop to 320 rows; optionally (not the paper's)
+semantic dropout, the fallback semantic map in place of a share of the frames'. The semantic map and
 depths are never jittered. Every random choice comes from the ``numpy.random.Generator`` passed
 in, which the dataset seeds per (seed, epoch, index).
 """
@@ -16,8 +17,18 @@ import numpy as np
 import torch
 
 from semattnet.data.io import DataError
+from semattnet.palette import unknown_map
 
-__all__ = ["EvalTransform", "Sample", "TrainTransform", "Transform", "bottom_crop", "color_jitter", "hflip"]
+__all__ = [
+    "EvalTransform",
+    "Sample",
+    "TrainTransform",
+    "Transform",
+    "bottom_crop",
+    "color_jitter",
+    "drop_semantic",
+    "hflip",
+]
 
 
 @dataclass
@@ -104,14 +115,28 @@ def color_jitter(rgb: np.ndarray, rng: np.random.Generator, amount: float = 0.1)
     return x.astype(np.float32)
 
 
+def drop_semantic(sample: Sample, rng: np.random.Generator, share: float) -> Sample:
+    """Semantic dropout: with probability ``share``, the frame's semantic map becomes the no-segmenter
+    fallback (:func:`semattnet.palette.unknown_map`), so that a model learns to complete depth without one.
+
+    Draws from ``rng`` only when ``share > 0`` (a run without dropout keeps its random stream)."""
+    if share <= 0 or rng.random() >= share:
+        return sample
+    return replace(sample, semantic=unknown_map(*sample.size))
+
+
 @dataclass(frozen=True)
 class TrainTransform:
-    """The paper's training augmentation. Sizes default to the paper's (352x1216 then 320 rows)."""
+    """The paper's training augmentation. Sizes default to the paper's (352x1216 then 320 rows).
+
+    ``semantic_dropout``: the share of frames trained with the fallback semantic map (:func:`drop_semantic`;
+    not the paper's: 0 by default)."""
 
     crop: tuple[int, int] = (352, 1216)
     random_crop_height: int = 320
     flip: bool = True
     jitter: float = 0.1
+    semantic_dropout: float = 0.0
 
     def __call__(self, sample: Sample, rng: np.random.Generator) -> Sample:
         sample = bottom_crop(sample, *self.crop)
@@ -123,7 +148,7 @@ class TrainTransform:
         if self.random_crop_height < h:
             top = int(rng.integers(0, h - self.random_crop_height + 1))
             sample = sample.crop(top, 0, self.random_crop_height, w)
-        return sample
+        return drop_semantic(sample, rng, self.semantic_dropout)
 
 
 @dataclass(frozen=True)

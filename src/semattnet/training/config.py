@@ -57,6 +57,9 @@ class TrainConfig:
             last value repeating: the authors' (0.2, 0.2, 0.05, 0.05, 0.0).
         crop, random_crop_height, flip, jitter: augmentation (paper: 352x1216, 320 rows, flip, 0.1);
             ``random_crop_height=None`` is 320 rows, or the whole crop when that is smaller.
+        semantic_dropout: the share of training frames given the no-segmenter fallback semantic map
+            (:func:`~semattnet.data.transforms.drop_semantic`), so the model also works without a
+            segmenter; 0 (the paper) by default.
         val_split, val_every, val_max_frames: validation each ``val_every`` epochs on at most
             that many frames (all by default); ``val_split=""`` disables it.
         amp: ``none``, ``bf16`` or ``fp16`` autocast (propagation always in float32).
@@ -97,6 +100,7 @@ class TrainConfig:
     random_crop_height: int | None = None
     flip: bool = True
     jitter: float = 0.1
+    semantic_dropout: float = 0.0
     val_split: str = "val_select"
     val_every: int = 1
     val_max_frames: int | None = None
@@ -168,6 +172,8 @@ class TrainConfig:
         check(
             "betas", len(self.betas) == 2 and all(finite(b) and 0 <= b < 1 for b in self.betas), "two numbers in [0, 1)"
         )
+        drop = self.semantic_dropout
+        check("semantic_dropout", finite(drop) and 0 <= drop <= 1, "a number in [0, 1]")
         check("branch_weights", all(finite(w) and w >= 0 for w in self.branch_weights), "finite numbers >= 0")
         for name in ("sync_bn", "activation_checkpointing"):
             check(name, isinstance(getattr(self, name), bool), "true or false")

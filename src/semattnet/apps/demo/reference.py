@@ -24,7 +24,14 @@ import torch
 from torch import nn
 
 from semattnet._errors import DataError
-from semattnet.apps.experiment import HeldOut, complete_held_out, make_synthetic, score, train_variant
+from semattnet.apps.experiment import (
+    HeldOut,
+    complete_held_out,
+    fallback_semantic,
+    make_synthetic,
+    score,
+    train_variant,
+)
 from semattnet.baselines.classical import complete_classical
 from semattnet.models.registry import build_model
 from semattnet.weights.checkpoint import load_checkpoint, load_weights
@@ -96,7 +103,9 @@ class ReferenceError(DataError):
 class ReferenceRecipe:
     """How the reference checkpoint is trained: the paper's three stages in miniature (backbone;
     refinement initialisation with the backbone frozen and the head at ``head_lr_factor`` x lr;
-    full model, backbone at lr / 4), L1 + L2 loss (not the paper's L2), cosine schedules.
+    full model, backbone at lr / 4), L1 + L2 loss (not the paper's L2), cosine schedules;
+    ``semantic_dropout`` of the frames trained with the fallback semantic map (so the model also works
+    without a segmenter).
     ``seed`` is the training seed (batch order, augmentation, initialisation); the scenes come
     from ``data_seed`` for every training seed."""
 
@@ -113,6 +122,7 @@ class ReferenceRecipe:
     full_steps: int = 200
     head_lr_factor: float = 5.0
     loss: str = "l1+l2"
+    semantic_dropout: float = 0.0
     seed: int = 0
 
 
@@ -169,7 +179,7 @@ def train_reference(
     ckpt = train_variant(work / "run", work / "data", r.backbone_steps, r.full_steps, size=r.size, width=r.width,
                          batch_size=r.batch_size, lr=r.lr, seed=r.seed, device=torch.device(device), log=log,
                          refine_init_steps=r.refine_init_steps, head_lr_factor=r.head_lr_factor, loss=r.loss,
-                         branches=3)  # fmt: skip
+                         semantic_dropout=r.semantic_dropout, branches=3)  # fmt: skip
     return package_reference(ckpt, held, target, r, time.perf_counter() - start, log)
 
 
@@ -188,13 +198,16 @@ def package_reference(
     load_weights(model, trained)
     levels = choose_levels(model)
     load_weights(model, dequantise(quantise(model.state_dict(), levels)))  # score exactly what ships
-    preds = {n: o["refined_depth"] for n, o in complete_held_out(model, held, torch.device("cpu")).items()}
+    cpu = torch.device("cpu")
+    preds = {n: o["refined_depth"] for n, o in complete_held_out(model, held, cpu).items()}
+    blind = {n: o["refined_depth"] for n, o in complete_held_out(model, held, cpu, fallback_semantic).items()}
     classical = {n: complete_classical(s["sparse"][None])[0, 0].numpy()
                  for n, s in zip(held.names, held.samples, strict=True)}  # fmt: skip
     info = {"recipe": asdict(recipe), "command": REFERENCE_COMMAND, "torch": torch.__version__,
             "machine": machine_line(), "levels": levels,
             "train_seconds": None if train_seconds is None else round(train_seconds, 1),
             "val": {"reference": _metrics(score(preds, held)["all"]),
+                    "reference_fallback_map": _metrics(score(blind, held)["all"]),
                     "classical": _metrics(score(classical, held)["all"])}}  # fmt: skip
     save_reference(model, target, info, levels)
     log(

@@ -130,8 +130,8 @@ class DatasetSpec:
 
         transform = None
         if train:
-            flip, jitter = (config.flip, config.jitter) if config is not None else (True, 0.1)
-            transform = IndoorTrainTransform(self.sparse_samples, flip, jitter)
+            flip, jitter, drop = (config.flip, config.jitter, config.semantic_dropout) if config else (True, 0.1, 0.0)
+            transform = IndoorTrainTransform(self.sparse_samples, flip, jitter, drop)
         source = self.source(root, split, semantic_root=semantic_root, seed=seed)
         return FrameDataset(source, transform, seed)
 
@@ -160,6 +160,9 @@ class TrainRecipe(Protocol):
     @property
     def jitter(self) -> float: ...
 
+    @property
+    def semantic_dropout(self) -> float: ...
+
 
 def _kitti_dataset(spec: DatasetSpec, root: PathLike, split: str, train: bool, seed: int, raw_root: PathLike | None,
                    semantic_root: PathLike | None, cfg: TrainRecipe | None) -> SplitDataset:  # fmt: skip
@@ -170,8 +173,8 @@ def _kitti_dataset(spec: DatasetSpec, root: PathLike, split: str, train: bool, s
         ds = KittiDepthCompletion(root, split, raw_root, semantic_root)
         ds.transform = EvalTransform(spec.eval_crop(split, ds.load(0).size))
         return ds
-    t = TrainTransform(cfg.crop, cfg.random_crop_height or cfg.crop[0], cfg.flip, cfg.jitter) if cfg else (
-        TrainTransform())  # fmt: skip
+    t = TrainTransform(cfg.crop, cfg.random_crop_height or cfg.crop[0], cfg.flip, cfg.jitter,
+                       cfg.semantic_dropout) if cfg else TrainTransform()  # fmt: skip
     return KittiDepthCompletion(root, split, raw_root, semantic_root, seed=seed, transform=t)
 
 

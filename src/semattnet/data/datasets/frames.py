@@ -13,7 +13,7 @@ from torch.utils.data import Dataset
 
 from semattnet._errors import DataError, InputError
 from semattnet.data.frames import Frame, IndexedSource
-from semattnet.data.transforms import Sample, Transform, color_jitter, hflip
+from semattnet.data.transforms import Sample, Transform, color_jitter, drop_semantic, hflip
 from semattnet.models.checks import SIZE_MULTIPLE
 
 __all__ = [
@@ -86,11 +86,13 @@ def pad_sample(sample: Sample, multiple: int = SIZE_MULTIPLE) -> Sample:
 class IndoorTrainTransform:
     """Training augmentation of the indoor protocols (NLSPN's, without its scale / rotation): a fresh draw of
     ``samples`` sparse points from the ground truth (None: keep the source's sparse map), a joint horizontal
-    flip (p = 0.5), colour jitter on RGB only, then padding to the model's multiple of 32 (gt 0 there)."""
+    flip (p = 0.5), colour jitter on RGB only, semantic dropout (:func:`~semattnet.data.transforms.drop_semantic`),
+    then padding to the model's multiple of 32 (gt 0 there)."""
 
     samples: int | None = 500
     flip: bool = True
     jitter: float = 0.1
+    semantic_dropout: float = 0.0
 
     def __call__(self, sample: Sample, rng: np.random.Generator) -> Sample:
         if self.samples is not None and sample.gt is not None:
@@ -99,7 +101,7 @@ class IndoorTrainTransform:
             sample = hflip(sample)
         if self.jitter > 0:
             sample = replace(sample, rgb=color_jitter(sample.rgb, rng, self.jitter))
-        return pad_sample(sample)
+        return pad_sample(drop_semantic(sample, rng, self.semantic_dropout))
 
 
 @dataclass(frozen=True)
