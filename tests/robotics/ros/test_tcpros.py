@@ -141,13 +141,14 @@ def test_bad_handshakes_are_one_line_and_refused(
     caplog.set_level(logging.WARNING, LOGGER)
     with _raw_subscriber(talker, {}) as oversized:  # a header length of 2 GB
         assert oversized.recv(100) == b""
-    wrong = {"topic": "/depth", "md5sum": "0" * 32, "callerid": "/wrong", "type": "sensor_msgs/Image"}
+    wrong = {"topic": "/depth", "md5sum": "0" * 32, "callerid": "/wrong\nforged line", "type": "sensor_msgs/Image"}
     with _raw_subscriber(talker, wrong) as sock:
         reply = sock.recv(1000)
     assert b"error=md5sum" in reply
     _wait(lambda: len(caplog.records) >= 2)
     assert "over the limit" in caplog.records[0].getMessage()
-    assert "/wrong" in caplog.records[1].getMessage() and "md5sum" in caplog.records[1].getMessage()
+    line = caplog.records[1].getMessage()
+    assert "/wrong" in line and "md5sum" in line and "\n" not in line  # a peer's text cannot forge log lines
     received: list[Any] = []  # and the publisher goes on
     listener.subscribe("/depth", IMAGE, SENSOR_QOS, received.append)
     _publish_until(publisher, _depth_message(talker), received)

@@ -248,7 +248,7 @@ class _Inbound:
         code, status, proto = xmlrpc_call(self.uri, "requestTopic", sub.caller_id, sub.topic, [["TCPROS"]],
                                           timeout=sub.timeout)  # fmt: skip
         if code != 1 or not isinstance(proto, list) or len(proto) != 3 or proto[0] != "TCPROS":
-            raise TcprosError(f"requestTopic refused or not TCPROS ({status})")
+            raise TcprosError(f"requestTopic refused or not TCPROS ({status!r})")
         if not isinstance(proto[1], str) or not isinstance(proto[2], int):
             raise TcprosError(f"requestTopic: {proto[1:]!r} is not a host and a port")
         sock = socket.create_connection((proto[1], proto[2]), timeout=sub.timeout)
@@ -256,7 +256,7 @@ class _Inbound:
         sock.sendall(encode_header(sub.fields))
         reply = read_header(sock)
         if "error" in reply:
-            raise TcprosError(f"the publisher refused the connection: {reply['error']}")
+            raise TcprosError(f"the publisher refused the connection: {reply['error']!r}")
         if reply.get("md5sum") not in (sub.md5sum, "*"):
             raise TcprosError(f"md5sum {reply.get('md5sum')!r} is not {sub.md5sum} ({ros1_type_name(sub.msgtype)})")
         sock.settimeout(_POLL_S)
@@ -269,7 +269,7 @@ class _Inbound:
                 self.sub.deliver(frame)
         except (TcprosError, OSError, xmlrpc.client.Error) as exc:
             if not self.stop.is_set():
-                _log.warning("%s: publisher %s: %s", self.sub.topic, self.uri, exc)
+                _log.warning("%s: publisher %r: %s", self.sub.topic, self.uri, exc)
         finally:
             if self.sock is not None:
                 self.sock.close()
@@ -442,7 +442,7 @@ class TcprosTransport:
         """Call the master as this node; its value, or a :class:`TcprosError` when it answers with a failure."""
         code, status, value = xmlrpc_call(self.master_uri, method, self.node_name, *args, timeout=self.timeout)
         if code != 1:
-            raise TcprosError(f"ROS master {self.master_uri} {method}: {status}")
+            raise TcprosError(f"ROS master {self.master_uri} {method}: {status!r}")
         return value
 
     def _unregister_all(self) -> None:
@@ -484,7 +484,7 @@ class TcprosTransport:
             publisher = self._publishers.get(request.get("topic", ""))
             error = self._refusal(request, publisher)
             if error or publisher is None:
-                _log.warning("tcpros: refused subscriber %s (%s): %s", label, request.get("callerid", "?"), error)
+                _log.warning("tcpros: refused subscriber %s (%r): %s", label, request.get("callerid", "?"), error)
                 sock.sendall(encode_header({"error": error}))
                 sock.close()
                 return
@@ -498,7 +498,7 @@ class TcprosTransport:
             return
         if request.get("tcp_nodelay") == "1":
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        outbox = publisher.attach(sock, request.get("callerid", label), self._stop)
+        outbox = publisher.attach(sock, repr(request.get("callerid", label)), self._stop)
         if outbox is not None:
             outbox.run()
 
@@ -544,6 +544,6 @@ class TcprosTransport:
         return [1, "", ["TCPROS", self.host, self._listener.getsockname()[1]]]
 
     def _remote_shutdown(self, caller: str, message: str = "") -> list[Any]:
-        _log.warning("tcpros: %s asked this node to shut down (%s)", caller, message)
+        _log.warning("tcpros: %r asked this node to shut down (%r)", caller, message)
         threading.Thread(target=self.close, name="tcpros-shutdown", daemon=True).start()
         return [1, "", 0]
