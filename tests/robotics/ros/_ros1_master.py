@@ -22,6 +22,7 @@ class FakeMaster:
         self.publishers: defaultdict[str, list[str]] = defaultdict(list)
         self.subscribers: defaultdict[str, list[str]] = defaultdict(list)
         self._notifiers: list[threading.Thread] = []
+        self.refuse: set[str] = set()  # topics whose registration fails (code -1), as a master's error
         for name in ("registerPublisher", "registerSubscriber", "unregisterPublisher", "unregisterSubscriber"):
             self._server.register_function(getattr(self, name), name)
         self._server.register_function(lambda caller: [1, "", self.uri], "getUri")
@@ -33,11 +34,15 @@ class FakeMaster:
         return f"http://127.0.0.1:{self._server.server_address[1]}/"
 
     def registerPublisher(self, caller: str, topic: str, msgtype: str, api: str) -> list[Any]:
+        if topic in self.refuse:
+            return [-1, f"{topic} refused", []]
         self.publishers[topic].append(api)
         self._notify(topic)
         return [1, "", list(self.subscribers[topic])]
 
     def registerSubscriber(self, caller: str, topic: str, msgtype: str, api: str) -> list[Any]:
+        if topic in self.refuse:
+            return [-1, f"{topic} refused", []]
         self.subscribers[topic].append(api)
         return [1, "", list(self.publishers[topic])]
 

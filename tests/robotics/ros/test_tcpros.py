@@ -109,6 +109,33 @@ def test_publisher_to_subscriber(node: Callable[[str], TcprosTransport], subscri
     assert publisher.subscriber_count == 1
 
 
+def test_subscriber_reconnects_after_a_dropped_connection(node: Callable[[str], TcprosTransport]) -> None:
+    talker, listener = node("/talker"), node("/listener")
+    received: list[Any] = []
+    listener.subscribe("/depth", IMAGE, SENSOR_QOS, received.append)
+    publisher = talker.advertise("/depth", IMAGE, OUTPUT_QOS)
+    _publish_until(publisher, _depth_message(talker), received)
+    publisher.abort()  # every subscriber connection cut, the node still listed by the master
+    time.sleep(0.1)
+    count = len(received)
+    _publish_until(publisher, _depth_message(talker), received, count + 1)
+    _check_depth(received[-1])
+    assert publisher.subscriber_count == 1
+
+
+def test_failed_registration_can_be_retried(master: FakeMaster, node: Callable[[str], TcprosTransport]) -> None:
+    talker = node("/talker")
+    master.refuse.add("/depth")
+    with pytest.raises(TcprosError, match="registerPublisher: '/depth refused'"):
+        talker.advertise("/depth", IMAGE, OUTPUT_QOS)
+    with pytest.raises(TcprosError, match="registerSubscriber: '/depth refused'"):
+        talker.subscribe("/depth", IMAGE, SENSOR_QOS, print)
+    master.refuse.clear()
+    talker.advertise("/depth", IMAGE, OUTPUT_QOS)
+    talker.subscribe("/depth", IMAGE, SENSOR_QOS, print)
+    assert master.publishers["/depth"] == master.subscribers["/depth"] == [talker.uri]
+
+
 def test_ros2_messages_are_converted(node: Callable[[str], TcprosTransport]) -> None:
     """A ROS 2 store's CameraInfo (lower-case d/k/r/p, no Header.seq) goes out as the ROS 1 message."""
     ros1, ros2 = rosbags_typestore(True), rosbags_typestore(False)

@@ -69,6 +69,8 @@ MAX_PEERS = 64
 _LEN = struct.Struct("<I")
 _NAME = re.compile(r"/[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*")
 _POLL_S = 0.1
+#: Seconds before reconnecting to a publisher, by the number of failed attempts since the last connection.
+_RETRY_S = (0.2, 0.5, 1.0, 2.0, 4.0, 8.0)
 _MISSING = object()
 
 
@@ -234,7 +236,7 @@ class TcprosPublisher:
 
 
 class _Inbound:
-    """One publisher of a subscribed topic: ``requestTopic``, connect, handshake, then receive until stopped."""
+    """One publisher of a subscribed topic: ``requestTopic``, connect, handshake, receive; reconnect until stopped."""
 
     def __init__(self, subscription: _Subscription, uri: str) -> None:
         self.sub, self.uri = subscription, uri
@@ -263,16 +265,26 @@ class _Inbound:
         return sock
 
     def _run(self) -> None:
-        try:
-            sock = self._connect()
-            while (frame := read_frame(sock, self.sub.max_message_bytes, self.stop)) is not None:
-                self.sub.deliver(frame)
-        except (TcprosError, OSError, xmlrpc.client.Error) as exc:
-            if not self.stop.is_set():
-                _log.warning("%s: publisher %r: %s", self.sub.topic, self.uri, exc)
-        finally:
-            if self.sock is not None:
-                self.sock.close()
+        """Connect and receive; after a failure or a closed connection, retry with backoff until stopped."""
+        attempt = 0
+        while not self.stop.is_set():
+            try:
+                sock = self._connect()
+                attempt = 0
+                while (frame := read_frame(sock, self.sub.max_message_bytes, self.stop)) is not None:
+                    self.sub.deliver(frame)
+                if not self.stop.is_set():
+                    _log.info("%s: publisher %r closed the connection; reconnecting", self.sub.topic, self.uri)
+            except (TcprosError, OSError, xmlrpc.client.Error) as exc:
+                if not self.stop.is_set():  # one line per outage; the retries after it are debug lines
+                    level = logging.WARNING if attempt == 0 else logging.DEBUG
+                    _log.log(level, "%s: publisher %r: %s (retrying while the master lists it)", self.sub.topic,
+                             self.uri, exc)  # fmt: skip
+                attempt += 1
+            finally:
+                if self.sock is not None:
+                    self.sock.close()
+            self.stop.wait(_RETRY_S[min(attempt, len(_RETRY_S) - 1)])
 
     def abort(self) -> None:
         """Stop receiving and unblock the thread."""
@@ -298,15 +310,15 @@ class _Subscription:
         self._lock = threading.Lock()
         self.closed = False
 
-    def update(self, uris: list[str]) -> None:
-        """Connect to the publishers in ``uris`` not yet connected; drop those no longer listed."""
+    def update(self, uris: list[str], drop: bool = True) -> None:
+        """Connect to the publishers in ``uris`` not yet connected; drop those no longer listed (if ``drop``)."""
         if len(uris) > MAX_PEERS:
             _log.warning("%s: %d publishers, connecting to the first %d", self.topic, len(uris), MAX_PEERS)
         wanted = uris[:MAX_PEERS]
         with self._lock:
             if self.closed:
                 return
-            for uri in [u for u in self._inbound if u not in wanted]:
+            for uri in [u for u in self._inbound if drop and u not in wanted]:
                 self._inbound.pop(uri).abort()
             for uri in wanted:
                 if uri not in self._inbound or not self._inbound[uri].thread.is_alive():
@@ -387,7 +399,12 @@ class TcprosTransport:
                     raise InputError(f"{topic}: already advertised as {known.msgtype}, not {typename}")
                 return known
             publisher = self._publishers[topic] = TcprosPublisher(self.typestore, self.node_name, topic, typename, qos)
-        self._master("registerPublisher", topic, ros1_type_name(typename), self.uri)
+        try:
+            self._master("registerPublisher", topic, ros1_type_name(typename), self.uri)
+        except BaseException:
+            with self._lock:
+                del self._publishers[topic]
+            raise
         return publisher
 
     def subscribe(self, topic: str, msgtype: str, qos: QoS, callback: Callable[[object], None]) -> None:
@@ -397,8 +414,15 @@ class TcprosTransport:
             if topic in self._subscriptions:
                 raise InputError(f"{topic}: already subscribed")
             subscription = self._subscriptions[topic] = _Subscription(self, topic, typename, callback)
-        publishers = self._master("registerSubscriber", topic, ros1_type_name(typename), self.uri)
-        subscription.update([uri for uri in publishers if isinstance(uri, str)] if isinstance(publishers, list) else [])
+        try:
+            publishers = self._master("registerSubscriber", topic, ros1_type_name(typename), self.uri)
+        except BaseException:
+            with self._lock:
+                del self._subscriptions[topic]
+            raise
+        # Additive: a publisherUpdate that raced ahead of this reply is newer than it.
+        listed = [uri for uri in publishers if isinstance(uri, str)] if isinstance(publishers, list) else []
+        subscription.update(listed, drop=False)
 
     def close(self) -> None:
         """Unregister from the master, stop the servers, end every connection and thread (bounded; idempotent)."""
