@@ -273,8 +273,10 @@ def test_bad_arguments(master: FakeMaster, node: Callable[[str], TcprosTransport
         TcprosTransport("127.0.0.1:11311")
     with socket.create_server(("127.0.0.1", 0)) as closed:
         port = closed.getsockname()[1]
-    with pytest.raises(TcprosError, match=f"ROS master http://127.0.0.1:{port}/: not reachable"):
+    with pytest.raises(TcprosError, match=f"ROS master http://127.0.0.1:{port}/ getUri: .*refused"):
         TcprosTransport(f"http://127.0.0.1:{port}/", timeout=1.0)
+    with pytest.raises(InputError, match="ROS host '203.0.113.1' .*cannot listen there"):
+        TcprosTransport(master.uri, host="203.0.113.1")  # an address of no interface here (TEST-NET-3)
     talker = node("/talker")
     with pytest.raises(InputError, match="absolute name"):
         talker.advertise("depth", IMAGE, OUTPUT_QOS)

@@ -371,16 +371,19 @@ class TcprosTransport:
         self._subscriptions: dict[str, _Subscription] = {}
         self._threads: list[threading.Thread] = []
         self._closed = False
-        self._listener = socket.create_server((self.host, 0))
+        try:
+            self._listener = socket.create_server((self.host, 0))
+        except OSError as exc:
+            raise InputError(f"ROS host {self.host!r} (ROS_IP): cannot listen there ({exc})") from None
         self._listener.settimeout(_POLL_S)
         self._slave = SlaveServer(self.host, timeout)
         self._register_api()
         try:
             self._master("getUri")
-        except (TcprosError, OSError, xmlrpc.client.Error) as exc:
+        except TcprosError:
             self._listener.close()
             self._slave.server_close()
-            raise TcprosError(f"ROS master {master_uri}: not reachable ({exc})") from None
+            raise
         self._slave.start()
         self._track(threading.Thread(target=self._accept_loop, name="tcpros-accept", daemon=True))
 
@@ -463,8 +466,11 @@ class TcprosTransport:
         return typename
 
     def _master(self, method: str, *args: object) -> Any:
-        """Call the master as this node; its value, or a :class:`TcprosError` when it answers with a failure."""
-        code, status, value = xmlrpc_call(self.master_uri, method, self.node_name, *args, timeout=self.timeout)
+        """Call the master as this node: its value, or a :class:`TcprosError` (unreachable, or a failure code)."""
+        try:
+            code, status, value = xmlrpc_call(self.master_uri, method, self.node_name, *args, timeout=self.timeout)
+        except (OSError, xmlrpc.client.Error) as exc:
+            raise TcprosError(f"ROS master {self.master_uri} {method}: {exc}") from None
         if code != 1:
             raise TcprosError(f"ROS master {self.master_uri} {method}: {status!r}")
         return value
