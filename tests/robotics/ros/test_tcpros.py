@@ -14,6 +14,8 @@ from xmlrpc.server import SimpleXMLRPCServer
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from semattnet._errors import InputError
 from semattnet.geometry.cameras import CameraInfoData
@@ -79,6 +81,16 @@ def _check_depth(message: Any) -> None:
     assert (message.header.stamp.sec, message.header.stamp.nanosec) == divmod(STAMP, 1_000_000_000)
     assert (message.height, message.width, message.encoding, message.step) == (3, 4, "32FC1", 16)
     np.testing.assert_array_equal(np.frombuffer(message.data.tobytes(), "<f4").reshape(3, 4), DEPTH)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.binary(max_size=64))
+def test_any_header_bytes_are_fields_or_one_error(block: bytes) -> None:
+    try:
+        fields = decode_header(block)
+    except TcprosError:
+        return
+    assert all(isinstance(k, str) and isinstance(v, str) for k, v in fields.items())
 
 
 def test_type_names_and_headers() -> None:
@@ -263,7 +275,15 @@ def test_slave_api(node: Callable[[str], TcprosTransport]) -> None:
     assert proxy.getPublications("/x")[2] == [["/depth", "sensor_msgs/Image"]]
     assert proxy.requestTopic("/x", "/other", [["TCPROS"]])[0] == -1
     assert proxy.requestTopic("/x", "/depth", [["UDPROS"]])[0] == 0
-    with socket.create_connection(("127.0.0.1", int(talker.uri.rsplit(":", 1)[1].strip("/"))), timeout=5) as sock:
+    with pytest.raises(xmlrpc.client.Fault):  # wrong arguments: a fault back, the server goes on
+        proxy.requestTopic("/x")
+    port = int(talker.uri.rsplit(":", 1)[1].strip("/"))
+    broken = b"<?xml version='1.0'?><methodCall><methodName>getPid</methodName><params><param>"
+    with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
+        sock.sendall(b"POST / HTTP/1.0\r\nContent-Length: %d\r\n\r\n" % len(broken) + broken)
+        assert sock.recv(100).startswith(b"HTTP/1.0 200")  # an XML-RPC fault, in a 200 reply
+    assert proxy.getPid("/x")[0] == 1
+    with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
         sock.sendall(b"POST / HTTP/1.0\r\nContent-Length: 2000000\r\n\r\n<")  # 2 MB announced: refused unread
         assert sock.recv(100).startswith(b"HTTP/1.0 413")
 
