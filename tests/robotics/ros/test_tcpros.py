@@ -146,6 +146,8 @@ def test_failed_registration_can_be_retried(master: FakeMaster, node: Callable[[
     talker.advertise("/depth", IMAGE, OUTPUT_QOS)
     talker.subscribe("/depth", IMAGE, SENSOR_QOS, print)
     assert master.publishers["/depth"] == master.subscribers["/depth"] == [talker.uri]
+    talker.close()
+    assert master.publishers["/depth"] == master.subscribers["/depth"] == []
 
 
 def test_ros2_messages_are_converted(node: Callable[[str], TcprosTransport]) -> None:
@@ -267,7 +269,7 @@ def test_slow_subscriber_never_blocks_publish_and_close_is_bounded(node: Callabl
     stalled.close()
 
 
-def test_slave_api(node: Callable[[str], TcprosTransport]) -> None:
+def test_slave_api(master: FakeMaster, node: Callable[[str], TcprosTransport]) -> None:
     talker = node("/talker")
     talker.advertise("/depth", IMAGE, OUTPUT_QOS)
     proxy = xmlrpc.client.ServerProxy(talker.uri)
@@ -286,6 +288,10 @@ def test_slave_api(node: Callable[[str], TcprosTransport]) -> None:
     with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
         sock.sendall(b"POST / HTTP/1.0\r\nContent-Length: 2000000\r\n\r\n<")  # 2 MB announced: refused unread
         assert sock.recv(100).startswith(b"HTTP/1.0 413")
+    assert proxy.shutdown("/x", "asked to")[0] == 1  # as `rosnode kill` does: the node closes itself
+    _wait(lambda: master.publishers["/depth"] == [])
+    talker.close()  # waits for the shutdown in progress
+    _wait(lambda: not [t for t in threading.enumerate() if t.name.startswith("tcpros") and t.is_alive()], 1.0)
 
 
 def test_bad_arguments(master: FakeMaster, node: Callable[[str], TcprosTransport]) -> None:

@@ -12,6 +12,7 @@ import json
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -51,9 +52,16 @@ def _isolation() -> tuple[str, ...]:
 def _scenario(name: str, workdir: Path) -> dict[str, Any]:
     env = dict(os.environ, PYTHONPATH=str(Path(semattnet.__file__).parents[1]))
     cmd = [*_isolation(), sys.executable, str(SCENARIOS), name, str(workdir)]
-    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr[-4000:]
-    return json.loads(proc.stdout.splitlines()[-1])
+    # Its own process group: if it ever outlives its bounded waits, it goes with its roscore and rostopic.
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)  # fmt: skip
+    try:
+        out, err = proc.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        out, err = proc.communicate(timeout=10)
+    assert proc.returncode == 0, err[-4000:]
+    return json.loads(out.splitlines()[-1])
 
 
 def test_rostopic_echo_receives_our_depth(tmp_path: Path) -> None:

@@ -371,6 +371,7 @@ class TcprosTransport:
         self._subscriptions: dict[str, _Subscription] = {}
         self._threads: list[threading.Thread] = []
         self._closed = False
+        self._done = threading.Event()  # set when close() has ended everything
         try:
             self._listener = socket.create_server((self.host, 0))
         except OSError as exc:
@@ -430,9 +431,10 @@ class TcprosTransport:
     def close(self) -> None:
         """Unregister from the master, stop the servers, end every connection and thread (bounded; idempotent)."""
         with self._lock:
-            if self._closed:
-                return
-            self._closed = True
+            closing, self._closed = self._closed, True
+        if closing:  # closing or closed already (a remote shutdown, say): wait for it to finish
+            self._done.wait(self.timeout + 2.0)
+            return
         self._unregister_all()
         self._stop.set()
         self._slave.stop(self.timeout)
@@ -447,6 +449,7 @@ class TcprosTransport:
             if thread is not threading.current_thread():
                 thread.join(max(0.0, deadline - time.monotonic()))
         self._listener.close()
+        self._done.set()
 
     def __enter__(self) -> TcprosTransport:
         return self
