@@ -11,7 +11,9 @@ Bounded: every connect, handshake and XML-RPC call has a timeout; each subscribe
 own send queue of the QoS depth that drops the oldest message (a slow subscriber never blocks
 :meth:`TcprosPublisher.publish`); headers, frames and XML-RPC documents have size limits; at most
 :data:`MAX_PEERS` connections per topic. A malformed handshake or message is one logged line naming the
-topic, and :meth:`TcprosTransport.close` ends every thread and socket within a few timeouts.
+topic, and :meth:`TcprosTransport.close` ends every thread and socket within a few timeouts. A
+subscriber reconnects to a publisher whose connection dropped (with backoff) while the master lists it;
+``subscribe``'s callback runs on that connection's thread.
 
 Example (needs a running ``roscore``)::
 
