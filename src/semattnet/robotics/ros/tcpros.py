@@ -1,0 +1,584 @@
+"""ROS 1 without rospy: a :class:`~.transport.Transport` that speaks the master's XML-RPC and TCPROS itself.
+
+A ROS 1 node is an XML-RPC client of the master (``registerPublisher``, ``registerSubscriber``,
+``unregister*``), an XML-RPC server for its peers (``requestTopic``, ``publisherUpdate``, ``getPid``,
+``shutdown``, ...) and, per topic, TCP connections that open with a header exchange (the type's name,
+md5sum and message definition) and then carry 4-byte length-prefixed ROS 1 serialised messages. The
+messages are ``rosbags`` objects of the ROS 1 Noetic type store (:attr:`TcprosTransport.typestore`);
+objects of a ROS 2 store are converted field by field (a missing ``Header.seq`` is 0).
+
+Bounded: every connect, handshake and XML-RPC call has a timeout; each subscriber connection has its
+own send queue of the QoS depth that drops the oldest message (a slow subscriber never blocks
+:meth:`TcprosPublisher.publish`); headers, frames and XML-RPC documents have size limits; at most
+:data:`MAX_PEERS` connections per topic. A malformed handshake or message is one logged line naming the
+topic, and :meth:`TcprosTransport.close` ends every thread and socket within a few timeouts. A
+subscriber reconnects to a publisher whose connection dropped (with backoff) while the master lists it;
+``subscribe``'s callback runs on that connection's thread.
+
+Example (needs a running ``roscore``)::
+
+    transport = TcprosTransport("http://127.0.0.1:11311", "/semattnet", "127.0.0.1")
+    depth = transport.advertise("/semattnet/depth_image", "sensor_msgs/msg/Image", OUTPUT_QOS)
+    depth.publish(message)  # a rosbags sensor_msgs/msg/Image of transport.typestore
+    transport.close()
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+import re
+import socket
+import struct
+import threading
+import time
+import xmlrpc.client
+from collections import deque
+from collections.abc import Callable, Mapping
+from typing import Any, Protocol, cast
+
+from semattnet._errors import InputError
+
+from ..bags.deps import rosbags_typestore
+from ._tcpros_wire import (
+    SlaveServer,
+    TcprosError,
+    check_http_uri,
+    encode_header,
+    read_frame,
+    read_header,
+    xmlrpc_call,
+)
+from .transport import QoS
+
+__all__ = [
+    "DEFAULT_MAX_MESSAGE_BYTES",
+    "MAX_PEERS",
+    "TcprosError",
+    "TcprosPublisher",
+    "TcprosTransport",
+    "adopt_message",
+    "ros1_type_name",
+]
+
+_log = logging.getLogger(__name__)
+
+#: The longest message accepted from a publisher (a 4K 32FC1 image is 33 MB).
+DEFAULT_MAX_MESSAGE_BYTES = 1 << 28
+#: At most this many connections per topic (subscribers of a publisher, publishers of a subscription).
+MAX_PEERS = 64
+_LEN = struct.Struct("<I")
+_NAME = re.compile(r"/[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*")
+_POLL_S = 0.1
+#: Seconds before reconnecting to a publisher, by the number of failed attempts since the last connection.
+_RETRY_S = (0.2, 0.5, 1.0, 2.0, 4.0, 8.0)
+_MISSING = object()
+
+
+class _Ros1Store(Protocol):
+    """What the transport uses of rosbags' ROS 1 type store."""
+
+    @property
+    def types(self) -> Mapping[str, type]: ...
+
+    def serialize_ros1(self, message: object, typename: str) -> memoryview: ...
+
+    def deserialize_ros1(self, rawdata: bytes, typename: str) -> object: ...
+
+    def generate_msgdef(self, typename: str) -> tuple[str, str]: ...
+
+
+def ros1_type_name(msgtype: str) -> str:
+    """The ROS 1 name of a type: ``sensor_msgs/msg/Image`` -> ``sensor_msgs/Image``."""
+    package, sep, name = msgtype.partition("/msg/")
+    return f"{package}/{name}" if sep else msgtype
+
+
+def _store_type_name(msgtype: str) -> str:
+    """The type store's name of a type: ``sensor_msgs/Image`` -> ``sensor_msgs/msg/Image`` (unchanged if so already)."""
+    if "/msg/" in msgtype:
+        return msgtype
+    package, sep, name = msgtype.partition("/")
+    return f"{package}/msg/{name}" if sep and name else msgtype
+
+
+def adopt_message(store: _Ros1Store, message: object) -> object:
+    """``message`` as an object of ``store``: objects of another rosbags store are converted by field name.
+
+    A ROS 2 object converts: ``CameraInfo``'s ``d``/``k``/``r``/``p`` fill ROS 1's ``D``/``K``/``R``/``P``,
+    and a field ROS 2 lacks (``Header.seq``) is 0. Arrays, strings and numbers pass through.
+    """
+    if isinstance(message, list):
+        return [adopt_message(store, item) for item in message]
+    name = getattr(type(message), "__msgtype__", None)
+    if not isinstance(name, str):
+        return message
+    cls = store.types.get(name)
+    if cls is None:
+        raise InputError(f"message type {name}: not a ROS 1 Noetic type")
+    if type(message) is cls:
+        return message
+    values = {}
+    for field in dataclasses.fields(cls):
+        if not field.name.startswith("__"):
+            value = getattr(message, field.name, getattr(message, field.name.lower(), _MISSING))
+            values[field.name] = 0 if value is _MISSING else adopt_message(store, value)
+    return cls(**values)
+
+
+class _Outbox:
+    """One subscriber's connection: a send queue of the QoS depth (drop-oldest) and the thread that empties it."""
+
+    def __init__(self, sock: socket.socket, depth: int, label: str, stop: threading.Event) -> None:
+        self._sock = sock
+        self._queue: deque[tuple[bytes, memoryview]] = deque(maxlen=max(1, depth))
+        self._cond = threading.Condition()
+        self._stop = stop
+        self.label = label
+        self.dropped = 0
+        self.alive = True
+
+    def put(self, prefix: bytes, data: memoryview) -> None:
+        """Queue one frame; the oldest queued frame is dropped (and counted) when the queue is full."""
+        with self._cond:
+            if len(self._queue) == self._queue.maxlen:
+                self.dropped += 1
+            self._queue.append((prefix, data))
+            self._cond.notify()
+
+    def run(self) -> None:
+        """Send queued frames until the transport stops or the subscriber goes away (the caller's thread)."""
+        try:
+            while not self._stop.is_set():
+                with self._cond:
+                    self._cond.wait_for(lambda: self._queue or self._stop.is_set(), timeout=_POLL_S)
+                    if not self._queue:
+                        continue
+                    prefix, data = self._queue.popleft()
+                self._sock.sendall(prefix)
+                self._sock.sendall(data)
+        except OSError as exc:
+            if not self._stop.is_set():
+                _log.info("%s: subscriber connection ended (%s)", self.label, exc)
+        finally:
+            self.alive = False
+            self._sock.close()
+
+    def abort(self) -> None:
+        """Unblock a send in progress (close's first step)."""
+        _shutdown(self._sock)
+
+
+def _shutdown(sock: socket.socket | None) -> None:
+    if sock is not None:
+        try:
+            sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+
+
+class TcprosPublisher:
+    """One advertised topic (:class:`~.transport.Publisher`): serialises once, queues to every subscriber."""
+
+    def __init__(self, store: _Ros1Store, caller_id: str, topic: str, msgtype: str, qos: QoS) -> None:
+        self.topic, self.msgtype, self.qos = topic, msgtype, qos
+        self._store = store
+        definition, self.md5sum = store.generate_msgdef(msgtype)
+        self.fields = {"callerid": caller_id, "topic": topic, "type": ros1_type_name(msgtype),
+                       "md5sum": self.md5sum, "message_definition": definition, "latching": "0"}  # fmt: skip
+        self._outboxes: list[_Outbox] = []
+        self._lock = threading.Lock()
+        self._dropped_gone = 0
+
+    @property
+    def dropped(self) -> int:
+        """Messages dropped so far because a subscriber's queue was full (a slow subscriber)."""
+        with self._lock:
+            return self._dropped_gone + sum(o.dropped for o in self._outboxes)
+
+    @property
+    def subscriber_count(self) -> int:
+        """How many subscriber connections are open."""
+        with self._lock:
+            return sum(o.alive for o in self._outboxes)
+
+    def publish(self, message: object) -> None:
+        """Serialise ``message`` (a rosbags ``msgtype`` object) once and queue it to every subscriber; never blocks."""
+        try:
+            data = self._store.serialize_ros1(adopt_message(self._store, message), self.msgtype)
+        except InputError:
+            raise
+        except Exception as exc:
+            raise InputError(f"{self.topic}: cannot serialise the message as {self.msgtype} ({exc})") from None
+        prefix = _LEN.pack(len(data))
+        with self._lock:
+            self._dropped_gone += sum(o.dropped for o in self._outboxes if not o.alive)
+            self._outboxes = [o for o in self._outboxes if o.alive]
+            outboxes = list(self._outboxes)
+        for outbox in outboxes:
+            outbox.put(prefix, data)
+
+    def attach(self, sock: socket.socket, label: str, stop: threading.Event) -> _Outbox | None:
+        """A new subscriber's outbox, or None (the socket closed) beyond :data:`MAX_PEERS` connections."""
+        with self._lock:
+            if sum(o.alive for o in self._outboxes) >= MAX_PEERS:
+                _log.warning("%s: refused %s: already %d subscribers", self.topic, label, MAX_PEERS)
+                sock.close()
+                return None
+            outbox = _Outbox(sock, self.qos.depth, f"{self.topic} -> {label}", stop)
+            self._outboxes.append(outbox)
+            return outbox
+
+    def abort(self) -> None:
+        """Unblock every send in progress."""
+        with self._lock:
+            for outbox in self._outboxes:
+                outbox.abort()
+
+
+class _Inbound:
+    """One publisher of a subscribed topic: ``requestTopic``, connect, handshake, receive; reconnect until stopped."""
+
+    def __init__(self, subscription: _Subscription, uri: str) -> None:
+        self.sub, self.uri = subscription, uri
+        self.stop = threading.Event()
+        self.sock: socket.socket | None = None
+        self.thread = threading.Thread(target=self._run, name=f"tcpros-in{subscription.topic}", daemon=True)
+
+    def _connect(self) -> socket.socket:
+        sub = self.sub
+        check_http_uri(self.uri, f"{sub.topic}: publisher URI")
+        code, status, proto = xmlrpc_call(self.uri, "requestTopic", sub.caller_id, sub.topic, [["TCPROS"]],
+                                          timeout=sub.timeout)  # fmt: skip
+        if code != 1 or not isinstance(proto, list) or len(proto) != 3 or proto[0] != "TCPROS":
+            raise TcprosError(f"requestTopic refused or not TCPROS ({status!r})")
+        if not isinstance(proto[1], str) or not isinstance(proto[2], int):
+            raise TcprosError(f"requestTopic: {proto[1:]!r} is not a host and a port")
+        sock = socket.create_connection((proto[1], proto[2]), timeout=sub.timeout)
+        self.sock = sock
+        sock.sendall(encode_header(sub.fields))
+        reply = read_header(sock)
+        if "error" in reply:
+            raise TcprosError(f"the publisher refused the connection: {reply['error']!r}")
+        if reply.get("md5sum") not in (sub.md5sum, "*"):
+            raise TcprosError(f"md5sum {reply.get('md5sum')!r} is not {sub.md5sum} ({ros1_type_name(sub.msgtype)})")
+        sock.settimeout(_POLL_S)
+        return sock
+
+    def _run(self) -> None:
+        """Connect and receive; after a failure or a closed connection, retry with backoff until stopped."""
+        attempt = 0
+        while not self.stop.is_set():
+            try:
+                sock = self._connect()
+                attempt = 0
+                while (frame := read_frame(sock, self.sub.max_message_bytes, self.stop)) is not None:
+                    self.sub.deliver(frame)
+                if not self.stop.is_set():
+                    _log.info("%s: publisher %r closed the connection; reconnecting", self.sub.topic, self.uri)
+            except (TcprosError, OSError, xmlrpc.client.Error) as exc:
+                if not self.stop.is_set():  # one line per outage; the retries after it are debug lines
+                    level = logging.WARNING if attempt == 0 else logging.DEBUG
+                    _log.log(level, "%s: publisher %r: %s (retrying while the master lists it)", self.sub.topic,
+                             self.uri, exc)  # fmt: skip
+                attempt += 1
+            finally:
+                if self.sock is not None:
+                    self.sock.close()
+            self.stop.wait(_RETRY_S[min(attempt, len(_RETRY_S) - 1)])
+
+    def abort(self) -> None:
+        """Stop receiving and unblock the thread."""
+        self.stop.set()
+        _shutdown(self.sock)
+
+
+class _Subscription:
+    """A subscribed topic: one :class:`_Inbound` per publisher the master names, following ``publisherUpdate``."""
+
+    def __init__(
+        self, transport: TcprosTransport, topic: str, msgtype: str, callback: Callable[[object], None]
+    ) -> None:
+        self.topic, self.msgtype, self.callback = topic, msgtype, callback
+        self.store = transport.typestore
+        self.caller_id, self.timeout = transport.node_name, transport.timeout
+        self.max_message_bytes = transport.max_message_bytes
+        definition, self.md5sum = self.store.generate_msgdef(msgtype)
+        self.fields = {"callerid": transport.node_name, "topic": topic, "type": ros1_type_name(msgtype),
+                       "md5sum": self.md5sum, "message_definition": definition, "tcp_nodelay": "1"}  # fmt: skip
+        self._track = transport._track
+        self._inbound: dict[str, _Inbound] = {}
+        self._lock = threading.Lock()
+        self.closed = False
+
+    def update(self, uris: list[str], drop: bool = True) -> None:
+        """Connect to the publishers in ``uris`` not yet connected; drop those no longer listed (if ``drop``)."""
+        if len(uris) > MAX_PEERS:
+            _log.warning("%s: %d publishers, connecting to the first %d", self.topic, len(uris), MAX_PEERS)
+        wanted = uris[:MAX_PEERS]
+        with self._lock:
+            if self.closed:
+                return
+            for uri in [u for u in self._inbound if drop and u not in wanted]:
+                self._inbound.pop(uri).abort()
+            for uri in wanted:
+                if uri not in self._inbound or not self._inbound[uri].thread.is_alive():
+                    self._inbound[uri] = inbound = _Inbound(self, uri)
+                    self._track(inbound.thread)
+
+    def deliver(self, frame: bytes) -> None:
+        """Deserialise one frame and call back; a bad frame or a failing callback is one logged line."""
+        try:
+            message = self.store.deserialize_ros1(frame, self.msgtype)
+        except Exception as exc:
+            _log.warning("%s: dropped a message that is not a valid %s (%s)", self.topic, self.msgtype, exc)
+            return
+        try:
+            self.callback(message)
+        except Exception as exc:
+            _log.warning("%s: the callback failed on a message (%s: %s)", self.topic, type(exc).__name__, exc)
+
+    def abort(self) -> None:
+        """Stop every connection."""
+        with self._lock:
+            self.closed = True
+            for inbound in self._inbound.values():
+                inbound.abort()
+
+
+class TcprosTransport:
+    """A ROS 1 node's transport (:class:`~.transport.Transport`): master XML-RPC, a slave API and TCPROS.
+
+    ``master_uri`` is the ROS master (``ROS_MASTER_URI``), ``node_name`` the node's caller id,
+    ``host`` the address peers reach this node at (default ``ROS_IP``, else ``ROS_HOSTNAME``, else
+    127.0.0.1); ``timeout`` bounds each connect, handshake and XML-RPC call. The master must be
+    reachable: the constructor checks it.
+    """
+
+    name = "tcpros"
+
+    def __init__(self, master_uri: str, node_name: str = "/semattnet", host: str | None = None, *,
+                 timeout: float = 5.0, max_message_bytes: int = DEFAULT_MAX_MESSAGE_BYTES) -> None:  # fmt: skip
+        check_http_uri(master_uri, "ROS master URI")
+        self.node_name = "/" + node_name.strip("/")
+        if not _NAME.fullmatch(self.node_name):
+            raise InputError(f"ROS node name {node_name!r}: expected letters, digits, '_' and '/'")
+        self.master_uri, self.timeout, self.max_message_bytes = master_uri, timeout, max_message_bytes
+        self.host = host or os.environ.get("ROS_IP") or os.environ.get("ROS_HOSTNAME") or "127.0.0.1"
+        self.typestore = cast(_Ros1Store, rosbags_typestore(True))  # rosbags' Typestore has these too
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._publishers: dict[str, TcprosPublisher] = {}
+        self._subscriptions: dict[str, _Subscription] = {}
+        self._threads: list[threading.Thread] = []
+        self._closed = False
+        self._done = threading.Event()  # set when close() has ended everything
+        try:
+            self._listener = socket.create_server((self.host, 0))
+        except OSError as exc:
+            raise InputError(f"ROS host {self.host!r} (ROS_IP): cannot listen there ({exc})") from None
+        self._listener.settimeout(_POLL_S)
+        self._slave = SlaveServer(self.host, timeout)
+        self._register_api()
+        try:
+            self._master("getUri")
+        except TcprosError:
+            self._listener.close()
+            self._slave.server_close()
+            raise
+        self._slave.start()
+        self._track(threading.Thread(target=self._accept_loop, name="tcpros-accept", daemon=True))
+
+    @property
+    def uri(self) -> str:
+        """This node's XML-RPC URI (what the master and peers call)."""
+        return f"http://{self.host}:{self._slave.port}/"
+
+    def advertise(self, topic: str, msgtype: str, qos: QoS) -> TcprosPublisher:
+        """Register ``topic`` of ``msgtype`` with the master and accept its subscribers."""
+        typename = self._check(topic, msgtype)
+        with self._lock:
+            known = self._publishers.get(topic)
+            if known is not None:
+                if known.msgtype != typename:
+                    raise InputError(f"{topic}: already advertised as {known.msgtype}, not {typename}")
+                return known
+            publisher = self._publishers[topic] = TcprosPublisher(self.typestore, self.node_name, topic, typename, qos)
+        try:
+            self._master("registerPublisher", topic, ros1_type_name(typename), self.uri)
+        except BaseException:
+            with self._lock:
+                del self._publishers[topic]
+            raise
+        return publisher
+
+    def subscribe(self, topic: str, msgtype: str, qos: QoS, callback: Callable[[object], None]) -> None:
+        """Register ``topic`` with the master, connect to its publishers; ``callback`` gets each message."""
+        typename = self._check(topic, msgtype)
+        with self._lock:
+            if topic in self._subscriptions:
+                raise InputError(f"{topic}: already subscribed")
+            subscription = self._subscriptions[topic] = _Subscription(self, topic, typename, callback)
+        try:
+            publishers = self._master("registerSubscriber", topic, ros1_type_name(typename), self.uri)
+        except BaseException:
+            with self._lock:
+                del self._subscriptions[topic]
+            raise
+        # Additive: a publisherUpdate that raced ahead of this reply is newer than it.
+        listed = [uri for uri in publishers if isinstance(uri, str)] if isinstance(publishers, list) else []
+        subscription.update(listed, drop=False)
+
+    def close(self) -> None:
+        """Unregister from the master, stop the servers, end every connection and thread (bounded; idempotent)."""
+        with self._lock:
+            closing, self._closed = self._closed, True
+        if closing:  # closing or closed already (a remote shutdown, say): wait for it to finish
+            self._done.wait(self.timeout + 2.0)
+            return
+        self._unregister_all()
+        self._stop.set()
+        self._slave.stop(self.timeout)
+        for publisher in self._publishers.values():
+            publisher.abort()
+        for subscription in self._subscriptions.values():
+            subscription.abort()
+        deadline = time.monotonic() + self.timeout + 1.0
+        with self._lock:
+            threads = list(self._threads)
+        for thread in threads:
+            if thread is not threading.current_thread():
+                thread.join(max(0.0, deadline - time.monotonic()))
+        self._listener.close()
+        self._done.set()
+
+    def __enter__(self) -> TcprosTransport:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _check(self, topic: str, msgtype: str) -> str:
+        """The type store's name of ``msgtype``, after checking the topic name and the type."""
+        if not _NAME.fullmatch(topic):
+            raise InputError(f"ROS topic {topic!r}: expected an absolute name such as /camera/image_raw")
+        typename = _store_type_name(msgtype)
+        if typename not in self.typestore.types:
+            raise InputError(f"{topic}: message type {msgtype!r} is not a ROS 1 Noetic type")
+        if self._closed:
+            raise InputError(f"{topic}: the ROS 1 transport is closed")
+        return typename
+
+    def _master(self, method: str, *args: object) -> Any:
+        """Call the master as this node: its value, or a :class:`TcprosError` (unreachable, or a failure code)."""
+        try:
+            code, status, value = xmlrpc_call(self.master_uri, method, self.node_name, *args, timeout=self.timeout)
+        except (OSError, xmlrpc.client.Error) as exc:
+            raise TcprosError(f"ROS master {self.master_uri} {method}: {exc}") from None
+        if code != 1:
+            raise TcprosError(f"ROS master {self.master_uri} {method}: {status!r}")
+        return value
+
+    def _unregister_all(self) -> None:
+        calls = [("unregisterPublisher", t) for t in self._publishers]
+        calls += [("unregisterSubscriber", t) for t in self._subscriptions]
+        for method, topic in calls:
+            try:
+                xmlrpc_call(self.master_uri, method, self.node_name, topic, self.uri, timeout=min(self.timeout, 2.0))
+            except (TcprosError, OSError, xmlrpc.client.Error) as exc:
+                _log.info("%s: %s failed (%s)", topic, method, exc)
+
+    def _track(self, thread: threading.Thread) -> None:
+        """Start ``thread`` and remember it for close (forgetting finished ones)."""
+        with self._lock:
+            self._threads = [t for t in self._threads if t.is_alive()]
+            self._threads.append(thread)
+        thread.start()
+
+    def _accept_loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                sock, address = self._listener.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            if sum(t.is_alive() for t in self._threads) > MAX_PEERS * (1 + len(self._publishers)):
+                _log.warning("tcpros: refused a connection from %s: too many connections", address[0])
+                sock.close()
+                continue
+            label = f"{address[0]}:{address[1]}"
+            self._track(threading.Thread(target=self._serve, args=(sock, label), name="tcpros-out", daemon=True))
+
+    def _serve(self, sock: socket.socket, label: str) -> None:
+        """A subscriber's connection: the handshake (bounded, checked), then its outbox until it ends."""
+        sock.settimeout(self.timeout)
+        try:
+            request = read_header(sock)
+            publisher = self._publishers.get(request.get("topic", ""))
+            error = self._refusal(request, publisher)
+            if error or publisher is None:
+                _log.warning("tcpros: refused subscriber %s (%r): %s", label, request.get("callerid", "?"), error)
+                sock.sendall(encode_header({"error": error}))
+                sock.close()
+                return
+            sock.sendall(encode_header(publisher.fields))
+        except (TcprosError, OSError) as exc:
+            _log.warning("tcpros: handshake with %s failed: %s", label, exc)
+            sock.close()
+            return
+        if request.get("probe") == "1":
+            sock.close()
+            return
+        if request.get("tcp_nodelay") == "1":
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        outbox = publisher.attach(sock, repr(request.get("callerid", label)), self._stop)
+        if outbox is not None:
+            outbox.run()
+
+    @staticmethod
+    def _refusal(request: Mapping[str, str], publisher: TcprosPublisher | None) -> str:
+        """Why a subscriber's header is refused ("" if it is not)."""
+        if publisher is None:
+            return f"topic {request.get('topic')!r} is not published by this node"
+        if request.get("md5sum") not in ("*", publisher.md5sum):
+            return f"md5sum {request.get('md5sum')!r} is not {publisher.md5sum} ({publisher.fields['type']})"
+        return ""
+
+    def _register_api(self) -> None:
+        """The slave API peers and the master call (ROS's Slave API; each reply is [code, status, value])."""
+        api: dict[str, Callable[..., list[Any]]] = {
+            "getBusStats": lambda caller: [1, "", [[], [], []]],
+            "getBusInfo": lambda caller: [1, "", []],
+            "getMasterUri": lambda caller: [1, "", self.master_uri],
+            "getPid": lambda caller: [1, "", os.getpid()],
+            "getPublications": lambda caller: [1, "", [[t, p.fields["type"]] for t, p in self._publishers.items()]],
+            "getSubscriptions": lambda caller: [
+                1, "", [[t, ros1_type_name(s.msgtype)] for t, s in self._subscriptions.items()]],
+            "paramUpdate": lambda caller, key, value: [1, "", 0],
+            "publisherUpdate": self._publisher_update,
+            "requestTopic": self._request_topic,
+            "shutdown": self._remote_shutdown,
+        }  # fmt: skip
+        for method, function in api.items():
+            self._slave.register_function(function, method)
+
+    def _publisher_update(self, caller: str, topic: str, publishers: list[Any]) -> list[Any]:
+        subscription = self._subscriptions.get(topic)
+        if subscription is None or not isinstance(publishers, list):
+            return [0, f"not a subscriber of {topic!r}", 0]
+        subscription.update([uri for uri in publishers if isinstance(uri, str)])
+        return [1, "", 0]
+
+    def _request_topic(self, caller: str, topic: str, protocols: list[Any]) -> list[Any]:
+        if topic not in self._publishers:
+            return [-1, f"not a publisher of {topic!r}", []]
+        if not any(isinstance(p, list) and p[:1] == ["TCPROS"] for p in protocols):
+            return [0, "no supported protocol (this node speaks TCPROS)", []]
+        return [1, "", ["TCPROS", self.host, self._listener.getsockname()[1]]]
+
+    def _remote_shutdown(self, caller: str, message: str = "") -> list[Any]:
+        _log.warning("tcpros: %r asked this node to shut down (%r)", caller, message)
+        threading.Thread(target=self.close, name="tcpros-shutdown", daemon=True).start()
+        return [1, "", 0]
