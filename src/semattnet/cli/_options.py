@@ -273,6 +273,19 @@ def check_precision_options(method: str, amp: str, precision: str | None, calibr
         check_precision(precision, amp, backend)
     except SemAttNetError as exc:
         raise click.UsageError(str(exc).replace("precision ", "--precision ", 1).replace("amp ", "--amp ")) from None
+    if calibration is not None:
+        check_calibration(calibration)
+
+
+def check_calibration(calibration: Path) -> None:
+    """``--calibration``'s frames read and checked before any work: a file, an empty folder, a corrupt PNG or a
+    frame without a LiDAR point is one line naming the option and the file, never blamed on the frames."""
+    from semattnet.inference.backends.calibration import CalibrationError, calibration_frames
+
+    try:
+        calibration_frames(calibration)
+    except CalibrationError as exc:
+        raise click.BadParameter(str(exc).removeprefix("calibration: "), param_hint="'--calibration'") from None
 
 
 #: ``--backend``: the inference engine of every command that runs a model (see ``optimize_for_inference``).
