@@ -7,6 +7,7 @@ a one-line error naming the option before any work starts.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, TypeVar
@@ -165,12 +166,20 @@ class WeightsSpecType(click.ParamType):
     name = "NAME|PATH|URL"
 
     def convert(self, value: object, param: click.Parameter | None, ctx: click.Context | None) -> str:
-        from semattnet.weights.resolve import WeightsSpecError, parse_weights_spec
+        from semattnet.weights.resolve import ShadowedNameWarning, WeightsSpecError, parse_weights_spec
 
         try:
-            parse_weights_spec(str(value))
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", ShadowedNameWarning)
+                parse_weights_spec(str(value))
         except WeightsSpecError as exc:
             self.fail(str(exc), param, ctx)
+        for note in caught:  # a name that a local file or folder shadows: said once, in one line
+            if not issubclass(note.category, ShadowedNameWarning):
+                warnings.warn(note.message, note.category, stacklevel=2)
+                continue
+            click.echo(f"note: {note.message}", err=True)
+            warnings.filterwarnings("ignore", category=ShadowedNameWarning)  # not again when it is resolved
         return str(value)
 
 
