@@ -80,6 +80,7 @@ def test_load_model_takes_a_save_pretrained_folder_and_a_name(tmp_path: Path) ->
     assert semattnet.load_model("semattnet-demo-ref-seed1").config.width == 0.125
 
 
+@pytest.mark.slow  # packing and reading 5.7 M parameters: ~8 s on 2 cores; test_builder checks the rule fast
 def test_a_packed_file_whose_config_contradicts_its_tensors_is_refused_beside_a_record(tmp_path: Path) -> None:
     model = _model()
     folder = save_pretrained(model, tmp_path / "folder")  # config.json: the record, true to the tensors
