@@ -1,7 +1,8 @@
-"""Issue 48, round 5: a fault is blamed on its cause, and the small findings ("Others").
-
-int8 calibration frames that cannot be used name ``--calibration`` and the file (not every frame); ...
-Each: one line naming the option or file, or correct work."""
+"""Issue 48, round 5: int8 calibration frames that cannot be used (a file, an empty folder, empty subfolders, a
+corrupt PNG, a frame without a LiDAR point) are one line naming ``--calibration`` and the file, before any work,
+never "no frame could be completed" about every frame. (The other findings of the round are tested beside
+their code: tests/evaluation/test_metrics_pairs.py, tests/data/test_datasets.py, tests/weights/,
+tests/inference/test_uncertainty_outputs.py.)"""
 
 from __future__ import annotations
 
@@ -46,7 +47,7 @@ def _calibration_cases(tmp_path: Path) -> dict[str, tuple[Path, str]]:
     _frames(tmp_path / "no_lidar", sparse=0.0)
     return {
         "file": (tmp_path / "a_file.txt", "is not a folder"),
-        "empty folder": (tmp_path / "empty", "no val_select frames"),
+        "empty folder": (tmp_path / "empty", "neither rgb/ + sparse/ subfolders nor a KITTI root"),
         "empty subfolders": (tmp_path / "subs", "no PNG images"),
         "corrupt PNG": (tmp_path / "corrupt", "corrupt/sparse/f0.png"),
         "no LiDAR point": (tmp_path / "no_lidar", "has no LiDAR point"),

@@ -15,6 +15,10 @@ columns; zero-padded at the top when smaller); a frame without a semantic map ge
 ``unknown`` fallback map (:func:`semattnet.palette.unknown_map`). The cache key of a
 calibration is its description for synthetic scenes (they are a function of the seed and the
 library version, which the engine key holds) and the sha256 of the frames' arrays otherwise.
+
+Calibration frames that cannot be used (not a folder, no frames, a corrupt file, a frame without a
+LiDAR point) are a :class:`CalibrationError`: the run's fault, never taken for a fault of the frames
+being completed (``predict --calibration`` checks them before any work).
 """
 
 from __future__ import annotations
@@ -138,6 +142,7 @@ def _from_frames(frames: Sequence[CalibrationFrame], size: tuple[int, int], what
 
 
 def _source_of_folder(path: Path) -> FrameSource:
+    from semattnet.data.datasets.frames import MissingSplitError
     from semattnet.data.sources import FolderSource, KittiSplitSource
 
     if not path.is_dir():
@@ -146,7 +151,11 @@ def _source_of_folder(path: Path) -> FrameSource:
     if (path / "rgb").is_dir() and (path / "sparse").is_dir():
         semantic = path / "semantic" if (path / "semantic").is_dir() else None
         return FolderSource.pair(path / "rgb", path / "sparse", semantic)
-    return KittiSplitSource(path, "val_select")
+    try:
+        return KittiSplitSource(path, "val_select")
+    except MissingSplitError:
+        raise CalibrationError(f"calibration: {path}: neither rgb/ + sparse/ subfolders nor a KITTI root with "
+                               "val_select frames") from None  # fmt: skip
 
 
 def _checked(frames: Sequence[CalibrationFrame], what: str) -> list[CalibrationFrame]:
