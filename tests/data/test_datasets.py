@@ -122,14 +122,17 @@ def test_void_list_with_a_byte_order_mark_keeps_its_first_entry(tmp_path: Path) 
     assert len(src.names) == 2 and src.load(src.names[0]).rgb.shape == (32, 64, 3)
 
 
-@pytest.mark.parametrize("entry", ["validity_map", "intrinsics"])
+@pytest.mark.parametrize("entry", ["validity_map", "intrinsics", "the list of ground truth"])
 def test_void_entry_that_is_a_fifo_says_so(tmp_path: Path, entry: str) -> None:
     root = make_void(tmp_path, train=0, test=1, h=32, w=64) / "void_1500"
-    target = root.parent / (root / f"test_{entry}.txt").read_text().split()[0]
+    if entry.startswith("the list"):
+        target = root / "test_ground_truth.txt"
+    else:
+        target = root.parent / (root / f"test_{entry}.txt").read_text().split()[0]
     target.unlink()
     os.mkfifo(target)
-    src = get_dataset("void").source(root, "test")
     with pytest.raises(DataError) as exc:
+        src = get_dataset("void").source(root, "test")
         src.load(src.names[0])
     assert str(exc.value).startswith(f"{target}: is a FIFO, not a regular")
 
