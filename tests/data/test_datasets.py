@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import os
 import tarfile
 from pathlib import Path
 
@@ -61,6 +62,10 @@ def test_train_draw_changes_with_epoch(tmp_path: Path) -> None:
         ({"rgb": np.zeros((3, 8, 8), np.float32), "depth": np.ones((8, 8), np.float32)}, "'rgb' must be uint8"),
         ({"rgb": np.zeros((3, 8, 8), np.uint8), "depth": np.ones((8, 8), np.uint16)}, "'depth' must be float32"),
         ({"rgb": np.zeros((3, 8, 8), np.uint8), "depth": np.full((8, 8), 2500.0, np.float32)}, "millimetres"),
+        (
+            {"rgb": np.zeros((3, 1, 1), np.uint8), "depth": np.ones((1, 1), np.float32)},
+            r"'rgb' is 1x1; the NYU v2 protocol \(NYU_K, the resize to 320x240\) is for 640x480",
+        ),  # not upsampled
     ],
 )
 def test_nyu_bad_files_are_one_line(tmp_path: Path, arrays: dict, message: str) -> None:
@@ -107,6 +112,40 @@ def test_void_errors_name_the_file(tmp_path: Path) -> None:
     with pytest.raises(DataError, match="millimetres") as exc:
         src.load(src.names[0])
     assert str(exc.value).startswith(str(gt))
+
+
+def test_void_list_with_a_byte_order_mark_keeps_its_first_entry(tmp_path: Path) -> None:
+    root = make_void(tmp_path, train=0, test=2, h=32, w=64) / "void_1500"
+    for list_file in root.glob("test_*.txt"):  # as Windows Notepad saves UTF-8
+        list_file.write_bytes(b"\xef\xbb\xbf" + list_file.read_bytes())
+    src = get_dataset("void").source(root, "test")
+    assert len(src.names) == 2 and src.load(src.names[0]).rgb.shape == (32, 64, 3)
+
+
+@pytest.mark.parametrize("entry", ["validity_map", "intrinsics", "the list of ground truth"])
+def test_void_entry_that_is_a_fifo_says_so(tmp_path: Path, entry: str) -> None:
+    root = make_void(tmp_path, train=0, test=1, h=32, w=64) / "void_1500"
+    if entry.startswith("the list"):
+        target = root / "test_ground_truth.txt"
+    else:
+        target = root.parent / (root / f"test_{entry}.txt").read_text().split()[0]
+    target.unlink()
+    os.mkfifo(target)
+    with pytest.raises(DataError) as exc:
+        src = get_dataset("void").source(root, "test")
+        src.load(src.names[0])
+    assert str(exc.value).startswith(f"{target}: is a FIFO, not a regular")
+
+
+@pytest.mark.parametrize("k", ["nan 0 16\n0 500 16\n0 0 1\n", "0 0 16\n0 500 16\n0 0 1\n"])
+def test_void_meaningless_intrinsics_name_the_file(tmp_path: Path, k: str) -> None:
+    root = make_void(tmp_path, train=0, test=1, h=32, w=64) / "void_1500"
+    k_txt = next((root / "data").glob("*/K.txt"))
+    k_txt.write_text(k)
+    src = get_dataset("void").source(root, "test")
+    with pytest.raises(DataError) as exc:
+        src.load(src.names[0])
+    assert str(exc.value).startswith(f"{k_txt}: K") and "\n" not in str(exc.value)
 
 
 def test_data_check_reports_bad_frames(tmp_path: Path) -> None:

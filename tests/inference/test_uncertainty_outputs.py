@@ -104,6 +104,16 @@ def test_cloud_keeps_exactly_the_pixels_under_the_limit(text: str, tmp_path: Pat
     assert len(pred.cloud(80.0, 0)) == int((d > 0).sum())  # no limit: every pixel with depth
 
 
+def test_an_empty_cloud_names_its_cause_not_a_file(tmp_path: Path) -> None:
+    pred = _prediction()
+    with pytest.raises(InputError) as info:  # every uncertainty is at least 1/256 m: nothing is kept
+        PlySink(max_uncertainty=UncertaintyLimit(0.001)).write(tmp_path, pred)
+    assert str(info.value).startswith("f0: --max-uncertainty 0.001: no pixel's uncertainty is within it")
+    with pytest.raises(InputError, match="f0: no completed pixel within 1 m below the top 0 rows"):
+        PlySink(max_depth=1.0).write(tmp_path, pred)
+    assert not list(tmp_path.iterdir())
+
+
 @pytest.mark.parametrize(("text", "value", "relative"), [("0.5", 0.5, False), (" 2 ", 2.0, False),
                                                          ("5%", 0.05, True), ("250%", 2.5, True)])  # fmt: skip
 def test_parse(text: str, value: float, relative: bool) -> None:

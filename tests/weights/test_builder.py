@@ -130,6 +130,17 @@ def test_a_file_whose_recorded_config_contradicts_its_tensors(tmp_path: Path, ti
     assert "config in the file's metadata contradicts" in str(err.value) and "width 0.25 recorded" in str(err.value)
 
 
+def test_a_file_contradicting_itself_is_refused_beside_a_record(tiny_model) -> None:
+    from semattnet.weights import Checkpoint
+
+    lying = tiny_model.config.replace(width=0.25)  # the file's own config; the record (config.json) is true
+    ckpt = Checkpoint(path=Path("mine.gz"), state_dict=tiny_model.state_dict(), format="packed", config=lying)
+    with pytest.raises(WeightsMismatchError) as err:
+        builder.build_model_with_weights(ckpt, config=tiny_model.config)
+    assert str(err.value) == ("mine.gz: the config in the file's metadata contradicts the weights: width 0.25 "
+                              "recorded, 0.125 in the tensors")  # fmt: skip
+
+
 def test_no_private_names_cross_modules_in_weights_and_the_cache() -> None:
     """``from semattnet.x import _name`` is forbidden between modules (one home, public names)."""
     offenders = []

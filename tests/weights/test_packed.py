@@ -13,7 +13,7 @@ from click.testing import CliRunner
 import semattnet
 from semattnet.cli import main
 from semattnet.models.registry import build_model
-from semattnet.weights import CheckpointError, load_checkpoint
+from semattnet.weights import CheckpointError, WeightsMismatchError, load_checkpoint
 from semattnet.weights import packed as packed_mod
 from semattnet.weights.hub import load_model, save_pretrained
 
@@ -78,6 +78,18 @@ def test_load_model_takes_a_save_pretrained_folder_and_a_name(tmp_path: Path) ->
         torch.equal(a, b) for a, b in zip(model.state_dict().values(), loaded.state_dict().values(), strict=True)
     )
     assert semattnet.load_model("semattnet-demo-ref-seed1").config.width == 0.125
+
+
+@pytest.mark.slow  # packing and reading 5.7 M parameters: ~8 s on 2 cores; test_builder checks the rule fast
+def test_a_packed_file_whose_config_contradicts_its_tensors_is_refused_beside_a_record(tmp_path: Path) -> None:
+    model = _model()
+    folder = save_pretrained(model, tmp_path / "folder")  # config.json: the record, true to the tensors
+    lying = model.config.replace(width=0.25).to_dict()
+    (folder / "model.safetensors").write_bytes(packed_mod.encode_packed(model.state_dict(), lying, {}))
+    with pytest.raises(WeightsMismatchError) as err:
+        semattnet.load_model(folder)
+    assert "config in the file's metadata contradicts the weights: width 0.25 recorded" in str(err.value)
+    assert str(folder / "model.safetensors") in str(err.value) and "\n" not in str(err.value)
 
 
 def test_info_takes_a_shipped_name() -> None:

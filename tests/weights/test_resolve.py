@@ -11,6 +11,7 @@ import pytest
 import torch
 
 from semattnet.weights import (
+    ShadowedNameWarning,
     WeightsSpecError,
     from_pretrained,
     get_weights,
@@ -99,6 +100,26 @@ def test_a_shipped_name_resolves_to_its_packed_file_and_record() -> None:
     assert resolved.file.name == entry.file_name and resolved.file.stat().st_size == entry.size_bytes
     model = from_pretrained("semattnet-demo-ref-seed1")
     assert model.config.width == 0.125 and not model.training
+
+
+def test_a_local_folder_named_like_a_registry_name_never_shadows_it(
+    tmp_path: Path, tiny_model: torch.nn.Module, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    name = "semattnet-demo-ref-seed1"
+    monkeypatch.chdir(tmp_path)
+    save_pretrained(tiny_model, tmp_path / name)
+    with pytest.warns(ShadowedNameWarning, match=f"the registered weights are used.*pass ./{name}"):
+        resolved = resolve_weights(name)
+    assert resolved.entry is get_weights(name)  # the registry's, as the name says
+    local = resolve_weights(f"./{name}")  # the folder: asked for as a path
+    assert local.entry is None and local.path.resolve() == (tmp_path / name).resolve()
+    from semattnet.cli._options import WEIGHTS_SPEC
+
+    capsys.readouterr()
+    assert WEIGHTS_SPEC.convert(name, None, None) == name  # what every --weights does first
+    notes = capsys.readouterr().err.splitlines()
+    assert notes == [f"note: weights {name!r}: the registered weights are used, not the local {name} here (pass "
+                     f"./{name} for that one)"]  # fmt: skip
 
 
 def test_load_model_takes_a_folder_with_its_config(tmp_path: Path, tiny_model: torch.nn.Module) -> None:

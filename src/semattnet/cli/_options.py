@@ -7,6 +7,7 @@ a one-line error naming the option before any work starts.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, TypeVar
@@ -165,12 +166,20 @@ class WeightsSpecType(click.ParamType):
     name = "NAME|PATH|URL"
 
     def convert(self, value: object, param: click.Parameter | None, ctx: click.Context | None) -> str:
-        from semattnet.weights.resolve import WeightsSpecError, parse_weights_spec
+        from semattnet.weights.resolve import ShadowedNameWarning, WeightsSpecError, parse_weights_spec
 
         try:
-            parse_weights_spec(str(value))
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", ShadowedNameWarning)
+                parse_weights_spec(str(value))
         except WeightsSpecError as exc:
             self.fail(str(exc), param, ctx)
+        for note in caught:  # a name that a local file or folder shadows: said once, in one line
+            if not issubclass(note.category, ShadowedNameWarning):
+                warnings.warn(note.message, note.category, stacklevel=2)
+                continue
+            click.echo(f"note: {note.message}", err=True)
+            warnings.filterwarnings("ignore", category=ShadowedNameWarning)  # not again when it is resolved
         return str(value)
 
 
@@ -273,6 +282,19 @@ def check_precision_options(method: str, amp: str, precision: str | None, calibr
         check_precision(precision, amp, backend)
     except SemAttNetError as exc:
         raise click.UsageError(str(exc).replace("precision ", "--precision ", 1).replace("amp ", "--amp ")) from None
+    if calibration is not None:
+        check_calibration(calibration)
+
+
+def check_calibration(calibration: Path) -> None:
+    """``--calibration``'s frames read and checked before any work: a file, an empty folder, a corrupt PNG or a
+    frame without a LiDAR point is one line naming the option and the file, never blamed on the frames."""
+    from semattnet.inference.backends.calibration import CalibrationError, calibration_frames
+
+    try:
+        calibration_frames(calibration)
+    except CalibrationError as exc:
+        raise click.BadParameter(str(exc).removeprefix("calibration: "), param_hint="'--calibration'") from None
 
 
 #: ``--backend``: the inference engine of every command that runs a model (see ``optimize_for_inference``).

@@ -29,8 +29,8 @@ if TYPE_CHECKING:
 
 
 @main.command()
-@click.argument("pred_dir", type=click.Path(exists=True, file_okay=False, path_type=Path))
-@click.argument("gt_dir", type=click.Path(exists=True, file_okay=False, path_type=Path))
+@click.argument("pred_dir", metavar="PRED", type=click.Path(exists=True, path_type=Path))
+@click.argument("gt_dir", metavar="GT", type=click.Path(exists=True, path_type=Path))
 @click.option(
     "--json",
     "json_path",
@@ -50,7 +50,10 @@ if TYPE_CHECKING:
 def metrics(
     pred_dir: Path, gt_dir: Path, json_path: Path | None, min_gt: float, no_fill: bool, overwrite: bool
 ) -> None:
-    """Score 16-bit PNG depth predictions against ground truth (KITTI devkit metrics)."""
+    """Score 16-bit PNG depth predictions against ground truth (KITTI devkit metrics).
+
+    PRED and GT: two folders whose PNGs pair by name (KITTI selection names too: a prediction named like its
+    ``..._image_...`` image pairs with ``..._groundtruth_depth_...``), or two files (one frame)."""
     from semattnet.evaluation.evaluate import score_folders_to_json
 
     m = score_folders_to_json(pred_dir, gt_dir, json_path, overwrite, fill_holes=not no_fill, min_gt=min_gt)

@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 __all__ = [
@@ -23,6 +24,7 @@ __all__ = [
     "VAL_SELECT_DIR",
     "groundtruth_path",
     "raw_image_path",
+    "selection_key",
     "selection_name",
     "semantic_path",
     "velodyne_path",
@@ -73,3 +75,18 @@ def semantic_path(semantic_root: Path, drive: str, camera: str, frame: str) -> P
 def selection_name(drive: str, kind: str, frame: str, camera: str, suffix: str = ".png") -> str:
     """File name in val_selection_cropped, e.g. ``<drive>_velodyne_raw_<frame>_image_02.png``."""
     return f"{drive}_{kind}_{frame}_image_{camera}{suffix}"
+
+
+#: A val_selection_cropped file name: ``<drive>_<kind>_<frame>_image_0X.png``, ``<kind>`` one of the split's
+#: three (the name ``predict --rgb image/`` gives its output is the image's).
+_SELECTION_NAME = re.compile(
+    r"(\d{4}_\d{2}_\d{2}_drive_\d{4}_sync)_(?:image|velodyne_raw|groundtruth_depth)_(\d+_image_\d\d\.png)"
+)
+
+
+def selection_key(name: str) -> str:
+    """The ground truth's name of a val_selection_cropped file name of any kind (``..._image_...``,
+    ``..._velodyne_raw_...``, ``..._groundtruth_depth_...``): what pairs a prediction with its ground truth;
+    any other name unchanged."""
+    m = _SELECTION_NAME.fullmatch(name)
+    return f"{m[1]}_groundtruth_depth_{m[2]}" if m else name

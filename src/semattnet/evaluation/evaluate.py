@@ -11,7 +11,7 @@ import inspect
 import json
 import os
 import tempfile
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,7 +36,7 @@ from semattnet.inference.journal import FRAMES_FILE
 from semattnet.inference.pipeline import Completer, check_frames, complete_frames
 from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sharding import gather_rows, on_main, process_group, shared_stage
-from semattnet.inference.sinks import DepthPngSink, PanelSink, Sink, output_files
+from semattnet.inference.sinks import ColorPngSink, DepthPngSink, PanelSink, Sink, output_files
 
 __all__ = ["SPARSIFICATION_PNG", "Evaluation", "evaluate_split", "resolve_completer", "score_folders",
            "score_folders_to_json"]  # fmt: skip
@@ -46,27 +46,63 @@ PathLike = str | os.PathLike[str]
 SPARSIFICATION_PNG = "sparsification.png"
 
 
-def score_folders(pred_dir: str | Path, gt_dir: str | Path, fill_holes: bool = True, min_gt: float = 0.0,
-                  progress: bool = True) -> KittiMetrics:  # fmt: skip
-    """Score 16-bit PNG predictions against ground truth, pairing files by name.
+def _previews(folder: Path) -> set[Path]:
+    """The pictures ``predict`` writes beside a depth PNG ``NAME.png`` (``NAME_color.png``, ``NAME_panel.png``):
+    not predictions."""
+    suffixes = (ColorPngSink.suffix, PanelSink.suffix)
+    return {p for p in folder.glob("*.png") for s in suffixes
+            if p.name.endswith(s) and (folder / (p.name.removesuffix(s) + ".png")).is_file()}  # fmt: skip
 
-    Raises:
-        DataError: the folders hold different file names (listed), or a pair differs in size.
-    """
-    pred_dir, gt_dir = Path(pred_dir), Path(gt_dir)
-    preds = {p.name: p for p in pred_dir.glob("*.png")}
-    gts = {p.name: p for p in gt_dir.glob("*.png")}
+
+def _pngs_by_key(folder: Path, skip: Collection[Path] = ()) -> dict[str, Path]:
+    """The PNGs of ``folder`` (but ``skip``) by the name that pairs them (:func:`~semattnet.data.layout.selection_key`:
+    a KITTI selection image or scan is keyed as its ground truth); two files of one frame are refused."""
+    from semattnet.data.layout import selection_key
+
+    found: dict[str, Path] = {}
+    for p in sorted(p for p in folder.glob("*.png") if p not in skip):
+        key = selection_key(p.name)
+        if key in found:
+            raise DataError(f"{folder}: {found[key].name} and {p.name} are predictions of one KITTI frame; keep one")
+        found[key] = p
+    return found
+
+
+def _pairs(pred: Path, gt: Path) -> dict[str, tuple[Path, Path]]:
+    """(prediction, ground truth) by the ground truth's name: two files (one pair), or two folders paired by
+    name (KITTI's selection names ``_image_`` / ``_velodyne_raw_`` with ``_groundtruth_depth_``)."""
+    if pred.is_file() and gt.is_file():
+        return {gt.name: (pred, gt)}
+    if pred.is_dir() != gt.is_dir() or not pred.is_dir():
+        kinds = " and ".join(f"{p} is {'a folder' if p.is_dir() else 'a file' if p.is_file() else 'neither'}"
+                             for p in (pred, gt))  # fmt: skip
+        raise DataError(f"PRED and GT must be two PNG files or two folders: {kinds}")
+    preds, gts = _pngs_by_key(pred, _previews(pred)), _pngs_by_key(gt)
     if not gts:
-        raise DataError(f"{gt_dir}: no PNG files")
+        raise DataError(f"{gt}: no PNG files")
     if preds.keys() != gts.keys():
-        only_p, only_g = sorted(preds.keys() - gts.keys()), sorted(gts.keys() - preds.keys())
-        raise DataError(f"{pred_dir} has {len(preds)} files, {gt_dir} {len(gts)}; "
+        only_p = sorted(preds[k].name for k in preds.keys() - gts.keys())
+        only_g = sorted(gts[k].name for k in gts.keys() - preds.keys())
+        raise DataError(f"{pred} has {len(preds)} files, {gt} {len(gts)}; "
                         f"without ground truth: {only_p[:5]}{' ...' if len(only_p) > 5 else ''}; "
                         f"without prediction: {only_g[:5]}{' ...' if len(only_g) > 5 else ''}")  # fmt: skip
+    return {gts[k].name: (preds[k], gts[k]) for k in gts}
+
+
+def score_folders(pred_dir: str | Path, gt_dir: str | Path, fill_holes: bool = True, min_gt: float = 0.0,
+                  progress: bool = True) -> KittiMetrics:  # fmt: skip
+    """Score 16-bit PNG predictions against ground truth: one pair of files, or two folders whose files pair by
+    name (a KITTI selection prediction named like its image, ``..._image_...``, pairs with
+    ``..._groundtruth_depth_...``).
+
+    Raises:
+        DataError: the folders hold different frames (listed), a pair differs in size, or a file meets a folder.
+    """
+    pairs = _pairs(Path(pred_dir), Path(gt_dir))
     metrics = KittiMetrics(fill_holes=fill_holes, min_gt=min_gt)
     bad = []
-    for name in progress_bar(sorted(gts), desc="scoring", enabled=progress, leave=False):
-        pred, gt = read_depth(preds[name]), read_depth(gts[name])
+    for name in progress_bar(sorted(pairs), desc="scoring", enabled=progress, leave=False):
+        pred, gt = (read_depth(p) for p in pairs[name])
         if pred.shape != gt.shape:
             bad.append(
                 f"{name}: prediction {pred.shape[1]}x{pred.shape[0]} vs ground truth {gt.shape[1]}x{gt.shape[0]}"

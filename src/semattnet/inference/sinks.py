@@ -231,7 +231,15 @@ class PlySink(Sink):
     def save(self, path: Path, pred: Prediction) -> None:
         from semattnet.geometry import write_ply
 
-        write_ply(path, pred.cloud(self.max_depth, self.top_crop, self.max_uncertainty), overwrite=True)
+        cloud = pred.cloud(self.max_depth, self.top_crop, self.max_uncertainty)
+        if len(cloud) == 0:  # named by its cause, not by the staged file write_ply would refuse
+            name, limit = pred.frame.name, self.max_uncertainty
+            if limit is not None and len(pred.cloud(self.max_depth, self.top_crop)):
+                raise InputError(f"{name}: --max-uncertainty {limit}: no pixel's uncertainty is within it, the point "
+                                 "cloud would be empty (raise the limit)")  # fmt: skip
+            raise InputError(f"{name}: no completed pixel within {self.max_depth:g} m below the top "
+                             f"{self.top_crop} rows: the point cloud would be empty")  # fmt: skip
+        write_ply(path, cloud, overwrite=True)
 
 
 def _uncertainty_of(pred: Prediction) -> tuple[np.ndarray, np.ndarray]:

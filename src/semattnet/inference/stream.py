@@ -46,10 +46,12 @@ __all__ = ["FrameFault", "completions", "is_frame_fault", "read_frame"]
 def is_frame_fault(exc: BaseException) -> bool:
     """Whether ``exc``, raised while one frame was read or completed, is that frame's fault (a corrupt or
     missing input, no LiDAR point in the image, an empty sparse map) rather than the run's (a missing
-    package, a full disk, a bug): a :class:`~semattnet.DataError` or :class:`~semattnet.InputError`."""
+    package, unusable int8 calibration frames, a full disk, a bug): a :class:`~semattnet.DataError` or
+    :class:`~semattnet.InputError`."""
     from semattnet._errors import DataError, InputError, MissingDependencyError
+    from semattnet.inference.backends.calibration import CalibrationError
 
-    return isinstance(exc, DataError | InputError) and not isinstance(exc, MissingDependencyError)
+    return isinstance(exc, DataError | InputError) and not isinstance(exc, MissingDependencyError | CalibrationError)
 
 
 @dataclass(frozen=True)

@@ -61,7 +61,14 @@ from semattnet.weights.pretrained import (
     list_pretrained,
     register_weights,
 )
-from semattnet.weights.resolve import ResolvedWeights, WeightsSpecError, fetch, parse_weights_spec, resolve_weights
+from semattnet.weights.resolve import (
+    ResolvedWeights,
+    ShadowedNameWarning,
+    WeightsSpecError,
+    fetch,
+    parse_weights_spec,
+    resolve_weights,
+)
 
 __all__ = [
     "CONFIG_NAME",
@@ -77,6 +84,7 @@ __all__ = [
     "OfflineError",
     "PretrainedWeights",
     "ResolvedWeights",
+    "ShadowedNameWarning",
     "StateDictMismatchError",
     "UnknownWeightsError",
     "UnsafeCheckpointError",

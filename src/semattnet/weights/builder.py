@@ -81,11 +81,14 @@ def weights_config(
         return given  # not inferable: the strict load decides
     if given is None:
         return inferred
-    wrong = _differences(inferred, given, _INFERRED)
-    if wrong:
-        shown = ", ".join(f"{f} {getattr(given, f)!r} recorded, {getattr(inferred, f)!r} in the tensors" for f in wrong)
-        where = "the recorded config" if recorded is not None else "the config in the file's metadata"
-        raise WeightsMismatchError(f"{source or ckpt.path}: {where} contradicts the weights: {shown}")
+    # the file's own config too when a record is used: a file that contradicts itself is refused either way
+    for where, cfg in (("the recorded config", recorded), ("the config in the file's metadata", ckpt.config)):
+        wrong = _differences(inferred, cfg, _INFERRED) if cfg is not None else []
+        if wrong:
+            shown = ", ".join(
+                f"{f} {getattr(cfg, f)!r} recorded, {getattr(inferred, f)!r} in the tensors" for f in wrong
+            )
+            raise WeightsMismatchError(f"{source or ckpt.path}: {where} contradicts the weights: {shown}")
     return given
 
 

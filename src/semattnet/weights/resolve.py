@@ -15,6 +15,9 @@ A spec is one of
   ``model.safetensors``);
 * a URL: ``http(s)://``, ``file://``, ``gdrive://<id>`` (a file) or ``hf://owner/repo[@revision][/file]``.
 
+A registered name always means the registry's weights, even where a local file or folder of that name
+exists (a :class:`ShadowedNameWarning` says so, once per call): the local one is ``./NAME`` (or a ``Path``).
+
 A pickle that was downloaded is converted once to ``<cache>/converted/<sha256 of the pickle>.safetensors``
 (:meth:`ResolvedWeights.load`); later loads read that file.
 """
@@ -22,6 +25,7 @@ A pickle that was downloaded is converted once to ``<cache>/converted/<sha256 of
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -66,6 +70,7 @@ __all__ = [
     "URL_SCHEMES",
     "WEIGHTS_NAME",
     "ResolvedWeights",
+    "ShadowedNameWarning",
     "WeightsSpec",
     "WeightsSpecError",
     "fetch",
@@ -88,6 +93,11 @@ class WeightsSpecError(UnknownWeightsError):
     """A weights spec that names no registered weights, existing file or folder, or URL."""
 
 
+class ShadowedNameWarning(UserWarning):
+    """A registered weights name was given while a local file or folder of that name exists: the registry's
+    weights are used (``./NAME`` is the local one)."""
+
+
 def parse_weights_spec(spec: str | os.PathLike[str] | PretrainedWeights) -> WeightsSpec:
     """The one parser of weights specs: a record (from a record or a registry name), a local ``Path``, or a URL.
 
@@ -106,10 +116,13 @@ def parse_weights_spec(spec: str | os.PathLike[str] | PretrainedWeights) -> Weig
     if "://" in spec:
         return spec
     path = Path(spec).expanduser()
+    if spec in list_pretrained():  # a name is the registry's: a local NAME is ./NAME (never a silent shadow)
+        if path.exists():
+            warnings.warn(f"weights {spec!r}: the registered weights are used, not the local {spec} here "
+                          f"(pass ./{spec} for that one)", ShadowedNameWarning, stacklevel=3)  # fmt: skip
+        return get_weights(spec)
     if path.exists():
         return path
-    if spec in list_pretrained():
-        return get_weights(spec)
     raise WeightsSpecError(
         f"{spec!r}: not an existing file or folder, a URL ({', '.join(s + '://' for s in URL_SCHEMES)}) or registered "
         f"weights; known: {', '.join(list_pretrained())}"

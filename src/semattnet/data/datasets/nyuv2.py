@@ -35,6 +35,7 @@ __all__ = ["NYU_K", "NYU_SPLITS", "NyuV2Source", "check_root", "label_colors", "
 NYU_K = (5.1885790117450188e02, 5.1946961112127485e02, 3.2558244941119034e02, 2.5373616633400465e02)
 #: Split name -> folder below ROOT.
 NYU_SPLITS = {"train": "train", "test": "val/official"}
+KINECT = (480, 640)  # H, W of every frame of the layout (NYU_K's size)
 RESIZED = (240, 320)  # H, W after the resize
 CROP = (228, 304)  # H, W of the centre crop
 SAMPLES = 500
@@ -178,6 +179,9 @@ class NyuV2Source(IndexedSource):
 
         path = self.files[name]
         rgb, depth, label = read_nyu_h5(path)
+        if rgb.shape[:2] != KINECT:  # a 1x1 image would be upsampled to the crop, under the wrong intrinsics
+            raise DataError(f"{path}: 'rgb' is {rgb.shape[1]}x{rgb.shape[0]}; the NYU v2 protocol (NYU_K, the resize "
+                            f"to {RESIZED[1]}x{RESIZED[0]}) is for {KINECT[1]}x{KINECT[0]} Kinect frames")  # fmt: skip
         rgb, gt = _crop(_resize(rgb, False)), _crop(_resize(depth, False))
         paths = {"rgb": path, "gt": path, "sparse": path}
         sem = None

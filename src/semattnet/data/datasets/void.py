@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from semattnet._errors import DataError
+from semattnet._errors import DataError, InputError
 from semattnet._utils.bounds import regular_file
 from semattnet.data.datasets.frames import MissingSplitError, check_split_in
 from semattnet.data.frames import Frame, IndexedSource, unique_names
@@ -35,23 +35,27 @@ MAX_MEDIAN_M = 100.0
 
 
 def read_void_intrinsics(path: Path) -> np.ndarray:
-    """A (3, 3) matrix from ``.npy`` or text (9 numbers), naming the file on any fault."""
-    if not path.is_file():
-        raise DataError(f"{path}: file not found")
+    """A (3, 3) pinhole matrix (finite, positive focal lengths) from ``.npy`` or text (9 numbers), naming the
+    file on any fault."""
+    from semattnet.geometry.projection import check_intrinsics
+
+    regular_file(path, "intrinsics file")
     try:
         K = np.load(path, allow_pickle=False) if path.suffix == ".npy" else np.loadtxt(path)
     except (ValueError, OSError) as exc:
         raise DataError(f"{path}: not a 3x3 intrinsics matrix ({exc})") from None
     if np.asarray(K).size != 9:
         raise DataError(f"{path}: expected a 3x3 intrinsics matrix, got shape {np.asarray(K).shape}")
-    return np.asarray(K, dtype=np.float64).reshape(3, 3)
+    try:
+        return check_intrinsics(np.asarray(K, dtype=np.float64).reshape(3, 3), str(path))
+    except InputError as exc:  # NaN, a zero focal length: the file's fault
+        raise DataError(str(exc)) from None
 
 
 def _read_validity(path: Path) -> np.ndarray:
     from PIL import Image
 
-    if not path.is_file():
-        raise DataError(f"{path}: file not found")
+    regular_file(path, "validity map PNG")
     try:
         with Image.open(path) as img:
             return np.asarray(img)
@@ -88,7 +92,7 @@ def _resolve(entry: str, lists: Path) -> Path:
 def _read_list(path: Path, lists: Path) -> list[Path]:
     """The entries of one list file, resolved; naming the file (and line) when it is not UTF-8 text of paths."""
     try:
-        text = regular_file(path, "VOID list file").read_bytes().decode("utf-8")
+        text = regular_file(path, "VOID list file").read_bytes().decode("utf-8-sig")  # a BOM is not a path
     except UnicodeDecodeError as exc:
         raise DataError(f"{path}: not a UTF-8 text list of paths (byte {exc.start}: {exc.reason})") from None
     entries = []
@@ -120,12 +124,12 @@ class VoidSource(IndexedSource):
         self.split = check_split_in("void", split, VOID_SPLITS)
         self.lists = _folder(Path(root))
         files = {r: self.lists / f"{self.split}_{r}.txt" for r in VOID_ROLES}
-        if not any(p.is_file() for p in files.values()):
+        if not any(p.exists() for p in files.values()):  # a FIFO or folder: said by _read_list, not "not found"
             raise MissingSplitError(f"{files['image']}: split list not found (the VOID {self.split} split)")
         for role in VOID_ROLES[:3]:
-            if not files[role].is_file():
+            if not files[role].exists():
                 raise DataError(f"{files[role]}: split file not found (VOID lists {', '.join(VOID_ROLES[:3])})")
-        entries = {r: _read_list(p, self.lists) for r, p in files.items() if p.is_file()}
+        entries = {r: _read_list(p, self.lists) for r, p in files.items() if p.exists()}
         counts = {r: len(v) for r, v in entries.items()}
         if len(set(counts.values())) > 1:
             raise DataError(f"{self.lists}: the {self.split} lists differ in length: "

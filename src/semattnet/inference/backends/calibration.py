@@ -15,6 +15,10 @@ columns; zero-padded at the top when smaller); a frame without a semantic map ge
 ``unknown`` fallback map (:func:`semattnet.palette.unknown_map`). The cache key of a
 calibration is its description for synthetic scenes (they are a function of the seed and the
 library version, which the engine key holds) and the sha256 of the frames' arrays otherwise.
+
+Calibration frames that cannot be used (not a folder, no frames, a corrupt file, a frame without a
+LiDAR point) are a :class:`CalibrationError`: the run's fault, never taken for a fault of the frames
+being completed (``predict --calibration`` checks them before any work).
 """
 
 from __future__ import annotations
@@ -28,12 +32,25 @@ from typing import TYPE_CHECKING, Protocol, TypeAlias, TypeGuard
 
 import numpy as np
 
-from semattnet._errors import InputError
+from semattnet._errors import DataError, InputError, MissingDependencyError
 
 if TYPE_CHECKING:
     from semattnet.data.frames import FrameSource
 
-__all__ = ["DEFAULT_CALIBRATION_FRAMES", "Calibration", "CalibrationFrames", "fit_to_size", "resolve_calibration"]
+__all__ = [
+    "DEFAULT_CALIBRATION_FRAMES",
+    "Calibration",
+    "CalibrationError",
+    "CalibrationFrames",
+    "calibration_frames",
+    "fit_to_size",
+    "resolve_calibration",
+]
+
+
+class CalibrationError(InputError):
+    """The calibration frames cannot be used (not a folder, no frames, a corrupt file, no LiDAR point): the
+    run's fault, never one frame's (:func:`semattnet.inference.stream.is_frame_fault`)."""
 
 
 class CalibrationFrame(Protocol):
@@ -117,8 +134,6 @@ def _synthetic(size: tuple[int, int], count: int) -> Calibration:
 
 def _from_frames(frames: Sequence[CalibrationFrame], size: tuple[int, int], what: str) -> Calibration:
     feeds = [_feed(f.rgb, f.semantic, f.sparse, size) for f in frames]
-    if not feeds:
-        raise InputError(f"calibration: {what} holds no frames; give at least one (or None for synthetic scenes)")
     digest = hashlib.sha256()
     for feed in feeds:
         for name in sorted(feed):
@@ -127,14 +142,57 @@ def _from_frames(frames: Sequence[CalibrationFrame], size: tuple[int, int], what
 
 
 def _source_of_folder(path: Path) -> FrameSource:
+    from semattnet.data.datasets.frames import MissingSplitError
     from semattnet.data.sources import FolderSource, KittiSplitSource
 
     if not path.is_dir():
-        raise InputError(f"calibration: {path} is not a folder (expected rgb/ + sparse/ subfolders or a KITTI root)")
+        raise CalibrationError(f"calibration: {path} is not a folder (expected rgb/ + sparse/ subfolders or a KITTI "
+                               "root)")  # fmt: skip
     if (path / "rgb").is_dir() and (path / "sparse").is_dir():
         semantic = path / "semantic" if (path / "semantic").is_dir() else None
         return FolderSource.pair(path / "rgb", path / "sparse", semantic)
-    return KittiSplitSource(path, "val_select")
+    try:
+        return KittiSplitSource(path, "val_select")
+    except MissingSplitError:
+        raise CalibrationError(f"calibration: {path}: neither rgb/ + sparse/ subfolders nor a KITTI root with "
+                               "val_select frames") from None  # fmt: skip
+
+
+def _checked(frames: Sequence[CalibrationFrame], what: str) -> list[CalibrationFrame]:
+    """``frames``, refused when there are none or one has no LiDAR point (it would calibrate nothing)."""
+    if not frames:
+        raise CalibrationError(f"calibration: {what} holds no frames; give at least one (or None for synthetic scenes)")
+    for i, f in enumerate(frames):
+        if not np.any(np.asarray(f.sparse) > 0):
+            name = getattr(f, "name", f"frame {i}")
+            raise CalibrationError(f"calibration: {what}: {name} has no LiDAR point (an empty sparse map calibrates "
+                                   "nothing)")  # fmt: skip
+    return list(frames)
+
+
+def calibration_frames(
+    calibration: CalibrationFrames, count: int = DEFAULT_CALIBRATION_FRAMES
+) -> tuple[list[CalibrationFrame], str]:
+    """The first ``count`` frames of ``calibration`` (not ``None``: a folder, a FrameSource or Frames) and what
+    they are, read and checked: any problem is a :class:`CalibrationError` naming the folder or file."""
+    if isinstance(calibration, Sequence) and not isinstance(calibration, str):
+        if not all(_is_frame(f) for f in calibration):
+            raise CalibrationError("calibration: expected Frames (with .rgb and .sparse) in the sequence")
+        return _checked(list(calibration)[:count], "the given frames"), "the given frames"
+    if calibration is None or (not isinstance(calibration, str | os.PathLike) and not hasattr(calibration, "load")):
+        raise CalibrationError("calibration: expected None, a FrameSource, a sequence of Frames or a folder path, "
+                               f"got {type(calibration).__name__}")  # fmt: skip
+    try:
+        if isinstance(calibration, str | os.PathLike):
+            calibration, what = _source_of_folder(Path(calibration)), str(calibration)
+        else:
+            what = type(calibration).__name__
+        frames = [calibration.load(n) for n in list(calibration.names)[:count]]
+    except (DataError, InputError) as exc:  # a missing split, a corrupt PNG: the calibration's, not a frame's
+        if isinstance(exc, CalibrationError | MissingDependencyError):
+            raise
+        raise CalibrationError(f"calibration: {' '.join(str(exc).split())}") from None
+    return _checked(frames, what), what
 
 
 def resolve_calibration(
@@ -145,15 +203,5 @@ def resolve_calibration(
         raise InputError(f"calibration_frames: expected a whole number >= 1, got {count!r}")
     if calibration is None:
         return _synthetic(size, count)
-    if isinstance(calibration, str | os.PathLike):
-        calibration = _source_of_folder(Path(calibration))
-    if not isinstance(calibration, Sequence) and hasattr(calibration, "load"):  # a FrameSource: the frames used
-        frames = [calibration.load(n) for n in list(calibration.names)[:count]]
-        return _from_frames(frames, size, type(calibration).__name__)
-    given = [f for f in calibration if _is_frame(f)] if isinstance(calibration, Sequence) else None
-    if given is not None and len(given) == len(calibration):
-        return _from_frames(given[:count], size, "the given frames")
-    raise InputError(
-        "calibration: expected None, a FrameSource, a sequence of Frames or a folder path, "
-        f"got {type(calibration).__name__}"
-    )
+    frames, what = calibration_frames(calibration, count)
+    return _from_frames(frames, size, what)
