@@ -16,8 +16,9 @@ Per frame, on one timeline (``sensor_time``) stamped with the sensor time, in th
 
 A file recording is written to a hidden temporary file beside the target and moved into place at
 :meth:`RerunLogger.close`; after an error inside the ``with`` block nothing is left. ``serve=True`` streams
-the frames live to a browser instead of (or besides) the file: a gRPC server plus the web viewer that ships
-in the ``rerun-sdk`` wheel (:attr:`RerunLogger.url`).
+the frames live instead of (or besides) the file: a gRPC server on ``host`` (127.0.0.1 by default) that
+``rerun GRPC_URL`` connects to and, with a ``web_port``, the web viewer that ships in the ``rerun-sdk`` wheel
+(:attr:`RerunLogger.url`; rerun binds it to every interface, so it is off by default).
 """
 
 from __future__ import annotations
@@ -68,12 +69,13 @@ class RerunLogger:
         spawn: start a Rerun viewer and stream to it as well.
         overwrite: replace an existing ``path`` (else :class:`FileExistsError` at once).
         max_depth: completed-cloud points deeper than this are left out, metres (None: all).
-        serve: host a gRPC server (the recording, buffered in memory up to 1 GiB for late viewers) and the
-            web viewer shipped in the ``rerun-sdk`` wheel (no internet needed); open :attr:`url` in a browser.
-            The gRPC server stops at :meth:`close`; the web viewer's HTTP server (which serves only the viewer's
-            files, on every interface) stays up until the process exits (rerun gives no handle to stop it).
+        serve: host a gRPC server (the recording, buffered in memory up to 1 GiB for late viewers) on ``host``;
+            ``rerun`` :attr:`grpc_url` opens it in a native viewer. The gRPC server stops at :meth:`close`.
         grpc_port: the gRPC server's port (Rerun's default 9876; 0: a free port).
-        web_port: the web viewer's port (Rerun's default 9090; 0: a free port).
+        web_port: with ``serve``, also serve the web viewer shipped in the ``rerun-sdk`` wheel (no internet
+            needed) on this port (0: a free port); open :attr:`url` in a browser. Its HTTP server (which serves
+            only the viewer's files) listens on **every interface** and stays up until the process exits (rerun
+            gives no handle to bind or stop it). None (the default): no web viewer.
         host: the interface the gRPC server listens on.
 
     Attributes:
@@ -84,7 +86,7 @@ class RerunLogger:
 
     def __init__(self, path: str | os.PathLike[str] | None = None, spawn: bool = False, overwrite: bool = False,
                  app_id: str = "semattnet", max_depth: float | None = None, serve: bool = False,
-                 grpc_port: int = 9876, web_port: int = 9090, host: str = "127.0.0.1") -> None:  # fmt: skip
+                 grpc_port: int = 9876, web_port: int | None = None, host: str = "127.0.0.1") -> None:  # fmt: skip
         if path is None and not spawn and not serve:
             raise InputError("RerunLogger: give a .rrd path, spawn=True, serve=True, or several")
         self.path = None if path is None else Path(path)
@@ -108,7 +110,8 @@ class RerunLogger:
             raise
         self._log_static(rr)
 
-    def _set_sinks(self, rr: ModuleType, spawn: bool, serve: bool, host: str, grpc_port: int, web_port: int) -> None:
+    def _set_sinks(self, rr: ModuleType, spawn: bool, serve: bool, host: str, grpc_port: int,
+                   web_port: int | None) -> None:  # fmt: skip
         """The file, the spawned viewer and the served stream + web viewer, as asked."""
         if spawn:
             self.rec.spawn(connect=self._tmp is None and not serve)
@@ -119,11 +122,14 @@ class RerunLogger:
                 self.rec.save(str(self._tmp))
             return
         grpc_port = _port(host, grpc_port, "the gRPC stream")
-        web_port = _port("0.0.0.0", web_port, "the web viewer")  # rerun's HTTP server binds every interface
+        if web_port is not None:
+            web_port = _port("0.0.0.0", web_port, "the web viewer")  # rerun's HTTP server binds every interface
         server = rr.GrpcServerSink(host, grpc_port)
         sinks = [rr.FileSink(str(self._tmp))] * (self._tmp is not None) + [rr.GrpcSink()] * spawn + [server]
         self.rec.set_sinks(*sinks)
         self.grpc_url = str(server.uri)
+        if web_port is None:
+            return
         try:
             rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=self.grpc_url)
         except (RuntimeError, OSError) as e:
