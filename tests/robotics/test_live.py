@@ -354,3 +354,15 @@ def test_a_slow_handshake_is_closed(monkeypatch: pytest.MonkeyPatch) -> None:
             assert s.recv(1) == b""  # closed by the gate after 0.2 s
     finally:
         g.close()
+
+
+def test_serving_beyond_loopback_warns_in_one_line() -> None:
+    """127.0.0.1: one line, the URL; 0.0.0.0 (every interface): a warning line first."""
+    for address, warned in (("127.0.0.1:0", False), ("0.0.0.0:0", True)):
+        lines: list[str] = []
+        sink = LiveSink(address=address, log=lines.append)
+        sink.open()
+        sink.abort()
+        assert len(lines) == 1 + warned and lines[-1].startswith("live view: ws://")
+        assert lines[0].startswith("warning: --live serves ws://0.0.0.0:") == warned, lines
+        assert all("\n" not in line for line in lines)
