@@ -1,11 +1,13 @@
 """A TCP front for a local server that no client can hold: a connection cap, a handshake timeout, a bounded close.
 
-The live servers (:mod:`~semattnet.robotics.live`) run in libraries that wait for every connection when they
-stop, a half-open one included. :class:`Gate` listens on the user's address instead and relays each client to
-the server on a private loopback port, but only after the client's first request (an HTTP upgrade) came in
-full, within :data:`HANDSHAKE_S`; at most :data:`MAX_CLIENTS` clients at once (more are closed at once).
-A client that stops reading holds at most a socket buffer here: the relay stops reading from the server,
-whose own per-client queue then drops its oldest messages. :meth:`Gate.close` drops every client at once.
+The live servers (``--live``: :mod:`~semattnet.robotics.live`; ``--rerun-serve``: :mod:`~semattnet.robotics.rerun`)
+run in libraries that may wait for every connection when they stop (foxglove-sdk waits on a half-open one).
+:class:`Gate` listens on the user's address instead and relays each client to the server on a private
+loopback port, but only after the client's first request (an HTTP upgrade, a gRPC-web request or the HTTP/2
+preface) came in full, within :data:`HANDSHAKE_S`; at most :data:`MAX_CLIENTS` clients at once (more are
+closed at once). A client that stops reading holds at most a socket buffer here: the relay stops reading
+from the server, whose own per-client queue then drops its oldest messages (foxglove-sdk keeps
+:data:`~semattnet.robotics.live.BACKLOG`). :meth:`Gate.close` drops every client at once.
 """
 
 from __future__ import annotations

@@ -16,9 +16,11 @@ Per frame, on one timeline (``sensor_time``) stamped with the sensor time, in th
 
 A file recording is written to a hidden temporary file beside the target and moved into place at
 :meth:`RerunLogger.close`; after an error inside the ``with`` block nothing is left. ``serve=True`` streams
-the frames live instead of (or besides) the file: a gRPC server on ``host`` (127.0.0.1 by default) that
-``rerun GRPC_URL`` connects to and, with a ``web_port``, the web viewer that ships in the ``rerun-sdk`` wheel
-(:attr:`RerunLogger.url`; rerun binds it to every interface, so it is off by default).
+the frames live instead of (or besides) the file: a gRPC server that ``rerun GRPC_URL`` connects to, reached
+on ``host`` (127.0.0.1 by default) through a :class:`~semattnet.robotics.gate.Gate` (a connection cap,
+handshake timeouts, every viewer dropped at :meth:`RerunLogger.close`), and, with a ``web_port``, the web
+viewer that ships in the ``rerun-sdk`` wheel (:attr:`RerunLogger.url`; rerun binds it to every interface, so
+it is off by default).
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ import tempfile
 from pathlib import Path
 from types import ModuleType, TracebackType
 from typing import Protocol
-from urllib.parse import quote
+from urllib.parse import quote, urlparse
 
 import numpy as np
 
@@ -37,6 +39,7 @@ from semattnet._utils.atomic import new_file_mode
 from semattnet._utils.extras import require
 from semattnet.geometry import depth_to_points, invert_T
 from semattnet.palette import IGNORE_ID, TRAIN_CLASSES, UNKNOWN_COLOR, colors_to_ids
+from semattnet.robotics.gate import Gate
 
 __all__ = ["ENTITIES", "TIMELINE", "RerunLogger", "read_rrd_frames"]
 
@@ -69,8 +72,9 @@ class RerunLogger:
         spawn: start a Rerun viewer and stream to it as well.
         overwrite: replace an existing ``path`` (else :class:`FileExistsError` at once).
         max_depth: completed-cloud points deeper than this are left out, metres (None: all).
-        serve: host a gRPC server (the recording, buffered in memory up to 1 GiB for late viewers) on ``host``;
-            ``rerun`` :attr:`grpc_url` opens it in a native viewer. The gRPC server stops at :meth:`close`.
+        serve: host a gRPC server (the recording, buffered in memory up to 1 GiB for late viewers) on ``host``
+            (through the gate, module doc); ``rerun`` :attr:`grpc_url` opens it in a native viewer. The viewers
+            are dropped and the gRPC server stops at :meth:`close`.
         grpc_port: the gRPC server's port (Rerun's default 9876; 0: a free port).
         web_port: with ``serve``, also serve the web viewer shipped in the ``rerun-sdk`` wheel (no internet
             needed) on this port (0: a free port); open :attr:`url` in a browser. Its HTTP server (which serves
@@ -98,6 +102,7 @@ class RerunLogger:
         self.grpc_url: str | None = None
         self.rec = rr.RecordingStream(app_id)
         self._tmp: Path | None = None
+        self._gate: Gate | None = None
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.p{os.getpid()}.", suffix=".rrd", dir=self.path.parent)
@@ -121,13 +126,18 @@ class RerunLogger:
             elif self._tmp is not None:
                 self.rec.save(str(self._tmp))
             return
-        grpc_port = _port(host, grpc_port, "the gRPC stream")
         if web_port is not None:
             web_port = _port("0.0.0.0", web_port, "the web viewer")  # rerun's HTTP server binds every interface
-        server = rr.GrpcServerSink(host, grpc_port)
+        server = rr.GrpcServerSink("127.0.0.1", _port("127.0.0.1", 0, "the gRPC stream"))  # behind the gate
+        self._gate = Gate(host, grpc_port, ("127.0.0.1", int(urlparse(str(server.uri)).port or 0)))
+        try:
+            self._gate.start()
+        except OSError as e:
+            reason = e.strerror or e
+            raise InputError(f"RerunLogger: cannot serve the gRPC stream on {host}:{grpc_port} ({reason})") from None
         sinks = [rr.FileSink(str(self._tmp))] * (self._tmp is not None) + [rr.GrpcSink()] * spawn + [server]
         self.rec.set_sinks(*sinks)
-        self.grpc_url = str(server.uri)
+        self.grpc_url = f"rerun+http://{_url_host(host)}:{self._gate.port}/proxy"
         if web_port is None:
             return
         try:
@@ -191,6 +201,8 @@ class RerunLogger:
             return
         try:
             _flush(rec, self._tmp)
+            if self._gate is not None:  # the viewers dropped first: nothing they do delays the stop
+                self._gate.close()
             rec.disconnect()
             if ok and self._tmp is not None and self.path is not None:
                 os.chmod(self._tmp, new_file_mode())
