@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 import torch
@@ -71,3 +72,26 @@ def test_no_compiler_falls_back_with_one_line(fresh: list[Path], monkeypatch: py
                    "or set CXX)); using the PyTorch propagation\n")  # fmt: skip
     with pytest.raises(RuntimeError, match=r"no C\+\+ compiler"):
         cpu_kernel.normalize_affinity(torch.zeros(1, 8, 2, 2))
+
+
+def test_each_compilation_is_said_once(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """``torch.compile`` (faked: no compilation) of the CUDA propagation: one line before and one after the first
+    call at each size, nothing at a size seen."""
+    from semattnet.inference.backends import compiled_propagation as cp
+
+    monkeypatch.setattr(torch, "compile", lambda fn, **kw: lambda heads, it: (heads.depth, heads.depth))
+    cp.compiled_propagation.cache_clear()
+    try:
+        run = cp.compiled_propagation("test-mode")
+        heads = [SimpleNamespace(depth=torch.zeros(1, 1, h, 8)) for h in (4, 4, 6)]
+        for h in heads:
+            run(h, 3)  # type: ignore[arg-type]
+    finally:
+        cp.compiled_propagation.cache_clear()
+    err = capsys.readouterr().err.splitlines()
+    assert [line.split(" (")[0].split(" in ")[0] for line in err] == [
+        "semattnet: compiling the propagation for 4x8, 3 iteration(s)",
+        "semattnet: compiled the propagation",
+        "semattnet: compiling the propagation for 6x8, 3 iteration(s)",
+        "semattnet: compiled the propagation",
+    ]
