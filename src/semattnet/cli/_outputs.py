@@ -89,10 +89,12 @@ OUTPUT_OPTIONS = (
          help="Also write a Rerun recording FILE.rrd.  [extra: rerun]"),
     _OUT(["--rerun-spawn"], is_flag=True, help="Stream the frames to a spawned Rerun viewer."),
     _OUT(["--rerun-serve"], is_flag=False, flag_value=RERUN_SERVE, default=None, type=Address(),
+         metavar="[[HOST:]PORT]",
          help=f"Serve the frames to Rerun viewers as they are completed, on [HOST:]PORT (alone: {RERUN_SERVE}; "
          "a HOST other than this machine's also serves the web viewer).  [extra: rerun]"),
     _OUT(["--live"], default=None, type=Address(),
-         help="Serve the frames as they are completed over the Foxglove WebSocket protocol.  [extra: live]"),
+         help="Serve the frames as they are completed over the Foxglove WebSocket protocol (HOST: 127.0.0.1 unless "
+         "given).  [extra: live]"),
     _OUT(["--overwrite"], is_flag=True, help="Replace existing outputs."),
     _OUT(["--resume"], is_flag=False, flag_value="", default=None, metavar="[OUT]",
          help="Continue the killed or failed run in OUT (or --out): keep its completed frames, do the rest."),
@@ -103,7 +105,7 @@ OUTPUT_OPTIONS = (
          help="Read, project and segment the next frames in a background thread while one is completed."),
     _RUN(["--realtime"], is_flag=True,
          help="Replay at the recorded rate: frames that come while the completer is busy are dropped."),
-    _RUN(["--speed"], type=SPEED, default=None, help="With --realtime: replay this many times faster."),
+    _RUN(["--speed"], type=SPEED, default=None, help="With --realtime: replay this many times faster (0.01-1000)."),
 )  # fmt: skip
 
 _F = TypeVar("_F", bound=Callable[..., object])
