@@ -33,6 +33,8 @@ pytestmark = pytest.mark.filterwarnings("ignore:.*hole:UserWarning")  # the fram
 
 # The SDK's server speaks foxglove.sdk.v1 (0.30); older ones foxglove.websocket.v1.
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
+#: The topics of a LiveSink with the default prefix.
+TOPICS_ALL = set(LiveSink().topics.values())
 H, W = 16, 24
 STAMP = 1_317_000_000_123_456_789
 K = np.array([[30.0, 0, 11.5], [0, 30.0, 7.5], [0, 0, 1]])

@@ -76,21 +76,20 @@ def _listening(port: int) -> set[str]:
 def test_live_ends_with_a_client_that_never_reads(tmp_path: Path) -> None:
     pytest.importorskip("foxglove")
     ws_client = pytest.importorskip("websockets.sync.client")
-    from tests.robotics.test_live import SUBPROTOCOLS
+    from tests.robotics.test_live import SUBPROTOCOLS, TOPICS_ALL, _handshake
 
     port = _free_port()
     thread, result, out = _start(tmp_path, "--live", f"127.0.0.1:{port}")
     _connect(port).close()  # the server is up
-    ws = ws_client.connect(f"ws://127.0.0.1:{port}", subprotocols=SUBPROTOCOLS, open_timeout=5, close_timeout=0.2,
-                           max_queue=1)  # fmt: skip
-    half_open = [_connect(port) for _ in range(60)]  # past the cap: the later ones are closed at once
-    try:
-        ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": i, "channelId": i} for i in range(1, 9)]}))
-        _ends_complete(thread, result, out)  # the client never reads a message
-    finally:
-        ws.close()
-        for s in half_open:
-            s.close()
+    connect = {"subprotocols": SUBPROTOCOLS, "open_timeout": 5, "close_timeout": 0.2, "max_queue": 1}
+    with ws_client.connect(f"ws://127.0.0.1:{port}", **connect) as ws:
+        _handshake(ws, TOPICS_ALL)  # subscribed to every channel; from here on it reads nothing
+        half_open = [_connect(port) for _ in range(60)]  # past the cap: the later ones are closed at once
+        try:
+            _ends_complete(thread, result, out)
+        finally:
+            for s in half_open:
+                s.close()
 
 
 def test_rerun_serve_listens_on_loopback_and_ends_with_a_silent_client(tmp_path: Path) -> None:
