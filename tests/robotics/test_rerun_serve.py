@@ -104,3 +104,21 @@ def test_viewers_reach_the_stream_through_the_gate() -> None:
     finally:
         for s in [silent, *held]:
             s.close()
+
+
+def test_the_file_is_complete_before_the_stream_stops(tmp_path: Path) -> None:
+    """finish_file: the recording in place and whole while viewers still read the stream; close stops the stream."""
+    from semattnet.robotics.rerun import ENTITIES, RerunLogger, read_rrd_frames
+
+    log = RerunLogger(tmp_path / "run.rrd", serve=True, grpc_port=0)
+    port = int(urlparse(log.grpc_url or "").port or 0)
+    _log_frames(log)
+    log.finish_file()
+    assert read_rrd_frames(tmp_path / "run.rrd")[ENTITIES["depth"]] == STAMPS
+    assert b"semattnet" in _read_messages(port)  # still served
+    assert [p.name for p in tmp_path.iterdir()] == ["run.rrd"]
+    log.close()
+    deadline = time.monotonic() + 5
+    while not _refused(port):
+        assert time.monotonic() < deadline, "the stream still listens after close()"
+        time.sleep(0.02)

@@ -36,7 +36,7 @@ import numpy as np
 
 from semattnet._errors import InputError
 from semattnet._utils.atomic import new_file_mode
-from semattnet._utils.extras import require
+from semattnet._utils.extras import optional, require
 from semattnet.geometry import depth_to_points, invert_T
 from semattnet.palette import IGNORE_ID, TRAIN_CLASSES, UNKNOWN_COLOR, colors_to_ids
 from semattnet.robotics.gate import Gate
@@ -191,8 +191,23 @@ class RerunLogger:
             log(ENTITIES["uncertainty"], rr.DepthImage(np.nan_to_num(np.asarray(uncertainty, np.float32)), meter=1.0))
         self.frames += 1
 
+    def finish_file(self) -> None:
+        """Complete the file recording and move it into place while a served stream goes on serving (until
+        :meth:`close`); without ``serve``: :meth:`close`."""
+        finalize = getattr(optional("rerun_bindings"), "finalize_deferred_sinks", None)  # not in older releases
+        if self.rec is None or self._tmp is None or self.path is None:
+            return
+        if self._gate is None or finalize is None:
+            self.close()
+            return
+        _flush(self.rec, self._tmp)
+        finalize(recording=self.rec.to_native())  # the file's sink only: the stream stays
+        os.chmod(self._tmp, new_file_mode())
+        os.replace(self._tmp, self.path)
+        self._tmp = None
+
     def close(self) -> None:
-        """Flush and finish; a file recording is moved into place."""
+        """Flush and finish; a file recording is moved into place; the served stream stops (its viewers dropped)."""
         self._finish(ok=True)
 
     def _finish(self, ok: bool) -> None:

@@ -235,9 +235,15 @@ class RerunSink(_StagedTarget):
         self._count += 1
 
     def finish(self, stage: Path) -> None:
+        """The recording complete (staged); a served stream goes on until :meth:`close`."""
         with self._full_disk():
             if self._logger is not None:
-                self._logger.close()
+                self._logger.finish_file() if self.serve is not None else self._logger.close()
+
+    def close(self) -> None:
+        """Stop serving (the run is recorded): the viewers dropped, the gRPC server stopped, within seconds."""
+        if self._logger is not None:
+            self._logger.close()
 
     def commit(self) -> None:
         if self.target is not None:
