@@ -33,6 +33,8 @@ pytestmark = pytest.mark.filterwarnings("ignore:.*hole:UserWarning")  # the fram
 
 # The SDK's server speaks foxglove.sdk.v1 (0.30); older ones foxglove.websocket.v1.
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
+#: The topics of a LiveSink with the default prefix.
+TOPICS_ALL = set(LiveSink().topics.values())
 H, W = 16, 24
 STAMP = 1_317_000_000_123_456_789
 K = np.array([[30.0, 0, 11.5], [0, 30.0, 7.5], [0, 0, 1]])
@@ -142,7 +144,7 @@ def test_live_frame_round_trip(sink: LiveSink, tmp_path: Path) -> None:
         other.write(tmp_path, pred)
         sink.write(tmp_path, pred)
         got = _receive(ws, channels, len(sink.topics))
-    other.finish(tmp_path)
+    other.close()
     assert all(t == STAMP for t, _ in got.values())  # the log time is the sensor stamp
     msgs = {role: got[topic][1] for role, topic in sink.topics.items()}
     for role in ("depth", "uncertainty", "rgb", "sparse", "points", "calibration"):
@@ -164,7 +166,7 @@ def test_live_frame_round_trip(sink: LiveSink, tmp_path: Path) -> None:
     _check_calibration(msgs["calibration"], msgs["tf"])
     assert msgs["latency"] == {"frame": "000042", "stamp_ns": STAMP, "stages_ms": {"complete": 12.5, "write": 0.25}}
     port = sink.port
-    sink.finish(tmp_path)
+    sink.close()
     _wait_for(lambda: _refused(port), "the server to stop")
 
 
@@ -230,14 +232,14 @@ def test_write_without_client_is_cheap(sink: LiveSink, tmp_path: Path) -> None:
     assert pred._clouds == {}
 
 
-def test_finish_and_abort_stop_serving(tmp_path: Path) -> None:
-    """After finish or abort nothing listens on the port; abort never raises (twice, or never opened)."""
-    for end in ("finish", "abort"):
+def test_close_and_abort_stop_serving(tmp_path: Path) -> None:
+    """After close or abort nothing listens on the port; abort never raises (twice, or never opened)."""
+    for end in ("close", "abort"):
         s = LiveSink(address="127.0.0.1:0")
         s.open()
         port = s.port
         assert not _refused(port)
-        s.finish(tmp_path) if end == "finish" else s.abort()
+        s.close() if end == "close" else s.abort()
         _wait_for(lambda port=port: _refused(port), f"the server to stop after {end}")  # type: ignore[misc]
         s.abort()
     LiveSink().abort()
@@ -264,3 +266,105 @@ def test_missing_foxglove_is_one_line(monkeypatch: pytest.MonkeyPatch) -> None:
     with pytest.raises(MissingDependencyError, match=r"pip install 'semattnet\[live\]'") as e:
         LiveSink(address="127.0.0.1:0").open()
     assert "\n" not in str(e.value)
+
+
+def _ends_within(fn: Any, seconds: float) -> bool:
+    """Whether ``fn()`` returns within ``seconds`` (run in a daemon thread: a hang fails the test, not the run);
+    what it raises is raised here."""
+    import threading
+
+    errors: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            fn()
+        except BaseException as exc:
+            errors.append(exc)
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    thread.join(seconds)
+    if errors:
+        raise errors[0]
+    return not thread.is_alive()
+
+
+def test_half_open_and_idle_clients_do_not_hold_the_server(tmp_path: Path) -> None:
+    """60 connections that never send a handshake, then 300 idle ones: close still returns within seconds."""
+    sink = LiveSink(address="127.0.0.1:0")
+    sink.open()
+    socks: list[socket.socket] = []
+    try:
+        for _ in range(360):
+            socks.append(socket.create_connection(("127.0.0.1", sink.port), timeout=5))
+        time.sleep(0.2)  # the server (or the gate) has taken them
+        assert _ends_within(lambda: sink.close(), 5), "the server did not stop"
+    finally:
+        for s in socks:
+            s.close()
+        sink.abort()
+
+
+def test_the_gate_caps_the_clients() -> None:
+    """Connections beyond the cap are closed at once; those within it stay until they are done or the gate closes."""
+    from semattnet.robotics.gate import Gate
+
+    g = Gate("127.0.0.1", 0, ("127.0.0.1", 9), max_clients=3)
+    port = g.start()
+    try:
+        held = [socket.create_connection(("127.0.0.1", port), timeout=5) for _ in range(3)]
+        _wait_for(lambda: g.clients == 3, "three clients")
+        with socket.create_connection(("127.0.0.1", port), timeout=5) as extra:
+            assert extra.recv(1) == b""  # closed at once
+        assert g.refused == 1 and g.clients == 3
+        assert _ends_within(g.close, 5)
+        assert all(s.recv(1) == b"" for s in held)  # dropped by close
+    finally:
+        for s in held:
+            s.close()
+        g.close()
+
+
+def test_a_client_that_never_reads_does_not_hold_the_server(tmp_path: Path) -> None:
+    """A subscribed client that stops reading while large frames are logged: write never blocks, close ends."""
+    sink = LiveSink(address="127.0.0.1:0")
+    sink.open()
+    rng = np.random.default_rng(1)
+    rgb = rng.integers(0, 256, (256, 512, 3), dtype=np.uint8)
+    frame = Frame("big", rgb, np.zeros((256, 512), np.float32), K=K)
+    big = predict_frame(frame, Completion(rng.uniform(1, 60, (256, 512)).astype(np.float32)))  # ~3 MiB a frame
+    try:
+        connect = {"open_timeout": 5, "close_timeout": 0.2, "max_queue": 1}  # it reads no more once one is queued
+        with ws_client.connect(sink.url, subprotocols=SUBPROTOCOLS, **connect) as ws:
+            _handshake(ws, set(sink.topics.values()))
+            _wait_for(lambda: sink.subscribed("depth"), "the subscription")
+            assert _ends_within(lambda: [sink.write(tmp_path, big) for _ in range(20)], 10)
+            assert _ends_within(lambda: sink.close(), 5)
+    finally:
+        sink.abort()
+
+
+def test_a_slow_handshake_is_closed(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A client that does not finish its first request in time is closed (the gate's handshake timeout)."""
+    from semattnet.robotics import gate
+
+    g = gate.Gate("127.0.0.1", 0, ("127.0.0.1", 9), handshake_s=0.2)
+    port = g.start()
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=5) as s:
+            s.sendall(b"GET / HTTP/1.1\r\n")
+            assert s.recv(1) == b""  # closed by the gate after 0.2 s
+    finally:
+        g.close()
+
+
+def test_serving_beyond_loopback_warns_in_one_line() -> None:
+    """127.0.0.1: one line, the URL; 0.0.0.0 (every interface): a warning line first."""
+    for address, warned in (("127.0.0.1:0", False), ("0.0.0.0:0", True)):
+        lines: list[str] = []
+        sink = LiveSink(address=address, log=lines.append)
+        sink.open()
+        sink.abort()
+        assert len(lines) == 1 + warned and lines[-1].startswith("live view: ws://")
+        assert lines[0].startswith("warning: --live serves ws://0.0.0.0:") == warned, lines
+        assert all("\n" not in line for line in lines)

@@ -61,9 +61,10 @@ def _depth_messages(bag: Path) -> list[tuple[int, np.ndarray]]:
             for m in msgs]  # fmt: skip
 
 
-def write_bag(path: Path, n: int, h: int, w: int, fmt: str = "mcap") -> Path:
-    """A clean bag of ``n`` random frames (h x w camera, a 2000-point scan 2 ms after each image, 0.1 s apart)
-    on the topics of :mod:`tests.robotics._faulty_bag`."""
+def write_bag(path: Path, n: int, h: int, w: int, fmt: str = "mcap", gaps_s: dict[int, float] | None = None) -> Path:
+    """A clean bag of ``n`` random frames (h x w camera, a 2000-point scan 2 ms after each image, 0.1 s apart;
+    ``gaps_s``: frame index -> seconds after the frame before it instead) on the topics of
+    :mod:`tests.robotics._faulty_bag`."""
     from semattnet.robotics.bags import CameraInfoData, MessageWriter
     from semattnet.robotics.bags.encode import camera_info_message, image_message, pointcloud2_message, tf_message
 
@@ -71,8 +72,9 @@ def write_bag(path: Path, n: int, h: int, w: int, fmt: str = "mcap") -> Path:
     info = CameraInfoData(w, h, K, np.zeros(5), np.eye(3), np.hstack([K, np.zeros((3, 1))]), "plumb_bob", "cam")
     with MessageWriter(path, fmt) as out:
         out.write("/tf_static", T0, tf_message(out.ts, [("cam", "lidar", T_CAM_LIDAR)], T0))
+        t = T0
         for i in range(n):
-            t, rng = T0 + i * 10**8, np.random.default_rng(i)
+            t, rng = t + (0 if i == 0 else round((gaps_s or {}).get(i, 0.1) * 1e9)), np.random.default_rng(i)
             rgb = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
             out.write(IMAGE_TOPIC, t, image_message(out.ts, rgb, t, "cam"))
             out.write("/cam/camera_info", t, camera_info_message(out.ts, info, t, "cam"))

@@ -68,3 +68,57 @@ def test_serve_port_in_use_is_one_line() -> None:
             assert "\n" not in str(e.value)
     with pytest.raises(InputError, match="serve=True"):
         RerunLogger()
+
+
+def _read_messages(port: int) -> bytes:
+    """The start of the recording as a viewer reads it (gRPC-web ``ReadMessages`` over HTTP/1.1)."""
+    req = urllib.request.Request(f"http://127.0.0.1:{port}/rerun.sdk_comms.v1alpha1.MessageProxyService/ReadMessages",
+                                 data=bytes(5), method="POST",
+                                 headers={"content-type": "application/grpc-web+proto", "x-grpc-web": "1"})  # fmt: skip
+    with urllib.request.urlopen(req, timeout=5) as r:
+        assert r.status == 200 and r.headers["content-type"] == "application/grpc-web+proto"
+        return bytes(r.read(4096))
+
+
+def test_viewers_reach_the_stream_through_the_gate() -> None:
+    """The stream is read through the gate (the app id in the recording's first messages); connections beyond the
+    gate's cap are closed at once; a viewer that stops reading and 60 half-open ones do not hold close()."""
+    from semattnet.robotics.gate import MAX_CLIENTS
+    from semattnet.robotics.rerun import RerunLogger
+
+    log = RerunLogger(serve=True, grpc_port=0, app_id="gate_check")
+    port = int(urlparse(log.grpc_url or "").port or 0)
+    _log_frames(log)
+    assert b"gate_check" in _read_messages(port)
+    silent = socket.create_connection(("127.0.0.1", port), timeout=5)
+    silent.sendall(b"POST /rerun.sdk_comms.v1alpha1.MessageProxyService/ReadMessages HTTP/1.1\r\nHost: x\r\n"
+                   b"content-type: application/grpc-web+proto\r\ncontent-length: 5\r\n\r\n" + bytes(5))  # fmt: skip
+    held = [socket.create_connection(("127.0.0.1", port), timeout=5) for _ in range(60)]
+    try:
+        closed = sum(s.recv(1) == b"" for s in held[MAX_CLIENTS:])  # past the cap (the silent one holds a place)
+        assert closed == 60 - MAX_CLIENTS
+        _log_frames(log)
+        start = time.monotonic()
+        log.close()
+        assert time.monotonic() - start < 5
+    finally:
+        for s in [silent, *held]:
+            s.close()
+
+
+def test_the_file_is_complete_before_the_stream_stops(tmp_path: Path) -> None:
+    """finish_file: the recording in place and whole while viewers still read the stream; close stops the stream."""
+    from semattnet.robotics.rerun import ENTITIES, RerunLogger, read_rrd_frames
+
+    log = RerunLogger(tmp_path / "run.rrd", serve=True, grpc_port=0)
+    port = int(urlparse(log.grpc_url or "").port or 0)
+    _log_frames(log)
+    log.finish_file()
+    assert read_rrd_frames(tmp_path / "run.rrd")[ENTITIES["depth"]] == STAMPS
+    assert b"semattnet" in _read_messages(port)  # still served
+    assert [p.name for p in tmp_path.iterdir()] == ["run.rrd"]
+    log.close()
+    deadline = time.monotonic() + 5
+    while not _refused(port):
+        assert time.monotonic() < deadline, "the stream still listens after close()"
+        time.sleep(0.02)

@@ -79,8 +79,8 @@ DEPTH_M_OR_ZERO = FiniteFloat(0.0, 1000.0)
 SECONDS = FiniteFloat(0.0, MAX_SKEW_S)
 #: A sensor's period in seconds: > 0, at most an hour.
 PERIOD = FiniteFloat(0.0, 3600.0, low_open=True)
-#: A replay speed factor.
-SPEED = FiniteFloat(0.0, 1000.0, low_open=True)
+#: A replay speed factor: at most 100 times slower (a wait between frames is capped besides) or 1000 times faster.
+SPEED = FiniteFloat(0.01, 1000.0)
 #: A learning rate.
 LEARNING_RATE = FiniteFloat(0.0, 10.0, low_open=True)
 #: A model width multiplier: ``semattnet.models.config.RANGES["width"]``.

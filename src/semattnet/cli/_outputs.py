@@ -44,6 +44,26 @@ class MaxUncertainty(click.ParamType):
             self.fail(str(exc), param, ctx)
 
 
+class Address(click.ParamType):
+    """``--live`` / ``--rerun-serve``: ``[HOST:]PORT`` (:func:`semattnet.robotics.gate.parse_address`), returned
+    as given; a malformed one is a one-line usage error."""
+
+    name = "[HOST:]PORT"
+
+    def convert(self, value: object, param: click.Parameter | None, ctx: click.Context | None) -> str:
+        from semattnet._errors import InputError
+        from semattnet.robotics.gate import parse_address
+
+        try:
+            parse_address(str(value), "address")
+        except InputError as exc:
+            self.fail(str(exc), param, ctx)
+        return str(value)
+
+
+#: Where ``--rerun-serve`` without a value serves the recording (Rerun's own default port, this machine only).
+RERUN_SERVE = "127.0.0.1:9876"
+
 _OUT, _RUN = section(OUTPUTS), section(RUN)
 
 #: The output options, then the run options, in the order of ``predict --help``.
@@ -68,10 +88,13 @@ OUTPUT_OPTIONS = (
     _OUT(["--rerun", "rerun_file"], type=click.Path(dir_okay=False, path_type=Path), default=None,
          help="Also write a Rerun recording FILE.rrd.  [extra: rerun]"),
     _OUT(["--rerun-spawn"], is_flag=True, help="Stream the frames to a spawned Rerun viewer."),
-    _OUT(["--rerun-serve"], is_flag=True,
-         help="Serve the frames to Rerun's web viewer in a browser as they are completed.  [extra: rerun]"),
-    _OUT(["--live"], default=None, metavar="[HOST:]PORT",
-         help="Serve the frames as they are completed over the Foxglove WebSocket protocol.  [extra: live]"),
+    _OUT(["--rerun-serve"], is_flag=False, flag_value=RERUN_SERVE, default=None, type=Address(),
+         metavar="[[HOST:]PORT]",
+         help=f"Serve the frames to Rerun viewers as they are completed, on [HOST:]PORT (alone: {RERUN_SERVE}; "
+         "a HOST other than this machine's also serves the web viewer).  [extra: rerun]"),
+    _OUT(["--live"], default=None, type=Address(),
+         help="Serve the frames as they are completed over the Foxglove WebSocket protocol (HOST: 127.0.0.1 unless "
+         "given).  [extra: live]"),
     _OUT(["--overwrite"], is_flag=True, help="Replace existing outputs."),
     _OUT(["--resume"], is_flag=False, flag_value="", default=None, metavar="[OUT]",
          help="Continue the killed or failed run in OUT (or --out): keep its completed frames, do the rest."),
@@ -82,7 +105,7 @@ OUTPUT_OPTIONS = (
          help="Read, project and segment the next frames in a background thread while one is completed."),
     _RUN(["--realtime"], is_flag=True,
          help="Replay at the recorded rate: frames that come while the completer is busy are dropped."),
-    _RUN(["--speed"], type=SPEED, default=None, help="With --realtime: replay this many times faster."),
+    _RUN(["--speed"], type=SPEED, default=None, help="With --realtime: replay this many times faster (0.01-1000)."),
 )  # fmt: skip
 
 _F = TypeVar("_F", bound=Callable[..., object])
@@ -114,7 +137,7 @@ class Outputs:
     bag_out: Path | None
     rerun_file: Path | None
     rerun_spawn: bool
-    rerun_serve: bool
+    rerun_serve: str | None
     live: str | None
     overwrite: bool
     resume: str | None
@@ -122,7 +145,8 @@ class Outputs:
     @property
     def replayed(self) -> bool:
         """A bag or a Rerun recording or viewer: outputs a resumed run rebuilds from the kept frames."""
-        return self.bag_out is not None or self.rerun_file is not None or self.rerun_spawn or self.rerun_serve
+        served = self.rerun_serve is not None
+        return self.bag_out is not None or self.rerun_file is not None or self.rerun_spawn or served
 
     @property
     def robot(self) -> bool:
@@ -180,7 +204,7 @@ class Outputs:
         sinks.append(LatencySink(timer=timer))
         if self.bag_out is not None:
             sinks.append(BagSink(target=self.bag_out, max_depth=depth, uncertainty=unc, max_uncertainty=limit))
-        if self.rerun_file is not None or self.rerun_spawn or self.rerun_serve:
+        if self.rerun_file is not None or self.rerun_spawn or self.rerun_serve is not None:
             rerun = RerunSink(target=self.rerun_file, spawn=self.rerun_spawn, serve=self.rerun_serve, max_depth=depth,
                               log=click.echo, uncertainty=unc, max_uncertainty=limit)  # fmt: skip
             sinks.append(rerun)

@@ -430,13 +430,17 @@ def _close(loop: _FrameLoop) -> FrameRun:
             s.abort()
         loop.forget()
         raise _nothing_done(entries)
-    for s in loop.runs:
-        s.commit()
-    wall = loop.timer.wall_s - journal.earlier_wall_s  # this run's share
-    if world_size() == 1:
-        journal.save(complete=True, wall_s=wall)
-    elif is_main():
-        journal.merge(entries, complete=True, wall_s=wall)
+    try:
+        for s in loop.runs:
+            s.commit()
+        wall = loop.timer.wall_s - journal.earlier_wall_s  # this run's share
+        if world_size() == 1:
+            journal.save(complete=True, wall_s=wall)
+        elif is_main():
+            journal.merge(entries, complete=True, wall_s=wall)
+    finally:  # a live server stops only now: frames.json is complete whatever its clients do
+        for s in loop.runs:
+            s.close()
     for e in entries:
         journal.frames[e["name"]] = e
     depth = loop.depth_sink

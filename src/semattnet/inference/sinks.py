@@ -307,7 +307,8 @@ class RunSink(Sink):
     """A sink with one output for the whole run, around the frame loop of
     :func:`~semattnet.inference.pipeline.complete_frames`: :meth:`open` before the first frame, :meth:`write`
     per frame, :meth:`finish` after the last one (the output complete, still staged), then :meth:`commit`
-    once the per-frame files are in place, or :meth:`abort` (nothing left) on any error.
+    once the per-frame files are in place, or :meth:`abort` (nothing left) on any error; :meth:`close` last,
+    once ``frames.json`` records the run complete (a server stops there, so no client can delay the record).
 
     ``files()``: its outputs inside the output folder (written into the stage by :meth:`finish`);
     ``targets()``: its outputs elsewhere (checked like every output: never over or inside an input, none
@@ -342,6 +343,9 @@ class RunSink(Sink):
 
     def abort(self) -> None:
         """Remove whatever was staged."""
+
+    def close(self) -> None:
+        """The run is recorded: stop what still serves (nothing for a file)."""
 
 
 @register_sink("latency", option="--stream")

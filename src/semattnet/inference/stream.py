@@ -24,8 +24,10 @@ Stages (:data:`~.timing.STAGES`): ``read`` (read and decode), ``projection`` (Li
 from __future__ import annotations
 
 import queue
+import statistics
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Generator, Iterator, Sequence
 from contextlib import AbstractContextManager, closing, contextmanager, nullcontext
 from dataclasses import dataclass
@@ -35,7 +37,7 @@ from typing import TYPE_CHECKING
 from semattnet.data.frames import Frame, FrameSource
 from semattnet.inference.batching import BatchCompleter, complete_group, groups
 from semattnet.inference.completion import Completer, Completion, StageTimed
-from semattnet.inference.timing import DEFAULT_SENSOR_PERIOD_S, StageTimes
+from semattnet.inference.timing import DEFAULT_SENSOR_PERIOD_S, GAP_PERIODS, MAX_WAIT_S, StageTimes
 
 if TYPE_CHECKING:
     from semattnet.inference.semantic import SemanticMaps
@@ -200,23 +202,46 @@ class _Mailbox:
             return frame if frame is not None else _DONE
 
 
+class _Pace:
+    """When each frame of a paced replay is due: ``speed`` times its sensor pace, a gap longer than
+    :data:`GAP_PERIODS` sensor periods (or a wait over :data:`MAX_WAIT_S`) skipped, counted in ``timer``."""
+
+    def __init__(self, speed: float, timer: StageTimes) -> None:
+        self.speed, self.timer = speed, timer
+        self.due = time.monotonic()
+        self.prev: float | None = None
+        self.gaps: deque[float] = deque(maxlen=64)  # the last gaps between frames, seconds
+
+    def wait_s(self, t: float) -> float:
+        """Seconds until the frame stamped ``t`` (sensor seconds) is due (0: now)."""
+        gap, self.prev = (0.0 if self.prev is None else t - self.prev), t
+        period = statistics.median(self.gaps) if self.gaps else 0.0
+        if gap / self.speed > MAX_WAIT_S or (self.gaps and gap > GAP_PERIODS * period):
+            self.timer.gaps_skipped += 1
+            self.timer.longest_gap_s = max(self.timer.longest_gap_s, gap)
+            gap = period  # the frame comes one period after the one before
+        elif gap > 0:
+            self.gaps.append(gap)
+        self.due += gap / self.speed
+        return max(0.0, self.due - time.monotonic())
+
+
 def _paced(source: FrameSource, names: Sequence[str], semantic: SemanticMaps | None, timer: StageTimes,
            speed: float) -> Generator[_Item, None, None]:  # fmt: skip
     """The frames at their sensor pace (``timestamp``, else :data:`~.timing.DEFAULT_SENSOR_PERIOD_S` apart, ``speed``
-    times faster): a thread reads each frame and hands it over at its time; when the loop is still busy the
-    newest frame wins and the older one is dropped (a ``dropped`` :class:`FrameFault`). Bounded: one frame
-    waiting, one being read, one being completed."""
+    times faster; long gaps skipped, :class:`_Pace`): a thread reads each frame and hands it over at its time;
+    when the loop is still busy the newest frame wins and the older one is dropped (a ``dropped``
+    :class:`FrameFault`). Bounded: one frame waiting, one being read, one being completed."""
     box, stop = _Mailbox(), threading.Event()
 
     def work() -> None:
-        start, first = time.monotonic(), None
+        pace = _Pace(speed, timer)
         try:
             for i, name in enumerate(names):
                 item = _attempt(source, name, semantic, timer)
                 if isinstance(item, Frame):
                     t = item.timestamp if item.timestamp is not None else i * DEFAULT_SENSOR_PERIOD_S
-                    first = t if first is None else first
-                    if stop.wait(max(0.0, start + (t - first) / speed - time.monotonic())):
+                    if stop.wait(pace.wait_s(t)):
                         return
                 box.post(item)
         except BaseException as exc:

@@ -16,7 +16,9 @@ import numpy as np
 
 __all__ = [
     "DEFAULT_SENSOR_PERIOD_S",
+    "GAP_PERIODS",
     "LATENCY_FILE",
+    "MAX_WAIT_S",
     "STAGES",
     "LatencySummary",
     "StageSummary",
@@ -29,6 +31,10 @@ STAGES = ("read", "projection", "segmentation", "network", "propagation", "writi
 _LABELS = {"read": "read/decode"}
 #: The sensor period assumed when the frames' stamps cannot say (a 10 Hz LiDAR), seconds.
 DEFAULT_SENSOR_PERIOD_S = 0.1
+#: ``--realtime``: a gap between two frames longer than this many sensor periods (their median so far) is skipped.
+GAP_PERIODS = 5
+#: ``--realtime``: the longest wait for one frame, seconds (a longer one is skipped as well).
+MAX_WAIT_S = 60.0
 #: Where ``semattnet predict`` writes the table, in its ``--out``.
 LATENCY_FILE = "latency.json"
 
@@ -56,6 +62,7 @@ class LatencySummary(TypedDict):
     realtime_factor: float
     not_done: dict[str, int]
     queue_most: int | None
+    gaps_skipped: int
     cpu: str
 
 
@@ -85,6 +92,8 @@ class StageTimes:
         self.overlapped = False
         self.queue_most: int | None = None  # --realtime: the most frames waiting for the completer at once
         self.not_done: dict[str, int] = {}  # frames skipped / dropped, by status (the loop sets it)
+        self.gaps_skipped = 0  # --realtime: gaps between frames not waited for (too long)
+        self.longest_gap_s = 0.0  # ... the longest of them, sensor seconds
         self._lock = threading.Lock()
         self._local = threading.local()
         self._start: float | None = None
@@ -166,7 +175,8 @@ class StageTimes:
                 "sum_of_stages_s": float(sum(per_frame)), "wall_s": self.wall_s, "overlapped": self.overlapped,
                 "per_frame_median_ms": 1e3 * float(np.median(per_frame)) if per_frame else 0.0,
                 "throughput_hz": fps, "sensor_period_s": period, "realtime_factor": fps * period,
-                "not_done": dict(self.not_done), "queue_most": self.queue_most, "cpu": cpu_name()}  # fmt: skip
+                "not_done": dict(self.not_done), "queue_most": self.queue_most, "gaps_skipped": self.gaps_skipped,
+                "cpu": cpu_name()}  # fmt: skip
 
     def table(self) -> str:
         """The per-stage latency table (what ``semattnet predict`` prints)."""
@@ -187,6 +197,11 @@ class StageTimes:
         if any(s["not_done"].values()):
             held = f"; at most {s['queue_most']} frame(s) waited" if s["queue_most"] is not None else ""
             rows.append("not completed: " + ", ".join(f"{n} {k}" for k, n in s["not_done"].items() if n) + held)
+        if self.gaps_skipped:
+            rows.append(
+                f"--realtime skipped {self.gaps_skipped} gap(s) between frames too long to wait for (over "
+                f"{GAP_PERIODS} sensor periods or {MAX_WAIT_S:g} s; the longest {self.longest_gap_s:.3g} s)"
+            )
         return "\n".join(rows)
 
     def to_json(self) -> str:

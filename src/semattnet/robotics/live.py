@@ -22,7 +22,10 @@ topic                         schema                 what
 
 Each sink logs into its own :class:`foxglove.Context`, so two sinks in one process never mix. A message
 is built only when a client is subscribed to its channel: with no client :meth:`LiveSink.write` costs
-next to nothing, and the server drops the oldest messages of a slow client (it never blocks the loop).
+next to nothing, and the server drops the oldest messages of a slow client (:data:`BACKLOG` kept; it never
+blocks the loop). The clients reach the server through a :class:`~semattnet.robotics.gate.Gate` (at most
+32 at once, 5 s for a handshake), so the server stops within seconds whatever they do: silent, half-open
+or many.
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ from semattnet.data.io import decode_depth
 from semattnet.geometry.cameras import CameraInfoData
 from semattnet.inference.sinks import Prediction, RunSink, register_sink
 from semattnet.inference.uncertainty import UncertaintyLimit
+from semattnet.robotics.gate import Gate, exposed, is_loopback, parse_address
 from semattnet.robotics.sinks import camera_info, stamp_ns
 
 if TYPE_CHECKING:
@@ -94,16 +98,6 @@ def _accepts(fn: Callable[..., object], name: str) -> bool:
         return name in inspect.signature(fn).parameters
     except (TypeError, ValueError):
         return False
-
-
-def parse_address(address: str) -> tuple[str, int]:
-    """``"[HOST:]PORT"`` -> (host, port); host defaults to 127.0.0.1, ``[::1]:PORT`` for IPv6; port 0 = any free."""
-    text = str(address).strip()
-    host, sep, port = text.rpartition(":")
-    host = host.strip("[]") if sep else "127.0.0.1"
-    if not port.isdigit() or int(port) > 65535 or (sep and not host):
-        raise InputError(f"live address {address!r}: expected [HOST:]PORT with PORT 0-65535 (e.g. 127.0.0.1:8765)")
-    return host, int(port)
 
 
 def _timestamp(m: ModuleType, stamp_ns: int) -> object:
@@ -187,6 +181,20 @@ class _Server(Protocol):
     def stop(self) -> None: ...
 
 
+#: Seconds :meth:`LiveSink.finish` waits for the server to stop (it has no client left by then).
+STOP_S = 5.0
+
+
+def _bounded(fn: Callable[[], object], seconds: float) -> bool:
+    """Call ``fn`` in a daemon thread and wait at most ``seconds``; whether it returned."""
+    import threading
+
+    thread = threading.Thread(target=fn, name="semattnet-stop", daemon=True)
+    thread.start()
+    thread.join(seconds)
+    return not thread.is_alive()
+
+
 class _Channel(Protocol):
     """What the sink uses of a foxglove channel."""
 
@@ -218,6 +226,7 @@ class LiveSink(RunSink):
     #: Frames kept from an earlier (resumed) run are not re-sent.
     replays: ClassVar[bool] = False
     _server: _Server | None = field(default=None, init=False, repr=False)
+    _gate: Gate | None = field(default=None, init=False, repr=False)
     _channels: dict[str, _Channel] = field(default_factory=dict, init=False, repr=False)
     _context: object = field(default=None, init=False, repr=False)  # kept alive: channels die with their context
     _count: int = field(default=0, init=False, repr=False)
@@ -230,26 +239,30 @@ class LiveSink(RunSink):
     @property
     def port(self) -> int:
         """The port the server listens on (after :meth:`open`)."""
-        if self._server is None:
+        if self._gate is None:
             raise InputError("LiveSink.port: the server is not running (call open() first)")
-        return int(self._server.port)
+        return self._gate.port
 
     @property
     def url(self) -> str:
         """``ws://HOST:PORT`` to connect the Foxglove app to (after :meth:`open`)."""
-        host = parse_address(self.address)[0]
+        host = parse_address(self.address, "live address")[0]
         return f"ws://{f'[{host}]' if ':' in host else host}:{self.port}"
 
     def open(self, overwrite: bool = False) -> None:
         """Start the server and advertise the channels (``overwrite`` means nothing here)."""
         fg = _foxglove()
-        host, port = parse_address(self.address)
+        host, port = parse_address(self.address, "live address")
         self._context = context = fg.Context()
         kwargs = {"message_backlog_size": BACKLOG} if _accepts(fg.start_server, "message_backlog_size") else {}
-        try:
-            self._server = fg.start_server(name="semattnet", host=host, port=port, context=context, **kwargs)
+        try:  # the server on a private loopback port, the clients through the gate on the address asked for
+            self._server = server = fg.start_server(name="semattnet", host="127.0.0.1", port=0, context=context,
+                                                    **kwargs)  # fmt: skip
+            self._gate = Gate(host, port, ("127.0.0.1", int(server.port)))
+            self._gate.start()
         except (RuntimeError, OSError) as e:
-            reason = str(e).removeprefix("FoxgloveError: ").splitlines()[0]
+            self._stop()
+            reason = (str(e).removeprefix("FoxgloveError: ").splitlines() or [type(e).__name__])[0]
             raise InputError(f"live address {self.address!r}: cannot serve there ({reason})") from None
         ch, topics = fg.channels, self.topics
         self._count = 0
@@ -264,6 +277,8 @@ class LiveSink(RunSink):
             "sparse": ch.RawImageChannel(topics["sparse"], context=context),
         }
         if self.log is not None:
+            if not is_loopback(host):
+                self.log(exposed("--live", host, self.url))
             self.log(f"live view: {self.url} (Foxglove: Open connection, Foxglove WebSocket, this URL)")
 
     def subscribed(self, role: str = "depth") -> bool:
@@ -306,15 +321,21 @@ class LiveSink(RunSink):
         self._log("latency", t_ns, lambda: {"frame": frame.name, "stamp_ns": t_ns, "stages_ms": stages})
 
     def _stop(self) -> None:
-        server, self._server = self._server, None
+        """Drop the clients (the gate), then stop the server: bounded whatever the clients do."""
+        server, self._server, gate, self._gate = self._server, None, self._gate, None
         channels, self._channels, self._context = self._channels, {}, None
         for channel in channels.values():
             channel.close()
-        if server is not None:
-            server.stop()
+        if gate is not None:
+            gate.close()
+        if server is not None and not _bounded(server.stop, STOP_S) and self.log is not None:
+            self.log(f"live view: the server did not stop within {STOP_S:g} s; left to end with the process")
 
     def finish(self, stage: Path) -> None:
-        """Close the server."""
+        """Every frame sent; the server keeps serving until :meth:`close` (after ``frames.json`` is complete)."""
+
+    def close(self) -> None:
+        """Drop the clients and stop the server (within seconds, whatever the clients do)."""
         self._stop()
 
     def abort(self) -> None:

@@ -16,8 +16,11 @@ Per frame, on one timeline (``sensor_time``) stamped with the sensor time, in th
 
 A file recording is written to a hidden temporary file beside the target and moved into place at
 :meth:`RerunLogger.close`; after an error inside the ``with`` block nothing is left. ``serve=True`` streams
-the frames live to a browser instead of (or besides) the file: a gRPC server plus the web viewer that ships
-in the ``rerun-sdk`` wheel (:attr:`RerunLogger.url`).
+the frames live instead of (or besides) the file: a gRPC server that ``rerun GRPC_URL`` connects to, reached
+on ``host`` (127.0.0.1 by default) through a :class:`~semattnet.robotics.gate.Gate` (a connection cap,
+handshake timeouts, every viewer dropped at :meth:`RerunLogger.close`), and, with a ``web_port``, the web
+viewer that ships in the ``rerun-sdk`` wheel (:attr:`RerunLogger.url`; rerun binds it to every interface, so
+it is off by default).
 """
 
 from __future__ import annotations
@@ -27,15 +30,16 @@ import tempfile
 from pathlib import Path
 from types import ModuleType, TracebackType
 from typing import Protocol
-from urllib.parse import quote
+from urllib.parse import quote, urlparse
 
 import numpy as np
 
 from semattnet._errors import InputError
 from semattnet._utils.atomic import new_file_mode
-from semattnet._utils.extras import require
+from semattnet._utils.extras import optional, require
 from semattnet.geometry import depth_to_points, invert_T
 from semattnet.palette import IGNORE_ID, TRAIN_CLASSES, UNKNOWN_COLOR, colors_to_ids
+from semattnet.robotics.gate import Gate
 
 __all__ = ["ENTITIES", "TIMELINE", "RerunLogger", "read_rrd_frames"]
 
@@ -68,12 +72,14 @@ class RerunLogger:
         spawn: start a Rerun viewer and stream to it as well.
         overwrite: replace an existing ``path`` (else :class:`FileExistsError` at once).
         max_depth: completed-cloud points deeper than this are left out, metres (None: all).
-        serve: host a gRPC server (the recording, buffered in memory up to 1 GiB for late viewers) and the
-            web viewer shipped in the ``rerun-sdk`` wheel (no internet needed); open :attr:`url` in a browser.
-            The gRPC server stops at :meth:`close`; the web viewer's HTTP server (which serves only the viewer's
-            files, on every interface) stays up until the process exits (rerun gives no handle to stop it).
+        serve: host a gRPC server (the recording, buffered in memory up to 1 GiB for late viewers) on ``host``
+            (through the gate, module doc); ``rerun`` :attr:`grpc_url` opens it in a native viewer. The viewers
+            are dropped and the gRPC server stops at :meth:`close`.
         grpc_port: the gRPC server's port (Rerun's default 9876; 0: a free port).
-        web_port: the web viewer's port (Rerun's default 9090; 0: a free port).
+        web_port: with ``serve``, also serve the web viewer shipped in the ``rerun-sdk`` wheel (no internet
+            needed) on this port (0: a free port); open :attr:`url` in a browser. Its HTTP server (which serves
+            only the viewer's files) listens on **every interface** and stays up until the process exits (rerun
+            gives no handle to bind or stop it). None (the default): no web viewer.
         host: the interface the gRPC server listens on.
 
     Attributes:
@@ -84,7 +90,7 @@ class RerunLogger:
 
     def __init__(self, path: str | os.PathLike[str] | None = None, spawn: bool = False, overwrite: bool = False,
                  app_id: str = "semattnet", max_depth: float | None = None, serve: bool = False,
-                 grpc_port: int = 9876, web_port: int = 9090, host: str = "127.0.0.1") -> None:  # fmt: skip
+                 grpc_port: int = 9876, web_port: int | None = None, host: str = "127.0.0.1") -> None:  # fmt: skip
         if path is None and not spawn and not serve:
             raise InputError("RerunLogger: give a .rrd path, spawn=True, serve=True, or several")
         self.path = None if path is None else Path(path)
@@ -96,6 +102,7 @@ class RerunLogger:
         self.grpc_url: str | None = None
         self.rec = rr.RecordingStream(app_id)
         self._tmp: Path | None = None
+        self._gate: Gate | None = None
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.p{os.getpid()}.", suffix=".rrd", dir=self.path.parent)
@@ -108,7 +115,8 @@ class RerunLogger:
             raise
         self._log_static(rr)
 
-    def _set_sinks(self, rr: ModuleType, spawn: bool, serve: bool, host: str, grpc_port: int, web_port: int) -> None:
+    def _set_sinks(self, rr: ModuleType, spawn: bool, serve: bool, host: str, grpc_port: int,
+                   web_port: int | None) -> None:  # fmt: skip
         """The file, the spawned viewer and the served stream + web viewer, as asked."""
         if spawn:
             self.rec.spawn(connect=self._tmp is None and not serve)
@@ -118,12 +126,20 @@ class RerunLogger:
             elif self._tmp is not None:
                 self.rec.save(str(self._tmp))
             return
-        grpc_port = _port(host, grpc_port, "the gRPC stream")
-        web_port = _port("0.0.0.0", web_port, "the web viewer")  # rerun's HTTP server binds every interface
-        server = rr.GrpcServerSink(host, grpc_port)
+        if web_port is not None:
+            web_port = _port("0.0.0.0", web_port, "the web viewer")  # rerun's HTTP server binds every interface
+        server = rr.GrpcServerSink("127.0.0.1", _port("127.0.0.1", 0, "the gRPC stream"))  # behind the gate
+        self._gate = Gate(host, grpc_port, ("127.0.0.1", int(urlparse(str(server.uri)).port or 0)))
+        try:
+            self._gate.start()
+        except OSError as e:
+            reason = e.strerror or e
+            raise InputError(f"RerunLogger: cannot serve the gRPC stream on {host}:{grpc_port} ({reason})") from None
         sinks = [rr.FileSink(str(self._tmp))] * (self._tmp is not None) + [rr.GrpcSink()] * spawn + [server]
         self.rec.set_sinks(*sinks)
-        self.grpc_url = str(server.uri)
+        self.grpc_url = f"rerun+http://{_url_host(host)}:{self._gate.port}/proxy"
+        if web_port is None:
+            return
         try:
             rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=self.grpc_url)
         except (RuntimeError, OSError) as e:
@@ -175,8 +191,23 @@ class RerunLogger:
             log(ENTITIES["uncertainty"], rr.DepthImage(np.nan_to_num(np.asarray(uncertainty, np.float32)), meter=1.0))
         self.frames += 1
 
+    def finish_file(self) -> None:
+        """Complete the file recording and move it into place while a served stream goes on serving (until
+        :meth:`close`); without ``serve``: :meth:`close`."""
+        finalize = getattr(optional("rerun_bindings"), "finalize_deferred_sinks", None)  # not in older releases
+        if self.rec is None or self._tmp is None or self.path is None:
+            return
+        if self._gate is None or finalize is None:
+            self.close()
+            return
+        _flush(self.rec, self._tmp)
+        finalize(recording=self.rec.to_native())  # the file's sink only: the stream stays
+        os.chmod(self._tmp, new_file_mode())
+        os.replace(self._tmp, self.path)
+        self._tmp = None
+
     def close(self) -> None:
-        """Flush and finish; a file recording is moved into place."""
+        """Flush and finish; a file recording is moved into place; the served stream stops (its viewers dropped)."""
         self._finish(ok=True)
 
     def _finish(self, ok: bool) -> None:
@@ -185,6 +216,8 @@ class RerunLogger:
             return
         try:
             _flush(rec, self._tmp)
+            if self._gate is not None:  # the viewers dropped first: nothing they do delays the stop
+                self._gate.close()
             rec.disconnect()
             if ok and self._tmp is not None and self.path is not None:
                 os.chmod(self._tmp, new_file_mode())

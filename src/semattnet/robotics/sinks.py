@@ -25,6 +25,7 @@ from semattnet.data.frames import Frame
 from semattnet.geometry.cameras import CameraInfoData
 from semattnet.inference.sinks import Prediction, RunSink, register_sink
 from semattnet.inference.uncertainty import UncertaintyLimit
+from semattnet.robotics.gate import exposed, is_loopback, parse_address
 
 if TYPE_CHECKING:
     from semattnet.robotics.bags import BagWriter
@@ -172,6 +173,10 @@ def camera_info(frame: Frame) -> CameraInfoData:
     return CameraInfoData(w, h, K, np.zeros(5), np.eye(3), np.hstack([K, np.zeros((3, 1))]), "plumb_bob", "camera")
 
 
+#: ``--rerun-serve``'s web viewer port (Rerun's default), served only with a HOST other than this machine.
+WEB_PORT = 9090
+
+
 @register_sink("rerun", option="--rerun")
 @dataclass
 class RerunSink(_StagedTarget):
@@ -184,7 +189,7 @@ class RerunSink(_StagedTarget):
     target: Path | None = None
     spawn: bool = False
     max_depth: float | None = None
-    serve: bool = False  # serve the frames to a web viewer (the URL goes to ``log``)
+    serve: str | None = None  # ``[HOST:]PORT``: serve the frames to Rerun viewers (the URL goes to ``log``)
     log: Callable[[str], object] | None = None
     uncertainty: bool = False
     max_uncertainty: UncertaintyLimit | None = None
@@ -199,9 +204,19 @@ class RerunSink(_StagedTarget):
 
         path = self._begin(overwrite) if self.target is not None else None
         self._count = 0
+        host, port, web_port = "127.0.0.1", 0, None
+        if self.serve is not None:
+            host, port = parse_address(self.serve, "--rerun-serve")
+            web_port = None if is_loopback(host) else WEB_PORT  # rerun binds its web viewer to every interface
         with self._full_disk():
-            self._logger = logger = RerunLogger(path, spawn=self.spawn, max_depth=self.max_depth, serve=self.serve)
-        if logger.url is not None and self.log is not None:
+            self._logger = logger = RerunLogger(path, spawn=self.spawn, max_depth=self.max_depth,
+                                                serve=self.serve is not None, grpc_port=port, web_port=web_port,
+                                                host=host)  # fmt: skip
+        if self.log is not None and logger.grpc_url is not None:
+            if not is_loopback(host):
+                self.log(exposed("--rerun-serve", host, logger.grpc_url))
+            self.log(f"Rerun stream: {logger.grpc_url} (open it with: rerun {logger.grpc_url})")
+        if self.log is not None and logger.url is not None:
             self.log(f"Rerun web viewer: {logger.url}")
 
     def write(self, stage: Path, pred: Prediction) -> None:
@@ -220,9 +235,15 @@ class RerunSink(_StagedTarget):
         self._count += 1
 
     def finish(self, stage: Path) -> None:
+        """The recording complete (staged); a served stream goes on until :meth:`close`."""
         with self._full_disk():
             if self._logger is not None:
-                self._logger.close()
+                self._logger.finish_file() if self.serve is not None else self._logger.close()
+
+    def close(self) -> None:
+        """Stop serving (the run is recorded): the viewers dropped, the gRPC server stopped, within seconds."""
+        if self._logger is not None:
+            self._logger.close()
 
     def commit(self) -> None:
         if self.target is not None:

@@ -6,14 +6,17 @@ form (one in-place multiply-add per tap and step: 2 x 3 x 6 steps x up to 49 tap
 kernel launch). Under ``torch.compile`` the same function takes its recorded form
 (:func:`semattnet.models.propagation.export.propagate_functional`, chosen by
 :func:`semattnet.models._tracing.is_tracing`), which Inductor fuses into a few Triton kernels.
-Compiled once per input size and iteration count (``dynamic=False``); on the CPU the same
-compilation works but takes minutes on 2 cores, so the tests check the recorded form through
-TorchScript tracing (:func:`traced_propagation`), which takes the same code path.
+Compiled once per input size and iteration count (``dynamic=False``; each first compilation said on
+stderr with the time it took); on the CPU the same compilation works but takes minutes on 2 cores, so the
+tests check the recorded form through TorchScript tracing (:func:`traced_propagation`), which takes the
+same code path.
 """
 
 from __future__ import annotations
 
 import functools
+import sys
+import time
 from collections.abc import Callable
 
 import torch
@@ -27,8 +30,27 @@ Propagation = Callable[[RefinementHeads, int], tuple[torch.Tensor, torch.Tensor]
 
 @functools.cache
 def compiled_propagation(mode: str | None = None) -> Propagation:
-    """``refine`` compiled by Inductor (``mode``: e.g. ``"max-autotune-no-cudagraphs"``)."""
-    return torch.compile(refine, dynamic=False, mode=mode)
+    """``refine`` compiled by Inductor (``mode``: e.g. ``"max-autotune-no-cudagraphs"``); the first call at each
+    size and iteration count (a compilation) is said on stderr, with the time it took."""
+    compiled = torch.compile(refine, dynamic=False, mode=mode)
+    seen: set[tuple[object, ...]] = set()
+
+    def run(heads: RefinementHeads, iterations: int) -> tuple[torch.Tensor, torch.Tensor]:
+        key = (tuple(heads.depth.shape), heads.depth.device.type, iterations)
+        if key in seen:
+            return compiled(heads, iterations)
+        size = "x".join(map(str, key[0][-2:]))
+        print(f"semattnet: compiling the propagation for {size}, {iterations} iteration(s) (once per size) ...",
+              file=sys.stderr, flush=True)  # fmt: skip
+        start = time.perf_counter()
+        out = compiled(heads, iterations)
+        seen.add(key)
+        print(
+            f"semattnet: compiled the propagation in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True
+        )
+        return out
+
+    return run
 
 
 def traced_propagation(heads: RefinementHeads, iterations: int) -> tuple[torch.Tensor, torch.Tensor]:

@@ -15,16 +15,21 @@ the outputs agree to float rounding (and to the bit with the steps run one at a 
 :func:`normalize_affinity` turns the raw guidance into that kernel (eq. 13) in one pass.
 
 It is built with :func:`torch.utils.cpp_extension.load_inline` (needs a C++ compiler and the
-``ninja`` package; the build is cached, ~30 s the first time). Without them, or for autograd,
-CUDA, or non-float32 tensors, the refinement uses the PyTorch implementation instead. Set
-``SEMATTNET_NO_CPP=1`` to disable the kernel.
+``ninja`` package; the build is cached, ~30-60 s the first time, said on stderr with the time it took).
+Without them (one line on stderr), or for autograd, CUDA, or non-float32 tensors, the refinement uses
+the PyTorch implementation instead. Set ``SEMATTNET_NO_CPP=1`` to disable the kernel. A build lock that
+torch left behind when a build was killed (older than :data:`STALE_LOCK_S`) is removed instead of
+waited on forever.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
+import sys
 import threading
-import warnings
+import time
+from pathlib import Path
 
 import torch
 
@@ -154,9 +159,71 @@ torch::Tensor normalize_affinity(torch::Tensor guide, torch::Tensor out) {
 }
 """
 
+#: The extension's name (its build folder under torch's extensions root); a new version for new sources.
+NAME = "semattnet_propagation_v5"
+#: A build lock older than this (seconds) was left by a build that was killed (a build takes about a minute).
+STALE_LOCK_S = 600.0
+
 _lock = threading.Lock()
 _module: object | None = None
 _failed: str | None = None
+
+
+def _say(text: str) -> None:
+    """One line on stderr (the build is said once per process)."""
+    print(f"semattnet: {text}", file=sys.stderr, flush=True)
+
+
+def _build_dir() -> Path:
+    """torch's build folder of the extension (``TORCH_EXTENSIONS_DIR`` or ``~/.cache/torch_extensions/...``)."""
+    from torch.utils.cpp_extension import _get_build_directory
+
+    return Path(_get_build_directory(NAME, False))
+
+
+def _missing_tools() -> str | None:
+    """What a build lacks (a C++ compiler, ninja), or None."""
+    from torch.utils.cpp_extension import is_ninja_available
+
+    compiler = os.environ.get("CXX") or "c++"
+    if shutil.which(compiler) is None:
+        return f"no C++ compiler ({compiler} not found; install one or set CXX)"
+    if not is_ninja_available():
+        return "no ninja (pip install ninja)"
+    return None
+
+
+def _clear_stale_lock(build: Path) -> None:
+    """Wait for another process's build at most until its lock is :data:`STALE_LOCK_S` old; an older lock is a
+    killed build's and is removed (torch itself would wait on it forever)."""
+    lock = build / "lock"
+    while True:
+        try:
+            age = time.time() - lock.stat().st_mtime
+        except FileNotFoundError:
+            return
+        if age > STALE_LOCK_S:
+            _say(f"removing {lock}, left by a build that was killed {age / 60:.0f} min ago")
+            lock.unlink(missing_ok=True)
+            return
+        time.sleep(min(1.0, STALE_LOCK_S - age + 0.01))
+
+
+def _build() -> object:
+    """The compiled module: built (and said so, with the time taken) when not cached yet."""
+    from torch.utils.cpp_extension import load_inline
+
+    build = _build_dir()
+    _clear_stale_lock(build)
+    fresh = not (build / f"{NAME}.so").is_file()
+    if fresh:
+        _say("building the fused CPU propagation kernel (once; about a minute) ...")
+    start = time.perf_counter()
+    module = load_inline(name=NAME, cpp_sources=[_SOURCE], functions=["propagate_iterations", "normalize_affinity"],
+                         extra_cflags=["-O3", "-march=native", "-fno-math-errno"], verbose=False)  # fmt: skip
+    if fresh:
+        _say(f"built the fused CPU propagation kernel in {time.perf_counter() - start:.1f} s ({build})")
+    return module
 
 
 def _load() -> object | None:
@@ -170,18 +237,14 @@ def _load() -> object | None:
             _failed = "disabled by SEMATTNET_NO_CPP"
             return None
         try:
-            from torch.utils.cpp_extension import load_inline
-
-            _module = load_inline(
-                name="semattnet_propagation_v5",
-                cpp_sources=[_SOURCE],
-                functions=["propagate_iterations", "normalize_affinity"],
-                extra_cflags=["-O3", "-march=native", "-fno-math-errno"],
-                verbose=False,
-            )
-        except Exception as err:  # no compiler, no ninja, ...: fall back to PyTorch
+            built = (_build_dir() / f"{NAME}.so").is_file()
+            _failed = None if built else _missing_tools()
+            if _failed is None:
+                _module = _build()
+        except Exception as err:  # a failed build, ...: fall back to PyTorch
             _failed = f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
-            warnings.warn(f"semattnet: fused CPU propagation unavailable ({_failed}); using PyTorch", stacklevel=3)
+        if _failed is not None:
+            _say(f"fused CPU propagation unavailable ({_failed}); using the PyTorch propagation")
         return _module
 
 
