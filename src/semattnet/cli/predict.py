@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import click
 
 from semattnet.cli._group import main
-from semattnet.cli._inputs import ChosenInput, choose_input, input_options
+from semattnet.cli._inputs import MAP_OPTIONS, ChosenInput, choose_input, input_params
 from semattnet.cli._options import (
     DEPTH_M,
     MODEL,
@@ -27,7 +27,7 @@ from semattnet.cli._options import (
     weights_option,
 )
 from semattnet.cli._outputs import Outputs, RunOptions, output_options
-from semattnet.cli._params import SectionedCommand, section, values_of
+from semattnet.cli._params import GeneratedCommand, section, values_of, with_options
 
 if TYPE_CHECKING:
     from semattnet.inference.pipeline import Completer, FrameRun
@@ -97,8 +97,8 @@ def _identity(params: Mapping[str, object]) -> dict[str, object]:
     return run
 
 
-@main.command(cls=SectionedCommand)
-@input_options()
+@main.command(cls=GeneratedCommand, generated=[("", input_params)])
+@with_options(MAP_OPTIONS)
 @weights_option
 @click.option(
     "--method",
@@ -156,7 +156,7 @@ def _run_frames(chosen: ChosenInput, outputs: Outputs, run: RunOptions, model: M
     timer = StageTimes()
     sinks = outputs.sinks(timer)
     with process_group():
-        source, maps = chosen.values.open(chosen.maps, model.device)
+        source, maps = chosen.open(model.device)
         plan = check_frames(source, sinks, out, overwrite=outputs.overwrite, on_error=run.on_error, resume=resuming,
                             run=identity, inputs=[weights_input(model.weights)[1]])  # before the model  # fmt: skip
         if plan.journal.kept:

@@ -165,10 +165,10 @@ class Sink:
 
 
 #: Sink name -> :class:`~semattnet._utils.registry.Entry` (the class and the ``predict`` option asking for it).
-#: The robot sinks register from :mod:`semattnet.robotics` (which imports this layer, never the reverse), so
-#: they are listed once their modules are imported. Every registered sink runs through the suite in
+#: The robot sinks register from :mod:`semattnet.robotics` (which imports this layer, never the reverse), named
+#: here by their modules and imported on first read. Every registered sink runs through the suite in
 #: ``tests/registry/test_sinks.py``.
-SINKS: Registry[Sink] = Registry("sink")
+SINKS: Registry[Sink] = Registry("sink", homes=(__name__, "semattnet.robotics.sinks", "semattnet.robotics.live"))
 
 
 def register_sink(name: str, option: str | None = None) -> Callable[[type[Sink]], type[Sink]]:
@@ -177,7 +177,7 @@ def register_sink(name: str, option: str | None = None) -> Callable[[type[Sink]]
 
 
 def list_sinks() -> list[str]:
-    """The registered sink names (the robot ones once :mod:`semattnet.robotics`' modules are imported)."""
+    """The registered sink names."""
     return SINKS.names()
 
 

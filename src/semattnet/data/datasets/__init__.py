@@ -17,13 +17,16 @@ import math
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol
+from pathlib import Path
+from typing import TYPE_CHECKING, ClassVar, Protocol
 
 from semattnet._errors import InputError
+from semattnet._utils.registry import option
 from semattnet.data.datasets.frames import check_split_in
 from semattnet.data.datasets.nyuv2 import NYU_SPLITS, NyuV2Source
 from semattnet.data.datasets.void import VOID_SPLITS, VoidSource
 from semattnet.data.frames import IndexedSource
+from semattnet.data.sources.registry import SOURCES, SourceOptions
 
 if TYPE_CHECKING:
     from semattnet.data.datasets.frames import FrameDataset
@@ -32,8 +35,8 @@ if TYPE_CHECKING:
     #: The torch Dataset of a split (:meth:`DatasetSpec.dataset`): dicts of tensors, ``load(i)`` the raw sample.
     SplitDataset = KittiDepthCompletion | FrameDataset
 
-__all__ = ["DATASETS", "DEFAULT_DATASET", "DatasetArchive", "DatasetSpec", "UnknownDatasetError", "check_split",
-           "get_dataset"]  # fmt: skip
+__all__ = ["DATASETS", "DEFAULT_DATASET", "DatasetArchive", "DatasetOptions", "DatasetSpec", "UnknownDatasetError",
+           "check_split", "get_dataset"]  # fmt: skip
 
 PathLike = str | os.PathLike[str]
 DEFAULT_DATASET = "kitti-dc"
@@ -237,3 +240,31 @@ def get_dataset(name: str | DatasetSpec | None = None) -> DatasetSpec:
 def check_split(name: str, split: str | None) -> str:
     """:meth:`DatasetSpec.check_split` of the dataset ``name``."""
     return get_dataset(name).check_split(split)
+
+
+@dataclass(frozen=True)
+class DatasetOptions(SourceOptions):
+    """``--data --dataset --split``: a split of a registered dataset (the ``kitti-split`` source's options)."""
+
+    heading: ClassVar[str] = "Inputs: dataset"
+    usage: ClassVar[str] = "--data (with --dataset)"
+    selects: ClassVar[tuple[str, ...]] = ("data_root",)
+    accepts: ClassVar[tuple[str, ...]] = ("semantic", "segment_spec")
+
+    data_root: Path | None = option(
+        "--data", type="folder", help="A dataset root (instead of --rgb/--sparse): the frames of --split."
+    )
+    dataset: str = option("--dataset", type="choice", choices=tuple(DATASETS), default=DEFAULT_DATASET,
+                          show_default=True, help="The dataset whose root --data is.")  # fmt: skip
+    split: str | None = option("--split", help="The split [the dataset's evaluation split].")
+
+    def segment_split(self) -> tuple[str, Path, str] | None:
+        assert self.data_root is not None  # it chose this input
+        return self.dataset, self.data_root, self.split or get_dataset(self.dataset).eval_split
+
+    def source(self, semantic: Path | None, log: Callable[[str], None]) -> IndexedSource:
+        assert self.data_root is not None  # it chose this input
+        return get_dataset(self.dataset).source(self.data_root, self.split, semantic_root=semantic)
+
+
+SOURCES.attach("kitti-split", DatasetOptions)
