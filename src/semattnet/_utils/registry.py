@@ -21,12 +21,12 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any, Generic, TypeVar
 
 from semattnet._errors import InputError
 
-__all__ = ["Entry", "Option", "OptionError", "Registry", "UnknownEntryError", "option"]
+__all__ = ["Entry", "Option", "OptionError", "Registry", "UnknownEntryError", "option", "volatile"]
 
 T = TypeVar("T")
 
@@ -49,7 +49,8 @@ class Option:
     """One command-line option of a dataclass field: its ``flags``, ``help`` and ``type`` (a name the command
     turns into its parameter type: ``text``, ``flag``, ``choice`` (of ``choices``), or one of the command's
     path, duration and range types: ``input``, ``folder``, ``file``, ``seconds``, ...); ``metavar``,
-    ``show_default``; ``flag_value``: an option whose value may be left out."""
+    ``show_default``; ``flag_value``: an option whose value may be left out; ``identity``: whether the option
+    changes what a run writes (a resumed run must agree with the first in those)."""
 
     flags: tuple[str, ...]
     help: str
@@ -58,6 +59,7 @@ class Option:
     metavar: str | None = None
     show_default: bool = False
     flag_value: str | None = None
+    identity: bool = True
 
 
 def option(*flags: str, help: str, default: Any = None, **kw: Any) -> Any:
@@ -65,6 +67,11 @@ def option(*flags: str, help: str, default: Any = None, **kw: Any) -> Any:
     defaults to False."""
     spec = Option(tuple(flags), help, **kw)
     return field(default=False if spec.type == "flag" and default is None else default, metadata={"option": spec})
+
+
+def volatile(cls: type) -> set[str]:
+    """The fields of the dataclass ``cls`` whose options do not change what a run writes (``identity=False``)."""
+    return {f.name for f in fields(cls) if "option" in f.metadata and not f.metadata["option"].identity}
 
 
 @dataclass(frozen=True)

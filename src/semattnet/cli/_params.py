@@ -65,9 +65,9 @@ class SectionedCommand(Command):
 
 class GeneratedCommand(SectionedCommand):
     """A sectioned command some of whose options are made from registries each time they are read, so that an
-    entry registered after the command was made (a plugin's, a test's) is on it too. ``generated``: (where,
-    make) pairs; ``make()`` gives options, inserted at the start (``where`` ``""``) or after the last option
-    under the heading ``where``."""
+    entry registered after the command was made (a plugin's, a test's) is on it too. ``generated``: (after,
+    make) pairs; ``make()`` gives options, inserted at the start (``after`` ``""``) or after the option named
+    ``after``."""
 
     def __init__(self, *args: Any, generated: Sequence[tuple[str, Callable[[], Sequence[click.Parameter]]]] = (),
                  **kwargs: Any) -> None:  # fmt: skip
@@ -78,8 +78,8 @@ class GeneratedCommand(SectionedCommand):
     def refresh(self) -> None:
         """Make the generated options again (from the registries as they are now)."""
         params = list(self._static)
-        for where, make in self._generated:
-            at = 0 if not where else 1 + max(i for i, p in enumerate(params) if heading_of(p) == where)
+        for after, make in self._generated:
+            at = 0 if not after else 1 + next(i for i, p in enumerate(params) if p.name == after)
             params[at:at] = make()
         self.params = params
 

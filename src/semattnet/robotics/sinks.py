@@ -21,16 +21,17 @@ import numpy as np
 
 from semattnet._errors import InputError
 from semattnet._utils.outputs import clean_stale_stages
+from semattnet._utils.registry import option
 from semattnet.data.frames import Frame
 from semattnet.geometry.cameras import CameraInfoData
-from semattnet.inference.sinks import Prediction, RunSink, register_sink
+from semattnet.inference.sinks import OutputSettings, Prediction, RunSink, Sink, SinkOptions, register_sink
 from semattnet.inference.uncertainty import UncertaintyLimit
 
 if TYPE_CHECKING:
     from semattnet.robotics.bags import BagWriter
     from semattnet.robotics.rerun import RerunLogger
 
-__all__ = ["BagSink", "RerunSink", "camera_info", "stamp_ns"]
+__all__ = ["BagOutOptions", "BagSink", "RerunOptions", "RerunSink", "camera_info", "stamp_ns"]
 
 
 def stamp_ns(frame: Frame, index: int) -> int:
@@ -97,7 +98,46 @@ class _StagedTarget(RunSink):
             self._dir = None  # type: ignore[assignment]
 
 
-@register_sink("bag", option="--bag-out")
+@dataclass(frozen=True)
+class BagOutOptions(SinkOptions):
+    """``--bag-out``."""
+
+    needs_intrinsics: ClassVar[bool] = True
+    clouds: ClassVar[str] = "always"
+    bag_out: Path | None = option("--bag-out", type="out-path", help="Also write a ROS 2 bag (MCAP; ROS 1 for .bag): "
+                                  "depth 32FC1, coloured cloud, CameraInfo.")  # fmt: skip
+
+    def sinks(self, settings: OutputSettings) -> list[Sink]:
+        if self.bag_out is None:
+            return []
+        s = settings
+        return [BagSink(target=self.bag_out, max_depth=s.max_depth, uncertainty=s.uncertainty,
+                        max_uncertainty=s.max_uncertainty)]  # fmt: skip
+
+
+@dataclass(frozen=True)
+class RerunOptions(SinkOptions):
+    """``--rerun FILE``, ``--rerun-spawn``, ``--rerun-serve``."""
+
+    needs_intrinsics: ClassVar[bool] = True
+    clouds: ClassVar[str] = "always"
+    rerun_file: Path | None = option("--rerun", type="out-file",
+                                     help="Also write a Rerun recording FILE.rrd.  [extra: rerun]")  # fmt: skip
+    rerun_spawn: bool = option("--rerun-spawn", type="flag", identity=False,
+                               help="Stream the frames to a spawned Rerun viewer.")  # fmt: skip
+    rerun_serve: bool = option("--rerun-serve", type="flag", identity=False,
+                               help="Serve the frames to Rerun's web viewer in a browser as they are completed.  "
+                               "[extra: rerun]")  # fmt: skip
+
+    def sinks(self, settings: OutputSettings) -> list[Sink]:
+        if not self.asked():
+            return []
+        s = settings
+        return [RerunSink(target=self.rerun_file, spawn=self.rerun_spawn, serve=self.rerun_serve, max_depth=s.max_depth,
+                          log=s.log, uncertainty=s.uncertainty, max_uncertainty=s.max_uncertainty)]  # fmt: skip
+
+
+@register_sink("bag", option="--bag-out", options=BagOutOptions)
 @dataclass
 class BagSink(_StagedTarget):
     """``--bag-out``: a ROS 2 bag (MCAP where rosbags writes it; ROS 1 for ``.bag``) by
@@ -172,7 +212,7 @@ def camera_info(frame: Frame) -> CameraInfoData:
     return CameraInfoData(w, h, K, np.zeros(5), np.eye(3), np.hstack([K, np.zeros((3, 1))]), "plumb_bob", "camera")
 
 
-@register_sink("rerun", option="--rerun")
+@register_sink("rerun", option="--rerun", options=RerunOptions)
 @dataclass
 class RerunSink(_StagedTarget):
     """``--rerun FILE.rrd`` / ``--rerun-spawn``: per frame the camera, image, sparse input, stored depth, semantic

@@ -61,7 +61,7 @@ class BagOptions(SourceOptions):
     max_skew: float | None = option(
         "--max-skew", type="seconds", help="Seconds between an image and its scan at most [half the scan period]."
     )
-    list_topics: bool = option("--list-topics", type="flag", help="Print the bag's topics and exit.")
+    list_topics: bool = option("--list-topics", type="flag", identity=False, help="Print the bag's topics and exit.")
 
     def check(self, segment_spec: str | None) -> None:
         if not self.list_topics and None in (self.image_topic, self.points_topic):
