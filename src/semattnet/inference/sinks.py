@@ -144,12 +144,25 @@ def predict_frame(frame: Frame, completion: Completion) -> Prediction:
 @dataclass
 class Sink:
     """Writes ``FOLDER/NAME+SUFFIX`` per frame (``rename``: frame name -> file name instead; ``only``:
-    the frames it writes, default all). Subclasses write the file in :meth:`save`."""
+    the frames it writes, default all). Subclasses write the file in :meth:`save`.
+
+    What the frame loop asks of every sink (a per-frame sink's run hooks do nothing; :class:`RunSink`'s do):
+    :meth:`open` before the first frame, :meth:`write` per frame, :meth:`finish`, then :meth:`commit` or
+    :meth:`abort`; ``files()`` and ``targets()``, its outputs of the whole run. Its facts: ``role``, what the
+    loop finds it by (``depth``: the depth PNG, named in each frame's line, the paths a run returns and read
+    back by a resume; ``uncertainty``: the uncertainty PNG a resume reads back); ``replays``: a resumed run hands
+    it the frames kept from the earlier run; ``once``: under ``torchrun`` one process (rank 0) finishes it."""
 
     suffix: str = ".png"
     folder: str = ""
     only: Collection[str] | None = None
     rename: Mapping[str, str] | None = None
+    role: ClassVar[str] = ""
+    replays: ClassVar[bool] = False
+    once: ClassVar[bool] = False
+    #: The option that names ``targets()`` and what they are (a kind of :data:`semattnet._utils.outputs.KINDS`).
+    option: ClassVar[str] = "--out"
+    kind: ClassVar[str] = "file"
 
     def path(self, name: str) -> str | None:
         """The file for frame ``name``, relative to the output folder (None: not written)."""
@@ -166,6 +179,26 @@ class Sink:
 
     def save(self, path: Path, pred: Prediction) -> None:
         raise NotImplementedError
+
+    def files(self) -> list[str]:
+        """Its outputs of the whole run inside the output folder (written into the stage by :meth:`finish`)."""
+        return []
+
+    def targets(self) -> list[Path]:
+        """Its outputs of the whole run elsewhere (checked like every output)."""
+        return []
+
+    def open(self, overwrite: bool = False) -> None:
+        """Start the run (``overwrite``: existing targets may be replaced at :meth:`commit`)."""
+
+    def finish(self, stage: Path) -> None:
+        """Every frame written: complete the run's outputs (``files()`` into ``stage``, ``targets()`` staged)."""
+
+    def commit(self) -> None:
+        """Move ``targets()`` into place."""
+
+    def abort(self) -> None:
+        """Remove whatever was staged."""
 
 
 #: Sink name -> :class:`~semattnet._utils.registry.Entry` (the class and the ``predict`` option asking for it).
@@ -293,6 +326,8 @@ def list_sinks() -> list[str]:
 class DepthPngSink(Sink):
     """``NAME.png``: the KITTI 16-bit depth (``metres * 256``, 0 = hole)."""
 
+    role: ClassVar[str] = "depth"
+
     def save(self, path: Path, pred: Prediction) -> None:
         write_depth(path, pred.png, overwrite=True)
 
@@ -356,6 +391,7 @@ class UncertaintyPngSink(Sink):
     a hole in the depth; :func:`~semattnet.inference.uncertainty.encode_uncertainty`)."""
 
     folder: str = "uncertainty"
+    role: ClassVar[str] = "uncertainty"
 
     def save(self, path: Path, pred: Prediction) -> None:
         write_depth(path, _uncertainty_of(pred)[1], overwrite=True)
@@ -415,33 +451,12 @@ class RunSink(Sink):
     earlier run (their stored depth, in their place), so that its output covers every frame."""
 
     replays: ClassVar[bool] = True
-    #: The option that names ``targets()`` and what they are (a kind of :data:`semattnet._utils.outputs.KINDS`).
-    option: ClassVar[str] = "--out"
-    kind: ClassVar[str] = "file"
 
     def path(self, name: str) -> str | None:
         return None
 
-    def files(self) -> list[str]:
-        return []
-
-    def targets(self) -> list[Path]:
-        return []
-
-    def open(self, overwrite: bool = False) -> None:
-        """Start the run (``overwrite``: existing targets may be replaced at :meth:`commit`)."""
-
     def write(self, stage: Path, pred: Prediction) -> None:
         """One frame."""
-
-    def finish(self, stage: Path) -> None:
-        """Every frame written: complete the output (``files()`` into ``stage``, ``targets()`` staged)."""
-
-    def commit(self) -> None:
-        """Move ``targets()`` into place."""
-
-    def abort(self) -> None:
-        """Remove whatever was staged."""
 
 
 @register_sink("latency", option="--stream", options=_Latency)
@@ -452,6 +467,7 @@ class LatencySink(RunSink):
     timer: StageTimes | None = None
     name: str = "latency.json"
     replays: ClassVar[bool] = False  # the loop adds the kept frames' recorded times to the timer
+    once: ClassVar[bool] = True  # rank 0's timer: every rank's frames
 
     def files(self) -> list[str]:
         return [self.name]

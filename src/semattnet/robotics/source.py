@@ -26,7 +26,7 @@ import numpy as np
 
 from semattnet._errors import DataError
 from semattnet._utils.registry import OptionError, option
-from semattnet.data.frames import Frame, IndexedSource, SensorMeta
+from semattnet.data.frames import Frame, IndexedSource, SensorMeta, SourceInfo
 from semattnet.data.sources.registry import SourceOptions, register_source
 from semattnet.geometry import RigCalibration
 from semattnet.robotics.bags import BagFailure, BagPair, BagPairs, StampPairing
@@ -143,6 +143,12 @@ class BagSource(IndexedSource):
             if p.dropped_images:
                 text += f" ({p.dropped_images} image(s) without one within {p.max_skew_ns / 1e6:.1f} ms)"
         return text
+
+    @property
+    def info(self) -> SourceInfo:
+        """No semantic palette of its own (a semantic topic's maps are Cityscapes: ``palette``), every frame's
+        header stamp."""
+        return SourceInfo(self.palette, stamps_ns=[int(ns) for ns in self.stamps_ns])
 
     @property
     def stamps_ns(self) -> np.ndarray:
