@@ -51,7 +51,7 @@ def or_list(items: Sequence[str]) -> str:
 
 #: What an :class:`~semattnet._utils.registry.Option`'s ``type`` names: an existing input (file or folder), an
 #: existing folder or file, an output folder, file or path, seconds, metres, pixels, a speed factor.
-TYPES: dict[str, Any] = {
+TYPES: dict[str, click.ParamType | None] = {
     "text": None, "input": _INPUT, "folder": click.Path(exists=True, file_okay=False, path_type=Path),
     "file": click.Path(exists=True, dir_okay=False, path_type=Path),
     "out-folder": click.Path(file_okay=False, path_type=Path), "out-file": click.Path(dir_okay=False, path_type=Path),
