@@ -133,11 +133,8 @@ class AskedSinks:
 
 
 def _replays(name: str, v: SinkOptions) -> bool:
-    """A resumed run rebuilds it from the kept frames (:attr:`semattnet.inference.sinks.RunSink.replays`)."""
-    from semattnet.inference.sinks import RunSink
-
-    cls = SINKS[name].cls
-    return issubclass(cls, RunSink) and cls.replays
+    """A resumed run rebuilds it from the kept frames (the sink's :attr:`~semattnet.inference.sinks.Sink.replays`)."""
+    return SINKS[name].cls.replays
 
 
 @dataclass(frozen=True)
