@@ -320,7 +320,7 @@ class LiveSink(RunSink):
         if T is not None:
             lidar = frame.meta.lidar_frame_id or "lidar"
             self._log("tf", t_ns, lambda: _transform(m, stamp, frame_id, lidar, T))
-        stages = {str(k): float(v) for k, v in (getattr(pred, "stage_ms", None) or {}).items()}
+        stages = {str(k): float(v) for k, v in pred.stage_ms.items()}
         self._log("latency", t_ns, lambda: {"frame": frame.name, "stamp_ns": t_ns, "stages_ms": stages})
 
     def _stop(self) -> None:
