@@ -84,7 +84,7 @@ def _dataset(name: str) -> Callable[[Path], IndexedSource]:
 KITTI_RAW = (375, 1242)
 FIXTURES = {
     "folder": SourceFixture(folder_frames, _folder, 2, SIZE, "sparse", _folder_values),
-    "kitti-split": SourceFixture(kitti_tree, _dataset("kitti-dc"), 1, SIZE, "sparse"),
+    "kitti-dc": SourceFixture(kitti_tree, _dataset("kitti-dc"), 1, SIZE, "sparse"),
     "kitti-raw": SourceFixture(three_frame_drive, _open_raw, 3, KITTI_RAW, "scan", _official_scan),
     "nyuv2": SourceFixture(nyu_tree, _dataset("nyuv2"), 2, (228, 304), "sparse", _same_as_gt),
     "void": SourceFixture(void_tree, _dataset("void"), 2, SIZE, "sparse", _same_as_gt),
@@ -157,3 +157,11 @@ class TestSources(RegistryTester[SourceFixture]):
         assert np.isfinite(a.sparse).all() and 0 <= a.sparse.min() and a.sparse.max() < 256
         if fx.check is not None:
             fx.check(a)
+
+
+def test_each_dataset_is_the_source_of_its_name(inputs: dict[str, Path]) -> None:
+    """A dataset and its frames' source go by one name (``kitti-dc``, ``nyuv2``, ``void``)."""
+    from semattnet.data.datasets import DATASETS
+
+    for name in DATASETS:
+        assert isinstance(FIXTURES[name].open(inputs[name]), SOURCES[name].cls), name

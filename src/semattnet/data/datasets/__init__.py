@@ -244,7 +244,8 @@ def check_split(name: str, split: str | None) -> str:
 
 @dataclass(frozen=True)
 class DatasetOptions(SourceOptions):
-    """``--data --dataset --split``: a split of a registered dataset (the ``kitti-split`` source's options)."""
+    """``--data --dataset --split``: a split of a registered dataset (the options of the default dataset's source,
+    ``kitti-dc``)."""
 
     heading: ClassVar[str] = "Inputs: dataset"
     usage: ClassVar[str] = "--data (with --dataset)"
@@ -267,4 +268,4 @@ class DatasetOptions(SourceOptions):
         return get_dataset(self.dataset).source(self.data_root, self.split, semantic_root=semantic)
 
 
-SOURCES.attach("kitti-split", DatasetOptions)
+SOURCES.attach("kitti-dc", DatasetOptions)

@@ -13,7 +13,7 @@ from semattnet.data.sources.registry import register_source
 __all__ = ["KittiSplitSource", "prediction_name"]
 
 
-@register_source("kitti-split", option="--data")  # its options: data.datasets.DatasetOptions
+@register_source("kitti-dc", option="--data")  # the dataset's name; options: data.datasets.DatasetOptions
 class KittiSplitSource(IndexedSource):
     """The frames of a split at full size, read by :func:`semattnet.data.kitti.load_frame` (paired by drive,
     camera and frame id; incomplete frames refused as :class:`KittiDepthCompletion` does).
