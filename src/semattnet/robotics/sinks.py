@@ -47,6 +47,7 @@ class _StagedTarget(RunSink):
     """A run output at ``target``, written into a hidden folder beside it and moved into place at commit."""
 
     target: Path | None
+    _dir: Path | None = None  # the hidden folder, between open and commit / abort (a class default, not a field)
 
     def targets(self) -> list[Path]:
         return [] if self.target is None else [Path(self.target)]
@@ -73,13 +74,13 @@ class _StagedTarget(RunSink):
 
         from semattnet._utils.atomic import full_disk_named
 
-        return nullcontext() if self.target is None else full_disk_named(self.target, getattr(self, "_dir", None))
+        return nullcontext() if self.target is None else full_disk_named(self.target, self._dir)
 
     def commit(self) -> None:
         from semattnet._utils.atomic import fsync_dir
         from semattnet._utils.outputs import refuse_existing
 
-        assert self.target is not None  # _begin refused a missing target
+        assert self.target is not None and self._dir is not None  # _begin refused a missing target
         target = Path(self.target)
         try:
             refuse_existing([target], self._overwrite)
@@ -93,9 +94,9 @@ class _StagedTarget(RunSink):
     def abort(self) -> None:
         import shutil
 
-        if getattr(self, "_dir", None) is not None:
+        if self._dir is not None:
             shutil.rmtree(self._dir, ignore_errors=True)
-            self._dir = None  # type: ignore[assignment]
+            self._dir = None
 
 
 @dataclass(frozen=True)
@@ -187,7 +188,7 @@ class BagSink(_StagedTarget):
                 writer.close()  # the bag is complete in the hidden folder
 
     def abort(self) -> None:
-        writer, self._writer = getattr(self, "_writer", None), None
+        writer, self._writer = self._writer, None
         try:
             if writer is not None:  # still open: BagWriter removes its stage
                 writer.__exit__(RuntimeError, RuntimeError("aborted"), None)
@@ -269,7 +270,7 @@ class RerunSink(_StagedTarget):
             super().commit()
 
     def abort(self) -> None:
-        logger, self._logger = getattr(self, "_logger", None), None
+        logger, self._logger = self._logger, None
         try:
             if logger is not None:
                 logger.__exit__(RuntimeError, RuntimeError("aborted"), None)
