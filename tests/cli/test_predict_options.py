@@ -6,15 +6,18 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import ClassVar
 
 import click
 import pytest
 from click.testing import CliRunner
 
+from semattnet._utils.registry import option as cli_option
 from semattnet.cli import main
-from semattnet.cli._inputs import INPUTS, MAP_OPTIONS, InputKind, InputValues, choose_input, input_options, or_list
-from semattnet.cli._params import OTHER, SectionedCommand, heading_of, section
+from semattnet.cli._inputs import INPUTS, MAP_OPTIONS, InputKind, choose_input, input_options, or_list
+from semattnet.cli._params import OTHER, SectionedCommand, heading_of
 from semattnet.cli.predict import predict
+from semattnet.data.sources.registry import SourceOptions
 
 HEADINGS = ["Inputs: files", "Inputs: KITTI raw drive", "Inputs: ROS bag", "Inputs: dataset", "Semantic maps",
             "Model", "Outputs", "Run", OTHER]  # fmt: skip
@@ -127,14 +130,17 @@ def test_every_registered_source_and_sink_is_made_by_an_option_of_predict() -> N
 
 
 @dataclass(frozen=True)
-class _ToyInput(InputValues):
-    toy: str
-    toy_level: str | None
+class _ToyInput(SourceOptions):
+    heading: ClassVar[str] = "Inputs: toy"
+    usage: ClassVar[str] = "--toy"
+    selects: ClassVar[tuple[str, ...]] = ("toy",)
+    accepts: ClassVar[tuple[str, ...]] = ("segment_spec",)
+
+    toy: str | None = cli_option("--toy", help="A toy input.")
+    toy_level: str | None = cli_option("--toy-level", help="Its level.")
 
 
-_TOY = InputKind("toy", "--toy", (section("Inputs: toy")(["--toy"], default=None, help="A toy input."),
-                                  section("Inputs: toy")(["--toy-level"], default=None, help="Its level.")),
-                 _ToyInput, selects=("toy",), accepts=("segment_spec",))  # fmt: skip
+_TOY = InputKind("toy", _ToyInput)
 _KINDS = (*INPUTS, _TOY)
 
 

@@ -218,3 +218,16 @@ def test_tar_members_leaving_the_folder_are_refused(tmp_path: Path) -> None:
     with pytest.raises(UnsafeArchiveError, match="outside.txt"):
         extract_tar(path, tmp_path / "dest")
     assert not (tmp_path / "outside.txt").exists()
+
+
+def test_the_cropped_splits_are_the_entrys_not_its_names() -> None:
+    """Which splits the protocol crops is a field of the entry: any dataset may declare them."""
+    from dataclasses import replace
+
+    from semattnet.data.datasets import get_dataset
+
+    spec = replace(get_dataset("nyuv2"), name="indoor-cropped", crop=(8, 12), crop_splits=("test",))
+    assert spec.eval_crop("test", (16, 24)) == (8, 12)
+    assert spec.eval_crop("train", (16, 24)) is None and spec.eval_crop("test", (8, 12)) is None
+    assert get_dataset("kitti-dc").eval_crop("val", (375, 1242)) == (352, 1216)
+    assert get_dataset("kitti-dc").eval_crop("val_select", (375, 1242)) is None

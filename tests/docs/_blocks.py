@@ -16,6 +16,7 @@ import re
 import shlex
 import subprocess
 import sys
+import types
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -137,7 +138,9 @@ def run_bash(code: str, cwd: Path, env: dict[str, str], where: str) -> None:
 
 def run_page(blocks: list[Block], cwd: Path, env: dict[str, str]) -> int:
     """Run a page's runnable blocks in order in ``cwd``; returns how many ran."""
-    namespace: dict[str, object] = {"__name__": "__docs__"}
+    page = types.ModuleType("__docs__")  # a module, so that a block may define dataclasses
+    namespace: dict[str, object] = page.__dict__
+    sys.modules[page.__name__] = page
     ran = 0
     old_cwd, old_env = Path.cwd(), dict(os.environ)
     os.chdir(cwd)
@@ -158,6 +161,7 @@ def run_page(blocks: list[Block], cwd: Path, env: dict[str, str]) -> int:
                         run_semattnet(argv, block.where)
             ran += 1
     finally:
+        sys.modules.pop(page.__name__, None)
         os.chdir(old_cwd)
         os.environ.clear()
         os.environ.update(old_env)

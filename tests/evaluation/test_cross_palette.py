@@ -56,11 +56,15 @@ def test_kitti_model_on_nyu(policy: str, setup: tuple[Path, Path], tmp_path: Pat
 
 def test_recolouring_reaches_the_model(setup: tuple[Path, Path]) -> None:
     from semattnet.data.datasets import get_dataset
-    from semattnet.data.sources.semantic import CrossPaletteSource
+    from semattnet.data.sources.semantic import CrossPalette
 
-    src = CrossPaletteSource(get_dataset("nyuv2").source(setup[0], "test"), "cityscapes")
-    ids = colors_to_ids(src.load("00001").semantic)  # Cityscapes colours now: wall kept, floor/cabinet/bed unknown
-    assert set(np.unique(ids).tolist()) == {CITY["wall"], 255} and src.palette == "cityscapes"
+    src = get_dataset("nyuv2").source(setup[0], "test")
+    assert src.palette is not None
+    cross = CrossPalette(src.palette, "cityscapes")
+    semantic = src.load("00001").semantic
+    assert semantic is not None
+    ids = colors_to_ids(cross.map(semantic))  # Cityscapes colours now: wall kept, floor/cabinet/bed unknown
+    assert set(np.unique(ids).tolist()) == {CITY["wall"], 255} and cross.palette == "cityscapes"
 
 
 def test_predict_recolours_too(setup: tuple[Path, Path], tmp_path: Path) -> None:

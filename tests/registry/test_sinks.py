@@ -19,10 +19,7 @@ from semattnet.data.io import read_depth, read_image
 from semattnet.inference.completer import Completion
 from semattnet.inference.sinks import SINKS, Prediction, RunSink, Sink, list_sinks, predict_frame
 from tests._base import RegistryTester
-from tests.registry._entries import import_all
 from tests.registry._trees import SIZE
-
-import_all()  # the robot sinks register from semattnet.robotics
 
 K = np.array([[50.0, 0, 32], [0, 50.0, 16], [0, 0, 1]])
 NAMES = ("f00", "f01")

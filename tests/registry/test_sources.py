@@ -19,10 +19,7 @@ from semattnet.data.sources.registry import SOURCES, list_sources
 from tests._base import RegistryTester
 from tests._helpers import agreement
 from tests.inference._raw_sample import official_velodyne_raw, three_frame_drive
-from tests.registry._entries import import_all
 from tests.registry._trees import SIZE, corrupt, folder_frames, kitti_tree, nyu_tree, sensor_bag, void_tree
-
-import_all()  # the robot sources register from semattnet.robotics
 
 
 def _same_as_gt(frame: Frame) -> None:
@@ -43,26 +40,12 @@ def _folder_values(frame: Frame) -> None:
     np.testing.assert_array_equal(frame.sparse, expected)
 
 
-def _cityscapes_maps(frame: Frame) -> None:
-    from semattnet.palette import colors_to_ids
-
-    assert frame.semantic is not None
-    colors_to_ids(frame.semantic, palette="cityscapes")  # recoloured from NYU-40: every colour is Cityscapes'
-
-
 def _open_bag(root: Path) -> IndexedSource:
     from semattnet.robotics import BagSource
     from semattnet.robotics.bags import BagTopics
 
     topics = BagTopics()
     return BagSource(root / "drive.bag", topics.image, topics.points)
-
-
-def _open_cross(root: Path) -> IndexedSource:
-    from semattnet.data.datasets.nyuv2 import NyuV2Source
-    from semattnet.data.sources.semantic import CrossPaletteSource
-
-    return CrossPaletteSource(NyuV2Source(root, "test"), "cityscapes", "recolour")
 
 
 def _open_raw(root: Path) -> IndexedSource:
@@ -101,11 +84,10 @@ def _dataset(name: str) -> Callable[[Path], IndexedSource]:
 KITTI_RAW = (375, 1242)
 FIXTURES = {
     "folder": SourceFixture(folder_frames, _folder, 2, SIZE, "sparse", _folder_values),
-    "kitti-split": SourceFixture(kitti_tree, _dataset("kitti-dc"), 1, SIZE, "sparse"),
+    "kitti-dc": SourceFixture(kitti_tree, _dataset("kitti-dc"), 1, SIZE, "sparse"),
     "kitti-raw": SourceFixture(three_frame_drive, _open_raw, 3, KITTI_RAW, "scan", _official_scan),
     "nyuv2": SourceFixture(nyu_tree, _dataset("nyuv2"), 2, (228, 304), "sparse", _same_as_gt),
     "void": SourceFixture(void_tree, _dataset("void"), 2, SIZE, "sparse", _same_as_gt),
-    "cross-palette": SourceFixture(nyu_tree, _open_cross, 2, (228, 304), "sparse", _cityscapes_maps),
     "bag": SourceFixture(sensor_bag, _open_bag, 2, KITTI_RAW, "bag", _official_scan, needs="rosbags"),
 }
 
@@ -175,3 +157,11 @@ class TestSources(RegistryTester[SourceFixture]):
         assert np.isfinite(a.sparse).all() and 0 <= a.sparse.min() and a.sparse.max() < 256
         if fx.check is not None:
             fx.check(a)
+
+
+def test_each_dataset_is_the_source_of_its_name(inputs: dict[str, Path]) -> None:
+    """A dataset and its frames' source go by one name (``kitti-dc``, ``nyuv2``, ``void``)."""
+    from semattnet.data.datasets import DATASETS
+
+    for name in DATASETS:
+        assert isinstance(FIXTURES[name].open(inputs[name]), SOURCES[name].cls), name

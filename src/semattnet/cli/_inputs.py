@@ -1,38 +1,46 @@
-"""The inputs ``predict`` reads, as one table: each kind of input, the options it owns and how it makes its source.
+"""The inputs ``predict`` reads, generated from the source registry: each kind of input, its options and its source.
 
-An :class:`InputKind` declares its options (listed under its heading in ``predict --help``), the options that
-choose it, the shared semantic-map options it takes, what it offers the outputs (a recording with LiDAR,
-frames the viewer can show) and a dataclass of its parsed values that checks them and builds the
-:class:`~semattnet.data.frames.IndexedSource`. One rule covers every kind (:func:`choose_input`): exactly one
-kind is chosen, and an option of another kind is a usage error naming the kinds it belongs to. A kind added to
-:data:`INPUTS` gets its options, its heading and the rule with no other code.
+Each source entry of :data:`~semattnet.data.sources.registry.SOURCES` that declares its options (a
+:class:`~semattnet.data.sources.registry.SourceOptions` dataclass) is a kind of input here: its fields are its
+options (listed under its heading in ``predict --help``), its class facts say which options choose it, which
+shared semantic-map options it takes and what it offers the outputs, and its values build the source. One rule
+covers every kind (:func:`choose_input`): exactly one kind is chosen, and an option of another kind is a usage
+error naming the kinds it belongs to. A source registered with its options gets them, its heading and the rule
+with no other code.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
-from semattnet.cli._options import SECONDS
+from semattnet._utils.registry import Option, OptionError
+from semattnet.cli._options import DEPTH_M, PIXELS, SECONDS, SPEED
 from semattnet.cli._params import given, section, values_of, with_options
-from semattnet.data.datasets import DATASETS, DEFAULT_DATASET
+from semattnet.data.sources.registry import SOURCES, SourceOptions
 
 if TYPE_CHECKING:
-    import numpy as np
-
     from semattnet.data.frames import IndexedSource
     from semattnet.inference.semantic import SemanticMaps
 
-__all__ = ["INPUTS", "ChosenInput", "InputKind", "InputValues", "Maps", "choose_input", "input_options", "or_list"]
+__all__ = [
+    "INPUTS",
+    "ChosenInput",
+    "InputKind",
+    "Maps",
+    "choose_input",
+    "field_options",
+    "input_options",
+    "or_list",
+    "usage_error",
+]
 
-FILES, RAW, BAG, DATASET = "Inputs: files", "Inputs: KITTI raw drive", "Inputs: ROS bag", "Inputs: dataset"
 SEMANTIC = "Semantic maps"
 _INPUT = click.Path(exists=True, path_type=Path)
-_FOLDER = click.Path(exists=True, file_okay=False, path_type=Path)
 _F = TypeVar("_F", bound=Callable[..., object])
 
 
@@ -41,17 +49,56 @@ def or_list(items: Sequence[str]) -> str:
     return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} or {items[-1]}"
 
 
-def intrinsics(text: str | None) -> np.ndarray | None:
-    """``--K`` as a (3, 3) matrix, or None (a bad value: a usage error of ``--K``)."""
-    from semattnet._errors import SemAttNetError
-    from semattnet.viz.viewer import parse_intrinsics
+class Address(click.ParamType):
+    """``--live`` / ``--rerun-serve``: ``[HOST:]PORT`` (:func:`semattnet.robotics.gate.parse_address`), returned
+    as given; a malformed one is a one-line usage error."""
 
-    try:
-        return parse_intrinsics(text) if text else None
-    except SemAttNetError as exc:
-        raise click.BadParameter(str(exc), param_hint="--K") from None
-    except ValueError:
-        raise click.BadParameter(f"expected fx,fy,cx,cy or kitti, got {text!r}", param_hint="--K") from None
+    name = "[HOST:]PORT"
+
+    def convert(self, value: object, param: click.Parameter | None, ctx: click.Context | None) -> str:
+        from semattnet._errors import InputError
+        from semattnet.robotics.gate import parse_address
+
+        try:
+            parse_address(str(value), "address")
+        except InputError as exc:
+            self.fail(str(exc), param, ctx)
+        return str(value)
+
+
+#: What an :class:`~semattnet._utils.registry.Option`'s ``type`` names: an existing input (file or folder), an
+#: existing folder or file, an output folder, file or path, seconds, metres, pixels, a speed factor, a server's
+#: ``[HOST:]PORT``.
+TYPES: dict[str, click.ParamType | None] = {
+    "text": None, "input": _INPUT, "folder": click.Path(exists=True, file_okay=False, path_type=Path),
+    "file": click.Path(exists=True, dir_okay=False, path_type=Path),
+    "out-folder": click.Path(file_okay=False, path_type=Path), "out-file": click.Path(dir_okay=False, path_type=Path),
+    "out-path": click.Path(path_type=Path), "seconds": SECONDS, "metres": DEPTH_M, "pixels": PIXELS, "speed": SPEED,
+    "address": Address(),
+}  # fmt: skip
+
+
+def usage_error(exc: OptionError) -> click.UsageError:
+    """An :class:`~semattnet._utils.registry.OptionError` as click reports a usage error (exit status 2)."""
+    return click.BadParameter(str(exc), param_hint=exc.option) if exc.option else click.UsageError(str(exc))
+
+
+def _click_option(name: str, spec: Option, default: object, heading: str) -> click.Option:
+    kw: dict[str, Any] = {"help": spec.help, "metavar": spec.metavar, "show_default": spec.show_default}
+    if spec.type == "flag":
+        kw["is_flag"] = True
+    elif spec.flag_value is not None:
+        kw.update(is_flag=False, flag_value=spec.flag_value, default=default, type=TYPES[spec.type])
+    else:
+        kw.update(type=click.Choice(spec.choices) if spec.type == "choice" else TYPES[spec.type], default=default)
+    return section(heading)([*spec.flags, name], **kw)
+
+
+def field_options(cls: type, heading: str) -> tuple[click.Option, ...]:
+    """The click options of a dataclass whose fields carry :func:`~semattnet._utils.registry.option` metadata,
+    under ``heading``, in field order."""
+    return tuple(_click_option(f.name, f.metadata["option"], f.default, heading) for f in fields(cls)
+                 if "option" in f.metadata)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -86,143 +133,37 @@ MAP_OPTIONS = (
 
 
 @dataclass(frozen=True)
-class InputValues:
-    """The parsed options of one input kind (its fields: the kind's option names)."""
-
-    def check(self, maps: Maps) -> None:
-        """Usage errors among the kind's own options (before any work)."""
-
-    def listing(self) -> str | None:
-        """What to print instead of a run (``--list-topics``), or None."""
-        return None
-
-    def has_intrinsics(self) -> bool:
-        """Whether the frames come with the camera's intrinsics."""
-        return True
-
-    def source(self, semantic: Path | None) -> IndexedSource:
-        """The frames (``semantic``: the folder or file of their semantic maps, or None)."""
-        raise NotImplementedError  # every kind's values define it
-
-    def open(self, maps: Maps, device: str) -> tuple[IndexedSource, SemanticMaps]:
-        """The source and the filler of its missing semantic maps."""
-        filler = maps.semantic_maps(folder=maps.semantic is not None)
-        return self.source(maps.semantic), filler
-
-
-@dataclass(frozen=True)
-class FilesInput(InputValues):
-    """``--rgb`` / ``--sparse`` (and ``--K``): the user's own files or folders, paired by name."""
-
-    rgb: Path | None
-    sparse: Path | None
-    intrinsics: str | None
-
-    def check(self, maps: Maps) -> None:
-        if self.rgb is None or self.sparse is None:
-            raise click.UsageError("--rgb and --sparse go together: give both")
-        intrinsics(self.intrinsics)
-
-    def has_intrinsics(self) -> bool:
-        return self.intrinsics is not None
-
-    def source(self, semantic: Path | None) -> IndexedSource:
-        from semattnet.data.sources import FolderSource
-
-        assert self.rgb is not None and self.sparse is not None  # checked
-        return FolderSource.pair(self.rgb, self.sparse, semantic, K=intrinsics(self.intrinsics), missing_ok=True)
-
-
-@dataclass(frozen=True)
-class RawDriveInput(InputValues):
-    """``--kitti-raw``: a KITTI raw drive (images, Velodyne scans, calibration, OXTS)."""
-
-    kitti_raw: Path
-    frames: str | None
-    camera: str
-    deskew: bool
-
-    def source(self, semantic: Path | None) -> IndexedSource:
-        from semattnet.data.sources import RawDriveSource
-
-        return RawDriveSource(self.kitti_raw, self.frames, self.camera, semantic, self.deskew)
-
-
-@dataclass(frozen=True)
-class BagInput(InputValues):
-    """``--bag``: a ROS 1 or ROS 2 recording of a camera and a LiDAR."""
-
-    bag: Path
-    image_topic: str | None
-    points_topic: str | None
-    camera_info_topic: str | None
-    rig: Path | None
-    semantic_topic: str | None
-    max_skew: float | None
-    list_topics: bool
-
-    def check(self, maps: Maps) -> None:
-        if not self.list_topics and None in (self.image_topic, self.points_topic):
-            raise click.UsageError("--bag needs --image-topic and --points-topic (see --list-topics)")
-        if self.semantic_topic is not None and maps.segment_spec is not None:
-            raise click.UsageError("give --semantic-topic or --segment, not both")
-
-    def listing(self) -> str | None:
-        from semattnet.robotics.bags import format_topics, list_topics
-
-        return format_topics(list_topics(self.bag)) if self.list_topics else None
-
-    def source(self, semantic: Path | None) -> IndexedSource:
-        from semattnet.robotics import BagSource
-
-        assert self.image_topic is not None and self.points_topic is not None  # checked
-        return BagSource(self.bag, self.image_topic, self.points_topic, self.camera_info_topic, self.rig,
-                         self.max_skew, self.semantic_topic, log=click.echo)  # fmt: skip
-
-    def open(self, maps: Maps, device: str) -> tuple[IndexedSource, SemanticMaps]:
-        return self.source(None), maps.semantic_maps(folder=self.semantic_topic is not None)
-
-
-@dataclass(frozen=True)
-class DatasetInput(InputValues):
-    """``--data --dataset --split``: a split of a registered dataset."""
-
-    data_root: Path
-    dataset: str
-    split: str | None
-
-    def source(self, semantic: Path | None) -> IndexedSource:
-        from semattnet.data.datasets import get_dataset
-
-        return get_dataset(self.dataset).source(self.data_root, self.split, semantic_root=semantic)
-
-    def open(self, maps: Maps, device: str) -> tuple[IndexedSource, SemanticMaps]:
-        """With ``--segment``: the split's maps, segmented once into a cache folder, read as a folder."""
-        from semattnet.data.datasets import get_dataset
-        from semattnet.segmentation.datasets import segment_split
-
-        if maps.segment_spec is None or maps.semantic is not None:  # (both: refused by the maps' filler)
-            return super().open(maps, device)
-        split = self.split or get_dataset(self.dataset).eval_split
-        folder = segment_split(self.dataset, self.data_root, (split,), maps.segment_spec, device, log=click.echo)
-        return self.source(folder), Maps(None, None, maps.palette_mismatch).semantic_maps(folder=True)
-
-
-@dataclass(frozen=True)
 class InputKind:
-    """One kind of input: its ``options`` (listed under their heading), the parameter names that choose it
-    (``selects``), how the one-input error names it (``usage``), the semantic-map options it takes
-    (``accepts``), its values' dataclass; ``recording``: a timed recording of a camera and a LiDAR (point
-    clouds, a bird's-eye view, a real-time replay); ``report``: the viewer (``--report``) can show its frames."""
+    """One kind of input: a source ``name`` and its options' dataclass ``values`` (with the facts: heading,
+    ``selects``, ``usage``, ``accepts``, ``recording``, ``report``; see
+    :class:`~semattnet.data.sources.registry.SourceOptions`); ``options``: its click options."""
 
     name: str
-    usage: str
-    options: tuple[click.Option, ...]
-    values: type[InputValues]
-    selects: tuple[str, ...]
-    accepts: tuple[str, ...] = ()
-    recording: bool = False
-    report: bool = False
+    values: type[SourceOptions]
+
+    @property
+    def options(self) -> tuple[click.Option, ...]:
+        return _kind_options(self.values)
+
+    @property
+    def usage(self) -> str:
+        return self.values.usage
+
+    @property
+    def selects(self) -> tuple[str, ...]:
+        return self.values.selects
+
+    @property
+    def accepts(self) -> tuple[str, ...]:
+        return self.values.accepts
+
+    @property
+    def recording(self) -> bool:
+        return self.values.recording
+
+    @property
+    def report(self) -> bool:
+        return self.values.report
 
     @property
     def flag(self) -> str:
@@ -234,50 +175,34 @@ class InputKind:
         return name in self.accepts or any(o.name == name for o in self.options)
 
 
-#: Every kind of input ``predict`` reads, in the order of its ``--help``.
-INPUTS: tuple[InputKind, ...] = (
-    InputKind("files", "--rgb and --sparse", (
-        section(FILES)(["--rgb"], type=_INPUT, default=None, help="PNG file or folder (with --sparse)."),
-        section(FILES)(["--sparse"], type=_INPUT, default=None, help="16-bit PNG file or folder (with --rgb)."),
-        section(FILES)(["--K", "intrinsics"], default=None, metavar="fx,fy,cx,cy|kitti",
-                       help="The camera's intrinsics ('kitti': KITTI's camera 02): for --report's 3D view and the "
-                       "clouds of --bag-out, --rerun and --live."),
-    ), FilesInput, selects=("rgb", "sparse"), accepts=("semantic",), report=True),
-    InputKind("kitti-raw", "--kitti-raw", (
-        section(RAW)(["--kitti-raw"], type=_FOLDER, default=None,
-                     help="A KITTI raw drive folder RAW_ROOT/DATE/DATE_drive_NNNN_sync (instead of --rgb/--sparse)."),
-        section(RAW)(["--frames"], default=None, help="Indices, a range a-b or a comma list (default all)."),
-        section(RAW)(["--camera"], type=click.Choice(["2", "3"]), default="2", show_default=True,
-                     help="The colour camera: image_02 or image_03."),
-        section(RAW)(["--deskew"], is_flag=True, help="Ego-motion compensate the scans with their OXTS data."),
-    ), RawDriveInput, selects=("kitti_raw",), accepts=("semantic", "segment_spec"), recording=True),
-    InputKind("bag", "--bag", (
-        section(BAG)(["--bag"], type=_INPUT, default=None,
-                     help="A ROS 1 .bag, a ROS 2 bag folder or a .db3 / .mcap file (instead of --rgb/--sparse)."),
-        section(BAG)(["--image-topic"], default=None, help="sensor_msgs/Image or CompressedImage topic."),
-        section(BAG)(["--points-topic"], default=None, help="sensor_msgs/PointCloud2 topic (x, y, z)."),
-        section(BAG)(["--camera-info-topic"], default=None, help="sensor_msgs/CameraInfo topic [the bag's only one]."),
-        section(BAG)(["--rig"], type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
-                     help="Rig JSON (K, T_cam_lidar, image_size) overriding CameraInfo and /tf_static."),
-        section(BAG)(["--semantic-topic"], default=None,
-                     help="Colour-coded semantic images, paired with the images by stamp."),
-        section(BAG)(["--max-skew"], type=SECONDS, default=None,
-                     help="Seconds between an image and its scan at most [half the scan period]."),
-        section(BAG)(["--list-topics"], is_flag=True, help="Print the bag's topics and exit."),
-    ), BagInput, selects=("bag",), accepts=("segment_spec",), recording=True),
-    InputKind("dataset", "--data (with --dataset)", (
-        section(DATASET)(["--data", "data_root"], type=_FOLDER, default=None,
-                         help="A dataset root (instead of --rgb/--sparse): the frames of --split."),
-        section(DATASET)(["--dataset"], type=click.Choice(list(DATASETS)), default=DEFAULT_DATASET,
-                         show_default=True, help="The dataset whose root --data is."),
-        section(DATASET)(["--split"], default=None, help="The split [the dataset's evaluation split]."),
-    ), DatasetInput, selects=("data_root",), accepts=("semantic", "segment_spec")),
-)  # fmt: skip
+_CACHE: dict[type, tuple[click.Option, ...]] = {}
 
 
-def input_options(kinds: Sequence[InputKind] = INPUTS) -> Callable[[_F], _F]:
-    """The options of every kind in ``kinds``, then the semantic-map options, under their headings."""
-    return with_options([o for kind in kinds for o in kind.options] + list(MAP_OPTIONS))
+def _kind_options(values: type[SourceOptions]) -> tuple[click.Option, ...]:
+    """A kind's click options, made once (the command and the rules share the same objects)."""
+    if values not in _CACHE:
+        _CACHE[values] = field_options(values, values.heading)
+    return _CACHE[values]
+
+
+def input_kinds() -> tuple[InputKind, ...]:
+    """Every registered source with options, in the registry's order: the kinds of input ``predict`` reads."""
+    return tuple(InputKind(e.name, e.options) for e in SOURCES.values() if e.options is not None)
+
+
+#: Every kind of input ``predict`` reads, in the order of its ``--help`` (the registry's, when this was imported).
+INPUTS: tuple[InputKind, ...] = input_kinds()
+
+
+def input_options(kinds: Sequence[InputKind] | None = None) -> Callable[[_F], _F]:
+    """The options of every kind in ``kinds`` (default: every registered one), then the semantic-map options,
+    under their headings."""
+    return with_options([*input_params(kinds), *MAP_OPTIONS])
+
+
+def input_params(kinds: Sequence[InputKind] | None = None) -> list[click.Option]:
+    """The options of every kind in ``kinds`` (default: every registered one, now)."""
+    return [o for kind in (input_kinds() if kinds is None else kinds) for o in kind.options]
 
 
 @dataclass(frozen=True)
@@ -285,22 +210,41 @@ class ChosenInput:
     """The kind of input the options chose, its checked values and the semantic-map options."""
 
     kind: InputKind
-    values: InputValues
+    values: SourceOptions
     maps: Maps
 
+    def open(self, device: str) -> tuple[IndexedSource, SemanticMaps]:
+        """The source and the filler of its missing semantic maps (with ``--segment``, a dataset split's maps
+        segmented once on ``device`` into a cache folder and read as a folder)."""
+        maps, values = self.maps, self.values
+        split = values.segment_split() if maps.segment_spec is not None and maps.semantic is None else None
+        if split is not None:
+            from semattnet.segmentation.datasets import segment_split
 
-def choose_input(ctx: click.Context, kinds: Sequence[InputKind] = INPUTS) -> ChosenInput:
+            dataset, root, name = split
+            spec = str(maps.segment_spec)  # given: split is not None
+            folder = segment_split(dataset, root, (name,), spec, device, log=click.echo)
+            return values.source(folder, click.echo), Maps(None, None, maps.palette_mismatch).semantic_maps(True)
+        filler = maps.semantic_maps(folder=values.reads_maps(maps.semantic))
+        return values.source(maps.semantic, click.echo), filler
+
+
+def choose_input(ctx: click.Context, kinds: Sequence[InputKind] | None = None) -> ChosenInput:
     """Exactly one kind of input, no option of another kind, then the kind's own checks (usage errors)."""
+    kinds = input_kinds() if kinds is None else kinds
     chosen = [kind for kind in kinds if any(given(ctx, name) for name in kind.selects)]
     if len(chosen) != 1:
         several = f" (one of them: not {' and '.join(k.flag for k in chosen)})" if chosen else ""
         raise click.UsageError("give " + ", or ".join(k.usage for k in kinds) + several)
     kind = chosen[0]
-    flags = {p.name: p.opts[0] for p in ctx.command.params}
+    flags = {p.name: p.opts[0] for p in ctx.command.get_params(ctx)}
     for name in dict.fromkeys(n for k in kinds for n in (*(str(o.name) for o in k.options), *k.accepts)):
         if given(ctx, name) and not kind.takes(name):
             owners = [k.flag for k in kinds if k.takes(name)]
             raise click.UsageError(f"{flags.get(name, name)} is an option of {or_list(owners)}, not of {kind.flag}")
     picked = ChosenInput(kind, values_of(kind.values, ctx.params), values_of(Maps, ctx.params))
-    picked.values.check(picked.maps)
+    try:
+        picked.values.check(picked.maps.segment_spec)
+    except OptionError as exc:
+        raise usage_error(exc) from None
     return picked

@@ -1,29 +1,33 @@
 """What ``predict`` writes and how it runs: the output and run options, their checks and the sinks they ask for.
 
-The rules that are about combinations (an output that needs what only some inputs give: intrinsics, a
-LiDAR recording, frames the viewer can show) are written here once, against the chosen
-:class:`~semattnet.cli._inputs.InputKind`'s declared facts, so they name the inputs from the table.
+The sinks are made from the sink registry (:data:`semattnet.inference.sinks.SINKS`): each entry's
+:class:`~semattnet.inference.sinks.SinkOptions` declares its own options (listed under "Outputs") and makes its
+sinks from them and the shared output options here (:class:`~semattnet.inference.sinks.OutputSettings`). The
+rules that are about combinations (an output that needs what only some inputs give: intrinsics, a LiDAR
+recording, frames the viewer can show) are written here once, against the declared facts of the chosen
+:class:`~semattnet.cli._inputs.InputKind` and of the sinks asked for, so they name both from the tables.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, TypeVar
 
 import click
 
-from semattnet.cli._inputs import INPUTS, ChosenInput, or_list
+from semattnet.cli._inputs import ChosenInput, field_options, input_kinds, or_list
 from semattnet.cli._options import DEPTH_M, PIXELS, SPEED, require_with
-from semattnet.cli._params import section, with_options
+from semattnet.cli._params import section, values_of, with_options
+from semattnet.inference.sinks import SINKS, SinkOptions
 
 if TYPE_CHECKING:
     from semattnet.inference.sinks import Sink
     from semattnet.inference.timing import StageTimes
     from semattnet.inference.uncertainty import UncertaintyLimit
 
-__all__ = ["OUTPUTS", "RUN", "Outputs", "RunOptions", "output_options"]
+__all__ = ["OUTPUTS", "RUN", "AskedSinks", "Outputs", "RunOptions", "output_options", "sink_params"]
 
 OUTPUTS, RUN = "Outputs", "Run"
 
@@ -44,26 +48,6 @@ class MaxUncertainty(click.ParamType):
             self.fail(str(exc), param, ctx)
 
 
-class Address(click.ParamType):
-    """``--live`` / ``--rerun-serve``: ``[HOST:]PORT`` (:func:`semattnet.robotics.gate.parse_address`), returned
-    as given; a malformed one is a one-line usage error."""
-
-    name = "[HOST:]PORT"
-
-    def convert(self, value: object, param: click.Parameter | None, ctx: click.Context | None) -> str:
-        from semattnet._errors import InputError
-        from semattnet.robotics.gate import parse_address
-
-        try:
-            parse_address(str(value), "address")
-        except InputError as exc:
-            self.fail(str(exc), param, ctx)
-        return str(value)
-
-
-#: Where ``--rerun-serve`` without a value serves the recording (Rerun's own default port, this machine only).
-RERUN_SERVE = "127.0.0.1:9876"
-
 _OUT, _RUN = section(OUTPUTS), section(RUN)
 
 #: The output options, then the run options, in the order of ``predict --help``.
@@ -76,25 +60,11 @@ OUTPUT_OPTIONS = (
     _OUT(["--max-uncertainty"], type=MaxUncertainty(), default=None,
          help="Point clouds (--ply, bird's-eye view, --bag-out, --rerun, --live) leave out pixels whose uncertainty "
          "exceeds METRES, or PERCENT% of their depth; depth maps stay dense."),
-    _OUT(["--panel"], is_flag=True, help="Also write the per-branch panel (with --kitti-raw: a bird's-eye view)."),
-    _OUT(["--ply"], is_flag=True, help="With --kitti-raw or --bag: also write a binary PLY point cloud."),
     _OUT(["--max-depth"], type=DEPTH_M, default=80.0, show_default=True,
          help="PLY / bird's-eye view: drop deeper pixels, m."),
     _OUT(["--top-crop"], type=PIXELS, default=0, show_default=True,
          help="PLY / bird's-eye view: drop the top N rows (sky)."),
     _OUT(["--report"], is_flag=True, help="Also write viewer.html: hover depths, layers, 3D view (with --K)."),
-    _OUT(["--bag-out"], type=click.Path(path_type=Path), default=None,
-         help="Also write a ROS 2 bag (MCAP; ROS 1 for .bag): depth 32FC1, coloured cloud, CameraInfo."),
-    _OUT(["--rerun", "rerun_file"], type=click.Path(dir_okay=False, path_type=Path), default=None,
-         help="Also write a Rerun recording FILE.rrd.  [extra: rerun]"),
-    _OUT(["--rerun-spawn"], is_flag=True, help="Stream the frames to a spawned Rerun viewer."),
-    _OUT(["--rerun-serve"], is_flag=False, flag_value=RERUN_SERVE, default=None, type=Address(),
-         metavar="[[HOST:]PORT]",
-         help=f"Serve the frames to Rerun viewers as they are completed, on [HOST:]PORT (alone: {RERUN_SERVE}; "
-         "a HOST other than this machine's also serves the web viewer).  [extra: rerun]"),
-    _OUT(["--live"], default=None, type=Address(),
-         help="Serve the frames as they are completed over the Foxglove WebSocket protocol (HOST: 127.0.0.1 unless "
-         "given).  [extra: live]"),
     _OUT(["--overwrite"], is_flag=True, help="Replace existing outputs."),
     _OUT(["--resume"], is_flag=False, flag_value="", default=None, metavar="[OUT]",
          help="Continue the killed or failed run in OUT (or --out): keep its completed frames, do the rest."),
@@ -112,46 +82,74 @@ _F = TypeVar("_F", bound=Callable[..., object])
 
 
 def output_options(f: _F) -> _F:
-    """The output and run options of ``predict`` (read back with ``values_of(Outputs | RunOptions, params)``)."""
+    """The shared output and run options of ``predict`` (read back with ``values_of(Outputs | RunOptions, params)``);
+    the sinks' own: :func:`sink_params`."""
     return with_options(OUTPUT_OPTIONS)(f)
+
+
+_CACHE: dict[type, tuple[click.Option, ...]] = {}
+
+
+def sink_params() -> list[click.Option]:
+    """The options of every registered sink, in the registry's order, under "Outputs"."""
+    for e in SINKS.values():
+        if e.options is not None and e.options not in _CACHE:
+            _CACHE[e.options] = field_options(e.options, OUTPUTS)
+    return [o for e in SINKS.values() if e.options is not None for o in _CACHE[e.options]]
 
 
 def _recordings() -> str:
     """The inputs that are a recording of a camera and a LiDAR, as options: ``--kitti-raw or --bag``."""
-    return or_list([k.flag for k in INPUTS if k.recording])
+    return or_list([k.flag for k in input_kinds() if k.recording])
+
+
+def _and_list(items: Sequence[str]) -> str:
+    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} and {items[-1]}"
+
+
+@dataclass(frozen=True)
+class AskedSinks:
+    """The sinks' options as given: ``values`` (name -> the entry's :class:`SinkOptions`), and the facts the rules
+    read, by the option naming each sink (its first)."""
+
+    values: Mapping[str, SinkOptions]
+
+    @classmethod
+    def of(cls, params: Mapping[str, object]) -> AskedSinks:
+        return cls({e.name: values_of(e.options, params) for e in SINKS.values() if e.options is not None})
+
+    def flag(self, name: str) -> str:
+        """The option naming sink ``name``: its first (``--bag-out``)."""
+        first = fields(self.values[name])[0].name
+        return next(o.opts[0] for o in sink_params() if o.name == first)
+
+    def named(self, when: Callable[[str, SinkOptions], bool]) -> list[str]:
+        """The flags of the sinks with options (asked or not) for which ``when(name, options)`` holds."""
+        return [self.flag(n) for n, v in self.values.items() if fields(v) and when(n, v)]
+
+    def any(self, when: Callable[[str, SinkOptions], bool]) -> bool:
+        """Whether a sink asked for satisfies ``when``."""
+        return any(v.asked() and when(n, v) for n, v in self.values.items())
+
+
+def _replays(name: str, v: SinkOptions) -> bool:
+    """A resumed run rebuilds it from the kept frames (the sink's :attr:`~semattnet.inference.sinks.Sink.replays`)."""
+    return SINKS[name].cls.replays
 
 
 @dataclass(frozen=True)
 class Outputs:
-    """The output options' values: files per frame, the run-wide outputs and the output folder's rules."""
+    """The shared output options' values: files per frame, the clouds, the viewer and the output folder's rules."""
 
     out: Path | None
     npy: bool
     uncertainty: bool
     max_uncertainty: str | None
-    panel: bool
-    ply: bool
     max_depth: float
     top_crop: int
     report: bool
-    bag_out: Path | None
-    rerun_file: Path | None
-    rerun_spawn: bool
-    rerun_serve: str | None
-    live: str | None
     overwrite: bool
     resume: str | None
-
-    @property
-    def replayed(self) -> bool:
-        """A bag or a Rerun recording or viewer: outputs a resumed run rebuilds from the kept frames."""
-        served = self.rerun_serve is not None
-        return self.bag_out is not None or self.rerun_file is not None or self.rerun_spawn or served
-
-    @property
-    def robot(self) -> bool:
-        """Any robot output (a bag, Rerun, the live server): each needs the camera's intrinsics."""
-        return self.replayed or self.live is not None
 
     @property
     def limit(self) -> UncertaintyLimit | None:
@@ -170,49 +168,46 @@ class Outputs:
             raise click.UsageError("Missing option '--out'.")
         return out, resume is not None
 
-    def check(self, chosen: ChosenInput) -> tuple[Path, bool]:
+    def check(self, chosen: ChosenInput, asked: AskedSinks) -> tuple[Path, bool]:
         """The outputs agree with each other and with the chosen input (usage errors, before any work); returns
         :meth:`folder`."""
         out, resuming = self.folder()
         kind = chosen.kind
-        if self.ply and not kind.recording:
-            raise click.UsageError(f"--ply needs {_recordings()}")
-        require_with("--report, --bag-out, --rerun or --live", self.report or self.robot, "intrinsics")
+        for flag in asked.named(lambda n, v: v.asked() and v.needs_recording and not kind.recording):
+            raise click.UsageError(f"{flag} needs {_recordings()}")
+        robots = asked.named(lambda n, v: v.needs_intrinsics)
+        robot = asked.any(lambda n, v: v.needs_intrinsics)
+        require_with(or_list(["--report", *robots]), self.report or robot, "intrinsics")
         if self.report and not kind.report:
-            viewable = or_list([k.usage for k in INPUTS if k.report])
+            viewable = or_list([k.usage for k in input_kinds() if k.report])
             raise click.UsageError(f"--report needs {viewable} (not yet {kind.flag})")
-        if self.robot and not chosen.values.has_intrinsics():
-            raise click.UsageError(f"--bag-out, --rerun and --live need the intrinsics: {_recordings()}, or --K")
-        clouds = self.ply or (self.panel and kind.recording) or self.robot
-        require_with("--ply, --panel (with --kitti-raw or --bag), --bag-out, --rerun or --live", clouds,
-                     "max_uncertainty")  # fmt: skip
-        if self.max_uncertainty is not None and self.replayed and not self.uncertainty:
-            raise click.UsageError("--max-uncertainty with --bag-out or --rerun needs --uncertainty (a resumed run "
-                                   "rebuilds the kept frames' clouds from OUT/uncertainty/)")  # fmt: skip
+        if robot and not chosen.values.has_intrinsics():
+            raise click.UsageError(f"{_and_list(robots)} need the intrinsics: {_recordings()}, or --K")
+        self._check_clouds(kind.recording, asked)
         if resuming and self.overwrite:
             raise click.UsageError("give --resume or --overwrite, not both")
         return out, resuming
 
-    def sinks(self, timer: StageTimes) -> list[Sink]:
-        """The sinks the options ask for: the files per frame, ``latency.json`` and, as asked, the bag, the Rerun
-        recording or viewer and the live server (their clouds without the pixels above ``--max-uncertainty``)."""
-        from semattnet.inference.sinks import LatencySink, default_sinks
-        from semattnet.robotics.sinks import BagSink, RerunSink
+    def _check_clouds(self, recording: bool, asked: AskedSinks) -> None:
+        """``--max-uncertainty`` only with an output that draws clouds (and ``--uncertainty`` for a replayed one)."""
+        label = {"always": "{}", "recording": f"{{}} (with {_recordings()})"}
+        names = [label[v.clouds].format(asked.flag(n)) for n, v in asked.values.items() if v.clouds]
+        clouds = asked.any(lambda n, v: v.clouds == "always" or (v.clouds == "recording" and recording))
+        require_with(or_list(names), clouds, "max_uncertainty")
+        if self.max_uncertainty is not None and asked.any(_replays) and not self.uncertainty:
+            replayed = or_list(asked.named(_replays))
+            raise click.UsageError(f"--max-uncertainty with {replayed} needs --uncertainty (a resumed run rebuilds "
+                                   "the kept frames' clouds from OUT/uncertainty/)")  # fmt: skip
 
-        limit, depth, unc = self.limit, self.max_depth, self.uncertainty
-        sinks = default_sinks(self.npy, self.panel, self.ply, depth, self.top_crop, unc, limit)
-        sinks.append(LatencySink(timer=timer))
-        if self.bag_out is not None:
-            sinks.append(BagSink(target=self.bag_out, max_depth=depth, uncertainty=unc, max_uncertainty=limit))
-        if self.rerun_file is not None or self.rerun_spawn or self.rerun_serve is not None:
-            rerun = RerunSink(target=self.rerun_file, spawn=self.rerun_spawn, serve=self.rerun_serve, max_depth=depth,
-                              log=click.echo, uncertainty=unc, max_uncertainty=limit)  # fmt: skip
-            sinks.append(rerun)
-        if self.live is not None:
-            from semattnet.robotics.live import LiveSink
+    def sinks(self, asked: AskedSinks, timer: StageTimes) -> list[Sink]:
+        """The sinks of every registry entry, in its order, as its options and the shared ones ask: the files per
+        frame, ``latency.json`` and the bag, the Rerun recording or viewer and the live server (their clouds
+        without the pixels above ``--max-uncertainty``)."""
+        from semattnet.inference.sinks import OutputSettings
 
-            sinks.append(LiveSink(address=self.live, max_depth=depth, log=click.echo, max_uncertainty=limit))
-        return sinks
+        settings = OutputSettings(self.npy, self.uncertainty, self.limit, self.max_depth, self.top_crop, timer,
+                                  click.echo)  # fmt: skip
+        return [sink for values in asked.values.values() for sink in values.sinks(settings)]
 
 
 @dataclass(frozen=True)
@@ -225,6 +220,7 @@ class RunOptions:
     speed: float | None
 
     def check(self, chosen: ChosenInput) -> None:
+        """The run options agree with each other and with the chosen input (usage errors)."""
         if self.speed is not None and not self.realtime:
             raise click.UsageError("--speed needs --realtime")
         if self.realtime and not chosen.kind.recording:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import fields
-from typing import TYPE_CHECKING, ClassVar, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 import click
 
@@ -20,7 +20,7 @@ from semattnet.cli._group import Command
 if TYPE_CHECKING:
     from _typeshed import DataclassInstance
 
-__all__ = ["SectionOption", "SectionedCommand", "given", "section", "values_of", "with_options"]
+__all__ = ["GeneratedCommand", "SectionOption", "SectionedCommand", "given", "section", "values_of", "with_options"]
 
 #: The heading of the options that name none (``--help``).
 OTHER = "Other options"
@@ -61,6 +61,31 @@ class SectionedCommand(Command):
         for heading, records in sections.items():
             with formatter.section(heading):
                 formatter.write_dl(records)
+
+
+class GeneratedCommand(SectionedCommand):
+    """A sectioned command some of whose options are made from registries each time they are read, so that an
+    entry registered after the command was made (a plugin's, a test's) is on it too. ``generated``: (after,
+    make) pairs; ``make()`` gives options, inserted at the start (``after`` ``""``) or after the option named
+    ``after``."""
+
+    def __init__(self, *args: Any, generated: Sequence[tuple[str, Callable[[], Sequence[click.Parameter]]]] = (),
+                 **kwargs: Any) -> None:  # fmt: skip
+        super().__init__(*args, **kwargs)
+        self._generated, self._static = tuple(generated), list(self.params)
+        self.refresh()
+
+    def refresh(self) -> None:
+        """Make the generated options again (from the registries as they are now)."""
+        params = list(self._static)
+        for after, make in self._generated:
+            at = 0 if not after else 1 + next(i for i, p in enumerate(params) if p.name == after)
+            params[at:at] = make()
+        self.params = params
+
+    def get_params(self, ctx: click.Context) -> list[click.Parameter]:
+        self.refresh()
+        return super().get_params(ctx)
 
 
 _F = TypeVar("_F", bound=Callable[..., object])

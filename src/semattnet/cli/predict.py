@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import click
 
 from semattnet.cli._group import main
-from semattnet.cli._inputs import ChosenInput, choose_input, input_options
+from semattnet.cli._inputs import MAP_OPTIONS, ChosenInput, choose_input, input_params
 from semattnet.cli._options import (
     DEPTH_M,
     MODEL,
@@ -26,15 +26,15 @@ from semattnet.cli._options import (
     weights_input,
     weights_option,
 )
-from semattnet.cli._outputs import Outputs, RunOptions, output_options
-from semattnet.cli._params import SectionedCommand, section, values_of
+from semattnet.cli._outputs import AskedSinks, Outputs, RunOptions, output_options, sink_params
+from semattnet.cli._params import GeneratedCommand, section, values_of, with_options
 
 if TYPE_CHECKING:
     from semattnet.inference.pipeline import Completer, FrameRun
 
-#: The options that do not change what a run writes: a resumed run may differ from the first in these only.
-_NOT_IDENTITY = {"resume", "overwrite", "on_error", "stream", "live", "rerun_serve", "rerun_spawn", "realtime",
-                 "speed", "list_topics", "out"}  # fmt: skip
+#: The options that do not change what a run writes: a resumed run may differ from the first in these only (and in
+#: the registries' options declared so: ``option(..., identity=False)``).
+_NOT_IDENTITY = {"resume", "overwrite", "on_error", "stream", "realtime", "speed", "out"}
 
 
 @dataclass(frozen=True)
@@ -81,6 +81,16 @@ class ModelOptions:
 _MODEL = section(MODEL)
 
 
+def _not_identity() -> set[str]:
+    """:data:`_NOT_IDENTITY` and the sources' and sinks' options declared so."""
+    from semattnet._utils.registry import volatile
+    from semattnet.data.sources.registry import SOURCES
+    from semattnet.inference.sinks import SINKS
+
+    options = [e.options for e in SOURCES.values()] + [e.options for e in SINKS.values()]
+    return _NOT_IDENTITY.union(*(volatile(o) for o in options if o is not None))
+
+
 def _identity(params: Mapping[str, object]) -> dict[str, object]:
     """What a run is, for a resume to check: every option that changes the outputs (paths resolved, a
     weights file by its SHA-256) and the package version."""
@@ -88,8 +98,9 @@ def _identity(params: Mapping[str, object]) -> dict[str, object]:
     from semattnet.cache import sha256_file
 
     run: dict[str, object] = {"command": "predict", "version": __version__}
+    skip = _not_identity()
     for key, value in sorted(params.items()):
-        if key in _NOT_IDENTITY or value is None or value is False:
+        if key in skip or value is None or value is False:
             continue
         if key == "weights" and Path(str(value)).is_file():  # a file by its digest (--checkpoint arrives here too)
             value = f"sha256:{sha256_file(str(value))}"
@@ -97,8 +108,8 @@ def _identity(params: Mapping[str, object]) -> dict[str, object]:
     return run
 
 
-@main.command(cls=SectionedCommand)
-@input_options()
+@main.command(cls=GeneratedCommand, generated=[("", input_params), ("report", sink_params)])
+@with_options(MAP_OPTIONS)
 @weights_option
 @click.option(
     "--method",
@@ -132,10 +143,11 @@ def predict(**params: object) -> None:
         click.echo(listing)
         return
     outputs, run, model = values_of(Outputs, params), values_of(RunOptions, params), values_of(ModelOptions, params)
-    out, resuming = outputs.check(chosen)
+    asked = AskedSinks.of(params)
+    out, resuming = outputs.check(chosen, asked)
     run.check(chosen)
     model.check()
-    result = _run_frames(chosen, outputs, run, model, (out, resuming), _identity(params))
+    result = _run_frames(chosen, (outputs, asked), run, model, (out, resuming), _identity(params))
     if launch_rank() == 0:
         click.echo(result.summary())
     launched = int(os.environ.get("WORLD_SIZE", "1")) > 1  # torchrun takes any other status for a crash
@@ -143,20 +155,22 @@ def predict(**params: object) -> None:
         ctx.exit(result.exit_code)
 
 
-def _run_frames(chosen: ChosenInput, outputs: Outputs, run: RunOptions, model: ModelOptions,
+def _run_frames(chosen: ChosenInput, outputs_asked: tuple[Outputs, AskedSinks], run: RunOptions, model: ModelOptions,
                 folder: tuple[Path, bool], identity: dict[str, object]) -> FrameRun:  # fmt: skip
     """Check everything, load the completer, run the one frame loop; then the table (and the report).
-    ``folder``: the output folder and whether to resume; ``identity``: the run's, for a resume to check."""
+    ``outputs_asked``: the shared output options and the sinks' own; ``folder``: the output folder and whether to
+    resume; ``identity``: the run's, for a resume to check."""
     from semattnet._utils.distributed import launch_rank, process_group
     from semattnet.data.sources import FolderSource
     from semattnet.inference.pipeline import check_frames, complete_frames
     from semattnet.inference.timing import StageTimes
 
     out, resuming = folder
+    outputs, asked = outputs_asked
     timer = StageTimes()
-    sinks = outputs.sinks(timer)
+    sinks = outputs.sinks(asked, timer)
     with process_group():
-        source, maps = chosen.values.open(chosen.maps, model.device)
+        source, maps = chosen.open(model.device)
         plan = check_frames(source, sinks, out, overwrite=outputs.overwrite, on_error=run.on_error, resume=resuming,
                             run=identity, inputs=[weights_input(model.weights)[1]])  # before the model  # fmt: skip
         if plan.journal.kept:

@@ -23,9 +23,19 @@ from semattnet._errors import DataError
 from semattnet.geometry.calibration import RigCalibration
 from semattnet.geometry.cameras import CameraInfoData
 
-__all__ = ["DuplicateFrameError", "Frame", "FrameSource", "IndexedSource", "SensorMeta", "unique_names"]
+__all__ = [
+    "DuplicateFrameError",
+    "Frame",
+    "FrameSource",
+    "IndexedSource",
+    "SensorMeta",
+    "SourceInfo",
+    "TwoStageSource",
+    "unique_names",
+]
 
 _T = TypeVar("_T")
+_R = TypeVar("_R")
 
 
 @dataclass(frozen=True)
@@ -101,14 +111,41 @@ class Frame:
         return replace(self, semantic=semantic)
 
 
+@dataclass(frozen=True)
+class SourceInfo:
+    """What a source says about its frames beyond loading them (:attr:`FrameSource.info`).
+
+    Attributes:
+        palette: the palette of the semantic maps its frames carry (None: they carry none).
+        stamps_ns: every frame's sensor stamp, integer nanoseconds, in the order of ``names`` (None: unknown):
+            the sensor period of a run, from every frame and not only those done.
+        prediction_names: frame name -> the file name of its prediction where the source names it (KITTI's
+            ``val_select``: the ground truth's name); other frames: ``NAME.png`` (:meth:`prediction_name`).
+        listed_files: the files the source's lists name (which may lie anywhere): an output must not replace one.
+    """
+
+    palette: str | None = None
+    stamps_ns: Sequence[int] | None = None
+    prediction_names: Mapping[str, str] = field(default_factory=dict)
+    listed_files: Sequence[Path] = ()
+
+    def prediction_name(self, name: str) -> str:
+        """The file name of frame ``name``'s prediction."""
+        return self.prediction_names.get(name, f"{name}.png")
+
+
 @runtime_checkable
 class FrameSource(Protocol):
     """Frames by name: ``names`` (in order), ``len()``, iteration (yields :class:`Frame`), ``load(name)``,
-    ``check(names)`` (decode and validate those inputs, raising :class:`DataError` naming the file) and
-    ``inputs()`` (the files and folders that outputs must never land in or replace)."""
+    ``check(names)`` (decode and validate those inputs, raising :class:`DataError` naming the file),
+    ``inputs()`` (the files and folders that outputs must never land in or replace) and ``info``
+    (:class:`SourceInfo`: what else it says about its frames)."""
 
     @property
     def names(self) -> Sequence[str]: ...
+
+    @property
+    def info(self) -> SourceInfo: ...
 
     def __len__(self) -> int: ...
 
@@ -121,13 +158,29 @@ class FrameSource(Protocol):
     def inputs(self) -> list[Path]: ...
 
 
+@runtime_checkable
+class TwoStageSource(FrameSource, Protocol[_R]):
+    """A source whose ``load`` is two stages that the frame loop times apart: ``read(name)`` (the raw inputs,
+    decoded) then ``assemble(raw)`` (the :class:`Frame`, its scan projected into the image), as
+    :class:`semattnet.robotics.BagSource` does; ``load(name)`` is ``assemble(read(name))``."""
+
+    def read(self, name: str) -> _R: ...
+
+    def assemble(self, raw: _R) -> Frame: ...
+
+
 class IndexedSource:
     """Base of sources with random access by name: subclasses set ``names`` and write ``load`` and
     ``inputs``; ``check`` loads every frame (override it when a cheaper full validation exists).
-    ``palette``: the palette of the semantic maps its frames carry (None: it gives none)."""
+    ``palette``: the palette of the semantic maps its frames carry (None: it gives none); ``info``: that
+    palette, and what a subclass adds (:class:`SourceInfo`)."""
 
     names: Sequence[str] = ()
     palette: str | None = None
+
+    @property
+    def info(self) -> SourceInfo:
+        return SourceInfo(self.palette)
 
     def __len__(self) -> int:
         return len(self.names)

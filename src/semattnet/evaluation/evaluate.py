@@ -256,8 +256,8 @@ def _file_sinks(source: IndexedSource, save_predictions: bool, pictures: int) ->
     the first ``pictures`` frames in ``pictures/NAME.png``."""
     sinks: list[Sink] = []
     if save_predictions:
-        named = getattr(source, "prediction_name", None)
-        rename = {n: str(named(n)) if callable(named) else f"{n}.png" for n in source.names}
+        info = source.info
+        rename = {n: info.prediction_name(n) for n in source.names}
         sinks.append(DepthPngSink(folder="predictions", rename=rename))
     if pictures:
         sinks.append(PanelSink(suffix=".png", folder="pictures", only=set(source.names[:pictures])))

@@ -110,7 +110,7 @@ class ThinnedSource(IndexedSource):
             raise SparsityError(f"ThinnedSource takes one setting (beams=N or keep=R), got {setting!r}")
         self.setting = parsed[0]
         self.source, self.seed, self.names = source, seed, list(source.names)
-        self.palette: str | None = getattr(source, "palette", None)
+        self.palette: str | None = source.info.palette
         self.position = {name: i for i, name in enumerate(self.names)}
 
     def load(self, name: str) -> Frame:

@@ -12,6 +12,7 @@ from semattnet.data.datasets import get_dataset
 
 if TYPE_CHECKING:
     from semattnet.data.datasets import SplitDataset
+    from semattnet.data.frames import FrameSource
 
 __all__ = ["eval_dataset", "prepare_out", "refuse_listed_inputs"]
 
@@ -37,15 +38,14 @@ def prepare_out(out: Path, overwrite: bool, inputs: Sequence[PathLike | None] = 
     return out
 
 
-def refuse_listed_inputs(out: Path | None, ds: object) -> None:
-    """Refuse an ``out`` that holds a file the dataset ``ds`` (a source, or a Dataset or source wrapping one as
-    ``ds.source``) reads by name from its lists (a VOID list may name any path: ``VoidSource.listed_files``),
-    so that ``--overwrite`` never replaces an input."""
-    listed = getattr(ds, "listed_files", None) or getattr(getattr(ds, "source", None), "listed_files", None)
-    if out is None or listed is None:
+def refuse_listed_inputs(out: Path | None, source: FrameSource) -> None:
+    """Refuse an ``out`` that holds a file ``source`` reads by name from its lists (its
+    :attr:`~semattnet.data.frames.SourceInfo.listed_files`: a VOID list may name any path), so that
+    ``--overwrite`` never replaces an input."""
+    if out is None:
         return
     root = Path(out).resolve()
-    for path in listed():
+    for path in source.info.listed_files:
         if Path(path).resolve().is_relative_to(root):
             raise OutputError(f"output folder {out} holds the input {path} (named by the dataset's lists); "
                               "choose an --out outside the inputs")  # fmt: skip

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["KITTI_IMAGE_SIZE", "KITTI_K", "CameraInfoData"]
+__all__ = ["KITTI_IMAGE_SIZE", "KITTI_K", "CameraInfoData", "parse_intrinsics"]
 
 #: KITTI camera 02 intrinsics (pixels) at :data:`KITTI_IMAGE_SIZE` (drive date 2011_09_26).
 KITTI_K = np.array([[721.5377, 0.0, 609.5593], [0.0, 721.5377, 172.854], [0.0, 0.0, 1.0]])
@@ -51,3 +51,18 @@ class CameraInfoData:
         if rectified and np.any(self.P[:, :3]):
             return self.P[:, :3].copy()
         return self.K.copy()
+
+
+def parse_intrinsics(text: str) -> np.ndarray:
+    """``"fx,fy,cx,cy"`` or ``"kitti"`` (KITTI's camera 02, :data:`KITTI_K`) -> (3, 3) K.
+
+    Raises:
+        ValueError: not four numbers; InputError (a ValueError) for NaN / inf / non-positive focal lengths.
+    """
+    if text.strip().lower() == "kitti":
+        return KITTI_K.copy()
+    from semattnet._utils.bounds import check_pinhole
+
+    fx, fy, cx, cy = (float(v) for v in text.split(","))
+    check_pinhole(fx, fy, cx, cy, "--K")
+    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])

@@ -52,16 +52,7 @@ from semattnet.inference.completer import Completer, Completion
 from semattnet.inference.journal import FRAMES_FILE, FrameEntry, RunJournal, describe_counts
 from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sharding import agree, gather_rows, on_main, process_group, rank_log, shard
-from semattnet.inference.sinks import (
-    DepthPngSink,
-    LatencySink,
-    Prediction,
-    RunSink,
-    Sink,
-    UncertaintyPngSink,
-    output_files,
-    predict_frame,
-)
+from semattnet.inference.sinks import Prediction, Sink, output_files, predict_frame
 from semattnet.inference.stream import FrameFault, completions, is_frame_fault, read_frame
 from semattnet.inference.timing import StageTimes
 
@@ -83,9 +74,8 @@ def _check_outputs(source: FrameSource, sinks: Sequence[Sink], out: Path, overwr
                    inputs: Sequence[PathLike | None]) -> None:  # fmt: skip
     """The one output rule (:func:`~semattnet._utils.outputs.check_outputs`) over every output of the run: the
     folder, each frame's files and the run outputs (a bag, a recording), before the first frame."""
-    runs = [s for s in sinks if isinstance(s, RunSink)]
-    names = [*output_files(source.names, sinks), *(f for s in runs for f in s.files())]
-    targets = [Output(s.option, t, s.kind) for s in runs for t in s.targets()]
+    names = [*output_files(source.names, sinks), *(f for s in sinks for f in s.files())]
+    targets = [Output(s.option, t, s.kind) for s in sinks for t in s.targets()]
     given = [*source.inputs(), *(Path(p) for p in inputs if p is not None)]
     outputs = [Output("--out", out, "folder"), *(Output("--out", out / n) for n in names), *targets]
     check_outputs([("", p) for p in given], outputs, overwrite)
@@ -227,18 +217,16 @@ class _FrameLoop:
                  log: Callable[[str], None], semantic: SemanticMaps) -> None:  # fmt: skip
         self.source, self.out, self.plan, self.timer, self.log = source, out, plan, timer, log
         self.journal, self.semantic = plan.journal, semantic
-        self.runs = [s for s in sinks if isinstance(s, RunSink)]
-        self.files = [s for s in sinks if not isinstance(s, RunSink)]
         self.sinks = sinks
-        self.replays = [s for s in self.runs if s.replays]
-        self.depth_sink = next((s for s in sinks if isinstance(s, DepthPngSink)), None)
-        self.uncertainty_sink = next((s for s in sinks if isinstance(s, UncertaintyPngSink)), None)
+        self.replays = [s for s in sinks if s.replays]
+        self.depth_sink = next((s for s in sinks if s.role == "depth"), None)
+        self.uncertainty_sink = next((s for s in sinks if s.role == "uncertainty"), None)
         self.names = shard(source.names)
         self.waiting = deque(n for n in self.names if n in self.journal.kept or n in plan.faults)
         self.position = {n: i for i, n in enumerate(self.names)}
         self.created = not out.exists()
         timer.wall_s += self.journal.earlier_wall_s  # the table covers the kept frames' time too
-        stamps = getattr(source, "stamps_ns", None)  # the sensor period from every frame, not only those done
+        stamps = source.info.stamps_ns  # the sensor period from every frame, not only those done
         if stamps is not None and len(stamps) == len(source.names):
             for name, ns in zip(source.names, stamps, strict=True):
                 timer.stamp(name, int(ns) / 1e9)
@@ -285,7 +273,7 @@ class _FrameLoop:
         with self.timer.time(frame.name, "writing"):
             stage_ms = {k: 1e3 * v for k, v in self.timer.times.get(frame.name, {}).items()}
             write_prediction(stage, frame, completion, self.sinks, stage_ms)
-            files = output_files([frame.name], self.files)
+            files = output_files([frame.name], self.sinks)
             for rel in files:
                 (self.out / rel).parent.mkdir(parents=True, exist_ok=True)
                 os.replace(stage / rel, self.out / rel)
@@ -298,10 +286,10 @@ class _FrameLoop:
         """Every frame seen: the run outputs completed (rank 0's ``latency.json``) and moved into place."""
         self.catch_up(None)
         self.timer.not_done = {k: v for k, v in self.journal.counts().items() if k in ("skipped", "dropped")}
-        for s in self.runs:
-            if not isinstance(s, LatencySink) or is_main():
+        for s in self.sinks:
+            if not s.once or is_main():
                 s.finish(stage)
-        for rel in [f for s in self.runs for f in s.files()] if is_main() else []:
+        for rel in [f for s in self.sinks for f in s.files()] if is_main() else []:
             if (stage / rel).is_file():
                 os.replace(stage / rel, self.out / rel)
 
@@ -324,7 +312,7 @@ def _run_frames(loop: _FrameLoop, completer: Completer, prefetch: int, realtime:
     finished after; aborted on any error)."""
     try:
         with stage_folder(loop.out) as stage:  # each frame is written there, then moved into place
-            for s in loop.runs:
+            for s in loop.sinks:
                 s.open(overwrite)
             for frame, completion in completions(loop.source, completer, loop.todo(), loop.semantic, loop.timer,
                                                  prefetch, report=loop.note, realtime=realtime, batch_size=batch_size,
@@ -332,7 +320,7 @@ def _run_frames(loop: _FrameLoop, completer: Completer, prefetch: int, realtime:
                 loop.write(stage, frame, completion)
             loop.finish(stage)
     except BaseException:
-        for s in loop.runs:
+        for s in loop.sinks:
             s.abort()
         raise
 
@@ -426,12 +414,12 @@ def _close(loop: _FrameLoop) -> FrameRun:
     position = {n: i for i, n in enumerate(names)}
     entries = gather_rows([journal.frames[n] for n in loop.names], key=lambda e: position[e["name"]])
     if entries and not any(e["status"] == "done" for e in entries):
-        for s in loop.runs:
+        for s in loop.sinks:
             s.abort()
         loop.forget()
         raise _nothing_done(entries)
     try:
-        for s in loop.runs:
+        for s in loop.sinks:
             s.commit()
         wall = loop.timer.wall_s - journal.earlier_wall_s  # this run's share
         if world_size() == 1:
@@ -439,7 +427,7 @@ def _close(loop: _FrameLoop) -> FrameRun:
         elif is_main():
             journal.merge(entries, complete=True, wall_s=wall)
     finally:  # a live server stops only now: frames.json is complete whatever its clients do
-        for s in loop.runs:
+        for s in loop.sinks:
             s.close()
     for e in entries:
         journal.frames[e["name"]] = e
@@ -448,7 +436,7 @@ def _close(loop: _FrameLoop) -> FrameRun:
     return FrameRun(journal, paths)
 
 
-def _line(frame: Frame, out: Path, depth_sink: DepthPngSink | None) -> str:
+def _line(frame: Frame, out: Path, depth_sink: Sink | None) -> str:
     h, w = frame.size
     rel = depth_sink.path(frame.name) if depth_sink is not None else None
     target = f" -> {out / rel}" if rel is not None else ""

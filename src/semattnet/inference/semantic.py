@@ -6,7 +6,7 @@ from __future__ import annotations
 import warnings
 
 from semattnet._errors import InputError
-from semattnet.data.frames import Frame
+from semattnet.data.frames import Frame, FrameSource
 from semattnet.data.sources.semantic import CrossPalette, MapSegmenter
 
 __all__ = ["SemanticMaps"]
@@ -46,17 +46,17 @@ class SemanticMaps:
             self.segmenter = load_segmenter(self.segmenter, getattr(completer, "device", "auto"))
         return self
 
-    def check_palette(self, completer: object, source: object) -> None:
+    def check_palette(self, completer: object, source: FrameSource) -> None:
         """Refuse maps of another palette than the one ``completer``'s model was trained with (one line;
         :func:`semattnet.palette.check_palette`): a segmenter's maps are of its ``palette`` (Cityscapes
-        unless it says otherwise), a source's of its ``palette`` (None: it gives none, and the fallback map fits
-        every palette)."""
+        unless it says otherwise), a source's of its ``info.palette`` (None: it gives none, and the fallback map
+        fits every palette)."""
         from semattnet.palette import check_palette, get_palette
 
         if not self.needed:
             return
         palette = getattr(self.segmenter, "palette", "cityscapes") if self.segmenter is not None else (
-            getattr(source, "palette", None))  # fmt: skip
+            source.info.palette)  # fmt: skip
         palette = palette or ("cityscapes" if self.folder else None)
         if palette is not None:
             where = "the segmenter's maps" if self.segmenter is not None else f"{type(source).__name__} maps"

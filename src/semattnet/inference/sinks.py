@@ -25,14 +25,14 @@ fed each completed frame and finished after the last one (:class:`LatencySink`).
 from __future__ import annotations
 
 from collections.abc import Callable, Collection, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
 from semattnet._errors import InputError
-from semattnet._utils.registry import Registry
+from semattnet._utils.registry import Registry, option
 from semattnet.data.frames import Frame
 from semattnet.data.io import clamp_for_png, decode_depth, encode_depth, write_depth, write_image
 from semattnet.inference.completer import Completion
@@ -49,11 +49,15 @@ __all__ = [
     "DepthPngSink",
     "LatencySink",
     "NpySink",
+    "OutputSettings",
+    "PanelOptions",
     "PanelSink",
+    "PlyOptions",
     "PlySink",
     "Prediction",
     "RunSink",
     "Sink",
+    "SinkOptions",
     "UncertaintyNpySink",
     "UncertaintyPngSink",
     "default_sinks",
@@ -140,12 +144,26 @@ def predict_frame(frame: Frame, completion: Completion) -> Prediction:
 @dataclass
 class Sink:
     """Writes ``FOLDER/NAME+SUFFIX`` per frame (``rename``: frame name -> file name instead; ``only``:
-    the frames it writes, default all). Subclasses write the file in :meth:`save`."""
+    the frames it writes, default all). Subclasses write the file in :meth:`save`.
+
+    What the frame loop asks of every sink (a per-frame sink's run hooks do nothing; :class:`RunSink`'s do):
+    :meth:`open` before the first frame, :meth:`write` per frame, :meth:`finish`, then :meth:`commit` or
+    :meth:`abort`, and :meth:`close` once ``frames.json`` records the run; ``files()`` and ``targets()``, its
+    outputs of the whole run. Its facts: ``role``, what the
+    loop finds it by (``depth``: the depth PNG, named in each frame's line, the paths a run returns and read
+    back by a resume; ``uncertainty``: the uncertainty PNG a resume reads back); ``replays``: a resumed run hands
+    it the frames kept from the earlier run; ``once``: under ``torchrun`` one process (rank 0) finishes it."""
 
     suffix: str = ".png"
     folder: str = ""
     only: Collection[str] | None = None
     rename: Mapping[str, str] | None = None
+    role: ClassVar[str] = ""
+    replays: ClassVar[bool] = False
+    once: ClassVar[bool] = False
+    #: The option that names ``targets()`` and what they are (a kind of :data:`semattnet._utils.outputs.KINDS`).
+    option: ClassVar[str] = "--out"
+    kind: ClassVar[str] = "file"
 
     def path(self, name: str) -> str | None:
         """The file for frame ``name``, relative to the output folder (None: not written)."""
@@ -163,33 +181,162 @@ class Sink:
     def save(self, path: Path, pred: Prediction) -> None:
         raise NotImplementedError
 
+    def files(self) -> list[str]:
+        """Its outputs of the whole run inside the output folder (written into the stage by :meth:`finish`)."""
+        return []
+
+    def targets(self) -> list[Path]:
+        """Its outputs of the whole run elsewhere (checked like every output)."""
+        return []
+
+    def open(self, overwrite: bool = False) -> None:
+        """Start the run (``overwrite``: existing targets may be replaced at :meth:`commit`)."""
+
+    def finish(self, stage: Path) -> None:
+        """Every frame written: complete the run's outputs (``files()`` into ``stage``, ``targets()`` staged)."""
+
+    def commit(self) -> None:
+        """Move ``targets()`` into place."""
+
+    def abort(self) -> None:
+        """Remove whatever was staged."""
+
+    def close(self) -> None:
+        """The run is recorded: stop what still serves (nothing for a file)."""
+
 
 #: Sink name -> :class:`~semattnet._utils.registry.Entry` (the class and the ``predict`` option asking for it).
-#: The robot sinks register from :mod:`semattnet.robotics` (which imports this layer, never the reverse), so
-#: they are listed once their modules are imported. Every registered sink runs through the suite in
+#: The robot sinks register from :mod:`semattnet.robotics` (which imports this layer, never the reverse), named
+#: here by their modules and imported on first read. Every registered sink runs through the suite in
 #: ``tests/registry/test_sinks.py``.
-SINKS: Registry[Sink] = Registry("sink")
+SINKS: Registry[Sink] = Registry("sink", homes=(__name__, "semattnet.robotics.sinks", "semattnet.robotics.live"))
 
 
-def register_sink(name: str, option: str | None = None) -> Callable[[type[Sink]], type[Sink]]:
-    """Enrol a :class:`Sink` subclass as ``name`` (``option``: the CLI option asking for it)."""
-    return SINKS.register(name, option)
+def register_sink(
+    name: str, option: str | None = None, options: type[SinkOptions] | None = None
+) -> Callable[[type[Sink]], type[Sink]]:
+    """Enrol a :class:`Sink` subclass as ``name`` (``option``: the CLI option asking for it; ``options``: how
+    ``predict`` makes it, with its own command-line options: :class:`SinkOptions`)."""
+    return SINKS.register(name, option, options)
+
+
+@dataclass(frozen=True)
+class OutputSettings:
+    """What the sinks of one run share (``predict``'s output options): ``npy``, ``uncertainty``, the clouds'
+    ``max_depth`` / ``top_crop`` / ``max_uncertainty``, the run's ``timer`` and where messages go (``log``)."""
+
+    npy: bool = False
+    uncertainty: bool = False
+    max_uncertainty: UncertaintyLimit | None = None
+    max_depth: float = 80.0
+    top_crop: int = 0
+    timer: StageTimes | None = None
+    log: Callable[[str], None] = print
+
+
+@dataclass(frozen=True)
+class SinkOptions:
+    """How ``predict`` makes a sink: its own command-line options (the fields, with
+    :func:`~semattnet._utils.registry.option` metadata, listed under "Outputs") and :meth:`sinks`.
+
+    Facts (class attributes) the output rules read: ``needs_recording``: its output needs a recording of a
+    camera and a LiDAR (``--ply``); ``needs_intrinsics``: it needs the camera's intrinsics from the input (the
+    robot outputs); ``clouds``: it draws point clouds (``--max-uncertainty`` applies): ``always``, ``recording``
+    (only for a recording's frames) or ``""``. Whether a resumed run rebuilds it from the kept frames is the
+    sink's own :attr:`RunSink.replays`."""
+
+    needs_recording: ClassVar[bool] = False
+    needs_intrinsics: ClassVar[bool] = False
+    clouds: ClassVar[str] = ""
+
+    def asked(self) -> bool:
+        """Whether its options ask for it (any given)."""
+        return any(self.__dict__[f.name] not in (None, False) for f in fields(self))
+
+    def sinks(self, settings: OutputSettings) -> list[Sink]:
+        """The sinks to write (none when not asked)."""
+        raise NotImplementedError  # every entry's options define it
+
+
+@dataclass(frozen=True)
+class _DepthPng(SinkOptions):
+    def sinks(self, settings: OutputSettings) -> list[Sink]:
+        return [DepthPngSink()]
+
+
+@dataclass(frozen=True)
+class _ColorPng(SinkOptions):
+    def sinks(self, settings: OutputSettings) -> list[Sink]:
+        return [ColorPngSink()]
+
+
+@dataclass(frozen=True)
+class _Npy(SinkOptions):
+    def sinks(self, settings: OutputSettings) -> list[Sink]:
+        return [NpySink()] * settings.npy
+
+
+@dataclass(frozen=True)
+class _UncertaintyPng(SinkOptions):
+    def sinks(self, settings: OutputSettings) -> list[Sink]:
+        return [UncertaintyPngSink()] * settings.uncertainty
+
+
+@dataclass(frozen=True)
+class _UncertaintyNpy(SinkOptions):
+    def sinks(self, settings: OutputSettings) -> list[Sink]:
+        return [UncertaintyNpySink()] * (settings.uncertainty and settings.npy)
+
+
+@dataclass(frozen=True)
+class PlyOptions(SinkOptions):
+    """``--ply``."""
+
+    needs_recording: ClassVar[bool] = True
+    clouds: ClassVar[str] = "always"
+    ply: bool = option("--ply", type="flag", help="With --kitti-raw or --bag: also write a binary PLY point cloud.")
+
+    def sinks(self, settings: OutputSettings) -> list[Sink]:
+        s = settings
+        return [PlySink(max_depth=s.max_depth, top_crop=s.top_crop, max_uncertainty=s.max_uncertainty)] * self.ply
+
+
+@dataclass(frozen=True)
+class PanelOptions(SinkOptions):
+    """``--panel``."""
+
+    clouds: ClassVar[str] = "recording"
+    panel: bool = option(
+        "--panel", type="flag", help="Also write the per-branch panel (with --kitti-raw: a bird's-eye view)."
+    )
+
+    def sinks(self, settings: OutputSettings) -> list[Sink]:
+        s = settings
+        return [PanelSink(max_depth=s.max_depth, top_crop=s.top_crop, max_uncertainty=s.max_uncertainty)] * self.panel
+
+
+@dataclass(frozen=True)
+class _Latency(SinkOptions):
+    def sinks(self, settings: OutputSettings) -> list[Sink]:
+        return [LatencySink(timer=settings.timer)]
 
 
 def list_sinks() -> list[str]:
-    """The registered sink names (the robot ones once :mod:`semattnet.robotics`' modules are imported)."""
+    """The registered sink names."""
     return SINKS.names()
 
 
-@register_sink("depth-png", option="--out")
+@register_sink("depth-png", option="--out", options=_DepthPng)
 class DepthPngSink(Sink):
     """``NAME.png``: the KITTI 16-bit depth (``metres * 256``, 0 = hole)."""
+
+    role: ClassVar[str] = "depth"
 
     def save(self, path: Path, pred: Prediction) -> None:
         write_depth(path, pred.png, overwrite=True)
 
 
-@register_sink("color-png", option="--out")
+@register_sink("color-png", option="--out", options=_ColorPng)
 @dataclass
 class ColorPngSink(Sink):
     """``NAME_color.png``: the stored depth in colour."""
@@ -202,21 +349,7 @@ class ColorPngSink(Sink):
         write_image(path, colorize_depth(pred.stored), overwrite=True)
 
 
-@register_sink("npy", option="--npy")
-@dataclass
-class NpySink(Sink):
-    """``NAME.npy``: the clamped depth, float32 metres (0 = hole), unquantised."""
-
-    suffix: str = ".npy"
-
-    def save(self, path: Path, pred: Prediction) -> None:
-        from semattnet._utils.atomic import atomic_path
-
-        with atomic_path(path, suffix=".npy") as tmp:
-            np.save(tmp, pred.depth)
-
-
-@register_sink("ply", option="--ply")
+@register_sink("ply", option="--ply", options=PlyOptions)
 @dataclass
 class PlySink(Sink):
     """``NAME.ply``: the stored depth back-projected (camera frame: x right, y down, z forward, metres),
@@ -242,6 +375,20 @@ class PlySink(Sink):
         write_ply(path, cloud, overwrite=True)
 
 
+@register_sink("npy", option="--npy", options=_Npy)
+@dataclass
+class NpySink(Sink):
+    """``NAME.npy``: the clamped depth, float32 metres (0 = hole), unquantised."""
+
+    suffix: str = ".npy"
+
+    def save(self, path: Path, pred: Prediction) -> None:
+        from semattnet._utils.atomic import atomic_path
+
+        with atomic_path(path, suffix=".npy") as tmp:
+            np.save(tmp, pred.depth)
+
+
 def _uncertainty_of(pred: Prediction) -> tuple[np.ndarray, np.ndarray]:
     """(float32 metres, uint16 encoding) of ``pred``'s uncertainty; a one-line error when the method has none."""
     if pred.uncertainty is None or pred.uncertainty_png is None:
@@ -249,19 +396,20 @@ def _uncertainty_of(pred: Prediction) -> tuple[np.ndarray, np.ndarray]:
     return pred.uncertainty, pred.uncertainty_png
 
 
-@register_sink("uncertainty-png", option="--uncertainty")
+@register_sink("uncertainty-png", option="--uncertainty", options=_UncertaintyPng)
 @dataclass
 class UncertaintyPngSink(Sink):
     """``uncertainty/NAME.png``: the uncertainty in the KITTI 16-bit encoding (``metres * 256``, 0 = none:
     a hole in the depth; :func:`~semattnet.inference.uncertainty.encode_uncertainty`)."""
 
     folder: str = "uncertainty"
+    role: ClassVar[str] = "uncertainty"
 
     def save(self, path: Path, pred: Prediction) -> None:
         write_depth(path, _uncertainty_of(pred)[1], overwrite=True)
 
 
-@register_sink("uncertainty-npy", option="--uncertainty")
+@register_sink("uncertainty-npy", option="--uncertainty", options=_UncertaintyNpy)
 @dataclass
 class UncertaintyNpySink(Sink):
     """``uncertainty/NAME.npy``: the uncertainty, float32 metres (0 at the holes), unquantised."""
@@ -277,7 +425,7 @@ class UncertaintyNpySink(Sink):
             np.save(tmp, values)
 
 
-@register_sink("panel", option="--panel")
+@register_sink("panel", option="--panel", options=PanelOptions)
 @dataclass
 class PanelSink(Sink):
     """``NAME_panel.png``: the per-branch panel (with ground truth and its error map when the frame has
@@ -316,39 +464,15 @@ class RunSink(Sink):
     earlier run (their stored depth, in their place), so that its output covers every frame."""
 
     replays: ClassVar[bool] = True
-    #: The option that names ``targets()`` and what they are (a kind of :data:`semattnet._utils.outputs.KINDS`).
-    option: ClassVar[str] = "--out"
-    kind: ClassVar[str] = "file"
 
     def path(self, name: str) -> str | None:
         return None
 
-    def files(self) -> list[str]:
-        return []
-
-    def targets(self) -> list[Path]:
-        return []
-
-    def open(self, overwrite: bool = False) -> None:
-        """Start the run (``overwrite``: existing targets may be replaced at :meth:`commit`)."""
-
     def write(self, stage: Path, pred: Prediction) -> None:
         """One frame."""
 
-    def finish(self, stage: Path) -> None:
-        """Every frame written: complete the output (``files()`` into ``stage``, ``targets()`` staged)."""
 
-    def commit(self) -> None:
-        """Move ``targets()`` into place."""
-
-    def abort(self) -> None:
-        """Remove whatever was staged."""
-
-    def close(self) -> None:
-        """The run is recorded: stop what still serves (nothing for a file)."""
-
-
-@register_sink("latency", option="--stream")
+@register_sink("latency", option="--stream", options=_Latency)
 @dataclass
 class LatencySink(RunSink):
     """``latency.json``: the per-stage times of the run (:class:`semattnet.inference.timing.StageTimes`)."""
@@ -356,6 +480,7 @@ class LatencySink(RunSink):
     timer: StageTimes | None = None
     name: str = "latency.json"
     replays: ClassVar[bool] = False  # the loop adds the kept frames' recorded times to the timer
+    once: ClassVar[bool] = True  # rank 0's timer: every rank's frames
 
     def files(self) -> list[str]:
         return [self.name]

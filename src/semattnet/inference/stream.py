@@ -10,9 +10,9 @@ written; at most ``N`` frames are read ahead of the one the loop holds (a semaph
 Stages (:data:`~.timing.STAGES`): ``read`` (read and decode), ``projection`` (LiDAR scan into the image),
 ``segmentation`` (the semantic map, when one is computed), ``network``, ``propagation``, ``writing`` (every sink).
 
-* A source splits ``read`` from ``projection`` by offering ``read(name)`` (raw inputs, decoded) and
-  ``assemble(raw)`` (the :class:`~semattnet.data.frames.Frame`, scan projected), as
-  :class:`~semattnet.data.sources.BagSource` does; for other sources ``load`` is timed as ``read``.
+* A source splits ``read`` from ``projection`` by being a :class:`~semattnet.data.frames.TwoStageSource`:
+  ``read(name)`` (raw inputs, decoded) and ``assemble(raw)`` (the :class:`~semattnet.data.frames.Frame`, scan
+  projected), as :class:`semattnet.robotics.BagSource` does; for other sources ``load`` is timed as ``read``.
 * ``network`` vs ``propagation``: a completer that times the stages inside its call
   (:class:`~semattnet.inference.completer.StageTimed`) gets a hook that times them: for a
   :class:`~semattnet.inference.DepthCompleter` on the ``torch`` engine the model's CSPN++ propagation
@@ -34,7 +34,7 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import TYPE_CHECKING
 
-from semattnet.data.frames import Frame, FrameSource
+from semattnet.data.frames import Frame, FrameSource, TwoStageSource
 from semattnet.inference.batching import BatchCompleter, complete_group, groups
 from semattnet.inference.completion import Completer, Completion, StageTimed
 from semattnet.inference.timing import DEFAULT_SENSOR_PERIOD_S, GAP_PERIODS, MAX_WAIT_S, StageTimes
@@ -78,7 +78,7 @@ def _reason(exc: BaseException) -> str:
 
 def read_frame(source: FrameSource, name: str, semantic: SemanticMaps | None, timer: StageTimes) -> Frame:
     """One frame read (and projected, when the source splits it) and given its semantic map, timed."""
-    if hasattr(source, "read") and hasattr(source, "assemble"):
+    if isinstance(source, TwoStageSource):
         with timer.time(name, "read"):
             raw = source.read(name)
         with timer.time(name, "projection"):

@@ -41,10 +41,11 @@ import numpy as np
 
 from semattnet._errors import InputError
 from semattnet._utils.extras import optional, require
+from semattnet._utils.registry import option
 from semattnet.data.frames import Frame
 from semattnet.data.io import decode_depth
 from semattnet.geometry.cameras import CameraInfoData
-from semattnet.inference.sinks import Prediction, RunSink, register_sink
+from semattnet.inference.sinks import OutputSettings, Prediction, RunSink, Sink, SinkOptions, register_sink
 from semattnet.inference.uncertainty import UncertaintyLimit
 from semattnet.robotics.gate import Gate, exposed, is_loopback, parse_address
 from semattnet.robotics.sinks import camera_info, stamp_ns
@@ -52,7 +53,7 @@ from semattnet.robotics.sinks import camera_info, stamp_ns
 if TYPE_CHECKING:
     from semattnet.geometry import PointCloud
 
-__all__ = ["LATENCY_SCHEMA", "LiveSink", "parse_address"]
+__all__ = ["LATENCY_SCHEMA", "LiveOptions", "LiveSink", "parse_address"]
 
 #: Topics by role; ``PREFIX`` is :attr:`LiveSink.prefix`.
 TOPICS = {
@@ -205,7 +206,24 @@ class _Channel(Protocol):
     def close(self) -> None: ...
 
 
-@register_sink("live", option="--live")
+@dataclass(frozen=True)
+class LiveOptions(SinkOptions):
+    """``--live [HOST:]PORT``."""
+
+    needs_intrinsics: ClassVar[bool] = True
+    clouds: ClassVar[str] = "always"
+    live: str | None = option("--live", type="address", identity=False,
+                              help="Serve the frames as they are completed over the Foxglove WebSocket protocol "
+                              "(HOST: 127.0.0.1 unless given).  [extra: live]")  # fmt: skip
+
+    def sinks(self, settings: OutputSettings) -> list[Sink]:
+        if self.live is None:
+            return []
+        s = settings
+        return [LiveSink(address=self.live, max_depth=s.max_depth, log=s.log, max_uncertainty=s.max_uncertainty)]
+
+
+@register_sink("live", option="--live", options=LiveOptions)
 @dataclass
 class LiveSink(RunSink):
     """``--live [HOST:]PORT``: serve each completed frame over the Foxglove WebSocket protocol (module doc).
@@ -317,7 +335,7 @@ class LiveSink(RunSink):
         if T is not None:
             lidar = frame.meta.lidar_frame_id or "lidar"
             self._log("tf", t_ns, lambda: _transform(m, stamp, frame_id, lidar, T))
-        stages = {str(k): float(v) for k, v in (getattr(pred, "stage_ms", None) or {}).items()}
+        stages = {str(k): float(v) for k, v in pred.stage_ms.items()}
         self._log("latency", t_ns, lambda: {"frame": frame.name, "stamp_ns": t_ns, "stages_ms": stages})
 
     def _stop(self) -> None:

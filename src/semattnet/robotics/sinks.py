@@ -21,9 +21,10 @@ import numpy as np
 
 from semattnet._errors import InputError
 from semattnet._utils.outputs import clean_stale_stages
+from semattnet._utils.registry import option
 from semattnet.data.frames import Frame
 from semattnet.geometry.cameras import CameraInfoData
-from semattnet.inference.sinks import Prediction, RunSink, register_sink
+from semattnet.inference.sinks import OutputSettings, Prediction, RunSink, Sink, SinkOptions, register_sink
 from semattnet.inference.uncertainty import UncertaintyLimit
 from semattnet.robotics.gate import exposed, is_loopback, parse_address
 
@@ -31,7 +32,7 @@ if TYPE_CHECKING:
     from semattnet.robotics.bags import BagWriter
     from semattnet.robotics.rerun import RerunLogger
 
-__all__ = ["BagSink", "RerunSink", "camera_info", "stamp_ns"]
+__all__ = ["BagOutOptions", "BagSink", "RerunOptions", "RerunSink", "camera_info", "stamp_ns"]
 
 
 def stamp_ns(frame: Frame, index: int) -> int:
@@ -47,6 +48,7 @@ class _StagedTarget(RunSink):
     """A run output at ``target``, written into a hidden folder beside it and moved into place at commit."""
 
     target: Path | None
+    _dir: Path | None = None  # the hidden folder, between open and commit / abort (a class default, not a field)
 
     def targets(self) -> list[Path]:
         return [] if self.target is None else [Path(self.target)]
@@ -73,13 +75,13 @@ class _StagedTarget(RunSink):
 
         from semattnet._utils.atomic import full_disk_named
 
-        return nullcontext() if self.target is None else full_disk_named(self.target, getattr(self, "_dir", None))
+        return nullcontext() if self.target is None else full_disk_named(self.target, self._dir)
 
     def commit(self) -> None:
         from semattnet._utils.atomic import fsync_dir
         from semattnet._utils.outputs import refuse_existing
 
-        assert self.target is not None  # _begin refused a missing target
+        assert self.target is not None and self._dir is not None  # _begin refused a missing target
         target = Path(self.target)
         try:
             refuse_existing([target], self._overwrite)
@@ -93,12 +95,57 @@ class _StagedTarget(RunSink):
     def abort(self) -> None:
         import shutil
 
-        if getattr(self, "_dir", None) is not None:
+        if self._dir is not None:
             shutil.rmtree(self._dir, ignore_errors=True)
-            self._dir = None  # type: ignore[assignment]
+            self._dir = None
 
 
-@register_sink("bag", option="--bag-out")
+@dataclass(frozen=True)
+class BagOutOptions(SinkOptions):
+    """``--bag-out``."""
+
+    needs_intrinsics: ClassVar[bool] = True
+    clouds: ClassVar[str] = "always"
+    bag_out: Path | None = option("--bag-out", type="out-path", help="Also write a ROS 2 bag (MCAP; ROS 1 for .bag): "
+                                  "depth 32FC1, coloured cloud, CameraInfo.")  # fmt: skip
+
+    def sinks(self, settings: OutputSettings) -> list[Sink]:
+        if self.bag_out is None:
+            return []
+        s = settings
+        return [BagSink(target=self.bag_out, max_depth=s.max_depth, uncertainty=s.uncertainty,
+                        max_uncertainty=s.max_uncertainty)]  # fmt: skip
+
+
+#: Where ``--rerun-serve`` without a value serves the recording (Rerun's own default port, this machine only).
+RERUN_SERVE = "127.0.0.1:9876"
+
+
+@dataclass(frozen=True)
+class RerunOptions(SinkOptions):
+    """``--rerun FILE``, ``--rerun-spawn``, ``--rerun-serve``."""
+
+    needs_intrinsics: ClassVar[bool] = True
+    clouds: ClassVar[str] = "always"
+    rerun_file: Path | None = option("--rerun", type="out-file",
+                                     help="Also write a Rerun recording FILE.rrd.  [extra: rerun]")  # fmt: skip
+    rerun_spawn: bool = option("--rerun-spawn", type="flag", identity=False,
+                               help="Stream the frames to a spawned Rerun viewer.")  # fmt: skip
+    rerun_serve: str | None = option("--rerun-serve", type="address", flag_value=RERUN_SERVE, identity=False,
+                                     metavar="[[HOST:]PORT]",
+                                     help=f"Serve the frames to Rerun viewers as they are completed, on [HOST:]PORT "
+                                     f"(alone: {RERUN_SERVE}; a HOST other than this machine's also serves the web "
+                                     "viewer).  [extra: rerun]")  # fmt: skip
+
+    def sinks(self, settings: OutputSettings) -> list[Sink]:
+        if not self.asked():
+            return []
+        s = settings
+        return [RerunSink(target=self.rerun_file, spawn=self.rerun_spawn, serve=self.rerun_serve, max_depth=s.max_depth,
+                          log=s.log, uncertainty=s.uncertainty, max_uncertainty=s.max_uncertainty)]  # fmt: skip
+
+
+@register_sink("bag", option="--bag-out", options=BagOutOptions)
 @dataclass
 class BagSink(_StagedTarget):
     """``--bag-out``: a ROS 2 bag (MCAP where rosbags writes it; ROS 1 for ``.bag``) by
@@ -148,7 +195,7 @@ class BagSink(_StagedTarget):
                 writer.close()  # the bag is complete in the hidden folder
 
     def abort(self) -> None:
-        writer, self._writer = getattr(self, "_writer", None), None
+        writer, self._writer = self._writer, None
         try:
             if writer is not None:  # still open: BagWriter removes its stage
                 writer.__exit__(RuntimeError, RuntimeError("aborted"), None)
@@ -177,7 +224,7 @@ def camera_info(frame: Frame) -> CameraInfoData:
 WEB_PORT = 9090
 
 
-@register_sink("rerun", option="--rerun")
+@register_sink("rerun", option="--rerun", options=RerunOptions)
 @dataclass
 class RerunSink(_StagedTarget):
     """``--rerun FILE.rrd`` / ``--rerun-spawn``: per frame the camera, image, sparse input, stored depth, semantic
@@ -250,7 +297,7 @@ class RerunSink(_StagedTarget):
             super().commit()
 
     def abort(self) -> None:
-        logger, self._logger = getattr(self, "_logger", None), None
+        logger, self._logger = self._logger, None
         try:
             if logger is not None:
                 logger.__exit__(RuntimeError, RuntimeError("aborted"), None)

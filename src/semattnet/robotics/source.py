@@ -18,22 +18,73 @@ import os
 import threading
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from semattnet._errors import DataError
-from semattnet.data.frames import Frame, IndexedSource, SensorMeta
-from semattnet.data.sources.registry import register_source
+from semattnet._utils.registry import OptionError, option
+from semattnet.data.frames import Frame, IndexedSource, SensorMeta, SourceInfo
+from semattnet.data.sources.registry import SourceOptions, register_source
 from semattnet.geometry import RigCalibration
 from semattnet.robotics.bags import BagFailure, BagPair, BagPairs, StampPairing
 from semattnet.robotics.bags.reader import message_where
 
-__all__ = ["BagSource"]
+__all__ = ["BagOptions", "BagSource"]
 
 
-@register_source("bag", option="--bag")
+@dataclass(frozen=True)
+class BagOptions(SourceOptions):
+    """``--bag``: a ROS 1 or ROS 2 recording of a camera and a LiDAR."""
+
+    heading: ClassVar[str] = "Inputs: ROS bag"
+    usage: ClassVar[str] = "--bag"
+    selects: ClassVar[tuple[str, ...]] = ("bag",)
+    accepts: ClassVar[tuple[str, ...]] = ("segment_spec",)
+    recording: ClassVar[bool] = True
+
+    bag: Path | None = option("--bag", type="input", help="A ROS 1 .bag, a ROS 2 bag folder or a .db3 / .mcap file "
+                              "(instead of --rgb/--sparse).")  # fmt: skip
+    image_topic: str | None = option("--image-topic", help="sensor_msgs/Image or CompressedImage topic.")
+    points_topic: str | None = option("--points-topic", help="sensor_msgs/PointCloud2 topic (x, y, z).")
+    camera_info_topic: str | None = option(
+        "--camera-info-topic", help="sensor_msgs/CameraInfo topic [the bag's only one]."
+    )
+    rig: Path | None = option(
+        "--rig", type="file", help="Rig JSON (K, T_cam_lidar, image_size) overriding CameraInfo and /tf_static."
+    )
+    semantic_topic: str | None = option(
+        "--semantic-topic", help="Colour-coded semantic images, paired with the images by stamp."
+    )
+    max_skew: float | None = option(
+        "--max-skew", type="seconds", help="Seconds between an image and its scan at most [half the scan period]."
+    )
+    list_topics: bool = option("--list-topics", type="flag", identity=False, help="Print the bag's topics and exit.")
+
+    def check(self, segment_spec: str | None) -> None:
+        if not self.list_topics and None in (self.image_topic, self.points_topic):
+            raise OptionError("--bag needs --image-topic and --points-topic (see --list-topics)")
+        if self.semantic_topic is not None and segment_spec is not None:
+            raise OptionError("give --semantic-topic or --segment, not both")
+
+    def listing(self) -> str | None:
+        from semattnet.robotics.bags import format_topics, list_topics
+
+        assert self.bag is not None  # it chose this input
+        return format_topics(list_topics(self.bag)) if self.list_topics else None
+
+    def reads_maps(self, semantic: Path | None) -> bool:
+        return self.semantic_topic is not None
+
+    def source(self, semantic: Path | None, log: Callable[[str], None]) -> BagSource:
+        assert self.bag is not None and self.image_topic is not None and self.points_topic is not None  # checked
+        return BagSource(self.bag, self.image_topic, self.points_topic, self.camera_info_topic, self.rig,
+                         self.max_skew, self.semantic_topic, log=log)  # fmt: skip
+
+
+@register_source("bag", option="--bag", options=BagOptions)
 class BagSource(IndexedSource):
     """The frames of a bag, one per image of the image topic (see :class:`~semattnet.robotics.bags.BagPairs` for
     the arguments and what is checked at construction: topics, pairing, calibration). Frames are named by the
@@ -92,6 +143,12 @@ class BagSource(IndexedSource):
             if p.dropped_images:
                 text += f" ({p.dropped_images} image(s) without one within {p.max_skew_ns / 1e6:.1f} ms)"
         return text
+
+    @property
+    def info(self) -> SourceInfo:
+        """No semantic palette of its own (a semantic topic's maps are Cityscapes: ``palette``), every frame's
+        header stamp."""
+        return SourceInfo(self.palette, stamps_ns=[int(ns) for ns in self.stamps_ns])
 
     @property
     def stamps_ns(self) -> np.ndarray:

@@ -37,7 +37,7 @@ import numpy as np
 
 from semattnet._errors import InputError
 from semattnet._utils.atomic import atomic_path
-from semattnet.geometry.cameras import KITTI_K
+from semattnet.geometry.cameras import parse_intrinsics
 
 if TYPE_CHECKING:
     from semattnet.data.pairing import FramePaths
@@ -104,21 +104,6 @@ def cloud_points(depth: np.ndarray, K: np.ndarray, stride: int, rgb: np.ndarray 
     grid = np.zeros(depth.shape, dtype=bool)
     grid[::stride, ::stride] = True
     return depth_to_points(np.nan_to_num(depth), K, rgb=rgb, mask=grid)
-
-
-def parse_intrinsics(text: str) -> np.ndarray:
-    """``"fx,fy,cx,cy"`` or ``"kitti"`` (KITTI's camera 02) -> (3, 3) K.
-
-    Raises:
-        ValueError: not four numbers; InputError (a ValueError) for NaN / inf / non-positive focal lengths.
-    """
-    if text.strip().lower() == "kitti":
-        return KITTI_K.copy()
-    from semattnet._utils.bounds import check_pinhole
-
-    fx, fy, cx, cy = (float(v) for v in text.split(","))
-    check_pinhole(fx, fy, cx, cy, "--K")
-    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 
 
 def _packed(a: np.ndarray) -> str:

@@ -17,13 +17,16 @@ import math
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol
+from pathlib import Path
+from typing import TYPE_CHECKING, ClassVar, Protocol
 
 from semattnet._errors import InputError
+from semattnet._utils.registry import option
 from semattnet.data.datasets.frames import check_split_in
 from semattnet.data.datasets.nyuv2 import NYU_SPLITS, NyuV2Source
 from semattnet.data.datasets.void import VOID_SPLITS, VoidSource
 from semattnet.data.frames import IndexedSource
+from semattnet.data.sources.registry import SOURCES, SourceOptions
 
 if TYPE_CHECKING:
     from semattnet.data.datasets.frames import FrameDataset
@@ -32,8 +35,8 @@ if TYPE_CHECKING:
     #: The torch Dataset of a split (:meth:`DatasetSpec.dataset`): dicts of tensors, ``load(i)`` the raw sample.
     SplitDataset = KittiDepthCompletion | FrameDataset
 
-__all__ = ["DATASETS", "DEFAULT_DATASET", "DatasetArchive", "DatasetSpec", "UnknownDatasetError", "check_split",
-           "get_dataset"]  # fmt: skip
+__all__ = ["DATASETS", "DEFAULT_DATASET", "DatasetArchive", "DatasetOptions", "DatasetSpec", "UnknownDatasetError",
+           "check_split", "get_dataset"]  # fmt: skip
 
 PathLike = str | os.PathLike[str]
 DEFAULT_DATASET = "kitti-dc"
@@ -71,6 +74,9 @@ class DatasetSpec:
         palette: the semantic palette of its maps. recipe: :class:`~semattnet.training.TrainConfig`
             defaults for ``train --dataset`` (starting points from the literature, see the docs).
         licence: the terms, named. archives: what ``data download`` fetches.
+        crop_splits: the splits whose full frames the protocol bottom-crops to ``crop`` (:meth:`eval_crop`).
+        make_source: its frames' reader; make_dataset: its own torch Dataset (None: frames of ``make_source``,
+            :class:`~semattnet.data.datasets.frames.FrameDataset`).
     """
 
     name: str
@@ -90,6 +96,8 @@ class DatasetSpec:
     recipe: dict[str, object] = field(default_factory=dict)
     archives: tuple[DatasetArchive, ...] = ()
     make_source: Callable[..., IndexedSource] | None = field(default=None, repr=False)
+    crop_splits: tuple[str, ...] = ()
+    make_dataset: Callable[..., SplitDataset] | None = field(default=None, repr=False)
 
     def check_split(self, split: str | None, train: bool = False) -> str:
         """``split`` (default: the train / eval split) if this dataset has it."""
@@ -111,9 +119,10 @@ class DatasetSpec:
 
     def eval_crop(self, split: str, size: tuple[int, int]) -> tuple[int, int] | None:
         """The (H, W) bottom crop the protocol scores frames of ``size`` in ``split`` at, or None (as they are):
-        KITTI's full ``val`` is cropped to 352x1216 (frames smaller than that, as in small synthetic trees, stay
-        whole); ``val_select`` and every other dataset's frames are scored as their source gives them."""
-        if self.name != "kitti-dc" or split == "val_select" or self.crop is None or min(size) < self.crop[0]:
+        the frames of ``crop_splits`` (KITTI's full ``val``: 352x1216; frames smaller than that, as in small
+        synthetic trees, stay whole); other splits (``val_select``) and datasets are scored as their source gives
+        them."""
+        if split not in self.crop_splits or self.crop is None or min(size) < self.crop[0]:
             return None
         return None if size == self.crop else self.crop
 
@@ -124,8 +133,8 @@ class DatasetSpec:
         :class:`~semattnet.training.TrainConfig` for KITTI's crop and jitter), else as the protocol scores it
         (:meth:`eval_crop`; the model's padding to multiples of 32 is the evaluation loop's)."""
         split = self.check_split(split, train)
-        if self.name == "kitti-dc":
-            return _kitti_dataset(self, root, split, train, seed, raw_root, semantic_root, config)
+        if self.make_dataset is not None:
+            return self.make_dataset(self, root, split, train, seed, raw_root, semantic_root, config)
         from semattnet.data.datasets.frames import FrameDataset, IndoorTrainTransform
 
         transform = None
@@ -199,7 +208,7 @@ _KITTI = DatasetSpec(
     "kitti-dc", "KITTI depth completion", "data_depth_{velodyne,annotated,selection}/, kitti_raw/, semantic/",
     ("train", "val", "val_select", "test"), "train", "val_select", (352, 1216), (0.0, 255.0), None, None, "mm",
     ("rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km"), "cityscapes", "CC BY-NC-SA 3.0 (KITTI)",
-    make_source=_kitti_source,
+    make_source=_kitti_source, crop_splits=("train", "val", "test"), make_dataset=_kitti_dataset,
 )  # fmt: skip
 _NYU = DatasetSpec(
     "nyuv2", "NYU Depth v2 (sparse-to-dense HDF5)", "train/<scene>/<NNNNN>.h5, val/official/<NNNNN>.h5",
@@ -240,3 +249,32 @@ def get_dataset(name: str | DatasetSpec | None = None) -> DatasetSpec:
 def check_split(name: str, split: str | None) -> str:
     """:meth:`DatasetSpec.check_split` of the dataset ``name``."""
     return get_dataset(name).check_split(split)
+
+
+@dataclass(frozen=True)
+class DatasetOptions(SourceOptions):
+    """``--data --dataset --split``: a split of a registered dataset (the options of the default dataset's source,
+    ``kitti-dc``)."""
+
+    heading: ClassVar[str] = "Inputs: dataset"
+    usage: ClassVar[str] = "--data (with --dataset)"
+    selects: ClassVar[tuple[str, ...]] = ("data_root",)
+    accepts: ClassVar[tuple[str, ...]] = ("semantic", "segment_spec")
+
+    data_root: Path | None = option(
+        "--data", type="folder", help="A dataset root (instead of --rgb/--sparse): the frames of --split."
+    )
+    dataset: str = option("--dataset", type="choice", choices=tuple(DATASETS), default=DEFAULT_DATASET,
+                          show_default=True, help="The dataset whose root --data is.")  # fmt: skip
+    split: str | None = option("--split", help="The split [the dataset's evaluation split].")
+
+    def segment_split(self) -> tuple[str, Path, str] | None:
+        assert self.data_root is not None  # it chose this input
+        return self.dataset, self.data_root, self.split or get_dataset(self.dataset).eval_split
+
+    def source(self, semantic: Path | None, log: Callable[[str], None]) -> IndexedSource:
+        assert self.data_root is not None  # it chose this input
+        return get_dataset(self.dataset).source(self.data_root, self.split, semantic_root=semantic)
+
+
+SOURCES.attach("kitti-dc", DatasetOptions)

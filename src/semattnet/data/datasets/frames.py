@@ -12,7 +12,7 @@ import torch
 from torch.utils.data import Dataset
 
 from semattnet._errors import DataError, InputError
-from semattnet.data.frames import Frame, IndexedSource
+from semattnet.data.frames import Frame, IndexedSource, SourceInfo
 from semattnet.data.transforms import Sample, Transform, color_jitter, drop_semantic, hflip
 from semattnet.models.checks import SIZE_MULTIPLE
 
@@ -122,7 +122,7 @@ class FrameDataset(Dataset[dict[str, object]]):
     def __init__(self, source: IndexedSource, transform: Transform | None = None, seed: int = 0) -> None:
         self.source, self.transform, self.seed, self.epoch = source, transform, seed, 0
         self.frames = [FrameRef(n) for n in source.names]
-        self.palette: str | None = getattr(source, "palette", None)  # None: no maps (the unknown map)
+        self.palette: str | None = source.info.palette  # None: no maps (the unknown map)
 
     def set_epoch(self, epoch: int) -> None:
         self.epoch = int(epoch)
@@ -158,7 +158,7 @@ class CroppedSource(IndexedSource):
 
     def __init__(self, source: IndexedSource, crop: tuple[int, int]) -> None:
         self.source, self.crop, self.names = source, crop, source.names
-        self.palette: str | None = getattr(source, "palette", None)
+        self.palette: str | None = source.info.palette
 
     def load(self, name: str) -> Frame:
         frame = self.source.load(name)
@@ -177,7 +177,7 @@ class CroppedSource(IndexedSource):
     def inputs(self) -> list[Path]:
         return self.source.inputs()
 
-    def prediction_name(self, name: str) -> str:
-        """The source's file name of a frame's prediction (``NAME.png`` when it names none)."""
-        named = getattr(self.source, "prediction_name", None)
-        return str(named(name)) if callable(named) else f"{name}.png"
+    @property
+    def info(self) -> SourceInfo:
+        """The source's (its frames' names, palette and predictions' names are theirs)."""
+        return self.source.info

@@ -20,7 +20,7 @@ import numpy as np
 from semattnet._errors import DataError, InputError
 from semattnet._utils.bounds import regular_file
 from semattnet.data.datasets.frames import MissingSplitError, check_split_in
-from semattnet.data.frames import Frame, IndexedSource, unique_names
+from semattnet.data.frames import Frame, IndexedSource, SourceInfo, unique_names
 from semattnet.data.sources.registry import register_source
 
 #: The splits of VOID's release lists.
@@ -166,6 +166,10 @@ class VoidSource(IndexedSource):
             paths["semantic"] = self.semantic_root / f"{name}.png"
             sem = read_semantic(paths["semantic"])
         return Frame(name, rgb, sparse.astype(np.float32), sem, K=K, gt=gt, paths=paths)
+
+    @property
+    def info(self) -> SourceInfo:
+        return SourceInfo(self.palette, listed_files=self.listed_files())
 
     def listed_files(self) -> list[Path]:
         """Every file the lists name for this source's frames (image, depth, validity, intrinsics)."""

@@ -3,18 +3,21 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
 from semattnet._errors import DataError
+from semattnet._utils.registry import option
 from semattnet.data.frames import Frame, IndexedSource
 from semattnet.data.io import read_semantic
 from semattnet.data.kitti_raw import RawDrive, RawFrame
-from semattnet.data.sources.registry import register_source
+from semattnet.data.sources.registry import SourceOptions, register_source
 
-__all__ = ["RawDriveSource", "project_frame"]
+__all__ = ["RawDriveOptions", "RawDriveSource", "project_frame"]
 
 
 def project_frame(frame: RawFrame) -> np.ndarray:
@@ -30,7 +33,30 @@ def project_frame(frame: RawFrame) -> np.ndarray:
     return depth
 
 
-@register_source("kitti-raw", option="--kitti-raw")
+@dataclass(frozen=True)
+class RawDriveOptions(SourceOptions):
+    """``--kitti-raw``: a KITTI raw drive (images, Velodyne scans, calibration, OXTS)."""
+
+    heading: ClassVar[str] = "Inputs: KITTI raw drive"
+    usage: ClassVar[str] = "--kitti-raw"
+    selects: ClassVar[tuple[str, ...]] = ("kitti_raw",)
+    accepts: ClassVar[tuple[str, ...]] = ("semantic", "segment_spec")
+    recording: ClassVar[bool] = True
+
+    kitti_raw: Path | None = option("--kitti-raw", type="folder",
+                                    help="A KITTI raw drive folder RAW_ROOT/DATE/DATE_drive_NNNN_sync (instead of "
+                                    "--rgb/--sparse).")  # fmt: skip
+    frames: str | None = option("--frames", help="Indices, a range a-b or a comma list (default all).")
+    camera: str = option("--camera", type="choice", choices=("2", "3"), default="2", show_default=True,
+                         help="The colour camera: image_02 or image_03.")  # fmt: skip
+    deskew: bool = option("--deskew", type="flag", help="Ego-motion compensate the scans with their OXTS data.")
+
+    def source(self, semantic: Path | None, log: Callable[[str], None]) -> RawDriveSource:
+        assert self.kitti_raw is not None  # it chose this input
+        return RawDriveSource(self.kitti_raw, self.frames, self.camera, semantic, self.deskew)
+
+
+@register_source("kitti-raw", option="--kitti-raw", options=RawDriveOptions)
 class RawDriveSource(IndexedSource):
     """The frames ``frames`` (see :func:`semattnet.data.kitti_raw.parse_frames`) of a KITTI raw drive
     (:class:`~semattnet.data.kitti_raw.RawDrive`: ``camera``, ``deskew``), with the points and calibration

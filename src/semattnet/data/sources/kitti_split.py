@@ -6,14 +6,14 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from semattnet.data.frames import Frame, IndexedSource, unique_names
+from semattnet.data.frames import Frame, IndexedSource, SourceInfo, unique_names
 from semattnet.data.kitti import FrameFiles, KittiDepthCompletion, load_frame
 from semattnet.data.sources.registry import register_source
 
 __all__ = ["KittiSplitSource", "prediction_name"]
 
 
-@register_source("kitti-split", option="--data")
+@register_source("kitti-dc", option="--data")  # the dataset's name; options: data.datasets.DatasetOptions
 class KittiSplitSource(IndexedSource):
     """The frames of a split at full size, read by :func:`semattnet.data.kitti.load_frame` (paired by drive,
     camera and frame id; incomplete frames refused as :class:`KittiDepthCompletion` does).
@@ -40,10 +40,12 @@ class KittiSplitSource(IndexedSource):
         paths |= {k: p for k, p in (("gt", f.gt), ("intrinsics", f.intrinsics)) if p is not None}
         return Frame(name, s.rgb, s.sparse, s.semantic, K=s.K, gt=s.gt, paths=paths)
 
-    def prediction_name(self, name: str) -> str:
-        """The file name of a frame's prediction: for ``val_select`` the ground truth's own name (so that
+    @property
+    def info(self) -> SourceInfo:
+        """Its Cityscapes maps and its predictions' names: for ``val_select`` the ground truth's own (so that
         ``semattnet metrics`` pairs by name), else ``NAME.png``."""
-        return prediction_name(self.split, self.by_name[name])
+        names = {n: prediction_name(self.split, f) for n, f in self.by_name.items()}
+        return SourceInfo(self.palette, prediction_names=names)
 
     def inputs(self) -> list[Path]:
         return list(self.roots)

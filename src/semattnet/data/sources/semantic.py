@@ -5,16 +5,11 @@ Which map a frame gets when its source has none is decided in :mod:`semattnet.in
 from __future__ import annotations
 
 from collections.abc import Callable
-from pathlib import Path
 from typing import TypedDict
 
 import numpy as np
 
-from semattnet._errors import InputError
-from semattnet.data.frames import Frame, IndexedSource
-from semattnet.data.sources.registry import register_source
-
-__all__ = ["MISMATCH_POLICIES", "CrossPalette", "CrossPaletteSource", "MapSegmenter", "PaletteReport"]
+__all__ = ["MISMATCH_POLICIES", "CrossPalette", "MapSegmenter", "PaletteReport"]
 
 #: A segmenter: (B, H, W, 3) uint8 images -> (B, H, W) uint8 class ids (a
 #: :class:`semattnet.segmentation.Segmenter`, whose ``palette`` names them; Cityscapes without one).
@@ -68,27 +63,3 @@ class CrossPalette:
             line = f"{src} maps replaced by the fallback (unknown) map: the model was trained with {dst}"
         return {"maps_palette": self.maps_palette, "model_palette": self.palette, "used": self.policy,
                 "classes_kept": self.kept if self.policy == "recolour" else [], "summary": line}  # fmt: skip
-
-
-@register_source("cross-palette", option="--palette-mismatch")
-class CrossPaletteSource(IndexedSource):
-    """``source``'s frames with their maps converted for a model of ``palette`` (:class:`CrossPalette`)."""
-
-    def __init__(self, source: IndexedSource, palette: str, policy: str = "recolour") -> None:
-        if source.palette is None:
-            raise InputError(f"{type(source).__name__}: its frames have no semantic maps to convert to {palette}")
-        self.source, self.cross = source, CrossPalette(source.palette, palette, policy)
-        self.palette, self.names = self.cross.palette, source.names
-
-    def load(self, name: str) -> Frame:
-        frame = self.source.load(name)
-        if frame.semantic is None:
-            return frame
-        where = str(frame.paths.get("semantic", name)) if frame.paths else name
-        return frame.with_semantic(self.cross.map(frame.semantic, where))
-
-    def inputs(self) -> list[Path]:
-        return list(self.source.inputs())
-
-    def report(self) -> PaletteReport:
-        return self.cross.report()

@@ -1,0 +1,103 @@
+"""The frame loop's contract is written, not probed: what a source says beyond its frames is its ``info``
+(:class:`~semattnet.data.frames.SourceInfo`), a two-stage source is a declared
+:class:`~semattnet.data.frames.TwoStageSource`, and the loop finds sinks by their ``role``, not their class."""
+
+from __future__ import annotations
+
+import ast
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+import pytest
+
+import semattnet
+from semattnet.baselines import ClassicalCompleter
+from semattnet.data.frames import Frame, IndexedSource, SourceInfo, TwoStageSource
+from semattnet.inference.pipeline import complete_frames
+from semattnet.inference.sinks import Prediction, Sink
+from semattnet.inference.timing import StageTimes
+
+SIZE = (16, 24)
+SRC = Path(semattnet.__file__).parent
+#: The modules of the frame path: the loop, its reader, the semantic maps and the sources and sinks it reads.
+FRAME_PATH = [
+    "inference/pipeline.py",
+    "inference/stream.py",
+    "inference/semantic.py",
+    "inference/sinks.py",
+    "data/datasets/frames.py",
+    "evaluation/evaluate.py",
+    "evaluation/split.py",
+    "evaluation/sparsity.py",
+]
+
+
+def _frame(name: str) -> Frame:
+    sparse = np.zeros(SIZE, np.float32)
+    sparse[::4, ::4] = 4.0
+    return Frame(name, np.full((*SIZE, 3), 90, np.uint8), sparse)
+
+
+class Stamped(IndexedSource):
+    """Frames with no timestamp of their own; the source knows every frame's sensor stamp (0.1 s apart)."""
+
+    names = ("a", "b", "c")
+
+    @property
+    def info(self) -> SourceInfo:
+        return SourceInfo(stamps_ns=[0, 100_000_000, 200_000_000])
+
+    def load(self, name: str) -> Frame:
+        return _frame(name)
+
+    def inputs(self) -> list[Path]:
+        return []
+
+
+class TwoStage(Stamped):
+    """Its frames read in two stages (decode, then assemble)."""
+
+    def read(self, name: str) -> str:
+        return name
+
+    def assemble(self, raw: str) -> Frame:
+        return _frame(raw)
+
+
+@dataclass
+class TextDepth(Sink):
+    """The frame's depth file, under another class than the depth PNG's: ``NAME.txt``."""
+
+    suffix: str = ".txt"
+    role: ClassVar[str] = "depth"
+
+    def save(self, path: Path, pred: Prediction) -> None:
+        path.write_text(f"{pred.stored.mean():.2f}")
+
+
+def test_the_loop_reads_the_sources_info_and_stages(tmp_path: Path) -> None:
+    timer, lines = StageTimes(), []
+    assert isinstance(TwoStage(), TwoStageSource) and not isinstance(Stamped(), TwoStageSource)
+    run = complete_frames(TwoStage(), ClassicalCompleter(), [TextDepth()], tmp_path / "out", timer=timer,
+                          log=lines.append)  # fmt: skip
+    assert timer.stamps == {"a": 0.0, "b": 0.1, "c": 0.2} and timer.sensor_period_s == pytest.approx(0.1)
+    assert all("projection" in timer.times[n] for n in "abc")  # assemble timed apart from read
+    assert run.paths == [tmp_path / "out" / f"{n}.txt" for n in "abc"]  # the sink whose role is depth
+    assert lines[0].endswith(f"-> {tmp_path / 'out' / 'a.txt'}")
+
+
+def test_no_probe_of_sources_or_sinks_in_the_frame_path() -> None:
+    """No ``getattr`` / ``hasattr`` on a source or a sink, no ``isinstance`` against a sink class."""
+    found = []
+    for rel in FRAME_PATH:
+        for node in ast.walk(ast.parse((SRC / rel).read_text())):
+            if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.args):
+                continue
+            first, name = ast.unparse(node.args[0]), node.func.id
+            probed = name in ("getattr", "hasattr") and any(w in first for w in ("source", "sink", "ds"))
+            by_class = name == "isinstance" and len(node.args) > 1 and "Sink" in ast.unparse(node.args[1])
+            if probed or by_class:
+                found.append(f"{rel}:{node.lineno}: {ast.unparse(node)}")
+    assert not found, "\n".join(found)
