@@ -83,9 +83,9 @@ _MODEL = section(MODEL)
 
 def _identity(params: Mapping[str, object]) -> dict[str, object]:
     """What a run is, for a resume to check: every option that changes the outputs (paths resolved, a
-    weights file by its SHA-256) and the package version."""
+    weights file or folder by its SHA-256) and the package version."""
     from semattnet._utils.version import __version__
-    from semattnet.cache import sha256_file
+    from semattnet.cache import sha256_file, sha256_tree
 
     run: dict[str, object] = {"command": "predict", "version": __version__}
     for key, value in sorted(params.items()):
@@ -93,6 +93,8 @@ def _identity(params: Mapping[str, object]) -> dict[str, object]:
             continue
         if key == "weights" and Path(str(value)).is_file():  # a file by its digest (--checkpoint arrives here too)
             value = f"sha256:{sha256_file(str(value))}"
+        elif key == "weights" and Path(str(value)).is_dir():  # a folder (hf layout) by every file in it
+            value = f"sha256-tree:{sha256_tree(str(value))}"
         run[key] = str(Path(value).resolve()) if isinstance(value, Path) else value
     return run
 

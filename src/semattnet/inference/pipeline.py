@@ -148,7 +148,7 @@ def check_frames(source: FrameSource, sinks: Sequence[Sink], out: PathLike, *, o
     """
     out, policy = Path(out), _policy(on_error, len(source.names))
     with process_group():
-        journal = agree(RunJournal, out, source.names, run, resume, rank(), world_size())
+        journal = agree(_journal, source, sinks, out, run, resume)
         if not (overwrite or resume):  # before the files it left are refused one by one: say --resume
             on_main(_refuse_earlier_run, out)
         on_main(_check_outputs, source, sinks, out, overwrite or resume, inputs)
@@ -160,6 +160,14 @@ def check_frames(source: FrameSource, sinks: Sequence[Sink], out: PathLike, *, o
         if bad and len(bad) == len(source.names):
             raise _nothing_done(bad)  # every input is bad: one line, before the model is loaded
     return RunPlan(journal, faults, policy, resume)
+
+
+def _journal(source: FrameSource, sinks: Sequence[Sink], out: Path, run: Mapping[str, object] | None,
+             resume: bool) -> RunJournal:  # fmt: skip
+    """This process's journal of the run: its inputs recorded, a resume keeping only frames with this run's files."""
+    files = [s for s in sinks if not isinstance(s, RunSink)]
+    return RunJournal(out, source.names, run, resume, rank(), world_size(), inputs=source.inputs(),
+                      expect=lambda name: output_files([name], files))  # fmt: skip
 
 
 def _refuse_earlier_run(out: Path) -> None:
@@ -295,25 +303,29 @@ class _FrameLoop:
         self.log(_line(frame, self.out, self.depth_sink))
 
     def finish(self, stage: Path) -> None:
-        """Every frame seen: the run outputs completed (rank 0's ``latency.json``) and moved into place."""
+        """Every frame seen: the run outputs completed (rank 0's ``latency.json``) and moved into place, when a
+        frame is done."""
         self.catch_up(None)
         self.timer.not_done = {k: v for k, v in self.journal.counts().items() if k in ("skipped", "dropped")}
         for s in self.runs:
             if not isinstance(s, LatencySink) or is_main():
                 s.finish(stage)
+        if world_size() == 1 and not self.journal.counts()["done"]:
+            return  # no frame done: nothing is put in place (no latency.json; the run raises in _close)
         for rel in [f for s in self.runs for f in s.files()] if is_main() else []:
             if (stage / rel).is_file():
                 os.replace(stage / rel, self.out / rel)
 
     def forget(self) -> None:
-        """After a run error: keep the journal when a frame is done, else leave no trace of this run."""
+        """After a run error: keep the journal when a frame is done, else leave no trace of this run (the journal
+        it found, an earlier run's, put back)."""
         if self.journal.counts()["done"]:
             try:
                 self.journal.save()
             except OSError:  # a full disk: the journal keeps its last save (those frames are redone on resume)
                 pass
             return
-        self.journal.path.unlink(missing_ok=True)
+        self.journal.restore()
         if self.created and self.out.is_dir() and not any(self.out.iterdir()):
             self.out.rmdir()
 
@@ -383,8 +395,7 @@ def complete_frames(
         if isinstance(checked, RunPlan):
             plan = checked
         elif checked:  # checked by the caller, nothing to skip or keep
-            plan = RunPlan(RunJournal(out, source.names, run, False, rank(), world_size()), {},
-                           _policy(on_error, len(source.names)))  # fmt: skip
+            plan = RunPlan(_journal(source, sinks, out, run, False), {}, _policy(on_error, len(source.names)))
         else:
             plan = check_frames(source, sinks, out, overwrite=overwrite, inputs=inputs, on_error=on_error,
                                 resume=resume, run=run)  # fmt: skip

@@ -1,0 +1,198 @@
+"""``frames.json`` is verified, not trusted: a resume keeps a frame only when every file it records is a
+regular file inside OUT with its recorded size and digest, refuses a damaged journal in one line naming the
+field, a changed input, weights folder or version, and never loses an earlier run's record."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from semattnet._errors import DataError
+from semattnet.baselines import ClassicalCompleter
+from semattnet.data.io import write_depth, write_image
+from semattnet.data.sources import FolderSource
+from semattnet.inference.journal import ResumeError
+from semattnet.inference.pipeline import check_frames, complete_frames
+from semattnet.inference.sinks import LatencySink, default_sinks
+from semattnet.inference.timing import StageTimes
+
+N = 3
+
+
+def _frames(root: Path) -> FolderSource:
+    rng = np.random.default_rng(0)
+    for i in range(N):
+        write_image(root / "rgb" / f"f{i}.png", rng.integers(0, 255, (24, 32, 3), dtype=np.uint8))
+        d = np.zeros((24, 32), np.float32)
+        d[::2, ::3] = rng.uniform(2, 60, d[::2, ::3].shape)
+        write_depth(root / "sparse" / f"f{i}.png", d)
+    return FolderSource.pair(root / "rgb", root / "sparse")
+
+
+def _run(source: FolderSource, out: Path, resume: bool = False, completer: Any = None) -> Any:
+    sinks = [*default_sinks(), LatencySink(timer=StageTimes())]
+    return complete_frames(source, completer or ClassicalCompleter(), sinks, out, resume=resume,
+                           log=lambda _: None)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory: pytest.TempPathFactory) -> tuple[FolderSource, Path]:
+    """Three frames and a finished run of them (not to be changed: see :func:`done`)."""
+    root = tmp_path_factory.mktemp("finished")
+    source = _frames(root)
+    _run(source, root / "out")
+    return source, root / "out"
+
+
+@pytest.fixture
+def done(finished: tuple[FolderSource, Path], tmp_path: Path) -> tuple[FolderSource, Path]:
+    """The frames of :func:`finished` and a copy of its run in ``tmp_path/out``."""
+    shutil.copytree(finished[1], tmp_path / "out")
+    return finished[0], tmp_path / "out"
+
+
+def _edit(out: Path, change: Callable[[dict[str, Any]], None]) -> None:
+    doc = json.loads((out / "frames.json").read_text())
+    change(doc)
+    (out / "frames.json").write_text(json.dumps(doc))
+
+
+def _refusal(source: FolderSource, out: Path) -> str:
+    with pytest.raises(ResumeError) as info:
+        check_frames(source, default_sinks(), out, resume=True)
+    message = str(info.value)
+    assert "\n" not in message and "frames.json" in message, message
+    return message
+
+
+def _kept(source: FolderSource, out: Path) -> set[str]:
+    return check_frames(source, default_sinks(), out, resume=True).journal.kept
+
+
+@pytest.mark.parametrize("rel", ["/etc/hostname", "../f0.png", "a/../../f0.png", ""])
+def test_a_path_outside_out_is_a_damaged_field(done: tuple[FolderSource, Path], rel: str) -> None:
+    source, out = done
+    _edit(out, lambda d: d["frames"][0].update(files={rel: {"size": 1, "sha256": "0" * 64}}))
+    assert "damaged field frames[0].files" in _refusal(source, out)
+
+
+def test_only_whole_regular_files_inside_out_are_kept(done: tuple[FolderSource, Path], tmp_path: Path) -> None:
+    source, out = done
+    foreign = tmp_path / "foreign.png"
+    foreign.write_bytes((out / "f0.png").read_bytes())  # same size, same bytes: still not ours
+    (out / "f0.png").unlink()
+    (out / "f0.png").symlink_to(foreign)
+    data = bytearray((out / "f1_color.png").read_bytes())
+    data[-20] ^= 0xFF  # same size, other content
+    (out / "f1_color.png").write_bytes(bytes(data))
+    _edit(out, lambda d: d["frames"][2].update(files={}))  # a done frame that names no file
+    assert _kept(source, out) == set()
+    _run(source, out, resume=True)
+    assert not (out / "f0.png").is_symlink() and foreign.read_bytes() == (out / "f0.png").read_bytes()
+    assert _kept(source, out) == {"f0", "f1", "f2"}
+
+
+@pytest.mark.parametrize(
+    ("field", "change"),
+    [
+        ("wall_s", lambda d: d.update(wall_s="abc")),
+        ("wall_s", lambda d: d.update(wall_s=float("nan"))),
+        ("wall_s", lambda d: d.update(wall_s=-5)),
+        ("frames[1].stage_ms", lambda d: d["frames"][1].update(stage_ms=None)),
+        ("frames[1].stage_ms['writing']", lambda d: d["frames"][1]["stage_ms"].update(writing="text")),
+        ("frames[0]", lambda d: d["frames"].__setitem__(0, {})),
+        ("frames[0].files['f0.png']", lambda d: d["frames"][0]["files"].update({"f0.png": 12})),
+        ("run", lambda d: d.update(run="x")),
+        ("run", lambda d: d.update(run={})),
+        ("inputs", lambda d: d.pop("inputs")),
+    ],
+)
+def test_a_damaged_number_or_record_is_one_line_naming_the_field(
+    done: tuple[FolderSource, Path], field: str, change: Callable[[dict[str, Any]], None]
+) -> None:
+    source, out = done
+    _edit(out, change)
+    message = _refusal(source, out)
+    assert f"damaged field {field}:" in message and "--amp" not in message, message
+
+
+def test_deeply_nested_json_is_one_line(done: tuple[FolderSource, Path]) -> None:
+    source, out = done
+    (out / "frames.json").write_text("[" * 100_000 + "]" * 100_000)
+    assert "nested too deeply" in _refusal(source, out)
+
+
+def test_a_journal_of_the_previous_format_is_refused(done: tuple[FolderSource, Path]) -> None:
+    source, out = done
+    _edit(out, lambda d: d.update(schema="semattnet.frames/1"))
+    assert "cannot be verified" in _refusal(source, out)
+
+
+@pytest.mark.parametrize("kind", ["folder", "fifo"])
+def test_a_journal_that_is_no_file_is_named_as_such(tmp_path: Path, kind: str) -> None:
+    source, out = _frames(tmp_path), tmp_path / "out"
+    out.mkdir()
+    if kind == "folder":
+        (out / "frames.json").mkdir()
+    else:
+        os.mkfifo(out / "frames.json")
+    message = _refusal(source, out)
+    assert f"is a {'FIFO' if kind == 'fifo' else 'folder'}" in message and "no frames.json" not in message
+
+
+def test_a_changed_version_is_not_called_an_option(done: tuple[FolderSource, Path]) -> None:
+    source, out = done
+    _edit(out, lambda d: d["run"].update(version="0.0.1"))
+    message = _refusal(source, out)
+    assert "written by semattnet 0.0.1" in message and "--version" not in message, message
+
+
+def test_a_changed_input_is_refused(tmp_path: Path) -> None:
+    source, out = _frames(tmp_path), tmp_path / "out"
+    _run(source, out)
+    image = tmp_path / "rgb" / "f1.png"
+    os.utime(image, ns=(image.stat().st_atime_ns, image.stat().st_mtime_ns + 10**9))  # edited since
+    assert f"the input {image.resolve()} changed" in _refusal(source, out)
+
+
+def test_a_weights_folder_is_recorded_by_digest(tmp_path: Path) -> None:
+    from semattnet.cli.predict import _identity
+
+    (tmp_path / "w").mkdir()
+    (tmp_path / "w" / "model.safetensors").write_bytes(b"one")
+    first = _identity({"weights": str(tmp_path / "w")})
+    (tmp_path / "w" / "model.safetensors").write_bytes(b"two")
+    assert str(first["weights"]).startswith("sha256-tree:") and _identity({"weights": str(tmp_path / "w")}) != first
+
+
+class _Fails:
+    """A completer for which every frame is bad."""
+
+    def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Any:
+        raise DataError("no LiDAR point in the image")
+
+
+def test_a_resume_that_completes_nothing_keeps_the_earlier_record(done: tuple[FolderSource, Path]) -> None:
+    source, out = done
+    before = (out / "frames.json").read_bytes()
+    for p in out.glob("f*.png"):
+        p.unlink()  # nothing kept: every frame is done again, and every one fails
+    with pytest.raises(DataError, match="no frame could be completed"):
+        _run(source, out, resume=True, completer=_Fails())
+    assert (out / "frames.json").read_bytes() == before
+
+
+def test_a_run_with_no_frame_done_leaves_nothing_and_blocks_nothing(tmp_path: Path) -> None:
+    source, out = _frames(tmp_path), tmp_path / "out"
+    out.mkdir()
+    with pytest.raises(DataError, match="no frame could be completed"):
+        _run(source, out, completer=_Fails())
+    assert list(out.iterdir()) == []  # no latency.json, no frames.json
+    assert _run(source, out).counts["done"] == N  # the next run into it is not refused
