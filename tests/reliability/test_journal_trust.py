@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from semattnet._errors import DataError
+from semattnet._utils.outputs import FolderBusyError
 from semattnet.baselines import ClassicalCompleter
 from semattnet.data.io import write_depth, write_image
 from semattnet.data.sources import FolderSource
@@ -196,3 +197,20 @@ def test_a_run_with_no_frame_done_leaves_nothing_and_blocks_nothing(tmp_path: Pa
         _run(source, out, completer=_Fails())
     assert list(out.iterdir()) == []  # no latency.json, no frames.json
     assert _run(source, out).counts["done"] == N  # the next run into it is not refused
+
+
+def test_a_second_run_into_a_folder_in_use_is_refused(tmp_path: Path) -> None:
+    import fcntl
+
+    source, out = _frames(tmp_path), tmp_path / "out"
+    out.mkdir()
+    with open(out / ".semattnet.lock", "w") as held:  # another run holds the folder
+        fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        held.write("4242\n")
+        held.flush()
+        with pytest.raises(FolderBusyError) as info:
+            _run(source, out)
+        assert "another semattnet run (process 4242)" in str(info.value) and "\n" not in str(info.value)
+    assert {p.name for p in out.iterdir()} == {".semattnet.lock"}  # nothing written; its lock left alone
+    _run(source, out)  # a lock file no process holds (a killed run's) is stale: taken over
+    assert not (out / ".semattnet.lock").exists() and (out / "frames.json").is_file()

@@ -161,11 +161,14 @@ def _run_frames(chosen: ChosenInput, outputs: Outputs, run: RunOptions, model: M
         source, maps = chosen.values.open(chosen.maps, model.device)
         plan = check_frames(source, sinks, out, overwrite=outputs.overwrite, on_error=run.on_error, resume=resuming,
                             run=identity, inputs=[weights_input(model.weights)[1]])  # before the model  # fmt: skip
-        if plan.journal.kept:
-            click.echo(f"{out}: resuming: {len(plan.journal.kept)} of {len(source.names)} frame(s) already done")
-        result = complete_frames(source, model.completer(), sinks, out, overwrite=outputs.overwrite, log=click.echo,
-                                 semantic=maps, checked=plan, timer=timer, prefetch=run.prefetch,
-                                 realtime=run.rate)  # fmt: skip
+        try:
+            if plan.journal.kept:
+                click.echo(f"{out}: resuming: {len(plan.journal.kept)} of {len(source.names)} frame(s) already done")
+            result = complete_frames(source, model.completer(), sinks, out, overwrite=outputs.overwrite,
+                                     log=click.echo, semantic=maps, checked=plan, timer=timer, prefetch=run.prefetch,
+                                     realtime=run.rate)  # fmt: skip
+        finally:
+            plan.release()  # also when the model cannot be loaded
     if launch_rank() == 0:
         click.echo(timer.table())
         if maps.note:

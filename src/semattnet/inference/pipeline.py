@@ -45,7 +45,7 @@ import numpy as np
 from semattnet._errors import DataError, InputError
 from semattnet._utils.atomic import fsync_dir
 from semattnet._utils.distributed import first_error, is_main, rank, world_size
-from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs, stage_folder
+from semattnet._utils.outputs import FolderLock, Output, check_no_input_overlap, check_outputs, stage_folder
 from semattnet.data.frames import Frame, FrameSource
 from semattnet.data.io import encode_depth, read_depth
 from semattnet.inference.completer import Completer, Completion
@@ -104,12 +104,20 @@ def _policy(on_error: str | None, frames: int) -> str:
 @dataclass
 class RunPlan:
     """What :func:`check_frames` decided: the run's :class:`~.journal.RunJournal` (with the frames a resume
-    keeps), the frames whose inputs failed the check (name -> reason; ``on_error="skip"``) and the policy."""
+    keeps), the frames whose inputs failed the check (name -> reason; ``on_error="skip"``) and the policy;
+    ``lock``: the output folder's lock, held from the check to the end of :func:`complete_frames`
+    (:meth:`release` it when the run does not happen)."""
 
     journal: RunJournal
     faults: dict[str, str] = field(default_factory=dict)
     on_error: str = "stop"
     resume: bool = False
+    lock: FolderLock | None = None
+
+    def release(self) -> None:
+        """Let the output folder go (idempotent)."""
+        if self.lock is not None:
+            self.lock.release()
 
 
 def _check_inputs(source: FrameSource, names: Sequence[str], on_error: str) -> dict[str, str]:
@@ -140,25 +148,45 @@ def check_frames(source: FrameSource, sinks: Sequence[Sink], out: PathLike, *, o
     for more than one frame). ``resume``: continue the run in ``out`` (``run``: its identity, which must be the
     one recorded there; the frames done, with every output whole, are kept).
 
+    The output folder is locked (:class:`~semattnet._utils.outputs.FolderLock`) first, until the end of
+    :func:`complete_frames` (or :meth:`RunPlan.release`).
+
     Raises:
         FileExistsError: an output exists and neither ``overwrite`` nor ``resume`` is set.
-        OutputError: an output in or over an input.
+        OutputError: an output in or over an input; ``FolderBusyError``: another run is writing into ``out``.
         ResumeError: nothing to resume in ``out``, or a run with another identity.
         DataError: an input is missing or corrupt (naming the file), with ``on_error="stop"``.
     """
-    out, policy = Path(out), _policy(on_error, len(source.names))
+    out, lock = Path(out), FolderLock(out)
     with process_group():
-        journal = agree(_journal, source, sinks, out, run, resume)
-        if not (overwrite or resume):  # before the files it left are refused one by one: say --resume
-            on_main(_refuse_earlier_run, out)
-        on_main(_check_outputs, source, sinks, out, overwrite or resume, inputs)
-        todo = [n for n in shard(source.names) if n not in journal.kept]
-        faults = agree(_check_inputs, source, todo, policy)
-        position = {n: i for i, n in enumerate(source.names)}
-        rows: list[FrameEntry] = [{"name": n, "status": "skipped", "reason": r} for n, r in faults.items()]
-        bad = gather_rows(rows, key=lambda e: position[e["name"]])
-        if bad and len(bad) == len(source.names):
-            raise _nothing_done(bad)  # every input is bad: one line, before the model is loaded
+        on_main(_acquire, lock)
+        try:
+            plan = _plan(source, sinks, out, overwrite, inputs, _policy(on_error, len(source.names)), resume, run)
+        except BaseException:
+            lock.release()
+            raise
+    plan.lock = lock
+    return plan
+
+
+def _acquire(lock: FolderLock) -> None:
+    lock.acquire()
+
+
+def _plan(source: FrameSource, sinks: Sequence[Sink], out: Path, overwrite: bool, inputs: Sequence[PathLike | None],
+          policy: str, resume: bool, run: Mapping[str, object] | None) -> RunPlan:  # fmt: skip
+    """:func:`check_frames` once the folder is locked."""
+    journal = agree(_journal, source, sinks, out, run, resume)
+    if not (overwrite or resume):  # before the files it left are refused one by one: say --resume
+        on_main(_refuse_earlier_run, out)
+    on_main(_check_outputs, source, sinks, out, overwrite or resume, inputs)
+    todo = [n for n in shard(source.names) if n not in journal.kept]
+    faults = agree(_check_inputs, source, todo, policy)
+    position = {n: i for i, n in enumerate(source.names)}
+    rows: list[FrameEntry] = [{"name": n, "status": "skipped", "reason": r} for n, r in faults.items()]
+    bad = gather_rows(rows, key=lambda e: position[e["name"]])
+    if bad and len(bad) == len(source.names):
+        raise _nothing_done(bad)  # every input is bad: one line, before the model is loaded
     return RunPlan(journal, faults, policy, resume)
 
 
@@ -399,13 +427,16 @@ def complete_frames(
         else:
             plan = check_frames(source, sinks, out, overwrite=overwrite, inputs=inputs, on_error=on_error,
                                 resume=resume, run=run)  # fmt: skip
-        maps = agree((semantic or SemanticMaps()).bind, completer)
-        maps.check_palette(completer, source)
-        loop = _FrameLoop(source, sinks, out, plan, timer, rank_log(log), maps)
-        first = first_error(_attempt_run(loop, completer, prefetch, realtime, overwrite or plan.resume, batch_size))
-        if first is not None:
-            raise first
-        return _close(loop)
+        try:
+            maps = agree((semantic or SemanticMaps()).bind, completer)
+            maps.check_palette(completer, source)
+            loop = _FrameLoop(source, sinks, out, plan, timer, rank_log(log), maps)
+            first = first_error(_attempt_run(loop, completer, prefetch, realtime, overwrite or plan.resume, batch_size))
+            if first is not None:
+                raise first
+            return _close(loop)
+        finally:
+            plan.release()
 
 
 def _attempt_run(loop: _FrameLoop, completer: Completer, prefetch: int, realtime: float | None,
