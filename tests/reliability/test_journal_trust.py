@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from semattnet._errors import DataError
-from semattnet._utils.outputs import FolderBusyError
+from semattnet._utils.outputs import FolderBusyError, Output, OutputError, check_outputs
 from semattnet.baselines import ClassicalCompleter
 from semattnet.data.io import write_depth, write_image
 from semattnet.data.sources import FolderSource
@@ -214,3 +214,29 @@ def test_a_second_run_into_a_folder_in_use_is_refused(tmp_path: Path) -> None:
     assert {p.name for p in out.iterdir()} == {".semattnet.lock"}  # nothing written; its lock left alone
     _run(source, out)  # a lock file no process holds (a killed run's) is stale: taken over
     assert not (out / ".semattnet.lock").exists() and (out / "frames.json").is_file()
+
+
+def test_an_output_subfolder_linked_out_of_out_is_refused_with_overwrite_too(tmp_path: Path) -> None:
+    source, out, foreign = _frames(tmp_path), tmp_path / "out", tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "f0.png").write_bytes(b"a user's file")
+    out.mkdir()
+    (out / "uncertainty").symlink_to(foreign)
+    with pytest.raises(OutputError, match=r"out/uncertainty is a symbolic link to .*foreign; remove the link"):
+        check_frames(source, default_sinks(uncertainty=True), out, overwrite=True)
+    assert (foreign / "f0.png").read_bytes() == b"a user's file" and sorted(os.listdir(out)) == ["uncertainty"]
+
+
+def test_overwrite_replaces_a_ros1_bag_by_our_mark_not_by_its_magic_bytes(tmp_path: Path) -> None:
+    from semattnet.robotics.bags.writer import staged_bag
+
+    theirs, ours = tmp_path / "theirs.bag", tmp_path / "ours.bag"
+    theirs.write_bytes(b"#ROSBAG V2.0\nthe user's recording")
+    with pytest.raises(OutputError, match="never a user's folder or file"):
+        check_outputs([], [Output("--bag-out", theirs, "bag")], overwrite=True)
+    with staged_bag(ours) as tmp:
+        tmp.write_bytes(b"#ROSBAG V2.0\nours")
+    check_outputs([], [Output("--bag-out", ours, "bag")], overwrite=True)  # ours: replaceable
+    ours.write_bytes(b"#ROSBAG V2.0\nrecorded over ours by the user")
+    with pytest.raises(OutputError, match="never a user's folder or file"):
+        check_outputs([], [Output("--bag-out", ours, "bag")], overwrite=True)

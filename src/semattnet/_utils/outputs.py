@@ -43,10 +43,12 @@ __all__ = [
     "FolderLock",
     "Output",
     "OutputError",
+    "bag_mark",
     "check_no_input_overlap",
     "check_outputs",
     "clean_stale_stages",
     "incomplete_tree",
+    "mark_bag_file",
     "mark_tree",
     "refuse_existing",
     "stage_folder",
@@ -60,7 +62,9 @@ STAGE_PREFIX = ".semattnet-stage."
 #: The completion marker of a generated tree (JSON: generator, complete, resume).
 TREE_MARKER = ".semattnet-tree.json"
 
-#: The marker file inside a ROS 2 bag folder semattnet wrote: what lets ``--overwrite`` replace it.
+#: The marker file inside a ROS 2 bag folder semattnet wrote: what lets ``--overwrite`` replace it. A ROS 1
+#: ``NAME.bag`` file semattnet wrote has it beside it instead, as ``.NAME.bag.semattnet-bag``: its size and
+#: modification time (:func:`mark_bag_file`), so a user's recording put in its place is not taken for ours.
 BAG_MARKER = ".semattnet-bag"
 
 
@@ -347,11 +351,34 @@ def _is_safetensors(path: Path) -> bool:
     return len(head) == 9 and int.from_bytes(head[:8], "little") < path.stat().st_size and head[8:] == b"{"
 
 
+def bag_mark(path: str | os.PathLike[str]) -> Path:
+    """Where the mark of the ROS 1 bag file ``path`` goes (:func:`mark_bag_file`): ``.NAME.semattnet-bag`` beside it."""
+    path = Path(path)
+    return path.parent / f".{path.name}{BAG_MARKER}"
+
+
+def _stamp(path: Path) -> dict[str, int]:
+    st = path.lstat()
+    return {"size": st.st_size, "mtime_ns": st.st_mtime_ns, "inode": st.st_ino}
+
+
+def mark_bag_file(path: str | os.PathLike[str]) -> None:
+    """Record the ROS 1 bag file ``path`` (just written by semattnet) beside it, so that ``--overwrite`` may
+    replace it later: the file ``.NAME.semattnet-bag`` with its size, modification time and inode."""
+    path = Path(path)
+    with atomic_path(bag_mark(path), suffix=".json") as tmp:
+        tmp.write_text(json.dumps(_stamp(path)) + "\n")
+
+
 def _is_bag(path: Path) -> bool:
-    """A ROS 2 bag folder carrying :data:`BAG_MARKER`, or a ROS 1 ``.bag`` file."""
+    """A ROS 2 bag folder carrying :data:`BAG_MARKER`, or a ROS 1 bag file that its mark beside it describes
+    (:func:`mark_bag_file`): what semattnet wrote, recognised by its mark, never by a format's magic bytes."""
     if path.is_dir():
         return (path / BAG_MARKER).is_file() and (path / "metadata.yaml").is_file()
-    return _head(path, 13) == b"#ROSBAG V2.0\n"
+    try:
+        return path.is_file() and not path.is_symlink() and json.loads(bag_mark(path).read_text()) == _stamp(path)
+    except (OSError, ValueError, RecursionError):
+        return False
 
 
 def _is_file(magic: bytes) -> Callable[[Path], bool]:
@@ -365,7 +392,7 @@ KINDS: dict[str, tuple[str, Callable[[Path], bool]]] = {
     "folder": ("a folder", Path.is_dir),
     "file": ("a regular file", Path.is_file),
     "tree": (f"a tree semattnet generated ({TREE_MARKER} in it)", lambda p: (p / TREE_MARKER).is_file()),
-    "bag": (f"a bag semattnet wrote ({BAG_MARKER} in it, or a ROS 1 .bag file)", _is_bag),
+    "bag": (f"a bag semattnet wrote ({BAG_MARKER} in it, or beside a ROS 1 .bag file)", _is_bag),
     "json": ("a JSON file", lambda p: p.is_file() and _head(p, 64).lstrip()[:1] in (b"{", b"[")),
     "rrd": ("a Rerun recording", _is_file(b"RRF")),
     "ply": ("a PLY file", _is_file(b"ply")),
@@ -394,7 +421,8 @@ def check_outputs(inputs: Iterable[tuple[str, str | os.PathLike[str] | None]], o
     """The one output rule, checked before any work. ``inputs``: (option, path) pairs (None paths ignored).
 
     * No output is an input (by resolved path or, hard links, by inode), lies inside an input, or contains one.
-    * No two outputs are one path, and none lies inside another (only inside a ``folder`` output).
+    * No two outputs are one path, and none lies inside another (only inside a ``folder`` output, and then it
+      resolves inside it: a subfolder that is a symlink out of the folder is refused).
     * An existing output is refused unless ``overwrite``; with it, only one that is recognisably an earlier
       output of ours (:data:`KINDS`): never a user's folder or file.
 
@@ -422,12 +450,30 @@ def check_outputs(inputs: Iterable[tuple[str, str | os.PathLike[str] | None]], o
             what = "the output folder" if o.kind == "folder" else "the output"
             raise OutputError(f"{_named(outer.option, outer.path)} would replace {what} {_named(o.option, o.path)} "
                               "(it holds it); choose distinct paths")  # fmt: skip
+    _inside_folders(outs)
     for (option, given), r in ((v, k) for k, v in ins.items() if isinstance(k, Path)):
         holder = next((by_path[p] for p in r.parents if p in by_path), None)
         if holder is not None:
             raise OutputError(f"{_named(holder.option, holder.path)} holds the input {_named(option, given)}; "
                               "choose an output path that holds no input")  # fmt: skip
     _check_replaceable([o for o, _ in outs], overwrite)
+
+
+def _inside_folders(outs: list[tuple[Output, Path]]) -> None:
+    """Every output named inside a ``folder`` output lands inside it (no symlinked subfolder leads out of it),
+    with ``overwrite`` too: a file in someone else's folder is never replaced. (An output that is itself a
+    symlink is replaced by the new file, its target untouched.)"""
+    folders = [(o, Path(os.path.abspath(o.path)), r) for o, r in outs if o.kind == "folder"]
+    for o, _ in outs:
+        named = Path(os.path.abspath(o.path))
+        lands = _resolve(named.parent) / named.name
+        for f, f_named, f_resolved in folders:
+            if named != f_named and named.is_relative_to(f_named) and not lands.is_relative_to(f_resolved):
+                steps = [p for p in [*reversed(named.parents), named] if p != f_named and p.is_relative_to(f_named)]
+                link = next((p for p in steps if p.is_symlink()), named)
+                raise OutputError(f"{_named(o.option, o.path)} lies outside {_named(f.option, f.path)}: {link} "
+                                  f"is a symbolic link to {_resolve(link)}; remove the link or choose another "
+                                  "--out")  # fmt: skip
 
 
 def _against_inputs(o: Output, r: Path, ins: dict[Path | tuple[int, int], tuple[str, Path]]) -> None:
