@@ -7,10 +7,10 @@ The journal is how a long run survives bad frames and kills (:func:`semattnet.in
   before the completer was free), ``failed`` (the frame that stopped an ``on_error="stop"`` run) or
   ``pending`` (not reached);
 * a done frame records its output files (path relative to the folder -> size and SHA-256, taken when they
-  were written) and its stage times (milliseconds);
-* ``run`` is the run's identity (the command's options, the weights' digest) and ``inputs`` the size and
-  modification time of every input file: a resume with another identity or a changed input is refused
-  (:class:`ResumeError`), so one folder never mixes two runs' outputs.
+  were written), its input files (path -> size and modification time) and its stage times (milliseconds);
+* ``run`` is the run's identity (the command's options, the weights' digest, the version): a resume with
+  another identity is refused (:class:`ResumeError`), and a frame whose input changed is done again, so one
+  folder never mixes two runs' outputs.
 
 Nothing read back is trusted: on resume every field is type- and range-checked (a damaged journal is one
 line naming ``frames.json`` and the field), and a done frame is kept only when each of its files is a regular
@@ -31,7 +31,7 @@ import os
 import stat
 import time
 from collections import Counter
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path, PurePosixPath
 from typing import TypedDict
 
@@ -85,10 +85,12 @@ class FileRecord(TypedDict):
 
 class FrameEntry(_Entry, total=False):
     """One frame of the journal: ``name``, ``status`` (:data:`STATUSES`), and ``reason`` (not done) or ``files``
-    (relative path -> :class:`FileRecord`) and ``stage_ms`` (stage -> milliseconds) (done)."""
+    (relative path -> :class:`FileRecord`), ``inputs`` (path -> [size, mtime_ns]) and ``stage_ms`` (stage ->
+    milliseconds) (done)."""
 
     reason: str
     files: dict[str, FileRecord]
+    inputs: dict[str, list[int]]
     stage_ms: dict[str, float]
 
 
@@ -159,9 +161,6 @@ def _checked(path: Path, doc: object) -> dict[str, object]:
     if not isinstance(run, dict) or not all(isinstance(run.get(k), str) for k in ("command", "version")):
         raise _damaged(path, "run", f"{_shown(run)} is not the record of a run (its command, version and options)")
     _time(path, "wall_s", doc.get("wall_s"))
-    stamps = doc.get("inputs")
-    if not isinstance(stamps, dict) or not all(_is_stamp(v) for v in stamps.values()):
-        raise _damaged(path, "inputs", "not a table of input files (path -> [size, mtime_ns])")
     frames = doc.get("frames")
     if not isinstance(frames, list):
         raise _damaged(path, "frames", f"{_shown(frames)} is not a list of frames")
@@ -180,7 +179,9 @@ def _check_entry(path: Path, where: str, entry: object) -> None:
         raise _damaged(path, where, f"{_shown(entry)} is not a frame record (a name and a status)")
     if entry["status"] != "done":
         return
-    files, stage_ms = entry.get("files"), entry.get("stage_ms", {})
+    files, stage_ms, stamps = entry.get("files"), entry.get("stage_ms", {}), entry.get("inputs")
+    if not isinstance(stamps, dict) or not all(_is_stamp(v) for v in stamps.values()):
+        raise _damaged(path, f"{where}.inputs", f"{_shown(stamps)} is not a table of input files (path -> stamp)")
     if not isinstance(files, dict):
         raise _damaged(path, f"{where}.files", f"{_shown(files)} is not a table of output files")
     for rel, record in files.items():
@@ -205,9 +206,9 @@ def _is_digest(value: object) -> bool:
     return isinstance(value, str) and len(value) == 64 and all(c in "0123456789abcdef" for c in value)
 
 
-def input_stamps(paths: Sequence[str | os.PathLike[str]]) -> dict[str, list[int]]:
+def input_stamps(paths: Iterable[str | os.PathLike[str]]) -> dict[str, list[int]]:
     """Size and modification time (ns) of every input file of ``paths`` (the files, and the files directly
-    inside the folders), by resolved path: what a resume compares to see an input changed."""
+    inside the folders, e.g. a ROS 2 bag's), by resolved path: what a resume compares to see an input changed."""
     stamps: dict[str, list[int]] = {}
     for given in paths:
         p = Path(given).resolve()
@@ -241,31 +242,24 @@ def _difference(old: Mapping[str, object], new: Mapping[str, object]) -> str | N
     return None
 
 
-def _changed_input(old: Mapping[str, object], new: Mapping[str, list[int]]) -> str | None:
-    """The first input file recorded in both with another size or modification time, or None."""
-    return next((p for p, stamp in new.items() if p in old and old[p] != stamp), None)
-
-
 class RunJournal:
     """The frames of one run in ``out`` (``names`` in order) and what happened to each.
 
     ``run``: the run's identity (JSON values; ``command`` and ``version`` default to ``predict`` and this
-    version). ``inputs``: the input files and folders (their files' sizes and
-    modification times are recorded). ``resume``: continue the run in ``out`` (its journal must exist and hold
-    the same identity and inputs); else a new journal is started. ``rank`` / ``world``: this process under
+    version). ``resume``: continue the run in ``out`` (its journal must exist and hold the same identity); else a
+    new journal is started. ``rank`` / ``world``: this process under
     ``torchrun`` (its own partial file while running). ``expect``: a frame's output files (relative paths); a
     resume keeps a done frame only when it recorded exactly those.
 
     Raises:
-        ResumeError: ``resume`` without a journal in ``out``, a damaged one, another identity or a changed input.
+        ResumeError: ``resume`` without a journal in ``out``, a damaged one or another identity.
     """
 
     def __init__(self, out: str | Path, names: Sequence[str], run: Mapping[str, object] | None = None,
-                 resume: bool = False, rank: int = 0, world: int = 1, inputs: Sequence[str | os.PathLike[str]] = (),
+                 resume: bool = False, rank: int = 0, world: int = 1,
                  expect: Callable[[str], Sequence[str]] | None = None) -> None:  # fmt: skip
         self.out, self.names, self.run = Path(out), list(names), {**_DEFAULT_RUN, **(run or {})}
         self.rank, self.world, self.expect = rank, world, expect
-        self.inputs = input_stamps(inputs)
         self.frames: dict[str, FrameEntry] = {n: {"name": n, "status": "pending"} for n in self.names}
         self.earlier_wall_s = 0.0
         self.kept: set[str] = set()
@@ -295,12 +289,9 @@ class RunJournal:
                               "its run was killed before the first frame); run without --resume")  # fmt: skip
         for doc in found:
             why = _difference(doc["run"], self.run)  # type: ignore[arg-type]  # checked by _read
-            changed = _changed_input(doc["inputs"], self.inputs)  # type: ignore[arg-type]
-            if why is None and changed is not None:
-                why = f"the input {changed} changed since the first run (size or modification time)"
             if why is not None:
                 raise ResumeError(f"{self.out / FRAMES_FILE}: cannot resume: {why}; resume with the first run's "
-                                  "options, weights and inputs, or choose a new --out")  # fmt: skip
+                                  "options and weights, or choose a new --out")  # fmt: skip
         self.earlier_wall_s = max(float(d["wall_s"]) for d in found)  # type: ignore[arg-type]
         for doc in found:
             for entry in doc["frames"]:  # type: ignore[attr-defined]
@@ -310,15 +301,17 @@ class RunJournal:
                     self.kept.add(kept["name"])
 
     def _kept(self, entry: FrameEntry) -> FrameEntry | None:
-        """A done frame of an earlier run (checked by :func:`_read`) whose every output is whole, else None."""
-        name, files = entry["name"], entry.get("files", {})
-        if entry["status"] != "done" or name not in self.frames:
+        """A done frame of an earlier run (checked by :func:`_read`) whose inputs are unchanged and whose every
+        output is whole, else None."""
+        name, files, stamps = entry["name"], entry.get("files", {}), entry.get("inputs", {})
+        if entry["status"] != "done" or name not in self.frames or input_stamps(stamps) != stamps:
             return None
         if self.expect is not None and set(files) != set(self.expect(name)):
             return None  # not the files this run writes (an edited journal): done again
         if not files or not all(self._whole(rel, record) for rel, record in files.items()):
             return None
-        return {"name": name, "status": "done", "files": dict(files), "stage_ms": dict(entry.get("stage_ms", {}))}
+        return {"name": name, "status": "done", "files": dict(files), "inputs": dict(stamps),
+                "stage_ms": dict(entry.get("stage_ms", {}))}  # fmt: skip
 
     def _whole(self, rel: str, record: FileRecord) -> bool:
         """``out/rel`` is a regular file (no symlink) inside ``out`` with the recorded size and digest."""
@@ -332,11 +325,14 @@ class RunJournal:
             return False
         return sha256_file(p) == record["sha256"]
 
-    def done(self, name: str, files: Sequence[str], stage_ms: Mapping[str, float]) -> None:
-        """Frame ``name``'s outputs (paths relative to ``out``, already in place) and its stage times."""
+    def done(self, name: str, files: Sequence[str], stage_ms: Mapping[str, float],
+             inputs: Iterable[str | os.PathLike[str]] = ()) -> None:  # fmt: skip
+        """Frame ``name``'s outputs (paths relative to ``out``, already in place), its stage times and the input
+        files (or folders) it was read from."""
         records = {rel: _record(self.out / rel) for rel in files}
         times = {k: round(float(v), 3) for k, v in stage_ms.items()}
-        self.frames[name] = {"name": name, "status": "done", "files": records, "stage_ms": times}
+        stamps = input_stamps(inputs)
+        self.frames[name] = {"name": name, "status": "done", "files": records, "inputs": stamps, "stage_ms": times}
 
     def mark(self, name: str, status: str, reason: str) -> None:
         """Frame ``name`` ``skipped`` / ``dropped`` / ``failed`` for ``reason`` (one line)."""
@@ -353,8 +349,8 @@ class RunJournal:
         return [(n, e.get("reason", "")) for n, e in self.frames.items() if e["status"] == status]
 
     def to_doc(self, complete: bool, wall_s: float = 0.0) -> dict[str, object]:
-        return {"schema": SCHEMA, "complete": complete, "run": self.run, "inputs": self.inputs,
-                "counts": self.counts(), "wall_s": round(self.earlier_wall_s + wall_s, 3),
+        return {"schema": SCHEMA, "complete": complete, "run": self.run, "counts": self.counts(),
+                "wall_s": round(self.earlier_wall_s + wall_s, 3),
                 "frames": [self.frames[n] for n in self.names]}  # fmt: skip
 
     def save(self, complete: bool = False, wall_s: float = 0.0, force: bool = True) -> None:

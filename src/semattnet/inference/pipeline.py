@@ -192,10 +192,9 @@ def _plan(source: FrameSource, sinks: Sequence[Sink], out: Path, overwrite: bool
 
 def _journal(source: FrameSource, sinks: Sequence[Sink], out: Path, run: Mapping[str, object] | None,
              resume: bool) -> RunJournal:  # fmt: skip
-    """This process's journal of the run: its inputs recorded, a resume keeping only frames with this run's files."""
+    """This process's journal of the run (a resume keeps only frames that recorded this run's files)."""
     files = [s for s in sinks if not isinstance(s, RunSink)]
-    return RunJournal(out, source.names, run, resume, rank(), world_size(), inputs=source.inputs(),
-                      expect=lambda name: output_files([name], files))  # fmt: skip
+    return RunJournal(out, source.names, run, resume, rank(), world_size(), lambda name: output_files([name], files))
 
 
 def _refuse_earlier_run(out: Path) -> None:
@@ -326,7 +325,8 @@ class _FrameLoop:
                 (self.out / rel).parent.mkdir(parents=True, exist_ok=True)
                 os.replace(stage / rel, self.out / rel)
             fsync_dir(self.out)
-        self.journal.done(frame.name, files, {k: 1e3 * v for k, v in self.timer.times[frame.name].items()})
+        stage_ms = {k: 1e3 * v for k, v in self.timer.times[frame.name].items()}
+        self.journal.done(frame.name, files, stage_ms, inputs=frame.paths.values())
         self.journal.save(force=False)
         self.log(_line(frame, self.out, self.depth_sink))
 
