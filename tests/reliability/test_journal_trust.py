@@ -243,3 +243,18 @@ def test_overwrite_replaces_a_ros1_bag_by_our_mark_not_by_its_magic_bytes(tmp_pa
     ours.write_bytes(b"#ROSBAG V2.0\nrecorded over ours by the user")
     with pytest.raises(OutputError, match="never a user's folder or file"):
         check_outputs([], [Output("--bag-out", ours, "bag")], overwrite=True)
+
+
+def test_the_cli_says_a_damaged_journal_in_one_line(done: tuple[FolderSource, Path]) -> None:
+    from click.testing import CliRunner
+
+    from semattnet.cli import main
+
+    source, out = done
+    _edit(out, lambda d: d.update(wall_s="abc"))
+    rgb, sparse = source.given
+    res = CliRunner().invoke(main, ["predict", "--method", "classical", "--rgb", str(rgb), "--sparse", str(sparse),
+                                    "--resume", str(out)])  # fmt: skip
+    errors = [ln for ln in res.output.splitlines() if ln.startswith("Error:")]
+    assert res.exit_code == 1 and len(errors) == 1, res.output
+    assert "frames.json: damaged field wall_s: 'abc'" in errors[0], res.output
