@@ -258,3 +258,17 @@ def test_the_cli_says_a_damaged_journal_in_one_line(done: tuple[FolderSource, Pa
     errors = [ln for ln in res.output.splitlines() if ln.startswith("Error:")]
     assert res.exit_code == 1 and len(errors) == 1, res.output
     assert "frames.json: damaged field wall_s: 'abc'" in errors[0], res.output
+
+
+def test_a_kept_depth_is_read_back_only_while_it_is_the_recorded_file(
+    done: tuple[FolderSource, Path], tmp_path: Path
+) -> None:
+    source, out = done
+    plan = check_frames(source, default_sinks(), out, resume=True)
+    plan.release()
+    assert plan.journal.stored("f0", "f0.png") == out / "f0.png"
+    (tmp_path / "foreign.png").write_bytes((out / "f0.png").read_bytes())
+    (out / "f0.png").unlink()
+    (out / "f0.png").symlink_to(tmp_path / "foreign.png")  # swapped after the check: never replayed into a bag
+    with pytest.raises(ResumeError, match="f0.png: changed or replaced while the resume ran"):
+        plan.journal.stored("f0", "f0.png")

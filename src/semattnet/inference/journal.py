@@ -325,6 +325,19 @@ class RunJournal:
             return False
         return sha256_file(p) == record["sha256"]
 
+    def stored(self, name: str, rel: str) -> Path:
+        """The output ``rel`` of the kept frame ``name``, checked again as the resume checked it (a regular file
+        inside ``out`` with its recorded size and digest), to be read back (e.g. into a bag).
+
+        Raises:
+            ResumeError: it changed since (or is not among the frame's recorded files).
+        """
+        record = self.frames[name].get("files", {}).get(rel)
+        if record is None or not self._whole(rel, record):
+            raise ResumeError(f"{self.out / rel}: changed or replaced while the resume ran (not the file "
+                              f"{FRAMES_FILE} records); run the resume again")  # fmt: skip
+        return self.out / rel
+
     def done(self, name: str, files: Sequence[str], stage_ms: Mapping[str, float],
              inputs: Iterable[str | os.PathLike[str]] = ()) -> None:  # fmt: skip
         """Frame ``name``'s outputs (paths relative to ``out``, already in place), its stage times and the input

@@ -306,10 +306,10 @@ class _FrameLoop:
         if not self.replays or self.depth_sink is None:
             return
         frame = read_frame(self.source, name, self.semantic, StageTimes())
-        stored = read_depth(self.out / str(self.depth_sink.path(name)))
+        stored = read_depth(self.journal.stored(name, str(self.depth_sink.path(name))))  # never a link's target
         pred = Prediction(frame, Completion(stored), stored, encode_depth(stored), stored)
         if self.uncertainty_sink is not None:
-            pred.uncertainty = read_depth(self.out / str(self.uncertainty_sink.path(name)))
+            pred.uncertainty = read_depth(self.journal.stored(name, str(self.uncertainty_sink.path(name))))
             pred.uncertainty_png = encode_depth(pred.uncertainty)
         for sink in self.replays:
             sink.write(self.out, pred)
