@@ -26,14 +26,13 @@ keeps ``.frames.rankR.json`` while it runs and process 0 merges them into ``fram
 from __future__ import annotations
 
 import json
-import math
 import os
 import stat
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path, PurePosixPath
-from typing import TypedDict
+from typing import TypedDict, cast
 
 from semattnet._errors import SemAttNetError
 from semattnet._utils.atomic import atomic_path
@@ -94,6 +93,14 @@ class FrameEntry(_Entry, total=False):
     stage_ms: dict[str, float]
 
 
+class _Journal(TypedDict):
+    """What :func:`_read` gives: a journal whose fields :func:`_checked` checked."""
+
+    run: dict[str, object]
+    wall_s: float
+    frames: list[FrameEntry]
+
+
 class ResumeError(SemAttNetError):
     """A resume that cannot continue the run in its folder (no journal, a damaged one, another run's options,
     weights or inputs)."""
@@ -111,7 +118,7 @@ def _what(mode: int) -> str:
     return "a FIFO" if stat.S_ISFIFO(mode) else "a special file"
 
 
-def _read(path: Path) -> dict[str, object] | None:
+def _read(path: Path) -> _Journal | None:
     """A journal file's content, checked (:func:`_checked`); None when absent. Anything else (a folder, a
     FIFO, a symlink, bad JSON, a damaged field) is a one-line :class:`ResumeError` naming the file."""
     try:
@@ -143,13 +150,12 @@ def _shown(value: object) -> str:
 
 def _time(path: Path, field: str, value: object) -> float:
     """``value`` as a finite number of seconds or milliseconds in [0, 1e9], else :func:`_damaged`."""
-    ok = isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
-    if not ok or not 0 <= float(value) <= _MAX_TIME:  # type: ignore[arg-type]
-        raise _damaged(path, field, f"{_shown(value)} is not a time (a number from 0 to {_MAX_TIME:g})")
-    return float(value)  # type: ignore[arg-type]
+    if isinstance(value, int | float) and not isinstance(value, bool) and 0 <= value <= _MAX_TIME:
+        return float(value)  # NaN fails the comparison
+    raise _damaged(path, field, f"{_shown(value)} is not a time (a number from 0 to {_MAX_TIME:g})")
 
 
-def _checked(path: Path, doc: object) -> dict[str, object]:
+def _checked(path: Path, doc: object) -> _Journal:
     """``doc`` when it is a journal of :data:`SCHEMA` whose every field has its type and range."""
     schema = doc.get("schema") if isinstance(doc, dict) else None
     if schema in OLD_SCHEMAS:
@@ -166,7 +172,7 @@ def _checked(path: Path, doc: object) -> dict[str, object]:
         raise _damaged(path, "frames", f"{_shown(frames)} is not a list of frames")
     for i, entry in enumerate(frames):
         _check_entry(path, f"frames[{i}]", entry)
-    return doc
+    return cast(_Journal, doc)
 
 
 def _is_stamp(value: object) -> bool:
@@ -288,13 +294,13 @@ class RunJournal:
             raise ResumeError(f"{self.out}: no {FRAMES_FILE} to resume from (not a semattnet predict folder, or "
                               "its run was killed before the first frame); run without --resume")  # fmt: skip
         for doc in found:
-            why = _difference(doc["run"], self.run)  # type: ignore[arg-type]  # checked by _read
+            why = _difference(doc["run"], self.run)
             if why is not None:
                 raise ResumeError(f"{self.out / FRAMES_FILE}: cannot resume: {why}; resume with the first run's "
                                   "options and weights, or choose a new --out")  # fmt: skip
-        self.earlier_wall_s = max(float(d["wall_s"]) for d in found)  # type: ignore[arg-type]
+        self.earlier_wall_s = max(float(d["wall_s"]) for d in found)
         for doc in found:
-            for entry in doc["frames"]:  # type: ignore[attr-defined]
+            for entry in doc["frames"]:
                 kept = self._kept(entry)
                 if kept is not None:
                     self.frames[kept["name"]] = kept
