@@ -198,8 +198,11 @@ def test_a_run_with_no_frame_done_leaves_nothing_and_blocks_nothing(tmp_path: Pa
     out.mkdir()
     with pytest.raises(DataError, match="no frame could be completed"):
         _run(source, out, completer=_Fails())
-    assert list(out.iterdir()) == []  # no latency.json, no frames.json
+    assert list(out.iterdir()) == []  # no latency.json, no frames.json, no lock
     assert _run(source, out).counts["done"] == N  # the next run into it is not refused
+    with pytest.raises(DataError, match="no frame could be completed"):
+        _run(source, tmp_path / "new", completer=_Fails())
+    assert not (tmp_path / "new").exists()  # nor a folder it made
 
 
 def test_a_second_run_into_a_folder_in_use_is_refused(tmp_path: Path) -> None:
