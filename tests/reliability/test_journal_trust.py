@@ -275,3 +275,15 @@ def test_a_kept_depth_is_read_back_only_while_it_is_the_recorded_file(
     (out / "f0.png").symlink_to(tmp_path / "foreign.png")  # swapped after the check: never replayed into a bag
     with pytest.raises(ResumeError, match="f0.png: changed or replaced while the resume ran"):
         plan.journal.stored("f0", "f0.png")
+
+
+def test_a_resume_keeps_the_record_of_frames_whose_input_is_gone(tmp_path: Path) -> None:
+    source, out = _frames(tmp_path), tmp_path / "out"
+    _run(source, out)
+    for role in ("rgb", "sparse"):
+        (tmp_path / role / "f2.png").unlink()
+    fewer = FolderSource.pair(tmp_path / "rgb", tmp_path / "sparse")
+    assert _run(fewer, out, resume=True).counts["done"] == N - 1
+    doc = json.loads((out / "frames.json").read_text())
+    assert [e["name"] for e in doc["frames"]] == ["f0", "f1"] and [e["name"] for e in doc["earlier"]] == ["f2"]
+    assert (out / "f2.png").is_file()  # its files stay, and so does their record

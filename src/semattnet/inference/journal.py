@@ -8,6 +8,8 @@ The journal is how a long run survives bad frames and kills (:func:`semattnet.in
   ``pending`` (not reached);
 * a done frame records its output files (path relative to the folder -> size and SHA-256, taken when they
   were written), its input files (path -> size and modification time) and its stage times (milliseconds);
+* ``earlier`` keeps the records of done frames of an earlier run that a resume no longer has (their input
+  is gone), so that no resume loses the record of a frame whose files are in the folder;
 * ``run`` is the run's identity (the command's options, the weights' digest, the version): a resume with
   another identity is refused (:class:`ResumeError`), and a frame whose input changed is done again, so one
   folder never mixes two runs' outputs.
@@ -99,6 +101,7 @@ class _Journal(TypedDict):
     run: dict[str, object]
     wall_s: float
     frames: list[FrameEntry]
+    earlier: list[FrameEntry]
 
 
 class ResumeError(SemAttNetError):
@@ -170,8 +173,12 @@ def _checked(path: Path, doc: object) -> _Journal:
     frames = doc.get("frames")
     if not isinstance(frames, list):
         raise _damaged(path, "frames", f"{_shown(frames)} is not a list of frames")
-    for i, entry in enumerate(frames):
-        _check_entry(path, f"frames[{i}]", entry)
+    earlier = doc.setdefault("earlier", [])
+    if not isinstance(earlier, list):
+        raise _damaged(path, "earlier", f"{_shown(earlier)} is not a list of frames")
+    for key, entries in (("frames", frames), ("earlier", earlier)):
+        for i, entry in enumerate(entries):
+            _check_entry(path, f"{key}[{i}]", entry)
     return cast(_Journal, doc)
 
 
@@ -269,6 +276,7 @@ class RunJournal:
         self.frames: dict[str, FrameEntry] = {n: {"name": n, "status": "pending"} for n in self.names}
         self.earlier_wall_s = 0.0
         self.kept: set[str] = set()
+        self.earlier: dict[str, FrameEntry] = {}  # done frames of earlier runs that this run does not have
         self._saved_at = 0.0
         self._before = self._snapshot()
         if resume:
@@ -300,7 +308,9 @@ class RunJournal:
                                   "options and weights, or choose a new --out")  # fmt: skip
         self.earlier_wall_s = max(float(d["wall_s"]) for d in found)
         for doc in found:
-            for entry in doc["frames"]:
+            for entry in [*doc["earlier"], *doc["frames"]]:
+                if entry["status"] == "done" and entry["name"] not in self.frames:
+                    self.earlier[entry["name"]] = entry  # its input is gone: its record stays
                 kept = self._kept(entry)
                 if kept is not None:
                     self.frames[kept["name"]] = kept
@@ -370,7 +380,7 @@ class RunJournal:
     def to_doc(self, complete: bool, wall_s: float = 0.0) -> dict[str, object]:
         return {"schema": SCHEMA, "complete": complete, "run": self.run, "counts": self.counts(),
                 "wall_s": round(self.earlier_wall_s + wall_s, 3),
-                "frames": [self.frames[n] for n in self.names]}  # fmt: skip
+                "frames": [self.frames[n] for n in self.names], "earlier": list(self.earlier.values())}  # fmt: skip
 
     def save(self, complete: bool = False, wall_s: float = 0.0, force: bool = True) -> None:
         """Write this process's file atomically (``force=False``: only when it is due, see the module doc)."""
