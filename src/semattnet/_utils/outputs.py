@@ -98,8 +98,8 @@ class FolderLock:
 
     def acquire(self) -> FolderLock:
         """Take the lock (a path that is not a folder is left to the output checks: nothing is taken)."""
-        if self.folder.exists() and not self.folder.is_dir():
-            return self
+        if (self.folder.exists() or self.folder.is_symlink()) and not self.folder.is_dir():
+            return self  # a file or a dangling link
         self.created = not self.folder.exists()
         self.folder.mkdir(parents=True, exist_ok=True)
         try:
