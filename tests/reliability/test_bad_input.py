@@ -84,7 +84,7 @@ CASES = [
     ("metrics {t}/pred {t}/gt --min-gt -1", 2, "--min-gt"),
     ("metrics {t}/pred {t}/rgb", 1, "16-bit"),
     ("metrics {t}/pred {t}/sem", 1, "16-bit"),
-    ("metrics {t}/missing {t}/gt", 2, "PRED_DIR"),
+    ("metrics {t}/missing {t}/gt", 2, "'PRED'"),
     # evaluate
     ("evaluate --data {t}/rgb --method classical --out {t}/new", 2, "--method classical"),
     ("evaluate --data {t}/missing", 2, "--data"),

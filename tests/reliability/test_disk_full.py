@@ -70,7 +70,7 @@ def test_predict_on_a_full_disk(tmp_path: Path, small_fs: Path) -> None:
     done = json.loads(journal.read_text())["frames"] if journal.exists() else []
     kept = {out / f for e in done if e["status"] == "done" for f in e["files"]} | ({journal} if done else set())
     assert set(_leftovers(small_fs)) == kept
-    assert all(p.stat().st_size == e["files"][p.name] for e in done if e["status"] == "done"
+    assert all(p.stat().st_size == e["files"][p.name]["size"] for e in done if e["status"] == "done"
                for p in (out / f for f in e["files"]))  # fmt: skip
 
 

@@ -14,6 +14,8 @@
    (a kill, a full disk) and ``data check`` refuses it (:func:`incomplete_tree`).
 5. Single files are written atomically (:func:`semattnet._utils.atomic.atomic_path`): umask mode,
    fsynced, orphaned temporary files cleaned on the next write of the same target.
+6. A run that writes into a folder over time (``predict``) holds :class:`FolderLock` on it: a second run into
+   the same folder is refused while the first one runs.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import json
 import os
 import shutil
 import tempfile
+import weakref
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -33,14 +36,19 @@ from semattnet._utils.atomic import atomic_path, disk_full_error, fsync_dir, is_
 __all__ = [
     "BAG_MARKER",
     "KINDS",
+    "LOCK_FILE",
     "STAGE_PREFIX",
     "TREE_MARKER",
+    "FolderBusyError",
+    "FolderLock",
     "Output",
     "OutputError",
+    "bag_mark",
     "check_no_input_overlap",
     "check_outputs",
     "clean_stale_stages",
     "incomplete_tree",
+    "mark_bag_file",
     "mark_tree",
     "refuse_existing",
     "stage_folder",
@@ -54,12 +62,116 @@ STAGE_PREFIX = ".semattnet-stage."
 #: The completion marker of a generated tree (JSON: generator, complete, resume).
 TREE_MARKER = ".semattnet-tree.json"
 
-#: The marker file inside a ROS 2 bag folder semattnet wrote: what lets ``--overwrite`` replace it.
+#: The marker file inside a ROS 2 bag folder semattnet wrote: what lets ``--overwrite`` replace it. A ROS 1
+#: ``NAME.bag`` file semattnet wrote has it beside it instead, as ``.NAME.bag.semattnet-bag``: its size and
+#: modification time (:func:`mark_bag_file`), so a user's recording put in its place is not taken for ours.
 BAG_MARKER = ".semattnet-bag"
+
+
+#: The lock file of an output folder a run is writing into (:class:`FolderLock`).
+LOCK_FILE = ".semattnet.lock"
 
 
 class OutputError(SemAttNetError):
     """An output that would replace or land inside the command's own inputs."""
+
+
+class FolderBusyError(OutputError):
+    """An output folder another semattnet run is writing into (:class:`FolderLock`)."""
+
+
+class FolderLock:
+    """An advisory lock on the output folder ``folder``: ``folder/.semattnet.lock``, ``flock``-ed and holding
+    the process id, while a run writes into it. The operating system releases it when the process ends (a kill
+    too); where ``flock`` is not supported, a lock file whose process is gone is stale and taken over.
+    :meth:`release` removes the file (and the folder when :meth:`acquire` created it and it is empty).
+
+    Raises:
+        FolderBusyError: (:meth:`acquire`) another run holds the folder, naming its process.
+    """
+
+    def __init__(self, folder: str | os.PathLike[str]) -> None:
+        self.folder = Path(folder)
+        self.path = self.folder / LOCK_FILE
+        self.created = False
+        self._release: weakref.finalize[[int, Path], FolderLock] | None = None  # runs when dropped too
+
+    def acquire(self) -> FolderLock:
+        """Take the lock (a path that is not a folder is left to the output checks: nothing is taken)."""
+        if (self.folder.exists() or self.folder.is_symlink()) and not self.folder.is_dir():
+            return self  # a file or a dangling link
+        self.created = not self.folder.exists()
+        self.folder.mkdir(parents=True, exist_ok=True)
+        try:
+            for _ in range(5):  # the file was removed by the holder between open and flock: again
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o644)
+                if self._lock(fd) and _same_file(fd, self.path):
+                    os.ftruncate(fd, 0)
+                    os.write(fd, f"{os.getpid()}\n".encode())
+                    self._release = weakref.finalize(self, _unlock, fd, self.path)
+                    return self
+                os.close(fd)
+        except BaseException:
+            self.release()
+            raise
+        raise FolderBusyError(f"{self.path}: could not be locked; choose another --out")
+
+    def _lock(self, fd: int) -> bool:
+        """``flock`` ``fd``; a lock held by a live process is :class:`FolderBusyError`."""
+        try:
+            import fcntl
+
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return True
+        except BlockingIOError:
+            holder = _holder(fd)
+        except (ImportError, OSError):  # no flock here: the process id alone says whether it is held
+            from semattnet._utils.atomic import pid_alive
+
+            holder = _holder(fd)
+            if holder is None or holder == os.getpid() or not pid_alive(holder):
+                return True
+        os.close(fd)
+        who = f"process {holder}" if holder is not None else "another process"
+        raise FolderBusyError(f"{self.folder}: another semattnet run ({who}) is writing into it ({self.path}); "
+                              "wait for it to end or choose another --out")  # fmt: skip
+
+    def release(self) -> None:
+        """Give the lock up (idempotent)."""
+        if self._release is not None:
+            self._release()
+            self._release = None
+        if self.created and self.folder.is_dir() and not any(self.folder.iterdir()):
+            self.folder.rmdir()  # a run that left nothing leaves no empty folder it made
+        self.created = False
+
+    def __enter__(self) -> FolderLock:
+        return self.acquire()
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+def _unlock(fd: int, path: Path) -> None:
+    path.unlink(missing_ok=True)
+    os.close(fd)
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    """Whether ``path`` is still the file open as ``fd`` (the holder removes it when it lets go)."""
+    try:
+        return os.fstat(fd).st_ino == path.stat().st_ino
+    except OSError:
+        return False
+
+
+def _holder(fd: int) -> int | None:
+    """The process id written in the lock file ``fd``, None when unreadable."""
+    try:
+        text = os.pread(fd, 32, 0).decode("ascii").strip()
+    except (OSError, UnicodeDecodeError):
+        return None
+    return int(text) if text.isdigit() else None
 
 
 def _resolve(path: str | os.PathLike[str]) -> Path:
@@ -239,11 +351,34 @@ def _is_safetensors(path: Path) -> bool:
     return len(head) == 9 and int.from_bytes(head[:8], "little") < path.stat().st_size and head[8:] == b"{"
 
 
+def bag_mark(path: str | os.PathLike[str]) -> Path:
+    """Where the mark of the ROS 1 bag file ``path`` goes (:func:`mark_bag_file`): ``.NAME.semattnet-bag`` beside it."""
+    path = Path(path)
+    return path.parent / f".{path.name}{BAG_MARKER}"
+
+
+def _stamp(path: Path) -> dict[str, int]:
+    st = path.lstat()
+    return {"size": st.st_size, "mtime_ns": st.st_mtime_ns, "inode": st.st_ino}
+
+
+def mark_bag_file(path: str | os.PathLike[str]) -> None:
+    """Record the ROS 1 bag file ``path`` (just written by semattnet) beside it, so that ``--overwrite`` may
+    replace it later: the file ``.NAME.semattnet-bag`` with its size, modification time and inode."""
+    path = Path(path)
+    with atomic_path(bag_mark(path), suffix=".json") as tmp:
+        tmp.write_text(json.dumps(_stamp(path)) + "\n")
+
+
 def _is_bag(path: Path) -> bool:
-    """A ROS 2 bag folder carrying :data:`BAG_MARKER`, or a ROS 1 ``.bag`` file."""
+    """A ROS 2 bag folder carrying :data:`BAG_MARKER`, or a ROS 1 bag file that its mark beside it describes
+    (:func:`mark_bag_file`): what semattnet wrote, recognised by its mark, never by a format's magic bytes."""
     if path.is_dir():
         return (path / BAG_MARKER).is_file() and (path / "metadata.yaml").is_file()
-    return _head(path, 13) == b"#ROSBAG V2.0\n"
+    try:
+        return path.is_file() and not path.is_symlink() and json.loads(bag_mark(path).read_text()) == _stamp(path)
+    except (OSError, ValueError, RecursionError):
+        return False
 
 
 def _is_file(magic: bytes) -> Callable[[Path], bool]:
@@ -257,7 +392,7 @@ KINDS: dict[str, tuple[str, Callable[[Path], bool]]] = {
     "folder": ("a folder", Path.is_dir),
     "file": ("a regular file", Path.is_file),
     "tree": (f"a tree semattnet generated ({TREE_MARKER} in it)", lambda p: (p / TREE_MARKER).is_file()),
-    "bag": (f"a bag semattnet wrote ({BAG_MARKER} in it, or a ROS 1 .bag file)", _is_bag),
+    "bag": (f"a bag semattnet wrote ({BAG_MARKER} in it, or beside a ROS 1 .bag file)", _is_bag),
     "json": ("a JSON file", lambda p: p.is_file() and _head(p, 64).lstrip()[:1] in (b"{", b"[")),
     "rrd": ("a Rerun recording", _is_file(b"RRF")),
     "ply": ("a PLY file", _is_file(b"ply")),
@@ -286,7 +421,8 @@ def check_outputs(inputs: Iterable[tuple[str, str | os.PathLike[str] | None]], o
     """The one output rule, checked before any work. ``inputs``: (option, path) pairs (None paths ignored).
 
     * No output is an input (by resolved path or, hard links, by inode), lies inside an input, or contains one.
-    * No two outputs are one path, and none lies inside another (only inside a ``folder`` output).
+    * No two outputs are one path, and none lies inside another (only inside a ``folder`` output, and then it
+      resolves inside it: a subfolder that is a symlink out of the folder is refused).
     * An existing output is refused unless ``overwrite``; with it, only one that is recognisably an earlier
       output of ours (:data:`KINDS`): never a user's folder or file.
 
@@ -314,12 +450,30 @@ def check_outputs(inputs: Iterable[tuple[str, str | os.PathLike[str] | None]], o
             what = "the output folder" if o.kind == "folder" else "the output"
             raise OutputError(f"{_named(outer.option, outer.path)} would replace {what} {_named(o.option, o.path)} "
                               "(it holds it); choose distinct paths")  # fmt: skip
+    _inside_folders(outs)
     for (option, given), r in ((v, k) for k, v in ins.items() if isinstance(k, Path)):
         holder = next((by_path[p] for p in r.parents if p in by_path), None)
         if holder is not None:
             raise OutputError(f"{_named(holder.option, holder.path)} holds the input {_named(option, given)}; "
                               "choose an output path that holds no input")  # fmt: skip
     _check_replaceable([o for o, _ in outs], overwrite)
+
+
+def _inside_folders(outs: list[tuple[Output, Path]]) -> None:
+    """Every output named inside a ``folder`` output lands inside it (no symlinked subfolder leads out of it),
+    with ``overwrite`` too: a file in someone else's folder is never replaced. (An output that is itself a
+    symlink is replaced by the new file, its target untouched.)"""
+    folders = [(o, Path(os.path.abspath(o.path)), r) for o, r in outs if o.kind == "folder"]
+    for o, _ in outs:
+        named = Path(os.path.abspath(o.path))
+        lands = _resolve(named.parent) / named.name
+        for f, f_named, f_resolved in folders:
+            if named != f_named and named.is_relative_to(f_named) and not lands.is_relative_to(f_resolved):
+                steps = [p for p in [*reversed(named.parents), named] if p != f_named and p.is_relative_to(f_named)]
+                link = next((p for p in steps if p.is_symlink()), named)
+                raise OutputError(f"{_named(o.option, o.path)} lies outside {_named(f.option, f.path)}: {link} "
+                                  f"is a symbolic link to {_resolve(link)}; remove the link or choose another "
+                                  "--out")  # fmt: skip
 
 
 def _against_inputs(o: Output, r: Path, ins: dict[Path | tuple[int, int], tuple[str, Path]]) -> None:

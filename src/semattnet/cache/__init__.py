@@ -41,6 +41,7 @@ from semattnet.cache.store import (
     read_pins,
     remove_empty_dirs,
     sha256_file,
+    sha256_tree,
     update_pins,
     verify_cached,
 )
@@ -68,6 +69,7 @@ __all__ = [
     "read_pins",
     "remove_empty_dirs",
     "sha256_file",
+    "sha256_tree",
     "update_pins",
     "url_scheme",
     "url_target",

@@ -39,6 +39,7 @@ __all__ = [
     "read_pins",
     "remove_empty_dirs",
     "sha256_file",
+    "sha256_tree",
     "update_pins",
     "verify_cached",
 ]
@@ -90,6 +91,14 @@ def sha256_file(path: str | os.PathLike[str], chunk: int = 1 << 20) -> str:
     with open(path, "rb") as f:
         while block := f.read(chunk):
             h.update(block)
+    return h.hexdigest()
+
+
+def sha256_tree(folder: str | os.PathLike[str]) -> str:
+    """Hex sha256 of a folder: every regular file under it (symlinks followed), by relative path and content."""
+    h, root = hashlib.sha256(), Path(folder)
+    for p in sorted(q for q in root.rglob("*") if q.is_file()):
+        h.update(f"{p.relative_to(root).as_posix()}\0{sha256_file(p)}\n".encode())
     return h.hexdigest()
 
 

@@ -93,9 +93,9 @@ def _not_identity() -> set[str]:
 
 def _identity(params: Mapping[str, object]) -> dict[str, object]:
     """What a run is, for a resume to check: every option that changes the outputs (paths resolved, a
-    weights file by its SHA-256) and the package version."""
+    weights file or folder by its SHA-256) and the package version."""
     from semattnet._utils.version import __version__
-    from semattnet.cache import sha256_file
+    from semattnet.cache import sha256_file, sha256_tree
 
     run: dict[str, object] = {"command": "predict", "version": __version__}
     skip = _not_identity()
@@ -104,6 +104,8 @@ def _identity(params: Mapping[str, object]) -> dict[str, object]:
             continue
         if key == "weights" and Path(str(value)).is_file():  # a file by its digest (--checkpoint arrives here too)
             value = f"sha256:{sha256_file(str(value))}"
+        elif key == "weights" and Path(str(value)).is_dir():  # a folder (hf layout) by every file in it
+            value = f"sha256-tree:{sha256_tree(str(value))}"
         run[key] = str(Path(value).resolve()) if isinstance(value, Path) else value
     return run
 
@@ -173,11 +175,14 @@ def _run_frames(chosen: ChosenInput, outputs_asked: tuple[Outputs, AskedSinks], 
         source, maps = chosen.open(model.device)
         plan = check_frames(source, sinks, out, overwrite=outputs.overwrite, on_error=run.on_error, resume=resuming,
                             run=identity, inputs=[weights_input(model.weights)[1]])  # before the model  # fmt: skip
-        if plan.journal.kept:
-            click.echo(f"{out}: resuming: {len(plan.journal.kept)} of {len(source.names)} frame(s) already done")
-        result = complete_frames(source, model.completer(), sinks, out, overwrite=outputs.overwrite, log=click.echo,
-                                 semantic=maps, checked=plan, timer=timer, prefetch=run.prefetch,
-                                 realtime=run.rate)  # fmt: skip
+        try:
+            if plan.journal.kept:
+                click.echo(f"{out}: resuming: {len(plan.journal.kept)} of {len(source.names)} frame(s) already done")
+            result = complete_frames(source, model.completer(), sinks, out, overwrite=outputs.overwrite,
+                                     log=click.echo, semantic=maps, checked=plan, timer=timer, prefetch=run.prefetch,
+                                     realtime=run.rate)  # fmt: skip
+        finally:
+            plan.release()  # also when the model cannot be loaded
     if launch_rank() == 0:
         click.echo(timer.table())
         if maps.note:

@@ -6,10 +6,18 @@ The journal is how a long run survives bad frames and kills (:func:`semattnet.in
   could not be read or completed; ``reason`` says why), ``dropped`` (``--realtime``: a newer frame came
   before the completer was free), ``failed`` (the frame that stopped an ``on_error="stop"`` run) or
   ``pending`` (not reached);
-* a done frame records its output files and their sizes and its stage times (milliseconds), so that a
-  resumed run keeps it only when every file is still there, whole, and its latency table covers it;
-* ``run`` is the run's identity (the command's options, the weights' digest, the inputs): a resume with
-  another identity is refused (:class:`ResumeError`), so one folder never mixes two runs' outputs.
+* a done frame records its output files (path relative to the folder -> size and SHA-256, taken when they
+  were written), its input files (path -> size and modification time) and its stage times (milliseconds);
+* ``earlier`` keeps the records of done frames of an earlier run that a resume no longer has (their input
+  is gone), so that no resume loses the record of a frame whose files are in the folder;
+* ``run`` is the run's identity (the command's options, the weights' digest, the version): a resume with
+  another identity is refused (:class:`ResumeError`), and a frame whose input changed is done again, so one
+  folder never mixes two runs' outputs.
+
+Nothing read back is trusted: on resume every field is type- and range-checked (a damaged journal is one
+line naming ``frames.json`` and the field), and a done frame is kept only when each of its files is a regular
+file inside the folder (no absolute path, no ``..``, no symlink) with its recorded size and digest; any
+other frame is done again.
 
 The file is rewritten atomically (:func:`semattnet._utils.atomic.atomic_path`) after every frame of a small
 run and at most once per :data:`SAVE_INTERVAL_S` of a large one (a kill loses at most that much work; those
@@ -20,36 +28,48 @@ keeps ``.frames.rankR.json`` while it runs and process 0 merges them into ``fram
 from __future__ import annotations
 
 import json
+import os
+import stat
 import time
 from collections import Counter
-from collections.abc import Mapping, Sequence
-from pathlib import Path
-from typing import TypedDict
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from pathlib import Path, PurePosixPath
+from typing import TypedDict, cast
 
 from semattnet._errors import SemAttNetError
 from semattnet._utils.atomic import atomic_path
+from semattnet._utils.version import __version__
+from semattnet.cache.store import sha256_file
 
 __all__ = [
     "FRAMES_FILE",
     "SAVE_INTERVAL_S",
     "SCHEMA",
     "STATUSES",
+    "FileRecord",
     "FrameEntry",
     "ResumeError",
     "RunJournal",
     "describe_counts",
+    "input_stamps",
 ]
 
 #: The journal's name in the output folder.
 FRAMES_FILE = "frames.json"
 #: Its schema tag.
-SCHEMA = "semattnet.frames/1"
+SCHEMA = "semattnet.frames/2"
+#: Schemas of earlier versions: their journals recorded no digests, so they are refused, not trusted.
+OLD_SCHEMAS = ("semattnet.frames/1",)
 #: A frame's possible statuses.
 STATUSES = ("done", "skipped", "dropped", "failed", "pending")
 #: A run of at most this many frames saves the journal after every frame; a larger one at most every
 #: :data:`SAVE_INTERVAL_S` seconds.
 SMALL_RUN = 500
 SAVE_INTERVAL_S = 1.0
+#: The identity of a run the caller did not describe (``run=None``).
+_DEFAULT_RUN: dict[str, object] = {"command": "predict", "version": __version__}
+#: The largest number of seconds or milliseconds a journal may hold (about 30 years).
+_MAX_TIME = 1e9
 
 
 class _Entry(TypedDict):
@@ -57,43 +77,179 @@ class _Entry(TypedDict):
     status: str
 
 
+class FileRecord(TypedDict):
+    """One output file of a done frame, as it was written: its size in bytes and its SHA-256 (hex)."""
+
+    size: int
+    sha256: str
+
+
 class FrameEntry(_Entry, total=False):
     """One frame of the journal: ``name``, ``status`` (:data:`STATUSES`), and ``reason`` (not done) or ``files``
-    (relative path -> size in bytes) and ``stage_ms`` (stage -> milliseconds) (done)."""
+    (relative path -> :class:`FileRecord`), ``inputs`` (path -> [size, mtime_ns]) and ``stage_ms`` (stage ->
+    milliseconds) (done)."""
 
     reason: str
-    files: dict[str, int]
+    files: dict[str, FileRecord]
+    inputs: dict[str, list[int]]
     stage_ms: dict[str, float]
 
 
+class _Journal(TypedDict):
+    """What :func:`_read` gives: a journal whose fields :func:`_checked` checked."""
+
+    run: dict[str, object]
+    wall_s: float
+    frames: list[FrameEntry]
+    earlier: list[FrameEntry]
+
+
 class ResumeError(SemAttNetError):
-    """A resume that cannot continue the run in its folder (no journal, another run's options or weights)."""
+    """A resume that cannot continue the run in its folder (no journal, a damaged one, another run's options,
+    weights or inputs)."""
 
 
 def _rank_file(rank: int) -> str:
     return f".frames.rank{rank}.json"
 
 
-def _read(path: Path) -> dict[str, object] | None:
-    """A journal file's content, None when absent; a damaged one is a one-line :class:`ResumeError`."""
-    if not path.is_file():
+def _what(mode: int) -> str:
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISLNK(mode):
+        return "a symbolic link"
+    return "a FIFO" if stat.S_ISFIFO(mode) else "a special file"
+
+
+def _read(path: Path) -> _Journal | None:
+    """A journal file's content, checked (:func:`_checked`); None when absent. Anything else (a folder, a
+    FIFO, a symlink, bad JSON, a damaged field) is a one-line :class:`ResumeError` naming the file."""
+    try:
+        mode = path.lstat().st_mode
+    except FileNotFoundError:
         return None
+    except OSError as exc:
+        raise ResumeError(f"{path}: cannot be read ({exc.strerror}); fix it or choose a new --out") from None
+    if not stat.S_ISREG(mode):
+        raise ResumeError(f"{path} is {_what(mode)}, not a frames journal semattnet wrote; move it away "
+                          "or choose a new --out")  # fmt: skip
     try:
         doc = json.loads(path.read_text())
+    except RecursionError:
+        raise ResumeError(f"{path}: not a frames journal (its JSON is nested too deeply); choose a new --out") from None
     except (OSError, ValueError) as exc:
         raise ResumeError(f"{path}: not a readable frames journal ({exc}); start a new --out") from None
-    if not isinstance(doc, dict) or doc.get("schema") != SCHEMA or not isinstance(doc.get("frames"), list):
+    return _checked(path, doc)
+
+
+def _damaged(path: Path, field: str, what: str) -> ResumeError:
+    return ResumeError(f"{path}: damaged field {field}: {what}; run again with --overwrite or choose a new --out")
+
+
+def _shown(value: object) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _time(path: Path, field: str, value: object) -> float:
+    """``value`` as a finite number of seconds or milliseconds in [0, 1e9], else :func:`_damaged`."""
+    if isinstance(value, int | float) and not isinstance(value, bool) and 0 <= value <= _MAX_TIME:
+        return float(value)  # NaN fails the comparison
+    raise _damaged(path, field, f"{_shown(value)} is not a time (a number from 0 to {_MAX_TIME:g})")
+
+
+def _checked(path: Path, doc: object) -> _Journal:
+    """``doc`` when it is a journal of :data:`SCHEMA` whose every field has its type and range."""
+    schema = doc.get("schema") if isinstance(doc, dict) else None
+    if schema in OLD_SCHEMAS:
+        raise ResumeError(f"{path}: written by an earlier semattnet ({schema}) that recorded no digest of "
+                          "the outputs, so it cannot be verified; rerun with --overwrite or a new --out")  # fmt: skip
+    if not isinstance(doc, dict) or schema != SCHEMA:
         raise ResumeError(f"{path}: not a semattnet frames journal (schema {SCHEMA}); start a new --out")
-    return doc
+    run = doc.get("run")
+    if not isinstance(run, dict) or not all(isinstance(run.get(k), str) for k in ("command", "version")):
+        raise _damaged(path, "run", f"{_shown(run)} is not the record of a run (its command, version and options)")
+    _time(path, "wall_s", doc.get("wall_s"))
+    frames = doc.get("frames")
+    if not isinstance(frames, list):
+        raise _damaged(path, "frames", f"{_shown(frames)} is not a list of frames")
+    earlier = doc.setdefault("earlier", [])
+    if not isinstance(earlier, list):
+        raise _damaged(path, "earlier", f"{_shown(earlier)} is not a list of frames")
+    for key, entries in (("frames", frames), ("earlier", earlier)):
+        for i, entry in enumerate(entries):
+            _check_entry(path, f"{key}[{i}]", entry)
+    return cast(_Journal, doc)
+
+
+def _is_stamp(value: object) -> bool:
+    return isinstance(value, list) and len(value) == 2 and all(type(v) is int and v >= 0 for v in value)
+
+
+def _check_entry(path: Path, where: str, entry: object) -> None:
+    """One frame record: a name and a status; a done one's files (inside the folder) and stage times."""
+    if not isinstance(entry, dict) or not isinstance(entry.get("name"), str) or entry.get("status") not in STATUSES:
+        raise _damaged(path, where, f"{_shown(entry)} is not a frame record (a name and a status)")
+    if entry["status"] != "done":
+        return
+    files, stage_ms, stamps = entry.get("files"), entry.get("stage_ms", {}), entry.get("inputs")
+    if not isinstance(stamps, dict) or not all(_is_stamp(v) for v in stamps.values()):
+        raise _damaged(path, f"{where}.inputs", f"{_shown(stamps)} is not a table of input files (path -> stamp)")
+    if not isinstance(files, dict):
+        raise _damaged(path, f"{where}.files", f"{_shown(files)} is not a table of output files")
+    for rel, record in files.items():
+        _check_relative(path, f"{where}.files", rel)
+        ok = isinstance(record, dict) and type(record.get("size")) is int and record["size"] >= 0
+        if not ok or not _is_digest(record.get("sha256")):
+            raise _damaged(path, f"{where}.files[{rel!r}]", f"{_shown(record)} is not a size and a sha256")
+    if not isinstance(stage_ms, dict):
+        raise _damaged(path, f"{where}.stage_ms", f"{_shown(stage_ms)} is not a table of stage times")
+    for stage, ms in stage_ms.items():
+        _time(path, f"{where}.stage_ms[{stage!r}]", ms)
+
+
+def _check_relative(path: Path, where: str, rel: str) -> None:
+    """``rel`` is a path inside the output folder: relative, without ``..``, not empty."""
+    parts = PurePosixPath(rel).parts
+    if not rel or "\\" in rel or PurePosixPath(rel).is_absolute() or ".." in parts or not parts:
+        raise _damaged(path, where, f"{rel!r} is not a path inside the output folder")
+
+
+def _is_digest(value: object) -> bool:
+    return isinstance(value, str) and len(value) == 64 and all(c in "0123456789abcdef" for c in value)
+
+
+def input_stamps(paths: Iterable[str | os.PathLike[str]]) -> dict[str, list[int]]:
+    """Size and modification time (ns) of every input file of ``paths`` (the files, and the files directly
+    inside the folders, e.g. a ROS 2 bag's), by resolved path: what a resume compares to see an input changed."""
+    stamps: dict[str, list[int]] = {}
+    for given in paths:
+        p = Path(given).resolve()
+        for f in sorted(p.iterdir()) if p.is_dir() else [p]:
+            try:
+                st = f.stat()
+            except OSError:
+                continue
+            if stat.S_ISREG(st.st_mode):
+                stamps[str(f)] = [st.st_size, st.st_mtime_ns]
+    return stamps
+
+
+def _record(path: Path) -> FileRecord:
+    return {"size": path.stat().st_size, "sha256": sha256_file(path)}
 
 
 def _difference(old: Mapping[str, object], new: Mapping[str, object]) -> str | None:
-    """The first option whose value differs between two run identities, as a phrase, or None."""
+    """The first thing that differs between two run identities, as a phrase, or None."""
 
     def said(value: object) -> str:
         return "not given" if value is None else "given" if value is True else repr(value)
 
-    for key in sorted(set(old) | set(new)):
+    if old.get("command") != new.get("command"):
+        return f"it holds a `semattnet {old.get('command')}` run, not `semattnet {new.get('command')}`"
+    if old.get("version") != new.get("version"):
+        return f"it was written by semattnet {old.get('version')}, this is semattnet {new.get('version')}"
+    for key in sorted((set(old) | set(new)) - {"command", "version"}):
         if old.get(key) != new.get(key):
             return f"--{key.replace('_', '-')} was {said(old.get(key))} in the first run, now {said(new.get(key))}"
     return None
@@ -102,22 +258,27 @@ def _difference(old: Mapping[str, object], new: Mapping[str, object]) -> str | N
 class RunJournal:
     """The frames of one run in ``out`` (``names`` in order) and what happened to each.
 
-    ``run``: the run's identity (JSON values). ``resume``: continue the run in ``out`` (its journal must
-    exist and hold the same identity); else a new journal is started. ``rank`` / ``world``: this process
-    under ``torchrun`` (its own partial file while running).
+    ``run``: the run's identity (JSON values; ``command`` and ``version`` default to ``predict`` and this
+    version). ``resume``: continue the run in ``out`` (its journal must exist and hold the same identity); else a
+    new journal is started. ``rank`` / ``world``: this process under
+    ``torchrun`` (its own partial file while running). ``expect``: a frame's output files (relative paths); a
+    resume keeps a done frame only when it recorded exactly those.
 
     Raises:
-        ResumeError: ``resume`` without a journal in ``out``, or with another identity.
+        ResumeError: ``resume`` without a journal in ``out``, a damaged one or another identity.
     """
 
     def __init__(self, out: str | Path, names: Sequence[str], run: Mapping[str, object] | None = None,
-                 resume: bool = False, rank: int = 0, world: int = 1) -> None:  # fmt: skip
-        self.out, self.names, self.run = Path(out), list(names), dict(run or {})
-        self.rank, self.world = rank, world
+                 resume: bool = False, rank: int = 0, world: int = 1,
+                 expect: Callable[[str], Sequence[str]] | None = None) -> None:  # fmt: skip
+        self.out, self.names, self.run = Path(out), list(names), {**_DEFAULT_RUN, **(run or {})}
+        self.rank, self.world, self.expect = rank, world, expect
         self.frames: dict[str, FrameEntry] = {n: {"name": n, "status": "pending"} for n in self.names}
         self.earlier_wall_s = 0.0
         self.kept: set[str] = set()
+        self.earlier: dict[str, FrameEntry] = {}  # done frames of earlier runs that this run does not have
         self._saved_at = 0.0
+        self._before = self._snapshot()
         if resume:
             self._resume()
 
@@ -125,6 +286,13 @@ class RunJournal:
     def path(self) -> Path:
         """The file this process writes while running."""
         return self.out / (FRAMES_FILE if self.world == 1 else _rank_file(self.rank))
+
+    def _snapshot(self) -> bytes | None:
+        """The bytes of the journal this process would replace (a regular file), to put back by :meth:`restore`."""
+        try:
+            return self.path.read_bytes() if stat.S_ISREG(self.path.lstat().st_mode) else None
+        except OSError:
+            return None
 
     def _resume(self) -> None:
         main = _read(self.out / FRAMES_FILE)
@@ -134,40 +302,66 @@ class RunJournal:
             raise ResumeError(f"{self.out}: no {FRAMES_FILE} to resume from (not a semattnet predict folder, or "
                               "its run was killed before the first frame); run without --resume")  # fmt: skip
         for doc in found:
-            run = doc.get("run", {})
-            why = _difference(run if isinstance(run, dict) else {}, self.run)
+            why = _difference(doc["run"], self.run)
             if why is not None:
                 raise ResumeError(f"{self.out / FRAMES_FILE}: cannot resume: {why}; resume with the first run's "
                                   "options and weights, or choose a new --out")  # fmt: skip
-        self.earlier_wall_s = max(_seconds(d.get("wall_s", 0.0)) for d in found)
+        self.earlier_wall_s = max(float(d["wall_s"]) for d in found)
         for doc in found:
-            for entry in _list(doc["frames"]):
+            for entry in [*doc["earlier"], *doc["frames"]]:
+                if entry["status"] == "done" and entry["name"] not in self.frames:
+                    self.earlier[entry["name"]] = entry  # its input is gone: its record stays
                 kept = self._kept(entry)
                 if kept is not None:
                     self.frames[kept["name"]] = kept
                     self.kept.add(kept["name"])
 
-    def _kept(self, entry: object) -> FrameEntry | None:
-        """A done frame of an earlier run with every output file there at its recorded size, else None."""
-        if not isinstance(entry, dict) or entry.get("status") != "done" or entry.get("name") not in self.frames:
+    def _kept(self, entry: FrameEntry) -> FrameEntry | None:
+        """A done frame of an earlier run (checked by :func:`_read`) whose inputs are unchanged and whose every
+        output is whole, else None."""
+        name, files, stamps = entry["name"], entry.get("files", {}), entry.get("inputs", {})
+        if entry["status"] != "done" or name not in self.frames or input_stamps(stamps) != stamps:
             return None
-        name, files, stage_ms = str(entry["name"]), entry.get("files"), entry.get("stage_ms", {})
-        if not isinstance(files, dict) or not isinstance(stage_ms, dict):
+        if self.expect is not None and set(files) != set(self.expect(name)):
+            return None  # not the files this run writes (an edited journal): done again
+        if not files or not all(self._whole(rel, record) for rel, record in files.items()):
             return None
-        for rel, size in files.items():
-            p = self.out / str(rel)
-            if not p.is_file() or p.stat().st_size != size:
-                return None
-        kept: FrameEntry = {"name": name, "status": "done", "files": dict(files)}
-        if "stage_ms" in entry:
-            kept["stage_ms"] = dict(stage_ms)
-        return kept
+        return {"name": name, "status": "done", "files": dict(files), "inputs": dict(stamps),
+                "stage_ms": dict(entry.get("stage_ms", {}))}  # fmt: skip
 
-    def done(self, name: str, files: Sequence[str], stage_ms: Mapping[str, float]) -> None:
-        """Frame ``name``'s outputs (paths relative to ``out``, already in place) and its stage times."""
-        sizes = {rel: (self.out / rel).stat().st_size for rel in files}
+    def _whole(self, rel: str, record: FileRecord) -> bool:
+        """``out/rel`` is a regular file (no symlink) inside ``out`` with the recorded size and digest."""
+        p = self.out / rel
+        try:
+            st = p.lstat()
+            inside = p.resolve().is_relative_to(self.out.resolve())
+        except OSError:
+            return False
+        if not (stat.S_ISREG(st.st_mode) and inside and st.st_size == record["size"]):
+            return False
+        return sha256_file(p) == record["sha256"]
+
+    def stored(self, name: str, rel: str) -> Path:
+        """The output ``rel`` of the kept frame ``name``, checked again as the resume checked it (a regular file
+        inside ``out`` with its recorded size and digest), to be read back (e.g. into a bag).
+
+        Raises:
+            ResumeError: it changed since (or is not among the frame's recorded files).
+        """
+        record = self.frames[name].get("files", {}).get(rel)
+        if record is None or not self._whole(rel, record):
+            raise ResumeError(f"{self.out / rel}: changed or replaced while the resume ran (not the file "
+                              f"{FRAMES_FILE} records); run the resume again")  # fmt: skip
+        return self.out / rel
+
+    def done(self, name: str, files: Sequence[str], stage_ms: Mapping[str, float],
+             inputs: Iterable[str | os.PathLike[str]] = ()) -> None:  # fmt: skip
+        """Frame ``name``'s outputs (paths relative to ``out``, already in place), its stage times and the input
+        files (or folders) it was read from."""
+        records = {rel: _record(self.out / rel) for rel in files}
         times = {k: round(float(v), 3) for k, v in stage_ms.items()}
-        self.frames[name] = {"name": name, "status": "done", "files": sizes, "stage_ms": times}
+        stamps = input_stamps(inputs)
+        self.frames[name] = {"name": name, "status": "done", "files": records, "inputs": stamps, "stage_ms": times}
 
     def mark(self, name: str, status: str, reason: str) -> None:
         """Frame ``name`` ``skipped`` / ``dropped`` / ``failed`` for ``reason`` (one line)."""
@@ -186,7 +380,7 @@ class RunJournal:
     def to_doc(self, complete: bool, wall_s: float = 0.0) -> dict[str, object]:
         return {"schema": SCHEMA, "complete": complete, "run": self.run, "counts": self.counts(),
                 "wall_s": round(self.earlier_wall_s + wall_s, 3),
-                "frames": [self.frames[n] for n in self.names]}  # fmt: skip
+                "frames": [self.frames[n] for n in self.names], "earlier": list(self.earlier.values())}  # fmt: skip
 
     def save(self, complete: bool = False, wall_s: float = 0.0, force: bool = True) -> None:
         """Write this process's file atomically (``force=False``: only when it is due, see the module doc)."""
@@ -195,8 +389,17 @@ class RunJournal:
             return
         self.out.mkdir(parents=True, exist_ok=True)
         with atomic_path(self.path, suffix=".json") as tmp:
-            tmp.write_text(json.dumps(self.to_doc(complete, wall_s), indent=1) + "\n")
+            tmp.write_text(json.dumps(self.to_doc(complete, wall_s), indent=1, allow_nan=False) + "\n")
         self._saved_at = now
+
+    def restore(self) -> None:
+        """Undo this process's saves: the journal it found put back (an earlier run's record is never lost), or
+        none when there was none."""
+        if self._before is None:
+            self.path.unlink(missing_ok=True)
+            return
+        with atomic_path(self.path, suffix=".json") as tmp:
+            tmp.write_bytes(self._before)
 
     def merge(self, entries: Sequence[FrameEntry], complete: bool, wall_s: float) -> None:
         """Process 0 under ``torchrun``: every process's entries into ``frames.json``; the partial files go."""
@@ -207,14 +410,6 @@ class RunJournal:
         self.save(complete=complete, wall_s=wall_s)
         for r in range(keep):
             (self.out / _rank_file(r)).unlink(missing_ok=True)
-
-
-def _seconds(value: object) -> float:
-    return float(value) if isinstance(value, int | float | str) else 0.0
-
-
-def _list(value: object) -> list[object]:
-    return list(value) if isinstance(value, list) else []
 
 
 def describe_counts(counts: Mapping[str, int]) -> str:

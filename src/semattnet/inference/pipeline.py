@@ -45,7 +45,7 @@ import numpy as np
 from semattnet._errors import DataError, InputError
 from semattnet._utils.atomic import fsync_dir
 from semattnet._utils.distributed import first_error, is_main, rank, world_size
-from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs, stage_folder
+from semattnet._utils.outputs import FolderLock, Output, check_no_input_overlap, check_outputs, stage_folder
 from semattnet.data.frames import Frame, FrameSource
 from semattnet.data.io import encode_depth, read_depth
 from semattnet.inference.completer import Completer, Completion
@@ -94,12 +94,20 @@ def _policy(on_error: str | None, frames: int) -> str:
 @dataclass
 class RunPlan:
     """What :func:`check_frames` decided: the run's :class:`~.journal.RunJournal` (with the frames a resume
-    keeps), the frames whose inputs failed the check (name -> reason; ``on_error="skip"``) and the policy."""
+    keeps), the frames whose inputs failed the check (name -> reason; ``on_error="skip"``) and the policy;
+    ``lock``: the output folder's lock, held from the check to the end of :func:`complete_frames`
+    (:meth:`release` it when the run does not happen)."""
 
     journal: RunJournal
     faults: dict[str, str] = field(default_factory=dict)
     on_error: str = "stop"
     resume: bool = False
+    lock: FolderLock | None = None
+
+    def release(self) -> None:
+        """Let the output folder go (idempotent)."""
+        if self.lock is not None:
+            self.lock.release()
 
 
 def _check_inputs(source: FrameSource, names: Sequence[str], on_error: str) -> dict[str, str]:
@@ -130,26 +138,52 @@ def check_frames(source: FrameSource, sinks: Sequence[Sink], out: PathLike, *, o
     for more than one frame). ``resume``: continue the run in ``out`` (``run``: its identity, which must be the
     one recorded there; the frames done, with every output whole, are kept).
 
+    The output folder is locked (:class:`~semattnet._utils.outputs.FolderLock`) first, until the end of
+    :func:`complete_frames` (or :meth:`RunPlan.release`).
+
     Raises:
         FileExistsError: an output exists and neither ``overwrite`` nor ``resume`` is set.
-        OutputError: an output in or over an input.
+        OutputError: an output in or over an input; ``FolderBusyError``: another run is writing into ``out``.
         ResumeError: nothing to resume in ``out``, or a run with another identity.
         DataError: an input is missing or corrupt (naming the file), with ``on_error="stop"``.
     """
-    out, policy = Path(out), _policy(on_error, len(source.names))
+    out, lock = Path(out), FolderLock(out)
     with process_group():
-        journal = agree(RunJournal, out, source.names, run, resume, rank(), world_size())
-        if not (overwrite or resume):  # before the files it left are refused one by one: say --resume
-            on_main(_refuse_earlier_run, out)
-        on_main(_check_outputs, source, sinks, out, overwrite or resume, inputs)
-        todo = [n for n in shard(source.names) if n not in journal.kept]
-        faults = agree(_check_inputs, source, todo, policy)
-        position = {n: i for i, n in enumerate(source.names)}
-        rows: list[FrameEntry] = [{"name": n, "status": "skipped", "reason": r} for n, r in faults.items()]
-        bad = gather_rows(rows, key=lambda e: position[e["name"]])
-        if bad and len(bad) == len(source.names):
-            raise _nothing_done(bad)  # every input is bad: one line, before the model is loaded
+        on_main(_acquire, lock)
+        try:
+            plan = _plan(source, sinks, out, overwrite, inputs, _policy(on_error, len(source.names)), resume, run)
+        except BaseException:
+            lock.release()
+            raise
+    plan.lock = lock
+    return plan
+
+
+def _acquire(lock: FolderLock) -> None:
+    lock.acquire()
+
+
+def _plan(source: FrameSource, sinks: Sequence[Sink], out: Path, overwrite: bool, inputs: Sequence[PathLike | None],
+          policy: str, resume: bool, run: Mapping[str, object] | None) -> RunPlan:  # fmt: skip
+    """:func:`check_frames` once the folder is locked."""
+    journal = agree(_journal, source, sinks, out, run, resume)
+    if not (overwrite or resume):  # before the files it left are refused one by one: say --resume
+        on_main(_refuse_earlier_run, out)
+    on_main(_check_outputs, source, sinks, out, overwrite or resume, inputs)
+    todo = [n for n in shard(source.names) if n not in journal.kept]
+    faults = agree(_check_inputs, source, todo, policy)
+    position = {n: i for i, n in enumerate(source.names)}
+    rows: list[FrameEntry] = [{"name": n, "status": "skipped", "reason": r} for n, r in faults.items()]
+    bad = gather_rows(rows, key=lambda e: position[e["name"]])
+    if bad and len(bad) == len(source.names):
+        raise _nothing_done(bad)  # every input is bad: one line, before the model is loaded
     return RunPlan(journal, faults, policy, resume)
+
+
+def _journal(source: FrameSource, sinks: Sequence[Sink], out: Path, run: Mapping[str, object] | None,
+             resume: bool) -> RunJournal:  # fmt: skip
+    """This process's journal of the run (a resume keeps only frames that recorded this run's files)."""
+    return RunJournal(out, source.names, run, resume, rank(), world_size(), lambda name: output_files([name], sinks))
 
 
 def _refuse_earlier_run(out: Path) -> None:
@@ -259,10 +293,10 @@ class _FrameLoop:
         if not self.replays or self.depth_sink is None:
             return
         frame = read_frame(self.source, name, self.semantic, StageTimes())
-        stored = read_depth(self.out / str(self.depth_sink.path(name)))
+        stored = read_depth(self.journal.stored(name, str(self.depth_sink.path(name))))  # never a link's target
         pred = Prediction(frame, Completion(stored), stored, encode_depth(stored), stored)
         if self.uncertainty_sink is not None:
-            pred.uncertainty = read_depth(self.out / str(self.uncertainty_sink.path(name)))
+            pred.uncertainty = read_depth(self.journal.stored(name, str(self.uncertainty_sink.path(name))))
             pred.uncertainty_png = encode_depth(pred.uncertainty)
         for sink in self.replays:
             sink.write(self.out, pred)
@@ -278,30 +312,35 @@ class _FrameLoop:
                 (self.out / rel).parent.mkdir(parents=True, exist_ok=True)
                 os.replace(stage / rel, self.out / rel)
             fsync_dir(self.out)
-        self.journal.done(frame.name, files, {k: 1e3 * v for k, v in self.timer.times[frame.name].items()})
+        stage_ms = {k: 1e3 * v for k, v in self.timer.times[frame.name].items()}
+        self.journal.done(frame.name, files, stage_ms, inputs=frame.paths.values())
         self.journal.save(force=False)
         self.log(_line(frame, self.out, self.depth_sink))
 
     def finish(self, stage: Path) -> None:
-        """Every frame seen: the run outputs completed (rank 0's ``latency.json``) and moved into place."""
+        """Every frame seen: the run outputs completed (rank 0's ``latency.json``) and moved into place, when a
+        frame is done."""
         self.catch_up(None)
         self.timer.not_done = {k: v for k, v in self.journal.counts().items() if k in ("skipped", "dropped")}
         for s in self.sinks:
             if not s.once or is_main():
                 s.finish(stage)
+        if world_size() == 1 and not self.journal.counts()["done"]:
+            return  # no frame done: nothing is put in place (no latency.json; the run raises in _close)
         for rel in [f for s in self.sinks for f in s.files()] if is_main() else []:
             if (stage / rel).is_file():
                 os.replace(stage / rel, self.out / rel)
 
     def forget(self) -> None:
-        """After a run error: keep the journal when a frame is done, else leave no trace of this run."""
+        """After a run error: keep the journal when a frame is done, else leave no trace of this run (the journal
+        it found, an earlier run's, put back)."""
         if self.journal.counts()["done"]:
             try:
                 self.journal.save()
             except OSError:  # a full disk: the journal keeps its last save (those frames are redone on resume)
                 pass
             return
-        self.journal.path.unlink(missing_ok=True)
+        self.journal.restore()
         if self.created and self.out.is_dir() and not any(self.out.iterdir()):
             self.out.rmdir()
 
@@ -371,18 +410,20 @@ def complete_frames(
         if isinstance(checked, RunPlan):
             plan = checked
         elif checked:  # checked by the caller, nothing to skip or keep
-            plan = RunPlan(RunJournal(out, source.names, run, False, rank(), world_size()), {},
-                           _policy(on_error, len(source.names)))  # fmt: skip
+            plan = RunPlan(_journal(source, sinks, out, run, False), {}, _policy(on_error, len(source.names)))
         else:
             plan = check_frames(source, sinks, out, overwrite=overwrite, inputs=inputs, on_error=on_error,
                                 resume=resume, run=run)  # fmt: skip
-        maps = agree((semantic or SemanticMaps()).bind, completer)
-        maps.check_palette(completer, source)
-        loop = _FrameLoop(source, sinks, out, plan, timer, rank_log(log), maps)
-        first = first_error(_attempt_run(loop, completer, prefetch, realtime, overwrite or plan.resume, batch_size))
-        if first is not None:
-            raise first
-        return _close(loop)
+        try:
+            maps = agree((semantic or SemanticMaps()).bind, completer)
+            maps.check_palette(completer, source)
+            loop = _FrameLoop(source, sinks, out, plan, timer, rank_log(log), maps)
+            first = first_error(_attempt_run(loop, completer, prefetch, realtime, overwrite or plan.resume, batch_size))
+            if first is not None:
+                raise first
+            return _close(loop)
+        finally:
+            plan.release()
 
 
 def _attempt_run(loop: _FrameLoop, completer: Completer, prefetch: int, realtime: float | None,

@@ -54,14 +54,14 @@ def bag_format(path: str | os.PathLike[str], fmt: str | None = None) -> str:
 def staged_bag(path: str | os.PathLike[str], overwrite: bool = False) -> Iterator[Path]:
     """Yield a path in a hidden temporary folder beside ``path``; when the block succeeds it is moved to ``path``
     in one rename (a previous bag there is replaced only with ``overwrite``, and only a bag we wrote: a ROS 2
-    bag folder carries :data:`~semattnet._utils.outputs.BAG_MARKER`), else removed. Stage folders of killed
-    runs beside ``path`` are removed first.
+    bag folder carries :data:`~semattnet._utils.outputs.BAG_MARKER`, a ROS 1 file has it beside it), else
+    removed. Stage folders of killed runs beside ``path`` are removed first.
 
     Raises:
         FileExistsError: ``path`` exists and ``overwrite`` is False (checked first).
         OutputError: ``path`` exists and is not a bag we wrote.
     """
-    from semattnet._utils.outputs import BAG_MARKER, Output, check_outputs, clean_stale_stages
+    from semattnet._utils.outputs import BAG_MARKER, Output, check_outputs, clean_stale_stages, mark_bag_file
 
     if Path(path).exists() and not overwrite:
         raise FileExistsError(f"{path} exists; refusing to overwrite (pass --overwrite / overwrite=True)")
@@ -78,6 +78,8 @@ def staged_bag(path: str | os.PathLike[str], overwrite: bool = False) -> Iterato
         if path.is_dir() and not path.is_symlink():
             os.replace(path, stage / ".replaced")
         os.replace(stage / path.name, path)
+        if path.is_file():  # a ROS 1 bag: its mark beside it (what lets --overwrite replace it)
+            mark_bag_file(path)
         fsync_dir(path.parent)
     finally:
         shutil.rmtree(stage, ignore_errors=True)
