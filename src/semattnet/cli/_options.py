@@ -14,7 +14,6 @@ from typing import TYPE_CHECKING, TypeVar
 import click
 import torch
 
-from semattnet._errors import SemAttNetError
 from semattnet._utils.bounds import MAX_SKEW_S
 from semattnet.cli._params import section
 
@@ -238,50 +237,3 @@ def model_from_options(weights: str | None, device: str = "cpu") -> torch.nn.Mod
     if weights is None:
         raise click.UsageError("--checkpoint or --weights is required (they are one option: --checkpoint is an alias)")
     return from_pretrained(weights, map_location=device)
-
-
-def precision_options(f: _F) -> _F:
-    """``--precision f32|bf16|int8`` and ``--calibration PATH`` (int8 only) of every command that runs a model."""
-    f = click.option(
-        "--calibration",
-        cls=section(MODEL),
-        type=click.Path(exists=True, path_type=Path),
-        default=None,
-        help="With --precision int8: the frames NNCF measures value ranges on: a folder with rgb/ + sparse/ "
-        "(+ semantic/), or a KITTI / synth root (its val_select) [8 synthetic street scenes].",
-    )(f)
-    return click.option(
-        "--precision",
-        cls=section(MODEL),
-        type=click.Choice(["f32", "bf16", "int8"]),
-        default=None,
-        help="The network's arithmetic: f32 [default], bf16 (faster only on CPUs with native bfloat16), int8 "
-        "(OpenVINO + NNCF: --backend openvino; quantised once per weights, size and calibration, then cached).",
-    )(f)
-
-
-def check_precision_options(method: str, amp: str, precision: str | None, calibration: Path | None,
-                            backend: str) -> None:  # fmt: skip
-    """``--precision`` / ``--calibration`` agree with the method, ``--amp`` and ``--backend`` (usage errors, before
-    any work)."""
-    from semattnet.inference.completer import check_precision
-
-    require_with("--precision int8", precision == "int8", "calibration")
-    if method == "classical" and precision is not None:
-        raise click.UsageError("--precision is the network's: --method classical runs none")
-    try:
-        check_precision(precision, amp, backend)
-    except SemAttNetError as exc:
-        raise click.UsageError(str(exc).replace("precision ", "--precision ", 1).replace("amp ", "--amp ")) from None
-
-
-#: ``--backend``: the inference engine of every command that runs a model (see ``optimize_for_inference``).
-backend_option = click.option(
-    "--backend",
-    cls=section(MODEL),
-    type=click.Choice(["torch", "openvino", "onnxruntime", "auto"]),
-    default="torch",
-    show_default=True,
-    help="Inference engine: torch (BN folded, fused propagation), openvino / onnxruntime (exported once per "
-    "frame size, cached on disk; worth it over many frames) or auto.",
-)
