@@ -31,7 +31,8 @@ from semattnet.inference.backends.calibration import DEFAULT_CALIBRATION_FRAMES,
 __all__ = ["ENGINE_MODULES", "EngineEntry", "EngineRequest", "choose_backend", "engine_entries", "get_engine",
            "precisions", "register_engine"]  # fmt: skip
 
-#: The modules of :mod:`semattnet.inference.backends` that declare the built-in engines, in the table's order.
+#: The modules of :mod:`semattnet.inference.backends` that declare the built-in engines (each its ``ENTRY``), in the
+#: table's order.
 ENGINE_MODULES: tuple[str, ...] = ("torch_engine", "openvino_engine", "onnxruntime_engine", "tensorrt_engine")
 
 
@@ -103,12 +104,13 @@ _loaded = False
 
 
 def register_engine(entry: EngineEntry) -> EngineEntry:
-    """Add ``entry`` to the table (a second entry of one name is a bug: ``ValueError``); gives ``entry``."""
+    """Add ``entry`` to the table (a second entry of one name, or one named ``auto``, is a bug: ``ValueError``);
+    gives ``entry``."""
     known = _ENGINES.get(entry.name)
-    if known is not None and known != entry:
-        raise ValueError(f"engine {entry.name!r} is registered twice")
-    if entry.name == "auto":
-        raise ValueError("'auto' names the choice among engines, not an engine")
+    if entry.name == "auto" or (known is not None and known != entry):
+        why = "registered twice" if known is not None else "auto names the choice among engines"
+        # an engine module's own mistake (the name taken, or auto's), found at import: not a user's input
+        raise ValueError(f"engine {entry.name!r}: {why}")
     _ENGINES[entry.name] = entry
     return entry
 
@@ -116,10 +118,12 @@ def register_engine(entry: EngineEntry) -> EngineEntry:
 def engine_entries() -> Mapping[str, EngineEntry]:
     """Every engine by name (the built-in ones imported on first use), installed or not."""
     global _loaded
-    if not _loaded:
+    if not _loaded:  # the built-in entries first, in ENGINE_MODULES' order, whatever imported them before
         _loaded = True
-        for module in ENGINE_MODULES:
-            importlib.import_module(f"{__package__}.{module}")
+        builtin = {e.name: e for e in (importlib.import_module(f"{__package__}.{m}").ENTRY for m in ENGINE_MODULES)}
+        others = {name: e for name, e in _ENGINES.items() if name not in builtin}
+        _ENGINES.clear()
+        _ENGINES.update(builtin | others)
     return MappingProxyType(_ENGINES)
 
 
