@@ -94,3 +94,14 @@ def test_a_registered_engine_runs_predict(echo: EngineEntry, frame: list[str], t
     assert res.exit_code == 0 and EchoEngine.calls == 2, res.output
     assert res.output.count("deprecated") == 1, res.output
     np.testing.assert_array_equal(read_depth(tmp_path / "a" / "f.png"), read_depth(tmp_path / "o" / "f.png"))
+
+
+def test_one_model_section_for_every_command_that_runs_a_model() -> None:
+    """predict, evaluate and submit take the one Model section (submit: no --method); predict stays within its
+    48 options."""
+    commands = {name: {p.name: p for p in main.commands[name].params} for name in ("predict", "evaluate", "submit")}
+    model = ["weights", "device", "backend", "precision", "calibration", "amp"]
+    for name, params in commands.items():
+        assert set(model) <= set(params) and ("method" in params) == (name != "submit"), name
+        assert [params[m].help for m in model] == [commands["predict"][m].help for m in model], name
+    assert len(commands["predict"]) <= 48
