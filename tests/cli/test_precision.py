@@ -34,8 +34,11 @@ def _predict(*args: str) -> object:
 @pytest.mark.parametrize(
     ("options", "words"),
     [
-        (["--precision", "int8"], "--precision int8 runs on the openvino backend (NNCF), not 'torch'"),
-        (["--precision", "int8", "--backend", "onnxruntime"], "not 'onnxruntime'"),
+        (
+            ["--precision", "int8"],
+            "--precision: the torch backend runs f32, bf16, fp16, not 'int8'; int8 runs on the openvino backend",
+        ),
+        (["--precision", "int8", "--backend", "onnxruntime"], "the onnxruntime backend runs f32, not 'int8'"),
         (["--calibration", "{rgb}"], "--calibration only mean(s) something with --precision int8"),
         (["--precision", "bf16", "--amp", "fp16"], "--precision 'bf16' and --amp 'fp16' disagree"),
         (["--precision", "f32", "--method", "classical"], "--method classical runs none"),

@@ -63,7 +63,7 @@ def test_int8_is_never_the_default() -> None:
 
 @pytest.mark.parametrize(
     ("backend", "precision", "size", "words"),
-    [("torch", "int8", SIZE, "torch backend runs"), ("onnxruntime", "int8", SIZE, "float32 only"),
+    [("torch", "int8", SIZE, "torch backend runs"), ("onnxruntime", "int8", SIZE, "onnxruntime backend runs f32, not"),
      ("openvino", "fp16", SIZE, "openvino backend runs"), ("openvino", "int8", None, "size")],
 )  # fmt: skip
 def test_precision_rules(model: torch.nn.Module, backend: str, precision: str, size, words: str) -> None:  # type: ignore[no-untyped-def]

@@ -114,10 +114,10 @@ def _no_model(*args, **kwargs):  # type: ignore[no-untyped-def]
 
 @pytest.mark.parametrize("case", ["existing", "corrupt"])
 def test_predict_checks_everything_before_loading_the_model(tmp_path: Path, monkeypatch, case: str) -> None:  # type: ignore[no-untyped-def]
-    import semattnet.cli._options as options
+    import semattnet.inference.completer as completer
     from semattnet.cli import main
 
-    monkeypatch.setattr(options, "model_from_options", _no_model)
+    monkeypatch.setattr(completer, "load_completer", _no_model)
     for name in ("a.png", "b.png"):
         write_image(tmp_path / "rgb" / name, np.zeros((8, 12, 3), np.uint8))
         write_depth(tmp_path / "sparse" / name, np.ones((8, 12)))
@@ -148,10 +148,10 @@ def test_predict_checks_everything_before_loading_the_model(tmp_path: Path, monk
 
 
 def test_evaluate_checks_before_loading_the_model(tree: Path, tmp_path: Path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
-    import semattnet.cli.evaluate as cli_evaluate
+    import semattnet.inference.completer as completer
     from semattnet.cli import main
 
-    monkeypatch.setattr(cli_evaluate, "_load_completer", _no_model)
+    monkeypatch.setattr(completer, "load_completer", _no_model)
     (tmp_path / "ev").mkdir()
     (tmp_path / "ev" / "old.txt").write_text("x")
     weights = tmp_path / "never-read.safetensors"  # exists (the option checks that), never loaded

@@ -1,4 +1,4 @@
-"""Every inference engine (:data:`~semattnet.inference.backends.BACKEND_PRECISIONS`: each backend at each
+"""Every inference engine (:func:`~semattnet.inference.backends.engine_entries`: each backend at each
 precision it runs) built on a tiny model and run on a 32x64 frame: the outputs of the eager model, refused
 inputs, and parity with the eager model within the precision's tolerance. An engine this machine cannot run
 (its package missing, no CUDA) is skipped with the reason."""
@@ -16,7 +16,7 @@ import torch
 
 import semattnet
 from semattnet._errors import InputError
-from semattnet.inference.backends import BACKEND_PRECISIONS, InferenceEngine, available_backends, optimize_for_inference
+from semattnet.inference.backends import InferenceEngine, available_backends, engine_entries, optimize_for_inference
 from tests._base import RegistryTester
 from tests._helpers import random_inputs
 
@@ -115,9 +115,7 @@ class TestEngines(RegistryTester[EngineFixture]):
 
     @classmethod
     def entries(cls) -> list[str]:
-        return [
-            f"{backend}-{precision}" for backend, precisions in BACKEND_PRECISIONS.items() for precision in precisions
-        ]
+        return [f"{name}-{precision}" for name, entry in engine_entries().items() for precision in entry.precisions]
 
     @classmethod
     def marks(cls, name: str) -> tuple[pytest.MarkDecorator, ...]:

@@ -28,7 +28,7 @@ from torch import nn
 
 from semattnet._errors import InputError
 from semattnet._utils.cpu import cpu_summary
-from semattnet.inference.backends import available_backends, optimize_for_inference
+from semattnet.inference.backends import engine_entries, optimize_for_inference
 from semattnet.models.bn_folding import fold_batchnorm
 from semattnet.models.layers import set_gradient_checkpointing
 from semattnet.models.outputs import DepthCompletionOutput
@@ -290,17 +290,17 @@ def _backend_candidates(
     only: str | None = None,
     calibration: Path | None = None,
 ) -> dict[str, Callable[[], DepthCompletionOutput]]:
-    """Every installed inference backend at this size (float32; also bf16 where the CPU has it natively;
-    int8 for OpenVINO with nncf installed, calibrated on synthetic scenes: a row, never a default)."""
+    """Every installed inference backend at this size that runs on ``dev`` (the engine table's), at float32;
+    also bf16 where the CPU has it natively; int8 for OpenVINO with nncf installed, calibrated on synthetic
+    scenes (a row, never a default); fp16 only when asked for (``only``)."""
     size = (int(x["rgb"].shape[-2]), int(x["rgb"].shape[-1]))
+    wanted = {"f32"} | ({"bf16"} if fast_dtype is torch.bfloat16 else set()) | ({"fp16"} if only == "fp16" else set())
+    wanted |= {"int8"} if importlib.util.find_spec("nncf") is not None else set()
     runs: dict[str, Callable[[], DepthCompletionOutput]] = {}
-    for backend in available_backends():
-        usable = dev.type == "cuda" if backend == "tensorrt" else backend == "torch" or dev.type == "cpu"
-        if not usable:
+    for backend, entry in engine_entries().items():
+        if not entry.installed() or dev.type not in entry.devices:
             continue
-        precisions = ["f32"] + (["bf16"] if backend != "onnxruntime" and fast_dtype is torch.bfloat16 else [])
-        precisions += ["int8"] if backend == "openvino" and importlib.util.find_spec("nncf") is not None else []
-        for precision in [p for p in precisions if only in (None, p)]:
+        for precision in [p for p in entry.precisions if p in wanted and only in (None, p)]:
             engine = optimize_for_inference(net, backend=backend, size=size, precision=precision, device=dev,
                                             calibration=calibration if precision == "int8" else None)  # fmt: skip
             runs[f"full model, backend {backend} ({precision})"] = functools.partial(engine, **x)

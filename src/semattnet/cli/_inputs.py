@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import click
 
 from semattnet._utils.registry import Option, OptionError
+from semattnet.cli._model import palette_mismatch_option
 from semattnet.cli._options import DEPTH_M, PIXELS, SECONDS, SPEED
 from semattnet.cli._params import given, section, values_of, with_options
 from semattnet.data.sources.registry import SOURCES, SourceOptions
@@ -125,10 +126,7 @@ MAP_OPTIONS = (
                       help="With --kitti-raw or --bag: segment each image with this model (see `semattnet segment "
                       "--model`); with --data (nyuv2, void): the split's frames segmented once into a cache folder "
                       "and reused."),
-    section(SEMANTIC)(["--palette-mismatch"], type=click.Choice(["refuse", "recolour", "fallback"]),
-                      default="refuse", show_default=True,
-                      help="Maps of another palette than the model's: refuse, recolour the classes both palettes "
-                      "name (the rest unknown), or use the fallback map (see evaluate)."),
+    palette_mismatch_option(section(SEMANTIC)),
 )  # fmt: skip
 
 

@@ -15,7 +15,6 @@ from typing import TYPE_CHECKING, TypeVar
 import click
 import torch
 
-from semattnet._errors import SemAttNetError
 from semattnet._utils.bounds import MAX_SKEW_S
 from semattnet.cli._params import section
 
@@ -249,44 +248,7 @@ def model_from_options(weights: str | None, device: str = "cpu") -> torch.nn.Mod
     return from_pretrained(weights, map_location=device)
 
 
-def precision_options(f: _F) -> _F:
-    """``--precision f32|bf16|int8`` and ``--calibration PATH`` (int8 only) of every command that runs a model."""
-    f = click.option(
-        "--calibration",
-        cls=section(MODEL),
-        type=click.Path(exists=True, path_type=Path),
-        default=None,
-        help="With --precision int8: the frames NNCF measures value ranges on: a folder with rgb/ + sparse/ "
-        "(+ semantic/), or a KITTI / synth root (its val_select) [8 synthetic street scenes].",
-    )(f)
-    return click.option(
-        "--precision",
-        cls=section(MODEL),
-        type=click.Choice(["f32", "bf16", "int8"]),
-        default=None,
-        help="The network's arithmetic: f32 [default], bf16 (faster only on CPUs with native bfloat16), int8 "
-        "(OpenVINO + NNCF: --backend openvino; quantised once per weights, size and calibration, then cached).",
-    )(f)
-
-
-def check_precision_options(method: str, amp: str, precision: str | None, calibration: Path | None,
-                            backend: str) -> None:  # fmt: skip
-    """``--precision`` / ``--calibration`` agree with the method, ``--amp`` and ``--backend`` (usage errors, before
-    any work)."""
-    from semattnet.inference.completer import check_precision
-
-    require_with("--precision int8", precision == "int8", "calibration")
-    if method == "classical" and precision is not None:
-        raise click.UsageError("--precision is the network's: --method classical runs none")
-    try:
-        check_precision(precision, amp, backend)
-    except SemAttNetError as exc:
-        raise click.UsageError(str(exc).replace("precision ", "--precision ", 1).replace("amp ", "--amp ")) from None
-    if calibration is not None:
-        check_calibration(calibration)
-
-
-def check_calibration(calibration: Path) -> None:
+def check_calibration_frames(calibration: Path) -> None:
     """``--calibration``'s frames read and checked before any work: a file, an empty folder, a corrupt PNG or a
     frame without a LiDAR point is one line naming the option and the file, never blamed on the frames."""
     from semattnet.inference.backends.calibration import CalibrationError, calibration_frames
@@ -295,15 +257,3 @@ def check_calibration(calibration: Path) -> None:
         calibration_frames(calibration)
     except CalibrationError as exc:
         raise click.BadParameter(str(exc).removeprefix("calibration: "), param_hint="'--calibration'") from None
-
-
-#: ``--backend``: the inference engine of every command that runs a model (see ``optimize_for_inference``).
-backend_option = click.option(
-    "--backend",
-    cls=section(MODEL),
-    type=click.Choice(["torch", "openvino", "onnxruntime", "auto"]),
-    default="torch",
-    show_default=True,
-    help="Inference engine: torch (BN folded, fused propagation), openvino / onnxruntime (exported once per "
-    "frame size, cached on disk; worth it over many frames) or auto.",
-)

@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from semattnet.cli._group import main
+from semattnet.cli._model import check_calibration, device_option, precision_options
 from semattnet.cli._options import (
     COUNT,
     POSITIVE_FLOAT,
@@ -15,10 +16,9 @@ from semattnet.cli._options import (
     SEEDS,
     SIZE,
     WIDTH,
-    check_precision_options,
+    check_calibration_frames,
     model_from_options,
     parse_size,
-    precision_options,
     weights_input,
     weights_option,
 )
@@ -52,7 +52,7 @@ from semattnet.data.synthetic.scenes import SCENE_STYLES
                    "mean and every seed.")  # fmt: skip
 @click.option("--style", type=click.Choice(SCENE_STYLES), default="realistic", show_default=True,
               help="Scene style: realistic has LiDAR failures and colour edges without depth edges.")  # fmt: skip
-@click.option("--device", default="auto", show_default=True, help="auto, cpu or cuda[:N].")
+@device_option()
 @click.option("--no-reference", is_flag=True, help="Do not evaluate the shipped reference checkpoints.")
 @click.option("--train-reference", is_flag=True,
               help="Instead of the demo: retrain the shipped reference checkpoints into --out, one per --seeds "
@@ -106,7 +106,7 @@ def demo(out_dir: Path, minutes: float | None, size: str, frames: int, eval_fram
 @click.option("--eval-frames", type=POSITIVE_INT, default=48, help="Held-out scenes (half shadowed).")
 @click.option("--width", type=WIDTH, default=0.125, help="Model width multiplier.")
 @click.option("--style", type=click.Choice(SCENE_STYLES), default="realistic", help="Synthetic scene style.")
-@click.option("--device", default="auto")
+@device_option()
 def ablate(out_dir: Path, configs: str, seeds: tuple[int, ...], backbone_steps: int, full_steps: int, size: str,
            frames: int, eval_frames: int, width: float, style: str, device: str) -> None:  # fmt: skip
     """Table 2 configurations (a)-(g) on synthetic scenes over paired seeds: RMSE and MAE per configuration,
@@ -125,7 +125,7 @@ def ablate(out_dir: Path, configs: str, seeds: tuple[int, ...], backbone_steps: 
 @main.command(context_settings={"show_default": True})
 @click.option("--size", type=SIZE, default="352x1216", help="Frame size HxW for inference.")
 @click.option("--train-size", type=SIZE, default="320x1216", help="Crop size HxW for the training step.")
-@click.option("--device", default="auto", help="auto, cpu or cuda[:N].")
+@device_option()
 @click.option("--repeats", type=POSITIVE_INT, default=3, help="Timed runs per measurement (median reported).")
 @click.option("--width", type=WIDTH, default=1.0, help="Model width multiplier (1.0 = paper).")
 @click.option("--parts", default="propagation,backbone,full,fast,backends,train",
@@ -144,7 +144,9 @@ def bench(size: str, train_size: str, device: str, repeats: int, width: float, p
     from semattnet._utils.outputs import Output, check_outputs, write_text
     from semattnet.apps.benchmark import run_benchmark
 
-    check_precision_options("semattnet", "none", precision, calibration, "auto")
+    check_calibration(precision)
+    if calibration is not None:
+        check_calibration_frames(calibration)
     if precision is not None and "backends" not in parts.split(","):
         raise click.UsageError("--precision chooses the rows of --parts backends; backends is not in --parts")
     check_outputs([weights_input(weights)], [Output("--json", json_path, "json")] if json_path else [], overwrite)

@@ -11,21 +11,18 @@ import click
 
 from semattnet.cli._dataset import dataset_option
 from semattnet.cli._group import main
+from semattnet.cli._model import ModelOptions, model_options, palette_mismatch_option
 from semattnet.cli._options import (
     BATCH_SIZE,
     COUNT,
     DEPTH_M_OR_ZERO,
     POSITIVE_INT,
     WORKERS,
-    backend_option,
-    check_precision_options,
-    precision_options,
-    weights_option,
 )
+from semattnet.cli._params import values_of, with_options
 
 if TYPE_CHECKING:
     from semattnet.evaluation.evaluate import Evaluation
-    from semattnet.inference.completer import DepthCompleter
 
 
 @main.command()
@@ -61,7 +58,7 @@ def metrics(
 
 
 @main.command()
-@weights_option
+@model_options()
 @click.option("--data", "data_root", required=True, type=click.Path(exists=True, file_okay=False, path_type=Path))
 @dataset_option("The dataset and its protocol (split, crop, depth range, metrics).")
 @click.option("--split", type=click.Choice(["val_select", "val", "test"]), default=None,
@@ -79,42 +76,29 @@ def metrics(
     metavar="beams=64,32,..|keep=1,0.5,..",
     help="Sweep sparser inputs (repeatable): the model and the classical baseline side by side; needs --out.",
 )
-@click.option(
-    "--method",
-    type=click.Choice(["semattnet", "classical"]),
-    default="semattnet",
-    show_default=True,
-    help="With --sparsity: classical sweeps only the baseline (no model needed).",
-)
 @click.option("--segment", default=None, metavar="SPEC",
               help="nyuv2 / void: semantic maps from this segmenter (e.g. hf:indoor; see `semattnet segment`), "
               "segmented once into a cache folder and reused.")  # fmt: skip
-@click.option("--palette-mismatch", type=click.Choice(["refuse", "recolour", "fallback"]), default="refuse",
-              show_default=True, help="Maps of another palette than the model's (a KITTI model on nyuv2): refuse, "
-              "recolour the classes both palettes name (the rest unknown), or use the fallback map; "
-              "metrics.json's 'semantic' says which.")  # fmt: skip
+@with_options([palette_mismatch_option()])
 @click.option("--save-predictions", is_flag=True, help="Write 16-bit PNG predictions (needs --out).")
 @click.option(
     "--pictures", type=COUNT, default=0, show_default=True, help="Branch panels for the first N frames (needs --out)."
 )
-@click.option("--device", default="auto", show_default=True)
 @click.option("--batch-size", type=BATCH_SIZE, default=1, show_default=True)
-@click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
 @click.option("--workers", type=WORKERS, default=2, show_default=True, help="Frames read ahead in a background thread.")
 @click.option("--max-frames", type=POSITIVE_INT, default=None)
 @click.option("--overwrite", is_flag=True)
-@backend_option
-@precision_options
-def evaluate(weights: str | None, data_root: Path, dataset: str, split: str | None, out: Path | None,
-             sparsity: tuple[str, ...], method: str, segment: str | None, palette_mismatch: str,
-             save_predictions: bool, pictures: int, device: str, batch_size: int, amp: str, workers: int,
-             max_frames: int | None, overwrite: bool, backend: str, precision: str | None,
-             calibration: Path | None) -> None:  # fmt: skip
-    """Evaluate weights on a split with its dataset's metrics (KITTI: the devkit's), or sweep sparser inputs."""
+def evaluate(data_root: Path, dataset: str, split: str | None, out: Path | None, sparsity: tuple[str, ...],
+             segment: str | None, palette_mismatch: str, save_predictions: bool, pictures: int, batch_size: int,
+             workers: int, max_frames: int | None, overwrite: bool, **params: object) -> None:  # fmt: skip
+    """Evaluate weights on a split with its dataset's metrics (KITTI: the devkit's), or sweep sparser inputs
+    (--method classical: the baseline alone, with --sparsity only)."""
+    model = values_of(ModelOptions, params)
+    weights, method, device = model.weights, model.method, model.device
     split = _split(dataset, split)
     if sparsity and segment:
         raise click.UsageError("--segment is for the model's evaluation, not --sparsity")
-    check_precision_options(method, amp, precision, calibration, backend)
+    model.check_engine()
     if sparsity:
         _one_process("evaluate --sparsity")
         if out is None:
@@ -134,12 +118,12 @@ def evaluate(weights: str | None, data_root: Path, dataset: str, split: str | No
         from semattnet.segmentation.datasets import segment_split
 
         semantic = segment_split(dataset, data_root, (split,), segment, device, log=click.echo, max_frames=max_frames)
-    completer = partial(_load_completer, spec, device, amp, backend, precision, calibration)  # after every check
+    completer = model.completer  # loaded after every check
     local = Path(spec) if Path(spec).exists() else None
     res = evaluate_split(completer, data_root, split, out, dataset=dataset, batch_size=batch_size, prefetch=workers,
                          save_predictions=save_predictions, pictures=pictures, max_frames=max_frames,
                          overwrite=overwrite, semantic_root=semantic, palette_mismatch=palette_mismatch, label=spec,
-                         inputs=[local, calibration])  # fmt: skip
+                         inputs=[local, model.calibration])  # fmt: skip
     _report(res, out)
 
 
@@ -148,18 +132,6 @@ def _required_weights(weights: str | None) -> str:
     if weights is None:
         raise click.UsageError("--checkpoint or --weights is required (they are one option: --checkpoint is an alias)")
     return weights
-
-
-def _load_completer(spec: str, device: str, amp: str, backend: str, precision: str | None,
-                    calibration: Path | None) -> DepthCompleter:  # fmt: skip
-    """The model of ``--weights`` (:func:`semattnet.weights.hub.load_model`) as a completer on this process's
-    device (``cuda:LOCAL_RANK`` under torchrun with CUDA)."""
-    from semattnet._utils.distributed import process_device
-    from semattnet.inference.completer import DepthCompleter
-    from semattnet.weights.hub import load_model
-
-    return DepthCompleter(load_model(spec), device=process_device(device), amp=amp, backend=backend, inplace=True,
-                          precision=precision, calibration=calibration)  # fmt: skip
 
 
 def _report(res: Evaluation, out: Path | None) -> None:
@@ -216,7 +188,7 @@ def _sweep(weights: str | None, data_root: Path, split: str, out: Path, sparsity
 
 
 @main.command()
-@weights_option
+@model_options(method=False)
 @click.option("--data", "data_root", required=True, type=click.Path(exists=True, file_okay=False, path_type=Path))
 @click.option(
     "--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Folder; OUT.zip is written too."
@@ -224,19 +196,18 @@ def _sweep(weights: str | None, data_root: Path, split: str, out: Path, sparsity
 @click.option(
     "--expected-frames", type=COUNT, default=1000, show_default=True, help="0 accepts any count (synthetic data)."
 )
-@click.option("--device", default="auto", show_default=True)
-@click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True)
 @click.option("--overwrite", is_flag=True)
-@backend_option
-def submit(weights: str | None, data_root: Path, out: Path, expected_frames: int, device: str, amp: str,
-           overwrite: bool, backend: str) -> None:  # fmt: skip
+def submit(data_root: Path, out: Path, expected_frames: int, overwrite: bool, **params: object) -> None:
     """Predict the KITTI test split and write the zip to upload (checked before zipping)."""
     from semattnet.evaluation.submission import write_submission
 
     _one_process("submit")
+    model = ModelOptions(method="semattnet", **params)  # type: ignore[arg-type]
+    weights = model.weights
     if weights is None:
         raise click.UsageError("give exactly one of --checkpoint or --weights (they are one option)")
-    completer = partial(_load_completer, weights, device, amp, backend, None, None)  # after every check
+    model.check_engine()
+    completer = model.completer  # loaded after every check
     local = Path(weights) if Path(weights).exists() else None  # a name or URL reads a cached download
     zip_path = write_submission(completer, data_root, out, expected_frames or None, overwrite, inputs=[local])
     click.echo(f"wrote {out} and {zip_path}")

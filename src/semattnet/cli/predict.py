@@ -1,14 +1,13 @@
 """Prediction and pictures for a user's frames: ``predict``, ``visualize``.
 
 ``predict``'s options are declared by their owners: each kind of input in :mod:`semattnet.cli._inputs`'s
-table, the outputs and run options in :mod:`semattnet.cli._outputs`, the model's here (and the shared ones in
-:mod:`semattnet.cli._options`); its ``--help`` lists them under those headings.
+table, the outputs and run options in :mod:`semattnet.cli._outputs`, the model's in :mod:`semattnet.cli._model`;
+its ``--help`` lists them under those headings.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -16,69 +15,17 @@ import click
 
 from semattnet.cli._group import main
 from semattnet.cli._inputs import MAP_OPTIONS, ChosenInput, choose_input, input_params
-from semattnet.cli._options import (
-    DEPTH_M,
-    MODEL,
-    backend_option,
-    check_precision_options,
-    precision_options,
-    require_with,
-    weights_input,
-    weights_option,
-)
+from semattnet.cli._model import ModelOptions, model_options
+from semattnet.cli._options import DEPTH_M, weights_input
 from semattnet.cli._outputs import AskedSinks, Outputs, RunOptions, output_options, sink_params
-from semattnet.cli._params import GeneratedCommand, section, values_of, with_options
+from semattnet.cli._params import GeneratedCommand, values_of, with_options
 
 if TYPE_CHECKING:
-    from semattnet.inference.pipeline import Completer, FrameRun
+    from semattnet.inference.pipeline import FrameRun
 
 #: The options that do not change what a run writes: a resumed run may differ from the first in these only (and in
 #: the registries' options declared so: ``option(..., identity=False)``).
 _NOT_IDENTITY = {"resume", "overwrite", "on_error", "stream", "realtime", "speed", "out"}
-
-
-@dataclass(frozen=True)
-class ModelOptions:
-    """The model's options: which completer, on which device, in which arithmetic and engine."""
-
-    weights: str | None
-    method: str
-    device: str
-    amp: str
-    backend: str
-    precision: str | None
-    calibration: Path | None
-
-    def check(self) -> None:
-        """The model options agree (usage errors, before any work): no option that would be ignored."""
-        if self.method == "classical":
-            if self.weights is not None:
-                raise click.UsageError("--method classical uses no model: drop --checkpoint / --weights")
-            # no semantic map, engine or precision: a spec, backend or --amp given with it would be ignored unread
-            require_with("--method semattnet", False, "segment_spec", "backend", "amp")
-        elif self.weights is None:
-            raise click.UsageError("--checkpoint or --weights is required (or --method classical)")
-        check_precision_options(self.method, self.amp, self.precision, self.calibration, self.backend)
-        if self.method != "classical":
-            from semattnet._utils.device import resolve_device
-
-            resolve_device(self.device)  # a bad --device: one line, before any work
-
-    def completer(self) -> Completer:
-        """The one completer the options name: the classical baseline or a DepthCompleter of --weights."""
-        from semattnet._utils.distributed import process_device
-        from semattnet.baselines.classical import ClassicalCompleter
-        from semattnet.cli._options import model_from_options
-        from semattnet.inference import DepthCompleter
-
-        if self.method == "classical":
-            return ClassicalCompleter()
-        model = model_from_options(self.weights, "cpu")
-        return DepthCompleter(model, device=process_device(self.device), amp=self.amp, backend=self.backend,
-                              inplace=True, precision=self.precision, calibration=self.calibration)  # fmt: skip
-
-
-_MODEL = section(MODEL)
 
 
 def _not_identity() -> set[str]:
@@ -112,20 +59,7 @@ def _identity(params: Mapping[str, object]) -> dict[str, object]:
 
 @main.command(cls=GeneratedCommand, generated=[("", input_params), ("report", sink_params)])
 @with_options(MAP_OPTIONS)
-@weights_option
-@click.option(
-    "--method",
-    cls=_MODEL,
-    type=click.Choice(["semattnet", "classical"]),
-    default="semattnet",
-    show_default=True,
-    help="classical: the non-learned IP-Basic-style baseline (no checkpoint).",
-)
-@click.option("--device", cls=_MODEL, default="auto", show_default=True, help="Where the network runs.")
-@click.option("--amp", cls=_MODEL, type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True,
-              help="Autocast the network to bf16 or fp16.")  # fmt: skip
-@backend_option
-@precision_options
+@model_options()
 @output_options
 def predict(**params: object) -> None:
     """Complete depth for one frame, folders of frames (any size), a KITTI split or raw drive, a dataset

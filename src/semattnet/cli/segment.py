@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from semattnet.cli._group import main
+from semattnet.cli._model import device_option
 from semattnet.cli._options import BATCH_SIZE, SIZE, parse_size, parse_triple
 
 
@@ -20,7 +21,7 @@ from semattnet.cli._options import BATCH_SIZE, SIZE, parse_size, parse_triple
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Semantic root; mirrors the image tree.")  # fmt: skip
 @click.option("--batch-size", type=BATCH_SIZE, default=4, show_default=True)
-@click.option("--device", default="auto", show_default=True)
+@device_option(help="Where the segmenter runs: auto, cpu, cuda[:N] or mps.")
 @click.option("--mean", default="0.485,0.456,0.406", show_default=True, help="Input normalisation (RGB in [0, 1]).")
 @click.option("--std", default="0.229,0.224,0.225", show_default=True)
 @click.option("--input-size", type=SIZE, default=None, help="Run the network at HxW (maps are resized back).")

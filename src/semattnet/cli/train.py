@@ -6,6 +6,7 @@ import click
 
 from semattnet.cli._dataset import dataset_option
 from semattnet.cli._group import main
+from semattnet.cli._model import device_option
 from semattnet.cli._options import (
     BATCH_SIZE,
     COUNT,
@@ -49,7 +50,7 @@ from semattnet.cli._options import (
 @click.option("--width", type=WIDTH, default=None, help="Model width multiplier [1.0].")
 @click.option("--crop", type=SIZE, default=None, help="Training crop HxW [352x1216].")
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default=None)
-@click.option("--device", default=None, help="auto, cpu or cuda.")
+@device_option(default=None, help="Where training runs: auto, cpu, cuda[:N] or mps [the config's].")
 @click.option("--workers", type=WORKERS, default=None, help="Data loading processes [4].")
 @click.option("--max-steps", type=COUNT, default=None, help="Stop after N steps in total.")
 @click.option("--activation-checkpointing", is_flag=True, default=None,

@@ -29,8 +29,7 @@ import torch
 from torch import nn
 
 from semattnet._errors import InputError
-from semattnet._utils.device import amp_dtype, resolve_device
-from semattnet.inference.backends import needs_semantic, optimize_for_inference
+from semattnet.inference.backends import EngineSpec, needs_semantic, optimize_for_inference
 from semattnet.inference.backends._base import InferenceEngine, StageHook
 from semattnet.inference.backends.calibration import CalibrationFrames
 from semattnet.inference.completion import Completer, Completion, StageTimed
@@ -38,7 +37,7 @@ from semattnet.inference.padding import crop_padding, pad_to_multiple
 from semattnet.models.checks import check_has_points, check_sparse_depth
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.uncertainty import with_uncertainty
-from semattnet.weights.hub import load_model
+from semattnet.weights.hub import from_pretrained, load_model
 from semattnet.weights.resolve import resolve_weights
 
 if TYPE_CHECKING:
@@ -46,24 +45,7 @@ if TYPE_CHECKING:
     from semattnet.inference.semantic import SemanticMaps
     from semattnet.inference.timing import StageTimes
 
-__all__ = ["Completer", "Completion", "DepthCompleter", "StageHook", "StageTimed"]
-
-
-def check_precision(precision: str | None, amp: str, backend: str) -> str | None:
-    """``precision`` (``f32``, ``bf16`` or ``int8``; ``None``: as ``amp`` says) checked against ``amp`` and ``backend``.
-
-    ``bf16`` is autocast with the ``torch`` backend and the engine's bfloat16 otherwise; ``int8`` is OpenVINO's
-    NNCF-quantised engine (``backend`` ``openvino`` or ``auto``).
-    """
-    if precision is None:
-        return None
-    if precision not in ("f32", "bf16", "int8"):
-        raise InputError(f"precision {precision!r}: choose f32, bf16 or int8")
-    if amp not in ("none", precision):
-        raise InputError(f"precision {precision!r} and amp {amp!r} disagree: give one (amp is the older name)")
-    if precision == "int8" and backend not in ("openvino", "auto"):
-        raise InputError(f"precision int8 runs on the openvino backend (NNCF), not {backend!r}: --backend openvino")
-    return precision
+__all__ = ["Completer", "Completion", "DepthCompleter", "EngineSpec", "StageHook", "StageTimed", "load_completer"]
 
 
 def _item(t: torch.Tensor, i: int) -> torch.Tensor:
@@ -92,24 +74,34 @@ class DepthCompleter:
     Args:
         model: a SemAttNet (full or backbone) model.
         device: ``auto``, ``cpu`` or ``cuda[:N]``.
-        amp: ``none``, ``bf16`` or ``fp16`` autocast (the propagation stays in float32).
+        amp: deprecated, the older name of ``precision``: ``none``, ``bf16`` or ``fp16``.
         backend: the inference engine (:func:`semattnet.inference.backends.optimize_for_inference`):
-            ``torch`` (default: BatchNorm folded, fused propagation), ``openvino``, ``onnxruntime``
-            or ``auto``; the fixed-size backends build (and cache on disk) one engine per padded
-            frame size, so they pay off over many frames of one size.
+            ``torch`` (default: BatchNorm folded, fused propagation), ``openvino``, ``onnxruntime``,
+            another registered engine or ``auto``; the fixed-size backends build (and cache on disk) one engine
+            per padded frame size, so they pay off over many frames of one size.
         inplace: fold ``model`` itself instead of a copy (saves memory; ``from_checkpoint`` does).
-        precision: ``f32``, ``bf16`` or ``int8`` (:func:`check_precision`); ``None``: as ``amp`` says.
+        precision: ``f32`` (default), ``bf16``, ``fp16`` (``torch``: autocast; the propagation stays float32)
+            or ``int8`` (OpenVINO + NNCF), as the backend runs.
         calibration: int8's calibration frames (a folder, a FrameSource or Frames; default: synthetic scenes).
+        spec: all of ``device``, ``backend``, ``precision`` and ``calibration`` as one
+            :class:`~semattnet.inference.backends.EngineSpec` (then give none of them).
+
+    Raises:
+        InputError: a backend, precision and device that do not go together (:meth:`EngineSpec.resolve`).
     """
 
     def __init__(self, model: nn.Module, device: str | torch.device = "auto", amp: str = "none",
                  backend: str = "torch", inplace: bool = False, precision: str | None = None,
-                 calibration: CalibrationFrames = None) -> None:  # fmt: skip
-        self.device = resolve_device(device)
-        self.precision = check_precision(precision, amp, backend)
-        self.amp = amp_dtype("bf16" if self.precision == "bf16" and backend == "torch" else amp)
-        self.backend = "openvino" if self.precision == "int8" and backend == "auto" else backend
-        self.calibration = calibration
+                 calibration: CalibrationFrames = None, *, spec: EngineSpec | None = None) -> None:  # fmt: skip
+        if spec is None:
+            spec = EngineSpec(backend, precision, device, calibration, None if amp == "none" else amp)
+        elif (device, amp, backend, precision, calibration) != ("auto", "none", "torch", None, None):
+            raise InputError("give spec or device / amp / backend / precision / calibration, not both")
+        #: The engine's spec, resolved: a concrete backend, precision and device.
+        self.spec = spec.resolve()
+        self.device = torch.device(self.spec.device)
+        self.backend, self.precision, self.calibration = self.spec.backend, self.spec.precision, spec.calibration
+        self.amp = self.spec.autocast
         self.needs_semantic = needs_semantic(model)
         #: The semantic palette the model was trained with (its config's; Cityscapes when it records none).
         self.palette: str = getattr(getattr(model, "config", None), "palette", "cityscapes")
@@ -140,14 +132,12 @@ class DepthCompleter:
 
     def engine(self, size: tuple[int, int] | None = None) -> InferenceEngine:
         """The engine for padded inputs of ``size`` (built on first use; one for all sizes with ``torch``)."""
-        fixed = self.backend in ("openvino", "onnxruntime") or (self.backend == "auto" and self.device.type == "cpu")
+        fixed = self.spec.entry.fixed_size
         key = size if fixed else None
         if key not in self._engines:
-            precision = "bf16" if self.amp is torch.bfloat16 and self.backend != "torch" else "f32"
-            precision = self.precision if self.precision in ("int8", "bf16") and self.backend != "torch" else precision
             self._engines[key] = optimize_for_inference(self._source, backend=self.backend, size=key,
-                                                        precision=precision, device=self.device,
-                                                        inplace=self._inplace and self.backend == "torch",
+                                                        precision=self.spec.engine_precision, device=self.device,
+                                                        inplace=self._inplace and not fixed,
                                                         calibration=self.calibration)  # fmt: skip
         return self._engines[key]
 
@@ -155,7 +145,7 @@ class DepthCompleter:
     def timing(self, hook: StageHook) -> Iterator[tuple[str, ...]]:
         """While active, the stages the engine runs inside a call (the ``torch`` engine's ``propagation``) run
         inside ``hook(stage)``; gives those stages (empty: this engine does not split its call)."""
-        engine = self.engine(None) if self.backend == "torch" else None
+        engine = None if self.spec.entry.fixed_size else self.engine(None)
         if engine is None or not engine.inner_stages:
             yield ()
             return
@@ -168,7 +158,7 @@ class DepthCompleter:
     @property
     def model(self) -> nn.Module:
         """The engine for any size (``torch`` backend), called like the model: what evaluation loops run."""
-        return self.engine(None) if self.backend == "torch" else self._source
+        return self._source if self.spec.entry.fixed_size else self.engine(None)
 
     def run(self, rgb: torch.Tensor, semantic: torch.Tensor | None, sparse: torch.Tensor) -> DepthCompletionOutput:
         """Batched tensors (B, C, H, W) of any H, W -> outputs at the same size, with their ``uncertainty``
@@ -259,3 +249,12 @@ class DepthCompleter:
 
         maps = (semantic if semantic is not None else SemanticMaps()).bind(self)
         yield from completions(source, self, names, maps, timer, prefetch)
+
+
+def load_completer(weights: str | os.PathLike[str], spec: EngineSpec | None = None, *,
+                   progress: bool = True) -> DepthCompleter:  # fmt: skip
+    """The completer of ``weights`` (a released name, a file or folder, a URL:
+    :func:`semattnet.weights.from_pretrained`) on the engine ``spec`` says (default: ``torch`` on the best
+    device), folded in place: the one builder every command (and a live node) runs its model through."""
+    return DepthCompleter(from_pretrained(weights, map_location="cpu", progress=progress), spec=spec or EngineSpec(),
+                          inplace=True)  # fmt: skip

@@ -8,7 +8,8 @@
 >>> engine(**x).refined_depth.shape
 torch.Size([1, 1, 64, 64])
 
-Backends (see the README's "Benchmarks" for measurements and which to use on which CPU):
+Backends, one entry each in the engine table (:mod:`~semattnet.inference.backends.registry`; see the README's
+"Benchmarks" for measurements and which to use on which CPU):
 
 * ``torch``: eager PyTorch on a BatchNorm-folded copy, with the fused C++ propagation kernel on
   the CPU; any size, any device.
@@ -24,7 +25,6 @@ Backends (see the README's "Benchmarks" for measurements and which to use on whi
 
 from __future__ import annotations
 
-import importlib.util
 import os
 
 import torch
@@ -33,17 +33,20 @@ from torch import nn
 from semattnet._errors import InputError
 from semattnet.inference.backends._base import InferenceEngine, LogFn, output_from_arrays
 from semattnet.inference.backends.calibration import DEFAULT_CALIBRATION_FRAMES, CalibrationFrames
-from semattnet.inference.backends.torch_engine import TorchEngine
+from semattnet.inference.backends.registry import (
+    EngineEntry,
+    EngineRequest,
+    choose_backend,
+    engine_entries,
+    get_engine,
+    precisions,
+    register_engine,
+)
+from semattnet.inference.backends.spec import EngineSpec
 
-__all__ = ["BACKENDS", "BACKEND_PRECISIONS", "PRECISIONS", "InferenceEngine", "available_backends", "choose_backend",
-           "needs_semantic", "optimize_for_inference", "output_from_arrays"]  # fmt: skip
-
-BACKENDS: tuple[str, ...] = ("torch", "openvino", "onnxruntime", "tensorrt")
-PRECISIONS: tuple[str, ...] = ("f32", "bf16", "fp16", "int8")
-_PACKAGES = {"openvino": "openvino", "onnxruntime": "onnxruntime", "tensorrt": "torch_tensorrt"}
-#: The precisions each backend runs (``int8``: NNCF post-training quantisation, OpenVINO only).
-BACKEND_PRECISIONS = {"torch": ("f32", "bf16", "fp16"), "openvino": ("f32", "bf16", "int8"),
-                      "onnxruntime": ("f32",), "tensorrt": ("f32", "fp16")}  # fmt: skip
+__all__ = ["EngineEntry", "EngineRequest", "EngineSpec", "InferenceEngine", "available_backends", "choose_backend",
+           "engine_entries", "get_engine", "needs_semantic", "optimize_for_inference", "output_from_arrays",
+           "precisions", "register_engine"]  # fmt: skip
 
 
 def needs_semantic(model: object) -> bool:
@@ -59,42 +62,8 @@ def needs_semantic(model: object) -> bool:
 
 
 def available_backends() -> list[str]:
-    """The backends whose packages are installed (``torch`` always)."""
-    return [b for b in BACKENDS if b == "torch" or importlib.util.find_spec(_PACKAGES[b]) is not None]
-
-
-def choose_backend(
-    device: torch.device | str = "cpu", size: tuple[int, int] | None = None, precision: str = "f32"
-) -> str:
-    """What ``backend="auto"`` picks: OpenVINO for CPU inference at a fixed size if installed, else torch;
-    ``precision="int8"`` always OpenVINO (the only int8 engine)."""
-    if precision == "int8":
-        return "openvino"
-    cpu = torch.device(device).type == "cpu"
-    if cpu and size is not None and precision in BACKEND_PRECISIONS["openvino"] and "openvino" in available_backends():
-        return "openvino"
-    return "torch"
-
-
-def _check(backend: str, precision: str, size: tuple[int, int] | None) -> None:
-    if backend not in (*BACKENDS, "auto"):
-        raise InputError(f"unknown backend {backend!r}; choose one of auto, {', '.join(BACKENDS)}")
-    if precision not in PRECISIONS:
-        raise InputError(f"unknown precision {precision!r}; choose one of {', '.join(PRECISIONS)}")
-    if backend in ("openvino", "onnxruntime") and size is None:
-        raise InputError(f"the {backend} backend compiles for one input size: pass size=(H, W)")
-    if backend == "onnxruntime" and precision != "f32":
-        raise InputError("the onnxruntime backend runs float32 only")
-    _check_precision(backend, precision, size)
-
-
-def _check_precision(backend: str, precision: str, size: tuple[int, int] | None) -> None:
-    """The int8 / fp16 / TensorRT rules (:data:`BACKEND_PRECISIONS`)."""
-    if backend != "auto" and precision not in BACKEND_PRECISIONS[backend]:
-        raise InputError(f"precision: the {backend} backend runs {', '.join(BACKEND_PRECISIONS[backend])}, "
-                         f"got {precision!r}")  # fmt: skip
-    if (precision == "int8" or backend == "tensorrt") and size is None:
-        raise InputError(f"size: {backend} {precision} compiles for one input size: pass size=(H, W)")
+    """The engines whose packages are installed (``torch`` always), in the table's order."""
+    return [name for name, entry in engine_entries().items() if entry.installed()]
 
 
 def optimize_for_inference(
@@ -115,8 +84,9 @@ def optimize_for_inference(
 
     The model itself is not changed (folding happens on a copy; ``inplace=True`` folds ``model``
     itself and saves the copy's memory); the weights stay exactly in the authors' layout.
-    ``size`` (H, W; multiples of 32) is required by ``openvino``/``onnxruntime``, which compile for
-    one size (cached on disk under ``cache_dir``, default ``$SEMATTNET_CACHE``).
+    ``size`` (H, W; multiples of 32) is required by the engines compiled for one size (``openvino``,
+    ``onnxruntime``, ``tensorrt``; cached on disk under ``cache_dir``, default ``$SEMATTNET_CACHE``).
+    ``backend``, ``precision`` and ``device`` are checked and chosen by :meth:`EngineSpec.resolve`.
     ``precision="bf16"`` is faster only on CPUs with native bfloat16 (on CUDA use ``torch`` with
     autocast); ``f32`` outputs match the eager model within 1e-4 relative.
     ``precision="int8"`` (OpenVINO; ``auto`` then means OpenVINO) quantises the network (not the
@@ -127,21 +97,11 @@ def optimize_for_inference(
     (``torch``; default: on CUDA): the propagation through ``torch.compile``
     (:mod:`~semattnet.inference.backends.compiled_propagation`).
     """
-    _check(backend, precision, size)
-    backend = choose_backend(device, size, precision) if backend == "auto" else backend
-    semantic = needs_semantic(model)
-    model = model.eval()
-    if backend == "torch":
-        return TorchEngine(model.to(device), precision, semantic, inplace, compile_propagation)
-    if backend == "onnxruntime":
-        from semattnet.inference.backends.onnxruntime_engine import OnnxRuntimeEngine
-
-        return OnnxRuntimeEngine(model.cpu(), tuple(size), semantic, cache_dir, log)  # type: ignore[arg-type]
-    if backend == "tensorrt":
-        from semattnet.inference.backends.tensorrt_engine import TensorRTEngine
-
-        return TensorRTEngine(model, tuple(size), semantic, precision, torch.device(device))  # type: ignore[arg-type]
-    from semattnet.inference.backends.openvino_engine import OpenVinoEngine
-
-    return OpenVinoEngine(model.cpu(), tuple(size), semantic, precision, cache_dir, log,  # type: ignore[arg-type]
-                          calibration=calibration, calibration_frames=calibration_frames)  # fmt: skip
+    spec = EngineSpec(backend, precision, device).resolve(fixed_size=size is not None)
+    entry = spec.entry
+    if entry.fixed_size and size is None:
+        raise InputError(f"size: the {entry.name} backend compiles for one input size: pass size=(H, W)")
+    request = EngineRequest(None if size is None else (int(size[0]), int(size[1])), spec.precision or "f32",
+                            torch.device(spec.device), needs_semantic(model), cache_dir, log, inplace, calibration,
+                            calibration_frames, compile_propagation)  # fmt: skip
+    return entry.build(model.eval(), request)

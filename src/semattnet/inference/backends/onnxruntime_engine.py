@@ -11,6 +11,7 @@ from torch import nn
 from semattnet._utils.extras import require
 from semattnet.inference.backends._base import ExportedGraphEngine, LogFn
 from semattnet.inference.backends._export_cache import cached_onnx, engine_dir, engine_key, propagation_settings
+from semattnet.inference.backends.registry import EngineEntry, EngineRequest, register_engine
 
 __all__ = ["OnnxRuntimeEngine"]
 
@@ -37,3 +38,13 @@ class OnnxRuntimeEngine(ExportedGraphEngine):
 
     def run_graph(self, feeds: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         return dict(zip(self.output_names, self.session.run(self.output_names, feeds), strict=True))
+
+
+def _build(model: nn.Module, r: EngineRequest) -> OnnxRuntimeEngine:
+    return OnnxRuntimeEngine(model.cpu(), r.fixed_size(), r.needs_semantic, r.cache_dir, r.log)
+
+
+ENTRY = register_engine(EngineEntry(
+    "onnxruntime", precisions=("f32",), devices=("cpu",), build=_build, package="onnxruntime", fixed_size=True,
+    summary="the ONNX export run by ONNX Runtime (exported once per frame size, cached on disk)",
+))  # fmt: skip

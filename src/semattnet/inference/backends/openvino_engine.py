@@ -33,6 +33,7 @@ from semattnet.inference.backends.calibration import (
     resolve_calibration,
 )
 from semattnet.inference.backends.openvino_int8 import quantized_ir
+from semattnet.inference.backends.registry import EngineEntry, EngineRequest, register_engine
 from semattnet.models.outputs import DepthCompletionOutput
 
 __all__ = ["OpenVinoEngine"]
@@ -88,3 +89,15 @@ class OpenVinoEngine(ExportedGraphEngine):
         result = self.request.infer([feeds[name] for name in self.input_names], share_outputs=True)
         arrays = {name: result[port] for name, port in zip(self.output_names, self.compiled.outputs, strict=True)}
         return {name: a if name.startswith(HEADS_PREFIX) else a.copy() for name, a in arrays.items()}
+
+
+def _build(model: nn.Module, r: EngineRequest) -> OpenVinoEngine:
+    return OpenVinoEngine(model.cpu(), r.fixed_size(), r.needs_semantic, r.precision, r.cache_dir, r.log,
+                          calibration=r.calibration, calibration_frames=r.calibration_frames)  # fmt: skip
+
+
+#: int8 is NNCF's quantisation of the IR (:mod:`~semattnet.inference.backends.openvino_int8`; needs ``nncf``).
+ENTRY = register_engine(EngineEntry(
+    "openvino", precisions=("f32", "bf16", "int8"), devices=("cpu",), build=_build, package="openvino",
+    fixed_size=True, auto=True, summary="OpenVINO IR compiled for the CPU at one size (cached on disk); int8: NNCF",
+))  # fmt: skip

@@ -16,6 +16,7 @@ from semattnet._errors import InputError
 from semattnet._utils.extras import require
 from semattnet.inference.backends._base import HEADS_PREFIX, InferenceEngine, output_from_arrays
 from semattnet.inference.backends._export_cache import propagation_settings
+from semattnet.inference.backends.registry import EngineEntry, EngineRequest, register_engine
 from semattnet.models.bn_folding import fold_batchnorm
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.semattnet import SemAttNet
@@ -77,3 +78,13 @@ class TensorRTEngine(InferenceEngine):
         with torch.inference_mode():
             arrays = dict(zip(self.names, self.graph(*inputs), strict=True))
         return output_from_arrays({k: v.float() for k, v in arrays.items()}, self.settings)
+
+
+def _build(model: nn.Module, r: EngineRequest) -> TensorRTEngine:
+    return TensorRTEngine(model, r.fixed_size(), r.needs_semantic, r.precision, r.device)
+
+
+ENTRY = register_engine(EngineEntry(
+    "tensorrt", precisions=("f32", "fp16"), devices=("cuda",), build=_build, package="torch_tensorrt",
+    fixed_size=True, summary="CUDA: the network compiled by Torch-TensorRT at one size",
+))  # fmt: skip

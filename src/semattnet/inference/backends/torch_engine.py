@@ -19,6 +19,7 @@ from torch import nn
 
 from semattnet.inference.backends._base import InferenceEngine
 from semattnet.inference.backends.compiled_propagation import compiled_propagation
+from semattnet.inference.backends.registry import EngineEntry, EngineRequest, register_engine
 from semattnet.models.bn_folding import fold_batchnorm
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.semattnet import SemAttNet
@@ -86,3 +87,13 @@ class TorchEngine(InferenceEngine):
             else:
                 out = self.net(rgb=rgb, semantic=semantic, sparse=sparse)
         return out.map(lambda t: t.float()) if dtype is not None else out
+
+
+def _build(model: nn.Module, r: EngineRequest) -> TorchEngine:
+    return TorchEngine(model.to(r.device), r.precision, r.needs_semantic, r.inplace, r.compile_propagation)
+
+
+ENTRY = register_engine(EngineEntry(
+    "torch", precisions=("f32", "bf16", "fp16"), devices=("cpu", "cuda", "mps"), build=_build, auto=True,
+    summary="eager PyTorch on a BatchNorm-folded copy, fused propagation; any size, any device",
+))  # fmt: skip
