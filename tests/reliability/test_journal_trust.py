@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from semattnet._errors import DataError
-from semattnet._utils.outputs import FolderBusyError, Output, OutputError, check_outputs
+from semattnet._utils.lock import FolderBusyError
+from semattnet._utils.outputs import Output, OutputError, check_outputs
 from semattnet.baselines import ClassicalCompleter
 from semattnet.data.io import write_depth, write_image
 from semattnet.data.sources import FolderSource

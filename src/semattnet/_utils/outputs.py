@@ -14,8 +14,8 @@
    (a kill, a full disk) and ``data check`` refuses it (:func:`incomplete_tree`).
 5. Single files are written atomically (:func:`semattnet._utils.atomic.atomic_path`): umask mode,
    fsynced, orphaned temporary files cleaned on the next write of the same target.
-6. A run that writes into a folder over time (``predict``) holds :class:`FolderLock` on it: a second run into
-   the same folder is refused while the first one runs.
+6. A run that writes into a folder over time (``predict``) holds :class:`~semattnet._utils.lock.FolderLock` on
+   it: a second run into the same folder is refused while the first one runs.
 """
 
 from __future__ import annotations
@@ -24,7 +24,6 @@ import json
 import os
 import shutil
 import tempfile
-import weakref
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -36,11 +35,8 @@ from semattnet._utils.atomic import atomic_path, disk_full_error, fsync_dir, is_
 __all__ = [
     "BAG_MARKER",
     "KINDS",
-    "LOCK_FILE",
     "STAGE_PREFIX",
     "TREE_MARKER",
-    "FolderBusyError",
-    "FolderLock",
     "Output",
     "OutputError",
     "bag_mark",
@@ -68,110 +64,8 @@ TREE_MARKER = ".semattnet-tree.json"
 BAG_MARKER = ".semattnet-bag"
 
 
-#: The lock file of an output folder a run is writing into (:class:`FolderLock`).
-LOCK_FILE = ".semattnet.lock"
-
-
 class OutputError(SemAttNetError):
     """An output that would replace or land inside the command's own inputs."""
-
-
-class FolderBusyError(OutputError):
-    """An output folder another semattnet run is writing into (:class:`FolderLock`)."""
-
-
-class FolderLock:
-    """An advisory lock on the output folder ``folder``: ``folder/.semattnet.lock``, ``flock``-ed and holding
-    the process id, while a run writes into it. The operating system releases it when the process ends (a kill
-    too); where ``flock`` is not supported, a lock file whose process is gone is stale and taken over.
-    :meth:`release` removes the file (and the folder when :meth:`acquire` created it and it is empty).
-
-    Raises:
-        FolderBusyError: (:meth:`acquire`) another run holds the folder, naming its process.
-    """
-
-    def __init__(self, folder: str | os.PathLike[str]) -> None:
-        self.folder = Path(folder)
-        self.path = self.folder / LOCK_FILE
-        self.created = False
-        self._release: weakref.finalize[[int, Path], FolderLock] | None = None  # runs when dropped too
-
-    def acquire(self) -> FolderLock:
-        """Take the lock (a path that is not a folder is left to the output checks: nothing is taken)."""
-        if (self.folder.exists() or self.folder.is_symlink()) and not self.folder.is_dir():
-            return self  # a file or a dangling link
-        self.created = not self.folder.exists()
-        self.folder.mkdir(parents=True, exist_ok=True)
-        try:
-            for _ in range(5):  # the file was removed by the holder between open and flock: again
-                fd = os.open(self.path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o644)
-                if self._lock(fd) and _same_file(fd, self.path):
-                    os.ftruncate(fd, 0)
-                    os.write(fd, f"{os.getpid()}\n".encode())
-                    self._release = weakref.finalize(self, _unlock, fd, self.path)
-                    return self
-                os.close(fd)
-        except BaseException:
-            self.release()
-            raise
-        raise FolderBusyError(f"{self.path}: could not be locked; choose another --out")
-
-    def _lock(self, fd: int) -> bool:
-        """``flock`` ``fd``; a lock held by a live process is :class:`FolderBusyError`."""
-        try:
-            import fcntl
-
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            return True
-        except BlockingIOError:
-            holder = _holder(fd)
-        except (ImportError, OSError):  # no flock here: the process id alone says whether it is held
-            from semattnet._utils.atomic import pid_alive
-
-            holder = _holder(fd)
-            if holder is None or holder == os.getpid() or not pid_alive(holder):
-                return True
-        os.close(fd)
-        who = f"process {holder}" if holder is not None else "another process"
-        raise FolderBusyError(f"{self.folder}: another semattnet run ({who}) is writing into it ({self.path}); "
-                              "wait for it to end or choose another --out")  # fmt: skip
-
-    def release(self) -> None:
-        """Give the lock up (idempotent)."""
-        if self._release is not None:
-            self._release()
-            self._release = None
-        if self.created and self.folder.is_dir() and not any(self.folder.iterdir()):
-            self.folder.rmdir()  # a run that left nothing leaves no empty folder it made
-        self.created = False
-
-    def __enter__(self) -> FolderLock:
-        return self.acquire()
-
-    def __exit__(self, *exc: object) -> None:
-        self.release()
-
-
-def _unlock(fd: int, path: Path) -> None:
-    path.unlink(missing_ok=True)
-    os.close(fd)
-
-
-def _same_file(fd: int, path: Path) -> bool:
-    """Whether ``path`` is still the file open as ``fd`` (the holder removes it when it lets go)."""
-    try:
-        return os.fstat(fd).st_ino == path.stat().st_ino
-    except OSError:
-        return False
-
-
-def _holder(fd: int) -> int | None:
-    """The process id written in the lock file ``fd``, None when unreadable."""
-    try:
-        text = os.pread(fd, 32, 0).decode("ascii").strip()
-    except (OSError, UnicodeDecodeError):
-        return None
-    return int(text) if text.isdigit() else None
 
 
 def _resolve(path: str | os.PathLike[str]) -> Path:

@@ -45,7 +45,8 @@ import numpy as np
 from semattnet._errors import DataError, InputError
 from semattnet._utils.atomic import fsync_dir
 from semattnet._utils.distributed import first_error, is_main, rank, world_size
-from semattnet._utils.outputs import FolderLock, Output, check_no_input_overlap, check_outputs, stage_folder
+from semattnet._utils.lock import FolderLock
+from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs, stage_folder
 from semattnet.data.frames import Frame, FrameSource
 from semattnet.data.io import encode_depth, read_depth
 from semattnet.inference.completer import Completer, Completion
@@ -138,7 +139,7 @@ def check_frames(source: FrameSource, sinks: Sequence[Sink], out: PathLike, *, o
     for more than one frame). ``resume``: continue the run in ``out`` (``run``: its identity, which must be the
     one recorded there; the frames done, with every output whole, are kept).
 
-    The output folder is locked (:class:`~semattnet._utils.outputs.FolderLock`) first, until the end of
+    The output folder is locked (:class:`~semattnet._utils.lock.FolderLock`) first, until the end of
     :func:`complete_frames` (or :meth:`RunPlan.release`).
 
     Raises:

@@ -7,10 +7,12 @@ that stalls past its timeout or an XML-RPC document over :data:`MAX_XMLRPC_BYTES
 
 from __future__ import annotations
 
+import logging
 import socket
 import struct
 import threading
 import xmlrpc.client
+from collections import deque
 from collections.abc import Mapping
 from typing import Any
 from urllib.parse import urlsplit
@@ -21,6 +23,8 @@ from semattnet._errors import DataError, InputError
 __all__ = [
     "MAX_HEADER_BYTES",
     "MAX_XMLRPC_BYTES",
+    "POLL_S",
+    "Outbox",
     "SlaveServer",
     "TcprosError",
     "check_http_uri",
@@ -28,14 +32,19 @@ __all__ = [
     "encode_header",
     "read_frame",
     "read_header",
+    "shutdown_socket",
     "xmlrpc_call",
 ]
+
+_log = logging.getLogger(__name__)
 
 #: The longest TCPROS connection header accepted (the largest message definitions are a few tens of KB).
 MAX_HEADER_BYTES = 1 << 20
 #: The longest XML-RPC request or response accepted (ROS's are a few KB).
 MAX_XMLRPC_BYTES = 1 << 20
 _LEN = struct.Struct("<I")
+#: How often waiting threads look whether the transport stops, seconds.
+POLL_S = 0.1
 
 
 class TcprosError(DataError):
@@ -212,3 +221,55 @@ class SlaveServer(SimpleXMLRPCServer):
             self.shutdown()
             self._thread.join(timeout)
         self.server_close()
+
+
+class Outbox:
+    """One subscriber's connection: a send queue of the QoS depth (drop-oldest) and the thread that empties it."""
+
+    def __init__(self, sock: socket.socket, depth: int, label: str, stop: threading.Event) -> None:
+        self._sock = sock
+        self._queue: deque[tuple[bytes, memoryview]] = deque(maxlen=max(1, depth))
+        self._cond = threading.Condition()
+        self._stop = stop
+        self.label = label
+        self.dropped = 0
+        self.alive = True
+
+    def put(self, prefix: bytes, data: memoryview) -> None:
+        """Queue one frame; the oldest queued frame is dropped (and counted) when the queue is full."""
+        with self._cond:
+            if len(self._queue) == self._queue.maxlen:
+                self.dropped += 1
+            self._queue.append((prefix, data))
+            self._cond.notify()
+
+    def run(self) -> None:
+        """Send queued frames until the transport stops or the subscriber goes away (the caller's thread)."""
+        try:
+            while not self._stop.is_set():
+                with self._cond:
+                    self._cond.wait_for(lambda: self._queue or self._stop.is_set(), timeout=POLL_S)
+                    if not self._queue:
+                        continue
+                    prefix, data = self._queue.popleft()
+                self._sock.sendall(prefix)
+                self._sock.sendall(data)
+        except OSError as exc:
+            if not self._stop.is_set():
+                _log.info("%s: subscriber connection ended (%s)", self.label, exc)
+        finally:
+            self.alive = False
+            self._sock.close()
+
+    def abort(self) -> None:
+        """Unblock a send in progress (close's first step)."""
+        shutdown_socket(self._sock)
+
+
+def shutdown_socket(sock: socket.socket | None) -> None:
+    """Unblock every thread reading or writing ``sock`` (an already closed socket is fine)."""
+    if sock is not None:
+        try:
+            sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass

@@ -25,7 +25,6 @@ Example (needs a running ``roscore``)::
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import os
 import re
@@ -34,22 +33,25 @@ import struct
 import threading
 import time
 import xmlrpc.client
-from collections import deque
 from collections.abc import Callable, Mapping
-from typing import Any, Protocol, cast
+from typing import Any, cast
 
 from semattnet._errors import InputError
 
 from ..bags.deps import rosbags_typestore
 from ._tcpros_wire import (
+    POLL_S,
+    Outbox,
     SlaveServer,
     TcprosError,
     check_http_uri,
     encode_header,
     read_frame,
     read_header,
+    shutdown_socket,
     xmlrpc_call,
 )
+from .ros1_types import Ros1Store, adopt_message, ros1_type_name, store_type_name
 from .transport import QoS
 
 __all__ = [
@@ -70,124 +72,21 @@ DEFAULT_MAX_MESSAGE_BYTES = 1 << 28
 MAX_PEERS = 64
 _LEN = struct.Struct("<I")
 _NAME = re.compile(r"/[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*")
-_POLL_S = 0.1
 #: Seconds before reconnecting to a publisher, by the number of failed attempts since the last connection.
 _RETRY_S = (0.2, 0.5, 1.0, 2.0, 4.0, 8.0)
 _MISSING = object()
 
 
-class _Ros1Store(Protocol):
-    """What the transport uses of rosbags' ROS 1 type store."""
-
-    @property
-    def types(self) -> Mapping[str, type]: ...
-
-    def serialize_ros1(self, message: object, typename: str) -> memoryview: ...
-
-    def deserialize_ros1(self, rawdata: bytes, typename: str) -> object: ...
-
-    def generate_msgdef(self, typename: str) -> tuple[str, str]: ...
-
-
-def ros1_type_name(msgtype: str) -> str:
-    """The ROS 1 name of a type: ``sensor_msgs/msg/Image`` -> ``sensor_msgs/Image``."""
-    package, sep, name = msgtype.partition("/msg/")
-    return f"{package}/{name}" if sep else msgtype
-
-
-def _store_type_name(msgtype: str) -> str:
-    """The type store's name of a type: ``sensor_msgs/Image`` -> ``sensor_msgs/msg/Image`` (unchanged if so already)."""
-    if "/msg/" in msgtype:
-        return msgtype
-    package, sep, name = msgtype.partition("/")
-    return f"{package}/msg/{name}" if sep and name else msgtype
-
-
-def adopt_message(store: _Ros1Store, message: object) -> object:
-    """``message`` as an object of ``store``: objects of another rosbags store are converted by field name.
-
-    A ROS 2 object converts: ``CameraInfo``'s ``d``/``k``/``r``/``p`` fill ROS 1's ``D``/``K``/``R``/``P``,
-    and a field ROS 2 lacks (``Header.seq``) is 0. Arrays, strings and numbers pass through.
-    """
-    if isinstance(message, list):
-        return [adopt_message(store, item) for item in message]
-    name = getattr(type(message), "__msgtype__", None)
-    if not isinstance(name, str):
-        return message
-    cls = store.types.get(name)
-    if cls is None:
-        raise InputError(f"message type {name}: not a ROS 1 Noetic type")
-    if type(message) is cls:
-        return message
-    values = {}
-    for field in dataclasses.fields(cls):
-        if not field.name.startswith("__"):
-            value = getattr(message, field.name, getattr(message, field.name.lower(), _MISSING))
-            values[field.name] = 0 if value is _MISSING else adopt_message(store, value)
-    return cls(**values)
-
-
-class _Outbox:
-    """One subscriber's connection: a send queue of the QoS depth (drop-oldest) and the thread that empties it."""
-
-    def __init__(self, sock: socket.socket, depth: int, label: str, stop: threading.Event) -> None:
-        self._sock = sock
-        self._queue: deque[tuple[bytes, memoryview]] = deque(maxlen=max(1, depth))
-        self._cond = threading.Condition()
-        self._stop = stop
-        self.label = label
-        self.dropped = 0
-        self.alive = True
-
-    def put(self, prefix: bytes, data: memoryview) -> None:
-        """Queue one frame; the oldest queued frame is dropped (and counted) when the queue is full."""
-        with self._cond:
-            if len(self._queue) == self._queue.maxlen:
-                self.dropped += 1
-            self._queue.append((prefix, data))
-            self._cond.notify()
-
-    def run(self) -> None:
-        """Send queued frames until the transport stops or the subscriber goes away (the caller's thread)."""
-        try:
-            while not self._stop.is_set():
-                with self._cond:
-                    self._cond.wait_for(lambda: self._queue or self._stop.is_set(), timeout=_POLL_S)
-                    if not self._queue:
-                        continue
-                    prefix, data = self._queue.popleft()
-                self._sock.sendall(prefix)
-                self._sock.sendall(data)
-        except OSError as exc:
-            if not self._stop.is_set():
-                _log.info("%s: subscriber connection ended (%s)", self.label, exc)
-        finally:
-            self.alive = False
-            self._sock.close()
-
-    def abort(self) -> None:
-        """Unblock a send in progress (close's first step)."""
-        _shutdown(self._sock)
-
-
-def _shutdown(sock: socket.socket | None) -> None:
-    if sock is not None:
-        try:
-            sock.shutdown(socket.SHUT_RDWR)
-        except OSError:
-            pass
-
-
 class TcprosPublisher:
     """One advertised topic (:class:`~.transport.Publisher`): serialises once, queues to every subscriber."""
 
-    def __init__(self, store: _Ros1Store, caller_id: str, topic: str, msgtype: str, qos: QoS) -> None:
+    def __init__(self, store: Ros1Store, caller_id: str, topic: str, msgtype: str, qos: QoS) -> None:
         self.topic, self.msgtype, self.qos = topic, msgtype, qos
         self._store = store
         definition, self.md5sum = store.generate_msgdef(msgtype)
         self.fields = {"callerid": caller_id, "topic": topic, "type": ros1_type_name(msgtype),
                        "md5sum": self.md5sum, "message_definition": definition, "latching": "0"}  # fmt: skip
-        self._outboxes: list[_Outbox] = []
+        self._outboxes: list[Outbox] = []
         self._lock = threading.Lock()
         self._dropped_gone = 0
 
@@ -219,14 +118,14 @@ class TcprosPublisher:
         for outbox in outboxes:
             outbox.put(prefix, data)
 
-    def attach(self, sock: socket.socket, label: str, stop: threading.Event) -> _Outbox | None:
+    def attach(self, sock: socket.socket, label: str, stop: threading.Event) -> Outbox | None:
         """A new subscriber's outbox, or None (the socket closed) beyond :data:`MAX_PEERS` connections."""
         with self._lock:
             if sum(o.alive for o in self._outboxes) >= MAX_PEERS:
                 _log.warning("%s: refused %s: already %d subscribers", self.topic, label, MAX_PEERS)
                 sock.close()
                 return None
-            outbox = _Outbox(sock, self.qos.depth, f"{self.topic} -> {label}", stop)
+            outbox = Outbox(sock, self.qos.depth, f"{self.topic} -> {label}", stop)
             self._outboxes.append(outbox)
             return outbox
 
@@ -263,7 +162,7 @@ class _Inbound:
             raise TcprosError(f"the publisher refused the connection: {reply['error']!r}")
         if reply.get("md5sum") not in (sub.md5sum, "*"):
             raise TcprosError(f"md5sum {reply.get('md5sum')!r} is not {sub.md5sum} ({ros1_type_name(sub.msgtype)})")
-        sock.settimeout(_POLL_S)
+        sock.settimeout(POLL_S)
         return sock
 
     def _run(self) -> None:
@@ -291,7 +190,7 @@ class _Inbound:
     def abort(self) -> None:
         """Stop receiving and unblock the thread."""
         self.stop.set()
-        _shutdown(self.sock)
+        shutdown_socket(self.sock)
 
 
 class _Subscription:
@@ -366,7 +265,7 @@ class TcprosTransport:
             raise InputError(f"ROS node name {node_name!r}: expected letters, digits, '_' and '/'")
         self.master_uri, self.timeout, self.max_message_bytes = master_uri, timeout, max_message_bytes
         self.host = host or os.environ.get("ROS_IP") or os.environ.get("ROS_HOSTNAME") or "127.0.0.1"
-        self.typestore = cast(_Ros1Store, rosbags_typestore(True))  # rosbags' Typestore has these too
+        self.typestore = cast(Ros1Store, rosbags_typestore(True))  # rosbags' Typestore has these too
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._publishers: dict[str, TcprosPublisher] = {}
@@ -378,7 +277,7 @@ class TcprosTransport:
             self._listener = socket.create_server((self.host, 0))
         except OSError as exc:
             raise InputError(f"ROS host {self.host!r} (ROS_IP): cannot listen there ({exc})") from None
-        self._listener.settimeout(_POLL_S)
+        self._listener.settimeout(POLL_S)
         self._slave = SlaveServer(self.host, timeout)
         self._register_api()
         try:
@@ -463,7 +362,7 @@ class TcprosTransport:
         """The type store's name of ``msgtype``, after checking the topic name and the type."""
         if not _NAME.fullmatch(topic):
             raise InputError(f"ROS topic {topic!r}: expected an absolute name such as /camera/image_raw")
-        typename = _store_type_name(msgtype)
+        typename = store_type_name(msgtype)
         if typename not in self.typestore.types:
             raise InputError(f"{topic}: message type {msgtype!r} is not a ROS 1 Noetic type")
         if self._closed:
