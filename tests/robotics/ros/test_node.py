@@ -1,0 +1,132 @@
+"""The live node over an in-process transport: newest pair only, drops counted, bad messages skipped."""
+
+from __future__ import annotations
+
+import logging
+import threading
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from semattnet.inference.completion import Completion
+from semattnet.robotics.ros.node import DepthNode, NodeTopics
+from semattnet.robotics.ros.transport import OUTPUT_QOS, SENSOR_QOS, TF_STATIC_QOS
+
+from ._fakes import INFO, TS, FakeTransport, camera_info, image, scan, tf_static
+
+pytest.importorskip("rosbags")
+
+NS = "/robot1"
+IMAGE, SCAN, INFO_T = "/robot1/semattnet/input/image", "/robot1/semattnet/input/point_cloud", "/robot1/cam/info"
+OUT = "/robot1/semattnet/output"
+T0 = 1_700_000_000_000_000_000
+STEP = 100_000_000
+
+
+def _complete(rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
+    """Depth = the stamp-free constant 7.5 m with one hole; the sparse input must have points."""
+    assert (sparse > 0).any()
+    depth = np.full(sparse.shape, 7.5, np.float32)
+    depth[0, 0] = 0
+    return Completion(depth)
+
+
+def _node(lines: list[str] | None = None) -> tuple[DepthNode, FakeTransport]:
+    fake = FakeTransport()
+    topics = NodeTopics(camera_info="cam/info")  # remapped (relative: in the namespace)
+    node = DepthNode(fake, _complete, topics, namespace=NS, say=(lines if lines is not None else []).append)
+    node.start()
+    fake.deliver(INFO_T, camera_info())
+    fake.deliver("/tf_static", tf_static())
+    return node, fake
+
+
+def _spin(node: DepthNode, frames: int = 1) -> None:
+    stop = threading.Event()
+    threading.Timer(5.0, stop.set).start()  # bounded, whatever happens
+    node.spin(stop, frames=frames)
+    stop.set()
+
+
+def test_topics_qos_and_one_frame() -> None:
+    node, fake = _node()
+    assert {t: (m, q) for t, (m, q, _) in fake.subs.items()} == {
+        IMAGE: ("sensor_msgs/msg/Image", SENSOR_QOS),
+        SCAN: ("sensor_msgs/msg/PointCloud2", SENSOR_QOS),
+        INFO_T: ("sensor_msgs/msg/CameraInfo", SENSOR_QOS),
+        "/tf_static": ("tf2_msgs/msg/TFMessage", TF_STATIC_QOS),
+    }
+    assert OUTPUT_QOS.reliable and OUTPUT_QOS.depth == 1
+    fake.deliver(IMAGE, image(T0))
+    fake.deliver(SCAN, scan(T0 + 5_000_000))
+    _spin(node)
+    out = {t.removeprefix(OUT + "/"): m for t, m in fake.published.items()}
+    assert sorted(out) == ["camera_info", "depth_image", "point_cloud", "uncertainty"]
+    depth = out["depth_image"][0]
+    assert (depth.header.stamp.sec, depth.header.stamp.nanosec, depth.header.frame_id) == (T0 // 10**9, 0, "cam")
+    pixels = np.frombuffer(depth.data.tobytes(), "<f4").reshape(INFO.height, INFO.width)
+    assert np.isnan(pixels[0, 0]) and (pixels.ravel()[1:] == 7.5).all()
+    assert out["camera_info"][0].header == depth.header == out["point_cloud"][0].header
+    assert out["point_cloud"][0].width == INFO.height * INFO.width - 1 and out["uncertainty"] == []
+
+
+def test_newest_pair_only_stale_pairs_counted() -> None:
+    """Pairs made while the worker is busy replace each other in one slot: only the newest is completed."""
+    lines: list[str] = []
+    node, fake = _node(lines)
+    for i in range(4):
+        fake.deliver(IMAGE, image(T0 + i * STEP))
+        fake.deliver(SCAN, scan(T0 + i * STEP))
+    _spin(node)
+    (depth,) = fake.published[f"{OUT}/depth_image"]
+    assert depth.header.stamp.nanosec == 3 * STEP  # the newest
+    c = node.inputs.counts
+    assert (c.paired, c.stale, c.unpaired, c.bad, node.published) == (4, 3, 0, 0, 1)
+    assert "1 frame(s) published, 3 stale pair(s) dropped" in lines[-1] and "network" in lines[-1]
+
+
+def test_image_waits_for_its_scan_and_unpaired_are_counted() -> None:
+    node, fake = _node()
+    fake.deliver(IMAGE, image(T0))
+    fake.deliver(SCAN, scan(T0 - STEP))  # before the image: not decided yet (a nearer one may come)
+    assert node.inputs.counts.paired == 0
+    fake.deliver(SCAN, scan(T0 + STEP // 10))
+    assert node.inputs.counts.paired == 1  # the nearer one
+    fake.deliver(IMAGE, image(T0 + 5 * STEP))  # no scan near it ...
+    fake.deliver(IMAGE, image(T0 + 6 * STEP))  # ... decided when a newer image comes
+    assert node.inputs.counts.unpaired == 1
+
+
+def _bad_cases() -> list[tuple[str, object, str]]:
+    trunc = image(T0)
+    trunc = replace(trunc, data=trunc.data[:10])  # type: ignore[type-var]
+    odd = replace(image(T0), encoding="yuv422")  # type: ignore[type-var]
+    nan_info = camera_info()
+    nan_info.k[0] = np.nan  # type: ignore[attr-defined]
+    no_xyz = TS.types["sensor_msgs/msg/PointCloud2"](header=scan(T0).header, height=1, width=0, fields=[],  # type: ignore[attr-defined]
+                                                     is_bigendian=False, point_step=0, row_step=0,
+                                                     data=np.zeros(0, np.uint8), is_dense=True)  # fmt: skip
+    return [(IMAGE, trunc, "holds 10 bytes"), (IMAGE, odd, "unsupported image encoding 'yuv422'"),
+            (INFO_T, nan_info, "is NaN"), (SCAN, no_xyz, "no x/y/z field")]  # fmt: skip
+
+
+def test_bad_messages_are_one_line_each_and_the_node_goes_on(caplog: pytest.LogCaptureFixture) -> None:
+    node, fake = _node()
+    with caplog.at_level(logging.WARNING, logger="semattnet.ros"):
+        for topic, msg, why in _bad_cases():
+            caplog.clear()
+            fake.deliver(topic, msg)
+            (rec,) = caplog.records
+            assert rec.getMessage().startswith(f"{topic} message ") and why in rec.getMessage(), rec.getMessage()
+            assert "\n" not in rec.getMessage()
+        behind = np.array([[-5.0, 0, 0], [-6.0, 1, 0]], np.float32)  # every point behind the camera
+        caplog.clear()
+        fake.deliver(IMAGE, image(T0))
+        fake.deliver(SCAN, scan(T0, behind))
+        _spin(node)  # the frame fails
+    assert node.failed == 1 and "no point in front of the camera" in caplog.text
+    fake.deliver(IMAGE, image(T0 + STEP))
+    fake.deliver(SCAN, scan(T0 + STEP))
+    _spin(node, frames=2)  # one failed, one published
+    assert node.published == 1 and node.failed == 1 and node.inputs.counts.bad == 4
