@@ -43,7 +43,7 @@ if TYPE_CHECKING:
     from semattnet.inference.semantic import SemanticMaps
     from semattnet.inference.uncertainty import UncertaintyLimit
 
-__all__ = ["DepthNode", "NodeTopics", "StageStats"]
+__all__ = ["DepthNode", "NodeTopics", "StageStats", "run_node"]
 
 log = logging.getLogger("semattnet.ros")
 
@@ -256,3 +256,23 @@ class DepthNode:
     def close(self) -> None:
         """End the transport (its threads and sockets)."""
         self.transport.close()
+
+
+def run_node(node: DepthNode, frames: int | None = None) -> None:
+    """Start ``node`` and spin it until Ctrl-C or SIGTERM (or ``frames`` done), then close it: the signal only
+    sets the stop event, so the frame in hand finishes, the summary is printed and the transport ends."""
+    import signal
+
+    stop = threading.Event()
+    previous = {}
+    on_main = threading.current_thread() is threading.main_thread()
+    if on_main:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, lambda *_: stop.set())
+    try:
+        node.start()
+        node.spin(stop, frames)
+    finally:
+        node.close()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

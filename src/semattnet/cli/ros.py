@@ -1,0 +1,128 @@
+"""``semattnet ros2``: the live depth-completion node on a ROS 2 robot (DDS, no ROS installation needed).
+
+The model options are ``predict``'s own (the same click options, one definition) and the semantic-map options
+``--segment`` / ``--palette-mismatch``; the node is :class:`semattnet.robotics.ros.node.DepthNode`.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import click
+
+from semattnet.cli._group import main
+from semattnet.cli._inputs import MAP_OPTIONS, Maps
+from semattnet.cli._options import DEPTH_M, POSITIVE_FLOAT, POSITIVE_INT, SECONDS
+from semattnet.cli._outputs import MaxUncertainty
+from semattnet.cli._params import SectionedCommand, section, values_of, with_options
+from semattnet.cli.predict import ModelOptions, predict
+
+if TYPE_CHECKING:
+    from semattnet.inference.completion import Completer
+    from semattnet.inference.semantic import SemanticMaps
+    from semattnet.robotics.ros.node import DepthNode
+
+_ROS = section("ROS")
+#: ``predict``'s model options, the click objects themselves (so both commands always take the same ones).
+MODEL_OPTIONS = tuple(p for p in predict.params if p.name in {f.name for f in fields(ModelOptions)})
+#: The semantic-map options a live node takes (a segmenter; no map files).
+SEGMENT_OPTIONS = tuple(p for p in MAP_OPTIONS if p.name in ("segment_spec", "palette_mismatch"))
+
+ROS2_OPTIONS = (
+    _ROS(["--image-topic"], default="~/input/image", show_default=True,
+         help="sensor_msgs/Image (rgb8, bgr8, mono8); a name ending in /compressed: CompressedImage."),
+    _ROS(["--camera-info-topic"], default="~/input/camera_info", show_default=True, help="sensor_msgs/CameraInfo."),
+    _ROS(["--points-topic"], default="~/input/point_cloud", show_default=True,
+         help="sensor_msgs/PointCloud2 (x, y, z), or with --sparse-depth a sparse depth Image (32FC1 m, 16UC1 mm)."),
+    _ROS(["--sparse-depth"], is_flag=True, help="--points-topic is a sparse depth image in the camera's frame."),
+    _ROS(["--output-prefix"], default="~/output", show_default=True,
+         help="Where depth_image, point_cloud, uncertainty and camera_info are published."),
+    _ROS(["--namespace"], default="", help="The node's namespace (~ is NAMESPACE/NODE) [/]."),
+    _ROS(["--node-name"], default="semattnet", show_default=True, help="The node's name."),
+    _ROS(["--domain-id"], type=click.IntRange(0, 232), default=None, help="DDS domain [ROS_DOMAIN_ID, else 0]."),
+    _ROS(["--rig"], type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+         help="Rig JSON (K, T_cam_lidar, image_size) overriding CameraInfo and /tf_static."),
+    _ROS(["--max-skew"], type=SECONDS, default=None, help="Seconds between an image and its scan at most "
+         "[half the scan period]."),
+    _ROS(["--max-depth"], type=DEPTH_M, default=None, help="The point cloud leaves out deeper pixels, m [none]."),
+    _ROS(["--max-uncertainty"], type=MaxUncertainty(), default=None,
+         help="The point cloud leaves out pixels whose uncertainty exceeds METRES or PERCENT% of their depth."),
+    _ROS(["--loopback"], is_flag=True, help="DDS on 127.0.0.1 only (unicast; one machine, no multicast)."),
+    _ROS(["--report-every"], type=POSITIVE_FLOAT, default=5.0, show_default=True,
+         help="Seconds between two latency and drop lines."),
+    _ROS(["--frames"], type=POSITIVE_INT, default=None, help="Stop after this many frames [run until Ctrl-C]."),
+)  # fmt: skip
+
+
+def _domain_id(given: int | None) -> int:
+    """``--domain-id``, else ``ROS_DOMAIN_ID``, else 0 (a bad environment value: a usage error)."""
+    if given is not None:
+        return given
+    text = os.environ.get("ROS_DOMAIN_ID", "").strip() or "0"
+    if not text.isdigit() or int(text) > 232:
+        raise click.UsageError(f"ROS_DOMAIN_ID={text!r}: expected a domain id 0-232 (or give --domain-id)")
+    return int(text)
+
+
+@dataclass(frozen=True)
+class NodeOptions:
+    """The node's own options (:data:`ROS2_OPTIONS`)."""
+
+    image_topic: str
+    camera_info_topic: str
+    points_topic: str
+    sparse_depth: bool
+    output_prefix: str
+    namespace: str
+    node_name: str
+    domain_id: int | None
+    rig: Path | None
+    max_skew: float | None
+    max_depth: float | None
+    max_uncertainty: str | None
+    loopback: bool
+    report_every: float
+    frames: int | None
+
+    def node(self, completer: Completer, semantic: SemanticMaps) -> DepthNode:
+        """The node on a DDS transport (checks the names, the domain and the rig first)."""
+        from semattnet.geometry import read_rig_json
+        from semattnet.inference.uncertainty import UncertaintyLimit
+        from semattnet.robotics.ros.dds import DdsTransport
+        from semattnet.robotics.ros.names import check_namespace
+        from semattnet.robotics.ros.node import DepthNode, NodeTopics
+
+        topics = NodeTopics(self.image_topic, self.camera_info_topic, self.points_topic, output=self.output_prefix)
+        namespace = check_namespace(self.namespace)
+        topics.resolved(namespace, self.node_name)  # a bad name: one line, before DDS starts
+        rig = read_rig_json(self.rig) if self.rig is not None else None
+        limit = None if self.max_uncertainty is None else UncertaintyLimit.parse(self.max_uncertainty)
+        transport = DdsTransport(_domain_id(self.domain_id), loopback=self.loopback)
+        return DepthNode(transport, completer, topics, namespace=namespace, node=self.node_name, rig=rig,
+                         max_skew_ns=None if self.max_skew is None else round(self.max_skew * 1e9),
+                         compressed=self.image_topic.rstrip("/").endswith("/compressed"), sparse=self.sparse_depth,
+                         semantic=semantic, max_depth=self.max_depth, max_uncertainty=limit,
+                         report_s=self.report_every, say=click.echo)  # fmt: skip
+
+
+@main.command(cls=SectionedCommand)
+@with_options(ROS2_OPTIONS)
+@with_options(MODEL_OPTIONS)
+@with_options(SEGMENT_OPTIONS)
+def ros2(**params: object) -> None:
+    """Run a ROS 2 depth-completion node: subscribe a camera, its CameraInfo and a LiDAR, publish completed depth.
+
+    Speaks DDS itself (cyclonedds: pip install 'semattnet[ros2]'), no ROS installation or sourced workspace.
+    Completes the newest image-scan pair (older pairs are dropped and counted), publishes under
+    --output-prefix with the image's stamp and frame id; Ctrl-C or SIGTERM stops it."""
+    from semattnet.robotics.ros.node import run_node
+
+    model, options = values_of(ModelOptions, params), values_of(NodeOptions, params)
+    model.check()
+    maps = Maps(None, params["segment_spec"], str(params["palette_mismatch"]))  # type: ignore[arg-type]
+    completer = model.completer()
+    node = options.node(completer, maps.semantic_maps(folder=False).bind(completer))
+    run_node(node, options.frames)
