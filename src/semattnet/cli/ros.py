@@ -92,12 +92,18 @@ class NodeOptions:
         from semattnet.geometry import read_rig_json
         from semattnet.inference.uncertainty import UncertaintyLimit
         from semattnet.robotics.ros.dds import DdsTransport
-        from semattnet.robotics.ros.names import check_namespace
+        from semattnet.robotics.ros.names import check_namespace, resolve_name
         from semattnet.robotics.ros.node import DepthNode, NodeTopics
 
         topics = NodeTopics(self.image_topic, self.camera_info_topic, self.points_topic, output=self.output_prefix)
         namespace = check_namespace(self.namespace)
-        topics.resolved(namespace, self.node_name)  # a bad name: one line, before DDS starts
+        for option, name in (
+            ("--image-topic", self.image_topic),
+            ("--camera-info-topic", self.camera_info_topic),
+            ("--points-topic", self.points_topic),
+            ("--output-prefix", self.output_prefix),
+        ):
+            resolve_name(name, namespace, self.node_name, option)  # a bad name: one line, before DDS starts
         rig = read_rig_json(self.rig) if self.rig is not None else None
         limit = None if self.max_uncertainty is None else UncertaintyLimit.parse(self.max_uncertainty)
         transport = DdsTransport(_domain_id(self.domain_id), loopback=self.loopback)

@@ -19,18 +19,19 @@ def check_namespace(namespace: str, option: str = "--namespace") -> str:
     return ns
 
 
-def resolve_name(name: str, namespace: str = "", node: str = "semattnet") -> str:
-    """The absolute topic of ``name`` for node ``node`` in ``namespace``.
+def resolve_name(name: str, namespace: str = "", node: str = "semattnet", what: str = "topic") -> str:
+    """The absolute topic of ``name`` for node ``node`` in ``namespace`` (``what`` names it in the error).
 
     >>> resolve_name("~/output/depth_image", "/robot1"), resolve_name("camera/image_raw", "/robot1")
     ('/robot1/semattnet/output/depth_image', '/robot1/camera/image_raw')
     """
     ns = check_namespace(namespace)
+    full = name
     if name.startswith("~"):
-        name = f"{ns}/{node}{name[1:]}"
+        full = f"{ns}/{node}{name[1:]}"
     elif not name.startswith("/"):
-        name = f"{ns}/{name}"
-    parts = [p for p in name.split("/") if p]
+        full = f"{ns}/{name}"
+    parts = full.split("/")[1:]
     if not parts or not all(_TOKEN.fullmatch(p) for p in parts):
-        raise InputError(f"topic {name!r}: expected names of letters, digits and _ joined by /")
-    return "/" + "/".join(parts)
+        raise InputError(f"{what} {name!r}: expected names of letters, digits and _ joined by / (e.g. /camera/image)")
+    return full
