@@ -97,7 +97,9 @@ class PairingInputs:
 
     Args:
         topics: ``{"image", "scan", "camera_info"}`` resolved names (the errors name them).
-        compressed: the image topic is ``CompressedImage``. sparse: the scan topic is a sparse depth image.
+        on_pair: called with each new pair.
+        compressed: the image topic is ``CompressedImage``.
+        sparse: the scan topic is a sparse depth image.
         max_skew_ns: image-scan tolerance (None: half the scan period).
     """
 

@@ -94,12 +94,19 @@ class DepthNode:
     event; :meth:`close` ends the transport.
 
     Args:
-        transport: what moves the messages. completer: the completer (classical or a DepthCompleter).
-        topics: the names (remappable). namespace, node: how ``~`` and relative names resolve.
-        rig: calibration overriding CameraInfo and ``/tf_static``. max_skew_ns: image-scan tolerance.
-        compressed / sparse: the image topic is ``CompressedImage`` / the scan topic a sparse depth image.
+        transport: what moves the messages.
+        completer: the completer (classical or a DepthCompleter).
+        topics: the names (remappable).
+        namespace: how ``~`` and relative names resolve (with ``node``).
+        node: the node's name.
+        rig: calibration overriding CameraInfo and ``/tf_static``.
+        max_skew_ns: image-scan tolerance (None: half the scan period).
+        compressed: the image topic is ``CompressedImage``.
+        sparse: the scan topic is a sparse depth image.
         semantic: bound semantic maps (fills the frames' maps), or None.
-        max_depth / max_uncertainty: what the cloud leaves out. report_s: seconds between two report lines.
+        max_depth: the cloud leaves out deeper pixels, metres.
+        max_uncertainty: the cloud leaves out pixels above it.
+        report_s: seconds between two report lines.
         say: where the report lines go.
     """
 
