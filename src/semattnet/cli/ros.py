@@ -16,18 +16,22 @@ import click
 from semattnet.cli._group import main
 from semattnet.cli._inputs import MAP_OPTIONS, Maps
 from semattnet.cli._options import DEPTH_M, POSITIVE_FLOAT, POSITIVE_INT, SECONDS
-from semattnet.cli._outputs import MaxUncertainty
+from semattnet.cli._outputs import OUTPUT_OPTIONS, MaxUncertainty
 from semattnet.cli._params import SectionedCommand, section, values_of, with_options
 from semattnet.cli.predict import ModelOptions, predict
 
 if TYPE_CHECKING:
     from semattnet.inference.completion import Completer
     from semattnet.inference.semantic import SemanticMaps
+    from semattnet.inference.sinks import RunSink
+    from semattnet.inference.uncertainty import UncertaintyLimit
     from semattnet.robotics.ros.node import DepthNode
 
 _ROS = section("ROS")
 #: ``predict``'s model options, the click objects themselves (so both commands always take the same ones).
 MODEL_OPTIONS = tuple(p for p in predict.params if p.name in {f.name for f in fields(ModelOptions)})
+#: ``predict``'s live viewers, which run beside the node: ``--live`` (Foxglove) and ``--rerun-serve``.
+VIEWER_OPTIONS = tuple(p for p in OUTPUT_OPTIONS if p.name in ("live", "rerun_serve"))
 #: The semantic-map options a live node takes (a segmenter; no map files).
 SEGMENT_OPTIONS = tuple(p for p in MAP_OPTIONS if p.name in ("segment_spec", "palette_mismatch"))
 
@@ -86,6 +90,21 @@ class NodeOptions:
     loopback: bool
     report_every: float
     frames: int | None
+    live: str | None
+    rerun_serve: bool
+
+    def viewers(self, limit: UncertaintyLimit | None) -> list[RunSink]:
+        """The live viewers asked for (``--live``, ``--rerun-serve``), fed every published frame."""
+        sinks: list[RunSink] = []
+        if self.live is not None:
+            from semattnet.robotics.live import LiveSink
+
+            sinks.append(LiveSink(address=self.live, max_depth=self.max_depth, log=click.echo, max_uncertainty=limit))
+        if self.rerun_serve:
+            from semattnet.robotics.sinks import RerunSink
+
+            sinks.append(RerunSink(serve=True, max_depth=self.max_depth, log=click.echo, max_uncertainty=limit))
+        return sinks
 
     def node(self, completer: Completer, semantic: SemanticMaps) -> DepthNode:
         """The node on a DDS transport (checks the names, the domain and the rig first)."""
@@ -111,13 +130,14 @@ class NodeOptions:
                          max_skew_ns=None if self.max_skew is None else round(self.max_skew * 1e9),
                          compressed=self.image_topic.rstrip("/").endswith("/compressed"), sparse=self.sparse_depth,
                          semantic=semantic, max_depth=self.max_depth, max_uncertainty=limit,
-                         report_s=self.report_every, say=click.echo)  # fmt: skip
+                         report_s=self.report_every, say=click.echo, sinks=self.viewers(limit))  # fmt: skip
 
 
 @main.command(cls=SectionedCommand)
 @with_options(ROS2_OPTIONS)
 @with_options(MODEL_OPTIONS)
 @with_options(SEGMENT_OPTIONS)
+@with_options(VIEWER_OPTIONS)
 def ros2(**params: object) -> None:
     """Run a ROS 2 depth-completion node: subscribe a camera, its CameraInfo and a LiDAR, publish completed depth.
 

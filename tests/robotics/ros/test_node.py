@@ -130,3 +130,50 @@ def test_bad_messages_are_one_line_each_and_the_node_goes_on(caplog: pytest.LogC
     fake.deliver(SCAN, scan(T0 + STEP))
     _spin(node, frames=2)  # one failed, one published
     assert node.published == 1 and node.failed == 1 and node.inputs.counts.bad == 4
+
+
+def test_sigterm_stops_cleanly_and_prints_the_summary() -> None:
+    """run_node: SIGTERM only sets the stop event; the summary is said, the transport closed, handlers restored."""
+    import os
+    import signal
+
+    from semattnet.robotics.ros.node import run_node
+
+    lines: list[str] = []
+    fake = FakeTransport()
+    node = DepthNode(fake, _complete, say=lines.append)
+    before = signal.getsignal(signal.SIGTERM)
+    threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGTERM)).start()
+    run_node(node)
+    assert fake.closed and lines[-1].startswith("ros node stopped: 0 frame(s) published")
+    assert signal.getsignal(signal.SIGTERM) is before
+
+
+def test_viewers_run_beside_the_node() -> None:
+    """Run outputs (``--live``, ``--rerun-serve``) get every published frame, opened and finished with the node."""
+    from semattnet.inference.sinks import RunSink
+
+    class Recorder(RunSink):
+        def __init__(self) -> None:
+            self.events: list[str] = []
+
+        def open(self, overwrite: bool = False) -> None:
+            self.events.append("open")
+
+        def write(self, stage: object, pred: object) -> None:
+            self.events.append(f"write {pred.frame.meta.stamp_ns}")  # type: ignore[attr-defined]
+
+        def finish(self, stage: object) -> None:
+            self.events.append("finish")
+
+    viewer = Recorder()
+    fake = FakeTransport()
+    node = DepthNode(fake, _complete, NodeTopics(camera_info="cam/info"), namespace=NS, say=[].append,
+                     sinks=[viewer]).start()  # fmt: skip
+    fake.deliver(INFO_T, camera_info())
+    fake.deliver("/tf_static", tf_static())
+    fake.deliver(IMAGE, image(T0))
+    fake.deliver(SCAN, scan(T0))
+    _spin(node)
+    node.close()
+    assert viewer.events == ["open", f"write {T0}", "finish"] and fake.closed

@@ -116,13 +116,15 @@ class PairingInputs:
 
     def _decoded(self, role: str, msg: Any, decode: Callable[[Any, str], Any]) -> tuple[Any, str] | None:
         """``decode(msg, where)`` and ``where``; a failure is one logged line and None (the message is forgotten)."""
-        n = self.counts.received.get(role, 0)
-        self.counts.received[role] = n + 1
+        with self._lock:  # the transport may call from several threads
+            n = self.counts.received.get(role, 0)
+            self.counts.received[role] = n + 1
         where = f"{self.topics[role]} message {n}"
         try:
             return decode(msg, where), where
         except (SemAttNetError, ValueError, TypeError, AttributeError, IndexError) as exc:
-            self.counts.bad += 1
+            with self._lock:
+                self.counts.bad += 1
             log.warning("%s", exc if str(exc).startswith(where) else f"{where}: {exc}")
             return None
 

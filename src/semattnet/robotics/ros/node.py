@@ -22,8 +22,9 @@ import logging
 import threading
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -41,6 +42,7 @@ from .transport import OUTPUT_QOS, SENSOR_QOS, TF_STATIC_QOS, Transport
 if TYPE_CHECKING:
     from semattnet.inference.completion import Completer
     from semattnet.inference.semantic import SemanticMaps
+    from semattnet.inference.sinks import RunSink
     from semattnet.inference.uncertainty import UncertaintyLimit
 
 __all__ = ["DepthNode", "NodeTopics", "StageStats", "run_node"]
@@ -108,6 +110,7 @@ class DepthNode:
         max_uncertainty: the cloud leaves out pixels above it.
         report_s: seconds between two report lines.
         say: where the report lines go.
+        sinks: run outputs fed each completed frame beside the topics (``--live``, ``--rerun-serve``).
     """
 
     def __init__(self, transport: Transport, completer: Completer, topics: NodeTopics | None = None, *,
@@ -115,7 +118,7 @@ class DepthNode:
                  max_skew_ns: int | None = None, compressed: bool = False, sparse: bool = False,
                  semantic: SemanticMaps | None = None, max_depth: float | None = None,
                  max_uncertainty: UncertaintyLimit | None = None, report_s: float = 5.0,
-                 say: Callable[[str], object] = print) -> None:  # fmt: skip
+                 say: Callable[[str], object] = print, sinks: Sequence[RunSink] = ()) -> None:  # fmt: skip
         self.transport, self.completer, self.rig, self.semantic = transport, completer, rig, semantic
         self.names = (topics or NodeTopics()).resolved(namespace, node)
         self.max_depth, self.max_uncertainty, self.report_s, self.say = max_depth, max_uncertainty, report_s, say
@@ -125,9 +128,12 @@ class DepthNode:
         self._slot: Pair | None = None
         self._ready = threading.Condition()
         self._publishers: dict[str, Any] = {}
+        self.sinks = list(sinks)
 
     def start(self) -> DepthNode:
-        """Advertise the outputs and subscribe the inputs."""
+        """Open the sinks, advertise the outputs and subscribe the inputs."""
+        for sink in self.sinks:
+            sink.open()
         t, n, inp = self.transport, self.names, self.inputs
         for role, msgtype in ROS_TYPES.items():
             self._publishers[role] = t.advertise(n[f"out:{role}"], msgtype, OUTPUT_QOS)
@@ -250,6 +256,8 @@ class DepthNode:
                               max_uncertainty=self.max_uncertainty)  # fmt: skip
         for role, msg in robot.messages(self.transport_typestore).items():
             self._publishers[role].publish(msg)
+        for sink in self.sinks:
+            sink.write(Path("."), pred)  # the live viewers write no file
         self.stats.add("publish", (time.perf_counter() - start) * 1e3)
         self.published += 1
 
@@ -261,8 +269,12 @@ class DepthNode:
         return getattr(self.transport, "ts", None) or rosbags_typestore(False)
 
     def close(self) -> None:
-        """End the transport (its threads and sockets)."""
-        self.transport.close()
+        """End the sinks and the transport (its threads and sockets)."""
+        try:
+            for sink in self.sinks:
+                sink.finish(Path("."))
+        finally:
+            self.transport.close()
 
 
 def run_node(node: DepthNode, frames: int | None = None) -> None:
