@@ -175,7 +175,7 @@ class PairingInputs:
         p = pair_stamps(np.array([image.stamp_ns]), np.array([s.stamp_ns for s in scans]), self.max_skew_ns)
         for _ in range(k + 1):
             self._images.popleft()
-        self.counts.unpaired += k + (p.match[0] < 0)
+        self.counts.unpaired += k + int(p.match[0] < 0)
         if p.match[0] < 0:
             log.warning("%s: no %s scan within %.1f ms (nearest %.1f ms apart)", image.where, self.topics["scan"],
                         p.max_skew_ns / 1e6, p.skew_ns[0] / 1e6)  # fmt: skip
