@@ -27,7 +27,6 @@ next to nothing, and the server drops the oldest messages of a slow client (it n
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,7 +42,7 @@ from semattnet.geometry.cameras import CameraInfoData
 from semattnet.inference.sinks import Prediction, RunSink, register_sink
 from semattnet.inference.uncertainty import UncertaintyLimit
 from semattnet.robotics.frame import TOPICS as OUTPUT_TOPICS
-from semattnet.robotics.frame import frame_camera, stamp_ns
+from semattnet.robotics.frame import RobotFrame, frame_camera, stamp_ns
 
 if TYPE_CHECKING:
     from semattnet.geometry import PointCloud
@@ -280,10 +279,8 @@ class LiveSink(RunSink):
             self._log("uncertainty", t_ns, lambda: _depth_image(m, stamp, frame_id, decode_depth(unc_png)))
         self._log("rgb", t_ns, lambda: _image(m, stamp, frame_id, np.asarray(frame.rgb, np.uint8), "rgb8"))
         self._log("sparse", t_ns, lambda: _depth_image(m, stamp, frame_id, frame.sparse))
-        if frame.K is not None:
-            max_depth = math.inf if self.max_depth is None else float(self.max_depth)
-            limit = self.max_uncertainty
-            self._log("points", t_ns, lambda: _cloud(m, stamp, frame_id, pred.cloud(max_depth, 0, limit)))
+        if frame.K is not None:  # the cloud every robot output sends (RobotFrame), built when a client wants it
+            self._log("points", t_ns, lambda: _cloud(m, stamp, frame_id, self._robot(pred).cloud))
         if info is not None:
             self._log("camera_info", t_ns, lambda: _calibration(m, stamp, frame_id, info))
         T = None if frame.calib is None else frame.calib.T_cam_lidar
@@ -292,6 +289,10 @@ class LiveSink(RunSink):
             self._log("tf", t_ns, lambda: _transform(m, stamp, frame_id, lidar, T))
         stages = {str(k): float(v) for k, v in (getattr(pred, "stage_ms", None) or {}).items()}
         self._log("latency", t_ns, lambda: {"frame": frame.name, "stamp_ns": t_ns, "stages_ms": stages})
+
+    def _robot(self, pred: Prediction) -> RobotFrame:
+        return RobotFrame.of(pred, self._count, max_depth=self.max_depth, max_uncertainty=self.max_uncertainty,
+                             output="the live view")  # fmt: skip
 
     def _stop(self) -> None:
         server, self._server = self._server, None
