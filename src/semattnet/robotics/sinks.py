@@ -25,7 +25,7 @@ from semattnet.data.frames import Frame
 from semattnet.geometry.cameras import CameraInfoData
 from semattnet.inference.sinks import Prediction, RunSink, register_sink
 from semattnet.inference.uncertainty import UncertaintyLimit
-from semattnet.robotics.frame import pinhole_info, stamp_ns
+from semattnet.robotics.frame import RobotFrame, pinhole_info, stamp_ns
 
 if TYPE_CHECKING:
     from semattnet.robotics.bags import BagWriter
@@ -201,10 +201,11 @@ class RerunSink(_StagedTarget):
         if self._logger is None:
             raise InputError("the Rerun recording is not open (call open() first)")
         with self._full_disk():
+            robot = RobotFrame.of(pred, self._count, max_depth=self.max_depth, max_uncertainty=self.max_uncertainty,
+                                  output="the Rerun recording")  # fmt: skip
             self._logger.log_frame(stamp_ns(frame, self._count), frame.rgb, frame.K, np.eye(4) if T is None else T,
                                    sparse=frame.sparse, depth=pred.stored, semantic=frame.semantic,
-                                   points=frame.points, uncertainty=unc,
-                                   keep=pred.keep(self.max_uncertainty))  # fmt: skip
+                                   points=frame.points, uncertainty=unc, cloud=robot.cloud)  # fmt: skip
         self._count += 1
 
     def finish(self, stage: Path) -> None:
