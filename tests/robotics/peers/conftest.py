@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 
+from ._netns import unshare_prefix
+
 HERE = Path(__file__).parent
 TOOLS = ("fastddsgen", "idlc", "cmake", "c++", "cc", "unshare", "ip", "java")
 HEADERS = ("/usr/include/fastdds/dds/domain/DomainParticipant.hpp", "/usr/include/dds/dds.h")
@@ -24,9 +26,8 @@ def _missing() -> str | None:
     lacking = [t for t in TOOLS if shutil.which(t) is None] + [h for h in HEADERS if not Path(h).is_file()]
     if lacking:
         return f"no {', '.join(lacking)}: run `bash scripts/setup-ros-peers.sh` (Debian: Fast DDS, Cyclone DDS C)"
-    probe = subprocess.run(["unshare", "--net", "true"], capture_output=True, timeout=10)
-    if probe.returncode != 0:
-        return f"cannot make a network namespace (unshare --net: {probe.stderr.decode().strip()}); needs root"
+    if unshare_prefix() is None:
+        return "cannot make a network namespace (unshare --net, as root or in a user namespace)"
     return None
 
 
