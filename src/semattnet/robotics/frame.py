@@ -4,7 +4,8 @@
 ids, the stored depth as ``32FC1`` metres with holes NaN (REP 118), its uncertainty, the coloured cloud in the
 camera frame (the pixels ``max_uncertainty`` rejects left out), the CameraInfo and ``T_cam_lidar``.
 :meth:`RobotFrame.messages` turns it into ROS messages (``rosbags`` objects of a type store); the bag
-(``--bag-out``) writes them and the live ROS nodes publish them.
+(``--bag-out``) writes them and the live ROS nodes publish them. The live Foxglove view (``--live``) and the
+Rerun recording send its cloud.
 
 :data:`TOPICS` names every output topic by role. A bag or the Foxglove view puts them under their prefix
 (``/semattnet/depth_image``); a ROS node under ``~/output`` (``/NAMESPACE/semattnet/output/depth_image``).
