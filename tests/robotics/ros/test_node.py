@@ -177,3 +177,38 @@ def test_viewers_run_beside_the_node() -> None:
     _spin(node)
     node.close()
     assert viewer.events == ["open", f"write {T0}", "finish"] and fake.closed
+
+
+def test_compressed_image_and_sparse_depth_inputs() -> None:
+    """CompressedImage in; a sparse depth Image (32FC1 m, NaN = none) instead of a cloud: used as it is."""
+    from semattnet.robotics.bags.encode import compressed_image_message, depth_image_message
+
+    seen: list[np.ndarray] = []
+
+    def complete(rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
+        seen.append(sparse)
+        return _complete(rgb, sparse, semantic)
+
+    fake = FakeTransport()
+    node = DepthNode(fake, complete, NodeTopics(image="camera/image/compressed"), compressed=True, sparse=True,
+                     say=[].append).start()  # fmt: skip
+    assert fake.subs["/camera/image/compressed"][0] == "sensor_msgs/msg/CompressedImage"
+    assert fake.subs["/semattnet/input/point_cloud"][0] == "sensor_msgs/msg/Image" and "/tf_static" not in fake.subs
+    sparse = np.zeros((INFO.height, INFO.width), np.float32)
+    sparse[3, 4], sparse[7, 9] = 5.5, 12.25
+    fake.deliver("/semattnet/input/camera_info", camera_info())
+    fake.deliver("/camera/image/compressed", compressed_image_message(TS, np.zeros((12, 16, 3), np.uint8), T0, "cam"))
+    fake.deliver("/semattnet/input/point_cloud", depth_image_message(TS, sparse, T0, "cam"))
+    _spin(node)
+    assert node.published == 1 and len(seen) == 1
+    np.testing.assert_array_equal(seen[0], sparse)
+
+
+def test_sparse_depth_16uc1_is_millimetres() -> None:
+    from semattnet.robotics.ros.inputs import decode_sparse_depth
+
+    mm = np.array([[0, 1500], [65535, 250]], "<u2")
+    data = np.frombuffer(mm.tobytes(), np.uint8)
+    msg = TS.types["sensor_msgs/msg/Image"](header=image(T0).header, height=2, width=2, encoding="16UC1",  # type: ignore[attr-defined]
+                                            is_bigendian=0, step=4, data=data)  # fmt: skip
+    np.testing.assert_allclose(decode_sparse_depth(msg, "/d"), [[0, 1.5], [65.535, 0.25]], rtol=1e-6)
