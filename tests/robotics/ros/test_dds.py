@@ -53,3 +53,24 @@ def test_image_round_trip_is_rosbags_cdr() -> None:
 
     image_type = a._types.struct("sensor_msgs/msg/Image")
     assert image_type.__annotations__["is_bigendian"] is byte
+
+
+def test_garbage_and_callback_errors_are_one_line(caplog: pytest.LogCaptureFixture) -> None:
+    """Bytes that are no Image, and a callback that raises, are one logged line each; nothing propagates."""
+    import logging
+
+    t = DdsTransport(42, loopback=True)
+    try:
+        with caplog.at_level(logging.WARNING, logger="semattnet.robotics.ros.dds"):
+            t._deliver("/t/img", "sensor_msgs/msg/Image", b"\x00\x01\x00\x00\xff\xff", lambda m: None)
+            t._deliver("/t/img", "sensor_msgs/msg/Image", bytes(t.ts.serialize_cdr(_image(t), "sensor_msgs/msg/Image")),
+                       lambda m: (_ for _ in ()).throw(MemoryError("too big")))  # fmt: skip
+    finally:
+        t.close()
+    lines = [r.getMessage() for r in caplog.records]
+    assert len(lines) == 2 and lines[0].startswith("/t/img: cannot deserialise a sensor_msgs/msg/Image (6 bytes)")
+    assert lines[1] == "/t/img: MemoryError: too big"
+
+
+def _image(t: DdsTransport) -> object:
+    return depth_image_message(t.ts, np.ones((2, 3), np.float32), 5, "cam")

@@ -196,7 +196,10 @@ class DdsTransport:
         except Exception as exc:  # whatever a peer sends: one line, never an exception in DDS' thread
             log.warning("%s: cannot deserialise a %s (%d bytes): %s", topic, msgtype, len(cdr), exc)
             return
-        callback(message)
+        try:
+            callback(message)
+        except Exception as exc:  # e.g. an image that is a decompression bomb: one line, the node goes on
+            log.warning("%s: %s: %s", topic, type(exc).__name__, str(exc).splitlines()[0] if str(exc) else "")
 
     def close(self) -> None:
         """Delete the participant (its readers, writers and listener threads) and the domain."""
