@@ -57,27 +57,43 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
         (raw / f"points_{i}.bin").write_bytes(rec.points.astype("<f4").tobytes())
         lines.append(f"{rec.image_stamp_ns} {len(rec.points)}")
     (raw / "meta.txt").write_text("\n".join(lines) + "\n")
+    model = root / "tiny.safetensors"
+    _tiny_model(model)
     want = {}
-    for key, extra in (("bag", []), ("rig", ["--rig", str(rig)])):
+    runs = (("bag", ["--method", "classical"]), ("rig", ["--rig", str(rig), "--method", "classical"]),
+            ("semattnet", ["--weights", str(model), "--device", "cpu"]))  # fmt: skip
+    for key, extra in runs:
         out = root / f"predict_{key}"
         res = CliRunner().invoke(main, ["predict", "--bag", str(bag), "--image-topic", TOPICS.image, "--points-topic",
-                                        TOPICS.points, *extra, "--method", "classical", "--out", str(out)])  # fmt: skip
+                                        TOPICS.points, *extra, "--out", str(out)])  # fmt: skip
         assert res.exit_code == 0, res.output
         want[key] = {T0 + i * STEP: read_depth(out / f"{i:010d}.png") for i in range(FRAMES)}
-    return {"bag": bag, "rig": rig, "raw": raw, "want": want}
+    return {"bag": bag, "rig": rig, "raw": raw, "want": want, "model": model}
 
 
-def _node(*extra: str) -> dict[str, object]:
+def _tiny_model(path: Path) -> None:
+    """A random width-0.125 SemAttNet (the method's code path, not its accuracy, is under test)."""
+    import torch
+
+    import semattnet
+    from semattnet.weights import save_safetensors
+
+    torch.manual_seed(0)
+    save_safetensors(semattnet.build_model("semattnet", width=0.125).state_dict(), path)
+
+
+def _node(*extra: str, model: tuple[str, ...] = ("--method", "classical")) -> dict[str, object]:
     """The node under test. ``--max-skew``: the frames repeat, so a lost scan must not widen the tolerance
     estimated from the few distinct stamps received (half the period) to the next frame."""
-    argv = [sys.executable, "-m", "semattnet", "ros2", "--loopback", "--method", "classical", "--image-topic",
+    argv = [sys.executable, "-m", "semattnet", "ros2", "--loopback", *model, "--image-topic",
             TOPICS.image, "--points-topic", TOPICS.points, "--camera-info-topic", TOPICS.camera_info,
             "--report-every", "1", "--max-skew", "0.02", *extra]  # fmt: skip
     return {"name": "node", "argv": argv}
 
 
-def _check(out: Path, got_name: str, want: dict[int, np.ndarray], count: int) -> None:
-    """Each received depth image: the input's stamp and camera frame id, pixels equal to predict --bag's."""
+def _check(out: Path, got_name: str, want: dict[int, np.ndarray], count: int, atol: float = 0.0) -> None:
+    """Each received depth image: the input's stamp and camera frame id, pixels equal to predict --bag's
+    (within ``atol`` metres)."""
     lines = (out / f"{got_name}.out").read_text().splitlines()
     assert len(lines) == count, (out / "node.err").read_text()[-3000:]
     for n, line in enumerate(lines):
@@ -86,27 +102,32 @@ def _check(out: Path, got_name: str, want: dict[int, np.ndarray], count: int) ->
         assert stamp in want and (frame_id, int(w), int(h), encoding, int(step)) == (TOPICS.camera_frame, W, H,
                                                                                         "32FC1", 4 * W)  # fmt: skip
         pixels = np.fromfile(out / "rx" / f"{n}.bin", "<f4").reshape(H, W)
-        np.testing.assert_array_equal(pixels, np.where(want[stamp] > 0, want[stamp], np.nan))
+        np.testing.assert_allclose(pixels, np.where(want[stamp] > 0, want[stamp], np.nan), rtol=0, atol=atol)
     node_out = (out / "node.out").read_text()
     assert "ros node stopped:" in node_out and " 0 bad message(s)" in node_out, node_out
 
 
-def test_cyclone_c_subscriber_receives_predict_bag_depth(
-    peers: dict[str, Path], recorded: dict, tmp_path: Path
-) -> None:
-    """Our player (bag -> DDS, /tf_static transient local) drives the node; Cyclone 0.10 C receives its depth."""
+@pytest.mark.parametrize("method", ["classical", "semattnet"])
+def test_cyclone_c_subscriber_receives_predict_bag_depth(peers: dict[str, Path], recorded: dict, tmp_path: Path,
+                                                         method: str) -> None:  # fmt: skip
+    """Our player (bag -> DDS, /tf_static transient local) drives the node; Cyclone 0.10 C receives its depth:
+    classical bit for bit, the network within float rounding (one 1/256 m step of the PNG)."""
     from semattnet.robotics.ros.dds import loopback_config
 
+    model: tuple[str, ...] = ("--method", "classical")
+    if method == "semattnet":
+        model = ("--weights", str(recorded["model"]), "--device", "cpu")
     out = tmp_path / "run"
     (out / "rx").mkdir(parents=True)
     player = [sys.executable, str(HERE / "play.py"), str(recorded["bag"]), TOPICS.image, TOPICS.points,
               TOPICS.camera_info, "60"]  # fmt: skip
     sub = [str(peers["cyclone"]), "rt" + OUT_TOPIC, "2", str(out / "rx"), "60"]
     env = {"CYCLONEDDS_URI": loopback_config(0)}
-    status = run_isolated(out, [_node(), {"name": "sub", "argv": sub, "env": env, "wait": True},
+    status = run_isolated(out, [_node(model=model), {"name": "sub", "argv": sub, "env": env, "wait": True},
                                 {"name": "player", "argv": player, "delay": 1}], 70)  # fmt: skip
     assert status["sub"] == 0 and status["node"] == 0, status
-    _check(out, "sub", recorded["want"]["bag"], 2)
+    want = recorded["want"]["bag" if method == "classical" else "semattnet"]
+    _check(out, "sub", want, 2, atol=0.0 if method == "classical" else 1 / 256)
 
 
 def test_fastdds_camera_drives_the_node_and_fastdds_receives(peers: dict[str, Path], recorded: dict,
