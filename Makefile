@@ -2,7 +2,7 @@
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup demo test test-all lint docs bench figures clean
+.PHONY: setup demo test test-ros-peers test-all lint docs bench figures clean
 
 $(BIN)/semattnet: pyproject.toml scripts/setup.sh
 	VENV=$(VENV) bash scripts/setup.sh
@@ -15,6 +15,13 @@ demo: setup
 
 test: setup
 	$(BIN)/python -m pytest
+
+# The ROS 2 node against Fast DDS and Cyclone DDS C peers (their Debian packages: scripts/setup-ros-peers.sh).
+# The ROS nodes against implementations that are not ours (Fast DDS, Cyclone DDS C, Debian's roscore/rostopic).
+test-ros-peers: setup
+	bash scripts/setup-ros-peers.sh
+	bash scripts/setup-ros1-peers.sh
+	SEMATTNET_REQUIRE_ROS_PEERS=1 SEMATTNET_REQUIRE_ROS1=1 $(BIN)/python -m pytest -m ros_peers tests/robotics/peers tests/robotics/ros
 
 test-all: setup
 	$(BIN)/python -m pytest -m "slow or not slow"

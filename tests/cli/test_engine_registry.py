@@ -97,9 +97,10 @@ def test_a_registered_engine_runs_predict(echo: EngineEntry, frame: list[str], t
 
 
 def test_one_model_section_for_every_command_that_runs_a_model() -> None:
-    """predict, evaluate and submit take the one Model section (submit: no --method); predict stays within its
-    48 options."""
-    commands = {name: {p.name: p for p in main.commands[name].params} for name in ("predict", "evaluate", "submit")}
+    """predict, evaluate, submit and the ROS nodes take the one Model section (submit: no --method); predict stays
+    within its 48 options."""
+    names = ("predict", "evaluate", "submit", "ros1", "ros2")
+    commands = {name: {p.name: p for p in main.commands[name].params} for name in names}
     model = ["weights", "device", "backend", "precision", "calibration", "amp"]
     for name, params in commands.items():
         assert set(model) <= set(params) and ("method" in params) == (name != "submit"), name

@@ -93,7 +93,7 @@ def _bag(path: Path, pred: Prediction) -> None:
 
     with open_bag(path) as reader:
         depth = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()
-                 if c.topic == "/semattnet/depth"]  # fmt: skip
+                 if c.topic == "/semattnet/depth_image"]  # fmt: skip
     assert len(depth) == len(NAMES)
     img = depth[0]
     got = np.frombuffer(np.asarray(img.data, np.uint8).tobytes(), "<f4").reshape(SIZE)

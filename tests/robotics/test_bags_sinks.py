@@ -40,8 +40,8 @@ def test_bag_writer_round_trip(tmp_path: Path, name: str, fmt: str | None) -> No
     with open_bag(path) as reader:
         types = {c.topic: c.msgtype for c in reader.connections}
         assert types == {
-            "/semattnet/depth": "sensor_msgs/msg/Image",
-            "/semattnet/points": "sensor_msgs/msg/PointCloud2",
+            "/semattnet/depth_image": "sensor_msgs/msg/Image",
+            "/semattnet/point_cloud": "sensor_msgs/msg/PointCloud2",
             "/semattnet/camera_info": "sensor_msgs/msg/CameraInfo",
         }
         msgs: dict[str, list] = {}

@@ -147,7 +147,7 @@ def test_live_frame_round_trip(sink: LiveSink, tmp_path: Path) -> None:
     other.close()
     assert all(t == STAMP for t, _ in got.values())  # the log time is the sensor stamp
     msgs = {role: got[topic][1] for role, topic in sink.topics.items()}
-    for role in ("depth", "uncertainty", "rgb", "sparse", "points", "calibration"):
+    for role in ("depth", "uncertainty", "rgb", "sparse", "points", "camera_info"):
         assert _stamp_of(msgs[role]) == STAMP and msgs[role].frame_id == "cam_left", role
     DepthPngSink().write(tmp_path, pred)
     png = read_depth(tmp_path / "000042.png")  # the 16-bit PNG, decode_depth-ed
@@ -163,7 +163,7 @@ def test_live_frame_round_trip(sink: LiveSink, tmp_path: Path) -> None:
     sparse = pred.frame.sparse
     np.testing.assert_array_equal(_image(msgs["sparse"], "<f4", (H, W)), np.where(sparse > 0, sparse, np.nan))
     _check_cloud(msgs["points"], pred)
-    _check_calibration(msgs["calibration"], msgs["tf"])
+    _check_calibration(msgs["camera_info"], msgs["tf"])
     assert msgs["latency"] == {"frame": "000042", "stamp_ns": STAMP, "stages_ms": {"complete": 12.5, "write": 0.25}}
     port = sink.port
     sink.close()

@@ -32,7 +32,7 @@ T0, T_CAM_LIDAR = fb.T0, fb.T_CAM_LIDAR
 pytest.importorskip("rosbags")
 
 TOPICS = ["--image-topic", IMAGE_TOPIC, "--points-topic", POINTS_TOPIC]
-DEPTH_TOPIC = "/semattnet/depth"
+DEPTH_TOPIC = "/semattnet/depth_image"
 #: Frames of the run that is killed and resumed (128x192, about 20 ms each).
 N_LONG = 40
 

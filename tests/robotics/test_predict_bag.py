@@ -76,7 +76,8 @@ def test_bag_out_and_rerun_read_back(sample: dict[str, Path], tmp_path: Path) ->
         msgs: dict[str, list] = {}
         for conn, _, raw in reader.messages():
             msgs.setdefault(conn.topic, []).append(reader.deserialize(raw, conn.msgtype))
-    assert types == {"/semattnet/depth": "sensor_msgs/msg/Image", "/semattnet/points": "sensor_msgs/msg/PointCloud2",
+    assert types == {"/semattnet/depth_image": "sensor_msgs/msg/Image",
+                     "/semattnet/point_cloud": "sensor_msgs/msg/PointCloud2",
                      "/semattnet/camera_info": "sensor_msgs/msg/CameraInfo"}  # fmt: skip
     assert {k: len(v) for k, v in msgs.items()} == dict.fromkeys(types, 2)
     for i, (img, cloud, info) in enumerate(zip(*(msgs[t] for t in types), strict=True)):

@@ -73,7 +73,7 @@ def test_files_journal_ply_and_bag(bag: Path, tmp_path: Path) -> None:
         keep = (depth > 0) & (unc <= 0.5)
         assert 0 < keep.sum() < (depth > 0).sum()  # some dropped, some kept
         np.testing.assert_array_equal(_ply_xyz(out / f"{name}.ply"), depth_to_points(depth, K, mask=keep).xyz)
-        u_msg, d_msg, p_msg = (msgs[f"/semattnet/{t}"][i] for t in ("uncertainty", "depth", "points"))
+        u_msg, d_msg, p_msg = (msgs[f"/semattnet/{t}"][i] for t in ("uncertainty", "depth_image", "point_cloud"))
         assert u_msg.encoding == "32FC1" and u_msg.header == d_msg.header
         np.testing.assert_array_equal(_float_image(u_msg), np.where(unc > 0, unc, np.nan))
         np.testing.assert_array_equal(_float_image(d_msg), np.where(depth > 0, depth, np.nan))  # dense

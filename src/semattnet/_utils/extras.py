@@ -30,6 +30,7 @@ EXTRAS: Mapping[str, tuple[str, str]] = MappingProxyType(
         "nncf": ("nncf", "openvino"),
         "transformers": ("transformers", "segment"),
         "rosbags": ("rosbags", "ros"),
+        "cyclonedds": ("cyclonedds", "ros2"),
         "rerun": ("rerun-sdk", "rerun"),
         "foxglove": ("foxglove-sdk", "live"),
         "h5py": ("h5py", "nyu"),

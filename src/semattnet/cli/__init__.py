@@ -8,6 +8,7 @@ from semattnet.cli import (  # noqa: F401  (register the commands)
     models,
     predict,
     project,
+    ros,
     segment,
     train,
     weights,

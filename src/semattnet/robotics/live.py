@@ -7,13 +7,13 @@ input's sensor time and frame id (as :class:`~semattnet.inference.sinks.BagSink`
 ============================  =====================  ==================================================
 topic                         schema                 what
 ============================  =====================  ==================================================
-``/semattnet/depth``          foxglove.RawImage      the completed depth as stored, ``32FC1`` metres, holes NaN
+``/semattnet/depth_image``    foxglove.RawImage      the completed depth as stored, ``32FC1`` metres, holes NaN
 ``/semattnet/uncertainty``    foxglove.RawImage      its per-pixel uncertainty as stored, ``32FC1`` metres,
                                                      NaN where none (when the method gives one)
-``/semattnet/points``         foxglove.PointCloud    the coloured completed cloud (x, y, z float32, red,
+``/semattnet/point_cloud``    foxglove.PointCloud    the coloured completed cloud (x, y, z float32, red,
                                                      green, blue, alpha uint8) in the camera frame, the
                                                      pixels above ``max_uncertainty`` left out
-``/semattnet/calibration``    foxglove.CameraCalib.  K, P, size, distortion (``meta.camera_info`` or ``K``)
+``/semattnet/camera_info``    foxglove.CameraCalib.  K, P, size, distortion (``meta.camera_info`` or ``K``)
 ``/semattnet/latency``        JSON                   ``{frame, stamp_ns, stages_ms: {stage: ms}}``
 ``/tf``                       foxglove.FrameTransf.  camera <- LiDAR (``calib.T_cam_lidar``), when known
 ``/input/image``              foxglove.RawImage      the input image, ``rgb8``
@@ -30,7 +30,6 @@ or many.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,26 +41,22 @@ import numpy as np
 from semattnet._errors import InputError
 from semattnet._utils.extras import optional, require
 from semattnet._utils.registry import option
-from semattnet.data.frames import Frame
 from semattnet.data.io import decode_depth
 from semattnet.geometry.cameras import CameraInfoData
 from semattnet.inference.sinks import OutputSettings, Prediction, RunSink, Sink, SinkOptions, register_sink
 from semattnet.inference.uncertainty import UncertaintyLimit
+from semattnet.robotics.frame import TOPICS as OUTPUT_TOPICS
+from semattnet.robotics.frame import RobotFrame, frame_camera, stamp_ns
 from semattnet.robotics.gate import Gate, exposed, is_loopback, parse_address
-from semattnet.robotics.sinks import camera_info, stamp_ns
 
 if TYPE_CHECKING:
     from semattnet.geometry import PointCloud
 
 __all__ = ["LATENCY_SCHEMA", "LiveOptions", "LiveSink", "parse_address"]
 
-#: Topics by role; ``PREFIX`` is :attr:`LiveSink.prefix`.
+#: Topics by role; ``PREFIX`` is :attr:`LiveSink.prefix` (the outputs' names: :data:`semattnet.robotics.frame.TOPICS`).
 TOPICS = {
-    "depth": "PREFIX/depth",
-    "uncertainty": "PREFIX/uncertainty",
-    "points": "PREFIX/points",
-    "calibration": "PREFIX/calibration",
-    "latency": "PREFIX/latency",
+    **{role: f"PREFIX/{name}" for role, name in OUTPUT_TOPICS.items()},
     "tf": "/tf",
     "rgb": "/input/image",
     "sparse": "/input/sparse",
@@ -163,14 +158,6 @@ def _transform(m: ModuleType, stamp: object, parent: str, child: str, T_parent_c
                           translation=m.Vector3(x=t[0], y=t[1], z=t[2]),
                           rotation=m.Quaternion(x=x, y=y, z=z, w=w))  # fmt: skip
     return m.FrameTransforms(transforms=[tf])
-
-
-def _camera(frame: Frame) -> tuple[str, CameraInfoData | None]:
-    """The camera frame id (``meta.frame_id``, else the CameraInfo's, else ``camera``) and the CameraInfo
-    (``meta.camera_info``, else one made from ``K``; None without either)."""
-    info = frame.meta.camera_info or (camera_info(frame) if frame.K is not None else None)
-    frame_id = frame.meta.frame_id or (info.frame_id if info is not None else "") or "camera"
-    return str(frame_id), info
 
 
 class _Server(Protocol):
@@ -288,7 +275,7 @@ class LiveSink(RunSink):
             "depth": ch.RawImageChannel(topics["depth"], context=context),
             "uncertainty": ch.RawImageChannel(topics["uncertainty"], context=context),
             "points": ch.PointCloudChannel(topics["points"], context=context),
-            "calibration": ch.CameraCalibrationChannel(topics["calibration"], context=context),
+            "camera_info": ch.CameraCalibrationChannel(topics["camera_info"], context=context),
             "latency": fg.Channel(topics["latency"], schema=LATENCY_SCHEMA, context=context),
             "tf": ch.FrameTransformsChannel(topics["tf"], context=context),
             "rgb": ch.RawImageChannel(topics["rgb"], context=context),
@@ -318,25 +305,27 @@ class LiveSink(RunSink):
         t_ns = stamp_ns(frame, self._count)
         self._count += 1
         stamp = _timestamp(m, t_ns)
-        frame_id, info = _camera(frame)
+        frame_id, info = frame_camera(frame)
         self._log("depth", t_ns, lambda: _depth_image(m, stamp, frame_id, pred.stored))
         unc_png = pred.uncertainty_png
         if unc_png is not None:
             self._log("uncertainty", t_ns, lambda: _depth_image(m, stamp, frame_id, decode_depth(unc_png)))
         self._log("rgb", t_ns, lambda: _image(m, stamp, frame_id, np.asarray(frame.rgb, np.uint8), "rgb8"))
         self._log("sparse", t_ns, lambda: _depth_image(m, stamp, frame_id, frame.sparse))
-        if frame.K is not None:
-            max_depth = math.inf if self.max_depth is None else float(self.max_depth)
-            limit = self.max_uncertainty
-            self._log("points", t_ns, lambda: _cloud(m, stamp, frame_id, pred.cloud(max_depth, 0, limit)))
+        if frame.K is not None:  # the cloud every robot output sends (RobotFrame), built when a client wants it
+            self._log("points", t_ns, lambda: _cloud(m, stamp, frame_id, self._robot(pred).cloud))
         if info is not None:
-            self._log("calibration", t_ns, lambda: _calibration(m, stamp, frame_id, info))
+            self._log("camera_info", t_ns, lambda: _calibration(m, stamp, frame_id, info))
         T = None if frame.calib is None else frame.calib.T_cam_lidar
         if T is not None:
             lidar = frame.meta.lidar_frame_id or "lidar"
             self._log("tf", t_ns, lambda: _transform(m, stamp, frame_id, lidar, T))
         stages = {str(k): float(v) for k, v in pred.stage_ms.items()}
         self._log("latency", t_ns, lambda: {"frame": frame.name, "stamp_ns": t_ns, "stages_ms": stages})
+
+    def _robot(self, pred: Prediction) -> RobotFrame:
+        return RobotFrame.of(pred, self._count, max_depth=self.max_depth, max_uncertainty=self.max_uncertainty,
+                             output="the live view")  # fmt: skip
 
     def _stop(self) -> None:
         """Drop the clients (the gate), then stop the server: bounded whatever the clients do."""

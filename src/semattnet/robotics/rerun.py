@@ -37,7 +37,7 @@ import numpy as np
 from semattnet._errors import InputError
 from semattnet._utils.atomic import new_file_mode
 from semattnet._utils.extras import optional, require
-from semattnet.geometry import depth_to_points, invert_T
+from semattnet.geometry import PointCloud, depth_to_points, invert_T
 from semattnet.palette import IGNORE_ID, TRAIN_CLASSES, UNKNOWN_COLOR, colors_to_ids
 from semattnet.robotics.gate import Gate
 
@@ -158,11 +158,13 @@ class RerunLogger:
     def log_frame(self, stamp_ns: int, rgb: np.ndarray, K: np.ndarray, T_cam_lidar: np.ndarray, *,
                   sparse: np.ndarray | None = None, depth: np.ndarray | None = None,
                   semantic: np.ndarray | None = None, points: np.ndarray | None = None,
-                  uncertainty: np.ndarray | None = None, keep: np.ndarray | None = None) -> None:  # fmt: skip
+                  uncertainty: np.ndarray | None = None, keep: np.ndarray | None = None,
+                  cloud: PointCloud | None = None) -> None:  # fmt: skip
         """One frame at sensor time ``stamp_ns``: ``rgb`` (H, W, 3) uint8, ``K`` (3, 3), ``T_cam_lidar`` (4, 4);
         optional ``sparse`` / ``depth`` / ``uncertainty`` (H, W) metres (0 = none), ``semantic`` (H, W) trainIds
         or (H, W, 3) palette colours, ``points`` (N, 3|4) LiDAR frame; ``keep`` (H, W) bool: the pixels of
-        ``depth`` the completed cloud keeps (default all)."""
+        ``depth`` the completed cloud keeps (default all); ``cloud``: that cloud in the camera frame, already
+        built (:class:`~semattnet.robotics.frame.RobotFrame`'s; default: ``depth`` back-projected here)."""
         rr = _rerun()
         rgb = np.asarray(rgb, dtype=np.uint8)
         h, w = rgb.shape[:2]
@@ -185,8 +187,10 @@ class RerunLogger:
         if depth is not None:
             d = np.nan_to_num(np.asarray(depth, dtype=np.float32), nan=0.0)
             log(ENTITIES["depth"], rr.DepthImage(d, meter=1.0))
-            cloud = depth_to_points(d, K, rgb=rgb, max_depth=self.max_depth, mask=keep).transform(T_lidar_cam, "lidar")
-            log(ENTITIES["cloud"], rr.Points3D(cloud.xyz, colors=cloud.rgb))
+            if cloud is None:
+                cloud = depth_to_points(d, K, rgb=rgb, max_depth=self.max_depth, mask=keep)
+            in_lidar = cloud.transform(T_lidar_cam, "lidar")
+            log(ENTITIES["cloud"], rr.Points3D(in_lidar.xyz, colors=in_lidar.rgb))
         if uncertainty is not None:
             log(ENTITIES["uncertainty"], rr.DepthImage(np.nan_to_num(np.asarray(uncertainty, np.float32)), meter=1.0))
         self.frames += 1

@@ -26,6 +26,7 @@ from semattnet.data.frames import Frame
 from semattnet.geometry.cameras import CameraInfoData
 from semattnet.inference.sinks import OutputSettings, Prediction, RunSink, Sink, SinkOptions, register_sink
 from semattnet.inference.uncertainty import UncertaintyLimit
+from semattnet.robotics.frame import RobotFrame, pinhole_info, stamp_ns
 from semattnet.robotics.gate import exposed, is_loopback, parse_address
 
 if TYPE_CHECKING:
@@ -33,15 +34,6 @@ if TYPE_CHECKING:
     from semattnet.robotics.rerun import RerunLogger
 
 __all__ = ["BagOutOptions", "BagSink", "RerunOptions", "RerunSink", "camera_info", "stamp_ns"]
-
-
-def stamp_ns(frame: Frame, index: int) -> int:
-    """A frame's sensor time in ns: its ``meta.stamp_ns``, else its ``timestamp``, else ``index`` x 0.1 s."""
-    if frame.meta.stamp_ns is not None:
-        return int(frame.meta.stamp_ns)
-    if frame.timestamp is not None:
-        return round(frame.timestamp * 1e9)
-    return index * 100_000_000
 
 
 class _StagedTarget(RunSink):
@@ -174,18 +166,15 @@ class BagSink(_StagedTarget):
             self._writer = BagWriter(path, fmt=self.fmt, prefix=self.prefix, max_depth=self.max_depth).open()
 
     def write(self, stage: Path, pred: Prediction) -> None:
-        frame = pred.frame
-        if frame.K is None:
-            raise InputError(f"{frame.name}: the bag output needs the frame's intrinsics K, none given")
-        info = frame.meta.camera_info or camera_info(frame)
-        frame_id = frame.meta.frame_id or info.frame_id or "camera"
-        depth = np.where(pred.stored > 0, pred.stored, np.nan).astype(np.float32)  # REP 118: holes NaN
-        unc = _stored_uncertainty(pred) if self.uncertainty else None
+        from semattnet.robotics.frame import RobotFrame
+
         if self._writer is None:
             raise InputError(f"{self.target}: the bag is not open (call open() first)")
+        robot = RobotFrame.of(
+            pred, self._count, self.uncertainty, self.max_depth, self.max_uncertainty, "the bag output"
+        )
         with self._full_disk():
-            self._writer.write(stamp_ns(frame, self._count), frame_id, depth, info, rgb=frame.rgb, K=frame.K,
-                               uncertainty=unc, keep=pred.keep(self.max_uncertainty))  # fmt: skip
+            self._writer.write_frame(robot)
         self._count += 1
 
     def finish(self, stage: Path) -> None:
@@ -215,9 +204,8 @@ def _stored_uncertainty(pred: Prediction) -> np.ndarray:
 
 def camera_info(frame: Frame) -> CameraInfoData:
     """A distortion-free CameraInfo of a frame's ``K`` and size."""
-    K = np.asarray(frame.K, dtype=np.float64)
     h, w = frame.size
-    return CameraInfoData(w, h, K, np.zeros(5), np.eye(3), np.hstack([K, np.zeros((3, 1))]), "plumb_bob", "camera")
+    return pinhole_info(np.asarray(frame.K, dtype=np.float64), w, h)
 
 
 #: ``--rerun-serve``'s web viewer port (Rerun's default), served only with a HOST other than this machine.
@@ -275,10 +263,11 @@ class RerunSink(_StagedTarget):
         if self._logger is None:
             raise InputError("the Rerun recording is not open (call open() first)")
         with self._full_disk():
+            robot = RobotFrame.of(pred, self._count, max_depth=self.max_depth, max_uncertainty=self.max_uncertainty,
+                                  output="the Rerun recording")  # fmt: skip
             self._logger.log_frame(stamp_ns(frame, self._count), frame.rgb, frame.K, np.eye(4) if T is None else T,
                                    sparse=frame.sparse, depth=pred.stored, semantic=frame.semantic,
-                                   points=frame.points, uncertainty=unc,
-                                   keep=pred.keep(self.max_uncertainty))  # fmt: skip
+                                   points=frame.points, uncertainty=unc, cloud=robot.cloud)  # fmt: skip
         self._count += 1
 
     def finish(self, stage: Path) -> None:

@@ -29,6 +29,8 @@ class Typestore(Protocol):
 
     def serialize_cdr(self, message: object, typename: str) -> memoryview: ...
 
+    def deserialize_cdr(self, rawdata: bytes, typename: str) -> object: ...
+
 
 @lru_cache(maxsize=2)
 def rosbags_typestore(ros1: bool) -> Typestore:

@@ -121,7 +121,7 @@ def camera_info_message(
     cls = ts.types["sensor_msgs/msg/CameraInfo"]
     ros1 = "K" in vars(cls)["__dataclass_fields__"]
     mats = {"D": info.D, "K": info.K, "R": info.R, "P": info.P}
-    kw = {(k if ros1 else k.lower()): np.asarray(v, dtype=np.float64).reshape(-1) for k, v in mats.items()}
+    kw = {(k if ros1 else k.lower()): np.array(v, dtype=np.float64).reshape(-1) for k, v in mats.items()}  # copies
     roi = ts.types["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
     hdr = header(ts, info.stamp_ns if stamp_ns is None else stamp_ns, info.frame_id if frame_id is None else frame_id)
     return cls(header=hdr, height=int(info.height), width=int(info.width), distortion_model=info.distortion_model,

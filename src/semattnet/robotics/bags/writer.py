@@ -17,18 +17,20 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from semattnet._errors import InputError
 from semattnet._utils.atomic import fsync_dir, full_disk_named
 from semattnet._utils.extras import require
-from semattnet.geometry import depth_to_points
+from semattnet.robotics.frame import ROS_TYPES, topic_names
 
 from .decode import CameraInfoData
 from .deps import rosbags_typestore, writes_mcap
-from .encode import camera_info_message, depth_image_message, pack_rgb, pointcloud2_message
+
+if TYPE_CHECKING:
+    from semattnet.robotics.frame import RobotFrame
 
 __all__ = ["BAG_FORMATS", "BagWriter", "MessageWriter", "bag_format", "staged_bag"]
 
@@ -129,15 +131,16 @@ class BagWriter:
     Args:
         path: the bag to create (a ROS 2 bag is a folder; ``.bag`` or ``fmt="ros1"`` writes ROS 1).
         overwrite: replace an existing ``path`` (else :class:`FileExistsError` before anything is written).
-        prefix: topics are ``PREFIX/depth`` (Image 32FC1), ``PREFIX/points`` (PointCloud2 x, y, z, rgb),
-            ``PREFIX/camera_info`` and, for frames written with an uncertainty, ``PREFIX/uncertainty`` (Image 32FC1).
+        prefix: topics are ``PREFIX/depth_image`` (Image 32FC1), ``PREFIX/point_cloud`` (PointCloud2 x, y, z, rgb),
+            ``PREFIX/camera_info`` and, for frames written with an uncertainty, ``PREFIX/uncertainty`` (Image 32FC1)
+            (:data:`semattnet.robotics.frame.TOPICS`).
         max_depth: cloud points deeper than this are left out (None: all), metres.
     """
 
     def __init__(self, path: str | os.PathLike[str], overwrite: bool = False, fmt: str | None = None,
                  prefix: str = "/semattnet", max_depth: float | None = None) -> None:  # fmt: skip
         self.path, self.fmt = Path(path), bag_format(path, fmt)
-        self.topics = {k: f"{prefix.rstrip('/')}/{k}" for k in ("depth", "points", "camera_info", "uncertainty")}
+        self.topics = topic_names(prefix, tuple(ROS_TYPES))
         self.max_depth = max_depth
         from semattnet._utils.outputs import Output, check_outputs
 
@@ -168,27 +171,17 @@ class BagWriter:
         (H, W, 3) uint8 colours for the cloud, ``K`` the depth's intrinsics (default: ``camera_info``'s ``P``),
         ``uncertainty`` (H, W) metres (<= 0 or NaN = none) for the uncertainty topic, ``keep`` (H, W) bool: the
         pixels the cloud keeps (default all; the depth image stays whole)."""
+        from semattnet.robotics.frame import RobotFrame
+
+        self.write_frame(RobotFrame.build(stamp_ns, frame_id, depth, camera_info, rgb=rgb, K=K, uncertainty=uncertainty,
+                                          keep=keep, max_depth=self.max_depth))  # fmt: skip
+
+    def write_frame(self, frame: RobotFrame) -> None:
+        """One :class:`~semattnet.robotics.frame.RobotFrame`: its messages, on :attr:`topics`."""
         if self._out is None:
             raise InputError(f"{self.path}: BagWriter.write outside its with-block")
-        depth = np.asarray(depth, dtype=np.float32)
-        if depth.shape != (camera_info.height, camera_info.width):
-            raise InputError(f"depth: shape {depth.shape} differs from the CameraInfo's "
-                             f"{camera_info.height}x{camera_info.width}")  # fmt: skip
-        ts, out = self._out.ts, self._out
-        K = camera_info.intrinsics() if K is None else np.asarray(K, dtype=np.float64)
-        out.write(self.topics["depth"], stamp_ns, depth_image_message(ts, depth, stamp_ns, frame_id))
-        if uncertainty is not None:
-            unc = np.asarray(uncertainty, dtype=np.float32)
-            if unc.shape != depth.shape:
-                raise InputError(f"uncertainty: shape {unc.shape} differs from the depth's {depth.shape}")
-            out.write(self.topics["uncertainty"], stamp_ns, depth_image_message(ts, unc, stamp_ns, frame_id))
-        cloud = depth_to_points(np.nan_to_num(depth, nan=0.0), K, rgb=rgb, max_depth=self.max_depth, frame=frame_id,
-                                mask=keep)  # fmt: skip
-        fields = {"x": cloud.xyz[:, 0], "y": cloud.xyz[:, 1], "z": cloud.xyz[:, 2]}
-        if cloud.rgb is not None:
-            fields["rgb"] = pack_rgb(cloud.rgb)
-        out.write(self.topics["points"], stamp_ns, pointcloud2_message(ts, fields, stamp_ns, frame_id))
-        out.write(self.topics["camera_info"], stamp_ns, camera_info_message(ts, camera_info, stamp_ns, frame_id))
+        for role, msg in frame.messages(self._out.ts).items():
+            self._out.write(self.topics[role], frame.stamp_ns, msg)
         self.frames += 1
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,

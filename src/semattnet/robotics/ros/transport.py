@@ -13,21 +13,25 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
-__all__ = ["OUTPUT_QOS", "SENSOR_QOS", "Publisher", "QoS", "Transport"]
+__all__ = ["OUTPUT_QOS", "SENSOR_QOS", "TF_STATIC_QOS", "Publisher", "QoS", "Transport"]
 
 
 @dataclass(frozen=True)
 class QoS:
-    """The part of a ROS 2 QoS profile the node sets: reliability and keep-last depth (volatile always)."""
+    """The part of a ROS 2 QoS profile the node sets: reliability, keep-last depth and durability (``durable``:
+    transient local, a late subscriber gets the last ``depth`` messages, as ``/tf_static`` is published)."""
 
     reliable: bool
     depth: int
+    durable: bool = False
 
 
 #: What ROS 2 camera and LiDAR drivers publish with (rclcpp's sensor-data profile): best effort, keep-last 5.
 SENSOR_QOS = QoS(reliable=False, depth=5)
 #: What depth nodes publish with: reliable, keep-last 1 (a late subscriber gets only the newest frame).
 OUTPUT_QOS = QoS(reliable=True, depth=1)
+#: What ``/tf_static`` is subscribed with (tf2's static profile: reliable, transient local).
+TF_STATIC_QOS = QoS(reliable=True, depth=100, durable=True)
 
 
 class Publisher(Protocol):

@@ -1,0 +1,204 @@
+"""``semattnet ros2`` / ``semattnet ros1``: the live depth-completion node on a robot, over DDS (ROS 2) or the
+ROS 1 master and TCPROS; no ROS installation needed for either.
+
+The model options are the one "Model" section every command that runs a model takes (:mod:`semattnet.cli._model`),
+the semantic-map options ``--segment`` / ``--palette-mismatch``, and the live viewers ``--live`` / ``--rerun-serve``
+as their sink entries declare them; the node is :class:`semattnet.robotics.ros.node.DepthNode`.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import click
+
+from semattnet.cli._group import main
+from semattnet.cli._inputs import MAP_OPTIONS, Maps, field_options
+from semattnet.cli._model import ModelOptions, model_options
+from semattnet.cli._options import DEPTH_M, POSITIVE_FLOAT, POSITIVE_INT, SECONDS
+from semattnet.cli._outputs import MaxUncertainty
+from semattnet.cli._params import GeneratedCommand, section, values_of, with_options
+
+if TYPE_CHECKING:
+    from semattnet.inference.completion import Completer
+    from semattnet.inference.semantic import SemanticMaps
+    from semattnet.inference.sinks import RunSink
+    from semattnet.inference.uncertainty import UncertaintyLimit
+    from semattnet.robotics.ros.node import DepthNode
+    from semattnet.robotics.ros.transport import Transport
+
+_ROS = section("ROS")
+
+
+def viewer_options() -> Sequence[click.Parameter]:
+    """``predict``'s live viewers, which run beside the node: ``--live`` (Foxglove) and ``--rerun-serve``, as their
+    sink entries declare them."""
+    from semattnet.robotics.live import LiveOptions
+    from semattnet.robotics.sinks import RerunOptions
+
+    made = field_options(LiveOptions, "Viewers") + field_options(RerunOptions, "Viewers")
+    return tuple(p for p in made if p.name in ("live", "rerun_serve"))
+
+
+#: The semantic-map options a live node takes (a segmenter; no map files).
+SEGMENT_OPTIONS = tuple(p for p in MAP_OPTIONS if p.name in ("segment_spec", "palette_mismatch"))
+
+ROS2_OPTIONS = (
+    _ROS(["--image-topic"], default="~/input/image", show_default=True,
+         help="sensor_msgs/Image (rgb8, bgr8, mono8); a name ending in /compressed: CompressedImage."),
+    _ROS(["--camera-info-topic"], default="~/input/camera_info", show_default=True, help="sensor_msgs/CameraInfo."),
+    _ROS(["--points-topic"], default="~/input/point_cloud", show_default=True,
+         help="sensor_msgs/PointCloud2 (x, y, z), or with --sparse-depth a sparse depth Image (32FC1 m, 16UC1 mm)."),
+    _ROS(["--sparse-depth"], is_flag=True, help="--points-topic is a sparse depth image in the camera's frame."),
+    _ROS(["--output-prefix"], default="~/output", show_default=True,
+         help="Where depth_image, point_cloud, uncertainty and camera_info are published."),
+    _ROS(["--namespace"], default="", help="The node's namespace (~ is NAMESPACE/NODE) [/]."),
+    _ROS(["--node-name"], default="semattnet", show_default=True, help="The node's name."),
+    _ROS(["--rig"], type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+         help="Rig JSON (K, T_cam_lidar, image_size) overriding CameraInfo and /tf_static."),
+    _ROS(["--max-skew"], type=SECONDS, default=None, help="Seconds between an image and its scan at most "
+         "[half the scan period]."),
+    _ROS(["--max-depth"], type=DEPTH_M, default=None, help="The point cloud leaves out deeper pixels, m [none]."),
+    _ROS(["--max-uncertainty"], type=MaxUncertainty(), default=None,
+         help="The point cloud leaves out pixels whose uncertainty exceeds METRES or PERCENT% of their depth."),
+    _ROS(["--report-every"], type=POSITIVE_FLOAT, default=5.0, show_default=True,
+         help="Seconds between two latency and drop lines."),
+    _ROS(["--frames"], type=POSITIVE_INT, default=None, help="Stop after this many frames [run until Ctrl-C]."),
+)  # fmt: skip
+#: The DDS transport's options (``ros2``).
+DDS_OPTIONS = (
+    _ROS(["--domain-id"], type=click.IntRange(0, 232), default=None, help="DDS domain [ROS_DOMAIN_ID, else 0]."),
+    _ROS(["--loopback"], is_flag=True, help="DDS on 127.0.0.1 only (unicast; one machine, no multicast)."),
+)  # fmt: skip
+#: The ROS 1 transport's options (``ros1``).
+ROS1_OPTIONS = (
+    _ROS(["--master"], default=None, metavar="URI",
+         help="The ROS master [ROS_MASTER_URI, else http://127.0.0.1:11311]."),
+    _ROS(["--host"], default=None, help="The address peers reach this node at [ROS_IP, else ROS_HOSTNAME, else "
+         "127.0.0.1]."),
+)  # fmt: skip
+
+
+def _domain_id(given: int | None) -> int:
+    """``--domain-id``, else ``ROS_DOMAIN_ID``, else 0 (a bad environment value: a usage error)."""
+    if given is not None:
+        return given
+    text = os.environ.get("ROS_DOMAIN_ID", "").strip() or "0"
+    if not text.isdigit() or int(text) > 232:
+        raise click.UsageError(f"ROS_DOMAIN_ID={text!r}: expected a domain id 0-232 (or give --domain-id)")
+    return int(text)
+
+
+@dataclass(frozen=True)
+class NodeOptions:
+    """The node's own options (:data:`ROS2_OPTIONS`), whatever its transport."""
+
+    image_topic: str
+    camera_info_topic: str
+    points_topic: str
+    sparse_depth: bool
+    output_prefix: str
+    namespace: str
+    node_name: str
+    rig: Path | None
+    max_skew: float | None
+    max_depth: float | None
+    max_uncertainty: str | None
+    report_every: float
+    frames: int | None
+    live: str | None
+    rerun_serve: str | None
+
+    def viewers(self, limit: UncertaintyLimit | None) -> list[RunSink]:
+        """The live viewers asked for (``--live``, ``--rerun-serve``), fed every published frame."""
+        sinks: list[RunSink] = []
+        if self.live is not None:
+            from semattnet.robotics.live import LiveSink
+
+            sinks.append(LiveSink(address=self.live, max_depth=self.max_depth, log=click.echo, max_uncertainty=limit))
+        if self.rerun_serve is not None:
+            from semattnet.robotics.sinks import RerunSink
+
+            sinks.append(
+                RerunSink(serve=self.rerun_serve, max_depth=self.max_depth, log=click.echo, max_uncertainty=limit)
+            )
+        return sinks
+
+    def node(self, completer: Completer, semantic: SemanticMaps, transport: Callable[[], Transport]) -> DepthNode:
+        """The node on the transport ``transport()`` makes (the names and the rig checked first)."""
+        from semattnet.geometry import read_rig_json
+        from semattnet.inference.uncertainty import UncertaintyLimit
+        from semattnet.robotics.ros.names import check_namespace, resolve_name
+        from semattnet.robotics.ros.node import DepthNode, NodeTopics
+
+        topics = NodeTopics(self.image_topic, self.camera_info_topic, self.points_topic, output=self.output_prefix)
+        namespace = check_namespace(self.namespace)
+        for option, name in (
+            ("--image-topic", self.image_topic),
+            ("--camera-info-topic", self.camera_info_topic),
+            ("--points-topic", self.points_topic),
+            ("--output-prefix", self.output_prefix),
+        ):
+            resolve_name(name, namespace, self.node_name, option)  # a bad name: one line, before the transport starts
+        rig = read_rig_json(self.rig) if self.rig is not None else None
+        limit = None if self.max_uncertainty is None else UncertaintyLimit.parse(self.max_uncertainty)
+        return DepthNode(transport(), completer, topics, namespace=namespace, node=self.node_name, rig=rig,
+                         max_skew_ns=None if self.max_skew is None else round(self.max_skew * 1e9),
+                         compressed=self.image_topic.rstrip("/").endswith("/compressed"), sparse=self.sparse_depth,
+                         semantic=semantic, max_depth=self.max_depth, max_uncertainty=limit,
+                         report_s=self.report_every, say=click.echo, sinks=self.viewers(limit))  # fmt: skip
+
+
+def _run(params: dict[str, object], transport: Callable[[], Transport]) -> None:
+    """Check the model options, load the completer and spin the node on ``transport()`` until stopped."""
+    from semattnet.robotics.ros.node import run_node
+
+    model, options = values_of(ModelOptions, params), values_of(NodeOptions, params)
+    model.check()
+    maps = Maps(None, params["segment_spec"], str(params["palette_mismatch"]))  # type: ignore[arg-type]
+    completer = model.completer()
+    node = options.node(completer, maps.semantic_maps(folder=False).bind(completer), transport)
+    run_node(node, options.frames)
+
+
+@main.command(cls=GeneratedCommand, generated=[("frames", viewer_options)])
+@with_options(ROS2_OPTIONS + DDS_OPTIONS)
+@model_options()
+@with_options(SEGMENT_OPTIONS)
+def ros2(**params: object) -> None:
+    """Run a ROS 2 depth-completion node: subscribe a camera, its CameraInfo and a LiDAR, publish completed depth.
+
+    Speaks DDS itself (cyclonedds: pip install 'semattnet[ros2]'), no ROS installation or sourced workspace.
+    Completes the newest image-scan pair (older pairs are dropped and counted), publishes under
+    --output-prefix with the image's stamp and frame id; Ctrl-C or SIGTERM stops it."""
+    domain = _domain_id(params["domain_id"])  # type: ignore[arg-type]
+
+    def dds() -> Transport:
+        from semattnet.robotics.ros.dds import DdsTransport
+
+        return DdsTransport(domain, loopback=bool(params["loopback"]))
+
+    _run(params, dds)
+
+
+@main.command(cls=GeneratedCommand, generated=[("frames", viewer_options)])
+@with_options(ROS2_OPTIONS + ROS1_OPTIONS)
+@model_options()
+@with_options(SEGMENT_OPTIONS)
+def ros1(**params: object) -> None:
+    """Run a ROS 1 depth-completion node: the same node as ros2, registered with a ROS master and speaking TCPROS
+    itself (any Python, no rospy; pip install 'semattnet[ros]'). Topics, pairing, drops and outputs as ros2."""
+    master = str(params["master"] or os.environ.get("ROS_MASTER_URI") or "http://127.0.0.1:11311")
+    host = params["host"]
+
+    def tcpros() -> Transport:
+        from semattnet.robotics.ros.tcpros import TcprosTransport
+
+        name = "/" + str(params["node_name"]).strip("/")
+        return TcprosTransport(master, node_name=name, host=None if host is None else str(host))
+
+    _run(params, tcpros)
