@@ -6,6 +6,7 @@ import os
 import weakref
 from pathlib import Path
 
+from semattnet._utils.extras import optional
 from semattnet._utils.outputs import OutputError
 
 __all__ = ["LOCK_FILE", "FolderBusyError", "FolderLock"]
@@ -56,14 +57,15 @@ class FolderLock:
 
     def _lock(self, fd: int) -> bool:
         """``flock`` ``fd``; a lock held by a live process is :class:`FolderBusyError`."""
+        fcntl = optional("fcntl")  # None off POSIX
         try:
-            import fcntl
-
+            if fcntl is None:
+                raise OSError("no flock")
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             return True
         except BlockingIOError:
             holder = _holder(fd)
-        except (ImportError, OSError):  # no flock here: the process id alone says whether it is held
+        except OSError:  # no flock here: the process id alone says whether it is held
             from semattnet._utils.atomic import pid_alive
 
             holder = _holder(fd)
