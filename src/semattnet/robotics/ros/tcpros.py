@@ -78,15 +78,20 @@ _MISSING = object()
 
 
 class TcprosPublisher:
-    """One advertised topic (:class:`~.transport.Publisher`): serialises once, queues to every subscriber."""
+    """One advertised topic (:class:`~.transport.Publisher`): serialises once, queues to every subscriber.
+
+    A durable QoS (transient local, as ``/tf_static`` is published) makes it a latched topic, as ROS 1 has them:
+    a subscriber that connects later gets the last message first."""
 
     def __init__(self, store: Ros1Store, caller_id: str, topic: str, msgtype: str, qos: QoS) -> None:
         self.topic, self.msgtype, self.qos = topic, msgtype, qos
         self._store = store
         definition, self.md5sum = store.generate_msgdef(msgtype)
         self.fields = {"callerid": caller_id, "topic": topic, "type": ros1_type_name(msgtype),
-                       "md5sum": self.md5sum, "message_definition": definition, "latching": "0"}  # fmt: skip
+                       "md5sum": self.md5sum, "message_definition": definition,
+                       "latching": "1" if qos.durable else "0"}  # fmt: skip
         self._outboxes: list[Outbox] = []
+        self._latched: tuple[bytes, memoryview] | None = None  # a durable topic's last message, for late subscribers
         self._lock = threading.Lock()
         self._dropped_gone = 0
 
@@ -112,6 +117,8 @@ class TcprosPublisher:
             raise InputError(f"{self.topic}: cannot serialise the message as {self.msgtype} ({exc})") from None
         prefix = _LEN.pack(len(data))
         with self._lock:
+            if self.qos.durable:
+                self._latched = (prefix, data)
             self._dropped_gone += sum(o.dropped for o in self._outboxes if not o.alive)
             self._outboxes = [o for o in self._outboxes if o.alive]
             outboxes = list(self._outboxes)
@@ -126,6 +133,8 @@ class TcprosPublisher:
                 sock.close()
                 return None
             outbox = Outbox(sock, self.qos.depth, f"{self.topic} -> {label}", stop)
+            if self._latched is not None:
+                outbox.put(*self._latched)
             self._outboxes.append(outbox)
             return outbox
 
