@@ -135,6 +135,20 @@ def test_durable_topic_is_latched_for_a_late_subscriber(node: Callable[[str], Tc
     _check_depth(received[0])
 
 
+def test_header_seq_counts_each_topics_messages(node: Callable[[str], TcprosTransport]) -> None:
+    """As rospy does, a publisher numbers its messages in ``Header.seq`` (1, 2, ...); the caller's message keeps 0."""
+    talker, listener = node("/talker"), node("/listener")
+    received: list[Any] = []
+    listener.subscribe("/depth", IMAGE, SENSOR_QOS, received.append)
+    publisher = talker.advertise("/depth", IMAGE, SENSOR_QOS)
+    message = _depth_message(talker)
+    _publish_until(publisher, message, received, 3)
+    seqs = [m.header.seq for m in received]
+    assert seqs[0] >= 1 and seqs == list(range(seqs[0], seqs[0] + len(seqs))), seqs
+    assert message.header.seq == 0
+    _check_depth(received[-1])
+
+
 def test_subscriber_reconnects_after_a_dropped_connection(node: Callable[[str], TcprosTransport]) -> None:
     talker, listener = node("/talker"), node("/listener")
     received: list[Any] = []

@@ -126,7 +126,7 @@ def test_ros1_node_driven_by_rostopic_pub_reaches_rostopic_echo(tmp_path: Path, 
     fields = dict(re.findall(r"^\s*(\w+): (.*)$", result["echo"], re.MULTILINE))
     assert "data" in fields, result["echo"][-2000:]
     stamp = int(fields["secs"]) * 1_000_000_000 + int(fields["nsecs"])
-    assert stamp in drive and fields["frame_id"] == f'"{TOPICS.camera_frame}"'
+    assert stamp in drive and fields["frame_id"] == f'"{TOPICS.camera_frame}"' and int(fields["seq"]) >= 1
     assert (fields["encoding"], fields["is_bigendian"]) == ('"32FC1"', "0")
     assert (fields["height"], fields["width"], fields["step"]) == (str(H), str(W), str(4 * W))
     pixels = np.frombuffer(bytes(json.loads(fields["data"])), "<f4").reshape(H, W)

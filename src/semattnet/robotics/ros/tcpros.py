@@ -25,6 +25,7 @@ Example (needs a running ``roscore``)::
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import re
@@ -94,6 +95,7 @@ class TcprosPublisher:
         self._latched: tuple[bytes, memoryview] | None = None  # a durable topic's last message, for late subscribers
         self._lock = threading.Lock()
         self._dropped_gone = 0
+        self._seq = 0
 
     @property
     def dropped(self) -> int:
@@ -108,9 +110,10 @@ class TcprosPublisher:
             return sum(o.alive for o in self._outboxes)
 
     def publish(self, message: object) -> None:
-        """Serialise ``message`` (a rosbags ``msgtype`` object) once and queue it to every subscriber; never blocks."""
+        """Serialise ``message`` (a rosbags ``msgtype`` object) once and queue it to every subscriber; never blocks.
+        A ``Header.seq`` is this topic's count of messages, from 1, as rospy numbers them (``message`` is kept)."""
         try:
-            data = self._store.serialize_ros1(adopt_message(self._store, message), self.msgtype)
+            data = self._store.serialize_ros1(self._numbered(adopt_message(self._store, message)), self.msgtype)
         except InputError:
             raise
         except Exception as exc:
@@ -124,6 +127,16 @@ class TcprosPublisher:
             outboxes = list(self._outboxes)
         for outbox in outboxes:
             outbox.put(prefix, data)
+
+    def _numbered(self, message: Any) -> Any:
+        """``message`` with the next ``header.seq`` (a copy of it and its header; unchanged without a header)."""
+        header: Any = getattr(message, "header", None)
+        if not hasattr(header, "seq") or not hasattr(message, "__dataclass_fields__"):
+            return message
+        with self._lock:
+            self._seq += 1
+            seq = self._seq
+        return dataclasses.replace(message, header=dataclasses.replace(header, seq=seq))
 
     def attach(self, sock: socket.socket, label: str, stop: threading.Event) -> Outbox | None:
         """A new subscriber's outbox, or None (the socket closed) beyond :data:`MAX_PEERS` connections."""
