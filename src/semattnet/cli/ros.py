@@ -196,9 +196,11 @@ def ros1(**params: object) -> None:
     host = params["host"]
 
     def tcpros() -> Transport:
+        from semattnet.robotics.ros.names import check_namespace
         from semattnet.robotics.ros.tcpros import TcprosTransport
 
-        name = "/" + str(params["node_name"]).strip("/")
+        # The node's ROS 1 name is in its namespace: two robots' nodes on one master must not share a name.
+        name = check_namespace(str(params["namespace"])) + "/" + str(params["node_name"]).strip("/")
         return TcprosTransport(master, node_name=name, host=None if host is None else str(host))
 
     _run(params, tcpros)

@@ -1,13 +1,15 @@
 """Scenarios against Debian's ROS 1 (roscore, rostopic), run as a script so that a test can isolate it.
 
-``python _ros1_peers.py echo|pub WORKDIR`` starts ``roscore`` on a free port (``ROS_HOME`` in WORKDIR),
-runs the scenario with :class:`~semattnet.robotics.ros.tcpros.TcprosTransport` and prints one JSON line
-of what the peers saw. Every wait is bounded; every process it starts is ended by its PID (roscore with
+``python _ros1_peers.py echo|pub|node WORKDIR`` starts ``roscore`` on a free port (``ROS_HOME`` in WORKDIR),
+runs the scenario with :class:`~semattnet.robotics.ros.tcpros.TcprosTransport` (``node``: the
+``semattnet ros1`` command, fed from the bag ``WORKDIR/drive_mcap``) and prints one JSON line of what the
+peers saw. Every wait is bounded; every process it starts is ended by its PID (roscore with
 SIGINT, as its documentation asks). The test runs it inside a loopback-only network namespace.
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import os
@@ -16,6 +18,7 @@ import socket
 import subprocess
 import sys
 import time
+import xmlrpc.client
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -23,9 +26,11 @@ from typing import Any
 
 import numpy as np
 
+from semattnet.robotics.bags import BagTopics, open_bag
+from semattnet.robotics.bags.decode import stamp_ns
 from semattnet.robotics.bags.encode import depth_image_message
-from semattnet.robotics.ros.tcpros import TcprosError, TcprosTransport
-from semattnet.robotics.ros.transport import OUTPUT_QOS, SENSOR_QOS
+from semattnet.robotics.ros.tcpros import TcprosError, TcprosPublisher, TcprosTransport
+from semattnet.robotics.ros.transport import OUTPUT_QOS, SENSOR_QOS, TF_STATIC_QOS
 
 STAMP = 1_700_000_000_123_456_789
 H, W = 480, 640
@@ -53,8 +58,8 @@ def _stop(proc: subprocess.Popen[str], sig: int = signal.SIGINT) -> str:
 
 
 @contextmanager
-def _roscore(workdir: Path) -> Iterator[tuple[dict[str, str], TcprosTransport]]:
-    """roscore on a free port, and our node on it once the master answers."""
+def _roscore(workdir: Path, name: str = "/semattnet") -> Iterator[tuple[dict[str, str], TcprosTransport]]:
+    """roscore on a free port, and our node ``name`` on it once the master answers."""
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
@@ -66,7 +71,7 @@ def _roscore(workdir: Path) -> Iterator[tuple[dict[str, str], TcprosTransport]]:
         deadline = time.monotonic() + DEADLINE_S
         while transport is None:
             try:
-                transport = TcprosTransport(env["ROS_MASTER_URI"], "/semattnet", "127.0.0.1", timeout=3.0)
+                transport = TcprosTransport(env["ROS_MASTER_URI"], name, "127.0.0.1", timeout=3.0)
             except TcprosError:
                 if time.monotonic() > deadline or core.poll() is not None:
                     raise
@@ -124,6 +129,77 @@ def pub(workdir: Path) -> dict[str, Any]:
     }  # fmt: skip
 
 
+#: How many frames ``semattnet ros1 --frames`` completes before it stops on its own.
+NODE_FRAMES = 5
+NODE_DEPTH = "/semattnet/output/depth_image"
+
+
+def _camera_info_yaml(info: Any) -> str:
+    """A bag's (ROS 2) CameraInfo as ``rostopic pub``'s YAML (JSON is YAML), in ROS 1's field names."""
+    stamp = {"secs": int(info.header.stamp.sec), "nsecs": int(info.header.stamp.nanosec)}
+    return json.dumps({"header": {"stamp": stamp, "frame_id": info.header.frame_id}, "height": int(info.height),
+                       "width": int(info.width), "distortion_model": info.distortion_model, "D": info.d.tolist(),
+                       "K": info.k.tolist(), "R": info.r.tolist(), "P": info.p.tolist()})  # fmt: skip
+
+
+def _subscribed(env: dict[str, str], topic: str) -> bool:
+    """Whether the master lists a subscriber of ``topic``."""
+    code, _, (_, subscribers, _) = xmlrpc.client.ServerProxy(env["ROS_MASTER_URI"]).getSystemState("/probe")
+    return code == 1 and any(name == topic and nodes for name, nodes in subscribers)
+
+
+def _drive(env: dict[str, str], static: TcprosPublisher, frames: list[tuple[TcprosPublisher, Any]],
+           procs: dict[str, subprocess.Popen[str]]) -> None:  # fmt: skip
+    """Once the node has subscribed (/tf_static, its last input) and ``rostopic echo`` waits for its depth,
+    publish the bag's images and clouds at 10 Hz, round and round, until the node has stopped (bounded)."""
+    deadline = time.monotonic() + DEADLINE_S
+    while static.subscriber_count < 1 or not _subscribed(env, NODE_DEPTH):
+        if time.monotonic() > deadline or procs["node"].poll() is not None:
+            return
+        time.sleep(0.1)
+    time.sleep(1.0)  # the node's connection to rostopic pub's latched CameraInfo is made meanwhile
+    while procs["node"].poll() is None and time.monotonic() < deadline:
+        for publisher, message in frames:
+            publisher.publish(message)
+            time.sleep(0.05)
+
+
+def node(workdir: Path) -> dict[str, Any]:
+    """``semattnet ros1 --frames`` with its CameraInfo from ``rostopic pub -l`` and its image, cloud and latched
+    /tf_static from our camera driver (the bag): what ``rostopic echo -n 1`` printed of the node's depth, and
+    the node's exit status and output."""
+    topics = BagTopics()
+    with open_bag(workdir / "drive_mcap") as reader:
+        msgs = {c.topic: [reader.deserialize(raw, c.msgtype) for _, _, raw in reader.messages([c])]
+                for c in reader.connections}  # fmt: skip
+    with _roscore(workdir, "/camera_driver") as (env, transport):
+        static = transport.advertise(topics.tf_static, "tf2_msgs/msg/TFMessage", TF_STATIC_QOS)
+        static.publish(msgs[topics.tf_static][0])
+        image = transport.advertise(topics.image, "sensor_msgs/msg/Image", SENSOR_QOS)
+        cloud = transport.advertise(topics.points, "sensor_msgs/msg/PointCloud2", SENSOR_QOS)
+        frames = [(image, m) for m in msgs[topics.image]] + [(cloud, m) for m in msgs[topics.points]]
+        frames.sort(key=lambda frame: stamp_ns(frame[1].header.stamp))
+        info = _camera_info_yaml(msgs[topics.camera_info][0])
+        argv = {"info": ["rostopic", "pub", "-l", topics.camera_info, "sensor_msgs/CameraInfo", info],
+                "echo": ["rostopic", "echo", "-n", "1", NODE_DEPTH],
+                "node": [sys.executable, "-m", "semattnet", "ros1", "--master", env["ROS_MASTER_URI"], "--method",
+                         "classical", "--frames", str(NODE_FRAMES), "--image-topic", topics.image, "--points-topic",
+                         topics.points, "--camera-info-topic", topics.camera_info, "--max-skew", "0.02"]}  # fmt: skip
+        procs = {}
+        for name, cmd in argv.items():
+            with (workdir / f"{name}.out").open("w") as out:
+                procs[name] = subprocess.Popen(cmd, env=os.environ if name == "node" else env, text=True,
+                                               stdout=out, stderr=subprocess.STDOUT)  # fmt: skip
+        _drive(env, static, frames, procs)
+        for name in ("node", "echo", "info"):  # the node and echo end on their own; stragglers by their PID
+            if name != "info":
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    procs[name].wait(10)
+            _stop(procs[name])
+    read = {name: (workdir / f"{name}.out").read_text() for name in procs}
+    return {"echo": read["echo"], "node": read["node"], "node_returncode": procs["node"].returncode}
+
+
 if __name__ == "__main__":
-    scenario = {"echo": echo, "pub": pub}[sys.argv[1]]
+    scenario = {"echo": echo, "pub": pub, "node": node}[sys.argv[1]]
     print(json.dumps(scenario(Path(sys.argv[2]))))

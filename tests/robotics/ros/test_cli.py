@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 from click.testing import CliRunner
 
+from semattnet._errors import InputError
 from semattnet.cli import main
 from semattnet.cli.ros import ros1, ros2
 
@@ -31,3 +32,20 @@ def test_bad_options_are_one_line(args: list[str], env: dict[str, str], why: str
     res = CliRunner().invoke(main, ["ros2", *args], env=env)
     assert res.exit_code in (1, 2) and why in res.output, res.output
     assert "Traceback" not in res.output
+
+
+def test_ros1_node_name_is_in_its_namespace(monkeypatch: pytest.MonkeyPatch) -> None:
+    """ROS 1 names a node by its namespace too (``/robot1/semattnet``): a second robot's node on the same
+    master with the same --node-name must not take the first one's name (the master shuts the older down)."""
+    from semattnet.robotics.ros import tcpros
+
+    names: list[str] = []
+
+    def transport(master: str, node_name: str, host: str | None = None) -> None:
+        names.append(node_name)
+        raise InputError("stop here")
+
+    monkeypatch.setattr(tcpros, "TcprosTransport", transport)
+    res = CliRunner().invoke(main, ["ros1", "--method", "classical", "--namespace", "robot1/", "--master",
+                                    "http://127.0.0.1:9"])  # fmt: skip
+    assert "stop here" in res.output and names == ["/robot1/semattnet"], res.output

@@ -71,6 +71,25 @@ def test_topics_qos_and_one_frame() -> None:
     assert out["point_cloud"][0].width == INFO.height * INFO.width - 1 and out["uncertainty"] == []
 
 
+def test_messages_are_built_in_the_transports_type_store() -> None:
+    """Over TCPROS (its ``typestore``: ROS 1 Noetic's) the outputs are ROS 1 messages (``CameraInfo.K``), built
+    once per frame, not ROS 2 ones converted on every publish."""
+    from semattnet.robotics.bags.deps import rosbags_typestore
+
+    fake = FakeTransport()
+    del fake.ts
+    fake.typestore = ros1 = rosbags_typestore(True)
+    node = DepthNode(fake, _complete, NodeTopics(camera_info="cam/info"), namespace=NS).start()
+    for topic, message in ((INFO_T, camera_info()), ("/tf_static", tf_static()), (IMAGE, image(T0)),
+                           (SCAN, scan(T0 + 5_000_000))):  # fmt: skip
+        fake.deliver(topic, message)
+    _spin(node)
+    info = fake.published[OUT + "/camera_info"][0]
+    assert type(info) is ros1.types["sensor_msgs/msg/CameraInfo"]
+    np.testing.assert_array_equal(info.K.reshape(3, 3), INFO.K)
+    assert type(fake.published[OUT + "/depth_image"][0]) is ros1.types["sensor_msgs/msg/Image"]
+
+
 def test_newest_pair_only_stale_pairs_counted() -> None:
     """Pairs made while the worker is busy replace each other in one slot: only the newest is completed."""
     lines: list[str] = []

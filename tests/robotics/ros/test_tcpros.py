@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from semattnet._errors import InputError
 from semattnet.geometry.cameras import CameraInfoData
 from semattnet.robotics.ros.tcpros import MAX_PEERS, TcprosError, TcprosTransport, adopt_message, ros1_type_name
-from semattnet.robotics.ros.transport import OUTPUT_QOS, SENSOR_QOS, QoS
+from semattnet.robotics.ros.transport import OUTPUT_QOS, SENSOR_QOS, TF_STATIC_QOS, QoS
 
 from ._ros1_master import FakeMaster
 
@@ -119,6 +119,34 @@ def test_publisher_to_subscriber(node: Callable[[str], TcprosTransport], subscri
     _publish_until(publisher, _depth_message(talker), received)
     _check_depth(received[0])
     assert publisher.subscriber_count == 1
+
+
+def test_durable_topic_is_latched_for_a_late_subscriber(node: Callable[[str], TcprosTransport]) -> None:
+    """/tf_static's QoS (transient local) is a latched ROS 1 topic: published once, before anyone subscribed,
+    the message still reaches a subscriber that connects later (and the handshake says latching=1)."""
+    talker, listener = node("/talker"), node("/listener")
+    publisher = talker.advertise("/tf_depth", IMAGE, TF_STATIC_QOS)
+    publisher.publish(_depth_message(talker))
+    assert publisher.fields["latching"] == "1"
+    assert talker.advertise("/other", IMAGE, OUTPUT_QOS).fields["latching"] == "0"
+    received: list[Any] = []
+    listener.subscribe("/tf_depth", IMAGE, TF_STATIC_QOS, received.append)
+    _wait(lambda: received)
+    _check_depth(received[0])
+
+
+def test_header_seq_counts_each_topics_messages(node: Callable[[str], TcprosTransport]) -> None:
+    """As rospy does, a publisher numbers its messages in ``Header.seq`` (1, 2, ...); the caller's message keeps 0."""
+    talker, listener = node("/talker"), node("/listener")
+    received: list[Any] = []
+    listener.subscribe("/depth", IMAGE, SENSOR_QOS, received.append)
+    publisher = talker.advertise("/depth", IMAGE, SENSOR_QOS)
+    message = _depth_message(talker)
+    _publish_until(publisher, message, received, 3)
+    seqs = [m.header.seq for m in received]
+    assert seqs[0] >= 1 and seqs == list(range(seqs[0], seqs[0] + len(seqs))), seqs
+    assert message.header.seq == 0
+    _check_depth(received[-1])
 
 
 def test_subscriber_reconnects_after_a_dropped_connection(node: Callable[[str], TcprosTransport]) -> None:

@@ -1,4 +1,5 @@
-"""The ROS 1 transport against Debian's ROS 1 (``roscore``, ``rostopic``): a foreign master and foreign nodes.
+"""The ROS 1 transport and ``semattnet ros1`` against Debian's ROS 1 (``roscore``, ``rostopic``): a foreign master
+and foreign nodes.
 
 Each scenario (:mod:`._ros1_peers`) runs in its own loopback-only network namespace where ``unshare
 --net`` works (root), else on 127.0.0.1. Install the tools with ``scripts/setup-ros1-peers.sh``; run
@@ -18,11 +19,20 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
+from click.testing import CliRunner
 
 import semattnet
+from semattnet.cli import main
+from semattnet.data.io import read_depth
+from semattnet.geometry import RigCalibration
+
+from ..peers.test_peers import STEP, T0, T_CAM_LIDAR, TOPICS, H, K, W, _record
 
 pytest.importorskip("rosbags")
+from semattnet.robotics.bags import write_sensor_bag
+
 pytestmark = pytest.mark.ros_peers
 
 SCENARIOS = Path(__file__).with_name("_ros1_peers.py")
@@ -88,3 +98,38 @@ def test_rostopic_pub_reaches_our_subscriber(tmp_path: Path) -> None:
         "stamp": [1700000002, 7], "frame_id": "camera_optical", "distortion_model": "plumb_bob",
         "K": [500.0, 0.0, 1.0, 0.0, 500.0, 1.0, 0.0, 0.0, 1.0],
     }  # fmt: skip
+
+
+@pytest.fixture
+def drive(tmp_path: Path) -> dict[int, np.ndarray]:
+    """A 3-frame camera + LiDAR bag (``tmp_path/drive_mcap``, what the node's inputs play) and ``predict --bag``'s
+    depth of it (classical), by image stamp."""
+    rng = np.random.default_rng(5)
+    records = [_record(i, rng) for i in range(3)]
+    bag = write_sensor_bag(tmp_path / "drive_mcap", records, RigCalibration(K, T_CAM_LIDAR, (W, H))).path
+    out = tmp_path / "predict"
+    argv = ["predict", "--bag", str(bag), "--image-topic", TOPICS.image, "--points-topic", TOPICS.points,
+            "--method", "classical", "--out", str(out)]  # fmt: skip
+    result = CliRunner().invoke(main, argv)
+    assert result.exit_code == 0, result.output
+    return {T0 + i * STEP: read_depth(out / f"{i:010d}.png") for i in range(3)}
+
+
+def test_ros1_node_driven_by_rostopic_pub_reaches_rostopic_echo(tmp_path: Path, drive: dict[int, np.ndarray]) -> None:
+    """``semattnet ros1 --frames 5`` on a Debian roscore, its CameraInfo from ``rostopic pub -l`` (latched) and its
+    image, cloud and /tf_static from our driver: ``rostopic echo`` receives its 32FC1 depth with the image's stamp
+    and frame id, pixels equal to ``predict --bag``'s (classical: exact), and the node stops on its own."""
+    result = _scenario("node", tmp_path)
+    log = result["node"]
+    assert result["node_returncode"] == 0, log
+    assert "ros node stopped: 5 frame(s) published" in log and " 0 bad message(s)" in log, log
+    fields = dict(re.findall(r"^\s*(\w+): (.*)$", result["echo"], re.MULTILINE))
+    assert "data" in fields, result["echo"][-2000:]
+    stamp = int(fields["secs"]) * 1_000_000_000 + int(fields["nsecs"])
+    assert stamp in drive and fields["frame_id"] == f'"{TOPICS.camera_frame}"' and int(fields["seq"]) >= 1
+    assert (fields["encoding"], fields["is_bigendian"]) == ('"32FC1"', "0")
+    assert (fields["height"], fields["width"], fields["step"]) == (str(H), str(W), str(4 * W))
+    pixels = np.frombuffer(bytes(json.loads(fields["data"])), "<f4").reshape(H, W)
+    want = drive[stamp]
+    assert np.count_nonzero(want) and np.ptp(want) > 1.0  # a wall and a box: not a constant image
+    np.testing.assert_array_equal(pixels, np.where(want > 0, want, np.float32(np.nan)))

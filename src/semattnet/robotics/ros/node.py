@@ -263,10 +263,12 @@ class DepthNode:
 
     @property
     def transport_typestore(self) -> Any:
-        """The type store the transport's messages belong to (its ``ts``, else ROS 2 Humble's)."""
+        """The type store the transport's messages belong to (TCPROS's ``typestore``, ROS 1 Noetic's; DDS's ``ts``;
+        else ROS 2 Humble's): the messages are built in it, never converted on each publish."""
         from semattnet.robotics.bags.deps import rosbags_typestore
 
-        return getattr(self.transport, "ts", None) or rosbags_typestore(False)
+        store = getattr(self.transport, "typestore", None) or getattr(self.transport, "ts", None)
+        return store or rosbags_typestore(False)
 
     def close(self) -> None:
         """End the sinks and the transport (its threads and sockets)."""

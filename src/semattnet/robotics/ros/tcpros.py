@@ -25,6 +25,7 @@ Example (needs a running ``roscore``)::
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import re
@@ -78,17 +79,23 @@ _MISSING = object()
 
 
 class TcprosPublisher:
-    """One advertised topic (:class:`~.transport.Publisher`): serialises once, queues to every subscriber."""
+    """One advertised topic (:class:`~.transport.Publisher`): serialises once, queues to every subscriber.
+
+    A durable QoS (transient local, as ``/tf_static`` is published) makes it a latched topic, as ROS 1 has them:
+    a subscriber that connects later gets the last message first."""
 
     def __init__(self, store: Ros1Store, caller_id: str, topic: str, msgtype: str, qos: QoS) -> None:
         self.topic, self.msgtype, self.qos = topic, msgtype, qos
         self._store = store
         definition, self.md5sum = store.generate_msgdef(msgtype)
         self.fields = {"callerid": caller_id, "topic": topic, "type": ros1_type_name(msgtype),
-                       "md5sum": self.md5sum, "message_definition": definition, "latching": "0"}  # fmt: skip
+                       "md5sum": self.md5sum, "message_definition": definition,
+                       "latching": "1" if qos.durable else "0"}  # fmt: skip
         self._outboxes: list[Outbox] = []
+        self._latched: tuple[bytes, memoryview] | None = None  # a durable topic's last message, for late subscribers
         self._lock = threading.Lock()
         self._dropped_gone = 0
+        self._seq = 0
 
     @property
     def dropped(self) -> int:
@@ -103,20 +110,33 @@ class TcprosPublisher:
             return sum(o.alive for o in self._outboxes)
 
     def publish(self, message: object) -> None:
-        """Serialise ``message`` (a rosbags ``msgtype`` object) once and queue it to every subscriber; never blocks."""
+        """Serialise ``message`` (a rosbags ``msgtype`` object) once and queue it to every subscriber; never blocks.
+        A ``Header.seq`` is this topic's count of messages, from 1, as rospy numbers them (``message`` is kept)."""
         try:
-            data = self._store.serialize_ros1(adopt_message(self._store, message), self.msgtype)
+            data = self._store.serialize_ros1(self._numbered(adopt_message(self._store, message)), self.msgtype)
         except InputError:
             raise
         except Exception as exc:
             raise InputError(f"{self.topic}: cannot serialise the message as {self.msgtype} ({exc})") from None
         prefix = _LEN.pack(len(data))
         with self._lock:
+            if self.qos.durable:
+                self._latched = (prefix, data)
             self._dropped_gone += sum(o.dropped for o in self._outboxes if not o.alive)
             self._outboxes = [o for o in self._outboxes if o.alive]
             outboxes = list(self._outboxes)
         for outbox in outboxes:
             outbox.put(prefix, data)
+
+    def _numbered(self, message: Any) -> Any:
+        """``message`` with the next ``header.seq`` (a copy of it and its header; unchanged without a header)."""
+        header: Any = getattr(message, "header", None)
+        if not hasattr(header, "seq") or not hasattr(message, "__dataclass_fields__"):
+            return message
+        with self._lock:
+            self._seq += 1
+            seq = self._seq
+        return dataclasses.replace(message, header=dataclasses.replace(header, seq=seq))
 
     def attach(self, sock: socket.socket, label: str, stop: threading.Event) -> Outbox | None:
         """A new subscriber's outbox, or None (the socket closed) beyond :data:`MAX_PEERS` connections."""
@@ -126,6 +146,8 @@ class TcprosPublisher:
                 sock.close()
                 return None
             outbox = Outbox(sock, self.qos.depth, f"{self.topic} -> {label}", stop)
+            if self._latched is not None:
+                outbox.put(*self._latched)
             self._outboxes.append(outbox)
             return outbox
 
