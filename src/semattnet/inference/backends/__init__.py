@@ -41,12 +41,13 @@ from semattnet.inference.backends.registry import (
     get_engine,
     precisions,
     register_engine,
+    unregister_engine,
 )
 from semattnet.inference.backends.spec import EngineSpec
 
 __all__ = ["EngineEntry", "EngineRequest", "EngineSpec", "InferenceEngine", "available_backends", "choose_backend",
            "engine_entries", "get_engine", "needs_semantic", "optimize_for_inference", "output_from_arrays",
-           "precisions", "register_engine"]  # fmt: skip
+           "precisions", "register_engine", "unregister_engine"]  # fmt: skip
 
 
 def needs_semantic(model: object) -> bool:

@@ -115,6 +115,12 @@ def register_engine(entry: EngineEntry) -> EngineEntry:
     return entry
 
 
+def unregister_engine(name: str) -> None:
+    """Remove engine ``name`` from the table (a plugin's or a test's own; a built-in one comes back on the next
+    :func:`engine_entries` only if this process had not read the table yet)."""
+    _ENGINES.pop(name, None)
+
+
 def engine_entries() -> Mapping[str, EngineEntry]:
     """Every engine by name (the built-in ones imported on first use), installed or not."""
     global _loaded
