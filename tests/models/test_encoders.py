@@ -21,6 +21,8 @@ from semattnet.weights.checkpoint_filter import authors_encoder_filter
 #: A tiny width per registered encoder (stem first); a new encoder needs its row here.
 FIXTURES: dict[str, tuple[int, ...]] = {
     "resnet": (4, 8, 8, 16),
+    "lite_s4": (4, 8, 8, 16),
+    "lite_s2": (4, 8, 8, 8, 16),
 }
 
 
@@ -58,7 +60,7 @@ def test_encoder_hook_widens_the_next_stage_and_gradients_flow(name: str) -> Non
         seen.append(i)
         return torch.cat((x, x[:, :2]), dim=1)
 
-    x = torch.rand(1, 3, 32, 32, requires_grad=True)
+    x = torch.rand(2, 3, 64, 64, requires_grad=True)
     _, feats = enc(x, hook)
     feats[-1].sum().backward()
     assert seen == list(range(len(sizes) - 2)) and x.grad is not None and x.grad.abs().sum() > 0

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 import torch
 from torch import nn
 
-from semattnet.models.encoders.base import EncoderSpec, FeatureInfo, StageHook, register_encoder
+from semattnet.models.encoders.base import FeatureInfo, StageHook
 from semattnet.models.layers import BasicBlock, convbnrelu
 
 __all__ = ["ResNetEncoder", "add_resnet_layers", "run_resnet_layers"]
@@ -76,7 +76,3 @@ class ResNetEncoder(nn.Module):
 
     def forward(self, x: torch.Tensor, hook: StageHook | None = None) -> tuple[torch.Tensor, list[torch.Tensor]]:
         return run_resnet_layers(self, "stem", "layer", self.stages, x, hook)
-
-
-register_encoder(EncoderSpec("resnet", ResNetEncoder, "the authors' ResNet-style encoder (2 basic blocks a stage)",
-                             stem_stride=1, channels=(32, 64, 128, 256, 512, 1024)))  # fmt: skip
