@@ -6,7 +6,8 @@ imports plotly, openvino or rosbags):
 
     python benchmarks/frontier.py --out frontier-run --device cuda
 
-Timing half (later, on the 2-core CPU; reads the checkpoints of the training half when present):
+from the repository root, the package installed or ``PYTHONPATH=src``. Timing half (later, on the 2-core CPU;
+it reads the checkpoints of the training half when present):
 
     python benchmarks/frontier.py --out frontier-run --time
 
@@ -61,11 +62,11 @@ def variants() -> list[tuple[str, str, float]]:
     return [*PAPER, *rt]
 
 
-def train_one(work: Path, recipe: ReferenceRecipe, name: str, width: float, device: torch.device,
+def train_one(work: Path, data: Path, recipe: ReferenceRecipe, name: str, width: float, device: torch.device,
               log: Callable[[str], None]) -> Path:  # fmt: skip
-    """One variant, one seed, by ``recipe``: the trained full model's checkpoint."""
+    """One variant, one seed, by ``recipe``, on the synthetic tree ``data``: the trained full model's checkpoint."""
     r = recipe
-    return train_variant(work, work.parent.parent / "data", r.backbone_steps, r.full_steps, size=r.size, width=width,
+    return train_variant(work, data, r.backbone_steps, r.full_steps, size=r.size, width=width,
                          batch_size=r.batch_size, lr=r.lr, seed=r.seed, device=device, log=log,
                          refine_init_steps=r.refine_init_steps, head_lr_factor=r.head_lr_factor, loss=r.loss,
                          branches=3, model=name)  # fmt: skip
@@ -101,8 +102,8 @@ def train_and_score(out: Path, recipe: ReferenceRecipe, seeds: Sequence[int], he
         per_seed = {}
         for seed in seeds:
             log(f"[frontier] {key} ({name}, width {width:g}), seed {seed}: training ...")
-            ckpt = train_one(out / "runs" / f"{key}_seed{seed}", dataclasses.replace(recipe, seed=seed), name, width,
-                             device, log)  # fmt: skip
+            ckpt = train_one(out / "runs" / f"{key}_seed{seed}", out / "data", dataclasses.replace(recipe, seed=seed),
+                             name, width, device, log)  # fmt: skip
             model = load_model(ckpt)
             save_safetensors(load_checkpoint(ckpt), out / "checkpoints" / f"{key}_seed{seed}.safetensors")
             outputs = complete_held_out(model, held, device)
