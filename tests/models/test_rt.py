@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 import torch
 
@@ -110,3 +112,17 @@ def test_registry_rows_and_paper_names() -> None:
     rows = [spec for spec in registry._SPECS if spec.config.realtime]  # the paper's rows take seconds to build
     assert [s.name for s in rows] == list(RT_MODELS)
     assert all(registry._params_and_macs(s).endswith("GMAC") for s in rows)
+
+
+@pytest.mark.parametrize("backend", ["openvino", "onnxruntime"])
+def test_exports_through_the_engines(backend: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The whole forward (network and propagation) exports through the engines' path and matches eager."""
+    pytest.importorskip(backend)
+    monkeypatch.setenv("SEMATTNET_CACHE", str(tmp_path))
+    from semattnet.inference.backends import optimize_for_inference
+
+    model = _tiny("semattnet_rt_s").eval()
+    x = _frame(h=32, w=64)
+    engine = optimize_for_inference(model, backend=backend, size=(32, 64))
+    with torch.inference_mode():
+        torch.testing.assert_close(engine(**x).depth, model(**x).depth, rtol=1e-4, atol=1e-3)
