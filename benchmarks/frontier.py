@@ -22,7 +22,8 @@ seed and their mean.
 Written to ``--out``: ``results.json`` (the recipe, the machine, every score) and per variant and seed its
 weights, ``checkpoints/<variant>_seed<S>.safetensors`` (config in the metadata). ``--time`` adds
 ``timing.json``: the network and the propagation at 352x1216 in torch float32 (BatchNorm folded) and, where
-OpenVINO imports, in OpenVINO float32; each variant as a ratio to the width-1/8 paper model, in turns.
+OpenVINO imports, in OpenVINO float32; each variant as a ratio to the width-1/8 paper model on the same
+backend, in turns.
 """
 
 from __future__ import annotations
@@ -160,29 +161,36 @@ def _size(text: str) -> tuple[int, int]:
     return int(h), int(w)
 
 
-def time_variants(out: Path, size: tuple[int, int], repeats: int, log: Callable[[str], None] = print) -> Path:
-    """The timing half: torch float32 (BatchNorm folded) and, where it imports, OpenVINO float32; in turns."""
+def time_variants(out: Path, size: tuple[int, int], repeats: int, keys: Sequence[str] | None = None,
+                  log: Callable[[str], None] = print) -> Path:  # fmt: skip
+    """The timing half: torch float32 (BatchNorm folded), then, where it imports, OpenVINO float32; each backend's
+    variants in turns, as ratios to the width-1/8 paper model on the same backend. The backends run one after the
+    other: OpenVINO's own thread pool beside torch's would slow both. ``keys``: these variants and the reference."""
     from bench_rt import cpu_name, frame
     from semattnet.models.bn_folding import fold_batchnorm
 
     x = frame(size)
-    nets: dict[str, Callable[[], object]] = {}
+    models = {}
     for key, name, width in variants():
+        if keys and key not in (*keys, "paper_w1_8"):
+            continue
         path = out / "checkpoints" / f"{key}_seed0.safetensors"
-        model = load_model(path) if path.is_file() else build_model(name, width=width).eval()
-        folded = fold_batchnorm(model)
-        nets[f"{key}/torch-f32"] = lambda m=folded: m(**x)  # type: ignore[misc]
-        ov = _openvino(folded, x)
-        if ov is not None:
-            nets[f"{key}/openvino-f32"] = ov
-    times = _in_turns(nets, repeats)
-    ref = times["paper_w1_8/torch-f32"]
-    rows = {
-        k: {"ms": 1000 * statistics.median(t), "ratio": statistics.median(a / b for a, b in zip(t, ref, strict=True))}
-        for k, t in times.items()
+        models[key] = fold_batchnorm(load_model(path) if path.is_file() else build_model(name, width=width).eval())
+    rows: dict[str, dict[str, float]] = {}
+    backends: dict[str, Callable[[torch.nn.Module], Callable[[], object] | None]] = {
+        "torch-f32": lambda m: lambda: m(**x),
+        "openvino-f32": lambda m: _openvino(m, x),
     }
-    for k, row in rows.items():
-        log(f"{k:32s} {row['ms']:9.1f} ms  {row['ratio']:6.3f} x paper@1/8 (torch)")
+    for backend, make in backends.items():
+        nets = {key: fn for key, m in models.items() if (fn := make(m)) is not None}
+        if not nets:
+            continue
+        times = _in_turns(nets, repeats)
+        ref = times["paper_w1_8"]
+        for key, t in times.items():
+            ratio = statistics.median(a / b for a, b in zip(t, ref, strict=True))
+            rows[f"{key}/{backend}"] = {"ms": 1000 * statistics.median(t), "ratio": ratio}
+            log(f"{key + '/' + backend:32s} {1000 * statistics.median(t):9.1f} ms  {ratio:6.3f} x paper@1/8")
     target = out / "timing.json"
     _write_json(target, {"cpu": cpu_name(), "size": size, "repeats": repeats, "rows": rows})
     return target
@@ -239,7 +247,8 @@ def main(argv: Sequence[str] | None = None) -> Path:
     ap.add_argument("--frames", type=int, default=0, help="training scenes instead of the recipe's (checks only)")
     args = ap.parse_args(argv)
     if args.time:
-        return time_variants(args.out, _size(args.size or "352x1216"), args.repeats)
+        keys = args.variants.split(",") if args.variants else None
+        return time_variants(args.out, _size(args.size or "352x1216"), args.repeats, keys)
     return run_training(args)
 
 

@@ -70,3 +70,14 @@ def test_training_half_tiny(frontier: ModuleType, tmp_path: Path, bare_machine: 
         assert "ause_rmse" in scores[key]["uncertainty"]
         assert (tmp_path / "checkpoints" / f"{key}_seed0.safetensors").is_file()
     assert scores["semattnet_rt_s"]["params"] < scores["paper_w1_8"]["params"] / 10
+
+
+@pytest.mark.slow  # converts the paper model and one variant with OpenVINO: about 2 minutes on 2 busy cores
+def test_timing_half_tiny(frontier: ModuleType, tmp_path: Path) -> None:
+    args = ["--time", "--size", "64x96", "--repeats", "1", "--variants", "semattnet_rt_s"]
+    frontier.main(["--out", str(tmp_path), *args])
+    timing = json.loads((tmp_path / "timing.json").read_text())
+    keys = ("paper_w1_8", "semattnet_rt_s")
+    assert {f"{k}/torch-f32" for k in keys} == {k for k in timing["rows"] if k.endswith("torch-f32")}
+    assert timing["size"] == [64, 96]
+    assert timing["rows"]["paper_w1_8/torch-f32"]["ratio"] == 1.0 and timing["cpu"]
