@@ -54,6 +54,8 @@ class TestModels(RegistryTester[ModelFixture]):
         "table2_c": ModelFixture(BRANCHES | REFINED),
         "table2_d": ModelFixture(BRANCHES | SEMANTIC),
         "table2_e": ModelFixture(BRANCHES | SEMANTIC | REFINED),
+        "semattnet_rt_s": ModelFixture(BRANCHES | SEMANTIC | REFINED),
+        "semattnet_rt_m": ModelFixture(BRANCHES | SEMANTIC | REFINED),
     }
 
     @classmethod

@@ -7,7 +7,9 @@
   :mod:`.backbone` the three branches and :mod:`.confidence_fusion` (eq. 12).
 * :mod:`.refinement` CSPN++ with atrous propagation (Sec. III-C) over :mod:`.propagation` (eq. 13);
   :mod:`.semattnet` the full model; :mod:`.outputs` its typed result.
-* :mod:`.checks` input validation; :mod:`.bn_folding` BatchNorm folding for inference.
+* :mod:`.encoders` the branch encoders behind one interface and their registry (the authors' ResNet first);
+  :mod:`.rt` the real-time variants (SemAttNet-RT) built on the light ones.
+* :mod:`.checks` input validation; :mod:`.bn_folding` BatchNorm folding for inference; :mod:`.macs` MAC counts.
 """
 
 from semattnet.models.backbone import SemAttNetBackbone

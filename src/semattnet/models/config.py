@@ -60,6 +60,9 @@ class SemAttNetConfig:
             the paper. See :mod:`semattnet.models.refinement`.
         palette: the semantic palette the model was trained with (:data:`semattnet.palette.PALETTES`):
             ``"cityscapes"`` (the authors' KITTI maps; checkpoints that record none load as this) or ``"nyu40"``.
+        encoder: the branches' encoder (:func:`semattnet.models.encoders.list_encoders`): ``"resnet"`` is
+            the paper's network (widths from :class:`Widths`); any other builds the real-time variant
+            :mod:`semattnet.models.rt` with the encoder's registered widths times ``width``.
     """
 
     branches: Literal[2, 3] = 3
@@ -71,6 +74,7 @@ class SemAttNetConfig:
     iterations: int = 6
     refinement_mode: RefinementMode = "authors"
     palette: str = "cityscapes"
+    encoder: str = "resnet"
 
     def __post_init__(self) -> None:
         if self.branches not in (2, 3):
@@ -93,6 +97,14 @@ class SemAttNetConfig:
         if self.palette not in PALETTES:
             raise InputError(f"palette must be one of {tuple(PALETTES)}, got {self.palette!r}")
         object.__setattr__(self, "kernel_sizes", tuple(int(k) for k in self.kernel_sizes))
+        from semattnet.models.encoders import encoder_spec
+
+        encoder_spec(self.encoder)  # an unknown name: a one-line UnknownEncoderError listing the registered ones
+
+    @property
+    def realtime(self) -> bool:
+        """The real-time variant (:mod:`semattnet.models.rt`): any encoder but the paper's ResNet."""
+        return self.encoder != "resnet"
 
     def replace(self, **changes: Any) -> SemAttNetConfig:  # values from JSON / the CLI: __post_init__ checks them
         """A copy with some fields changed (validated)."""

@@ -6,8 +6,11 @@ Table 2 *are* the backbone and the full model, so ``table2_f`` and ``table2_g`` 
 them rather than rows of their own: :func:`list_models` names each architecture once, every alias
 resolves (:func:`resolve_model_name`), and :func:`describe_models` lists the aliases.
 
-The model class (full model with refinement vs backbone alone) is chosen in one place,
-:func:`model_class`, from the config's ``refine`` field.
+``semattnet_rt_s`` and ``semattnet_rt_m`` are real-time variants (:mod:`semattnet.models.rt`): the paper's
+structure on a light encoder (:mod:`semattnet.models.encoders`) at 1/4 and 1/2 resolution.
+
+The model class (full model with refinement vs backbone alone, paper vs real-time) is chosen in one
+place, :func:`model_class`, from the config's ``refine`` and ``encoder`` fields.
 """
 
 from __future__ import annotations
@@ -15,11 +18,14 @@ from __future__ import annotations
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 
+import torch
 from torch import nn
 
 from semattnet._errors import InputError
 from semattnet.models.backbone import SemAttNetBackbone
 from semattnet.models.config import SemAttNetConfig
+from semattnet.models.macs import count_macs
+from semattnet.models.rt import SemAttNetRT, SemAttNetRTBackbone
 from semattnet.models.semattnet import SemAttNet
 
 __all__ = [
@@ -39,7 +45,7 @@ __all__ = [
 ]
 
 #: The config fields a registered name fixes (the rest, e.g. ``width``, are free).
-ARCH_FIELDS = ("branches", "fusion", "refine")
+ARCH_FIELDS = ("branches", "fusion", "refine", "encoder")
 
 
 class UnknownModelError(InputError):
@@ -67,6 +73,10 @@ _SPECS = (
     ModelSpec("table2_c", "CG + DG, concatenation, CSPN++ refinement", SemAttNetConfig(branches=2, fusion="concat")),
     ModelSpec("table2_d", "CG + SG + DG, concatenation", SemAttNetConfig(fusion="concat", refine=False)),
     ModelSpec("table2_e", "CG + SG + DG, concatenation, CSPN++ refinement", SemAttNetConfig(fusion="concat")),
+    ModelSpec("semattnet_rt_s", "Real-time: the paper's structure at 1/4 resolution, separable blocks, CSPN++ at 1/4",
+              SemAttNetConfig(encoder="lite_s4", reduction=4, kernel_sizes=(3,), iterations=4)),
+    ModelSpec("semattnet_rt_m", "Real-time: the paper's structure at 1/2 resolution, separable blocks, CSPN++ at 1/2",
+              SemAttNetConfig(encoder="lite_s2", reduction=4, kernel_sizes=(3,), iterations=4)),
 )  # fmt: skip
 _BY_NAME = {s.name: s for s in _SPECS}
 
@@ -128,7 +138,10 @@ def model_config(name: str) -> SemAttNetConfig:
 
 
 def model_class(cfg: SemAttNetConfig) -> type[nn.Module]:
-    """The class a config builds: :class:`SemAttNet` with ``refine``, else :class:`SemAttNetBackbone`."""
+    """The class a config builds: :class:`SemAttNet` with ``refine``, else :class:`SemAttNetBackbone`;
+    their real-time twins (:mod:`semattnet.models.rt`) for a light ``encoder``."""
+    if cfg.realtime:
+        return SemAttNetRT if cfg.refine else SemAttNetRTBackbone
     return SemAttNet if cfg.refine else SemAttNetBackbone
 
 
@@ -138,6 +151,9 @@ def arch_for(cfg: SemAttNetConfig) -> str:
     for spec in _SPECS:
         if tuple(getattr(spec.config, f) for f in ARCH_FIELDS) == key:
             return spec.name
+    if cfg.realtime:  # the first real-time row on the same encoder (any real-time row for a new encoder)
+        rows = [s.name for s in _SPECS if s.config.realtime]
+        return next((s.name for s in _SPECS if s.config.encoder == cfg.encoder), rows[0])
     return "semattnet" if cfg.refine else "semattnet_backbone"  # a combination the paper did not name
 
 
@@ -189,10 +205,24 @@ def build_model(name: str | None = None, config: SemAttNetConfig | None = None, 
 
 
 def describe_models(count_parameters: bool = False) -> str:
-    """One line per registered architecture: name, (parameter count,) description, aliases."""
+    """One line per registered architecture: name, (parameter count, GMAC,) description, aliases.
+
+    GMAC: multiply-accumulates of one 352x1216 frame, counted for the real-time rows (the paper's model at
+    width 1 has about 530, at width 1/8 about 8).
+    """
     lines = []
     for spec in _SPECS:
-        count = f"{sum(p.numel() for p in build_model(spec.name).parameters()):>13,d}  " if count_parameters else ""
+        count = f"{_params_and_macs(spec):>27s}  " if count_parameters else ""
         also = f" [alias: {', '.join(spec.aliases)}]" if spec.aliases else ""
         lines.append(f"{spec.name:20s} {count}{spec.description}{also}")
     return "\n".join(lines)
+
+
+def _params_and_macs(spec: ModelSpec) -> str:
+    model = build_model(spec.name)
+    text = f"{sum(p.numel() for p in model.parameters()):,d}"
+    if not spec.config.realtime:
+        return text
+    h, w = 352, 1216
+    frame = {"rgb": torch.zeros(1, 3, h, w), "semantic": torch.zeros(1, 3, h, w), "sparse": torch.zeros(1, 1, h, w)}
+    return f"{text} {count_macs(model.eval(), frame):6.2f} GMAC"

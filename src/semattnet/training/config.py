@@ -46,6 +46,9 @@ class TrainConfig:
         out: run folder (checkpoints, logs, curves).
         init: checkpoint of the previous stage (required for refine-init and full).
         width, refinement_mode, branches, fusion: model options (paper defaults).
+        model: the registered architecture (:func:`semattnet.models.list_models`) whose other options
+            (encoder, kernel sizes, iterations, ...) the run uses, e.g. ``semattnet_rt_s``; the backbone stage
+            builds it without refinement.
         epochs, batch_size, lr, head_lr, patience: ``None`` = the stage's default; batch_size
             is per process (the global batch is batch_size x processes).
         depth_head_init: backbone stage from scratch; ``(scale, shift)`` for the branches' depth
@@ -86,6 +89,7 @@ class TrainConfig:
     branches: int = 3
     fusion: str = "sammafb"
     refinement_mode: str = "authors"
+    model: str = "semattnet"
     epochs: int | None = None
     batch_size: int | None = None
     lr: float | None = None
@@ -142,6 +146,9 @@ class TrainConfig:
         from semattnet.data.datasets import get_dataset
 
         get_dataset(self.dataset)  # a one-line error listing the names
+        from semattnet.models.registry import resolve_model_name
+
+        resolve_model_name(self.model)  # a one-line error listing the names
 
     def _validate(self) -> None:
         """Refuse numbers that cannot train: NaN/inf or non-positive rates, zero or negative counts."""

@@ -37,7 +37,8 @@ from semattnet.data.transforms import EvalTransform
 from semattnet.evaluation.protocols import protocol_metrics
 from semattnet.models.backbone import SemAttNetBackbone
 from semattnet.models.layers import set_gradient_checkpointing
-from semattnet.models.registry import build_model
+from semattnet.models.registry import build_model, model_config
+from semattnet.models.rt import SemAttNetRT, SemAttNetRTBackbone
 from semattnet.models.semattnet import SemAttNet
 from semattnet.training.checkpointing import set_activation_checkpointing
 from semattnet.training.config import TrainConfig
@@ -66,9 +67,9 @@ def _atomic_torch_save(obj: object, path: Path) -> None:
         torch.save(obj, tmp)
 
 
-def _unwrap(model: nn.Module) -> SemAttNet | SemAttNetBackbone:
+def _unwrap(model: nn.Module) -> SemAttNet | SemAttNetBackbone | SemAttNetRT | SemAttNetRTBackbone:
     inner = model.module if isinstance(model, nn.parallel.DistributedDataParallel) else model
-    assert isinstance(inner, SemAttNet | SemAttNetBackbone)  # what _build_model builds
+    assert isinstance(inner, SemAttNet | SemAttNetBackbone | SemAttNetRT | SemAttNetRTBackbone)  # _build_model's
     return inner
 
 
@@ -177,10 +178,10 @@ class Trainer:
 
     def _build_model(self, init_weights: bool) -> nn.Module:
         cfg = self.cfg
-        name = "semattnet_backbone" if cfg.stage == "backbone" else "semattnet"
-        model = build_model(name, width=cfg.width, branches=cfg.branches, fusion=cfg.fusion,
+        arch = model_config(cfg.model).replace(refine=cfg.stage != "backbone")
+        model = build_model(config=arch, width=cfg.width, branches=cfg.branches, fusion=cfg.fusion,
                             refinement_mode=cfg.refinement_mode, palette=get_dataset(cfg.dataset).palette)  # fmt: skip
-        if isinstance(model, SemAttNet):  # the refine-init and full stages
+        if isinstance(model, SemAttNet | SemAttNetRT):  # the refine-init and full stages
             if init_weights and not cfg.init:
                 raise InputError(f"stage {cfg.stage!r} starts from the previous stage's checkpoint: pass --init PATH")
             if init_weights and cfg.init:
@@ -196,7 +197,7 @@ class Trainer:
                     p.requires_grad_(False)
         elif cfg.init:
             load_weights(model, load_checkpoint(cfg.init))
-        elif cfg.depth_head_init is not None and isinstance(model, SemAttNetBackbone):
+        elif cfg.depth_head_init is not None and isinstance(model, SemAttNetBackbone | SemAttNetRTBackbone):
             model.init_depth_heads(*cfg.depth_head_init)
         if cfg.grad_checkpointing:
             set_gradient_checkpointing(model, True)
@@ -240,7 +241,7 @@ class Trainer:
         self.model.train()
         if self.cfg.stage == "refine-init":  # frozen backbone: its BN statistics stay fixed too
             model = _unwrap(self.model)
-            assert isinstance(model, SemAttNet)  # refine-init trains the refined model
+            assert isinstance(model, SemAttNet | SemAttNetRT)  # refine-init trains the refined model
             model.backbone.eval()
 
     # ----------------------------------------------------------------------------- state

@@ -45,7 +45,7 @@ from semattnet.weights.checkpoint import (
 __all__ = ["SHAPE_FIELDS", "WeightsMismatchError", "build_model_with_weights", "weights_config"]
 
 #: Config fields that decide parameter shapes: the weights fix them (``width`` by its channel count).
-SHAPE_FIELDS = ("branches", "fusion", "refine", "width", "reduction", "kernel_sizes")
+SHAPE_FIELDS = ("branches", "fusion", "refine", "width", "reduction", "kernel_sizes", "encoder")
 #: The shape fields :func:`config_from_state_dict` reads from the tensors (``reduction`` is checked by the load).
 _INFERRED = ("branches", "fusion", "refine", "width", "kernel_sizes")
 

@@ -37,7 +37,8 @@ def classical_uncertainties(held: HeldOut, depths: dict[str, np.ndarray]) -> dic
 
 def score_uncertainty(preds: BySeed, uncertainty: BySeed, held: HeldOut) -> dict[str, dict[str, Any]]:
     """method -> ``{"label", "ause_rmse", "aurg_rmse", "ause_mae", "aurg_mae"`` (mean over seeds),
-    ``"per_seed": {seed: the same four}``, ``"curves"``: the mean curves (lists, for the figure)}."""
+    ``"per_seed": {seed: the same four}``, ``"curves"``: the mean curves (lists, for the figure)}; the label is the
+    method's key where :data:`LABELS` has none."""
     out: dict[str, dict[str, Any]] = {}
     for method, seeds in uncertainty.items():
         per_seed: dict[str, dict[str, float]] = {}
@@ -50,7 +51,7 @@ def score_uncertainty(preds: BySeed, uncertainty: BySeed, held: HeldOut) -> dict
             curves.append(acc.curves())
         mean_curves = {k: np.mean([c[k] for c in curves], axis=0) for k in curves[0]}
         # the areas are linear in the curve: the AUSE / AURG of the mean curves are the means over seeds
-        out[method] = {"label": LABELS[method], **summary(mean_curves), "per_seed": per_seed,
+        out[method] = {"label": LABELS.get(method, method), **summary(mean_curves), "per_seed": per_seed,
                        "curves": {k: [round(float(x), 6) for x in v] for k, v in mean_curves.items()}}  # fmt: skip
     return out
 

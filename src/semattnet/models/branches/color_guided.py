@@ -17,7 +17,8 @@ import torch
 from torch import nn
 
 from semattnet.models.config import Widths
-from semattnet.models.layers import BasicBlock, convbnrelu, deconvbnrelu
+from semattnet.models.encoders.resnet import add_resnet_layers, run_resnet_layers
+from semattnet.models.layers import deconvbnrelu
 
 __all__ = ["ColorGuidedBranch", "ColorGuidedFeatures"]
 
@@ -42,12 +43,7 @@ class ColorGuidedBranch:
 
     def _build_color_guided(self, w: Widths) -> None:
         c = w.base
-        self.rgb_conv_init = convbnrelu(4, c[1], kernel_size=5, padding=2)
-        prev = c[1]
-        for i, s in enumerate(_STAGES):
-            setattr(self, f"rgb_encoder_layer{2 * i + 1}", BasicBlock(prev, c[s], stride=2))
-            setattr(self, f"rgb_encoder_layer{2 * i + 2}", BasicBlock(c[s], c[s]))
-            prev = c[s]
+        add_resnet_layers(self, "rgb_conv_init", "rgb_encoder_layer", 4, [c[s] for s in (1, *_STAGES)])
         for s in (16, 8, 4, 2, 1):  # rgb_decoder_layer8 ... rgb_decoder_layer0
             setattr(self, f"rgb_decoder_layer{_encoder_index(s)}", deconvbnrelu(2 * c[s], c[s]))
         self.rgb_decoder_output = nn.Sequential(
@@ -55,13 +51,10 @@ class ColorGuidedBranch:
         )
 
     def _color_guided(self, rgb: torch.Tensor, sparse: torch.Tensor) -> ColorGuidedFeatures:
-        stem = self.rgb_conv_init(torch.cat((rgb, sparse), dim=1))
-        skips = {1: stem}
-        x = stem
-        for i, s in enumerate(_STAGES):
-            x = getattr(self, f"rgb_encoder_layer{2 * i + 1}")(x)
-            x = getattr(self, f"rgb_encoder_layer{2 * i + 2}")(x)
-            skips[s] = x
+        x = torch.cat((rgb, sparse), dim=1)
+        stem, features = run_resnet_layers(self, "rgb_conv_init", "rgb_encoder_layer", len(_STAGES), x)
+        skips = {1: stem, **dict(zip(_STAGES, features, strict=True))}
+        x = skips[32]
         decoder: dict[int, torch.Tensor] = {}
         for s in (16, 8, 4, 2, 1):
             x = getattr(self, f"rgb_decoder_layer{_encoder_index(s)}")(x) + skips[s]

@@ -21,8 +21,9 @@ from torch import nn
 from semattnet.models.branches.color_guided import ColorGuidedFeatures
 from semattnet.models.branches.semantic_guided import SemanticGuidedFeatures
 from semattnet.models.config import SemAttNetConfig, Widths
+from semattnet.models.encoders.resnet import add_resnet_layers, run_resnet_layers
 from semattnet.models.fusion import FusionMode, fuse_features, make_fusion_block
-from semattnet.models.layers import BasicBlock, convbnrelu, deconvbnrelu
+from semattnet.models.layers import convbnrelu, deconvbnrelu
 
 __all__ = ["DG_FUSION_BLOCKS", "DepthGuidedBranch", "DepthGuidedFeatures"]
 
@@ -55,12 +56,10 @@ class DepthGuidedBranch:
 
     def _build_depth_guided(self, w: Widths, cfg: SemAttNetConfig) -> None:
         c, dg = w.base, w.dg
-        self.depth_conv_init = convbnrelu(cfg.branches, c[1], kernel_size=5, padding=2)
-        prev = c[1]
-        for i, s in enumerate(_STAGES):
-            setattr(self, f"depth_layer{2 * i + 1}", BasicBlock(prev, dg[s], stride=2))
-            setattr(self, f"depth_layer{2 * i + 2}", BasicBlock(dg[s], dg[s]))
-            prev = w.fused_dg.get(s, dg[s])
+        extra = [w.fused_dg.get(s, dg[s]) - dg[s] for s in _STAGES]
+        add_resnet_layers(
+            self, "depth_conv_init", "depth_layer", cfg.branches, [c[1], *(dg[s] for s in _STAGES)], extra
+        )
         self.decoder_layer0 = deconvbnrelu(dg[32], c[32], kernel_size=1, stride=1, padding=0, output_padding=0)
         widths = (c[32], dg[16], dg[8], dg[4], dg[2], c[1])
         for j in range(5):
@@ -71,15 +70,15 @@ class DepthGuidedBranch:
         self, sparse: torch.Tensor, cg: ColorGuidedFeatures, sg: SemanticGuidedFeatures | None
     ) -> DepthGuidedFeatures:
         inputs = (sparse, cg.depth) if sg is None else (sparse, cg.depth, sg.depth)
-        x = self.depth_conv_init(torch.cat(inputs, dim=1))
-        skips: dict[int, torch.Tensor] = {}
-        for i, s in enumerate(_STAGES):
-            x = getattr(self, f"depth_layer{2 * i + 1}")(x)
-            x = getattr(self, f"depth_layer{2 * i + 2}")(x)
-            skips[s] = x
-            if s in DG_FUSION_BLOCKS:
-                guides = (cg.decoder[s], x) if sg is None else (cg.decoder[s], sg.decoder[s], x)
-                x = fuse_features(self._dg_fusion, getattr(self, DG_FUSION_BLOCKS[s]), guides)
+
+        def fuse(i: int, x: torch.Tensor) -> torch.Tensor:  # SAMMAFB after the stages at scales 2 .. 16
+            s = _STAGES[i]
+            guides = (cg.decoder[s], x) if sg is None else (cg.decoder[s], sg.decoder[s], x)
+            return fuse_features(self._dg_fusion, getattr(self, DG_FUSION_BLOCKS[s]), guides)
+
+        x = torch.cat(inputs, dim=1)
+        _, features = run_resnet_layers(self, "depth_conv_init", "depth_layer", len(_STAGES), x, fuse)
+        skips = dict(zip(_STAGES, features, strict=True))
         deepest = cg.encoder_out if sg is None else cg.encoder_out + sg.encoder_out
         x = self.decoder_layer1(deepest + self.decoder_layer0(skips[32]))
         for j, s in enumerate((16, 8, 4)):

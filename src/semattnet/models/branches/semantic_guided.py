@@ -21,8 +21,9 @@ from torch import nn
 
 from semattnet.models.branches.color_guided import ColorGuidedFeatures
 from semattnet.models.config import SemAttNetConfig, Widths
+from semattnet.models.encoders.resnet import add_resnet_layers, run_resnet_layers
 from semattnet.models.fusion import FusionMode, fuse_features, make_fusion_block
-from semattnet.models.layers import BasicBlock, convbnrelu, deconvbnrelu
+from semattnet.models.layers import deconvbnrelu
 
 __all__ = ["SG_FUSION_BLOCKS", "SemanticGuidedBranch", "SemanticGuidedFeatures"]
 
@@ -52,12 +53,9 @@ class SemanticGuidedBranch:
 
     def _build_semantic_guided(self, w: Widths) -> None:
         c = w.base
-        self.segment_conv_init = convbnrelu(5, c[1], kernel_size=5, padding=2)
-        prev = c[1]
-        for i, s in enumerate(_STAGES):
-            setattr(self, f"segment_encoder_layer{2 * i + 1}", BasicBlock(prev, w.sg[s], stride=2))
-            setattr(self, f"segment_encoder_layer{2 * i + 2}", BasicBlock(w.sg[s], w.sg[s]))
-            prev = w.fused_sg.get(s, w.sg[s])
+        extra = [w.fused_sg.get(s, w.sg[s]) - w.sg[s] for s in _STAGES]
+        add_resnet_layers(self, "segment_conv_init", "segment_encoder_layer", 5, [c[1], *(w.sg[s] for s in _STAGES)],
+                          extra)  # fmt: skip
         for j, s in enumerate((16, 8, 4, 2, 1)):
             setattr(self, f"segment_decoder_layer{j + 1}", deconvbnrelu(2 * c[s], c[s]))
         self.segment_decoder_layer6 = nn.Sequential(
@@ -67,14 +65,14 @@ class SemanticGuidedBranch:
     def _semantic_guided(
         self, semantic: torch.Tensor, sparse: torch.Tensor, cg: ColorGuidedFeatures
     ) -> SemanticGuidedFeatures:
-        x = self.segment_conv_init(torch.cat((semantic, sparse, cg.depth), dim=1))
-        skips: dict[int, torch.Tensor] = {}
-        for i, s in enumerate(_STAGES):
-            x = getattr(self, f"segment_encoder_layer{2 * i + 1}")(x)
-            x = getattr(self, f"segment_encoder_layer{2 * i + 2}")(x)
-            skips[s] = x
-            if s in SG_FUSION_BLOCKS:
-                x = fuse_features(self._sg_fusion, getattr(self, SG_FUSION_BLOCKS[s]), (cg.decoder[s], x))
+
+        def fuse(i: int, x: torch.Tensor) -> torch.Tensor:  # SAMMAFB after the stages at scales 2 .. 16
+            s = _STAGES[i]
+            return fuse_features(self._sg_fusion, getattr(self, SG_FUSION_BLOCKS[s]), (cg.decoder[s], x))
+
+        x = torch.cat((semantic, sparse, cg.depth), dim=1)
+        _, features = run_resnet_layers(self, "segment_conv_init", "segment_encoder_layer", len(_STAGES), x, fuse)
+        skips = dict(zip(_STAGES, features, strict=True))
         decoder: dict[int, torch.Tensor] = {}
         x = cg.encoder_out + skips[32]
         for j, s in enumerate((16, 8, 4, 2, 1)):

@@ -1,0 +1,132 @@
+"""SemAttNet-RT: the paper's structure on light encoders (shapes, typed outputs, gradients, bad input)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+
+import semattnet
+from semattnet._errors import InputError
+from semattnet.models import registry
+from semattnet.models.bn_folding import fold_batchnorm
+from semattnet.models.encoders import UnknownEncoderError
+from semattnet.models.outputs import DepthCompletionOutput
+from semattnet.models.registry import arch_for, model_class
+from semattnet.models.rt import SemAttNetRT, SemAttNetRTBackbone
+from tests._base import BaseTester
+
+RT_MODELS = ("semattnet_rt_s", "semattnet_rt_m")
+
+
+def _frame(b: int = 1, h: int = 32, w: int = 64, seed: int = 0) -> dict[str, torch.Tensor]:
+    g = torch.Generator().manual_seed(seed)
+    sparse = (torch.rand(b, 1, h, w, generator=g) < 0.2) * (1 + 79 * torch.rand(b, 1, h, w, generator=g))
+    return {"rgb": 255 * torch.rand(b, 3, h, w, generator=g), "semantic": 255 * torch.rand(b, 3, h, w, generator=g),
+            "sparse": sparse}  # fmt: skip
+
+
+def _tiny(name: str, **overrides: object) -> torch.nn.Module:
+    torch.manual_seed(0)
+    return semattnet.build_model(name, width=0.5, **overrides)
+
+
+class TestSemAttNetRT(BaseTester):
+    @pytest.mark.parametrize("name", RT_MODELS)
+    def test_smoke(self, name: str) -> None:
+        model = _tiny(name).eval()
+        assert isinstance(model, SemAttNetRT) and isinstance(model.backbone, SemAttNetRTBackbone)
+        with torch.no_grad():
+            out = model(**_frame())
+        assert isinstance(out, DepthCompletionOutput)
+        maps = out.to_dict()
+        assert set(maps) == {"color_depth", "semantic_depth", "guided_depth", "color_conf", "semantic_conf",
+                             "guided_conf", "fused_depth", "refined_s2_depth", "refined_depth"}  # fmt: skip
+        assert all(t.shape == (1, 1, 32, 64) and torch.isfinite(t).all() for t in maps.values())
+
+    @pytest.mark.parametrize(("b", "h", "w", "branches"), [(1, 64, 32, 3), (2, 32, 64, 2)])
+    def test_cardinality(self, b: int, h: int, w: int, branches: int) -> None:
+        model = _tiny("semattnet_rt_s", branches=branches).eval()
+        x = _frame(b, h, w)
+        if branches == 2:
+            x["semantic"] = None  # type: ignore[assignment]
+        with torch.no_grad():
+            out = model(**x)
+        assert out.refined_depth is not None and out.refined_depth.shape == (b, 1, h, w)
+        assert (out.semantic_depth is None) == (branches == 2)
+        backbone = semattnet.build_model("semattnet_rt_s", refine=False, branches=branches, width=0.5).eval()
+        assert isinstance(backbone, SemAttNetRTBackbone) and backbone(**x).fused_depth.shape == (b, 1, h, w)
+
+    def test_exception(self) -> None:
+        model = _tiny("semattnet_rt_s")
+        x = _frame()
+        with pytest.raises(InputError, match="sparse depth is required"):
+            model(x["rgb"], x["semantic"])
+        with pytest.raises(InputError, match="semantic is required"):
+            model(x["rgb"], None, x["sparse"])
+        with pytest.raises(InputError, match="multiple"):
+            model(**_frame(h=40))
+        with pytest.raises(UnknownEncoderError, match="unknown encoder 'mobilenet'"):
+            semattnet.build_model("semattnet_rt_s", encoder="mobilenet")
+        with pytest.raises(InputError, match="needs a light encoder"):
+            SemAttNetRTBackbone(semattnet.SemAttNetConfig(refine=False))
+        with pytest.raises(InputError, match="refined model"):
+            SemAttNetRT(semattnet.SemAttNetConfig(encoder="lite_s4", refine=False))
+
+    @pytest.mark.parametrize("name", RT_MODELS)
+    def test_numerics(self, name: str) -> None:
+        """Fusion weights sum to 1; BN folding and the compiled CPU propagation change nothing but rounding."""
+        model = _tiny(name).eval()
+        x = _frame(seed=1)
+        with torch.inference_mode():
+            out = model(**x)
+            folded = fold_batchnorm(model)(**x)
+            model.propagation_impl = "pytorch"
+            plain = model(**x)
+        total = out.color_conf + out.semantic_conf + out.guided_conf  # type: ignore[operator]
+        self.assert_close(total, torch.ones_like(total))
+        self.assert_close(folded.depth, out.depth, rtol=1e-4, atol=1e-3)
+        self.assert_close(plain.depth, out.depth, rtol=1e-4, atol=1e-3)
+        torch.testing.assert_close(model.backbone(**x).fused_depth, out.fused_depth)
+
+    def test_gradcheck(self) -> None:
+        """Gradients reach the image and every parameter but the authors-mode hand-over (``att_12``,
+        ``dimhalf_s2``: unused in that mode by design); a float64 gradcheck of a whole network is too slow here."""
+        model = _tiny("semattnet_rt_s").train()
+        model.backbone.init_depth_heads()
+        x = _frame(b=2)
+        x["rgb"].requires_grad_(True)
+        model(**x).refined_depth.mean().backward()
+        assert x["rgb"].grad is not None and x["rgb"].grad.abs().sum() > 0
+        dead = [n for n, p in model.named_parameters() if p.grad is None]
+        assert dead and all(n.startswith(("att_12.", "dimhalf_s2.")) for n in dead), dead
+
+
+def test_registry_rows_and_paper_names() -> None:
+    cfg = registry.model_config("semattnet_rt_s")
+    assert model_class(cfg) is SemAttNetRT and arch_for(cfg.replace(width=2.0)) == "semattnet_rt_s"
+    assert model_class(cfg.replace(refine=False)) is SemAttNetRTBackbone
+    keys = _tiny("semattnet_rt_s").state_dict()
+    assert any(k.startswith("backbone.rgb_branch.encoder.") for k in keys) and "mask_layer.0.weight" in keys
+    assert [s.name for s in registry._SPECS if s.config.realtime] == list(RT_MODELS)
+
+
+@pytest.mark.slow  # a forward of each real-time model at 352x1216: seconds
+def test_models_listing_counts_macs_of_the_real_time_rows() -> None:
+    rows = [spec for spec in registry._SPECS if spec.config.realtime]  # the paper's rows take seconds to build
+    assert all(registry._params_and_macs(s).endswith("GMAC") for s in rows)
+
+
+@pytest.mark.parametrize("backend", [pytest.param("openvino", marks=pytest.mark.slow), "onnxruntime"])
+def test_exports_through_the_engines(backend: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The whole forward (network and propagation) exports through the engines' path and matches eager."""
+    pytest.importorskip(backend)
+    monkeypatch.setenv("SEMATTNET_CACHE", str(tmp_path))
+    from semattnet.inference.backends import optimize_for_inference
+
+    model = _tiny("semattnet_rt_s").eval()
+    x = _frame(h=32, w=64)
+    engine = optimize_for_inference(model, backend=backend, size=(32, 64))
+    with torch.inference_mode():
+        torch.testing.assert_close(engine(**x).depth, model(**x).depth, rtol=1e-4, atol=1e-3)
