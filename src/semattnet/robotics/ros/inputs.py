@@ -89,7 +89,8 @@ def decode_sparse_depth(msg: Any, topic: str) -> np.ndarray:
         raise DataError(f"{topic}: sparse depth holds {data.size} bytes, {h} rows of {step} need {h * step}")
     rows = data[: h * step].reshape(h, step)[:, : w * dtype.itemsize]
     d = np.ascontiguousarray(rows).view(dtype).reshape(h, w).astype(np.float32) * np.float32(scale)
-    return np.where(np.isfinite(d) & (d > 0), d, np.float32(0)).astype(np.float32)
+    depth: np.ndarray = np.where(np.isfinite(d) & (d > 0), d, np.float32(0)).astype(np.float32)
+    return depth
 
 
 class PairingInputs:
