@@ -8,6 +8,7 @@ import warnings
 from semattnet._errors import InputError
 from semattnet.data.frames import Frame, FrameSource
 from semattnet.data.sources.semantic import CrossPalette, MapSegmenter
+from semattnet.inference.completion import Completer
 
 __all__ = ["SemanticMaps"]
 
@@ -35,18 +36,19 @@ class SemanticMaps:
         self.note: str | None = None
         self._warned = False
 
-    def bind(self, completer: object) -> SemanticMaps:
+    def bind(self, completer: Completer) -> SemanticMaps:
         """Decide for ``completer``: whether it needs maps; a segmenter SPEC is loaded on its device."""
-        from semattnet.inference.backends import needs_semantic
-
-        self.needed = needs_semantic(completer)
+        if not isinstance(completer, Completer):
+            raise InputError(f"completer: a {type(completer).__name__} is not a Completer: it must say its "
+                             "needs_semantic, palette and device (as ClassicalCompleter does)")  # fmt: skip
+        self.needed = bool(completer.needs_semantic)
         if self.needed and isinstance(self.segmenter, str):
             from semattnet.segmentation.segmenter import load_segmenter
 
-            self.segmenter = load_segmenter(self.segmenter, getattr(completer, "device", "auto"))
+            self.segmenter = load_segmenter(self.segmenter, completer.device)
         return self
 
-    def check_palette(self, completer: object, source: FrameSource) -> None:
+    def check_palette(self, completer: Completer, source: FrameSource) -> None:
         """Refuse maps of another palette than the one ``completer``'s model was trained with (one line;
         :func:`semattnet.palette.check_palette`): a segmenter's maps are of its ``palette`` (Cityscapes
         unless it says otherwise), a source's of its ``info.palette`` (None: it gives none, and the fallback map
@@ -60,7 +62,7 @@ class SemanticMaps:
         palette = palette or ("cityscapes" if self.folder else None)
         if palette is not None:
             where = "the segmenter's maps" if self.segmenter is not None else f"{type(source).__name__} maps"
-            model = getattr(completer, "palette", "cityscapes")
+            model = completer.palette
             if self.mismatch != "refuse" and get_palette(palette).name != get_palette(model).name:
                 self.cross = CrossPalette(palette, model, self.mismatch)
                 self.note = self.cross.report()["summary"]
