@@ -7,6 +7,7 @@ that stalls past its timeout or an XML-RPC document over :data:`MAX_XMLRPC_BYTES
 
 from __future__ import annotations
 
+import http.client
 import logging
 import socket
 import struct
@@ -147,12 +148,12 @@ class _BoundedTransport(xmlrpc.client.Transport):
         super().__init__()
         self._timeout = timeout
 
-    def make_connection(self, host: Any) -> Any:
+    def make_connection(self, host: str | tuple[str, dict[str, str]]) -> http.client.HTTPConnection:
         conn = super().make_connection(host)
         conn.timeout = self._timeout
         return conn
 
-    def parse_response(self, response: Any) -> Any:
+    def parse_response(self, response: http.client.HTTPResponse) -> tuple[Any, ...]:  # XML-RPC values
         body = response.read(MAX_XMLRPC_BYTES + 1)
         if len(body) > MAX_XMLRPC_BYTES:
             raise TcprosError(f"XML-RPC response over {MAX_XMLRPC_BYTES} bytes")
@@ -162,7 +163,7 @@ class _BoundedTransport(xmlrpc.client.Transport):
         return unmarshaller.close()
 
 
-def xmlrpc_call(uri: str, method: str, *args: object, timeout: float) -> list[Any]:
+def xmlrpc_call(uri: str, method: str, *args: object, timeout: float) -> list[object]:
     """Call ``method`` on the XML-RPC server at ``uri``; ROS's ``[code, status, value]`` reply, checked for shape.
 
     Raises :class:`TcprosError` for a reply that is not a 3-list, ``OSError`` for a network failure and
@@ -193,7 +194,7 @@ class _SlaveHandler(SimpleXMLRPCRequestHandler):
             return
         super().do_POST()
 
-    def log_message(self, format: str, *args: Any) -> None:
+    def log_message(self, format: str, *args: object) -> None:
         """Quiet: the base class writes every request to stderr."""
 
 

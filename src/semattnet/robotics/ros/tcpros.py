@@ -34,7 +34,7 @@ import threading
 import time
 import xmlrpc.client
 from collections.abc import Callable, Mapping
-from typing import Any, cast
+from typing import cast
 
 from semattnet._errors import InputError
 
@@ -369,7 +369,7 @@ class TcprosTransport:
             raise InputError(f"{topic}: the ROS 1 transport is closed")
         return typename
 
-    def _master(self, method: str, *args: object) -> Any:
+    def _master(self, method: str, *args: object) -> object:
         """Call the master as this node: its value, or a :class:`TcprosError` (unreachable, or a failure code)."""
         try:
             code, status, value = xmlrpc_call(self.master_uri, method, self.node_name, *args, timeout=self.timeout)
@@ -447,7 +447,7 @@ class TcprosTransport:
 
     def _register_api(self) -> None:
         """The slave API peers and the master call (ROS's Slave API; each reply is [code, status, value])."""
-        api: dict[str, Callable[..., list[Any]]] = {
+        api: dict[str, Callable[..., list[object]]] = {
             "getBusStats": lambda caller: [1, "", [[], [], []]],
             "getBusInfo": lambda caller: [1, "", []],
             "getMasterUri": lambda caller: [1, "", self.master_uri],
@@ -463,21 +463,21 @@ class TcprosTransport:
         for method, function in api.items():
             self._slave.register_function(function, method)
 
-    def _publisher_update(self, caller: str, topic: str, publishers: list[Any]) -> list[Any]:
+    def _publisher_update(self, caller: str, topic: str, publishers: object) -> list[object]:
         subscription = self._subscriptions.get(topic)
         if subscription is None or not isinstance(publishers, list):
             return [0, f"not a subscriber of {topic!r}", 0]
         subscription.update([uri for uri in publishers if isinstance(uri, str)])
         return [1, "", 0]
 
-    def _request_topic(self, caller: str, topic: str, protocols: list[Any]) -> list[Any]:
+    def _request_topic(self, caller: str, topic: str, protocols: list[object]) -> list[object]:
         if topic not in self._publishers:
             return [-1, f"not a publisher of {topic!r}", []]
         if not any(isinstance(p, list) and p[:1] == ["TCPROS"] for p in protocols):
             return [0, "no supported protocol (this node speaks TCPROS)", []]
         return [1, "", ["TCPROS", self.host, self._listener.getsockname()[1]]]
 
-    def _remote_shutdown(self, caller: str, message: str = "") -> list[Any]:
+    def _remote_shutdown(self, caller: str, message: str = "") -> list[object]:
         _log.warning("tcpros: %r asked this node to shut down (%r)", caller, message)
         threading.Thread(target=self.close, name="tcpros-shutdown", daemon=True).start()
         return [1, "", 0]
