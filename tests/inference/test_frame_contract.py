@@ -17,8 +17,10 @@ import semattnet
 from semattnet._errors import InputError
 from semattnet.baselines import ClassicalCompleter
 from semattnet.data.frames import Frame, IndexedSource, SourceInfo, TwoStageSource
+from semattnet.data.sources.semantic import MapSegmenter
 from semattnet.inference import Completion
 from semattnet.inference.pipeline import Completer, complete_frames
+from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sinks import Prediction, Sink
 from semattnet.inference.timing import StageTimes
 from semattnet.palette import PaletteMismatchError
@@ -133,15 +135,36 @@ def test_a_callable_that_does_not_say_what_it_needs_is_refused_in_one_line(tmp_p
     assert not (tmp_path / "out" / "a.txt").exists()
 
 
+class Labels:
+    """A segmenter of Cityscapes class ids: every pixel is road (0)."""
+
+    palette = "cityscapes"
+
+    def __call__(self, images: np.ndarray, /) -> np.ndarray:
+        return np.zeros(images.shape[:3], np.uint8)
+
+
+def test_the_segmenters_palette_is_asked_not_assumed(tmp_path: Path) -> None:
+    assert isinstance(Labels(), MapSegmenter)
+    with pytest.raises(PaletteMismatchError, match="the segmenter's maps"):  # Cityscapes ids for an NYU-40 model
+        complete_frames(Stamped(), Indoor(), [TextDepth()], tmp_path / "out", semantic=SemanticMaps(Labels()),
+                        log=lambda s: None)  # fmt: skip
+    with pytest.raises(InputError, match="semantic: a function is not a segmenter: it must say the palette"):
+        SemanticMaps(lambda images: np.zeros(images.shape[:3], np.uint8))  # type: ignore[arg-type]
+
+
 def test_no_probe_of_sources_sinks_or_completers_in_the_frame_path() -> None:
-    """No ``getattr`` / ``hasattr`` on a source, a sink or a completer, no ``isinstance`` against a sink class."""
+    """No ``getattr`` / ``hasattr`` on a source, a sink, a completer or a segmenter, no ``isinstance`` against a
+    sink class."""
     found = []
     for rel in FRAME_PATH:
         for node in ast.walk(ast.parse((SRC / rel).read_text())):
             if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.args):
                 continue
             first, name = ast.unparse(node.args[0]), node.func.id
-            probed = name in ("getattr", "hasattr") and any(w in first for w in ("source", "sink", "ds", "completer"))
+            probed = name in ("getattr", "hasattr") and any(
+                w in first for w in ("source", "sink", "ds", "completer", "segmenter")
+            )
             by_class = name == "isinstance" and len(node.args) > 1 and "Sink" in ast.unparse(node.args[1])
             if probed or by_class:
                 found.append(f"{rel}:{node.lineno}: {ast.unparse(node)}")

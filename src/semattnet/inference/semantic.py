@@ -30,6 +30,9 @@ class SemanticMaps:
                  mismatch: str = "refuse") -> None:  # fmt: skip
         if folder and segmenter is not None:
             raise InputError("semantic: give a semantic folder or a segmenter, not both")
+        if not (segmenter is None or isinstance(segmenter, str | MapSegmenter)):
+            raise InputError(f"semantic: a {type(segmenter).__name__} is not a segmenter: it must say the palette "
+                             "of its maps (as semattnet.segmentation.Segmenter does)")  # fmt: skip
         self.segmenter, self.folder, self.needed = segmenter, folder, False
         self.mismatch = mismatch
         self.cross: CrossPalette | None = None
@@ -57,8 +60,8 @@ class SemanticMaps:
 
         if not self.needed:
             return
-        palette = getattr(self.segmenter, "palette", "cityscapes") if self.segmenter is not None else (
-            source.info.palette)  # fmt: skip
+        palette = source.info.palette if self.segmenter is None else (
+            "cityscapes" if isinstance(self.segmenter, str) else self.segmenter.palette)  # fmt: skip
         palette = palette or ("cityscapes" if self.folder else None)
         if palette is not None:
             where = "the segmenter's maps" if self.segmenter is not None else f"{type(source).__name__} maps"
@@ -78,8 +81,7 @@ class SemanticMaps:
         if frame.semantic is None and self.segmenter is not None:
             if isinstance(self.segmenter, str):  # bind loads it
                 raise InputError(f"semantic: segmenter {self.segmenter!r} is not loaded; bind the completer first")
-            palette = getattr(self.segmenter, "palette", "cityscapes")
-            frame = frame.with_semantic(ids_to_colors(self.segmenter(frame.rgb[None])[0], palette))
+            frame = frame.with_semantic(ids_to_colors(self.segmenter(frame.rgb[None])[0], self.segmenter.palette))
         if frame.semantic is not None:
             return frame if self.cross is None else frame.with_semantic(self.cross.map(frame.semantic, frame.name))
         if not self._warned:
