@@ -53,15 +53,15 @@ class SemanticMaps:
 
     def check_palette(self, completer: Completer, source: FrameSource) -> None:
         """Refuse maps of another palette than the one ``completer``'s model was trained with (one line;
-        :func:`semattnet.palette.check_palette`): a segmenter's maps are of its ``palette`` (Cityscapes
-        unless it says otherwise), a source's of its ``info.palette`` (None: it gives none, and the fallback map
-        fits every palette)."""
+        :func:`semattnet.palette.check_palette`): a segmenter's maps are of its ``palette``, a source's of its
+        ``info.palette`` (None: it gives none, and the fallback map fits every palette)."""
         from semattnet.palette import check_palette, get_palette
 
         if not self.needed:
             return
-        palette = source.info.palette if self.segmenter is None else (
-            "cityscapes" if isinstance(self.segmenter, str) else self.segmenter.palette)  # fmt: skip
+        if isinstance(self.segmenter, str):  # bind, which decides ``needed``, loads it
+            raise InputError(f"semantic: segmenter {self.segmenter!r} is not loaded; bind the completer first")
+        palette = source.info.palette if self.segmenter is None else self.segmenter.palette
         palette = palette or ("cityscapes" if self.folder else None)
         if palette is not None:
             where = "the segmenter's maps" if self.segmenter is not None else f"{type(source).__name__} maps"
