@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 
+from semattnet.baselines.classical import ClassicalCompleter
 from semattnet.data.io import MIN_DEPTH_M, clamp_for_png, read_depth
 from semattnet.data.pairing import FramePaths
 from semattnet.data.synthetic.tree import write_synthetic_kitti
@@ -53,8 +54,11 @@ def test_predict_path_keeps_holes(tmp_path: Path) -> None:
     write_depth(tmp_path / "s.png", np.full((20, 30), 4.0))
     pred = _with_holes(np.full((20, 30), 7.0))
 
-    def completer(image: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
-        return Completion(depth=pred)
+    class Fixed(ClassicalCompleter):
+        def __call__(self, image: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
+            return Completion(depth=pred)
+
+    completer = Fixed()
 
     with pytest.warns(UserWarning, match="hole"):
         complete_folder(completer, [FramePaths("a", tmp_path / "a.png", tmp_path / "s.png")], tmp_path / "o", log=str)
@@ -73,9 +77,14 @@ def test_submission_keeps_and_reports_holes(tmp_path: Path) -> None:
     assert (read_depth(tmp_path / "s" / "0000000001.png") > 0).all()
 
 
-def _holey(rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
+class _Holey(ClassicalCompleter):
     """Predicts 9 m + the mean sparse depth with the hole pattern (NaN, -1 and 0)."""
-    return Completion(depth=_with_holes(np.full(sparse.shape, 9.0) + sparse.mean()))
+
+    def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
+        return Completion(depth=_with_holes(np.full(sparse.shape, 9.0) + sparse.mean()))
+
+
+_holey = _Holey()
 
 
 def test_evaluate_saved_and_quantized_scores_match_metrics(tmp_path: Path) -> None:

@@ -70,18 +70,20 @@ def test_checks_come_before_the_completer(tree: Path, tmp_path: Path) -> None:
 def test_the_read_back_check_and_the_holes_warning(tree: Path, tmp_path: Path) -> None:
     """A prediction of the wrong size fails the read-back check (nothing written); holes are warned."""
 
-    def cropped(rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
-        return Completion(np.full((sparse.shape[0] - 1, sparse.shape[1]), 5.0, np.float32))
+    class Cropped(ClassicalCompleter):
+        def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
+            return Completion(np.full((sparse.shape[0] - 1, sparse.shape[1]), 5.0, np.float32))
 
     with pytest.raises(SubmissionError, match="read-back check"):
-        write_submission(cropped, tree, tmp_path / "a", expected_frames=None)
+        write_submission(Cropped(), tree, tmp_path / "a", expected_frames=None)
     assert not list(tmp_path.iterdir())  # no folder, no zip, no stage
 
-    def holed(rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
-        depth = np.full(sparse.shape, 5.0, np.float32)
-        depth[0, :3] = 0.0
-        return Completion(depth)
+    class Holed(ClassicalCompleter):
+        def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
+            depth = np.full(sparse.shape, 5.0, np.float32)
+            depth[0, :3] = 0.0
+            return Completion(depth)
 
     with pytest.warns(UserWarning, match=r"submission: 6 hole\(s\) .* in 2 file\(s\)"):
-        write_submission(holed, tree, tmp_path / "b", expected_frames=None)
+        write_submission(Holed(), tree, tmp_path / "b", expected_frames=None)
     assert all((read_depth(p) == 0).sum() == 3 for p in (tmp_path / "b").iterdir())

@@ -19,10 +19,8 @@ from semattnet.inference.sinks import DepthPngSink, default_sinks, predict_frame
 from tests.inference._raw_sample import DRIVE
 
 
-class _Bad:
+class _Bad(ClassicalCompleter):
     """Returns a fixed depth with NaN, negative, zero, too-small and too-large values, whatever the input."""
-
-    needs_semantic = False
 
     def __call__(self, rgb, sparse, semantic=None):  # type: ignore[no-untyped-def]
         d = np.full(sparse.shape, 7.3, np.float32)

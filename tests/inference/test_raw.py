@@ -61,7 +61,7 @@ def test_python_api_gives_the_cli_depth(tmp_path: Path) -> None:
 class _Recorder:
     """A completer that records the semantic map it receives and returns the sparse depth plus weights."""
 
-    needs_semantic = True
+    needs_semantic, palette, device = True, "cityscapes", "cpu"
 
     def __call__(self, rgb, sparse, semantic=None):  # type: ignore[no-untyped-def]
         import torch

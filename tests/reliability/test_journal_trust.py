@@ -177,7 +177,7 @@ def test_a_weights_folder_is_recorded_by_digest(tmp_path: Path) -> None:
     assert str(first["weights"]).startswith("sha256-tree:") and _identity({"weights": str(tmp_path / "w")}) != first
 
 
-class _Fails:
+class _Fails(ClassicalCompleter):
     """A completer for which every frame is bad."""
 
     def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Any:

@@ -14,6 +14,7 @@ from click.testing import CliRunner
 
 from semattnet._errors import SemAttNetError
 from semattnet._utils.outputs import OutputError, check_no_input_overlap
+from semattnet.baselines import ClassicalCompleter
 from semattnet.cli import main
 from semattnet.data.download import ArchiveConflictError, extract_zip
 
@@ -154,11 +155,14 @@ def test_predict_overwrite_keeps_whole_frames_when_a_late_frame_fails(tmp_path: 
 
     calls = []
 
-    def completer(rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
-        calls.append(1)
-        if len(calls) == 3:
-            raise RuntimeError("the model failed on the last frame")
-        return Completion(np.full(sparse.shape, 3.0, np.float32))
+    class Failing(ClassicalCompleter):
+        def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
+            calls.append(1)
+            if len(calls) == 3:
+                raise RuntimeError("the model failed on the last frame")
+            return Completion(np.full(sparse.shape, 3.0, np.float32))
+
+    completer = Failing()
 
     out = tmp_path / "out"
     out.mkdir()

@@ -11,6 +11,7 @@ import pytest
 
 import semattnet
 from semattnet._errors import DataError
+from semattnet.baselines.classical import ClassicalCompleter
 from semattnet.data.frames import Frame, IndexedSource
 from semattnet.inference import DepthCompleter
 from semattnet.inference.completer import Completion
@@ -45,9 +46,13 @@ class SlowSource(IndexedSource):
         return []
 
 
-def slow_completer(rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
-    time.sleep(SLEEP)
-    return Completion(np.full(sparse.shape, sparse.max(), np.float32))
+class _SlowCompleter(ClassicalCompleter):
+    def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
+        time.sleep(SLEEP)
+        return Completion(np.full(sparse.shape, sparse.max(), np.float32))
+
+
+slow_completer = _SlowCompleter()
 
 
 def test_stream_overlaps_reading_with_compute() -> None:

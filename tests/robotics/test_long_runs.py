@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from semattnet.baselines.classical import ClassicalCompleter
 from semattnet.cli import main
 from tests.robotics import _faulty_bag as fb
 from tests.robotics._faulty_bag import FAULTS, GOOD, IMAGE_TOPIC, N_FRAMES, POINTS_TOPIC, write_faulty_bag
@@ -233,17 +234,15 @@ def test_resume_without_a_journal_is_refused(tmp_path: Path) -> None:
         assert len(res.output.strip().splitlines()) <= 2 and not any((tmp_path / "empty").iterdir())
 
 
-class _Slow:
+class _Slow(ClassicalCompleter):
     """The classical completer, ``seconds`` slower per frame."""
 
     def __init__(self, seconds: float) -> None:
-        from semattnet.baselines.classical import ClassicalCompleter
-
-        self.inner, self.seconds = ClassicalCompleter(), seconds
+        self.seconds = seconds
 
     def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Any:
         time.sleep(self.seconds)
-        return self.inner(rgb, sparse, semantic)
+        return super().__call__(rgb, sparse, semantic)
 
 
 def test_realtime_drops_the_frames_that_come_while_busy(tmp_path: Path) -> None:

@@ -141,13 +141,16 @@ def test_failed_frame_leaves_no_bag_and_no_recording(sample: dict[str, Path], tm
     pytest.importorskip("rerun")
     calls = []
 
-    def failing(rgb, sparse, semantic=None):  # type: ignore[no-untyped-def]
-        from semattnet.baselines.classical import ClassicalCompleter
+    from semattnet.baselines.classical import ClassicalCompleter
 
-        calls.append(1)
-        if len(calls) == 2:
-            raise RuntimeError("frame 2 fails")
-        return ClassicalCompleter()(rgb, sparse, semantic)
+    class Failing(ClassicalCompleter):
+        def __call__(self, rgb, sparse, semantic=None):  # type: ignore[no-untyped-def]
+            calls.append(1)
+            if len(calls) == 2:
+                raise RuntimeError("frame 2 fails")
+            return super().__call__(rgb, sparse, semantic)
+
+    failing = Failing()
 
     sinks = [*default_sinks(), BagSink(target=tmp_path / "b.bag"), RerunSink(target=tmp_path / "r.rrd")]
     source = BagSource(sample["sqlite3"], T.image, T.points, rig=sample["rig"])

@@ -62,7 +62,7 @@ class Option:
     identity: bool = True
 
 
-def option(*flags: str, help: str, default: Any = None, **kw: Any) -> Any:
+def option(*flags: str, help: str, default: object = None, **kw: Any) -> Any:
     """A dataclass ``field`` that is the command-line option ``flags`` (see :class:`Option`); ``type="flag"``
     defaults to False."""
     spec = Option(tuple(flags), help, **kw)

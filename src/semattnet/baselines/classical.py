@@ -210,6 +210,9 @@ class ClassicalCompleter:
     ``completer(rgb, sparse, semantic=None)`` -> ``Completion`` (the image and semantics are unused)."""
 
     needs_semantic = False
+    #: Unused (it reads no semantic map); the frame loop's :class:`~semattnet.inference.pipeline.Completer` asks.
+    palette = "cityscapes"
+    device = "cpu"
 
     def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
         t = torch.from_numpy(np.ascontiguousarray(sparse, dtype=np.float32))

@@ -10,7 +10,7 @@ import os
 import warnings
 from pathlib import Path
 from types import ModuleType
-from typing import Any
+from typing import TYPE_CHECKING, overload
 
 import numpy as np
 from PIL import Image, UnidentifiedImageError
@@ -18,6 +18,10 @@ from PIL import Image, UnidentifiedImageError
 from semattnet._errors import DataError
 from semattnet._utils.atomic import atomic_path
 from semattnet._utils.bounds import MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, regular_file
+from semattnet.geometry.transforms import Array, is_tensor
+
+if TYPE_CHECKING:
+    from torch import Tensor
 
 __all__ = [
     "DEPTH_SCALE",
@@ -140,11 +144,15 @@ def decode_depth(values: np.ndarray) -> np.ndarray:
     return (np.asarray(values).astype(np.float32) / DEPTH_SCALE).astype(np.float32)
 
 
-def quantize_depth(depth: Any) -> Any:
+@overload
+def quantize_depth(depth: Tensor) -> Tensor: ...
+@overload
+def quantize_depth(depth: np.ndarray) -> np.ndarray: ...
+def quantize_depth(depth: Array) -> Array:
     """Metres as a KITTI 16-bit PNG stores them (1/256 m steps, clamped to the uint16 range), as float32
     metres; a NumPy array (via :func:`encode_depth`) or a torch tensor (same device). Finite input only:
     apply :func:`clamp_for_png` first for predictions."""
-    if type(depth).__module__.split(".")[0] == "torch":
+    if is_tensor(depth):
         import torch
 
         if not bool(torch.isfinite(depth).all()):
@@ -153,7 +161,11 @@ def quantize_depth(depth: Any) -> Any:
     return decode_depth(encode_depth(depth))
 
 
-def clamp_for_png(depth: Any, name: str = "prediction") -> Any:
+@overload
+def clamp_for_png(depth: Tensor, name: str = "prediction") -> Tensor: ...
+@overload
+def clamp_for_png(depth: np.ndarray, name: str = "prediction") -> np.ndarray: ...
+def clamp_for_png(depth: Array, name: str = "prediction") -> Array:
     """What a KITTI 16-bit PNG of a prediction holds, before rounding to 1/256 m: the one rule every
     PNG the project writes follows (``predict``, ``evaluate``'s predictions and PNG-exact scoring, ``submit``).
 
@@ -165,12 +177,14 @@ def clamp_for_png(depth: Any, name: str = "prediction") -> Any:
     ``depth``: a NumPy array or a torch tensor (returned as the same type, same device).
     """
     xp: ModuleType  # torch or numpy: the same calls on either
-    if type(depth).__module__.split(".")[0] == "torch":
+    d: Array
+    if is_tensor(depth):
         import torch as xp
+
+        d = depth
     else:
-        xp, depth = np, np.asarray(depth)
-        depth = depth if np.issubdtype(depth.dtype, np.floating) else depth.astype(np.float64)
-    d: Any = depth
+        xp, d = np, np.asarray(depth)
+        d = d if np.issubdtype(d.dtype, np.floating) else d.astype(np.float64)
     hole = ~xp.isfinite(d) | (xp.nan_to_num(d, nan=0.0) <= 0)
     holes = int(hole.sum())
     low, high = int((~hole & (d < MIN_DEPTH_M)).sum()), int((~hole & (d > MAX_DEPTH_M)).sum())
@@ -181,7 +195,8 @@ def clamp_for_png(depth: Any, name: str = "prediction") -> Any:
         warnings.warn(f"{name}: clamped {low} pixel(s) below {MIN_DEPTH_M:.4f} m and {high} above "
                       f"{MAX_DEPTH_M:.2f} m to KITTI's 16-bit range", stacklevel=2)  # fmt: skip
     clamped = xp.clip(xp.nan_to_num(d, nan=0.0, posinf=0.0, neginf=0.0), MIN_DEPTH_M, MAX_DEPTH_M)
-    return xp.where(hole, xp.zeros_like(clamped), clamped)
+    out: Array = xp.where(hole, xp.zeros_like(clamped), clamped)
+    return out
 
 
 #: The zlib level of the PNGs we write. 3 (zlib's fast strategy) against PIL's default 6, measured on a 352x1216

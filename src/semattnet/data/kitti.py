@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import os
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 from torch.utils.data import Dataset
@@ -42,7 +43,7 @@ class FrameFiles:
 
 
 #: What a split finder returns: the frames found, and (name, missing or wrong files) per bad frame.
-_Found = tuple[list[FrameFiles], list[tuple[str, list[Any]]]]
+_Found = tuple[list[FrameFiles], list[tuple[str, Sequence[Path | str]]]]
 
 
 def _first_existing(candidates: list[Path]) -> Path:
@@ -69,7 +70,7 @@ def _raw_roots(root: Path, raw_root: Path | None) -> list[Path]:
 
 def _find_train_val(root: Path, split: str, raw_root: Path | None, semantic_root: Path | None) -> _Found:
     frames: list[FrameFiles] = []
-    problems: list[tuple[str, list[Any]]] = []
+    problems: list[tuple[str, Sequence[Path | str]]] = []
     velo = (root / "data_depth_velodyne" / split).glob("*/proj_depth/velodyne_raw/image_0[23]/*.png")
     gts = set((root / "data_depth_annotated" / split).glob("*/proj_depth/groundtruth/image_0[23]/*.png"))
     raws, sems = _raw_roots(root, raw_root), _semantic_roots(root, semantic_root)
@@ -98,7 +99,7 @@ def _find_selection(root: Path, split: str, semantic_root: Path | None) -> _Foun
     if semantic_root is not None:
         sem_dirs = [Path(semantic_root), Path(semantic_root) / base.name, *sem_dirs]
     frames: list[FrameFiles] = []
-    problems: list[tuple[str, list[Any]]] = []
+    problems: list[tuple[str, Sequence[Path | str]]] = []
     velo_files = sorted((base / "velodyne_raw").glob("*.png"))
     for sparse in velo_files:
         if split == "val_select":
@@ -129,7 +130,7 @@ def find_frames(
     split: str,
     raw_root: str | os.PathLike[str] | None = None,
     semantic_root: str | os.PathLike[str] | None = None,
-) -> tuple[list[FrameFiles], list[tuple[str, list[Path | str]]]]:
+) -> tuple[list[FrameFiles], list[tuple[str, Sequence[Path | str]]]]:
     """Index a split: the complete frames, and (frame, missing files) for the incomplete ones."""
     if split not in layout.SPLITS:
         raise InputError(f"split: unknown split {split!r}; choose one of {layout.SPLITS}")
@@ -163,7 +164,7 @@ def load_frame(f: FrameFiles) -> Sample:
     return sample
 
 
-def _describe(problems: list[tuple[str, list[Path | str]]], limit: int = 5) -> str:
+def _describe(problems: list[tuple[str, Sequence[Path | str]]], limit: int = 5) -> str:
     shown = "; ".join(f"{name}: missing {', '.join(map(str, paths))}" for name, paths in problems[:limit])
     more = f"; ... and {len(problems) - limit} more" if len(problems) > limit else ""
     return shown + more
@@ -226,7 +227,7 @@ class KittiDepthCompletion(Dataset[dict[str, object]]):
         """The raw sample (numpy arrays, before any transform)."""
         return load_frame(self.frames[index])
 
-    def __getitem__(self, index: int) -> dict[str, Any]:
+    def __getitem__(self, index: int) -> dict[str, object]:
         sample = self.load(index)
         if self.transform is not None:
             sample = self.transform(sample, np.random.default_rng([self.seed, self.epoch, index]))

@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Mapping, Sequence
-from typing import Any
 
 import numpy as np
 
@@ -132,7 +131,7 @@ def verdict(ci: Sequence[float], p: float, alpha: float = ALPHA) -> str:
     return "not separated"
 
 
-def compare(d: np.ndarray, seeds: Sequence[int], *, alpha: float = ALPHA, seed: int = 0) -> dict[str, Any]:
+def compare(d: np.ndarray, seeds: Sequence[int], *, alpha: float = ALPHA, seed: int = 0) -> dict[str, object]:
     """The whole paired procedure (module docstring) on ``d`` of shape (seeds, images).
 
     Returns ``mean_diff``, ``ci95``, ``p``, ``test_units`` (``"seeds"`` or ``"seed-image pairs"``),

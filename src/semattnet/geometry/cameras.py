@@ -48,9 +48,8 @@ class CameraInfoData:
 
     def intrinsics(self, rectified: bool = True) -> np.ndarray:
         """(3, 3) intrinsics: ``P``'s left 3x3 for a rectified image (when ``P`` is set), else ``K``."""
-        if rectified and np.any(self.P[:, :3]):
-            return self.P[:, :3].copy()
-        return self.K.copy()
+        K: np.ndarray = self.P[:, :3] if rectified and np.any(self.P[:, :3]) else self.K
+        return np.array(K)
 
 
 def parse_intrinsics(text: str) -> np.ndarray:
@@ -60,7 +59,7 @@ def parse_intrinsics(text: str) -> np.ndarray:
         ValueError: not four numbers; InputError (a ValueError) for NaN / inf / non-positive focal lengths.
     """
     if text.strip().lower() == "kitti":
-        return KITTI_K.copy()
+        return np.array(KITTI_K)
     from semattnet._utils.bounds import check_pinhole
 
     fx, fy, cx, cy = (float(v) for v in text.split(","))

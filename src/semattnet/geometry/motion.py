@@ -87,7 +87,7 @@ def deskew_scan(
     dt = -np.arctan2(xyz[:, 1], xyz[:, 0]) / (2 * np.pi) * float(scan_period)
     a = float(yaw_rate) * dt
     c, s = np.cos(a), np.sin(a)
-    out = pts.copy()
+    out: np.ndarray = pts.copy()
     out[:, 0] = c * xyz[:, 0] - s * xyz[:, 1]
     out[:, 1] = s * xyz[:, 0] + c * xyz[:, 1]
     out[:, 2] = xyz[:, 2]

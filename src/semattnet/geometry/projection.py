@@ -19,14 +19,17 @@ Back-projection of pixel (u, v) with depth z: ``x = (u - cx) z / fx``, ``y = (v 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, TypeVar, overload
 
 import numpy as np
 
 from semattnet._errors import DataError, InputError
 from semattnet._utils.bounds import check_pinhole
 
-from .transforms import is_tensor, transform_points
+from .transforms import Array, ArrayInput, is_tensor, transform_points
+
+if TYPE_CHECKING:
+    from torch import Tensor
 
 __all__ = [
     "PointCloud",
@@ -39,7 +42,10 @@ __all__ = [
 ]
 
 
-def _check_points(points: Any, name: str) -> None:
+_ArrayT = TypeVar("_ArrayT", np.ndarray, "Tensor")
+
+
+def _check_points(points: Array, name: str) -> None:
     if points.ndim != 2 or points.shape[1] < 3:
         raise DataError(f"{name}: points must be (N, 3) or (N, 4), got shape {tuple(points.shape)}")
     if points.shape[0] == 0:
@@ -50,7 +56,17 @@ def _check_points(points: Any, name: str) -> None:
         raise DataError(f"{name}: {bad} of {points.shape[0]} points have NaN or infinite coordinates")
 
 
-def points_to_pixels(points: Any, K: Any, T_cam_lidar: Any, R_rect: Any = None) -> tuple[Any, Any]:
+@overload
+def points_to_pixels(
+    points: Tensor, K: ArrayInput, T_cam_lidar: ArrayInput, R_rect: ArrayInput | None = None
+) -> tuple[Tensor, Tensor]: ...
+@overload
+def points_to_pixels(
+    points: np.ndarray, K: ArrayInput, T_cam_lidar: ArrayInput, R_rect: ArrayInput | None = None
+) -> tuple[np.ndarray, np.ndarray]: ...
+def points_to_pixels(
+    points: Array, K: ArrayInput, T_cam_lidar: ArrayInput, R_rect: ArrayInput | None = None
+) -> tuple[Array, Array]:
     """Continuous pixel coordinates and depths of points, without any filtering.
 
     Args:
@@ -64,23 +80,28 @@ def points_to_pixels(points: Any, K: Any, T_cam_lidar: Any, R_rect: Any = None) 
         ``uv`` (N, 2) pixels (u = column, v = row) and ``z`` (N,) metres; NumPy float64 or torch (dtype of points).
         Points with ``z <= 0`` get meaningless ``uv``; filter on ``z`` first.
     """
-    xyz = transform_points(T_cam_lidar, points[:, :3] if is_tensor(points) else np.asarray(points)[:, :3])
-    if is_tensor(xyz):
+    if is_tensor(points):
         import torch
 
-        K = torch.as_tensor(K, dtype=xyz.dtype, device=xyz.device)
+        xyz = transform_points(T_cam_lidar, points[:, :3])
         if R_rect is not None:
             xyz = xyz @ torch.as_tensor(R_rect, dtype=xyz.dtype, device=xyz.device).T
-    else:
-        xyz, K = xyz.astype(np.float64), np.asarray(K, dtype=np.float64)
-        if R_rect is not None:
-            xyz = xyz @ np.asarray(R_rect, dtype=np.float64).T
+        u, v, z = _pinhole(xyz, torch.as_tensor(K, dtype=xyz.dtype, device=xyz.device))
+        return torch.stack([u, v], 1), z
+    xyz_np = transform_points(T_cam_lidar, np.asarray(points)[:, :3]).astype(np.float64)
+    if R_rect is not None:
+        xyz_np = xyz_np @ np.asarray(R_rect, dtype=np.float64).T
+    u_np, v_np, z_np = _pinhole(xyz_np, np.asarray(K, dtype=np.float64))
+    return np.stack([u_np, v_np], 1), z_np
+
+
+def _pinhole(xyz: _ArrayT, K: _ArrayT) -> tuple[_ArrayT, _ArrayT, _ArrayT]:
+    """``u``, ``v`` (pixels) and ``z`` (metres) of camera-frame points (N, 3) through intrinsics ``K``."""
     z = xyz[:, 2]
     safe = z + (z == 0) * 1e-12
     u = (K[0, 0] * xyz[:, 0] + K[0, 1] * xyz[:, 1]) / safe + K[0, 2]
     v = K[1, 1] * xyz[:, 1] / safe + K[1, 2]
-    stack = __import__("torch").stack if is_tensor(xyz) else np.stack
-    return stack([u, v], 1), z
+    return u, v, z
 
 
 def pixel_indices(uv: np.ndarray, image_size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -95,7 +116,7 @@ def pixel_indices(uv: np.ndarray, image_size: tuple[int, int]) -> tuple[np.ndarr
     return np.where(inside, col, -1).astype(np.int64), np.where(inside, row, -1).astype(np.int64), inside
 
 
-def check_intrinsics(K: Any, where: str) -> np.ndarray:
+def check_intrinsics(K: ArrayInput, where: str) -> np.ndarray:
     """``K`` as a (3, 3) float64 array when it is a pinhole matrix with finite entries and positive focal
     lengths; otherwise an :class:`~semattnet.InputError` naming ``where``."""
     k = np.asarray(K.detach().cpu() if is_tensor(K) else K, dtype=np.float64)
@@ -107,16 +128,38 @@ def check_intrinsics(K: Any, where: str) -> np.ndarray:
     return k
 
 
+@overload
 def project_points(
-    points: Any,
-    K: Any,
-    T_cam_lidar: Any,
+    points: Tensor,
+    K: ArrayInput,
+    T_cam_lidar: ArrayInput,
     image_size: tuple[int, int],
-    R_rect: Any = None,
+    R_rect: ArrayInput | None = None,
     min_depth: float = 0.1,
     max_depth: float | None = None,
     name: str = "points",
-) -> Any:
+) -> Tensor: ...
+@overload
+def project_points(
+    points: np.ndarray,
+    K: ArrayInput,
+    T_cam_lidar: ArrayInput,
+    image_size: tuple[int, int],
+    R_rect: ArrayInput | None = None,
+    min_depth: float = 0.1,
+    max_depth: float | None = None,
+    name: str = "points",
+) -> np.ndarray: ...
+def project_points(
+    points: Array,
+    K: ArrayInput,
+    T_cam_lidar: ArrayInput,
+    image_size: tuple[int, int],
+    R_rect: ArrayInput | None = None,
+    min_depth: float = 0.1,
+    max_depth: float | None = None,
+    name: str = "points",
+) -> Array:
     """Render points into a sparse depth map with a z-buffer (the nearest point wins each pixel).
 
     Args:
@@ -139,12 +182,11 @@ def project_points(
     if W <= 0 or H <= 0:
         raise DataError(f"{name}: image_size must be positive (width, height), got {image_size}")
     check_intrinsics(K, "project_points")
-    uv, z = points_to_pixels(points, K, T_cam_lidar, R_rect)
-    front = z > min_depth
-    if not bool(front.any()):
-        raise DataError(f"{name}: no point in front of the camera (all {len(z)} have depth <= {min_depth} m)")
     if is_tensor(points):
-        return _zbuffer_torch(uv, z, front, W, H, max_depth)
+        uv_t, z_t = points_to_pixels(points, K, T_cam_lidar, R_rect)
+        return _zbuffer_torch(uv_t, z_t, _in_front(z_t > min_depth, name, min_depth), W, H, max_depth)
+    uv, z = points_to_pixels(points, K, T_cam_lidar, R_rect)
+    front = _in_front(z > min_depth, name, min_depth)
     col, row, inside = pixel_indices(uv, (W, H))
     keep = front & inside
     if max_depth is not None:
@@ -160,7 +202,14 @@ def project_points(
     return depth.reshape(H, W)
 
 
-def _zbuffer_torch(uv: Any, z: Any, front: Any, W: int, H: int, max_depth: float | None) -> Any:
+def _in_front(front: _ArrayT, name: str, min_depth: float) -> _ArrayT:
+    """``front`` (N,) bool, unless no point is in front of the camera."""
+    if not bool(front.any()):
+        raise DataError(f"{name}: no point in front of the camera (all {len(front)} have depth <= {min_depth} m)")
+    return front
+
+
+def _zbuffer_torch(uv: Tensor, z: Tensor, front: Tensor, W: int, H: int, max_depth: float | None) -> Tensor:
     import torch
 
     col, row = torch.floor(uv[:, 0] + 0.5), torch.floor(uv[:, 1] + 0.5)
@@ -205,15 +254,18 @@ class PointCloud:
 
     def select(self, keep: np.ndarray) -> PointCloud:
         """The points where ``keep`` (N,) bool is True (or at the given indices)."""
-        pick = lambda a: None if a is None else a[keep]  # noqa: E731
+
+        def pick(a: np.ndarray | None) -> np.ndarray | None:
+            return None if a is None else a[keep]
+
         values = {k: v[keep] for k, v in self.values.items()}
         return replace(self, xyz=self.xyz[keep], rgb=pick(self.rgb), uv=pick(self.uv),
                        confidence=pick(self.confidence), values=values)  # fmt: skip
 
 
-def _as_map(a: Any, what: str, ndim: int = 2) -> np.ndarray:
+def _as_map(x: ArrayInput, what: str, ndim: int = 2) -> np.ndarray:
     """NumPy (H, W[, C]) from an array/tensor, squeezing leading singleton axes ((1, H, W), (1, 1, H, W))."""
-    a = a.detach().cpu().numpy() if is_tensor(a) else np.asarray(a)
+    a: np.ndarray = x.detach().cpu().numpy() if is_tensor(x) else np.asarray(x)
     while a.ndim > ndim and a.shape[0] == 1:
         a = a[0]
     if a.ndim != ndim:
@@ -221,7 +273,9 @@ def _as_map(a: Any, what: str, ndim: int = 2) -> np.ndarray:
     return a
 
 
-def select_pixels(depth: Any, max_depth: float | None = None, top_crop: int = 0, mask: Any = None) -> np.ndarray:
+def select_pixels(
+    depth: ArrayInput, max_depth: float | None = None, top_crop: int = 0, mask: ArrayInput | None = None
+) -> np.ndarray:
     """Which pixels of a dense depth map to turn into points.
 
     Args:
@@ -234,7 +288,7 @@ def select_pixels(depth: Any, max_depth: float | None = None, top_crop: int = 0,
         (H, W) bool: finite, positive depth and all the conditions above.
     """
     d = _as_map(depth, "depth")
-    keep = np.isfinite(d) & (d > 0)
+    keep: np.ndarray = np.isfinite(d) & (d > 0)
     if max_depth is not None:
         keep &= d <= max_depth
     if top_crop:
@@ -248,11 +302,11 @@ def select_pixels(depth: Any, max_depth: float | None = None, top_crop: int = 0,
 
 
 def depth_to_points(
-    depth: Any,
-    K: Any,
-    rgb: Any = None,
-    mask: Any = None,
-    confidence: Any = None,
+    depth: ArrayInput,
+    K: ArrayInput,
+    rgb: ArrayInput | None = None,
+    mask: ArrayInput | None = None,
+    confidence: ArrayInput | None = None,
     max_depth: float | None = None,
     top_crop: int = 0,
     frame: str = "cam",

@@ -24,11 +24,11 @@ Everything random takes a seed and is deterministic for it.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from semattnet._errors import DataError, InputError
+
+from .transforms import ArrayInput, is_tensor
 
 __all__ = ["beam_ids", "elevation_deg", "keep_beams", "keep_random", "keep_row_bands"]
 
@@ -100,7 +100,8 @@ def keep_beams(
     if keep <= 0 or num_beams % keep:
         raise InputError(f"keep must divide num_beams={num_beams}, got {keep}")
     ids = beam_ids(points, num_beams, method) if beams is None else np.asarray(beams)
-    return np.asarray(points)[ids % (num_beams // keep) == 0]
+    kept: np.ndarray = np.asarray(points)[ids % (num_beams // keep) == 0]
+    return kept
 
 
 def keep_random(data: np.ndarray, ratio: float, seed: int = 0, kind: str = "auto") -> np.ndarray:
@@ -129,7 +130,7 @@ def keep_random(data: np.ndarray, ratio: float, seed: int = 0, kind: str = "auto
         raise InputError(f"kind must be 'points' or 'map' (an (H, W) array), got {kind!r} with shape {a.shape}")
     flat = np.flatnonzero(a > 0)
     drop = rng.choice(flat, size=len(flat) - round(ratio * len(flat)), replace=False)
-    out = a.copy()
+    out: np.ndarray = a.copy()
     out.flat[drop] = 0
     return out
 
@@ -162,7 +163,12 @@ def _beam_ids_from_depth(d: np.ndarray, K: np.ndarray, T_cam_lidar: np.ndarray, 
 
 
 def keep_row_bands(
-    sparse: Any, keep: int, num_beams: int = 64, K: Any = None, T_cam_lidar: Any = None, strip: int = 16
+    sparse: ArrayInput,
+    keep: int,
+    num_beams: int = 64,
+    K: np.ndarray | None = None,
+    T_cam_lidar: np.ndarray | None = None,
+    strip: int = 16,
 ) -> np.ndarray:
     """Approximate :func:`keep_beams` on a projected sparse depth map when the scan itself is not available.
 
@@ -189,13 +195,16 @@ def keep_row_bands(
         raise InputError("pass both K and T_cam_lidar, or neither")
     valid = d > 0
     if not valid.any():
-        return d.copy()
-    ids = _row_band_ids(valid, strip) if K is None else _beam_ids_from_depth(d, K, T_cam_lidar, num_beams)
+        return np.array(d)
+    if K is None or T_cam_lidar is None:
+        ids = _row_band_ids(valid, strip)
+    else:
+        ids = _beam_ids_from_depth(d, K, T_cam_lidar, num_beams)
     return np.where(valid & (ids % (num_beams // keep) == 0), d, 0).astype(np.float32)
 
 
-def _as_numpy_map(a: Any) -> np.ndarray:
-    a = a.detach().cpu().numpy() if type(a).__module__.split(".")[0] == "torch" else np.asarray(a)
+def _as_numpy_map(x: ArrayInput) -> np.ndarray:
+    a: np.ndarray = x.detach().cpu().numpy() if is_tensor(x) else np.asarray(x)
     a = np.squeeze(a) if a.ndim > 2 else a
     if a.ndim != 2:
         raise DataError(f"sparse depth must be (H, W), got shape {a.shape}")

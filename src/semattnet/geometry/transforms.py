@@ -9,28 +9,53 @@ Every function accepts NumPy arrays or torch tensors and returns the same kind.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, TypeAlias, overload
 
 import numpy as np
+import numpy.typing as npt
 
 from semattnet._errors import InputError
 
-__all__ = ["check_rigid", "check_rotation", "invert_T", "is_tensor", "make_T", "transform_points"]
+if TYPE_CHECKING:
+    from torch import Tensor
+    from typing_extensions import TypeIs
 
-Array = Any  # np.ndarray or torch.Tensor
+__all__ = [
+    "Array",
+    "ArrayInput",
+    "check_rigid",
+    "check_rotation",
+    "invert_T",
+    "is_tensor",
+    "make_T",
+    "transform_points",
+]
+
+Array: TypeAlias = "np.ndarray | Tensor"
+"""A NumPy array or a torch tensor: what the functions here take, returning the same kind."""
+ArrayInput: TypeAlias = "np.ndarray | Tensor | npt.ArrayLike"
+"""What a matrix argument may be: an array, a tensor or nested sequences of numbers."""
 
 
-def is_tensor(x: object) -> bool:
+def is_tensor(x: object) -> TypeIs[Tensor]:
     """Whether ``x`` is a torch tensor (checked without importing torch; NumPy otherwise)."""
     return type(x).__module__.split(".")[0] == "torch"
 
 
+@overload
+def _swap_last(x: Tensor) -> Tensor: ...
+@overload
+def _swap_last(x: np.ndarray) -> np.ndarray: ...
 def _swap_last(x: Array) -> Array:
     """Transpose of the last two axes, for NumPy arrays and torch tensors."""
     return x.transpose(-1, -2) if is_tensor(x) else np.swapaxes(x, -1, -2)
 
 
-def make_T(R: Array, t: Array) -> Array:
+@overload
+def make_T(R: Tensor, t: ArrayInput) -> Tensor: ...
+@overload
+def make_T(R: np.ndarray, t: npt.ArrayLike) -> np.ndarray: ...
+def make_T(R: Array, t: ArrayInput) -> Array:
     """Build ``T = [[R, t], [0, 0, 0, 1]]``.
 
     Args:
@@ -55,6 +80,10 @@ def make_T(R: Array, t: Array) -> Array:
     return out
 
 
+@overload
+def invert_T(T: Tensor) -> Tensor: ...
+@overload
+def invert_T(T: np.ndarray) -> np.ndarray: ...
 def invert_T(T: Array) -> Array:
     """Closed-form inverse of a rigid transform: ``T^-1 = [[R^T, -R^T t], [0, 1]]``.
 
@@ -69,7 +98,11 @@ def invert_T(T: Array) -> Array:
     return make_T(Rt, -(Rt @ t))
 
 
-def transform_points(T: Array, xyz: Array) -> Array:
+@overload
+def transform_points(T: ArrayInput, xyz: Tensor) -> Tensor: ...
+@overload
+def transform_points(T: ArrayInput, xyz: np.ndarray) -> np.ndarray: ...
+def transform_points(T: ArrayInput, xyz: Array) -> Array:
     """Apply ``T`` to points: ``p' = R p + t`` for each row.
 
     Args:
@@ -84,32 +117,32 @@ def transform_points(T: Array, xyz: Array) -> Array:
     if is_tensor(xyz):
         import torch
 
-        T = torch.as_tensor(T, dtype=xyz.dtype, device=xyz.device)
-        out = xyz.clone()
-        out[..., :3] = xyz[..., :3] @ T[:3, :3].transpose(0, 1) + T[:3, 3]
-        return out
-    xyz = np.asarray(xyz)
-    out = xyz.astype(np.result_type(xyz.dtype, np.float32), copy=True)
-    T = np.asarray(T, dtype=np.float64)
-    x, y, z = (xyz[..., i].astype(np.float64) for i in range(3))
+        Tt = torch.as_tensor(T, dtype=xyz.dtype, device=xyz.device)
+        moved = xyz.clone()
+        moved[..., :3] = xyz[..., :3] @ Tt[:3, :3].transpose(0, 1) + Tt[:3, 3]
+        return moved
+    pts = np.asarray(xyz)
+    out = pts.astype(np.result_type(pts.dtype, np.float32), copy=True)
+    M = np.asarray(T, dtype=np.float64)
+    x, y, z = (pts[..., i].astype(np.float64) for i in range(3))
     for i in range(3):  # written out: a BLAS matmul of (N, 3) @ (3, 3) is slower and thread-hungry
-        out[..., i] = T[i, 0] * x + T[i, 1] * y + T[i, 2] * z + T[i, 3]
+        out[..., i] = M[i, 0] * x + M[i, 1] * y + M[i, 2] * z + M[i, 3]
     return out
 
 
-def check_rigid(T: Array, tol: float = 1e-3) -> str | None:
+def check_rigid(T: ArrayInput, tol: float = 1e-3) -> str | None:
     """Why ``T`` is not a rigid transform, or None when it is.
 
     Checks shape (4, 4), finiteness, last row ``[0, 0, 0, 1]``, ``R^T R = I`` and ``det R = +1`` to ``tol``.
     """
-    T = np.asarray(T.detach().cpu() if is_tensor(T) else T, dtype=np.float64)
-    if T.shape != (4, 4):
-        return f"expected a 4x4 matrix, got shape {T.shape}"
-    if not np.all(np.isfinite(T)):
+    M = np.asarray(T.detach().cpu() if is_tensor(T) else T, dtype=np.float64)
+    if M.shape != (4, 4):
+        return f"expected a 4x4 matrix, got shape {M.shape}"
+    if not np.all(np.isfinite(M)):
         return "contains NaN or infinite values"
-    if not np.allclose(T[3], [0, 0, 0, 1], atol=tol):
-        return f"last row is {T[3].tolist()}, expected [0, 0, 0, 1]"
-    return check_rotation(T[:3, :3], tol)
+    if not np.allclose(M[3], [0, 0, 0, 1], atol=tol):
+        return f"last row is {M[3].tolist()}, expected [0, 0, 0, 1]"
+    return check_rotation(M[:3, :3], tol)
 
 
 def check_rotation(R: np.ndarray, tol: float = 1e-3) -> str | None:

@@ -53,9 +53,26 @@ class Completion:
         return torch.stack([c[0, 0].float().cpu() for c in confs]).amax(0).numpy()
 
 
+@runtime_checkable
 class Completer(Protocol):
-    """Anything called as ``completer(rgb, sparse, semantic)`` -> :class:`Completion`: what the frame loop runs
-    (:class:`DepthCompleter`, :class:`semattnet.baselines.ClassicalCompleter`)."""
+    """What the frame loop runs (:class:`DepthCompleter`, :class:`semattnet.baselines.ClassicalCompleter`):
+    called as ``completer(rgb, sparse, semantic)`` -> :class:`Completion`, and saying whether it takes a
+    semantic map, of which palette, and the device a segmenter for it runs on. Everything the loop asks of it."""
+
+    @property
+    def needs_semantic(self) -> bool:
+        """Whether a call takes a semantic map (the loop then gives every frame one)."""
+        ...
+
+    @property
+    def palette(self) -> str:
+        """The palette of the semantic maps it reads (:mod:`semattnet.palette`; maps of another are refused)."""
+        ...
+
+    @property
+    def device(self) -> str | torch.device:
+        """Where it runs: a segmenter loaded for its maps runs there too."""
+        ...
 
     def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion: ...
 

@@ -14,9 +14,9 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
 
 from semattnet.data.sources.kitti_raw import RawDriveSource, project_frame
+from semattnet.data.sources.semantic import MapSegmenter
 from semattnet.inference.pipeline import Completer, complete_frames
 from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sinks import default_sinks, fusion_confidence, output_files
@@ -38,7 +38,7 @@ def complete_kitti_raw(
     frames: str | int | Sequence[int] | None = None,
     camera: str | int = 2,
     semantic: str | os.PathLike[str] | None = None,
-    segmenter: Any = None,
+    segmenter: MapSegmenter | str | None = None,
     ply: bool = False,
     max_depth: float = 80.0,
     top_crop: int = 0,

@@ -8,6 +8,7 @@ import warnings
 from semattnet._errors import InputError
 from semattnet.data.frames import Frame, FrameSource
 from semattnet.data.sources.semantic import CrossPalette, MapSegmenter
+from semattnet.inference.completion import Completer
 
 __all__ = ["SemanticMaps"]
 
@@ -29,38 +30,42 @@ class SemanticMaps:
                  mismatch: str = "refuse") -> None:  # fmt: skip
         if folder and segmenter is not None:
             raise InputError("semantic: give a semantic folder or a segmenter, not both")
+        if not (segmenter is None or isinstance(segmenter, str | MapSegmenter)):
+            raise InputError(f"semantic: a {type(segmenter).__name__} is not a segmenter: it must say the palette "
+                             "of its maps (as semattnet.segmentation.Segmenter does)")  # fmt: skip
         self.segmenter, self.folder, self.needed = segmenter, folder, False
         self.mismatch = mismatch
         self.cross: CrossPalette | None = None
         self.note: str | None = None
         self._warned = False
 
-    def bind(self, completer: object) -> SemanticMaps:
+    def bind(self, completer: Completer) -> SemanticMaps:
         """Decide for ``completer``: whether it needs maps; a segmenter SPEC is loaded on its device."""
-        from semattnet.inference.backends import needs_semantic
-
-        self.needed = needs_semantic(completer)
+        if not isinstance(completer, Completer):
+            raise InputError(f"completer: a {type(completer).__name__} is not a Completer: it must say its "
+                             "needs_semantic, palette and device (as ClassicalCompleter does)")  # fmt: skip
+        self.needed = bool(completer.needs_semantic)
         if self.needed and isinstance(self.segmenter, str):
             from semattnet.segmentation.segmenter import load_segmenter
 
-            self.segmenter = load_segmenter(self.segmenter, getattr(completer, "device", "auto"))
+            self.segmenter = load_segmenter(self.segmenter, completer.device)
         return self
 
-    def check_palette(self, completer: object, source: FrameSource) -> None:
+    def check_palette(self, completer: Completer, source: FrameSource) -> None:
         """Refuse maps of another palette than the one ``completer``'s model was trained with (one line;
-        :func:`semattnet.palette.check_palette`): a segmenter's maps are of its ``palette`` (Cityscapes
-        unless it says otherwise), a source's of its ``info.palette`` (None: it gives none, and the fallback map
-        fits every palette)."""
+        :func:`semattnet.palette.check_palette`): a segmenter's maps are of its ``palette``, a source's of its
+        ``info.palette`` (None: it gives none, and the fallback map fits every palette)."""
         from semattnet.palette import check_palette, get_palette
 
         if not self.needed:
             return
-        palette = getattr(self.segmenter, "palette", "cityscapes") if self.segmenter is not None else (
-            source.info.palette)  # fmt: skip
+        if isinstance(self.segmenter, str):  # bind, which decides ``needed``, loads it
+            raise InputError(f"semantic: segmenter {self.segmenter!r} is not loaded; bind the completer first")
+        palette = source.info.palette if self.segmenter is None else self.segmenter.palette
         palette = palette or ("cityscapes" if self.folder else None)
         if palette is not None:
             where = "the segmenter's maps" if self.segmenter is not None else f"{type(source).__name__} maps"
-            model = getattr(completer, "palette", "cityscapes")
+            model = completer.palette
             if self.mismatch != "refuse" and get_palette(palette).name != get_palette(model).name:
                 self.cross = CrossPalette(palette, model, self.mismatch)
                 self.note = self.cross.report()["summary"]
@@ -76,8 +81,7 @@ class SemanticMaps:
         if frame.semantic is None and self.segmenter is not None:
             if isinstance(self.segmenter, str):  # bind loads it
                 raise InputError(f"semantic: segmenter {self.segmenter!r} is not loaded; bind the completer first")
-            palette = getattr(self.segmenter, "palette", "cityscapes")
-            frame = frame.with_semantic(ids_to_colors(self.segmenter(frame.rgb[None])[0], palette))
+            frame = frame.with_semantic(ids_to_colors(self.segmenter(frame.rgb[None])[0], self.segmenter.palette))
         if frame.semantic is not None:
             return frame if self.cross is None else frame.with_semantic(self.cross.map(frame.semantic, frame.name))
         if not self._warned:

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, MutableMapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal, NamedTuple
+from typing import Literal, NamedTuple
 
 import torch
 import torch.nn.functional as F
@@ -262,7 +262,7 @@ class RefinementHeads:
         return [len(self.kernel_sizes), 1, *(k * k - 1 for k in self.kernel_sizes)]
 
     def _stage(self, stacked: torch.Tensor, valid: torch.Tensor, impl: PropagationImpl, workspace: Workspace | None,
-               stage: str) -> tuple[Any, ...]:  # fmt: skip
+               stage: str) -> tuple[list[torch.Tensor], torch.Tensor, torch.Tensor]:  # fmt: skip
         sizes = self.split_sizes()
         if stacked.shape[1] != sum(sizes):
             raise InputError(f"refinement heads: {stacked.shape[1]} channels, expected {sum(sizes)} for kernel "

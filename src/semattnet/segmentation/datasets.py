@@ -12,9 +12,12 @@ from __future__ import annotations
 
 import hashlib
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from semattnet.data.frames import FrameSource
 
 __all__ = ["segment_split", "semantic_cache"]
 
@@ -55,7 +58,7 @@ def segment_split(dataset: str, root: PathLike, splits: tuple[str, ...], spec: s
     return out
 
 
-def _segment(todo: list[tuple[Any, str]], spec: str, palette: str, device: str, out: Path) -> None:
+def _segment(todo: Sequence[tuple[FrameSource, str]], spec: str, palette: str, device: str, out: Path) -> None:
     from semattnet._utils.progress import progress
     from semattnet.data.io import write_image
     from semattnet.palette import ids_to_colors

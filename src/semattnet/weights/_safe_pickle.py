@@ -31,7 +31,7 @@ import struct
 import sys
 import types
 from collections.abc import Callable
-from typing import Any
+from typing import IO, Any
 
 import torch
 
@@ -237,7 +237,7 @@ class Unpickler(_BASE):
     sink: set[str] | None = None
     dispatch = _DISPATCH
 
-    def __init__(self, file: Any, **kwargs: Any) -> None:
+    def __init__(self, file: IO[bytes], **kwargs: Any) -> None:
         super().__init__(file, **kwargs)
         self.named: dict[int, object] = {}  # id -> every object find_class gave out (kept alive)
 
@@ -282,7 +282,7 @@ def safe_pickle_module() -> tuple[types.SimpleNamespace, set[str]]:
     neutralised: set[str] = set()
     unpickler = type("Unpickler", (Unpickler,), {"sink": neutralised})
 
-    def load(file: Any, **kwargs: Any) -> object:
+    def load(file: IO[bytes], **kwargs: Any) -> object:
         return unpickler(file, **kwargs).load()
 
     return types.SimpleNamespace(__name__="semattnet_safe_pickle", Unpickler=unpickler, load=load), neutralised

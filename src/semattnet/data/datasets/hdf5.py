@@ -15,9 +15,13 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import Any
+from types import ModuleType
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import h5py  # no type hints of its own: its classes name what is passed
 
 from semattnet._errors import DataError
 from semattnet._utils.bounds import MAX_IMAGE_PIXELS
@@ -28,7 +32,7 @@ __all__ = ["MAX_DATASET_BYTES", "plain_dataset", "read_bounded"]
 MAX_DATASET_BYTES = 4 * MAX_IMAGE_PIXELS
 
 
-def _refuse_link(path: Path, key: str, link: Any, h5py: Any) -> None:
+def _refuse_link(path: Path, key: str, link: object, h5py: ModuleType) -> None:
     if isinstance(link, h5py.ExternalLink):
         raise DataError(f"{path}: '{key}' is an external link to {link.filename}:{link.path}; only datasets "
                         "stored in the file itself are read")  # fmt: skip
@@ -39,7 +43,7 @@ def _refuse_link(path: Path, key: str, link: Any, h5py: Any) -> None:
         raise DataError(f"{path}: '{key}' is a {type(link).__name__}, not a dataset stored in the file")
 
 
-def plain_dataset(f: Any, key: str, path: Path) -> Any:
+def plain_dataset(f: h5py.File, key: str, path: Path) -> h5py.Dataset | None:
     """The ``h5py.Dataset`` ``key`` of the open file ``f`` (None when absent), when it is a hard link to a
     dataset whose bytes lie in the file; nothing is read.
 
@@ -69,7 +73,7 @@ def plain_dataset(f: Any, key: str, path: Path) -> Any:
     return obj
 
 
-def read_bounded(ds: Any, key: str, path: Path) -> np.ndarray:
+def read_bounded(ds: h5py.Dataset, key: str, path: Path) -> np.ndarray:
     """The whole of dataset ``ds`` (from :func:`plain_dataset`) when it holds at most
     :data:`MAX_DATASET_BYTES` of plain numbers; checked before a byte is read.
 

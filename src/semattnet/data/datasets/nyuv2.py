@@ -17,9 +17,12 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import h5py
 
 from semattnet._errors import DataError
 from semattnet._utils.bounds import check_image_size, regular_file
@@ -43,7 +46,7 @@ MAX_MEDIAN_M = 100.0  # a median depth above this is millimetres, not metres
 RAW_LABELS = 894  # the labelled subset's raw class ids (semattnet.palette.nyu40_map)
 
 
-def _check_layout(path: Path, rgb: Any, depth: Any, label: Any) -> None:
+def _check_layout(path: Path, rgb: h5py.Dataset, depth: h5py.Dataset, label: h5py.Dataset | None) -> None:
     """Dtypes and shapes (of datasets, before they are read): rgb uint8 (3, H, W) within the image bounds,
     depth float (H, W), label integer (H, W)."""
     if rgb.dtype != np.uint8 or len(rgb.shape) != 3 or rgb.shape[0] != 3:

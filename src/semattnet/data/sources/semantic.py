@@ -4,16 +4,24 @@ Which map a frame gets when its source has none is decided in :mod:`semattnet.in
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import TypedDict
+from typing import Protocol, TypedDict, runtime_checkable
 
 import numpy as np
 
 __all__ = ["MISMATCH_POLICIES", "CrossPalette", "MapSegmenter", "PaletteReport"]
 
-#: A segmenter: (B, H, W, 3) uint8 images -> (B, H, W) uint8 class ids (a
-#: :class:`semattnet.segmentation.Segmenter`, whose ``palette`` names them; Cityscapes without one).
-MapSegmenter = Callable[[np.ndarray], np.ndarray]
+
+@runtime_checkable
+class MapSegmenter(Protocol):
+    """What the frame loop asks of a segmenter (a :class:`semattnet.segmentation.Segmenter`): called on
+    (B, H, W, 3) uint8 images -> (B, H, W) uint8 class ids of its ``palette``."""
+
+    @property
+    def palette(self) -> str:
+        """The palette its class ids are of (:mod:`semattnet.palette`)."""
+        ...
+
+    def __call__(self, images: np.ndarray, /) -> np.ndarray: ...
 
 
 class PaletteReport(TypedDict):

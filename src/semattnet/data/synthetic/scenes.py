@@ -42,7 +42,6 @@ this module puts a frame together.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
@@ -75,7 +74,7 @@ class SyntheticFrame:
     labels: np.ndarray  # (H, W) int64 index into CITYSCAPES_PALETTE order
     K: np.ndarray  # 3x3 intrinsics
     shadowed: bool
-    meta: dict[str, Any] = field(default_factory=dict)
+    meta: dict[str, object] = field(default_factory=dict)
     #: (H, W) uint8 index into MATERIALS of the surface each pixel sees (all "matte" in the ideal style).
     material: np.ndarray | None = None
     #: (H, W) bool: road markings and posters of the realistic style (colour edges on flat surfaces).

@@ -15,7 +15,7 @@ import os
 import zlib
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 
@@ -53,11 +53,22 @@ def _write_calib(path: Path, K: np.ndarray) -> None:
     path.write_text("\n".join(rows) + "\n")
 
 
-def _job(args: tuple[Path, str, int, int, int, int, bool | None, str]) -> dict[str, Any]:
+class SceneManifest(TypedDict):
+    """``scenes.json``: how the tree was generated, frames per split, and every frame's entry."""
+
+    generator: str
+    style: str
+    seed: int
+    size: list[int]
+    counts: dict[str, int]
+    frames: list[dict[str, object]]
+
+
+def _job(args: tuple[Path, str, int, int, int, int, bool | None, str]) -> dict[str, object]:
     out, split, index, seed, height, width, shadow, style = args
     fseed = frame_seed(seed, split, index)
     fr = make_frame(height, width, seed=fseed, shadow=shadow, style=style)
-    entry: dict[str, Any] = {"split": split, "index": index, "seed": fseed, "shadowed": fr.shadowed}
+    entry: dict[str, object] = {"split": split, "index": index, "seed": fseed, "shadowed": fr.shadowed}
     if split in ("train", "val"):
         drive = f"{SYNTH_DATE}_drive_{_DRIVE_BASE[split] + index // _FRAMES_PER_DRIVE:04d}_sync"
         frame = f"{index % _FRAMES_PER_DRIVE:010d}"
@@ -109,7 +120,7 @@ def write_synthetic_kitti(
     overwrite: bool = False,
     shadow_fraction: float = 0.5,
     style: str = "ideal",
-) -> dict[str, Any]:
+) -> SceneManifest:
     """Generate ``frames`` training frames and ``eval_frames`` frames for each of val,
     val_select and test (default ``max(2, frames // 5)``) under ``out``.
 
@@ -149,9 +160,10 @@ def write_synthetic_kitti(
         entries = [_job(j) for j in jobs]
     K0 = np.array(entries[0]["K"])
     _write_calib(out / "kitti_raw" / SYNTH_DATE / "calib_cam_to_cam.txt", K0)  # train and val drives share it
-    manifest = {"generator": "semattnet.data.synthetic.scenes", "style": style, "seed": seed, "size": [height, width],
-                "counts": {s: sum(e["split"] == s for e in entries) for s in layout.SPLITS},
-                "frames": [{k: v for k, v in e.items() if k != "K"} for e in entries]}  # fmt: skip
+    manifest: SceneManifest = {
+        "generator": "semattnet.data.synthetic.scenes", "style": style, "seed": seed, "size": [height, width],
+        "counts": {s: sum(e["split"] == s for e in entries) for s in layout.SPLITS},
+        "frames": [{k: v for k, v in e.items() if k != "K"} for e in entries]}  # fmt: skip
     (out / "scenes.json").write_text(json.dumps(manifest, indent=1))
     mark_tree(out, "synth", True)
     return manifest

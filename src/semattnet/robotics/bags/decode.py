@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import io
 import struct
-from typing import Any
 
 import numpy as np
 
 from semattnet._errors import DataError
 from semattnet.geometry.cameras import CameraInfoData  # its home (a frame's metadata carries it)
+
+from .messages import CameraInfoMsg, CompressedImageMsg, ImageMsg, PointCloud2Msg, PointFieldMsg, TimeMsg
 
 __all__ = [
     "IMAGE_ENCODINGS",
@@ -49,7 +50,7 @@ MAX_POINT_COORDINATE_M = 1000.0
 MAX_FOCAL_PER_PIXEL = 1000.0
 
 
-def stamp_ns(stamp: Any) -> int:
+def stamp_ns(stamp: TimeMsg) -> int:
     """Nanoseconds of a ``builtin_interfaces/Time`` (``sec``, ``nanosec``)."""
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
@@ -82,7 +83,7 @@ def _rows(data: np.ndarray, height: int, step: int, row_bytes: int, topic: str, 
     return np.lib.stride_tricks.as_strided(data, (height, row_bytes), (step, 1))
 
 
-def decode_image(msg: Any, topic: str) -> np.ndarray:
+def decode_image(msg: ImageMsg, topic: str) -> np.ndarray:
     """(H, W, 3) uint8 RGB of a ``sensor_msgs/Image`` in rgb8, bgr8 or mono8 (mono is repeated), honouring
     ``step`` (row padding).
 
@@ -101,7 +102,7 @@ def decode_image(msg: Any, topic: str) -> np.ndarray:
     return np.ascontiguousarray(img[..., list(order)])
 
 
-def decode_compressed_image(msg: Any, topic: str) -> np.ndarray:
+def decode_compressed_image(msg: CompressedImageMsg, topic: str) -> np.ndarray:
     """(H, W, 3) uint8 RGB of a ``sensor_msgs/CompressedImage`` (JPEG or PNG, through Pillow).
 
     Raises:
@@ -119,7 +120,7 @@ def decode_compressed_image(msg: Any, topic: str) -> np.ndarray:
         raise DataError(f"{topic}: cannot decode the compressed image (format {fmt!r}): {exc}") from None
 
 
-def _point_dtype(msg: Any, topic: str) -> tuple[np.dtype, dict[str, Any]]:
+def _point_dtype(msg: PointCloud2Msg, topic: str) -> tuple[np.dtype, dict[str, PointFieldMsg]]:
     """Structured dtype (itemsize ``point_step``) of a PointCloud2's x, y, z and intensity fields."""
     order = ">" if msg.is_bigendian else "<"
     listed = [str(f.name) for f in msg.fields]
@@ -153,7 +154,7 @@ def _point_dtype(msg: Any, topic: str) -> tuple[np.dtype, dict[str, Any]]:
     return dtype, fields
 
 
-def decode_pointcloud2(msg: Any, topic: str) -> np.ndarray:
+def decode_pointcloud2(msg: PointCloud2Msg, topic: str) -> np.ndarray:
     """(N, 3) or (N, 4) points of a ``sensor_msgs/PointCloud2``: x, y, z (metres, the message's frame) and
     the intensity when the cloud has one (``intensity``/``reflectance``/``i``).
 
@@ -186,10 +187,14 @@ def decode_pointcloud2(msg: Any, topic: str) -> np.ndarray:
     return out
 
 
-def _matrix(msg: Any, name: str, shape: tuple[int, int], topic: str) -> np.ndarray:
+def _by_case(msg: object, name: str) -> object:
+    """CameraInfo's field ``name``: ``K`` in ROS 1, ``k`` in ROS 2."""
     value = getattr(msg, name.upper(), None)
-    value = getattr(msg, name.lower()) if value is None else value
-    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    return getattr(msg, name.lower()) if value is None else value
+
+
+def _matrix(msg: object, name: str, shape: tuple[int, int], topic: str) -> np.ndarray:
+    arr = np.asarray(_by_case(msg, name), dtype=np.float64).reshape(-1)
     if arr.size != shape[0] * shape[1]:
         raise DataError(f"{topic}: CameraInfo {name} has {arr.size} numbers, expected {shape[0] * shape[1]}")
     return arr.reshape(shape)
@@ -223,7 +228,7 @@ def _check_finite(matrices: dict[str, np.ndarray], topic: str) -> None:
             raise DataError(f"{topic}: CameraInfo {label}({cell}) is {value}")
 
 
-def decode_camera_info(msg: Any, topic: str) -> CameraInfoData:
+def decode_camera_info(msg: CameraInfoMsg, topic: str) -> CameraInfoData:
     """:class:`CameraInfoData` of a ``sensor_msgs/CameraInfo`` (ROS 1 ``K``/``P`` or ROS 2 ``k``/``p``).
 
     Raises:
@@ -233,7 +238,7 @@ def decode_camera_info(msg: Any, topic: str) -> CameraInfoData:
     """
     K, P = _matrix(msg, "K", (3, 3), topic), _matrix(msg, "P", (3, 4), topic)
     R = _matrix(msg, "R", (3, 3), topic)
-    D = np.asarray(getattr(msg, "D", None) if hasattr(msg, "D") else msg.d, dtype=np.float64).reshape(-1)
+    D = np.asarray(_by_case(msg, "D"), dtype=np.float64).reshape(-1)
     w, h = int(msg.width), int(msg.height)
     if w <= 0 or h <= 0:
         raise DataError(f"{topic}: CameraInfo has no image size (width {w}, height {h})")

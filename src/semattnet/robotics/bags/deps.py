@@ -31,15 +31,17 @@ class Typestore(Protocol):
 
     def deserialize_cdr(self, rawdata: bytes, typename: str) -> object: ...
 
+    def register(self, typs: Mapping[str, object]) -> None: ...
+
 
 @lru_cache(maxsize=2)
 def rosbags_typestore(ros1: bool) -> Typestore:
     """The rosbags type store used to write (and to read bags without embedded definitions): ROS 1 Noetic
     (plus ``tf2_msgs/TFMessage``) or ROS 2 Humble."""
     typesys = require("rosbags.typesys", "reading or writing ROS bags")
+    store: Typestore = typesys.get_typestore(typesys.Stores.ROS1_NOETIC if ros1 else typesys.Stores.ROS2_HUMBLE)
     if not ros1:
-        return typesys.get_typestore(typesys.Stores.ROS2_HUMBLE)
-    store = typesys.get_typestore(typesys.Stores.ROS1_NOETIC)
+        return store
     if "tf2_msgs/msg/TFMessage" not in store.types:
         store.register(typesys.get_types_from_msg(_TF_MESSAGE_MSG, "tf2_msgs/msg/TFMessage"))
     return store

@@ -200,7 +200,7 @@ class BagPairs:
             raise DataError(f"{self.path}: {bad[0]}; no image has a usable CameraInfo")
 
     def _find_camera_info(self, reader: Any) -> str:
-        topics = sorted({c.topic for c in reader.connections if c.msgtype == CAMERA_INFO_TYPE})
+        topics: list[str] = sorted({c.topic for c in reader.connections if c.msgtype == CAMERA_INFO_TYPE})
         if not topics:
             raise DataError(f"{self.path}: no sensor_msgs/CameraInfo topic for {self.image_topic!r}; "
                             "give the camera-info topic or a rig file")  # fmt: skip

@@ -16,12 +16,15 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Iterable
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from semattnet._errors import DataError
 from semattnet.geometry import invert_T, make_T
+
+if TYPE_CHECKING:
+    from .messages import TFMessageMsg
 
 __all__ = [
     "QUATERNION_NORM_TOLERANCE",
@@ -124,7 +127,7 @@ class TransformTree:
         self._edges.setdefault(parent, {})[child] = T
         self._edges.setdefault(child, {})[parent] = invert_T(T)
 
-    def add_message(self, msg: Any, where: str = "") -> None:
+    def add_message(self, msg: TFMessageMsg, where: str = "") -> None:
         """Add every ``geometry_msgs/TransformStamped`` of a ``tf2_msgs/TFMessage``.
 
         Raises:

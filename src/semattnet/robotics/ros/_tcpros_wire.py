@@ -7,6 +7,7 @@ that stalls past its timeout or an XML-RPC document over :data:`MAX_XMLRPC_BYTES
 
 from __future__ import annotations
 
+import http.client
 import logging
 import socket
 import struct
@@ -22,6 +23,7 @@ from semattnet._errors import DataError, InputError
 
 __all__ = [
     "MAX_HEADER_BYTES",
+    "MAX_PEERS",
     "MAX_XMLRPC_BYTES",
     "POLL_S",
     "Outbox",
@@ -43,6 +45,8 @@ MAX_HEADER_BYTES = 1 << 20
 #: The longest XML-RPC request or response accepted (ROS's are a few KB).
 MAX_XMLRPC_BYTES = 1 << 20
 _LEN = struct.Struct("<I")
+#: At most this many connections per topic (subscribers of a publisher, publishers of a subscription).
+MAX_PEERS = 64
 #: How often waiting threads look whether the transport stops, seconds.
 POLL_S = 0.1
 
@@ -147,12 +151,12 @@ class _BoundedTransport(xmlrpc.client.Transport):
         super().__init__()
         self._timeout = timeout
 
-    def make_connection(self, host: Any) -> Any:
+    def make_connection(self, host: str | tuple[str, dict[str, str]]) -> http.client.HTTPConnection:
         conn = super().make_connection(host)
         conn.timeout = self._timeout
         return conn
 
-    def parse_response(self, response: Any) -> Any:
+    def parse_response(self, response: http.client.HTTPResponse) -> tuple[Any, ...]:  # XML-RPC values
         body = response.read(MAX_XMLRPC_BYTES + 1)
         if len(body) > MAX_XMLRPC_BYTES:
             raise TcprosError(f"XML-RPC response over {MAX_XMLRPC_BYTES} bytes")
@@ -162,7 +166,7 @@ class _BoundedTransport(xmlrpc.client.Transport):
         return unmarshaller.close()
 
 
-def xmlrpc_call(uri: str, method: str, *args: object, timeout: float) -> list[Any]:
+def xmlrpc_call(uri: str, method: str, *args: object, timeout: float) -> list[object]:
     """Call ``method`` on the XML-RPC server at ``uri``; ROS's ``[code, status, value]`` reply, checked for shape.
 
     Raises :class:`TcprosError` for a reply that is not a 3-list, ``OSError`` for a network failure and
@@ -193,7 +197,7 @@ class _SlaveHandler(SimpleXMLRPCRequestHandler):
             return
         super().do_POST()
 
-    def log_message(self, format: str, *args: Any) -> None:
+    def log_message(self, format: str, *args: object) -> None:
         """Quiet: the base class writes every request to stderr."""
 
 

@@ -17,7 +17,8 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Callable
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Protocol
 
 from semattnet._errors import InputError
 from semattnet._utils.extras import require
@@ -58,11 +59,35 @@ def loopback_config(domain_id: int) -> str:
             f"<Internal>{buffers}</Internal></Domain></CycloneDDS>")  # fmt: skip
 
 
-def _serialize(self: Any, buffer: object = None, endianness: object = None, use_version_2: object = None) -> bytes:
+class _RawSample(Protocol):
+    """A sample of a raw struct (:func:`_raw_cdr`): its CDR bytes."""
+
+    cdr: bytes
+
+
+class _Entity(Protocol):
+    """A Cyclone DDS entity (participant, reader, writer, domain): deleted explicitly."""
+
+    def __del__(self) -> None: ...
+
+
+class _DataWriter(_Entity, Protocol):
+    def write(self, sample: _RawSample) -> None: ...
+
+
+class _DataReader(_Entity, Protocol):
+    def take(self, N: int) -> list[_RawSample]: ...  # (a writer that went away: a sample without ``cdr``)
+
+
+def _serialize(
+    self: _RawSample, buffer: object = None, endianness: object = None, use_version_2: object = None
+) -> bytes:
     return bytes(self.cdr)
 
 
-def _deserialize(cls: Any, data: bytes, has_header: bool = True, use_version_2: object = None) -> Any:
+def _deserialize(
+    cls: type[_RawSample], data: bytes, has_header: bool = True, use_version_2: object = None
+) -> _RawSample:
     sample = cls.__new__(cls)
     sample.cdr = bytes(data)
     return sample
@@ -82,7 +107,7 @@ class _Types:
 
     def __init__(self, ts: Any) -> None:
         self.ts = ts
-        self._built: dict[tuple[str, bool], Any] = {}
+        self._built: dict[tuple[str, bool], type[_RawSample]] = {}
         idl = require("cyclonedds.idl", "semattnet ros2 (DDS)")
         self.idl, self.t = idl, require("cyclonedds.idl.types", "semattnet ros2 (DDS)")
         t = self.t
@@ -104,7 +129,7 @@ class _Types:
             return self.t.array[item, size]
         return self.t.sequence[item, size] if size else self.t.sequence[item]
 
-    def struct(self, msgtype: str, raw: bool = False) -> Any:
+    def struct(self, msgtype: str, raw: bool = False) -> type[_RawSample]:
         """The struct class of ``msgtype`` (``raw``: the top-level one, whose samples are their CDR bytes)."""
         key = (msgtype, raw)
         if key not in self._built:
@@ -117,7 +142,7 @@ class _Types:
         return self._built[key]
 
 
-def _qos(qos: QoS) -> Any:
+def _qos(qos: QoS) -> object:
     core = require("cyclonedds.core", "semattnet ros2 (DDS)")
     P = core.Policy
     reliability = P.Reliability.Reliable(max_blocking_time=100_000_000) if qos.reliable else P.Reliability.BestEffort
@@ -129,7 +154,7 @@ def _qos(qos: QoS) -> Any:
 class _Writer:
     """One advertised topic: serialises with rosbags' CDR and writes the bytes."""
 
-    def __init__(self, writer: Any, cls: Any, ts: Typestore, msgtype: str) -> None:
+    def __init__(self, writer: _DataWriter, cls: type[_RawSample], ts: Typestore, msgtype: str) -> None:
         self._writer, self._cls, self._ts, self._msgtype = writer, cls, ts, msgtype
 
     def publish(self, message: object) -> None:
@@ -158,7 +183,7 @@ class DdsTransport:
         if loopback:
             _open_domain(self.domain_id)
         self._participant = domain.DomainParticipant(self.domain_id)
-        self._entities: list[Any] = []
+        self._entities: list[_Entity] = []
         self._lock = threading.Lock()
         self._closed = False
 
@@ -177,7 +202,7 @@ class DdsTransport:
         tp = require("cyclonedds.topic", "semattnet ros2")
         cls = self._types.struct(msgtype, raw=True)
 
-        def on_data(reader: Any) -> None:
+        def on_data(reader: _DataReader) -> None:
             for sample in reader.take(N=64):
                 if not getattr(sample, "cdr", b""):  # a writer went away: a sample without data
                     continue
@@ -214,8 +239,16 @@ class DdsTransport:
             _close_domain(self.domain_id)
 
 
-#: The loopback domains this process configured: domain id -> [Domain, transports using it].
-_DOMAINS: dict[int, list[Any]] = {}
+@dataclass
+class _Domain:
+    """A loopback domain this process configured, and how many transports use it."""
+
+    domain: _Entity
+    users: int = 0
+
+
+#: The loopback domains this process configured, by domain id.
+_DOMAINS: dict[int, _Domain] = {}
 _DOMAINS_LOCK = threading.Lock()
 
 
@@ -224,14 +257,14 @@ def _open_domain(domain_id: int) -> None:
     with _DOMAINS_LOCK:
         if domain_id not in _DOMAINS:
             domain = require("cyclonedds.domain", "semattnet ros2 (DDS)")
-            _DOMAINS[domain_id] = [domain.Domain(domain_id, loopback_config(domain_id)), 0]
-        _DOMAINS[domain_id][1] += 1
+            _DOMAINS[domain_id] = _Domain(domain.Domain(domain_id, loopback_config(domain_id)))
+        _DOMAINS[domain_id].users += 1
 
 
 def _close_domain(domain_id: int) -> None:
     with _DOMAINS_LOCK:
         entry = _DOMAINS[domain_id]
-        entry[1] -= 1
-        if entry[1] == 0:
+        entry.users -= 1
+        if entry.users == 0:
             del _DOMAINS[domain_id]
-            entry[0].__del__()
+            entry.domain.__del__()

@@ -16,7 +16,7 @@ import threading
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Protocol, TypeVar, cast
 
 import numpy as np
 
@@ -28,6 +28,14 @@ from semattnet.robotics.bags.decode import (
     decode_image,
     decode_pointcloud2,
     stamp_ns,
+)
+from semattnet.robotics.bags.messages import (
+    CameraInfoMsg,
+    CompressedImageMsg,
+    HeaderMsg,
+    ImageMsg,
+    PointCloud2Msg,
+    TFMessageMsg,
 )
 from semattnet.robotics.bags.pairing import pair_stamps
 from semattnet.robotics.bags.tf import TransformTree
@@ -70,7 +78,7 @@ class Counts:
     stale: int = 0  # pairs dropped from the slot by a newer one (the completer was busy)
 
 
-def decode_sparse_depth(msg: Any, topic: str) -> np.ndarray:
+def decode_sparse_depth(msg: ImageMsg, topic: str) -> np.ndarray:
     """(H, W) float32 metres (0 = none) of a sparse depth ``sensor_msgs/Image``: ``32FC1`` metres or ``16UC1``
     millimetres (NaN, infinite, <= 0: no depth).
 
@@ -89,7 +97,19 @@ def decode_sparse_depth(msg: Any, topic: str) -> np.ndarray:
         raise DataError(f"{topic}: sparse depth holds {data.size} bytes, {h} rows of {step} need {h * step}")
     rows = data[: h * step].reshape(h, step)[:, : w * dtype.itemsize]
     d = np.ascontiguousarray(rows).view(dtype).reshape(h, w).astype(np.float32) * np.float32(scale)
-    return np.where(np.isfinite(d) & (d > 0), d, np.float32(0)).astype(np.float32)
+    depth: np.ndarray = np.where(np.isfinite(d) & (d > 0), d, np.float32(0)).astype(np.float32)
+    return depth
+
+
+_M = TypeVar("_M")
+_T = TypeVar("_T")
+
+
+class _Headed(Protocol):
+    """A message that starts with a ``std_msgs/Header``."""
+
+    @property
+    def header(self) -> HeaderMsg: ...
 
 
 class PairingInputs:
@@ -114,7 +134,7 @@ class PairingInputs:
         self._scans: deque[Stamped] = deque(maxlen=KEEP)
         self._lock = threading.Lock()
 
-    def _decoded(self, role: str, msg: Any, decode: Callable[[Any, str], Any]) -> tuple[Any, str] | None:
+    def _decoded(self, role: str, msg: _M, decode: Callable[[_M, str], _T]) -> tuple[_T, str] | None:
         """``decode(msg, where)`` and ``where``; a failure is one logged line and None (the message is forgotten)."""
         with self._lock:  # the transport may call from several threads
             n = self.counts.received.get(role, 0)
@@ -128,37 +148,40 @@ class PairingInputs:
             log.warning("%s", exc if str(exc).startswith(where) else f"{where}: {exc}")
             return None
 
-    def on_image(self, msg: Any) -> None:
-        """A ``sensor_msgs/Image`` (rgb8, bgr8, mono8) or ``CompressedImage``."""
-        got = self._decoded("image", msg, decode_compressed_image if self.compressed else decode_image)
+    def on_image(self, msg: object) -> None:
+        """A ``sensor_msgs/Image`` (rgb8, bgr8, mono8) or ``CompressedImage`` (the transport deserialised the
+        topic's type: the casts below say which)."""
+        if self.compressed:
+            got = self._decoded("image", cast(CompressedImageMsg, msg), decode_compressed_image)
+        else:
+            got = self._decoded("image", cast(ImageMsg, msg), decode_image)
         if got is not None:
-            head = msg.header
+            head = cast(_Headed, msg).header
             with self._lock:
                 self._images.append(Stamped(stamp_ns(head.stamp), str(head.frame_id).lstrip("/"), got[0], got[1]))
                 self._match()
 
-    def on_scan(self, msg: Any) -> None:
+    def on_scan(self, msg: object) -> None:
         """A ``sensor_msgs/PointCloud2`` (x, y, z), or a sparse depth ``Image`` with ``sparse``."""
-        got = self._decoded("scan", msg, decode_sparse_depth if self.sparse else decode_pointcloud2)
+        if self.sparse:
+            got = self._decoded("scan", cast(ImageMsg, msg), decode_sparse_depth)
+        else:
+            got = self._decoded("scan", cast(PointCloud2Msg, msg), decode_pointcloud2)
         if got is not None:
-            head = msg.header
+            head = cast(_Headed, msg).header
             with self._lock:
                 self._scans.append(Stamped(stamp_ns(head.stamp), str(head.frame_id).lstrip("/"), got[0], got[1]))
                 self._match()
 
-    def on_camera_info(self, msg: Any) -> None:
+    def on_camera_info(self, msg: object) -> None:
         """A ``sensor_msgs/CameraInfo``: the newest good one is used."""
-        got = self._decoded("camera_info", msg, decode_camera_info)
+        got = self._decoded("camera_info", cast(CameraInfoMsg, msg), decode_camera_info)
         if got is not None:
             self.camera_info = got[0]
 
-    def on_tf_static(self, msg: Any) -> None:
+    def on_tf_static(self, msg: object) -> None:
         """A ``tf2_msgs/TFMessage`` of static transforms."""
-
-        def add(m: Any, where: str) -> None:
-            self.tree.add_message(m, where)
-
-        self._decoded("tf_static", msg, add)
+        self._decoded("tf_static", cast(TFMessageMsg, msg), self.tree.add_message)
 
     def _match(self) -> None:
         """Pair the newest decided image (module doc); called with the lock held."""

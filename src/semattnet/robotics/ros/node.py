@@ -25,7 +25,7 @@ import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -37,13 +37,14 @@ from semattnet.robotics.frame import ROS_TYPES, TOPICS, RobotFrame
 
 from .inputs import Pair, PairingInputs
 from .names import resolve_name
-from .transport import OUTPUT_QOS, SENSOR_QOS, TF_STATIC_QOS, Transport
+from .transport import OUTPUT_QOS, SENSOR_QOS, TF_STATIC_QOS, Publisher, Transport
 
 if TYPE_CHECKING:
     from semattnet.inference.completion import Completer
     from semattnet.inference.semantic import SemanticMaps
     from semattnet.inference.sinks import RunSink
     from semattnet.inference.uncertainty import UncertaintyLimit
+    from semattnet.robotics.bags.deps import Typestore
 
 __all__ = ["DepthNode", "NodeTopics", "StageStats", "run_node"]
 
@@ -127,7 +128,7 @@ class DepthNode:
         self.published = self.failed = 0
         self._slot: Pair | None = None
         self._ready = threading.Condition()
-        self._publishers: dict[str, Any] = {}
+        self._publishers: dict[str, Publisher] = {}
         self.sinks = list(sinks)
 
     def start(self) -> DepthNode:
@@ -262,13 +263,13 @@ class DepthNode:
         self.published += 1
 
     @property
-    def transport_typestore(self) -> Any:
+    def transport_typestore(self) -> Typestore:
         """The type store the transport's messages belong to (TCPROS's ``typestore``, ROS 1 Noetic's; DDS's ``ts``;
         else ROS 2 Humble's): the messages are built in it, never converted on each publish."""
         from semattnet.robotics.bags.deps import rosbags_typestore
 
         store = getattr(self.transport, "typestore", None) or getattr(self.transport, "ts", None)
-        return store or rosbags_typestore(False)
+        return cast("Typestore", store or rosbags_typestore(False))
 
     def close(self) -> None:
         """End the sinks and the transport (its threads and sockets)."""

@@ -35,21 +35,24 @@ import threading
 import time
 import xmlrpc.client
 from collections.abc import Callable, Mapping
-from typing import Any, cast
+from typing import TYPE_CHECKING, cast
 
 from semattnet._errors import InputError
 
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
 from ..bags.deps import rosbags_typestore
+from ._tcpros_subscriber import Subscription
 from ._tcpros_wire import (
+    MAX_PEERS,
     POLL_S,
     Outbox,
     SlaveServer,
     TcprosError,
     check_http_uri,
     encode_header,
-    read_frame,
     read_header,
-    shutdown_socket,
     xmlrpc_call,
 )
 from .ros1_types import Ros1Store, adopt_message, ros1_type_name, store_type_name
@@ -69,12 +72,8 @@ _log = logging.getLogger(__name__)
 
 #: The longest message accepted from a publisher (a 4K 32FC1 image is 33 MB).
 DEFAULT_MAX_MESSAGE_BYTES = 1 << 28
-#: At most this many connections per topic (subscribers of a publisher, publishers of a subscription).
-MAX_PEERS = 64
 _LEN = struct.Struct("<I")
 _NAME = re.compile(r"/[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*")
-#: Seconds before reconnecting to a publisher, by the number of failed attempts since the last connection.
-_RETRY_S = (0.2, 0.5, 1.0, 2.0, 4.0, 8.0)
 _MISSING = object()
 
 
@@ -128,15 +127,16 @@ class TcprosPublisher:
         for outbox in outboxes:
             outbox.put(prefix, data)
 
-    def _numbered(self, message: Any) -> Any:
+    def _numbered(self, message: object) -> object:
         """``message`` with the next ``header.seq`` (a copy of it and its header; unchanged without a header)."""
-        header: Any = getattr(message, "header", None)
-        if not hasattr(header, "seq") or not hasattr(message, "__dataclass_fields__"):
+        header: object = getattr(message, "header", None)
+        if not hasattr(header, "seq") or not dataclasses.is_dataclass(message) or isinstance(message, type):
             return message
         with self._lock:
             self._seq += 1
             seq = self._seq
-        return dataclasses.replace(message, header=dataclasses.replace(header, seq=seq))
+        numbered = dataclasses.replace(cast("DataclassInstance", header), seq=seq)
+        return dataclasses.replace(message, header=numbered)
 
     def attach(self, sock: socket.socket, label: str, stop: threading.Event) -> Outbox | None:
         """A new subscriber's outbox, or None (the socket closed) beyond :data:`MAX_PEERS` connections."""
@@ -156,116 +156,6 @@ class TcprosPublisher:
         with self._lock:
             for outbox in self._outboxes:
                 outbox.abort()
-
-
-class _Inbound:
-    """One publisher of a subscribed topic: ``requestTopic``, connect, handshake, receive; reconnect until stopped."""
-
-    def __init__(self, subscription: _Subscription, uri: str) -> None:
-        self.sub, self.uri = subscription, uri
-        self.stop = threading.Event()
-        self.sock: socket.socket | None = None
-        self.thread = threading.Thread(target=self._run, name=f"tcpros-in{subscription.topic}", daemon=True)
-
-    def _connect(self) -> socket.socket:
-        sub = self.sub
-        check_http_uri(self.uri, f"{sub.topic}: publisher URI")
-        code, status, proto = xmlrpc_call(self.uri, "requestTopic", sub.caller_id, sub.topic, [["TCPROS"]],
-                                          timeout=sub.timeout)  # fmt: skip
-        if code != 1 or not isinstance(proto, list) or len(proto) != 3 or proto[0] != "TCPROS":
-            raise TcprosError(f"requestTopic refused or not TCPROS ({status!r})")
-        if not isinstance(proto[1], str) or not isinstance(proto[2], int):
-            raise TcprosError(f"requestTopic: {proto[1:]!r} is not a host and a port")
-        sock = socket.create_connection((proto[1], proto[2]), timeout=sub.timeout)
-        self.sock = sock
-        sock.sendall(encode_header(sub.fields))
-        reply = read_header(sock)
-        if "error" in reply:
-            raise TcprosError(f"the publisher refused the connection: {reply['error']!r}")
-        if reply.get("md5sum") not in (sub.md5sum, "*"):
-            raise TcprosError(f"md5sum {reply.get('md5sum')!r} is not {sub.md5sum} ({ros1_type_name(sub.msgtype)})")
-        sock.settimeout(POLL_S)
-        return sock
-
-    def _run(self) -> None:
-        """Connect and receive; after a failure or a closed connection, retry with backoff until stopped."""
-        attempt = 0
-        while not self.stop.is_set():
-            try:
-                sock = self._connect()
-                attempt = 0
-                while (frame := read_frame(sock, self.sub.max_message_bytes, self.stop)) is not None:
-                    self.sub.deliver(frame)
-                if not self.stop.is_set():
-                    _log.info("%s: publisher %r closed the connection; reconnecting", self.sub.topic, self.uri)
-            except (TcprosError, OSError, xmlrpc.client.Error) as exc:
-                if not self.stop.is_set():  # one line per outage; the retries after it are debug lines
-                    level = logging.WARNING if attempt == 0 else logging.DEBUG
-                    _log.log(level, "%s: publisher %r: %s (retrying while the master lists it)", self.sub.topic,
-                             self.uri, exc)  # fmt: skip
-                attempt += 1
-            finally:
-                if self.sock is not None:
-                    self.sock.close()
-            self.stop.wait(_RETRY_S[min(attempt, len(_RETRY_S) - 1)])
-
-    def abort(self) -> None:
-        """Stop receiving and unblock the thread."""
-        self.stop.set()
-        shutdown_socket(self.sock)
-
-
-class _Subscription:
-    """A subscribed topic: one :class:`_Inbound` per publisher the master names, following ``publisherUpdate``."""
-
-    def __init__(
-        self, transport: TcprosTransport, topic: str, msgtype: str, callback: Callable[[object], None]
-    ) -> None:
-        self.topic, self.msgtype, self.callback = topic, msgtype, callback
-        self.store = transport.typestore
-        self.caller_id, self.timeout = transport.node_name, transport.timeout
-        self.max_message_bytes = transport.max_message_bytes
-        definition, self.md5sum = self.store.generate_msgdef(msgtype)
-        self.fields = {"callerid": transport.node_name, "topic": topic, "type": ros1_type_name(msgtype),
-                       "md5sum": self.md5sum, "message_definition": definition, "tcp_nodelay": "1"}  # fmt: skip
-        self._track = transport._track
-        self._inbound: dict[str, _Inbound] = {}
-        self._lock = threading.Lock()
-        self.closed = False
-
-    def update(self, uris: list[str], drop: bool = True) -> None:
-        """Connect to the publishers in ``uris`` not yet connected; drop those no longer listed (if ``drop``)."""
-        if len(uris) > MAX_PEERS:
-            _log.warning("%s: %d publishers, connecting to the first %d", self.topic, len(uris), MAX_PEERS)
-        wanted = uris[:MAX_PEERS]
-        with self._lock:
-            if self.closed:
-                return
-            for uri in [u for u in self._inbound if drop and u not in wanted]:
-                self._inbound.pop(uri).abort()
-            for uri in wanted:
-                if uri not in self._inbound or not self._inbound[uri].thread.is_alive():
-                    self._inbound[uri] = inbound = _Inbound(self, uri)
-                    self._track(inbound.thread)
-
-    def deliver(self, frame: bytes) -> None:
-        """Deserialise one frame and call back; a bad frame or a failing callback is one logged line."""
-        try:
-            message = self.store.deserialize_ros1(frame, self.msgtype)
-        except Exception as exc:
-            _log.warning("%s: dropped a message that is not a valid %s (%s)", self.topic, self.msgtype, exc)
-            return
-        try:
-            self.callback(message)
-        except Exception as exc:
-            _log.warning("%s: the callback failed on a message (%s: %s)", self.topic, type(exc).__name__, exc)
-
-    def abort(self) -> None:
-        """Stop every connection."""
-        with self._lock:
-            self.closed = True
-            for inbound in self._inbound.values():
-                inbound.abort()
 
 
 class TcprosTransport:
@@ -291,7 +181,7 @@ class TcprosTransport:
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._publishers: dict[str, TcprosPublisher] = {}
-        self._subscriptions: dict[str, _Subscription] = {}
+        self._subscriptions: dict[str, Subscription] = {}
         self._threads: list[threading.Thread] = []
         self._closed = False
         self._done = threading.Event()  # set when close() has ended everything
@@ -340,7 +230,7 @@ class TcprosTransport:
         with self._lock:
             if topic in self._subscriptions:
                 raise InputError(f"{topic}: already subscribed")
-            subscription = self._subscriptions[topic] = _Subscription(self, topic, typename, callback)
+            subscription = self._subscriptions[topic] = Subscription(self, topic, typename, callback)
         try:
             publishers = self._master("registerSubscriber", topic, ros1_type_name(typename), self.uri)
         except BaseException:
@@ -391,7 +281,7 @@ class TcprosTransport:
             raise InputError(f"{topic}: the ROS 1 transport is closed")
         return typename
 
-    def _master(self, method: str, *args: object) -> Any:
+    def _master(self, method: str, *args: object) -> object:
         """Call the master as this node: its value, or a :class:`TcprosError` (unreachable, or a failure code)."""
         try:
             code, status, value = xmlrpc_call(self.master_uri, method, self.node_name, *args, timeout=self.timeout)
@@ -469,7 +359,7 @@ class TcprosTransport:
 
     def _register_api(self) -> None:
         """The slave API peers and the master call (ROS's Slave API; each reply is [code, status, value])."""
-        api: dict[str, Callable[..., list[Any]]] = {
+        api: dict[str, Callable[..., list[object]]] = {
             "getBusStats": lambda caller: [1, "", [[], [], []]],
             "getBusInfo": lambda caller: [1, "", []],
             "getMasterUri": lambda caller: [1, "", self.master_uri],
@@ -485,21 +375,21 @@ class TcprosTransport:
         for method, function in api.items():
             self._slave.register_function(function, method)
 
-    def _publisher_update(self, caller: str, topic: str, publishers: list[Any]) -> list[Any]:
+    def _publisher_update(self, caller: str, topic: str, publishers: object) -> list[object]:
         subscription = self._subscriptions.get(topic)
         if subscription is None or not isinstance(publishers, list):
             return [0, f"not a subscriber of {topic!r}", 0]
         subscription.update([uri for uri in publishers if isinstance(uri, str)])
         return [1, "", 0]
 
-    def _request_topic(self, caller: str, topic: str, protocols: list[Any]) -> list[Any]:
+    def _request_topic(self, caller: str, topic: str, protocols: list[object]) -> list[object]:
         if topic not in self._publishers:
             return [-1, f"not a publisher of {topic!r}", []]
         if not any(isinstance(p, list) and p[:1] == ["TCPROS"] for p in protocols):
             return [0, "no supported protocol (this node speaks TCPROS)", []]
         return [1, "", ["TCPROS", self.host, self._listener.getsockname()[1]]]
 
-    def _remote_shutdown(self, caller: str, message: str = "") -> list[Any]:
+    def _remote_shutdown(self, caller: str, message: str = "") -> list[object]:
         _log.warning("tcpros: %r asked this node to shut down (%r)", caller, message)
         threading.Thread(target=self.close, name="tcpros-shutdown", daemon=True).start()
         return [1, "", 0]

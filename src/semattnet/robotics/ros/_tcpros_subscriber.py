@@ -1,0 +1,143 @@
+"""A TCPROS subscription: one connection per publisher the master names, each reconnected with backoff while the
+master lists it (:class:`Subscription`, :class:`Inbound`; used by :mod:`.tcpros`)."""
+
+from __future__ import annotations
+
+import logging
+import socket
+import threading
+import xmlrpc.client
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+from ._tcpros_wire import (
+    MAX_PEERS,
+    POLL_S,
+    TcprosError,
+    check_http_uri,
+    encode_header,
+    read_frame,
+    read_header,
+    shutdown_socket,
+    xmlrpc_call,
+)
+from .ros1_types import ros1_type_name
+
+if TYPE_CHECKING:
+    from .tcpros import TcprosTransport
+
+__all__ = ["Inbound", "Subscription"]
+
+_log = logging.getLogger("semattnet.robotics.ros.tcpros")
+#: Seconds before reconnecting to a publisher, by the number of failed attempts since the last connection.
+_RETRY_S = (0.2, 0.5, 1.0, 2.0, 4.0, 8.0)
+
+
+class Inbound:
+    """One publisher of a subscribed topic: ``requestTopic``, connect, handshake, receive; reconnect until stopped."""
+
+    def __init__(self, subscription: Subscription, uri: str) -> None:
+        self.sub, self.uri = subscription, uri
+        self.stop = threading.Event()
+        self.sock: socket.socket | None = None
+        self.thread = threading.Thread(target=self._run, name=f"tcpros-in{subscription.topic}", daemon=True)
+
+    def _connect(self) -> socket.socket:
+        sub = self.sub
+        check_http_uri(self.uri, f"{sub.topic}: publisher URI")
+        code, status, proto = xmlrpc_call(self.uri, "requestTopic", sub.caller_id, sub.topic, [["TCPROS"]],
+                                          timeout=sub.timeout)  # fmt: skip
+        if code != 1 or not isinstance(proto, list) or len(proto) != 3 or proto[0] != "TCPROS":
+            raise TcprosError(f"requestTopic refused or not TCPROS ({status!r})")
+        if not isinstance(proto[1], str) or not isinstance(proto[2], int):
+            raise TcprosError(f"requestTopic: {proto[1:]!r} is not a host and a port")
+        sock = socket.create_connection((proto[1], proto[2]), timeout=sub.timeout)
+        self.sock = sock
+        sock.sendall(encode_header(sub.fields))
+        reply = read_header(sock)
+        if "error" in reply:
+            raise TcprosError(f"the publisher refused the connection: {reply['error']!r}")
+        if reply.get("md5sum") not in (sub.md5sum, "*"):
+            raise TcprosError(f"md5sum {reply.get('md5sum')!r} is not {sub.md5sum} ({ros1_type_name(sub.msgtype)})")
+        sock.settimeout(POLL_S)
+        return sock
+
+    def _run(self) -> None:
+        """Connect and receive; after a failure or a closed connection, retry with backoff until stopped."""
+        attempt = 0
+        while not self.stop.is_set():
+            try:
+                sock = self._connect()
+                attempt = 0
+                while (frame := read_frame(sock, self.sub.max_message_bytes, self.stop)) is not None:
+                    self.sub.deliver(frame)
+                if not self.stop.is_set():
+                    _log.info("%s: publisher %r closed the connection; reconnecting", self.sub.topic, self.uri)
+            except (TcprosError, OSError, xmlrpc.client.Error) as exc:
+                if not self.stop.is_set():  # one line per outage; the retries after it are debug lines
+                    level = logging.WARNING if attempt == 0 else logging.DEBUG
+                    _log.log(level, "%s: publisher %r: %s (retrying while the master lists it)", self.sub.topic,
+                             self.uri, exc)  # fmt: skip
+                attempt += 1
+            finally:
+                if self.sock is not None:
+                    self.sock.close()
+            self.stop.wait(_RETRY_S[min(attempt, len(_RETRY_S) - 1)])
+
+    def abort(self) -> None:
+        """Stop receiving and unblock the thread."""
+        self.stop.set()
+        shutdown_socket(self.sock)
+
+
+class Subscription:
+    """A subscribed topic: one :class:`Inbound` per publisher the master names, following ``publisherUpdate``."""
+
+    def __init__(
+        self, transport: TcprosTransport, topic: str, msgtype: str, callback: Callable[[object], None]
+    ) -> None:
+        self.topic, self.msgtype, self.callback = topic, msgtype, callback
+        self.store = transport.typestore
+        self.caller_id, self.timeout = transport.node_name, transport.timeout
+        self.max_message_bytes = transport.max_message_bytes
+        definition, self.md5sum = self.store.generate_msgdef(msgtype)
+        self.fields = {"callerid": transport.node_name, "topic": topic, "type": ros1_type_name(msgtype),
+                       "md5sum": self.md5sum, "message_definition": definition, "tcp_nodelay": "1"}  # fmt: skip
+        self._track = transport._track
+        self._inbound: dict[str, Inbound] = {}
+        self._lock = threading.Lock()
+        self.closed = False
+
+    def update(self, uris: list[str], drop: bool = True) -> None:
+        """Connect to the publishers in ``uris`` not yet connected; drop those no longer listed (if ``drop``)."""
+        if len(uris) > MAX_PEERS:
+            _log.warning("%s: %d publishers, connecting to the first %d", self.topic, len(uris), MAX_PEERS)
+        wanted = uris[:MAX_PEERS]
+        with self._lock:
+            if self.closed:
+                return
+            for uri in [u for u in self._inbound if drop and u not in wanted]:
+                self._inbound.pop(uri).abort()
+            for uri in wanted:
+                if uri not in self._inbound or not self._inbound[uri].thread.is_alive():
+                    self._inbound[uri] = inbound = Inbound(self, uri)
+                    self._track(inbound.thread)
+
+    def deliver(self, frame: bytes) -> None:
+        """Deserialise one frame and call back; a bad frame or a failing callback is one logged line."""
+        try:
+            message = self.store.deserialize_ros1(frame, self.msgtype)
+        except Exception as exc:
+            _log.warning("%s: dropped a message that is not a valid %s (%s)", self.topic, self.msgtype, exc)
+            return
+        try:
+            self.callback(message)
+        except Exception as exc:
+            _log.warning("%s: the callback failed on a message (%s: %s)", self.topic, type(exc).__name__, exc)
+
+    def abort(self) -> None:
+        """Stop every connection."""
+        with self._lock:
+            self.closed = True
+            for inbound in self._inbound.values():
+                inbound.abort()
