@@ -117,8 +117,8 @@ def measure(drive: Path, work: Path, width: float, backend: str, prefetch: int, 
     import semattnet
     from semattnet.data.sources import RawDriveSource
     from semattnet.inference import DepthCompleter
+    from semattnet.inference.feed import read_frame
     from semattnet.inference.semantic import SemanticMaps
-    from semattnet.inference.stream import read_frame
     from semattnet.inference.timing import StageTimes
 
     torch.manual_seed(0)

@@ -24,7 +24,7 @@ SRC = Path(semattnet.__file__).parent
 #: The modules of the frame path: the loop, its reader, the semantic maps and the sources and sinks it reads.
 FRAME_PATH = [
     "inference/pipeline.py",
-    "inference/stream.py",
+    "inference/feed.py",
     "inference/semantic.py",
     "inference/sinks.py",
     "data/datasets/frames.py",

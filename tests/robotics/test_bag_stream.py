@@ -14,9 +14,9 @@ from semattnet._errors import DataError
 from semattnet.data.frames import Frame, IndexedSource
 from semattnet.inference import DepthCompleter
 from semattnet.inference.completer import Completion
+from semattnet.inference.feed import completions
 from semattnet.inference.pipeline import complete_frames
 from semattnet.inference.sinks import DepthPngSink, LatencySink
-from semattnet.inference.stream import completions
 from semattnet.inference.timing import STAGES, StageTimes
 
 SLEEP = 0.06

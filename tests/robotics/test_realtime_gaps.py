@@ -43,7 +43,7 @@ def test_an_hour_gap_is_skipped_and_counted(tmp_path: Path) -> None:
 
 def test_pace_keeps_the_recorded_gaps() -> None:
     """Gaps within a few periods are waited as recorded (speed 2: half), a long one replaced by one period."""
-    from semattnet.inference.stream import _Pace
+    from semattnet.inference.feed import _Pace
     from semattnet.inference.timing import StageTimes
 
     timer = StageTimes()

@@ -159,8 +159,9 @@ def evaluate_split(
     label: str | None = None,
     inputs: Sequence[PathLike | None] = (),
 ) -> Evaluation:
-    """Complete a split with ``completer`` through the one frame loop (:func:`~.pipeline.complete_frames`) and
-    score it with the dataset's metrics (:class:`~.sink.MetricsSink`); optionally write predictions and panels.
+    """Complete a split with ``completer`` through the one frame loop
+    (:func:`~semattnet.inference.pipeline.complete_frames`) and score it with the dataset's metrics
+    (:class:`~.sink.MetricsSink`); optionally write predictions and panels.
 
     ``completer``: a :class:`~semattnet.inference.DepthCompleter` (or any
     :class:`~semattnet.inference.pipeline.Completer`, e.g. :class:`~semattnet.baselines.ClassicalCompleter`),

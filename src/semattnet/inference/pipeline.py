@@ -14,7 +14,7 @@ splits and raw drives, bags and datasets, and what writes ``evaluate``'s predict
 A long run survives its bad frames and its kills:
 
 * **Per-frame faults are the frame's.** A frame whose input cannot be read or completed (a corrupt file, a
-  LiDAR scan with no point in the image, an empty sparse map: :func:`~.stream.is_frame_fault`) is skipped
+  LiDAR scan with no point in the image, an empty sparse map: :func:`~.feed.is_frame_fault`) is skipped
   with one line naming it and why (``on_error="skip"``, the default for more than one frame), or stops the
   run with the frames done so far kept (``"stop"``). Errors of the run (a full disk, a sink that fails, a
   missing package) stop it at once.
@@ -50,11 +50,11 @@ from semattnet._utils.outputs import Output, check_no_input_overlap, check_outpu
 from semattnet.data.frames import Frame, FrameSource
 from semattnet.data.io import encode_depth, read_depth
 from semattnet.inference.completer import Completer, Completion
+from semattnet.inference.feed import FrameFault, completions, is_frame_fault, read_frame
 from semattnet.inference.journal import FRAMES_FILE, FrameEntry, RunJournal, describe_counts
 from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sharding import agree, gather_rows, on_main, process_group, rank_log, shard
 from semattnet.inference.sinks import Prediction, Sink, output_files, predict_frame
-from semattnet.inference.stream import FrameFault, completions, is_frame_fault, read_frame
 from semattnet.inference.timing import StageTimes
 
 __all__ = [
@@ -388,7 +388,7 @@ def complete_frames(
 
     Each frame's files appear in ``out`` (atomically) as soon as it is completed and are recorded in
     ``out/frames.json`` (:mod:`~.journal`). A frame whose input cannot be read or completed (its fault:
-    :func:`~.stream.is_frame_fault`) is skipped with one logged line (``on_error="skip"``, the default for more
+    :func:`~.feed.is_frame_fault`) is skipped with one logged line (``on_error="skip"``, the default for more
     than one frame) or stops the run (``"stop"``), the frames done so far kept. Errors of the run (a full disk,
     a failing sink) stop it at once; the frames done stay, resumable. ``resume``: continue the run in ``out``
     (``run``: its identity; see :func:`check_frames`), keeping its done frames; the run outputs then cover all.
@@ -396,9 +396,9 @@ def complete_frames(
     ``semantic``: how frames without a semantic map get one (default: the fallback map for completers that
     need one). ``checked``: the :class:`RunPlan` of :func:`check_frames` run with these arguments (``True``: it
     ran, with nothing to skip or keep; ``False``: it runs now). ``timer``: per-stage times
-    (:class:`~.stream.StageTimes`; ``writing`` is every sink). ``prefetch`` > 0: read, project and segment
+    (:class:`~.feed.StageTimes`; ``writing`` is every sink). ``prefetch`` > 0: read, project and segment
     that many frames ahead in a background thread; ``realtime``: replay at the sensor pace, that many times
-    faster, dropping frames that come while the completer is busy (:func:`~.stream.completions`).
+    faster, dropping frames that come while the completer is busy (:func:`~.feed.completions`).
     :class:`~.sinks.RunSink` outputs (a bag, a recording, ``latency.json``) are put in place at the end.
     ``batch_size`` > 1: up to that many consecutive frames of one size completed in one engine call (a
     :class:`~.completer.DepthCompleter`, through its input checks; the same results up to float rounding).

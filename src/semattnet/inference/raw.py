@@ -52,10 +52,12 @@ def complete_kitti_raw(
     """Complete frames of a KITTI raw drive (see :class:`semattnet.data.kitti_raw.RawDrive`) into ``out``.
 
     Args:
-        completer: a :class:`DepthCompleter`, :class:`ClassicalCompleter` or anything with their call.
+        completer: a :class:`~semattnet.inference.DepthCompleter`, :class:`~semattnet.baselines.ClassicalCompleter` or
+            anything with their call.
         drive_dir: ``RAW_ROOT/DATE/DATE_drive_NNNN_sync``. frames: ``"a-b"``, ``"1,3"``, indices or None (all).
         camera: 2 or 3. semantic: folder of colour-coded maps named like the images. segmenter: a
-            :class:`Segmenter` or its SPEC. Without either, models that need semantics get the fallback map.
+            :class:`~semattnet.segmentation.segmenter.Segmenter` or its SPEC. Without either, models that need semantics
+            get the fallback map.
         ply: also write ``NAME.ply``; ``max_depth`` (metres) and ``top_crop`` (rows) select its pixels.
         deskew: ego-motion compensate the scans with their OXTS packets before projecting.
 

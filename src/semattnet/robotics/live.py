@@ -2,7 +2,7 @@
 
 ``semattnet predict ... --live [HOST:]PORT`` serves each frame as it is completed; open the Foxglove app
 (desktop or https://app.foxglove.dev) and connect to ``ws://HOST:PORT``. Per frame, stamped with the
-input's sensor time and frame id (as :class:`~semattnet.inference.sinks.BagSink` stamps them):
+input's sensor time and frame id (as :class:`~semattnet.robotics.sinks.BagSink` stamps them):
 
 ============================  =====================  ==================================================
 topic                         schema                 what

@@ -1,6 +1,6 @@
 """What a completer gives and what the frame loop asks of one: :class:`Completion`, the :class:`Completer`
 protocol and :class:`StageTimed` (a completer that times its inner stages). Below both the completer and the
-stream, so that each can name them."""
+feed (:mod:`~.feed`), so that each can name them."""
 
 from __future__ import annotations
 
