@@ -32,6 +32,16 @@ def _tree(module: str) -> ast.Module:
     return ast.parse(_modules()[module].read_text(encoding="utf-8"))
 
 
+@cache
+def _defined(module: str, owner: tuple[str, ...] = ()) -> dict[str, ast.AST]:
+    """What ``module`` (or its class at path ``owner``) defines, read once."""
+    if not owner:
+        return _names(_tree(module).body)
+    node = _defined(module, owner[:-1])[owner[-1]]
+    assert isinstance(node, ast.ClassDef)
+    return _names(node.body, node)
+
+
 def _names(body: list[ast.stmt], owner: ast.ClassDef | None = None) -> dict[str, ast.AST]:
     """What a module or class body defines (an import by its target), with a class's ``self.X`` attributes."""
     found: dict[str, ast.AST] = {}
@@ -57,10 +67,9 @@ def _resolves(target: str, seen: int = 0) -> bool:
     if not heads or seen > 5:
         return not target.startswith("semattnet")  # outside the package: not ours to check
     i = heads[0]
-    module = ".".join(parts[:i])
-    names, rest = _names(_tree(module).body), parts[i:]
+    module, rest = ".".join(parts[:i]), parts[i:]
     for k, part in enumerate(rest):
-        node = names.get(part)
+        node = _defined(module, tuple(rest[:k])).get(part)
         if node is None:
             return False
         if isinstance(node, ast.ImportFrom):
@@ -69,7 +78,6 @@ def _resolves(target: str, seen: int = 0) -> bool:
                        for a in node.names if (a.asname or a.name) == part)  # fmt: skip
         if not isinstance(node, ast.ClassDef):
             return k == len(rest) - 1
-        names = _names(node.body, node)
     return True
 
 
