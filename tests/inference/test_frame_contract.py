@@ -15,7 +15,7 @@ import pytest
 import semattnet
 from semattnet.baselines import ClassicalCompleter
 from semattnet.data.frames import Frame, IndexedSource, SourceInfo, TwoStageSource
-from semattnet.inference.pipeline import complete_frames
+from semattnet.inference.pipeline import check_frames
 from semattnet.inference.sinks import Prediction, Sink
 from semattnet.inference.timing import StageTimes
 
@@ -80,8 +80,8 @@ class TextDepth(Sink):
 def test_the_loop_reads_the_sources_info_and_stages(tmp_path: Path) -> None:
     timer, lines = StageTimes(), []
     assert isinstance(TwoStage(), TwoStageSource) and not isinstance(Stamped(), TwoStageSource)
-    run = complete_frames(TwoStage(), ClassicalCompleter(), [TextDepth()], tmp_path / "out", timer=timer,
-                          log=lines.append)  # fmt: skip
+    run = check_frames(TwoStage(), [TextDepth()], tmp_path / "out").run(ClassicalCompleter(), timer=timer,
+                                                                         log=lines.append)  # fmt: skip
     assert timer.stamps == {"a": 0.0, "b": 0.1, "c": 0.2} and timer.sensor_period_s == pytest.approx(0.1)
     assert all("projection" in timer.times[n] for n in "abc")  # assemble timed apart from read
     assert run.paths == [tmp_path / "out" / f"{n}.txt" for n in "abc"]  # the sink whose role is depth

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from semattnet.data.sources.kitti_raw import RawDriveSource, project_frame
-from semattnet.inference.pipeline import Completer, complete_frames
+from semattnet.inference.pipeline import Completer, OutputSpec, RunOptions, check_frames
 from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sinks import default_sinks, fusion_confidence, output_files
 
@@ -77,6 +77,5 @@ def complete_kitti_raw(
     maps = SemanticMaps(segmenter, folder=semantic is not None)
     source = RawDriveSource(drive_dir, frames, camera, semantic, deskew)
     sinks = default_sinks(npy, panel, ply, max_depth, top_crop)
-    run = complete_frames(source, completer, sinks, out, overwrite=overwrite, log=log, semantic=maps,
-                          on_error=on_error)  # fmt: skip
-    return run.paths
+    plan = check_frames(source, sinks, out, OutputSpec(overwrite), RunOptions(on_error))
+    return plan.run(completer, semantic=maps, log=log).paths
