@@ -2,7 +2,7 @@
 
 Writes an MCAP bag of ``--frames`` copies of the bundled KITTI raw frame (1242x375 image and its 120k-point
 Velodyne scan) stamped at the sensor's 10 Hz, then replays it through the one frame loop at the recorded
-rate, ``--speed`` times faster (``complete_frames(..., realtime=SPEED)``; the classical completion, depth
+rate, ``--speed`` times faster (``RunOptions(realtime=SPEED)`` of the plan; the classical completion, depth
 PNGs written) while a thread samples the process's RSS every 50 ms. Prints the RSS after the first 10 % of
 the frames, at the middle and at the end, its peak, the frames done and dropped, and the most frames that
 waited for the completer, with the CPU::
