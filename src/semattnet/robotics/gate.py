@@ -63,7 +63,8 @@ class Gate:
     """Listen on ``host:port`` and relay each client to ``upstream`` (module doc).
 
     Args:
-        host, port: where to listen (port 0: a free port, see :attr:`port`).
+        host: where to listen.
+        port: the port to listen on (0: a free port, see :attr:`port`).
         upstream: the (host, port) of the server the clients are relayed to.
         max_clients: clients at once (:data:`MAX_CLIENTS`).
         handshake_s: seconds for a client's first request (:data:`HANDSHAKE_S`).
