@@ -126,7 +126,8 @@ class RunPlan:
         need one). ``timer``: per-stage times (:class:`~.timing.StageTimes`; ``writing`` is every sink).
         ``log``: where each frame's line goes."""
         try:
-            return _execute(self, completer, semantic or SemanticMaps(), timer or StageTimes(), log)
+            timer = timer if timer is not None else StageTimes()
+            return _execute(self, completer, semantic or SemanticMaps(), timer, log)
         finally:
             self.release()
 
