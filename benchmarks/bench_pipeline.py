@@ -92,7 +92,7 @@ def _network_pass(completer: Any, frames: list[Any]) -> float:
 def _pipeline_pass(completer: Any, drive: Path, out: Path, prefetch: int) -> dict[str, Any]:
     """One ``predict --kitti-raw --stream`` run: frames per second of the loop, the check's seconds, the table."""
     from semattnet.data.sources import RawDriveSource
-    from semattnet.inference.pipeline import check_frames, complete_frames
+    from semattnet.inference.pipeline import RunOptions, check_frames
     from semattnet.inference.sinks import LatencySink, default_sinks
     from semattnet.inference.timing import LATENCY_FILE, StageTimes
 
@@ -100,9 +100,9 @@ def _pipeline_pass(completer: Any, drive: Path, out: Path, prefetch: int) -> dic
     source = RawDriveSource(drive)
     sinks = [*default_sinks(), LatencySink(timer=timer)]
     t0 = time.perf_counter()
-    plan = check_frames(source, sinks, out)
+    plan = check_frames(source, sinks, out, options=RunOptions(prefetch=prefetch))
     t1 = time.perf_counter()
-    complete_frames(source, completer, sinks, out, log=lambda _: None, checked=plan, timer=timer, prefetch=prefetch)
+    plan.run(completer, timer=timer, log=lambda _: None)
     t2 = time.perf_counter()
     n = len(source.names)
     return {"fps": n / (t2 - t1), "check_s": t1 - t0, "fps_with_check": n / (t2 - t0),
@@ -117,8 +117,8 @@ def measure(drive: Path, work: Path, width: float, backend: str, prefetch: int, 
     import semattnet
     from semattnet.data.sources import RawDriveSource
     from semattnet.inference import DepthCompleter
+    from semattnet.inference.feed import read_frame
     from semattnet.inference.semantic import SemanticMaps
-    from semattnet.inference.stream import read_frame
     from semattnet.inference.timing import StageTimes
 
     torch.manual_seed(0)

@@ -2,7 +2,7 @@
 
 Writes an MCAP bag of ``--frames`` copies of the bundled KITTI raw frame (1242x375 image and its 120k-point
 Velodyne scan) stamped at the sensor's 10 Hz, then replays it through the one frame loop at the recorded
-rate, ``--speed`` times faster (``complete_frames(..., realtime=SPEED)``; the classical completion, depth
+rate, ``--speed`` times faster (``RunOptions(realtime=SPEED)`` of the plan; the classical completion, depth
 PNGs written) while a thread samples the process's RSS every 50 ms. Prints the RSS after the first 10 % of
 the frames, at the middle and at the end, its peak, the frames done and dropped, and the most frames that
 waited for the completer, with the CPU::
@@ -46,7 +46,7 @@ def write_bag(path: Path, frames: int) -> Path:
 def replay(bag: Path, out: Path, speed: float = 1.0) -> dict[str, object]:
     """The bag at its recorded rate through the loop, RSS sampled meanwhile."""
     from semattnet.baselines import ClassicalCompleter
-    from semattnet.inference.pipeline import complete_frames
+    from semattnet.inference.pipeline import RunOptions, check_frames
     from semattnet.inference.sinks import DepthPngSink, LatencySink
     from semattnet.inference.timing import StageTimes
     from semattnet.robotics import BagSource
@@ -64,8 +64,8 @@ def replay(bag: Path, out: Path, speed: float = 1.0) -> dict[str, object]:
     timer = StageTimes()
     thread = threading.Thread(target=sample, daemon=True)
     thread.start()
-    run = complete_frames(source, ClassicalCompleter(), [DepthPngSink(), LatencySink(timer=timer)], out,
-                          log=lambda line: done.__setitem__(0, done[0] + 1), timer=timer, realtime=speed)  # fmt: skip
+    plan = check_frames(source, [DepthPngSink(), LatencySink(timer=timer)], out, options=RunOptions(realtime=speed))
+    run = plan.run(ClassicalCompleter(), timer=timer, log=lambda line: done.__setitem__(0, done[0] + 1))
     stop.set()
     thread.join()
     n = len(source.names)

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from semattnet._errors import MissingDependencyError, SemAttNetError
-from semattnet._utils.extras import EXTRAS, install_hint, optional, require
+from semattnet._utils.extras import EXTRAS, call_with_newer, install_hint, optional, require
 
 SRC = Path(__file__).resolve().parents[2] / "src" / "semattnet"
 
@@ -49,3 +49,27 @@ def test_require_names_the_feature_the_package_and_the_command(monkeypatch: pyte
     assert optional("foxglove") is None and optional("json") is sys.modules["json"]
     assert install_hint("plyfile") == "pip install plyfile"  # a core dependency: no extra provides it
     assert install_hint("no_such_package_xyz.sub") == "pip install no_such_package_xyz"
+
+
+def test_call_with_newer_leaves_out_only_the_keywords_an_older_release_lacks() -> None:
+    calls: list[dict[str, object]] = []
+
+    def old(url: str, *, size: int = 0) -> str:
+        calls.append({"url": url, "size": size})
+        return "old"
+
+    def new(url: str, *, size: int = 0, quiet: bool = False) -> str:
+        calls.append({"url": url, "size": size, "quiet": quiet})
+        return "new"
+
+    assert call_with_newer(new, {"quiet": True}, "u", size=2) == "new"
+    assert call_with_newer(old, {"quiet": True}, "u", size=2) == "old"
+    assert calls == [{"url": "u", "size": 2, "quiet": True}, {"url": "u", "size": 2}]  # the old one ran once
+    with pytest.raises(TypeError, match="'colour'"):  # a keyword not among the newer ones is the caller's bug
+        call_with_newer(old, {"quiet": True}, "u", colour=1)
+    with pytest.raises(TypeError, match="body"):  # a TypeError raised inside is never retried
+
+        def broken(url: str, quiet: bool = False) -> None:
+            raise TypeError("body")
+
+        call_with_newer(broken, {"quiet": True}, "u")

@@ -73,9 +73,10 @@ def test_the_shipped_references_are_small_load_and_record_their_recipe(seed: int
     model, info = ref.load_reference(path)
     assert model.config.branches == 3 and model.config.refine and model.config.width == info["recipe"]["width"]
     recipe = dataclasses.replace(ref.REFERENCE_RECIPE, seed=seed)
-    assert info["recipe"] == dataclasses.asdict(recipe) | {"size": list(recipe.size)}
+    recorded = {"semantic_dropout": 0.0} | info["recipe"]  # files trained before the field had none
+    assert recorded == dataclasses.asdict(recipe) | {"size": list(recipe.size)}
     assert info["command"] == ref.REFERENCE_COMMAND and info["levels"] in ref.LEVELS
-    assert set(info["val"]) == {"reference", "classical"}
+    assert {"reference", "classical"} <= set(info["val"]) <= {"reference", "reference_fallback_map", "classical"}
     notes = ref.recipe_notes(info["recipe"])
     assert "data seed 1000" in notes[0] and "L1 + L2" in notes[1] and "seed 0, 1" in notes[0]
 
@@ -83,18 +84,19 @@ def test_the_shipped_references_are_small_load_and_record_their_recipe(seed: int
 def test_train_reference_tiny_recipe(tmp_path: Path) -> None:
     """The whole --train-reference path on a tiny recipe: three stages, then the packaged file."""
     tiny = dataclasses.replace(ref.REFERENCE_RECIPE, train_frames=4, val_frames=2, size=(32, 64), batch_size=2,
-                               backbone_steps=2, refine_init_steps=1, full_steps=1)  # fmt: skip
+                               backbone_steps=2, refine_init_steps=1, full_steps=1, semantic_dropout=0.5)  # fmt: skip
     lines: list[str] = []
     target = ref.train_reference(tmp_path / "work", tmp_path / "out.safetensors.gz", tiny, log=lines.append)
     for stage in ("backbone", "refine_init", "full"):
         assert (tmp_path / "work" / "run" / stage / "checkpoints" / "last.pt").is_file(), stage
     refine_init = TrainConfig.load(tmp_path / "work" / "run" / "refine_init" / "config.json")
     assert refine_init.stage == "refine-init" and refine_init.lr == pytest.approx(tiny.lr * tiny.head_lr_factor)
-    assert refine_init.loss == "l1+l2"
+    assert refine_init.loss == "l1+l2" and refine_init.semantic_dropout == 0.5
     full = TrainConfig.load(tmp_path / "work" / "run" / "full" / "config.json")
     assert full.lr == pytest.approx(tiny.lr / 4) and full.head_lr == pytest.approx(tiny.lr * tiny.head_lr_factor)
     _, info = ref.load_reference(target)
     assert info["recipe"]["backbone_steps"] == 2 and info["levels"] in ref.LEVELS and "written" in lines[-1]
+    assert set(info["val"]) == {"reference", "reference_fallback_map", "classical"}  # scored with the fallback map too
 
 
 def test_cli_train_reference_refuses_a_non_empty_folder(tmp_path: Path) -> None:

@@ -115,9 +115,6 @@ def test_each_kinds_values_are_its_own_options(kind: InputKind) -> None:
 
 
 def test_every_registered_source_and_sink_is_made_by_an_option_of_predict() -> None:
-    import semattnet.robotics.live
-    import semattnet.robotics.sinks
-    import semattnet.robotics.source  # noqa: F401  (register the robot sources and sinks)
     from semattnet.data.sources.registry import SOURCES
     from semattnet.inference.sinks import SINKS
 

@@ -13,7 +13,7 @@ from semattnet.baselines.classical import ClassicalCompleter
 from semattnet.data.io import MIN_DEPTH_M, clamp_for_png, read_depth
 from semattnet.data.pairing import FramePaths
 from semattnet.data.synthetic.tree import write_synthetic_kitti
-from semattnet.evaluation.evaluate import evaluate_split, score_folders
+from semattnet.evaluation.evaluate import EvalOutputs, EvalSplit, evaluate_split, score_folders
 from semattnet.evaluation.protocols import eval_source
 from semattnet.evaluation.submission import write_submission_files
 from semattnet.inference.completer import Completion
@@ -93,7 +93,7 @@ def test_evaluate_saved_and_quantized_scores_match_metrics(tmp_path: Path) -> No
     out = tmp_path / "eval"
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        m = evaluate_split(_holey, root, "val_select", out, save_predictions=True).metrics
+        m = evaluate_split(_holey, EvalSplit(root, "val_select"), out, EvalOutputs(save_predictions=True)).metrics
     first = eval_source("kitti-dc", root, "val_select").names[0]
     assert any("hole" in str(w.message) and first in str(w.message) for w in caught)
     saved = sorted((out / "predictions").glob("*.png"))

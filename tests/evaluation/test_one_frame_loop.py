@@ -1,5 +1,6 @@
 """Evaluation has no frame loop of its own (issue 34): every module of ``semattnet.evaluation`` that completes
-frames does it through :func:`~semattnet.inference.pipeline.complete_frames`, read from the source with ``ast``.
+frames does it through :func:`~semattnet.inference.pipeline.complete_frames` (or ``plan.run``, a
+:class:`~semattnet.inference.pipeline.RunPlan`'s run: the same loop), read from the source with ``ast``.
 
 A private loop shows in one of four ways: a completer, engine or model called on inputs (``completer(rgb,
 ...)``, ``engine.run(...)``), the loop's own parts used (``completions``, ``read_frame``, ``predict_frame``,
@@ -32,6 +33,13 @@ def _name(func: ast.expr) -> str:
     return func.id if isinstance(func, ast.Name) else func.attr if isinstance(func, ast.Attribute) else ""
 
 
+def _runs_the_loop(node: ast.Call) -> bool:
+    """``complete_frames(...)`` or ``plan.run(...)``: the one loop."""
+    func = node.func
+    plan_run = isinstance(func, ast.Attribute) and func.attr == "run" and _name(func.value) == "plan"
+    return _name(func) == "complete_frames" or plan_run
+
+
 def _is_range_len(node: ast.Call) -> bool:
     """``range(...)`` over a length: ``range(len(ds))``, ``range(min(len(ds), n))``."""
     return _name(node.func) == "range" and any(
@@ -44,7 +52,7 @@ def private_loops(source: str) -> list[str]:
     tree, found = ast.parse(source), []
     in_loop = {id(n) for loop in ast.walk(tree) if isinstance(loop, LOOPS) for n in ast.walk(loop) if n is not loop}
     for node in ast.walk(tree):
-        if not isinstance(node, ast.Call):
+        if not isinstance(node, ast.Call) or _runs_the_loop(node):
             continue
         name, argued = _name(node.func), bool(node.args or node.keywords)
         if argued and name in COMPLETERS:
@@ -87,7 +95,9 @@ THROUGH_THE_LOOP = textwrap.dedent("""
         model = completer() if callable(completer) else completer
         size = source.load(source.names[0]).size
         for k, (name, method) in enumerate(methods.items()):
-            complete_frames(source, method, sinks, stage / f"run{k}", checked=True)
+            complete_frames(source, method, sinks, stage / f"run{k}")
+        plan = check_frames(source, sinks, stage)
+        plan.run(completer, log=print)
         return size
 """)
 
@@ -113,6 +123,7 @@ def test_no_evaluation_module_loops_over_frames(path: Path) -> None:
 
 @pytest.mark.parametrize("module", ["evaluate.py", "sparsity.py", "submission.py"])
 def test_the_scoring_modules_run_the_one_loop(module: str) -> None:
-    """What completes frames in ``evaluation`` calls ``complete_frames`` (and so is not a module without frames)."""
+    """What completes frames in ``evaluation`` calls ``complete_frames`` or ``plan.run`` (and so is not a module
+    without frames)."""
     tree = ast.parse((EVALUATION / module).read_text(encoding="utf-8"))
-    assert any(isinstance(n, ast.Call) and _name(n.func) == "complete_frames" for n in ast.walk(tree)), module
+    assert any(isinstance(n, ast.Call) and _runs_the_loop(n) for n in ast.walk(tree)), module

@@ -15,6 +15,7 @@ from semattnet.data.sources import KittiSplitSource
 from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.evaluation.submission import SubmissionError, write_submission
 from semattnet.inference.completer import Completion
+from semattnet.inference.contract import CompleterFactory
 from semattnet.inference.sinks import predict_frame
 
 
@@ -39,7 +40,7 @@ class Never:
 def test_the_test_split_through_the_loop(tree: Path, tmp_path: Path) -> None:
     """Every test frame's prediction, named as its sparse file, as the loop stores it; nothing else anywhere."""
     out = tmp_path / "sub"
-    zip_path = write_submission(ClassicalCompleter, tree, out, expected_frames=2)  # the class: a factory
+    zip_path = write_submission(CompleterFactory(ClassicalCompleter), tree, out, expected_frames=2)
     source = KittiSplitSource(tree, "test")
     names = sorted(source.by_name[n].sparse.name for n in source.names)
     assert sorted(p.name for p in out.iterdir()) == names and len(names) == 2  # no journal, no stage
@@ -55,15 +56,15 @@ def test_the_test_split_through_the_loop(tree: Path, tmp_path: Path) -> None:
 def test_checks_come_before_the_completer(tree: Path, tmp_path: Path) -> None:
     never = Never()
     with pytest.raises(SubmissionError, match="KITTI expects 1000"):
-        write_submission(never, tree, tmp_path / "a")
+        write_submission(CompleterFactory(never), tree, tmp_path / "a")
     write_submission(ClassicalCompleter(), tree, tmp_path / "b", expected_frames=None)
     with pytest.raises(FileExistsError, match="--overwrite"):
-        write_submission(never, tree, tmp_path / "b", expected_frames=None)
+        write_submission(CompleterFactory(never), tree, tmp_path / "b", expected_frames=None)
     (tmp_path / "b" / "notes.txt").write_text("mine")
     with pytest.raises(SubmissionError, match="notes.txt"):
-        write_submission(never, tree, tmp_path / "b", expected_frames=None, overwrite=True)
+        write_submission(CompleterFactory(never), tree, tmp_path / "b", expected_frames=None, overwrite=True)
     assert never.calls == 0 and (tmp_path / "b" / "notes.txt").read_text() == "mine"
-    with pytest.raises(InputError, match="submit: .* neither a completer"):
+    with pytest.raises(InputError, match="submit: 42 is neither a completer .* nor a CompleterFactory"):
         write_submission(42, tree, tmp_path / "c", expected_frames=None)  # type: ignore[arg-type]
 
 

@@ -11,8 +11,8 @@ import pytest
 import semattnet
 from semattnet._errors import InputError
 from semattnet.data.synthetic.tree import write_synthetic_kitti
-from semattnet.evaluation import evaluate_split
-from semattnet.inference import DepthCompleter
+from semattnet.evaluation import EvalSplit, evaluate_split
+from semattnet.inference import DepthCompleter, RunOptions
 from semattnet.inference.batching import groups
 
 
@@ -32,8 +32,8 @@ def test_evaluate_batched_equals_one_per_call(tmp_path: Path) -> None:
     model = semattnet.build_model("semattnet", width=0.125)
     model.backbone.init_depth_heads()
     completer = DepthCompleter(model, device="cpu")
-    one = evaluate_split(completer, tmp_path / "t").result
-    three = evaluate_split(completer, tmp_path / "t", batch_size=3).result
+    one = evaluate_split(completer, EvalSplit(tmp_path / "t")).result
+    three = evaluate_split(completer, EvalSplit(tmp_path / "t"), options=RunOptions(batch_size=3)).result
     assert one.keys() == three.keys() and one["images"] == three["images"] == 3
     for k, v in one.items():
         assert three[k] == pytest.approx(v, rel=1e-4, abs=1e-6), k

@@ -19,7 +19,7 @@ from semattnet.baselines import ClassicalCompleter
 from semattnet.data.frames import Frame, IndexedSource, SourceInfo, TwoStageSource
 from semattnet.data.sources.semantic import MapSegmenter
 from semattnet.inference import Completion
-from semattnet.inference.pipeline import Completer, complete_frames
+from semattnet.inference.pipeline import Completer, check_frames
 from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sinks import Prediction, Sink
 from semattnet.inference.timing import StageTimes
@@ -30,7 +30,7 @@ SRC = Path(semattnet.__file__).parent
 #: The modules of the frame path: the loop, its reader, the semantic maps and the sources and sinks it reads.
 FRAME_PATH = [
     "inference/pipeline.py",
-    "inference/stream.py",
+    "inference/feed.py",
     "inference/semantic.py",
     "inference/sinks.py",
     "data/datasets/frames.py",
@@ -86,8 +86,8 @@ class TextDepth(Sink):
 def test_the_loop_reads_the_sources_info_and_stages(tmp_path: Path) -> None:
     timer, lines = StageTimes(), []
     assert isinstance(TwoStage(), TwoStageSource) and not isinstance(Stamped(), TwoStageSource)
-    run = complete_frames(TwoStage(), ClassicalCompleter(), [TextDepth()], tmp_path / "out", timer=timer,
-                          log=lines.append)  # fmt: skip
+    run = check_frames(TwoStage(), [TextDepth()], tmp_path / "out").run(ClassicalCompleter(), timer=timer,
+                                                                         log=lines.append)  # fmt: skip
     assert timer.stamps == {"a": 0.0, "b": 0.1, "c": 0.2} and timer.sensor_period_s == pytest.approx(0.1)
     assert all("projection" in timer.times[n] for n in "abc")  # assemble timed apart from read
     assert run.paths == [tmp_path / "out" / f"{n}.txt" for n in "abc"]  # the sink whose role is depth
@@ -119,11 +119,11 @@ def test_the_loop_runs_a_completer_by_its_protocol(tmp_path: Path) -> None:
     completer = Indoor()
     assert isinstance(completer, Completer)
     with pytest.warns(UserWarning, match="fallback map"):
-        run = complete_frames(Stamped(), completer, [TextDepth()], tmp_path / "out", log=lambda s: None)
+        run = check_frames(Stamped(), [TextDepth()], tmp_path / "out").run(completer, log=lambda s: None)
     assert [p.name for p in run.paths] == ["a.txt", "b.txt", "c.txt"]
     assert len(completer.semantic) == 3 and all(m is not None and m.shape == (*SIZE, 3) for m in completer.semantic)
     with pytest.raises(PaletteMismatchError, match="NYU"):  # its palette, not a default, decides
-        complete_frames(CityscapesMaps(), completer, [TextDepth()], tmp_path / "city", log=lambda s: None)
+        check_frames(CityscapesMaps(), [TextDepth()], tmp_path / "city").run(completer, log=lambda s: None)
 
 
 def test_a_callable_that_does_not_say_what_it_needs_is_refused_in_one_line(tmp_path: Path) -> None:
@@ -131,7 +131,7 @@ def test_a_callable_that_does_not_say_what_it_needs_is_refused_in_one_line(tmp_p
         return Completion(sparse)
 
     with pytest.raises(InputError, match=r"completer: a function is not a Completer: it must say its needs_semantic"):
-        complete_frames(Stamped(), bare, [TextDepth()], tmp_path / "out", log=lambda s: None)  # type: ignore[arg-type]
+        check_frames(Stamped(), [TextDepth()], tmp_path / "out").run(bare, log=lambda s: None)  # type: ignore[arg-type]
     assert not (tmp_path / "out" / "a.txt").exists()
 
 
@@ -147,8 +147,8 @@ class Labels:
 def test_the_segmenters_palette_is_asked_not_assumed(tmp_path: Path) -> None:
     assert isinstance(Labels(), MapSegmenter)
     with pytest.raises(PaletteMismatchError, match="the segmenter's maps"):  # Cityscapes ids for an NYU-40 model
-        complete_frames(Stamped(), Indoor(), [TextDepth()], tmp_path / "out", semantic=SemanticMaps(Labels()),
-                        log=lambda s: None)  # fmt: skip
+        check_frames(Stamped(), [TextDepth()], tmp_path / "out").run(Indoor(), semantic=SemanticMaps(Labels()),
+                                                                    log=lambda s: None)  # fmt: skip
     with pytest.raises(InputError, match="semantic: a function is not a segmenter: it must say the palette"):
         SemanticMaps(lambda images: np.zeros(images.shape[:3], np.uint8))  # type: ignore[arg-type]
 

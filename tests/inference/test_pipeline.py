@@ -14,7 +14,7 @@ from semattnet.data.io import MAX_DEPTH_M, read_depth, write_depth, write_image
 from semattnet.data.kitti_raw import RawDrive
 from semattnet.data.sources import FolderSource, KittiSplitSource, RawDriveSource
 from semattnet.data.synthetic.tree import write_synthetic_kitti
-from semattnet.inference import Completion, complete_frames
+from semattnet.inference import Completion, check_frames, complete_frames
 from semattnet.inference.sinks import DepthPngSink, default_sinks, predict_frame
 from tests.inference._raw_sample import DRIVE
 
@@ -35,7 +35,7 @@ class _Bad(ClassicalCompleter):
 def _run(source, out: Path) -> list[str]:  # type: ignore[no-untyped-def]
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        complete_frames(source, _Bad(), default_sinks(npy=True), out, log=lambda s: None)
+        check_frames(source, default_sinks(npy=True), out).run(_Bad(), log=lambda s: None)
     return sorted(str(w.message) for w in caught)
 
 
@@ -81,7 +81,7 @@ def test_every_source_goes_through_the_one_writer(tree: Path, tmp_path: Path, mo
         DepthPngSink, "save", lambda self, path, pred: (written.append(path.name), save(self, path, pred))
     )
     split = KittiSplitSource(tree, "val_select")
-    paths = complete_frames(split, ClassicalCompleter(), default_sinks(), tmp_path / "split", log=lambda s: None).paths
+    paths = check_frames(split, default_sinks(), tmp_path / "split").run(ClassicalCompleter(), log=lambda s: None).paths
     assert [p.name for p in paths] == [f"{n}.png" for n in split.names] == written
     frame = split.load(split.names[0])
     assert frame.gt is not None and frame.K is not None and "gt" in frame.paths
@@ -89,7 +89,7 @@ def test_every_source_goes_through_the_one_writer(tree: Path, tmp_path: Path, mo
         read_depth(paths[0]), predict_frame(frame, ClassicalCompleter()(frame.rgb, frame.sparse)).stored
     )
     written.clear()
-    complete_frames(RawDriveSource(DRIVE, "5"), ClassicalCompleter(), default_sinks(), tmp_path / "raw", log=str)
+    complete_frames(RawDriveSource(DRIVE, "5"), ClassicalCompleter(), default_sinks(), tmp_path / "raw")
     assert written == ["0000000005.png"]
     written.clear()
     from semattnet.cli import main

@@ -69,7 +69,7 @@ def test_int8_calibration_is_blamed_not_the_frames(tmp_path: Path, case: str) ->
 
 def test_calibration_errors_are_the_runs_not_a_frames(tmp_path: Path) -> None:
     from semattnet.inference.backends.calibration import CalibrationError, resolve_calibration
-    from semattnet.inference.stream import is_frame_fault
+    from semattnet.inference.feed import is_frame_fault
 
     calibration, _ = _calibration_cases(tmp_path)["corrupt PNG"]
     message = _one_line(lambda: resolve_calibration(calibration, (64, 96)), CalibrationError)

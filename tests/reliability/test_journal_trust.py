@@ -23,7 +23,7 @@ from semattnet.baselines import ClassicalCompleter
 from semattnet.data.io import write_depth, write_image
 from semattnet.data.sources import FolderSource
 from semattnet.inference.journal import ResumeError
-from semattnet.inference.pipeline import check_frames, complete_frames
+from semattnet.inference.pipeline import OutputSpec, check_frames
 from semattnet.inference.sinks import LatencySink, default_sinks
 from semattnet.inference.timing import StageTimes
 
@@ -42,8 +42,8 @@ def _frames(root: Path) -> FolderSource:
 
 def _run(source: FolderSource, out: Path, resume: bool = False, completer: Any = None) -> Any:
     sinks = [*default_sinks(), LatencySink(timer=StageTimes())]
-    return complete_frames(source, completer or ClassicalCompleter(), sinks, out, resume=resume,
-                           log=lambda _: None)  # fmt: skip
+    plan = check_frames(source, sinks, out, OutputSpec(resume=resume))
+    return plan.run(completer or ClassicalCompleter(), log=lambda _: None)
 
 
 @pytest.fixture(scope="module")
@@ -70,14 +70,14 @@ def _edit(out: Path, change: Callable[[dict[str, Any]], None]) -> None:
 
 def _refusal(source: FolderSource, out: Path) -> str:
     with pytest.raises(ResumeError) as info:
-        check_frames(source, default_sinks(), out, resume=True)
+        check_frames(source, default_sinks(), out, OutputSpec(resume=True))
     message = str(info.value)
     assert "\n" not in message and "frames.json" in message, message
     return message
 
 
 def _kept(source: FolderSource, out: Path) -> set[str]:
-    return check_frames(source, default_sinks(), out, resume=True).journal.kept
+    return check_frames(source, default_sinks(), out, OutputSpec(resume=True)).journal.kept
 
 
 @pytest.mark.parametrize("rel", ["/etc/hostname", "../f0.png", "a/../../f0.png", ""])
@@ -230,7 +230,7 @@ def test_an_output_subfolder_linked_out_of_out_is_refused_with_overwrite_too(tmp
     out.mkdir()
     (out / "uncertainty").symlink_to(foreign)
     with pytest.raises(OutputError, match=r"out/uncertainty is a symbolic link to .*foreign; remove the link"):
-        check_frames(source, default_sinks(uncertainty=True), out, overwrite=True)
+        check_frames(source, default_sinks(uncertainty=True), out, OutputSpec(overwrite=True))
     assert (foreign / "f0.png").read_bytes() == b"a user's file" and sorted(os.listdir(out)) == ["uncertainty"]
 
 
@@ -268,7 +268,7 @@ def test_a_kept_depth_is_read_back_only_while_it_is_the_recorded_file(
     done: tuple[FolderSource, Path], tmp_path: Path
 ) -> None:
     source, out = done
-    plan = check_frames(source, default_sinks(), out, resume=True)
+    plan = check_frames(source, default_sinks(), out, OutputSpec(resume=True))
     plan.release()
     assert plan.journal.stored("f0", "f0.png") == out / "f0.png"
     (tmp_path / "foreign.png").write_bytes((out / "f0.png").read_bytes())

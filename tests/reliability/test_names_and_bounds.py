@@ -203,7 +203,7 @@ def test_max_skew_is_bounded_in_the_cli_and_the_library(tmp_path: Path) -> None:
     code, out = run("predict", "--bag", tmp_path, "--image-topic", "/i", "--points-topic", "/p", "--method",
                     "classical", "--out", tmp_path / "o", "--max-skew", "1e300")  # fmt: skip
     assert code == 2 and "--max-skew" in out and "<= 3600" in out and "Traceback" not in out, out
-    from semattnet.robotics.bags.source import _skew_ns
+    from semattnet.robotics.bags.pairs import _skew_ns
 
     for bad in (1e300, float("nan"), -1.0, float("inf")):
         with pytest.raises(InputError, match="max_skew: must be a number of seconds in 0..3600"):

@@ -139,7 +139,7 @@ def test_predict_overwrite_keeps_whole_frames_when_a_late_frame_fails(tmp_path: 
     from semattnet.data.frames import Frame, IndexedSource
     from semattnet.data.io import read_depth
     from semattnet.inference.completer import Completion
-    from semattnet.inference.pipeline import complete_frames
+    from semattnet.inference.pipeline import OutputSpec, check_frames
     from semattnet.inference.sinks import DepthPngSink
 
     class Source(IndexedSource):
@@ -169,7 +169,7 @@ def test_predict_overwrite_keeps_whole_frames_when_a_late_frame_fails(tmp_path: 
     for n in Source.names:
         (out / f"{n}.png").write_bytes(b"previous " + n.encode())
     with pytest.raises(RuntimeError, match="last frame"):
-        complete_frames(Source(), completer, [DepthPngSink()], out, overwrite=True, log=lambda s: None)
+        check_frames(Source(), [DepthPngSink()], out, OutputSpec(overwrite=True)).run(completer, log=lambda s: None)
     assert len(calls) == 3
     # the frames done before the error are replaced (each whole, as asked) and journaled; the failed one is not
     assert sorted(p.name for p in out.iterdir()) == ["f0.png", "f1.png", "f2.png", "frames.json"]

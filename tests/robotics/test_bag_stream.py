@@ -15,9 +15,9 @@ from semattnet.baselines.classical import ClassicalCompleter
 from semattnet.data.frames import Frame, IndexedSource
 from semattnet.inference import DepthCompleter
 from semattnet.inference.completer import Completion
-from semattnet.inference.pipeline import complete_frames
+from semattnet.inference.feed import completions
+from semattnet.inference.pipeline import RunOptions, check_frames
 from semattnet.inference.sinks import DepthPngSink, LatencySink
-from semattnet.inference.stream import completions
 from semattnet.inference.timing import STAGES, StageTimes
 
 SLEEP = 0.06
@@ -150,8 +150,9 @@ def test_complete_frames_writes_latency_json(tmp_path: Path) -> None:
     import json
 
     times = StageTimes()
-    complete_frames(SlowSource(3, delay=0.0), slow_completer, [DepthPngSink(), LatencySink(timer=times)],
-                    tmp_path / "out", log=lambda _: None, timer=times, prefetch=2)  # fmt: skip
+    sinks = [DepthPngSink(), LatencySink(timer=times)]
+    plan = check_frames(SlowSource(3, delay=0.0), sinks, tmp_path / "out", options=RunOptions(prefetch=2))
+    plan.run(slow_completer, timer=times, log=lambda _: None)
     doc = json.loads((tmp_path / "out" / "latency.json").read_text())
     assert doc["frames"] == 3 and doc["stages"]["writing"]["frames"] == 3 and doc["overlapped"]
     names = sorted(p.name for p in (tmp_path / "out").iterdir())

@@ -16,7 +16,7 @@ import pytest
 from semattnet._errors import DataError
 from semattnet.robotics import BagSource
 from semattnet.robotics.bags import BagFailure, BagPair, BagPairs
-from semattnet.robotics.bags.source import decode_message
+from semattnet.robotics.bags.pairs import decode_message
 from tests.robotics._faulty_bag import FAULTS, FORMATS, GOOD, IMAGE_TOPIC, N_FRAMES, POINTS_TOPIC, write_faulty_bag
 
 pytest.importorskip("rosbags")
@@ -41,7 +41,7 @@ def bags(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Path, Path
 @pytest.fixture
 def opens(monkeypatch: pytest.MonkeyPatch) -> list[Path]:
     """The bags BagPairs' frame pass opens (one entry per pass started)."""
-    import semattnet.robotics.bags.source as source_module
+    import semattnet.robotics.bags.pairs as source_module
 
     real, seen = source_module.open_bag, []
 

@@ -246,7 +246,7 @@ class _Slow(ClassicalCompleter):
 
 
 def test_realtime_drops_the_frames_that_come_while_busy(tmp_path: Path) -> None:
-    from semattnet.inference.pipeline import EXIT_DROPPED, complete_frames
+    from semattnet.inference.pipeline import EXIT_DROPPED, RunOptions, check_frames
     from semattnet.inference.sinks import LatencySink, default_sinks
     from semattnet.inference.timing import StageTimes
     from semattnet.robotics import BagSource
@@ -254,7 +254,8 @@ def test_realtime_drops_the_frames_that_come_while_busy(tmp_path: Path) -> None:
     bag, out = write_bag(tmp_path / "b_mcap", 8, 32, 48), tmp_path / "out"
     source, timer = BagSource(bag, IMAGE_TOPIC, POINTS_TOPIC), StageTimes()
     sinks = [*default_sinks(), LatencySink(timer=timer)]
-    run = complete_frames(source, _Slow(0.05), sinks, out, log=lambda _: None, timer=timer, realtime=20.0)
+    plan = check_frames(source, sinks, out, options=RunOptions(realtime=20.0))
+    run = plan.run(_Slow(0.05), timer=timer, log=lambda _: None)
     # frames 5 ms apart (35 ms in all), 50 ms a frame: whichever frame is taken first, every later one but the
     # last comes while it is completed and is replaced by the next; the newest is never replaced. (Which frame is
     # taken first depends on when the loop's thread starts: on a loaded machine frame 1 may have replaced frame 0.)

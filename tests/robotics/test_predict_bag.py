@@ -133,7 +133,7 @@ def test_bad_input_is_one_line_and_leaves_nothing(sample: dict[str, Path], tmp_p
 
 
 def test_failed_frame_leaves_no_bag_and_no_recording(sample: dict[str, Path], tmp_path: Path) -> None:
-    from semattnet.inference.pipeline import complete_frames
+    from semattnet.inference.pipeline import RunOptions, check_frames
     from semattnet.inference.sinks import default_sinks
     from semattnet.robotics import BagSource
     from semattnet.robotics.sinks import BagSink, RerunSink
@@ -155,7 +155,7 @@ def test_failed_frame_leaves_no_bag_and_no_recording(sample: dict[str, Path], tm
     sinks = [*default_sinks(), BagSink(target=tmp_path / "b.bag"), RerunSink(target=tmp_path / "r.rrd")]
     source = BagSource(sample["sqlite3"], T.image, T.points, rig=sample["rig"])
     with pytest.raises(RuntimeError, match="frame 2 fails"):
-        complete_frames(source, failing, sinks, tmp_path / "out", log=lambda _: None, prefetch=2)
+        check_frames(source, sinks, tmp_path / "out", options=RunOptions(prefetch=2)).run(failing, log=lambda _: None)
     assert [p.name for p in tmp_path.iterdir()] == ["out"]  # no bag, no recording, nothing staged beside them
     first = source.names[0]  # the frame done before the error stays, whole and journaled (resumable)
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [f"{first}.png", f"{first}_color.png",

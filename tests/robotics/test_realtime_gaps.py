@@ -23,7 +23,7 @@ def test_an_hour_gap_is_skipped_and_counted(tmp_path: Path) -> None:
     """Frames 0.1 s apart with an hour between frames 3 and 4: the replay takes about 0.5 s, not an hour; the gap
     is in the latency table and latency.json."""
     from semattnet.baselines.classical import ClassicalCompleter
-    from semattnet.inference.pipeline import complete_frames
+    from semattnet.inference.pipeline import RunOptions, check_frames
     from semattnet.inference.sinks import LatencySink, default_sinks
     from semattnet.inference.timing import StageTimes
     from semattnet.robotics import BagSource
@@ -31,8 +31,9 @@ def test_an_hour_gap_is_skipped_and_counted(tmp_path: Path) -> None:
     bag, out = write_bag(tmp_path / "b_mcap", 6, 32, 48, gaps_s={4: 3600.0}), tmp_path / "out"
     source, timer = BagSource(bag, IMAGE_TOPIC, POINTS_TOPIC), StageTimes()
     sinks = [*default_sinks(), LatencySink(timer=timer)]
-    run = threading.Thread(target=complete_frames, args=(source, ClassicalCompleter(), sinks, out), daemon=True,
-                           kwargs={"log": lambda _: None, "timer": timer, "realtime": 1.0})  # fmt: skip
+    plan = check_frames(source, sinks, out, options=RunOptions(realtime=1.0))
+    run = threading.Thread(target=plan.run, args=(ClassicalCompleter(),), daemon=True,
+                           kwargs={"log": lambda _: None, "timer": timer})  # fmt: skip
     run.start()
     run.join(20)
     assert not run.is_alive(), "--realtime waited the recording's gap"
@@ -43,7 +44,7 @@ def test_an_hour_gap_is_skipped_and_counted(tmp_path: Path) -> None:
 
 def test_pace_keeps_the_recorded_gaps() -> None:
     """Gaps within a few periods are waited as recorded (speed 2: half), a long one replaced by one period."""
-    from semattnet.inference.stream import _Pace
+    from semattnet.inference.feed import _Pace
     from semattnet.inference.timing import StageTimes
 
     timer = StageTimes()

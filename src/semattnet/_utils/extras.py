@@ -10,12 +10,15 @@ This module is the only place in ``src/`` that catches an ``ImportError`` (a tes
 from __future__ import annotations
 
 import importlib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from types import MappingProxyType, ModuleType
+from typing import TypeVar
 
 from semattnet._errors import MissingDependencyError
 
-__all__ = ["EXTRAS", "install_hint", "optional", "require"]
+__all__ = ["EXTRAS", "call_with_newer", "install_hint", "optional", "require"]
+
+_T = TypeVar("_T")
 
 #: Top-level module -> (the package to install, the extra of semattnet that installs it; "" for a package no
 #: extra provides: a core dependency missing from a broken install, or one semattnet never installs).
@@ -73,3 +76,15 @@ def require(module: str, feature: str) -> ModuleType:
     top = module.split(".")[0]
     package = EXTRAS.get(top, (top, ""))[0]
     raise MissingDependencyError(f"{feature} needs the optional package {package!r}: {install_hint(module)}", name=top)
+
+
+def call_with_newer(fn: Callable[..., _T], newer: Mapping[str, object], /, *args: object, **kwargs: object) -> _T:
+    """``fn(*args, **kwargs, **newer)``, or without ``newer`` (keywords that older releases of an optional package
+    lack) when ``fn`` refuses one of them as an unexpected keyword: a call that binds its arguments first fails
+    before doing anything, so the second call is the only one that runs."""
+    try:
+        return fn(*args, **kwargs, **newer)
+    except TypeError as exc:
+        if not any(f"keyword argument '{k}'" in str(exc) for k in newer):
+            raise
+    return fn(*args, **kwargs)

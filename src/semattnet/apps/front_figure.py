@@ -31,7 +31,7 @@ from semattnet.evaluation.sparsification import Sparsification
 from semattnet.evaluation.sparsity import SweepRow, run_sparsity_sweep
 from semattnet.evaluation.split import eval_dataset
 from semattnet.inference.backends import needs_semantic
-from semattnet.inference.completion import Completer
+from semattnet.inference.contract import Completer
 
 __all__ = ["FIGURE_COMMAND", "SETTINGS", "WEIGHTS", "make_front_figure", "plot_front", "uncertainty_curves"]
 

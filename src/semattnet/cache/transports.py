@@ -18,7 +18,6 @@
 
 from __future__ import annotations
 
-import inspect
 import re
 import shutil
 from pathlib import Path
@@ -27,7 +26,7 @@ from urllib.request import url2pathname
 
 from semattnet._errors import InputError
 from semattnet._utils.bounds import regular_file
-from semattnet._utils.extras import optional, require
+from semattnet._utils.extras import call_with_newer, optional, require
 from semattnet.cache.errors import DownloadError, NotAFileError
 
 __all__ = ["check_file_name", "default_file_name", "download_to", "gdrive_id", "url_scheme"]
@@ -91,14 +90,13 @@ def _download_http(url: str, part: Path, progress: bool) -> None:
     http_get = hf_download.http_get
     # No expected_size: http_get checks the body against Content-Length itself; the published size
     # is checked afterwards, so that a wrong file is deleted instead of being kept for resuming.
-    kwargs: dict[str, object] = {"displayed_filename": part.name.removesuffix(".part")}
-    if not progress and "tqdm_class" in inspect.signature(http_get).parameters:
-        kwargs["tqdm_class"] = _silent_tqdm()
+    shown = part.name.removesuffix(".part")
+    newer = {} if progress else {"tqdm_class": _silent_tqdm()}  # older huggingface_hub releases lack it
     resume = part.stat().st_size if part.exists() else 0
     try:
         try:
             with open(part, "ab") as f:
-                http_get(url, f, resume_size=resume, **kwargs)
+                call_with_newer(http_get, newer, url, f, resume_size=resume, displayed_filename=shown)
         except Exception:
             if not resume:
                 raise  # keep what arrived: the next call continues from there
@@ -106,7 +104,7 @@ def _download_http(url: str, part: Path, progress: bool) -> None:
             # file changed on the server): start over once from byte 0.
             part.unlink(missing_ok=True)
             with open(part, "ab") as f:
-                http_get(url, f, resume_size=0, **kwargs)
+                call_with_newer(http_get, newer, url, f, resume_size=0, displayed_filename=shown)
     except BaseException:
         if part.exists() and part.stat().st_size == 0:
             part.unlink()

@@ -26,7 +26,7 @@ from semattnet.cli._params import section
 
 if TYPE_CHECKING:
     from semattnet.inference.backends import EngineSpec
-    from semattnet.inference.completion import Completer
+    from semattnet.inference.contract import Completer
 
 __all__ = ["ModelOptions", "device_option", "model_options", "palette_mismatch_option", "precision_options"]
 

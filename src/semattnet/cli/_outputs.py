@@ -20,6 +20,8 @@ import click
 from semattnet.cli._inputs import ChosenInput, field_options, input_kinds, or_list
 from semattnet.cli._options import DEPTH_M, PIXELS, SPEED, require_with
 from semattnet.cli._params import section, values_of, with_options
+from semattnet.inference.options import OutputSpec
+from semattnet.inference.options import RunOptions as LoopOptions
 from semattnet.inference.sinks import SINKS, SinkOptions
 
 if TYPE_CHECKING:
@@ -199,6 +201,11 @@ class Outputs:
             raise click.UsageError(f"--max-uncertainty with {replayed} needs --uncertainty (a resumed run rebuilds "
                                    "the kept frames' clouds from OUT/uncertainty/)")  # fmt: skip
 
+    def spec(self, resuming: bool, identity: Mapping[str, object], inputs: Sequence[Path | None]) -> OutputSpec:
+        """The library's :class:`~semattnet.inference.options.OutputSpec` of these options: ``resuming`` (from
+        :meth:`folder`), the run's ``identity`` and the further ``inputs`` (the weights)."""
+        return OutputSpec(self.overwrite, resuming, identity, tuple(inputs))
+
     def sinks(self, asked: AskedSinks, timer: StageTimes) -> list[Sink]:
         """The sinks of every registry entry, in its order, as its options and the shared ones ask: the files per
         frame, ``latency.json`` and the bag, the Rerun recording or viewer and the live server (their clouds
@@ -235,3 +242,7 @@ class RunOptions:
     def prefetch(self) -> int:
         """Frames read ahead in a background thread."""
         return 2 if self.stream else 0
+
+    def options(self) -> LoopOptions:
+        """The library's :class:`~semattnet.inference.options.RunOptions` of these options."""
+        return LoopOptions(self.on_error, self.prefetch, self.rate)

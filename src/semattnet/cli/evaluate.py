@@ -106,7 +106,9 @@ def evaluate(data_root: Path, dataset: str, split: str | None, out: Path | None,
         _sweep(weights, data_root, split, out, sparsity, method, device, max_frames, overwrite, dataset,
                palette_mismatch)  # fmt: skip
         return
-    from semattnet.evaluation.evaluate import evaluate_split
+    from semattnet.evaluation.evaluate import EvalOutputs, EvalSplit, evaluate_split
+    from semattnet.inference.contract import CompleterFactory
+    from semattnet.inference.options import RunOptions
 
     if method != "semattnet":
         raise click.UsageError("--method classical needs --sparsity")
@@ -118,12 +120,11 @@ def evaluate(data_root: Path, dataset: str, split: str | None, out: Path | None,
         from semattnet.segmentation.datasets import segment_split
 
         semantic = segment_split(dataset, data_root, (split,), segment, device, log=click.echo, max_frames=max_frames)
-    completer = model.completer  # loaded after every check
     local = Path(spec) if Path(spec).exists() else None
-    res = evaluate_split(completer, data_root, split, out, dataset=dataset, batch_size=batch_size, prefetch=workers,
-                         save_predictions=save_predictions, pictures=pictures, max_frames=max_frames,
-                         overwrite=overwrite, semantic_root=semantic, palette_mismatch=palette_mismatch, label=spec,
-                         inputs=[local, model.calibration])  # fmt: skip
+    frames = EvalSplit(data_root, split, dataset, max_frames, semantic_root=semantic, palette_mismatch=palette_mismatch)
+    outputs = EvalOutputs(save_predictions, pictures, overwrite, label=spec, inputs=(local, model.calibration))
+    options = RunOptions(prefetch=workers, batch_size=batch_size)
+    res = evaluate_split(CompleterFactory(model.completer), frames, out, outputs, options)  # loaded after every check
     _report(res, out)
 
 
@@ -200,6 +201,7 @@ def _sweep(weights: str | None, data_root: Path, split: str, out: Path, sparsity
 def submit(data_root: Path, out: Path, expected_frames: int, overwrite: bool, **params: object) -> None:
     """Predict the KITTI test split and write the zip to upload (checked before zipping)."""
     from semattnet.evaluation.submission import write_submission
+    from semattnet.inference.contract import CompleterFactory
 
     _one_process("submit")
     model = ModelOptions(method="semattnet", **params)  # type: ignore[arg-type]
@@ -207,7 +209,7 @@ def submit(data_root: Path, out: Path, expected_frames: int, overwrite: bool, **
     if weights is None:
         raise click.UsageError("give exactly one of --checkpoint or --weights (they are one option)")
     model.check_engine()
-    completer = model.completer  # loaded after every check
+    completer = CompleterFactory(model.completer)  # loaded after every check
     local = Path(weights) if Path(weights).exists() else None  # a name or URL reads a cached download
     zip_path = write_submission(completer, data_root, out, expected_frames or None, overwrite, inputs=[local])
     click.echo(f"wrote {out} and {zip_path}")

@@ -98,7 +98,7 @@ def _run_frames(chosen: ChosenInput, outputs_asked: tuple[Outputs, AskedSinks], 
     resume; ``identity``: the run's, for a resume to check."""
     from semattnet._utils.distributed import launch_rank, process_group
     from semattnet.data.sources import FolderSource
-    from semattnet.inference.pipeline import check_frames, complete_frames
+    from semattnet.inference.pipeline import check_frames
     from semattnet.inference.timing import StageTimes
 
     out, resuming = folder
@@ -107,14 +107,12 @@ def _run_frames(chosen: ChosenInput, outputs_asked: tuple[Outputs, AskedSinks], 
     sinks = outputs.sinks(asked, timer)
     with process_group():
         source, maps = chosen.open(model.device)
-        plan = check_frames(source, sinks, out, overwrite=outputs.overwrite, on_error=run.on_error, resume=resuming,
-                            run=identity, inputs=[weights_input(model.weights)[1]])  # before the model  # fmt: skip
+        spec = outputs.spec(resuming, identity, [weights_input(model.weights)[1]])
+        plan = check_frames(source, sinks, out, spec, run.options())  # before the model
         try:
             if plan.journal.kept:
                 click.echo(f"{out}: resuming: {len(plan.journal.kept)} of {len(source.names)} frame(s) already done")
-            result = complete_frames(source, model.completer(), sinks, out, overwrite=outputs.overwrite,
-                                     log=click.echo, semantic=maps, checked=plan, timer=timer, prefetch=run.prefetch,
-                                     realtime=run.rate)  # fmt: skip
+            result = plan.run(model.completer(), semantic=maps, timer=timer, log=click.echo)
         finally:
             plan.release()  # also when the model cannot be loaded
     if launch_rank() == 0:

@@ -24,7 +24,7 @@ from semattnet.cli._outputs import MaxUncertainty
 from semattnet.cli._params import GeneratedCommand, section, values_of, with_options
 
 if TYPE_CHECKING:
-    from semattnet.inference.completion import Completer
+    from semattnet.inference.contract import Completer
     from semattnet.inference.semantic import SemanticMaps
     from semattnet.inference.sinks import RunSink
     from semattnet.inference.uncertainty import UncertaintyLimit

@@ -7,15 +7,13 @@ Every score goes through the protocol's metrics (:mod:`semattnet.evaluation.prot
 from __future__ import annotations
 
 import csv
-import inspect
 import json
 import os
 import tempfile
-from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
+from collections.abc import Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TypeGuard
 
 import torch
 
@@ -32,14 +30,15 @@ from semattnet.evaluation.protocols import eval_source, protocol_metrics
 from semattnet.evaluation.sink import MetricsSink
 from semattnet.evaluation.sparsification import Sparsification
 from semattnet.evaluation.split import prepare_out, refuse_listed_inputs
+from semattnet.inference.contract import CompleterFactory
 from semattnet.inference.journal import FRAMES_FILE
-from semattnet.inference.pipeline import Completer, check_frames, complete_frames
+from semattnet.inference.pipeline import Completer, OutputSpec, RunOptions, check_frames
 from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sharding import gather_rows, on_main, process_group, shared_stage
 from semattnet.inference.sinks import ColorPngSink, DepthPngSink, PanelSink, Sink, output_files
 
-__all__ = ["SPARSIFICATION_PNG", "Evaluation", "evaluate_split", "resolve_completer", "score_folders",
-           "score_folders_to_json"]  # fmt: skip
+__all__ = ["SPARSIFICATION_PNG", "EvalOutputs", "EvalSplit", "Evaluation", "evaluate_split", "resolve_completer",
+           "score_folders", "score_folders_to_json"]  # fmt: skip
 
 PathLike = str | os.PathLike[str]
 #: The sparsification curves' picture in ``evaluate``'s output folder.
@@ -140,36 +139,49 @@ class Evaluation:
     semantic: PaletteReport | None = None
 
 
-def evaluate_split(
-    completer: Completer | Callable[[], Completer],
-    data: PathLike,
-    split: str | None = None,
-    out_dir: PathLike | None = None,
-    *,
-    dataset: str = "kitti-dc",
-    batch_size: int = 1,
-    prefetch: int = 0,
-    save_predictions: bool = False,
-    pictures: int = 0,
-    max_frames: int | None = None,
-    overwrite: bool = False,
-    raw_root: PathLike | None = None,
-    semantic_root: PathLike | None = None,
-    palette_mismatch: str = "refuse",
-    label: str | None = None,
-    inputs: Sequence[PathLike | None] = (),
-) -> Evaluation:
-    """Complete a split with ``completer`` through the one frame loop (:func:`~.pipeline.complete_frames`) and
-    score it with the dataset's metrics (:class:`~.sink.MetricsSink`); optionally write predictions and panels.
+@dataclass(frozen=True)
+class EvalSplit:
+    """The frames :func:`evaluate_split` scores: ``split`` (default: the dataset's evaluation split) of ``dataset``
+    (the registry entry, :mod:`semattnet.data.datasets`: ``kitti-dc``, ``nyuv2``, ``void``) under ``data``, its
+    first ``max_frames`` frames (None: all; :func:`~.protocols.eval_source`), with the raw drives and semantic
+    maps of separate roots; ``palette_mismatch``: what a semantic map of another palette becomes
+    (:class:`~semattnet.inference.semantic.SemanticMaps`)."""
+
+    data: PathLike
+    split: str | None = None
+    dataset: str = "kitti-dc"
+    max_frames: int | None = None
+    raw_root: PathLike | None = None
+    semantic_root: PathLike | None = None
+    palette_mismatch: str = "refuse"
+
+
+@dataclass(frozen=True)
+class EvalOutputs:
+    """What :func:`evaluate_split` writes into its output folder besides the scores: ``predictions/``
+    (``save_predictions``), the panels of the first ``pictures`` frames; ``overwrite`` an existing folder;
+    ``label``: ``metrics.json``'s ``checkpoint`` (the model's class by default); ``inputs``: further files (the
+    weights) that outputs must stay out of."""
+
+    save_predictions: bool = False
+    pictures: int = 0
+    overwrite: bool = False
+    label: str | None = None
+    inputs: Sequence[PathLike | None] = ()
+
+
+def evaluate_split(completer: Completer | CompleterFactory, frames: EvalSplit, out_dir: PathLike | None = None,
+                   outputs: EvalOutputs | None = None, options: RunOptions | None = None) -> Evaluation:  # fmt: skip
+    """Complete a split with ``completer`` through the one frame loop
+    (:func:`~semattnet.inference.pipeline.complete_frames`) and score it with the dataset's metrics
+    (:class:`~.sink.MetricsSink`); optionally write predictions and panels.
 
     ``completer``: a :class:`~semattnet.inference.DepthCompleter` (or any
-    :class:`~semattnet.inference.pipeline.Completer`, e.g. :class:`~semattnet.baselines.ClassicalCompleter`),
-    or a function without arguments that returns one, called only after every input and output check.
-    ``dataset``: the registry entry (:mod:`semattnet.data.datasets`: ``kitti-dc``, ``nyuv2``, ``void``) whose
-    split (default: its evaluation split), frames (:func:`~.protocols.eval_source`), metrics and palette apply
-    (``palette_mismatch``: :class:`~semattnet.inference.semantic.SemanticMaps`). ``batch_size`` / ``prefetch``: as
-    :func:`~semattnet.inference.pipeline.complete_frames`. ``label``: ``metrics.json``'s ``checkpoint`` (the
-    model's class by default); ``inputs``: further files (the weights) that outputs must stay out of.
+    :class:`~semattnet.inference.pipeline.Completer`, e.g. :class:`~semattnet.baselines.ClassicalCompleter`), or
+    a :class:`~semattnet.inference.contract.CompleterFactory`, built only after every input and output check.
+    ``frames``: the split (:class:`EvalSplit`); ``outputs``: :class:`EvalOutputs`; ``options``: the
+    loop's ``batch_size`` and ``prefetch`` (:class:`~semattnet.inference.options.RunOptions`; a faulty frame stops
+    the run, and every frame is scored: no real-time replay).
 
     Writes into ``out_dir``, all together or nothing: ``metrics.json``, ``per_image.csv``, ``predictions/``
     (16-bit PNGs named like the ground truth for val_select), ``pictures/`` (panels of the first ``pictures``
@@ -177,57 +189,48 @@ def evaluate_split(
 
     Under ``torchrun`` (same arguments on every rank) each rank completes its share of the frames; metrics are
     summed over the ranks and per-image rows gathered in the split's order: the files of one process."""
+    outputs, loop = outputs or EvalOutputs(), _loop_options(options or RunOptions())
     with process_group():
-        spec = get_dataset(dataset)
-        split = spec.check_split(split)
-        given = [data, raw_root, semantic_root, *inputs]
-        out = on_main(prepare_out, Path(out_dir), overwrite, given) if out_dir is not None else None
-        source = eval_source(spec, data, split, raw_root=raw_root, semantic_root=semantic_root, max_frames=max_frames)
+        spec = get_dataset(frames.dataset)
+        split = spec.check_split(frames.split)
+        given = [frames.data, frames.raw_root, frames.semantic_root, *outputs.inputs]
+        out = on_main(prepare_out, Path(out_dir), outputs.overwrite, given) if out_dir is not None else None
+        source = eval_source(spec, frames.data, split, raw_root=frames.raw_root, semantic_root=frames.semantic_root,
+                             max_frames=frames.max_frames)  # fmt: skip
         refuse_listed_inputs(out, source)
         scores = MetricsSink(metrics=protocol_metrics(spec))
-        sinks = [*(_file_sinks(source, save_predictions, pictures) if out is not None else []), scores]
+        sinks = [*(_file_sinks(source, outputs.save_predictions, outputs.pictures) if out is not None else []), scores]
         expected = output_files(source.names, sinks)
-        with _stage(out, overwrite, expected) as stage:
-            plan = check_frames(source, sinks, stage, overwrite=True, inputs=given, on_error="stop")
+        with _stage(out, outputs.overwrite, expected) as stage:
+            plan = check_frames(source, sinks, stage, OutputSpec(overwrite=True, inputs=given), loop)
             model = resolve_completer(completer, "evaluate")  # after every check
-            maps = SemanticMaps(mismatch=palette_mismatch)
-            complete_frames(source, model, sinks, stage, checked=plan, semantic=maps, log=_quiet,
-                            prefetch=prefetch, batch_size=batch_size)  # fmt: skip
+            maps = SemanticMaps(mismatch=frames.palette_mismatch)
+            plan.run(model, semantic=maps, log=_quiet)
             on_main(_forget_journal, stage)  # the output is all or nothing: no frame to resume
             semantic = maps.cross.report() if maps.cross is not None else None
             res = _merge(scores, source, semantic)
             if out is not None and res.result:  # metrics.json's keys as before: "checkpoint" names the model
-                head = {"checkpoint": label or type(model).__name__, "dataset": spec.name, "split": split}
+                head = {"checkpoint": outputs.label or type(model).__name__, "dataset": spec.name, "split": split}
                 expected += _write_scores(stage, res, head | ({"semantic": semantic} if semantic else {}))
     return res
 
 
-def resolve_completer(completer: Completer | Callable[[], Completer], command: str = "evaluate") -> Completer:
-    """``completer``, or what it returns when it is a function of no argument (a completer takes frames): what
+def _loop_options(options: RunOptions) -> RunOptions:
+    """The loop's options for a scored run: ``options``' batches and read-ahead; the first faulty frame stops it."""
+    if options.realtime is not None:
+        raise InputError("evaluate: every frame is scored; a real-time replay (RunOptions.realtime) would drop some")
+    return replace(options, on_error="stop")
+
+
+def resolve_completer(completer: Completer | CompleterFactory, command: str = "evaluate") -> Completer:
+    """``completer``, or the one a :class:`~semattnet.inference.contract.CompleterFactory` builds: what
     :func:`evaluate_split`, the sparsity sweep and the submission accept, resolved after every check."""
-    if _is_factory(completer):
-        return completer()
-    if _takes_frames(completer):
+    if isinstance(completer, CompleterFactory):
+        return completer.build()
+    if callable(completer):
         return completer
-    raise InputError(f"{command}: {completer!r} is neither a completer (rgb, sparse, semantic) nor a function "
-                     "without arguments that returns one")  # fmt: skip
-
-
-def _required(f: Callable[..., object]) -> int | None:
-    """How many positional arguments ``f`` requires (None: no signature to read)."""
-    try:
-        params = inspect.signature(f).parameters.values()
-    except (TypeError, ValueError):  # a callable without a readable signature
-        return None
-    return sum(p.default is p.empty and p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD) for p in params)
-
-
-def _is_factory(f: object) -> TypeGuard[Callable[[], Completer]]:
-    return callable(f) and _required(f) == 0
-
-
-def _takes_frames(f: object) -> TypeGuard[Completer]:
-    return callable(f) and _required(f) != 0
+    raise InputError(f"{command}: {completer!r} is neither a completer (rgb, sparse, semantic) nor a "
+                     "CompleterFactory")  # fmt: skip
 
 
 def _quiet(line: str) -> None:

@@ -28,7 +28,7 @@ from semattnet.evaluation.protocols import eval_source, protocol_metrics
 from semattnet.evaluation.sink import MetricsSink
 from semattnet.evaluation.split import prepare_out, refuse_listed_inputs
 from semattnet.geometry.sparsify import keep_random, keep_row_bands
-from semattnet.inference.pipeline import Completer, check_frames, complete_frames
+from semattnet.inference.pipeline import Completer, OutputSpec, RunOptions, RunPlan, check_frames
 from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sinks import Prediction, Sink
 
@@ -153,8 +153,8 @@ def _score_setting(source: FrameSource, setting: str, completers: dict[str, Comp
     for k, (name, completer) in enumerate(completers.items()):
         scores = MetricsSink(metrics=protocol_metrics(dataset, keep_per_image=False))
         density = InputDensity()
-        complete_frames(thinned, completer, [scores, density], stage / f"run{k}", checked=True, on_error="stop",
-                        log=_quiet, semantic=SemanticMaps(mismatch=palette_mismatch))  # fmt: skip
+        plan = RunPlan.trusted(thinned, [scores, density], stage / f"run{k}", RunOptions(on_error="stop"))
+        plan.run(completer, semantic=SemanticMaps(mismatch=palette_mismatch), log=_quiet)
         r = scores.metrics.compute()
         rows.append(SweepRow(method=name, setting=setting, density=float(np.mean(density.values)),
                              rmse_mm=r["rmse_mm"], mae_mm=r["mae_mm"], irmse_per_km=r["irmse_per_km"],
@@ -235,7 +235,7 @@ def _sweep(data_root: str | Path, split: str, settings: Iterable[str], make: Cal
     out = prepare_out(Path(out_dir), overwrite, [data_root])  # never inside the data
     refuse_listed_inputs(out, source)
     with stage_folder(out) as stage:  # the runs' folders (their journals): removed, whatever happens
-        check_frames(source, [], stage, overwrite=True, inputs=[data_root], on_error="stop")
+        check_frames(source, [], stage, OutputSpec(overwrite=True, inputs=[data_root]), RunOptions(on_error="stop"))
         completers = make()
         rows = [
             row

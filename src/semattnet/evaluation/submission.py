@@ -19,8 +19,9 @@ from semattnet._utils.progress import progress as progress_bar
 from semattnet.data.io import clamp_for_png, read_depth, write_depth
 from semattnet.data.sources import KittiSplitSource
 from semattnet.evaluation.evaluate import resolve_completer
+from semattnet.inference.contract import CompleterFactory
 from semattnet.inference.journal import FRAMES_FILE
-from semattnet.inference.pipeline import Completer, check_frames, complete_frames
+from semattnet.inference.pipeline import Completer, OutputSpec, RunOptions, check_frames
 from semattnet.inference.sinks import DepthPngSink
 
 __all__ = ["KITTI_TEST_FRAMES", "SubmissionError", "write_submission", "write_submission_files"]
@@ -135,7 +136,7 @@ def _publish(out: PathLike, expected: dict[str, tuple[int, int]], overwrite: boo
 
 
 def write_submission(
-    completer: Completer | Callable[[], Completer],
+    completer: Completer | CompleterFactory,
     data: PathLike,
     out: PathLike,
     expected_frames: int | None = KITTI_TEST_FRAMES,
@@ -147,8 +148,9 @@ def write_submission(
     loop (:func:`~semattnet.inference.pipeline.complete_frames`) and write a ready-to-upload zip.
 
     ``completer``: a :class:`~semattnet.inference.DepthCompleter` (any
-    :class:`~semattnet.inference.pipeline.Completer`), or a function without arguments that returns one,
-    called only after every input and output check (as :func:`~.evaluate.evaluate_split`). Each prediction is
+    :class:`~semattnet.inference.pipeline.Completer`), or a
+    :class:`~semattnet.inference.contract.CompleterFactory`, built only after every input and output check (as
+    :func:`~.evaluate.evaluate_split`). Each prediction is
     written as its frame's sparse file is named, into a stage that :func:`write_submission_files`' checks verify
     before ``out`` and ``OUT.zip`` appear. ``expected_frames`` is KITTI's 1000; pass ``None`` to accept any
     count (e.g. synthetic data). ``inputs``: further files (the weights) that outputs must stay out of.
@@ -167,10 +169,10 @@ def write_submission(
 
     def fill(stage: Path) -> None:
         sinks = [DepthPngSink(rename=rename)]
-        plan = check_frames(source, sinks, stage, overwrite=True, inputs=given, on_error="stop")
+        plan = check_frames(source, sinks, stage, OutputSpec(overwrite=True, inputs=given), RunOptions(on_error="stop"))
         model = resolve_completer(completer, "submit")  # after every check
         with progress_bar(total=len(source), desc="test split", leave=False) as bar:
-            complete_frames(source, model, sinks, stage, checked=plan, log=lambda _: bar.update())
+            plan.run(model, log=lambda _: bar.update())
         (stage / FRAMES_FILE).unlink(missing_ok=True)  # the run's journal: the stage holds the PNGs only
 
     return _publish(out, expected, overwrite, fill)

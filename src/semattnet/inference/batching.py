@@ -1,4 +1,4 @@
-"""Batching in the one frame loop (:func:`semattnet.inference.stream.completions`, ``batch_size`` > 1): runs of
+"""Batching in the one frame loop (:func:`semattnet.inference.feed.completions`, ``batch_size`` > 1): runs of
 consecutive frames of one size, completed in one engine call (a completer with ``check_frame`` and
 ``complete_batch``, as :class:`~semattnet.inference.DepthCompleter`)."""
 
@@ -11,7 +11,7 @@ from typing import Protocol, TypeVar, runtime_checkable
 import numpy as np
 
 from semattnet.data.frames import Frame
-from semattnet.inference.completion import Completion
+from semattnet.inference.contract import Completion
 
 __all__ = ["BatchCompleter", "complete_group", "groups"]
 

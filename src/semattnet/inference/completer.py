@@ -32,7 +32,7 @@ from semattnet._errors import InputError
 from semattnet.inference.backends import EngineSpec, needs_semantic, optimize_for_inference
 from semattnet.inference.backends._base import InferenceEngine, StageHook
 from semattnet.inference.backends.calibration import CalibrationFrames
-from semattnet.inference.completion import Completer, Completion, StageTimed
+from semattnet.inference.contract import Completer, Completion, StageTimed
 from semattnet.inference.padding import crop_padding, pad_to_multiple
 from semattnet.models.checks import check_has_points, check_sparse_depth
 from semattnet.models.outputs import DepthCompletionOutput
@@ -242,10 +242,10 @@ class DepthCompleter:
 
         ``semantic``: a :class:`~.semantic.SemanticMaps` (default: the fallback map when the model
         needs one). ``timer``: a :class:`~semattnet.inference.timing.StageTimes` that gets every stage's time
-        (``timer.table()`` afterwards). The loop is :func:`semattnet.inference.stream.completions`, the one that
+        (``timer.table()`` afterwards). The loop is :func:`semattnet.inference.feed.completions`, the one that
         ``complete_frames`` writes from."""
+        from semattnet.inference.feed import completions
         from semattnet.inference.semantic import SemanticMaps
-        from semattnet.inference.stream import completions
 
         maps = (semantic if semantic is not None else SemanticMaps()).bind(self)
         yield from completions(source, self, names, maps, timer, prefetch)

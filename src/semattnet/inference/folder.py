@@ -8,7 +8,8 @@ from pathlib import Path
 
 from semattnet.data.pairing import FramePaths
 from semattnet.data.sources.folder import FolderSource
-from semattnet.inference.pipeline import Completer, complete_frames
+from semattnet.inference import pipeline
+from semattnet.inference.pipeline import Completer, OutputSpec, RunOptions
 from semattnet.inference.sinks import default_sinks, output_files
 
 __all__ = ["Completer", "check_frames", "complete_folder", "output_paths"]
@@ -60,6 +61,5 @@ def complete_folder(
         OutputError: ``out`` is an input folder or inside one.
     """
     source = FolderSource(frames, given=inputs or ())
-    run = complete_frames(source, completer, default_sinks(npy, panel), out, overwrite=overwrite, log=log,
-                          on_error=on_error)  # fmt: skip
-    return run.paths
+    plan = pipeline.check_frames(source, default_sinks(npy, panel), out, OutputSpec(overwrite), RunOptions(on_error))
+    return plan.run(completer, log=log).paths

@@ -8,19 +8,22 @@ splits and raw drives, bags and datasets, and what writes ``evaluate``'s predict
 
     source = FolderSource.pair("rgb/", "sparse/")
     plan = check_frames(source, default_sinks(), "out")    # every input decoded, every output checked
-    run = complete_frames(source, ClassicalCompleter(), default_sinks(), "out", checked=plan)
+    run = plan.run(ClassicalCompleter())                   # (complete_frames does both)
     print(run.summary())                                   # "3 frame(s): 3 done"
+
+What the run is told is typed (:mod:`~.options`): :class:`~.options.OutputSpec` (overwrite, resume) and
+:class:`~.options.RunOptions` (``on_error``, read-ahead, real-time replay, batches).
 
 A long run survives its bad frames and its kills:
 
 * **Per-frame faults are the frame's.** A frame whose input cannot be read or completed (a corrupt file, a
-  LiDAR scan with no point in the image, an empty sparse map: :func:`~.stream.is_frame_fault`) is skipped
-  with one line naming it and why (``on_error="skip"``, the default for more than one frame), or stops the
-  run with the frames done so far kept (``"stop"``). Errors of the run (a full disk, a sink that fails, a
+  LiDAR scan with no point in the image, an empty sparse map: :func:`~.feed.is_frame_fault`) is skipped
+  with one line naming it and why (``RunOptions(on_error="skip")``, the default for more than one frame), or
+  stops the run with the frames done so far kept (``"stop"``). Errors of the run (a full disk, a sink that fails, a
   missing package) stop it at once.
 * **Every frame's outputs appear as it is done**, each file atomically, and the frame is recorded in
   ``OUT/frames.json`` (:mod:`~.journal`) once they are all in place.
-* **Resume.** ``resume=True`` continues a killed or failed run in ``out``: the frames done, with every
+* **Resume.** ``OutputSpec(resume=True)`` continues a killed or failed run in ``out``: the frames done, with every
   output whole, are kept; the rest are done; the run outputs (a bag, a recording, ``latency.json``) are
   written at the end over every frame, in order, so they equal those of an uninterrupted run.
 
@@ -42,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from semattnet._errors import DataError, InputError
+from semattnet._errors import DataError
 from semattnet._utils.atomic import fsync_dir
 from semattnet._utils.distributed import first_error, is_main, rank, world_size
 from semattnet._utils.lock import FolderLock
@@ -50,11 +53,12 @@ from semattnet._utils.outputs import Output, check_no_input_overlap, check_outpu
 from semattnet.data.frames import Frame, FrameSource
 from semattnet.data.io import encode_depth, read_depth
 from semattnet.inference.completer import Completer, Completion
+from semattnet.inference.feed import FrameFault, completions, is_frame_fault, read_frame
 from semattnet.inference.journal import FRAMES_FILE, FrameEntry, RunJournal, describe_counts
+from semattnet.inference.options import OutputSpec, RunOptions
 from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sharding import agree, gather_rows, on_main, process_group, rank_log, shard
 from semattnet.inference.sinks import Prediction, Sink, output_files, predict_frame
-from semattnet.inference.stream import FrameFault, completions, is_frame_fault, read_frame
 from semattnet.inference.timing import StageTimes
 
 __all__ = [
@@ -62,6 +66,8 @@ __all__ = [
     "EXIT_SKIPPED",
     "Completer",
     "FrameRun",
+    "OutputSpec",
+    "RunOptions",
     "RunPlan",
     "check_frames",
     "complete_frames",
@@ -83,27 +89,47 @@ def _check_outputs(source: FrameSource, sinks: Sequence[Sink], out: Path, overwr
     check_no_input_overlap(given, out_files=[o.path for o in outputs[1:]])  # and hard links into input folders
 
 
-def _policy(on_error: str | None, frames: int) -> str:
-    """``on_error`` as given, else ``skip`` for more than one frame and ``stop`` for one."""
-    if on_error is None:
-        return "skip" if frames > 1 else "stop"
-    if on_error not in ("skip", "stop"):
-        raise InputError(f"on_error must be 'skip' or 'stop', got {on_error!r}")
-    return on_error
-
-
 @dataclass
 class RunPlan:
-    """What :func:`check_frames` decided: the run's :class:`~.journal.RunJournal` (with the frames a resume
-    keeps), the frames whose inputs failed the check (name -> reason; ``on_error="skip"``) and the policy;
-    ``lock``: the output folder's lock, held from the check to the end of :func:`complete_frames`
-    (:meth:`release` it when the run does not happen)."""
+    """What :func:`check_frames` decided for ``source`` into ``sinks`` and ``out``: the run's
+    :class:`~.journal.RunJournal` (with the frames a resume keeps), the frames whose inputs failed the check
+    (name -> reason; ``on_error="skip"``), ``on_error`` as it applies and the options; ``lock``: the output
+    folder's lock, held from the check to the end of :meth:`run` (:meth:`release` it when the run does not
+    happen)."""
 
+    source: FrameSource
+    sinks: Sequence[Sink]
+    out: Path
     journal: RunJournal
+    output: OutputSpec = field(default_factory=OutputSpec)
+    options: RunOptions = field(default_factory=RunOptions)
     faults: dict[str, str] = field(default_factory=dict)
     on_error: str = "stop"
-    resume: bool = False
     lock: FolderLock | None = None
+
+    @classmethod
+    def trusted(cls, source: FrameSource, sinks: Sequence[Sink], out: PathLike,
+                options: RunOptions | None = None) -> RunPlan:  # fmt: skip
+        """A plan without the checks, for frames whose inputs and outputs the caller has checked (e.g. the
+        thinned frames of a sparsity sweep, into a folder of its stage): nothing to skip or keep, no lock."""
+        out, options = Path(out), options or RunOptions()
+        journal = _journal(source, sinks, out, None, False)
+        return cls(source, sinks, out, journal, OutputSpec(overwrite=True), options,
+                   on_error=options.policy(len(source.names)))  # fmt: skip
+
+    def run(self, completer: Completer, *, semantic: SemanticMaps | None = None, timer: StageTimes | None = None,
+            log: Callable[[str], None] = print) -> FrameRun:  # fmt: skip
+        """Complete the planned frames with ``completer`` (:func:`complete_frames` after the checks); the folder
+        is released at the end, whatever happens.
+
+        ``semantic``: how frames without a semantic map get one (default: the fallback map for completers that
+        need one). ``timer``: per-stage times (:class:`~.timing.StageTimes`; ``writing`` is every sink).
+        ``log``: where each frame's line goes."""
+        try:
+            timer = timer if timer is not None else StageTimes()
+            return _execute(self, completer, semantic or SemanticMaps(), timer, log)
+        finally:
+            self.release()
 
     def release(self) -> None:
         """Let the output folder go (idempotent)."""
@@ -128,19 +154,18 @@ def _check_inputs(source: FrameSource, names: Sequence[str], on_error: str) -> d
     return faults
 
 
-def check_frames(source: FrameSource, sinks: Sequence[Sink], out: PathLike, *, overwrite: bool = False,
-                 inputs: Sequence[PathLike | None] = (), on_error: str | None = None, resume: bool = False,
-                 run: Mapping[str, object] | None = None) -> RunPlan:  # fmt: skip
+def check_frames(source: FrameSource, sinks: Sequence[Sink], out: PathLike, output: OutputSpec | None = None,
+                 options: RunOptions | None = None) -> RunPlan:  # fmt: skip
     """Every check before any work (and before a model is loaded): a resume's journal, the outputs (rank 0),
-    then every input of every frame to do decoded (each rank its share).
+    then every input of every frame to do decoded (each rank its share). Run it with :meth:`RunPlan.run`.
 
-    ``inputs``: further paths the user gave (files or folders) that outputs must stay out of. ``on_error``:
-    ``stop`` (the first faulty input raises), ``skip`` (faulty frames are noted and skipped) or None (``skip``
-    for more than one frame). ``resume``: continue the run in ``out`` (``run``: its identity, which must be the
-    one recorded there; the frames done, with every output whole, are kept).
+    ``output``: the folder's rules (:class:`~.options.OutputSpec`: overwrite, resume and the run's identity,
+    further inputs that outputs must stay out of; default: nothing replaced). ``options``: how the frames are run
+    (:class:`~.options.RunOptions`; ``on_error="stop"``: the first faulty input raises, ``"skip"``: faulty
+    frames are noted and skipped).
 
     The output folder is locked (:class:`~semattnet._utils.lock.FolderLock`) first, until the end of
-    :func:`complete_frames` (or :meth:`RunPlan.release`).
+    :meth:`RunPlan.run` (or :meth:`RunPlan.release`).
 
     Raises:
         FileExistsError: an output exists and neither ``overwrite`` nor ``resume`` is set.
@@ -152,7 +177,7 @@ def check_frames(source: FrameSource, sinks: Sequence[Sink], out: PathLike, *, o
     with process_group():
         on_main(_acquire, lock)
         try:
-            plan = _plan(source, sinks, out, overwrite, inputs, _policy(on_error, len(source.names)), resume, run)
+            plan = _plan(source, sinks, out, output or OutputSpec(), options or RunOptions())
         except BaseException:
             lock.release()
             raise
@@ -164,13 +189,13 @@ def _acquire(lock: FolderLock) -> None:
     lock.acquire()
 
 
-def _plan(source: FrameSource, sinks: Sequence[Sink], out: Path, overwrite: bool, inputs: Sequence[PathLike | None],
-          policy: str, resume: bool, run: Mapping[str, object] | None) -> RunPlan:  # fmt: skip
+def _plan(source: FrameSource, sinks: Sequence[Sink], out: Path, output: OutputSpec, options: RunOptions) -> RunPlan:
     """:func:`check_frames` once the folder is locked."""
-    journal = agree(_journal, source, sinks, out, run, resume)
-    if not (overwrite or resume):  # before the files it left are refused one by one: say --resume
+    policy = options.policy(len(source.names))
+    journal = agree(_journal, source, sinks, out, output.run, output.resume)
+    if not (output.overwrite or output.resume):  # before the files it left are refused one by one: say --resume
         on_main(_refuse_earlier_run, out)
-    on_main(_check_outputs, source, sinks, out, overwrite or resume, inputs)
+    on_main(_check_outputs, source, sinks, out, output.overwrite or output.resume, output.inputs)
     todo = [n for n in shard(source.names) if n not in journal.kept]
     faults = agree(_check_inputs, source, todo, policy)
     position = {n: i for i, n in enumerate(source.names)}
@@ -178,7 +203,7 @@ def _plan(source: FrameSource, sinks: Sequence[Sink], out: Path, overwrite: bool
     bad = gather_rows(rows, key=lambda e: position[e["name"]])
     if bad and len(bad) == len(source.names):
         raise _nothing_done(bad)  # every input is bad: one line, before the model is loaded
-    return RunPlan(journal, faults, policy, resume)
+    return RunPlan(source, sinks, out, journal, output, options, faults, policy)
 
 
 def _journal(source: FrameSource, sinks: Sequence[Sink], out: Path, run: Mapping[str, object] | None,
@@ -346,17 +371,18 @@ class _FrameLoop:
             self.out.rmdir()
 
 
-def _run_frames(loop: _FrameLoop, completer: Completer, prefetch: int, realtime: float | None,
-                overwrite: bool, batch_size: int = 1) -> None:  # fmt: skip
+def _run_frames(loop: _FrameLoop, completer: Completer) -> None:
     """The frames of this process through the completer into ``loop`` (the run outputs opened before and
     finished after; aborted on any error)."""
+    plan, options = loop.plan, loop.plan.options
     try:
         with stage_folder(loop.out) as stage:  # each frame is written there, then moved into place
             for s in loop.sinks:
-                s.open(overwrite)
+                s.open(plan.output.overwrite or plan.output.resume)
             for frame, completion in completions(loop.source, completer, loop.todo(), loop.semantic, loop.timer,
-                                                 prefetch, report=loop.note, realtime=realtime, batch_size=batch_size,
-                                                 stop_on_fault=loop.plan.on_error == "stop"):  # fmt: skip
+                                                 options.prefetch, report=loop.note, realtime=options.realtime,
+                                                 batch_size=options.batch_size,
+                                                 stop_on_fault=plan.on_error == "stop"):  # fmt: skip
                 loop.write(stage, frame, completion)
             loop.finish(stage)
     except BaseException:
@@ -365,74 +391,46 @@ def _run_frames(loop: _FrameLoop, completer: Completer, prefetch: int, realtime:
         raise
 
 
-def complete_frames(
-    source: FrameSource,
-    completer: Completer,
-    sinks: Sequence[Sink],
-    out: PathLike,
-    *,
-    overwrite: bool = False,
-    log: Callable[[str], None] = print,
-    inputs: Sequence[PathLike | None] = (),
-    semantic: SemanticMaps | None = None,
-    checked: bool | RunPlan = False,
-    timer: StageTimes | None = None,
-    prefetch: int = 0,
-    on_error: str | None = None,
-    resume: bool = False,
-    run: Mapping[str, object] | None = None,
-    realtime: float | None = None,
-    batch_size: int = 1,
-) -> FrameRun:
-    """Complete every frame of ``source`` with ``completer`` and write what ``sinks`` say into ``out``.
+def complete_frames(source: FrameSource, completer: Completer, sinks: Sequence[Sink], out: PathLike,
+                    output: OutputSpec | None = None, options: RunOptions | None = None) -> FrameRun:  # fmt: skip
+    """Complete every frame of ``source`` with ``completer`` and write what ``sinks`` say into ``out``:
+    ``check_frames(source, sinks, out, output, options).run(completer)`` (:meth:`RunPlan.run` also takes the
+    semantic maps, a timer and where the per-frame lines go).
 
     Each frame's files appear in ``out`` (atomically) as soon as it is completed and are recorded in
     ``out/frames.json`` (:mod:`~.journal`). A frame whose input cannot be read or completed (its fault:
-    :func:`~.stream.is_frame_fault`) is skipped with one logged line (``on_error="skip"``, the default for more
+    :func:`~.feed.is_frame_fault`) is skipped with one logged line (``on_error="skip"``, the default for more
     than one frame) or stops the run (``"stop"``), the frames done so far kept. Errors of the run (a full disk,
-    a failing sink) stop it at once; the frames done stay, resumable. ``resume``: continue the run in ``out``
-    (``run``: its identity; see :func:`check_frames`), keeping its done frames; the run outputs then cover all.
-
-    ``semantic``: how frames without a semantic map get one (default: the fallback map for completers that
-    need one). ``checked``: the :class:`RunPlan` of :func:`check_frames` run with these arguments (``True``: it
-    ran, with nothing to skip or keep; ``False``: it runs now). ``timer``: per-stage times
-    (:class:`~.stream.StageTimes`; ``writing`` is every sink). ``prefetch`` > 0: read, project and segment
-    that many frames ahead in a background thread; ``realtime``: replay at the sensor pace, that many times
-    faster, dropping frames that come while the completer is busy (:func:`~.stream.completions`).
-    :class:`~.sinks.RunSink` outputs (a bag, a recording, ``latency.json``) are put in place at the end.
-    ``batch_size`` > 1: up to that many consecutive frames of one size completed in one engine call (a
-    :class:`~.completer.DepthCompleter`, through its input checks; the same results up to float rounding).
+    a failing sink) stop it at once; the frames done stay, resumable. ``output``: the folder's rules (resume:
+    keep the done frames; the run outputs then cover all); ``options``: on errors, read-ahead
+    (:func:`~.feed.completions`), a real-time replay, batches (a :class:`~.completer.DepthCompleter`, through
+    its input checks; the same results up to float rounding). :class:`~.sinks.RunSink` outputs (a bag, a
+    recording, ``latency.json``) are put in place at the end.
 
     Returns:
         The :class:`FrameRun`: every frame's status, the depth PNGs of the frames done (all ranks).
     """
-    out, timer = Path(out), timer if timer is not None else StageTimes()
+    return check_frames(source, sinks, out, output, options).run(completer)
+
+
+def _execute(plan: RunPlan, completer: Completer, semantic: SemanticMaps, timer: StageTimes,
+             log: Callable[[str], None]) -> FrameRun:  # fmt: skip
+    """:meth:`RunPlan.run`: the loop of every process, the first error of any raised on all."""
     with process_group():
-        if isinstance(checked, RunPlan):
-            plan = checked
-        elif checked:  # checked by the caller, nothing to skip or keep
-            plan = RunPlan(_journal(source, sinks, out, run, False), {}, _policy(on_error, len(source.names)))
-        else:
-            plan = check_frames(source, sinks, out, overwrite=overwrite, inputs=inputs, on_error=on_error,
-                                resume=resume, run=run)  # fmt: skip
-        try:
-            maps = agree((semantic or SemanticMaps()).bind, completer)
-            maps.check_palette(completer, source)
-            loop = _FrameLoop(source, sinks, out, plan, timer, rank_log(log), maps)
-            first = first_error(_attempt_run(loop, completer, prefetch, realtime, overwrite or plan.resume, batch_size))
-            if first is not None:
-                raise first
-            return _close(loop)
-        finally:
-            plan.release()
+        maps = agree(semantic.bind, completer)
+        maps.check_palette(completer, plan.source)
+        loop = _FrameLoop(plan.source, plan.sinks, plan.out, plan, timer, rank_log(log), maps)
+        first = first_error(_attempt_run(loop, completer))
+        if first is not None:
+            raise first
+        return _close(loop)
 
 
-def _attempt_run(loop: _FrameLoop, completer: Completer, prefetch: int, realtime: float | None,
-                 overwrite: bool, batch_size: int = 1) -> Exception | None:  # fmt: skip
+def _attempt_run(loop: _FrameLoop, completer: Completer) -> Exception | None:
     """:func:`_run_frames`, its error returned (for every rank to agree on); on any error the frames done
     stay journaled. Ctrl-C is raised at once."""
     try:
-        _run_frames(loop, completer, prefetch, realtime, overwrite, batch_size)
+        _run_frames(loop, completer)
     except BaseException as exc:
         loop.forget()
         if not isinstance(exc, Exception):

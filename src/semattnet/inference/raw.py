@@ -17,7 +17,7 @@ from pathlib import Path
 
 from semattnet.data.sources.kitti_raw import RawDriveSource, project_frame
 from semattnet.data.sources.semantic import MapSegmenter
-from semattnet.inference.pipeline import Completer, complete_frames
+from semattnet.inference.pipeline import Completer, OutputSpec, RunOptions, check_frames
 from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sinks import default_sinks, fusion_confidence, output_files
 
@@ -52,10 +52,12 @@ def complete_kitti_raw(
     """Complete frames of a KITTI raw drive (see :class:`semattnet.data.kitti_raw.RawDrive`) into ``out``.
 
     Args:
-        completer: a :class:`DepthCompleter`, :class:`ClassicalCompleter` or anything with their call.
+        completer: a :class:`~semattnet.inference.DepthCompleter`, :class:`~semattnet.baselines.ClassicalCompleter` or
+            anything with their call.
         drive_dir: ``RAW_ROOT/DATE/DATE_drive_NNNN_sync``. frames: ``"a-b"``, ``"1,3"``, indices or None (all).
         camera: 2 or 3. semantic: folder of colour-coded maps named like the images. segmenter: a
-            :class:`Segmenter` or its SPEC. Without either, models that need semantics get the fallback map.
+            :class:`~semattnet.segmentation.segmenter.Segmenter` or its SPEC. Without either, models that need semantics
+            get the fallback map.
         ply: also write ``NAME.ply``; ``max_depth`` (metres) and ``top_crop`` (rows) select its pixels.
         deskew: ego-motion compensate the scans with their OXTS packets before projecting.
 
@@ -75,6 +77,5 @@ def complete_kitti_raw(
     maps = SemanticMaps(segmenter, folder=semantic is not None)
     source = RawDriveSource(drive_dir, frames, camera, semantic, deskew)
     sinks = default_sinks(npy, panel, ply, max_depth, top_crop)
-    run = complete_frames(source, completer, sinks, out, overwrite=overwrite, log=log, semantic=maps,
-                          on_error=on_error)  # fmt: skip
-    return run.paths
+    plan = check_frames(source, sinks, out, OutputSpec(overwrite), RunOptions(on_error))
+    return plan.run(completer, semantic=maps, log=log).paths

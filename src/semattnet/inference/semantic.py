@@ -8,7 +8,7 @@ import warnings
 from semattnet._errors import InputError
 from semattnet.data.frames import Frame, FrameSource
 from semattnet.data.sources.semantic import CrossPalette, MapSegmenter
-from semattnet.inference.completion import Completer
+from semattnet.inference.contract import Completer
 
 __all__ = ["SemanticMaps"]
 

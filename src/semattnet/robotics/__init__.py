@@ -1,6 +1,6 @@
 """The project's robot I/O, in one room: ROS bags in and out, Rerun, and the live server.
 
-- :class:`BagSource` (:mod:`.source`): a ROS 1 / ROS 2 (sqlite3, MCAP) bag as frames, images paired with
+- :class:`BagSource` (:mod:`.bag_source`): a ROS 1 / ROS 2 (sqlite3, MCAP) bag as frames, images paired with
   scans by stamp, each scan projected as :class:`~semattnet.data.sources.RawDriveSource` does; a bad message
   fails its frame only.
 - :mod:`.bags`: reading (pairing, decoding, ``/tf_static``) and writing bags (``rosbags``, extra ``ros``).
@@ -18,14 +18,14 @@ import importlib
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from .bag_source import BagSource
     from .live import LiveSink
     from .rerun import RerunLogger
     from .sinks import BagSink, RerunSink
-    from .source import BagSource
 
 __all__ = ["BagSink", "BagSource", "LiveSink", "RerunLogger", "RerunSink"]
 
-_HOMES = {"BagSink": ".sinks", "BagSource": ".source", "LiveSink": ".live", "RerunLogger": ".rerun",
+_HOMES = {"BagSink": ".sinks", "BagSource": ".bag_source", "LiveSink": ".live", "RerunLogger": ".rerun",
           "RerunSink": ".sinks"}  # fmt: skip
 
 

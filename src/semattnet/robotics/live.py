@@ -2,7 +2,7 @@
 
 ``semattnet predict ... --live [HOST:]PORT`` serves each frame as it is completed; open the Foxglove app
 (desktop or https://app.foxglove.dev) and connect to ``ws://HOST:PORT``. Per frame, stamped with the
-input's sensor time and frame id (as :class:`~semattnet.inference.sinks.BagSink` stamps them):
+input's sensor time and frame id (as :class:`~semattnet.robotics.sinks.BagSink` stamps them):
 
 ============================  =====================  ==================================================
 topic                         schema                 what
@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, ClassVar, Protocol
 import numpy as np
 
 from semattnet._errors import InputError
-from semattnet._utils.extras import optional, require
+from semattnet._utils.extras import call_with_newer, optional, require
 from semattnet._utils.registry import option
 from semattnet.data.io import decode_depth
 from semattnet.geometry.cameras import CameraInfoData
@@ -84,16 +84,6 @@ def _foxglove() -> ModuleType:
 def _messages() -> ModuleType:
     """The message classes: ``foxglove.messages`` (``foxglove.schemas`` in older releases)."""
     return optional("foxglove.messages") or require("foxglove.schemas", "--live")
-
-
-def _accepts(fn: Callable[..., object], name: str) -> bool:
-    """Whether ``fn`` takes a keyword ``name`` (options the older foxglove-sdk releases lack)."""
-    import inspect
-
-    try:
-        return name in inspect.signature(fn).parameters
-    except (TypeError, ValueError):
-        return False
 
 
 def _timestamp(m: ModuleType, stamp_ns: int) -> object:
@@ -259,10 +249,10 @@ class LiveSink(RunSink):
         fg = _foxglove()
         host, port = parse_address(self.address, "live address")
         self._context = context = fg.Context()
-        kwargs = {"message_backlog_size": BACKLOG} if _accepts(fg.start_server, "message_backlog_size") else {}
+        newer = {"message_backlog_size": BACKLOG}  # older foxglove-sdk releases lack it
         try:  # the server on a private loopback port, the clients through the gate on the address asked for
-            self._server = server = fg.start_server(name="semattnet", host="127.0.0.1", port=0, context=context,
-                                                    **kwargs)  # fmt: skip
+            self._server = server = call_with_newer(fg.start_server, newer, name="semattnet", host="127.0.0.1", port=0,
+                                                    context=context)  # fmt: skip
             self._gate = Gate(host, port, ("127.0.0.1", int(server.port)))
             self._gate.start()
         except (RuntimeError, OSError) as e:

@@ -216,7 +216,7 @@ WEB_PORT = 9090
 @dataclass
 class RerunSink(_StagedTarget):
     """``--rerun FILE.rrd`` / ``--rerun-spawn``: per frame the camera, image, sparse input, stored depth, semantic
-    map, LiDAR points and completed cloud (:class:`semattnet.robotics.bags.RerunLogger`) at the frame's sensor time;
+    map, LiDAR points and completed cloud (:class:`semattnet.robotics.rerun.RerunLogger`) at the frame's sensor time;
     ``uncertainty``: the stored uncertainty too; ``max_uncertainty``: the cloud leaves out the pixels above it."""
 
     option: ClassVar[str] = "--rerun"

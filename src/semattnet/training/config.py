@@ -40,7 +40,7 @@ class TrainConfig:
         dataset: ``kitti-dc`` (default), ``nyuv2`` or ``void`` (:mod:`semattnet.data.datasets`): its reader,
             augmentation, validation metrics and semantic palette (recorded in the model config);
             ``semattnet train --dataset`` also starts from its recipe (epochs, batch, lr, schedule).
-        raw_root, semantic_root: optional separate roots (see :class:`KittiDepthCompletion`).
+        raw_root, semantic_root: optional separate roots (see :class:`~semattnet.data.kitti.KittiDepthCompletion`).
         segment: a segmenter SPEC for ``nyuv2`` / ``void``: the train and validation frames segmented once into
             a cached folder (:mod:`semattnet.segmentation.datasets`) that serves as ``semantic_root``.
         out: run folder (checkpoints, logs, curves).

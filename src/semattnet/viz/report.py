@@ -81,7 +81,8 @@ def write_report(
     """Write ``report.md`` and ``report.html`` into ``out_dir``.
 
     Args:
-        metrics: method -> group -> KITTI metrics (as :meth:`KittiMetrics.compute` returns).
+        metrics: method -> group -> KITTI metrics (as :meth:`~semattnet.evaluation.metrics.KittiMetrics.compute`
+            returns).
         labels: method -> display name.
         figures: (caption, image path relative to ``out_dir``).
         setup: facts shown under the table (device, timings, settings, ...).

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from semattnet.data.frames import Frame, SensorMeta
-from semattnet.inference.completion import Completion
+from semattnet.inference.contract import Completion
 from semattnet.inference.sinks import predict_frame
 from semattnet.robotics.bags import BagWriter, CameraInfoData, open_bag
 from semattnet.robotics.frame import ROS_TYPES, RobotFrame, topic_names

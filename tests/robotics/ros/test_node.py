@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from semattnet.inference.completion import Completion
+from semattnet.inference.contract import Completion
 from semattnet.robotics.ros.node import DepthNode, NodeTopics
 from semattnet.robotics.ros.transport import OUTPUT_QOS, SENSOR_QOS, TF_STATIC_QOS
 

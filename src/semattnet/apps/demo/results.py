@@ -75,11 +75,12 @@ class Machine(TypedDict):
 COMPARED: dict[str, tuple[str, ...]] = {"classical": ("rmse", "mae", "irmse", "imae"), "two_branch": ("rmse", "mae")}
 METRICS = ("rmse", "mae", "irmse", "imae")
 _NAMES = {"rmse": "RMSE", "mae": "MAE", "irmse": "iRMSE", "imae": "iMAE"}
-#: results.json metric name -> key of :meth:`KittiMetrics.compute`.
+#: results.json metric name -> key of :meth:`~semattnet.evaluation.metrics.KittiMetrics.compute`.
 _RESULT_KEYS = {"rmse": "rmse_mm", "mae": "mae_mm", "irmse": "irmse_per_km", "imae": "imae_per_km", "images": "images"}
 
 
-#: method -> seed -> group -> KITTI metrics (:meth:`KittiMetrics.compute`'s keys): every score of a demo run.
+#: method -> seed -> group -> KITTI metrics (:meth:`~semattnet.evaluation.metrics.KittiMetrics.compute`'s keys):
+#: every score of a demo run.
 Runs = dict[str, dict[int, dict[str, dict[str, float]]]]
 
 
@@ -143,7 +144,8 @@ def verdict_sentences(
 
 
 def record(groups: dict[str, dict[str, float]]) -> dict[str, dict[str, float]]:
-    """group -> results.json metric names (leaderboard units) of :meth:`KittiMetrics.compute`'s output."""
+    """group -> results.json metric names (leaderboard units) of
+    :meth:`~semattnet.evaluation.metrics.KittiMetrics.compute`'s output."""
     return {g: {k: v[src] for k, src in _RESULT_KEYS.items() if src in v} for g, v in groups.items()}
 
 

@@ -25,7 +25,7 @@ __all__ = ["SOURCES", "SourceOptions", "list_sources", "register_source"]
 #: Source name -> :class:`~semattnet._utils.registry.Entry` (the class, the ``predict`` option making it and
 #: the :class:`SourceOptions` of its options).
 SOURCES: Registry[IndexedSource] = Registry("source", homes=(
-    "semattnet.data.sources.folder", "semattnet.data.sources.kitti_raw", "semattnet.robotics.source",
+    "semattnet.data.sources.folder", "semattnet.data.sources.kitti_raw", "semattnet.robotics.bag_source",
     "semattnet.data.sources.kitti_split", "semattnet.data.datasets.nyuv2", "semattnet.data.datasets.void",
     "semattnet.data.datasets",
 ))  # fmt: skip

@@ -50,7 +50,7 @@ __all__ = [
 
 class CalibrationError(InputError):
     """The calibration frames cannot be used (not a folder, no frames, a corrupt file, no LiDAR point): the
-    run's fault, never one frame's (:func:`semattnet.inference.stream.is_frame_fault`)."""
+    run's fault, never one frame's (:func:`semattnet.inference.feed.is_frame_fault`)."""
 
 
 class CalibrationFrame(Protocol):

@@ -21,8 +21,8 @@ from .decode import (
 )
 from .kitti import BagTopics, SensorRecord, WrittenBag, kitti_stamps_ns, write_kitti_bag, write_sensor_bag
 from .pairing import StampPairing, pair_stamps
+from .pairs import BagFailure, BagPair, BagPairs
 from .reader import TopicRow, format_topics, list_topics, open_bag
-from .source import BagFailure, BagPair, BagPairs
 from .tf import NoTransformError, TransformTree
 from .writer import BagWriter, MessageWriter, bag_format
 

@@ -8,7 +8,7 @@ import socket
 import threading
 import xmlrpc.client
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from ._tcpros_wire import (
     MAX_PEERS,
@@ -24,9 +24,9 @@ from ._tcpros_wire import (
 from .ros1_types import ros1_type_name
 
 if TYPE_CHECKING:
-    from .tcpros import TcprosTransport
+    from .ros1_types import Ros1Store
 
-__all__ = ["Inbound", "Subscription"]
+__all__ = ["Inbound", "SubscriberNode", "Subscription"]
 
 _log = logging.getLogger("semattnet.robotics.ros.tcpros")
 #: Seconds before reconnecting to a publisher, by the number of failed attempts since the last connection.
@@ -90,12 +90,23 @@ class Inbound:
         shutdown_socket(self.sock)
 
 
+class SubscriberNode(Protocol):
+    """What a subscription reads of its transport (:class:`~.tcpros.TcprosTransport`)."""
+
+    node_name: str
+    timeout: float
+    max_message_bytes: int
+
+    @property
+    def typestore(self) -> Ros1Store: ...
+
+    def _track(self, thread: threading.Thread) -> None: ...
+
+
 class Subscription:
     """A subscribed topic: one :class:`Inbound` per publisher the master names, following ``publisherUpdate``."""
 
-    def __init__(
-        self, transport: TcprosTransport, topic: str, msgtype: str, callback: Callable[[object], None]
-    ) -> None:
+    def __init__(self, transport: SubscriberNode, topic: str, msgtype: str, callback: Callable[[object], None]) -> None:
         self.topic, self.msgtype, self.callback = topic, msgtype, callback
         self.store = transport.typestore
         self.caller_id, self.timeout = transport.node_name, transport.timeout

@@ -40,7 +40,7 @@ from .names import resolve_name
 from .transport import OUTPUT_QOS, SENSOR_QOS, TF_STATIC_QOS, Publisher, Transport
 
 if TYPE_CHECKING:
-    from semattnet.inference.completion import Completer
+    from semattnet.inference.contract import Completer
     from semattnet.inference.semantic import SemanticMaps
     from semattnet.inference.sinks import RunSink
     from semattnet.inference.uncertainty import UncertaintyLimit
@@ -201,7 +201,7 @@ class DepthNode:
 
     def _calibration(self, pair: Pair) -> tuple[np.ndarray, np.ndarray, CameraInfoData]:
         """(K, T_cam_lidar, CameraInfo) of a pair: the rig's, else its CameraInfo and ``/tf_static``."""
-        from semattnet.robotics.bags.source import rig_camera_info
+        from semattnet.robotics.bags.pairs import rig_camera_info
 
         image, scan = pair.image, pair.scan
         if self.rig is not None:

@@ -1,14 +1,14 @@
 """A ROS bag (ROS 1, ROS 2 sqlite3 or MCAP) as frames: images paired with scans by
 :class:`~semattnet.robotics.bags.BagPairs`, each scan projected into the camera here with
-:func:`semattnet.geometry.project_points` (exactly as :class:`~.kitti_raw.RawDriveSource` projects a
-KITTI scan).
+:func:`semattnet.geometry.project_points` (exactly as
+:class:`~semattnet.data.sources.kitti_raw.RawDriveSource` projects a KITTI scan).
 
 Every image of the image topic is a frame. One that cannot be completed (no scan within the max skew, an
 undecodable image or scan, no semantic image near enough, an empty scan) is that frame's fault: its
 ``read``/``load``/``check`` raises its own one-line :class:`~semattnet._errors.DataError` and the frames after
 it still load. A bag is read front to back: loading (or checking) frames in order reads the bag once, a bad
 frame included; asking for an earlier frame reads it again from the start. :meth:`BagSource.read` (decode)
-and :meth:`BagSource.assemble` (project) let :func:`semattnet.inference.stream.completions` time the two
+and :meth:`BagSource.assemble` (project) let :func:`semattnet.inference.feed.completions` time the two
 stages apart; ``load`` is both.
 """
 
@@ -157,8 +157,8 @@ class BagSource(IndexedSource):
 
     def _pair_semantic(self, topic: str, max_skew: float | None) -> StampPairing:
         from semattnet.robotics.bags import header_stamp_frame, open_bag, pair_stamps
+        from semattnet.robotics.bags.pairs import IMAGE_TYPES
         from semattnet.robotics.bags.reader import topic_connections
-        from semattnet.robotics.bags.source import IMAGE_TYPES
 
         with open_bag(self.path) as reader:
             conns = topic_connections(reader, topic, IMAGE_TYPES, self.path)
@@ -179,8 +179,8 @@ class BagSource(IndexedSource):
         """Every semantic message in order: the image, or the DataError of one that cannot be decoded."""
         from semattnet.palette import colors_to_ids
         from semattnet.robotics.bags import decode_compressed_image, decode_image, open_bag
+        from semattnet.robotics.bags.pairs import IMAGE_TYPES, decode_message
         from semattnet.robotics.bags.reader import topic_connections
-        from semattnet.robotics.bags.source import IMAGE_TYPES, decode_message
 
         assert self.semantic_topic is not None
         with open_bag(self.path) as reader:

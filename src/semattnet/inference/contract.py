@@ -1,9 +1,11 @@
 """What a completer gives and what the frame loop asks of one: :class:`Completion`, the :class:`Completer`
-protocol and :class:`StageTimed` (a completer that times its inner stages). Below both the completer and the
-stream, so that each can name them."""
+protocol, :class:`CompleterFactory` (a completer built later) and :class:`StageTimed` (a completer that times its
+inner stages). Below both the completer and the
+feed (:mod:`~.feed`), so that each can name them."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
@@ -14,7 +16,7 @@ import torch
 from semattnet.inference.backends._base import StageHook
 from semattnet.models.outputs import DepthCompletionOutput
 
-__all__ = ["Completer", "Completion", "StageTimed"]
+__all__ = ["Completer", "CompleterFactory", "Completion", "StageTimed"]
 
 
 @dataclass
@@ -75,6 +77,15 @@ class Completer(Protocol):
         ...
 
     def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion: ...
+
+
+@dataclass(frozen=True)
+class CompleterFactory:
+    """A completer built later: ``build()`` is called once every input and output is checked, so that a bad input
+    is reported before a model is loaded (what ``evaluate_split``, the sparsity sweep and ``write_submission``
+    accept besides a completer), e.g. ``CompleterFactory(lambda: DepthCompleter.from_pretrained(name))``."""
+
+    build: Callable[[], Completer]
 
 
 @runtime_checkable

@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING
 
 from semattnet.data.frames import Frame, FrameSource, TwoStageSource
 from semattnet.inference.batching import BatchCompleter, complete_group, groups
-from semattnet.inference.completion import Completer, Completion, StageTimed
+from semattnet.inference.contract import Completer, Completion, StageTimed
 from semattnet.inference.timing import DEFAULT_SENSOR_PERIOD_S, GAP_PERIODS, MAX_WAIT_S, StageTimes
 
 if TYPE_CHECKING:

@@ -1,0 +1,60 @@
+"""What a run of the one frame loop is told, typed: :class:`OutputSpec` (the output folder's rules) and
+:class:`RunOptions` (how the frames are run). The library's side of ``semattnet predict``'s output and run
+options (``--overwrite``, ``--resume``, ``--on-error``, ``--stream``, ``--realtime``/``--speed``)::
+
+    plan = check_frames(source, sinks, "out", OutputSpec(overwrite=True), RunOptions(on_error="skip", prefetch=2))
+    run = plan.run(completer)
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+from semattnet._errors import InputError
+
+__all__ = ["OutputSpec", "RunOptions"]
+
+PathLike = str | os.PathLike[str]
+
+
+@dataclass(frozen=True)
+class OutputSpec:
+    """The output folder's rules (:mod:`semattnet._utils.outputs`).
+
+    ``overwrite``: replace existing outputs. ``resume``: continue the run in the folder, keeping its done frames;
+    ``run``: the run's identity, which must be the one recorded there. ``inputs``: further paths the user gave
+    (files or folders; the weights) that outputs must stay out of.
+    """
+
+    overwrite: bool = False
+    resume: bool = False
+    run: Mapping[str, object] | None = None
+    inputs: Sequence[PathLike | None] = ()
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How the frames are run.
+
+    ``on_error``: a frame whose input cannot be read or completed is ``"skip"``-ped (one line) or ``"stop"``-s the
+    run; None: ``skip`` for more than one frame. ``prefetch`` > 0: read, project and segment that many frames
+    ahead in a background thread. ``realtime``: replay at the sensor pace, that many times faster, dropping frames
+    that come while the completer is busy (None: every frame). ``batch_size`` > 1: up to that many consecutive
+    frames of one size completed in one engine call.
+    """
+
+    on_error: str | None = None
+    prefetch: int = 0
+    realtime: float | None = None
+    batch_size: int = 1
+
+    def policy(self, frames: int) -> str:
+        """``on_error`` for a run of ``frames`` frames: as given, else ``skip`` for more than one and ``stop``
+        for one."""
+        if self.on_error is None:
+            return "skip" if frames > 1 else "stop"
+        if self.on_error not in ("skip", "stop"):
+            raise InputError(f"on_error must be 'skip' or 'stop', got {self.on_error!r}")
+        return self.on_error
