@@ -9,12 +9,6 @@ for name in chromium chromium-browser google-chrome; do
     exit 0
   fi
 done
-SUDO=""
-if [ "$(id -u)" != 0 ]; then
-  command -v sudo >/dev/null 2>&1 || { echo "setup-browser: need root or sudo to apt-get install chromium" >&2; exit 1; }
-  SUDO="sudo -n"
-fi
-export DEBIAN_FRONTEND=noninteractive
-$SUDO apt-get update -q
-$SUDO apt-get install -y -q --no-install-recommends chromium fonts-dejavu-core
+. "$(dirname "$0")/_apt.sh"
+apt_install setup-browser chromium fonts-dejavu-core
 command -v chromium

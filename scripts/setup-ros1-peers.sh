@@ -6,13 +6,7 @@ if command -v roscore >/dev/null 2>&1 && command -v rostopic >/dev/null 2>&1; th
   echo "ros1 peers: $(command -v roscore) $(command -v rostopic)"
   exit 0
 fi
-SUDO=""
-if [ "$(id -u)" != 0 ]; then
-  command -v sudo >/dev/null 2>&1 || { echo "setup-ros1-peers: need root or sudo to apt-get install ros-core" >&2; exit 1; }
-  SUDO="sudo -n"
-fi
-export DEBIAN_FRONTEND=noninteractive
-$SUDO apt-get update -q
-$SUDO apt-get install -y -q --no-install-recommends ros-core python3-rospy python3-rostopic python3-sensor-msgs
+. "$(dirname "$0")/_apt.sh"
+apt_install setup-ros1-peers ros-core python3-rospy python3-rostopic python3-sensor-msgs
 command -v roscore
 command -v rostopic
