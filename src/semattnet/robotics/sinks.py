@@ -166,8 +166,6 @@ class BagSink(_StagedTarget):
             self._writer = BagWriter(path, fmt=self.fmt, prefix=self.prefix, max_depth=self.max_depth).open()
 
     def write(self, stage: Path, pred: Prediction) -> None:
-        from semattnet.robotics.frame import RobotFrame
-
         if self._writer is None:
             raise InputError(f"{self.target}: the bag is not open (call open() first)")
         robot = RobotFrame.of(
