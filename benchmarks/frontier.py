@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 import statistics
 import time
@@ -70,7 +71,7 @@ def train_one(work: Path, data: Path, recipe: ReferenceRecipe, name: str, width:
     return train_variant(work, data, r.backbone_steps, r.full_steps, size=r.size, width=width,
                          batch_size=r.batch_size, lr=r.lr, seed=r.seed, device=device, log=log,
                          refine_init_steps=r.refine_init_steps, head_lr_factor=r.head_lr_factor, loss=r.loss,
-                         branches=3, model=name)  # fmt: skip
+                         semantic_dropout=r.semantic_dropout, branches=3, model=name)  # fmt: skip
 
 
 def load_model(path: Path) -> torch.nn.Module:
@@ -78,6 +79,18 @@ def load_model(path: Path) -> torch.nn.Module:
     model = build_model(config=ckpt.config)
     load_weights(model, ckpt)
     return model.eval()
+
+
+def trained(out: Path, key: str, seed: int, train: Callable[[], Path], log: Callable[[str], None]) -> torch.nn.Module:
+    """The variant's model of ``seed``: its saved weights when an earlier run left them (a run resumes variant by
+    variant), else trained by ``train`` and saved first."""
+    saved = out / "checkpoints" / f"{key}_seed{seed}.safetensors"
+    if saved.is_file():
+        log(f"[frontier] {key}, seed {seed}: trained earlier ({saved})")
+        return load_model(saved)
+    log(f"[frontier] {key}, seed {seed}: training ...")
+    save_safetensors(load_checkpoint(train()), saved)
+    return load_model(saved)
 
 
 def _scores(preds: dict[str, np.ndarray], held: HeldOut) -> dict[str, float]:
@@ -102,11 +115,9 @@ def train_and_score(out: Path, recipe: ReferenceRecipe, seeds: Sequence[int], he
             continue
         per_seed = {}
         for seed in seeds:
-            log(f"[frontier] {key} ({name}, width {width:g}), seed {seed}: training ...")
-            ckpt = train_one(out / "runs" / f"{key}_seed{seed}", out / "data", dataclasses.replace(recipe, seed=seed),
-                             name, width, device, log)  # fmt: skip
-            model = load_model(ckpt)
-            save_safetensors(load_checkpoint(ckpt), out / "checkpoints" / f"{key}_seed{seed}.safetensors")
+            run = functools.partial(train_one, out / "runs" / f"{key}_seed{seed}", out / "data",
+                                    dataclasses.replace(recipe, seed=seed), name, width, device, log)  # fmt: skip
+            model = trained(out, key, seed, run, log)
             outputs = complete_held_out(model, held, device)
             preds.setdefault(key, {})[seed] = {n: o["refined_depth"] for n, o in outputs.items()}
             uncs.setdefault(key, {})[seed] = {n: o["uncertainty"] for n, o in outputs.items()}

@@ -11,6 +11,7 @@ from pathlib import Path
 from types import ModuleType
 
 import pytest
+import torch
 
 from semattnet._errors import InputError
 from semattnet.models.registry import list_models, model_config
@@ -81,3 +82,23 @@ def test_timing_half_tiny(frontier: ModuleType, tmp_path: Path) -> None:
     assert {f"{k}/torch-f32" for k in keys} == {k for k in timing["rows"] if k.endswith("torch-f32")}
     assert timing["size"] == [64, 96]
     assert timing["rows"]["paper_w1_8/torch-f32"]["ratio"] == 1.0 and timing["cpu"]
+
+
+def test_a_variant_trained_earlier_is_read_back_not_trained_again(frontier: ModuleType, tmp_path: Path) -> None:
+    """A run resumes variant by variant: the first call trains and saves, the second reads the saved weights."""
+    from semattnet.models.registry import build_model
+    from semattnet.weights.checkpoint import Checkpoint, save_safetensors
+
+    model = build_model("semattnet_rt_s")
+    first = tmp_path / "first.safetensors"
+    save_safetensors(Checkpoint(first, model.state_dict(), "state_dict", config=model.config), first)
+    calls: list[int] = []
+
+    def train() -> Path:
+        calls.append(1)
+        return first
+
+    a = frontier.trained(tmp_path, "rt", 0, train, log=lambda _: None)
+    b = frontier.trained(tmp_path, "rt", 0, train, log=lambda _: None)
+    assert calls == [1] and (tmp_path / "checkpoints" / "rt_seed0.safetensors").is_file()
+    assert all(torch.equal(x, y) for x, y in zip(a.state_dict().values(), b.state_dict().values(), strict=True))
