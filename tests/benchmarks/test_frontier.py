@@ -102,3 +102,17 @@ def test_a_variant_trained_earlier_is_read_back_not_trained_again(frontier: Modu
     b = frontier.trained(tmp_path, "rt", 0, train, log=lambda _: None)
     assert calls == [1] and (tmp_path / "checkpoints" / "rt_seed0.safetensors").is_file()
     assert all(torch.equal(x, y) for x, y in zip(a.state_dict().values(), b.state_dict().values(), strict=True))
+
+
+def test_the_width_1_8_paper_model_is_the_shipped_reference_only_for_its_own_recipe(frontier: ModuleType) -> None:
+    import dataclasses
+
+    from semattnet.apps.demo.reference import REFERENCE_RECIPE, shipped_references
+
+    shipped = shipped_references()
+    r1 = dataclasses.replace(REFERENCE_RECIPE, seed=1)
+    assert frontier.shipped_reference("paper_w1_8", 0, REFERENCE_RECIPE) == shipped[0]
+    assert frontier.shipped_reference("paper_w1_8", 1, r1) == shipped[1]
+    assert frontier.shipped_reference("paper_w1_8", 7, REFERENCE_RECIPE) is None  # no such seed shipped
+    assert frontier.shipped_reference("paper_w1_8", 0, dataclasses.replace(REFERENCE_RECIPE, full_steps=1)) is None
+    assert frontier.shipped_reference("semattnet_rt_s", 0, REFERENCE_RECIPE) is None
