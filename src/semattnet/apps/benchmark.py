@@ -225,7 +225,7 @@ def _bench_inference(
     gmacs = count_macs(net, x)
     peak = conv_peak_gflops(dev, bench.res.size)
     bench.res.notes.append(
-        f"{gmacs:.0f} GMACs per frame (convolutions); measured conv peak {peak:.0f} GFLOP/s (float32)"
+        f"{gmacs:.3g} GMACs per frame (convolutions); measured conv peak {peak:.0f} GFLOP/s (float32)"
     )
     fast_net = fold_batchnorm(net)
     candidates = _inference_candidates(net, fast_net, x, parts, fast_dtype, dev, arithmetic)
@@ -240,7 +240,7 @@ def _bench_inference(
                   None if naive else _rel(outputs[what], outputs[base]))  # fmt: skip
     if "full" in parts:
         achieved = 2 * gmacs / seconds["full model, ours (float32)"]
-        bench.res.notes.append(f"ours (float32): {achieved:.0f} GFLOP/s over the whole forward "
+        bench.res.notes.append(f"ours (float32): {achieved:.3g} GFLOP/s over the whole forward "
                                f"({100 * achieved / peak:.0f} % of the measured conv peak)")  # fmt: skip
     bench.kept += [net, fast_net, outputs, last]
 
