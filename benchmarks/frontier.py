@@ -53,7 +53,14 @@ from semattnet.apps.demo.reference import (
     machine_line,
     shipped_references,
 )
-from semattnet.apps.experiment import HeldOut, complete_held_out, make_synthetic, score, train_variant
+from semattnet.apps.experiment import (
+    HeldOut,
+    complete_held_out,
+    load_held_out,
+    make_synthetic,
+    score,
+    train_variant,
+)
 from semattnet.baselines.classical import complete_classical
 from semattnet.models.registry import build_model, list_models, model_config
 from semattnet.weights.checkpoint import load_checkpoint, load_weights, save_safetensors
@@ -177,9 +184,9 @@ def run_training(args: argparse.Namespace, log: Callable[[str], None] = print) -
     demo = DemoSettings()
     device = resolve_device(args.device)
     start = time.perf_counter()
-    make_synthetic(out / "data", recipe.train_frames, recipe.val_frames, recipe.size, recipe.data_seed, recipe.style)
-    held = make_synthetic(out / "held_out", 2 if args.frames else demo.train_frames, 2 if args.frames else
-                          demo.eval_frames, recipe.size, demo.seed, style=demo.style)  # fmt: skip
+    synthetic(out / "data", recipe.train_frames, recipe.val_frames, recipe.size, recipe.data_seed, recipe.style)
+    held = synthetic(out / "held_out", 2 if args.frames else demo.train_frames, 2 if args.frames else
+                     demo.eval_frames, recipe.size, demo.seed, style=demo.style)  # fmt: skip
     seeds = tuple(int(s) for s in args.seeds.split(","))
     keys = args.variants.split(",") if args.variants else None
     results = train_and_score(out, recipe, seeds, held, device, keys, log)
@@ -188,6 +195,22 @@ def run_training(args: argparse.Namespace, log: Callable[[str], None] = print) -
                          "seconds": round(time.perf_counter() - start, 1), "results": results})  # fmt: skip
     log(f"[frontier] wrote {target}")
     return target
+
+
+def synthetic(root: Path, frames: int, eval_frames: int, size: tuple[int, int], seed: int, style: str) -> HeldOut:
+    """The synthetic tree at ``root``: read back when an earlier run wrote it with these settings (the generator
+    is deterministic), else written; one that differs is refused in one line."""
+    manifest = root / "scenes.json"
+    if not manifest.is_file():
+        return make_synthetic(root, frames, eval_frames, size, seed, style)
+    m = json.loads(manifest.read_text())
+    wanted = {"seed": seed, "size": list(size), "style": style, "train": frames, "val_select": eval_frames}
+    counts = m.get("counts", {})
+    found = {"seed": m.get("seed"), "size": m.get("size"), "style": m.get("style"), "train": counts.get("train"),
+             "val_select": counts.get("val_select")}  # fmt: skip
+    if found != wanted:
+        raise InputError(f"{manifest}: written with {found}, this run needs {wanted}; use another --out")
+    return load_held_out(root)
 
 
 def _size(text: str) -> tuple[int, int]:

@@ -116,3 +116,10 @@ def test_the_width_1_8_paper_model_is_the_shipped_reference_only_for_its_own_rec
     assert frontier.shipped_reference("paper_w1_8", 7, REFERENCE_RECIPE) is None  # no such seed shipped
     assert frontier.shipped_reference("paper_w1_8", 0, dataclasses.replace(REFERENCE_RECIPE, full_steps=1)) is None
     assert frontier.shipped_reference("semattnet_rt_s", 0, REFERENCE_RECIPE) is None
+
+
+def test_a_synthetic_tree_of_other_settings_is_refused_not_reused(frontier: ModuleType, tmp_path: Path) -> None:
+    manifest = {"seed": 1000, "size": [96, 320], "style": "realistic", "counts": {"train": 400, "val_select": 16}}
+    (tmp_path / "scenes.json").write_text(json.dumps(manifest))
+    with pytest.raises(InputError, match=r"scenes.json: written with .*'seed': 1000.*this run needs .*'seed': 7"):
+        frontier.synthetic(tmp_path, 400, 16, (96, 320), 7, "realistic")
