@@ -22,7 +22,12 @@ A long run survives its bad frames and its kills:
   stops the run with the frames done so far kept (``"stop"``). Errors of the run (a full disk, a sink that fails, a
   missing package) stop it at once.
 * **Every frame's outputs appear as it is done**, each file atomically, and the frame is recorded in
-  ``OUT/frames.json`` (:mod:`~.journal`) once they are all in place.
+  ``OUT/frames.json`` (:mod:`~.journal`) once they are all in place. With ``realtime`` or read-ahead the
+  writing (every sink, the moves, the journal) runs a frame behind the network in a bounded background stage
+  (:mod:`~.writer`; ``RunOptions.write_ahead``), in order, so the network is the only serial stage. A sink's
+  fault on a frame (:func:`~.feed.is_frame_fault`) is that frame's, as a completer's is.
+* **Ctrl-C and SIGTERM** stop the run once the frames handed to the writer are written and journaled (SIGTERM
+  raises ``SystemExit(143)`` for it while the loop runs in the main thread).
 * **Resume.** ``OutputSpec(resume=True)`` continues a killed or failed run in ``out``: the frames done, with every
   output whole, are kept; the rest are done; the run outputs (a bag, a recording, ``latency.json``) are
   written at the end over every frame, in order, so they equal those of an uninterrupted run.
