@@ -19,8 +19,8 @@ def test_bench_realtime_writes_a_10_hz_bag_and_reports_the_counts_and_stages(tmp
 
     bench = load_script("bench_realtime")
     out = tmp_path / "r.json"
-    args = ["--frames", "3", "--size", "32x96", "--scenes", "2", "--speed", "10", "--out", str(tmp_path / "w"),
-            "--json", str(out)]  # fmt: skip
+    args = ["--frames", "3", "--size", "32x96", "--scenes", "2", "--speed", "10", "--warmup", "1", "--serial",
+            "--out", str(tmp_path / "w"), "--json", str(out)]  # fmt: skip
     assert bench.main(args) == 0
     topics = BagTopics()
     source = BagSource(tmp_path / "w" / "recording.mcap", topics.image, topics.points)
@@ -30,11 +30,12 @@ def test_bench_realtime_writes_a_10_hz_bag_and_reports_the_counts_and_stages(tmp
     stamps = source.info.stamps_ns
     assert stamps is not None and np.diff(stamps).tolist() == [bench.PERIOD_NS] * 2
 
-    r = json.loads(out.read_text())
-    assert r["frames_fed"] == 3 and r["completed"] >= 1 and r["completed"] + r["dropped"] + r["skipped"] == 3
-    assert r["exit_code"] == (4 if r["dropped"] else 0) and r["size"] == [32, 96] and r["cpu"]
-    assert r["method"] == "--method classical"
-    stages = r["latency"]["stages"]
-    assert stages["network"]["frames"] == r["completed"] and "beside" not in stages["network"]
-    assert stages["writing"]["beside"] == "the writer thread" and stages["read"]["beside"] == "the sensor thread"
-    assert r["latency"]["not_done"]["dropped"] == r["dropped"]
+    doc = json.loads(out.read_text())
+    assert doc["size"] == [32, 96] and doc["cpu"] and doc["method"] == "classical" and doc["warmup"] == 1
+    for name, writer in (("pipelined", "the writer thread"), ("serial", None)):
+        r = doc[name]
+        assert r["frames_fed"] == 3 and r["completed"] >= 1 and r["completed"] + r["dropped"] + r["skipped"] == 3
+        assert r["exit_code"] == (4 if r["dropped"] else 0) and r["latency"]["not_done"]["dropped"] == r["dropped"]
+        stages = r["latency"]["stages"]
+        assert stages["network"]["frames"] == r["completed"] and "beside" not in stages["network"]
+        assert stages["writing"].get("beside") == writer and stages["read"]["beside"] == "the sensor thread"
