@@ -20,9 +20,9 @@ import pytest
 from semattnet._errors import InputError
 from semattnet.data.frames import Frame, IndexedSource
 from semattnet.inference import Completion
-from semattnet.inference.options import RunOptions
+from semattnet.inference.options import OutputSpec, RunOptions
 from semattnet.inference.pipeline import check_frames
-from semattnet.inference.sinks import Prediction, RunSink, Sink
+from semattnet.inference.sinks import DepthPngSink, Prediction, RunSink, Sink
 from semattnet.inference.timing import StageTimes
 from semattnet.inference.writer import WriteStage
 
@@ -192,6 +192,28 @@ def test_ctrl_c_and_sigterm_drain_the_writer(tmp_path: Path, how: str) -> None:
     assert [f["status"] for f in frames] == ["done"] * 3 + ["pending"] * 3
     assert all((tmp_path / f"f00{i}.txt").is_file() for i in range(3)) and not _writers()
     assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL
+
+
+def test_a_run_stopped_while_writing_resumes_exactly(tmp_path: Path) -> None:
+    """Ctrl-C with frames in the writer, then ``resume``: the kept frames are not redone, the rest are, and the
+    files and the run output (fed the kept frames in their place) equal those of an uninterrupted run."""
+    options = RunOptions(prefetch=2, write_ahead=2)
+    whole = Recorder()
+    check_frames(Frames(6), [DepthPngSink(), whole], tmp_path / "whole", options=options).run(
+        Sleepy(), log=lambda s: None
+    )
+    plan = check_frames(Frames(6), [DepthPngSink(), Text(seconds=0.05)], tmp_path / "cut", options=options)
+    with pytest.raises(KeyboardInterrupt):
+        plan.run(Sleepy(interrupt=3), log=lambda s: None)
+    resumed, completer = Recorder(), Sleepy()
+    spec = OutputSpec(resume=True)
+    run = check_frames(Frames(6), [DepthPngSink(), Text(), resumed], tmp_path / "cut", spec, options).run(
+        completer, log=lambda s: None
+    )
+    assert completer.calls == 3 and run.counts["done"] == 6  # the three written before the stop are kept
+    assert resumed.frames == whole.frames == list(Frames(6).names)
+    for name in Frames(6).names:
+        assert (tmp_path / "cut" / f"{name}.png").read_bytes() == (tmp_path / "whole" / f"{name}.png").read_bytes()
 
 
 def test_the_stage_waits_instead_of_queueing(tmp_path: Path) -> None:

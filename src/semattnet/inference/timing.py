@@ -28,7 +28,7 @@ __all__ = [
 
 #: The stages timed, in order.
 STAGES = ("read", "projection", "segmentation", "network", "propagation", "writing")
-_LABELS = {"read": "read/decode"}
+_LABELS = {"read": "read/decode", "writing": "write/publish"}
 #: The sensor period assumed when the frames' stamps cannot say (a 10 Hz LiDAR), seconds.
 DEFAULT_SENSOR_PERIOD_S = 0.1
 #: ``--realtime``: a gap between two frames longer than this many sensor periods (their median so far) is skipped.
