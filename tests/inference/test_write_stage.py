@@ -108,24 +108,25 @@ def _writers() -> list[threading.Thread]:
 
 
 def _paced_run(tmp: Path, n: int, speed: float, write_ahead: int | None) -> tuple[dict[str, int], StageTimes]:
-    """``n`` frames paced ``speed`` times faster than 10 Hz, the network and the writing each 3/4 of a period."""
-    busy = 0.075 / speed
+    """``n`` frames paced ``speed`` times faster than 10 Hz; the network takes 0.8 of a period, the sink 0.5 (the
+    writing a little more: the moves, the journal)."""
+    period = 0.1 / speed
     timer = StageTimes()
     options = RunOptions(realtime=speed, write_ahead=write_ahead)
-    plan = check_frames(Frames(n), [Text(seconds=busy)], tmp, options=options)
-    run = plan.run(Sleepy(busy), timer=timer, log=lambda s: None)
+    plan = check_frames(Frames(n), [Text(seconds=0.5 * period)], tmp, options=options)
+    run = plan.run(Sleepy(0.8 * period), timer=timer, log=lambda s: None)
     return run.counts, timer
 
 
 @pytest.mark.parametrize(("n", "speed"), [(16, 2.0), pytest.param(50, 1.0, marks=pytest.mark.slow)])
 def test_writing_beside_the_network_keeps_the_pace(tmp_path: Path, n: int, speed: float) -> None:
-    """Network and writing each take 3/4 of the sensor period: written beside the network, the frames keep the
-    pace (next to no drops); written in line (``write_ahead=0``), each frame takes 1.5 periods and a third to a
-    half are dropped. Drop counts with wide margins, never times."""
+    """The network takes 0.8 of the sensor period and the writing over half: written beside the network, the
+    frames keep the pace (no drops); written in line (``write_ahead=0``), each frame takes about 1.4 periods and
+    about half are dropped. Drop counts with wide margins, never times."""
     piped, timer = _paced_run(tmp_path / "piped", n, speed, None)  # --realtime's default: the write stage
     serial, serial_timer = _paced_run(tmp_path / "serial", n, speed, 0)
-    assert piped["dropped"] <= n // 4, piped  # typically 0-1
-    assert serial["dropped"] >= n // 3, serial  # typically a third to a half
+    assert piped["dropped"] <= n // 8, piped  # 0 on 2 busy cores (load 12)
+    assert serial["dropped"] >= n // 4, serial  # 7-8 of 16 there
     assert piped["done"] + piped["dropped"] == serial["done"] + serial["dropped"] == n
     table = timer.table()
     assert "beside the network (the writer thread)" in table and "serial path" in table
