@@ -4,8 +4,9 @@
 writes what it yields; :meth:`semattnet.inference.DepthCompleter.stream` yields it): each frame is read
 (and decoded), projected, given its semantic map (:class:`~.semantic.SemanticMaps`), completed,
 and every stage is timed into a :class:`~.timing.StageTimes`. With ``prefetch=N`` the reading, projection and
-segmentation of the next frames run in a background thread while the current frame is completed and
-written; at most ``N`` frames are read ahead of the one the loop holds (a semaphore), so memory stays bounded.
+segmentation of the next frames run in a background thread while the current frame is completed (and the
+frame loop writes the previous one in its own, :mod:`~.writer`); at most ``N`` frames are read ahead of the one
+the loop holds (a semaphore), so memory stays bounded.
 
 Stages (:data:`~.timing.STAGES`): ``read`` (read and decode), ``projection`` (LiDAR scan into the image),
 ``segmentation`` (the semantic map, when one is computed), ``network``, ``propagation``, ``writing`` (every sink).

@@ -423,8 +423,10 @@ def _run_frames(loop: _FrameLoop, completer: Completer) -> None:
                                                  stop_on_fault=plan.on_error == "stop"):  # fmt: skip
                 writer.submit(partial(loop.write, stage, frame, completion))
             timer.begin()  # the writing of the last frames counts in the wall time
-            writer.drain()
-            timer.end()
+            try:
+                writer.drain()
+            finally:
+                timer.end()
             timer.write_waited_s = writer.waited_s
             loop.finish(stage)
     except BaseException:
