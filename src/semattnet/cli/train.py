@@ -22,6 +22,19 @@ from semattnet.cli._options import (
 )
 
 
+def _model_name(ctx: click.Context, param: click.Parameter, name: str | None) -> str | None:
+    """``--model``: a registered name (or alias), else a one-line error listing them."""
+    if name is None:
+        return None
+    from semattnet._errors import InputError
+    from semattnet.models.registry import UnknownModelError, resolve_model_name
+
+    try:
+        return resolve_model_name(name)
+    except UnknownModelError as exc:
+        raise InputError(f"--model: {exc}") from None
+
+
 @main.command(context_settings={"show_default": True})
 @click.option("--stage", type=click.Choice(["backbone", "refine-init", "full"]), default="backbone")
 @click.option(
@@ -47,6 +60,8 @@ from semattnet.cli._options import (
 @click.option("--epochs", type=POSITIVE_INT, default=None, help="[stage default: 60 / 5 / 95]")
 @click.option("--batch-size", type=BATCH_SIZE, default=None, help="Per process [stage default: 8 / 8 / 16].")
 @click.option("--lr", type=LEARNING_RATE, default=None, help="[stage default]")
+@click.option("--model", "model", default=None, metavar="NAME", callback=_model_name,
+              help="A registered model (semattnet models), e.g. semattnet_rt_s [semattnet].")  # fmt: skip
 @click.option("--width", type=WIDTH, default=None, help="Model width multiplier [1.0].")
 @click.option("--crop", type=SIZE, default=None, help="Training crop HxW [352x1216].")
 @click.option("--amp", type=click.Choice(["none", "bf16", "fp16"]), default=None)
@@ -64,7 +79,8 @@ from semattnet.cli._options import (
 )
 def train(stage: str, data_root: str | None, dataset: str, segment: str | None, out: str | None, init: str | None,
           config_file: str | None, resume: bool, overwrite: bool,
-          epochs: int | None, batch_size: int | None, lr: float | None, width: float | None, crop: str | None,
+          epochs: int | None, batch_size: int | None, lr: float | None, model: str | None, width: float | None,
+          crop: str | None,
           amp: str | None, device: str | None, workers: int | None, max_steps: int | None,
           activation_checkpointing: bool | None, overrides: tuple[str, ...]) -> None:  # fmt: skip
     """Train one stage of the paper's recipe (works under torchrun for DDP)."""
@@ -76,6 +92,8 @@ def train(stage: str, data_root: str | None, dataset: str, segment: str | None, 
     if resume:
         if not out:
             raise click.UsageError("--resume needs --out (the run folder)")
+        if model is not None:
+            raise click.UsageError("--model: a resumed run keeps its model (the one in its config.json)")
         cfg = TrainConfig(out=out)
     else:
         from semattnet.data.datasets import get_dataset
@@ -85,7 +103,7 @@ def train(stage: str, data_root: str | None, dataset: str, segment: str | None, 
         if not config_file or dataset != "kitti-dc":
             base["dataset"] = dataset
         given = {"stage": stage if not config_file else base["stage"], "data": data_root, "init": init,
-                 "epochs": epochs, "batch_size": batch_size, "lr": lr, "width": width, "amp": amp,
+                 "epochs": epochs, "batch_size": batch_size, "lr": lr, "model": model, "width": width, "amp": amp,
                  "device": device, "workers": workers, "max_steps": max_steps,
                  "activation_checkpointing": activation_checkpointing or None, "segment": segment,
                  "crop": list(parse_size(crop)) if crop else None}  # fmt: skip

@@ -4,8 +4,9 @@
 writes what it yields; :meth:`semattnet.inference.DepthCompleter.stream` yields it): each frame is read
 (and decoded), projected, given its semantic map (:class:`~.semantic.SemanticMaps`), completed,
 and every stage is timed into a :class:`~.timing.StageTimes`. With ``prefetch=N`` the reading, projection and
-segmentation of the next frames run in a background thread while the current frame is completed and
-written; at most ``N`` frames are read ahead of the one the loop holds (a semaphore), so memory stays bounded.
+segmentation of the next frames run in a background thread while the current frame is completed (and the
+frame loop writes the previous one in its own, :mod:`~.writer`); at most ``N`` frames are read ahead of the one
+the loop holds (a semaphore), so memory stays bounded.
 
 Stages (:data:`~.timing.STAGES`): ``read`` (read and decode), ``projection`` (LiDAR scan into the image),
 ``segmentation`` (the semantic map, when one is computed), ``network``, ``propagation``, ``writing`` (every sink).
@@ -42,7 +43,7 @@ from semattnet.inference.timing import DEFAULT_SENSOR_PERIOD_S, GAP_PERIODS, MAX
 if TYPE_CHECKING:
     from semattnet.inference.semantic import SemanticMaps
 
-__all__ = ["FrameFault", "completions", "is_frame_fault", "read_frame"]
+__all__ = ["FrameFault", "completions", "fault_reason", "is_frame_fault", "read_frame"]
 
 
 def is_frame_fault(exc: BaseException) -> bool:
@@ -72,7 +73,8 @@ def _input_of(frame: Frame) -> str:
     return str(paths.get("sparse") or paths.get("scan") or paths.get("bag") or "")
 
 
-def _reason(exc: BaseException) -> str:
+def fault_reason(exc: BaseException) -> str:
+    """A frame fault's one line (the error's text, whitespace collapsed; its type when it has none)."""
     return " ".join(str(exc).split()) or type(exc).__name__
 
 
@@ -305,10 +307,12 @@ def _complete_one(completer: Completer, group: Sequence[Frame], timer: StageTime
     yield frame, completion
 
 
-def _start_timer(timer: StageTimes | None, overlapped: bool) -> StageTimes:
-    """``timer`` (a new one when None) set for a run whose reading overlaps the network or not."""
+def _start_timer(timer: StageTimes | None, reader: str) -> StageTimes:
+    """``timer`` (a new one when None) set for a run whose reading runs in ``reader``'s thread ("": in line)."""
     timer = timer if timer is not None else StageTimes()
-    timer.overlapped = overlapped
+    timer.overlapped = bool(reader)
+    if reader:
+        timer.beside.update(dict.fromkeys(("read", "projection", "segmentation"), f"the {reader} thread"))
     timer.notes.setdefault("segmentation", "no segmenter run")
     timer.notes.setdefault("projection", "inside read/decode (the source does not split it)")
     return timer
@@ -328,18 +332,18 @@ def completions(source: FrameSource, completer: Completer, names: Sequence[str] 
     ``failed`` report. ``realtime``: replay at the frames' sensor pace, that many times faster (1.0: as
     recorded); frames that arrive while the completer is busy are dropped (reported ``dropped``). ``batch_size``:
     frames of one size per engine call (:mod:`~semattnet.inference.batching`; not with ``realtime``)."""
-    timer = _start_timer(timer, prefetch > 0 or realtime is not None)
+    timer = _start_timer(timer, "sensor" if realtime is not None else "reader" if prefetch > 0 else "")
     names = list(source.names if names is None else names)
     current = [""]
 
     def fault(name: str, exc: BaseException, where: str = "") -> None:
         timer.discard(name)
-        reason = _reason(exc)
+        reason = fault_reason(exc)
         reason = f"{where}: {reason}" if where and where not in reason else reason
         if report is not None:
             report(FrameFault(name, "failed" if stop_on_fault else "skipped", reason))
         if stop_on_fault or report is None:
-            if reason != _reason(exc):  # the file named: the same error, with where it comes from
+            if reason != fault_reason(exc):  # the file named: the same error, with where it comes from
                 from semattnet._errors import DataError
 
                 raise DataError(reason) from exc

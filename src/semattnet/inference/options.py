@@ -14,9 +14,13 @@ from dataclasses import dataclass
 
 from semattnet._errors import InputError
 
-__all__ = ["OutputSpec", "RunOptions"]
+__all__ = ["WRITE_AHEAD", "OutputSpec", "RunOptions"]
 
 PathLike = str | os.PathLike[str]
+
+#: Frames the writing runs behind the network by default in a paced or read-ahead run: the network completes frame
+#: ``i + 1`` while frame ``i`` is written, so it is the only serial stage.
+WRITE_AHEAD = 1
 
 
 @dataclass(frozen=True)
@@ -42,13 +46,25 @@ class RunOptions:
     run; None: ``skip`` for more than one frame. ``prefetch`` > 0: read, project and segment that many frames
     ahead in a background thread. ``realtime``: replay at the sensor pace, that many times faster, dropping frames
     that come while the completer is busy (None: every frame). ``batch_size`` > 1: up to that many consecutive
-    frames of one size completed in one engine call.
+    frames of one size completed in one engine call. ``write_ahead``: how many completed frames the writing (every
+    sink, the files moved into place, the journal) may run behind the network, in a background stage
+    (:mod:`~.writer`); 0: each frame written before the next is completed; None: :data:`WRITE_AHEAD` frames with
+    ``realtime`` or ``prefetch``, else 0.
     """
 
     on_error: str | None = None
     prefetch: int = 0
     realtime: float | None = None
     batch_size: int = 1
+    write_ahead: int | None = None
+
+    def write_depth(self) -> int:
+        """``write_ahead`` as it applies (its default resolved)."""
+        if self.write_ahead is None:
+            return WRITE_AHEAD if self.realtime is not None or self.prefetch > 0 else 0
+        if self.write_ahead < 0:
+            raise InputError(f"write_ahead must be 0 or more, got {self.write_ahead!r}")
+        return self.write_ahead
 
     def policy(self, frames: int) -> str:
         """``on_error`` for a run of ``frames`` frames: as given, else ``skip`` for more than one and ``stop``

@@ -22,7 +22,12 @@ A long run survives its bad frames and its kills:
   stops the run with the frames done so far kept (``"stop"``). Errors of the run (a full disk, a sink that fails, a
   missing package) stop it at once.
 * **Every frame's outputs appear as it is done**, each file atomically, and the frame is recorded in
-  ``OUT/frames.json`` (:mod:`~.journal`) once they are all in place.
+  ``OUT/frames.json`` (:mod:`~.journal`) once they are all in place. With ``realtime`` or read-ahead the
+  writing (every sink, the moves, the journal) runs a frame behind the network in a bounded background stage
+  (:mod:`~.writer`; ``RunOptions.write_ahead``), in order, so the network is the only serial stage. A sink's
+  fault on a frame (:func:`~.feed.is_frame_fault`) is that frame's, as a completer's is.
+* **Ctrl-C and SIGTERM** stop the run once the frames handed to the writer are written and journaled (SIGTERM
+  raises ``SystemExit(143)`` for it while the loop runs in the main thread).
 * **Resume.** ``OutputSpec(resume=True)`` continues a killed or failed run in ``out``: the frames done, with every
   output whole, are kept; the rest are done; the run outputs (a bag, a recording, ``latency.json``) are
   written at the end over every frame, in order, so they equal those of an uninterrupted run.
@@ -38,9 +43,13 @@ from __future__ import annotations
 
 import os
 import re
+import signal
+import threading
 from collections import Counter, deque
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -53,13 +62,14 @@ from semattnet._utils.outputs import Output, check_no_input_overlap, check_outpu
 from semattnet.data.frames import Frame, FrameSource
 from semattnet.data.io import encode_depth, read_depth
 from semattnet.inference.completer import Completer, Completion
-from semattnet.inference.feed import FrameFault, completions, is_frame_fault, read_frame
+from semattnet.inference.feed import FrameFault, completions, fault_reason, is_frame_fault, read_frame
 from semattnet.inference.journal import FRAMES_FILE, FrameEntry, RunJournal, describe_counts
 from semattnet.inference.options import OutputSpec, RunOptions
 from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sharding import agree, gather_rows, on_main, process_group, rank_log, shard
 from semattnet.inference.sinks import Prediction, Sink, output_files, predict_frame
 from semattnet.inference.timing import StageTimes
+from semattnet.inference.writer import WriteStage
 
 __all__ = [
     "EXIT_DROPPED",
@@ -278,6 +288,7 @@ class _FrameLoop:
         self.source, self.out, self.plan, self.timer, self.log = source, out, plan, timer, log
         self.journal, self.semantic = plan.journal, semantic
         self.sinks = sinks
+        self.files_first = sorted(sinks, key=lambda s: s.whole_run)  # the order frames are written in
         self.replays = [s for s in sinks if s.replays]
         self.depth_sink = next((s for s in sinks if s.role == "depth"), None)
         self.uncertainty_sink = next((s for s in sinks if s.role == "uncertainty"), None)
@@ -328,20 +339,40 @@ class _FrameLoop:
             sink.write(self.out, pred)
 
     def write(self, stage: Path, frame: Frame, completion: Completion) -> None:
-        """A completed frame: every sink, the frame's files moved into place, then journaled."""
+        """A completed frame: every sink, the frame's files moved into place, then journaled. A sink's fault on
+        the frame (:func:`~.feed.is_frame_fault`) is the frame's: its staged files removed, noted ``skipped``, or
+        ``failed`` and raised with ``on_error="stop"``."""
         self.catch_up(frame.name)
+        try:
+            files = self._put(stage, frame, completion)
+        except Exception as exc:
+            if not is_frame_fault(exc):
+                raise
+            for rel in output_files([frame.name], self.sinks):
+                (stage / rel).unlink(missing_ok=True)
+            self.timer.discard(frame.name)
+            stop = self.plan.on_error == "stop"
+            self.note(FrameFault(frame.name, "failed" if stop else "skipped", fault_reason(exc)))
+            if stop:
+                raise
+            return
+        stage_ms = {k: 1e3 * v for k, v in self.timer.times[frame.name].items()}
+        self.journal.done(frame.name, files, stage_ms, inputs=frame.paths.values())
+        self.journal.save(force=False)
+        self.log(_line(frame, self.out, self.depth_sink))
+
+    def _put(self, stage: Path, frame: Frame, completion: Completion) -> list[str]:
+        """Every sink (the frame's files first, then the run outputs, so a file's fault leaves those without
+        the frame), the frame's files moved from ``stage`` into place; timed as ``writing``. Returns the files."""
         with self.timer.time(frame.name, "writing"):
             stage_ms = {k: 1e3 * v for k, v in self.timer.times.get(frame.name, {}).items()}
-            write_prediction(stage, frame, completion, self.sinks, stage_ms)
+            write_prediction(stage, frame, completion, self.files_first, stage_ms)
             files = output_files([frame.name], self.sinks)
             for rel in files:
                 (self.out / rel).parent.mkdir(parents=True, exist_ok=True)
                 os.replace(stage / rel, self.out / rel)
             fsync_dir(self.out)
-        stage_ms = {k: 1e3 * v for k, v in self.timer.times[frame.name].items()}
-        self.journal.done(frame.name, files, stage_ms, inputs=frame.paths.values())
-        self.journal.save(force=False)
-        self.log(_line(frame, self.out, self.depth_sink))
+        return files
 
     def finish(self, stage: Path) -> None:
         """Every frame seen: the run outputs completed (rank 0's ``latency.json``) and moved into place, when a
@@ -374,16 +405,29 @@ class _FrameLoop:
 def _run_frames(loop: _FrameLoop, completer: Completer) -> None:
     """The frames of this process through the completer into ``loop`` (the run outputs opened before and
     finished after; aborted on any error)."""
-    plan, options = loop.plan, loop.plan.options
-    try:
-        with stage_folder(loop.out) as stage:  # each frame is written there, then moved into place
+    plan, options, timer = loop.plan, loop.plan.options, loop.timer
+    depth = options.write_depth()
+    if depth:
+        timer.beside["writing"] = "the writer thread"
+    try:  # each frame is written into the stage, then moved into place; the writing `depth` frames behind
+        with stage_folder(loop.out) as stage, WriteStage(depth) as writer:
             for s in loop.sinks:
                 s.open(plan.output.overwrite or plan.output.resume)
-            for frame, completion in completions(loop.source, completer, loop.todo(), loop.semantic, loop.timer,
-                                                 options.prefetch, report=loop.note, realtime=options.realtime,
+
+            def note(fault: FrameFault) -> None:
+                writer.submit(partial(loop.note, fault), frame=False)
+
+            for frame, completion in completions(loop.source, completer, loop.todo(), loop.semantic, timer,
+                                                 options.prefetch, report=note, realtime=options.realtime,
                                                  batch_size=options.batch_size,
                                                  stop_on_fault=plan.on_error == "stop"):  # fmt: skip
-                loop.write(stage, frame, completion)
+                writer.submit(partial(loop.write, stage, frame, completion))
+            timer.begin()  # the writing of the last frames counts in the wall time
+            try:
+                writer.drain()
+            finally:
+                timer.end()
+            timer.write_waited_s = writer.waited_s
             loop.finish(stage)
     except BaseException:
         for s in loop.sinks:
@@ -428,15 +472,38 @@ def _execute(plan: RunPlan, completer: Completer, semantic: SemanticMaps, timer:
 
 def _attempt_run(loop: _FrameLoop, completer: Completer) -> Exception | None:
     """:func:`_run_frames`, its error returned (for every rank to agree on); on any error the frames done
-    stay journaled. Ctrl-C is raised at once."""
+    stay journaled. Ctrl-C and SIGTERM are raised (once the frames handed to the writer are written)."""
     try:
-        _run_frames(loop, completer)
+        with _terminate_as_exit():
+            _run_frames(loop, completer)
     except BaseException as exc:
         loop.forget()
         if not isinstance(exc, Exception):
             raise
         return exc
     return None
+
+
+#: The exit status of a run stopped by SIGTERM (the shell's 128 + the signal's number).
+_SIGTERM_EXIT = 128 + signal.SIGTERM
+
+
+@contextmanager
+def _terminate_as_exit() -> Iterator[None]:
+    """While active, SIGTERM (when it would kill the process at once) raises ``SystemExit`` in the main thread,
+    so a terminated run stops as Ctrl-C does: the frames handed to the writer written, the journal saved."""
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGTERM) != signal.SIG_DFL:
+        yield
+        return
+
+    def stop(signum: int, frame: object) -> None:
+        raise SystemExit(_SIGTERM_EXIT)
+
+    signal.signal(signal.SIGTERM, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def _nothing_done(entries: Sequence[FrameEntry]) -> DataError:

@@ -77,7 +77,9 @@ class Sink:
     outputs of the whole run. Its facts: ``role``, what the
     loop finds it by (``depth``: the depth PNG, named in each frame's line, the paths a run returns and read
     back by a resume; ``uncertainty``: the uncertainty PNG a resume reads back); ``replays``: a resumed run hands
-    it the frames kept from the earlier run; ``once``: under ``torchrun`` one process (rank 0) finishes it."""
+    it the frames kept from the earlier run; ``once``: under ``torchrun`` one process (rank 0) finishes it;
+    ``whole_run``: it writes one output for the whole run (a :class:`RunSink`), fed each frame after the frame's
+    files are written, so a file's fault on a frame leaves it without that frame."""
 
     suffix: str = ".png"
     folder: str = ""
@@ -86,6 +88,7 @@ class Sink:
     role: ClassVar[str] = ""
     replays: ClassVar[bool] = False
     once: ClassVar[bool] = False
+    whole_run: ClassVar[bool] = False
     #: The option that names ``targets()`` and what they are (a kind of :data:`semattnet._utils.outputs.KINDS`).
     option: ClassVar[str] = "--out"
     kind: ClassVar[str] = "file"
@@ -389,6 +392,7 @@ class RunSink(Sink):
     earlier run (their stored depth, in their place), so that its output covers every frame."""
 
     replays: ClassVar[bool] = True
+    whole_run: ClassVar[bool] = True
 
     def path(self, name: str) -> str | None:
         return None

@@ -28,7 +28,7 @@ __all__ = [
 
 #: The stages timed, in order.
 STAGES = ("read", "projection", "segmentation", "network", "propagation", "writing")
-_LABELS = {"read": "read/decode"}
+_LABELS = {"read": "read/decode", "writing": "write/publish"}
 #: The sensor period assumed when the frames' stamps cannot say (a 10 Hz LiDAR), seconds.
 DEFAULT_SENSOR_PERIOD_S = 0.1
 #: ``--realtime``: a gap between two frames longer than this many sensor periods (their median so far) is skipped.
@@ -40,12 +40,14 @@ LATENCY_FILE = "latency.json"
 
 
 class StageSummary(TypedDict, total=False):
-    """One stage of :meth:`StageTimes.summary`: ``median_ms``, ``p95_ms`` and ``frames``, or ``note`` (not run)."""
+    """One stage of :meth:`StageTimes.summary`: ``median_ms``, ``p95_ms`` and ``frames``, or ``note`` (not run);
+    ``beside``: the thread it runs in beside the network (absent: on the loop's serial path)."""
 
     median_ms: float
     p95_ms: float
     frames: int
     note: str
+    beside: str
 
 
 class LatencySummary(TypedDict):
@@ -57,6 +59,8 @@ class LatencySummary(TypedDict):
     wall_s: float
     overlapped: bool
     per_frame_median_ms: float
+    serial_median_ms: float
+    write_waited_s: float
     throughput_hz: float
     sensor_period_s: float
     realtime_factor: float
@@ -82,12 +86,17 @@ class StageTimes:
 
     A stage timed inside another (``propagation`` inside ``network``) is subtracted from the outer one, so
     the stages add up to the time spent. ``notes``: stage -> why it has no times (shown in the table).
+    ``beside``: stage -> the thread it runs in beside the network (the reading in the reader's, the writing in
+    the writer's); the other stages are the serial path, which bounds the frames per second.
+    ``write_waited_s``: how long the loop waited for the writer (it ran behind by as many frames as allowed).
     """
 
     def __init__(self) -> None:
         self.times: dict[str, dict[str, float]] = {}
         self.stamps: dict[str, float] = {}
         self.notes: dict[str, str] = {}
+        self.beside: dict[str, str] = {}
+        self.write_waited_s = 0.0
         self.wall_s = 0.0
         self.overlapped = False
         self.queue_most: int | None = None  # --realtime: the most frames waiting for the completer at once
@@ -161,36 +170,49 @@ class StageTimes:
         with self._lock:
             return np.array([t[stage] for t in self.times.values() if stage in t], dtype=np.float64)
 
+    def _stage_summary(self, stage: str) -> StageSummary:
+        v = self.stage(stage)
+        row: StageSummary = ({"median_ms": 1e3 * float(np.median(v)), "p95_ms": 1e3 * float(np.percentile(v, 95)),
+                              "frames": len(v)} if len(v) else {"note": self.notes.get(stage, "not run")})  # fmt: skip
+        if stage in self.beside and len(v):
+            row["beside"] = self.beside[stage]
+        return row
+
     def summary(self) -> LatencySummary:
         """Median and p95 per stage (ms), the sum of medians, wall time, throughput and the sensor period."""
-        stages: dict[str, StageSummary] = {}
-        for s in STAGES:
-            v = self.stage(s)
-            stages[s] = ({"median_ms": 1e3 * float(np.median(v)), "p95_ms": 1e3 * float(np.percentile(v, 95)),
-                          "frames": len(v)} if len(v) else {"note": self.notes.get(s, "not run")})  # fmt: skip
-        per_frame = [sum(t.values()) for t in self.times.values()]
+        stages = {s: self._stage_summary(s) for s in STAGES}
+        with self._lock:
+            per_frame = [sum(t.values()) for t in self.times.values()]
+            serial = [sum(v for k, v in t.items() if k not in self.beside) for t in self.times.values()]
         period = self.sensor_period_s
         fps = self.frames / self.wall_s if self.wall_s > 0 else 0.0
         return {"frames": self.frames, "stages": stages,
                 "sum_of_stages_s": float(sum(per_frame)), "wall_s": self.wall_s, "overlapped": self.overlapped,
                 "per_frame_median_ms": 1e3 * float(np.median(per_frame)) if per_frame else 0.0,
-                "throughput_hz": fps, "sensor_period_s": period, "realtime_factor": fps * period,
+                "serial_median_ms": 1e3 * float(np.median(serial)) if serial else 0.0,
+                "write_waited_s": self.write_waited_s, "throughput_hz": fps, "sensor_period_s": period,
+                "realtime_factor": fps * period,
                 "not_done": dict(self.not_done), "queue_most": self.queue_most, "gaps_skipped": self.gaps_skipped,
                 "cpu": cpu_name()}  # fmt: skip
 
     def table(self) -> str:
         """The per-stage latency table (what ``semattnet predict`` prints)."""
         s = self.summary()
-        rows = [f"{'stage':<14}{'median ms':>11}{'p95 ms':>10}"]
+        rows = [f"{'stage':<14}{'median ms':>11}{'p95 ms':>10}  runs"]
         for stage, r in s["stages"].items():
             label = _LABELS.get(stage, stage)
             if "median_ms" in r and "p95_ms" in r:
-                rows.append(f"{label:<14}{r['median_ms']:>11.1f}{r['p95_ms']:>10.1f}")
+                runs = f"beside the network ({r['beside']})" if "beside" in r else "serial"
+                rows.append(f"{label:<14}{r['median_ms']:>11.1f}{r['p95_ms']:>10.1f}  {runs}")
             else:
                 rows.append(f"{label:<14}{'-':>11}{'-':>10}  ({r.get('note', '')})")
         period = s["sensor_period_s"]
         verdict = "keeps up" if s["realtime_factor"] >= 1 else "falls behind"
         rows.append(f"{'per frame':<14}{s['per_frame_median_ms']:>11.1f}")
+        if any("beside" in r for r in s["stages"].values()):
+            rows.append(f"{'serial path':<14}{s['serial_median_ms']:>11.1f}  (what bounds the frames/s)")
+        if s["write_waited_s"] > 0.0005:
+            rows.append(f"the loop waited {s['write_waited_s']:.2f} s in all for the writer (it fell behind)")
         rows.append(f"{s['frames']} frame(s) in {s['wall_s']:.2f} s{' (read ahead)' if s['overlapped'] else ''}: "
                     f"{s['throughput_hz']:.2f} frames/s against a sensor period of {1e3 * period:.1f} ms "
                     f"({1 / period:.1f} Hz): {s['realtime_factor']:.2g}x real time, {verdict}")  # fmt: skip
