@@ -23,6 +23,7 @@ FIXTURES: dict[str, tuple[int, ...]] = {
     "resnet": (4, 8, 8, 16),
     "lite_s4": (4, 8, 8, 16),
     "lite_s2": (4, 8, 8, 8, 16),
+    "lite_s4_wide": (4, 8, 8, 16),
 }
 
 

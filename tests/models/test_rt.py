@@ -17,7 +17,7 @@ from semattnet.models.registry import arch_for, model_class
 from semattnet.models.rt import SemAttNetRT, SemAttNetRTBackbone
 from tests._base import BaseTester
 
-RT_MODELS = ("semattnet_rt_s", "semattnet_rt_m")
+RT_MODELS = ("semattnet_rt_s", "semattnet_rt_m", "semattnet_rt_l")
 
 
 def _frame(b: int = 1, h: int = 32, w: int = 64, seed: int = 0) -> dict[str, torch.Tensor]:
@@ -130,3 +130,44 @@ def test_exports_through_the_engines(backend: str, tmp_path: Path, monkeypatch: 
     engine = optimize_for_inference(model, backend=backend, size=(32, 64))
     with torch.inference_mode():
         torch.testing.assert_close(engine(**x).depth, model(**x).depth, rtol=1e-4, atol=1e-3)
+
+
+class TestConvexUpsample:
+    """:func:`semattnet.models.rt.convex_upsample` against independent references (pooling, nearest)."""
+
+    def test_zero_logits_give_every_sub_pixel_the_3x3_mean(self) -> None:
+        import torch.nn.functional as F
+
+        from semattnet.models.rt import convex_upsample
+
+        x = torch.rand(2, 3, 5, 7)
+        mean = F.avg_pool2d(F.pad(x, (1, 1, 1, 1), mode="replicate"), 3, stride=1)
+        up = convex_upsample(x, torch.zeros(2, 9 * 16, 5, 7), 4)
+        torch.testing.assert_close(up, F.interpolate(mean, scale_factor=4, mode="nearest"))
+
+    @pytest.mark.parametrize(("neighbour", "shift"), [(4, (0, 0)), (5, (0, -1)), (1, (1, 0))])
+    def test_a_one_hot_weight_picks_that_neighbour(self, neighbour: int, shift: tuple[int, int]) -> None:
+        import torch.nn.functional as F
+
+        from semattnet.models.rt import convex_upsample
+
+        x = torch.arange(35.0).view(1, 1, 5, 7)
+        logits = torch.full((1, 9, 4, 5, 7), -50.0)
+        logits[:, neighbour] = 50.0
+        up = convex_upsample(x, logits.view(1, 36, 5, 7), 2)
+        padded = F.pad(x, (1, 1, 1, 1), mode="replicate")
+        di, dj = 1 - shift[0], 1 - shift[1]  # neighbour (i, j) of pixel (y, x) is padded[y + i, x + j]
+        picked = padded[..., di : di + 5, dj : dj + 7]
+        torch.testing.assert_close(up, F.interpolate(picked, scale_factor=2, mode="nearest"))
+
+    def test_sub_pixels_get_their_own_weights_and_gradients_flow(self) -> None:
+        from semattnet.models.rt import convex_upsample
+
+        x = torch.rand(1, 1, 3, 3, requires_grad=True)
+        logits = torch.zeros(1, 9, 2, 2, 3, 3, requires_grad=True)
+        with torch.no_grad():
+            logits[:, 0, 0, 0] = 50.0  # the top-left sub-pixel takes the top-left neighbour
+        up = convex_upsample(x, logits.view(1, 36, 3, 3), 2)
+        assert abs(up[0, 0, 2, 2].item() - x[0, 0, 0, 0].item()) < 1e-5  # pixel (1, 1)'s top-left sub-pixel
+        up.sum().backward()
+        assert x.grad is not None and logits.grad is not None and torch.isfinite(logits.grad).all()

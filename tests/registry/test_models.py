@@ -56,6 +56,7 @@ class TestModels(RegistryTester[ModelFixture]):
         "table2_e": ModelFixture(BRANCHES | SEMANTIC | REFINED),
         "semattnet_rt_s": ModelFixture(BRANCHES | SEMANTIC | REFINED),
         "semattnet_rt_m": ModelFixture(BRANCHES | SEMANTIC | REFINED),
+        "semattnet_rt_l": ModelFixture(BRANCHES | SEMANTIC | REFINED),
     }
 
     @classmethod

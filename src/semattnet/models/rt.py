@@ -10,10 +10,13 @@ with atrous propagation (Sec. III-C), but:
   bound by memory traffic);
 * the decoders have one stage per encoder stage (a 1x1 projection, a nearest 2x upsampling, the
   skip added, one residual separable block) and stop at the stem's resolution;
-* the CSPN++ refinement (the paper's heads, both stages) runs at the stem's resolution; a learned
-  upsampling (a 1x1 convolution and a pixel shuffle, as in sub-pixel convolution) gives a 3x3
-  affinity and a re-injection mask at full resolution, for :data:`FINAL_ITERATIONS` last
-  propagation steps from the bilinearly upsampled refined depth.
+* the CSPN++ refinement (the paper's heads, both stages) runs at the stem's resolution; its depth is
+  brought to full resolution by a learned convex upsampling (:func:`convex_upsample`: each full-resolution
+  pixel a softmax-weighted mean of its 3x3 low-resolution neighbours, weights predicted from the refinement's
+  features, as RAFT upsamples flow), which keeps depth edges sharp where a bilinear upsampling smears them
+  over a stem-sized band; a learned upsampling (a 1x1 convolution and a pixel shuffle, as in sub-pixel
+  convolution) gives a 3x3 affinity and a re-injection mask at full resolution, for :data:`FINAL_ITERATIONS`
+  last propagation steps.
 
 Every map of :class:`~semattnet.models.outputs.DepthCompletionOutput` is returned at full resolution
 (the branch depths and fusion weights bilinearly upsampled); ``refined_s2_depth`` is the
@@ -42,7 +45,15 @@ from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.propagation import downsample_sparse
 from semattnet.models.refinement import AtrousCSPNRefinement, affinity_kernel, refine, run_cspn_stage
 
-__all__ = ["FINAL_ITERATIONS", "RTBranch", "RTFeatures", "SemAttNetRT", "SemAttNetRTBackbone", "rt_channels"]
+__all__ = [
+    "FINAL_ITERATIONS",
+    "RTBranch",
+    "RTFeatures",
+    "SemAttNetRT",
+    "SemAttNetRTBackbone",
+    "convex_upsample",
+    "rt_channels",
+]
 
 #: Propagation steps at full resolution after the learned upsampling (3x3 kernel).
 FINAL_ITERATIONS = 2
@@ -128,6 +139,20 @@ class RTBackboneFeatures(NamedTuple):
 
 def _up(x: torch.Tensor, size: Sequence[int]) -> torch.Tensor:
     return F.interpolate(x, size=tuple(size), mode="bilinear", align_corners=False)
+
+
+def convex_upsample(x: torch.Tensor, logits: torch.Tensor, scale: int) -> torch.Tensor:
+    """``x`` (B, C, h, w) to (B, C, h*scale, w*scale): each output pixel the convex combination of the 3x3
+    neighbourhood of its low-resolution pixel (edge-replicated at the border), with weights
+    ``softmax(logits)`` over the 9 neighbours; ``logits`` (B, 9*scale*scale, h, w), neighbour-major.
+    Zero logits give every sub-pixel the 3x3 mean. Written with slices (no unfold) so that every exporter
+    and OpenVINO take it."""
+    b, c, h, w = x.shape
+    padded = F.pad(x, (1, 1, 1, 1), mode="replicate")
+    patches = torch.stack([padded[:, :, i : i + h, j : j + w] for i in range(3) for j in range(3)], dim=1)
+    weights = logits.view(b, 9, 1, scale, scale, h, w).softmax(dim=1)
+    up = (weights * patches.view(b, 9, c, 1, 1, h, w)).sum(dim=1)  # (B, C, s, s, h, w)
+    return up.permute(0, 1, 4, 2, 5, 3).reshape(b, c, h * scale, w * scale)
 
 
 class SemAttNetRTBackbone(nn.Module):
@@ -225,6 +250,9 @@ class SemAttNetRT(AtrousCSPNRefinement, nn.Module):
         self._build_refinement(c1, c2, config.kernel_sizes, config.iterations, config.refinement_mode)
         s = self.backbone.stem_stride
         self.upsample = nn.Sequential(nn.Conv2d(c1, 9 * s * s, 1), nn.PixelShuffle(s))  # 8 guidance + 1 mask
+        self.convex = nn.Conv2d(c1, 9 * s * s, 1)  # the convex upsampling's weights (logits)
+        nn.init.zeros_(self.convex.weight)
+        nn.init.zeros_(self.convex.bias)
 
     def forward(
         self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
@@ -237,7 +265,7 @@ class SemAttNetRT(AtrousCSPNRefinement, nn.Module):
         heads = self.refinement_heads(depth, sparse_lr, feature_s1, feature_s2)
         _, refined_lr = refine(heads, self._iterations, self.propagation_impl)
         guide, mask = self.upsample(feature_s1).split((8, 1), dim=1)
-        start = _up(refined_lr, sparse.shape[-2:])
+        start = convex_upsample(refined_lr, self.convex(feature_s1), self.backbone.stem_stride)
         valid = (sparse > 0).to(sparse.dtype)
         affinity = affinity_kernel(guide.float(), self.propagation_impl)
         refined = run_cspn_stage(start, start, [affinity], torch.ones_like(start), sparse, torch.sigmoid(mask) * valid,
