@@ -24,6 +24,7 @@ FIXTURES: dict[str, tuple[int, ...]] = {
     "lite_s4": (4, 8, 8, 16),
     "lite_s2": (4, 8, 8, 8, 16),
     "lite_s4_wide": (4, 8, 8, 16),
+    "lite_s2_deep": (4, 8, 8, 8, 16),
 }
 
 

@@ -57,6 +57,7 @@ class TestModels(RegistryTester[ModelFixture]):
         "semattnet_rt_s": ModelFixture(BRANCHES | SEMANTIC | REFINED),
         "semattnet_rt_m": ModelFixture(BRANCHES | SEMANTIC | REFINED),
         "semattnet_rt_l": ModelFixture(BRANCHES | SEMANTIC | REFINED),
+        "semattnet_rt_md": ModelFixture(BRANCHES | SEMANTIC | REFINED),
     }
 
     @classmethod
