@@ -24,6 +24,10 @@ def frontier() -> ModuleType:
     return load_script("frontier")
 
 
+def report_module() -> ModuleType:
+    return load_script("frontier_report")
+
+
 def test_variants_are_the_paper_at_two_widths_and_every_real_time_model(frontier: ModuleType) -> None:
     keys = [key for key, _, _ in frontier.variants()]
     rt = [n for n in list_models() if model_config(n).realtime]
@@ -73,15 +77,31 @@ def test_training_half_tiny(frontier: ModuleType, tmp_path: Path, bare_machine: 
     assert scores["semattnet_rt_s"]["params"] < scores["paper_w1_8"]["params"] / 10
 
 
-@pytest.mark.slow  # converts the paper model and one variant with OpenVINO: about 2 minutes on 2 busy cores
-def test_timing_half_tiny(frontier: ModuleType, tmp_path: Path) -> None:
-    args = ["--time", "--size", "64x96", "--repeats", "1", "--variants", "semattnet_rt_s"]
-    frontier.main(["--out", str(tmp_path), *args])
-    timing = json.loads((tmp_path / "timing.json").read_text())
+@pytest.mark.slow  # trains one variant, builds its and the paper model's engines (f32, int8): minutes on 2 busy cores
+def test_all_tiny_trains_times_and_reports(frontier: ModuleType, tmp_path: Path) -> None:
+    """``--all``: the training half, the timing half (every backend, the whole frame, memory, int8 scores) and
+    the report, on a tiny run."""
+    docs = tmp_path / "docs"
+    docs.mkdir()
+    (docs / "performance.md").write_text(f"# P\n\n{report_module().BEGIN}\nold\n{report_module().END}\n")
+    frontier.main(["--out", str(tmp_path / "run"), "--all", "--device", "cpu", "--frames", "4", "--steps", "2,1,2",
+                   "--size", "32x64", "--seeds", "0", "--variants", "semattnet_rt_s", "--time-size", "64x96",
+                   "--repeats", "1", "--docs", str(docs)])  # fmt: skip
+    timing = json.loads((tmp_path / "run" / "timing.json").read_text())
     keys = ("paper_w1_8", "semattnet_rt_s")
-    assert {f"{k}/torch-f32" for k in keys} == {k for k in timing["rows"] if k.endswith("torch-f32")}
-    assert timing["size"] == [64, 96]
-    assert timing["rows"]["paper_w1_8/torch-f32"]["ratio"] == 1.0 and timing["cpu"]
+    backends = [b for b, _, _ in frontier._backends()]
+    assert set(timing["rows"]) == {f"{k}/{b}" for k in keys for b in backends} and "torch-f32" in backends
+    assert timing["size"] == [64, 96] and timing["cpu"] and timing["threads"] >= 1 and "isa" in timing
+    assert timing["rows"]["paper_w1_8/torch-f32"]["ratio"] == 1.0
+    assert all(r["peak_mb"] > 0 for r in timing["rows"].values())
+    assert set(timing["frames"]) == set(keys) and all(f["frame_ms"] > 0 for f in timing["frames"].values())
+    assert set(timing["models"]) == set(keys) and timing["classical_ms"] > 0
+    if "openvino-int8" in backends:  # the trained variant's int8 scores beside its float32 ones
+        assert set(timing["int8"]) == {"semattnet_rt_s"}
+        assert set(timing["int8"]["semattnet_rt_s"]["change"]) == {"rmse", "mae", "irmse", "imae"}
+    text = (docs / "performance.md").read_text()
+    assert "old" not in text and "| `semattnet_rt_s` |" in text
+    assert (docs / "frontier.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_a_variant_trained_earlier_is_read_back_not_trained_again(frontier: ModuleType, tmp_path: Path) -> None:
