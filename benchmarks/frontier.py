@@ -195,7 +195,7 @@ MEMORY = (
     "one forward in a fresh process per variant and backend, its engine built: the resident set's high-water "
     "mark (VmHWM, reset by /proc/self/clear_refs) and its growth over VmRSS before the forward"
 )
-#: Frames of the whole-frame run (``predict --stream``'s loop), the first a warm-up the median leaves out.
+#: Frames of the whole-frame run (``predict --stream``'s loop); their median is robust to the first one's warm-up.
 STREAM_FRAMES = 6
 
 

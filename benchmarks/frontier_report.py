@@ -135,6 +135,30 @@ def verdict(results: Mapping[str, Any], timing: Mapping[str, Any], key: str) -> 
     return " ".join(parts)
 
 
+def passes(results: Mapping[str, Any], timing: Mapping[str, Any], key: str) -> bool:
+    """Whether ``key`` meets every acceptance item measured: network + propagation within the budget, better than
+    the classical completion on all four metrics, RMSE within 15 % of the width-1/8 paper model's, and (where
+    measured) int8 within 1 % of float32 on every metric."""
+    res = results["results"]
+    fastest = best(timing, key)
+    scores = res[key]["scores"]
+    int8 = timing.get("int8", {}).get(key)
+    return (fastest is not None and fastest[0] <= BUDGET_MS
+            and all(scores[m] < res["classical"]["scores"][m] for m in METRICS)
+            and "paper_w1_8" in res and scores["rmse"] <= (1 + RMSE_SLACK) * res["paper_w1_8"]["scores"]["rmse"]
+            and (int8 is None or all(abs(c) <= INT8_SLACK for c in int8["change"].values())))  # fmt: skip
+
+
+def summary(results: Mapping[str, Any], timing: Mapping[str, Any], keys: list[str]) -> str:
+    """The acceptance in one line: the real-time variants that meet all of it, or that none does."""
+    ok = [f"`{k}`" for k in keys if passes(results, timing, k)]
+    if not ok:
+        return "**Acceptance: no real-time variant meets all of it** (each one's reading below)."
+    return (f"**Acceptance: met by {', '.join(ok)}**: within {BUDGET_MS:.0f} ms network + propagation, better than "
+            f"the classical completion on all four metrics, RMSE within {100 * RMSE_SLACK:.0f} % of the width-1/8 "
+            "paper model's (and int8 within 1 % of float32 where measured).")  # fmt: skip
+
+
 def bound(timing: Mapping[str, Any], keys: list[str]) -> str:
     """When no variant is within the budget: the fastest one's time and where it goes, measured (its whole frame's
     stages and the arithmetic rate it reached)."""
@@ -208,6 +232,8 @@ def section(results: Mapping[str, Any], timing: Mapping[str, Any], image: str) -
         f"ms: network + propagation (median); {frame_note}; memory: the resident set during {MEMORY_NOTE}, its growth "
         "over the set before the forward and its high-water mark. The classical completion's time is in the torch "
         "f32 column; int8 scores are in timing.json.",
+        "",
+        summary(results, timing, keys),
         "",
         *(f"- {verdict(results, timing, k)}" for k in keys),
         "",

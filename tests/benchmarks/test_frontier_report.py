@@ -79,6 +79,16 @@ def test_verdict_reads_the_acceptance(report: ModuleType) -> None:
     slow = report.verdict(results, _timing(rt_ms=120.0), "semattnet_rt_s")
     assert "95 ms" in slow and "(OV f32)" in slow  # the fastest backend
     assert "does not beat the classical completion on IMAE" in slow
+    assert report.passes(_results(), _timing(), "semattnet_rt_s")
+    assert report.summary(_results(), _timing(), ["semattnet_rt_s"]).startswith("**Acceptance: met by `semattnet_rt_s`")
+    assert not report.passes(results, _timing(), "semattnet_rt_s")  # worse iMAE than the classical completion
+    timing = _timing(rt_ms=120.0)
+    timing["rows"]["semattnet_rt_s/openvino-f32"]["ms"] = 101.0
+    assert not report.passes(_results(), timing, "semattnet_rt_s")  # over the budget on every backend
+    timing = _timing()
+    timing["int8"]["semattnet_rt_s"]["change"]["mae"] = 0.02
+    assert not report.passes(_results(), timing, "semattnet_rt_s")  # int8 2 % off float32
+    assert "no real-time variant meets all of it" in report.summary(_results(), timing, ["semattnet_rt_s"])
 
 
 def test_bound_names_the_best_reached_and_where_its_frame_goes(report: ModuleType) -> None:
