@@ -54,6 +54,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from frontier_report import METRICS
 from semattnet._errors import InputError
 from semattnet._utils.atomic import atomic_path
 from semattnet._utils.device import resolve_device
@@ -69,7 +70,6 @@ from semattnet.weights.checkpoint import load_checkpoint, load_weights, save_saf
 DOCS = Path(__file__).resolve().parents[1] / "docs"
 #: The command of the full training run (results.json records it).
 COMMAND = "python benchmarks/frontier.py --out frontier-run --device cuda"
-METRICS = ("rmse", "mae", "irmse", "imae")
 PAPER = (("paper_w1_8", "semattnet", 0.125), ("paper_w1_4", "semattnet", 0.25))
 
 
@@ -450,7 +450,7 @@ def main(argv: Sequence[str] | None = None) -> Path:
 
 def report(out: Path, docs: Path) -> Path:
     """``--report``: the section between the markers of ``docs/performance.md`` and ``docs/frontier.png``."""
-    from frontier_report import write_report
+    from frontier_report import write_report  # its plot imports matplotlib
 
     doc = write_report(out, docs / "performance.md", docs / "frontier.png")
     print(f"[frontier] wrote {doc} and {docs / 'frontier.png'}")
