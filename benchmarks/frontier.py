@@ -29,7 +29,8 @@ per variant and backend (:data:`BACKENDS`: torch float32 with BatchNorm folded, 
 built by the engine table, one backend after the other, the variants in turns) the network + propagation's
 median ms and its ratio to the width-1/8 paper model, and the memory of one forward in a fresh process
 (:data:`MEMORY`); per variant the whole ``predict --stream`` frame on its fastest backend (the library's frame loop
-on synthetic scenes as a folder input: its latency table); the classical completion's ms; and, with
+on synthetic scenes as a folder input: its latency table); the classical completion's ms; the float32
+convolution peak measured at that size (GFLOP/s); and, with
 ``results.json`` there, each variant's int8 scores on the held-out scenes beside its float32 ones. ``--report``
 writes the section "The real-time frontier" of ``docs/performance.md`` (between its markers) and
 ``docs/frontier.png`` from the two files (``benchmarks/frontier_report.py``).
@@ -62,6 +63,7 @@ from semattnet.apps.demo import uncertainty as unc
 from semattnet.apps.demo.recipe import DemoSettings
 from semattnet.apps.demo.reference import REFERENCE_RECIPE, ReferenceRecipe, machine_line
 from semattnet.apps.experiment import HeldOut, complete_held_out, load_held_out, make_synthetic, score, train_variant
+from semattnet.apps.timing import conv_peak_gflops
 from semattnet.baselines.classical import complete_classical
 from semattnet.models.registry import build_model, list_models, model_config
 from semattnet.weights.checkpoint import load_checkpoint, load_weights, save_safetensors
@@ -410,8 +412,10 @@ def time_variants(out: Path, size: tuple[int, int], repeats: int, keys: Sequence
         int8 = int8_accuracy(out, list(models), log)
     target = out / "timing.json"
     classical = _classical_ms(size, repeats)
+    peak = conv_peak_gflops(torch.device("cpu"), size)  # what the arithmetic alone would allow
     _write_json(target, {**machine(), "size": size, "repeats": repeats, "memory": MEMORY, "models": counts,
-                         "rows": rows, "classical_ms": classical, "frames": frames, "int8": int8})  # fmt: skip
+                         "rows": rows, "classical_ms": classical, "conv_peak_gflops": peak, "frames": frames,
+                         "int8": int8})  # fmt: skip
     log(f"[frontier] wrote {target}")
     return target
 

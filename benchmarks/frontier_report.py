@@ -171,7 +171,14 @@ def bound(timing: Mapping[str, Any], keys: list[str]) -> str:
     stages = timing.get("frames", {}).get(key, {}).get("stages_ms", {})
     where = ", ".join(f"{s} {v:.0f} ms" for s, v in stages.items())
     gmac = timing.get("models", {}).get(key, {}).get("gmac")
-    rate = "" if gmac is None else f" It runs {gmac:.2f} GMAC at {1000 * gmac / ms:.0f} GMAC/s."
+    rate = "" if gmac is None else f" It runs {gmac:.2f} GMAC at {2000 * gmac / ms:.0f} GFLOP/s"
+    if gmac is not None and timing.get("conv_peak_gflops"):
+        peak = timing["conv_peak_gflops"]
+        rate += (
+            f", {100 * 2000 * gmac / ms / peak:.0f} % of the float32 convolution peak measured here "
+            f"({peak:.0f} GFLOP/s): bound by memory traffic and small operations, not by arithmetic"
+        )
+    rate += "." if rate else ""
     return (f"No real-time variant is within the {BUDGET_MS:.0f} ms budget: the best reached is {ms:.0f} ms "
             f"(`{key}`, {BACKENDS[backend]}); its whole frame: {where or 'not measured'}.{rate}")  # fmt: skip
 

@@ -96,7 +96,11 @@ def test_bound_names_the_best_reached_and_where_its_frame_goes(report: ModuleTyp
     timing["rows"]["semattnet_rt_s/openvino-f32"]["ms"] = 125.0
     text = report.bound(timing, ["semattnet_rt_s"])
     assert text.startswith("No real-time variant is within the 100 ms budget: the best reached is 125 ms")
-    assert "network 110 ms" in text and "0.95 GMAC at 8 GMAC/s" in text
+    assert "network 110 ms" in text and "0.95 GMAC at 15 GFLOP/s." in text
+    timing["conv_peak_gflops"] = 152.0
+    assert "0.95 GMAC at 15 GFLOP/s, 10 % of the float32 convolution peak measured here (152 GFLOP/s)" in report.bound(
+        timing, ["semattnet_rt_s"]
+    )
     assert report.bound(_timing(), ["semattnet_rt_s"]).startswith("Fastest: `semattnet_rt_s`, 80 ms (OV int8)")
 
 
