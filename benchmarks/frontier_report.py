@@ -8,6 +8,7 @@ Nothing here imports torch: it reads the two files, so the report is remade in a
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -83,7 +84,8 @@ def table(results: Mapping[str, Any], timing: Mapping[str, Any]) -> str:
         fastest = best(timing, key)
         frame = timing.get("frames", {}).get(key, {}).get("frame_ms")
         row = {} if fastest is None else timing["rows"][f"{key}/{fastest[1]}"]
-        memory = "–" if "peak_mb" not in row else f"{row['growth_mb']:.0f} / {row['peak_mb']:.0f}"
+        measured = "peak_mb" in row and not math.isnan(row["peak_mb"])
+        memory = f"{row['growth_mb']:.0f} / {row['peak_mb']:.0f}" if measured else "–"
         times = [_cell(_ms(timing, key, b)) for b in BACKENDS]
         if key == "classical":
             times = [_cell(timing.get("classical_ms")), "–", "–"]

@@ -66,6 +66,9 @@ def test_table_rows_in_kitti_units_with_the_seeds_spread(report: ModuleType) -> 
     assert classical[:4] == ["classical completion", "–", "–", "2000"] and classical[8:11] == ["30", "–", "–"]
     paper = [c.strip() for c in lines[3].strip("|").split("|")]
     assert paper[0] == "paper model, width 1/8" and paper[10] == "–" and paper[-1] == "300 / 700"  # not run in int8
+    timing = _timing()
+    timing["rows"]["paper_w1_8/openvino-f32"].update(peak_mb=float("nan"), growth_mb=float("nan"))  # its run failed
+    assert report.table(_results(), timing).splitlines()[3].endswith("| 600 | – |")
 
 
 def test_verdict_reads_the_acceptance(report: ModuleType) -> None:
