@@ -24,7 +24,10 @@ BACKENDS = {"torch-f32": "torch f32", "openvino-f32": "OV f32", "openvino-int8":
 BUDGET_MS = 100.0  # a 10 Hz LiDAR's period
 RMSE_SLACK = 0.15  # within 15 % of the width-1/8 paper model's RMSE
 INT8_SLACK = 0.01  # int8 metrics within 1 % of float32
-MEMORY_NOTE = "one forward in a fresh process, on the variant's fastest backend"
+MEMORY_NOTE = (
+    "one forward in a fresh process, on the variant's fastest backend (Linux's VmHWM, reset through "
+    "/proc/self/clear_refs once the engine is built)"
+)
 LABELS = {"classical": "classical completion", "paper_w1_8": "paper model, width 1/8",
           "paper_w1_4": "paper model, width 1/4"}  # fmt: skip
 
