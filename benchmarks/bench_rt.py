@@ -7,22 +7,22 @@ Every model is built with random weights, BatchNorm folded (:func:`~semattnet.mo
 and run in float32 under ``torch.inference_mode`` on one random frame (5 % LiDAR density), the network and the
 propagation together. The models run in turns within one process, ``--repeats`` rounds, so a machine shared
 with other jobs slows all of them alike: the **ratio** to the paper model at width 1/8 (median over rounds)
-is the figure to read; the milliseconds are the medians of this run. The CPU is printed (``lscpu``'s model name).
+is the figure to read; the milliseconds are the medians of this run. The CPU is printed with its ISA flags
+(:func:`semattnet._utils.cpu.cpu_summary`).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import platform
 import statistics
-import subprocess
 import time
 from pathlib import Path
 
 import torch
 
 import semattnet
+from semattnet._utils.cpu import cpu_summary
 from semattnet.models.bn_folding import fold_batchnorm
 from semattnet.models.macs import count_macs
 
@@ -30,13 +30,8 @@ REFERENCE = ("semattnet", {"width": 0.125})
 
 
 def cpu_name() -> str:
-    """The CPU's model name (``lscpu``; the platform's processor string where lscpu is missing)."""
-    try:
-        out = subprocess.run(["lscpu"], capture_output=True, text=True, check=True).stdout
-    except (OSError, subprocess.CalledProcessError):
-        return platform.processor() or "unknown CPU"
-    names = [line.split(":", 1)[1].strip() for line in out.splitlines() if line.startswith("Model name")]
-    return f"{names[0] if names else 'unknown CPU'}, {torch.get_num_threads()} threads"
+    """The CPU named: model, threads, torch's SIMD level and its notable ISA flags (avx2, avx512*, amx*)."""
+    return cpu_summary()
 
 
 def frame(size: tuple[int, int], seed: int = 0) -> dict[str, torch.Tensor]:

@@ -6,10 +6,13 @@ imports plotly, openvino or rosbags):
 
     python benchmarks/frontier.py --out frontier-run --device cuda
 
-from the repository root, the package installed or ``PYTHONPATH=src``. Timing half (later, on the 2-core CPU;
-it reads the checkpoints of the training half when present):
+from the repository root, the package installed or ``PYTHONPATH=src``. Timing half (later, on the quiet 2-core
+CPU; it reads the checkpoints of the training half when present), then the report:
 
     python benchmarks/frontier.py --out frontier-run --time
+    python benchmarks/frontier.py --out frontier-run --report
+
+(or ``--all``: the three in one go on one machine).
 
 Recipe (:data:`semattnet.apps.demo.reference.REFERENCE_RECIPE`, the one ``semattnet-demo-ref-seed0`` was trained
 with): 400 synthetic training scenes (data seed 1000) at 96x320, batch 4, Adam at 2e-3 with cosine schedules,
@@ -20,10 +23,17 @@ in training). Scores: RMSE, MAE, iRMSE, iMAE (means over scenes) and the AUSE of
 seed and their mean.
 
 Written to ``--out``: ``results.json`` (the recipe, the machine, every score) and per variant and seed its
-weights, ``checkpoints/<variant>_seed<S>.safetensors`` (config in the metadata). ``--time`` adds
-``timing.json``: the network and the propagation at 352x1216 in torch float32 (BatchNorm folded) and, where
-OpenVINO imports, in OpenVINO float32; each variant as a ratio to the width-1/8 paper model on the same
-backend, in turns.
+weights, ``checkpoints/<variant>_seed<S>.safetensors`` (config in the metadata). ``--time`` adds ``timing.json``,
+at ``--time-size`` (352x1216): the CPU named (model, threads, ISA flags); per variant its GMAC and parameters;
+per variant and backend (:data:`BACKENDS`: torch float32 with BatchNorm folded, OpenVINO float32 and int8, each
+built by the engine table, one backend after the other, the variants in turns) the network + propagation's
+median ms and its ratio to the width-1/8 paper model, and the memory of one forward in a fresh process
+(:data:`MEMORY`); per variant the whole ``predict --stream`` frame on its fastest backend (the library's frame loop
+on synthetic scenes as a folder input: its latency table); the classical completion's ms; the float32
+convolution peak measured at that size (GFLOP/s); and, with
+``results.json`` there, each variant's int8 scores on the held-out scenes beside its float32 ones. ``--report``
+writes the section "The real-time frontier" of ``docs/performance.md`` (between its markers) and
+``docs/frontier.png`` from the two files (``benchmarks/frontier_report.py``).
 """
 
 from __future__ import annotations
@@ -31,9 +41,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import functools
+import importlib.util
 import json
 import statistics
+import subprocess
+import sys
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -41,6 +55,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from frontier_report import METRICS
 from semattnet._errors import InputError
 from semattnet._utils.atomic import atomic_path
 from semattnet._utils.device import resolve_device
@@ -61,13 +76,15 @@ from semattnet.apps.experiment import (
     score,
     train_variant,
 )
+from semattnet.apps.timing import conv_peak_gflops
 from semattnet.baselines.classical import complete_classical
 from semattnet.models.registry import build_model, list_models, model_config
 from semattnet.weights.checkpoint import load_checkpoint, load_weights, save_safetensors
 
+#: The docs folder the report writes into (``--docs``).
+DOCS = Path(__file__).resolve().parents[1] / "docs"
 #: The command of the full training run (results.json records it).
 COMMAND = "python benchmarks/frontier.py --out frontier-run --device cuda"
-METRICS = ("rmse", "mae", "irmse", "imae")
 PAPER = (("paper_w1_8", "semattnet", 0.125), ("paper_w1_4", "semattnet", 0.25))
 
 
@@ -213,46 +230,175 @@ def synthetic(root: Path, frames: int, eval_frames: int, size: tuple[int, int], 
     return load_held_out(root)
 
 
-def _size(text: str) -> tuple[int, int]:
+def _size(text: str, option: str = "--size") -> tuple[int, int]:
     h, _, w = text.lower().partition("x")
     if not (h.isdigit() and w.isdigit()):
-        raise InputError(f"--size must be HxW, e.g. 352x1216, got {text!r}")
+        raise InputError(f"{option} must be HxW, e.g. 352x1216, got {text!r}")
     return int(h), int(w)
 
 
-def time_variants(out: Path, size: tuple[int, int], repeats: int, keys: Sequence[str] | None = None,
-                  log: Callable[[str], None] = print) -> Path:  # fmt: skip
-    """The timing half: torch float32 (BatchNorm folded), then, where it imports, OpenVINO float32; each backend's
-    variants in turns, as ratios to the width-1/8 paper model on the same backend. The backends run one after the
-    other: OpenVINO's own thread pool beside torch's would slow both. ``keys``: these variants and the reference."""
-    from bench_rt import cpu_name, frame
-    from semattnet.models.bn_folding import fold_batchnorm
+#: (name in timing.json, engine, precision): the backends timed, one after the other (OpenVINO's thread pool beside
+#: torch's would slow both). int8 is the engine table's OpenVINO int8 (NNCF, calibrated on synthetic scenes).
+BACKENDS = (("torch-f32", "torch", "f32"), ("openvino-f32", "openvino", "f32"), ("openvino-int8", "openvino", "int8"))
+#: How timing.json's peak_mb is measured.
+MEMORY = (
+    "one forward in a fresh process per variant and backend, its engine built: the resident set's high-water "
+    "mark (VmHWM, reset by /proc/self/clear_refs) and its growth over VmRSS before the forward"
+)
+#: Frames of the whole-frame run (``predict --stream``'s loop); their median is robust to the first one's warm-up.
+STREAM_FRAMES = 6
+
+
+def machine() -> dict[str, Any]:
+    """The CPU named: its model, the threads torch uses, its notable ISA flags (avx2, avx512*, amx*:
+    :data:`semattnet._utils.cpu.SHOWN_FLAGS`)."""
+    from semattnet._utils.cpu import SHOWN_FLAGS, cpu_flags, cpu_model
+
+    isa = [f for f in SHOWN_FLAGS if f in cpu_flags()]
+    return {"cpu": cpu_model(), "threads": torch.get_num_threads(), "isa": isa}
+
+
+def _backends() -> list[tuple[str, str, str]]:
+    """The :data:`BACKENDS` this machine has (OpenVINO installed; int8 also needs nncf)."""
+    from semattnet.inference.backends import get_engine
+
+    have_nncf = importlib.util.find_spec("nncf") is not None
+    return [(n, b, p) for n, b, p in BACKENDS if get_engine(b).installed() and (p != "int8" or have_nncf)]
+
+
+def _timed_models(out: Path, keys: Sequence[str] | None) -> dict[str, torch.nn.Module]:
+    """Every variant (``keys``: these and the width-1/8 paper model, the reference): :func:`_variant_model`."""
+    return {key: _variant_model(out, key) for key, _, _ in variants() if not keys or key in (*keys, "paper_w1_8")}
+
+
+def _counts(models: dict[str, torch.nn.Module], size: tuple[int, int]) -> dict[str, dict[str, float]]:
+    """Per variant: GMAC of one frame of ``size`` (:func:`~semattnet.models.macs.count_macs`) and parameters."""
+    from bench_rt import frame
+    from semattnet.models.macs import count_macs
 
     x = frame(size)
-    models = {}
-    for key, name, width in variants():
-        if keys and key not in (*keys, "paper_w1_8"):
-            continue
-        path = out / "checkpoints" / f"{key}_seed0.safetensors"
-        models[key] = fold_batchnorm(load_model(path) if path.is_file() else build_model(name, width=width).eval())
+    return {k: {"gmac": count_macs(m, x), "params": sum(p.numel() for p in m.parameters())} for k, m in models.items()}
+
+
+def _classical_ms(size: tuple[int, int], repeats: int) -> float:
+    """The classical completion's time on one frame of ``size`` (median of ``repeats`` after a warm-up)."""
+    from bench_rt import frame
+
+    sparse = frame(size)["sparse"]
+    return 1000 * statistics.median(_in_turns({"classical": lambda: complete_classical(sparse)}, repeats)["classical"])
+
+
+def _variant_model(out: Path, key: str) -> torch.nn.Module:
+    """Seed 0 of variant ``key``: its trained weights where the training half left them, else random ones (speed
+    and memory do not depend on the weights)."""
+    name, width = next((n, w) for k, n, w in variants() if k == key)
+    path = out / "checkpoints" / f"{key}_seed0.safetensors"
+    if path.is_file():
+        return load_model(path)
+    with torch.random.fork_rng():  # the same weights in every process: their exported engines are cached once
+        torch.manual_seed(0)
+        return build_model(name, width=width).eval()
+
+
+def forward_memory(out: Path, key: str, backend: str, size: tuple[int, int]) -> dict[str, float]:
+    """In this process (a fresh one: :func:`_memory`): variant ``key``'s engine of ``backend`` built, then one
+    forward at ``size``: the resident set's high-water mark during it (reset through Linux's
+    ``/proc/self/clear_refs`` once the engine is built, :func:`~semattnet.apps.timing.peak_memory`) and its growth
+    over the resident set before, in MB."""
+    from bench_rt import frame
+    from semattnet.apps.timing import peak_memory, status_mib
+    from semattnet.inference.backends import optimize_for_inference
+
+    engine, precision = next((e, p) for n, e, p in BACKENDS if n == backend)
+    net = optimize_for_inference(_variant_model(out, key), backend=engine, size=size, precision=precision)
+    x = frame(size)
+    before = status_mib("VmRSS")
+    with torch.inference_mode(), peak_memory(torch.device("cpu")) as pm:
+        net(**x)
+    mb = 2**20 / 1e6
+    return {"peak_mb": pm["peak_mib"] * mb, "growth_mb": (pm["peak_mib"] - before) * mb}
+
+
+def _memory(out: Path, key: str, backend: str, size: tuple[int, int]) -> dict[str, float]:
+    """:func:`forward_memory` in a fresh Python process (nothing of the other variants resident); NaN where that
+    process fails (said in one line: the run goes on)."""
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--out", str(out), "--memory-of", f"{key}/{backend}",
+           "--time-size", f"{size[0]}x{size[1]}"]  # fmt: skip
+    done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    if done.returncode != 0:  # the times stay: one line, and no memory figure for this row
+        print(f"[frontier] {key}/{backend}: the memory run failed: {(done.stderr.strip().splitlines() or ['?'])[-1]}")
+        return {"peak_mb": float("nan"), "growth_mb": float("nan")}
+    return {k: float(v) for k, v in json.loads(done.stdout.strip().splitlines()[-1]).items()}
+
+
+def time_network(out: Path, models: dict[str, torch.nn.Module], size: tuple[int, int], repeats: int,
+                 log: Callable[[str], None] = print) -> dict[str, dict[str, float]]:  # fmt: skip
+    """Network + propagation per variant and backend (``KEY/BACKEND`` -> ms, ratio to the width-1/8 paper model
+    on that backend, peak and growth of the resident set in MB, :func:`forward_memory`): each backend's engines
+    built by the engine table (:func:`~semattnet.inference.backends.optimize_for_inference`), its variants run in
+    turns."""
+    from bench_rt import frame
+    from semattnet.inference.backends import optimize_for_inference
+
+    x = frame(size)
     rows: dict[str, dict[str, float]] = {}
-    backends: dict[str, Callable[[torch.nn.Module], Callable[[], object] | None]] = {
-        "torch-f32": lambda m: lambda: m(**x),
-        "openvino-f32": lambda m: _openvino(m, x),
-    }
-    for backend, make in backends.items():
-        nets = {key: fn for key, m in models.items() if (fn := make(m)) is not None}
-        if not nets:
-            continue
+    for backend, engine, precision in _backends():
+        log(f"[frontier] {backend}: building the engines at {size[0]}x{size[1]} ...")
+        nets = {key: functools.partial(optimize_for_inference(m, backend=engine, size=size, precision=precision),
+                                       **x) for key, m in models.items()}  # fmt: skip
         times = _in_turns(nets, repeats)
         ref = times["paper_w1_8"]
         for key, t in times.items():
             ratio = statistics.median(a / b for a, b in zip(t, ref, strict=True))
-            rows[f"{key}/{backend}"] = {"ms": 1000 * statistics.median(t), "ratio": ratio}
-            log(f"{key + '/' + backend:32s} {1000 * statistics.median(t):9.1f} ms  {ratio:6.3f} x paper@1/8")
-    target = out / "timing.json"
-    _write_json(target, {"cpu": cpu_name(), "size": size, "repeats": repeats, "rows": rows})
-    return target
+            ms = 1000 * statistics.median(t)
+            rows[f"{key}/{backend}"] = {"ms": ms, "ratio": ratio}
+            log(f"{key + '/' + backend:34s} {ms:9.1f} ms  {ratio:6.3f} x paper@1/8")
+        del nets
+        for key in models:  # a fresh process each, once this backend's engines are built and cached
+            rows[f"{key}/{backend}"].update(_memory(out, key, backend, size))
+    return rows
+
+
+def write_stream_frames(folder: Path, size: tuple[int, int], count: int = STREAM_FRAMES) -> Any:
+    """``count`` synthetic scenes at ``size`` (seeds 100, 101, ...) as a folder input (``rgb/``, ``sparse/``,
+    ``semantic/`` PNGs, as ``predict`` reads them): its :class:`~semattnet.data.sources.FolderSource`."""
+    from semattnet.data.io import write_depth, write_image
+    from semattnet.data.sources import FolderSource
+    from semattnet.data.synthetic import make_frame
+
+    for sub in ("rgb", "sparse", "semantic"):
+        (folder / sub).mkdir(parents=True, exist_ok=True)
+    for i in range(count):
+        name = f"{i:06d}.png"
+        if all((folder / sub / name).is_file() for sub in ("rgb", "sparse", "semantic")):
+            continue  # an earlier --time wrote it (the same seed: the same scene)
+        f = make_frame(size[0], size[1], seed=100 + i)
+        write_image(folder / "rgb" / name, f.rgb, overwrite=True)
+        write_image(folder / "semantic" / name, f.semantic, overwrite=True)
+        write_depth(folder / "sparse" / name, f.sparse, overwrite=True)
+    return FolderSource.pair(folder / "rgb", folder / "sparse", folder / "semantic")
+
+
+def time_stream(model: torch.nn.Module, backend: str, precision: str, source: Any, out: Path) -> dict[str, Any]:
+    """The whole ``predict --stream`` frame: the library's frame loop (read ahead in a background thread, the
+    network, the propagation, the depth and colour PNGs written) on ``source``; its latency table's per-frame
+    median (the stages of one frame, summed), its throughput and each stage's median."""
+    from semattnet.inference import DepthCompleter
+    from semattnet.inference.options import OutputSpec, RunOptions
+    from semattnet.inference.pipeline import check_frames
+    from semattnet.inference.sinks import default_sinks
+    from semattnet.inference.timing import StageTimes
+
+    completer = DepthCompleter(model, device="cpu", backend=backend, precision=precision)
+    timer = StageTimes()
+    plan = check_frames(source, default_sinks(), out, OutputSpec(overwrite=True), RunOptions(prefetch=2))
+    with warnings.catch_warnings():  # an untrained model's holes and clamped pixels, one line per frame
+        warnings.simplefilter("ignore", UserWarning)
+        plan.run(completer, timer=timer, log=lambda _: None)
+    summary = timer.summary()
+    stages = {k: round(v["median_ms"], 1) for k, v in summary["stages"].items() if "median_ms" in v}
+    return {"backend": f"{backend}-{precision}", "frame_ms": summary["per_frame_median_ms"],
+            "throughput_hz": summary["throughput_hz"], "stages_ms": stages}  # fmt: skip
 
 
 def _in_turns(nets: dict[str, Callable[[], object]], repeats: int) -> dict[str, list[float]]:
@@ -268,28 +414,62 @@ def _in_turns(nets: dict[str, Callable[[], object]], repeats: int) -> dict[str, 
     return times
 
 
-def _openvino(model: torch.nn.Module, x: dict[str, torch.Tensor]) -> Callable[[], object] | None:
-    """The whole model (network and propagation) compiled by OpenVINO in float32, or None without OpenVINO."""
-    try:
-        import openvino as ov
-    except ImportError:
-        return None
-    inputs = (x["rgb"], x["semantic"], x["sparse"])
-    with torch.no_grad():
-        compiled = ov.compile_model(ov.convert_model(_Depth(model), example_input=inputs), "CPU",
-                                    {"INFERENCE_PRECISION_HINT": "f32", "PERFORMANCE_HINT": "LATENCY"})  # fmt: skip
-    return lambda: compiled(list(inputs))
+def int8_accuracy(out: Path, keys: Sequence[str], log: Callable[[str], None] = print) -> dict[str, Any]:
+    """Every trained variant's scores on the held-out scenes in OpenVINO int8 (calibrated on the validation scenes
+    of the training tree, never the held-out ones) beside its float32 scores of ``results.json``, over the seeds
+    both have: ``key`` -> per_seed, scores (their mean), f32 (the same seeds' mean), change (int8 / f32 - 1)."""
+    from semattnet.inference import DepthCompleter
+
+    results = json.loads((out / "results.json").read_text())["results"]
+    held = load_held_out(out / "held_out")
+    found: dict[str, Any] = {}
+    for key in keys:
+        per_seed = {}
+        for seed in results.get(key, {}).get("per_seed", {}):
+            path = out / "checkpoints" / f"{key}_seed{seed}.safetensors"
+            if not path.is_file():
+                continue
+            log(f"[frontier] {key}, seed {seed}: int8 on the held-out scenes ...")
+            completer = DepthCompleter(load_model(path), device="cpu", backend="openvino", precision="int8",
+                                       calibration=out / "data")  # fmt: skip
+            preds = {n: completer.run(s["rgb"][None], s["semantic"][None], s["sparse"][None]).refined_depth[0, 0]
+                     .numpy() for n, s in zip(held.names, held.samples, strict=True)}  # fmt: skip
+            per_seed[seed] = _scores(preds, held)
+        if per_seed:
+            f32 = _mean({s: results[key]["per_seed"][s] for s in per_seed})
+            int8 = _mean(per_seed)
+            found[key] = {"per_seed": per_seed, "scores": int8, "f32": f32,
+                          "change": {m: int8[m] / f32[m] - 1 for m in METRICS}}  # fmt: skip
+    return found
 
 
-class _Depth(torch.nn.Module):
-    """The final depth alone (what a converter traces)."""
-
-    def __init__(self, model: torch.nn.Module) -> None:
-        super().__init__()
-        self.model = model
-
-    def forward(self, rgb: torch.Tensor, semantic: torch.Tensor, sparse: torch.Tensor) -> torch.Tensor:
-        return self.model(rgb, semantic, sparse).depth
+def time_variants(out: Path, size: tuple[int, int], repeats: int, keys: Sequence[str] | None = None,
+                  log: Callable[[str], None] = print) -> Path:  # fmt: skip
+    """The timing half, into ``timing.json``: network + propagation per variant and backend (:func:`time_network`),
+    the whole ``predict --stream`` frame per variant on its fastest backend (:func:`time_stream`), and, where the
+    training half left ``results.json`` and OpenVINO int8 runs here, the int8 scores (:func:`int8_accuracy`).
+    ``keys``: these variants and the reference."""
+    models = _timed_models(out, keys)
+    counts = _counts(models, size)
+    rows = time_network(out, models, size, repeats, log)
+    source = write_stream_frames(out / "timing" / "frames", size)
+    frames = {}
+    for key, model in models.items():
+        best = min((r["ms"], b) for k, r in rows.items() for b in [k.split("/", 1)[1]] if k.startswith(f"{key}/"))[1]
+        engine, precision = next((e, p) for n, e, p in BACKENDS if n == best)
+        log(f"[frontier] {key}: the whole --stream frame on {best} ...")
+        frames[key] = time_stream(model, engine, precision, source, out / "timing" / f"stream_{key}")
+    int8 = {}
+    if (out / "results.json").is_file() and any(n == "openvino-int8" for n, _, _ in _backends()):
+        int8 = int8_accuracy(out, list(models), log)
+    target = out / "timing.json"
+    classical = _classical_ms(size, repeats)
+    peak = conv_peak_gflops(torch.device("cpu"), size)  # what the arithmetic alone would allow
+    _write_json(target, {**machine(), "size": size, "repeats": repeats, "memory": MEMORY, "models": counts,
+                         "rows": rows, "classical_ms": classical, "conv_peak_gflops": peak, "frames": frames,
+                         "int8": int8})  # fmt: skip
+    log(f"[frontier] wrote {target}")
+    return target
 
 
 def main(argv: Sequence[str] | None = None) -> Path:
@@ -301,14 +481,36 @@ def main(argv: Sequence[str] | None = None) -> Path:
     ap.add_argument("--overwrite", action="store_true")
     ap.add_argument("--time", action="store_true", help="the timing half (CPU)")
     ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--size", default="", help="HxW: training scenes (default: the recipe's); --time: 352x1216")
+    ap.add_argument("--size", default="", help="HxW of the training scenes (default: the recipe's; checks only)")
+    ap.add_argument("--time-size", default="352x1216", help="HxW the variants are timed at")
     ap.add_argument("--steps", default="", help="B,I,F steps instead of the recipe's (checks only)")
     ap.add_argument("--frames", type=int, default=0, help="training scenes instead of the recipe's (checks only)")
+    ap.add_argument("--report", action="store_true", help="the docs' frontier section and plot from the two halves")
+    ap.add_argument("--all", action="store_true", help="train and score, then --time, then --report")
+    ap.add_argument("--docs", type=Path, default=DOCS, help="the folder of performance.md and frontier.png")
+    ap.add_argument("--memory-of", default="", help=argparse.SUPPRESS)  # KEY/BACKEND: one forward_memory
     args = ap.parse_args(argv)
-    if args.time:
-        keys = args.variants.split(",") if args.variants else None
-        return time_variants(args.out, _size(args.size or "352x1216"), args.repeats, keys)
-    return run_training(args)
+    keys = args.variants.split(",") if args.variants else None
+    if args.memory_of:
+        key, backend = args.memory_of.split("/")
+        print(json.dumps(forward_memory(args.out, key, backend, _size(args.time_size, "--time-size"))))
+        return args.out
+    if args.all:
+        run_training(args)
+    if args.time or args.all:
+        time_variants(args.out, _size(args.time_size, "--time-size"), args.repeats, keys)
+    if args.report or args.all:
+        return report(args.out, args.docs)
+    return args.out / "timing.json" if args.time else run_training(args)
+
+
+def report(out: Path, docs: Path) -> Path:
+    """``--report``: the section between the markers of ``docs/performance.md`` and ``docs/frontier.png``."""
+    from frontier_report import write_report  # its plot imports matplotlib
+
+    doc = write_report(out, docs / "performance.md", docs / "frontier.png")
+    print(f"[frontier] wrote {doc} and {docs / 'frontier.png'}")
+    return doc
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@ the imports a GPU machine may lack blocked."""
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import sys
 from collections.abc import Iterator
@@ -22,6 +23,10 @@ from tests.benchmarks._scripts import load_script
 @pytest.fixture(scope="module")
 def frontier() -> ModuleType:
     return load_script("frontier")
+
+
+def report_module() -> ModuleType:
+    return load_script("frontier_report")
 
 
 def test_variants_are_the_paper_at_two_widths_and_every_real_time_model(frontier: ModuleType) -> None:
@@ -73,15 +78,51 @@ def test_training_half_tiny(frontier: ModuleType, tmp_path: Path, bare_machine: 
     assert scores["semattnet_rt_s"]["params"] < scores["paper_w1_8"]["params"] / 10
 
 
-@pytest.mark.slow  # converts the paper model and one variant with OpenVINO: about 2 minutes on 2 busy cores
-def test_timing_half_tiny(frontier: ModuleType, tmp_path: Path) -> None:
-    args = ["--time", "--size", "64x96", "--repeats", "1", "--variants", "semattnet_rt_s"]
-    frontier.main(["--out", str(tmp_path), *args])
-    timing = json.loads((tmp_path / "timing.json").read_text())
+@pytest.fixture(scope="module")
+def tiny_run(frontier: ModuleType, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """``--all`` on a tiny run (one variant trained: two steps a stage on 4 scenes at 32x64), timed at 64x96 in
+    torch float32 only (OpenVINO's exports of the paper model take minutes on 2 busy cores; the int8 scores are
+    taken in their own test). Returns its folder; the report went to ``docs/`` beside it."""
+    root = tmp_path_factory.mktemp("frontier")
+    docs = root / "docs"
+    docs.mkdir()
+    (docs / "performance.md").write_text(f"# P\n\n{report_module().BEGIN}\nPLACEHOLDER\n{report_module().END}\n")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(frontier, "_backends", lambda: [frontier.BACKENDS[0]])
+        frontier.main(["--out", str(root / "run"), "--all", "--device", "cpu", "--frames", "4", "--steps", "2,1,2",
+                       "--size", "32x64", "--seeds", "0", "--variants", "semattnet_rt_s", "--time-size", "64x96",
+                       "--repeats", "1", "--docs", str(docs)])  # fmt: skip
+    return root / "run"
+
+
+@pytest.mark.slow  # trains one variant, times it and the paper model, runs the frame loop: a minute or more
+def test_all_tiny_trains_times_and_reports(tiny_run: Path) -> None:
+    """``--all``: the training half, the timing half (network + propagation, memory, the whole frame, the CPU)
+    and the report."""
+    timing = json.loads((tiny_run / "timing.json").read_text())
     keys = ("paper_w1_8", "semattnet_rt_s")
-    assert {f"{k}/torch-f32" for k in keys} == {k for k in timing["rows"] if k.endswith("torch-f32")}
-    assert timing["size"] == [64, 96]
-    assert timing["rows"]["paper_w1_8/torch-f32"]["ratio"] == 1.0 and timing["cpu"]
+    assert set(timing["rows"]) == {f"{k}/torch-f32" for k in keys}
+    assert timing["size"] == [64, 96] and timing["cpu"] and timing["threads"] >= 1 and "isa" in timing
+    assert timing["rows"]["paper_w1_8/torch-f32"]["ratio"] == 1.0
+    assert all(r["peak_mb"] > 0 and r["peak_mb"] >= r["growth_mb"] for r in timing["rows"].values())
+    assert set(timing["frames"]) == set(keys) and all(f["frame_ms"] > 0 for f in timing["frames"].values())
+    assert timing["frames"]["semattnet_rt_s"]["stages_ms"]["network"] > 0
+    assert set(timing["models"]) == set(keys) and timing["classical_ms"] > 0 and timing["int8"] == {}
+    text = (tiny_run.parent / "docs" / "performance.md").read_text()
+    assert "PLACEHOLDER" not in text and "| `semattnet_rt_s` |" in text and "Acceptance" in text
+    assert (tiny_run.parent / "docs" / "frontier.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.slow  # exports, quantises (NNCF) and runs the tiny variant at 32x64: about a minute on 2 busy cores
+@pytest.mark.skipif(importlib.util.find_spec("openvino") is None or importlib.util.find_spec("nncf") is None,
+                    reason="int8 needs openvino and nncf (pip install 'semattnet[openvino]')")  # fmt: skip
+def test_int8_scores_beside_float32(frontier: ModuleType, tiny_run: Path) -> None:
+    found = frontier.int8_accuracy(tiny_run, ["paper_w1_8", "semattnet_rt_s"], log=lambda _: None)
+    assert set(found) == {"semattnet_rt_s"}  # the paper model was not trained in this run
+    entry = found["semattnet_rt_s"]
+    results = json.loads((tiny_run / "results.json").read_text())["results"]["semattnet_rt_s"]
+    assert entry["f32"] == results["scores"] and set(entry["per_seed"]) == {"0"}
+    assert entry["change"]["rmse"] == pytest.approx(entry["scores"]["rmse"] / results["scores"]["rmse"] - 1)
 
 
 def test_a_variant_trained_earlier_is_read_back_not_trained_again(frontier: ModuleType, tmp_path: Path) -> None:
