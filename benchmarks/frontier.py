@@ -66,6 +66,7 @@ from semattnet.apps.demo.reference import (
     ReferenceRecipe,
     load_reference,
     machine_line,
+    package_reference,
     shipped_references,
 )
 from semattnet.apps.experiment import (
@@ -80,6 +81,7 @@ from semattnet.apps.timing import conv_peak_gflops
 from semattnet.baselines.classical import complete_classical
 from semattnet.models.registry import build_model, list_models, model_config
 from semattnet.weights.checkpoint import load_checkpoint, load_weights, save_safetensors
+from semattnet.weights.packed import SHIPPED
 
 #: The docs folder the report writes into (``--docs``).
 DOCS = Path(__file__).resolve().parents[1] / "docs"
@@ -489,8 +491,11 @@ def main(argv: Sequence[str] | None = None) -> Path:
     ap.add_argument("--all", action="store_true", help="train and score, then --time, then --report")
     ap.add_argument("--docs", type=Path, default=DOCS, help="the folder of performance.md and frontier.png")
     ap.add_argument("--memory-of", default="", help=argparse.SUPPRESS)  # KEY/BACKEND: one forward_memory
+    ap.add_argument("--ship", default="", help="KEY: package that variant's checkpoints into the package's assets")
     args = ap.parse_args(argv)
     keys = args.variants.split(",") if args.variants else None
+    if args.ship:
+        return ship(args.out, args.ship, tuple(int(s) for s in args.seeds.split(",")))[-1]
     if args.memory_of:
         key, backend = args.memory_of.split("/")
         print(json.dumps(forward_memory(args.out, key, backend, _size(args.time_size, "--time-size"))))
@@ -502,6 +507,24 @@ def main(argv: Sequence[str] | None = None) -> Path:
     if args.report or args.all:
         return report(args.out, args.docs)
     return args.out / "timing.json" if args.time else run_training(args)
+
+
+def ship(out: Path, key: str, seeds: Sequence[int], assets: Path = SHIPPED, log: Callable[[str], None] = print
+         ) -> list[Path]:  # fmt: skip
+    """``--ship KEY``: each seed's trained checkpoint of variant ``key`` packed as the demo references are
+    (:func:`~semattnet.apps.demo.reference.package_reference`: quantised, scored on the training tree's own
+    validation scenes beside the classical completion, the recipe and command recorded) into ``assets`` as
+    ``<key>_demo_seed<S>.safetensors.gz``."""
+    held = load_held_out(out / "data")
+    made = []
+    for seed in seeds:
+        ckpt = out / "checkpoints" / f"{key}_seed{seed}.safetensors"
+        if not ckpt.is_file():
+            raise InputError(f"{ckpt}: no trained checkpoint of {key}, seed {seed}; train it first")
+        target = assets / f"{key}_demo_seed{seed}.safetensors.gz"
+        made.append(package_reference(ckpt, held, target, dataclasses.replace(REFERENCE_RECIPE, seed=seed),
+                                      log=log, command=COMMAND))  # fmt: skip
+    return made
 
 
 def report(out: Path, docs: Path) -> Path:

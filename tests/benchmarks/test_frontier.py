@@ -164,3 +164,17 @@ def test_a_synthetic_tree_of_other_settings_is_refused_not_reused(frontier: Modu
     (tmp_path / "scenes.json").write_text(json.dumps(manifest))
     with pytest.raises(InputError, match=r"scenes.json: written with .*'seed': 1000.*this run needs .*'seed': 7"):
         frontier.synthetic(tmp_path, 400, 16, (96, 320), 7, "realistic")
+
+
+@pytest.mark.slow  # reuses the tiny run (trained in its fixture)
+def test_ship_packs_a_trained_variant_that_loads_by_its_config(frontier: ModuleType, tiny_run: Path,
+                                                               tmp_path: Path) -> None:  # fmt: skip
+    from semattnet.apps.demo.reference import load_reference
+
+    (made,) = frontier.ship(tiny_run, "semattnet_rt_s", [0], assets=tmp_path, log=lambda _: None)
+    assert made == tmp_path / "semattnet_rt_s_demo_seed0.safetensors.gz"
+    model, info = load_reference(made)
+    assert type(model).__name__ == "SemAttNetRT" and info["command"] == frontier.COMMAND
+    assert set(info["val"]) >= {"reference", "classical"} and info["recipe"]["seed"] == 0
+    with pytest.raises(InputError, match="no trained checkpoint of semattnet_rt_m, seed 0"):
+        frontier.ship(tiny_run, "semattnet_rt_m", [0], assets=tmp_path)

@@ -190,9 +190,11 @@ def package_reference(
     recipe: ReferenceRecipe = REFERENCE_RECIPE,
     train_seconds: float | None = None,
     log: Callable[[str], None] = print,
+    command: str = REFERENCE_COMMAND,
 ) -> Path:
-    """Quantise the trained ``weights`` (a training run's file), score what ships on ``held`` beside the
-    classical completion, and write it with its record to ``target``."""
+    """Quantise the trained ``weights`` (a training run's file; any registered architecture), score what ships
+    on ``held`` beside the classical completion, and write it with its record (``command``: what trained it)
+    to ``target``."""
     trained = load_checkpoint(weights)
     model = build_model("semattnet", config=trained.config)
     load_weights(model, trained)
@@ -203,7 +205,7 @@ def package_reference(
     blind = {n: o["refined_depth"] for n, o in complete_held_out(model, held, cpu, fallback_semantic).items()}
     classical = {n: complete_classical(s["sparse"][None])[0, 0].numpy()
                  for n, s in zip(held.names, held.samples, strict=True)}  # fmt: skip
-    info = {"recipe": asdict(recipe), "command": REFERENCE_COMMAND, "torch": torch.__version__,
+    info = {"recipe": asdict(recipe), "command": command, "torch": torch.__version__,
             "machine": machine_line(), "levels": levels,
             "train_seconds": None if train_seconds is None else round(train_seconds, 1),
             "val": {"reference": _metrics(score(preds, held)["all"]),
