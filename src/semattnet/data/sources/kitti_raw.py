@@ -12,8 +12,8 @@ import numpy as np
 
 from semattnet._errors import DataError
 from semattnet._utils.registry import option
-from semattnet.data.frames import Frame, IndexedSource
-from semattnet.data.io import read_semantic
+from semattnet.data.frames import Frame, IndexedSource, View
+from semattnet.data.io import read_image, read_semantic
 from semattnet.data.kitti_raw import RawDrive, RawFrame
 from semattnet.data.sources.registry import SourceOptions, register_source
 
@@ -82,6 +82,28 @@ class RawDriveSource(IndexedSource):
         paths = {"rgb": raw.image_path, "scan": raw.scan_path} | ({"semantic": sem_path} if sem_path else {})
         return Frame(name, raw.image, project_frame(raw), sem, K=raw.calib.K, points=raw.points,
                      calib=raw.calib, paths=paths)  # fmt: skip
+
+    def views(self, name: str) -> tuple[View, ...]:
+        """The stereo partner of frame ``name`` (camera 03 for 02 and back), when the drive has its image:
+        ``T_view_cam`` is the rectified baseline from the calibration's ``P_rect_02`` / ``P_rect_03``.
+
+        Raises:
+            DataError: the partner's image is unreadable or not of its calibrated size (naming the file).
+        """
+        from semattnet.geometry import invert_T, read_kitti_calibration
+
+        drive = self.drive
+        partner = {"02": "03", "03": "02"}.get(drive.camera)
+        path = drive.drive_dir / f"image_{partner}" / "data" / f"{name}.png"
+        if partner is None or not path.is_file():
+            return ()
+        calib = read_kitti_calibration(drive.drive_dir.parent, partner)
+        image = read_image(path)
+        if calib.image_size is not None and image.shape[:2] != calib.image_size[::-1]:
+            raise DataError(f"{path}: image is {image.shape[1]}x{image.shape[0]}, the calibration says "
+                            f"{calib.image_size[0]}x{calib.image_size[1]} for camera {partner}")  # fmt: skip
+        T_view_cam = calib.T_cam_lidar @ invert_T(drive.calib.T_cam_lidar)
+        return (View(f"image_{partner}", image, calib.K, T_view_cam),)
 
     def inputs(self) -> list[Path]:
         date = self.drive.drive_dir.parent
