@@ -42,7 +42,8 @@ def adapt(cfg: AdaptConfig, source: FrameSource, semantic: SemanticMaps | None =
     exactly. Returns where it ended (:class:`AdaptResult`); the weights are ``cfg.out/adapted.safetensors``."""
     from semattnet._utils.outputs import check_no_input_overlap
 
-    check_no_input_overlap([*source.inputs(), cfg.weights if Path(cfg.weights).exists() else None], out_dir=cfg.out)
+    weights = cfg.weights if cfg.weights and Path(cfg.weights).exists() else None
+    check_no_input_overlap([*source.inputs(), weights], out_dir=cfg.out)
     if not resume:
         prepare_run_folder(cfg.out, overwrite)
     return Adapter(cfg, source, semantic, resume=resume, log=log).run()

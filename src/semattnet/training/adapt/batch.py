@@ -61,7 +61,7 @@ def crop_size(asked: tuple[int, int], sizes: Sequence[tuple[int, int]], multiple
 
 
 def _chw(a: np.ndarray) -> torch.Tensor:
-    return torch.from_numpy(np.ascontiguousarray(a)).permute(2, 0, 1).float()
+    return torch.from_numpy(np.array(a, dtype=np.float32)).permute(2, 0, 1)  # a copy: frames are read-only
 
 
 def _views(frames: Sequence[Frame], offsets: torch.Tensor) -> ViewBatch | None:
@@ -99,7 +99,7 @@ def make_batch(frames: Sequence[Frame], crop: tuple[int, int], rng: torch.Genera
         rgb.append(_chw(frame.rgb[window]))
         assert frame.semantic is not None  # the pool fills every frame's map
         semantic.append(_chw(frame.semantic[window]))
-        sparse.append(torch.from_numpy(np.ascontiguousarray(frame.sparse[window], dtype=np.float32))[None])
+        sparse.append(torch.from_numpy(np.array(frame.sparse[window], dtype=np.float32))[None])
     views = _views(frames, offsets) if all(f.K is not None for f in frames) else None
     names = tuple(f.name for f in frames)
     return AdaptBatch(torch.stack(rgb), torch.stack(semantic), torch.stack(sparse), names, views)

@@ -81,7 +81,8 @@ class Adapter:
             cfg = AdaptConfig.from_dict({**state["adapt_config"], "out": cfg.out})  # type: ignore[dict-item]
         self.cfg, self.device = cfg, resolve_device(cfg.device)
         _check_amp(cfg.amp, self.device)
-        self.model = from_pretrained(cfg.weights, map_location=self.device)
+        # a resumed run starts from its own state (a normal checkpoint): the first weights may have moved since
+        self.model = from_pretrained(self.out / STATE if state is not None else cfg.weights, map_location=self.device)
         self.completer = TrainingCompleter(self.model, self.device)
         maps = (semantic or SemanticMaps()).bind(self.completer)
         maps.check_palette(self.completer, source)
@@ -193,7 +194,7 @@ class Adapter:
         lr = self.optimizer.param_groups[0]["lr"]
         self.scheduler.step()
         self.step += 1
-        return {"step": self.step, "loss": float(loss), **{k: float(v) for k, v in terms.items()}, "lr": lr}
+        return {"step": self.step, "loss": loss.item(), **{k: v.item() for k, v in terms.items()}, "lr": lr}
 
     def _terms(self, pred: torch.Tensor, batch: AdaptBatch, kept: torch.Tensor,
                hidden: torch.Tensor | None) -> dict[str, torch.Tensor]:  # fmt: skip
