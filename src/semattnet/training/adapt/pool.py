@@ -66,7 +66,7 @@ class FramePool:
                     raise
                 reason = " ".join(str(exc).split()) or type(exc).__name__
                 self.faults.append(FrameFault(name, "skipped", reason))
-                self.log(f"skipped {name}: {reason}")
+                self.log(f"{name}: skipped: {reason}")  # as predict says it
                 continue
             sizes[name] = frame.size
             if frame.gt is not None and (frame.gt > 0).any():

@@ -153,6 +153,8 @@ class Adapter:
                 self.rows.append(row)
                 bar.update(1)
                 bar.set_postfix(loss=f"{row['loss']:.3f}")
+                if bar.disable and (self.step % max(1, cfg.steps // 20) == 0 or self.step == cfg.steps):
+                    self.log(f"step {self.step}/{cfg.steps}: loss {row['loss']:.4f}, {times[-1]:.2f} s/step")
                 if cfg.gt_every and self.pool.held_out and self.step % cfg.gt_every == 0:
                     self._held_out_metric()
                 if self.step % cfg.save_every == 0 or self.step == cfg.steps:
