@@ -163,7 +163,7 @@ class Adapter:
             self.save()  # nothing left to do: the log at least
         weights = self._write_final()
         last = self.metrics[-1] if self.metrics and self.metrics[-1]["step"] == self.step else None
-        losses = {k: v for k, v in (self.rows[-1] if self.rows else {}).items() if k != "step"}
+        losses = {k: v for k, v in (self.rows[-1] if self.rows else {}).items() if k not in ("step", "lr")}
         return AdaptResult(self.step, weights, len(self.pool.names), tuple(self.pool.faults),
                            last, sum(times) / len(times) if times else math.nan, losses)  # fmt: skip
 
