@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -140,3 +142,31 @@ def test_the_real_stereo_partner_warps_onto_the_frame_with_the_annotated_depth()
         return float(((warped - target).abs().mean(1, keepdim=True) * keep).sum() / keep.sum())
 
     assert error(1.0) < 0.6 * min(error(0.7), error(1.5))
+
+
+def _with_next_frame(root: Path, metres_east: float) -> Path:
+    """A copy of the bundled drive with a frame 6 (frame 5's image) recorded ``metres_east`` further east, both
+    packets heading east (roll, pitch, yaw 0)."""
+    date = root / "2011_09_26"
+    shutil.copytree(DRIVE.parent, date, ignore=shutil.ignore_patterns("*.bin"))
+    drive = date / DRIVE.name
+    (drive / "velodyne_points" / "data" / "0000000005.bin").symlink_to(DRIVE / "velodyne_points/data/0000000005.bin")
+    shutil.copy(drive / "image_02/data/0000000005.png", drive / "image_02/data/0000000006.png")
+    fields = (drive / "oxts/data/0000000005.txt").read_text().split()
+    fields[3:6] = ["0", "0", "0"]
+    (drive / "oxts/data/0000000005.txt").write_text(" ".join(fields))
+    lat = math.radians(float(fields[0]))
+    fields[1] = repr(float(fields[1]) + math.degrees(metres_east / (6378137.0 * math.cos(lat))))
+    (drive / "oxts/data/0000000006.txt").write_text(" ".join(fields))
+    return drive
+
+
+def test_the_next_frame_of_a_drive_is_a_view_posed_by_its_oxts_packets(tmp_path: Path) -> None:
+    """Frame 6 taken 1 m further along the heading: its camera is 1 m ahead of frame 5's (camera z forward)."""
+    source = RawDriveSource(_with_next_frame(tmp_path, 1.0))
+    views = {v.name: v for v in source.views("0000000005")}
+    assert sorted(views) == ["0000000006", "image_03"]
+    T = views["0000000006"].T_view_cam
+    assert np.allclose(T[:3, :3], np.eye(3), atol=1e-6)
+    assert np.allclose(T[:3, 3], [0, 0, -1], atol=0.03)
+    assert [v.name for v in source.views("0000000006")] == ["0000000005"]  # frame 6 has no image_03

@@ -15,6 +15,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypedDict
 
 import torch
 
@@ -32,10 +33,10 @@ from semattnet.training.adapt.losses import hide_points, photometric_loss, smoot
 from semattnet.training.adapt.model import TrainingCompleter, final_depth, set_train_mode
 from semattnet.training.adapt.pool import FramePool
 from semattnet.training.reference import make_adam
-from semattnet.weights.checkpoint import Checkpoint, CheckpointError, load_checkpoint, load_weights, save_safetensors
+from semattnet.weights.checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_safetensors
 from semattnet.weights.gate import DIGEST_KEY, tensor_digest
 
-__all__ = ["FINAL", "LOG", "RUN_FILES", "STATE", "AdaptResult", "Adapter", "read_state"]
+__all__ = ["FINAL", "LOG", "RUN_FILES", "STATE", "AdaptResult", "AdaptState", "Adapter", "read_state"]
 
 _FORMAT = "semattnet-adapt-v1"
 STATE, FINAL, LOG = "checkpoints/last.pt", "adapted.safetensors", "log.json"
@@ -57,14 +58,26 @@ class AdaptResult:
     losses: dict[str, float] = field(default_factory=dict)
 
 
-def read_state(path: Path) -> dict[str, object]:
+class AdaptState(TypedDict):
+    """What an exact resume restores from ``checkpoints/last.pt`` (besides the model's weights and config)."""
+
+    adapt_config: dict[str, object]
+    optimizer: dict[str, object]
+    scheduler: dict[str, object]
+    scaler: dict[str, object]
+    rng: torch.Tensor
+    step: int
+
+
+def read_state(path: Path) -> AdaptState:
     """An adaptation state (``checkpoints/last.pt``), verified (digest, format); one line naming the file if not."""
     if not path.is_file():
         raise CheckpointError(f"{path}: nothing to resume from")
-    ckpt = load_checkpoint(path)
-    if ckpt.extra.get("format") != _FORMAT:
+    extra = load_checkpoint(path).extra
+    if extra.get("format") != _FORMAT:
         raise CheckpointError(f"{path}: not a semattnet adapt state (no optimiser state to resume)")
-    return {"model": ckpt.state_dict, **ckpt.extra}
+    return AdaptState(adapt_config=extra["adapt_config"], optimizer=extra["optimizer"], scheduler=extra["scheduler"],
+                      scaler=extra["scaler"], rng=extra["rng"], step=int(extra["step"]))  # fmt: skip
 
 
 class Adapter:
@@ -78,7 +91,7 @@ class Adapter:
         self.out, self.log = Path(cfg.out), log
         state = read_state(self.out / STATE) if resume else None
         if state is not None:  # the run's own options; it may have moved
-            cfg = AdaptConfig.from_dict({**state["adapt_config"], "out": cfg.out})  # type: ignore[dict-item]
+            cfg = AdaptConfig.from_dict({**state["adapt_config"], "out": cfg.out})
         self.cfg, self.device = cfg, resolve_device(cfg.device)
         _check_amp(cfg.amp, self.device)
         # a resumed run starts from its own state (a normal checkpoint): the first weights may have moved since
@@ -102,13 +115,13 @@ class Adapter:
         self._no_views_said = False
 
     # ----------------------------------------------------------------------------- state
-    def _restore(self, state: dict[str, object]) -> None:
-        load_weights(self.model, state["model"])  # type: ignore[arg-type]
-        self.optimizer.load_state_dict(state["optimizer"])  # type: ignore[arg-type]
-        self.scheduler.load_state_dict(state["scheduler"])  # type: ignore[arg-type]
-        self.scaler.load_state_dict(state["scaler"])  # type: ignore[arg-type]
-        self.rng.set_state(state["rng"])  # type: ignore[arg-type]
-        self.step = int(state["step"])  # type: ignore[call-overload]
+    def _restore(self, state: AdaptState) -> None:
+        """Optimiser, schedule, scaler, generator and step (the weights came with the model, from the state)."""
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.scheduler.load_state_dict(state["scheduler"])
+        self.scaler.load_state_dict(state["scaler"])
+        self.rng.set_state(state["rng"])
+        self.step = state["step"]
         logged = _read_log(self.out / LOG)
         self.rows = [r for r in logged.get("steps", []) if r["step"] <= self.step]
         self.metrics = [r for r in logged.get("metrics", []) if r["step"] <= self.step]
