@@ -10,8 +10,10 @@ import numpy as np
 import pytest
 import torch
 
+from semattnet._errors import DataError
 from semattnet.data.io import read_depth, read_image
 from semattnet.data.sources import RawDriveSource
+from semattnet.geometry.motion import read_oxts_pose
 from semattnet.geometry.warp import inverse_warp
 from semattnet.training.adapt.batch import ViewBatch
 from semattnet.training.adapt.losses import (
@@ -170,3 +172,12 @@ def test_the_next_frame_of_a_drive_is_a_view_posed_by_its_oxts_packets(tmp_path:
     assert np.allclose(T[:3, :3], np.eye(3), atol=1e-6)
     assert np.allclose(T[:3, 3], [0, 0, -1], atol=0.03)
     assert [v.name for v in source.views("0000000006")] == ["0000000005"]  # frame 6 has no image_03
+
+
+def test_a_malformed_oxts_packet_is_one_line_naming_the_file(tmp_path: Path) -> None:
+    (tmp_path / "short.txt").write_text("49.0 8.3 113.4")
+    (tmp_path / "pole.txt").write_text(" ".join(["89.9"] + ["0"] * 29))
+    for name, message in (("short.txt", "expected 30 finite OXTS fields"), ("pole.txt", "out of range")):
+        with pytest.raises(DataError, match=message) as err:
+            read_oxts_pose(tmp_path / name)
+        assert name in str(err.value)
