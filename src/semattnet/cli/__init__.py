@@ -1,6 +1,7 @@
 """The ``semattnet`` command line: one module per command group; commands parse options and call the library."""
 
 from semattnet.cli import (  # noqa: F401  (register the commands)
+    adapt,
     apps,
     bag,
     data,

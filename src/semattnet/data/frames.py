@@ -31,6 +31,8 @@ __all__ = [
     "SensorMeta",
     "SourceInfo",
     "TwoStageSource",
+    "View",
+    "ViewSource",
     "unique_names",
 ]
 
@@ -61,6 +63,31 @@ class SensorMeta:
 
 
 @dataclass(frozen=True)
+class View:
+    """Another calibrated image of a frame's scene: a stereo partner, or a neighbouring frame of a recording with
+    the camera's motion (what the photometric loss of ``semattnet adapt`` warps into the frame's camera).
+
+    Attributes:
+        name: what it is (``image_03``, ``prev``, ...).
+        rgb: (h, w, 3) uint8 image (its size may differ from the frame's).
+        K: (3, 3) its intrinsics, pixels.
+        T_view_cam: (4, 4) the frame's camera -> this view's camera, metres (a rectified stereo pair: the baseline).
+    """
+
+    name: str
+    rgb: np.ndarray
+    K: np.ndarray
+    T_view_cam: np.ndarray
+
+    def __post_init__(self) -> None:
+        if self.rgb.ndim != 3 or self.rgb.shape[2] != 3:
+            raise DataError(f"view {self.name}: the image must be (h, w, 3), got {self.rgb.shape}")
+        if np.shape(self.K) != (3, 3) or np.shape(self.T_view_cam) != (4, 4):
+            raise DataError(f"view {self.name}: K must be 3x3 and T_view_cam 4x4, got {np.shape(self.K)} and "
+                            f"{np.shape(self.T_view_cam)}")  # fmt: skip
+
+
+@dataclass(frozen=True)
 class Frame:
     """One frame.
 
@@ -77,6 +104,8 @@ class Frame:
         paths: the files it was read from, by role (``rgb``, ``sparse``, ``semantic``, ``gt``, ``scan``, ...).
         meta: what else the recording says (a bag frame's header stamp, frame ids, CameraInfo:
             :class:`SensorMeta`); all defaults for sources that know nothing more.
+        views: other calibrated images of the scene (:class:`View`), given by a :class:`ViewSource` on request
+            (``semattnet adapt``); empty otherwise.
     """
 
     name: str
@@ -90,6 +119,7 @@ class Frame:
     gt: np.ndarray | None = None
     paths: Mapping[str, Path] = field(default_factory=dict)
     meta: SensorMeta = field(default_factory=SensorMeta)
+    views: tuple[View, ...] = ()
 
     def __post_init__(self) -> None:
         where = self.paths.get("rgb", self.name)
@@ -167,6 +197,14 @@ class TwoStageSource(FrameSource, Protocol[_R]):
     def read(self, name: str) -> _R: ...
 
     def assemble(self, raw: _R) -> Frame: ...
+
+
+@runtime_checkable
+class ViewSource(Protocol):
+    """A source that can also give a frame's other calibrated views (:class:`View`: a stereo partner, neighbouring
+    frames), read only when asked: ``views(name)`` (empty when it has none for that frame)."""
+
+    def views(self, name: str) -> tuple[View, ...]: ...
 
 
 class IndexedSource:

@@ -27,7 +27,10 @@ from semattnet._utils.bounds import regular_file
 MAX_SPEED_MPS = 100.0
 MAX_YAW_RATE = 10.0
 
-__all__ = ["MAX_SPEED_MPS", "MAX_YAW_RATE", "VehicleMotion", "deskew_scan", "read_oxts_motion"]
+#: The Earth's radius (metres) of KITTI's Mercator projection of the OXTS positions.
+EARTH_RADIUS_M = 6378137.0
+
+__all__ = ["MAX_SPEED_MPS", "MAX_YAW_RATE", "VehicleMotion", "deskew_scan", "read_oxts_motion", "read_oxts_pose"]
 
 
 @dataclass(frozen=True)
@@ -93,3 +96,43 @@ def deskew_scan(
     out[:, 2] = xyz[:, 2]
     out[:, :3] += vel.reshape(1, 3) * dt[:, None]
     return out
+
+
+def _oxts_numbers(path: str | os.PathLike[str], count: int) -> list[float]:
+    """The first numbers of an OXTS packet, at least ``count`` of them, all finite (a DataError naming the file)."""
+    path = regular_file(path, "OXTS file")
+    try:
+        vals = [float(v) for v in path.read_text().split()]
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise DataError(f"{path}: malformed numbers: {exc}") from None
+    if len(vals) < count or not np.all(np.isfinite(vals[:count])):
+        raise DataError(f"{path}: expected 30 finite OXTS fields, found {len(vals)}")
+    return vals
+
+
+def read_oxts_pose(path: str | os.PathLike[str], lat0_deg: float | None = None) -> np.ndarray:
+    """(4, 4) ``T_world_imu`` of one KITTI raw OXTS packet, as the devkit's ``convertOxtsToPose``: the position
+    (``lat, lon, alt``, fields 1-3) in a Mercator projection scaled by ``cos(lat0)`` (``lat0_deg``: the latitude
+    that fixes the scale, the same for every pose compared; None: this packet's), the orientation
+    ``Rz(yaw) Ry(pitch) Rx(roll)`` (fields 4-6, radians). Relative poses of nearby packets are metres.
+
+    Raises:
+        DataError: missing file, fewer than 6 numbers, or a latitude beyond +-85 degrees (naming the file).
+    """
+    lat, lon, alt, roll, pitch, yaw = _oxts_numbers(path, 6)[:6]
+    if abs(lat) > 85 or abs(lon) > 180:
+        raise DataError(f"{path}: OXTS latitude {lat:g} / longitude {lon:g} out of range")
+    scale = np.cos(np.deg2rad(lat if lat0_deg is None else lat0_deg))
+    t = [scale * EARTH_RADIUS_M * np.deg2rad(lon), scale * EARTH_RADIUS_M * np.log(np.tan(np.pi * (90 + lat) / 360)),
+         alt]  # fmt: skip
+
+    def rot(axis: int, a: float) -> np.ndarray:
+        c, s, (i, j) = np.cos(a), np.sin(a), [(1, 2), (2, 0), (0, 1)][axis]
+        R = np.eye(3)
+        R[i, i], R[i, j], R[j, i], R[j, j] = c, -s, s, c
+        return R
+
+    T = np.eye(4)
+    T[:3, :3] = rot(2, yaw) @ rot(1, pitch) @ rot(0, roll)
+    T[:3, 3] = t
+    return T

@@ -12,8 +12,8 @@ import numpy as np
 
 from semattnet._errors import DataError
 from semattnet._utils.registry import option
-from semattnet.data.frames import Frame, IndexedSource
-from semattnet.data.io import read_semantic
+from semattnet.data.frames import Frame, IndexedSource, View
+from semattnet.data.io import read_image, read_semantic
 from semattnet.data.kitti_raw import RawDrive, RawFrame
 from semattnet.data.sources.registry import SourceOptions, register_source
 
@@ -83,7 +83,67 @@ class RawDriveSource(IndexedSource):
         return Frame(name, raw.image, project_frame(raw), sem, K=raw.calib.K, points=raw.points,
                      calib=raw.calib, paths=paths)  # fmt: skip
 
+    def views(self, name: str) -> tuple[View, ...]:
+        """Frame ``name``'s other views: its stereo partner (camera 03 for 02 and back; ``T_view_cam`` the rectified
+        baseline from the calibration's ``P_rect_02`` / ``P_rect_03``) and the same camera's previous and next frames
+        (``T_view_cam`` from the OXTS poses, :func:`semattnet.geometry.motion.read_oxts_pose`, and
+        ``calib_imu_to_velo.txt``), each where the drive has its files.
+
+        Raises:
+            DataError: an image unreadable or not of its calibrated size, a malformed OXTS packet (naming the file).
+        """
+        partner = {"02": "03", "03": "02"}.get(self.drive.camera)
+        stereo = self._partner(name, partner) if partner is not None else None
+        return tuple(v for v in (stereo, *(self._neighbour(name, step) for step in (-1, 1))) if v is not None)
+
+    def _image(self, path: Path, size: tuple[int, int] | None, camera: str) -> np.ndarray:
+        image = read_image(path)
+        if size is not None and image.shape[:2] != size[::-1]:
+            raise DataError(f"{path}: image is {image.shape[1]}x{image.shape[0]}, the calibration says "
+                            f"{size[0]}x{size[1]} for camera {camera}")  # fmt: skip
+        return image
+
+    def _partner(self, name: str, partner: str) -> View | None:
+        from semattnet.geometry import invert_T, read_kitti_calibration
+
+        path = self.drive.drive_dir / f"image_{partner}" / "data" / f"{name}.png"
+        if not path.is_file():
+            return None
+        calib = read_kitti_calibration(self.drive.drive_dir.parent, partner)
+        T_view_cam = calib.T_cam_lidar @ invert_T(self.drive.calib.T_cam_lidar)
+        return View(f"image_{partner}", self._image(path, calib.image_size, partner), calib.K, T_view_cam)
+
+    def _neighbour(self, name: str, step: int) -> View | None:
+        """The same camera's frame ``step`` away, with the camera's motion from the OXTS poses, when all exist."""
+        from semattnet.geometry import invert_T, read_velo_to_cam
+        from semattnet.geometry.motion import read_oxts_pose
+
+        drive = self.drive
+        other = f"{int(name) + step:0{len(name)}d}" if name.isdigit() and int(name) + step >= 0 else None
+        imu = drive.drive_dir.parent / "calib_imu_to_velo.txt"
+        if other is None:
+            return None
+        needed = (
+            drive.image_dir / f"{other}.png",
+            imu,
+            drive.oxts_dir / f"{name}.txt",
+            drive.oxts_dir / f"{other}.txt",
+        )
+        if not all(p.is_file() for p in needed):
+            return None
+        here = read_oxts_pose(drive.oxts_dir / f"{name}.txt")
+        there = read_oxts_pose(drive.oxts_dir / f"{other}.txt", lat0_deg=_latitude(drive.oxts_dir / f"{name}.txt"))
+        T_cam_imu = drive.calib.T_cam_lidar @ read_velo_to_cam(imu)
+        T_view_cam = T_cam_imu @ invert_T(there) @ here @ invert_T(T_cam_imu)
+        image = self._image(drive.image_dir / f"{other}.png", drive.calib.image_size, drive.camera)
+        return View(other, image, drive.calib.K, T_view_cam)
+
     def inputs(self) -> list[Path]:
         date = self.drive.drive_dir.parent
         calib = [p for p in (date / "calib_cam_to_cam.txt", date / "calib_velo_to_cam.txt") if p.is_file()]
         return [self.drive.drive_dir, *calib, *([self.semantic_dir] if self.semantic_dir is not None else [])]
+
+
+def _latitude(path: Path) -> float:
+    """The latitude of an OXTS packet (its first number), which fixes the Mercator scale of a drive's poses."""
+    return float(path.read_text().split()[0])
