@@ -121,3 +121,16 @@ def test_drives_are_deterministic_and_refuse_a_full_folder(tree: Path, tmp_path:
         write_synthetic_drives(tmp_path / "a", drives=1, frames=1, size=SIZE)
     with pytest.raises(ValueError, match="unknown synthetic domain"):
         write_synthetic_drives(tmp_path / "b", domain="mars")
+
+
+def test_a_drive_of_several_streets_leaves_a_frame_out_between_them(tmp_path: Path) -> None:
+    from semattnet.data.synthetic.drive import STREET_GAP
+
+    m = write_synthetic_drives(tmp_path, drives=1, frames=2, size=(32, 64), seed=1, streets=2)
+    drive = _drive(tmp_path)
+    assert RawDrive(drive).names == ["0000000000", "0000000001", "0000000003", "0000000004"]
+    assert m["drives"][0]["frames"] == 4 and len(set(m["drives"][0]["seeds"])) == 2  # type: ignore[arg-type]
+    read = [oxts_pose([float(x) for x in (drive / "oxts" / "data" / f"{k:010d}.txt").read_text().split()])
+            for k in (1, 3)]  # fmt: skip
+    assert (invert_T(read[0]) @ read[1])[0, 3] == pytest.approx(STREET_GAP - STEP, abs=1e-5)
+    assert len((drive / "oxts" / "timestamps.txt").read_text().splitlines()) == 5

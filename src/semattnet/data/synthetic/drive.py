@@ -49,6 +49,7 @@ __all__ = [
     "FRAME_RATE",
     "ORIGIN_LAT_LON",
     "STEP",
+    "STREET_GAP",
     "DriveFrame",
     "DriveManifest",
     "drive_name",
@@ -68,6 +69,8 @@ STEP = 1.0
 ORIGIN_LAT_LON = (49.0, 8.4)
 #: The Earth radius of KITTI's Mercator poses (metres).
 EARTH_RADIUS = 6378137.0
+#: How far apart (metres along the OXTS road) the streets of one drive folder are.
+STREET_GAP = 1000.0
 _DRIVE_BASE = 3000  # drive numbers: clear of the depth-completion trees' (0, 1000, 2000)
 
 
@@ -208,8 +211,9 @@ class DriveManifest(TypedDict):
     drives: list[dict[str, object]]
 
 
-def _write_frame(out: Path, drive: str, k: int, fr: DriveFrame) -> None:
-    """One frame: the raw drive's files and the depth-completion files beside them."""
+def _write_frame(out: Path, drive: str, k: int, fr: DriveFrame, offset: float = 0.0) -> None:
+    """One frame (number ``k``, ``offset`` metres further along the OXTS road): the raw drive's files and the
+    depth-completion files beside them."""
     from semattnet.data.io import quantize_depth
 
     name = f"{k:010d}"
@@ -221,7 +225,7 @@ def _write_frame(out: Path, drive: str, k: int, fr: DriveFrame) -> None:
     fr.points.astype("<f4").tofile(scan)
     oxts = raw / "oxts" / "data" / f"{name}.txt"
     oxts.parent.mkdir(parents=True, exist_ok=True)
-    oxts.write_text(" ".join(f"{v:.14g}" for v in oxts_packet(fr.forward, STEP * FRAME_RATE)) + "\n")
+    oxts.write_text(" ".join(f"{v:.14g}" for v in oxts_packet(offset + fr.forward, STEP * FRAME_RATE)) + "\n")
     write_depth(layout.velodyne_path(out, "train", drive, "02", name), quantize_depth(fr.scan.sparse))
     write_depth(layout.groundtruth_path(out, "train", drive, "02", name), quantize_depth(fr.gt))
     write_image(layout.semantic_path(out / "semantic", drive, "02", name), LABEL_COLOURS[fr.left.labels])
@@ -242,10 +246,17 @@ def write_synthetic_drives(
     style: str = "realistic",
     domain: str | Domain = "source",
     overwrite: bool = False,
+    streets: int = 1,
 ) -> DriveManifest:
     """Write ``drives`` drives of ``frames`` frames each (see the module doc) under ``out``: the raw drives in
     ``out/kitti_raw/DATE/``, the depth-completion ``train`` split and semantic maps beside them, and the manifest
     ``out/drives.json``. Drive ``i`` is the scene of seed ``frame_seed(seed, "drive", i)`` whatever ``drives``.
+
+    ``streets`` > 1: each drive folder holds that many streets (``frames`` frames each) one after another, as a
+    recording that drives through several places: street ``j`` of drive ``i`` is the scene of seed
+    ``frame_seed(seed, "drive", i * streets + j)``, its frames numbered from ``j * (frames + 1)`` (one number
+    left out between streets, so no reader takes the last frame of a street and the first of the next for
+    neighbours) and its OXTS positions :data:`STREET_GAP` further along the road.
 
     Raises:
         FileExistsError: ``out`` holds files and ``overwrite`` is not set.
@@ -263,11 +274,12 @@ def write_synthetic_drives(
     _write_calibration(out / "kitti_raw" / SYNTH_DATE, K, size, T_cam_lidar, dom)
     entries: list[dict[str, object]] = []
     for d in range(drives):
-        name, scene_seed = drive_name(d), frame_seed(seed, "drive", d)
-        for k, fr in enumerate(make_drive(frames, size, scene_seed, style, dom)):
-            _write_frame(out, name, k, fr)
-        _write_timestamps(out / "kitti_raw" / SYNTH_DATE / name, frames)
-        entries.append({"drive": name, "seed": scene_seed, "frames": frames})
+        name, seeds = drive_name(d), [frame_seed(seed, "drive", d * streets + j) for j in range(streets)]
+        for j, scene_seed in enumerate(seeds):
+            for k, fr in enumerate(make_drive(frames, size, scene_seed, style, dom)):
+                _write_frame(out, name, j * (frames + 1) + k, fr, j * STREET_GAP)
+        _write_timestamps(out / "kitti_raw" / SYNTH_DATE / name, streets * (frames + 1) - 1)
+        entries.append({"drive": name, "seeds": seeds, "frames": streets * frames})
     manifest: DriveManifest = {"generator": "semattnet.data.synthetic.drive", "style": style, "domain": dom.name,
                                "seed": seed, "size": [height, width], "frames": frames, "drives": entries}  # fmt: skip
     (out / "drives.json").write_text(json.dumps(manifest, indent=1))
