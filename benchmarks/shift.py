@@ -56,7 +56,7 @@ from semattnet.apps.demo.reference import REFERENCE_RECIPE, ReferenceRecipe, mac
 from semattnet.apps.experiment import HeldOut, complete_held_out, fallback_semantic, load_held_out, score
 from semattnet.apps.experiment import train_variant as _train_variant
 from semattnet.baselines.classical import complete_classical
-from semattnet.data.synthetic.domain import SOURCE, TARGET
+from semattnet.data.synthetic.domain import SOURCE, TARGET, Domain
 from semattnet.data.synthetic.drive import drive_name, write_synthetic_drives
 from semattnet.data.synthetic.tree import SYNTH_DATE, write_synthetic_kitti
 from semattnet.models.registry import build_model
@@ -68,6 +68,15 @@ REPO = Path(__file__).resolve().parents[1]
 DOC_PAGE = REPO / "docs" / "guides" / "domain-shift.md"
 PLOT = REPO / "docs" / "domain-shift.png"
 MARKERS = ("<!-- shift-results:start -->", "<!-- shift-results:end -->")
+GAP_MARKERS = ("<!-- shift-gap:start -->", "<!-- shift-gap:end -->")
+#: The groups of :class:`~semattnet.data.synthetic.domain.Domain` fields the rigs differ in (``--references``).
+FACTORS: dict[str, tuple[str, ...]] = {
+    "image size": (),
+    "LiDAR": ("beams", "elevation", "lidar_offset", "lidar_pitch"),
+    "camera mounting": ("camera_height", "camera_pitch"),
+    "lens": ("focal_scale", "principal_row"),
+    "light and paint": ("sun_x", "sun_z", "exposure", "albedo_gain", "noise"),
+}
 #: Scores, as :class:`semattnet.evaluation.metrics.KittiMetrics` names them (mm and 1/km).
 METRICS = ("rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km")
 #: Adapted rows: key -> the ``--loss`` of ``semattnet adapt``.
@@ -124,7 +133,7 @@ class Clock:
 
 
 def _tree(root: Path, frames: int, eval_frames: int, size: tuple[int, int], seed: int, style: str,
-          domain: str) -> HeldOut:  # fmt: skip
+          domain: str | Domain) -> HeldOut:  # fmt: skip
     """A synthetic tree (:func:`~semattnet.data.synthetic.tree.write_synthetic_kitti`): the one an earlier run
     completed, else written anew; its held-out scenes."""
     done = (root / "scenes.json").is_file() and incomplete_tree(root) is None
@@ -377,21 +386,74 @@ def plot(results: dict[str, Any], path: Path) -> Path:
     return path
 
 
-def update_docs(page: Path, results: dict[str, Any], plot_path: Path) -> Path:
-    """Put the table and a link to the plot between the page's :data:`MARKERS` (atomically)."""
+def replace_between(page: Path, markers: tuple[str, str], body: str) -> Path:
+    """Put ``body`` between the page's two ``markers`` lines (atomically)."""
     text = page.read_text(encoding="utf-8")
-    start, end = MARKERS
+    start, end = markers
     if text.count(start) != 1 or text.count(end) != 1 or text.index(start) > text.index(end):
         raise InputError(f"{page}: needs one {start} line and one {end} line after it")
+    new = text[: text.index(start) + len(start)] + "\n" + body + text[text.index(end) :]
+    with atomic_path(page, suffix=".md") as tmp:
+        tmp.write_text(new, encoding="utf-8")
+    return page
+
+
+def update_docs(page: Path, results: dict[str, Any], plot_path: Path) -> Path:
+    """Put the table and a link to the plot between the page's :data:`MARKERS`."""
     rel = Path("..") / plot_path.name if plot_path.parent == page.parent.parent else Path(plot_path.name)
     s = results["settings"]
     body = (f"\nRun: `{results['command']}`, seeds {', '.join(map(str, s['seeds']))}, {results['device']} "
             f"({results['machine']}), {results['seconds']['total'] / 60:.0f} minutes.\n\n{table(results)}\n"
             f"![RMSE and MAE per method on the held-out target scenes]({rel.as_posix()})\n\n")  # fmt: skip
-    new = text[: text.index(start) + len(start)] + "\n" + body + text[text.index(end) :]
-    with atomic_path(page, suffix=".md") as tmp:
-        tmp.write_text(new, encoding="utf-8")
-    return page
+    return replace_between(page, MARKERS, body)
+
+
+def factor_domains() -> dict[str, Domain]:
+    """The source rig with one group of :data:`FACTORS` taken from the target's (and the whole target)."""
+    out = {}
+    for factor, fields in FACTORS.items():
+        changes = {f: getattr(TARGET, f) for f in fields}
+        out[factor] = dataclasses.replace(SOURCE, name=f"source+{factor.replace(' ', '-')}", **changes)
+    return {**out, "all: the target": TARGET}
+
+
+def reference_gap(out: Path, s: ShiftSettings, device: torch.device, log: Callable[[str], None] = print
+                  ) -> dict[str, Any]:  # fmt: skip
+    """How big the shift is, without training: the shipped reference checkpoints and the classical completion on
+    the held-out scenes of the source (at the source size) and of each of :func:`factor_domains` (at the target
+    size); ``out/reference_gap.json``."""
+    from semattnet.apps.demo.reference import load_reference, shipped_references
+
+    refs = {seed: load_reference(path)[0] for seed, path in shipped_references().items()}
+    cases = {"source": (SOURCE, s.recipe.size), **{k: (d, s.target_size) for k, d in factor_domains().items()}}
+    rows: dict[str, Any] = {}
+    for name, (domain, size) in cases.items():
+        root = out / "data" / f"held_out_{domain.name}"
+        held = _tree(root, 2, s.held_out_frames, size, s.held_out_seed, s.style, domain)
+        classical = {n: complete_classical(x["sparse"][None])[0, 0].numpy()
+                     for n, x in zip(held.names, held.samples, strict=True)}  # fmt: skip
+        per_seed = {}
+        for seed, model in refs.items():
+            outputs = complete_held_out(model, held, device, fallback_semantic if s.fallback_map else None)
+            per_seed[str(seed)] = scores({n: o["refined_depth"] for n, o in outputs.items()}, held)
+        rows[name] = {"classical": scores(classical, held), "reference": _row(per_seed)}
+        log(f"[shift] {name}: reference RMSE {rows[name]['reference']['scores']['rmse_mm']:.0f} mm, classical "
+            f"{rows[name]['classical']['rmse_mm']:.0f} mm")  # fmt: skip
+    with atomic_path(out / "reference_gap.json") as tmp:
+        tmp.write_text(json.dumps({"settings": dataclasses.asdict(s), "rows": rows}, indent=1, default=str) + "\n")
+    return rows
+
+
+def gap_table(rows: dict[str, Any]) -> str:
+    """The markdown table of :func:`reference_gap`."""
+    lines = ["| held-out scenes | reference RMSE mm | reference MAE mm | classical RMSE mm | classical MAE mm |",
+             "|---|---:|---:|---:|---:|"]  # fmt: skip
+    for name, row in rows.items():
+        ref, cl = row["reference"]["scores"], row["classical"]
+        label = name if name in ("source", "all: the target") else f"source rig, the target's {name}"
+        lines.append(f"| {label} | {ref['rmse_mm']:.0f} | {ref['mae_mm']:.0f} | {cl['rmse_mm']:.0f} | "
+                     f"{cl['mae_mm']:.0f} |")  # fmt: skip
+    return "\n".join(lines) + "\n"
 
 
 def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
@@ -405,6 +467,8 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
                     "--tiny: none)")  # fmt: skip
     ap.add_argument("--plot", type=Path, default=None, help=f"the plot to write (default: docs/{PLOT.name})")
     ap.add_argument("--overwrite", action="store_true", help="replace results.json (checkpoints are reused)")
+    ap.add_argument("--references", action="store_true", help="only score the shipped references on the source "
+                    "and on each factor of the shift (no training): the page's first table")  # fmt: skip
     ap.add_argument("--estimate", action="store_true", help="first time a frame and a training step per size on "
                     "--device and record the full run's minutes estimated from them")  # fmt: skip
     args = ap.parse_args(argv)
@@ -415,6 +479,12 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     s = tiny() if args.tiny else ShiftSettings()
     s = dataclasses.replace(s, seeds=seeds or s.seeds, fallback_map=args.fallback_map)
     device = resolve_device(args.device)
+    if args.references:
+        rows = reference_gap(args.out, s, device)
+        if args.docs is not None or not args.tiny:
+            replace_between(args.docs or DOC_PAGE, GAP_MARKERS, "\n" + gap_table(rows) + "\n")
+        print(gap_table(rows))
+        return rows
     command = " ".join(["python benchmarks/shift.py", *(argv if argv is not None else sys.argv[1:])])
     extra = {"estimate_full_run": estimate(ShiftSettings(), device)} if args.estimate else {}
     if extra:

@@ -134,3 +134,22 @@ def test_tiny_run(shift: ModuleType, tmp_path: Path) -> None:
     again = shift.run(tmp_path / "run", shift.tiny(), torch.device("cpu"), overwrite=True, log=lines.append)
     assert "[shift] source, seed 0: trained earlier" in lines[0]
     assert again["rows"]["unadapted"] == saved["rows"]["unadapted"]
+
+
+def test_factor_domains_take_one_group_of_the_target_rig_each(shift: ModuleType) -> None:
+    from semattnet.data.synthetic.domain import SOURCE, TARGET
+
+    domains = shift.factor_domains()
+    assert list(domains) == [*shift.FACTORS, "all: the target"] and domains["all: the target"] == TARGET
+    lidar = domains["LiDAR"]
+    assert (lidar.beams, lidar.lidar_pitch, lidar.camera_pitch, lidar.focal_scale) == (32, 2.0, 0.0, 1.0)
+    assert domains["image size"] == shift.dataclasses.replace(SOURCE, name="source+image-size")
+    grouped = [f for fields in shift.FACTORS.values() for f in fields]
+    differing = [f.name for f in shift.dataclasses.fields(TARGET) if getattr(TARGET, f.name) != getattr(SOURCE, f.name)]
+    assert sorted(grouped) == sorted(f for f in differing if f != "name")  # every difference in one group
+    rows = {"source": {"reference": _row(1500, 600), "classical": _row(4500, 1300)["scores"]},
+            "lens": {"reference": _row(6900, 4500), "classical": _row(3800, 985)["scores"]}}  # fmt: skip
+    text = shift.gap_table(rows)
+    assert "| source | 1500 | 600 | 4500 | 1300 |" in text and "| source rig, the target's lens | 6900 |" in text
+    shipped = shift.DOC_PAGE.read_text()
+    assert all(shipped.count(m) == 1 for m in shift.GAP_MARKERS)
