@@ -4,8 +4,8 @@ A :class:`Domain` says how a scene is seen, not what it holds: the same scene se
 every domain. :data:`SOURCE` is the generator's original rig (KITTI-like: 64 beams from +2 to -24.8 deg, the
 camera 1.65 m above the road, level, KITTI's field of view) and draws exactly the numbers it always drew;
 :data:`TARGET` is another car's rig, as a robot builder would have: a 32-beam LiDAR mounted lower and
-tilted down, a camera lower, pitched down, with a wider lens and a centred principal point, another
-exposure, a warmer sun and paler, more saturated paint. :data:`DOMAINS` names them.
+tilted down, a camera lower, pitched down, with a wider lens and a centred principal point, the sun from
+other directions, a darker exposure, warmer colours and more image noise. :data:`DOMAINS` names them.
 
 Frames (metres): the *street frame* is the original camera frame of the first frame of a scene (x right,
 y down, z forward, the ground plane at ``y = CAM_HEIGHT``); a rig's camera sits ``camera_height`` above
