@@ -50,6 +50,11 @@ def test_the_raw_reader_reads_every_frame_and_the_scan_agrees_with_the_ground_tr
         # sub-pixel positions on the steep near road, 2 cm range noise; a few points see past edges
         assert np.mean(np.abs(sparse[both] - gt[both]) < 0.05 * gt[both]) > 0.93
     assert RawDrive(drive, camera=3).frame("0000000000").image.shape == (*SIZE, 3)
+    from semattnet.data.kitti import KittiDepthCompletion  # the same frames as a depth-completion train split
+
+    split = KittiDepthCompletion(tree, "train")
+    assert len(split) == FRAMES
+    np.testing.assert_allclose(split[0]["sparse"][0].numpy(), project_frame(raw.frame("0000000000")), atol=1 / 512)
 
 
 def test_the_right_image_is_the_left_seen_from_the_baseline(tree: Path) -> None:
