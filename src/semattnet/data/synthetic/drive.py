@@ -102,7 +102,7 @@ def make_drive(
     """The ``frames`` frames of the drive of scene ``seed`` (see the module doc), one at a time.
 
     Raises:
-        InputError: unknown ``style`` or ``domain``.
+        InputError: unknown ``style`` or ``domain`` (when the first frame is asked for).
     """
     check_style(style)
     dom = get_domain(domain)
