@@ -75,11 +75,21 @@ _PINNED = {
 }
 
 
-@pytest.mark.parametrize("key", list(_PINNED))
-def test_ideal_style_is_unchanged(key: tuple[int, int, int]) -> None:
+# The realistic style in the source domain (what the shipped reference checkpoints were trained on), pinned when
+# the domains (the rig and the look) were added: the default domain must keep drawing exactly these frames.
+_PINNED_REALISTIC = {
+    (64, 128, 3): ("9e2f0c5238eeb892", "11c2a05dd9aa1aa6", "9ace9695fe265d39", "0ab2785234a34263", 114279.154, False),
+    (96, 320, 7): ("c2299d5861008ec4", "4681ac06a84ebf1e", "a976372375fd0b8e", "841de39344b3ebbc", 616202.952, True),
+}
+
+
+@pytest.mark.parametrize(
+    ("style", "key"), [("ideal", k) for k in _PINNED] + [("realistic", k) for k in _PINNED_REALISTIC]
+)
+def test_default_domain_is_unchanged(style: str, key: tuple[int, int, int]) -> None:
     h, w, seed = key
-    f = make_frame(h, w, seed=seed)
-    rgb, labels, sparse, gt, depth_sum, shadowed = _PINNED[key]
+    f = make_frame(h, w, seed=seed, style=style)
+    rgb, labels, sparse, gt, depth_sum, shadowed = (_PINNED if style == "ideal" else _PINNED_REALISTIC)[key]
     assert _digest(f.rgb) == rgb
     assert _digest(f.labels.astype(np.uint8)) == labels
     assert _digest(np.round(f.sparse * 256).astype(np.uint16)) == sparse
@@ -290,3 +300,48 @@ def test_depth_edges_without_colour_edges(realistic, ideal) -> None:  # type: ig
     assert sum(f.meta["camouflaged_poles"] for f in realistic) > 0
     hidden, before = sum(map(_hidden_edges, realistic)), sum(map(_hidden_edges, ideal))
     assert hidden > 4 * before + 100, (hidden, before)  # the ideal style has next to none
+
+
+# --- domains (the rig and the look) -------------------------------------------------------------------------
+
+
+def test_source_domain_is_the_default_and_names_are_checked() -> None:
+    from semattnet.data.synthetic.domain import SOURCE, Domain
+
+    a, b = make_frame(64, 128, seed=3), make_frame(64, 128, seed=3, domain=SOURCE)
+    for k in ("rgb", "sparse", "gt", "lidar_points", "T_cam_lidar"):
+        np.testing.assert_array_equal(getattr(a, k), getattr(b, k))
+    with pytest.raises(ValueError, match="unknown synthetic domain 'moon'"):
+        make_frame(64, 128, domain="moon")
+    with pytest.raises(ValueError, match="beams"):
+        Domain(beams=1)
+
+
+def test_target_domain_has_its_own_rig() -> None:
+    """The target's camera (height, pitch, K) and LiDAR (beams, mounting) are what its Domain says, and the
+    depth, the scan and the ground truth agree through them."""
+    from semattnet.data.synthetic.domain import TARGET, Pose
+    from semattnet.geometry import transform_points
+
+    h, w = 128, 352
+    src, f = make_frame(h, w, seed=4, style="realistic"), make_frame(h, w, seed=4, style="realistic", domain="target")
+    assert f.K[0, 0] == pytest.approx(0.8 * src.K[0, 0]) and f.K[1, 2] == 64.0
+    assert f.meta["domain"] == "target" and "domain" not in src.meta
+    assert not np.array_equal(f.T_cam_lidar, src.T_cam_lidar)
+    cam = Pose.of_camera(TARGET)
+    road = (f.labels == _ID["road"]) & (f.depth > 5)
+    street = depth_to_points(f.depth, f.K, mask=road).xyz @ cam.R.T + cam.position
+    np.testing.assert_allclose(street[:, 1], CAM_HEIGHT, atol=1e-4)  # the camera is 1.3 m up, pitched 3 deg
+    assert f.lidar_points is not None and f.T_cam_lidar is not None
+    in_street = transform_points(f.T_cam_lidar, f.lidar_points) @ cam.R.T + cam.position
+    ground = in_street[:, 1] > CAM_HEIGHT - 0.1
+    assert ground.mean() > 0.3 and np.abs(in_street[ground, 1] - CAM_HEIGHT).max() < 0.1  # 2 cm range noise
+    elevation = np.degrees(np.arcsin(f.lidar_points[:, 2] / np.linalg.norm(f.lidar_points, axis=1)))
+    assert len(np.unique(np.round(elevation))) == TARGET.n_beams(h)
+    assert TARGET.n_beams(h) == 12 and (f.sparse > 0).mean() < 0.8 * (src.sparse > 0).mean()
+    depth = project_points(f.lidar_points, f.K, f.T_cam_lidar, (w, h))
+    np.testing.assert_array_equal(np.round(depth * DEPTH_SCALE) / DEPTH_SCALE, f.sparse)
+    v = f.sparse > 0
+    assert np.mean(np.abs(f.sparse[v] - f.depth[v]) < 0.03 * f.depth[v]) > 0.93
+    gt = f.gt > 0
+    np.testing.assert_allclose(f.gt[gt], f.depth[gt], atol=1 / 512 + 1e-6)

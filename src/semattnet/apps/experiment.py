@@ -57,11 +57,18 @@ class HeldOut:
 
 
 def make_synthetic(
-    root: Path, frames: int, eval_frames: int, size: tuple[int, int], seed: int = 0, style: str = "ideal"
+    root: Path,
+    frames: int,
+    eval_frames: int,
+    size: tuple[int, int],
+    seed: int = 0,
+    style: str = "ideal",
+    domain: str = "source",
 ) -> HeldOut:
-    """Write a synthetic tree at ``root`` (half of each split shadowed, scenes of ``style``) and load
-    its held-out scenes."""
-    write_synthetic_kitti(root, frames=frames, size=size, seed=seed, eval_frames=eval_frames, style=style)
+    """Write a synthetic tree at ``root`` (half of each split shadowed, scenes of ``style`` seen by the rig of
+    ``domain``, see :mod:`semattnet.data.synthetic.domain`) and load its held-out scenes."""
+    write_synthetic_kitti(root, frames=frames, size=size, seed=seed, eval_frames=eval_frames, style=style,
+                          domain=domain)  # fmt: skip
     return load_held_out(root)
 
 

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .domain import Pose
 from .layout import CAM_HEIGHT, Box
 
 __all__ = ["View", "camera_view", "cast", "cast_camera", "pixel_rays"]
@@ -53,13 +54,23 @@ def pixel_rays(K: np.ndarray, height: int, width: int) -> np.ndarray:
     return np.stack(((u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones((height, width))), -1)
 
 
-def _screen_window(K: np.ndarray, height: int, width: int, box: Box) -> tuple[slice, slice] | None:
-    """Rows and columns whose pixel centres may see ``box`` (a conservative screen rectangle), or None."""
+def _screen_window(K: np.ndarray, height: int, width: int, box: Box, pose: Pose | None) -> tuple[slice, slice] | None:
+    """Rows and columns whose pixel centres may see ``box`` (a conservative screen rectangle), or None.
+
+    ``pose``: the camera's (None: the street frame itself); a box partly behind a moved camera gets the whole image.
+    """
     lo, hi = box.lo.copy(), box.hi.copy()
-    lo[2] = max(lo[2], 0.1)  # the part in front of the camera
-    if hi[2] <= lo[2]:
-        return None
+    if pose is None:
+        lo[2] = max(lo[2], 0.1)  # the part in front of the camera
+        if hi[2] <= lo[2]:
+            return None
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    if pose is not None:
+        corners = (corners - pose.position) @ pose.R  # street -> camera: R^T (p - position), row by row
+        if corners[:, 2].max() <= 0.1:
+            return None
+        if corners[:, 2].min() <= 0.1:
+            return slice(0, height), slice(0, width)
     pu = K[0, 0] * corners[:, 0] / corners[:, 2] + K[0, 2]
     pv = K[1, 1] * corners[:, 1] / corners[:, 2] + K[1, 2]
     u0, u1 = max(0, int(np.floor(pu.min()))), min(width, int(np.ceil(pu.max())) + 1)
@@ -70,17 +81,22 @@ def _screen_window(K: np.ndarray, height: int, width: int, box: Box) -> tuple[sl
 
 
 def cast_camera(
-    K: np.ndarray, height: int, width: int, boxes: list[Box]
+    K: np.ndarray, height: int, width: int, boxes: list[Box], pose: Pose | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`cast` for the camera's pixel rays (:func:`pixel_rays`), testing each box only inside its
-    screen rectangle. Returns flattened (row-major) rays (N, 3), t, box index and face axis."""
-    dirs = pixel_rays(K, height, width)
-    t_best, idx, axis = (a.reshape(height, width) for a in cast(np.zeros(3), dirs.reshape(-1, 3), []))
+    screen rectangle. Returns flattened (row-major) rays (N, 3, street axes), t, box index and face axis.
+
+    ``pose``: the camera's pose in the street frame (None or the identity: the street frame's own camera).
+    """
+    pose = None if pose is None or pose.identity else pose
+    dirs = pixel_rays(K, height, width) if pose is None else pixel_rays(K, height, width) @ pose.R.T
+    origin = np.zeros(3) if pose is None else pose.position
+    t_best, idx, axis = (a.reshape(height, width) for a in cast(origin, dirs.reshape(-1, 3), []))
     for b, box in enumerate(boxes):
-        win = _screen_window(K, height, width, box)
+        win = _screen_window(K, height, width, box, pose)
         if win is None:
             continue
-        t, _, ax = cast(np.zeros(3), dirs[win].reshape(-1, 3), [box])
+        t, _, ax = cast(origin, dirs[win].reshape(-1, 3), [box])
         t = t.reshape(t_best[win].shape)
         hit = t < t_best[win]
         t_best[win] = np.where(hit, t, t_best[win])
@@ -95,19 +111,23 @@ class View:
 
     height: int
     width: int
-    dirs: np.ndarray  # (N, 3) pixel rays, z = 1
+    dirs: np.ndarray  # (N, 3) pixel rays (street axes; z = 1 in the camera's)
     idx: np.ndarray  # (N,) box index hit, -1 ground, -2 sky (or beyond 150 m)
     axis: np.ndarray  # (N,) axis of the box face hit
     far: np.ndarray  # (N,) sky or beyond 150 m: no surface
-    points: np.ndarray  # (N, 3) surface points in the camera frame (0 where far)
+    points: np.ndarray  # (N, 3) surface points in the street frame (the camera's position where far)
     on_box: np.ndarray  # (N,) the ray hits a box
     ground: np.ndarray  # (N,) the ray hits the ground
+    depth: np.ndarray  # (N,) depth in the camera (z of the camera frame), 0 where far
 
 
-def camera_view(K: np.ndarray, height: int, width: int, boxes: list[Box]) -> View:
-    """Cast the camera's rays; hits beyond 150 m count as sky."""
-    dirs, t, idx, axis = cast_camera(K, height, width, boxes)
-    far = ~np.isfinite(t) | (t * dirs[:, 2] > 150)
+def camera_view(K: np.ndarray, height: int, width: int, boxes: list[Box], pose: Pose | None = None) -> View:
+    """Cast the camera's rays (from ``pose``, see :func:`cast_camera`); hits beyond 150 m count as sky."""
+    dirs, t, idx, axis = cast_camera(K, height, width, boxes, pose)
+    far = ~np.isfinite(t) | (t > 150)  # t is the depth: the rays have z = 1 in the camera
     idx[far] = -2
-    points = dirs * np.where(far, 0.0, t)[:, None]
-    return View(height, width, dirs, idx, axis, far, points, idx >= 0, idx == -1)
+    depth = np.where(far, 0.0, t)
+    points = dirs * depth[:, None]
+    if pose is not None and not pose.identity:
+        points += pose.position
+    return View(height, width, dirs, idx, axis, far, points, idx >= 0, idx == -1, depth)

@@ -33,8 +33,12 @@ half the poles coloured like the facade behind them under the frame's sun. The g
 still the exact depth of the first surface (glass included) and the labels the exact classes;
 ``SyntheticFrame.material`` and ``meta`` say what was applied.
 
-Modules, one concern each: :mod:`.layout` (the boxes of a street), :mod:`.raycast` (exact ray casting,
-the camera's view), :mod:`.shading` (labels, colours, light), :mod:`.materials` (classes and LiDAR
+Domains (:mod:`.domain`, the ``domain`` argument of :func:`make_frame`): the rig and the look. ``"source"`` (the
+default) is everything above, drawn exactly as it always was; ``"target"`` sees the same streets with another
+car's sensors (a lower, tilted 32-beam LiDAR, a lower camera pitched down with a wider lens) under other light.
+
+Modules, one concern each: :mod:`.layout` (the boxes of a street), :mod:`.domain` (rigs), :mod:`.raycast`
+(exact ray casting, the camera's view), :mod:`.shading` (labels, colours, light), :mod:`.materials` (classes and LiDAR
 materials), :mod:`.realistic` (the realistic style's dressing), :mod:`.lidar` (the LiDAR simulator);
 this module puts a frame together.
 """
@@ -49,14 +53,16 @@ from semattnet._errors import InputError
 from semattnet.data.io import quantize_depth
 from semattnet.geometry.cameras import KITTI_IMAGE_SIZE, KITTI_K
 
+from .domain import SOURCE, Domain, Pose, get_domain
 from .layout import Box, make_boxes
-from .lidar import MAX_RANGE, T_CAM_LIDAR, simulate_lidar
+from .lidar import MAX_RANGE, simulate_lidar
 from .materials import CITYSCAPES_PALETTE, LABEL_COLOURS, MATERIAL_IDS, MATERIALS, surfaces
 from .raycast import View, camera_view
 from .realistic import Dress, camouflage_poles, decorate, dress
-from .shading import albedo, labels, overpass, render, sun_direction, sunlight
+from .shading import albedo, labels, overpass, overpass_band, render, sun_direction, sunlight
 
-__all__ = ["CITYSCAPES_PALETTE", "KITTI_K", "MATERIALS", "SCENE_STYLES", "SyntheticFrame", "check_style", "make_frame"]
+__all__ = ["CITYSCAPES_PALETTE", "KITTI_K", "MATERIALS", "SCENE_STYLES", "Scene", "Shot", "SyntheticFrame",
+           "check_style", "intrinsics", "make_frame", "make_scene", "shoot"]  # fmt: skip
 
 #: Scene styles of :func:`make_frame` (the first is the default).
 SCENE_STYLES: tuple[str, ...] = ("ideal", "realistic")
@@ -98,31 +104,99 @@ def _intrinsics(height: int, width: int, size_of_kitti: bool) -> np.ndarray:
     return K
 
 
+def intrinsics(height: int, width: int, size_of_kitti: bool = True, domain: Domain = SOURCE) -> np.ndarray:
+    """The camera matrix of ``domain`` at this image size: KITTI's (scaled to KITTI's field of view at this width
+    when ``size_of_kitti``), the focal length times ``domain.focal_scale``, the principal row where it says."""
+    K = _intrinsics(height, width, size_of_kitti)
+    if domain.focal_scale != 1.0:
+        K[0, 0] *= domain.focal_scale
+        K[1, 1] *= domain.focal_scale
+    if domain.principal_row is not None:
+        K[1, 2] = domain.principal_row * height
+    return K
+
+
 def _colours(
-    view: View, labels: np.ndarray, boxes: list[Box], dress: Dress | None, sun: np.ndarray
+    view: View, labels: np.ndarray, boxes: list[Box], dress: Dress | None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(N, 3) albedo, (N,) material codes and (N,) paint mask, with the realistic style's glass, posters,
     markings and camouflage (the ideal style: all matte, no paint beyond the centre line)."""
     n = view.height * view.width
     if dress is None:
         return albedo(view, labels, boxes), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool)
-    camouflage_poles(boxes, dress, sun)  # needs the sun; draws nothing
     hits = surfaces(view.points, view.idx, view.axis, boxes)
     colour, paint = decorate(view, labels, albedo(view, labels, boxes), hits, dress)
     return colour, np.where(view.far, MATERIAL_IDS["matte"], hits[0]), paint
 
 
-def _ground_truth(depth: np.ndarray, K: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def _ground_truth(depth: np.ndarray, K: np.ndarray, rng: np.random.Generator, domain: Domain = SOURCE) -> np.ndarray:
     """~16 % of the pixels the LiDAR's field of view covers, exact depth, in range (0 elsewhere).
 
-    The field of view starts at the first row whose pixel centre (integer v) lies below the top beam (2 deg up).
+    The field of view starts at the first row whose pixel centre (integer v) lies below the top beam (2 deg up
+    in the source domain; the top beam's elevation in the camera for others).
     """
     height, width = depth.shape
-    top_row = int(np.clip(np.ceil(K[1, 2] - K[1, 1] * np.tan(np.deg2rad(2.0))), 0, height - 1))
+    top = domain.elevation[0] - domain.lidar_pitch + domain.camera_pitch
+    top_row = int(np.clip(np.ceil(K[1, 2] - K[1, 1] * np.tan(np.deg2rad(top))), 0, height - 1))
     eligible = (depth > 0) & (depth < MAX_RANGE)
     eligible[:top_row] = False
     p = min(1.0, 0.17 * height * width / max(1, eligible.sum()))
     return np.where(eligible & (rng.random((height, width)) < p), depth, 0.0)
+
+
+@dataclass
+class Scene:
+    """What a scene seed draws before any camera looks: the street, its dressing and its light."""
+
+    boxes: list[Box]
+    dressing: Dress | None
+    sun: np.ndarray
+    exposure: float
+    shadow: bool
+    band: tuple[float, float]  # the overpass's z range in the street frame ((0, 0): none)
+    domain: Domain
+
+
+def make_scene(rng: np.random.Generator, style: str, domain: Domain = SOURCE, shadow: bool | None = None) -> Scene:
+    """The street (boxes, the ``style``'s dressing), the sun, the exposure and the overpass, drawn from ``rng``."""
+    boxes, dressing = make_boxes(rng), None
+    if style == "realistic":
+        boxes, dressing = dress(rng, boxes)
+    sun = sun_direction(rng, domain.sun_x, domain.sun_z)
+    exposure = float(rng.uniform(*domain.exposure))
+    shadow = bool(rng.random() < 0.5) if shadow is None else shadow
+    band = overpass_band(rng) if shadow else (0.0, 0.0)
+    if dressing is not None:
+        camouflage_poles(boxes, dressing, sun)  # needs the sun; draws nothing
+    return Scene(boxes, dressing, sun, exposure, shadow, band, domain)
+
+
+@dataclass
+class Shot:
+    """One camera's picture of a scene: (H, W, 3) uint8 image, (H, W) labels, exact depth (float64 metres, 0 for
+    sky), material codes and paint."""
+
+    rgb: np.ndarray
+    labels: np.ndarray
+    depth: np.ndarray
+    material: np.ndarray
+    paint: np.ndarray
+
+
+def shoot(scene: Scene, K: np.ndarray, size: tuple[int, int], pose: Pose, rng: np.random.Generator) -> Shot:
+    """Render ``scene`` from a camera at ``pose`` (street frame) with intrinsics ``K``; the image noise from ``rng``."""
+    height, width = size
+    view = camera_view(K, height, width, scene.boxes, pose)
+    label = labels(view, scene.boxes)
+    light = sunlight(view, scene.boxes, scene.sun, scene.exposure)
+    if scene.shadow:
+        light = overpass(view, light, scene.band)
+    colour, material, paint = _colours(view, label, scene.boxes, scene.dressing)
+    if scene.domain.albedo_gain != SOURCE.albedo_gain:
+        colour = colour * np.asarray(scene.domain.albedo_gain)
+    rgb = render(view, colour, light, scene.exposure, rng, scene.domain.noise)
+    return Shot(rgb, label.reshape(height, width), view.depth.reshape(height, width),
+                material.astype(np.uint8).reshape(height, width), paint.reshape(height, width))  # fmt: skip
 
 
 def make_frame(
@@ -132,8 +206,9 @@ def make_frame(
     shadow: bool | None = None,
     size_of_kitti: bool = True,
     style: str = "ideal",
+    domain: str | Domain = "source",
 ) -> SyntheticFrame:
-    """Generate one scene, deterministic in ``seed`` (and ``style``).
+    """Generate one scene, deterministic in ``seed`` (and ``style``, ``domain``).
 
     Args:
         height: image height (any; KITTI's raw frames are about 375 x 1242). width: image width.
@@ -142,48 +217,38 @@ def make_frame(
         size_of_kitti: scale the intrinsics so the field of view is KITTI's at this width.
         style: one of :data:`SCENE_STYLES`: ``"ideal"`` (every surface returns LiDAR, colour edges are
             depth edges but for shadows) or ``"realistic"`` (see the module docstring).
+        domain: the rig and look (:class:`~semattnet.data.synthetic.domain.Domain` or a name of
+            :data:`~semattnet.data.synthetic.domain.DOMAINS`); ``"source"`` is the original generator's.
 
     Raises:
-        InputError: unknown ``style``.
+        InputError: unknown ``style`` or ``domain``.
     """
     check_style(style)
+    dom = get_domain(domain)
     rng = np.random.default_rng(seed)  # every step below draws from it, in this order
-    K = _intrinsics(height, width, size_of_kitti)
-    boxes, dressing = make_boxes(rng), None
-    if style == "realistic":
-        boxes, dressing = dress(rng, boxes)
-    view = camera_view(K, height, width, boxes)
-    label = labels(view, boxes)
-    sun = sun_direction(rng)
-    exposure = rng.uniform(0.7, 1.15)
-    light = sunlight(view, boxes, sun, exposure)
-    shadow = bool(rng.random() < 0.5) if shadow is None else shadow
-    band = (0.0, 0.0)
-    if shadow:
-        light, band = overpass(view, light, rng)
-    colour, material, paint = _colours(view, label, boxes, dressing, sun)
-    rgb = render(view, colour, light, exposure, rng)
-    label = label.reshape(height, width)
-    depth = np.where(view.far.reshape(height, width), 0.0, view.points[:, 2].reshape(height, width))
-    scan = simulate_lidar(height, width, K, boxes, rng, realistic=dressing is not None)
-    gt = _ground_truth(depth, K, rng)
-    meta = {"seed": seed, "style": style, "shadow_band_z": list(band), "sun": sun.tolist(), "exposure": exposure}
-    if dressing is not None:
-        meta |= {**dressing.meta, "lidar": scan.stats}
+    K = intrinsics(height, width, size_of_kitti, dom)
+    scene = make_scene(rng, style, dom, shadow)
+    shot = shoot(scene, K, (height, width), Pose.of_camera(dom), rng)
+    scan = simulate_lidar(height, width, K, scene.boxes, rng, realistic=scene.dressing is not None, domain=dom)
+    gt = _ground_truth(shot.depth, K, rng, dom)
+    meta = {"seed": seed, "style": style, "shadow_band_z": list(scene.band), "sun": scene.sun.tolist(),
+            "exposure": scene.exposure} | ({"domain": dom.name} if dom != SOURCE else {})  # fmt: skip
+    if scene.dressing is not None:
+        meta |= {**scene.dressing.meta, "lidar": scan.stats}
     return SyntheticFrame(
-        rgb=rgb,
-        semantic=LABEL_COLOURS[label],
+        rgb=shot.rgb,
+        semantic=LABEL_COLOURS[shot.labels],
         sparse=quantize_depth(scan.sparse),
         gt=quantize_depth(gt),
-        depth=depth.astype(np.float32),
-        labels=label,
+        depth=shot.depth.astype(np.float32),
+        labels=shot.labels,
         K=K,
-        shadowed=shadow,
+        shadowed=scene.shadow,
         meta=meta,
-        material=material.astype(np.uint8).reshape(height, width),
-        paint=paint.reshape(height, width),
+        material=shot.material,
+        paint=shot.paint,
         lidar_points=scan.points,
-        T_cam_lidar=T_CAM_LIDAR.copy(),
+        T_cam_lidar=scan.T_cam_lidar,
     )
 
 

@@ -12,7 +12,8 @@ from .layout import CAM_HEIGHT, Box, road_half_width, window
 from .materials import CLASS_IDS
 from .raycast import View
 
-__all__ = ["albedo", "convex_hull", "ground_shadow", "labels", "overpass", "render", "sun_direction", "sunlight"]
+__all__ = ["albedo", "convex_hull", "ground_shadow", "labels", "overpass", "overpass_band", "render", "sun_direction",
+           "sunlight"]  # fmt: skip
 
 
 def convex_hull(points: np.ndarray) -> np.ndarray:
@@ -83,9 +84,11 @@ def albedo(view: View, labels: np.ndarray, boxes: list[Box]) -> np.ndarray:
     return out
 
 
-def sun_direction(rng: np.random.Generator) -> np.ndarray:
-    """A random unit direction the sunlight travels (downwards)."""
-    sun = np.array([rng.uniform(-0.6, 0.6), 1.0, rng.uniform(-0.3, 0.8)])
+def sun_direction(
+    rng: np.random.Generator, x: tuple[float, float] = (-0.6, 0.6), z: tuple[float, float] = (-0.3, 0.8)
+) -> np.ndarray:
+    """A random unit direction the sunlight travels (downwards: y = 1 before normalising, x and z drawn in ranges)."""
+    sun = np.array([rng.uniform(*x), 1.0, rng.uniform(*z)])
     sun /= np.linalg.norm(sun)
     return sun
 
@@ -103,19 +106,26 @@ def sunlight(view: View, boxes: list[Box], sun: np.ndarray, exposure: float) -> 
     return shade
 
 
-def overpass(view: View, light: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, tuple[float, float]]:
-    """Shade a random band of the street (an overpass), whatever the surface: new light, the band's z range."""
+def overpass_band(rng: np.random.Generator) -> tuple[float, float]:
+    """A random band of the street (an overpass): its z range in the street frame."""
     z0 = rng.uniform(6, 18)
-    band = (z0, z0 + rng.uniform(4, 9))
+    return z0, z0 + rng.uniform(4, 9)
+
+
+def overpass(view: View, light: np.ndarray, band: tuple[float, float]) -> np.ndarray:
+    """Shade the overpass ``band`` of the street (:func:`overpass_band`), whatever the surface: the new light."""
     z = view.points[:, 2]
-    return np.where(~view.far & (z > band[0]) & (z < band[1]), light * 0.3, light), band
+    shaded: np.ndarray = np.where(~view.far & (z > band[0]) & (z < band[1]), light * 0.3, light)
+    return shaded
 
 
-def render(view: View, albedo: np.ndarray, light: np.ndarray, exposure: float, rng: np.random.Generator) -> np.ndarray:
-    """(H, W, 3) uint8 image: albedo x light x 6 % noise, and a vertical gradient for the sky."""
+def render(
+    view: View, albedo: np.ndarray, light: np.ndarray, exposure: float, rng: np.random.Generator, noise: float = 0.06
+) -> np.ndarray:
+    """(H, W, 3) uint8 image: albedo x light x (1 + ``noise`` x a normal draw), and a vertical gradient for the sky."""
     h, w, far = view.height, view.width, view.far
-    noise = 1.0 + 0.06 * rng.standard_normal(h * w)
-    rgb = albedo * (light * noise)[:, None]
+    grain = 1.0 + noise * rng.standard_normal(h * w)
+    rgb = albedo * (light * grain)[:, None]
     sky_v = np.mgrid[0:h, 0:w][0].reshape(-1)[far] / max(1, h)
     rgb[far] = np.stack((150 + 60 * sky_v, 185 + 40 * sky_v, 235 + 0 * sky_v), -1) * exposure
     return np.clip(rgb, 0, 255).astype(np.uint8).reshape(h, w, 3)

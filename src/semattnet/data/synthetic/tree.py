@@ -23,6 +23,7 @@ from semattnet._utils.outputs import Output, check_outputs, incomplete_tree, mar
 from semattnet.data import layout
 from semattnet.data.io import write_depth as _write_depth
 from semattnet.data.io import write_image as _write_image
+from semattnet.data.synthetic.domain import Domain, get_domain
 from semattnet.data.synthetic.scenes import check_style, make_frame
 
 __all__ = ["SYNTH_DATE", "frame_seed", "write_synthetic_kitti"]
@@ -58,16 +59,17 @@ class SceneManifest(TypedDict):
 
     generator: str
     style: str
+    domain: str
     seed: int
     size: list[int]
     counts: dict[str, int]
     frames: list[dict[str, object]]
 
 
-def _job(args: tuple[Path, str, int, int, int, int, bool | None, str]) -> dict[str, object]:
-    out, split, index, seed, height, width, shadow, style = args
+def _job(args: tuple[Path, str, int, int, int, int, bool | None, str, Domain]) -> dict[str, object]:
+    out, split, index, seed, height, width, shadow, style, domain = args
     fseed = frame_seed(seed, split, index)
-    fr = make_frame(height, width, seed=fseed, shadow=shadow, style=style)
+    fr = make_frame(height, width, seed=fseed, shadow=shadow, style=style, domain=domain)
     entry: dict[str, object] = {"split": split, "index": index, "seed": fseed, "shadowed": fr.shadowed}
     if split in ("train", "val"):
         drive = f"{SYNTH_DATE}_drive_{_DRIVE_BASE[split] + index // _FRAMES_PER_DRIVE:04d}_sync"
@@ -120,13 +122,15 @@ def write_synthetic_kitti(
     overwrite: bool = False,
     shadow_fraction: float = 0.5,
     style: str = "ideal",
+    domain: str | Domain = "source",
 ) -> SceneManifest:
     """Generate ``frames`` training frames and ``eval_frames`` frames for each of val,
     val_select and test (default ``max(2, frames // 5)``) under ``out``.
 
     Every frame alternates shadowed / unshadowed deterministically when ``shadow_fraction`` is
     0.5 (exactly half of each split); otherwise each frame is shadowed with that probability.
-    ``style`` is a scene style of :data:`~semattnet.data.synthetic.scenes.SCENE_STYLES`.
+    ``style`` is a scene style of :data:`~semattnet.data.synthetic.scenes.SCENE_STYLES`, ``domain`` the rig and
+    look (:mod:`semattnet.data.synthetic.domain`; ``"source"``, the default, is the original generator's).
 
     Returns the manifest (also written to ``out/scenes.json``). The tree's completion marker
     (:data:`semattnet._utils.outputs.TREE_MARKER`) is written first as "started" and last as "complete".
@@ -134,9 +138,10 @@ def write_synthetic_kitti(
     Raises:
         FileExistsError: ``out`` holds files and ``overwrite`` is not set.
         OutputError: ``overwrite`` and ``out`` holds files but no tree of ours (no marker).
-        InputError: unknown ``style``.
+        InputError: unknown ``style`` or ``domain``.
     """
     check_style(style)
+    dom = get_domain(domain)
     out = Path(out)
     _check_out(out, overwrite)
     height, width = size
@@ -145,7 +150,7 @@ def write_synthetic_kitti(
     for split, n in (("train", frames), ("val", n_eval), ("val_select", n_eval), ("test", n_eval)):
         for i in range(n):
             shadow = (i % 2 == 1) if shadow_fraction == 0.5 else None
-            jobs.append((out, split, i, seed, height, width, shadow, style))
+            jobs.append((out, split, i, seed, height, width, shadow, style, dom))
     if overwrite and out.exists():
         import shutil
 
@@ -161,7 +166,8 @@ def write_synthetic_kitti(
     K0 = np.array(entries[0]["K"])
     _write_calib(out / "kitti_raw" / SYNTH_DATE / "calib_cam_to_cam.txt", K0)  # train and val drives share it
     manifest: SceneManifest = {
-        "generator": "semattnet.data.synthetic.scenes", "style": style, "seed": seed, "size": [height, width],
+        "generator": "semattnet.data.synthetic.scenes", "style": style, "domain": dom.name, "seed": seed,
+        "size": [height, width],
         "counts": {s: sum(e["split"] == s for e in entries) for s in layout.SPLITS},
         "frames": [{k: v for k, v in e.items() if k != "K"} for e in entries]}  # fmt: skip
     (out / "scenes.json").write_text(json.dumps(manifest, indent=1))
