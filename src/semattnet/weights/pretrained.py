@@ -297,7 +297,16 @@ _register_demo_references()
 #: The real-time variants' demo checkpoints, shipped inside the package: (registered model, training seed,
 #: sha256, bytes, parameters, scores on their own 16 validation scenes as shipped: RMSE, MAE [mm], iRMSE, iMAE
 #: [1/km]). Made by ``python benchmarks/frontier.py --out frontier-run --ship MODEL`` after its training half.
-_RT_DEMO: tuple[tuple[str, int, str, int, int, tuple[float, float, float, float]], ...] = ()
+_RT_DEMO: tuple[tuple[str, int, str, int, int, tuple[float, float, float, float]], ...] = (
+    ("semattnet_rt_l", 0, "0d9d2f9f579308c7f8a3e827a1399edf35935e370f54e3fc125f42c6567560e3",
+     349_878, 305_028, (2301.5, 801.4, 6.33, 3.40)),
+    ("semattnet_rt_l", 1, "4c484fc9d629cb26327f3b64c8233f14f17cd487f701e7683d968d5fa03ec934",
+     350_107, 305_028, (2226.3, 804.1, 6.64, 3.65)),
+    ("semattnet_rt_md", 0, "dc079f9b1f94a66ac9af14eb10049cddd5c1d58902b0667b5ea9ab87c419e71d",
+     590_459, 537_530, (2005.9, 780.6, 7.42, 4.12)),
+    ("semattnet_rt_md", 1, "8dffdeb8b6bf6e7a31f17703a7490fd8ae6cf0d7df2d432f888f4dc823e1682a",
+     591_376, 537_530, (1992.8, 759.6, 5.91, 3.57)),
+)  # fmt: skip
 _RT_NOTES = (
     "Trained by `python benchmarks/frontier.py` with the demo references' recipe (the same 400 synthetic street "
     "scenes at 96x320, 600 backbone, 60 refinement-initialisation and 200 full-model steps, batch 4, L1 + L2 loss). "

@@ -157,7 +157,7 @@ def load_reference(path: Path | None = None) -> tuple[nn.Module, dict[str, Any]]
     except CheckpointError as exc:
         why = str(exc).removeprefix(f"{path}: ")
         raise ReferenceError(f"{path}: not a readable demo reference checkpoint ({why})") from None
-    model = build_model("semattnet", config=ckpt.config)
+    model = build_model(config=ckpt.config)
     load_weights(model, ckpt)
     return model.eval(), dict(ckpt.extra.get("info") or {})
 
@@ -196,7 +196,7 @@ def package_reference(
     on ``held`` beside the classical completion, and write it with its record (``command``: what trained it)
     to ``target``."""
     trained = load_checkpoint(weights)
-    model = build_model("semattnet", config=trained.config)
+    model = build_model(config=trained.config)
     load_weights(model, trained)
     levels = choose_levels(model)
     load_weights(model, dequantise(quantise(model.state_dict(), levels)))  # score exactly what ships
