@@ -65,13 +65,16 @@ def random_weights(model: str, folder: Path) -> Path:
     return save_pretrained(build_model(model).eval(), folder)
 
 
-def completer_of(weights: str | None) -> Any:
-    """What ``predict`` completes with: the model of ``weights`` on its default engine
+def completer_of(weights: str | None, backend: str = "torch", precision: str | None = None) -> Any:
+    """What ``predict --backend B --precision P`` completes with: the model of ``weights`` on that engine
     (:func:`~semattnet.inference.completer.load_completer`), else the classical completion."""
     from semattnet.baselines import ClassicalCompleter
+    from semattnet.inference.backends.spec import EngineSpec
     from semattnet.inference.completer import load_completer
 
-    return ClassicalCompleter() if weights is None else load_completer(weights, progress=False)
+    if weights is None:
+        return ClassicalCompleter()
+    return load_completer(weights, EngineSpec(backend=backend, precision=precision, device="cpu"), progress=False)
 
 
 def warm_up(completer: Any, bag: Path, calls: int) -> None:
@@ -119,6 +122,8 @@ def _args(argv: Sequence[str] | None) -> argparse.Namespace:
     how = parser.add_mutually_exclusive_group()
     how.add_argument("--weights", help="weights to complete with (a name, file or folder)")
     how.add_argument("--model", help="a registered model, with random weights (e.g. semattnet_rt_s)")
+    parser.add_argument("--backend", default="torch", help="the engine, as predict --backend (e.g. openvino)")
+    parser.add_argument("--precision", default=None, help="as predict --precision (f32, int8, ...)")
     parser.add_argument("--speed", type=float, default=1.0, help="replay this many times faster than recorded")
     parser.add_argument("--warmup", type=int, default=3, help="completions of the first frame before the replay")
     parser.add_argument("--serial", action="store_true", help="also run with the writing in line (write_ahead=0)")
@@ -135,7 +140,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     bag = write_recording(args.out / "recording.mcap", args.frames, (h, w), args.scenes)
     print(f"{args.frames} frames of {w}x{h} at 10 Hz written in {time.perf_counter() - t:.1f} s: {bag}")
     weights = str(random_weights(args.model, args.out / "weights")) if args.model else args.weights
-    completer = completer_of(weights)
+    completer = completer_of(weights, args.backend, args.precision)
     warm_up(completer, bag, args.warmup)
     runs = {}
     for name, write_ahead in [("pipelined", None), *([("serial", 0)] if args.serial else [])]:
@@ -143,7 +148,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         r = runs[name] = run_realtime(bag, args.out / name, completer, args.speed, write_ahead)
         print(f"{r['frames_fed']} frames fed at 10 Hz x {args.speed:g}: {r['completed']} completed, "
               f"{r['dropped']} dropped, {r['skipped']} skipped")  # fmt: skip
-    doc = {"size": [h, w], "speed": args.speed, "method": args.model or weights or "classical",
+    doc = {"size": [h, w], "speed": args.speed, "method": args.model or weights or "classical", "backend": args.backend,
            "random_weights": bool(args.model), "warmup": args.warmup, "cpu": cpu_name(), **runs}  # fmt: skip
     print(json.dumps(doc))
     if args.json is not None:
