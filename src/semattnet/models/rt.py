@@ -251,8 +251,9 @@ class SemAttNetRT(AtrousCSPNRefinement, nn.Module):
         s = self.backbone.stem_stride
         self.upsample = nn.Sequential(nn.Conv2d(c1, 9 * s * s, 1), nn.PixelShuffle(s))  # 8 guidance + 1 mask
         self.convex = nn.Conv2d(c1, 9 * s * s, 1)  # the convex upsampling's weights (logits)
-        nn.init.zeros_(self.convex.weight)
-        nn.init.zeros_(self.convex.bias)
+        with torch.no_grad():  # zero logits: every sub-pixel starts as the 3x3 mean
+            for p in self.convex.parameters():
+                p.zero_()
 
     def forward(
         self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
