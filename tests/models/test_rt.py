@@ -17,7 +17,7 @@ from semattnet.models.registry import arch_for, model_class
 from semattnet.models.rt import SemAttNetRT, SemAttNetRTBackbone
 from tests._base import BaseTester
 
-RT_MODELS = ("semattnet_rt_s", "semattnet_rt_m", "semattnet_rt_l", "semattnet_rt_md")
+RT_MODELS = ("semattnet_rt_s", "semattnet_rt_m", "semattnet_rt_md", "semattnet_rt_l")
 
 
 def _frame(b: int = 1, h: int = 32, w: int = 64, seed: int = 0) -> dict[str, torch.Tensor]:

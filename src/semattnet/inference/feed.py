@@ -43,7 +43,7 @@ from semattnet.inference.timing import DEFAULT_SENSOR_PERIOD_S, GAP_PERIODS, MAX
 if TYPE_CHECKING:
     from semattnet.inference.semantic import SemanticMaps
 
-__all__ = ["FrameFault", "completions", "fault_reason", "is_frame_fault", "read_frame"]
+__all__ = ["FrameFault", "check_inputs", "completions", "fault_reason", "is_frame_fault", "read_frame"]
 
 
 def is_frame_fault(exc: BaseException) -> bool:
@@ -376,3 +376,20 @@ def completions(source: FrameSource, completer: Completer, names: Sequence[str] 
                     yield from _complete_one(completer, batch, timer, current, frame_fault)
     finally:
         timer.end()
+
+
+def check_inputs(source: FrameSource, names: Sequence[str], on_error: str) -> dict[str, str]:
+    """Decode the inputs of ``names``: ``stop`` raises the first fault, ``skip`` returns every faulty frame's
+    reason (frame by frame, in order)."""
+    if on_error == "stop":
+        source.check(names)
+        return {}
+    faults = {}
+    for name in names:
+        try:
+            source.check([name])
+        except Exception as exc:
+            if not is_frame_fault(exc):
+                raise
+            faults[name] = " ".join(str(exc).split())
+    return faults

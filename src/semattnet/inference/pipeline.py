@@ -43,11 +43,8 @@ from __future__ import annotations
 
 import os
 import re
-import signal
-import threading
 from collections import Counter, deque
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -62,12 +59,13 @@ from semattnet._utils.outputs import Output, check_no_input_overlap, check_outpu
 from semattnet.data.frames import Frame, FrameSource
 from semattnet.data.io import encode_depth, read_depth
 from semattnet.inference.completer import Completer, Completion
-from semattnet.inference.feed import FrameFault, completions, fault_reason, is_frame_fault, read_frame
+from semattnet.inference.feed import FrameFault, check_inputs, completions, fault_reason, is_frame_fault, read_frame
 from semattnet.inference.journal import FRAMES_FILE, FrameEntry, RunJournal, describe_counts
 from semattnet.inference.options import OutputSpec, RunOptions
 from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sharding import agree, gather_rows, on_main, process_group, rank_log, shard
-from semattnet.inference.sinks import Prediction, Sink, output_files, predict_frame
+from semattnet.inference.sinks import Prediction, Sink, output_files, write_prediction
+from semattnet.inference.stopping import terminate_as_exit
 from semattnet.inference.timing import StageTimes
 from semattnet.inference.writer import WriteStage
 
@@ -147,23 +145,6 @@ class RunPlan:
             self.lock.release()
 
 
-def _check_inputs(source: FrameSource, names: Sequence[str], on_error: str) -> dict[str, str]:
-    """Decode the inputs of ``names``: ``stop`` raises the first fault, ``skip`` returns every faulty frame's
-    reason (frame by frame, in order)."""
-    if on_error == "stop":
-        source.check(names)
-        return {}
-    faults = {}
-    for name in names:
-        try:
-            source.check([name])
-        except Exception as exc:
-            if not is_frame_fault(exc):
-                raise
-            faults[name] = " ".join(str(exc).split())
-    return faults
-
-
 def check_frames(source: FrameSource, sinks: Sequence[Sink], out: PathLike, output: OutputSpec | None = None,
                  options: RunOptions | None = None) -> RunPlan:  # fmt: skip
     """Every check before any work (and before a model is loaded): a resume's journal, the outputs (rank 0),
@@ -207,7 +188,7 @@ def _plan(source: FrameSource, sinks: Sequence[Sink], out: Path, output: OutputS
         on_main(_refuse_earlier_run, out)
     on_main(_check_outputs, source, sinks, out, output.overwrite or output.resume, output.inputs)
     todo = [n for n in shard(source.names) if n not in journal.kept]
-    faults = agree(_check_inputs, source, todo, policy)
+    faults = agree(check_inputs, source, todo, policy)
     position = {n: i for i, n in enumerate(source.names)}
     rows: list[FrameEntry] = [{"name": n, "status": "skipped", "reason": r} for n, r in faults.items()]
     bad = gather_rows(rows, key=lambda e: position[e["name"]])
@@ -226,17 +207,6 @@ def _refuse_earlier_run(out: Path) -> None:
     if (out / FRAMES_FILE).exists():
         raise FileExistsError(f"{out / FRAMES_FILE} exists: {out} holds an earlier run; pass --resume to continue "
                               "it or --overwrite to replace its outputs")  # fmt: skip
-
-
-def write_prediction(stage: Path, frame: Frame, completion: Completion, sinks: Sequence[Sink],
-                     stage_ms: Mapping[str, float] | None = None) -> Prediction:  # fmt: skip
-    """The one writer: the hole / clamp rule and the quantisation once (:func:`~.sinks.predict_frame`),
-    then every sink, into ``stage``. ``stage_ms``: the frame's stage times so far (for the live view)."""
-    pred = predict_frame(frame, completion)
-    pred.stage_ms = dict(stage_ms or {})
-    for sink in sinks:
-        sink.write(stage, pred)
-    return pred
 
 
 #: ``semattnet predict``'s exit status when some frames were skipped (their inputs could not be completed).
@@ -474,7 +444,7 @@ def _attempt_run(loop: _FrameLoop, completer: Completer) -> Exception | None:
     """:func:`_run_frames`, its error returned (for every rank to agree on); on any error the frames done
     stay journaled. Ctrl-C and SIGTERM are raised (once the frames handed to the writer are written)."""
     try:
-        with _terminate_as_exit():
+        with terminate_as_exit():
             _run_frames(loop, completer)
     except BaseException as exc:
         loop.forget()
@@ -482,28 +452,6 @@ def _attempt_run(loop: _FrameLoop, completer: Completer) -> Exception | None:
             raise
         return exc
     return None
-
-
-#: The exit status of a run stopped by SIGTERM (the shell's 128 + the signal's number).
-_SIGTERM_EXIT = 128 + signal.SIGTERM
-
-
-@contextmanager
-def _terminate_as_exit() -> Iterator[None]:
-    """While active, SIGTERM (when it would kill the process at once) raises ``SystemExit`` in the main thread,
-    so a terminated run stops as Ctrl-C does: the frames handed to the writer written, the journal saved."""
-    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGTERM) != signal.SIG_DFL:
-        yield
-        return
-
-    def stop(signum: int, frame: object) -> None:
-        raise SystemExit(_SIGTERM_EXIT)
-
-    signal.signal(signal.SIGTERM, stop)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def _nothing_done(entries: Sequence[FrameEntry]) -> DataError:

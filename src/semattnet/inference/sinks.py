@@ -38,6 +38,8 @@ from semattnet.inference.prediction import Prediction, fusion_confidence, predic
 from semattnet.inference.uncertainty import UncertaintyLimit
 
 if TYPE_CHECKING:  # geometry's point clouds and the stage times are imported where used
+    from semattnet.data.frames import Frame
+    from semattnet.inference.contract import Completion
     from semattnet.inference.timing import StageTimes
 
 __all__ = [
@@ -63,6 +65,7 @@ __all__ = [
     "output_files",
     "predict_frame",
     "register_sink",
+    "write_prediction",
 ]
 
 
@@ -436,3 +439,14 @@ def default_sinks(npy: bool = False, panel: bool = False, ply: bool = False, max
 def output_files(names: Sequence[str], sinks: Sequence[Sink]) -> list[str]:
     """Every file the sinks write for ``names``, relative to the output folder, frame by frame."""
     return [p for name in names for sink in sinks if (p := sink.path(name)) is not None]
+
+
+def write_prediction(stage: Path, frame: Frame, completion: Completion, sinks: Sequence[Sink],
+                     stage_ms: Mapping[str, float] | None = None) -> Prediction:  # fmt: skip
+    """The one writer: the hole / clamp rule and the quantisation once (:func:`~.sinks.predict_frame`),
+    then every sink, into ``stage``. ``stage_ms``: the frame's stage times so far (for the live view)."""
+    pred = predict_frame(frame, completion)
+    pred.stage_ms = dict(stage_ms or {})
+    for sink in sinks:
+        sink.write(stage, pred)
+    return pred

@@ -40,8 +40,8 @@ from .domain import Domain, Pose, get_domain
 from .layout import Box
 from .lidar import LidarScan, lidar_to_camera, simulate_lidar
 from .materials import LABEL_COLOURS
-from .scenes import Shot, _ground_truth, check_style, intrinsics, make_scene, shoot
-from .tree import SYNTH_DATE, _check_out, frame_seed, write_depth, write_image
+from .scenes import Shot, ground_truth_of, check_style, intrinsics, make_scene, shoot
+from .tree import SYNTH_DATE, check_out_folder, frame_seed, write_depth, write_image
 
 __all__ = [
     "BASELINE",
@@ -118,7 +118,7 @@ def make_drive(
         scan = simulate_lidar(height, width, K, scene.boxes, rng, scene.dressing is not None, dom,
                               poses=(Pose.of_lidar(dom, forward), left_pose))  # fmt: skip
         points = np.hstack([scan.points, _reflectance(scan, scene.boxes)[:, None]])
-        yield DriveFrame(left, right, scan, points, _ground_truth(left.depth, K, rng, dom), forward)
+        yield DriveFrame(left, right, scan, points, ground_truth_of(left.depth, K, rng, dom), forward)
 
 
 def _mercator_scale() -> float:
@@ -266,7 +266,7 @@ def write_synthetic_drives(
     check_style(style)
     dom = get_domain(domain)
     out = Path(out)
-    _check_out(out, overwrite)
+    check_out_folder(out, overwrite)
     mark_tree(out, "synth-drives", False, resume=f"write the drives into {out} again with overwrite=True")
     height, width = size
     K = intrinsics(height, width, True, dom)

@@ -129,7 +129,7 @@ def _colours(
     return colour, np.where(view.far, MATERIAL_IDS["matte"], hits[0]), paint
 
 
-def _ground_truth(depth: np.ndarray, K: np.ndarray, rng: np.random.Generator, domain: Domain = SOURCE) -> np.ndarray:
+def ground_truth_of(depth: np.ndarray, K: np.ndarray, rng: np.random.Generator, domain: Domain = SOURCE) -> np.ndarray:
     """~16 % of the pixels the LiDAR's field of view covers, exact depth, in range (0 elsewhere).
 
     The field of view starts at the first row whose pixel centre (integer v) lies below the top beam (2 deg up
@@ -230,7 +230,7 @@ def make_frame(
     scene = make_scene(rng, style, dom, shadow)
     shot = shoot(scene, K, (height, width), Pose.of_camera(dom), rng)
     scan = simulate_lidar(height, width, K, scene.boxes, rng, realistic=scene.dressing is not None, domain=dom)
-    gt = _ground_truth(shot.depth, K, rng, dom)
+    gt = ground_truth_of(shot.depth, K, rng, dom)
     meta = {"seed": seed, "style": style, "shadow_band_z": list(scene.band), "sun": scene.sun.tolist(),
             "exposure": scene.exposure} | ({"domain": dom.name} if dom != SOURCE else {})  # fmt: skip
     if scene.dressing is not None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import zlib
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -101,7 +102,7 @@ def _job(args: tuple[Path, str, int, int, int, int, bool | None, str, Domain]) -
     return entry
 
 
-def _check_out(out: Path, overwrite: bool) -> None:
+def check_out_folder(out: Path, overwrite: bool) -> None:
     """A non-empty ``out`` needs ``overwrite``, and then must be a tree of ours (its marker): never a user's."""
     if overwrite:
         check_outputs([], [Output("--out", out, "tree")], overwrite)
@@ -143,7 +144,7 @@ def write_synthetic_kitti(
     check_style(style)
     dom = get_domain(domain)
     out = Path(out)
-    _check_out(out, overwrite)
+    check_out_folder(out, overwrite)
     height, width = size
     n_eval = max(2, frames // 5) if eval_frames is None else eval_frames
     jobs = []
@@ -152,8 +153,6 @@ def write_synthetic_kitti(
             shadow = (i % 2 == 1) if shadow_fraction == 0.5 else None
             jobs.append((out, split, i, seed, height, width, shadow, style, dom))
     if overwrite and out.exists():
-        import shutil
-
         for sub in ("data_depth_velodyne", "data_depth_annotated", "kitti_raw", "semantic", layout.SELECTION):
             shutil.rmtree(out / sub, ignore_errors=True)
     mark_tree(out, "synth", False, resume=f"run synth again into {out} with --overwrite (overwrite=True)")
