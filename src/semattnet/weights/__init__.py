@@ -12,8 +12,8 @@ Examples:
     >>> from semattnet import weights
     >>> weights.list_pretrained()[:3]
     ['semattnet-kitti', 'semattnet-demo-ref-seed0', 'semattnet-demo-ref-seed1']
-    >>> [n for n in weights.list_pretrained() if "-rt-" in n]
-    ['semattnet-rt-l-demo-seed0', 'semattnet-rt-l-demo-seed1', 'semattnet-rt-md-demo-seed0', 'semattnet-rt-md-demo-seed1']
+    >>> [n for n in weights.list_pretrained() if n.startswith("semattnet-rt-md")]
+    ['semattnet-rt-md-demo-seed0', 'semattnet-rt-md-demo-seed1']
     >>> weights.get_weights("semattnet-kitti").paper_metrics["kitti/test"]["rmse_mm"]
     709.41
 

@@ -40,7 +40,7 @@ from .domain import Domain, Pose, get_domain
 from .layout import Box
 from .lidar import LidarScan, lidar_to_camera, simulate_lidar
 from .materials import LABEL_COLOURS
-from .scenes import Shot, ground_truth_of, check_style, intrinsics, make_scene, shoot
+from .scenes import Shot, check_style, ground_truth_of, intrinsics, make_scene, shoot
 from .tree import SYNTH_DATE, check_out_folder, frame_seed, write_depth, write_image
 
 __all__ = [
