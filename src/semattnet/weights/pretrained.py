@@ -264,31 +264,28 @@ _DEMO_NOTES = (
 )
 
 
+def _shipped(name: str, arch: str, file_name: str, description: str, sha: str, size: int, params: int,
+             scores: tuple[float, float, float, float], notes: str, config: Mapping[str, object] | None = None
+             ) -> PretrainedWeights:  # fmt: skip
+    """The record of a packed file shipped in the package's assets, scored on its own validation scenes."""
+    rmse, mae, irmse, imae = scores
+    return PretrainedWeights(
+        name=name, arch=arch, description=description, urls=(shipped_path(file_name).as_uri(),), file_name=file_name,
+        format="packed", trained_on="synthetic street scenes (demo)", config=dict(config or {}), sha256=sha,
+        size_bytes=size, num_params=params, license="MIT, as the package: trained here on synthetic scenes only",
+        paper_metrics={"synthetic/own-val": {"rmse_mm": rmse, "mae_mm": mae, "irmse_per_km": irmse,
+                                             "imae_per_km": imae}},
+        paper=_PAPER, source="shipped inside the package (semattnet/weights/assets)", notes=notes,
+    )  # fmt: skip
+
+
 def _register_demo_references() -> None:
-    for seed, sha, size, (rmse, mae, irmse, imae) in _DEMO_REFERENCES:
-        file_name = f"demo_reference_seed{seed}.safetensors.gz"
-        register_weights(
-            PretrainedWeights(
-                name=f"semattnet-demo-ref-seed{seed}",
-                arch="semattnet",
-                description=f"SemAttNet at width 1/8 trained on synthetic street scenes (demo reference, seed {seed})",
-                urls=(shipped_path(file_name).as_uri(),),
-                file_name=file_name,
-                format="packed",
-                trained_on="synthetic street scenes (demo)",
-                config={"width": 0.125},
-                sha256=sha,
-                size_bytes=size,
-                num_params=5_676_121,
-                license="MIT, as the package: trained here on synthetic scenes only",
-                paper_metrics={
-                    "synthetic/own-val": {"rmse_mm": rmse, "mae_mm": mae, "irmse_per_km": irmse, "imae_per_km": imae}
-                },
-                paper=_PAPER,
-                source="shipped inside the package (semattnet/weights/assets)",
-                notes=_DEMO_NOTES,
-            )
-        )
+    for seed, sha, size, scores in _DEMO_REFERENCES:
+        register_weights(_shipped(
+            f"semattnet-demo-ref-seed{seed}", "semattnet", f"demo_reference_seed{seed}.safetensors.gz",
+            f"SemAttNet at width 1/8 trained on synthetic street scenes (demo reference, seed {seed})",
+            sha, size, 5_676_121, scores, _DEMO_NOTES, config={"width": 0.125},
+        ))  # fmt: skip
 
 
 _register_demo_references()
@@ -317,30 +314,13 @@ _RT_NOTES = (
 
 
 def _register_rt_demo() -> None:
-    for arch, seed, sha, size, params, (rmse, mae, irmse, imae) in _RT_DEMO:
+    for arch, seed, sha, size, params, scores in _RT_DEMO:
         short = arch.removeprefix("semattnet_").replace("_", "-")
-        file_name = f"{arch}_demo_seed{seed}.safetensors.gz"
-        register_weights(
-            PretrainedWeights(
-                name=f"semattnet-{short}-demo-seed{seed}",
-                arch=arch,
-                description=f"{arch} trained on synthetic street scenes (real-time demo checkpoint, seed {seed})",
-                urls=(shipped_path(file_name).as_uri(),),
-                file_name=file_name,
-                format="packed",
-                trained_on="synthetic street scenes (demo)",
-                sha256=sha,
-                size_bytes=size,
-                num_params=params,
-                license="MIT, as the package: trained here on synthetic scenes only",
-                paper_metrics={
-                    "synthetic/own-val": {"rmse_mm": rmse, "mae_mm": mae, "irmse_per_km": irmse, "imae_per_km": imae}
-                },
-                paper=_PAPER,
-                source="shipped inside the package (semattnet/weights/assets)",
-                notes=_RT_NOTES,
-            )
-        )
+        register_weights(_shipped(
+            f"semattnet-{short}-demo-seed{seed}", arch, f"{arch}_demo_seed{seed}.safetensors.gz",
+            f"{arch} trained on synthetic street scenes (real-time demo checkpoint, seed {seed})",
+            sha, size, params, scores, _RT_NOTES,
+        ))  # fmt: skip
 
 
 _register_rt_demo()
