@@ -47,6 +47,7 @@ from semattnet.models.propagation import (
     shift_affinity,
 )
 from semattnet.models.propagation import cpu_kernel as fused_propagation
+from semattnet.models.propagation.export import propagate_functional, shift_functional
 
 __all__ = [
     "HEADS_PREFIX",
@@ -120,6 +121,11 @@ def run_cspn_stage(
                     g = mask * sparse + keep * g
                 grids.append(g)
             h = torch.cat(grids, dim=1)
+        elif is_tracing():  # the recorded form: one tensor per tap (see propagation.export)
+            tap_list = shift_functional(affinity, 1)
+            h = start
+            for _ in range(iterations):
+                h = mask * sparse + keep * propagate_functional(tap_list, h, h0, 1)
         else:
             shifted = shift_affinity(affinity)
             h = start

@@ -265,8 +265,9 @@ class SemAttNetRT(AtrousCSPNRefinement, nn.Module):
         sparse_lr, _ = downsample_sparse(sparse, self.backbone.stem_stride)
         heads = self.refinement_heads(depth, sparse_lr, feature_s1, feature_s2)
         _, refined_lr = refine(heads, self._iterations, self.propagation_impl)
-        guide, mask = self.upsample(feature_s1).split((8, 1), dim=1)
-        start = convex_upsample(refined_lr, self.convex(feature_s1), self.backbone.stem_stride)
+        s = self.backbone.stem_stride  # split before the pixel shuffle: no full-resolution split
+        guide, mask = (F.pixel_shuffle(t, s) for t in self.upsample[0](feature_s1).split((8 * s * s, s * s), dim=1))
+        start = convex_upsample(refined_lr, self.convex(feature_s1), s)
         valid = (sparse > 0).to(sparse.dtype)
         affinity = affinity_kernel(guide.float(), self.propagation_impl)
         refined = run_cspn_stage(start, start, [affinity], torch.ones_like(start), sparse, torch.sigmoid(mask) * valid,

@@ -44,7 +44,7 @@ def engine_key(model: nn.Module, size: tuple[int, int], extra: str = "") -> str:
         "torch": torch.__version__,
         "semattnet": library_version(),
         "extra": extra,
-        "graph": "network-without-propagation/v3-stacked-heads",  # the export form: a new form never reuses old files
+        "graph": "network-without-propagation/v4-tap-lists",  # the export form: a new form never reuses old files
     }
     return hashlib.sha256(json.dumps(facts, sort_keys=True).encode()).hexdigest()[:24]
 

@@ -18,10 +18,11 @@ multiplies 36 times.
 
 ``KEEP_FLOAT_RT``: the same rule for the real-time models (:mod:`semattnet.models.rt`), whose graph holds their
 propagation (the reduced-resolution CSPN++ and the last full-resolution steps, as plain tensor operations): the
-first convolution of each branch's stem (raw sparse depth in), the branch output heads, the refinement heads and
-the learned upsampling of the affinities, and every operation of the model's own forward outside the branches
-(the propagation's sums and products, the confidence fusion's softmax), and the bilinear upsamplings of the
-outputs to full resolution (named after them: one of them starts the last propagation steps). Measured on
+first convolution of each branch's stem (raw sparse depth in), the branch output heads, the refinement heads, the
+learned upsamplings (of the affinities, and the convex weights of the depth), every operation of the model's own
+forward outside the branches (the propagation's sums and products, the confidence fusion's softmax), and the
+bilinear upsamplings of the outputs to full resolution (named after them: one of them starts the last
+propagation steps). Measured on
 ``semattnet_rt_s`` trained by ``benchmarks/frontier.py`` (the demo reference recipe, seed 0) on the demo's 16
 held-out scenes, int8 against float32: with these layers float, RMSE +0.1 %, MAE -0.1 %, iRMSE +0.4 %, iMAE
 +0.2 %; with only :data:`KEEP_FLOAT`, +3.5 %, +22 %, +38 % and +55 %. They apply to a graph without refinement
@@ -57,7 +58,7 @@ KEEP_FLOAT: tuple[str, ...] = (
 KEEP_FLOAT_RT: tuple[str, ...] = (
     r".*_branch/encoder/stem/stem\.0/.*",  # each branch's first convolution: raw sparse depth (and colours) in
     r".*_branch/head/.*",  # the branch output heads: depth + confidence
-    r"/model/(Conv|upsample)(_\d+)?/.*",  # the refinement heads (one convolution per stage), the learned upsampling
+    r"/model/(Conv|convex|upsample(\.0)?)(_\d+)?/.*",  # refinement heads (a conv a stage), learned upsamplings
     r"/model/[A-Za-z]+(_\d+)?$",  # the model's own operations: the propagation, the fusion's softmax, the resizes
     r"(color|semantic|guided)_(depth|conf)$",  # the outputs' upsamplings to full resolution (metres, weights)
     r"(fused|refined_s2)_depth$",  # refined_s2_depth's starts the last full-resolution propagation steps

@@ -65,7 +65,7 @@ def shift_affinity(affinity: torch.Tensor, dilation: int = 1) -> torch.Tensor:
     """
     kernel_size(affinity)
     if exporting():
-        return shift_functional(affinity, dilation)
+        return torch.cat(shift_functional(affinity, dilation), dim=1)
     return _ShiftAffinity.apply(affinity, dilation)
 
 
@@ -117,7 +117,7 @@ def propagate_shifted(shifted: torch.Tensor, h: torch.Tensor, h0: torch.Tensor, 
     kernel_size(shifted)
     h0 = h0.expand_as(h)
     if exporting():
-        return propagate_functional(shifted, h, h0, dilation)
+        return propagate_functional(shifted.split(1, dim=1), h, h0, dilation)
     return _ShiftedPropagation.apply(shifted, h, h0, dilation)
 
 
