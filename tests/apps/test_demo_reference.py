@@ -97,6 +97,7 @@ def test_train_reference_tiny_recipe(tmp_path: Path) -> None:
     _, info = ref.load_reference(target)
     assert info["recipe"]["backbone_steps"] == 2 and info["levels"] in ref.LEVELS and "written" in lines[-1]
     assert set(info["val"]) == {"reference", "reference_fallback_map", "classical"}  # scored with the fallback map too
+    assert info["command"] == f"{ref.REFERENCE_COMMAND} --semantic-dropout 0.5"  # the command that remakes it
 
 
 def test_cli_train_reference_refuses_a_non_empty_folder(tmp_path: Path) -> None:
@@ -106,6 +107,15 @@ def test_cli_train_reference_refuses_a_non_empty_folder(tmp_path: Path) -> None:
     res = CliRunner().invoke(main, ["demo", "--train-reference", "--out", str(tmp_path)])
     assert res.exit_code != 0 and "not empty" in res.output
     assert (tmp_path / "keep.txt").read_text() == "x"
+
+
+def test_cli_semantic_dropout_belongs_to_train_reference(tmp_path: Path) -> None:
+    from semattnet.cli import main
+
+    res = CliRunner().invoke(main, ["demo", "--out", str(tmp_path / "demo"), "--semantic-dropout", "0.5"])
+    assert res.exit_code == 2 and "--semantic-dropout is an option of --train-reference" in res.output
+    assert not (tmp_path / "demo").exists()
+    assert ref.reference_command(ref.REFERENCE_RECIPE) == ref.REFERENCE_COMMAND  # no dropout: the shipped command
 
 
 def _out(refined: torch.Tensor | None, fused: torch.Tensor) -> DepthCompletionOutput:

@@ -58,17 +58,23 @@ from semattnet.data.synthetic.scenes import SCENE_STYLES
               help="Instead of the demo: retrain the shipped reference checkpoints into --out, one per --seeds "
                    "(default 0,1; their fixed recipe, ~12 minutes each on 2 cores), writing "
                    "--out/demo_reference_seedS.safetensors.gz.")  # fmt: skip
+@click.option("--semantic-dropout", type=click.FloatRange(0.0, 1.0), default=0.0, show_default=True,
+              help="With --train-reference: the share of training frames given the fallback semantic map (a "
+                   "model that also works without a segmenter).")  # fmt: skip
 @click.option("--overwrite", is_flag=True, help="Replace the contents of --out.")
 def demo(out_dir: Path, minutes: float | None, size: str, frames: int, eval_frames: int, width: float,
          steps: str | None, equal_time: bool, seed: int, seeds: tuple[int, ...], style: str, device: str,
-         no_reference: bool, train_reference: bool, overwrite: bool) -> None:  # fmt: skip
+         no_reference: bool, train_reference: bool, semantic_dropout: float, overwrite: bool) -> None:  # fmt: skip
     """Synthetic data -> train SemAttNet and the two-branch ablation -> evaluate (with the shipped
     reference checkpoints) -> HTML report."""
     from semattnet.apps.demo import DemoSettings, run_demo, train_reference_run
 
     if train_reference:
-        train_reference_run(out_dir, overwrite=overwrite, device=device, log=click.echo, seeds=seeds)
+        train_reference_run(out_dir, overwrite=overwrite, device=device, log=click.echo, seeds=seeds,
+                            semantic_dropout=semantic_dropout)  # fmt: skip
         return
+    if semantic_dropout:
+        raise click.UsageError("--semantic-dropout is an option of --train-reference")
     if steps is not None and minutes is not None:
         raise click.UsageError("give --steps or --minutes, not both")
     plan: dict[str, object] = {"steps": None, "minutes": minutes} if minutes is not None else {}

@@ -56,6 +56,7 @@ __all__ = [
     "package_reference",
     "quantise",
     "recipe_notes",
+    "reference_command",
     "reference_path",
     "save_reference",
     "shipped_references",
@@ -180,7 +181,13 @@ def train_reference(
                          batch_size=r.batch_size, lr=r.lr, seed=r.seed, device=torch.device(device), log=log,
                          refine_init_steps=r.refine_init_steps, head_lr_factor=r.head_lr_factor, loss=r.loss,
                          semantic_dropout=r.semantic_dropout, branches=3)  # fmt: skip
-    return package_reference(ckpt, held, target, r, time.perf_counter() - start, log)
+    return package_reference(ckpt, held, target, r, time.perf_counter() - start, log, reference_command(r))
+
+
+def reference_command(recipe: ReferenceRecipe) -> str:
+    """The command that trains ``recipe``'s reference (its seed: one of ``--seeds``)."""
+    dropout = f" --semantic-dropout {recipe.semantic_dropout:g}" if recipe.semantic_dropout else ""
+    return f"{REFERENCE_COMMAND}{dropout}"
 
 
 def package_reference(

@@ -180,12 +180,15 @@ def train_reference_run(
     device: str = "auto",
     log: Callable[[str], None] = print,
     seeds: tuple[int, ...] = ref.REFERENCE_SEEDS,
+    semantic_dropout: float = 0.0,
 ) -> list[Path]:
     """``semattnet demo --train-reference``: train one reference checkpoint per seed in ``out_dir``
-    (refused if it holds files, unless ``overwrite``), writing ``out_dir/demo_reference_seed{S}.safetensors.gz``."""
+    (refused if it holds files, unless ``overwrite``), writing ``out_dir/demo_reference_seed{S}.safetensors.gz``;
+    ``semantic_dropout``: the recipe's share of frames trained with the fallback semantic map."""
     out = Path(out_dir)
     make_empty(out, overwrite)
-    recipes = [dataclasses.replace(ref.REFERENCE_RECIPE, seed=seed) for seed in seeds]
+    recipes = [dataclasses.replace(ref.REFERENCE_RECIPE, seed=seed, semantic_dropout=semantic_dropout)
+               for seed in seeds]  # fmt: skip
     paths = [ref.train_reference(out / f"seed{r.seed}", ref.reference_path(r.seed, out), r,
                                  device=resolve_device(device), log=log) for r in recipes]  # fmt: skip
     mark_tree(out, "demo --train-reference", True)
