@@ -9,7 +9,7 @@ imports plotly, openvino or rosbags):
 from the repository root, the package installed or ``PYTHONPATH=src``. Timing half (later, on the quiet 2-core
 CPU; it reads the checkpoints of the training half when present), then the report:
 
-    python benchmarks/frontier.py --out frontier-run --time
+    python benchmarks/frontier.py --out frontier-run --time --isa-cap AVX2
     python benchmarks/frontier.py --out frontier-run --report
 
 (or ``--all``: the three in one go on one machine).
@@ -26,11 +26,12 @@ Written to ``--out``: ``results.json`` (the recipe, the machine, every score) an
 weights, ``checkpoints/<variant>_seed<S>.safetensors`` (config in the metadata). ``--time`` adds ``timing.json``,
 at ``--time-size`` (352x1216): the CPU named (model, threads, ISA flags); per variant its GMAC and parameters;
 per variant and backend (:data:`BACKENDS`: torch float32 with BatchNorm folded, OpenVINO float32 and int8, each
-built by the engine table, one backend after the other, the variants in turns) the network + propagation's
-median ms and its ratio to the width-1/8 paper model, and the memory of one forward in a fresh process
-(:data:`MEMORY`); per variant the whole ``predict --stream`` frame on its fastest backend (the library's frame loop
-on synthetic scenes as a folder input: its latency table); the classical completion's ms; the float32
-convolution peak measured at that size (GFLOP/s); and, with
+built by the engine table, one backend after the other, the variants in turns, returning the refined depth:
+:data:`DEPTH_ONLY`) the network + propagation's median ms and its ratio to the width-1/8 paper model (with
+``--isa-cap AVX2`` also OpenVINO float32 with oneDNN's AVX2 kernels only, in a fresh process), and the memory
+of one forward in a fresh process (:data:`MEMORY`); per variant the whole ``predict --stream`` frame on its
+fastest backend (the library's frame loop on synthetic scenes as a folder input: its latency table); the
+classical completion's ms; the float32 convolution peak measured at that size (GFLOP/s); and, with
 ``results.json`` there, each variant's int8 scores on the held-out scenes beside its float32 ones. ``--report``
 writes the section "The real-time frontier" of ``docs/performance.md`` (between its markers) and
 ``docs/frontier.png`` from the two files (``benchmarks/frontier_report.py``).
@@ -242,6 +243,12 @@ def _size(text: str, option: str = "--size") -> tuple[int, int]:
 #: (name in timing.json, engine, precision): the backends timed, one after the other (OpenVINO's thread pool beside
 #: torch's would slow both). int8 is the engine table's OpenVINO int8 (NNCF, calibrated on synthetic scenes).
 BACKENDS = (("torch-f32", "torch", "f32"), ("openvino-f32", "openvino", "f32"), ("openvino-int8", "openvino", "int8"))
+#: What the timed engines return: the refined depth, what a robot reads (``optimize_for_inference(outputs=)``: OpenVINO
+#: compiles only what it needs; the torch engine computes every map regardless).
+DEPTH_ONLY = ("refined_depth",)
+#: ``--isa-cap``: the instruction sets oneDNN's kernels may be capped at (``ONEDNN_MAX_CPU_ISA``), e.g. an AVX-512
+#: CPU timed with the AVX2 kernels an AVX2-only CPU runs (same cores, clocks and caches: an estimate, not that CPU).
+ISA_CAPS = ("AVX2", "AVX512_CORE")
 #: How timing.json's peak_mb is measured.
 MEMORY = (
     "one forward in a fresh process per variant and backend, its engine built: the resident set's high-water "
@@ -312,7 +319,8 @@ def forward_memory(out: Path, key: str, backend: str, size: tuple[int, int]) -> 
     from semattnet.inference.backends import optimize_for_inference
 
     engine, precision = next((e, p) for n, e, p in BACKENDS if n == backend)
-    net = optimize_for_inference(_variant_model(out, key), backend=engine, size=size, precision=precision)
+    net = optimize_for_inference(_variant_model(out, key), backend=engine, size=size, precision=precision,
+                                 outputs=DEPTH_ONLY)  # fmt: skip
     x = frame(size)
     before = status_mib("VmRSS")
     with torch.inference_mode(), peak_memory(torch.device("cpu")) as pm:
@@ -339,26 +347,65 @@ def time_network(out: Path, models: dict[str, torch.nn.Module], size: tuple[int,
     on that backend, peak and growth of the resident set in MB, :func:`forward_memory`): each backend's engines
     built by the engine table (:func:`~semattnet.inference.backends.optimize_for_inference`), its variants run in
     turns."""
-    from bench_rt import frame
-    from semattnet.inference.backends import optimize_for_inference
-
-    x = frame(size)
     rows: dict[str, dict[str, float]] = {}
-    for backend, engine, precision in _backends():
-        log(f"[frontier] {backend}: building the engines at {size[0]}x{size[1]} ...")
-        nets = {key: functools.partial(optimize_for_inference(m, backend=engine, size=size, precision=precision),
-                                       **x) for key, m in models.items()}  # fmt: skip
-        times = _in_turns(nets, repeats)
-        ref = times["paper_w1_8"]
-        for key, t in times.items():
-            ratio = statistics.median(a / b for a, b in zip(t, ref, strict=True))
-            ms = 1000 * statistics.median(t)
-            rows[f"{key}/{backend}"] = {"ms": ms, "ratio": ratio}
-            log(f"{key + '/' + backend:34s} {ms:9.1f} ms  {ratio:6.3f} x paper@1/8")
-        del nets
+    for backend, _, _ in _backends():
+        rows.update(time_backend(models, backend, size, repeats, log))
         for key in models:  # a fresh process each, once this backend's engines are built and cached
             rows[f"{key}/{backend}"].update(_memory(out, key, backend, size))
     return rows
+
+
+def time_backend(models: dict[str, torch.nn.Module], backend: str, size: tuple[int, int], repeats: int,
+                 log: Callable[[str], None] = print) -> dict[str, dict[str, float]]:  # fmt: skip
+    """``KEY/BACKEND`` -> ms and ratio to the width-1/8 paper model: the engines of one :data:`BACKENDS`
+    row, returning :data:`DEPTH_ONLY`, run in turns."""
+    from bench_rt import frame
+    from semattnet.inference.backends import optimize_for_inference
+
+    engine, precision = next((e, p) for n, e, p in BACKENDS if n == backend)
+    x = frame(size)
+    log(f"[frontier] {backend}: building the engines at {size[0]}x{size[1]} ...")
+    nets = {key: functools.partial(optimize_for_inference(m, backend=engine, size=size, precision=precision,
+                                                          outputs=DEPTH_ONLY), **x)
+            for key, m in models.items()}  # fmt: skip
+    times = _in_turns(nets, repeats)
+    rows: dict[str, dict[str, float]] = {}
+    for key, t in times.items():
+        ratio = statistics.median(a / b for a, b in zip(t, times["paper_w1_8"], strict=True))
+        name, ms = f"{key}/{backend}", 1000 * statistics.median(t)
+        rows[name] = {"ms": ms, "ratio": ratio}
+        log(f"{name:40s} {ms:9.1f} ms  {ratio:6.3f} x paper@1/8")
+    return rows
+
+
+def time_capped(out: Path, keys: Sequence[str] | None, isa: str, size: tuple[int, int], repeats: int
+                ) -> dict[str, dict[str, float]]:  # fmt: skip
+    """OpenVINO float32 with oneDNN's kernels capped at ``isa`` (:data:`ISA_CAPS`), in a fresh process (the cap is
+    read once, when the first kernel is made): rows ``KEY/openvino-f32-<isa>``; empty where that process fails
+    (said in one line)."""
+    import os
+
+    cmd = [
+        sys.executable,
+        str(Path(__file__).resolve()),
+        "--out",
+        str(out),
+        "--network-of",
+        "openvino-f32",
+        "--time-size",
+        f"{size[0]}x{size[1]}",
+        "--repeats",
+        str(repeats),
+        "--variants",
+        ",".join(keys or []),
+    ]
+    env = {**os.environ, "ONEDNN_MAX_CPU_ISA": isa}
+    done = subprocess.run(cmd, capture_output=True, text=True, check=False, env=env)
+    if done.returncode != 0:
+        print(f"[frontier] openvino-f32 capped at {isa}: failed: {(done.stderr.strip().splitlines() or ['?'])[-1]}")
+        return {}
+    rows = json.loads(done.stdout.strip().splitlines()[-1])
+    return {f"{k}-{isa.lower()}": v for k, v in rows.items()}
 
 
 def write_stream_frames(folder: Path, size: tuple[int, int], count: int = STREAM_FRAMES) -> Any:
@@ -446,14 +493,17 @@ def int8_accuracy(out: Path, keys: Sequence[str], log: Callable[[str], None] = p
 
 
 def time_variants(out: Path, size: tuple[int, int], repeats: int, keys: Sequence[str] | None = None,
-                  log: Callable[[str], None] = print) -> Path:  # fmt: skip
+                  log: Callable[[str], None] = print, isa_cap: str = "") -> Path:  # fmt: skip
     """The timing half, into ``timing.json``: network + propagation per variant and backend (:func:`time_network`),
     the whole ``predict --stream`` frame per variant on its fastest backend (:func:`time_stream`), and, where the
     training half left ``results.json`` and OpenVINO int8 runs here, the int8 scores (:func:`int8_accuracy`).
-    ``keys``: these variants and the reference."""
+    ``keys``: these variants and the reference; ``isa_cap``: also OpenVINO float32 with oneDNN's kernels capped at
+    that instruction set (:func:`time_capped`)."""
     models = _timed_models(out, keys)
     counts = _counts(models, size)
     rows = time_network(out, models, size, repeats, log)
+    if isa_cap:
+        rows.update(time_capped(out, keys, isa_cap, size, repeats))
     source = write_stream_frames(out / "timing" / "frames", size)
     frames = {}
     for key, model in models.items():
@@ -491,6 +541,13 @@ def main(argv: Sequence[str] | None = None) -> Path:
     ap.add_argument("--all", action="store_true", help="train and score, then --time, then --report")
     ap.add_argument("--docs", type=Path, default=DOCS, help="the folder of performance.md and frontier.png")
     ap.add_argument("--memory-of", default="", help=argparse.SUPPRESS)  # KEY/BACKEND: one forward_memory
+    ap.add_argument("--network-of", default="", help=argparse.SUPPRESS)  # BACKEND: time_backend's rows as JSON
+    ap.add_argument(
+        "--isa-cap",
+        default="",
+        choices=("", *ISA_CAPS),
+        help="with --time: also OpenVINO f32 with oneDNN's kernels capped at this ISA (e.g. AVX2)",
+    )
     ap.add_argument("--ship", default="", help="KEY: package that variant's checkpoints into the package's assets")
     args = ap.parse_args(argv)
     keys = args.variants.split(",") if args.variants else None
@@ -500,10 +557,15 @@ def main(argv: Sequence[str] | None = None) -> Path:
         key, backend = args.memory_of.split("/")
         print(json.dumps(forward_memory(args.out, key, backend, _size(args.time_size, "--time-size"))))
         return args.out
+    if args.network_of:
+        rows = time_backend(_timed_models(args.out, keys), args.network_of, _size(args.time_size, "--time-size"),
+                            args.repeats, log=lambda line: print(line, file=sys.stderr))  # fmt: skip
+        print(json.dumps(rows))
+        return args.out
     if args.all:
         run_training(args)
     if args.time or args.all:
-        time_variants(args.out, _size(args.time_size, "--time-size"), args.repeats, keys)
+        time_variants(args.out, _size(args.time_size, "--time-size"), args.repeats, keys, isa_cap=args.isa_cap)
     if args.report or args.all:
         return report(args.out, args.docs)
     return args.out / "timing.json" if args.time else run_training(args)

@@ -42,6 +42,7 @@ def _timing(rt_ms: float = 80.0) -> dict[str, Any]:
         "semattnet_rt_s/torch-f32": {"ms": 150.0, "ratio": 0.19, "peak_mb": 500.0, "growth_mb": 120.0},
         "semattnet_rt_s/openvino-f32": {"ms": 95.0, "ratio": 0.19, "peak_mb": 450.0, "growth_mb": 100.0},
         "semattnet_rt_s/openvino-int8": {"ms": rt_ms, "ratio": 0.2, "peak_mb": 400.0, "growth_mb": 90.0},
+        "semattnet_rt_s/openvino-f32-avx2": {"ms": 105.0, "ratio": 0.2},  # --isa-cap AVX2: no memory figure
     }
     change = {"rmse": 0.004, "mae": -0.002, "irmse": 0.008, "imae": 0.001}
     return {"cpu": "Test CPU", "threads": 2, "isa": ["avx2", "fma"], "size": [352, 1216], "repeats": 5,
@@ -61,11 +62,11 @@ def test_table_rows_in_kitti_units_with_the_seeds_spread(report: ModuleType) -> 
     cells = [c.strip() for c in rt.strip("|").split("|")]
     # GMAC, params, RMSE (mean ± half the range), MAE, iRMSE, iMAE, AUSE
     assert cells[1:8] == ["0.95", "0.15 M", "1200 ± 100", "500", "4.0", "2.0 ± 0.1", "0.300"]
-    assert cells[8:] == ["150", "95", "80", "140", "90 / 400"]  # torch, OV f32, OV int8, frame, memory (fastest)
+    assert cells[8:] == ["150", "95", "80", "105", "140", "90 / 400"]  # torch, OV f32, int8, AVX2, frame, memory
     classical = [c.strip() for c in lines[2].strip("|").split("|")]
-    assert classical[:4] == ["classical completion", "–", "–", "2000"] and classical[8:11] == ["30", "–", "–"]
+    assert classical[:4] == ["classical completion", "–", "–", "2000"] and classical[8:12] == ["30", "–", "–", "–"]
     paper = [c.strip() for c in lines[3].strip("|").split("|")]
-    assert paper[0] == "paper model, width 1/8" and paper[10] == "–" and paper[-1] == "300 / 700"  # not run in int8
+    assert paper[0] == "paper model, width 1/8" and paper[10:12] == ["–", "–"] and paper[-1] == "300 / 700"  # no int8
     timing = _timing()
     timing["rows"]["paper_w1_8/openvino-f32"].update(peak_mb=float("nan"), growth_mb=float("nan"))  # its run failed
     assert report.table(_results(), timing).splitlines()[3].endswith("| 600 | – |")
@@ -73,7 +74,7 @@ def test_table_rows_in_kitti_units_with_the_seeds_spread(report: ModuleType) -> 
 
 def test_verdict_reads_the_acceptance(report: ModuleType) -> None:
     text = report.verdict(_results(), _timing(), "semattnet_rt_s")
-    assert "80 ms network + propagation (OV int8), within the 100 ms budget" in text
+    assert "80 ms network + propagation (OV int8), within the 100 ms budget; 105 ms with AVX2 kernels only;" in text
     assert "beats the classical completion on all four metrics" in text
     assert "RMSE +9.1 % against the width-1/8 paper model (within 15 %)" in text
     assert "int8 within 1 % of float32 (largest change +0.8 %, IRMSE)" in text
