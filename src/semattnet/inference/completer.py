@@ -19,7 +19,7 @@ cropped back, so any size works, KITTI's 1242x375 included.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator, Sequence
+from collections.abc import Collection, Iterator, Sequence
 from contextlib import contextmanager
 from functools import partial
 from typing import TYPE_CHECKING
@@ -35,8 +35,8 @@ from semattnet.inference.backends.calibration import CalibrationFrames
 from semattnet.inference.contract import Completer, Completion, StageTimed
 from semattnet.inference.padding import crop_padding, pad_to_multiple
 from semattnet.models.checks import check_has_points, check_sparse_depth
-from semattnet.models.outputs import DepthCompletionOutput
-from semattnet.models.uncertainty import with_uncertainty
+from semattnet.models.outputs import DepthCompletionOutput, check_output_names
+from semattnet.models.uncertainty import outputs_to_compute, with_uncertainty
 from semattnet.weights.hub import from_pretrained, load_model
 from semattnet.weights.resolve import resolve_weights
 
@@ -106,11 +106,13 @@ class DepthCompleter:
         #: The semantic palette the model was trained with (its config's; Cityscapes when it records none).
         self.palette: str = getattr(getattr(model, "config", None), "palette", "cityscapes")
         #: Whether :meth:`run` (and a call) sets the outputs' ``uncertainty``
-        #: (:func:`semattnet.models.uncertainty.depth_uncertainty`; about 60 ms of one CPU core at 375x1242).
+        #: (:func:`semattnet.models.uncertainty.depth_uncertainty`; about 60 ms of one CPU core at 375x1242);
+        #: setting :attr:`outputs` sets it too.
         self.compute_uncertainty = True
+        self._outputs: frozenset[str] | None = None
         self._source = model.to(self.device).eval()
         self._inplace = inplace
-        self._engines: dict[tuple[int, int] | None, InferenceEngine] = {}
+        self._engines: dict[tuple[tuple[int, int] | None, frozenset[str] | None], InferenceEngine] = {}
 
     @classmethod
     def from_checkpoint(cls, path: str | os.PathLike[str], device: str | torch.device = "auto", amp: str = "none",
@@ -130,15 +132,34 @@ class DepthCompleter:
         resolved = resolve_weights(name_or_path, sha256=sha256, cache_dir=cache_dir, progress=progress)
         return cls(resolved.build(arch, overrides=overrides), device, amp, backend, inplace=True)
 
+    @property
+    def outputs(self) -> frozenset[str] | None:
+        """The fields of :class:`~semattnet.models.outputs.DepthCompletionOutput` the caller reads (None: all, the
+        default): ``refined_depth`` for the final depth, ``uncertainty`` for the uncertainty. Setting it sets
+        :attr:`compute_uncertainty` (whether ``uncertainty`` is among them), and the engines compiled for one size
+        (``openvino``) compute only what these need (:func:`~semattnet.models.uncertainty.outputs_to_compute`;
+        the other fields are then None); the ``torch`` engine computes them all.
+
+        Raises:
+            InputError: an unknown field name.
+        """
+        return self._outputs
+
+    @outputs.setter
+    def outputs(self, names: Collection[str] | None) -> None:
+        self._outputs = None if names is None else check_output_names(names, "outputs")
+        self.compute_uncertainty = self._outputs is None or "uncertainty" in self._outputs
+
     def engine(self, size: tuple[int, int] | None = None) -> InferenceEngine:
-        """The engine for padded inputs of ``size`` (built on first use; one for all sizes with ``torch``)."""
+        """The engine for padded inputs of ``size`` and the :attr:`outputs` (built on first use; one for all sizes
+        and outputs with ``torch``)."""
         fixed = self.spec.entry.fixed_size
-        key = size if fixed else None
+        key = (size, outputs_to_compute(self._outputs)) if fixed else (None, None)
         if key not in self._engines:
-            self._engines[key] = optimize_for_inference(self._source, backend=self.backend, size=key,
+            self._engines[key] = optimize_for_inference(self._source, backend=self.backend, size=key[0],
                                                         precision=self.spec.engine_precision, device=self.device,
                                                         inplace=self._inplace and not fixed,
-                                                        calibration=self.calibration)  # fmt: skip
+                                                        calibration=self.calibration, outputs=key[1])  # fmt: skip
         return self._engines[key]
 
     @contextmanager
