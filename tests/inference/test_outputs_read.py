@@ -156,3 +156,33 @@ def test_openvino_engine_asked_for_the_depth_computes_it_alone(name: str, tmp_pa
     torch.testing.assert_close(out.refined_depth, whole.refined_depth, rtol=0, atol=1e-5)
     assert out.color_depth is None and out.fused_depth is None and out.guided_conf is None
     assert len(engine.compiled.outputs) == (1 if name != "semattnet" else len(HEADS))
+
+
+def test_png_level_of_a_run() -> None:
+    from semattnet.data.io import PNG_COMPRESS_LEVEL, STREAM_PNG_COMPRESS_LEVEL
+    from semattnet.inference.options import RunOptions
+
+    assert RunOptions().png_level() == PNG_COMPRESS_LEVEL == 3
+    assert RunOptions(realtime=1.0).png_level() == RunOptions(prefetch=2).png_level() == STREAM_PNG_COMPRESS_LEVEL == 1
+    assert RunOptions(realtime=1.0, write_ahead=0).png_level() == PNG_COMPRESS_LEVEL  # written in line
+    assert RunOptions(realtime=1.0, png_compress_level=6).png_level() == 6
+    with pytest.raises(InputError, match="png_compress_level must be 0 to 9"):
+        RunOptions(png_compress_level=10)
+
+
+@pytest.mark.parametrize("prefetch", [0, 2])
+def test_the_run_writes_its_pngs_at_its_level(prefetch: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from semattnet.baselines import ClassicalCompleter
+    from semattnet.data.io import read_depth
+    from semattnet.inference import sinks
+    from semattnet.inference.options import RunOptions
+
+    levels: list[int] = []
+    for name in ("write_depth", "write_image"):
+        real = getattr(sinks, name)
+        monkeypatch.setattr(sinks, name, lambda *a, real=real, **k: levels.append(k["compress_level"]) or real(*a, **k))
+    options = RunOptions(prefetch=prefetch)
+    out = tmp_path / f"p{prefetch}"
+    check_frames(Frames(), default_sinks(), out, OutputSpec(), options).run(ClassicalCompleter(), log=lambda s: None)
+    assert levels == [options.png_level()] * 4 and levels[0] == (1 if prefetch else 3)
+    assert read_depth(out / "f0.png").shape == SIZE

@@ -337,7 +337,7 @@ class _FrameLoop:
         the frame), the frame's files moved from ``stage`` into place; timed as ``writing``. Returns the files."""
         with self.timer.time(frame.name, "writing"):
             stage_ms = {k: 1e3 * v for k, v in self.timer.times.get(frame.name, {}).items()}
-            write_prediction(stage, frame, completion, self.files_first, stage_ms)
+            write_prediction(stage, frame, completion, self.files_first, stage_ms, self.plan.options.png_level())
             files = output_files([frame.name], self.sinks)
             for rel in files:
                 (self.out / rel).parent.mkdir(parents=True, exist_ok=True)

@@ -276,7 +276,7 @@ class DepthPngSink(Sink):
         return DEPTH_OUTPUTS
 
     def save(self, path: Path, pred: Prediction) -> None:
-        write_depth(path, pred.png, overwrite=True)
+        write_depth(path, pred.png, overwrite=True, compress_level=pred.compress_level)
 
 
 @register_sink("color-png", option="--out", options=_ColorPng)
@@ -292,7 +292,7 @@ class ColorPngSink(Sink):
     def save(self, path: Path, pred: Prediction) -> None:
         from semattnet.viz.depth import colorize_depth
 
-        write_image(path, colorize_depth(pred.stored), overwrite=True)
+        write_image(path, colorize_depth(pred.stored), overwrite=True, compress_level=pred.compress_level)
 
 
 @register_sink("ply", option="--ply", options=PlyOptions)
@@ -361,7 +361,7 @@ class UncertaintyPngSink(Sink):
         return DEPTH_OUTPUTS | {"uncertainty"}
 
     def save(self, path: Path, pred: Prediction) -> None:
-        write_depth(path, _uncertainty_of(pred)[1], overwrite=True)
+        write_depth(path, _uncertainty_of(pred)[1], overwrite=True, compress_level=pred.compress_level)
 
 
 @register_sink("uncertainty-npy", option="--uncertainty", options=_UncertaintyNpy)
@@ -484,11 +484,15 @@ def output_files(names: Sequence[str], sinks: Sequence[Sink]) -> list[str]:
 
 
 def write_prediction(stage: Path, frame: Frame, completion: Completion, sinks: Sequence[Sink],
-                     stage_ms: Mapping[str, float] | None = None) -> Prediction:  # fmt: skip
+                     stage_ms: Mapping[str, float] | None = None,
+                     compress_level: int | None = None) -> Prediction:  # fmt: skip
     """The one writer: the hole / clamp rule and the quantisation once (:func:`~.sinks.predict_frame`),
-    then every sink, into ``stage``. ``stage_ms``: the frame's stage times so far (for the live view)."""
+    then every sink, into ``stage``. ``stage_ms``: the frame's stage times so far (for the live view);
+    ``compress_level``: the PNGs' zlib level (None: :data:`~semattnet.data.io.PNG_COMPRESS_LEVEL`)."""
     pred = predict_frame(frame, completion)
     pred.stage_ms = dict(stage_ms or {})
+    if compress_level is not None:
+        pred.compress_level = compress_level
     for sink in sinks:
         sink.write(stage, pred)
     return pred
