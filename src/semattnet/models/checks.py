@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import torch
 
 from semattnet._errors import InputError
@@ -20,14 +22,22 @@ MAX_INPUT_DEPTH_M = 1000.0
 def check_sparse_depth(sparse: torch.Tensor, name: str = "sparse") -> None:
     """Refuse NaN / infinite, negative or implausibly large (> :data:`MAX_INPUT_DEPTH_M`) depth, with the
     same one-line :class:`~semattnet.InputError` for the model and the classical completer."""
-    if not bool(torch.isfinite(sparse).all()):
+    low, top = _range(sparse)  # one pass: NaN and infinities show in the extremes
+    if not (math.isfinite(low) and math.isfinite(top)):
         raise InputError(f"{name} contains NaN or infinite values; depth is in metres with 0 = missing")
-    if bool((sparse < 0).any()):
+    if low < 0:
         raise InputError(f"{name} depth contains negative values; depth is in metres with 0 = missing")
-    top = float(sparse.max()) if sparse.numel() else 0.0
     if top > MAX_INPUT_DEPTH_M:
         bound = f"{MAX_INPUT_DEPTH_M:g} m (semattnet.models.checks.MAX_INPUT_DEPTH_M)"
         raise InputError(f"{name} depth reaches {top:.6g} m, above {bound}; depth is in metres, not millimetres")
+
+
+def _range(sparse: torch.Tensor) -> tuple[float, float]:
+    """(smallest, largest) value of ``sparse`` in one pass ((0, 0) when empty; NaN when it holds one)."""
+    if not sparse.numel():
+        return 0.0, 0.0
+    low, top = torch.aminmax(sparse.detach())
+    return float(low), float(top)
 
 
 def check_has_points(sparse: torch.Tensor, name: str = "sparse") -> None:
