@@ -186,3 +186,14 @@ def test_the_run_writes_its_pngs_at_its_level(prefetch: int, tmp_path: Path, mon
     check_frames(Frames(), default_sinks(), out, OutputSpec(), options).run(ClassicalCompleter(), log=lambda s: None)
     assert levels == [options.png_level()] * 4 and levels[0] == (1 if prefetch else 3)
     assert read_depth(out / "f0.png").shape == SIZE
+
+
+def test_a_call_leaves_the_callers_float_arrays_unchanged(completer: DepthCompleter) -> None:
+    """A batch of one goes to the engine uncopied (float32 inputs as views): nothing writes into them."""
+    rng = np.random.default_rng(0)
+    rgb = rng.uniform(0, 255, (*SIZE, 3)).astype(np.float32)
+    sparse = np.where(rng.random(SIZE) < 0.2, rng.uniform(1, 50, SIZE), 0).astype(np.float32)
+    kept = rgb.copy(), sparse.copy()
+    completer(rgb, sparse)
+    np.testing.assert_array_equal(rgb, kept[0])
+    np.testing.assert_array_equal(sparse, kept[1])

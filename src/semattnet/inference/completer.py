@@ -53,9 +53,14 @@ def _item(t: torch.Tensor, i: int) -> torch.Tensor:
     return t[i : i + 1]
 
 
+def _batch(items: Sequence[torch.Tensor]) -> torch.Tensor:
+    """Batches of one (B = 1) as one batch: the one as it is (no copy), else concatenated."""
+    return items[0] if len(items) == 1 else torch.cat(list(items))
+
+
 def _check_colour_range(name: str, a: np.ndarray | None) -> None:
     """``rgb`` / ``semantic`` hold 0..255 colours: NaN, infinite or out-of-range values are refused in one line."""
-    if a is None or np.asarray(a).size == 0:
+    if a is None or np.asarray(a).size == 0 or np.asarray(a).dtype == np.uint8:  # uint8: 0..255 by its type
         return
     try:
         v = np.asarray(a, dtype=np.float64)
@@ -249,8 +254,8 @@ class DepthCompleter:
         if len({x[0].shape for x in inputs}) > 1 or len({x[1] is None for x in inputs}) > 1:
             raise InputError("complete_batch: a batch's frames must have one size and all (or none) a semantic map")
         semantic = [x[1] for x in inputs if x[1] is not None]
-        out = self.run(torch.cat([x[0] for x in inputs]), torch.cat(semantic) if semantic else None,
-                       torch.cat([x[2] for x in inputs]))  # fmt: skip
+        out = self.run(_batch([x[0] for x in inputs]), _batch(semantic) if semantic else None,
+                       _batch([x[2] for x in inputs]))  # fmt: skip
         out = out.map(lambda t: t.cpu())
         return [Completion(out.depth[i, 0].numpy(), out.map(partial(_item, i=i))) for i in range(len(inputs))]
 
