@@ -104,14 +104,26 @@ def test_the_run_computes_the_uncertainty_only_when_a_sink_reads_it(
 
 
 def test_completer_outputs_are_checked_and_switch_the_uncertainty(completer: DepthCompleter) -> None:
+    frame = Frames().load("f0")
     completer.outputs = ["refined_depth"]
     try:
-        assert completer.outputs == {"refined_depth"} and not completer.compute_uncertainty
+        assert completer.outputs == {"refined_depth"} and completer(frame.rgb, frame.sparse).uncertainty is None
+        completer.outputs = {"refined_depth", "uncertainty"}
+        assert completer(frame.rgb, frame.sparse).uncertainty is not None
         with pytest.raises(InputError, match="outputs: unknown output"):
             completer.outputs = {"depth"}
     finally:
         completer.outputs = None
-    assert completer.compute_uncertainty
+    assert completer(frame.rgb, frame.sparse).uncertainty is not None
+
+
+def test_a_run_keeps_the_completers_own_uncertainty_switch(completer: DepthCompleter, tmp_path: Path) -> None:
+    completer.compute_uncertainty = False
+    try:
+        check_frames(Frames(), default_sinks(), tmp_path / "out", OutputSpec()).run(completer, log=lambda line: None)
+        assert not completer.compute_uncertainty and completer.outputs is None
+    finally:
+        completer.compute_uncertainty = True
 
 
 @pytest.mark.skipif(importlib.util.find_spec("openvino") is None, reason="openvino is not installed")

@@ -111,8 +111,8 @@ class DepthCompleter:
         #: The semantic palette the model was trained with (its config's; Cityscapes when it records none).
         self.palette: str = getattr(getattr(model, "config", None), "palette", "cityscapes")
         #: Whether :meth:`run` (and a call) sets the outputs' ``uncertainty``
-        #: (:func:`semattnet.models.uncertainty.depth_uncertainty`; about 60 ms of one CPU core at 375x1242);
-        #: setting :attr:`outputs` sets it too.
+        #: (:func:`semattnet.models.uncertainty.depth_uncertainty`; about 60 ms of one CPU core at 375x1242), when
+        #: :attr:`outputs` asks for it too.
         self.compute_uncertainty = True
         self._outputs: frozenset[str] | None = None
         self._source = model.to(self.device).eval()
@@ -140,10 +140,10 @@ class DepthCompleter:
     @property
     def outputs(self) -> frozenset[str] | None:
         """The fields of :class:`~semattnet.models.outputs.DepthCompletionOutput` the caller reads (None: all, the
-        default): ``refined_depth`` for the final depth, ``uncertainty`` for the uncertainty. Setting it sets
-        :attr:`compute_uncertainty` (whether ``uncertainty`` is among them), and the engines compiled for one size
-        (``openvino``) compute only what these need (:func:`~semattnet.models.uncertainty.outputs_to_compute`;
-        the other fields are then None); the ``torch`` engine computes them all.
+        default): ``refined_depth`` for the final depth, ``uncertainty`` for the uncertainty (computed only when
+        among them, and :attr:`compute_uncertainty`). The engines compiled for one size (``openvino``) compute only
+        what these need (:func:`~semattnet.models.uncertainty.outputs_to_compute`; the other fields are then None);
+        the ``torch`` engine computes them all.
 
         Raises:
             InputError: an unknown field name.
@@ -153,7 +153,6 @@ class DepthCompleter:
     @outputs.setter
     def outputs(self, names: Collection[str] | None) -> None:
         self._outputs = None if names is None else check_output_names(names, "outputs")
-        self.compute_uncertainty = self._outputs is None or "uncertainty" in self._outputs
 
     def engine(self, size: tuple[int, int] | None = None) -> InferenceEngine:
         """The engine for padded inputs of ``size`` and the :attr:`outputs` (built on first use; one for all sizes
@@ -189,7 +188,8 @@ class DepthCompleter:
     def run(self, rgb: torch.Tensor, semantic: torch.Tensor | None, sparse: torch.Tensor) -> DepthCompletionOutput:
         """Batched tensors (B, C, H, W) of any H, W -> outputs at the same size, with their ``uncertainty``
         (:func:`semattnet.models.uncertainty.depth_uncertainty`: from the outputs every engine returns and
-        ``sparse``, so the same for every engine up to float rounding; not with ``compute_uncertainty = False``).
+        ``sparse``, so the same for every engine up to float rounding; not with ``compute_uncertainty = False``, nor
+        when :attr:`outputs` leaves it out).
 
         Raises:
             InputError: NaN / infinite, negative or too large sparse depth (checked here too, as exported
@@ -206,7 +206,7 @@ class DepthCompleter:
             out: DepthCompletionOutput = engine(rgb=rgb_p.to(self.device), semantic=semantic_in,
                                                 sparse=sparse_p.to(self.device))  # fmt: skip
         out = out.map(lambda t: crop_padding(t.float(), pad))
-        if not self.compute_uncertainty:
+        if not self.compute_uncertainty or (self._outputs is not None and "uncertainty" not in self._outputs):
             return out
         with torch.inference_mode():
             return with_uncertainty(out, sparse)
