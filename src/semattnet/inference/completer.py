@@ -19,7 +19,7 @@ cropped back, so any size works, KITTI's 1242x375 included.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator, Sequence
+from collections.abc import Collection, Iterator, Sequence
 from contextlib import contextmanager
 from functools import partial
 from typing import TYPE_CHECKING
@@ -35,8 +35,8 @@ from semattnet.inference.backends.calibration import CalibrationFrames
 from semattnet.inference.contract import Completer, Completion, StageTimed
 from semattnet.inference.padding import crop_padding, pad_to_multiple
 from semattnet.models.checks import check_has_points, check_sparse_depth
-from semattnet.models.outputs import DepthCompletionOutput
-from semattnet.models.uncertainty import with_uncertainty
+from semattnet.models.outputs import DepthCompletionOutput, check_output_names
+from semattnet.models.uncertainty import outputs_to_compute, with_uncertainty
 from semattnet.weights.hub import from_pretrained, load_model
 from semattnet.weights.resolve import resolve_weights
 
@@ -53,9 +53,14 @@ def _item(t: torch.Tensor, i: int) -> torch.Tensor:
     return t[i : i + 1]
 
 
+def _batch(items: Sequence[torch.Tensor]) -> torch.Tensor:
+    """Batches of one (B = 1) as one batch: the one as it is (no copy), else concatenated."""
+    return items[0] if len(items) == 1 else torch.cat(list(items))
+
+
 def _check_colour_range(name: str, a: np.ndarray | None) -> None:
     """``rgb`` / ``semantic`` hold 0..255 colours: NaN, infinite or out-of-range values are refused in one line."""
-    if a is None or np.asarray(a).size == 0:
+    if a is None or np.asarray(a).size == 0 or np.asarray(a).dtype == np.uint8:  # uint8: 0..255 by its type
         return
     try:
         v = np.asarray(a, dtype=np.float64)
@@ -106,11 +111,13 @@ class DepthCompleter:
         #: The semantic palette the model was trained with (its config's; Cityscapes when it records none).
         self.palette: str = getattr(getattr(model, "config", None), "palette", "cityscapes")
         #: Whether :meth:`run` (and a call) sets the outputs' ``uncertainty``
-        #: (:func:`semattnet.models.uncertainty.depth_uncertainty`; about 60 ms of one CPU core at 375x1242).
+        #: (:func:`semattnet.models.uncertainty.depth_uncertainty`; about 60 ms of one CPU core at 375x1242), when
+        #: :attr:`outputs` asks for it too.
         self.compute_uncertainty = True
+        self._outputs: frozenset[str] | None = None
         self._source = model.to(self.device).eval()
         self._inplace = inplace
-        self._engines: dict[tuple[int, int] | None, InferenceEngine] = {}
+        self._engines: dict[tuple[tuple[int, int] | None, frozenset[str] | None], InferenceEngine] = {}
 
     @classmethod
     def from_checkpoint(cls, path: str | os.PathLike[str], device: str | torch.device = "auto", amp: str = "none",
@@ -130,15 +137,33 @@ class DepthCompleter:
         resolved = resolve_weights(name_or_path, sha256=sha256, cache_dir=cache_dir, progress=progress)
         return cls(resolved.build(arch, overrides=overrides), device, amp, backend, inplace=True)
 
+    @property
+    def outputs(self) -> frozenset[str] | None:
+        """The fields of :class:`~semattnet.models.outputs.DepthCompletionOutput` the caller reads (None: all, the
+        default): ``refined_depth`` for the final depth, ``uncertainty`` for the uncertainty (computed only when
+        among them, and :attr:`compute_uncertainty`). The engines compiled for one size (``openvino``) compute only
+        what these need (:func:`~semattnet.models.uncertainty.outputs_to_compute`; the other fields are then None);
+        the ``torch`` engine computes them all.
+
+        Raises:
+            InputError: an unknown field name.
+        """
+        return self._outputs
+
+    @outputs.setter
+    def outputs(self, names: Collection[str] | None) -> None:
+        self._outputs = None if names is None else check_output_names(names, "outputs")
+
     def engine(self, size: tuple[int, int] | None = None) -> InferenceEngine:
-        """The engine for padded inputs of ``size`` (built on first use; one for all sizes with ``torch``)."""
+        """The engine for padded inputs of ``size`` and the :attr:`outputs` (built on first use; one for all sizes
+        and outputs with ``torch``)."""
         fixed = self.spec.entry.fixed_size
-        key = size if fixed else None
+        key = (size, outputs_to_compute(self._outputs)) if fixed else (None, None)
         if key not in self._engines:
-            self._engines[key] = optimize_for_inference(self._source, backend=self.backend, size=key,
+            self._engines[key] = optimize_for_inference(self._source, backend=self.backend, size=key[0],
                                                         precision=self.spec.engine_precision, device=self.device,
                                                         inplace=self._inplace and not fixed,
-                                                        calibration=self.calibration)  # fmt: skip
+                                                        calibration=self.calibration, outputs=key[1])  # fmt: skip
         return self._engines[key]
 
     @contextmanager
@@ -163,7 +188,8 @@ class DepthCompleter:
     def run(self, rgb: torch.Tensor, semantic: torch.Tensor | None, sparse: torch.Tensor) -> DepthCompletionOutput:
         """Batched tensors (B, C, H, W) of any H, W -> outputs at the same size, with their ``uncertainty``
         (:func:`semattnet.models.uncertainty.depth_uncertainty`: from the outputs every engine returns and
-        ``sparse``, so the same for every engine up to float rounding; not with ``compute_uncertainty = False``).
+        ``sparse``, so the same for every engine up to float rounding; not with ``compute_uncertainty = False``, nor
+        when :attr:`outputs` leaves it out).
 
         Raises:
             InputError: NaN / infinite, negative or too large sparse depth (checked here too, as exported
@@ -180,7 +206,7 @@ class DepthCompleter:
             out: DepthCompletionOutput = engine(rgb=rgb_p.to(self.device), semantic=semantic_in,
                                                 sparse=sparse_p.to(self.device))  # fmt: skip
         out = out.map(lambda t: crop_padding(t.float(), pad))
-        if not self.compute_uncertainty:
+        if not self.compute_uncertainty or (self._outputs is not None and "uncertainty" not in self._outputs):
             return out
         with torch.inference_mode():
             return with_uncertainty(out, sparse)
@@ -228,8 +254,8 @@ class DepthCompleter:
         if len({x[0].shape for x in inputs}) > 1 or len({x[1] is None for x in inputs}) > 1:
             raise InputError("complete_batch: a batch's frames must have one size and all (or none) a semantic map")
         semantic = [x[1] for x in inputs if x[1] is not None]
-        out = self.run(torch.cat([x[0] for x in inputs]), torch.cat(semantic) if semantic else None,
-                       torch.cat([x[2] for x in inputs]))  # fmt: skip
+        out = self.run(_batch([x[0] for x in inputs]), _batch(semantic) if semantic else None,
+                       _batch([x[2] for x in inputs]))  # fmt: skip
         out = out.map(lambda t: t.cpu())
         return [Completion(out.depth[i, 0].numpy(), out.map(partial(_item, i=i))) for i in range(len(inputs))]
 

@@ -5,8 +5,8 @@ feed (:mod:`~.feed`), so that each can name them."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from contextlib import AbstractContextManager
+from collections.abc import Callable, Collection, Iterator
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -16,7 +16,7 @@ import torch
 from semattnet.inference.backends._base import StageHook
 from semattnet.models.outputs import DepthCompletionOutput
 
-__all__ = ["Completer", "CompleterFactory", "Completion", "StageTimed"]
+__all__ = ["Completer", "CompleterFactory", "Completion", "SelectsOutputs", "StageTimed", "reading_only"]
 
 
 @dataclass
@@ -47,11 +47,14 @@ class Completion:
 
     @property
     def confidence(self) -> np.ndarray | None:
-        """(H, W) largest of the fusion weights of eq. 12 (the method's confidence), or None without branches."""
+        """(H, W) largest of the fusion weights of eq. 12 (the method's confidence), or None without branches (or
+        from an engine not asked for them)."""
         if self.output is None:
             return None
         confs = [c for c in (self.output.color_conf, self.output.semantic_conf, self.output.guided_conf)
                  if c is not None]  # fmt: skip
+        if not confs:
+            return None
         return torch.stack([c[0, 0].float().cpu() for c in confs]).amax(0).numpy()
 
 
@@ -96,3 +99,31 @@ class StageTimed(Protocol):
         """While active, the inner stages of every call run inside ``hook(stage)``; gives those stages (empty:
         the call is not split)."""
         ...
+
+
+@runtime_checkable
+class SelectsOutputs(Protocol):
+    """A completer that computes only the outputs it is told are read (:attr:`DepthCompleter.outputs
+    <semattnet.inference.completer.DepthCompleter.outputs>`): fields of
+    :class:`~semattnet.models.outputs.DepthCompletionOutput`, None for all."""
+
+    @property
+    def outputs(self) -> frozenset[str] | None: ...
+
+    @outputs.setter
+    def outputs(self, names: Collection[str] | None) -> None: ...
+
+
+@contextmanager
+def reading_only(completer: object, outputs: Collection[str] | None) -> Iterator[None]:
+    """While active, ``completer`` (when it :class:`SelectsOutputs`) computes only ``outputs`` (None: all; what the
+    frame loop's sinks read, :func:`~semattnet.inference.sinks.outputs_read`); its own setting is put back after."""
+    if not isinstance(completer, SelectsOutputs) or outputs is None:
+        yield
+        return
+    before = completer.outputs
+    completer.outputs = outputs
+    try:
+        yield
+    finally:
+        completer.outputs = before

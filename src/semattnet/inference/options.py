@@ -49,7 +49,8 @@ class RunOptions:
     frames of one size completed in one engine call. ``write_ahead``: how many completed frames the writing (every
     sink, the files moved into place, the journal) may run behind the network, in a background stage
     (:mod:`~.writer`); 0: each frame written before the next is completed; None: :data:`WRITE_AHEAD` frames with
-    ``realtime`` or ``prefetch``, else 0.
+    ``realtime`` or ``prefetch``, else 0. ``png_compress_level``: the zlib level (0-9) of the PNGs the sinks write
+    (None: :meth:`png_level`'s default; the pixels are the same at every level).
     """
 
     on_error: str | None = None
@@ -57,6 +58,12 @@ class RunOptions:
     realtime: float | None = None
     batch_size: int = 1
     write_ahead: int | None = None
+    png_compress_level: int | None = None
+
+    def __post_init__(self) -> None:
+        level = self.png_compress_level
+        if level is not None and not (isinstance(level, int) and 0 <= level <= 9):
+            raise InputError(f"png_compress_level must be 0 to 9, got {level!r}")
 
     def write_depth(self) -> int:
         """``write_ahead`` as it applies (its default resolved)."""
@@ -65,6 +72,16 @@ class RunOptions:
         if self.write_ahead < 0:
             raise InputError(f"write_ahead must be 0 or more, got {self.write_ahead!r}")
         return self.write_ahead
+
+    def png_level(self) -> int:
+        """``png_compress_level`` as it applies: as given, else :data:`~semattnet.data.io.STREAM_PNG_COMPRESS_LEVEL`
+        when the writing runs beside the network (:meth:`write_depth` > 0: ``realtime`` or ``prefetch``), else
+        :data:`~semattnet.data.io.PNG_COMPRESS_LEVEL`."""
+        from semattnet.data.io import PNG_COMPRESS_LEVEL, STREAM_PNG_COMPRESS_LEVEL
+
+        if self.png_compress_level is None:
+            return STREAM_PNG_COMPRESS_LEVEL if self.write_depth() > 0 else PNG_COMPRESS_LEVEL
+        return self.png_compress_level
 
     def policy(self, frames: int) -> str:
         """``on_error`` for a run of ``frames`` frames: as given, else ``skip`` for more than one and ``stop``

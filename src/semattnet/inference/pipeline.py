@@ -59,12 +59,13 @@ from semattnet._utils.outputs import Output, check_no_input_overlap, check_outpu
 from semattnet.data.frames import Frame, FrameSource
 from semattnet.data.io import encode_depth, read_depth
 from semattnet.inference.completer import Completer, Completion
+from semattnet.inference.contract import reading_only
 from semattnet.inference.feed import FrameFault, check_inputs, completions, fault_reason, is_frame_fault, read_frame
 from semattnet.inference.journal import FRAMES_FILE, FrameEntry, RunJournal, describe_counts
 from semattnet.inference.options import OutputSpec, RunOptions
 from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sharding import agree, gather_rows, on_main, process_group, rank_log, shard
-from semattnet.inference.sinks import Prediction, Sink, output_files, write_prediction
+from semattnet.inference.sinks import Prediction, Sink, output_files, outputs_read, write_prediction
 from semattnet.inference.stopping import terminate_as_exit
 from semattnet.inference.timing import StageTimes
 from semattnet.inference.writer import WriteStage
@@ -336,7 +337,7 @@ class _FrameLoop:
         the frame), the frame's files moved from ``stage`` into place; timed as ``writing``. Returns the files."""
         with self.timer.time(frame.name, "writing"):
             stage_ms = {k: 1e3 * v for k, v in self.timer.times.get(frame.name, {}).items()}
-            write_prediction(stage, frame, completion, self.files_first, stage_ms)
+            write_prediction(stage, frame, completion, self.files_first, stage_ms, self.plan.options.png_level())
             files = output_files([frame.name], self.sinks)
             for rel in files:
                 (self.out / rel).parent.mkdir(parents=True, exist_ok=True)
@@ -444,7 +445,7 @@ def _attempt_run(loop: _FrameLoop, completer: Completer) -> Exception | None:
     """:func:`_run_frames`, its error returned (for every rank to agree on); on any error the frames done
     stay journaled. Ctrl-C and SIGTERM are raised (once the frames handed to the writer are written)."""
     try:
-        with terminate_as_exit():
+        with terminate_as_exit(), reading_only(completer, outputs_read(loop.sinks)):
             _run_frames(loop, completer)
     except BaseException as exc:
         loop.forget()

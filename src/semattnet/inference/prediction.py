@@ -10,7 +10,7 @@ import numpy as np
 
 from semattnet._errors import InputError
 from semattnet.data.frames import Frame
-from semattnet.data.io import clamp_for_png, decode_depth, encode_depth
+from semattnet.data.io import PNG_COMPRESS_LEVEL, clamp_for_png, decode_depth, encode_depth
 from semattnet.inference.completer import Completion
 from semattnet.inference.uncertainty import UncertaintyLimit, clean_uncertainty, encode_uncertainty
 from semattnet.models.outputs import DepthCompletionOutput
@@ -38,7 +38,9 @@ class Prediction:
     ``depth``: (H, W) float32 metres after the hole / clamp rule (0 = hole); ``png``: its uint16 KITTI
     encoding; ``stored``: the metres the PNG holds (1/256 m steps): what the PLY and the panel use.
     ``uncertainty``: (H, W) float32 metres, 0 at the holes (None when the method gives none);
-    ``uncertainty_png``: its uint16 encoding (:func:`~semattnet.inference.uncertainty.encode_uncertainty`)."""
+    ``uncertainty_png``: its uint16 encoding (:func:`~semattnet.inference.uncertainty.encode_uncertainty`).
+    ``compress_level``: the zlib level the PNG sinks write at (the run's
+    :meth:`~semattnet.inference.options.RunOptions.png_level`)."""
 
     frame: Frame
     completion: Completion
@@ -48,6 +50,7 @@ class Prediction:
     stage_ms: dict[str, float] = field(default_factory=dict)  # the frame's stage times so far (the loop's)
     uncertainty: np.ndarray | None = None
     uncertainty_png: np.ndarray | None = None
+    compress_level: int = PNG_COMPRESS_LEVEL
     _clouds: dict[tuple[float, int, str], PointCloud] = field(default_factory=dict, repr=False)
 
     @property

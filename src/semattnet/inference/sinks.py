@@ -36,6 +36,7 @@ from semattnet._utils.registry import Registry, option
 from semattnet.data.io import write_depth, write_image
 from semattnet.inference.prediction import Prediction, fusion_confidence, predict_frame
 from semattnet.inference.uncertainty import UncertaintyLimit
+from semattnet.models.outputs import CONFIDENCE_OUTPUTS, DEPTH_OUTPUTS
 
 if TYPE_CHECKING:  # geometry's point clouds and the stage times are imported where used
     from semattnet.data.frames import Frame
@@ -63,6 +64,7 @@ __all__ = [
     "fusion_confidence",
     "list_sinks",
     "output_files",
+    "outputs_read",
     "predict_frame",
     "register_sink",
     "write_prediction",
@@ -95,6 +97,13 @@ class Sink:
     #: The option that names ``targets()`` and what they are (a kind of :data:`semattnet._utils.outputs.KINDS`).
     option: ClassVar[str] = "--out"
     kind: ClassVar[str] = "file"
+
+    def reads(self) -> frozenset[str] | None:
+        """The outputs of the completion it reads: fields of :class:`~semattnet.models.outputs.DepthCompletionOutput`
+        (:data:`~semattnet.models.outputs.DEPTH_OUTPUTS` for the final depth, ``uncertainty`` for the uncertainty),
+        None for all of them (the default: a sink that does not say gets everything). The frame loop computes the
+        union over its sinks only (:func:`outputs_read`)."""
+        return None
 
     def path(self, name: str) -> str | None:
         """The file for frame ``name``, relative to the output folder (None: not written)."""
@@ -263,8 +272,11 @@ class DepthPngSink(Sink):
 
     role: ClassVar[str] = "depth"
 
+    def reads(self) -> frozenset[str]:
+        return DEPTH_OUTPUTS
+
     def save(self, path: Path, pred: Prediction) -> None:
-        write_depth(path, pred.png, overwrite=True)
+        write_depth(path, pred.png, overwrite=True, compress_level=pred.compress_level)
 
 
 @register_sink("color-png", option="--out", options=_ColorPng)
@@ -274,10 +286,13 @@ class ColorPngSink(Sink):
 
     suffix: str = "_color.png"
 
+    def reads(self) -> frozenset[str]:
+        return DEPTH_OUTPUTS
+
     def save(self, path: Path, pred: Prediction) -> None:
         from semattnet.viz.depth import colorize_depth
 
-        write_image(path, colorize_depth(pred.stored), overwrite=True)
+        write_image(path, colorize_depth(pred.stored), overwrite=True, compress_level=pred.compress_level)
 
 
 @register_sink("ply", option="--ply", options=PlyOptions)
@@ -291,6 +306,9 @@ class PlySink(Sink):
     max_depth: float = 80.0
     top_crop: int = 0
     max_uncertainty: UncertaintyLimit | None = None  # the pixels above it left out
+
+    def reads(self) -> frozenset[str]:
+        return DEPTH_OUTPUTS | CONFIDENCE_OUTPUTS | ({"uncertainty"} if self.max_uncertainty is not None else set())
 
     def save(self, path: Path, pred: Prediction) -> None:
         from semattnet.geometry import write_ply
@@ -319,6 +337,9 @@ class NpySink(Sink):
         with atomic_path(path, suffix=".npy") as tmp:
             np.save(tmp, pred.depth)
 
+    def reads(self) -> frozenset[str]:
+        return DEPTH_OUTPUTS
+
 
 def _uncertainty_of(pred: Prediction) -> tuple[np.ndarray, np.ndarray]:
     """(float32 metres, uint16 encoding) of ``pred``'s uncertainty; a one-line error when the method has none."""
@@ -336,8 +357,11 @@ class UncertaintyPngSink(Sink):
     folder: str = "uncertainty"
     role: ClassVar[str] = "uncertainty"
 
+    def reads(self) -> frozenset[str]:
+        return DEPTH_OUTPUTS | {"uncertainty"}
+
     def save(self, path: Path, pred: Prediction) -> None:
-        write_depth(path, _uncertainty_of(pred)[1], overwrite=True)
+        write_depth(path, _uncertainty_of(pred)[1], overwrite=True, compress_level=pred.compress_level)
 
 
 @register_sink("uncertainty-npy", option="--uncertainty", options=_UncertaintyNpy)
@@ -347,6 +371,9 @@ class UncertaintyNpySink(Sink):
 
     suffix: str = ".npy"
     folder: str = "uncertainty"
+
+    def reads(self) -> frozenset[str]:
+        return DEPTH_OUTPUTS | {"uncertainty"}
 
     def save(self, path: Path, pred: Prediction) -> None:
         from semattnet._utils.atomic import atomic_path
@@ -414,6 +441,9 @@ class LatencySink(RunSink):
     replays: ClassVar[bool] = False  # the loop adds the kept frames' recorded times to the timer
     once: ClassVar[bool] = True  # rank 0's timer: every rank's frames
 
+    def reads(self) -> frozenset[str]:
+        return frozenset()
+
     def files(self) -> list[str]:
         return [self.name]
 
@@ -436,17 +466,33 @@ def default_sinks(npy: bool = False, panel: bool = False, ply: bool = False, max
     return sinks + [PanelSink(max_depth=max_depth, top_crop=top_crop, max_uncertainty=max_uncertainty)] * panel
 
 
+def outputs_read(sinks: Sequence[Sink]) -> frozenset[str] | None:
+    """The outputs of the completion that any of ``sinks`` reads (:meth:`Sink.reads`): what a run computes
+    (None: all, when one of them reads all)."""
+    read: frozenset[str] = frozenset()
+    for sink in sinks:
+        more = sink.reads()
+        if more is None:
+            return None
+        read |= more
+    return read
+
+
 def output_files(names: Sequence[str], sinks: Sequence[Sink]) -> list[str]:
     """Every file the sinks write for ``names``, relative to the output folder, frame by frame."""
     return [p for name in names for sink in sinks if (p := sink.path(name)) is not None]
 
 
 def write_prediction(stage: Path, frame: Frame, completion: Completion, sinks: Sequence[Sink],
-                     stage_ms: Mapping[str, float] | None = None) -> Prediction:  # fmt: skip
+                     stage_ms: Mapping[str, float] | None = None,
+                     compress_level: int | None = None) -> Prediction:  # fmt: skip
     """The one writer: the hole / clamp rule and the quantisation once (:func:`~.sinks.predict_frame`),
-    then every sink, into ``stage``. ``stage_ms``: the frame's stage times so far (for the live view)."""
+    then every sink, into ``stage``. ``stage_ms``: the frame's stage times so far (for the live view);
+    ``compress_level``: the PNGs' zlib level (None: :data:`~semattnet.data.io.PNG_COMPRESS_LEVEL`)."""
     pred = predict_frame(frame, completion)
     pred.stage_ms = dict(stage_ms or {})
+    if compress_level is not None:
+        pred.compress_level = compress_level
     for sink in sinks:
         sink.write(stage, pred)
     return pred

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
 import torch
 
 from semattnet._errors import InputError
@@ -20,19 +23,40 @@ MAX_INPUT_DEPTH_M = 1000.0
 def check_sparse_depth(sparse: torch.Tensor, name: str = "sparse") -> None:
     """Refuse NaN / infinite, negative or implausibly large (> :data:`MAX_INPUT_DEPTH_M`) depth, with the
     same one-line :class:`~semattnet.InputError` for the model and the classical completer."""
-    if not bool(torch.isfinite(sparse).all()):
+    low, top = _range(sparse)  # one pass: NaN and infinities show in the extremes
+    if not (math.isfinite(low) and math.isfinite(top)):
         raise InputError(f"{name} contains NaN or infinite values; depth is in metres with 0 = missing")
-    if bool((sparse < 0).any()):
+    if low < 0:
         raise InputError(f"{name} depth contains negative values; depth is in metres with 0 = missing")
-    top = float(sparse.max()) if sparse.numel() else 0.0
     if top > MAX_INPUT_DEPTH_M:
         bound = f"{MAX_INPUT_DEPTH_M:g} m (semattnet.models.checks.MAX_INPUT_DEPTH_M)"
         raise InputError(f"{name} depth reaches {top:.6g} m, above {bound}; depth is in metres, not millimetres")
 
 
+def _cpu_array(t: torch.Tensor) -> np.ndarray | None:
+    """A CPU float tensor as a NumPy view (no copy), else None. One frame's checks run on it: PyTorch's
+    reductions wake its thread pool for each call (measured 7-16 ms a 352x1216 map on 2 busy cores, against
+    under 0.1 ms in NumPy)."""
+    if t.device.type != "cpu" or t.dtype not in (torch.float32, torch.float64, torch.float16):
+        return None
+    return t.detach().numpy()
+
+
+def _range(sparse: torch.Tensor) -> tuple[float, float]:
+    """(smallest, largest) value of ``sparse`` in one pass ((0, 0) when empty; NaN when it holds one)."""
+    if not sparse.numel():
+        return 0.0, 0.0
+    array = _cpu_array(sparse)
+    if array is not None:
+        return float(array.min()), float(array.max())
+    low, top = torch.aminmax(sparse.detach())
+    return float(low), float(top)
+
+
 def check_has_points(sparse: torch.Tensor, name: str = "sparse") -> None:
     """Refuse a frame whose sparse map has no valid point (every pixel 0): a completion of it means nothing."""
-    if not bool((sparse > 0).any()):
+    array = _cpu_array(sparse)
+    if not bool((array > 0).any() if array is not None else (sparse > 0).any()):
         raise InputError(f"{name} has no valid depth point (every pixel is 0 = missing); nothing to complete")
 
 

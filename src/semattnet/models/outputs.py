@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, fields, replace
 
 import torch
 
-__all__ = ["DepthCompletionOutput"]
+from semattnet._errors import InputError
+
+__all__ = ["CONFIDENCE_OUTPUTS", "DEPTH_OUTPUTS", "DepthCompletionOutput", "check_output_names"]
 
 
 @dataclass
@@ -27,6 +29,9 @@ class DepthCompletionOutput:
         uncertainty: per-pixel uncertainty of :attr:`depth` in metres
             (:func:`semattnet.models.uncertainty.depth_uncertainty`); set by whoever holds the sparse input
             (:meth:`semattnet.inference.DepthCompleter.run`), ``None`` straight out of a model.
+
+    An engine asked for some of the fields only (``optimize_for_inference(..., outputs=)``) may leave the
+    others ``None``: code that reads a field asks for it.
     """
 
     color_depth: torch.Tensor
@@ -53,3 +58,25 @@ class DepthCompletionOutput:
         """A copy with ``fn`` applied to every tensor (e.g. cropping, ``.cpu()``)."""
         mapped = {f.name: fn(v) for f in fields(self) if (v := getattr(self, f.name)) is not None}
         return replace(self, **mapped)
+
+
+#: The outputs that hold the final prediction (:attr:`DepthCompletionOutput.depth`), as they are asked of an engine:
+#: ``refined_depth``, which an engine gives as ``fused_depth`` for a model without refinement.
+DEPTH_OUTPUTS: frozenset[str] = frozenset({"refined_depth"})
+#: The fusion weights of eq. 12: what a completion's confidence (the point clouds') is read from.
+CONFIDENCE_OUTPUTS: frozenset[str] = frozenset({"color_conf", "semantic_conf", "guided_conf"})
+
+
+def check_output_names(names: Collection[str], what: str = "outputs") -> frozenset[str]:
+    """``names`` as a frozenset, each a field of :class:`DepthCompletionOutput`.
+
+    Raises:
+        InputError: an unknown name (``what``: the option or argument that gave them).
+    """
+    known = {f.name for f in fields(DepthCompletionOutput)}
+    if isinstance(names, str):
+        raise InputError(f"{what}: a collection of output names, got the string {names!r}")
+    unknown = sorted(set(names) - known)
+    if unknown:
+        raise InputError(f"{what}: unknown output(s) {unknown}; expected some of {sorted(known)}")
+    return frozenset(names)

@@ -24,21 +24,30 @@ standard deviation: it ranks pixels (see :mod:`semattnet.evaluation.sparsificati
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Collection
 
 import torch
 import torch.nn.functional as F
 
-from semattnet.models.outputs import DepthCompletionOutput
+from semattnet.models.outputs import CONFIDENCE_OUTPUTS, DEPTH_OUTPUTS, DepthCompletionOutput, check_output_names
 
 __all__ = [
+    "UNCERTAINTY_READS",
     "anchor_term",
     "branch_spread",
     "depth_slope",
     "depth_uncertainty",
     "lidar_distance",
+    "outputs_to_compute",
     "refinement_change",
     "with_uncertainty",
 ]
+
+#: The outputs :func:`depth_uncertainty` reads: the branch depths and their fusion weights (:func:`branch_spread`),
+#: the fused and the final depth (:func:`refinement_change`, :func:`anchor_term`).
+UNCERTAINTY_READS: frozenset[str] = (
+    frozenset({"color_depth", "semantic_depth", "guided_depth", "fused_depth"}) | CONFIDENCE_OUTPUTS | DEPTH_OUTPUTS
+)
 
 _ROWS_PER_CHECK = 8  # distance transform: the rows still open are re-counted every that many offsets
 
@@ -141,3 +150,17 @@ def depth_uncertainty(output: DepthCompletionOutput, sparse: torch.Tensor) -> to
 def with_uncertainty(output: DepthCompletionOutput, sparse: torch.Tensor) -> DepthCompletionOutput:
     """A copy of ``output`` with its ``uncertainty`` field set by :func:`depth_uncertainty`."""
     return dataclasses.replace(output, uncertainty=depth_uncertainty(output, sparse))
+
+
+def outputs_to_compute(asked: Collection[str] | None) -> frozenset[str] | None:
+    """The model outputs to compute for the outputs ``asked`` (field names of
+    :class:`~semattnet.models.outputs.DepthCompletionOutput`, ``uncertainty`` among them; None: all): those, and
+    what :func:`depth_uncertainty` reads (:data:`UNCERTAINTY_READS`) when the uncertainty is asked. None: all.
+
+    Raises:
+        InputError: an unknown output name.
+    """
+    if asked is None:
+        return None
+    names = check_output_names(asked)
+    return names | UNCERTAINTY_READS if "uncertainty" in names else names

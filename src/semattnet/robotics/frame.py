@@ -125,6 +125,14 @@ class RobotFrame:
                                 mask=keep)  # fmt: skip
         return cls(int(stamp), frame_id, "", d, unc, cloud, info)
 
+    @staticmethod
+    def reads(uncertainty: bool = False, max_uncertainty: UncertaintyLimit | None = None) -> frozenset[str]:
+        """What :meth:`of` reads of a completion with these options (:meth:`~semattnet.inference.sinks.Sink.reads`):
+        the final depth, and the uncertainty when it is sent or limits the cloud."""
+        from semattnet.models.outputs import DEPTH_OUTPUTS
+
+        return DEPTH_OUTPUTS | ({"uncertainty"} if uncertainty or max_uncertainty is not None else set())
+
     @classmethod
     def of(cls, pred: Prediction, index: int = 0, uncertainty: bool = False, max_depth: float | None = None,
            max_uncertainty: UncertaintyLimit | None = None, output: str = "a robot output") -> RobotFrame:  # fmt: skip

@@ -226,6 +226,10 @@ class LiveSink(RunSink):
     _context: object = field(default=None, init=False, repr=False)  # kept alive: channels die with their context
     _count: int = field(default=0, init=False, repr=False)
 
+    def reads(self) -> frozenset[str]:
+        """The depth and the uncertainty (sent to the clients that subscribe to it; RobotFrame's cloud)."""
+        return RobotFrame.reads(uncertainty=True)
+
     @property
     def topics(self) -> dict[str, str]:
         """Topic by role (:data:`TOPICS` with the prefix)."""

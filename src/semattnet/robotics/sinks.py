@@ -158,6 +158,9 @@ class BagSink(_StagedTarget):
     #: The open BagWriter, between open and finish.
     _writer: BagWriter | None = field(default=None, init=False, repr=False)
 
+    def reads(self) -> frozenset[str]:
+        return RobotFrame.reads(self.uncertainty, self.max_uncertainty)
+
     def open(self, overwrite: bool = False) -> None:
         from semattnet.robotics.bags import BagWriter
 
@@ -228,6 +231,9 @@ class RerunSink(_StagedTarget):
     max_uncertainty: UncertaintyLimit | None = None
     #: The open RerunLogger, between open and finish.
     _logger: RerunLogger | None = field(default=None, init=False, repr=False)
+
+    def reads(self) -> frozenset[str]:
+        return RobotFrame.reads(self.uncertainty, self.max_uncertainty)
 
     def targets(self) -> list[Path]:
         return [] if self.target is None else [Path(self.target)]

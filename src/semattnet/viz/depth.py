@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -16,14 +17,29 @@ DEPTH_CMAP = "turbo"
 DEPTH_MAX_M = 80.0
 
 
-def colorize_depth(depth: np.ndarray, vmax: float = DEPTH_MAX_M, cmap: str = DEPTH_CMAP) -> np.ndarray:
-    """(H, W) metres -> (H, W, 3) uint8 on a fixed scale [0, vmax]; invalid (<= 0) is black."""
+@functools.cache
+def _colour_table(cmap: str) -> np.ndarray:
+    """(N, 3) uint8: the colormap's N colours, as :func:`colorize_depth` writes them."""
     from matplotlib import colormaps
 
+    colours = colormaps[cmap]
+    return (colours(np.arange(colours.N))[:, :3] * 255.0 + 0.5).astype(np.uint8)
+
+
+def colorize_depth(depth: np.ndarray, vmax: float = DEPTH_MAX_M, cmap: str = DEPTH_CMAP) -> np.ndarray:
+    """(H, W) metres -> (H, W, 3) uint8 on a fixed scale [0, vmax]; invalid (<= 0) is black.
+
+    Each pixel is the colormap's colour ``floor(N * clip(d / vmax, 0, 1))`` (the last for ``d >= vmax``), looked
+    up in its table of N uint8 colours: the picture matplotlib's colormap call gives, without its float image."""
+    table = _colour_table(cmap)
+    n = len(table)
     d = np.asarray(depth, dtype=np.float32)
-    rgb = colormaps[cmap](np.clip(d / vmax, 0.0, 1.0))[..., :3]
-    rgb[~(d > 0)] = 0.0
-    return (rgb * 255.0 + 0.5).astype(np.uint8)
+    valid = d > 0
+    x = np.clip(d / np.float32(vmax), 0.0, 1.0) * np.float32(n)
+    index = np.where(valid, np.minimum(x, n - 1), 0).astype(np.intp)
+    rgb = table[index]
+    rgb[~valid] = 0
+    return rgb
 
 
 def error_map(pred: np.ndarray, gt: np.ndarray, abs_m: float = 3.0, rel: float = 0.05) -> np.ndarray:

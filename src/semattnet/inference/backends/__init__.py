@@ -26,6 +26,7 @@ Backends, one entry each in the engine table (:mod:`~semattnet.inference.backend
 from __future__ import annotations
 
 import os
+from collections.abc import Collection
 
 import torch
 from torch import nn
@@ -44,6 +45,7 @@ from semattnet.inference.backends.registry import (
     unregister_engine,
 )
 from semattnet.inference.backends.spec import EngineSpec
+from semattnet.models.outputs import check_output_names
 
 __all__ = ["EngineEntry", "EngineRequest", "EngineSpec", "InferenceEngine", "available_backends", "choose_backend",
            "engine_entries", "get_engine", "needs_semantic", "optimize_for_inference", "output_from_arrays",
@@ -80,6 +82,7 @@ def optimize_for_inference(
     calibration: CalibrationFrames = None,
     calibration_frames: int = DEFAULT_CALIBRATION_FRAMES,
     compile_propagation: bool | None = None,
+    outputs: Collection[str] | None = None,
 ) -> InferenceEngine:
     """``model`` ready to run: ``engine(rgb=, semantic=, sparse=)`` -> ``DepthCompletionOutput``.
 
@@ -96,7 +99,10 @@ def optimize_for_inference(
     ``calibration_frames`` of them), cached on disk per weights, size and calibration.
     ``precision="fp16"``: CUDA (``torch`` autocast, ``tensorrt``). ``compile_propagation``
     (``torch``; default: on CUDA): the propagation through ``torch.compile``
-    (:mod:`~semattnet.inference.backends.compiled_propagation`).
+    (:mod:`~semattnet.inference.backends.compiled_propagation`). ``outputs``: the fields of
+    :class:`~semattnet.models.outputs.DepthCompletionOutput` you read (None: all, the default); ``openvino``
+    then compiles only the part of the graph they need (the others are None), the other engines return all of
+    them (``refined_depth`` stands for the final depth: ``fused_depth`` for a model without refinement).
     """
     spec = EngineSpec(backend, precision, device).resolve(fixed_size=size is not None)
     entry = spec.entry
@@ -104,5 +110,6 @@ def optimize_for_inference(
         raise InputError(f"size: the {entry.name} backend compiles for one input size: pass size=(H, W)")
     request = EngineRequest(None if size is None else (int(size[0]), int(size[1])), spec.precision or "f32",
                             torch.device(spec.device), needs_semantic(model), cache_dir, log, inplace, calibration,
-                            calibration_frames, compile_propagation)  # fmt: skip
+                            calibration_frames, compile_propagation,
+                            None if outputs is None else check_output_names(outputs, "outputs"))  # fmt: skip
     return entry.build(model.eval(), request)

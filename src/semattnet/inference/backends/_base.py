@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping, Sequence
 from contextlib import AbstractContextManager
 from dataclasses import fields
 
@@ -14,7 +14,8 @@ from semattnet._errors import InputError
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.refinement import HEADS_PREFIX, PropagationSettings, RefinementHeads, Workspace, refine
 
-__all__ = ["HEADS_PREFIX", "ExportedGraphEngine", "InferenceEngine", "LogFn", "StageHook", "output_from_arrays"]
+__all__ = ["HEADS_PREFIX", "ExportedGraphEngine", "InferenceEngine", "LogFn", "StageHook", "graph_outputs",
+           "output_from_arrays"]  # fmt: skip
 
 #: A progress logger the backends call with one line of text (e.g. ``print`` or ``logger.info``).
 LogFn = Callable[[str], object]
@@ -90,6 +91,23 @@ def output_from_arrays(
                 workspace=workspace,
             )
     return DepthCompletionOutput(**{name: tensors.get(name) for name in _FIELDS})  # type: ignore[arg-type]
+
+
+def graph_outputs(available: Sequence[str], asked: Collection[str] | None) -> list[str]:
+    """The outputs of an exported graph (``available``, in order) that the fields ``asked`` of
+    :class:`~semattnet.models.outputs.DepthCompletionOutput` need (None: all): those present; for the refined depths
+    of a graph without its propagation, its ``refinement.*`` heads (:func:`output_from_arrays` finishes them); for
+    ``refined_depth`` of a model without refinement, ``fused_depth`` (its final depth). Fields the graph does not
+    compute (``uncertainty``) need nothing."""
+    if asked is None:
+        return list(available)
+    keep = set(asked) & set(available)
+    heads = {n for n in available if n.startswith(HEADS_PREFIX)}
+    if heads and {"refined_depth", "refined_s2_depth"} & set(asked):
+        keep |= heads
+    elif "refined_depth" in asked and "refined_depth" not in available:
+        keep.add("fused_depth")
+    return [n for n in available if n in keep]
 
 
 class ExportedGraphEngine(InferenceEngine):

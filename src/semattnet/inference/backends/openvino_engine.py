@@ -12,13 +12,15 @@ run in f32; only when asked for).
 from __future__ import annotations
 
 import os
+from types import ModuleType
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 from torch import nn
 
 from semattnet._utils.extras import require
-from semattnet.inference.backends._base import HEADS_PREFIX, ExportedGraphEngine, LogFn
+from semattnet.inference.backends._base import HEADS_PREFIX, ExportedGraphEngine, LogFn, graph_outputs
 from semattnet.inference.backends._export_cache import (
     cached_onnx,
     engine_dir,
@@ -36,6 +38,11 @@ from semattnet.inference.backends.openvino_int8 import quantized_ir
 from semattnet.inference.backends.registry import EngineEntry, EngineRequest, register_engine
 from semattnet.models.outputs import DepthCompletionOutput
 
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from openvino import Model, Output
+
 __all__ = ["OpenVinoEngine"]
 
 
@@ -48,15 +55,32 @@ def _one_of(names: set[str], known: set[str], prefix: str = "\0") -> str:
     return matches[0]
 
 
+def _output_names(ports: Sequence[Output]) -> list[str]:
+    """The output name of each of a model's result ``ports`` (a field of the typed output or a refinement head)."""
+    fields = set(DepthCompletionOutput.__dataclass_fields__)
+    return [_one_of(port.get_names(), fields, HEADS_PREFIX) for port in ports]
+
+
+def _cut(ov: ModuleType, model: Model, asked: frozenset[str]) -> tuple[Model, list[str]]:
+    """``model`` (an ``ov.Model``) with only the results that the fields ``asked`` need (same parameters), and their
+    names in order (a compiled port may carry the names of several results of one tensor: named here, before)."""
+    results = dict(zip(_output_names(model.outputs), model.get_results(), strict=True))
+    kept = graph_outputs(list(results), asked)
+    cut = ov.Model([results[name] for name in kept], model.get_parameters(), f"{model.get_friendly_name()}-cut")
+    return cut, kept
+
+
 class OpenVinoEngine(ExportedGraphEngine):
-    """A compiled OpenVINO CPU model at one ``size`` (LATENCY hint, all of this process's threads)."""
+    """A compiled OpenVINO CPU model at one ``size`` (LATENCY hint, all of this process's threads); ``outputs``:
+    only the graph those fields need (module doc)."""
 
     backend = "openvino"
 
     def __init__(self, model: nn.Module, size: tuple[int, int], needs_semantic: bool, precision: str = "f32",
                  cache_dir: str | os.PathLike[str] | None = None, log: LogFn | None = None,
                  calibration: CalibrationFrames = None,
-                 calibration_frames: int = DEFAULT_CALIBRATION_FRAMES) -> None:  # fmt: skip
+                 calibration_frames: int = DEFAULT_CALIBRATION_FRAMES,
+                 outputs: frozenset[str] | None = None) -> None:  # fmt: skip
         super().__init__(size, precision, needs_semantic)
         ov = require("openvino", "the openvino backend")
         folder = engine_dir(engine_key(model, size, extra=f"openvino-{ov.__version__}"), cache_dir)
@@ -75,11 +99,14 @@ class OpenVinoEngine(ExportedGraphEngine):
         hint = "f32" if precision == "int8" else precision
         config = {"PERFORMANCE_HINT": "LATENCY", "INFERENCE_PRECISION_HINT": hint,
                   "INFERENCE_NUM_THREADS": torch.get_num_threads(), "CACHE_DIR": str(xml.parent / "blobs")}  # fmt: skip
-        self.compiled = core.compile_model(str(xml), "CPU", config)
+        if outputs is None:
+            self.compiled = core.compile_model(str(xml), "CPU", config)
+            self.output_names = _output_names(self.compiled.outputs)
+        else:
+            graph, self.output_names = _cut(ov, core.read_model(str(xml)), outputs)
+            self.compiled = core.compile_model(graph, "CPU", config)
         self.request = self.compiled.create_infer_request()
         self.input_names = [_one_of(i.get_names(), {"rgb", "semantic", "sparse"}) for i in self.compiled.inputs]
-        fields = set(DepthCompletionOutput.__dataclass_fields__)
-        self.output_names = [_one_of(o.get_names(), fields, HEADS_PREFIX) for o in self.compiled.outputs]
         self.settings = propagation_settings(model)
 
     def run_graph(self, feeds: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -93,7 +120,8 @@ class OpenVinoEngine(ExportedGraphEngine):
 
 def _build(model: nn.Module, r: EngineRequest) -> OpenVinoEngine:
     return OpenVinoEngine(model.cpu(), r.fixed_size(), r.needs_semantic, r.precision, r.cache_dir, r.log,
-                          calibration=r.calibration, calibration_frames=r.calibration_frames)  # fmt: skip
+                          calibration=r.calibration, calibration_frames=r.calibration_frames,
+                          outputs=r.outputs)  # fmt: skip
 
 
 #: int8 is NNCF's quantisation of the IR (:mod:`~semattnet.inference.backends.openvino_int8`; needs ``nncf``).

@@ -38,7 +38,11 @@ ENGINE_MODULES: tuple[str, ...] = ("torch_engine", "openvino_engine", "onnxrunti
 
 @dataclass(frozen=True)
 class EngineRequest:
-    """What an entry's ``build`` gets besides the model (eval mode, on the CPU or already on ``device``)."""
+    """What an entry's ``build`` gets besides the model (eval mode, on the CPU or already on ``device``).
+
+    ``outputs``: the fields of :class:`~semattnet.models.outputs.DepthCompletionOutput` the caller reads (None: all);
+    an engine may compute only those (the others None; :func:`~semattnet.inference.backends._base.graph_outputs`
+    says which graph outputs they need) or ignore it and return them all."""
 
     size: tuple[int, int] | None
     precision: str
@@ -50,6 +54,7 @@ class EngineRequest:
     calibration: CalibrationFrames = None
     calibration_frames: int = DEFAULT_CALIBRATION_FRAMES
     compile_propagation: bool | None = None
+    outputs: frozenset[str] | None = None
 
     def fixed_size(self) -> tuple[int, int]:
         """``size``, which an engine compiled for one size needs (optimize_for_inference checks it first)."""
