@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import math
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -111,7 +112,10 @@ class Adapter:
         self.completer = TrainingCompleter(self.model, self.device)
         maps = (semantic or SemanticMaps()).bind(self.completer)
         maps.check_palette(self.completer, source)
-        self.pool = FramePool(source, maps, cfg.on_error, cfg.gt_frames if cfg.gt_every else 0, log)
+        with warnings.catch_warnings():
+            if not self.main:  # the same frames, the same warnings (the fallback map): rank 0 says them
+                warnings.simplefilter("ignore")
+            self.pool = FramePool(source, maps, cfg.on_error, cfg.gt_frames if cfg.gt_every else 0, self.log)
         self.crop = crop_size(cfg.crop, self.pool.sizes)
         if min(self.crop) < 32:
             raise InputError(f"crop: the frames ({self.pool.sizes[0][1]}x{self.pool.sizes[0][0]}) are smaller than 32")
