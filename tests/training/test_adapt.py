@@ -123,6 +123,28 @@ def test_resume_equals_the_uninterrupted_run(weights: Path, tmp_path: Path, monk
 
 
 @pytest.mark.filterwarnings("ignore:no semantic maps given")
+def test_a_run_killed_between_the_log_and_the_state_resumes_with_the_log_of_every_step(
+    weights: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from semattnet.training.adapt import run
+
+    writes, atomic_path = [], run.atomic_path
+
+    def die_at_the_fourth_write(path: Path, **kw: object):  # type: ignore[no-untyped-def]
+        writes.append(path)
+        if len(writes) == 4:  # step 2: its first file is written, the second never is
+            raise _Killed
+        return atomic_path(path, **kw)
+
+    monkeypatch.setattr(run, "atomic_path", die_at_the_fourth_write)
+    with pytest.raises(_Killed):
+        adapt(_cfg(weights, tmp_path, steps=2, save_every=1), _Frames(), log=_quiet)
+    monkeypatch.setattr(run, "atomic_path", atomic_path)
+    adapt(_cfg(weights, tmp_path), _Frames(), resume=True, log=_quiet)
+    assert [r["step"] for r in json.loads((tmp_path / LOG).read_text())["steps"]] == [1, 2]
+
+
+@pytest.mark.filterwarnings("ignore:no semantic maps given")
 def test_the_held_out_metric_uses_frames_kept_out_of_training(weights: Path, tmp_path: Path) -> None:
     adapter = Adapter(_cfg(weights, tmp_path, steps=1, gt_every=1, gt_frames=1), _Frames(3), log=_quiet)
     assert adapter.pool.held_out == ["f2"] and adapter.pool.names == ["f0", "f1"]

@@ -153,10 +153,13 @@ class Adapter:
         self.log(f"resumed at step {self.step} of {self.cfg.steps}")
 
     def save(self) -> None:
-        """The resumable state (atomically), then the log; rank 0 writes them (collective: every rank's generator)."""
+        """The log, then the resumable state, each atomically; rank 0 writes them (collective: every rank's
+        generator). In this order a run killed in between still has the log of every step of its state (a resumed
+        run drops the rows after it)."""
         rngs = [s for _, s in dist_utils.gather_rows([(dist_utils.rank(), self.rng.get_state())], key=lambda r: r[0])]
         if not self.main:
             return
+        self._write_log()
         model_config = getattr(self.model, "config", None)
         state: dict[str, object] = {
             "format": _FORMAT, "model": self.model.state_dict(),
@@ -170,7 +173,6 @@ class Adapter:
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(path) as tmp:
             torch.save(state, tmp)
-        self._write_log()
 
     def _write_log(self) -> None:
         faults = [{"name": f.name, "status": f.status, "reason": f.reason} for f in self.pool.faults]
