@@ -1,5 +1,5 @@
 """``semattnet.training.adapt``: a normal checkpoint out, bad frames skipped and counted, exact resume, the held-out
-metric, the run folder's rules, the configuration's checks."""
+metric, the run folder's rules, the configuration's checks, DDP under torchrun."""
 
 from __future__ import annotations
 
@@ -14,9 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+import torch.distributed as dist
 
 import semattnet
 from semattnet._errors import DataError, InputError
+from semattnet._utils import distributed as dist_utils
 from semattnet.data.frames import Frame, IndexedSource
 from semattnet.training.adapt import FINAL, LOG, STATE, AdaptConfig, Adapter, adapt
 from semattnet.weights import save_safetensors
@@ -121,6 +123,28 @@ def test_resume_equals_the_uninterrupted_run(weights: Path, tmp_path: Path, monk
 
 
 @pytest.mark.filterwarnings("ignore:no semantic maps given")
+def test_a_run_killed_between_the_log_and_the_state_resumes_with_the_log_of_every_step(
+    weights: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from semattnet.training.adapt import run
+
+    writes, atomic_path = [], run.atomic_path
+
+    def die_at_the_fourth_write(path: Path, **kw: object):  # type: ignore[no-untyped-def]
+        writes.append(path)
+        if len(writes) == 4:  # step 2: its first file is written, the second never is
+            raise _Killed
+        return atomic_path(path, **kw)
+
+    monkeypatch.setattr(run, "atomic_path", die_at_the_fourth_write)
+    with pytest.raises(_Killed):
+        adapt(_cfg(weights, tmp_path, steps=2, save_every=1), _Frames(), log=_quiet)
+    monkeypatch.setattr(run, "atomic_path", atomic_path)
+    adapt(_cfg(weights, tmp_path), _Frames(), resume=True, log=_quiet)
+    assert [r["step"] for r in json.loads((tmp_path / LOG).read_text())["steps"]] == [1, 2]
+
+
+@pytest.mark.filterwarnings("ignore:no semantic maps given")
 def test_the_held_out_metric_uses_frames_kept_out_of_training(weights: Path, tmp_path: Path) -> None:
     adapter = Adapter(_cfg(weights, tmp_path, steps=1, gt_every=1, gt_frames=1), _Frames(3), log=_quiet)
     assert adapter.pool.held_out == ["f2"] and adapter.pool.names == ["f0", "f1"]
@@ -166,3 +190,70 @@ def test_a_run_killed_with_sigkill_and_resumed_ends_with_the_uninterrupted_weigh
                    env=env)  # fmt: skip
     a, b = (load_checkpoint(tmp_path / run / FINAL).state_dict for run in ("whole", "cut"))
     assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+@pytest.mark.filterwarnings("ignore:no semantic maps given")
+def test_a_process_group_of_one_runs_the_ddp_path_and_resume_needs_as_many_processes(
+    weights: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    lines: list[str] = []
+    dist.init_process_group("gloo", store=dist.HashStore(), rank=0, world_size=1)
+    try:
+        adapt(_cfg(weights, tmp_path, steps=1), _Frames(), log=lines.append)
+    finally:
+        if dist.is_initialized():
+            dist.destroy_process_group()
+    assert any(line.startswith("1 ranks in sync (parameter checksum") for line in lines)
+    rng = load_checkpoint(tmp_path / STATE).extra["rng"]
+    assert isinstance(rng, list) and len(rng) == 1  # each rank's generator
+    monkeypatch.setattr(dist_utils, "world_size", lambda: 2)
+    with pytest.raises(InputError, match=r"ran as 1 process\(es\), this is 2; .*--nproc_per_node 1"):
+        Adapter(_cfg(weights, tmp_path), _Frames(), resume=True, log=_quiet)
+    with pytest.raises(InputError, match="--train-bn with several processes needs CUDA"):
+        Adapter(_cfg(weights, tmp_path / "bn", freeze_bn=False), _Frames(), log=_quiet)
+
+
+def _torchrun(*args: str) -> list[str]:
+    return [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", "-m",
+            "semattnet.cli", "adapt", *args]  # fmt: skip
+
+
+def _kill_workers_after_the_first_state(proc: subprocess.Popen[bytes], out: Path) -> None:
+    """SIGKILL torchrun's worker processes (a crash of every rank) once ``out`` holds a state, then the launcher."""
+    deadline = time.time() + 300
+    while not (out / STATE).exists():
+        assert proc.poll() is None and time.time() < deadline, "the run ended before it could be killed"
+        time.sleep(0.02)
+    children = Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()
+    for pid in children:
+        os.kill(int(pid), signal.SIGKILL)
+    proc.kill()
+    proc.wait()
+
+
+@pytest.mark.slow  # ~40 s: three torchrun launches of two processes
+def test_torchrun_two_processes_and_a_killed_run_resumed_under_torchrun(weights: Path, tmp_path: Path) -> None:
+    drive = Path(__file__).resolve().parents[1] / "data/kitti_sample/kitti_raw/2011_09_26/2011_09_26_drive_0035_sync"
+    common = ["--kitti-raw", str(drive), "--weights", str(weights), "--crop", "32x64", "--batch-size", "1",
+              "--steps", "6", "--save-every", "2", "--device", "cpu"]  # fmt: skip
+    env = os.environ | {"OMP_NUM_THREADS": "1"}
+    whole, cut = tmp_path / "whole", tmp_path / "cut"
+    res = subprocess.run(_torchrun(*common, "--out", str(whole)), capture_output=True, text=True, env=env,
+                         timeout=300)  # fmt: skip
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-4000:]
+    assert res.stdout.count("2 ranks in sync") == 1 and res.stdout.count("done: step 6") == 1  # rank 0 alone
+    assert [r["step"] for r in json.loads((whole / LOG).read_text())["steps"]] == [1, 2, 3, 4, 5, 6]
+    rng = load_checkpoint(whole / STATE).extra["rng"]
+    draws = [torch.rand(8, generator=torch.Generator().set_state(state)) for state in rng]
+    assert len(draws) == 2 and not torch.equal(*draws)  # each rank draws its own crops and points
+    proc = subprocess.Popen(_torchrun(*common, "--out", str(cut)), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, env=env)  # fmt: skip
+    _kill_workers_after_the_first_state(proc, cut)
+    assert load_checkpoint(cut / STATE).extra["step"] < 6, "the run was not interrupted"
+    res = subprocess.run(_torchrun("--kitti-raw", str(drive), "--out", str(cut), "--resume"), capture_output=True,
+                         text=True, env=env, timeout=300)  # fmt: skip
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-4000:]
+    a, b = (load_checkpoint(run / FINAL).state_dict for run in (whole, cut))
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+    logs = [json.loads((run / LOG).read_text())["steps"] for run in (whole, cut)]
+    assert logs[0] == logs[1]

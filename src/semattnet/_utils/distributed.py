@@ -7,6 +7,9 @@ is a plain call):
 * :func:`on_main`: run on rank 0 only (checks before any work); its value or error reaches every rank.
 * :func:`agree`: run on every rank; if it failed anywhere, every rank raises the lowest rank's error.
 * :func:`gather_rows`: every rank's rows, merged in order. :func:`rank_log`: ``[rank r/W]`` prefixes.
+
+and for training: :func:`wrap_model` (DDP, optionally SyncBatchNorm), :func:`rank_seed` (each rank its own
+random draws) and :func:`check_in_sync` (every rank ended with the same parameters).
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from typing import TYPE_CHECKING, ParamSpec, TypeVar
 
 import torch
 import torch.distributed as dist
+from torch import nn
 from torch.utils.data import Sampler
 
 from semattnet._errors import SemAttNetError
@@ -33,6 +37,7 @@ __all__ = [
     "ResumableSampler",
     "ShardSampler",
     "agree",
+    "check_in_sync",
     "cleanup",
     "first_error",
     "gather_rows",
@@ -44,7 +49,9 @@ __all__ = [
     "process_group",
     "rank",
     "rank_log",
+    "rank_seed",
     "world_size",
+    "wrap_model",
 ]
 
 
@@ -177,6 +184,36 @@ def gather_rows(rows: list[T], key: Callable[[T], SupportsRichComparison]) -> li
     parts: list[list[T] | None] = [None] * world_size()
     dist.all_gather_object(parts, rows)
     return sorted((row for part in parts for row in part or ()), key=key)
+
+
+def wrap_model(model: nn.Module, device: torch.device, sync_bn: bool = False,
+               find_unused: bool = False) -> nn.parallel.DistributedDataParallel:  # fmt: skip
+    """``model`` (on ``device``) in DDP, its BatchNorm layers made SyncBatchNorm with ``sync_bn`` (CUDA only);
+    ``find_unused``: where the loss may leave trainable parameters without a gradient."""
+    if sync_bn:
+        model = nn.SyncBatchNorm.convert_sync_batchnorm(model)
+    return nn.parallel.DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None,
+                                               find_unused_parameters=find_unused)  # fmt: skip
+
+
+def rank_seed(seed: int, rank: int) -> int:
+    """The seed of ``rank``'s own random draws: ``seed`` itself on rank 0 (a single process draws as before), moved
+    by ``rank`` times an odd constant on the others, so that the low 32 bits (all that torch's CPU generator keeps)
+    differ between any two ranks."""
+    return seed + rank * 0x9E3779B9
+
+
+def check_in_sync(model: nn.Module) -> float:
+    """The checksum of ``model``'s parameters, the same on every rank (collective), else a ``RuntimeError``
+    naming each rank's: DDP's contract, checked at the end of a run."""
+    total = torch.stack([p.detach().double().sum() for p in model.parameters()]).sum()
+    if world_size() == 1:
+        return float(total)
+    gathered = [torch.zeros_like(total) for _ in range(world_size())]
+    dist.all_gather(gathered, total)
+    if any(g != gathered[0] for g in gathered):
+        raise RuntimeError(f"ranks diverged: parameter checksums {[float(g) for g in gathered]}")
+    return float(total)
 
 
 class ResumableSampler(Sampler[int]):

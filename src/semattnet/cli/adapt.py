@@ -67,7 +67,9 @@ ADAPT_OPTIONS = (
     _OPTION(["--w-smooth"], type=NONNEGATIVE_FLOAT, default=1e-3, show_default=True,
             help="Weight of the smoothness loss."),
     _OPTION(["--no-automask"], is_flag=True, help="Keep every pixel in the photometric loss (no auto-masking)."),
-    _OPTION(["--train-bn"], is_flag=True, help="Let BatchNorm update its running statistics (default: frozen)."),
+    _OPTION(["--train-bn"], is_flag=True,
+            help="Let BatchNorm update its running statistics (default: frozen); under torchrun as SyncBatchNorm, "
+            "which needs CUDA."),
     _OPTION(["--amp"], type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True,
             help="Autocast, as train's: fp16 needs CUDA, bf16 on a CPU needs native bfloat16."),
     _OPTION(["--seed"], type=COUNT, default=0, show_default=True, help="Frames, crops and hidden points follow it."),
@@ -145,6 +147,7 @@ def adapt(**params: object) -> None:
     Reads every input `predict` reads. Writes OUT/adapted.safetensors (for `predict --weights`),
     OUT/checkpoints/last.pt (--resume) and OUT/log.json. Frames that cannot be read are skipped and counted
     (exit status 3 when some were)."""
+    from semattnet._utils.distributed import launch_rank
     from semattnet.training.adapt import adapt as run_adaptation
 
     ctx = click.get_current_context()
@@ -159,9 +162,10 @@ def adapt(**params: object) -> None:
     source, maps = chosen.open(options.device)
     cfg = options.config(len(source.names))
     result = run_adaptation(cfg, source, maps, resume=options.resume, overwrite=options.overwrite, log=click.echo)
-    skipped = f", {len(result.skipped)} frame(s) skipped" if result.skipped else ""
-    metric = f", held-out RMSE {result.metrics['rmse_mm']:.0f} mm" if result.metrics else ""
-    click.echo(f"done: step {result.step} on {result.frames} frame(s){skipped}{metric}, "
-               f"{result.seconds_per_step:.2f} s/step; weights: {result.weights}")  # fmt: skip
+    if launch_rank() == 0:  # under torchrun, rank 0 alone reports
+        skipped = f", {len(result.skipped)} frame(s) skipped" if result.skipped else ""
+        metric = f", held-out RMSE {result.metrics['rmse_mm']:.0f} mm" if result.metrics else ""
+        click.echo(f"done: step {result.step} on {result.frames} frame(s){skipped}{metric}, "
+                   f"{result.seconds_per_step:.2f} s/step; weights: {result.weights}")  # fmt: skip
     if result.skipped:
         ctx.exit(3)

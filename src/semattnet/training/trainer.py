@@ -108,8 +108,8 @@ class Trainer:
         self.model = self._build_model(init_weights=state is None)
         self._build_data()
         self._build_optimisation()
-        if self.distributed:
-            self._wrap_distributed()
+        if self.distributed:  # DDP, optionally with SyncBatchNorm
+            self.model = dist_utils.wrap_model(self.model, self.device, cfg.sync_bn)
         if state is not None:
             self._restore(state)
         self.tb = self._open_run_folder() if self.main else None
@@ -153,14 +153,6 @@ class Trainer:
             self.scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(self.optimizer, mode="min", factor=0.1,
                                                                         patience=cfg.patience)  # fmt: skip
         self.scaler = torch.amp.GradScaler(self.device.type, enabled=cfg.amp == "fp16")
-
-    def _wrap_distributed(self) -> None:
-        """DDP (optionally with SyncBatchNorm) around the model."""
-        if self.cfg.sync_bn:
-            self.model = nn.SyncBatchNorm.convert_sync_batchnorm(self.model)
-        self.model = nn.parallel.DistributedDataParallel(
-            self.model, device_ids=[self.device.index] if self.device.type == "cuda" else None
-        )
 
     def _open_run_folder(self) -> SummaryWriter | None:
         """Create the run folder, write ``config.json``; a TensorBoard writer if tensorboard is installed."""
@@ -416,12 +408,8 @@ class Trainer:
         """Across ranks, every parameter must be identical after training (DDP's contract)."""
         if not self.distributed:
             return
-        total = torch.stack([p.detach().double().sum() for p in _unwrap(self.model).parameters()]).sum()
-        gathered = [torch.zeros_like(total) for _ in range(dist_utils.world_size())]
-        torch.distributed.all_gather(gathered, total)
-        if any(g != gathered[0] for g in gathered):
-            raise RuntimeError(f"ranks diverged: parameter checksums {[float(g) for g in gathered]}")
-        self.log(f"{dist_utils.world_size()} ranks in sync (parameter checksum {float(total):.6e})")
+        total = dist_utils.check_in_sync(_unwrap(self.model))
+        self.log(f"{dist_utils.world_size()} ranks in sync (parameter checksum {total:.6e})")
 
 
 def _truncate_log(path: Path, step: int) -> None:

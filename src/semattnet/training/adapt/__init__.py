@@ -39,11 +39,17 @@ def adapt(cfg: AdaptConfig, source: FrameSource, semantic: SemanticMaps | None =
           overwrite: bool = False, log: Callable[[str], None] = print) -> AdaptResult:  # fmt: skip
     """Fine-tune ``cfg.weights`` on ``source``'s frames (``semantic``: where missing semantic maps come from; default
     the fallback map). A new run needs an empty ``cfg.out`` (or ``overwrite``); ``resume`` continues the run there
-    exactly. Returns where it ended (:class:`AdaptResult`); the weights are ``cfg.out/adapted.safetensors``."""
+    exactly. Returns where it ended (:class:`AdaptResult`); the weights are ``cfg.out/adapted.safetensors``.
+    Launched by ``torchrun``, joins (and then leaves) its process group: one DDP replica per process."""
+    from semattnet._utils import distributed as dist_utils
     from semattnet._utils.outputs import check_no_input_overlap
 
     weights = cfg.weights if cfg.weights and Path(cfg.weights).exists() else None
     check_no_input_overlap([*source.inputs(), weights], out_dir=cfg.out)
-    if not resume:
-        prepare_run_folder(cfg.out, overwrite)
-    return Adapter(cfg, source, semantic, resume=resume, log=log).run()
+    try:
+        if not resume:  # rank 0 checks (and clears) the folder; its error reaches every rank
+            dist_utils.init_distributed(dist_utils.process_device(cfg.device))  # a resumed run: its state's device
+            dist_utils.on_main(prepare_run_folder, cfg.out, overwrite)
+        return Adapter(cfg, source, semantic, resume=resume, log=log).run()
+    finally:
+        dist_utils.cleanup()

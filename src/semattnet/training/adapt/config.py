@@ -31,7 +31,8 @@ class AdaptConfig:
         w_photometric, w_smooth: weights of the photometric and smoothness losses.
         automask: Monodepth2's auto-masking of the photometric loss.
         freeze_bn: BatchNorm layers keep their running statistics and run in eval mode (small batches of one
-            recording would otherwise replace statistics learnt over a whole dataset).
+            recording would otherwise replace statistics learnt over a whole dataset). Trained (False) under
+            torchrun, they become SyncBatchNorm (statistics over every rank's crops), which needs CUDA.
         amp: ``none``, ``bf16`` or ``fp16`` autocast, as ``train`` (fp16: CUDA; bf16 on a CPU only with native
             bfloat16). device: ``auto``, ``cpu``, ``cuda[:N]``.
         seed: every random draw (frames, crops, hidden points) follows from it.

@@ -5,6 +5,11 @@ generators, step; written atomically every ``save_every`` steps and at the end; 
 ``predict --weights`` reads, as ``train``'s ``last.pt``), ``adapted.safetensors`` (the final weights) and
 ``log.json`` (the losses of every step, the held-out metrics, the frames skipped). ``resume=True`` continues from
 ``last.pt`` exactly: a run killed mid-way and resumed ends with the weights of an uninterrupted run, bit for bit.
+
+Launched by ``torchrun``, every process trains a DDP replica (gradients averaged) on its own random draws (frames,
+crops, hidden points: the seed and the rank); rank 0 alone logs and writes the run folder, the state holding every
+rank's generator, and at the end the ranks' parameters are checked identical. With ``freeze_bn=False`` the
+BatchNorm layers become SyncBatchNorm (statistics over every rank's crops), which needs CUDA.
 """
 
 from __future__ import annotations
@@ -12,6 +17,7 @@ from __future__ import annotations
 import json
 import math
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,8 +26,9 @@ from typing import TypedDict
 import torch
 
 from semattnet._errors import InputError
+from semattnet._utils import distributed as dist_utils
 from semattnet._utils.atomic import atomic_path
-from semattnet._utils.device import autocast, resolve_device
+from semattnet._utils.device import autocast
 from semattnet._utils.progress import progress
 from semattnet.data.frames import FrameSource
 from semattnet.evaluation.metrics import KittiMetrics
@@ -65,7 +72,7 @@ class AdaptState(TypedDict):
     optimizer: dict[str, object]
     scheduler: dict[str, object]
     scaler: dict[str, object]
-    rng: torch.Tensor
+    rng: list[torch.Tensor]  # each rank's generator (one in a single process)
     step: int
 
 
@@ -76,8 +83,10 @@ def read_state(path: Path) -> AdaptState:
     extra = load_checkpoint(path).extra
     if extra.get("format") != _FORMAT:
         raise CheckpointError(f"{path}: not a semattnet adapt state (no optimiser state to resume)")
+    rng = extra["rng"]  # a single tensor in the states of single-process runs before DDP
     return AdaptState(adapt_config=extra["adapt_config"], optimizer=extra["optimizer"], scheduler=extra["scheduler"],
-                      scaler=extra["scaler"], rng=extra["rng"], step=int(extra["step"]))  # fmt: skip
+                      scaler=extra["scaler"], rng=[rng] if isinstance(rng, torch.Tensor) else list(rng),
+                      step=int(extra["step"]))  # fmt: skip
 
 
 class Adapter:
@@ -88,31 +97,47 @@ class Adapter:
                  resume: bool = False, log: Callable[[str], None] = print) -> None:  # fmt: skip
         from semattnet.weights.hub import from_pretrained
 
-        self.out, self.log = Path(cfg.out), log
+        self.out = Path(cfg.out)
         state = read_state(self.out / STATE) if resume else None
         if state is not None:  # the run's own options; it may have moved
             cfg = AdaptConfig.from_dict({**state["adapt_config"], "out": cfg.out})
-        self.cfg, self.device = cfg, resolve_device(cfg.device)
+        self.cfg, self.device = cfg, dist_utils.process_device(cfg.device)
+        self.distributed = dist_utils.init_distributed(self.device)
+        self.main = dist_utils.is_main()
+        self.log = log if self.main else _silent
         _check_amp(cfg.amp, self.device)
+        _check_processes(cfg, self.device, state)
         # a resumed run starts from its own state (a normal checkpoint): the first weights may have moved since
         self.model = from_pretrained(self.out / STATE if state is not None else cfg.weights, map_location=self.device)
         self.completer = TrainingCompleter(self.model, self.device)
         maps = (semantic or SemanticMaps()).bind(self.completer)
         maps.check_palette(self.completer, source)
-        self.pool = FramePool(source, maps, cfg.on_error, cfg.gt_frames if cfg.gt_every else 0, log)
+        with warnings.catch_warnings():
+            if not self.main:  # the same frames, the same warnings (the fallback map): rank 0 says them
+                warnings.simplefilter("ignore")
+            self.pool = FramePool(source, maps, cfg.on_error, cfg.gt_frames if cfg.gt_every else 0, self.log)
         self.crop = crop_size(cfg.crop, self.pool.sizes)
         if min(self.crop) < 32:
             raise InputError(f"crop: the frames ({self.pool.sizes[0][1]}x{self.pool.sizes[0][0]}) are smaller than 32")
+        self.net = self._wrap() if self.distributed else self.model  # what the steps run
         self.optimizer = make_adam(self.model.parameters(), self.device, lr=cfg.lr)
         self.scheduler = torch.optim.lr_scheduler.LambdaLR(
             self.optimizer, lambda step: 0.5 * (1.0 + math.cos(math.pi * min(step, cfg.steps) / cfg.steps))
         )
         self.scaler = torch.amp.GradScaler(self.device.type, enabled=cfg.amp == "fp16")
-        self.rng = torch.Generator().manual_seed(cfg.seed)
+        self.rng = torch.Generator().manual_seed(dist_utils.rank_seed(cfg.seed, dist_utils.rank()))
         self.step, self.rows, self.metrics = 0, list[dict[str, float]](), list[dict[str, float]]()
         if state is not None:
             self._restore(state)
         self._no_views_said = False
+
+    def _wrap(self) -> torch.nn.Module:
+        """The model in DDP (SyncBatchNorm where BatchNorm trains); ``self.model`` stays the bare one. The losses
+        read the final depth alone, which some layers may not reach (under the authors' refinement, ``att_12`` and
+        ``dimhalf_s2``): DDP looks for the parameters without a gradient."""
+        net = dist_utils.wrap_model(self.model, self.device, sync_bn=not self.cfg.freeze_bn, find_unused=True)
+        self.model = net.module  # SyncBatchNorm replaced the model's BatchNorm layers in place
+        return net
 
     # ----------------------------------------------------------------------------- state
     def _restore(self, state: AdaptState) -> None:
@@ -120,7 +145,7 @@ class Adapter:
         self.optimizer.load_state_dict(state["optimizer"])
         self.scheduler.load_state_dict(state["scheduler"])
         self.scaler.load_state_dict(state["scaler"])
-        self.rng.set_state(state["rng"])
+        self.rng.set_state(state["rng"][dist_utils.rank()])
         self.step = state["step"]
         logged = _read_log(self.out / LOG)
         self.rows = [r for r in logged.get("steps", []) if r["step"] <= self.step]
@@ -128,21 +153,26 @@ class Adapter:
         self.log(f"resumed at step {self.step} of {self.cfg.steps}")
 
     def save(self) -> None:
-        """The resumable state (atomically), then the log."""
+        """The log, then the resumable state, each atomically; rank 0 writes them (collective: every rank's
+        generator). In this order a run killed in between still has the log of every step of its state (a resumed
+        run drops the rows after it)."""
+        rngs = [s for _, s in dist_utils.gather_rows([(dist_utils.rank(), self.rng.get_state())], key=lambda r: r[0])]
+        if not self.main:
+            return
+        self._write_log()
         model_config = getattr(self.model, "config", None)
         state: dict[str, object] = {
             "format": _FORMAT, "model": self.model.state_dict(),
             "config": model_config.to_dict() if model_config is not None else None,
             "adapt_config": self.cfg.to_dict(), "optimizer": self.optimizer.state_dict(),
             "scheduler": self.scheduler.state_dict(), "scaler": self.scaler.state_dict(),
-            "rng": self.rng.get_state(), "step": self.step,
+            "rng": rngs, "step": self.step,
         }  # fmt: skip
         state[DIGEST_KEY] = tensor_digest(state)
         path = self.out / STATE
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(path) as tmp:
             torch.save(state, tmp)
-        self._write_log()
 
     def _write_log(self) -> None:
         faults = [{"name": f.name, "status": f.status, "reason": f.reason} for f in self.pool.faults]
@@ -157,7 +187,8 @@ class Adapter:
         """Train from the current step to ``cfg.steps``; the final weights to ``adapted.safetensors``."""
         cfg, times = self.cfg, []
         self.out.mkdir(parents=True, exist_ok=True)
-        bar = progress(total=cfg.steps, initial=self.step, desc="adapt", unit="step", dynamic_ncols=True)
+        bar = progress(total=cfg.steps, initial=self.step, desc="adapt", unit="step", dynamic_ncols=True,
+                       enabled=self.main)  # fmt: skip
         with bar:
             while self.step < cfg.steps:
                 start = time.perf_counter()
@@ -168,13 +199,16 @@ class Adapter:
                 bar.set_postfix(loss=f"{row['loss']:.3f}")
                 if bar.disable and (self.step % max(1, cfg.steps // 20) == 0 or self.step == cfg.steps):
                     self.log(f"step {self.step}/{cfg.steps}: loss {row['loss']:.4f}, {times[-1]:.2f} s/step")
-                if cfg.gt_every and self.pool.held_out and self.step % cfg.gt_every == 0:
+                if self.main and cfg.gt_every and self.pool.held_out and self.step % cfg.gt_every == 0:
                     self._held_out_metric()
                 if self.step % cfg.save_every == 0 or self.step == cfg.steps:
                     self.save()
         if not times:
             self.save()  # nothing left to do: the log at least
-        weights = self._write_final()
+        if self.distributed:
+            self.log(f"{dist_utils.world_size()} ranks in sync (parameter checksum "
+                     f"{dist_utils.check_in_sync(self.model):.6e})")  # fmt: skip
+        weights = dist_utils.on_main(self._write_final)
         last = self.metrics[-1] if self.metrics and self.metrics[-1]["step"] == self.step else None
         losses = {k: v for k, v in (self.rows[-1] if self.rows else {}).items() if k not in ("step", "lr")}
         return AdaptResult(self.step, weights, len(self.pool.names), tuple(self.pool.faults),
@@ -192,10 +226,10 @@ class Adapter:
         batch = make_batch(self.pool.frames([self.pool.names[int(i)] for i in picks]), self.crop, self.rng)
         share = cfg.hide[0] + (cfg.hide[1] - cfg.hide[0]) * torch.rand(cfg.batch_size, generator=self.rng)
         kept, hidden = hide_points(batch.sparse, share, self.rng) if "sparse" in cfg.losses else (batch.sparse, None)
-        set_train_mode(self.model, cfg.freeze_bn)
+        set_train_mode(self.net, cfg.freeze_bn)
         dev = self.device
         with autocast(dev, cfg.amp):
-            out = self.model(batch.rgb.to(dev), batch.semantic.to(dev), kept.to(dev))
+            out = self.net(batch.rgb.to(dev), batch.semantic.to(dev), kept.to(dev))
         terms = self._terms(final_depth(out).float(), batch, kept.to(dev), hidden)
         loss = sum(terms.values(), torch.zeros((), device=dev))
         self.optimizer.zero_grad(set_to_none=True)
@@ -209,7 +243,11 @@ class Adapter:
         lr = self.optimizer.param_groups[0]["lr"]
         self.scheduler.step()
         self.step += 1
-        return {"step": self.step, "loss": loss.item(), **{k: v.item() for k, v in terms.items()}, "lr": lr}
+        values = torch.stack([loss.detach(), *(v.detach() for v in terms.values())])
+        if self.distributed:  # the mean over the ranks' crops, as the gradients are
+            torch.distributed.all_reduce(values)
+            values /= dist_utils.world_size()
+        return {"step": self.step, **dict(zip(["loss", *terms], values.tolist(), strict=True)), "lr": lr}
 
     def _terms(self, pred: torch.Tensor, batch: AdaptBatch, kept: torch.Tensor,
                hidden: torch.Tensor | None) -> dict[str, torch.Tensor]:  # fmt: skip
@@ -249,6 +287,22 @@ def _check_amp(amp: str, device: torch.device) -> None:
         raise InputError(f"amp: fp16 needs a CUDA device, not {device}; use bf16 or none")
     if amp == "bf16" and device.type == "cpu" and not has_native_bf16():
         raise InputError("amp: bf16 on this CPU has no native bfloat16 (slower than f32); use none")
+
+
+def _check_processes(cfg: AdaptConfig, device: torch.device, state: AdaptState | None) -> None:
+    """Several processes: a resumed run needs as many as it ran with (each resumes its own generator), and
+    trained BatchNorm is synchronised (SyncBatchNorm), which needs CUDA."""
+    world = dist_utils.world_size()
+    if state is not None and len(state["rng"]) != world:
+        raise InputError(f"{Path(cfg.out) / STATE}: the run ran as {len(state['rng'])} process(es), this is {world}; "
+                         f"resume it with as many (torchrun --nproc_per_node {len(state['rng'])})")  # fmt: skip
+    if world > 1 and not cfg.freeze_bn and device.type != "cuda":
+        raise InputError("--train-bn with several processes needs CUDA (SyncBatchNorm across the ranks); on a CPU "
+                         "leave BatchNorm frozen")  # fmt: skip
+
+
+def _silent(line: str) -> None:
+    """The log of ranks other than 0."""
 
 
 def _read_log(path: Path) -> dict[str, list[dict[str, float]]]:
