@@ -507,7 +507,7 @@ def time_variants(out: Path, size: tuple[int, int], repeats: int, keys: Sequence
     source = write_stream_frames(out / "timing" / "frames", size)
     frames = {}
     for key, model in models.items():
-        best = min((r["ms"], b) for k, r in rows.items() for b in [k.split("/", 1)[1]] if k.startswith(f"{key}/"))[1]
+        best = min((rows[f"{key}/{b}"]["ms"], b) for b, _, _ in BACKENDS if f"{key}/{b}" in rows)[1]  # not capped
         engine, precision = next((e, p) for n, e, p in BACKENDS if n == best)
         log(f"[frontier] {key}: the whole --stream frame on {best} ...")
         frames[key] = time_stream(model, engine, precision, source, out / "timing" / f"stream_{key}")

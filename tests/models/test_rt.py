@@ -171,3 +171,22 @@ class TestConvexUpsample:
         assert abs(up[0, 0, 2, 2].item() - x[0, 0, 0, 0].item()) < 1e-5  # pixel (1, 1)'s top-left sub-pixel
         up.sum().backward()
         assert x.grad is not None and logits.grad is not None and torch.isfinite(logits.grad).all()
+
+    def test_random_weights_against_a_per_pixel_loop(self) -> None:
+        """Every output pixel of a 2-channel map, with random logits, against the definition written as loops."""
+        import torch.nn.functional as F
+
+        from semattnet.models.rt import convex_upsample
+
+        torch.manual_seed(0)
+        s, h, w = 3, 4, 5
+        x, logits = torch.rand(1, 2, h, w), torch.randn(1, 9 * s * s, h, w)
+        padded = F.pad(x, (1, 1, 1, 1), mode="replicate")
+        weights = logits.view(9, s, s, h, w).softmax(dim=0)
+        want = torch.zeros(1, 2, h * s, w * s)
+        for y in range(h * s):
+            for xx in range(w * s):
+                (py, i), (px, j) = divmod(y, s), divmod(xx, s)
+                for n in range(9):
+                    want[0, :, y, xx] += weights[n, i, j, py, px] * padded[0, :, py + n // 3, px + n % 3]
+        torch.testing.assert_close(convex_upsample(x, logits, s), want)

@@ -26,6 +26,7 @@ reduced-resolution refinement, upsampled, before the last full-resolution steps.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from collections.abc import Sequence
 from typing import NamedTuple
 
@@ -145,14 +146,16 @@ def convex_upsample(x: torch.Tensor, logits: torch.Tensor, scale: int) -> torch.
     """``x`` (B, C, h, w) to (B, C, h*scale, w*scale): each output pixel the convex combination of the 3x3
     neighbourhood of its low-resolution pixel (edge-replicated at the border), with weights
     ``softmax(logits)`` over the 9 neighbours; ``logits`` (B, 9*scale*scale, h, w), neighbour-major.
-    Zero logits give every sub-pixel the 3x3 mean. Written with slices (no unfold) so that every exporter
-    and OpenVINO take it."""
+    Zero logits give every sub-pixel the 3x3 mean. Written with slices and 4-D tensors only, ending in a pixel
+    shuffle (no unfold, no 7-D permute), so that every exporter takes it and OpenVINO keeps its blocked layouts."""
     b, c, h, w = x.shape
+    if c != 1:  # one channel at a time: the same weights for each
+        return torch.cat([convex_upsample(x[:, i : i + 1], logits, scale) for i in range(c)], dim=1)
     padded = F.pad(x, (1, 1, 1, 1), mode="replicate")
-    patches = torch.stack([padded[:, :, i : i + h, j : j + w] for i in range(3) for j in range(3)], dim=1)
-    weights = logits.view(b, 9, 1, scale, scale, h, w).softmax(dim=1)
-    up = (weights * patches.view(b, 9, c, 1, 1, h, w)).sum(dim=1)  # (B, C, s, s, h, w)
-    return up.permute(0, 1, 4, 2, 5, 3).reshape(b, c, h * scale, w * scale)
+    patches = torch.cat([padded[:, :, i : i + h, j : j + w] for i in range(3) for j in range(3)], dim=1)
+    weights = logits.view(b, 9, scale * scale, h * w).softmax(dim=1)
+    up = (weights * patches.view(b, 9, 1, h * w)).sum(dim=1)  # (B, s*s, h*w): sub-pixel (i, j) at i*s + j
+    return F.pixel_shuffle(up.view(b, scale * scale, h, w), scale)
 
 
 class SemAttNetRTBackbone(nn.Module):
@@ -255,6 +258,14 @@ class SemAttNetRT(AtrousCSPNRefinement, nn.Module):
             for p in self.convex.parameters():
                 p.zero_()
 
+    def _upsampled_heads(self, feature: torch.Tensor, sizes: tuple[int, ...]) -> list[torch.Tensor]:
+        """``upsample``'s 1x1 convolution as one convolution per group of ``sizes`` output channels (its weights
+        sliced: the same numbers), so that no runtime splits its output (a copy in a slow layout in OpenVINO)."""
+        conv = self.upsample[0]
+        assert isinstance(conv, nn.Conv2d) and conv.bias is not None
+        ends = list(itertools.accumulate(sizes))
+        return [F.conv2d(feature, conv.weight[a:b], conv.bias[a:b]) for a, b in zip([0, *ends[:-1]], ends, strict=True)]
+
     def forward(
         self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
     ) -> DepthCompletionOutput:
@@ -265,8 +276,8 @@ class SemAttNetRT(AtrousCSPNRefinement, nn.Module):
         sparse_lr, _ = downsample_sparse(sparse, self.backbone.stem_stride)
         heads = self.refinement_heads(depth, sparse_lr, feature_s1, feature_s2)
         _, refined_lr = refine(heads, self._iterations, self.propagation_impl)
-        s = self.backbone.stem_stride  # split before the pixel shuffle: no full-resolution split
-        guide, mask = (F.pixel_shuffle(t, s) for t in self.upsample[0](feature_s1).split((8 * s * s, s * s), dim=1))
+        s = self.backbone.stem_stride
+        guide, mask = (F.pixel_shuffle(t, s) for t in self._upsampled_heads(feature_s1, (8 * s * s, s * s)))
         start = convex_upsample(refined_lr, self.convex(feature_s1), s)
         valid = (sparse > 0).to(sparse.dtype)
         affinity = affinity_kernel(guide.float(), self.propagation_impl)
