@@ -195,33 +195,42 @@ def bound(timing: Mapping[str, Any], keys: list[str]) -> str:
 
 
 def plot(results: Mapping[str, Any], timing: Mapping[str, Any], path: Path) -> Path:
-    """RMSE against network + propagation ms (log x): a point per variant and backend (int8: its int8 RMSE where
-    measured), the classical completion as a line, the 100 ms budget dashed."""
+    """RMSE against network + propagation ms (log x): a point per variant (colour) and backend (marker; int8 at its
+    int8 RMSE where measured), the classical completion as a line, the 100 ms budget dashed; the key beside the
+    axes."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
     from matplotlib.ticker import FuncFormatter
 
     res = results["results"]
-    fig, ax = plt.subplots(figsize=(7, 4), dpi=90)
+    fig, ax = plt.subplots(figsize=(9, 4.2), dpi=90)
     markers = dict(zip(COLUMNS, "os^v", strict=True))
-    for i, key in enumerate(k for k in res if k != "classical"):
-        for backend, label in COLUMNS.items():
+    variants = [k for k in res if k != "classical"]
+    for i, key in enumerate(variants):
+        for backend in COLUMNS:
             ms = _ms(timing, key, backend)
             int8 = timing.get("int8", {}).get(key) if backend.endswith("int8") else None
             rmse = (int8 or res[key])["scores"]["rmse"]  # the int8 points at the int8 scores where measured
             if ms is not None:
-                ax.plot(ms, 1000 * rmse, markers[backend], color=f"C{i}", label=f"{LABELS.get(key, key)}, {label}")
-    ax.axhline(1000 * res["classical"]["scores"]["rmse"], color="grey", label=LABELS["classical"])
-    ax.axvline(BUDGET_MS, color="grey", linestyle="--", label=f"{BUDGET_MS:.0f} ms (10 Hz)")
+                ax.plot(ms, 1000 * rmse, markers[backend], color=f"C{i}")
+    ax.axhline(1000 * res["classical"]["scores"]["rmse"], color="grey")
+    ax.axvline(BUDGET_MS, color="grey", linestyle="--")
+    # two keys beside the axes: colour = variant (and the two lines), marker = backend
+    handles = [Line2D([], [], color=f"C{i}", marker="o", linestyle="", label=LABELS.get(k, k))
+               for i, k in enumerate(variants)]  # fmt: skip
+    handles += [Line2D([], [], color="grey", label=LABELS["classical"]),
+                Line2D([], [], color="grey", linestyle="--", label=f"{BUDGET_MS:.0f} ms (10 Hz)")]  # fmt: skip
+    handles += [Line2D([], [], color="black", marker=m, linestyle="", label=COLUMNS[b]) for b, m in markers.items()]
+    ax.legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     ax.set_xscale("log")
     ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     ax.xaxis.set_minor_formatter(FuncFormatter(lambda v, _: f"{v:g}" if f"{v:g}"[0] in "25" else ""))
     ax.set_xlabel(f"network + propagation [ms], {timing['size'][0]}x{timing['size'][1]}")
     ax.set_ylabel("RMSE [mm], held-out scenes")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=6, loc="best")
     fig.tight_layout()
     with atomic_path(path, suffix=".png") as tmp:
         fig.savefig(tmp, format="png")
