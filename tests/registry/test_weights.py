@@ -54,6 +54,8 @@ class TestWeights(RegistryTester[WeightsFixture]):
         "semattnet-kitti": WeightsFixture(shipped=False),
         "semattnet-demo-ref-seed0": WeightsFixture(shipped=True, mean=10.6878, std=4.5891),
         "semattnet-demo-ref-seed1": WeightsFixture(shipped=True, mean=15.3220, std=7.8854),
+        "semattnet-demo-ref-robust-seed0": WeightsFixture(shipped=True, mean=15.1961, std=6.6165),
+        "semattnet-demo-ref-robust-seed1": WeightsFixture(shipped=True, mean=19.5696, std=8.2247),
         "semattnet-rt-l-demo-seed0": WeightsFixture(shipped=True, mean=19.0104, std=8.6174),
         "semattnet-rt-l-demo-seed1": WeightsFixture(shipped=True, mean=24.6099, std=8.7986),
         "semattnet-rt-md-demo-seed0": WeightsFixture(shipped=True, mean=17.1944, std=9.2669),
