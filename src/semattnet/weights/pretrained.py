@@ -292,20 +292,23 @@ _ROBUST_NOTES = (
 )
 
 
+#: Each shipped family of demo references: (name and file tag, its table, description after "street scenes", notes).
+_REFERENCE_FAMILIES = (
+    ("", _DEMO_REFERENCES, " (demo reference, seed {seed})", _DEMO_NOTES),
+    ("robust", _ROBUST_REFERENCES, ", 70 % of them without their semantic map (demo reference for frames without a "
+     "segmenter, seed {seed})", _ROBUST_NOTES + _DEMO_NOTES),
+)  # fmt: skip
+
+
 def _register_demo_references() -> None:
-    for seed, sha, size, scores in _DEMO_REFERENCES:
-        register_weights(_shipped(
-            f"semattnet-demo-ref-seed{seed}", "semattnet", f"demo_reference_seed{seed}.safetensors.gz",
-            f"SemAttNet at width 1/8 trained on synthetic street scenes (demo reference, seed {seed})",
-            sha, size, 5_676_121, scores, _DEMO_NOTES, config={"width": 0.125},
-        ))  # fmt: skip
-    for seed, sha, size, scores in _ROBUST_REFERENCES:
-        register_weights(_shipped(
-            f"semattnet-demo-ref-robust-seed{seed}", "semattnet", f"demo_reference_robust_seed{seed}.safetensors.gz",
-            f"SemAttNet at width 1/8 trained on synthetic street scenes, 70 % of them without their semantic map "
-            f"(demo reference for frames without a segmenter, seed {seed})",
-            sha, size, 5_676_121, scores, _ROBUST_NOTES + _DEMO_NOTES, config={"width": 0.125},
-        ))  # fmt: skip
+    for tag, table, what, notes in _REFERENCE_FAMILIES:
+        for seed, sha, size, scores in table:
+            register_weights(_shipped(
+                f"semattnet-demo-ref-{tag + '-' if tag else ''}seed{seed}", "semattnet",
+                f"demo_reference_{tag + '_' if tag else ''}seed{seed}.safetensors.gz",
+                "SemAttNet at width 1/8 trained on synthetic street scenes" + what.format(seed=seed),
+                sha, size, 5_676_121, scores, notes, config={"width": 0.125},
+            ))  # fmt: skip
 
 
 _register_demo_references()
