@@ -72,13 +72,16 @@ def test_torch_engine_leaves_the_model_unchanged(model: torch.nn.Module) -> None
 
 
 @pytest.mark.skipif(importlib.util.find_spec("onnxruntime") is None, reason="onnxruntime is not installed")
-def test_engines_run_the_network_in_the_graph_and_the_propagation_in_torch(tmp_path: Path) -> None:
+@pytest.mark.parametrize("affinity", ["eq13", "convex"])
+def test_engines_run_the_network_in_the_graph_and_the_propagation_in_torch(tmp_path: Path, affinity: str) -> None:
     """The cached graph ends at the refinement heads; the engine's propagation gives the eager result
-    (also in the paper's "clean" hand-over mode, whose blend weights come out of the graph)."""
+    (also in the paper's "clean" hand-over mode, whose blend weights come out of the graph, and with the
+    convex kernel, which the engine's propagation must apply as the model does)."""
     import onnx
 
     torch.manual_seed(1)
-    net = semattnet.build_model("semattnet", width=0.125, iterations=3, refinement_mode="clean").eval()
+    net = semattnet.build_model("semattnet", width=0.125, iterations=3, refinement_mode="clean",
+                                affinity=affinity).eval()  # fmt: skip
     engine = optimize_for_inference(net, backend="onnxruntime", size=SIZE, cache_dir=tmp_path)
     outputs = [o.name for o in onnx.load(next((tmp_path / "engines").glob("*/model.onnx"))).graph.output]
     assert "refined_depth" not in outputs and "fused_depth" in outputs

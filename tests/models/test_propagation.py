@@ -6,8 +6,10 @@ import pytest
 import torch
 
 from semattnet.models.propagation import (
+    convex_affinity,
     cspn_affinity,
     downsample_sparse,
+    normalise_affinity,
     propagate,
     propagate_shifted,
     shift_affinity,
@@ -75,6 +77,37 @@ def test_affinity_normalisation() -> None:
     assert w.shape == (2, 25, 5, 6)
     assert torch.allclose(w.sum(1), torch.ones(2, 5, 6), atol=1e-6)  # eq. 13: weights sum to one
     assert torch.allclose(w[:, :12].abs().sum(1) + w[:, 13:].abs().sum(1), torch.ones(2, 5, 6), atol=1e-6)
+
+
+def test_convex_affinity_gives_each_pixel_a_softmax_of_its_neighbours() -> None:
+    """Shifted to the receiving pixels (what each step reads), the convex kernel is the softmax of the guidance
+    and a zero centre logit, inside the image; the weights are never negative."""
+    guide = torch.randn(2, 8, 5, 6, dtype=torch.float64)
+    w = convex_affinity(guide)
+    assert w.shape == (2, 9, 5, 6) and bool((w >= 0).all())
+    e = guide.exp()
+    by_hand = torch.cat((e[:, :4], torch.ones_like(e[:, :1]), e[:, 4:]), 1)
+    by_hand = by_hand / by_hand.sum(1, keepdim=True)
+    torch.testing.assert_close(shift_affinity(w)[..., 1:-1, 1:-1], by_hand[..., 1:-1, 1:-1])
+    torch.testing.assert_close(normalise_affinity(guide, "convex"), w)
+    torch.testing.assert_close(normalise_affinity(guide), cspn_affinity(guide))
+    with pytest.raises(ValueError, match="affinity must be one of \\('eq13', 'convex'\\), got 'softmax'"):
+        normalise_affinity(guide, "softmax")
+    assert torch.autograd.gradcheck(convex_affinity, (guide[:1, :, :3, :4].clone().requires_grad_(True),))
+
+
+def test_convex_kernel_keeps_the_depth_within_its_range_where_eq13_overshoots() -> None:
+    """The maximum principle: every step of a convex kernel is a weighted mean (zero beyond the image), so no
+    pixel goes below 0 or above the largest input; eq. 13's received weights can be negative or sum past 1
+    (the overshoot of a far return inside a near object)."""
+    g = torch.Generator().manual_seed(3)
+    guide = torch.randn(1, 8, 16, 16, generator=g) * 3
+    h = torch.rand(1, 1, 16, 16, generator=g) * 70 + 5
+    for form, inside in (("convex", True), ("eq13", False)):
+        w, out = normalise_affinity(guide, form), h
+        for _ in range(6):
+            out = propagate(w, out, h)
+        assert bool((out >= 0).all() and (out <= h.max() + 1e-4).all()) is inside, form
 
 
 def test_scatter_form_conserves_mass() -> None:

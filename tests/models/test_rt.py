@@ -118,14 +118,22 @@ def test_models_listing_counts_macs_of_the_real_time_rows() -> None:
     assert all(registry._params_and_macs(s).endswith("GMAC") for s in rows)
 
 
-@pytest.mark.parametrize("backend", [pytest.param("openvino", marks=pytest.mark.slow), "onnxruntime"])
-def test_exports_through_the_engines(backend: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """The whole forward (network and propagation) exports through the engines' path and matches eager."""
+@pytest.mark.parametrize(
+    ("backend", "name"),
+    [
+        pytest.param("openvino", "semattnet_rt_s", marks=pytest.mark.slow),
+        ("onnxruntime", "semattnet_rt_s"),
+        ("onnxruntime", "semattnet_rt_md"),
+    ],
+)
+def test_exports_through_the_engines(backend: str, name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The whole forward (network and propagation, eq. 13 in rt_s, the convex kernel in rt_md) exports through the
+    engines' path and matches eager."""
     pytest.importorskip(backend)
     monkeypatch.setenv("SEMATTNET_CACHE", str(tmp_path))
     from semattnet.inference.backends import optimize_for_inference
 
-    model = _tiny("semattnet_rt_s").eval()
+    model = _tiny(name).eval()
     x = _frame(h=32, w=64)
     engine = optimize_for_inference(model, backend=backend, size=(32, 64))
     with torch.inference_mode():

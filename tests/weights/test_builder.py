@@ -150,3 +150,15 @@ def test_no_private_names_cross_modules_in_weights_and_the_cache() -> None:
                 if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("semattnet"):
                     offenders += [f"{path.name}: {node.module}.{a.name}" for a in node.names if a.name.startswith("_")]
     assert offenders == []
+
+
+def test_a_record_contradicting_the_kernel_the_file_was_trained_with_is_refused(tiny_model) -> None:
+    """The affinity form changes no shape: the same tensors would load and propagate with another kernel."""
+    from semattnet.weights import Checkpoint
+
+    ckpt = Checkpoint(path=Path("rt.gz"), state_dict=tiny_model.state_dict(), format="packed", config=tiny_model.config)
+    with pytest.raises(WeightsMismatchError) as err:
+        builder.build_model_with_weights(ckpt, config=tiny_model.config.replace(affinity="convex"))
+    assert str(err.value) == ("rt.gz: the recorded config contradicts the file's own: affinity 'convex' recorded, "
+                              "'eq13' in the file")  # fmt: skip
+    assert builder.build_model_with_weights(ckpt, config=tiny_model.config).config.affinity == "eq13"

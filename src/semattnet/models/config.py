@@ -15,6 +15,7 @@ from typing import Any, Literal
 
 from semattnet._errors import InputError
 from semattnet.models.fusion import FEATURE_FUSION_MODES, FusionMode
+from semattnet.models.propagation.affinity import AFFINITY_FORMS, AffinityForm
 
 __all__ = ["RANGES", "RefinementMode", "SemAttNetConfig", "Widths"]
 
@@ -63,6 +64,8 @@ class SemAttNetConfig:
         encoder: the branches' encoder (:func:`semattnet.models.encoders.list_encoders`): ``"resnet"`` is
             the paper's network (widths from :class:`Widths`); any other builds the real-time variant
             :mod:`semattnet.models.rt` with the encoder's registered widths times ``width``.
+        affinity: how the refinement's guidance becomes a propagation kernel: ``"eq13"`` (the paper's) or
+            ``"convex"`` (non-negative weights summing to 1: :func:`semattnet.models.propagation.convex_affinity`).
     """
 
     branches: Literal[2, 3] = 3
@@ -75,6 +78,7 @@ class SemAttNetConfig:
     refinement_mode: RefinementMode = "authors"
     palette: str = "cityscapes"
     encoder: str = "resnet"
+    affinity: AffinityForm = "eq13"
 
     def __post_init__(self) -> None:
         if self.branches not in (2, 3):
@@ -97,6 +101,8 @@ class SemAttNetConfig:
         if self.palette not in PALETTES:
             raise InputError(f"palette must be one of {tuple(PALETTES)}, got {self.palette!r}")
         object.__setattr__(self, "kernel_sizes", tuple(int(k) for k in self.kernel_sizes))
+        if self.affinity not in AFFINITY_FORMS:
+            raise InputError(f"affinity must be one of {tuple(AFFINITY_FORMS)}, got {self.affinity!r}")
         from semattnet.models.encoders import encoder_spec
 
         encoder_spec(self.encoder)  # an unknown name: a one-line UnknownEncoderError listing the registered ones

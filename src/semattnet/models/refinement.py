@@ -39,9 +39,10 @@ from semattnet.models._tracing import is_tracing
 from semattnet.models.config import RefinementMode
 from semattnet.models.layers import convbn, convbnrelu, stacked_heads
 from semattnet.models.propagation import (
+    AffinityForm,
     AffinityHead,
-    cspn_affinity,
     downsample_sparse,
+    normalise_affinity,
     propagate_pad_and_sum,
     propagate_shifted,
     shift_affinity,
@@ -152,10 +153,10 @@ class AtrousCSPNRefinement:
     #: Affinity buffers kept across calls (:func:`refine`), set by inference engines on their copy; None: fresh ones.
     propagation_workspace: Workspace | None = None
 
-    def _build_refinement(
-        self, channels_s1: int, channels_s2: int, kernel_sizes: Sequence[int], iterations: int, mode: RefinementMode
-    ) -> None:
+    def _build_refinement(self, channels_s1: int, channels_s2: int, kernel_sizes: Sequence[int], iterations: int,
+                          mode: RefinementMode, affinity: AffinityForm = "eq13") -> None:  # fmt: skip
         self._kernel_sizes = tuple(kernel_sizes)
+        self._affinity = affinity
         self._iterations = iterations
         self._refinement_mode = mode
         n = len(self._kernel_sizes)
@@ -187,7 +188,7 @@ class AtrousCSPNRefinement:
                 half = F.interpolate(self.dimhalf_s2(feature_s2), scale_factor=2.0, mode="nearest")
                 att = torch.softmax(self.att_12(torch.cat((feature_s1, half), dim=1)), dim=1)
             heads = self._stage_heads(feature_s1, "")
-        return RefinementHeads(depth, sparse, heads_s2, heads, self._kernel_sizes, att)
+        return RefinementHeads(depth, sparse, heads_s2, heads, self._kernel_sizes, att, self._affinity)
 
     def propagation(self, heads: RefinementHeads) -> tuple[torch.Tensor, torch.Tensor]:
         """Both propagation stages of :func:`propagate_refinement` with this model's settings."""
@@ -218,19 +219,21 @@ class RefinementInputs:
 
 
 class PropagationSettings(NamedTuple):
-    """What finishing a model's :class:`RefinementHeads` needs: steps per kernel size, and the kernel sizes."""
+    """What finishing a model's :class:`RefinementHeads` needs: steps per kernel size, the kernel sizes, and
+    how the guidance becomes a kernel."""
 
     iterations: int
     kernel_sizes: tuple[int, ...]
+    affinity: AffinityForm = "eq13"
 
 
 def affinity_kernel(guide: torch.Tensor, impl: PropagationImpl = "auto", workspace: Workspace | None = None,
-                    name: str = "") -> torch.Tensor:  # fmt: skip
-    """:func:`~semattnet.models.propagation.cspn_affinity` (eq. 13); in one pass of the compiled
-    kernel for float32 CPU inference (``impl="auto"``), equal to float rounding, written into
-    ``workspace[name]`` when a workspace is given (allocated there on the first call)."""
-    if not (impl == "auto" and _can_fuse(guide)):
-        return cspn_affinity(guide)
+                    name: str = "", form: AffinityForm = "eq13") -> torch.Tensor:  # fmt: skip
+    """The kernel of ``guide`` (:func:`~semattnet.models.propagation.normalise_affinity`: eq. 13 or the convex
+    form); eq. 13 in one pass of the compiled kernel for float32 CPU inference (``impl="auto"``), equal to float
+    rounding, written into ``workspace[name]`` when a workspace is given (allocated there on the first call)."""
+    if form != "eq13" or not (impl == "auto" and _can_fuse(guide)):
+        return normalise_affinity(guide, form)
     if workspace is None:
         return fused_propagation.normalize_affinity(guide)
     b, n, h, w = guide.shape
@@ -262,6 +265,7 @@ class RefinementHeads:
     heads: torch.Tensor
     kernel_sizes: tuple[int, ...]
     att: torch.Tensor | None = None
+    affinity: AffinityForm = "eq13"
 
     def split_sizes(self) -> list[int]:
         """Channels of each head in a stage's stacked tensor: kernel confidences, mask, guidance per kernel size."""
@@ -274,7 +278,7 @@ class RefinementHeads:
             raise InputError(f"refinement heads: {stacked.shape[1]} channels, expected {sum(sizes)} for kernel "
                              f"sizes {self.kernel_sizes}")  # fmt: skip
         conf, mask, *guides = torch.split(stacked, sizes, dim=1)
-        affinities = [affinity_kernel(g, impl, workspace, f"{stage}.{i}") for i, g in enumerate(guides)]
+        affinities = [affinity_kernel(g, impl, workspace, f"{stage}.{i}", self.affinity) for i, g in enumerate(guides)]
         return affinities, torch.softmax(conf, dim=1), torch.sigmoid(mask) * valid
 
     def finish(self, impl: PropagationImpl = "auto", workspace: Workspace | None = None) -> RefinementInputs:
@@ -298,14 +302,14 @@ class RefinementHeads:
         return {f"{prefix}{n}": v for n in (*_HEAD_TENSORS, "att") if (v := getattr(self, n)) is not None}
 
     @classmethod
-    def from_dict(cls, tensors: Mapping[str, torch.Tensor], kernel_sizes: Sequence[int],
-                  prefix: str = HEADS_PREFIX) -> RefinementHeads:  # fmt: skip
-        """The inverse of :meth:`to_dict` (other keys are ignored)."""
+    def from_dict(cls, tensors: Mapping[str, torch.Tensor], kernel_sizes: Sequence[int], prefix: str = HEADS_PREFIX,
+                  affinity: AffinityForm = "eq13") -> RefinementHeads:  # fmt: skip
+        """The inverse of :meth:`to_dict` (other keys are ignored; ``affinity`` is the model's form)."""
         missing = [n for n in _HEAD_TENSORS if f"{prefix}{n}" not in tensors]
         if missing:
             raise InputError(f"refinement heads: missing {', '.join(prefix + n for n in missing)}")
         t = {n: tensors[f"{prefix}{n}"] for n in _HEAD_TENSORS}
-        return cls(**t, kernel_sizes=tuple(kernel_sizes), att=tensors.get(f"{prefix}att"))
+        return cls(**t, kernel_sizes=tuple(kernel_sizes), att=tensors.get(f"{prefix}att"), affinity=affinity)
 
 
 def refine(

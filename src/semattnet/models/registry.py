@@ -77,8 +77,9 @@ _SPECS = (
               SemAttNetConfig(encoder="lite_s4", reduction=4, kernel_sizes=(3,), iterations=4)),
     ModelSpec("semattnet_rt_m", "Real-time: the paper's structure at 1/2 resolution, separable blocks, CSPN++ at 1/2",
               SemAttNetConfig(encoder="lite_s2", reduction=4, kernel_sizes=(3,), iterations=4)),
-    ModelSpec("semattnet_rt_md", "Real-time: rt_m with channels doubling at every stage (1/2 resolution)",
-              SemAttNetConfig(encoder="lite_s2_deep", reduction=4, kernel_sizes=(3,), iterations=4)),
+    ModelSpec("semattnet_rt_md", "Real-time: rt_m with channels doubling at every stage (1/2 resolution), convex "
+              "propagation kernels", SemAttNetConfig(encoder="lite_s2_deep", reduction=4, kernel_sizes=(3,),
+                                                     iterations=4, affinity="convex")),
     ModelSpec("semattnet_rt_l", "Real-time: semattnet_rt_s with twice its channels (1/4 resolution, CSPN++ at 1/4)",
               SemAttNetConfig(encoder="lite_s4_wide", reduction=4, kernel_sizes=(3,), iterations=4)),
 )  # fmt: skip

@@ -250,7 +250,7 @@ class SemAttNetRT(AtrousCSPNRefinement, nn.Module):
         self.config = config
         self.backbone = SemAttNetRTBackbone(config)
         c1, c2 = self.backbone.feature_channels
-        self._build_refinement(c1, c2, config.kernel_sizes, config.iterations, config.refinement_mode)
+        self._build_refinement(c1, c2, config.kernel_sizes, config.iterations, config.refinement_mode, config.affinity)
         s = self.backbone.stem_stride
         self.upsample = nn.Sequential(nn.Conv2d(c1, 9 * s * s, 1), nn.PixelShuffle(s))  # 8 guidance + 1 mask
         self.convex = nn.Conv2d(c1, 9 * s * s, 1)  # the convex upsampling's weights (logits)
@@ -280,7 +280,7 @@ class SemAttNetRT(AtrousCSPNRefinement, nn.Module):
         guide, mask = (F.pixel_shuffle(t, s) for t in self._upsampled_heads(feature_s1, (8 * s * s, s * s)))
         start = convex_upsample(refined_lr, self.convex(feature_s1), s)
         valid = (sparse > 0).to(sparse.dtype)
-        affinity = affinity_kernel(guide.float(), self.propagation_impl)
+        affinity = affinity_kernel(guide.float(), self.propagation_impl, form=self.config.affinity)
         refined = run_cspn_stage(start, start, [affinity], torch.ones_like(start), sparse, torch.sigmoid(mask) * valid,
                                  FINAL_ITERATIONS, self.propagation_impl)  # fmt: skip
         return dataclasses.replace(out, refined_s2_depth=start, refined_depth=refined)

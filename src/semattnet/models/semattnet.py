@@ -35,7 +35,7 @@ class SemAttNet(AtrousCSPNRefinement, nn.Module):
             raise InputError("SemAttNet is the refined model; use SemAttNetBackbone for refine=False")
         self.backbone = SemAttNetBackbone(config)
         c1, c2 = self.backbone.feature_channels
-        self._build_refinement(c1, c2, config.kernel_sizes, config.iterations, config.refinement_mode)
+        self._build_refinement(c1, c2, config.kernel_sizes, config.iterations, config.refinement_mode, config.affinity)
 
     def forward(
         self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None

@@ -48,6 +48,8 @@ __all__ = ["SHAPE_FIELDS", "WeightsMismatchError", "build_model_with_weights", "
 SHAPE_FIELDS = ("branches", "fusion", "refine", "width", "reduction", "kernel_sizes", "encoder")
 #: The shape fields :func:`config_from_state_dict` reads from the tensors (``reduction`` is checked by the load).
 _INFERRED = ("branches", "fusion", "refine", "width", "kernel_sizes")
+#: Fields that change no shape but what the trained weights compute: a record and the file's own config must agree.
+_TRAINED = ("affinity",)
 
 
 class WeightsMismatchError(CheckpointError, StateDictMismatchError):
@@ -89,6 +91,12 @@ def weights_config(
                 f"{f} {getattr(cfg, f)!r} recorded, {getattr(inferred, f)!r} in the tensors" for f in wrong
             )
             raise WeightsMismatchError(f"{source or ckpt.path}: {where} contradicts the weights: {shown}")
+    wrong = _differences(recorded, ckpt.config, _TRAINED) if recorded is not None and ckpt.config is not None else []
+    if wrong:
+        shown = ", ".join(
+            f"{f} {getattr(recorded, f)!r} recorded, {getattr(ckpt.config, f)!r} in the file" for f in wrong
+        )
+        raise WeightsMismatchError(f"{source or ckpt.path}: the recorded config contradicts the file's own: {shown}")
     return given
 
 

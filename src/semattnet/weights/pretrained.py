@@ -342,7 +342,7 @@ def _register_rt_demo() -> None:
         register_weights(_shipped(
             f"semattnet-{short}-demo-seed{seed}", arch, f"{arch}_demo_seed{seed}.safetensors.gz",
             f"{arch} trained on synthetic street scenes (real-time demo checkpoint, seed {seed})",
-            sha, size, params, scores, _RT_NOTES,
+            sha, size, params, scores, _RT_NOTES, {"affinity": "eq13"},
         ))  # fmt: skip
 
 

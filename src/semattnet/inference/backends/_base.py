@@ -86,7 +86,7 @@ def output_from_arrays(
             raise InputError("refinement heads without the propagation settings (iterations, kernel sizes)")
         with torch.inference_mode():
             tensors["refined_s2_depth"], tensors["refined_depth"] = refine(
-                RefinementHeads.from_dict(heads, settings.kernel_sizes, HEADS_PREFIX),
+                RefinementHeads.from_dict(heads, settings.kernel_sizes, HEADS_PREFIX, settings.affinity),
                 settings.iterations,
                 workspace=workspace,
             )

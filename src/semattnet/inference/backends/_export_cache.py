@@ -111,4 +111,4 @@ def propagation_settings(model: nn.Module) -> PropagationSettings | None:
     config = getattr(model, "config", None)
     if config is None or not config.refine:
         return None
-    return PropagationSettings(int(config.iterations), tuple(int(k) for k in config.kernel_sizes))
+    return PropagationSettings(int(config.iterations), tuple(int(k) for k in config.kernel_sizes), config.affinity)

@@ -60,7 +60,9 @@ def traced_propagation(heads: RefinementHeads, iterations: int) -> tuple[torch.T
     names = list(flat)
 
     def run(*tensors: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        return refine(RefinementHeads.from_dict(dict(zip(names, tensors, strict=True)), heads.kernel_sizes), iterations)
+        rebuilt = RefinementHeads.from_dict(dict(zip(names, tensors, strict=True)), heads.kernel_sizes,
+                                            affinity=heads.affinity)  # fmt: skip
+        return refine(rebuilt, iterations)
 
     with torch.no_grad():
         traced = torch.jit.trace(run, tuple(flat.values()), check_trace=False)
