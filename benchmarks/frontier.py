@@ -65,10 +65,9 @@ from semattnet.apps.demo.recipe import DemoSettings
 from semattnet.apps.demo.reference import (
     REFERENCE_RECIPE,
     ReferenceRecipe,
-    load_reference,
     machine_line,
     package_reference,
-    shipped_references,
+    reference_for,
 )
 from semattnet.apps.experiment import (
     HeldOut,
@@ -133,16 +132,9 @@ def trained(out: Path, key: str, seed: int, train: Callable[[], Path], log: Call
 
 
 def shipped_reference(key: str, seed: int, recipe: ReferenceRecipe | None) -> Path | None:
-    """The shipped demo reference of ``seed`` when it is variant ``key`` trained by ``recipe`` (same recipe but the
-    seed, as its record says), else None. It ships quantised to 63 levels per tensor: its scores are those of
-    the file users get."""
-    if key != "paper_w1_8" or recipe is None or seed not in shipped_references():
-        return None
-    path = shipped_references()[seed]
-    recorded = load_reference(path)[1].get("recipe", {})
-    wanted = {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(recipe).items()}
-    same = all(recorded.get(k, getattr(REFERENCE_RECIPE, k)) == v for k, v in wanted.items() if k != "seed")
-    return path if same and recorded.get("seed") == seed else None
+    """The shipped demo reference of ``seed`` when it is variant ``key`` trained by ``recipe``
+    (:func:`~semattnet.apps.demo.reference.reference_for`), else None."""
+    return reference_for(recipe, seed) if key == "paper_w1_8" and recipe is not None else None
 
 
 def _scores(preds: dict[str, np.ndarray], held: HeldOut) -> dict[str, float]:

@@ -18,9 +18,11 @@ Steps, each resumable (a tree or a checkpoint an earlier run left complete is re
    with ground truth; the demo's 16 held-out source scenes for reference.
 2. training: the source model and the supervised-on-target model by the reference recipe
    (:data:`semattnet.apps.demo.reference.REFERENCE_RECIPE`, :func:`semattnet.apps.experiment.train_variant`),
-   training seeds 0 and 1; weights in ``checkpoints/``.
-3. adaptation (:func:`adapt_rows`): ``semattnet adapt`` of each source model on the target recording, each
-   loss alone and all together; skipped (one line) where this checkout has no ``adapt`` command.
+   training seeds 0 and 1; weights in ``checkpoints/``. The source models are the shipped demo references
+   (``semattnet-demo-ref-seed0/1``: this recipe on these scenes, as their records say) where the recipe is theirs.
+3. adaptation (:func:`adapt_rows`): ``semattnet adapt`` of each source model on the target recording (400 steps,
+   lr 1e-3), all losses together first, then each alone; skipped (one line) where this checkout has no ``adapt``
+   command.
 4. scores on the held-out target scenes (RMSE, MAE, iRMSE, iMAE, means over scenes, then over seeds):
    unadapted, adapted, supervised on the target, classical; ``results.json`` (atomic; refused if present
    without ``--overwrite``), and the table and the plot into ``docs/guides/domain-shift.md`` (between its
@@ -52,7 +54,7 @@ from semattnet._errors import InputError
 from semattnet._utils.atomic import atomic_path
 from semattnet._utils.device import resolve_device
 from semattnet._utils.outputs import incomplete_tree
-from semattnet.apps.demo.reference import REFERENCE_RECIPE, ReferenceRecipe, machine_line
+from semattnet.apps.demo.reference import REFERENCE_RECIPE, ReferenceRecipe, machine_line, reference_for
 from semattnet.apps.experiment import HeldOut, complete_held_out, fallback_semantic, load_held_out, score
 from semattnet.apps.experiment import train_variant as _train_variant
 from semattnet.baselines.classical import complete_classical
@@ -80,13 +82,16 @@ FACTORS: dict[str, tuple[str, ...]] = {
 #: Scores, as :class:`semattnet.evaluation.metrics.KittiMetrics` names them (mm and 1/km).
 METRICS = ("rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km")
 #: Adapted rows: key -> the ``--loss`` of ``semattnet adapt``.
-LOSSES = {"sparse": "sparse", "photometric": "photometric", "smoothness": "smoothness",
-          "all": "sparse,photometric,smoothness"}  # fmt: skip
+LOSSES = {"all": "sparse,photometric,smoothness", "sparse": "sparse", "photometric": "photometric",
+          "smoothness": "smoothness"}  # fmt: skip
 #: Rows of the table, in order, with their labels.
 ROWS = {
     "classical": "classical completion",
     "unadapted": "source model, unadapted",
-    **{f"adapted_{k}": f"adapted: {v.replace(',', ' + ')}" for k, v in LOSSES.items()},
+    **{
+        f"adapted_{k}": f"adapted: {LOSSES[k].replace(',', ' + ')}"
+        for k in ("sparse", "photometric", "smoothness", "all")
+    },
     "supervised": "supervised on the target (upper bound)",
 }
 
@@ -105,6 +110,7 @@ class ShiftSettings:
     street_frames: int = 20
     drive_seed: int = 3000
     adapt_steps: int = 400
+    adapt_lr: float = 1e-3  # adapt's default 1e-4 moves a model trained elsewhere too slowly in 400 steps
     seeds: tuple[int, ...] = (0, 1)
     fallback_map: bool = False  # score (and adapt) with the no-segmenter map instead of the scenes' maps
 
@@ -181,6 +187,10 @@ def train_model(out: Path, key: str, data: Path, size: tuple[int, int], s: Shift
         log(f"[shift] {key}, seed {seed}: trained earlier ({saved})")
         return saved
     r = s.recipe
+    if key == "source" and size == r.size and (shipped := reference_for(dataclasses.replace(r, seed=seed), seed)):
+        log(f"[shift] {key}, seed {seed}: the shipped reference {shipped.name}, trained by this recipe on these scenes")
+        save_safetensors(load_checkpoint(shipped), saved)
+        return saved
     log(f"[shift] {key}, seed {seed}: training on {data} at {size[0]}x{size[1]} ...")
     last = _train_variant(out / "runs" / f"{key}_seed{seed}", data, r.backbone_steps, r.full_steps, size=size,
                           width=r.width, batch_size=r.batch_size, lr=r.lr, seed=seed, device=device, log=log,
@@ -214,14 +224,14 @@ def adapt_available() -> bool:
     return "adapt" in getattr(main, "commands", {})
 
 
-def adapt_one(weights: Path, drive: Path, run: Path, steps: int, loss: str, seed: int,
-              semantic: Path | None) -> Path:  # fmt: skip
+def adapt_one(weights: Path, drive: Path, run: Path, steps: int, loss: str, seed: int, semantic: Path | None,
+              lr: float = 1e-3) -> Path:  # fmt: skip
     """``semattnet adapt`` (through the CLI's ``main``) of ``weights`` on the recording ``drive``; returns
     ``run/adapted.safetensors``."""
     from semattnet.cli import main
 
     args = ["adapt", "--weights", str(weights), "--kitti-raw", str(drive), "--out", str(run), "--steps", str(steps),
-            "--loss", loss, "--seed", str(seed)]  # fmt: skip
+            "--loss", loss, "--seed", str(seed), "--lr", str(lr)]  # fmt: skip
     if semantic is not None:
         args += ["--semantic", str(semantic)]
     main.main(args=args, prog_name="semattnet", standalone_mode=False)
@@ -245,7 +255,7 @@ def adapt_rows(out: Path, source: dict[int, Path], data: dict[str, Any], s: Shif
                 log(f"[shift] adapting seed {seed} with {loss} ...")
                 with clock(f"adapt_{key}"):
                     adapted = adapt_one(weights, data["drive"], out / "adapt" / f"{key}_seed{seed}", s.adapt_steps,
-                                        loss, seed, semantic)  # fmt: skip
+                                        loss, seed, semantic, s.adapt_lr)  # fmt: skip
                 with atomic_path(saved, suffix=".safetensors") as tmp:
                     shutil.copyfile(adapted, tmp)
             per_seed[str(seed)] = score_model(saved, data["held_target"], s, device)

@@ -89,10 +89,10 @@ def test_adapt_rows_call_semattnet_adapt_per_loss_and_seed(shift: ModuleType, tm
     s = shift.tiny(seeds=(0, 1))
     rows = shift.adapt_rows(tmp_path, weights, data, s, torch.device("cpu"), shift.Clock(), log=lambda _: None)
     assert list(rows) == [f"adapted_{k}" for k in shift.LOSSES] and len(calls) == 8
-    assert calls[-1] == ["--weights", str(weights[1]), "--kitti-raw", str(tmp_path / "drive"), "--out",
-                         str(tmp_path / "adapt" / "all_seed1"), "--steps", "2", "--loss",
-                         LOSS_ALL, "--seed", "1", "--semantic", str(tmp_path / "sem")]  # fmt: skip
-    assert (tmp_path / "checkpoints" / "adapted_photometric_seed0.safetensors").read_bytes() == b"weights 3"
+    assert calls[1] == ["--weights", str(weights[1]), "--kitti-raw", str(tmp_path / "drive"), "--out",
+                        str(tmp_path / "adapt" / "all_seed1"), "--steps", "2", "--loss", LOSS_ALL, "--seed", "1",
+                        "--lr", "0.001", "--semantic", str(tmp_path / "sem")]  # fmt: skip
+    assert (tmp_path / "checkpoints" / "adapted_photometric_seed0.safetensors").read_bytes() == b"weights 5"
     assert (
         rows["adapted_all"]["scores"]["rmse_mm"] == 1.0
         and rows["adapted_all"]["loss"] == "sparse,photometric,smoothness"
@@ -153,3 +153,23 @@ def test_factor_domains_take_one_group_of_the_target_rig_each(shift: ModuleType)
     assert "| source | 1500 | 600 | 4500 | 1300 |" in text and "| source rig, the target's lens | 6900 |" in text
     shipped = shift.DOC_PAGE.read_text()
     assert all(shipped.count(m) == 1 for m in shift.GAP_MARKERS)
+
+
+def test_the_source_models_are_the_shipped_references_when_the_recipe_is_theirs(
+    shift: ModuleType, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The full run's source model of a seed is that seed's shipped reference (read, not trained again); any other
+    recipe, size or model trains."""
+    from semattnet.apps.demo.reference import shipped_references
+    from semattnet.weights.checkpoint import load_checkpoint
+
+    trained: list[str] = []
+    monkeypatch.setattr(shift, "_train_variant", lambda run, *a, **k: trained.append(run.name) or 1 / 0)
+    s = shift.ShiftSettings()
+    saved = shift.train_model(tmp_path, "source", tmp_path, s.recipe.size, s, 1, torch.device("cpu"), lambda _: None)
+    want, got = load_checkpoint(shipped_references()[1]).state_dict, load_checkpoint(saved).state_dict
+    assert trained == [] and want.keys() == got.keys() and all(torch.equal(want[k], got[k]) for k in want)
+    for key, size in (("supervised", s.recipe.size), ("source", s.target_size)):
+        with pytest.raises(ZeroDivisionError):
+            shift.train_model(tmp_path, key, tmp_path, size, s, 0, torch.device("cpu"), lambda _: None)
+    assert trained == ["supervised_seed0", "source_seed0"]

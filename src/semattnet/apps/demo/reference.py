@@ -57,6 +57,7 @@ __all__ = [
     "quantise",
     "recipe_notes",
     "reference_command",
+    "reference_for",
     "reference_path",
     "save_reference",
     "shipped_references",
@@ -161,6 +162,20 @@ def load_reference(path: Path | None = None) -> tuple[nn.Module, dict[str, Any]]
     model = build_model(config=ckpt.config)
     load_weights(model, ckpt)
     return model.eval(), dict(ckpt.extra.get("info") or {})
+
+
+def reference_for(recipe: ReferenceRecipe, seed: int) -> Path | None:
+    """The shipped reference of training seed ``seed`` when its record says it was trained by ``recipe`` (all but
+    the seed; a field the record lacks counts as :data:`REFERENCE_RECIPE`'s), else None: a run that needs the
+    model ``recipe`` trains reads it instead of training it again. It ships quantised: its scores are the file's."""
+    path = shipped_references().get(seed)
+    if path is None:
+        return None
+    recorded = dict(load_checkpoint(path).extra.get("info") or {}).get("recipe", {})
+    plain = lambda v: list(v) if isinstance(v, tuple) else v  # noqa: E731 (JSON keeps tuples as lists)
+    defaults = asdict(REFERENCE_RECIPE)
+    same = all(plain(recorded.get(k, defaults[k])) == plain(v) for k, v in asdict(recipe).items() if k != "seed")
+    return path if same and recorded.get("seed") == seed else None
 
 
 def train_reference(
