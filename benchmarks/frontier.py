@@ -32,7 +32,9 @@ built by the engine table, one backend after the other, the variants in turns, r
 of one forward in a fresh process (:data:`MEMORY`); per variant the whole ``predict --stream`` frame on its
 fastest backend (the library's frame loop on synthetic scenes as a folder input: its latency table); the
 classical completion's ms; the float32 convolution peak measured at that size (GFLOP/s); and, with
-``results.json`` there, each variant's int8 scores on the held-out scenes beside its float32 ones. ``--report``
+``results.json`` there, each variant's int8 scores on the held-out scenes beside its float32 ones (``--variants``:
+those variants are timed anew beside the reference, the others' entries kept from a ``timing.json`` of the same CPU
+and size). ``--report``
 writes the section "The real-time frontier" of ``docs/performance.md`` (between its markers) and
 ``docs/frontier.png`` from the two files (``benchmarks/frontier_report.py``).
 """
@@ -509,11 +511,27 @@ def time_variants(out: Path, size: tuple[int, int], repeats: int, keys: Sequence
     target = out / "timing.json"
     classical = _classical_ms(size, repeats)
     peak = conv_peak_gflops(torch.device("cpu"), size)  # what the arithmetic alone would allow
-    _write_json(target, {**machine(), "size": size, "repeats": repeats, "memory": MEMORY, "models": counts,
-                         "rows": rows, "classical_ms": classical, "conv_peak_gflops": peak, "frames": frames,
-                         "int8": int8})  # fmt: skip
+    timing = {**machine(), "size": size, "repeats": repeats, "memory": MEMORY, "models": counts, "rows": rows,
+              "classical_ms": classical, "conv_peak_gflops": peak, "frames": frames, "int8": int8}  # fmt: skip
+    _write_json(target, kept_from_earlier(target, timing, list(models)) if keys else timing)
     log(f"[frontier] wrote {target}")
     return target
+
+
+def kept_from_earlier(path: Path, timing: dict[str, Any], timed: Sequence[str]) -> dict[str, Any]:
+    """``timing`` (of the variants ``timed``) with the other variants' entries of the ``timing.json`` at ``path``
+    kept, when that file was taken on this CPU at this size (``--variants`` re-times some variants of a full run);
+    else ``timing`` alone."""
+    if not path.is_file():
+        return timing
+    old, same = json.loads(path.read_text()), ("cpu", "threads", "isa", "size")
+    if {k: old.get(k) for k in same} != json.loads(json.dumps({k: timing[k] for k in same})):
+        return timing
+    merged = dict(timing)
+    for section in ("models", "frames", "int8"):
+        merged[section] = {k: v for k, v in old.get(section, {}).items() if k not in timed} | timing[section]
+    merged["rows"] = {k: v for k, v in old.get("rows", {}).items() if k.split("/")[0] not in timed} | timing["rows"]
+    return merged
 
 
 def main(argv: Sequence[str] | None = None) -> Path:

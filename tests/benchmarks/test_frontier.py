@@ -178,3 +178,19 @@ def test_ship_packs_a_trained_variant_that_loads_by_its_config(frontier: ModuleT
     assert set(info["val"]) >= {"reference", "classical"} and info["recipe"]["seed"] == 0
     with pytest.raises(InputError, match="no trained checkpoint of semattnet_rt_m, seed 0"):
         frontier.ship(tiny_run, "semattnet_rt_m", [0], assets=tmp_path)
+
+
+def test_retiming_some_variants_keeps_the_others_rows_of_the_same_machine(frontier: ModuleType,
+                                                                         tmp_path: Path) -> None:  # fmt: skip
+    path = tmp_path / "timing.json"
+    machine = {"cpu": "Xeon", "threads": 2, "isa": ["avx2"], "size": [352, 1216]}
+    old = {**machine, "models": {"a": 1, "b": 2}, "frames": {"a": 1, "b": 2}, "int8": {"b": 2},
+           "rows": {"a/torch-f32": 1, "b/torch-f32": 2, "b/openvino-f32": 2}}  # fmt: skip
+    path.write_text(json.dumps(old))
+    new = {**machine, "size": (352, 1216), "models": {"b": 9}, "frames": {"b": 9}, "int8": {"b": 9},
+           "rows": {"b/torch-f32": 9}}  # fmt: skip
+    merged = frontier.kept_from_earlier(path, new, ["b"])
+    assert merged["rows"] == {"a/torch-f32": 1, "b/torch-f32": 9} and merged["models"] == {"a": 1, "b": 9}
+    assert merged["int8"] == {"b": 9} and merged["frames"] == {"a": 1, "b": 9}
+    assert frontier.kept_from_earlier(path, {**new, "cpu": "EPYC"}, ["b"])["rows"] == {"b/torch-f32": 9}
+    assert frontier.kept_from_earlier(tmp_path / "none.json", new, ["b"]) is new
