@@ -7,6 +7,7 @@ import torch
 
 import semattnet
 from semattnet import SemAttNetConfig, build_model
+from semattnet.models.outputs import DepthCompletionOutput
 from tests._helpers import random_inputs
 
 SMALL = 0.125
@@ -112,6 +113,29 @@ def test_bad_inputs_are_refused(change, message: str) -> None:
     change(x)
     with pytest.raises(ValueError, match=message):
         model(**x)
+
+
+@pytest.mark.parametrize("name", ["semattnet_backbone", "semattnet"])
+def test_sparse_is_required(name: str) -> None:
+    x = random_inputs(h=64, w=64)
+    with pytest.raises(semattnet.InputError, match="^sparse depth is required$"):
+        build_model(name, width=SMALL)(rgb=x["rgb"], semantic=x["semantic"])
+
+
+def test_branch_outputs_assemble_by_count() -> None:
+    d = [torch.full((1, 1, 2, 2), float(i)) for i in range(3)]
+    w = [torch.rand(1, 1, 2, 2) for _ in range(3)]
+    fused = torch.ones(1, 1, 2, 2)
+    three = DepthCompletionOutput.from_branches(d, w, fused)
+    got = (three.color_depth, three.semantic_depth, three.guided_depth, three.color_conf, three.semantic_conf)
+    assert all(a is b for a, b in zip(got, (*d, w[0], w[1]), strict=True))
+    assert three.guided_conf is w[2] and three.fused_depth is fused and three.refined_depth is None
+    two = DepthCompletionOutput.from_branches(d[::2], w[::2], fused)
+    got = (two.color_depth, two.guided_depth, two.color_conf, two.guided_conf, two.fused_depth)
+    assert all(a is b for a, b in zip(got, (d[0], d[2], w[0], w[2], fused), strict=True))
+    assert two.semantic_depth is None and two.semantic_conf is None
+    with pytest.raises(semattnet.InputError, match="2 or 3 depths and one weight each, got 3 and 2"):
+        DepthCompletionOutput.from_branches(d, w[:2], fused)
 
 
 def test_two_branch_model_needs_no_semantics() -> None:

@@ -10,20 +10,19 @@ checkpoints load with ``strict=True``.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import NamedTuple, Protocol, TypeVar
 
 import torch
 from torch import nn
 
-from semattnet._errors import InputError
 from semattnet.models.branches import ColorGuidedBranch, DepthGuidedBranch, SemanticGuidedBranch
-from semattnet.models.checks import check_inputs
+from semattnet.models.checks import check_inputs, require_sparse
 from semattnet.models.confidence_fusion import confidence_fusion
 from semattnet.models.config import SemAttNetConfig
 from semattnet.models.outputs import DepthCompletionOutput
 
-__all__ = ["BackboneFeatures", "SemAttNetBackbone"]
+__all__ = ["BackboneFeatures", "SemAttNetBackbone", "init_depth_channel"]
 
 F = TypeVar("F")
 
@@ -32,6 +31,16 @@ class BranchRunner(Protocol):
     """What :attr:`SemAttNetBackbone.branch_runner` holds: calls ``branch(*inputs)`` its own way."""
 
     def __call__(self, branch: Callable[..., F], *inputs: object) -> F: ...
+
+
+def init_depth_channel(heads: Iterable[nn.Sequential], scale: float, shift: float) -> None:
+    """Set the depth channel (0) of each branch head's BatchNorm (the heads end in BatchNorm, ReLU) to ``scale``
+    and ``shift`` (:meth:`SemAttNetBackbone.init_depth_heads`)."""
+    with torch.no_grad():
+        for head in heads:
+            bn = head[1]
+            assert isinstance(bn, nn.BatchNorm2d)
+            bn.weight[0], bn.bias[0] = scale, shift
 
 
 class BackboneFeatures(NamedTuple):
@@ -88,14 +97,10 @@ class SemAttNetBackbone(ColorGuidedBranch, SemanticGuidedBranch, DepthGuidedBran
         that; for short or small runs a KITTI-scale start trains orders of magnitude faster.
         Only the depth channel is changed, not the confidence channel.
         """
-        heads = [self.rgb_decoder_output[1], self.decoder_layer6[1]]
+        heads = [self.rgb_decoder_output, self.decoder_layer6]
         if self.config.branches == 3:
-            heads.append(self.segment_decoder_layer6[1])
-        with torch.no_grad():
-            for bn in heads:
-                assert isinstance(bn, nn.BatchNorm2d)  # the heads end in (BatchNorm, ReLU)
-                bn.weight[0] = scale
-                bn.bias[0] = shift
+            heads.append(self.segment_decoder_layer6)
+        init_depth_channel(heads, scale, shift)
 
     @property
     def feature_channels(self) -> tuple[int, int]:
@@ -115,31 +120,15 @@ class SemAttNetBackbone(ColorGuidedBranch, SemanticGuidedBranch, DepthGuidedBran
         cg = self.run_branch(self._color_guided, rgb, sparse)
         sg = self.run_branch(self._semantic_guided, semantic, sparse, cg) if three else None
         dg = self.run_branch(self._depth_guided, sparse, cg, sg)
-        if sg is None:
-            fused, (w_cg, w_dg) = confidence_fusion((cg.depth, dg.depth), (cg.conf, dg.conf))
-            w_sg = None
-            s1: tuple[torch.Tensor, ...] = (cg.feature_s1, dg.feature_s1)
-            s2: tuple[torch.Tensor, ...]
-            s2 = (cg.decoder[2], dg.feature_s2)
-        else:
-            fused, (w_cg, w_sg, w_dg) = confidence_fusion((cg.depth, sg.depth, dg.depth), (cg.conf, sg.conf, dg.conf))
-            s1 = (cg.feature_s1, sg.feature_s1, dg.feature_s1)
-            s2 = (cg.decoder[2], sg.decoder[2], dg.feature_s2)
-        output = DepthCompletionOutput(
-            color_depth=cg.depth,
-            semantic_depth=None if sg is None else sg.depth,
-            guided_depth=dg.depth,
-            color_conf=w_cg,
-            semantic_conf=w_sg,
-            guided_conf=w_dg,
-            fused_depth=fused,
-        )
-        return BackboneFeatures(output, torch.cat(s1, dim=1), torch.cat(s2, dim=1))
+        guides = (cg,) if sg is None else (cg, sg)  # the branches that guide DG
+        depths = [*(b.depth for b in guides), dg.depth]
+        fused, weights = confidence_fusion(depths, [*(b.conf for b in guides), dg.conf])
+        s1 = torch.cat([*(b.feature_s1 for b in guides), dg.feature_s1], dim=1)
+        s2 = torch.cat([*(b.decoder[2] for b in guides), dg.feature_s2], dim=1)
+        return BackboneFeatures(DepthCompletionOutput.from_branches(depths, weights, fused), s1, s2)
 
     def forward(
         self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
     ) -> DepthCompletionOutput:
         """Complete depth. Inputs: RGB 0..255, colour-coded semantic map 0..255, sparse metres."""
-        if sparse is None:
-            raise InputError("sparse depth is required")
-        return self.forward_features(rgb, semantic, sparse).output
+        return self.forward_features(rgb, semantic, require_sparse(sparse)).output

@@ -10,7 +10,14 @@ import torch
 from semattnet._errors import InputError
 from semattnet.models._tracing import is_tracing
 
-__all__ = ["MAX_INPUT_DEPTH_M", "SIZE_MULTIPLE", "check_has_points", "check_inputs", "check_sparse_depth"]
+__all__ = [
+    "MAX_INPUT_DEPTH_M",
+    "SIZE_MULTIPLE",
+    "check_has_points",
+    "check_inputs",
+    "check_sparse_depth",
+    "require_sparse",
+]
 
 #: H and W must be multiples of this (five stride-2 stages).
 SIZE_MULTIPLE = 32
@@ -18,6 +25,13 @@ SIZE_MULTIPLE = 32
 #: completer. LiDARs reach ~300 m and KITTI's 16-bit PNGs hold 256 m; larger values are unit errors
 #: (millimetres given as metres) or garbage.
 MAX_INPUT_DEPTH_M = 1000.0
+
+
+def require_sparse(sparse: torch.Tensor | None) -> torch.Tensor:
+    """``sparse``, the one input a model's ``forward`` cannot do without (its keyword default is None)."""
+    if sparse is None:
+        raise InputError("sparse depth is required")
+    return sparse
 
 
 def check_sparse_depth(sparse: torch.Tensor, name: str = "sparse") -> None:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, fields, replace
 
 import torch
@@ -44,6 +44,25 @@ class DepthCompletionOutput:
     refined_s2_depth: torch.Tensor | None = None
     refined_depth: torch.Tensor | None = None
     uncertainty: torch.Tensor | None = None
+
+    @classmethod
+    def from_branches(
+        cls, depths: Sequence[torch.Tensor], weights: Sequence[torch.Tensor], fused: torch.Tensor
+    ) -> DepthCompletionOutput:
+        """A backbone's output: the depths and fusion weights of its two (CG, DG) or three (CG, SG, DG) branches,
+        in that order, and the fused depth."""
+        if len(depths) not in (2, 3) or len(weights) != len(depths):
+            raise InputError(f"branch outputs: 2 or 3 depths and one weight each, got {len(depths)} and {len(weights)}")
+        three = len(depths) == 3
+        return cls(
+            color_depth=depths[0],
+            semantic_depth=depths[1] if three else None,
+            guided_depth=depths[-1],
+            color_conf=weights[0],
+            semantic_conf=weights[1] if three else None,
+            guided_conf=weights[-1],
+            fused_depth=fused,
+        )
 
     @property
     def depth(self) -> torch.Tensor:

@@ -36,7 +36,7 @@ from torch import nn
 
 from semattnet._errors import InputError
 from semattnet.models._tracing import is_tracing
-from semattnet.models.config import RefinementMode
+from semattnet.models.config import SemAttNetConfig
 from semattnet.models.layers import convbn, convbnrelu, stacked_heads
 from semattnet.models.propagation import (
     AffinityForm,
@@ -153,12 +153,14 @@ class AtrousCSPNRefinement:
     #: Affinity buffers kept across calls (:func:`refine`), set by inference engines on their copy; None: fresh ones.
     propagation_workspace: Workspace | None = None
 
-    def _build_refinement(self, channels_s1: int, channels_s2: int, kernel_sizes: Sequence[int], iterations: int,
-                          mode: RefinementMode, affinity: AffinityForm = "eq13") -> None:  # fmt: skip
-        self._kernel_sizes = tuple(kernel_sizes)
-        self._affinity = affinity
-        self._iterations = iterations
-        self._refinement_mode = mode
+    def _build_refinement(self, channels: tuple[int, int], config: SemAttNetConfig) -> None:
+        """The heads on guidance features of ``channels`` (s1, s2), with ``config``'s kernel sizes, iterations,
+        refinement mode and affinity form."""
+        channels_s1, channels_s2 = channels
+        self._kernel_sizes = tuple(config.kernel_sizes)
+        self._affinity = config.affinity
+        self._iterations = config.iterations
+        self._refinement_mode = config.refinement_mode
         n = len(self._kernel_sizes)
         for suffix, ch in (("", channels_s1), ("_s2", channels_s2)):
             setattr(self, f"kernel_conf_layer{suffix}", convbn(ch, n))

@@ -35,7 +35,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from semattnet._errors import InputError
-from semattnet.models.checks import check_inputs
+from semattnet.models.backbone import init_depth_channel
+from semattnet.models.checks import check_inputs, require_sparse
 from semattnet.models.confidence_fusion import confidence_fusion
 from semattnet.models.config import SemAttNetConfig
 from semattnet.models.encoders import FeatureInfo, create_encoder, encoder_spec
@@ -44,7 +45,7 @@ from semattnet.models.fusion import fuse_features, make_fusion_block
 from semattnet.models.layers import convbn, convbnrelu
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.propagation import downsample_sparse
-from semattnet.models.refinement import AtrousCSPNRefinement, affinity_kernel, refine, run_cspn_stage
+from semattnet.models.refinement import AtrousCSPNRefinement, affinity_kernel, run_cspn_stage
 
 __all__ = [
     "FINAL_ITERATIONS",
@@ -192,12 +193,8 @@ class SemAttNetRTBackbone(nn.Module):
 
     def init_depth_heads(self, scale: float = 10.0, shift: float = 15.0) -> None:
         """As :meth:`SemAttNetBackbone.init_depth_heads`: each branch's depth starts at street scale."""
-        with torch.no_grad():
-            for branch in (self.rgb_branch, self.semantic_branch, self.depth_branch):
-                if branch is not None:
-                    bn = branch.head[1]
-                    assert isinstance(bn, nn.BatchNorm2d)
-                    bn.weight[0], bn.bias[0] = scale, shift
+        branches = (self.rgb_branch, self.semantic_branch, self.depth_branch)
+        init_depth_channel([b.head for b in branches if b is not None], scale, shift)
 
     def forward_features(
         self, rgb: torch.Tensor, semantic: torch.Tensor | None, sparse: torch.Tensor
@@ -216,12 +213,9 @@ class SemAttNetRTBackbone(nn.Module):
         dg = self.depth_branch(torch.cat(depths, dim=1), guides, deep)
         branches = [b for b in (cg, sg, dg) if b is not None]
         fused, weights = confidence_fusion([b.depth for b in branches], [b.conf for b in branches])
-        full = [_up(t, size) for t in weights]
-        output = DepthCompletionOutput(
-            color_depth=depths[1], semantic_depth=None if sg is None else depths[2], guided_depth=_up(dg.depth, size),
-            color_conf=full[0], semantic_conf=None if sg is None else full[1], guided_conf=full[-1],
-            fused_depth=_up(fused, size),
-        )  # fmt: skip
+        output = DepthCompletionOutput.from_branches(
+            [*depths[1:], _up(dg.depth, size)], [_up(t, size) for t in weights], _up(fused, size)
+        )
         s1 = torch.cat([b.decoder[0] for b in branches], dim=1)
         s2 = torch.cat([b.decoder[1] for b in branches], dim=1)
         return RTBackboneFeatures(output, fused, s1, s2)
@@ -230,9 +224,7 @@ class SemAttNetRTBackbone(nn.Module):
         self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
     ) -> DepthCompletionOutput:
         """Complete depth. Inputs: RGB 0..255, colour-coded semantic map 0..255, sparse metres."""
-        if sparse is None:
-            raise InputError("sparse depth is required")
-        return self.forward_features(rgb, semantic, sparse).output
+        return self.forward_features(rgb, semantic, require_sparse(sparse)).output
 
 
 class SemAttNetRT(AtrousCSPNRefinement, nn.Module):
@@ -249,9 +241,8 @@ class SemAttNetRT(AtrousCSPNRefinement, nn.Module):
             raise InputError("SemAttNetRT is the refined model; use SemAttNetRTBackbone for refine=False")
         self.config = config
         self.backbone = SemAttNetRTBackbone(config)
-        c1, c2 = self.backbone.feature_channels
-        self._build_refinement(c1, c2, config.kernel_sizes, config.iterations, config.refinement_mode, config.affinity)
-        s = self.backbone.stem_stride
+        self._build_refinement(self.backbone.feature_channels, config)
+        c1, s = self.backbone.feature_channels[0], self.backbone.stem_stride
         self.upsample = nn.Sequential(nn.Conv2d(c1, 9 * s * s, 1), nn.PixelShuffle(s))  # 8 guidance + 1 mask
         self.convex = nn.Conv2d(c1, 9 * s * s, 1)  # the convex upsampling's weights (logits)
         with torch.no_grad():  # zero logits: every sub-pixel starts as the 3x3 mean
@@ -270,12 +261,10 @@ class SemAttNetRT(AtrousCSPNRefinement, nn.Module):
         self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
     ) -> DepthCompletionOutput:
         """Complete and refine depth. Inputs: RGB 0..255, semantic colours 0..255, sparse metres."""
-        if sparse is None:
-            raise InputError("sparse depth is required")
+        sparse = require_sparse(sparse)
         out, depth, feature_s1, feature_s2 = self.backbone.forward_features(rgb, semantic, sparse)
         sparse_lr, _ = downsample_sparse(sparse, self.backbone.stem_stride)
-        heads = self.refinement_heads(depth, sparse_lr, feature_s1, feature_s2)
-        _, refined_lr = refine(heads, self._iterations, self.propagation_impl)
+        _, refined_lr = self.propagation(self.refinement_heads(depth, sparse_lr, feature_s1, feature_s2))
         s = self.backbone.stem_stride
         guide, mask = (F.pixel_shuffle(t, s) for t in self._upsampled_heads(feature_s1, (8 * s * s, s * s)))
         start = convex_upsample(refined_lr, self.convex(feature_s1), s)

@@ -9,6 +9,7 @@ from torch import nn
 
 from semattnet._errors import InputError
 from semattnet.models.backbone import SemAttNetBackbone
+from semattnet.models.checks import require_sparse
 from semattnet.models.config import SemAttNetConfig
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.refinement import AtrousCSPNRefinement, RefinementHeads
@@ -34,8 +35,7 @@ class SemAttNet(AtrousCSPNRefinement, nn.Module):
         if not config.refine:
             raise InputError("SemAttNet is the refined model; use SemAttNetBackbone for refine=False")
         self.backbone = SemAttNetBackbone(config)
-        c1, c2 = self.backbone.feature_channels
-        self._build_refinement(c1, c2, config.kernel_sizes, config.iterations, config.refinement_mode, config.affinity)
+        self._build_refinement(self.backbone.feature_channels, config)
 
     def forward(
         self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
@@ -53,7 +53,6 @@ class SemAttNet(AtrousCSPNRefinement, nn.Module):
         ``forward`` is ``forward_network`` followed by :meth:`propagation`; inference engines
         run this part in another runtime and the propagation in PyTorch's fused kernel.
         """
-        if sparse is None:
-            raise InputError("sparse depth is required")
+        sparse = require_sparse(sparse)
         out, feature_s1, feature_s2 = self.backbone.forward_features(rgb, semantic, sparse)
         return out, self.refinement_heads(out.fused_depth, sparse, feature_s1, feature_s2)

@@ -35,12 +35,26 @@ def _time(ts: Typestore, ns: int) -> object:
     return ts.types["builtin_interfaces/msg/Time"](sec=int(ns) // 1_000_000_000, nanosec=int(ns) % 1_000_000_000)
 
 
+def _has_field(cls: type, name: str) -> bool:
+    """Whether the message class ``cls`` has the field ``name`` (where ROS 1 and ROS 2 differ)."""
+    return name in vars(cls)["__dataclass_fields__"]
+
+
 def header(ts: Typestore, stamp_ns: int, frame_id: str, seq: int = 0) -> object:
     """A ``std_msgs/Header`` (ROS 1 has a ``seq``, ROS 2 not)."""
     cls = ts.types["std_msgs/msg/Header"]
-    if "seq" in vars(cls)["__dataclass_fields__"]:
+    if _has_field(cls, "seq"):
         return cls(seq=seq, stamp=_time(ts, stamp_ns), frame_id=frame_id)
     return cls(stamp=_time(ts, stamp_ns), frame_id=frame_id)
+
+
+def _image(ts: Typestore, pixels: np.ndarray, encoding: str, stamp_ns: int, frame_id: str) -> object:
+    """``sensor_msgs/Image`` of C-contiguous little-endian ``pixels`` (H, W[, C]), rows unpadded."""
+    h, w = pixels.shape[:2]
+    step = int(np.prod(pixels.shape[1:])) * pixels.itemsize
+    return ts.types["sensor_msgs/msg/Image"](header=header(ts, stamp_ns, frame_id), height=h, width=w,
+                                             encoding=encoding, is_bigendian=0, step=step,
+                                             data=pixels.reshape(-1).view(np.uint8))  # fmt: skip
 
 
 def image_message(ts: Typestore, rgb: np.ndarray, stamp_ns: int, frame_id: str) -> object:
@@ -48,10 +62,7 @@ def image_message(ts: Typestore, rgb: np.ndarray, stamp_ns: int, frame_id: str) 
     rgb = np.ascontiguousarray(rgb, dtype=np.uint8)
     if rgb.ndim != 3 or rgb.shape[2] != 3:
         raise InputError(f"image: expected (H, W, 3) uint8, got shape {rgb.shape}")
-    h, w = rgb.shape[:2]
-    return ts.types["sensor_msgs/msg/Image"](header=header(ts, stamp_ns, frame_id), height=h, width=w,
-                                             encoding="rgb8", is_bigendian=0, step=3 * w,
-                                             data=rgb.reshape(-1))  # fmt: skip
+    return _image(ts, rgb, "rgb8", stamp_ns, frame_id)
 
 
 def depth_image_message(ts: Typestore, depth: np.ndarray, stamp_ns: int, frame_id: str) -> object:
@@ -60,10 +71,7 @@ def depth_image_message(ts: Typestore, depth: np.ndarray, stamp_ns: int, frame_i
     if d.ndim != 2:
         raise InputError(f"depth: expected (H, W) metres, got shape {d.shape}")
     d = np.where(np.isfinite(d) & (d > 0), d, np.float32(np.nan)).astype("<f4")
-    h, w = d.shape
-    return ts.types["sensor_msgs/msg/Image"](header=header(ts, stamp_ns, frame_id), height=h, width=w,
-                                             encoding="32FC1", is_bigendian=0, step=4 * w,
-                                             data=np.frombuffer(d.tobytes(), np.uint8))  # fmt: skip
+    return _image(ts, d, "32FC1", stamp_ns, frame_id)
 
 
 def compressed_image_message(ts: Typestore, rgb: np.ndarray, stamp_ns: int, frame_id: str, fmt: str = "png") -> object:
@@ -119,7 +127,7 @@ def camera_info_message(
 ) -> object:
     """``sensor_msgs/CameraInfo`` of :class:`CameraInfoData` (stamp and frame id from ``info`` unless given)."""
     cls = ts.types["sensor_msgs/msg/CameraInfo"]
-    ros1 = "K" in vars(cls)["__dataclass_fields__"]
+    ros1 = _has_field(cls, "K")
     mats = {"D": info.D, "K": info.K, "R": info.R, "P": info.P}
     kw = {(k if ros1 else k.lower()): np.array(v, dtype=np.float64).reshape(-1) for k, v in mats.items()}  # copies
     roi = ts.types["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)

@@ -39,15 +39,25 @@ class HeaderMsg(Protocol):
     def frame_id(self) -> str: ...
 
 
-class ImageMsg(Protocol):
-    """``sensor_msgs/Image``: ``height`` rows of ``step`` bytes in ``data``."""
+class _Stamped(Protocol):
+    """A message with a ``header``."""
 
     @property
     def header(self) -> HeaderMsg: ...
+
+
+class _Grid(_Stamped, Protocol):
+    """A stamped message of ``height`` x ``width`` pixels or points."""
+
     @property
     def height(self) -> int: ...
     @property
     def width(self) -> int: ...
+
+
+class ImageMsg(_Grid, Protocol):
+    """``sensor_msgs/Image``: ``height`` rows of ``step`` bytes in ``data``."""
+
     @property
     def encoding(self) -> str: ...
     @property
@@ -58,11 +68,9 @@ class ImageMsg(Protocol):
     def data(self) -> np.ndarray: ...
 
 
-class CompressedImageMsg(Protocol):
+class CompressedImageMsg(_Stamped, Protocol):
     """``sensor_msgs/CompressedImage``: JPEG or PNG bytes."""
 
-    @property
-    def header(self) -> HeaderMsg: ...
     @property
     def format(self) -> str: ...
     @property
@@ -80,15 +88,9 @@ class PointFieldMsg(Protocol):
     def datatype(self) -> int: ...
 
 
-class PointCloud2Msg(Protocol):
+class PointCloud2Msg(_Grid, Protocol):
     """``sensor_msgs/PointCloud2``: ``height`` rows of ``width`` points, ``point_step`` bytes each."""
 
-    @property
-    def header(self) -> HeaderMsg: ...
-    @property
-    def height(self) -> int: ...
-    @property
-    def width(self) -> int: ...
     @property
     def fields(self) -> Sequence[PointFieldMsg]: ...
     @property
@@ -101,15 +103,9 @@ class PointCloud2Msg(Protocol):
     def data(self) -> np.ndarray: ...
 
 
-class CameraInfoMsg(Protocol):
+class CameraInfoMsg(_Grid, Protocol):
     """``sensor_msgs/CameraInfo`` (its matrices, ``K`` in ROS 1 and ``k`` in ROS 2, are read by name)."""
 
-    @property
-    def header(self) -> HeaderMsg: ...
-    @property
-    def height(self) -> int: ...
-    @property
-    def width(self) -> int: ...
     @property
     def distortion_model(self) -> str: ...
 
@@ -135,9 +131,7 @@ class _Transform(Protocol):
     def rotation(self) -> _Quaternion: ...
 
 
-class _TransformStamped(Protocol):
-    @property
-    def header(self) -> HeaderMsg: ...
+class _TransformStamped(_Stamped, Protocol):
     @property
     def child_frame_id(self) -> str: ...
     @property
