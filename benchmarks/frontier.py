@@ -169,8 +169,8 @@ def train_and_score(out: Path, recipe: ReferenceRecipe, seeds: Sequence[int], he
             uncs.setdefault(key, {})[seed] = {n: o["uncertainty"] for n, o in outputs.items()}
             per_seed[str(seed)] = _scores(preds[key][seed], held)
         params = sum(p.numel() for p in model.parameters())
-        results[key] = {"model": name, "width": width, "params": params, "per_seed": per_seed,
-                        "scores": _mean(per_seed)}  # fmt: skip
+        results[key] = {"model": name, "width": width, "params": params, "affinity": model.config.affinity,
+                        "per_seed": per_seed, "scores": _mean(per_seed)}  # fmt: skip
     for key, ause in unc.score_uncertainty(preds, uncs, held).items():
         results[key]["uncertainty"] = {k: v for k, v in ause.items() if k not in ("curves", "label")}
     return results

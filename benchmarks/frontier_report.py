@@ -96,7 +96,8 @@ def table(results: Mapping[str, Any], timing: Mapping[str, Any]) -> str:
         times = [_cell(_ms(timing, key, b)) for b in COLUMNS]
         if key == "classical":
             times = [_cell(timing.get("classical_ms")), *["–"] * (len(COLUMNS) - 1)]
-        cells = [LABELS.get(key, f"`{key}`"), _cell(counts.get("gmac"), "{:.2f}"),
+        label = LABELS.get(key, f"`{key}`") + (" (convex kernel)" if entry.get("affinity") == "convex" else "")
+        cells = [label, _cell(counts.get("gmac"), "{:.2f}"),
                  "–" if params is None else f"{params / 1e6:.2f} M", *(_score(entry, m) for m in METRICS),
                  _cell(ause, "{:.3f}"), *times, _cell(frame), memory]  # fmt: skip
         lines.append("| " + " | ".join(cells) + " |")

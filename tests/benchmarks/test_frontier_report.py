@@ -70,6 +70,9 @@ def test_table_rows_in_kitti_units_with_the_seeds_spread(report: ModuleType) -> 
     timing = _timing()
     timing["rows"]["paper_w1_8/openvino-f32"].update(peak_mb=float("nan"), growth_mb=float("nan"))  # its run failed
     assert report.table(_results(), timing).splitlines()[3].endswith("| 600 | – |")
+    results = _results()
+    results["results"]["semattnet_rt_s"]["affinity"] = "convex"  # the propagation kernel it was trained with
+    assert "| `semattnet_rt_s` (convex kernel) |" in report.table(results, _timing())
 
 
 def test_verdict_reads_the_acceptance(report: ModuleType) -> None:

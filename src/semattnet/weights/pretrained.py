@@ -322,10 +322,10 @@ _RT_DEMO: tuple[tuple[str, int, str, int, int, tuple[float, float, float, float]
      349_878, 305_028, (2301.5, 801.4, 6.33, 3.40)),
     ("semattnet_rt_l", 1, "4c484fc9d629cb26327f3b64c8233f14f17cd487f701e7683d968d5fa03ec934",
      350_107, 305_028, (2226.3, 804.1, 6.64, 3.65)),
-    ("semattnet_rt_md", 0, "dc079f9b1f94a66ac9af14eb10049cddd5c1d58902b0667b5ea9ab87c419e71d",
-     590_459, 537_530, (2005.9, 780.6, 7.42, 4.12)),
-    ("semattnet_rt_md", 1, "8dffdeb8b6bf6e7a31f17703a7490fd8ae6cf0d7df2d432f888f4dc823e1682a",
-     591_376, 537_530, (1992.8, 759.6, 5.91, 3.57)),
+    ("semattnet_rt_md", 0, "de02e5de46361f9f4651ec80483ad804649ae0b8cddd795ab41fcb7e24381eb2",
+     590_158, 537_530, (1847.6, 524.1, 4.03, 1.95)),
+    ("semattnet_rt_md", 1, "3dbb837aab9a69dccf1390825b413e1583d19ec1aba5895f17628223c108ddc3",
+     591_432, 537_530, (1862.3, 524.4, 4.04, 1.88)),
 )  # fmt: skip
 _RT_NOTES = (
     "Trained by `python benchmarks/frontier.py` with the demo references' recipe (the same 400 synthetic street "
@@ -342,7 +342,7 @@ def _register_rt_demo() -> None:
         register_weights(_shipped(
             f"semattnet-{short}-demo-seed{seed}", arch, f"{arch}_demo_seed{seed}.safetensors.gz",
             f"{arch} trained on synthetic street scenes (real-time demo checkpoint, seed {seed})",
-            sha, size, params, scores, _RT_NOTES, {"affinity": "eq13"},
+            sha, size, params, scores, _RT_NOTES,
         ))  # fmt: skip
 
 
