@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -104,6 +105,9 @@ def test_tf_is_interpolated_half_way_and_not_extrapolated_beyond_the_tolerance()
         assert buffer.at("odom", "base", stamp) is None and buffer.lookup("odom", "cam", stamp) is None
     one = interpolate_transform(np.array([5]), np.zeros((1, 3)), np.array([[0.0, 0, 0, 1]]), 7, tolerance_ns=1)
     assert one is None
+    buffer.add("odom", "base", 2 * 10**9, make_T(Rz, np.array([4.0, 4, 0])))  # the same stamp again: the last wins
+    later = buffer.at("odom", "base", 1_500_000_000)
+    assert later is not None and later[0, 3] == pytest.approx(2.0)
 
 
 def test_a_neighbour_outside_the_span_of_tf_is_no_view(drive: Path, tmp_path: Path) -> None:
@@ -145,3 +149,21 @@ def test_adapt_on_a_bag_uses_its_neighbouring_frames_where_tf_poses_them(
     assert ("photometric" in step and step["photometric"] > 0) is photometric
     assert res.output.count("no other view") == (0 if photometric else 1)
     assert res.output.count("no neighbouring views") == (0 if photometric else 1)
+
+
+def _stamped(parent: str, child: str, sec: int, x: float, w: float) -> SimpleNamespace:
+    vec, rot = SimpleNamespace(x=x, y=0.0, z=0.0), SimpleNamespace(x=0.0, y=0.0, z=0.0, w=w)
+    header = SimpleNamespace(frame_id=parent, stamp=SimpleNamespace(sec=sec, nanosec=0))
+    transform = SimpleNamespace(translation=vec, rotation=rot)
+    return SimpleNamespace(header=header, child_frame_id=child, transform=transform)
+
+
+def test_a_bad_tf_transform_is_left_out_and_kept_to_be_said() -> None:
+    buffer = TransformBuffer()
+    msg = SimpleNamespace(transforms=[_stamped("/odom", "base", 1, 1.0, 1.0), _stamped("odom", "base", 2, np.nan, 1.0),
+                                      _stamped("odom", "base", 3, 3.0, 0.5)])  # fmt: skip
+    buffer.add_message(msg, "b.mcap: /tf message 0")
+    assert list(buffer.tracks[("odom", "base")].stamps) == [10**9]
+    assert len(buffer.skipped) == 2
+    assert buffer.skipped[0].startswith("b.mcap: /tf message 0: transform 'odom' -> 'base': ")
+    assert "not finite" in buffer.skipped[0] and "norm 0.5" in buffer.skipped[1]

@@ -12,6 +12,7 @@ neighbouring frames (:meth:`semattnet.robotics.BagSource.views`).
 from __future__ import annotations
 
 import os
+from array import array
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -99,14 +100,20 @@ class TransformBuffer:
         self.source = source
         self.tolerance_ns = round(tolerance_s * 1e9)
         self.skipped: list[str] = []
-        self._samples: dict[tuple[str, str], list[tuple[int, np.ndarray, np.ndarray]]] = {}
+        #: per edge, the stamps and the samples' 7 numbers (translation, quaternion), compact for a long recording
+        self._samples: dict[tuple[str, str], tuple[array[int], array[float]]] = {}
         self._tracks: dict[tuple[str, str], _Track] | None = None
 
     def add(self, parent: str, child: str, stamp_ns: int, T_parent_child: np.ndarray) -> None:
         """Add a sample of the edge ``p_parent = T_parent_child @ p_child`` at ``stamp_ns``."""
         T = np.asarray(T_parent_child, dtype=np.float64)
-        key = (parent.lstrip("/"), child.lstrip("/"))
-        self._samples.setdefault(key, []).append((int(stamp_ns), T[:3, 3].copy(), np.array(matrix_to_quaternion(T[:3, :3]))))
+        self._add(parent, child, stamp_ns, T[:3, 3], matrix_to_quaternion(T[:3, :3]))
+
+    def _add(self, parent: str, child: str, stamp_ns: int, translation: Iterable[float],
+             quaternion: Iterable[float]) -> None:  # fmt: skip
+        stamps, values = self._samples.setdefault((parent.lstrip("/"), child.lstrip("/")), (array("q"), array("d")))
+        stamps.append(int(stamp_ns))
+        values.extend([*map(float, translation), *map(float, quaternion)])
         self._tracks = None
 
     def add_message(self, msg: TFMessageMsg, where: str = "") -> None:
@@ -115,24 +122,27 @@ class TransformBuffer:
         for t in msg.transforms:
             parent, child = str(t.header.frame_id), str(t.child_frame_id)
             tr, rot = t.transform.translation, t.transform.rotation
+            q = (rot.x, rot.y, rot.z, rot.w)
             try:
-                T = checked_transform((tr.x, tr.y, tr.z), (rot.x, rot.y, rot.z, rot.w))
+                checked_transform((tr.x, tr.y, tr.z), q)
             except DataError as exc:
                 self.skipped.append(f"{where or self.source}: transform {parent!r} -> {child!r}: {exc}")
                 continue
             stamp = int(t.header.stamp.sec) * 1_000_000_000 + int(t.header.stamp.nanosec)
-            self.add(parent, child, stamp, T)
+            self._add(parent, child, stamp, (tr.x, tr.y, tr.z), np.asarray(q, dtype=np.float64) / np.linalg.norm(q))
 
     @property
     def tracks(self) -> dict[tuple[str, str], _Track]:
         """Every edge's samples, sorted by stamp (built once after the last :meth:`add`)."""
         if self._tracks is None:
             self._tracks = {}
-            for key, samples in self._samples.items():
-                last = {stamp: (t, q) for stamp, t, q in samples}  # a repeated stamp: the last received
-                stamps = sorted(last)
-                self._tracks[key] = _Track(np.array(stamps, dtype=np.int64), np.array([last[s][0] for s in stamps]),
-                                           np.array([last[s][1] for s in stamps]))  # fmt: skip
+            for key, (stamps, values) in self._samples.items():
+                t = np.array(stamps, dtype=np.int64)
+                v = np.array(values, dtype=np.float64).reshape(-1, 7)
+                order = np.argsort(t, kind="stable")
+                t, v = t[order], v[order]
+                last = np.append(t[1:] != t[:-1], True)  # a repeated stamp: the last received
+                self._tracks[key] = _Track(t[last], v[last, :3], v[last, 3:])
         return self._tracks
 
     def roots(self) -> list[str]:
