@@ -21,6 +21,7 @@ from semattnet.data.sources import RawDriveSource
 from semattnet.data.synthetic.drive import write_synthetic_drives
 from semattnet.geometry import make_T
 from semattnet.robotics import BagSource
+from semattnet.robotics.bag_source import BagOptions
 from semattnet.robotics.bags import BagTopics, SensorRecord, list_topics, write_kitti_bag, write_sensor_bag
 from semattnet.robotics.bags.tf import TransformTree
 from semattnet.robotics.bags.tf_buffer import TransformBuffer, interpolate_transform
@@ -75,7 +76,8 @@ def test_a_bag_without_tf_or_without_the_fixed_frame_gives_no_views_said_once(ba
     assert all(source.views(name) == () for name in source.names)
     assert [line for line in lines[1:]] == [f"{bags['no_tf']}: /tf: no transform; the frames get no neighbouring views"]
     lines.clear()
-    source = BagSource(bags["mcap"], T.image, T.points, log=lines.append, odom_frame="map")
+    options = BagOptions(bag=bags["mcap"], image_topic=T.image, points_topic=T.points, odom_frame="map")  # --odom-frame
+    source = options.source(None, lines.append)
     assert all(source.views(name) == () for name in source.names)
     assert len(lines) == 2 and "no chain from 'map' to the camera frame 'camera_color_left'" in lines[1]
     assert "/tf frames: base_link, odom" in lines[1]

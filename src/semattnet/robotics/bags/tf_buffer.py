@@ -38,8 +38,10 @@ __all__ = [
 
 #: The topic of transforms that change with time (``tf2_msgs/TFMessage``).
 TF_TOPIC = "/tf"
-#: How far (seconds) before the first or after the last sample of an edge its transform is still extrapolated.
-EXTRAPOLATION_TOLERANCE_S = 0.01
+#: How far (seconds) before the first or after the last sample of an edge its transform is still extrapolated: a
+#: camera and an odometry of the same rate are stamped some milliseconds apart, so the first or last image may fall
+#: just outside the odometry's span; half a 10 Hz period at most.
+EXTRAPOLATION_TOLERANCE_S = 0.05
 
 
 def slerp(q0: Iterable[float], q1: Iterable[float], s: float) -> np.ndarray:
