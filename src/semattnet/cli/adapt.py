@@ -57,7 +57,7 @@ ADAPT_OPTIONS = (
             help="Crop HxW, multiples of 32 (smaller frames: their size, rounded down)."),
     _OPTION(["--loss", "losses"], default="sparse,photometric,smoothness", show_default=True,
             help="The losses, comma-separated: sparse (hidden LiDAR points), photometric (the frames' other views: "
-            "KITTI raw's stereo partner), smoothness."),
+            "KITTI raw's stereo partner and neighbours, a bag's neighbours posed by /tf), smoothness."),
     _OPTION(["--hide"], default="0.2..0.3", show_default=True,
             help="The share of LiDAR points hidden from the input each step: 0.25, or a range drawn from."),
     _OPTION(["--w-kept"], type=NONNEGATIVE_FLOAT, default=0.5, show_default=True,
@@ -141,8 +141,8 @@ class AdaptOptions:
 @device_option(help="Where training runs: auto, cpu, cuda[:N].", cls=section(MODEL))
 @with_options(ADAPT_OPTIONS)
 def adapt(**params: object) -> None:
-    """Fine-tune weights on your own frames with no ground truth: hidden LiDAR points, the stereo partner's
-    photometric consistency and edge-aware smoothness (docs: guides/adapt.md).
+    """Fine-tune weights on your own frames with no ground truth: hidden LiDAR points, photometric consistency with
+    the frames' other views (a stereo partner, neighbouring frames) and edge-aware smoothness (docs: guides/adapt.md).
 
     Reads every input `predict` reads. Writes OUT/adapted.safetensors (for `predict --weights`),
     OUT/checkpoints/last.pt (--resume) and OUT/log.json. Frames that cannot be read are skipped and counted

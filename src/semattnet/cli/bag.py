@@ -27,7 +27,8 @@ from semattnet.cli.data import data
 @click.option("--overwrite", is_flag=True, help="Replace an existing bag.")
 def bag_from_kitti(drive_dir: Path, out: Path, fmt: str | None, camera: str, frames: str | None,
                    compressed: str | None, nan_points: int, overwrite: bool) -> None:  # fmt: skip
-    """Write a ROS bag of a KITTI raw drive: images, Velodyne scans, CameraInfo and /tf_static."""
+    """Write a ROS bag of a KITTI raw drive: images, Velodyne scans, CameraInfo, /tf_static and /tf (the OXTS
+    poses)."""
     from semattnet.robotics.bags import write_kitti_bag
 
     written = write_kitti_bag(drive_dir, out, camera=camera, frames=frames, fmt=fmt, compressed=compressed,

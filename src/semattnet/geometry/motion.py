@@ -30,7 +30,15 @@ MAX_YAW_RATE = 10.0
 #: The Earth's radius (metres) of KITTI's Mercator projection of the OXTS positions.
 EARTH_RADIUS_M = 6378137.0
 
-__all__ = ["MAX_SPEED_MPS", "MAX_YAW_RATE", "VehicleMotion", "deskew_scan", "read_oxts_motion", "read_oxts_pose"]
+__all__ = [
+    "MAX_SPEED_MPS",
+    "MAX_YAW_RATE",
+    "VehicleMotion",
+    "deskew_scan",
+    "read_oxts_latitude",
+    "read_oxts_motion",
+    "read_oxts_pose",
+]
 
 
 @dataclass(frozen=True)
@@ -108,6 +116,16 @@ def _oxts_numbers(path: str | os.PathLike[str], count: int) -> list[float]:
     if len(vals) < count or not np.all(np.isfinite(vals[:count])):
         raise DataError(f"{path}: expected 30 finite OXTS fields, found {len(vals)}")
     return vals
+
+
+def read_oxts_latitude(path: str | os.PathLike[str]) -> float:
+    """The latitude (degrees) of a KITTI raw OXTS packet (its first number): the ``lat0_deg`` of
+    :func:`read_oxts_pose` that fixes the Mercator scale of a drive's poses.
+
+    Raises:
+        DataError: missing file, fewer than 6 numbers or one not finite (naming the file).
+    """
+    return _oxts_numbers(path, 6)[0]
 
 
 def read_oxts_pose(path: str | os.PathLike[str], lat0_deg: float | None = None) -> np.ndarray:

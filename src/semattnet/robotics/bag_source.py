@@ -26,11 +26,12 @@ import numpy as np
 
 from semattnet._errors import DataError
 from semattnet._utils.registry import OptionError, option
-from semattnet.data.frames import Frame, IndexedSource, SensorMeta, SourceInfo
+from semattnet.data.frames import Frame, IndexedSource, SensorMeta, SourceInfo, View
 from semattnet.data.sources.registry import SourceOptions, register_source
 from semattnet.geometry import RigCalibration
 from semattnet.robotics.bags import BagFailure, BagPair, BagPairs, StampPairing
 from semattnet.robotics.bags.reader import message_where
+from semattnet.robotics.bags.tf_buffer import TransformBuffer
 
 __all__ = ["BagOptions", "BagSource"]
 
@@ -61,6 +62,9 @@ class BagOptions(SourceOptions):
     max_skew: float | None = option(
         "--max-skew", type="seconds", help="Seconds between an image and its scan at most [half the scan period]."
     )
+    odom_frame: str | None = option("--odom-frame", identity=False,
+                                    help="The fixed frame of /tf that poses neighbouring frames for adapt's "
+                                    "photometric loss [odom if /tf has it, else the root of /tf's tree].")  # fmt: skip
     list_topics: bool = option("--list-topics", type="flag", identity=False, help="Print the bag's topics and exit.")
 
     def check(self, segment_spec: str | None) -> None:
@@ -81,7 +85,7 @@ class BagOptions(SourceOptions):
     def source(self, semantic: Path | None, log: Callable[[str], None]) -> BagSource:
         assert self.bag is not None and self.image_topic is not None and self.points_topic is not None  # checked
         return BagSource(self.bag, self.image_topic, self.points_topic, self.camera_info_topic, self.rig,
-                         self.max_skew, self.semantic_topic, log=log)  # fmt: skip
+                         self.max_skew, self.semantic_topic, log=log, odom_frame=self.odom_frame)  # fmt: skip
 
 
 @register_source("bag", option="--bag", options=BagOptions)
@@ -94,7 +98,9 @@ class BagSource(IndexedSource):
 
     ``semantic_topic``: colour-coded semantic images (Cityscapes palette, ``sensor_msgs/Image`` or
     ``CompressedImage``), each image taking the one with the nearest stamp within ``max_skew`` (default: half
-    their period). ``log``: where the pairing report goes (one line at construction).
+    their period). ``log``: where the pairing report goes (one line at construction), and what :meth:`views` says
+    once about ``/tf``. ``odom_frame``: the fixed frame of ``/tf`` that poses the neighbouring frames (:meth:`views`;
+    None: ``odom`` when ``/tf`` has it, else the root of its tree).
 
     Raises:
         DataError: at construction, what :class:`BagPairs` raises (the whole bag is unusable), a semantic topic
@@ -110,8 +116,12 @@ class BagSource(IndexedSource):
     def __init__(self, path: str | os.PathLike[str], image_topic: str, points_topic: str,
                  camera_info_topic: str | None = None, rig: str | os.PathLike[str] | RigCalibration | None = None,
                  max_skew: float | None = None, semantic_topic: str | None = None,
-                 log: Callable[[str], None] | None = None) -> None:  # fmt: skip
+                 log: Callable[[str], None] | None = None, odom_frame: str | None = None) -> None:  # fmt: skip
         self.path = Path(path)
+        self.odom_frame = odom_frame
+        self._log = log
+        self._tf: TransformBuffer | DataError | None = None  # /tf, read when views are first asked for
+        self._fixed: dict[str, str | None] = {}  # camera frame -> the fixed frame posing it (None: none)
         self.pairs = BagPairs(self.path, image_topic, points_topic, camera_info_topic, rig, max_skew)
         self.indices = list(range(len(self.pairs)))
         self.names = [f"{i:010d}" for i in self.indices]
@@ -297,6 +307,79 @@ class BagSource(IndexedSource):
         :class:`DataError` (the projection, e.g. an empty scan, is ``load``'s)."""
         for name in self.names if names is None else names:
             self.read(name)
+
+    def views(self, name: str) -> tuple[View, ...]:
+        """Frame ``name``'s other views: the previous and next images of the topic where they are paired frames of
+        the same camera frame, each with ``T_view_cam = T_fixed_cam(t_view)^-1 @ T_fixed_cam(t)``: the camera's pose
+        in the fixed frame (``odom_frame``) chained from ``/tf``, interpolated at each image's header stamp
+        (:class:`~semattnet.robotics.bags.tf_buffer.TransformBuffer`), and ``/tf_static``. ``/tf`` is read once,
+        when views are first asked for. Empty without ``/tf`` or without a chain from the fixed frame to the camera
+        (said once to ``log``); a neighbour outside ``/tf``'s span is no view. Never raises for the bag's sake.
+        """
+        i = self._index[name]
+        with self._lock:
+            try:
+                here = self._advance(i)
+            except DataError:
+                return ()
+            fixed = None if isinstance(here, BagFailure) else self._fixed_frame(here.frame_id)
+            if isinstance(here, BagFailure) or fixed is None:
+                return ()
+            found = [self._neighbour(here, j, fixed) for j in (i - 1, i + 1) if 0 <= j < len(self.pairs)]
+        return tuple(v for v in found if v is not None)
+
+    def _say(self, line: str) -> None:
+        if self._log is not None:
+            self._log(line)
+
+    def _transforms(self) -> TransformBuffer | DataError:
+        """The bag's ``/tf`` over its ``/tf_static``, read on first call (a bag that cannot be read: its error)."""
+        if self._tf is None:
+            from semattnet.robotics.bags import open_bag
+            from semattnet.robotics.bags.tf_buffer import read_tf_buffer
+
+            try:
+                with open_bag(self.path) as reader:
+                    self._tf = read_tf_buffer(reader, self.path)
+            except DataError as exc:
+                self._tf = exc
+            if isinstance(self._tf, TransformBuffer) and self._tf.skipped:
+                bad = self._tf.skipped
+                self._say(f"{len(bad)} bad /tf transform(s) left out of the neighbouring views' poses: {bad[0]}")
+        return self._tf
+
+    def _fixed_frame(self, camera_frame: str) -> str | None:
+        """The ``/tf`` frame that poses ``camera_frame``, or None (no neighbouring views); said once per camera."""
+        if camera_frame not in self._fixed:
+            tf, fixed = self._transforms(), None
+            try:
+                if isinstance(tf, DataError):
+                    raise tf
+                fixed = tf.fixed_frame(camera_frame, self.odom_frame)
+                self._say(f"{self.path}: neighbouring frames as views, posed by /tf from {fixed!r} to the camera "
+                          f"{camera_frame!r}")  # fmt: skip
+            except DataError as exc:
+                self._say(f"{exc}; the frames get no neighbouring views")
+            self._fixed[camera_frame] = fixed
+        return self._fixed[camera_frame]
+
+    def _neighbour(self, here: BagPair, j: int, fixed: str) -> View | None:
+        """Image ``j`` as a view of ``here`` (a paired frame of the same camera, both posed at their stamps) or None."""
+        from semattnet.geometry import invert_T
+
+        tf = self._transforms()
+        assert isinstance(tf, TransformBuffer)  # a fixed frame was found in it
+        try:
+            there = self._advance(j)
+            if isinstance(there, BagFailure) or there.frame_id != here.frame_id:
+                return None
+            T_fixed_here = tf.lookup(fixed, here.frame_id, here.stamp_ns)
+            T_fixed_there = tf.lookup(fixed, there.frame_id, there.stamp_ns)
+        except DataError:  # the bag ends early, two chains disagree: no view
+            return None
+        if T_fixed_here is None or T_fixed_there is None:
+            return None
+        return View(there.name, there.image, there.K, invert_T(T_fixed_there) @ T_fixed_here)
 
     def inputs(self) -> list[Path]:
         """The bag (a ROS 2 bag's folder too, when a storage file inside it was given)."""

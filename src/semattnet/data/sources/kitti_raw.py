@@ -116,7 +116,7 @@ class RawDriveSource(IndexedSource):
     def _neighbour(self, name: str, step: int) -> View | None:
         """The same camera's frame ``step`` away, with the camera's motion from the OXTS poses, when all exist."""
         from semattnet.geometry import invert_T, read_velo_to_cam
-        from semattnet.geometry.motion import read_oxts_pose
+        from semattnet.geometry.motion import read_oxts_latitude, read_oxts_pose
 
         drive = self.drive
         other = f"{int(name) + step:0{len(name)}d}" if name.isdigit() and int(name) + step >= 0 else None
@@ -132,7 +132,7 @@ class RawDriveSource(IndexedSource):
         if not all(p.is_file() for p in needed):
             return None
         here = read_oxts_pose(drive.oxts_dir / f"{name}.txt")
-        there = read_oxts_pose(drive.oxts_dir / f"{other}.txt", lat0_deg=_latitude(drive.oxts_dir / f"{name}.txt"))
+        there = read_oxts_pose(drive.oxts_dir / f"{other}.txt", lat0_deg=read_oxts_latitude(needed[2]))
         T_cam_imu = drive.calib.T_cam_lidar @ read_velo_to_cam(imu)
         T_view_cam = T_cam_imu @ invert_T(there) @ here @ invert_T(T_cam_imu)
         image = self._image(drive.image_dir / f"{other}.png", drive.calib.image_size, drive.camera)
@@ -142,8 +142,3 @@ class RawDriveSource(IndexedSource):
         date = self.drive.drive_dir.parent
         calib = [p for p in (date / "calib_cam_to_cam.txt", date / "calib_velo_to_cam.txt") if p.is_file()]
         return [self.drive.drive_dir, *calib, *([self.semantic_dir] if self.semantic_dir is not None else [])]
-
-
-def _latitude(path: Path) -> float:
-    """The latitude of an OXTS packet (its first number), which fixes the Mercator scale of a drive's poses."""
-    return float(path.read_text().split()[0])

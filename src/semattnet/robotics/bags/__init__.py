@@ -5,8 +5,8 @@ one-line :class:`~semattnet.MissingDependencyError` with the install hint.
 
 - Reading: :func:`list_topics`, :class:`BagPairs` (image + nearest scan + calibration from ``CameraInfo`` and
   ``/tf_static``, or a rig file; a :class:`BagFailure` for an image without a good pair), the decoders of
-  :mod:`.decode`, :class:`TransformTree`.
-- Writing: :func:`write_kitti_bag` / :func:`write_sensor_bag` (images, scans, CameraInfo, ``/tf_static``),
+  :mod:`.decode`, :class:`TransformTree`, ``/tf`` by stamp (:mod:`.tf_buffer`).
+- Writing: :func:`write_kitti_bag` / :func:`write_sensor_bag` (images, scans, CameraInfo, ``/tf_static``, ``/tf``),
   :class:`BagWriter` (completed depth 32FC1, coloured cloud, CameraInfo per frame).
 - Rerun: :class:`semattnet.robotics.rerun.RerunLogger`.
 """

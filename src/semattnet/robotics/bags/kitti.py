@@ -4,9 +4,11 @@ Per frame: the image as ``sensor_msgs/Image`` rgb8 (and optionally ``CompressedI
 ``sensor_msgs/PointCloud2`` (x, y, z, intensity float32; optionally some NaN points, so ``is_dense`` is
 false), the camera's ``CameraInfo`` (rectified: ``K = P[:, :3]``, no distortion, ``P`` = KITTI's
 ``P_rect_0X``); once, ``/tf_static`` through an intermediate frame: ``base_link -> velodyne`` and
-``base_link -> camera_color_left``, composed so that ``T_cam_base @ T_base_lidar = T_cam_lidar``. KITTI's
-``base_link`` is its IMU (``calib_imu_to_velo.txt``). Stamps come from the drive's ``timestamps.txt`` files,
-else frame index x 0.1 s after the drive's date.
+``base_link -> camera_color_left``, composed so that ``T_cam_base @ T_base_lidar = T_cam_lidar``; per frame with a
+pose, ``/tf`` ``odom -> base_link`` (the vehicle's motion, what poses neighbouring frames). KITTI's ``base_link`` is
+its IMU (``calib_imu_to_velo.txt``), its ``odom`` the IMU's pose at the first frame written, the poses those of the
+OXTS packets (:func:`semattnet.geometry.motion.read_oxts_pose`). Stamps come from the drive's ``timestamps.txt``
+files, else frame index x 0.1 s after the drive's date.
 """
 
 from __future__ import annotations
@@ -41,9 +43,11 @@ class BagTopics:
     camera_info: str = "/kitti/camera_color_left/camera_info"
     points: str = "/kitti/velo/pointcloud"
     tf_static: str = "/tf_static"
+    tf: str = "/tf"
     camera_frame: str = "camera_color_left"
     lidar_frame: str = "velodyne"
     base_frame: str = "base_link"
+    odom_frame: str = "odom"
 
     @property
     def compressed(self) -> str:
@@ -60,12 +64,15 @@ class BagTopics:
 @dataclass(frozen=True)
 class SensorRecord:
     """One frame to write: ``image`` (H, W, 3) uint8, ``points`` (N, 3|4) float32 LiDAR frame (+ intensity),
-    the image's and the scan's stamps (ns)."""
+    the image's and the scan's stamps (ns); ``pose``: (4, 4) ``T_odom_base``, the base's pose at ``pose_stamp_ns``
+    (None: the image's stamp), written to ``/tf`` (None: none)."""
 
     image: np.ndarray
     points: np.ndarray
     image_stamp_ns: int
     scan_stamp_ns: int
+    pose: np.ndarray | None = None
+    pose_stamp_ns: int | None = None
 
 
 @dataclass(frozen=True)
@@ -137,6 +144,9 @@ def write_sensor_bag(path: str | os.PathLike[str], records: Iterable[SensorRecor
             if compressed:
                 out.write(topics.compressed, t_img, compressed_image_message(ts, img, t_img, cam, compressed))
             out.write(topics.camera_info, t_img, camera_info_message(ts, info, t_img, cam))
+            if rec.pose is not None:
+                t_pose = t_img if rec.pose_stamp_ns is None else rec.pose_stamp_ns
+                out.write(topics.tf, t_pose, tf_message(ts, [(topics.odom_frame, topics.base_frame, rec.pose)], t_pose))
             pts = _with_nans(pts, nan_points)
             cols = {"x": pts[:, 0], "y": pts[:, 1], "z": pts[:, 2]}
             if pts.shape[1] == 4:
@@ -178,7 +188,8 @@ def write_kitti_bag(drive_dir: str | os.PathLike[str], out: str | os.PathLike[st
                     frames: str | Sequence[int] | None = None, fmt: str | None = None, compressed: str | None = None,
                     nan_points: int = 0, overwrite: bool = False) -> WrittenBag:  # fmt: skip
     """A bag of a KITTI raw drive (:class:`semattnet.data.kitti_raw.RawDrive`): frames ``frames`` (e.g. "0-10";
-    None: all) of colour camera ``camera`` with the Velodyne scans, CameraInfo and ``/tf_static``.
+    None: all) of colour camera ``camera`` with the Velodyne scans, CameraInfo, ``/tf_static`` and, where the drive
+    has ``calib_imu_to_velo.txt`` and the frame its OXTS packet, ``/tf`` (``odom -> base_link``, module doc).
 
     Raises:
         DataError: a missing drive, camera, frame or calibration file (naming it). FileExistsError: ``out`` exists.
@@ -196,8 +207,24 @@ def write_kitti_bag(drive_dir: str | os.PathLike[str], out: str | os.PathLike[st
     T_base_lidar = invert_T(read_velo_to_cam(imu)) if imu.is_file() else None
     img_ns = kitti_stamps_ns(drive.drive_dir, f"image_{drive.camera}", names)
     scan_ns = kitti_stamps_ns(drive.drive_dir, "velodyne_points", names)
-    records = (SensorRecord(f.image, f.points, ti, ts)
-               for f, ti, ts in zip((drive.frame(n) for n in names), img_ns, scan_ns, strict=True))  # fmt: skip
+    poses = _odom_poses(drive.oxts_dir, names) if imu.is_file() else [None] * len(names)
+    pose_ns = kitti_stamps_ns(drive.drive_dir, "oxts", names)
+    records = (SensorRecord(f.image, f.points, ti, ts, T, tp) for f, ti, ts, T, tp in
+               zip((drive.frame(n) for n in names), img_ns, scan_ns, poses, pose_ns, strict=True))  # fmt: skip
     return write_sensor_bag(out, records, drive.calib, T_base_lidar=T_base_lidar,
                             topics=BagTopics.for_camera(drive.camera), fmt=fmt, compressed=compressed,
                             nan_points=nan_points, overwrite=overwrite)  # fmt: skip
+
+
+def _odom_poses(oxts_dir: Path, names: Sequence[str]) -> list[np.ndarray | None]:
+    """Each frame's ``T_odom_imu`` from its OXTS packet (None without one): ``odom`` is the IMU at the first frame
+    with a packet, whose latitude fixes the Mercator scale of every pose."""
+    from semattnet.geometry.motion import read_oxts_latitude, read_oxts_pose
+
+    paths = [oxts_dir / f"{name}.txt" for name in names]
+    first = next((p for p in paths if p.is_file()), None)
+    if first is None:
+        return [None] * len(paths)
+    lat0 = read_oxts_latitude(first)
+    T_odom_world = invert_T(read_oxts_pose(first, lat0_deg=lat0))
+    return [T_odom_world @ read_oxts_pose(p, lat0_deg=lat0) if p.is_file() else None for p in paths]

@@ -115,6 +115,12 @@ class TransformTree:
         self.source = source
         self._edges: dict[str, dict[str, np.ndarray]] = {}
 
+    def copy(self, source: str | None = None) -> TransformTree:
+        """A tree with the same edges (adding to it leaves this one unchanged), its errors naming ``source``."""
+        tree = TransformTree(self.source if source is None else source)
+        tree._edges = {frame: dict(edges) for frame, edges in self._edges.items()}
+        return tree
+
     @property
     def frames(self) -> list[str]:
         """Every frame named by an edge, sorted."""

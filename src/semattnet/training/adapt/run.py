@@ -260,7 +260,10 @@ class Adapter:
             photo, _ = photometric_loss(image, pred, batch.views.to(dev), cfg.automask)
             terms["photometric"] = cfg.w_photometric * photo
         elif "photometric" in cfg.losses and not self._no_views_said:
-            self.log("photometric loss: these frames have no other view (a stereo partner); it is left out")
+            self.log(
+                "photometric loss: these frames have no other view (a stereo partner, a posed neighbouring "
+                "frame); it is left out"
+            )
             self._no_views_said = True
         if "smoothness" in cfg.losses:
             terms["smoothness"] = cfg.w_smooth * smoothness_loss(pred, image)
