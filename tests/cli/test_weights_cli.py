@@ -187,12 +187,24 @@ def test_info_reads_names_and_folders_with_their_config(tmp_path: Path) -> None:
     assert bad.exit_code == 2 and "known: semattnet-kitti" in bad.output
 
 
-def test_bench_takes_precision_through_the_shared_options() -> None:
+def test_bench_takes_precision_and_outputs_through_the_shared_options(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--precision f32`` keeps the float32 rows; ``--outputs refined_depth`` builds engines that return what a
+    robot reads (an OpenVINO graph cut to it)."""
+    from semattnet.apps import benchmark
+
+    asked: list[object] = []
+    real = benchmark.optimize_for_inference
+    monkeypatch.setattr(
+        benchmark, "optimize_for_inference", lambda *a, **k: asked.append(k["outputs"]) or real(*a, **k)
+    )
     out = run("bench", "--parts", "backends", "--precision", "f32", "--size", "32x64", "--repeats", "1",
-              "--device", "cpu", "--width", "0.125")  # fmt: skip
+              "--device", "cpu", "--width", "0.125", "--outputs", "refined_depth")  # fmt: skip
     rows = [line for line in out.splitlines() if "backend " in line]
     assert rows and all("(f32)" in line for line in rows), out
-    for args, message in ((["--calibration", "."], "--calibration only mean(s) something with --precision int8"),
-                          (["--precision", "f32", "--parts", "full"], "backends is not in --parts")):  # fmt: skip
+    assert asked and set(asked) == {("refined_depth",)}
+    refused = ((["--calibration", "."], "--calibration only mean(s) something with --precision int8"),
+               (["--precision", "f32", "--parts", "full"], "backends is not in --parts"),
+               (["--outputs", "refined_depth,depth_map"], "--outputs: unknown output(s) ['depth_map']"))  # fmt: skip
+    for args, message in refused:
         res = CliRunner().invoke(main, ["bench", *args])
-        assert res.exit_code == 2 and message in res.output, res.output
+        assert res.exit_code != 0 and message in res.output, res.output

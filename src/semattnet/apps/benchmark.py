@@ -123,6 +123,11 @@ class _Bench:
         self.log(self.res.row(row))
 
 
+#: How the backends' engines are built: the one precision asked for (None: each the CPU runs well), int8's
+#: calibration frames, the output fields they return (None: every map).
+EngineOptions = tuple[str | None, Path | None, tuple[str, ...] | None]
+
+
 def run_benchmark(
     size: tuple[int, int] = (352, 1216),
     device: str | torch.device = "cpu",
@@ -134,10 +139,12 @@ def run_benchmark(
     log: Callable[[str], None] = print,
     precision: str | None = None,
     calibration: Path | None = None,
+    outputs: tuple[str, ...] | None = None,
 ) -> BenchResult:
     """Measure the parts asked for; ``model`` (a full SemAttNet) replaces random weights. ``precision``
     (``f32``, ``bf16``, ``int8``) keeps only the backends' rows of that arithmetic; ``calibration``: int8's
-    calibration frames (default: synthetic scenes)."""
+    calibration frames (default: synthetic scenes); ``outputs``: the fields the backends' engines return
+    (``optimize_for_inference(outputs=)``; None: every map)."""
     if model is not None and not hasattr(model, "backbone"):
         raise InputError("model: bench needs a full SemAttNet (with refinement), not a backbone checkpoint")
     dev = torch.device(device)
@@ -150,7 +157,7 @@ def run_benchmark(
     x = random_frame(size, dev)
     if any(p in parts for p in ("backbone", "full", "fast", "backends")):
         net = model if model is not None else build_model("semattnet", width=width)
-        _bench_inference(bench, net.to(dev).eval(), x, parts, fast_dtype, (precision, calibration))
+        _bench_inference(bench, net.to(dev).eval(), x, parts, fast_dtype, (precision, calibration, outputs))
     if "train" in parts:
         _bench_training(bench, train_size, model, width)
     for note in bench.res.notes:
@@ -218,7 +225,7 @@ def _bench_inference(
     x: dict[str, torch.Tensor],
     parts: tuple[str, ...],
     fast_dtype: torch.dtype | None,
-    arithmetic: tuple[str | None, Path | None] = (None, None),
+    engine: EngineOptions = (None, None, None),
 ) -> None:
     """Rows: backbone and full model, naive against ours (and the fast mode); notes: GMACs, GFLOP/s."""
     dev = bench.dev
@@ -228,7 +235,7 @@ def _bench_inference(
         f"{gmacs:.3g} GMACs per frame (convolutions); measured conv peak {peak:.0f} GFLOP/s (float32)"
     )
     fast_net = fold_batchnorm(net)
-    candidates = _inference_candidates(net, fast_net, x, parts, fast_dtype, dev, arithmetic)
+    candidates = _inference_candidates(net, fast_net, x, parts, fast_dtype, dev, engine)
     with torch.inference_mode():
         outputs, peaks, last = _first_runs(candidates, dev)
         seconds = interleaved(candidates, dev, bench.repeats)
@@ -252,7 +259,7 @@ def _inference_candidates(
     parts: tuple[str, ...],
     fast_dtype: torch.dtype | None,
     dev: torch.device,
-    arithmetic: tuple[str | None, Path | None] = (None, None),
+    engine: EngineOptions = (None, None, None),
 ) -> dict[str, Callable[[], DepthCompletionOutput]]:
     """Row label -> forward pass to time; each kind's naive reference comes before ours."""
 
@@ -278,7 +285,7 @@ def _inference_candidates(
     if "fast" in parts:
         candidates[f"full model, fast ({str(fast_dtype).removeprefix('torch.')} autocast)"] = fast_full
     if "backends" in parts:
-        candidates.update(_backend_candidates(net, x, dev, fast_dtype, *arithmetic))
+        candidates.update(_backend_candidates(net, x, dev, fast_dtype, *engine))
     return candidates
 
 
@@ -289,6 +296,7 @@ def _backend_candidates(
     fast_dtype: torch.dtype | None,
     only: str | None = None,
     calibration: Path | None = None,
+    outputs: tuple[str, ...] | None = None,
 ) -> dict[str, Callable[[], DepthCompletionOutput]]:
     """Every installed inference backend at this size that runs on ``dev`` (the engine table's), at float32;
     also bf16 where the CPU has it natively; int8 for OpenVINO with nncf installed, calibrated on synthetic
@@ -302,7 +310,8 @@ def _backend_candidates(
             continue
         for precision in [p for p in entry.precisions if p in wanted and only in (None, p)]:
             engine = optimize_for_inference(net, backend=backend, size=size, precision=precision, device=dev,
-                                            calibration=calibration if precision == "int8" else None)  # fmt: skip
+                                            calibration=calibration if precision == "int8" else None,
+                                            outputs=outputs)  # fmt: skip
             runs[f"full model, backend {backend} ({precision})"] = functools.partial(engine, **x)
     return runs
 

@@ -141,14 +141,17 @@ def ablate(out_dir: Path, configs: str, seeds: tuple[int, ...], backbone_steps: 
               help="Also write the results as JSON.")  # fmt: skip
 @click.option("--overwrite", is_flag=True, help="Replace an existing --json file.")
 @precision_options
+@click.option("--outputs", "output_fields", default="", help="The fields the backends' engines return, e.g. "
+              "refined_depth (what a robot reads: an OpenVINO graph cut to it) [default: every map].")  # fmt: skip
 def bench(size: str, train_size: str, device: str, repeats: int, width: float, parts: str, weights: str | None,
-          json_path: Path | None, overwrite: bool, precision: str | None,
-          calibration: Path | None) -> None:  # fmt: skip
+          json_path: Path | None, overwrite: bool, precision: str | None, calibration: Path | None,
+          output_fields: str) -> None:  # fmt: skip
     """Latency, throughput and peak memory against the naive reference, in one process. With --precision, the
     backends' rows are those of that arithmetic only (int8: OpenVINO + NNCF, calibrated on --calibration)."""
     from semattnet._utils.device import resolve_device
     from semattnet._utils.outputs import Output, check_outputs, write_text
     from semattnet.apps.benchmark import run_benchmark
+    from semattnet.models.outputs import check_output_names
 
     check_calibration(precision)
     if calibration is not None:
@@ -161,8 +164,10 @@ def bench(size: str, train_size: str, device: str, repeats: int, width: float, p
     unknown = set(chosen) - {"propagation", "backbone", "full", "fast", "backends", "train"}
     if unknown:
         raise click.BadParameter(f"unknown part(s) {sorted(unknown)}", param_hint="--parts")
+    fields = tuple(f.strip() for f in output_fields.split(",") if f.strip()) or None
+    check_output_names(fields or (), "--outputs")
     result = run_benchmark(parse_size(size), resolve_device(device), repeats, width, chosen,
                            parse_size(train_size), model, log=click.echo, precision=precision,
-                           calibration=calibration)  # fmt: skip
+                           calibration=calibration, outputs=fields)  # fmt: skip
     if json_path is not None:
         write_text(json_path, json.dumps(result.to_dict(), indent=2) + "\n", overwrite=overwrite)
