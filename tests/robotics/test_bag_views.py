@@ -21,7 +21,6 @@ from semattnet.data.sources import RawDriveSource
 from semattnet.data.synthetic.drive import write_synthetic_drives
 from semattnet.geometry import make_T
 from semattnet.robotics import BagSource
-from semattnet.robotics.bag_source import BagOptions
 from semattnet.robotics.bags import BagTopics, SensorRecord, list_topics, write_kitti_bag, write_sensor_bag
 from semattnet.robotics.bags.tf import TransformTree
 from semattnet.robotics.bags.tf_buffer import TransformBuffer, interpolate_transform
@@ -76,8 +75,7 @@ def test_a_bag_without_tf_or_without_the_fixed_frame_gives_no_views_said_once(ba
     assert all(source.views(name) == () for name in source.names)
     assert [line for line in lines[1:]] == [f"{bags['no_tf']}: /tf: no transform; the frames get no neighbouring views"]
     lines.clear()
-    options = BagOptions(bag=bags["mcap"], image_topic=T.image, points_topic=T.points, odom_frame="map")  # --odom-frame
-    source = options.source(None, lines.append)
+    source = BagSource(bags["mcap"], T.image, T.points, log=lines.append, odom_frame="map")  # adapt --odom-frame map
     assert all(source.views(name) == () for name in source.names)
     assert len(lines) == 2 and "no chain from 'map' to the camera frame 'camera_color_left'" in lines[1]
     assert "/tf frames: base_link, odom" in lines[1]
@@ -131,10 +129,10 @@ def weights(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-def _adapt(bag: Path, weights: Path, out: Path) -> Any:
+def _adapt(bag: Path, weights: Path, out: Path, *extra: str) -> Any:
     args = ["adapt", "--bag", bag, "--image-topic", T.image, "--points-topic", T.points, "--weights", weights,
             "--out", out, "--crop", "32x64", "--batch-size", "1", "--steps", "1", "--device", "cpu"]  # fmt: skip
-    return CliRunner().invoke(main, list(map(str, args)))
+    return CliRunner().invoke(main, list(map(str, [*args, *extra])))
 
 
 @pytest.mark.filterwarnings("ignore:no semantic maps given")
@@ -145,8 +143,9 @@ def _adapt(bag: Path, weights: Path, out: Path) -> Any:
 def test_adapt_on_a_bag_uses_its_neighbouring_frames_where_tf_poses_them(
     bags: dict[str, Path], weights: Path, tmp_path: Path, bag: str, photometric: bool
 ) -> None:
-    res = _adapt(bags[bag], weights, tmp_path / "run")
+    res = _adapt(bags[bag], weights, tmp_path / "run", *(["--odom-frame", "odom"] if photometric else []))
     assert res.exit_code == 0, res.output
+    assert res.output.count("posed by /tf from 'odom'") == int(photometric)
     step = json.loads((tmp_path / "run" / "log.json").read_text())["steps"][0]
     assert ("photometric" in step and step["photometric"] > 0) is photometric
     assert res.output.count("no other view") == (0 if photometric else 1)

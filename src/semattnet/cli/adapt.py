@@ -58,6 +58,9 @@ ADAPT_OPTIONS = (
     _OPTION(["--loss", "losses"], default="sparse,photometric,smoothness", show_default=True,
             help="The losses, comma-separated: sparse (hidden LiDAR points), photometric (the frames' other views: "
             "KITTI raw's stereo partner and neighbours, a bag's neighbours posed by /tf), smoothness."),
+    _OPTION(["--odom-frame"], default=None,
+            help="With --bag: the fixed frame of /tf that poses the neighbouring frames [odom if /tf has it, else the "
+            "root of /tf's tree]."),
     _OPTION(["--hide"], default="0.2..0.3", show_default=True,
             help="The share of LiDAR points hidden from the input each step: 0.25, or a range drawn from."),
     _OPTION(["--w-kept"], type=NONNEGATIVE_FLOAT, default=0.5, show_default=True,
@@ -98,6 +101,7 @@ class AdaptOptions:
     lr: float
     crop: str
     losses: str
+    odom_frame: str | None
     hide: str
     w_kept: float
     w_photometric: float
@@ -160,6 +164,10 @@ def adapt(**params: object) -> None:
     if options.weights is None and not options.resume:
         raise click.UsageError("--weights is required (the weights to adapt), unless --resume")
     source, maps = chosen.open(options.device)
+    if options.odom_frame is not None:
+        if not hasattr(source, "odom_frame"):
+            raise click.UsageError("--odom-frame poses a bag's neighbouring frames: it needs --bag")
+        source.odom_frame = options.odom_frame
     cfg = options.config(len(source.names))
     result = run_adaptation(cfg, source, maps, resume=options.resume, overwrite=options.overwrite, log=click.echo)
     if launch_rank() == 0:  # under torchrun, rank 0 alone reports

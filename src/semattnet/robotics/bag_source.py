@@ -62,9 +62,6 @@ class BagOptions(SourceOptions):
     max_skew: float | None = option(
         "--max-skew", type="seconds", help="Seconds between an image and its scan at most [half the scan period]."
     )
-    odom_frame: str | None = option("--odom-frame", identity=False,
-                                    help="The fixed frame of /tf that poses neighbouring frames for adapt's "
-                                    "photometric loss [odom if /tf has it, else the root of /tf's tree].")  # fmt: skip
     list_topics: bool = option("--list-topics", type="flag", identity=False, help="Print the bag's topics and exit.")
 
     def check(self, segment_spec: str | None) -> None:
@@ -85,7 +82,7 @@ class BagOptions(SourceOptions):
     def source(self, semantic: Path | None, log: Callable[[str], None]) -> BagSource:
         assert self.bag is not None and self.image_topic is not None and self.points_topic is not None  # checked
         return BagSource(self.bag, self.image_topic, self.points_topic, self.camera_info_topic, self.rig,
-                         self.max_skew, self.semantic_topic, log=log, odom_frame=self.odom_frame)  # fmt: skip
+                         self.max_skew, self.semantic_topic, log=log)  # fmt: skip
 
 
 @register_source("bag", option="--bag", options=BagOptions)
