@@ -3,6 +3,7 @@ from __future__ import annotations
 import os
 import signal
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 import torch
@@ -24,6 +25,15 @@ def _default_sigchld() -> Iterator[None]:
 @pytest.fixture(autouse=True)
 def _deterministic() -> None:
     torch.manual_seed(0)
+
+
+@pytest.fixture(scope="session")
+def tiny_weights(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A random three-branch SemAttNet at width 0.125 (seed 0) as safetensors: for tests of a code path that
+    needs weights, not their accuracy."""
+    from tests.inference._raw_sample import tiny_checkpoint
+
+    return tiny_checkpoint(tmp_path_factory.mktemp("tiny-weights") / "tiny.safetensors")
 
 
 def _devices() -> list[str]:

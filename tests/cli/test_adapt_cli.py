@@ -10,13 +10,10 @@ from typing import Any
 
 import numpy as np
 import pytest
-import torch
 from click.testing import CliRunner
 
-import semattnet
 from semattnet.cli import main
 from semattnet.data.io import write_depth, write_image
-from semattnet.weights import save_safetensors
 
 DRIVE = Path(__file__).resolve().parents[1] / "data/kitti_sample/kitti_raw/2011_09_26/2011_09_26_drive_0035_sync"
 TINY = ["--crop", "32x64", "--batch-size", "1", "--steps", "1", "--device", "cpu"]
@@ -24,27 +21,19 @@ TINY = ["--crop", "32x64", "--batch-size", "1", "--steps", "1", "--device", "cpu
 pytestmark = pytest.mark.filterwarnings("ignore:no semantic maps given")
 
 
-@pytest.fixture(scope="module")
-def weights(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    torch.manual_seed(0)
-    path = tmp_path_factory.mktemp("adapt-cli") / "tiny.safetensors"
-    save_safetensors(semattnet.build_model("semattnet", width=0.125).state_dict(), path)
-    return path
-
-
 def _run(*args: object) -> Any:
     return CliRunner().invoke(main, list(map(str, args)))
 
 
-def test_adapt_on_the_kitti_raw_drive_uses_the_stereo_partner(weights: Path, tmp_path: Path) -> None:
+def test_adapt_on_the_kitti_raw_drive_uses_the_stereo_partner(tiny_weights: Path, tmp_path: Path) -> None:
     out = tmp_path / "run"
-    res = _run("adapt", "--kitti-raw", DRIVE, "--weights", weights, "--out", out, *TINY)
+    res = _run("adapt", "--kitti-raw", DRIVE, "--weights", tiny_weights, "--out", out, *TINY)
     assert res.exit_code == 0, res.output
     assert "done: step 1 on 1 frame(s)" in res.output
     assert {p.name for p in out.iterdir()} == {"adapted.safetensors", "checkpoints", "log.json"}
     step = json.loads((out / "log.json").read_text())["steps"][0]
     assert {"sparse", "photometric", "smoothness"} <= set(step) and step["photometric"] > 0
-    again = _run("adapt", "--kitti-raw", DRIVE, "--weights", weights, "--out", out, *TINY)
+    again = _run("adapt", "--kitti-raw", DRIVE, "--weights", tiny_weights, "--out", out, *TINY)
     assert again.exit_code == 1 and "already holds an adaptation run" in again.output and "--overwrite" in again.output
 
 
@@ -64,11 +53,11 @@ def _folder(root: Path, bad: str) -> tuple[Path, Path]:
 @pytest.mark.slow  # seconds: adapt then predict; the drive's test above runs adapt end to end by default
 @pytest.mark.filterwarnings("ignore:.*hole\\(s\\)", "ignore:clamped")
 def test_adapt_on_a_folder_skips_and_counts_a_bad_frame_and_predict_reads_the_result(
-    weights: Path, tmp_path: Path
+    tiny_weights: Path, tmp_path: Path
 ) -> None:
     rgb, sparse = _folder(tmp_path / "frames", bad="f1")
     out = tmp_path / "run"
-    res = _run("adapt", "--rgb", rgb, "--sparse", sparse, "--weights", weights, "--out", out, *TINY)
+    res = _run("adapt", "--rgb", rgb, "--sparse", sparse, "--weights", tiny_weights, "--out", out, *TINY)
     assert res.exit_code == 3, res.output
     assert "f1: skipped: " in res.output and "f1.png" in res.output and "1 frame(s) skipped" in res.output
     assert json.loads((out / "log.json").read_text())["skipped"][0]["name"] == "f1"
@@ -83,9 +72,9 @@ def test_adapt_on_a_folder_skips_and_counts_a_bad_frame_and_predict_reads_the_re
      (["--hide", "a..b"], "--hide")],
 )  # fmt: skip
 def test_adapt_options_are_checked_before_any_work(
-    weights: Path, tmp_path: Path, args: list[str], message: str
+    tiny_weights: Path, tmp_path: Path, args: list[str], message: str
 ) -> None:
-    res = _run("adapt", "--kitti-raw", DRIVE, "--weights", weights, "--out", tmp_path / "run", *args)
+    res = _run("adapt", "--kitti-raw", DRIVE, "--weights", tiny_weights, "--out", tmp_path / "run", *args)
     assert res.exit_code == 2 and message in res.output, res.output
     assert not (tmp_path / "run").exists()
 

@@ -11,10 +11,8 @@ from typing import Any
 
 import numpy as np
 import pytest
-import torch
 from click.testing import CliRunner
 
-import semattnet
 from semattnet.cli import main
 from semattnet.data.kitti_raw import RawDrive
 from semattnet.data.sources import RawDriveSource
@@ -24,7 +22,6 @@ from semattnet.robotics import BagSource
 from semattnet.robotics.bags import BagTopics, SensorRecord, list_topics, write_kitti_bag, write_sensor_bag
 from semattnet.robotics.bags.tf import TransformTree
 from semattnet.robotics.bags.tf_buffer import TransformBuffer, interpolate_transform
-from semattnet.weights import save_safetensors
 
 pytest.importorskip("rosbags")
 
@@ -121,14 +118,6 @@ def test_a_neighbour_outside_the_span_of_tf_is_no_view(drive: Path, tmp_path: Pa
     assert [[v.name for v in source.views(n)] for n in NAMES] == [NAMES[1:2], NAMES[:1], []]
 
 
-@pytest.fixture(scope="module")
-def weights(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    torch.manual_seed(0)
-    path = tmp_path_factory.mktemp("bag-views-weights") / "tiny.safetensors"
-    save_safetensors(semattnet.build_model("semattnet", width=0.125).state_dict(), path)
-    return path
-
-
 def _adapt(bag: Path, weights: Path, out: Path, *extra: str) -> Any:
     args = ["adapt", "--bag", bag, "--image-topic", T.image, "--points-topic", T.points, "--weights", weights,
             "--out", out, "--crop", "32x64", "--batch-size", "1", "--steps", "1", "--device", "cpu"]  # fmt: skip
@@ -141,9 +130,9 @@ def _adapt(bag: Path, weights: Path, out: Path, *extra: str) -> Any:
     pytest.param("no_tf", False, marks=pytest.mark.slow),  # seconds; the source's own test above is fast
 ])  # fmt: skip
 def test_adapt_on_a_bag_uses_its_neighbouring_frames_where_tf_poses_them(
-    bags: dict[str, Path], weights: Path, tmp_path: Path, bag: str, photometric: bool
+    bags: dict[str, Path], tiny_weights: Path, tmp_path: Path, bag: str, photometric: bool
 ) -> None:
-    res = _adapt(bags[bag], weights, tmp_path / "run", *(["--odom-frame", "odom"] if photometric else []))
+    res = _adapt(bags[bag], tiny_weights, tmp_path / "run", *(["--odom-frame", "odom"] if photometric else []))
     assert res.exit_code == 0, res.output
     assert res.output.count("posed by /tf from 'odom'") == int(photometric)
     step = json.loads((tmp_path / "run" / "log.json").read_text())["steps"][0]

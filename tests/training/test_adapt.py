@@ -16,12 +16,10 @@ import pytest
 import torch
 import torch.distributed as dist
 
-import semattnet
 from semattnet._errors import DataError, InputError
 from semattnet._utils import distributed as dist_utils
 from semattnet.data.frames import Frame, IndexedSource
 from semattnet.training.adapt import FINAL, LOG, STATE, AdaptConfig, Adapter, adapt
-from semattnet.weights import save_safetensors
 from semattnet.weights.checkpoint import load_checkpoint
 from semattnet.weights.hub import from_pretrained
 
@@ -48,14 +46,6 @@ class _Frames(IndexedSource):
         return []
 
 
-@pytest.fixture(scope="module")
-def weights(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    torch.manual_seed(0)
-    path = tmp_path_factory.mktemp("adapt-weights") / "tiny.safetensors"
-    save_safetensors(semattnet.build_model("semattnet", width=0.125).state_dict(), path)
-    return path
-
-
 def _cfg(weights: Path, out: Path, **kw: object) -> AdaptConfig:
     return AdaptConfig(**({"weights": str(weights), "out": str(out), "steps": 2, "batch_size": 1, "crop": SIZE,
                            "device": "cpu"} | kw))  # type: ignore[arg-type]  # fmt: skip
@@ -66,16 +56,16 @@ def _quiet(msg: str) -> None:
 
 
 @pytest.mark.filterwarnings("ignore:no semantic maps given")
-def test_adapt_writes_a_normal_checkpoint_and_skips_bad_frames(weights: Path, tmp_path: Path) -> None:
+def test_adapt_writes_a_normal_checkpoint_and_skips_bad_frames(tiny_weights: Path, tmp_path: Path) -> None:
     lines: list[str] = []
-    result = adapt(_cfg(weights, tmp_path / "run"), _Frames(3, bad=("f1",)), log=lines.append)
+    result = adapt(_cfg(tiny_weights, tmp_path / "run"), _Frames(3, bad=("f1",)), log=lines.append)
     assert result.step == 2 and result.frames == 2
     assert [(f.name, f.status) for f in result.skipped] == [("f1", "skipped")] and "f1.png" in result.skipped[0].reason
     assert "f1: skipped: f1.png: not a PNG file" in lines
     assert any("no other view" in line for line in lines)  # the photometric loss asked for, and left out
     adapted = from_pretrained(tmp_path / "run" / FINAL)  # what predict --weights reads; so is the state
     state = from_pretrained(tmp_path / "run" / STATE)
-    before = load_checkpoint(weights).state_dict
+    before = load_checkpoint(tiny_weights).state_dict
     after = adapted.state_dict()
     assert any(not torch.equal(before[k], after[k]) for k in before)
     assert all(torch.equal(after[k], v) for k, v in state.state_dict().items())
@@ -86,12 +76,12 @@ def test_adapt_writes_a_normal_checkpoint_and_skips_bad_frames(weights: Path, tm
 
 @pytest.mark.filterwarnings("ignore:no semantic maps given")
 def test_a_bad_frame_stops_the_run_with_on_error_stop_and_no_usable_frame_is_one_line(
-    weights: Path, tmp_path: Path
+    tiny_weights: Path, tmp_path: Path
 ) -> None:
     with pytest.raises(DataError, match=r"f0\.png: not a PNG"):
-        adapt(_cfg(weights, tmp_path / "a", on_error="stop"), _Frames(2, bad=("f0",)), log=_quiet)
+        adapt(_cfg(tiny_weights, tmp_path / "a", on_error="stop"), _Frames(2, bad=("f0",)), log=_quiet)
     with pytest.raises(DataError, match="none of its 2 frame"):
-        adapt(_cfg(weights, tmp_path / "b"), _Frames(2, bad=("f0", "f1")), log=_quiet)
+        adapt(_cfg(tiny_weights, tmp_path / "b"), _Frames(2, bad=("f0", "f1")), log=_quiet)
 
 
 class _Killed(BaseException):
@@ -99,9 +89,11 @@ class _Killed(BaseException):
 
 
 @pytest.mark.filterwarnings("ignore:no semantic maps given")
-def test_resume_equals_the_uninterrupted_run(weights: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_resume_equals_the_uninterrupted_run(
+    tiny_weights: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     cfg = {"steps": 3, "save_every": 1}
-    adapt(_cfg(weights, tmp_path / "whole", **cfg), _Frames(), log=_quiet)
+    adapt(_cfg(tiny_weights, tmp_path / "whole", **cfg), _Frames(), log=_quiet)
     save = Adapter.save
 
     def save_then_die(self: Adapter) -> None:
@@ -111,11 +103,11 @@ def test_resume_equals_the_uninterrupted_run(weights: Path, tmp_path: Path, monk
 
     monkeypatch.setattr(Adapter, "save", save_then_die)
     with pytest.raises(_Killed):
-        adapt(_cfg(weights, tmp_path / "cut", **cfg), _Frames(), log=_quiet)
+        adapt(_cfg(tiny_weights, tmp_path / "cut", **cfg), _Frames(), log=_quiet)
     monkeypatch.setattr(Adapter, "save", save)
     with pytest.raises(FileExistsError, match="--resume"):
-        adapt(_cfg(weights, tmp_path / "cut", **cfg), _Frames(), log=_quiet)
-    adapt(_cfg(weights, tmp_path / "cut", **cfg), _Frames(), resume=True, log=_quiet)
+        adapt(_cfg(tiny_weights, tmp_path / "cut", **cfg), _Frames(), log=_quiet)
+    adapt(_cfg(tiny_weights, tmp_path / "cut", **cfg), _Frames(), resume=True, log=_quiet)
     a, b = (load_checkpoint(tmp_path / run / FINAL).state_dict for run in ("whole", "cut"))
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
     logs = [json.loads((tmp_path / run / LOG).read_text())["steps"] for run in ("whole", "cut")]
@@ -124,7 +116,7 @@ def test_resume_equals_the_uninterrupted_run(weights: Path, tmp_path: Path, monk
 
 @pytest.mark.filterwarnings("ignore:no semantic maps given")
 def test_a_run_killed_between_the_log_and_the_state_resumes_with_the_log_of_every_step(
-    weights: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tiny_weights: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     from semattnet.training.adapt import run
 
@@ -138,15 +130,15 @@ def test_a_run_killed_between_the_log_and_the_state_resumes_with_the_log_of_ever
 
     monkeypatch.setattr(run, "atomic_path", die_at_the_fourth_write)
     with pytest.raises(_Killed):
-        adapt(_cfg(weights, tmp_path, steps=2, save_every=1), _Frames(), log=_quiet)
+        adapt(_cfg(tiny_weights, tmp_path, steps=2, save_every=1), _Frames(), log=_quiet)
     monkeypatch.setattr(run, "atomic_path", atomic_path)
-    adapt(_cfg(weights, tmp_path), _Frames(), resume=True, log=_quiet)
+    adapt(_cfg(tiny_weights, tmp_path), _Frames(), resume=True, log=_quiet)
     assert [r["step"] for r in json.loads((tmp_path / LOG).read_text())["steps"]] == [1, 2]
 
 
 @pytest.mark.filterwarnings("ignore:no semantic maps given")
-def test_the_held_out_metric_uses_frames_kept_out_of_training(weights: Path, tmp_path: Path) -> None:
-    adapter = Adapter(_cfg(weights, tmp_path, steps=1, gt_every=1, gt_frames=1), _Frames(3), log=_quiet)
+def test_the_held_out_metric_uses_frames_kept_out_of_training(tiny_weights: Path, tmp_path: Path) -> None:
+    adapter = Adapter(_cfg(tiny_weights, tmp_path, steps=1, gt_every=1, gt_frames=1), _Frames(3), log=_quiet)
     assert adapter.pool.held_out == ["f2"] and adapter.pool.names == ["f0", "f1"]
     result = adapter.run()
     assert result.metrics is not None and result.metrics["rmse_mm"] > 0
@@ -169,10 +161,10 @@ def _cli(*args: str) -> list[str]:
 
 @pytest.mark.slow  # ~20 s: three processes on the real frame
 def test_a_run_killed_with_sigkill_and_resumed_ends_with_the_uninterrupted_weights(
-    weights: Path, tmp_path: Path
+    tiny_weights: Path, tmp_path: Path
 ) -> None:
     drive = Path(__file__).resolve().parents[1] / "data/kitti_sample/kitti_raw/2011_09_26/2011_09_26_drive_0035_sync"
-    common = ["--kitti-raw", str(drive), "--weights", str(weights), "--crop", "32x64", "--batch-size", "1",
+    common = ["--kitti-raw", str(drive), "--weights", str(tiny_weights), "--crop", "32x64", "--batch-size", "1",
               "--steps", "6", "--save-every", "2", "--device", "cpu"]  # fmt: skip
     env = os.environ | {"OMP_NUM_THREADS": "1"}
     subprocess.run(_cli(*common, "--out", str(tmp_path / "whole")), check=True, capture_output=True, env=env)
@@ -194,12 +186,12 @@ def test_a_run_killed_with_sigkill_and_resumed_ends_with_the_uninterrupted_weigh
 
 @pytest.mark.filterwarnings("ignore:no semantic maps given")
 def test_a_process_group_of_one_runs_the_ddp_path_and_resume_needs_as_many_processes(
-    weights: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tiny_weights: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     lines: list[str] = []
     dist.init_process_group("gloo", store=dist.HashStore(), rank=0, world_size=1)
     try:
-        adapt(_cfg(weights, tmp_path, steps=1), _Frames(), log=lines.append)
+        adapt(_cfg(tiny_weights, tmp_path, steps=1), _Frames(), log=lines.append)
     finally:
         if dist.is_initialized():
             dist.destroy_process_group()
@@ -208,9 +200,9 @@ def test_a_process_group_of_one_runs_the_ddp_path_and_resume_needs_as_many_proce
     assert isinstance(rng, list) and len(rng) == 1  # each rank's generator
     monkeypatch.setattr(dist_utils, "world_size", lambda: 2)
     with pytest.raises(InputError, match=r"ran as 1 process\(es\), this is 2; .*--nproc_per_node 1"):
-        Adapter(_cfg(weights, tmp_path), _Frames(), resume=True, log=_quiet)
+        Adapter(_cfg(tiny_weights, tmp_path), _Frames(), resume=True, log=_quiet)
     with pytest.raises(InputError, match="--train-bn with several processes needs CUDA"):
-        Adapter(_cfg(weights, tmp_path / "bn", freeze_bn=False), _Frames(), log=_quiet)
+        Adapter(_cfg(tiny_weights, tmp_path / "bn", freeze_bn=False), _Frames(), log=_quiet)
 
 
 def _torchrun(*args: str) -> list[str]:
@@ -232,9 +224,9 @@ def _kill_workers_after_the_first_state(proc: subprocess.Popen[bytes], out: Path
 
 
 @pytest.mark.slow  # ~40 s: three torchrun launches of two processes
-def test_torchrun_two_processes_and_a_killed_run_resumed_under_torchrun(weights: Path, tmp_path: Path) -> None:
+def test_torchrun_two_processes_and_a_killed_run_resumed_under_torchrun(tiny_weights: Path, tmp_path: Path) -> None:
     drive = Path(__file__).resolve().parents[1] / "data/kitti_sample/kitti_raw/2011_09_26/2011_09_26_drive_0035_sync"
-    common = ["--kitti-raw", str(drive), "--weights", str(weights), "--crop", "32x64", "--batch-size", "1",
+    common = ["--kitti-raw", str(drive), "--weights", str(tiny_weights), "--crop", "32x64", "--batch-size", "1",
               "--steps", "6", "--save-every", "2", "--device", "cpu"]  # fmt: skip
     env = os.environ | {"OMP_NUM_THREADS": "1"}
     whole, cut = tmp_path / "whole", tmp_path / "cut"
