@@ -31,7 +31,8 @@ def _row(rmse: float, mae: float = 1000.0, irmse: float = 5.0, imae: float = 3.0
 
 
 def _results(**rows: dict[str, Any]) -> dict[str, Any]:
-    return {"command": "python benchmarks/shift.py --tiny", "settings": {"seeds": [0, 1]}, "device": "cpu",
+    settings = {"seeds": [0, 1], "adapt_steps": 800, "ablation_steps": 400}
+    return {"command": "python benchmarks/shift.py --tiny", "settings": settings, "device": "cpu",
             "machine": "a CPU", "seconds": {"total": 60.0}, "rows": rows}  # fmt: skip
 
 
@@ -49,11 +50,13 @@ def test_summary_is_the_share_of_the_gap_closed_and_the_classical_comparison(shi
 
 def test_table_and_docs_between_the_markers(shift: ModuleType, tmp_path: Path) -> None:
     rows = {"classical": _row(3000, 2000, 9, 4), "unadapted": _row(8000), "adapted_all": _row(2500),
-            "supervised": _row(2000)}  # fmt: skip
+            "adapted_sparse": _row(2700), "supervised": _row(2000)}  # fmt: skip
     results = _results(**rows) | {"summary": shift.summary(rows)}
     text = shift.table(results)
-    assert "| adapted: sparse + photometric + smoothness | 2500 | 1000 | 5.00 | 3.00 | 2500, 2500 |" in text
-    assert "closes **92 %** of the RMSE gap" in text and "beats the classical" in text
+    assert "| adapted: all three losses, 800 steps (the recipe) | 2500 | 1000 | 5.00 | 3.00 | 2500, 2500 |" in text
+    assert "| adapted: sparse, 400 steps | 2700 |" in text
+    assert text.index("adapted: sparse") < text.index("adapted: all") < text.index("supervised")
+    assert "(all three losses, 800 steps) closes **92 %** of the RMSE gap" in text and "beats the classical" in text
     page = tmp_path / "docs" / "guides" / "page.md"
     page.parent.mkdir(parents=True)
     page.write_text(f"# Page\n\nbefore\n\n{shift.MARKERS[0]}\nold table\n{shift.MARKERS[1]}\n\nafter\n")
@@ -70,8 +73,9 @@ def test_table_and_docs_between_the_markers(shift: ModuleType, tmp_path: Path) -
 
 def test_adapt_rows_call_semattnet_adapt_per_loss_and_seed(shift: ModuleType, tmp_path: Path,
                                                            monkeypatch: pytest.MonkeyPatch) -> None:  # fmt: skip
-    """With an `adapt` command in the CLI, every loss and seed is adapted once with the documented options, the
-    result saved under checkpoints/ and scored; an earlier result is read back, not adapted again."""
+    """With an `adapt` command in the CLI, every row and seed is adapted once with the documented options (the
+    recipe's steps for `all`, the ablation's for the others), the result saved under checkpoints/ and scored; an
+    earlier result is read back, not adapted again."""
     calls: list[list[str]] = []
 
     @click.command("adapt", context_settings={"ignore_unknown_options": True})
@@ -88,17 +92,19 @@ def test_adapt_rows_call_semattnet_adapt_per_loss_and_seed(shift: ModuleType, tm
     data = {"drive": tmp_path / "drive", "semantic": tmp_path / "sem", "held_target": None}
     s = shift.tiny(seeds=(0, 1))
     rows = shift.adapt_rows(tmp_path, weights, data, s, torch.device("cpu"), shift.Clock(), log=lambda _: None)
-    assert list(rows) == [f"adapted_{k}" for k in shift.LOSSES] and len(calls) == 8
+    assert list(rows) == [f"adapted_{k}" for k in shift.LOSSES] and len(calls) == 10
     assert calls[1] == ["--weights", str(weights[1]), "--kitti-raw", str(tmp_path / "drive"), "--out",
                         str(tmp_path / "adapt" / "all_seed1"), "--steps", "2", "--loss", LOSS_ALL, "--seed", "1",
                         "--lr", "0.001", "--semantic", str(tmp_path / "sem")]  # fmt: skip
-    assert (tmp_path / "checkpoints" / "adapted_photometric_seed0.safetensors").read_bytes() == b"weights 5"
+    assert calls[2][calls[2].index("--out") + 1 :][:3] == [str(tmp_path / "adapt" / "all_short_seed0"), "--steps", "1"]
+    assert [c[c.index("--loss") + 1] for c in calls[::2]] == [LOSS_ALL, LOSS_ALL, "sparse", "photometric", "smoothness"]
+    assert (tmp_path / "checkpoints" / "adapted_photometric_seed0.safetensors").read_bytes() == b"weights 7"
     assert (
         rows["adapted_all"]["scores"]["rmse_mm"] == 1.0
         and rows["adapted_all"]["loss"] == "sparse,photometric,smoothness"
     )
     shift.adapt_rows(tmp_path, weights, data, s, torch.device("cpu"), shift.Clock(), log=lambda _: None)
-    assert len(calls) == 8  # read back
+    assert len(calls) == 10  # read back
     monkeypatch.delitem(cli.commands, "adapt")
     lines: list[str] = []
     assert shift.adapt_rows(tmp_path, weights, data, s, torch.device("cpu"), shift.Clock(), log=lines.append) == {}
