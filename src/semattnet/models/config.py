@@ -15,7 +15,7 @@ from typing import Any, Literal
 
 from semattnet._errors import InputError
 from semattnet.models.fusion import FEATURE_FUSION_MODES, FusionMode
-from semattnet.models.propagation.affinity import AFFINITY_FORMS, AffinityForm
+from semattnet.models.propagation.affinity import AffinityForm, check_affinity_form
 
 __all__ = ["RANGES", "RefinementMode", "SemAttNetConfig", "Widths"]
 
@@ -101,8 +101,7 @@ class SemAttNetConfig:
         if self.palette not in PALETTES:
             raise InputError(f"palette must be one of {tuple(PALETTES)}, got {self.palette!r}")
         object.__setattr__(self, "kernel_sizes", tuple(int(k) for k in self.kernel_sizes))
-        if self.affinity not in AFFINITY_FORMS:
-            raise InputError(f"affinity must be one of {tuple(AFFINITY_FORMS)}, got {self.affinity!r}")
+        check_affinity_form(self.affinity)
         from semattnet.models.encoders import encoder_spec
 
         encoder_spec(self.encoder)  # an unknown name: a one-line UnknownEncoderError listing the registered ones

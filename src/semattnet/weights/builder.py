@@ -83,21 +83,26 @@ def weights_config(
         return given  # not inferable: the strict load decides
     if given is None:
         return inferred
+    name = source or ckpt.path
     # the file's own config too when a record is used: a file that contradicts itself is refused either way
     for where, cfg in (("the recorded config", recorded), ("the config in the file's metadata", ckpt.config)):
-        wrong = _differences(inferred, cfg, _INFERRED) if cfg is not None else []
-        if wrong:
-            shown = ", ".join(
-                f"{f} {getattr(cfg, f)!r} recorded, {getattr(inferred, f)!r} in the tensors" for f in wrong
-            )
-            raise WeightsMismatchError(f"{source or ckpt.path}: {where} contradicts the weights: {shown}")
-    wrong = _differences(recorded, ckpt.config, _TRAINED) if recorded is not None and ckpt.config is not None else []
-    if wrong:
-        shown = ", ".join(
-            f"{f} {getattr(recorded, f)!r} recorded, {getattr(ckpt.config, f)!r} in the file" for f in wrong
-        )
-        raise WeightsMismatchError(f"{source or ckpt.path}: the recorded config contradicts the file's own: {shown}")
+        if cfg is not None:
+            _refuse_differences(inferred, "in the tensors", cfg, _INFERRED, f"{name}: {where} contradicts the weights")
+    if recorded is not None and ckpt.config is not None:
+        _refuse_differences(ckpt.config, "in the file", recorded, _TRAINED,
+                            f"{name}: the recorded config contradicts the file's own")  # fmt: skip
     return given
+
+
+def _refuse_differences(
+    truth: SemAttNetConfig, where: str, recorded: SemAttNetConfig, fields: tuple[str, ...], message: str
+) -> None:
+    """A :class:`WeightsMismatchError` ``message: <field> <recorded> recorded, <truth> <where>, ...`` when the two
+    configs differ in ``fields``."""
+    wrong = _differences(truth, recorded, fields)
+    if wrong:
+        shown = ", ".join(f"{f} {getattr(recorded, f)!r} recorded, {getattr(truth, f)!r} {where}" for f in wrong)
+        raise WeightsMismatchError(f"{message}: {shown}")
 
 
 def _apply_overrides(cfg: SemAttNetConfig, overrides: Mapping[str, object], source: str) -> SemAttNetConfig:

@@ -15,8 +15,8 @@ from semattnet._errors import InputError
 from semattnet.models.layers import convbn
 from semattnet.models.propagation._common import kernel_size, window
 
-__all__ = ["AFFINITY_FORMS", "AffinityForm", "AffinityHead", "convex_affinity", "cspn_affinity", "downsample_sparse",
-           "normalise_affinity"]  # fmt: skip
+__all__ = ["AFFINITY_FORMS", "AffinityForm", "AffinityHead", "check_affinity_form", "convex_affinity", "cspn_affinity",
+           "downsample_sparse", "normalise_affinity"]  # fmt: skip
 
 #: How raw guidance becomes a propagation kernel: ``"eq13"`` (the paper's, :func:`cspn_affinity`) or ``"convex"``
 #: (:func:`convex_affinity`).
@@ -71,10 +71,15 @@ def convex_affinity(guide: torch.Tensor) -> torch.Tensor:
 AFFINITY_FORMS: dict[str, Callable[[torch.Tensor], torch.Tensor]] = {"eq13": cspn_affinity, "convex": convex_affinity}
 
 
-def normalise_affinity(guide: torch.Tensor, form: str = "eq13") -> torch.Tensor:
-    """``guide`` normalised into a kernel by :data:`AFFINITY_FORMS` ``[form]``."""
+def check_affinity_form(form: str) -> None:
+    """Refuse a ``form`` that is not one of :data:`AFFINITY_FORMS` (a one-line :class:`~semattnet.InputError`)."""
     if form not in AFFINITY_FORMS:
         raise InputError(f"affinity must be one of {tuple(AFFINITY_FORMS)}, got {form!r}")
+
+
+def normalise_affinity(guide: torch.Tensor, form: str = "eq13") -> torch.Tensor:
+    """``guide`` normalised into a kernel by :data:`AFFINITY_FORMS` ``[form]``."""
+    check_affinity_form(form)
     return AFFINITY_FORMS[form](guide)
 
 
