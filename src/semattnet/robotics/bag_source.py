@@ -322,8 +322,20 @@ class BagSource(IndexedSource):
             fixed = None if isinstance(here, BagFailure) else self._fixed_frame(here.frame_id)
             if isinstance(here, BagFailure) or fixed is None:
                 return ()
-            found = [self._neighbour(here, j, fixed) for j in (i - 1, i + 1) if 0 <= j < len(self.pairs)]
+            T_fixed_here = self._pose(fixed, here)
+            if T_fixed_here is None:
+                return ()
+            found = [self._neighbour(here, T_fixed_here, j, fixed) for j in (i - 1, i + 1) if 0 <= j < len(self.pairs)]
         return tuple(v for v in found if v is not None)
+
+    def _pose(self, fixed: str, pair: BagPair) -> np.ndarray | None:
+        """``T_fixed_cam`` of ``pair``'s camera at its image's stamp (None: no chain then, or two that disagree)."""
+        tf = self._transforms()
+        assert isinstance(tf, TransformBuffer)  # a fixed frame was found in it
+        try:
+            return tf.lookup(fixed, pair.frame_id, pair.stamp_ns)
+        except DataError:
+            return None
 
     def _say(self, line: str) -> None:
         if self._log is not None:
@@ -360,21 +372,19 @@ class BagSource(IndexedSource):
             self._fixed[camera_frame] = fixed
         return self._fixed[camera_frame]
 
-    def _neighbour(self, here: BagPair, j: int, fixed: str) -> View | None:
-        """Image ``j`` as a view of ``here`` (a paired frame of the same camera, both posed at their stamps) or None."""
+    def _neighbour(self, here: BagPair, T_fixed_here: np.ndarray, j: int, fixed: str) -> View | None:
+        """Image ``j`` as a view of ``here`` (posed at ``T_fixed_here``): a paired frame of the same camera, posed at
+        its stamp, or None."""
         from semattnet.geometry import invert_T
 
-        tf = self._transforms()
-        assert isinstance(tf, TransformBuffer)  # a fixed frame was found in it
         try:
             there = self._advance(j)
             if isinstance(there, BagFailure) or there.frame_id != here.frame_id:
                 return None
-            T_fixed_here = tf.lookup(fixed, here.frame_id, here.stamp_ns)
-            T_fixed_there = tf.lookup(fixed, there.frame_id, there.stamp_ns)
-        except DataError:  # the bag ends early, two chains disagree: no view
+        except DataError:  # the bag ends early: no view
             return None
-        if T_fixed_here is None or T_fixed_there is None:
+        T_fixed_there = self._pose(fixed, there)
+        if T_fixed_there is None:
             return None
         return View(there.name, there.image, there.K, invert_T(T_fixed_there) @ T_fixed_here)
 

@@ -27,6 +27,7 @@ from semattnet.geometry import RigCalibration, invert_T, make_T, read_velo_to_ca
 
 from .decode import CameraInfoData
 from .encode import camera_info_message, compressed_image_message, image_message, pointcloud2_message, tf_message
+from .tf_buffer import TF_TOPIC
 from .writer import MessageWriter, bag_format, staged_bag
 
 __all__ = ["BagTopics", "SensorRecord", "WrittenBag", "kitti_stamps_ns", "write_kitti_bag", "write_sensor_bag"]
@@ -43,7 +44,7 @@ class BagTopics:
     camera_info: str = "/kitti/camera_color_left/camera_info"
     points: str = "/kitti/velo/pointcloud"
     tf_static: str = "/tf_static"
-    tf: str = "/tf"
+    tf: str = TF_TOPIC
     camera_frame: str = "camera_color_left"
     lidar_frame: str = "velodyne"
     base_frame: str = "base_link"
