@@ -6,6 +6,7 @@ from semattnet.cli import (  # noqa: F401  (register the commands)
     bag,
     data,
     evaluate,
+    generalist,
     models,
     predict,
     project,

@@ -35,6 +35,7 @@ from semattnet.inference.backends.calibration import CalibrationFrames
 from semattnet.inference.contract import Completer, Completion, StageTimed
 from semattnet.inference.padding import crop_padding, pad_to_multiple
 from semattnet.models.checks import check_has_points, check_sparse_depth
+from semattnet.models.generalist import Generalist
 from semattnet.models.outputs import DepthCompletionOutput, check_output_names
 from semattnet.models.uncertainty import outputs_to_compute, with_uncertainty
 from semattnet.weights.hub import from_pretrained, load_model
@@ -115,7 +116,10 @@ class DepthCompleter:
         #: :attr:`outputs` asks for it too.
         self.compute_uncertainty = True
         self._outputs: frozenset[str] | None = None
-        self._source = model.to(self.device).eval()
+        model = model.to(self.device).eval()
+        #: The generalist around the network the engines run (None: the model is the network).
+        self.generalist: Generalist | None = model if isinstance(model, Generalist) else None
+        self._source = model.net if isinstance(model, Generalist) else model
         self._inplace = inplace
         self._engines: dict[tuple[tuple[int, int] | None, frozenset[str] | None], InferenceEngine] = {}
 
@@ -196,6 +200,22 @@ class DepthCompleter:
                 backends skip the model's own checks).
         """
         check_sparse_depth(sparse)
+        want_uncertainty = self.compute_uncertainty and (self._outputs is None or "uncertainty" in self._outputs)
+        if self.generalist is not None:  # scale, colour and anchor around the network (models.generalist)
+            with torch.inference_mode():
+                inputs = self.generalist.prepare(rgb.to(self.device), sparse.to(self.device))
+                out = self._run_network(inputs.rgb, semantic, inputs.depth)
+                return self.generalist.finish(out.map(lambda t: t.to(self.device)), inputs, want_uncertainty)
+        out = self._run_network(rgb, semantic, sparse)
+        if not want_uncertainty:
+            return out
+        with torch.inference_mode():
+            return with_uncertainty(out, sparse)
+
+    def _run_network(
+        self, rgb: torch.Tensor, semantic: torch.Tensor | None, sparse: torch.Tensor
+    ) -> DepthCompletionOutput:
+        """The engine on padded inputs, its outputs cropped back to the inputs' size."""
         rgb_p, pad = pad_to_multiple(rgb)
         sparse_p, _ = pad_to_multiple(sparse)
         sem_p = pad_to_multiple(semantic)[0] if semantic is not None else None
@@ -205,11 +225,7 @@ class DepthCompleter:
             semantic_in = None if sem_p is None else sem_p.to(self.device)
             out: DepthCompletionOutput = engine(rgb=rgb_p.to(self.device), semantic=semantic_in,
                                                 sparse=sparse_p.to(self.device))  # fmt: skip
-        out = out.map(lambda t: crop_padding(t.float(), pad))
-        if not self.compute_uncertainty or (self._outputs is not None and "uncertainty" not in self._outputs):
-            return out
-        with torch.inference_mode():
-            return with_uncertainty(out, sparse)
+        return out.map(lambda t: crop_padding(t.float(), pad))
 
     def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
         """Complete one frame: ``rgb`` (H, W, 3) 0..255, ``sparse`` (H, W) metres (0 = none),

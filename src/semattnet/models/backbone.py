@@ -83,9 +83,9 @@ class SemAttNetBackbone(ColorGuidedBranch, SemanticGuidedBranch, DepthGuidedBran
         if config.branches == 3:
             self._build_semantic_fusion(w, config)
         self._build_depth_fusion(w, config)
-        self._build_color_guided(w)
+        self._build_color_guided(w, config.depth_channels)
         if config.branches == 3:
-            self._build_semantic_guided(w)
+            self._build_semantic_guided(w, config.depth_channels)
         self._build_depth_guided(w, config)
 
     def init_depth_heads(self, scale: float = 10.0, shift: float = 15.0) -> None:
@@ -116,7 +116,7 @@ class SemAttNetBackbone(ColorGuidedBranch, SemanticGuidedBranch, DepthGuidedBran
         self, rgb: torch.Tensor, semantic: torch.Tensor | None, sparse: torch.Tensor
     ) -> BackboneFeatures:
         three = self.config.branches == 3
-        check_inputs(rgb, semantic, sparse, need_semantic=three)
+        check_inputs(rgb, semantic, sparse, need_semantic=three, sparse_channels=self.config.depth_channels)
         cg = self.run_branch(self._color_guided, rgb, sparse)
         sg = self.run_branch(self._semantic_guided, semantic, sparse, cg) if three else None
         dg = self.run_branch(self._depth_guided, sparse, cg, sg)

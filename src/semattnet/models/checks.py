@@ -75,16 +75,22 @@ def check_has_points(sparse: torch.Tensor, name: str = "sparse") -> None:
 
 
 def check_inputs(
-    rgb: torch.Tensor, semantic: torch.Tensor | None, sparse: torch.Tensor, *, need_semantic: bool
+    rgb: torch.Tensor,
+    semantic: torch.Tensor | None,
+    sparse: torch.Tensor,
+    *,
+    need_semantic: bool,
+    sparse_channels: int = 1,
 ) -> None:
     """Raise :class:`~semattnet.InputError` unless the inputs are what SemAttNet expects.
 
     Expected: ``rgb`` (B, 3, H, W) 0..255, ``semantic`` (B, 3, H, W) colour-coded 0..255,
     ``sparse`` (B, 1, H, W) metres with 0 = missing; float tensors of one size, H and W
-    multiples of 32, finite values, depth in [0, :data:`MAX_INPUT_DEPTH_M`]. Use
+    multiples of 32, finite values, depth in [0, :data:`MAX_INPUT_DEPTH_M`] (``sparse_channels``: 2 for the
+    generalist's network, sparse and anchor). Use
     :func:`semattnet.pad_to_multiple` to run on other sizes.
     """
-    named = [("rgb", rgb, 3), ("sparse", sparse, 1)]
+    named = [("rgb", rgb, 3), ("sparse", sparse, sparse_channels)]
     if need_semantic:
         if semantic is None:
             raise InputError("semantic is required by this model (three-branch); got None")

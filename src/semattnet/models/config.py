@@ -17,9 +17,13 @@ from semattnet._errors import InputError
 from semattnet.models.fusion import FEATURE_FUSION_MODES, FusionMode
 from semattnet.models.propagation.affinity import AffinityForm, check_affinity_form
 
-__all__ = ["RANGES", "RefinementMode", "SemAttNetConfig", "Widths"]
+__all__ = ["ANCHOR_MODES", "RANGES", "AnchorMode", "RefinementMode", "SemAttNetConfig", "Widths"]
 
 RefinementMode = Literal["authors", "clean"]
+#: What the generalist corrects (:mod:`semattnet.models.generalist`): ``"none"`` (the paper's model) or
+#: ``"classical"`` (the classical completion, given as an input and corrected by a bounded log residual).
+AnchorMode = Literal["none", "classical"]
+ANCHOR_MODES: tuple[str, ...] = ("none", "classical")
 _SCALES = (1, 2, 4, 8, 16, 32)
 
 #: Allowed ranges (inclusive) of the numeric fields: one home, checked for every config, including
@@ -30,6 +34,7 @@ RANGES: dict[str, tuple[float, float]] = {
     "reduction": (1, 1024),
     "kernel_sizes": (1, 15),
     "iterations": (0, 32),
+    "residual_bound": (0.05, 5.0),
 }
 MAX_KERNELS = 8
 
@@ -66,6 +71,12 @@ class SemAttNetConfig:
             :mod:`semattnet.models.rt` with the encoder's registered widths times ``width``.
         affinity: how the refinement's guidance becomes a propagation kernel: ``"eq13"`` (the paper's) or
             ``"convex"`` (non-negative weights summing to 1: :func:`semattnet.models.propagation.convex_affinity`).
+        anchor: ``"none"`` (the paper) or ``"classical"``: the scale-free generalist
+            (:class:`semattnet.models.generalist.Generalist`), whose network reads its depth input as two channels
+            (the normalised sparse depth and the normalised classical completion) and whose output is the classical
+            completion times a bounded correction.
+        residual_bound: the generalist's largest correction of the anchor, in natural-log depth
+            (``log(depth / anchor)`` lies in ``(-b, b)``); unused without an anchor.
     """
 
     branches: Literal[2, 3] = 3
@@ -79,6 +90,8 @@ class SemAttNetConfig:
     palette: str = "cityscapes"
     encoder: str = "resnet"
     affinity: AffinityForm = "eq13"
+    anchor: AnchorMode = "none"
+    residual_bound: float = 1.5
 
     def __post_init__(self) -> None:
         if self.branches not in (2, 3):
@@ -102,6 +115,11 @@ class SemAttNetConfig:
             raise InputError(f"palette must be one of {tuple(PALETTES)}, got {self.palette!r}")
         object.__setattr__(self, "kernel_sizes", tuple(int(k) for k in self.kernel_sizes))
         check_affinity_form(self.affinity)
+        if self.anchor not in ANCHOR_MODES:
+            raise InputError(f"anchor must be one of {ANCHOR_MODES}, got {self.anchor!r}")
+        _in_range("residual_bound", self.residual_bound, integer=False)
+        if self.anchor != "none" and not self.refine:
+            raise InputError("anchor: the generalist is the refined model; set refine=True")
         from semattnet.models.encoders import encoder_spec
 
         encoder_spec(self.encoder)  # an unknown name: a one-line UnknownEncoderError listing the registered ones
@@ -110,6 +128,11 @@ class SemAttNetConfig:
     def realtime(self) -> bool:
         """The real-time variant (:mod:`semattnet.models.rt`): any encoder but the paper's ResNet."""
         return self.encoder != "resnet"
+
+    @property
+    def depth_channels(self) -> int:
+        """Channels of the network's depth input: 1 (sparse metres), 2 with an anchor (sparse, anchor)."""
+        return 1 if self.anchor == "none" else 2
 
     def replace(self, **changes: Any) -> SemAttNetConfig:  # values from JSON / the CLI: __post_init__ checks them
         """A copy with some fields changed (validated)."""

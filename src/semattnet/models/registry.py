@@ -24,6 +24,7 @@ from torch import nn
 from semattnet._errors import InputError
 from semattnet.models.backbone import SemAttNetBackbone
 from semattnet.models.config import SemAttNetConfig
+from semattnet.models.generalist import Generalist
 from semattnet.models.macs import count_macs
 from semattnet.models.rt import SemAttNetRT, SemAttNetRTBackbone
 from semattnet.models.semattnet import SemAttNet
@@ -45,7 +46,7 @@ __all__ = [
 ]
 
 #: The config fields a registered name fixes (the rest, e.g. ``width``, are free).
-ARCH_FIELDS = ("branches", "fusion", "refine", "encoder")
+ARCH_FIELDS = ("branches", "fusion", "refine", "encoder", "anchor")
 
 
 class UnknownModelError(InputError):
@@ -82,6 +83,12 @@ _SPECS = (
                                                      iterations=4, affinity="convex")),
     ModelSpec("semattnet_rt_l", "Real-time: semattnet_rt_s with twice its channels (1/4 resolution, CSPN++ at 1/4)",
               SemAttNetConfig(encoder="lite_s4_wide", reduction=4, kernel_sizes=(3,), iterations=4)),
+    ModelSpec("semattnet_generalist", "Generalist: the full model, scale-free, correcting the classical completion "
+              "(models.generalist)", SemAttNetConfig(width=0.125, anchor="classical")),
+    ModelSpec("semattnet_rt_generalist", "Generalist: semattnet_rt_md, scale-free, correcting the classical "
+              "completion (models.generalist)", SemAttNetConfig(encoder="lite_s2_deep", reduction=4,
+                                                                kernel_sizes=(3,), iterations=4, affinity="convex",
+                                                                anchor="classical")),
 )  # fmt: skip
 _BY_NAME = {s.name: s for s in _SPECS}
 
@@ -144,7 +151,10 @@ def model_config(name: str) -> SemAttNetConfig:
 
 def model_class(cfg: SemAttNetConfig) -> type[nn.Module]:
     """The class a config builds: :class:`SemAttNet` with ``refine``, else :class:`SemAttNetBackbone`;
-    their real-time twins (:mod:`semattnet.models.rt`) for a light ``encoder``."""
+    their real-time twins (:mod:`semattnet.models.rt`) for a light ``encoder``; :class:`Generalist` (around
+    either) for a config with an ``anchor``."""
+    if cfg.anchor != "none":
+        return Generalist
     if cfg.realtime:
         return SemAttNetRT if cfg.refine else SemAttNetRTBackbone
     return SemAttNet if cfg.refine else SemAttNetBackbone
@@ -156,6 +166,8 @@ def arch_for(cfg: SemAttNetConfig) -> str:
     for spec in _SPECS:
         if tuple(getattr(spec.config, f) for f in ARCH_FIELDS) == key:
             return spec.name
+    if cfg.anchor != "none":  # a generalist of another width or kernel
+        return "semattnet_rt_generalist" if cfg.realtime else "semattnet_generalist"
     if cfg.realtime:  # the first real-time row on the same encoder (any real-time row for a new encoder)
         rows = [s.name for s in _SPECS if s.config.realtime]
         return next((s.name for s in _SPECS if s.config.encoder == cfg.encoder), rows[0])

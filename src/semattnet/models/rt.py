@@ -179,10 +179,11 @@ class SemAttNetRTBackbone(nn.Module):
         n = len(c) - 2  # stages fused with guidance: all but the last
         three = config.branches == 3
         args = (config.fusion, config.reduction)
-        self.rgb_branch = RTBranch(config.encoder, 4, c, [0] * n, *args)
-        self.semantic_branch = RTBranch(config.encoder, 5, c, c[1:-1], *args) if three else None
-        self.depth_branch = RTBranch(config.encoder, config.branches, c, [(config.branches - 1) * ch for ch in c[1:-1]],
-                                     *args)  # fmt: skip
+        dc = config.depth_channels  # 2 for the generalist: sparse and anchor
+        self.rgb_branch = RTBranch(config.encoder, 3 + dc, c, [0] * n, *args)
+        self.semantic_branch = RTBranch(config.encoder, 4 + dc, c, c[1:-1], *args) if three else None
+        guide = [(config.branches - 1) * ch for ch in c[1:-1]]
+        self.depth_branch = RTBranch(config.encoder, config.branches - 1 + dc, c, guide, *args)
         self.stem_stride = self.rgb_branch.feature_info.stem_stride
 
     @property
@@ -199,7 +200,13 @@ class SemAttNetRTBackbone(nn.Module):
     def forward_features(
         self, rgb: torch.Tensor, semantic: torch.Tensor | None, sparse: torch.Tensor
     ) -> RTBackboneFeatures:
-        check_inputs(rgb, semantic, sparse, need_semantic=self.semantic_branch is not None)
+        check_inputs(
+            rgb,
+            semantic,
+            sparse,
+            need_semantic=self.semantic_branch is not None,
+            sparse_channels=self.config.depth_channels,
+        )
         size = sparse.shape[-2:]
         cg = self.rgb_branch(torch.cat((rgb, sparse), dim=1))
         guides: list[list[torch.Tensor]] = [[d] for d in cg.decoder[1:]]
@@ -261,8 +268,9 @@ class SemAttNetRT(AtrousCSPNRefinement, nn.Module):
         self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
     ) -> DepthCompletionOutput:
         """Complete and refine depth. Inputs: RGB 0..255, semantic colours 0..255, sparse metres."""
-        sparse = require_sparse(sparse)
-        out, depth, feature_s1, feature_s2 = self.backbone.forward_features(rgb, semantic, sparse)
+        depth_in = require_sparse(sparse)
+        out, depth, feature_s1, feature_s2 = self.backbone.forward_features(rgb, semantic, depth_in)
+        sparse = depth_in[:, :1]  # the measurements: a generalist's second channel is its anchor
         sparse_lr, _ = downsample_sparse(sparse, self.backbone.stem_stride)
         _, refined_lr = self.propagation(self.refinement_heads(depth, sparse_lr, feature_s1, feature_s2))
         s = self.backbone.stem_stride

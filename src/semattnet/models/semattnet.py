@@ -55,4 +55,5 @@ class SemAttNet(AtrousCSPNRefinement, nn.Module):
         """
         sparse = require_sparse(sparse)
         out, feature_s1, feature_s2 = self.backbone.forward_features(rgb, semantic, sparse)
-        return out, self.refinement_heads(out.fused_depth, sparse, feature_s1, feature_s2)
+        # the refinement re-injects the measurements: the first channel of a generalist's two-channel input
+        return out, self.refinement_heads(out.fused_depth, sparse[:, :1], feature_s1, feature_s2)

@@ -58,6 +58,8 @@ def _prepare(
     g = torch.Generator().manual_seed(0)
     rgb = torch.rand(1, 3, h, w, generator=g) * 255
     sparse = torch.rand(1, 1, h, w, generator=g) * 80 * (torch.rand(1, 1, h, w, generator=g) < 0.05)
+    if getattr(config, "depth_channels", 1) == 2:  # a generalist's network: sparse and anchor
+        sparse = torch.cat((sparse, torch.rand(1, 1, h, w, generator=g) * 80), dim=1)
     example = (rgb, torch.rand(1, 3, h, w, generator=g) * 255, sparse) if semantic else (rgb, sparse)
     with torch.inference_mode():
         names = list(_named_outputs(model, dict(zip(_input_names(semantic), example, strict=True)), propagation))

@@ -41,9 +41,10 @@ class ColorGuidedBranch:
     rgb_conv_init: nn.Sequential
     rgb_decoder_output: nn.Sequential
 
-    def _build_color_guided(self, w: Widths) -> None:
+    def _build_color_guided(self, w: Widths, depth_channels: int = 1) -> None:
         c = w.base
-        add_resnet_layers(self, "rgb_conv_init", "rgb_encoder_layer", 4, [c[s] for s in (1, *_STAGES)])
+        stages = [c[s] for s in (1, *_STAGES)]
+        add_resnet_layers(self, "rgb_conv_init", "rgb_encoder_layer", 3 + depth_channels, stages)
         for s in (16, 8, 4, 2, 1):  # rgb_decoder_layer8 ... rgb_decoder_layer0
             setattr(self, f"rgb_decoder_layer{_encoder_index(s)}", deconvbnrelu(2 * c[s], c[s]))
         self.rgb_decoder_output = nn.Sequential(

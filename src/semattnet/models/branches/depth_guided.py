@@ -57,9 +57,8 @@ class DepthGuidedBranch:
     def _build_depth_guided(self, w: Widths, cfg: SemAttNetConfig) -> None:
         c, dg = w.base, w.dg
         extra = [w.fused_dg.get(s, dg[s]) - dg[s] for s in _STAGES]
-        add_resnet_layers(
-            self, "depth_conv_init", "depth_layer", cfg.branches, [c[1], *(dg[s] for s in _STAGES)], extra
-        )
+        in_chans = cfg.branches - 1 + cfg.depth_channels
+        add_resnet_layers(self, "depth_conv_init", "depth_layer", in_chans, [c[1], *(dg[s] for s in _STAGES)], extra)
         self.decoder_layer0 = deconvbnrelu(dg[32], c[32], kernel_size=1, stride=1, padding=0, output_padding=0)
         widths = (c[32], dg[16], dg[8], dg[4], dg[2], c[1])
         for j in range(5):

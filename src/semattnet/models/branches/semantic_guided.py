@@ -51,11 +51,11 @@ class SemanticGuidedBranch:
         for s, name in SG_FUSION_BLOCKS.items():
             setattr(self, name, make_fusion_block(cfg.fusion, w.fused_sg[s], cfg.reduction))
 
-    def _build_semantic_guided(self, w: Widths) -> None:
+    def _build_semantic_guided(self, w: Widths, depth_channels: int = 1) -> None:
         c = w.base
         extra = [w.fused_sg.get(s, w.sg[s]) - w.sg[s] for s in _STAGES]
-        add_resnet_layers(self, "segment_conv_init", "segment_encoder_layer", 5, [c[1], *(w.sg[s] for s in _STAGES)],
-                          extra)  # fmt: skip
+        stages = [c[1], *(w.sg[s] for s in _STAGES)]
+        add_resnet_layers(self, "segment_conv_init", "segment_encoder_layer", 4 + depth_channels, stages, extra)
         for j, s in enumerate((16, 8, 4, 2, 1)):
             setattr(self, f"segment_decoder_layer{j + 1}", deconvbnrelu(2 * c[s], c[s]))
         self.segment_decoder_layer6 = nn.Sequential(

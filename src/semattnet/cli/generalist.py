@@ -1,0 +1,59 @@
+"""``semattnet train-generalist``: the generalist's recipe, one command from the synthetic world to packed weights."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from semattnet.cli._group import main
+
+
+@main.command("train-generalist", context_settings={"show_default": True})
+@click.option(
+    "--model",
+    type=click.Choice(["semattnet_rt_generalist", "semattnet_generalist"]),
+    default="semattnet_rt_generalist",
+    help="The generalist to train: the real-time variant or the paper's model.",
+)
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True, help="The run's folder.")
+@click.option(
+    "--bank",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="The folder of world frames, written when missing and shared between runs [OUT/bank].",
+)
+@click.option("--frames", type=click.IntRange(1), default=600, help="World frames in the bank.")
+@click.option("--steps", type=click.IntRange(1), default=1500, help="Optimisation steps.")
+@click.option("--batch", type=click.IntRange(1), default=8, help="Crops per step.")
+@click.option("--crop", default="160x256", help="Crop HxW, multiples of 32.")
+@click.option("--lr", type=click.FloatRange(min=0, min_open=True), default=2e-3, help="Adam's learning rate.")
+@click.option("--init", default=None, metavar="NAME|PATH", help="Start from the plain network's weights.")
+@click.option("--seed", type=int, default=0, help="Seed of the crops and the initialisation.")
+@click.option("--resume", is_flag=True, help="Go on from OUT/last.pt.")
+def train_generalist_command(
+    model: str,
+    out: Path,
+    bank: Path | None,
+    frames: int,
+    steps: int,
+    batch: int,
+    crop: str,
+    lr: float,
+    init: str | None,
+    seed: int,
+    resume: bool,
+) -> None:
+    """Train a generalist on the synthetic world, calibrate its uncertainty, write OUT/MODEL.safetensors.gz."""
+    from semattnet.cli._options import parse_size
+    from semattnet.training.generalist import GeneralistTrainConfig, finish_generalist, train_generalist, write_bank
+
+    bank = bank if bank is not None else out / "bank"
+    write_bank(bank, frames, log=click.echo)
+    cfg = GeneralistTrainConfig(
+        model=model, bank=str(bank), out=str(out), steps=steps, batch=batch, crop=parse_size(crop, "--crop"),
+        lr=lr, init=init, seed=seed,
+    )  # fmt: skip
+    trained = train_generalist(cfg, resume=resume, log=click.echo)
+    path = finish_generalist(trained, cfg, log=click.echo)
+    click.echo(f"wrote {path}")

@@ -1,0 +1,199 @@
+"""The generalist: a scale-free SemAttNet anchored on the classical completion.
+
+A network trained on one rig learns that rig's depths: a street model predicts street depths in a room. The
+generalist removes what ties the network to a rig, in three steps around an unchanged SemAttNet (the paper's
+model or a real-time variant, whose depth input has two channels instead of one, see
+:attr:`~semattnet.models.config.SemAttNetConfig.depth_channels`):
+
+1. **Scale.** Each frame's depth is divided by its own scale ``s``, the median of its valid sparse depths, and
+   multiplied by :data:`REFERENCE_DEPTH`: the network sees every frame as if its median point lay 10 m away,
+   in a 3 m room as on an 80 m road. Its output is multiplied back by ``s / REFERENCE_DEPTH``.
+2. **Colour.** Each image's channels are standardised (per image and channel: mean 128, standard deviation
+   50), so exposure and white balance do not tell the network which rig it is on.
+3. **Anchor.** The classical completion ``A`` (:func:`semattnet.baselines.classical.complete_classical`) is the
+   network's second depth channel and the base its output corrects: with ``D_n`` the network's refined depth
+   (paper eq. 13) and ``A_n`` the anchor in the same units, the generalist's depth is
+
+   ``D = A * exp(b * tanh(log(D_n / A_n) / b))``  (``b`` = ``config.residual_bound``)
+
+   so ``log(D / A)`` stays within ``(-b, b)``: where the network agrees with the anchor the output is the
+   classical completion, and no prediction strays more than a factor ``e^b`` from it.
+
+Nothing depends on the camera's intrinsics or the image size. The uncertainty (:meth:`Generalist.uncertainty`)
+adds the disagreement with the anchor to the model's own terms (:func:`~semattnet.models.uncertainty.depth_uncertainty`)
+and is calibrated: ``sigma = k * u + f * D``, with ``(k, f)`` a buffer fitted on held-out synthetic scenes so
+that 95 % of the errors lie within ``2 sigma`` (:func:`fit_calibration`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import NamedTuple
+
+import torch
+from torch import nn
+
+from semattnet._errors import InputError
+from semattnet.models.anchor import complete_classical
+from semattnet.models.backbone import SemAttNetBackbone
+from semattnet.models.checks import require_sparse
+from semattnet.models.config import SemAttNetConfig
+from semattnet.models.outputs import DepthCompletionOutput
+from semattnet.models.rt import SemAttNetRT, SemAttNetRTBackbone
+from semattnet.models.semattnet import SemAttNet
+from semattnet.models.uncertainty import depth_uncertainty
+
+__all__ = [
+    "REFERENCE_DEPTH",
+    "Generalist",
+    "GeneralistInputs",
+    "classical_anchor",
+    "fit_calibration",
+    "frame_scale",
+    "standardise_colour",
+]
+
+#: The depth (metres) at which the network sees every frame's median sparse point.
+REFERENCE_DEPTH = 10.0
+_COLOUR_MEAN, _COLOUR_STD = 128.0, 50.0
+_EPS = 1e-3
+
+
+def frame_scale(sparse: torch.Tensor) -> torch.Tensor:
+    """(B, 1, 1, 1): each image's median valid depth (metres), 1 for an image without points."""
+    b = sparse.shape[0]
+    flat = sparse.detach().float().reshape(b, -1)
+    masked = torch.where(flat > 0, flat, torch.full_like(flat, float("nan")))
+    med = torch.nanmedian(masked, dim=1).values
+    med = torch.where(torch.isfinite(med) & (med > 0), med, torch.ones_like(med))
+    return med.view(b, 1, 1, 1)
+
+
+def standardise_colour(rgb: torch.Tensor) -> torch.Tensor:
+    """Each image's channels to mean 128 and standard deviation 50, clipped to 0..255 (a flat channel: 128)."""
+    mean = rgb.mean(dim=(-2, -1), keepdim=True)
+    std = rgb.std(dim=(-2, -1), keepdim=True).clamp_min(1.0)
+    return ((rgb - mean) / std * _COLOUR_STD + _COLOUR_MEAN).clamp(0.0, 255.0)
+
+
+def classical_anchor(sparse: torch.Tensor) -> torch.Tensor:
+    """The classical completion of (B, 1, H, W) ``sparse`` metres, the generalist's anchor (no gradient)."""
+    with torch.no_grad():
+        return complete_classical(sparse.detach().float())
+
+
+class GeneralistInputs(NamedTuple):
+    """What :meth:`Generalist.prepare` gives the network, and what :meth:`Generalist.finish` needs back."""
+
+    rgb: torch.Tensor  # (B, 3, H, W), standardised colours
+    depth: torch.Tensor  # (B, 2, H, W): sparse and anchor, normalised to REFERENCE_DEPTH
+    sparse: torch.Tensor  # (B, 1, H, W) metres, as given
+    anchor: torch.Tensor  # (B, 1, H, W) metres
+    scale: torch.Tensor  # (B, 1, 1, 1): metres per normalised unit
+
+
+def _network(config: SemAttNetConfig) -> nn.Module:
+    if config.anchor == "none":
+        raise InputError("Generalist needs a config with an anchor (anchor='classical')")
+    return SemAttNetRT(config) if config.realtime else SemAttNet(config)
+
+
+class Generalist(nn.Module):
+    """Scale-free, anchored SemAttNet (module docstring): ``net`` is the paper's model or a real-time variant.
+
+    Parameters are ``net.*`` (the network's own names) and the buffer ``calibration`` = ``(k, f)``.
+
+    Shape:
+        rgb (B, 3, H, W) 0..255, semantic (B, 3, H, W) 0..255 (three-branch nets), sparse (B, 1, H, W) metres ->
+        :class:`~semattnet.models.outputs.DepthCompletionOutput` in metres, ``uncertainty`` set (calibrated).
+    """
+
+    calibration: torch.Tensor
+
+    def __init__(self, config: SemAttNetConfig) -> None:
+        super().__init__()
+        self.config = config
+        self.net = _network(config)
+        self.register_buffer("calibration", torch.tensor([1.0, 0.0]))
+
+    def init_depth_heads(self, scale: float = 10.0, shift: float = 15.0) -> None:
+        """As the network's (:meth:`SemAttNetBackbone.init_depth_heads`), at :data:`REFERENCE_DEPTH`."""
+        backbone = self.net.backbone
+        assert isinstance(backbone, SemAttNetBackbone | SemAttNetRTBackbone)
+        backbone.init_depth_heads(scale * REFERENCE_DEPTH / 15.0, REFERENCE_DEPTH)
+
+    def prepare(self, rgb: torch.Tensor, sparse: torch.Tensor) -> GeneralistInputs:
+        """Steps 1-3 of the module docstring before the network: scale, colour, anchor."""
+        anchor = classical_anchor(sparse)
+        scale = frame_scale(sparse) / REFERENCE_DEPTH
+        depth = torch.cat((sparse, anchor), dim=1) / scale
+        return GeneralistInputs(standardise_colour(rgb.float()), depth, sparse, anchor, scale)
+
+    def finish(
+        self, out: DepthCompletionOutput, inputs: GeneralistInputs, uncertainty: bool = True
+    ) -> DepthCompletionOutput:
+        """The network's output in metres, the refined depth as the bounded correction of the anchor, and the
+        calibrated uncertainty (``uncertainty=False``: left None)."""
+        scale = inputs.scale
+
+        depth_fields = ("color_depth", "semantic_depth", "guided_depth", "fused_depth", "refined_s2_depth")
+        changes = {f: getattr(out, f).float() * scale for f in depth_fields if getattr(out, f) is not None}
+        net_depth = out.depth.float() * scale
+        changes["refined_depth"] = self.correct(inputs.anchor, net_depth)
+        result = dataclasses.replace(out, **changes)
+        if not uncertainty:
+            return result
+        return dataclasses.replace(result, uncertainty=self.uncertainty(result, inputs, net_depth))
+
+    def correct(self, anchor: torch.Tensor, net_depth: torch.Tensor) -> torch.Tensor:
+        """``A * exp(b * tanh(log(D_n / A) / b))``: the network's depth pulled within a factor ``e^b`` of the
+        anchor (both metres); 0 where the anchor is 0 (an image without points)."""
+        b = self.config.residual_bound
+        a = anchor.clamp_min(_EPS)
+        r = torch.log(net_depth.clamp_min(_EPS)) - torch.log(a)
+        out = a * torch.exp(b * torch.tanh(r / b))
+        return torch.where(anchor > 0, out, torch.zeros_like(out))
+
+    def uncertainty(
+        self, out: DepthCompletionOutput, inputs: GeneralistInputs, net_depth: torch.Tensor
+    ) -> torch.Tensor:
+        """``sigma = k * sqrt(u^2 + (D - A)^2 + (D_n - D)^2) + f * D`` metres: the model's own terms ``u``
+        (:func:`depth_uncertainty`), the correction of the anchor and what the bound held back, calibrated."""
+        u = depth_uncertainty(out, inputs.sparse)
+        depth = out.depth.float()
+        raw = (u * u + (depth - inputs.anchor) ** 2 + (net_depth - depth) ** 2).sqrt()
+        k, f = self.calibration[0], self.calibration[1]
+        return k * raw + f * depth
+
+    def raw_uncertainty(self, out: DepthCompletionOutput) -> torch.Tensor:
+        """The uncalibrated term of :meth:`uncertainty` recovered from a calibrated output (for refitting)."""
+        k, f = self.calibration[0], self.calibration[1]
+        assert out.uncertainty is not None
+        return (out.uncertainty - f * out.depth.float()) / k.clamp_min(1e-12)
+
+    def forward(
+        self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
+    ) -> DepthCompletionOutput:
+        """Complete depth: RGB 0..255, semantic colours 0..255, sparse metres -> metres (module docstring)."""
+        inputs = self.prepare(rgb, require_sparse(sparse))
+        return self.finish(self.net(inputs.rgb, semantic, inputs.depth), inputs)
+
+
+def fit_calibration(
+    raw: torch.Tensor, depth: torch.Tensor, error: torch.Tensor, coverage: float = 0.95
+) -> tuple[float, float]:
+    """``(k, f)`` of ``sigma = k * raw + f * depth`` so that a share ``coverage`` of ``|error| <= 2 sigma``, the
+    sharpest (smallest mean sigma) over a grid of relative floors ``f``; 1-D tensors of the pixels with truth."""
+    best: tuple[float, float, float] | None = None
+    for f in (0.0, 0.0025, 0.005, 0.01, 0.02, 0.04):
+        lo, hi = 0.0, 1e3
+        for _ in range(60):  # bisection on k: coverage grows with k
+            k = (lo + hi) / 2
+            covered = (error.abs() <= 2 * (k * raw + f * depth)).float().mean().item()
+            lo, hi = (k, hi) if covered < coverage else (lo, k)
+        k = hi
+        mean_sigma = (k * raw + f * depth).mean().item()
+        if best is None or mean_sigma < best[0]:
+            best = (mean_sigma, k, f)
+    assert best is not None
+    return best[1], best[2]

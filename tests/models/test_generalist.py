@@ -1,0 +1,121 @@
+"""The generalist (models.generalist): scale-free inputs, the bounded correction of the classical anchor, the
+calibration fit, and the registry and completer around it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import semattnet
+from semattnet._errors import InputError
+from semattnet.models.anchor import complete_classical
+from semattnet.models.generalist import (
+    REFERENCE_DEPTH,
+    Generalist,
+    fit_calibration,
+    frame_scale,
+    standardise_colour,
+)
+from semattnet.models.registry import arch_for, build_model, model_config
+
+
+def _frame(h: int = 64, w: int = 96, seed: int = 0, far: float = 30.0) -> tuple[torch.Tensor, ...]:
+    g = torch.Generator().manual_seed(seed)
+    rgb = torch.rand(1, 3, h, w, generator=g) * 255
+    semantic = torch.rand(1, 3, h, w, generator=g) * 255
+    sparse = (2 + torch.rand(1, 1, h, w, generator=g) * far) * (torch.rand(1, 1, h, w, generator=g) < 0.08)
+    return rgb, semantic, sparse
+
+
+def test_frame_scale_is_the_median_of_the_valid_points_and_one_without_points() -> None:
+    sparse = torch.zeros(2, 1, 4, 4)
+    sparse[0, 0, 0, :3] = torch.tensor([2.0, 5.0, 11.0])
+    scale = frame_scale(sparse)
+    assert scale.shape == (2, 1, 1, 1)
+    assert scale[0].item() == 5.0 and scale[1].item() == 1.0
+
+
+def test_standardised_colours_have_the_same_statistics_whatever_the_exposure() -> None:
+    rgb = _frame()[0]
+    a, b = standardise_colour(rgb), standardise_colour(rgb * 0.3 + 20)
+    torch.testing.assert_close(a, b, atol=1e-3, rtol=0)
+    assert abs(a.mean().item() - 128) < 2 and abs(a.std().item() - 50) < 3
+
+
+@pytest.mark.parametrize("name", ["semattnet_generalist", "semattnet_rt_generalist"])
+def test_the_network_sees_the_same_depth_at_any_scale(name: str) -> None:
+    """Step 1: the sparse channel the network reads is the same for a frame and the frame 7x larger."""
+    model = build_model(name).eval()
+    rgb, _, sparse = _frame()
+    small, large = model.prepare(rgb, sparse), model.prepare(rgb, sparse * 7)
+    torch.testing.assert_close(small.depth[:, :1], large.depth[:, :1], rtol=1e-5, atol=1e-5)
+    valid = sparse > 0
+    assert small.depth[:, :1][valid].median().item() == pytest.approx(REFERENCE_DEPTH, rel=1e-5)
+
+
+def test_the_correction_returns_the_anchor_where_the_network_agrees_and_stays_within_the_bound() -> None:
+    model = build_model("semattnet_rt_generalist", residual_bound=0.5)
+    anchor = torch.rand(1, 1, 8, 8) * 40 + 1
+    torch.testing.assert_close(model.correct(anchor, anchor), anchor)
+    wild = anchor * torch.exp(torch.randn(1, 1, 8, 8) * 5)
+    ratio = torch.log(model.correct(anchor, wild) / anchor).abs()
+    assert ratio.max().item() <= 0.5 + 1e-6  # tanh saturates in float32
+    # monotone in the network's depth: a deeper prediction never gives a shallower output
+    a = torch.full((1, 1, 1, 5), 10.0)
+    out = model.correct(a, torch.tensor([2.0, 5.0, 10.0, 20.0, 50.0]).view(1, 1, 1, 5)).flatten()
+    assert torch.all(out[1:] > out[:-1])
+
+
+def test_the_output_is_in_metres_with_a_positive_uncertainty_and_the_measurements_nearby() -> None:
+    torch.manual_seed(0)
+    model = build_model("semattnet_rt_generalist").eval()
+    rgb, semantic, sparse = _frame(far=60.0)
+    with torch.no_grad():
+        out = model(rgb=rgb, semantic=semantic, sparse=sparse)
+    anchor = complete_classical(sparse)
+    assert out.refined_depth.shape == sparse.shape
+    ratio = (out.refined_depth / anchor).log().abs()
+    assert ratio.max().item() < model.config.residual_bound + 1e-4
+    assert out.uncertainty is not None and (out.uncertainty >= 0).all()
+
+
+def test_fit_calibration_covers_95_percent_at_two_sigma() -> None:
+    g = torch.Generator().manual_seed(0)
+    sigma = torch.rand(200_000, generator=g, dtype=torch.float64) * 2 + 0.1
+    error = torch.randn(200_000, generator=g, dtype=torch.float64) * sigma * 3  # raw under-states by 3x
+    depth = torch.full_like(sigma, 10.0)
+    k, f = fit_calibration(sigma, depth, error)
+    covered = (error.abs() <= 2 * (k * sigma + f * depth)).double().mean().item()
+    assert covered == pytest.approx(0.95, abs=0.002)
+    # the sharpest fit is no wider on average than the floor-free one (k = the Gaussian's 95 % quantile / 2)
+    assert (k * sigma + f * depth).mean().item() <= 3 * 1.96 / 2 * sigma.mean().item() * 1.01
+
+
+def test_a_plain_config_cannot_build_the_generalist_and_the_names_map_back() -> None:
+    cfg = model_config("semattnet_rt_generalist")
+    assert arch_for(cfg) == "semattnet_rt_generalist"
+    assert arch_for(model_config("semattnet_generalist")) == "semattnet_generalist"
+    with pytest.raises(InputError, match="anchor"):
+        build_model("semattnet_rt_md", config=cfg)
+    with pytest.raises(InputError, match="anchor must be"):
+        cfg.replace(anchor="monocular")
+    with pytest.raises(InputError, match="residual_bound"):
+        cfg.replace(residual_bound=math.inf)
+    assert isinstance(build_model("semattnet_generalist"), Generalist)
+
+
+def test_the_completer_runs_the_network_between_the_generalists_own_steps() -> None:
+    """DepthCompleter: the engine runs the network; scale, colour, anchor and uncertainty are the generalist's."""
+    torch.manual_seed(0)
+    model = build_model("semattnet_rt_generalist").eval()
+    rgb, semantic, sparse = _frame(h=70, w=100)  # padded to 96x128 inside the completer
+    completer = semattnet.DepthCompleter(model, device="cpu")
+    c = completer(
+        rgb[0].permute(1, 2, 0).numpy(), sparse[0, 0].numpy(), semantic[0].permute(1, 2, 0).numpy().astype(np.uint8)
+    )
+    assert c.depth.shape == (70, 100) and c.uncertainty is not None and np.isfinite(c.uncertainty).all()
+    anchor = complete_classical(sparse)[0, 0].numpy()
+    assert np.abs(np.log(c.depth / anchor)).max() < model.config.residual_bound + 1e-4
