@@ -11,7 +11,6 @@ import torch
 
 import semattnet
 from semattnet._errors import InputError
-from semattnet.models.anchor import complete_classical
 from semattnet.models.generalist import (
     REFERENCE_DEPTH,
     Generalist,
@@ -51,9 +50,19 @@ def test_the_network_sees_the_same_depth_at_any_scale(name: str) -> None:
     model = build_model(name).eval()
     rgb, _, sparse = _frame()
     small, large = model.prepare(rgb, sparse), model.prepare(rgb, sparse * 7)
-    torch.testing.assert_close(small.depth[:, :1], large.depth[:, :1], rtol=1e-5, atol=1e-5)
-    valid = sparse > 0
-    assert small.depth[:, :1][valid].median().item() == pytest.approx(REFERENCE_DEPTH, rel=1e-5)
+    torch.testing.assert_close(small.depth, large.depth, rtol=1e-4, atol=1e-4)  # points and anchor
+    torch.testing.assert_close(small.anchor * 7, large.anchor, rtol=1e-4, atol=1e-4)
+    assert (sparse[sparse > 0] / small.scale.flatten()).median().item() == pytest.approx(REFERENCE_DEPTH, rel=1e-5)
+
+
+def test_points_that_disagree_with_the_anchor_are_left_out_of_the_networks_input() -> None:
+    """A background return inside a foreground region (LiDAR bleed-through) is not read, nor re-injected."""
+    sparse = torch.zeros(1, 1, 32, 32)
+    sparse[0, 0, ::2, ::2] = 5.0  # a wall at 5 m
+    sparse[0, 0, 16, 16] = 20.0  # one return from 20 m behind it
+    model = build_model("semattnet_rt_generalist")
+    points = model.prepare(torch.rand(1, 3, 32, 32) * 255, sparse).depth[:, :1]
+    assert points[0, 0, 16, 16] == 0 and (points > 0).sum() == (sparse > 0).sum() - 1
 
 
 def test_the_correction_returns_the_anchor_where_the_network_agrees_and_stays_within_the_bound() -> None:
@@ -75,7 +84,7 @@ def test_the_output_is_in_metres_with_a_positive_uncertainty_and_the_measurement
     rgb, semantic, sparse = _frame(far=60.0)
     with torch.no_grad():
         out = model(rgb=rgb, semantic=semantic, sparse=sparse)
-    anchor = complete_classical(sparse)
+    anchor = model.prepare(rgb, sparse).anchor
     assert out.refined_depth.shape == sparse.shape
     ratio = (out.refined_depth / anchor).log().abs()
     assert ratio.max().item() < model.config.residual_bound + 1e-4
@@ -117,5 +126,5 @@ def test_the_completer_runs_the_network_between_the_generalists_own_steps() -> N
         rgb[0].permute(1, 2, 0).numpy(), sparse[0, 0].numpy(), semantic[0].permute(1, 2, 0).numpy().astype(np.uint8)
     )
     assert c.depth.shape == (70, 100) and c.uncertainty is not None and np.isfinite(c.uncertainty).all()
-    anchor = complete_classical(sparse)[0, 0].numpy()
+    anchor = model.prepare(rgb, sparse).anchor[0, 0].numpy()
     assert np.abs(np.log(c.depth / anchor)).max() < model.config.residual_bound + 1e-4

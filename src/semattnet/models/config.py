@@ -91,7 +91,7 @@ class SemAttNetConfig:
     encoder: str = "resnet"
     affinity: AffinityForm = "eq13"
     anchor: AnchorMode = "none"
-    residual_bound: float = 1.5
+    residual_bound: float = 1.0
 
     def __post_init__(self) -> None:
         if self.branches not in (2, 3):

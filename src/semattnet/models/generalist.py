@@ -10,9 +10,12 @@ model or a real-time variant, whose depth input has two channels instead of one,
    in a 3 m room as on an 80 m road. Its output is multiplied back by ``s / REFERENCE_DEPTH``.
 2. **Colour.** Each image's channels are standardised (per image and channel: mean 128, standard deviation
    50), so exposure and white balance do not tell the network which rig it is on.
-3. **Anchor.** The classical completion ``A`` (:func:`semattnet.baselines.classical.complete_classical`) is the
-   network's second depth channel and the base its output corrects: with ``D_n`` the network's refined depth
-   (paper eq. 13) and ``A_n`` the anchor in the same units, the generalist's depth is
+3. **Anchor.** The sparse points that disagree with the classical completion by more than
+   :data:`OUTLIER_LOG_RATIO` are left out (returns seen through a foreground edge), and the classical completion
+   of the points left, ``A`` (:func:`semattnet.models.anchor.complete_classical`, run in the normalised units so
+   that its depth-dependent dilation is scale-free too), is the network's second depth channel and the base its
+   output corrects: with ``D_n`` the network's refined depth (paper eq. 13) and ``A_n`` the anchor in the same
+   units, the generalist's depth is
 
    ``D = A * exp(b * tanh(log(D_n / A_n) / b))``  (``b`` = ``config.residual_bound``)
 
@@ -48,6 +51,7 @@ __all__ = [
     "Generalist",
     "GeneralistInputs",
     "classical_anchor",
+    "consistent_points",
     "fit_calibration",
     "frame_scale",
     "standardise_colour",
@@ -55,6 +59,10 @@ __all__ = [
 
 #: The depth (metres) at which the network sees every frame's median sparse point.
 REFERENCE_DEPTH = 10.0
+#: A sparse point further than this from the anchor (``|log(d / A)|``) is left out of the network's input: a
+#: LiDAR return seen through a foreground edge (the sensor sits beside the camera), which the classical
+#: completion's dilation and median have already outvoted.
+OUTLIER_LOG_RATIO = 0.1
 _COLOUR_MEAN, _COLOUR_STD = 128.0, 50.0
 _EPS = 1e-3
 
@@ -82,11 +90,17 @@ def classical_anchor(sparse: torch.Tensor) -> torch.Tensor:
         return complete_classical(sparse.detach().float())
 
 
+def consistent_points(sparse: torch.Tensor, anchor: torch.Tensor) -> torch.Tensor:
+    """``sparse`` without the points further than :data:`OUTLIER_LOG_RATIO` from ``anchor`` (set to 0)."""
+    ratio = torch.log(sparse.clamp_min(_EPS)) - torch.log(anchor.clamp_min(_EPS))
+    return torch.where((sparse > 0) & (ratio.abs() <= OUTLIER_LOG_RATIO), sparse, torch.zeros_like(sparse))
+
+
 class GeneralistInputs(NamedTuple):
     """What :meth:`Generalist.prepare` gives the network, and what :meth:`Generalist.finish` needs back."""
 
     rgb: torch.Tensor  # (B, 3, H, W), standardised colours
-    depth: torch.Tensor  # (B, 2, H, W): sparse and anchor, normalised to REFERENCE_DEPTH
+    depth: torch.Tensor  # (B, 2, H, W): consistent sparse points and anchor, normalised to REFERENCE_DEPTH
     sparse: torch.Tensor  # (B, 1, H, W) metres, as given
     anchor: torch.Tensor  # (B, 1, H, W) metres
     scale: torch.Tensor  # (B, 1, 1, 1): metres per normalised unit
@@ -123,11 +137,13 @@ class Generalist(nn.Module):
         backbone.init_depth_heads(scale * REFERENCE_DEPTH / 15.0, REFERENCE_DEPTH)
 
     def prepare(self, rgb: torch.Tensor, sparse: torch.Tensor) -> GeneralistInputs:
-        """Steps 1-3 of the module docstring before the network: scale, colour, anchor."""
-        anchor = classical_anchor(sparse)
+        """Steps 1-3 of the module docstring before the network: outliers, anchor, scale, colour."""
         scale = frame_scale(sparse) / REFERENCE_DEPTH
-        depth = torch.cat((sparse, anchor), dim=1) / scale
-        return GeneralistInputs(standardise_colour(rgb.float()), depth, sparse, anchor, scale)
+        normalised = sparse.float() / scale
+        points = consistent_points(normalised, classical_anchor(normalised))
+        anchor = classical_anchor(points)  # in normalised units too: the classical's depth bands become scale-free
+        depth = torch.cat((points, anchor), dim=1)
+        return GeneralistInputs(standardise_colour(rgb.float()), depth, sparse, anchor * scale, scale)
 
     def finish(
         self, out: DepthCompletionOutput, inputs: GeneralistInputs, uncertainty: bool = True
