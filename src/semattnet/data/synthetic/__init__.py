@@ -2,6 +2,15 @@
 of a domain (:mod:`.domain`), written as a KITTI depth-completion tree (:mod:`.tree`)."""
 
 from semattnet.data.synthetic.domain import DOMAINS, SOURCE, TARGET, Domain
+from semattnet.data.synthetic.patterns import (
+    PATTERNS,
+    LidarRig,
+    apply_pattern,
+    depthcam_pattern,
+    lidar_pattern,
+    points_pattern,
+)
+from semattnet.data.synthetic.rooms import ROOM_CLASSES, Room, make_room
 from semattnet.data.synthetic.scenes import (
     CITYSCAPES_PALETTE,
     KITTI_K,
@@ -11,17 +20,40 @@ from semattnet.data.synthetic.scenes import (
     make_frame,
 )
 from semattnet.data.synthetic.tree import write_synthetic_kitti
+from semattnet.data.synthetic.world import (
+    WORLD_KINDS,
+    WORLD_PATTERNS,
+    WORLD_SPLITS,
+    WorldFrame,
+    make_world_frame,
+    world_seed,
+)
 
 __all__ = [
     "CITYSCAPES_PALETTE",
     "DOMAINS",
     "KITTI_K",
     "MATERIALS",
+    "PATTERNS",
+    "ROOM_CLASSES",
     "SCENE_STYLES",
     "SOURCE",
     "TARGET",
+    "WORLD_KINDS",
+    "WORLD_PATTERNS",
+    "WORLD_SPLITS",
     "Domain",
+    "LidarRig",
+    "Room",
     "SyntheticFrame",
+    "WorldFrame",
+    "apply_pattern",
+    "depthcam_pattern",
+    "lidar_pattern",
     "make_frame",
+    "make_room",
+    "make_world_frame",
+    "points_pattern",
+    "world_seed",
     "write_synthetic_kitti",
 ]
