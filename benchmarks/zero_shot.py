@@ -4,9 +4,10 @@ One command (from the repository root, the package installed):
 
     python benchmarks/zero_shot.py --out zero-shot-run
 
-Rows (``--methods``): the classical completion, the shipped street-trained demo references, the generalists
-(``semattnet-generalist``, ``semattnet-rt-generalist``) and, with ``--adapted NAME=WEIGHTS``, weights that
-``semattnet adapt`` made from a generalist on the real frame's own sensors (no ground truth read). Columns:
+Rows (``--methods``): the classical completion, the generalist's anchor alone (its non-learned part), the
+shipped street-trained demo references, the generalists (``semattnet-generalist``, ``semattnet-rt-generalist``)
+and, with ``--adapted LABEL=WEIGHTS``, weights that ``semattnet adapt`` made from a generalist on the real frame's
+own sensors (no ground truth read). Columns:
 
 * ``real``: the bundled KITTI frame (drive 0035, frame 5), cameras 02 and 03, its own scan projected as
   ``predict --kitti-raw`` does, scored against the official annotated map; no semantic map (the fallback);
@@ -38,6 +39,7 @@ from semattnet.evaluation.zero_shot import BenchFrame, mean_scores, method, real
 
 DEFAULT_METHODS = (
     "classical",
+    "anchor",
     "semattnet-demo-ref-seed0",
     "semattnet-demo-ref-robust-seed0",
     "semattnet-rt-md-demo-seed0",
@@ -91,7 +93,8 @@ def table(results: dict, columns: list[str], metric: str = "rmse_mm") -> str:
     for name, cells in results.items():
         best = {c: min(r[c][metric] for r in results.values() if c in r) for c in columns}
         vals = [cells[c][metric] if c in cells else float("nan") for c in columns]
-        txt = [f"**{v:.0f}**" if v == best[c] else f"{v:.0f}" for v, c in zip(vals, columns, strict=True)]
+        fmt = ".3f" if metric == "rel" else ".0f"
+        txt = [f"**{v:{fmt}}**" if v == best[c] else f"{v:{fmt}}" for v, c in zip(vals, columns, strict=True)]
         lines.append(f"| `{name}` | " + " | ".join(txt) + " |")
     return head + "\n".join(lines) + "\n"
 
@@ -124,15 +127,18 @@ def plot(results: dict, path: Path) -> None:
     axes[0].barh(names, real, color=["0.5" if n == "classical" else "C0" for n in names])
     axes[0].axvline(real[names.index("classical")] if "classical" in names else 0, color="0.3", ls=":")
     axes[0].set(xlabel="RMSE (m), real KITTI frame, mean of cameras 02/03", xscale="log")
-    for ax, prefix, label in ((axes[1], "street/beams-", "LiDAR beams (streets)"),
-                              (axes[2], "indoor/points-", "random points (rooms)")):  # fmt: skip
+    for ax, prefix, label in (
+        (axes[1], "street/beams-", "LiDAR beams (streets)"),
+        (axes[2], "indoor/points-", "random points (rooms)"),
+    ):
         for n in names:
             cols = [c for c in results[n] if c.startswith(prefix)]
             if cols:
                 xs = [int(c.removeprefix(prefix)) for c in cols]
                 ax.plot(xs, [results[n][c]["rmse_mm"] / 1000 for c in cols], marker="o", label=n)
         ax.set(xscale="log", yscale="log", xlabel=label, ylabel="RMSE (m), held-out world scenes")
-    axes[2].legend(fontsize=7)
+    if axes[2].get_lines():
+        axes[2].legend(fontsize=7)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")

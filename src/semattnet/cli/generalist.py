@@ -51,9 +51,16 @@ def train_generalist_command(
     bank = bank if bank is not None else out / "bank"
     write_bank(bank, frames, log=click.echo)
     cfg = GeneralistTrainConfig(
-        model=model, bank=str(bank), out=str(out), steps=steps, batch=batch, crop=parse_size(crop, "--crop"),
-        lr=lr, init=init, seed=seed,
-    )  # fmt: skip
+        model=model,
+        bank=str(bank),
+        out=str(out),
+        steps=steps,
+        batch=batch,
+        crop=parse_size(crop, "--crop"),
+        lr=lr,
+        init=init,
+        seed=seed,
+    )
     trained = train_generalist(cfg, resume=resume, log=click.echo)
     path = finish_generalist(trained, cfg, log=click.echo)
     click.echo(f"wrote {path}")

@@ -58,21 +58,23 @@ def real_frames(sample_root: str | Path) -> list[BenchFrame]:
     return out
 
 
-def world_frames(kind: str, pattern: str, count: int, size: tuple[int, int] | None = None,
-                 first: int = 0, **draw: object) -> Iterator[BenchFrame]:  # fmt: skip
-    """``count`` held-out world frames of one ``kind`` and sparse ``pattern`` (``draw``: the pattern's own
-    settings, e.g. ``beams=16`` or ``points=500``, where the world takes them)."""
+def world_frames(
+    kind: str, pattern: str, frames: int, size: tuple[int, int] | None = None, first: int = 0, **draw: object
+) -> Iterator[BenchFrame]:
+    """``frames`` held-out world frames of one ``kind`` and sparse ``pattern`` (``draw``: the pattern's own
+    settings, e.g. ``beams=16`` or ``count=500``: :data:`~semattnet.data.synthetic.world.PATTERN_OPTIONS`)."""
     from semattnet.data.synthetic.world import make_world_frame, world_seed
 
-    for i in range(first, first + count):
+    for i in range(first, first + frames):
         f = make_world_frame(world_seed("heldout", i), kind=kind, pattern=pattern, size=size, **draw)
         label = pattern + "".join(f"-{k}{v}" for k, v in draw.items())
         yield BenchFrame(f"{kind}-{label}-{i}", f.rgb, f.sparse, f.gt, kind, label)
 
 
 def method(name: str, device: str = "cpu") -> Completer:
-    """``classical`` or weights (a registered name or a file), as a :data:`Completer`; the fallback semantic map
-    for models that read one."""
+    """``classical``, ``anchor`` (the generalist's anchor alone: :func:`~semattnet.models.generalist.prepare_inputs`)
+    or weights (a registered name or a file), as a :data:`Completer`; the fallback semantic map for models that
+    read one."""
     if name == "classical":
         from semattnet.baselines.classical import ClassicalCompleter
 
@@ -83,6 +85,14 @@ def method(name: str, device: str = "cpu") -> Completer:
             return c.depth, c.uncertainty
 
         return run_classical
+    if name == "anchor":  # the generalist's non-learned anchor alone
+        from semattnet.models.generalist import prepare_inputs
+
+        def run_anchor(rgb: np.ndarray, sparse: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+            t = torch.from_numpy(np.ascontiguousarray(sparse, dtype=np.float32))[None, None]
+            return prepare_inputs(torch.zeros(1, 3, *sparse.shape), t).anchor[0, 0].numpy(), None
+
+        return run_anchor
     from semattnet.inference.backends import EngineSpec
     from semattnet.inference.completer import load_completer
     from semattnet.palette import unknown_map

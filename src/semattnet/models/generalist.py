@@ -54,6 +54,7 @@ __all__ = [
     "consistent_points",
     "fit_calibration",
     "frame_scale",
+    "prepare_inputs",
     "standardise_colour",
 ]
 
@@ -106,6 +107,17 @@ class GeneralistInputs(NamedTuple):
     scale: torch.Tensor  # (B, 1, 1, 1): metres per normalised unit
 
 
+def prepare_inputs(rgb: torch.Tensor, sparse: torch.Tensor) -> GeneralistInputs:
+    """Steps 1-3 of the module docstring before the network: scale, outliers, anchor, colour. Its ``anchor``
+    alone is a non-learned completion (the benchmark's ``anchor`` row)."""
+    scale = frame_scale(sparse) / REFERENCE_DEPTH
+    normalised = sparse.float() / scale
+    points = consistent_points(normalised, classical_anchor(normalised))
+    anchor = classical_anchor(points)  # in normalised units too: the classical's depth bands become scale-free
+    depth = torch.cat((points, anchor), dim=1)
+    return GeneralistInputs(standardise_colour(rgb.float()), depth, sparse, anchor * scale, scale)
+
+
 def _network(config: SemAttNetConfig) -> nn.Module:
     if config.anchor == "none":
         raise InputError("Generalist needs a config with an anchor (anchor='classical')")
@@ -137,13 +149,8 @@ class Generalist(nn.Module):
         backbone.init_depth_heads(scale * REFERENCE_DEPTH / 15.0, REFERENCE_DEPTH)
 
     def prepare(self, rgb: torch.Tensor, sparse: torch.Tensor) -> GeneralistInputs:
-        """Steps 1-3 of the module docstring before the network: outliers, anchor, scale, colour."""
-        scale = frame_scale(sparse) / REFERENCE_DEPTH
-        normalised = sparse.float() / scale
-        points = consistent_points(normalised, classical_anchor(normalised))
-        anchor = classical_anchor(points)  # in normalised units too: the classical's depth bands become scale-free
-        depth = torch.cat((points, anchor), dim=1)
-        return GeneralistInputs(standardise_colour(rgb.float()), depth, sparse, anchor * scale, scale)
+        """Steps 1-3 of the module docstring before the network (:func:`prepare_inputs`)."""
+        return prepare_inputs(rgb, sparse)
 
     def finish(
         self, out: DepthCompletionOutput, inputs: GeneralistInputs, uncertainty: bool = True

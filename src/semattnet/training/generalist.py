@@ -74,8 +74,9 @@ class GeneralistTrainConfig:
             raise InputError(f"fallback_share must be in [0, 1], got {self.fallback_share}")
 
 
-def write_bank(out: str | Path, count: int, split: str = "train", start: int = 0,
-               log: Callable[[str], None] = print) -> Path:  # fmt: skip
+def write_bank(
+    out: str | Path, count: int, split: str = "train", start: int = 0, log: Callable[[str], None] = print
+) -> Path:
     """Write world frames ``start`` .. ``count - 1`` of ``split`` as ``out/{split}_{index:05d}.npz`` (frames already
     there are kept: a killed run goes on)."""
     from semattnet.data.synthetic.world import make_world_frame, world_seed
@@ -117,8 +118,10 @@ def _crop(frame: dict[str, np.ndarray], crop: tuple[int, int], rng: np.random.Ge
     arrays = [frame["rgb"], frame["semantic"], frame["sparse"], frame["gt"]]
     if h < ch or w < cw:
         ph, pw = max(0, ch - h), max(0, cw - w)
-        arrays = [np.pad(a, ((0, ph), (0, pw)) + ((0, 0),) * (a.ndim - 2), mode="edge" if a.ndim == 3 else "constant")
-                  for a in arrays]  # fmt: skip
+        arrays = [
+            np.pad(a, ((0, ph), (0, pw)) + ((0, 0),) * (a.ndim - 2), mode="edge" if a.ndim == 3 else "constant")
+            for a in arrays
+        ]
         h, w = arrays[2].shape
     y, x = int(rng.integers(0, h - ch + 1)), int(rng.integers(0, w - cw + 1))
     out = [a[y : y + ch, x : x + cw] for a in arrays]
@@ -150,8 +153,9 @@ def sample_batch(
     return stack(0, True), stack(1, True), stack(2, False), stack(3, False)
 
 
-def generalist_loss(model: Generalist, rgb: torch.Tensor, semantic: torch.Tensor, sparse: torch.Tensor,
-                    gt: torch.Tensor) -> torch.Tensor:  # fmt: skip
+def generalist_loss(
+    model: Generalist, rgb: torch.Tensor, semantic: torch.Tensor, sparse: torch.Tensor, gt: torch.Tensor
+) -> torch.Tensor:
     """Mean |log D - log gt| plus 0.1 mean |log D_n - log gt| over the pixels with truth (module docstring)."""
     inputs = model.prepare(rgb, sparse)
     out = model.net(inputs.rgb, semantic, inputs.depth)
@@ -194,8 +198,13 @@ def init_from_plain(model: Generalist, weights: str, log: Callable[[str], None] 
 
 
 def _state(step: int, model: Generalist, opt: torch.optim.Optimizer, sched: object, rng: np.random.Generator) -> dict:
-    return {"step": step, "model": model.state_dict(), "optimizer": opt.state_dict(),
-            "scheduler": sched.state_dict(), "rng": rng.bit_generator.state}  # type: ignore[attr-defined]  # fmt: skip
+    return {
+        "step": step,
+        "model": model.state_dict(),
+        "optimizer": opt.state_dict(),
+        "scheduler": sched.state_dict(),
+        "rng": rng.bit_generator.state,
+    }  # type: ignore[attr-defined]
 
 
 def train_generalist(
@@ -254,8 +263,9 @@ def train_generalist(
 CALIBRATION_FIRST = 1000
 
 
-def calibrate_uncertainty(model: Generalist, frames: int = 24, pixels: int = 200_000,
-                          log: Callable[[str], None] = print) -> tuple[float, float]:  # fmt: skip
+def calibrate_uncertainty(
+    model: Generalist, frames: int = 24, pixels: int = 200_000, log: Callable[[str], None] = print
+) -> tuple[float, float]:
     """Fit ``model.calibration`` (:func:`~semattnet.models.generalist.fit_calibration`: 95 % of the errors within
     2 sigma) on ``frames`` held-out world frames from :data:`CALIBRATION_FIRST` on (half of them with the fallback
     semantic map), whole frames as inference sees them; sets the buffer and returns ``(k, f)``."""
