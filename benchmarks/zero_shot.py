@@ -102,8 +102,9 @@ def table(results: dict, columns: list[str], metric: str = "rmse_mm") -> str:
 def real_table(results: dict) -> str:
     """The real frame: every metric per camera, one row per method."""
     keys = ("rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km", "coverage_2sigma_pct", "ause_rmse")
-    head = "| method | camera | RMSE mm | MAE mm | iRMSE 1/km | iMAE 1/km | 2-sigma coverage % | AUSE |\n"
-    head += "|---|---|---:|---:|---:|---:|---:|---:|\n"
+    keys += ("gate_kept_pct", "gate_rmse_mm")
+    head = "| method | camera | RMSE mm | MAE mm | iRMSE 1/km | iMAE 1/km | 2-sigma coverage % | AUSE |"
+    head += " kept by `--max-uncertainty 5%` | their RMSE mm |\n|---|---|" + "---:|" * len(keys) + "\n"
     rows = []
     for name, cells in results.items():
         for cam in ("real/cam02", "real/cam03"):
