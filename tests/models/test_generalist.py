@@ -68,14 +68,29 @@ def test_points_that_disagree_with_the_anchor_are_left_out_of_the_networks_input
 def test_the_correction_returns_the_anchor_where_the_network_agrees_and_stays_within_the_bound() -> None:
     model = build_model("semattnet_rt_generalist", residual_bound=0.5)
     anchor = torch.rand(1, 1, 8, 8) * 40 + 1
-    torch.testing.assert_close(model.correct(anchor, anchor), anchor)
+    far = torch.full_like(anchor, 1e4)  # pixels far from every point: the whole bound
+    torch.testing.assert_close(model.correct(anchor, anchor, far), anchor)
     wild = anchor * torch.exp(torch.randn(1, 1, 8, 8) * 5)
-    ratio = torch.log(model.correct(anchor, wild) / anchor).abs()
+    ratio = torch.log(model.correct(anchor, wild, far) / anchor).abs()
     assert ratio.max().item() <= 0.5 + 1e-6  # tanh saturates in float32
     # monotone in the network's depth: a deeper prediction never gives a shallower output
     a = torch.full((1, 1, 1, 5), 10.0)
-    out = model.correct(a, torch.tensor([2.0, 5.0, 10.0, 20.0, 50.0]).view(1, 1, 1, 5)).flatten()
+    out = model.correct(a, torch.tensor([2.0, 5.0, 10.0, 20.0, 50.0]).view(1, 1, 1, 5), far[..., :1, :5]).flatten()
     assert torch.all(out[1:] > out[:-1])
+
+
+def test_the_bound_shrinks_to_the_measurement_near_the_points() -> None:
+    """t = 1 - exp(-r / R): a measured pixel keeps the anchor, the bound at r = R is (1 - 1/e) of the whole."""
+    model = build_model("semattnet_rt_generalist", residual_bound=1.0, trust_radius=4.0)
+    anchor, net = torch.full((1, 1, 1, 3), 10.0), torch.full((1, 1, 1, 3), 1e4)  # the network wants far more
+    out = model.correct(anchor, net, torch.tensor([0.0, 4.0, 1e4]).view(1, 1, 1, 3)).flatten()
+    assert out[0].item() == pytest.approx(10.0)
+    assert math.log(out[1].item() / 10) == pytest.approx(1 - math.exp(-1), rel=1e-4)
+    assert math.log(out[2].item() / 10) == pytest.approx(1.0, rel=1e-4)
+    flat = build_model("semattnet_rt_generalist", trust_radius=0.0)
+    assert flat.correct(anchor, net, torch.zeros(1, 1, 1, 3)).flatten()[0].item() == pytest.approx(
+        10 * math.e, rel=1e-4
+    )
 
 
 def test_the_output_is_in_metres_with_a_positive_uncertainty_and_the_measurements_nearby() -> None:

@@ -35,6 +35,7 @@ RANGES: dict[str, tuple[float, float]] = {
     "kernel_sizes": (1, 15),
     "iterations": (0, 32),
     "residual_bound": (0.05, 5.0),
+    "trust_radius": (0.0, 64.0),
 }
 MAX_KERNELS = 8
 
@@ -77,6 +78,8 @@ class SemAttNetConfig:
             completion times a bounded correction.
         residual_bound: the generalist's largest correction of the anchor, in natural-log depth
             (``log(depth / anchor)`` lies in ``(-b, b)``); unused without an anchor.
+        trust_radius: the generalist's bound shrinks near the measurements: times ``1 - exp(-r / R)`` at ``r``
+            pixels from the nearest point (0: the same bound everywhere).
     """
 
     branches: Literal[2, 3] = 3
@@ -92,6 +95,7 @@ class SemAttNetConfig:
     affinity: AffinityForm = "eq13"
     anchor: AnchorMode = "none"
     residual_bound: float = 1.0
+    trust_radius: float = 4.0
 
     def __post_init__(self) -> None:
         if self.branches not in (2, 3):
@@ -118,6 +122,7 @@ class SemAttNetConfig:
         if self.anchor not in ANCHOR_MODES:
             raise InputError(f"anchor must be one of {ANCHOR_MODES}, got {self.anchor!r}")
         _in_range("residual_bound", self.residual_bound, integer=False)
+        _in_range("trust_radius", self.trust_radius, integer=False)
         if self.anchor != "none" and not self.refine:
             raise InputError("anchor: the generalist is the refined model; set refine=True")
         from semattnet.models.encoders import encoder_spec

@@ -20,7 +20,9 @@ model or a real-time variant, whose depth input has two channels instead of one,
    ``D = A * exp(b * tanh(log(D_n / A_n) / b))``  (``b`` = ``config.residual_bound``)
 
    so ``log(D / A)`` stays within ``(-b, b)``: where the network agrees with the anchor the output is the
-   classical completion, and no prediction strays more than a factor ``e^b`` from it.
+   classical completion, and no prediction strays more than a factor ``e^b`` from it. With a ``trust_radius``
+   ``R`` the bound shrinks near the measurements: ``b`` becomes ``t b``, ``t = 1 - exp(-r / R)`` at ``r``
+   pixels from the nearest point the network reads (0 on a measured pixel, where the anchor is the measurement).
 
 Nothing depends on the camera's intrinsics or the image size. The uncertainty (:meth:`Generalist.uncertainty`)
 adds the disagreement with the anchor to the model's own terms (:func:`~semattnet.models.uncertainty.depth_uncertainty`)
@@ -44,7 +46,7 @@ from semattnet.models.config import SemAttNetConfig
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.rt import SemAttNetRT, SemAttNetRTBackbone
 from semattnet.models.semattnet import SemAttNet
-from semattnet.models.uncertainty import depth_uncertainty
+from semattnet.models.uncertainty import depth_uncertainty, lidar_distance
 
 __all__ = [
     "REFERENCE_DEPTH",
@@ -105,6 +107,7 @@ class GeneralistInputs(NamedTuple):
     sparse: torch.Tensor  # (B, 1, H, W) metres, as given
     anchor: torch.Tensor  # (B, 1, H, W) metres
     scale: torch.Tensor  # (B, 1, 1, 1): metres per normalised unit
+    distance: torch.Tensor  # (B, 1, H, W): pixels to the nearest point the network reads
 
 
 def prepare_inputs(rgb: torch.Tensor, sparse: torch.Tensor) -> GeneralistInputs:
@@ -115,7 +118,8 @@ def prepare_inputs(rgb: torch.Tensor, sparse: torch.Tensor) -> GeneralistInputs:
     points = consistent_points(normalised, classical_anchor(normalised))
     anchor = classical_anchor(points)  # in normalised units too: the classical's depth bands become scale-free
     depth = torch.cat((points, anchor), dim=1)
-    return GeneralistInputs(standardise_colour(rgb.float()), depth, sparse, anchor * scale, scale)
+    distance = lidar_distance(points)
+    return GeneralistInputs(standardise_colour(rgb.float()), depth, sparse, anchor * scale, scale, distance)
 
 
 def _network(config: SemAttNetConfig) -> nn.Module:
@@ -162,19 +166,21 @@ class Generalist(nn.Module):
         depth_fields = ("color_depth", "semantic_depth", "guided_depth", "fused_depth", "refined_s2_depth")
         changes = {f: getattr(out, f).float() * scale for f in depth_fields if getattr(out, f) is not None}
         net_depth = out.depth.float() * scale
-        changes["refined_depth"] = self.correct(inputs.anchor, net_depth)
+        changes["refined_depth"] = self.correct(inputs.anchor, net_depth, inputs.distance)
         result = dataclasses.replace(out, **changes)
         if not uncertainty:
             return result
         return dataclasses.replace(result, uncertainty=self.uncertainty(result, inputs, net_depth))
 
-    def correct(self, anchor: torch.Tensor, net_depth: torch.Tensor) -> torch.Tensor:
-        """``A * exp(b * tanh(log(D_n / A) / b))``: the network's depth pulled within a factor ``e^b`` of the
-        anchor (both metres); 0 where the anchor is 0 (an image without points)."""
-        b = self.config.residual_bound
+    def correct(self, anchor: torch.Tensor, net_depth: torch.Tensor, distance: torch.Tensor) -> torch.Tensor:
+        """``A * exp(t * b * tanh(log(D_n / A) / b))``: the network's depth pulled within a factor ``e^(t b)`` of the
+        anchor (both metres), ``t = 1 - exp(-r / R)`` the trust in the network at ``distance`` ``r`` pixels from the
+        nearest point (``R`` = ``config.trust_radius``; 0: ``t = 1``); 0 where the anchor is 0 (no points)."""
+        b, radius = self.config.residual_bound, self.config.trust_radius
+        trust = 1.0 - torch.exp(-distance / radius) if radius > 0 else torch.ones_like(distance)
         a = anchor.clamp_min(_EPS)
         r = torch.log(net_depth.clamp_min(_EPS)) - torch.log(a)
-        out = a * torch.exp(b * torch.tanh(r / b))
+        out = a * torch.exp(trust * b * torch.tanh(r / b))
         return torch.where(anchor > 0, out, torch.zeros_like(out))
 
     def uncertainty(

@@ -160,7 +160,7 @@ def generalist_loss(
     inputs = model.prepare(rgb, sparse)
     out = model.net(inputs.rgb, semantic, inputs.depth)
     net_depth = out.depth.float() * inputs.scale
-    depth = model.correct(inputs.anchor, net_depth)
+    depth = model.correct(inputs.anchor, net_depth, inputs.distance)
     valid = gt > 0
     log_gt = torch.log(gt[valid])
     main = (torch.log(depth[valid].clamp_min(1e-3)) - log_gt).abs().mean()
@@ -175,7 +175,8 @@ def init_from_plain(model: Generalist, weights: str, log: Callable[[str], None] 
     semantic stems read ``[image; sparse; anchor; ...]``, the depth stem ``[sparse; anchor; ...]``)."""
     from semattnet.weights import from_pretrained
 
-    plain = from_pretrained(weights, map_location="cpu").state_dict()
+    loaded = from_pretrained(weights, map_location="cpu")
+    plain = (loaded.net if isinstance(loaded, Generalist) else loaded).state_dict()  # a generalist: go on from it
     own = model.net.state_dict()
     copied, widened = 0, 0
     for name, t in own.items():
