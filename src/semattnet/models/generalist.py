@@ -25,7 +25,7 @@ model or a real-time variant, whose depth input has two channels instead of one,
    pixels from the nearest point the network reads (0 on a measured pixel, where the anchor is the measurement).
 
 Nothing depends on the camera's intrinsics or the image size. The uncertainty (:meth:`Generalist.uncertainty`)
-adds the disagreement with the anchor to the model's own terms (:func:`~semattnet.models.uncertainty.depth_uncertainty`)
+adds the correction of the anchor to the model's own terms (:func:`~semattnet.models.uncertainty.depth_uncertainty`)
 and is calibrated: ``sigma = k * u + f * D``, with ``(k, f)`` a buffer fitted on held-out synthetic scenes so
 that 95 % of the errors lie within ``2 sigma`` (:func:`fit_calibration`).
 """
@@ -46,7 +46,7 @@ from semattnet.models.config import SemAttNetConfig
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.rt import SemAttNetRT, SemAttNetRTBackbone
 from semattnet.models.semattnet import SemAttNet
-from semattnet.models.uncertainty import depth_uncertainty, lidar_distance
+from semattnet.models.uncertainty import branch_spread, depth_slope, lidar_distance, refinement_change
 
 __all__ = [
     "REFERENCE_DEPTH",
@@ -170,7 +170,7 @@ class Generalist(nn.Module):
         result = dataclasses.replace(out, **changes)
         if not uncertainty:
             return result
-        return dataclasses.replace(result, uncertainty=self.uncertainty(result, inputs, net_depth))
+        return dataclasses.replace(result, uncertainty=self.uncertainty(result, inputs))
 
     def correct(self, anchor: torch.Tensor, net_depth: torch.Tensor, distance: torch.Tensor) -> torch.Tensor:
         """``A * exp(t * b * tanh(log(D_n / A) / b))``: the network's depth pulled within a factor ``e^(t b)`` of the
@@ -183,14 +183,14 @@ class Generalist(nn.Module):
         out = a * torch.exp(trust * b * torch.tanh(r / b))
         return torch.where(anchor > 0, out, torch.zeros_like(out))
 
-    def uncertainty(
-        self, out: DepthCompletionOutput, inputs: GeneralistInputs, net_depth: torch.Tensor
-    ) -> torch.Tensor:
-        """``sigma = k * sqrt(u^2 + (D - A)^2 + (D_n - D)^2) + f * D`` metres: the model's own terms ``u``
-        (:func:`depth_uncertainty`), the correction of the anchor and what the bound held back, calibrated."""
-        u = depth_uncertainty(out, inputs.sparse)
+    def uncertainty(self, out: DepthCompletionOutput, inputs: GeneralistInputs) -> torch.Tensor:
+        """``sigma = k * sqrt(s^2 + c^2 + a^2 + (D - A)^2) + f * D`` metres: the model's own terms (the branch spread
+        ``s``, the refinement change ``c`` and the anchor term ``a``, :mod:`semattnet.models.uncertainty`, ``a``
+        from the points the network reads) and the correction of the anchor, calibrated by ``(k, f)``."""
         depth = out.depth.float()
-        raw = (u * u + (depth - inputs.anchor) ** 2 + (net_depth - depth) ** 2).sqrt()
+        s, c = branch_spread(out), refinement_change(out)
+        a = (inputs.distance + 1) * depth_slope(depth)
+        raw = (s * s + c * c + a * a + (depth - inputs.anchor) ** 2).sqrt()
         k, f = self.calibration[0], self.calibration[1]
         return k * raw + f * depth
 
