@@ -3,6 +3,7 @@ calibration fit, and the registry and completer around it."""
 
 from __future__ import annotations
 
+import importlib.util
 import math
 
 import numpy as np
@@ -143,3 +144,22 @@ def test_the_completer_runs_the_network_between_the_generalists_own_steps() -> N
     assert c.depth.shape == (70, 100) and c.uncertainty is not None and np.isfinite(c.uncertainty).all()
     anchor = model.prepare(rgb, sparse).anchor[0, 0].numpy()
     assert np.abs(np.log(c.depth / anchor)).max() < model.config.residual_bound + 1e-4
+
+
+@pytest.mark.slow  # two OpenVINO engines and an int8 quantisation: tens of seconds
+@pytest.mark.skipif(
+    importlib.util.find_spec("openvino") is None or importlib.util.find_spec("nncf") is None,
+    reason="needs openvino and nncf",
+)
+def test_openvino_runs_the_network_and_int8_calibrates_on_prepared_inputs() -> None:
+    """The engines run the network alone (two depth channels); int8 calibrates on what prepare_inputs makes."""
+    torch.manual_seed(0)
+    model = build_model("semattnet_rt_generalist").eval()
+    rgb, semantic, sparse = _frame()
+    args = (rgb[0].permute(1, 2, 0).numpy(), sparse[0, 0].numpy(), semantic[0].permute(1, 2, 0).numpy())
+    ref = semattnet.DepthCompleter(model, device="cpu")(*args)
+    spec = {"device": "cpu", "backend": "openvino"}
+    f32 = semattnet.DepthCompleter(model, **spec)(*args)  # the suite's engines go to a temporary cache
+    int8 = semattnet.DepthCompleter(model, precision="int8", **spec)(*args)
+    np.testing.assert_allclose(f32.depth, ref.depth, rtol=1e-4, atol=1e-3)
+    assert np.abs(np.log(int8.depth / ref.depth)).mean() < 0.05 and int8.uncertainty is not None

@@ -195,6 +195,24 @@ def calibration_frames(
     return _checked(frames, what), what
 
 
+def anchored(calibration: Calibration) -> Calibration:
+    """``calibration`` as a generalist's network reads it (:func:`semattnet.models.generalist.prepare_inputs`:
+    standardised colours, the sparse points and the anchor as two normalised channels)."""
+
+    def make() -> list[dict[str, np.ndarray]]:
+        import torch
+
+        from semattnet.models.generalist import prepare_inputs
+
+        out = []
+        for feed in calibration.feeds():
+            prepared = prepare_inputs(torch.from_numpy(feed["rgb"]), torch.from_numpy(feed["sparse"]))
+            out.append(feed | {"rgb": prepared.rgb.numpy(), "sparse": prepared.depth.numpy()})
+        return out
+
+    return Calibration(f"{calibration.key}-anchored", f"{calibration.description}, anchored", make)
+
+
 def resolve_calibration(
     calibration: CalibrationFrames, size: tuple[int, int], count: int = DEFAULT_CALIBRATION_FRAMES
 ) -> Calibration:

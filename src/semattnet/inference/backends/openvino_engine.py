@@ -32,6 +32,7 @@ from semattnet.inference.backends._export_cache import (
 from semattnet.inference.backends.calibration import (
     DEFAULT_CALIBRATION_FRAMES,
     CalibrationFrames,
+    anchored,
     resolve_calibration,
 )
 from semattnet.inference.backends.openvino_int8 import quantized_ir
@@ -95,7 +96,10 @@ class OpenVinoEngine(ExportedGraphEngine):
             for done in (onnx_path, onnx_path.with_name(f"{onnx_path.name}.sha256")):  # the IR holds the weights
                 done.unlink(missing_ok=True)
         if precision == "int8":  # the quantised IR (cached per calibration); its float layers in f32
-            xml = quantized_ir(ov, xml, resolve_calibration(calibration, size, calibration_frames), log)
+            frames = resolve_calibration(calibration, size, calibration_frames)
+            if getattr(getattr(model, "config", None), "depth_channels", 1) == 2:  # a generalist's network
+                frames = anchored(frames)
+            xml = quantized_ir(ov, xml, frames, log)
         hint = "f32" if precision == "int8" else precision
         config = {"PERFORMANCE_HINT": "LATENCY", "INFERENCE_PRECISION_HINT": hint,
                   "INFERENCE_NUM_THREADS": torch.get_num_threads(), "CACHE_DIR": str(xml.parent / "blobs")}  # fmt: skip
