@@ -163,3 +163,14 @@ def test_openvino_runs_the_network_and_int8_calibrates_on_prepared_inputs() -> N
     int8 = semattnet.DepthCompleter(model, precision="int8", **spec)(*args)
     np.testing.assert_allclose(f32.depth, ref.depth, rtol=1e-4, atol=1e-3)
     assert np.abs(np.log(int8.depth / ref.depth)).mean() < 0.05 and int8.uncertainty is not None
+
+
+def test_bench_times_the_generalists_network_and_notes_its_anchor() -> None:
+    """`semattnet bench --weights` of a generalist: the rows are its network on prepared (two-channel) inputs."""
+    from semattnet.apps.benchmark import run_benchmark
+
+    model = build_model("semattnet_rt_generalist").eval()
+    lines: list[str] = []
+    res = run_benchmark((64, 96), "cpu", repeats=1, parts=("full",), model=model, log=lines.append)
+    assert [r["what"] for r in res.rows] == ["full model, naive reference", "full model, ours (float32)"]
+    assert any(n.startswith("generalist: the rows time its network") for n in res.notes)
