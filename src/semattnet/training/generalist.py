@@ -198,14 +198,21 @@ def init_from_plain(model: Generalist, weights: str, log: Callable[[str], None] 
     )
 
 
-def _state(step: int, model: Generalist, opt: torch.optim.Optimizer, sched: object, rng: np.random.Generator) -> dict:
+def _state(
+    step: int,
+    model: Generalist,
+    opt: torch.optim.Optimizer,
+    sched: torch.optim.lr_scheduler.LRScheduler,
+    rng: np.random.Generator,
+) -> dict[str, object]:
+    """Everything ``resume`` reads back: the step, model, optimiser, schedule and random state."""
     return {
         "step": step,
         "model": model.state_dict(),
         "optimizer": opt.state_dict(),
         "scheduler": sched.state_dict(),
         "rng": rng.bit_generator.state,
-    }  # type: ignore[attr-defined]
+    }
 
 
 def train_generalist(
