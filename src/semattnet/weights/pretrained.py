@@ -352,7 +352,15 @@ _register_rt_demo()
 #: The generalists (:mod:`semattnet.models.generalist`), shipped inside the package: (registered model, sha256,
 #: bytes, parameters, scores on the bundled real KITTI frame, camera 02, zero-shot: RMSE, MAE [mm], iRMSE,
 #: iMAE [1/km]). Made by ``semattnet train-generalist`` (docs/guides/generalist.md).
-_GENERALISTS: tuple[tuple[str, str, int, int, tuple[float, float, float, float]], ...] = ()
+_GENERALISTS: tuple[tuple[str, str, int, int, tuple[float, float, float, float]], ...] = (
+    (
+        "semattnet_rt_generalist",
+        "64c832874968f8cc6c91d825cb8d27c875928adab7472ee57b7ffd614b5ca615",
+        578_491,
+        537_854,
+        (1134.8, 238.5, 6.26, 1.46),
+    ),
+)
 _GENERALIST_NOTES = (
     "Trained by `semattnet train-generalist` on 800 frames of the randomised synthetic world (streets and furnished "
     "rooms, random rigs, image sizes, LiDARs of 8-128 beams, 50-5000 random points, depth cameras), starting from "
@@ -377,7 +385,7 @@ def _register_generalists() -> None:
             (rmse, mae, irmse, imae),
             _GENERALIST_NOTES,
         )
-        metrics = {"kitti-real/0035-5-cam02": dict(record.paper_metrics["synthetic/own-val"])}
+        metrics = {"kittireal/drive0035-frame5-cam02": dict(record.paper_metrics["synthetic/own-val"])}
         register_weights(
             dataclasses.replace(record, paper_metrics=metrics, trained_on="synthetic streets and rooms (world)")
         )
