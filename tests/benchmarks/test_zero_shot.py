@@ -34,7 +34,7 @@ def test_scores_match_hand_computed_values() -> None:
     assert s["rel"] == pytest.approx((0.5 + 0 + 0.5) / 3)
     # |error| <= 2 sigma: 1 <= 1.2 yes, 0 <= 0.2 yes, 4 <= 2 no
     assert s["coverage_2sigma_pct"] == pytest.approx(200 / 3)
-    # the 5 % gate keeps sigma <= 0.05 * depth: 0.1 <= 0.2 only (the pixel with no error)
+    # the 10 % gate keeps sigma <= 0.1 * depth: 0.1 <= 0.4 only (the pixel with no error)
     assert s["gate_kept_pct"] == pytest.approx(100 / 3) and s["gate_rmse_mm"] == 0.0
     assert mean_scores([{"a": 1.0, "b": 2.0}, {"a": 3.0}]) == {"a": 2.0}
 
