@@ -126,18 +126,21 @@ def plot(results: dict, path: Path) -> None:
     names = list(results)
     real = [np.mean([results[n][c]["rmse_mm"] for c in ("real/cam02", "real/cam03")]) / 1000 for n in names]
     axes[0].barh(names, real, color=["0.5" if n == "classical" else "C0" for n in names])
-    axes[0].axvline(real[names.index("classical")] if "classical" in names else 0, color="0.3", ls=":")
-    axes[0].set(xlabel="RMSE (m), real KITTI frame, mean of cameras 02/03", xscale="log")
-    for ax, prefix, label in (
-        (axes[1], "street/beams-", "LiDAR beams (streets)"),
-        (axes[2], "indoor/points-", "random points (rooms)"),
+    for y, v in enumerate(real):
+        axes[0].text(v, y, f" {v:.2f}", va="center", fontsize=8)
+    if "classical" in names:
+        axes[0].axvline(real[names.index("classical")], color="0.3", ls=":")
+    axes[0].set(xlabel="RMSE (m), real KITTI frame, mean of cameras 02/03", xlim=(0, max(real) * 1.15))
+    for ax, prefix, label, scale in (
+        (axes[1], "street/beams-", "LiDAR beams (streets)", "linear"),
+        (axes[2], "indoor/points-", "random points (rooms)", "log"),
     ):
         for n in names:
             cols = [c for c in results[n] if c.startswith(prefix)]
             if cols:
                 xs = [int(c.removeprefix(prefix)) for c in cols]
                 ax.plot(xs, [results[n][c]["rmse_mm"] / 1000 for c in cols], marker="o", label=n)
-        ax.set(xscale="log", yscale="log", xlabel=label, ylabel="RMSE (m), held-out world scenes")
+        ax.set(xscale="log", yscale=scale, xlabel=label, ylabel="RMSE (m), held-out world scenes")
     if axes[2].get_lines():
         axes[2].legend(fontsize=7)
     fig.tight_layout()
