@@ -19,7 +19,6 @@ the whole frame, up to 8 times; after that, as a last resort, random points, sai
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any
 
 import numpy as np
 
@@ -28,7 +27,7 @@ from semattnet._errors import InputError
 from .domain import Domain, Pose
 from .layout import Box
 from .materials import LABEL_COLOURS, MATERIAL_IDS
-from .patterns import PATTERNS, depthcam_pattern, lidar_pattern, points_pattern, random_rig
+from .patterns import PATTERNS, Options, depthcam_pattern, lidar_pattern, points_pattern, random_rig
 from .raycast import camera_view
 from .rooms import make_room, shoot_room
 from .scenes import SCENE_STYLES, Shot, make_scene, shoot
@@ -162,7 +161,7 @@ def _sparse(
     K: np.ndarray,
     gt: np.ndarray,
     kind: str,
-    options: dict[str, Any],
+    options: Options,
 ) -> tuple[np.ndarray, dict[str, object]]:
     """The ``pattern`` of the frame (with its ``options``, :data:`PATTERN_OPTIONS`), in range."""
     low, high = WORLD_RANGES[kind]
@@ -184,9 +183,7 @@ def _sparse(
     return np.where(sparse > 0, np.clip(sparse, low, high), 0.0).astype(np.float32), info
 
 
-def _attempt(
-    seed: int, attempt: int, kind: str, pattern: str, size: tuple[int, int], options: dict[str, Any]
-) -> WorldFrame:
+def _attempt(seed: int, attempt: int, kind: str, pattern: str, size: tuple[int, int], options: Options) -> WorldFrame:
     """One draw of the frame: the first of up to :data:`_PATTERN_TRIES` sparse patterns with :data:`MIN_SPARSE`
     points, else the last."""
     rng = np.random.default_rng((_TAG, seed, attempt + 1))
@@ -204,9 +201,7 @@ def _attempt(
     return WorldFrame(rgb, LABEL_COLOURS[scene.shot.labels], sparse, gt, K, kind, pattern, meta)
 
 
-def _check(
-    seed: int, kind: str | None, pattern: str | None, size: tuple[int, int] | None, options: dict[str, Any]
-) -> None:
+def _check(seed: int, kind: str | None, pattern: str | None, size: tuple[int, int] | None, options: Options) -> None:
     """Raise :class:`~semattnet.InputError` on a bad argument of :func:`make_world_frame`."""
     if not isinstance(seed, (int, np.integer)) or seed < 0:
         raise InputError(f"seed: must be an integer 0 or more, got {seed!r}")
@@ -223,7 +218,11 @@ def _check(
 
 
 def make_world_frame(
-    seed: int, kind: str | None = None, pattern: str | None = None, size: tuple[int, int] | None = None, **options: Any
+    seed: int,
+    kind: str | None = None,
+    pattern: str | None = None,
+    size: tuple[int, int] | None = None,
+    **options: object,
 ) -> WorldFrame:
     """One frame of the world (see the module's docstring), deterministic in its arguments.
 
