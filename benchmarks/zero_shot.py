@@ -33,9 +33,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from semattnet._utils.atomic import atomic_path
-from semattnet.evaluation.zero_shot import BenchFrame, mean_scores, method, real_frames, score, world_frames
+from semattnet.evaluation.zero_shot import BenchFrame, Completer, mean_scores, real_frames, score, world_frames
 
 DEFAULT_METHODS = (
     "classical",
@@ -67,6 +68,42 @@ def _cell_frames(cells: tuple, count: int) -> dict[str, list[BenchFrame]]:
         key = column + "".join(f"-{v}" for v in options.values()) if column.endswith(("beams", "points")) else column
         out[key] = list(world_frames(kind, pattern, count, SIZE, **options))
     return out
+
+
+def method(name: str, device: str = "cpu") -> Completer:
+    """``classical``, ``anchor`` (the generalist's anchor alone: :func:`~semattnet.models.generalist.prepare_inputs`)
+    or weights (a registered name or a file), as a :data:`Completer`; the fallback semantic map for models that
+    read one."""
+    if name == "classical":
+        from semattnet.baselines.classical import ClassicalCompleter
+
+        classical = ClassicalCompleter()
+
+        def run_classical(rgb: np.ndarray, sparse: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+            c = classical(rgb, sparse)
+            return c.depth, c.uncertainty
+
+        return run_classical
+    if name == "anchor":  # the generalist's non-learned anchor alone
+        from semattnet.models.generalist import prepare_inputs
+
+        def run_anchor(rgb: np.ndarray, sparse: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+            t = torch.from_numpy(np.ascontiguousarray(sparse, dtype=np.float32))[None, None]
+            return prepare_inputs(torch.zeros(1, 3, *sparse.shape), t).anchor[0, 0].numpy(), None
+
+        return run_anchor
+    from semattnet.inference.backends import EngineSpec
+    from semattnet.inference.completer import load_completer
+    from semattnet.palette import unknown_map
+
+    completer = load_completer(name, EngineSpec(device=device), progress=False)
+
+    def run_model(rgb: np.ndarray, sparse: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        semantic = unknown_map(*rgb.shape[:2]) if completer.needs_semantic else None
+        c = completer(rgb, sparse, semantic)
+        return c.depth, c.uncertainty
+
+    return run_model
 
 
 def run(methods: list[str], frames: dict[str, list[BenchFrame]], log: Callable[[str], None]) -> dict:

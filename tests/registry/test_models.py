@@ -58,6 +58,9 @@ class TestModels(RegistryTester[ModelFixture]):
         "semattnet_rt_m": ModelFixture(BRANCHES | SEMANTIC | REFINED),
         "semattnet_rt_l": ModelFixture(BRANCHES | SEMANTIC | REFINED),
         "semattnet_rt_md": ModelFixture(BRANCHES | SEMANTIC | REFINED),
+        # the generalists set their own calibrated uncertainty (models.generalist)
+        "semattnet_generalist": ModelFixture(BRANCHES | SEMANTIC | REFINED | {"uncertainty"}),
+        "semattnet_rt_generalist": ModelFixture(BRANCHES | SEMANTIC | REFINED | {"uncertainty"}),
     }
 
     @classmethod

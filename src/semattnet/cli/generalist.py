@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from semattnet.cli._group import main
+from semattnet.cli._options import BATCH_SIZE, COUNT, LEARNING_RATE, POSITIVE_INT
 
 
 @main.command("train-generalist", context_settings={"show_default": True})
@@ -23,13 +24,16 @@ from semattnet.cli._group import main
     default=None,
     help="The folder of world frames, written when missing and shared between runs [OUT/bank].",
 )
-@click.option("--frames", type=click.IntRange(1), default=600, help="World frames in the bank.")
-@click.option("--steps", type=click.IntRange(1), default=1500, help="Optimisation steps.")
-@click.option("--batch", type=click.IntRange(1), default=8, help="Crops per step.")
+@click.option("--frames", type=POSITIVE_INT, default=600, help="World frames in the bank.")
+@click.option("--steps", type=POSITIVE_INT, default=1500, help="Optimisation steps.")
+@click.option("--batch", type=BATCH_SIZE, default=8, help="Crops per step.")
 @click.option("--crop", default="160x256", help="Crop HxW, multiples of 32.")
-@click.option("--lr", type=click.FloatRange(min=0, min_open=True), default=2e-3, help="Adam's learning rate.")
+@click.option("--lr", type=LEARNING_RATE, default=2e-3, help="Adam's learning rate.")
 @click.option("--init", default=None, metavar="NAME|PATH", help="Start from the plain network's weights.")
-@click.option("--seed", type=int, default=0, help="Seed of the crops and the initialisation.")
+@click.option("--seed", type=COUNT, default=0, help="Seed of the crops and the initialisation.")
+@click.option(
+    "--calibration-frames", type=POSITIVE_INT, default=24, help="Held-out world frames the uncertainty is fitted on."
+)
 @click.option("--resume", is_flag=True, help="Go on from OUT/last.pt.")
 def train_generalist_command(
     model: str,
@@ -42,6 +46,7 @@ def train_generalist_command(
     lr: float,
     init: str | None,
     seed: int,
+    calibration_frames: int,
     resume: bool,
 ) -> None:
     """Train a generalist on the synthetic world, calibrate its uncertainty, write OUT/MODEL.safetensors.gz."""
@@ -62,5 +67,5 @@ def train_generalist_command(
         seed=seed,
     )
     trained = train_generalist(cfg, resume=resume, log=click.echo)
-    path = finish_generalist(trained, cfg, log=click.echo)
+    path = finish_generalist(trained, cfg, calibration_frames, log=click.echo)
     click.echo(f"wrote {path}")

@@ -3,8 +3,8 @@
 Frames: the bundled real KITTI frame (:func:`real_frames`: drive 0035, frame 5, cameras 02 and 03, its Velodyne
 scan projected as ``predict --kitti-raw`` projects it, scored against the official annotated map) and held-out
 scenes of the synthetic world (:func:`world_frames`: seeds of the ``heldout`` split, which training never
-draws). Methods (:func:`method`): ``classical`` or any weights name or file, run as ``predict`` runs them
-(the no-segmenter fallback map in place of a semantic map). Scores (:func:`score`): the KITTI metrics, REL,
+draws). Methods: ``benchmarks/zero_shot.py`` runs them (``classical``, the generalist's ``anchor``, weights).
+Scores (:func:`score`): the KITTI metrics, REL,
 the uncertainty's 2-sigma coverage (the share of pixels whose error is within twice the predicted standard
 deviation) and its AUSE (RMSE sparsification, :mod:`semattnet.evaluation.sparsification`).
 """
@@ -22,7 +22,7 @@ import torch
 from semattnet.evaluation.metrics import image_metrics
 from semattnet.evaluation.sparsification import ause, oracle_curve, sparsification_curve
 
-__all__ = ["BenchFrame", "Completer", "method", "real_frames", "score", "world_frames"]
+__all__ = ["BenchFrame", "Completer", "real_frames", "score", "world_frames"]
 
 #: The bundled real frame, relative to a KITTI sample root (``tests/data/kitti_sample``).
 REAL_DRIVE = "kitti_raw/2011_09_26/2011_09_26_drive_0035_sync"
@@ -49,16 +49,16 @@ class BenchFrame:
 
 def real_frames(sample_root: str | Path) -> list[BenchFrame]:
     """The bundled real frame seen by cameras 02 and 03 (sparse: its own scan projected; truth: the annotation)."""
+    return [_real_frame(Path(sample_root), "2"), _real_frame(Path(sample_root), "3")]
+
+
+def _real_frame(root: Path, camera: str) -> BenchFrame:
     from semattnet.data.io import read_depth
     from semattnet.data.sources.kitti_raw import RawDriveSource
 
-    root = Path(sample_root)
-    out = []
-    for camera in ("2", "3"):
-        frame = RawDriveSource(root / REAL_DRIVE, "5", camera).load("0000000005")
-        gt = read_depth(root / REAL_GT.format(camera=camera))
-        out.append(BenchFrame(f"kitti-0035-5-cam0{camera}", frame.rgb, frame.sparse, gt, "real", "lidar64"))
-    return out
+    frame = RawDriveSource(root / REAL_DRIVE, "5", camera).load("0000000005")
+    gt = read_depth(root / REAL_GT.format(camera=camera))
+    return BenchFrame(f"kitti-0035-5-cam0{camera}", frame.rgb, frame.sparse, gt, "real", "lidar64")
 
 
 def world_frames(
@@ -72,42 +72,6 @@ def world_frames(
         f = make_world_frame(world_seed("heldout", i), kind=kind, pattern=pattern, size=size, **draw)
         label = pattern + "".join(f"-{k}{v}" for k, v in draw.items())
         yield BenchFrame(f"{kind}-{label}-{i}", f.rgb, f.sparse, f.gt, kind, label)
-
-
-def method(name: str, device: str = "cpu") -> Completer:
-    """``classical``, ``anchor`` (the generalist's anchor alone: :func:`~semattnet.models.generalist.prepare_inputs`)
-    or weights (a registered name or a file), as a :data:`Completer`; the fallback semantic map for models that
-    read one."""
-    if name == "classical":
-        from semattnet.baselines.classical import ClassicalCompleter
-
-        classical = ClassicalCompleter()
-
-        def run_classical(rgb: np.ndarray, sparse: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-            c = classical(rgb, sparse)
-            return c.depth, c.uncertainty
-
-        return run_classical
-    if name == "anchor":  # the generalist's non-learned anchor alone
-        from semattnet.models.generalist import prepare_inputs
-
-        def run_anchor(rgb: np.ndarray, sparse: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-            t = torch.from_numpy(np.ascontiguousarray(sparse, dtype=np.float32))[None, None]
-            return prepare_inputs(torch.zeros(1, 3, *sparse.shape), t).anchor[0, 0].numpy(), None
-
-        return run_anchor
-    from semattnet.inference.backends import EngineSpec
-    from semattnet.inference.completer import load_completer
-    from semattnet.palette import unknown_map
-
-    completer = load_completer(name, EngineSpec(device=device), progress=False)
-
-    def run_model(rgb: np.ndarray, sparse: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        semantic = unknown_map(*rgb.shape[:2]) if completer.needs_semantic else None
-        c = completer(rgb, sparse, semantic)
-        return c.depth, c.uncertainty
-
-    return run_model
 
 
 def score(depth: np.ndarray, gt: np.ndarray, uncertainty: np.ndarray | None = None) -> dict[str, float]:

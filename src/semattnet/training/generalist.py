@@ -246,7 +246,7 @@ def train_generalist(
         log(f"resumed at step {step}")
     (out / "config.json").write_text(json.dumps(dataclasses.asdict(cfg), indent=1))
     model.train()
-    t0, running = time.perf_counter(), 0.0
+    t0, running, since = time.perf_counter(), 0.0, 0
     while step < cfg.steps:
         loss = generalist_loss(model, *sample_batch(bank, cfg, rng))
         opt.zero_grad(set_to_none=True)
@@ -256,14 +256,15 @@ def train_generalist(
         sched.step()
         step += 1
         running += loss.item()
+        since += 1
         if step % cfg.save_every == 0 or step == cfg.steps:
             with atomic_path(out / "last.pt") as tmp:
                 torch.save(_state(step, model, opt, sched, rng), tmp)
-            rate = (time.perf_counter() - t0) / cfg.save_every
+            rate, mean = (time.perf_counter() - t0) / since, running / since
             with open(out / "log.jsonl", "a") as fh:
-                fh.write(json.dumps({"step": step, "loss": running / cfg.save_every, "s_per_step": rate}) + "\n")
-            log(f"step {step}/{cfg.steps}: loss {running / cfg.save_every:.4f} ({rate:.2f} s/step)")
-            t0, running = time.perf_counter(), 0.0
+                fh.write(json.dumps({"step": step, "loss": mean, "s_per_step": rate}) + "\n")
+            log(f"step {step}/{cfg.steps}: loss {mean:.4f} ({rate:.2f} s/step)")
+            t0, running, since = time.perf_counter(), 0.0, 0
     return model.eval()
 
 
@@ -312,11 +313,13 @@ def _image(a: np.ndarray) -> torch.Tensor:
     return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32)).permute(2, 0, 1)[None]
 
 
-def finish_generalist(model: Generalist, cfg: GeneralistTrainConfig, log: Callable[[str], None] = print) -> Path:
+def finish_generalist(
+    model: Generalist, cfg: GeneralistTrainConfig, frames: int = 24, log: Callable[[str], None] = print
+) -> Path:
     """Calibrate the trained model's uncertainty (:func:`calibrate_uncertainty`) and write it packed (int8 per
     output channel, as the shipped weights are) to ``out/MODEL.safetensors.gz``."""
     from semattnet.weights.packed import save_packed
 
-    calibrate_uncertainty(model, log=log)
+    calibrate_uncertainty(model, frames=frames, log=log)
     info = {"recipe": dataclasses.asdict(cfg), "calibration": model.calibration.tolist()}
     return save_packed(model, Path(cfg.out) / f"{cfg.model}.safetensors.gz", info)

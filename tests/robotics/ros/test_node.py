@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import threading
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -152,20 +153,33 @@ def test_bad_messages_are_one_line_each_and_the_node_goes_on(caplog: pytest.LogC
 
 
 def test_sigterm_stops_cleanly_and_prints_the_summary() -> None:
-    """run_node: SIGTERM only sets the stop event; the summary is said, the transport closed, handlers restored."""
-    import os
-    import signal
+    """run_node: SIGTERM only sets the stop event; the summary is said, the transport closed, handlers restored.
 
-    from semattnet.robotics.ros.node import run_node
+    In a fresh process: a SIGTERM raised inside the suite's process, beside the worker threads earlier tests left
+    (OpenVINO's, torch's), crashed it (SIGSEGV) in two full runs of the suite."""
+    import subprocess
+    import sys
+    import textwrap
 
-    lines: list[str] = []
-    fake = FakeTransport()
-    node = DepthNode(fake, _complete, say=lines.append)
-    before = signal.getsignal(signal.SIGTERM)
-    threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGTERM)).start()
-    run_node(node)
-    assert fake.closed and lines[-1].startswith("ros node stopped: 0 frame(s) published")
-    assert signal.getsignal(signal.SIGTERM) is before
+    code = textwrap.dedent(
+        """
+        import os, signal, threading
+        from semattnet.robotics.ros.node import run_node
+        from tests.robotics.ros.test_node import DepthNode, FakeTransport, _complete
+        lines = []
+        fake = FakeTransport()
+        node = DepthNode(fake, _complete, say=lines.append)
+        before = signal.getsignal(signal.SIGTERM)
+        threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGTERM)).start()
+        run_node(node)
+        assert fake.closed and lines[-1].startswith("ros node stopped: 0 frame(s) published"), lines
+        assert signal.getsignal(signal.SIGTERM) is before
+        print("stopped cleanly")
+        """
+    )
+    repo = Path(__file__).resolve().parents[3]
+    r = subprocess.run([sys.executable, "-c", code], cwd=repo, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stdout.strip().endswith("stopped cleanly"), r.stderr[-2000:]
 
 
 def test_viewers_run_beside_the_node() -> None:
