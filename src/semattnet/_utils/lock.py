@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+import errno
 import os
+import stat
 import weakref
 from pathlib import Path
 
 from semattnet._utils.extras import optional
 from semattnet._utils.outputs import OutputError
 
-__all__ = ["LOCK_FILE", "FolderBusyError", "FolderLock"]
+__all__ = ["LOCK_FILE", "FolderBusyError", "FolderLock", "LockFileError"]
 
 #: The lock file of an output folder a run is writing into (:class:`FolderLock`).
 LOCK_FILE = ".semattnet.lock"
@@ -17,6 +19,11 @@ LOCK_FILE = ".semattnet.lock"
 
 class FolderBusyError(OutputError):
     """An output folder another semattnet run is writing into (:class:`FolderLock`)."""
+
+
+class LockFileError(OutputError):
+    """A lock file that is a link (symbolic, or a hard link: a file with another name) or not a regular file: refused,
+    never opened for writing (writing it would rewrite someone else's file)."""
 
 
 class FolderLock:
@@ -27,6 +34,7 @@ class FolderLock:
 
     Raises:
         FolderBusyError: (:meth:`acquire`) another run holds the folder, naming its process.
+        LockFileError: (:meth:`acquire`) the lock file is a symbolic or hard link, or not a regular file.
     """
 
     def __init__(self, folder: str | os.PathLike[str]) -> None:
@@ -43,7 +51,7 @@ class FolderLock:
         self.folder.mkdir(parents=True, exist_ok=True)
         try:
             for _ in range(5):  # the file was removed by the holder between open and flock: again
-                fd = os.open(self.path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o644)
+                fd = self._open()
                 if self._lock(fd) and _same_file(fd, self.path):
                     os.ftruncate(fd, 0)
                     os.write(fd, f"{os.getpid()}\n".encode())
@@ -54,6 +62,33 @@ class FolderLock:
             self.release()
             raise
         raise FolderBusyError(f"{self.path}: could not be locked; choose another --out")
+
+    def _open(self) -> int:
+        """The lock file, opened (created if missing) without following a symbolic link, and refused unless it is a
+        regular file of one name: checked on the open file, before anything is written."""
+        if self.path.is_symlink():  # where O_NOFOLLOW is missing; where it is there, the open refuses it too
+            raise self._refuse("is a symbolic link")
+        try:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o644)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP or self.path.is_symlink():
+                raise self._refuse("is a symbolic link") from None
+            if self.path.is_dir():
+                raise self._refuse("is a folder") from None
+            raise
+        info = os.fstat(fd)
+        if stat.S_ISREG(info.st_mode) and info.st_nlink <= 1:  # 0: its holder removed it meanwhile (tried again)
+            return fd
+        os.close(fd)
+        raise self._refuse(
+            f"has {info.st_nlink} names (a hard link)" if stat.S_ISREG(info.st_mode) else "is not a regular file"
+        )
+
+    def _refuse(self, what: str) -> LockFileError:
+        return LockFileError(
+            f"{self.path}: the lock file {what}; semattnet writes its process id into a plain file of its own "
+            "only: remove it, or choose another --out"
+        )
 
     def _lock(self, fd: int) -> bool:
         """``flock`` ``fd``; a lock held by a live process is :class:`FolderBusyError`."""

@@ -33,6 +33,37 @@ if TYPE_CHECKING:
 #: ``adapt``'s own options, listed under "Adaptation" in ``--help``.
 _OPTION = section("Adaptation")
 
+#: The options a resumed run takes from its state, by parameter: the field of the run's configuration each sets.
+#: Given with ``--resume``, each must agree with the run's (``semattnet.training.adapt.resume.resumed_config``).
+_RUN_FIELDS = {
+    "weights": "weights",
+    "steps": "steps",
+    "batch_size": "batch_size",
+    "lr": "lr",
+    "crop": "crop",
+    "losses": "losses",
+    "hide": "hide",
+    "w_kept": "w_kept",
+    "w_photometric": "w_photometric",
+    "w_smooth": "w_smooth",
+    "no_automask": "automask",
+    "train_bn": "freeze_bn",
+    "amp": "amp",
+    "seed": "seed",
+    "gt_every": "gt_every",
+    "gt_frames": "gt_frames",
+    "save_every": "save_every",
+    "on_error": "on_error",
+}
+
+
+def _given(ctx: click.Context) -> list[str]:
+    """The fields of the run's configuration whose options the command line gave (not left at their defaults)."""
+    from click.core import ParameterSource
+
+    defaults = (None, ParameterSource.DEFAULT, ParameterSource.DEFAULT_MAP)
+    return [field for name, field in _RUN_FIELDS.items() if ctx.get_parameter_source(name) not in defaults]
+
 
 def _hide(text: str) -> tuple[float, float]:
     """``--hide``: a share ``0.25`` or a range ``0.2..0.3`` (a usage error of ``--hide`` if not)."""
@@ -169,7 +200,10 @@ def adapt(**params: object) -> None:
             raise click.UsageError("--odom-frame poses a bag's neighbouring frames: it needs --bag")
         source.odom_frame = options.odom_frame
     cfg = options.config(len(source.names))
-    result = run_adaptation(cfg, source, maps, resume=options.resume, overwrite=options.overwrite, log=click.echo)
+    asked = _given(ctx) if options.resume else ()
+    result = run_adaptation(
+        cfg, source, maps, resume=options.resume, overwrite=options.overwrite, log=click.echo, asked=asked
+    )
     if launch_rank() == 0:  # under torchrun, rank 0 alone reports
         skipped = f", {len(result.skipped)} frame(s) skipped" if result.skipped else ""
         metric = f", held-out RMSE {result.metrics['rmse_mm']:.0f} mm" if result.metrics else ""

@@ -13,7 +13,6 @@ import csv
 import math
 import os
 import random
-import shutil
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -31,6 +30,7 @@ from semattnet._utils import distributed as dist_utils
 from semattnet._utils.atomic import atomic_path
 from semattnet._utils.extras import optional
 from semattnet._utils.progress import progress
+from semattnet._utils.run_folder import commit_stage, drop_stages, finish_replacements, open_stage
 from semattnet.data.datasets import get_dataset
 from semattnet.data.kitti import KittiDepthCompletion
 from semattnet.data.transforms import EvalTransform
@@ -84,7 +84,10 @@ class _Position:
 class Trainer:
     """One training stage. ``Trainer(cfg).fit()`` (or ``resume=True`` to continue)."""
 
-    def __init__(self, cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = print) -> None:
+    def __init__(
+        self, cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = print, replaces: bool = False
+    ) -> None:
+        self.replaces = replaces  # OUT holds an earlier run: it stays whole until this one's first state
         self.device = dist_utils.process_device(cfg.device)
         self.distributed = dist_utils.init_distributed(self.device)
         self.main = dist_utils.is_main()
@@ -155,9 +158,16 @@ class Trainer:
         self.scaler = torch.amp.GradScaler(self.device.type, enabled=cfg.amp == "fp16")
 
     def _open_run_folder(self) -> SummaryWriter | None:
-        """Create the run folder, write ``config.json``; a TensorBoard writer if tensorboard is installed."""
+        """Create the run folder (a stage inside it while the run replaces an earlier one, until its first state:
+        :mod:`semattnet._utils.run_folder`), write ``config.json``; a TensorBoard writer if tensorboard is installed."""
+        if self.replaces:
+            self.out = open_stage(Path(self.cfg.out))
+            self.ckpt_dir = self.out / "checkpoints"
         self.out.mkdir(parents=True, exist_ok=True)
         self.cfg.save(self.out / "config.json")
+        return self._tensorboard()
+
+    def _tensorboard(self) -> SummaryWriter | None:
         if optional("tensorboard") is None:  # optional: pip install 'semattnet[tensorboard]'
             return None
         from torch.utils.tensorboard import SummaryWriter
@@ -297,6 +307,18 @@ class Trainer:
             kept = sorted(self.ckpt_dir.glob("step-*.pt"))
             for old in kept[: -self.cfg.keep_last]:
                 old.unlink()
+        if self.replaces:
+            self._replace_earlier_run()
+
+    def _replace_earlier_run(self) -> None:
+        """The stage holds a whole state: it replaces the earlier run (committed first, then moved into place,
+        the earlier run's other files removed); from now on the run writes into its folder."""
+        if self.tb is not None:
+            self.tb.close()
+        stage, self.out = self.out, Path(self.cfg.out)
+        commit_stage(stage, self.out, run_files)
+        self.ckpt_dir, self.replaces = self.out / "checkpoints", False
+        self.tb = self._tensorboard()
 
     # ----------------------------------------------------------------------------- loop
     def _write_row(self, row: Mapping[str, float | str]) -> None:
@@ -429,30 +451,32 @@ def _truncate_log(path: Path, step: int) -> None:
         csv.writer(f).writerows(kept)
 
 
-def prepare_run_folder(out: str | os.PathLike[str], overwrite: bool = False) -> None:
-    """A new run (not ``resume``) refuses a folder that already holds a run; with ``overwrite`` it
-    removes the run's own files (:data:`RUN_FILES`, ``checkpoints/step-*.pt``, ``tensorboard/``) only."""
-    out = Path(out)
-    owned = [out / f for f in RUN_FILES] + sorted((out / "checkpoints").glob("step-*.pt"))
-    existing = [p for p in owned if p.exists()]
-    if not existing:
-        return
-    if not overwrite:
-        raise FileExistsError(f"{out} already holds a run ({existing[0]} exists); pass --resume to continue "
-                              "it or --overwrite to start over")  # fmt: skip
-    if os.environ.get("RANK", "0") == "0":
-        for p in existing:
-            p.unlink(missing_ok=True)
-        if (out / "tensorboard").is_dir():
-            shutil.rmtree(out / "tensorboard", ignore_errors=True)
+def run_files(folder: Path) -> list[str]:
+    """The files of a run in ``folder`` (:data:`RUN_FILES`, ``checkpoints/step-*.pt``, ``tensorboard/``), relative."""
+    steps = [f"checkpoints/{p.name}" for p in sorted((folder / "checkpoints").glob("step-*.pt"))]
+    return [f for f in (*RUN_FILES, *steps, "tensorboard") if (folder / f).exists() or (folder / f).is_symlink()]
+
+
+def prepare_run_folder(out: str | os.PathLike[str], overwrite: bool = False) -> bool:
+    """A new run (not ``resume``) refuses a folder that already holds a run. With ``overwrite`` it removes nothing:
+    returns whether there is one, which the new run replaces at its first state (:meth:`Trainer.save`); the earlier
+    run's files (:func:`run_files`) stay until then, and only they go."""
+    existing = run_files(Path(out))
+    if any(f != "tensorboard" for f in existing) and not overwrite:
+        raise FileExistsError(
+            f"{out} already holds a run ({Path(out) / existing[0]} exists); pass --resume to continue "
+            "it or --overwrite to start over"
+        )
+    return overwrite and bool(existing)
 
 
 def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = print,
           overwrite: bool = False) -> TrainResult:  # fmt: skip
     """Run one stage; joins/leaves the process group when launched by torchrun.
 
-    Without ``resume`` the run folder must not hold a run yet (``overwrite`` starts over, see
-    :func:`prepare_run_folder`); with ``resume`` the run continues exactly from ``last.pt``.
+    Without ``resume`` the run folder must not hold a run yet (``overwrite`` starts over, replacing the earlier run
+    once the new one has its first state: :func:`prepare_run_folder`); with ``resume`` the run continues exactly from
+    ``last.pt``.
     """
     from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs
 
@@ -463,9 +487,13 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
                    ("--init", init)], [Output("--out", cfg.out, "folder")])  # fmt: skip
     check_no_input_overlap([cfg.init if cfg.init and Path(cfg.init).exists() else None],
                            out_files=[Path(cfg.out) / f for f in RUN_FILES])  # fmt: skip
-    if not resume:
-        prepare_run_folder(cfg.out, overwrite)
+    if dist_utils.launch_rank() == 0:
+        finish_replacements(Path(cfg.out), run_files)  # a replacement a kill cut short, committed or not
+    replaces = not resume and prepare_run_folder(cfg.out, overwrite)
     try:
-        return Trainer(cfg, resume=resume, log=log).fit()
+        return Trainer(cfg, resume=resume, log=log, replaces=replaces).fit()
+    except BaseException:
+        drop_stages(Path(cfg.out))  # failed before its first state: the earlier run stays, and nothing of this one
+        raise
     finally:
         dist_utils.cleanup()

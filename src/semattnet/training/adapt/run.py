@@ -18,10 +18,10 @@ import json
 import math
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
-from typing import TypedDict
 
 import torch
 
@@ -30,6 +30,7 @@ from semattnet._utils import distributed as dist_utils
 from semattnet._utils.atomic import atomic_path
 from semattnet._utils.device import autocast
 from semattnet._utils.progress import progress
+from semattnet._utils.run_folder import replace_run
 from semattnet.data.frames import FrameSource
 from semattnet.evaluation.metrics import KittiMetrics
 from semattnet.inference.feed import FrameFault
@@ -39,16 +40,21 @@ from semattnet.training.adapt.config import AdaptConfig
 from semattnet.training.adapt.losses import hide_points, photometric_loss, smoothness_loss, sparse_loss
 from semattnet.training.adapt.model import TrainingCompleter, final_depth, set_train_mode
 from semattnet.training.adapt.pool import FramePool
+from semattnet.training.adapt.resume import FORMAT, AdaptState, read_state, restore, resumed_config
 from semattnet.training.reference import make_adam
-from semattnet.weights.checkpoint import Checkpoint, CheckpointError, load_checkpoint, save_safetensors
+from semattnet.weights.checkpoint import Checkpoint, save_safetensors
 from semattnet.weights.gate import DIGEST_KEY, tensor_digest
 
-__all__ = ["FINAL", "LOG", "RUN_FILES", "STATE", "AdaptResult", "AdaptState", "Adapter", "read_state"]
+__all__ = ["FINAL", "LOG", "RUN_FILES", "STATE", "AdaptResult", "AdaptState", "Adapter", "read_state", "run_files"]
 
-_FORMAT = "semattnet-adapt-v1"
 STATE, FINAL, LOG = "checkpoints/last.pt", "adapted.safetensors", "log.json"
-#: What a run writes into its folder (``overwrite`` removes exactly these).
+#: What a run writes into its folder (``overwrite`` replaces exactly these, at the new run's first state).
 RUN_FILES = (STATE, FINAL, LOG)
+
+
+def run_files(folder: Path) -> list[str]:
+    """The files of a run (:data:`RUN_FILES`) that ``folder`` holds."""
+    return [f for f in RUN_FILES if (folder / f).exists() or (folder / f).is_symlink()]
 
 
 @dataclass(frozen=True)
@@ -65,42 +71,30 @@ class AdaptResult:
     losses: dict[str, float] = field(default_factory=dict)
 
 
-class AdaptState(TypedDict):
-    """What an exact resume restores from ``checkpoints/last.pt`` (besides the model's weights and config)."""
-
-    adapt_config: dict[str, object]
-    optimizer: dict[str, object]
-    scheduler: dict[str, object]
-    scaler: dict[str, object]
-    rng: list[torch.Tensor]  # each rank's generator (one in a single process)
-    step: int
-
-
-def read_state(path: Path) -> AdaptState:
-    """An adaptation state (``checkpoints/last.pt``), verified (digest, format); one line naming the file if not."""
-    if not path.is_file():
-        raise CheckpointError(f"{path}: nothing to resume from")
-    extra = load_checkpoint(path).extra
-    if extra.get("format") != _FORMAT:
-        raise CheckpointError(f"{path}: not a semattnet adapt state (no optimiser state to resume)")
-    rng = extra["rng"]  # a single tensor in the states of single-process runs before DDP
-    return AdaptState(adapt_config=extra["adapt_config"], optimizer=extra["optimizer"], scheduler=extra["scheduler"],
-                      scaler=extra["scaler"], rng=[rng] if isinstance(rng, torch.Tensor) else list(rng),
-                      step=int(extra["step"]))  # fmt: skip
-
-
 class Adapter:
     """One adaptation run of ``cfg`` on ``source`` (``semantic``: the filler of missing semantic maps; default the
-    fallback map); ``resume`` continues the run in ``cfg.out``. ``Adapter(...).run()`` trains to ``cfg.steps``."""
+    fallback map); ``resume`` continues the run in ``cfg.out`` (``asked``: the fields of ``cfg`` the caller chose,
+    refused when they differ from the run's). ``replaces``: ``cfg.out`` holds an earlier run, which this one replaces
+    at its first state (:func:`~semattnet._utils.run_folder.replace_run`). ``Adapter(...).run()`` trains to
+    ``cfg.steps``."""
 
-    def __init__(self, cfg: AdaptConfig, source: FrameSource, semantic: SemanticMaps | None = None,
-                 resume: bool = False, log: Callable[[str], None] = print) -> None:  # fmt: skip
+    def __init__(
+        self,
+        cfg: AdaptConfig,
+        source: FrameSource,
+        semantic: SemanticMaps | None = None,
+        resume: bool = False,
+        log: Callable[[str], None] = print,
+        *,
+        asked: Collection[str] = (),
+        replaces: bool = False,
+    ) -> None:
         from semattnet.weights.hub import from_pretrained
 
-        self.out = Path(cfg.out)
+        self.out, self.replaces = Path(cfg.out), replaces
         state = read_state(self.out / STATE) if resume else None
         if state is not None:  # the run's own options; it may have moved
-            cfg = AdaptConfig.from_dict({**state["adapt_config"], "out": cfg.out})
+            cfg = resumed_config(self.out / STATE, state, cfg, asked)
         self.cfg, self.device = cfg, dist_utils.process_device(cfg.device)
         self.distributed = dist_utils.init_distributed(self.device)
         self.main = dist_utils.is_main()
@@ -141,45 +135,51 @@ class Adapter:
 
     # ----------------------------------------------------------------------------- state
     def _restore(self, state: AdaptState) -> None:
-        """Optimiser, schedule, scaler, generator and step (the weights came with the model, from the state)."""
-        self.optimizer.load_state_dict(state["optimizer"])
-        self.scheduler.load_state_dict(state["scheduler"])
-        self.scaler.load_state_dict(state["scaler"])
-        self.rng.set_state(state["rng"][dist_utils.rank()])
+        """Optimiser, schedule, scaler, generator and step (the weights came with the model, from the state), each
+        checked first (:func:`~semattnet.training.adapt.resume.restore`)."""
+        restore(self.out / STATE, state, (self.optimizer, self.scheduler, self.scaler), self.rng, dist_utils.rank())
         self.step = state["step"]
         logged = _read_log(self.out / LOG)
-        self.rows = [r for r in logged.get("steps", []) if r["step"] <= self.step]
-        self.metrics = [r for r in logged.get("metrics", []) if r["step"] <= self.step]
+        self.rows, self.metrics = _rows(logged, "steps", self.step), _rows(logged, "metrics", self.step)
         self.log(f"resumed at step {self.step} of {self.cfg.steps}")
 
     def save(self) -> None:
         """The log, then the resumable state, each atomically; rank 0 writes them (collective: every rank's
         generator). In this order a run killed in between still has the log of every step of its state (a resumed
-        run drops the rows after it)."""
+        run drops the rows after it). The first state of a run that replaces an earlier one goes through a stage
+        folder: the earlier run's files stay until it is complete."""
         rngs = [s for _, s in dist_utils.gather_rows([(dist_utils.rank(), self.rng.get_state())], key=lambda r: r[0])]
         if not self.main:
             return
-        self._write_log()
+        if self.replaces:
+            replace_run(self.out, run_files, partial(self._write_state, rngs=rngs))
+            self.replaces = False
+        else:
+            self._write_state(self.out, rngs)
+
+    def _write_state(self, folder: Path, rngs: list[torch.Tensor]) -> None:
+        """The log, then the resumable state, into ``folder`` (the run folder, or the stage replacing it)."""
+        self._write_log(folder)
         model_config = getattr(self.model, "config", None)
         state: dict[str, object] = {
-            "format": _FORMAT, "model": self.model.state_dict(),
+            "format": FORMAT, "model": self.model.state_dict(),
             "config": model_config.to_dict() if model_config is not None else None,
             "adapt_config": self.cfg.to_dict(), "optimizer": self.optimizer.state_dict(),
             "scheduler": self.scheduler.state_dict(), "scaler": self.scaler.state_dict(),
             "rng": rngs, "step": self.step,
         }  # fmt: skip
         state[DIGEST_KEY] = tensor_digest(state)
-        path = self.out / STATE
+        path = folder / STATE
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(path) as tmp:
             torch.save(state, tmp)
 
-    def _write_log(self) -> None:
+    def _write_log(self, folder: Path) -> None:
         faults = [{"name": f.name, "status": f.status, "reason": f.reason} for f in self.pool.faults]
         doc = {"config": self.cfg.to_dict(), "crop": list(self.crop), "frames": len(self.pool.names),
                "held_out": self.pool.held_out, "skipped": faults, "steps": self.rows,
                "metrics": self.metrics}  # fmt: skip
-        with atomic_path(self.out / LOG, suffix=".json") as tmp:
+        with atomic_path(folder / LOG, suffix=".json") as tmp:
             tmp.write_text(json.dumps(doc, indent=1) + "\n")
 
     # ----------------------------------------------------------------------------- loop
@@ -315,3 +315,11 @@ def _read_log(path: Path) -> dict[str, list[dict[str, float]]]:
     except (OSError, ValueError):
         return {}
     return doc if isinstance(doc, dict) else {}
+
+
+def _rows(log: dict[str, list[dict[str, float]]], key: str, step: int) -> list[dict[str, float]]:
+    """The rows of ``log[key]`` up to ``step`` (a row that is not a mapping with a whole ``step`` is left out)."""
+    rows = log.get(key)
+    if not isinstance(rows, list):
+        return []
+    return [r for r in rows if isinstance(r, dict) and type(r.get("step")) is int and r["step"] <= step]
