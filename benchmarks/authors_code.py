@@ -48,8 +48,16 @@ __all__ = ["AUTHORS_ARGS", "AuthorsModel", "build_authors_model", "cpu_shim", "f
 #: The attributes their ``A_CSPN_plus_plus(args)`` (and their main.py) reads, for the released full model.
 AUTHORS_ARGS = {"network_model": "sem_att", "dilation_rate": 2, "val_h": 352, "val_w": 1216, "cpu": True}
 #: Their forward's 8 outputs, in order, by our names.
-OUTPUT_NAMES = ("color_conf", "semantic_conf", "guided_conf", "color_depth", "semantic_depth", "guided_depth",
-                "refined_s2_depth", "refined_depth")  # fmt: skip
+OUTPUT_NAMES = (
+    "color_conf",
+    "semantic_conf",
+    "guided_conf",
+    "color_depth",
+    "semantic_depth",
+    "guided_depth",
+    "refined_s2_depth",
+    "refined_depth",
+)
 _THEIR_MODULES = ("model", "basic", "attention")
 
 

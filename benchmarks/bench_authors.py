@@ -70,8 +70,9 @@ def _engine(net: torch.nn.Module, engine: str, size: tuple[int, int], inplace: b
     return optimize_for_inference(net, backend=backend, size=size, precision=precision, inplace=inplace)
 
 
-def measure_speed(src: Path, size: tuple[int, int], engines: tuple[str, ...], rounds: int,
-                  width: float) -> dict[str, Any]:  # fmt: skip
+def measure_speed(
+    src: Path, size: tuple[int, int], engines: tuple[str, ...], rounds: int, width: float
+) -> dict[str, Any]:
     """Median seconds per frame of theirs and of ours per engine, in turns; speed-ups and parity errors."""
     from semattnet.apps.benchmark import random_frame
     from semattnet.apps.timing import interleaved
@@ -127,8 +128,18 @@ def _release_freed() -> float:
 
 
 def _run_child(args: argparse.Namespace, variant: str) -> dict[str, Any] | None:
-    cmd = [sys.executable, __file__, "--child", variant, "--authors-src", str(args.authors_src), "--size", args.size,
-           "--width", str(args.width)]  # fmt: skip
+    cmd = [
+        sys.executable,
+        __file__,
+        "--child",
+        variant,
+        "--authors-src",
+        str(args.authors_src),
+        "--size",
+        args.size,
+        "--width",
+        str(args.width),
+    ]
     proc = subprocess.run(cmd, stdout=subprocess.PIPE, text=True, check=False)
     if proc.returncode != 0:
         print(f"  memory of {variant}: failed (exit {proc.returncode})", flush=True)
@@ -151,12 +162,15 @@ def table(r: dict[str, Any]) -> list[str]:
     """The result as lines: per variant, seconds, speed-up, parity error, peak memory and its ratio."""
     speed, memory = r.get("speed", {}), r.get("memory", {})
     names = list(dict.fromkeys([*speed.get("seconds", {}), *memory.get("peaks", {})]))
-    head = " ".join(f"{h:>{n}s}" for h, n in (("s/frame", 8), ("x theirs", 8), ("rel err", 8), ("peak MiB", 9),
-                                                ("x theirs", 8)))  # fmt: skip
+    head = " ".join(
+        f"{h:>{n}s}" for h, n in (("s/frame", 8), ("x theirs", 8), ("rel err", 8), ("peak MiB", 9), ("x theirs", 8))
+    )
     timed_int8 = "ours-int8" in speed.get("seconds", {})
     what = "float32 and int8" if timed_int8 else "float32 (int8: memory only)"
-    lines = [f"CPU: {r['cpu']}; {r['size'][0]}x{r['size'][1]}, batch 1, {what}, {r['threads']} threads",
-             f"{'variant':14s} {head}"]  # fmt: skip
+    lines = [
+        f"CPU: {r['cpu']}; {r['size'][0]}x{r['size'][1]}, batch 1, {what}, {r['threads']} threads",
+        f"{'variant':14s} {head}",
+    ]
     for v in names:
         sec = speed.get("seconds", {}).get(v)
         up, err = speed.get("speedup", {}).get(v), speed.get("max_rel_error", {}).get(v)
@@ -191,8 +205,13 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     from semattnet._utils.cpu import cpu_summary
 
-    r: dict[str, Any] = {"cpu": cpu_summary(), "size": list(size), "threads": torch.get_num_threads(),
-                         "rounds": args.rounds, "load_before": os.getloadavg()}  # fmt: skip
+    r: dict[str, Any] = {
+        "cpu": cpu_summary(),
+        "size": list(size),
+        "threads": torch.get_num_threads(),
+        "rounds": args.rounds,
+        "load_before": os.getloadavg(),
+    }
     print(f"load before: {r['load_before']}", flush=True)
     if args.memory:  # first, while this process holds no model (the children start beside it)
         r["memory"] = measure_memory(args, engines)

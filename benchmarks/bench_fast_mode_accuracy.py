@@ -65,9 +65,16 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as cache:
         for backend in backends:
             for precision in ("f32", "bf16", *(("int8",) if int8 and backend == "openvino" else ())):
-                engine = optimize_for_inference(model, backend=backend, size=size, precision=precision,
-                                                device=device, cache_dir=cache, calibration=calibration,
-                                                calibration_frames=args.calibration_frames)  # fmt: skip
+                engine = optimize_for_inference(
+                    model,
+                    backend=backend,
+                    size=size,
+                    precision=precision,
+                    device=device,
+                    cache_dir=cache,
+                    calibration=calibration,
+                    calibration_frames=args.calibration_frames,
+                )
                 rows[f"{backend} {precision}"] = _complete(engine, held, device)
     ref = rows["torch f32"][0]
     print(f"{cpu_summary()}; {len(held.names)} held-out scenes at {size[0]}x{size[1]}")
@@ -78,8 +85,10 @@ def main() -> None:
         m = score(preds, held)["all"]
         change = max(abs(m[k] / base[k] - 1) for k in ("rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km"))
         diff = max(float(np.abs(preds[n] - ref[n]).max()) for n in held.names)
-        print(f"{name:14s} {m['rmse_mm']:8.1f} {m['mae_mm']:7.1f} {m['irmse_per_km']:7.2f} {m['imae_per_km']:6.2f} "
-              f"{diff:9.4f} m {sec * 1e3:9.1f}   largest metric change {100 * change:.2f} %")  # fmt: skip
+        print(
+            f"{name:14s} {m['rmse_mm']:8.1f} {m['mae_mm']:7.1f} {m['irmse_per_km']:7.2f} {m['imae_per_km']:6.2f} "
+            f"{diff:9.4f} m {sec * 1e3:9.1f}   largest metric change {100 * change:.2f} %"
+        )
 
 
 if __name__ == "__main__":

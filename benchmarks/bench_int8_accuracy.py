@@ -45,8 +45,12 @@ def _args(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--calibration-frames", type=int, default=None, help="calibration frames (default: the library's)")
     p.add_argument("--scenes", type=int, default=16, help="held-out scenes completed (the demo's: 16)")
     p.add_argument("--repeats", type=int, default=3, help="timed passes over the scenes, f32 and int8 in turns")
-    p.add_argument("--speed-size", default=None, metavar="HxW",
-                   help="also time both engines on a random frame of this size (e.g. 352x1216; minutes)")  # fmt: skip
+    p.add_argument(
+        "--speed-size",
+        default=None,
+        metavar="HxW",
+        help="also time both engines on a random frame of this size (e.g. 352x1216; minutes)",
+    )
     p.add_argument("--json", type=Path, default=None, help="also write the numbers here")
     p.add_argument("--dry-run", action="store_true", help="scenes and weights only, no engine")
     return p.parse_args(argv)
@@ -85,9 +89,18 @@ def compare(model: Any, held: Any, args: argparse.Namespace, cache: Path) -> dic
 
     size = tuple(held.samples[0]["rgb"].shape[-2:])
     frames = args.calibration_frames or DEFAULT_CALIBRATION_FRAMES
-    engines = {p: optimize_for_inference(model, backend="openvino", size=size, precision=p, cache_dir=cache,
-                                         calibration=args.calibration, calibration_frames=frames)
-               for p in ("f32", "int8")}  # fmt: skip
+    engines = {
+        p: optimize_for_inference(
+            model,
+            backend="openvino",
+            size=size,
+            precision=p,
+            cache_dir=cache,
+            calibration=args.calibration,
+            calibration_frames=frames,
+        )
+        for p in ("f32", "int8")
+    }
     preds: dict[str, dict[str, np.ndarray]] = {p: {} for p in engines}
     times: dict[str, list[float]] = {p: [] for p in engines}
     for r in range(args.repeats + 1):  # pass 0: warm-up, its outputs scored
@@ -123,8 +136,15 @@ def speed_at(model: Any, size: tuple[int, int], args: argparse.Namespace, cache:
     frames = args.calibration_frames or DEFAULT_CALIBRATION_FRAMES
     runs = {}
     for p in ("f32", "int8"):
-        engine = optimize_for_inference(model, backend="openvino", size=size, precision=p, cache_dir=cache,
-                                        calibration=args.calibration, calibration_frames=frames)  # fmt: skip
+        engine = optimize_for_inference(
+            model,
+            backend="openvino",
+            size=size,
+            precision=p,
+            cache_dir=cache,
+            calibration=args.calibration,
+            calibration_frames=frames,
+        )
         engine(**x)  # warm-up
         runs[p] = lambda e=engine: e(**x)
     seconds = interleaved(runs, torch.device("cpu"), args.repeats)
@@ -134,22 +154,30 @@ def speed_at(model: Any, size: tuple[int, int], args: argparse.Namespace, cache:
 
 def report(results: dict[str, Any]) -> None:
     """The table of :func:`compare`'s numbers per checkpoint."""
-    print(f"{results['cpu']}; {results['scenes']} held-out scenes at {results['size'][0]}x{results['size'][1]}; "
-          f"int8 calibrated on {results['calibration']}")  # fmt: skip
+    print(
+        f"{results['cpu']}; {results['scenes']} held-out scenes at {results['size'][0]}x{results['size'][1]}; "
+        f"int8 calibrated on {results['calibration']}"
+    )
     print("weights                       engine  RMSE mm  MAE mm  iRMSE  iMAE   ms/frame")
     for name, r in results["weights"].items():
         for p in ("f32", "int8"):
             m = r[p]
-            print(f"{name:29s} {p:6s} {m['rmse_mm']:8.1f} {m['mae_mm']:7.1f} {m['irmse_per_km']:6.3f} "
-                  f"{m['imae_per_km']:5.3f} {r['ms_per_frame'][p]:9.1f}")  # fmt: skip
+            print(
+                f"{name:29s} {p:6s} {m['rmse_mm']:8.1f} {m['mae_mm']:7.1f} {m['irmse_per_km']:6.3f} "
+                f"{m['imae_per_km']:5.3f} {r['ms_per_frame'][p]:9.1f}"
+            )
         c = r["change_pct"]
-        print(f"{'':29s} change {c['rmse_mm']:+7.2f}% {c['mae_mm']:+6.2f}% {c['irmse_per_km']:+5.2f}% "
-              f"{c['imae_per_km']:+5.2f}%   largest pixel change {r['max_pixel_change_m']:.2f} m, "
-              f"int8 {r['speedup']:.2f}x f32 (timings indicative)")  # fmt: skip
+        print(
+            f"{'':29s} change {c['rmse_mm']:+7.2f}% {c['mae_mm']:+6.2f}% {c['irmse_per_km']:+5.2f}% "
+            f"{c['imae_per_km']:+5.2f}%   largest pixel change {r['max_pixel_change_m']:.2f} m, "
+            f"int8 {r['speedup']:.2f}x f32 (timings indicative)"
+        )
         if "speed_at" in r:
             t = r["speed_at"]
-            print(f"{'':29s} at {results['speed_size'][0]}x{results['speed_size'][1]}: f32 {t['f32_ms']:.0f} ms, "
-                  f"int8 {t['int8_ms']:.0f} ms, int8 {t['speedup']:.2f}x f32")  # fmt: skip
+            print(
+                f"{'':29s} at {results['speed_size'][0]}x{results['speed_size'][1]}: f32 {t['f32_ms']:.0f} ms, "
+                f"int8 {t['int8_ms']:.0f} ms, int8 {t['speedup']:.2f}x f32"
+            )
 
 
 def main(argv: list[str]) -> dict[str, Any] | None:
@@ -168,8 +196,13 @@ def main(argv: list[str]) -> dict[str, Any] | None:
         if args.dry_run:
             print(f"dry run: {len(held.names)} scenes at {size}, weights {', '.join(models)}, int8 on {calibration}")
             return None
-        results: dict[str, Any] = {"cpu": cpu_summary(), "scenes": len(held.names), "size": list(size),
-                                   "calibration": calibration, "weights": {}}  # fmt: skip
+        results: dict[str, Any] = {
+            "cpu": cpu_summary(),
+            "scenes": len(held.names),
+            "size": list(size),
+            "calibration": calibration,
+            "weights": {},
+        }
         speed = tuple(int(v) for v in args.speed_size.split("x")) if args.speed_size else None
         for name, model in models.items():
             results["weights"][name] = compare(model, held, args, Path(work) / "cache")

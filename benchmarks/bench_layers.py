@@ -71,8 +71,12 @@ def profile_graph(xml: Path, runs: int) -> tuple[list[float], dict[tuple[str, st
     core = ov.Core()
     model = core.read_model(str(xml))
     macs, aliases = layer_macs(model), fused_names(model)
-    config = {"PERFORMANCE_HINT": "LATENCY", "INFERENCE_PRECISION_HINT": "f32",
-              "INFERENCE_NUM_THREADS": torch.get_num_threads(), "PERF_COUNT": True}  # fmt: skip
+    config = {
+        "PERFORMANCE_HINT": "LATENCY",
+        "INFERENCE_PRECISION_HINT": "f32",
+        "INFERENCE_NUM_THREADS": torch.get_num_threads(),
+        "PERF_COUNT": True,
+    }
     compiled = core.compile_model(model, "CPU", config)
     request = compiled.create_infer_request()
     rng = np.random.default_rng(0)
@@ -93,20 +97,36 @@ def analyse(times: dict[tuple[str, str, str], float], macs: dict[str, int]) -> d
     """The attainable rate, the floor, and every layer's loss against it (largest first)."""
     rates = [macs[n] / s for (n, _, _), s in times.items() if macs.get(n, 0) >= BIG_LAYER_MACS and s > 0]
     attainable = max(rates) if rates else float("nan")
-    layers = [{"name": n, "type": t, "kernel": e, "ms": 1e3 * s, "gmac": macs.get(n, 0) / 1e9,
-               "lost_ms": 1e3 * (s - macs.get(n, 0) / attainable)} for (n, t, e), s in times.items()]  # fmt: skip
+    layers = [
+        {
+            "name": n,
+            "type": t,
+            "kernel": e,
+            "ms": 1e3 * s,
+            "gmac": macs.get(n, 0) / 1e9,
+            "lost_ms": 1e3 * (s - macs.get(n, 0) / attainable),
+        }
+        for (n, t, e), s in times.items()
+    ]
     layers.sort(key=lambda r: -r["lost_ms"])
     total_s, total_mac = sum(times.values()), sum(macs.values())
-    return {"attainable_gmac_s": attainable / 1e9, "layers_s": total_s, "gmac": total_mac / 1e9,
-            "floor_s": total_mac / attainable, "layers": layers}  # fmt: skip
+    return {
+        "attainable_gmac_s": attainable / 1e9,
+        "layers_s": total_s,
+        "gmac": total_mac / 1e9,
+        "floor_s": total_mac / attainable,
+        "layers": layers,
+    }
 
 
 def table(r: dict[str, Any], top: int) -> list[str]:
-    lines = [f"CPU: {r['cpu']}; {r['size'][0]}x{r['size'][1]}, float32, {r['threads']} threads, median of {r['runs']}",
-             f"graph: {r['wall_s']:.3f} s a run (layers {r['layers_s']:.3f} s); {r['gmac']:.1f} GMAC; attainable "
-             f"{r['attainable_gmac_s']:.1f} GMAC/s (the best large layer); floor {r['floor_s']:.3f} s "
-             f"({100 * r['floor_s'] / r['layers_s']:.0f} % of the layers' time)",
-             f"{'lost ms':>8s} {'ms':>8s} {'GMAC':>7s} {'GMAC/s':>7s}  {'type':24s} layer"]  # fmt: skip
+    lines = [
+        f"CPU: {r['cpu']}; {r['size'][0]}x{r['size'][1]}, float32, {r['threads']} threads, median of {r['runs']}",
+        f"graph: {r['wall_s']:.3f} s a run (layers {r['layers_s']:.3f} s); {r['gmac']:.1f} GMAC; attainable "
+        f"{r['attainable_gmac_s']:.1f} GMAC/s (the best large layer); floor {r['floor_s']:.3f} s "
+        f"({100 * r['floor_s'] / r['layers_s']:.0f} % of the layers' time)",
+        f"{'lost ms':>8s} {'ms':>8s} {'GMAC':>7s} {'GMAC/s':>7s}  {'type':24s} layer",
+    ]
     for x in r["layers"][:top]:
         rate = f"{x['gmac'] / x['ms'] * 1e3:7.1f}" if x["gmac"] else " " * 7
         lines.append(f"{x['lost_ms']:8.1f} {x['ms']:8.1f} {x['gmac']:7.2f} {rate}  {x['type']:24s} {x['name'][:70]}")
@@ -134,8 +154,14 @@ def main(argv: list[str] | None = None) -> int:
         net = semattnet.build_model("semattnet", width=args.width).eval()
         optimize_for_inference(net, backend="openvino", size=size, cache_dir=cache)
         walls, times, macs = profile_graph(next(Path(cache).glob("engines/*/model.xml")), args.runs)
-    r = {"cpu": cpu_summary(), "size": list(size), "threads": torch.get_num_threads(), "runs": args.runs,
-         "wall_s": statistics.median(walls), **analyse(times, macs)}  # fmt: skip
+    r = {
+        "cpu": cpu_summary(),
+        "size": list(size),
+        "threads": torch.get_num_threads(),
+        "runs": args.runs,
+        "wall_s": statistics.median(walls),
+        **analyse(times, macs),
+    }
     print("\n".join(table(r, args.top)))
     if args.json:
         args.json.write_text(json.dumps(r, indent=1) + "\n")

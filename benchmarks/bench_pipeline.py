@@ -105,12 +105,18 @@ def _pipeline_pass(completer: Any, drive: Path, out: Path, prefetch: int) -> dic
     plan.run(completer, timer=timer, log=lambda _: None)
     t2 = time.perf_counter()
     n = len(source.names)
-    return {"fps": n / (t2 - t1), "check_s": t1 - t0, "fps_with_check": n / (t2 - t0),
-            "latency": json.loads((out / LATENCY_FILE).read_text()), "table": timer.table()}  # fmt: skip
+    return {
+        "fps": n / (t2 - t1),
+        "check_s": t1 - t0,
+        "fps_with_check": n / (t2 - t0),
+        "latency": json.loads((out / LATENCY_FILE).read_text()),
+        "table": timer.table(),
+    }
 
 
-def measure(drive: Path, work: Path, width: float, backend: str, prefetch: int, rounds: int,
-            precision: str | None = None) -> dict[str, Any]:  # fmt: skip
+def measure(
+    drive: Path, work: Path, width: float, backend: str, prefetch: int, rounds: int, precision: str | None = None
+) -> dict[str, Any]:
     """The network alone and the pipeline over the drive's frames, in turns; medians and the overhead."""
     import torch
 
@@ -122,8 +128,13 @@ def measure(drive: Path, work: Path, width: float, backend: str, prefetch: int, 
     from semattnet.inference.timing import StageTimes
 
     torch.manual_seed(0)
-    completer = DepthCompleter(semattnet.build_model("semattnet", width=width), device="cpu", backend=backend,
-                               inplace=True, precision=precision)  # fmt: skip
+    completer = DepthCompleter(
+        semattnet.build_model("semattnet", width=width),
+        device="cpu",
+        backend=backend,
+        inplace=True,
+        precision=precision,
+    )
     source = RawDriveSource(drive)
     maps = SemanticMaps().bind(completer)
     frames = [read_frame(source, name, maps, StageTimes()) for name in source.names]
@@ -135,10 +146,19 @@ def measure(drive: Path, work: Path, width: float, backend: str, prefetch: int, 
     fps_net, fps_pipe = statistics.median(net), statistics.median(p["fps"] for p in pipe)
     fps_check = statistics.median(p["fps_with_check"] for p in pipe)
     last = pipe[-1]
-    return {"frames": len(frames), "fps_network": fps_net, "fps_pipeline": fps_pipe, "overhead": 1 - fps_pipe / fps_net,
-            "overhead_with_check": 1 - fps_check / fps_net, "check_s": statistics.median(p["check_s"] for p in pipe),
-            "rounds_fps_network": net, "rounds_fps_pipeline": [p["fps"] for p in pipe],
-            "stages": last["latency"]["stages"], "latency": last["latency"], "table": last["table"]}  # fmt: skip
+    return {
+        "frames": len(frames),
+        "fps_network": fps_net,
+        "fps_pipeline": fps_pipe,
+        "overhead": 1 - fps_pipe / fps_net,
+        "overhead_with_check": 1 - fps_check / fps_net,
+        "check_s": statistics.median(p["check_s"] for p in pipe),
+        "rounds_fps_network": net,
+        "rounds_fps_pipeline": [p["fps"] for p in pipe],
+        "stages": last["latency"]["stages"],
+        "latency": last["latency"],
+        "table": last["table"],
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -161,14 +181,24 @@ def main(argv: list[str] | None = None) -> int:
         with warnings.catch_warnings():  # random weights: each frame's holes and clamps; the fallback semantic map
             warnings.simplefilter("ignore", UserWarning)
             r = measure(drive, Path(tmp), args.width, args.backend, args.prefetch, args.rounds, args.precision)
-    r |= {"cpu": cpu_summary(), "size": [h, w], "width": args.width, "backend": args.backend,
-          "precision": args.precision or "f32",
-          "prefetch": args.prefetch, "load_after": os.getloadavg()}  # fmt: skip
-    print(f"CPU: {r['cpu']}; {r['frames']} frames at {h}x{w}, width {args.width}, backend {args.backend} "
-          f"({r['precision']}), prefetch {args.prefetch}")  # fmt: skip
-    print(f"network alone {r['fps_network']:.3f} frames/s, pipeline {r['fps_pipeline']:.3f} frames/s: overhead "
-          f"{100 * r['overhead']:.1f} % ({100 * r['overhead_with_check']:.1f} % with the input check, "
-          f"{r['check_s']:.2f} s)")  # fmt: skip
+    r |= {
+        "cpu": cpu_summary(),
+        "size": [h, w],
+        "width": args.width,
+        "backend": args.backend,
+        "precision": args.precision or "f32",
+        "prefetch": args.prefetch,
+        "load_after": os.getloadavg(),
+    }
+    print(
+        f"CPU: {r['cpu']}; {r['frames']} frames at {h}x{w}, width {args.width}, backend {args.backend} "
+        f"({r['precision']}), prefetch {args.prefetch}"
+    )
+    print(
+        f"network alone {r['fps_network']:.3f} frames/s, pipeline {r['fps_pipeline']:.3f} frames/s: overhead "
+        f"{100 * r['overhead']:.1f} % ({100 * r['overhead_with_check']:.1f} % with the input check, "
+        f"{r['check_s']:.2f} s)"
+    )
     print(r.pop("table"))
     if args.json:
         args.json.write_text(json.dumps(r, indent=1) + "\n")

@@ -111,13 +111,19 @@ def run_realtime(bag: Path, out: Path, completer: Any, speed: float, write_ahead
     source = BagSource(bag, topics.image, topics.points)
     sinks = run_sinks(timer)
     options = RunOptions(realtime=speed, write_ahead=write_ahead)
-    run = check_frames(source, sinks, out, OutputSpec(overwrite=True), options).run(completer, timer=timer,
-                                                                                    log=lambda line: None)  # fmt: skip
+    run = check_frames(source, sinks, out, OutputSpec(overwrite=True), options).run(
+        completer, timer=timer, log=lambda line: None
+    )
     print(timer.table())
     counts = run.counts
-    return {"frames_fed": len(source.names), "completed": counts["done"], "dropped": counts["dropped"],
-            "skipped": counts["skipped"], "exit_code": run.exit_code,
-            "latency": json.loads((out / "latency.json").read_text())}  # fmt: skip
+    return {
+        "frames_fed": len(source.names),
+        "completed": counts["done"],
+        "dropped": counts["dropped"],
+        "skipped": counts["skipped"],
+        "exit_code": run.exit_code,
+        "latency": json.loads((out / "latency.json").read_text()),
+    }
 
 
 def _args(argv: Sequence[str] | None) -> argparse.Namespace:
@@ -156,10 +162,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     for name, write_ahead in [("pipelined", None), *([("serial", 0)] if args.serial else [])]:
         print(f"{name}:")
         r = runs[name] = run_realtime(bag, args.out / name, completer, args.speed, write_ahead)
-        print(f"{r['frames_fed']} frames fed at 10 Hz x {args.speed:g}: {r['completed']} completed, "
-              f"{r['dropped']} dropped, {r['skipped']} skipped")  # fmt: skip
-    doc = {"size": [h, w], "speed": args.speed, "method": args.model or weights or "classical", "backend": args.backend,
-           "random_weights": bool(args.model), "warmup": args.warmup, "cpu": cpu_name(), **runs}  # fmt: skip
+        print(
+            f"{r['frames_fed']} frames fed at 10 Hz x {args.speed:g}: {r['completed']} completed, "
+            f"{r['dropped']} dropped, {r['skipped']} skipped"
+        )
+    doc = {
+        "size": [h, w],
+        "speed": args.speed,
+        "method": args.model or weights or "classical",
+        "backend": args.backend,
+        "random_weights": bool(args.model),
+        "warmup": args.warmup,
+        "cpu": cpu_name(),
+        **runs,
+    }
     print(json.dumps(doc))
     if args.json is not None:
         args.json.write_text(json.dumps(doc, indent=2) + "\n")

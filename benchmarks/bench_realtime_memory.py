@@ -70,8 +70,15 @@ def replay(bag: Path, out: Path, speed: float = 1.0) -> dict[str, object]:
     thread.join()
     n = len(source.names)
     at = {q: next((r for k, r in samples if k >= q * n), samples[-1][1]) for q in (0.1, 0.5, 1.0)}
-    return {"frames": n, "counts": run.counts, "queue_most": timer.queue_most, "rss_10pct": at[0.1],
-            "rss_50pct": at[0.5], "rss_end": at[1.0], "rss_peak": max(r for _, r in samples)}  # fmt: skip
+    return {
+        "frames": n,
+        "counts": run.counts,
+        "queue_most": timer.queue_most,
+        "rss_10pct": at[0.1],
+        "rss_50pct": at[0.5],
+        "rss_end": at[1.0],
+        "rss_peak": max(r for _, r in samples),
+    }
 
 
 def main() -> None:
@@ -88,10 +95,14 @@ def main() -> None:
     print(f"bag of {args.frames} frames written in {time.perf_counter() - t:.1f} s")
     r = replay(bag, args.out / "pred", args.speed)
     print(f"CPU: {cpu_name()}; numpy {np.__version__}")
-    print(f"{r['frames']} frames at 10 Hz x {args.speed:g}: {r['counts']['done']} done, {r['counts']['dropped']} "
-          f"dropped; at most {r['queue_most']} frame(s) waited")  # fmt: skip
-    print(f"RSS MiB: after 10 % {r['rss_10pct']:.0f}, at 50 % {r['rss_50pct']:.0f}, at the end "
-          f"{r['rss_end']:.0f}, peak {r['rss_peak']:.0f}")  # fmt: skip
+    print(
+        f"{r['frames']} frames at 10 Hz x {args.speed:g}: {r['counts']['done']} done, {r['counts']['dropped']} "
+        f"dropped; at most {r['queue_most']} frame(s) waited"
+    )
+    print(
+        f"RSS MiB: after 10 % {r['rss_10pct']:.0f}, at 50 % {r['rss_50pct']:.0f}, at the end "
+        f"{r['rss_end']:.0f}, peak {r['rss_peak']:.0f}"
+    )
 
 
 if __name__ == "__main__":

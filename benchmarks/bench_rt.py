@@ -38,8 +38,11 @@ def frame(size: tuple[int, int], seed: int = 0) -> dict[str, torch.Tensor]:
     g = torch.Generator().manual_seed(seed)
     h, w = size
     sparse = (torch.rand(1, 1, h, w, generator=g) < 0.05) * torch.rand(1, 1, h, w, generator=g) * 80
-    return {"rgb": torch.rand(1, 3, h, w, generator=g) * 255, "semantic": torch.rand(1, 3, h, w, generator=g) * 255,
-            "sparse": sparse}  # fmt: skip
+    return {
+        "rgb": torch.rand(1, 3, h, w, generator=g) * 255,
+        "semantic": torch.rand(1, 3, h, w, generator=g) * 255,
+        "sparse": sparse,
+    }
 
 
 def main(argv: list[str] | None = None) -> dict[str, dict[str, float]]:
@@ -56,8 +59,10 @@ def main(argv: list[str] | None = None) -> dict[str, dict[str, float]]:
     names = ["paper@1/8", *args.models.split(",")]
     nets = {"paper@1/8": semattnet.build_model(REFERENCE[0], **REFERENCE[1])}
     nets.update({n: semattnet.build_model(n) for n in names[1:]})
-    info = {n: {"gmac": count_macs(net.eval(), x), "params": sum(p.numel() for p in net.parameters())}
-            for n, net in nets.items()}  # fmt: skip
+    info = {
+        n: {"gmac": count_macs(net.eval(), x), "params": sum(p.numel() for p in net.parameters())}
+        for n, net in nets.items()
+    }
     fast = {n: fold_batchnorm(net) for n, net in nets.items()}
     if args.channels_last:
         fast = {n: net.to(memory_format=torch.channels_last) for n, net in fast.items()}

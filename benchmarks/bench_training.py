@@ -83,8 +83,17 @@ def _model(variant: str, size: tuple[int, int], width: float, authors_src: Path 
     return fill_weights(build_model("semattnet", width=width))
 
 
-def child(variant: str, batch: int, size: tuple[int, int], width: float, device: str, steps: int,
-          warmup: int, authors_src: Path | None = None, profile: bool = False) -> dict[str, Any]:  # fmt: skip
+def child(
+    variant: str,
+    batch: int,
+    size: tuple[int, int],
+    width: float,
+    device: str,
+    steps: int,
+    warmup: int,
+    authors_src: Path | None = None,
+    profile: bool = False,
+) -> dict[str, Any]:
     """One variant in this process: median seconds per step and peak memory (MiB); with ``profile``, the
     convolutions' share of one more step (:func:`conv_share`, after the peak is read)."""
     import torch
@@ -127,8 +136,14 @@ def child(variant: str, batch: int, size: tuple[int, int], width: float, device:
         if i >= warmup:
             times.append(now(dev) - t0)
     peak = torch.cuda.max_memory_allocated(dev) / 2**20 if dev.type == "cuda" else _peak_rss_mib()
-    out = {"variant": variant, "batch": batch, "seconds": statistics.median(times), "peak_mib": peak,
-           "before_mib": before if dev.type == "cpu" else 0.0, "params": params}  # fmt: skip
+    out = {
+        "variant": variant,
+        "batch": batch,
+        "seconds": statistics.median(times),
+        "peak_mib": peak,
+        "before_mib": before if dev.type == "cpu" else 0.0,
+        "params": params,
+    }
     return {**out, **conv_share(step)} if profile and dev.type == "cpu" else out
 
 
@@ -158,9 +173,24 @@ def conv_share(step: Any) -> dict[str, float]:
 
 def _run_child(args: argparse.Namespace, variant: str, batch: int) -> dict[str, Any] | None:
     """The child process of one (variant, batch); None if it passed ``--max-gb`` (stopped) or failed."""
-    cmd = [sys.executable, __file__, "--child", variant, "--batches", str(batch), "--size", args.size,
-           "--width", str(args.width), "--device", args.device, "--steps", str(args.steps),
-           "--warmup", str(args.warmup)]  # fmt: skip
+    cmd = [
+        sys.executable,
+        __file__,
+        "--child",
+        variant,
+        "--batches",
+        str(batch),
+        "--size",
+        args.size,
+        "--width",
+        str(args.width),
+        "--device",
+        args.device,
+        "--steps",
+        str(args.steps),
+        "--warmup",
+        str(args.warmup),
+    ]
     cmd += ["--authors-src", str(args.authors_src)] if args.authors_src else []
     cmd += ["--profile"] if args.profile else []
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
@@ -213,9 +243,12 @@ def summarise(results: list[dict[str, Any]], variants: tuple[str, ...]) -> list[
 
 def _against_ours(med: dict[tuple[str, int], tuple[float, float]]) -> list[str]:
     """Activation checkpointing against ours without, per batch: step time and peak memory ratios."""
-    rows = [f"{'ours+ckpt / ours':16s} batch {b}: step time {med['ours+ckpt', b][0] / med['ours', b][0]:.2f}x, "
-            f"peak memory {med['ours+ckpt', b][1] / med['ours', b][1]:.2f}x"
-            for b in sorted({b for _, b in med}) if ("ours", b) in med and ("ours+ckpt", b) in med]  # fmt: skip
+    rows = [
+        f"{'ours+ckpt / ours':16s} batch {b}: step time {med['ours+ckpt', b][0] / med['ours', b][0]:.2f}x, "
+        f"peak memory {med['ours+ckpt', b][1] / med['ours', b][1]:.2f}x"
+        for b in sorted({b for _, b in med})
+        if ("ours", b) in med and ("ours+ckpt", b) in med
+    ]
     return ["", *rows] if rows else []
 
 
@@ -237,8 +270,9 @@ def _conv_bound(results: list[dict[str, Any]], variants: tuple[str, ...]) -> lis
     return [*lines, "(one more step under torch.profiler, self CPU seconds; bound: reference s/step / conv s)"]
 
 
-def _per_sample(results: list[dict[str, Any]], med: dict[tuple[str, int], tuple[float, float]],
-                v: str) -> tuple[float, float, str] | None:  # fmt: skip
+def _per_sample(
+    results: list[dict[str, Any]], med: dict[tuple[str, int], tuple[float, float]], v: str
+) -> tuple[float, float, str] | None:
     """(MiB per sample, fixed MiB, how it was obtained) of variant ``v``: from its smallest and largest
     measured batches, else extrapolated from batch 1."""
     batches = sorted(b for vv, b in med if vv == v)
@@ -279,8 +313,21 @@ def main(argv: list[str] | None = None) -> int:
     size = tuple(int(v) for v in args.size.lower().split("x"))
     batches = tuple(int(b) for b in args.batches.split(","))
     if args.child:
-        print(json.dumps(child(args.child, batches[0], size, args.width, args.device, args.steps, args.warmup,  # type: ignore[arg-type]
-                               args.authors_src, args.profile)))  # fmt: skip
+        print(
+            json.dumps(
+                child(
+                    args.child,
+                    batches[0],
+                    size,
+                    args.width,
+                    args.device,
+                    args.steps,
+                    args.warmup,  # type: ignore[arg-type]
+                    args.authors_src,
+                    args.profile,
+                )
+            )
+        )
         return 0
     variants = tuple(args.variants.split(",")) + (("ours+cl",) if args.channels_last else ())
     if args.authors_src is not None and AUTHORS_CODE not in variants:
@@ -291,8 +338,11 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--variants: expected some of {', '.join(VARIANTS)}, got {args.variants!r}")
     steps = plan(variants, batches, args.rounds)
     check_plan(steps, variants, batches)
-    print(f"plan: {len(steps)} processes at {size[0]}x{size[1]}, width {args.width}, {args.device}: "
-          + ", ".join(f"{v}@{b}" for v, b in steps), flush=True)  # fmt: skip
+    print(
+        f"plan: {len(steps)} processes at {size[0]}x{size[1]}, width {args.width}, {args.device}: "
+        + ", ".join(f"{v}@{b}" for v, b in steps),
+        flush=True,
+    )
     if args.dry_run:
         return 0
     print(f"load before: {os.getloadavg()}", flush=True)

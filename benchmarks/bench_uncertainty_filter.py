@@ -107,8 +107,9 @@ def picture(path: Path, weights: str, pred: Prediction, gt: np.ndarray, text: st
             ax = axes[row, col]
             side = -cloud.xyz[:, axis]  # camera x right, y down
             ax.scatter(cloud.xyz[~has, 2], side[~has], s=0.3, c="0.7", linewidths=0)
-            sc = ax.scatter(cloud.xyz[has, 2], side[has], s=0.8, c=err[has], cmap="inferno_r", vmin=0, vmax=3,
-                            linewidths=0)  # fmt: skip
+            sc = ax.scatter(
+                cloud.xyz[has, 2], side[has], s=0.8, c=err[has], cmap="inferno_r", vmin=0, vmax=3, linewidths=0
+            )
             if col == 0:
                 ax.set_ylabel(name, fontsize=8)
             ax.tick_params(labelsize=7)
@@ -125,15 +126,21 @@ def picture(path: Path, weights: str, pred: Prediction, gt: np.ndarray, text: st
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("data", type=Path, help="a synthetic tree (semattnet synth / demo) with scenes.json")
-    p.add_argument("--weights", nargs="+", default=["semattnet-demo-ref-seed0", "semattnet-demo-ref-seed1"],
-                   help="weights names or files ('classical': the baseline)")  # fmt: skip
+    p.add_argument(
+        "--weights",
+        nargs="+",
+        default=["semattnet-demo-ref-seed0", "semattnet-demo-ref-seed1"],
+        help="weights names or files ('classical': the baseline)",
+    )
     p.add_argument("--picture", type=Path, default=None, help="write the before/after cloud of one scene here")
     p.add_argument("--scene", type=int, default=3, help="with --picture: the held-out scene's index")
     p.add_argument("--picture-limit", default="5", help="with --picture: the limit drawn")
     args = p.parse_args()
     held = load_held_out(args.data)
-    print(f"{len(held.names)} held-out scenes of {args.data}, {tuple(held.samples[0]['rgb'].shape[-2:])}; "
-          f"points: pixels with depth <= {MAX_DEPTH:g} m; CPU: {cpu_summary()}")  # fmt: skip
+    print(
+        f"{len(held.names)} held-out scenes of {args.data}, {tuple(held.samples[0]['rgb'].shape[-2:])}; "
+        f"points: pixels with depth <= {MAX_DEPTH:g} m; CPU: {cpu_summary()}"
+    )
     print("\n| model | --max-uncertainty | points kept | RMSE of kept points (m) | kept points > 1 m off |")
     print("|---|---|---|---|---|")
     for i, w in enumerate(args.weights):

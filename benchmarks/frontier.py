@@ -98,14 +98,17 @@ def variants() -> list[tuple[str, str, float]]:
     return [*PAPER, *rt]
 
 
-def train_one(work: Path, data: Path, recipe: ReferenceRecipe, name: str, width: float, device: torch.device,
-              log: Callable[[str], None]) -> Path:  # fmt: skip
+def train_one(
+    work: Path,
+    data: Path,
+    recipe: ReferenceRecipe,
+    name: str,
+    width: float,
+    device: torch.device,
+    log: Callable[[str], None],
+) -> Path:
     """One variant, one seed, by ``recipe``, on the synthetic tree ``data``: the trained full model's checkpoint."""
-    r = recipe
-    return train_variant(work, data, r.backbone_steps, r.full_steps, size=r.size, width=width,
-                         batch_size=r.batch_size, lr=r.lr, seed=r.seed, device=device, log=log,
-                         refine_init_steps=r.refine_init_steps, head_lr_factor=r.head_lr_factor, loss=r.loss,
-                         semantic_dropout=r.semantic_dropout, branches=3, model=name)  # fmt: skip
+    return train_variant(work, data, recipe.variant(width, branches=3, model=name), device, log=log)
 
 
 def load_model(path: Path) -> torch.nn.Module:
@@ -115,8 +118,14 @@ def load_model(path: Path) -> torch.nn.Module:
     return model.eval()
 
 
-def trained(out: Path, key: str, seed: int, train: Callable[[], Path], log: Callable[[str], None],
-            recipe: ReferenceRecipe | None = None) -> torch.nn.Module:  # fmt: skip
+def trained(
+    out: Path,
+    key: str,
+    seed: int,
+    train: Callable[[], Path],
+    log: Callable[[str], None],
+    recipe: ReferenceRecipe | None = None,
+) -> torch.nn.Module:
     """The variant's model of ``seed``: its saved weights when an earlier run left them (a run resumes variant by
     variant), else the shipped demo reference of that seed when ``recipe`` is the one it was trained by (the
     width-1/8 paper model: not trained twice), else trained by ``train`` and saved first."""
@@ -148,11 +157,19 @@ def _mean(per_seed: dict[str, dict[str, float]]) -> dict[str, float]:
     return {k: statistics.fmean(s[k] for s in per_seed.values()) for k in keys}
 
 
-def train_and_score(out: Path, recipe: ReferenceRecipe, seeds: Sequence[int], held: HeldOut, device: torch.device,
-                    keys: Sequence[str] | None, log: Callable[[str], None]) -> dict[str, Any]:  # fmt: skip
+def train_and_score(
+    out: Path,
+    recipe: ReferenceRecipe,
+    seeds: Sequence[int],
+    held: HeldOut,
+    device: torch.device,
+    keys: Sequence[str] | None,
+    log: Callable[[str], None],
+) -> dict[str, Any]:
     """Train every variant per seed, save its weights, score it; the classical completion beside them."""
-    classical = {n: complete_classical(s["sparse"][None])[0, 0].numpy()
-                 for n, s in zip(held.names, held.samples, strict=True)}  # fmt: skip
+    classical = {
+        n: complete_classical(s["sparse"][None])[0, 0].numpy() for n, s in zip(held.names, held.samples, strict=True)
+    }
     preds: unc.BySeed = {"classical": dict.fromkeys(seeds, classical)}
     uncs: unc.BySeed = {"classical": dict.fromkeys(seeds, unc.classical_uncertainties(held, classical))}
     results: dict[str, Any] = {"classical": {"scores": _scores(classical, held)}}
@@ -161,16 +178,30 @@ def train_and_score(out: Path, recipe: ReferenceRecipe, seeds: Sequence[int], he
             continue
         per_seed = {}
         for seed in seeds:
-            run = functools.partial(train_one, out / "runs" / f"{key}_seed{seed}", out / "data",
-                                    dataclasses.replace(recipe, seed=seed), name, width, device, log)  # fmt: skip
+            run = functools.partial(
+                train_one,
+                out / "runs" / f"{key}_seed{seed}",
+                out / "data",
+                dataclasses.replace(recipe, seed=seed),
+                name,
+                width,
+                device,
+                log,
+            )
             model = trained(out, key, seed, run, log, recipe)
             outputs = complete_held_out(model, held, device)
             preds.setdefault(key, {})[seed] = {n: o["refined_depth"] for n, o in outputs.items()}
             uncs.setdefault(key, {})[seed] = {n: o["uncertainty"] for n, o in outputs.items()}
             per_seed[str(seed)] = _scores(preds[key][seed], held)
         params = sum(p.numel() for p in model.parameters())
-        results[key] = {"model": name, "width": width, "params": params, "affinity": model.config.affinity,
-                        "per_seed": per_seed, "scores": _mean(per_seed)}  # fmt: skip
+        results[key] = {
+            "model": name,
+            "width": width,
+            "params": params,
+            "affinity": model.config.affinity,
+            "per_seed": per_seed,
+            "scores": _mean(per_seed),
+        }
     for key, ause in unc.score_uncertainty(preds, uncs, held).items():
         results[key]["uncertainty"] = {k: v for k, v in ause.items() if k not in ("curves", "label")}
     return results
@@ -199,14 +230,30 @@ def run_training(args: argparse.Namespace, log: Callable[[str], None] = print) -
     device = resolve_device(args.device)
     start = time.perf_counter()
     synthetic(out / "data", recipe.train_frames, recipe.val_frames, recipe.size, recipe.data_seed, recipe.style)
-    held = synthetic(out / "held_out", 2 if args.frames else demo.train_frames, 2 if args.frames else
-                     demo.eval_frames, recipe.size, demo.seed, style=demo.style)  # fmt: skip
+    held = synthetic(
+        out / "held_out",
+        2 if args.frames else demo.train_frames,
+        2 if args.frames else demo.eval_frames,
+        recipe.size,
+        demo.seed,
+        style=demo.style,
+    )
     seeds = tuple(int(s) for s in args.seeds.split(","))
     keys = args.variants.split(",") if args.variants else None
     results = train_and_score(out, recipe, seeds, held, device, keys, log)
-    _write_json(target, {"command": COMMAND, "recipe": dataclasses.asdict(recipe), "seeds": seeds,
-                         "device": str(device), "machine": machine_line(), "torch": torch.__version__,
-                         "seconds": round(time.perf_counter() - start, 1), "results": results})  # fmt: skip
+    _write_json(
+        target,
+        {
+            "command": COMMAND,
+            "recipe": dataclasses.asdict(recipe),
+            "seeds": seeds,
+            "device": str(device),
+            "machine": machine_line(),
+            "torch": torch.__version__,
+            "seconds": round(time.perf_counter() - start, 1),
+            "results": results,
+        },
+    )
     log(f"[frontier] wrote {target}")
     return target
 
@@ -220,8 +267,13 @@ def synthetic(root: Path, frames: int, eval_frames: int, size: tuple[int, int], 
     m = json.loads(manifest.read_text())
     wanted = {"seed": seed, "size": list(size), "style": style, "train": frames, "val_select": eval_frames}
     counts = m.get("counts", {})
-    found = {"seed": m.get("seed"), "size": m.get("size"), "style": m.get("style"), "train": counts.get("train"),
-             "val_select": counts.get("val_select")}  # fmt: skip
+    found = {
+        "seed": m.get("seed"),
+        "size": m.get("size"),
+        "style": m.get("style"),
+        "train": counts.get("train"),
+        "val_select": counts.get("val_select"),
+    }
     if found != wanted:
         raise InputError(f"{manifest}: written with {found}, this run needs {wanted}; use another --out")
     return load_held_out(root)
@@ -313,8 +365,9 @@ def forward_memory(out: Path, key: str, backend: str, size: tuple[int, int]) -> 
     from semattnet.inference.backends import optimize_for_inference
 
     engine, precision = next((e, p) for n, e, p in BACKENDS if n == backend)
-    net = optimize_for_inference(_variant_model(out, key), backend=engine, size=size, precision=precision,
-                                 outputs=DEPTH_ONLY)  # fmt: skip
+    net = optimize_for_inference(
+        _variant_model(out, key), backend=engine, size=size, precision=precision, outputs=DEPTH_ONLY
+    )
     x = frame(size)
     before = status_mib("VmRSS")
     with torch.inference_mode(), peak_memory(torch.device("cpu")) as pm:
@@ -326,8 +379,16 @@ def forward_memory(out: Path, key: str, backend: str, size: tuple[int, int]) -> 
 def _memory(out: Path, key: str, backend: str, size: tuple[int, int]) -> dict[str, float]:
     """:func:`forward_memory` in a fresh Python process (nothing of the other variants resident); NaN where that
     process fails (said in one line: the run goes on)."""
-    cmd = [sys.executable, str(Path(__file__).resolve()), "--out", str(out), "--memory-of", f"{key}/{backend}",
-           "--time-size", f"{size[0]}x{size[1]}"]  # fmt: skip
+    cmd = [
+        sys.executable,
+        str(Path(__file__).resolve()),
+        "--out",
+        str(out),
+        "--memory-of",
+        f"{key}/{backend}",
+        "--time-size",
+        f"{size[0]}x{size[1]}",
+    ]
     done = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if done.returncode != 0:  # the times stay: one line, and no memory figure for this row
         print(f"[frontier] {key}/{backend}: the memory run failed: {(done.stderr.strip().splitlines() or ['?'])[-1]}")
@@ -335,8 +396,13 @@ def _memory(out: Path, key: str, backend: str, size: tuple[int, int]) -> dict[st
     return {k: float(v) for k, v in json.loads(done.stdout.strip().splitlines()[-1]).items()}
 
 
-def time_network(out: Path, models: dict[str, torch.nn.Module], size: tuple[int, int], repeats: int,
-                 log: Callable[[str], None] = print) -> dict[str, dict[str, float]]:  # fmt: skip
+def time_network(
+    out: Path,
+    models: dict[str, torch.nn.Module],
+    size: tuple[int, int],
+    repeats: int,
+    log: Callable[[str], None] = print,
+) -> dict[str, dict[str, float]]:
     """Network + propagation per variant and backend (``KEY/BACKEND`` -> ms, ratio to the width-1/8 paper model
     on that backend, peak and growth of the resident set in MB, :func:`forward_memory`): each backend's engines
     built by the engine table (:func:`~semattnet.inference.backends.optimize_for_inference`), its variants run in
@@ -349,8 +415,13 @@ def time_network(out: Path, models: dict[str, torch.nn.Module], size: tuple[int,
     return rows
 
 
-def time_backend(models: dict[str, torch.nn.Module], backend: str, size: tuple[int, int], repeats: int,
-                 log: Callable[[str], None] = print) -> dict[str, dict[str, float]]:  # fmt: skip
+def time_backend(
+    models: dict[str, torch.nn.Module],
+    backend: str,
+    size: tuple[int, int],
+    repeats: int,
+    log: Callable[[str], None] = print,
+) -> dict[str, dict[str, float]]:
     """``KEY/BACKEND`` -> ms and ratio to the width-1/8 paper model: the engines of one :data:`BACKENDS`
     row, returning :data:`DEPTH_ONLY`, run in turns."""
     from bench_rt import frame
@@ -359,9 +430,12 @@ def time_backend(models: dict[str, torch.nn.Module], backend: str, size: tuple[i
     engine, precision = next((e, p) for n, e, p in BACKENDS if n == backend)
     x = frame(size)
     log(f"[frontier] {backend}: building the engines at {size[0]}x{size[1]} ...")
-    nets = {key: functools.partial(optimize_for_inference(m, backend=engine, size=size, precision=precision,
-                                                          outputs=DEPTH_ONLY), **x)
-            for key, m in models.items()}  # fmt: skip
+    nets = {
+        key: functools.partial(
+            optimize_for_inference(m, backend=engine, size=size, precision=precision, outputs=DEPTH_ONLY), **x
+        )
+        for key, m in models.items()
+    }
     times = _in_turns(nets, repeats)
     rows: dict[str, dict[str, float]] = {}
     for key, t in times.items():
@@ -372,8 +446,9 @@ def time_backend(models: dict[str, torch.nn.Module], backend: str, size: tuple[i
     return rows
 
 
-def time_capped(out: Path, keys: Sequence[str] | None, isa: str, size: tuple[int, int], repeats: int
-                ) -> dict[str, dict[str, float]]:  # fmt: skip
+def time_capped(
+    out: Path, keys: Sequence[str] | None, isa: str, size: tuple[int, int], repeats: int
+) -> dict[str, dict[str, float]]:
     """OpenVINO float32 with oneDNN's kernels capped at ``isa`` (:data:`ISA_CAPS`), in a fresh process (the cap is
     read once, when the first kernel is made): rows ``KEY/openvino-f32-<isa>``; empty where that process fails
     (said in one line)."""
@@ -440,8 +515,12 @@ def time_stream(model: torch.nn.Module, backend: str, precision: str, source: An
         plan.run(completer, timer=timer, log=lambda _: None)
     summary = timer.summary()
     stages = {k: round(v["median_ms"], 1) for k, v in summary["stages"].items() if "median_ms" in v}
-    return {"backend": f"{backend}-{precision}", "frame_ms": summary["per_frame_median_ms"],
-            "throughput_hz": summary["throughput_hz"], "stages_ms": stages}  # fmt: skip
+    return {
+        "backend": f"{backend}-{precision}",
+        "frame_ms": summary["per_frame_median_ms"],
+        "throughput_hz": summary["throughput_hz"],
+        "stages_ms": stages,
+    }
 
 
 def _in_turns(nets: dict[str, Callable[[], object]], repeats: int) -> dict[str, list[float]]:
@@ -473,21 +552,34 @@ def int8_accuracy(out: Path, keys: Sequence[str], log: Callable[[str], None] = p
             if not path.is_file():
                 continue
             log(f"[frontier] {key}, seed {seed}: int8 on the held-out scenes ...")
-            completer = DepthCompleter(load_model(path), device="cpu", backend="openvino", precision="int8",
-                                       calibration=out / "data")  # fmt: skip
-            preds = {n: completer.run(s["rgb"][None], s["semantic"][None], s["sparse"][None]).refined_depth[0, 0]
-                     .numpy() for n, s in zip(held.names, held.samples, strict=True)}  # fmt: skip
+            completer = DepthCompleter(
+                load_model(path), device="cpu", backend="openvino", precision="int8", calibration=out / "data"
+            )
+            preds = {
+                n: completer.run(s["rgb"][None], s["semantic"][None], s["sparse"][None]).refined_depth[0, 0].numpy()
+                for n, s in zip(held.names, held.samples, strict=True)
+            }
             per_seed[seed] = _scores(preds, held)
         if per_seed:
             f32 = _mean({s: results[key]["per_seed"][s] for s in per_seed})
             int8 = _mean(per_seed)
-            found[key] = {"per_seed": per_seed, "scores": int8, "f32": f32,
-                          "change": {m: int8[m] / f32[m] - 1 for m in METRICS}}  # fmt: skip
+            found[key] = {
+                "per_seed": per_seed,
+                "scores": int8,
+                "f32": f32,
+                "change": {m: int8[m] / f32[m] - 1 for m in METRICS},
+            }
     return found
 
 
-def time_variants(out: Path, size: tuple[int, int], repeats: int, keys: Sequence[str] | None = None,
-                  log: Callable[[str], None] = print, isa_cap: str = "") -> Path:  # fmt: skip
+def time_variants(
+    out: Path,
+    size: tuple[int, int],
+    repeats: int,
+    keys: Sequence[str] | None = None,
+    log: Callable[[str], None] = print,
+    isa_cap: str = "",
+) -> Path:
     """The timing half, into ``timing.json``: network + propagation per variant and backend (:func:`time_network`),
     the whole ``predict --stream`` frame per variant on its fastest backend (:func:`time_stream`), and, where the
     training half left ``results.json`` and OpenVINO int8 runs here, the int8 scores (:func:`int8_accuracy`).
@@ -511,8 +603,18 @@ def time_variants(out: Path, size: tuple[int, int], repeats: int, keys: Sequence
     target = out / "timing.json"
     classical = _classical_ms(size, repeats)
     peak = conv_peak_gflops(torch.device("cpu"), size)  # what the arithmetic alone would allow
-    timing = {**machine(), "size": size, "repeats": repeats, "memory": MEMORY, "models": counts, "rows": rows,
-              "classical_ms": classical, "conv_peak_gflops": peak, "frames": frames, "int8": int8}  # fmt: skip
+    timing = {
+        **machine(),
+        "size": size,
+        "repeats": repeats,
+        "memory": MEMORY,
+        "models": counts,
+        "rows": rows,
+        "classical_ms": classical,
+        "conv_peak_gflops": peak,
+        "frames": frames,
+        "int8": int8,
+    }
     _write_json(target, kept_from_earlier(target, timing, list(models)) if keys else timing)
     log(f"[frontier] wrote {target}")
     return target
@@ -568,8 +670,13 @@ def main(argv: Sequence[str] | None = None) -> Path:
         print(json.dumps(forward_memory(args.out, key, backend, _size(args.time_size, "--time-size"))))
         return args.out
     if args.network_of:
-        rows = time_backend(_timed_models(args.out, keys), args.network_of, _size(args.time_size, "--time-size"),
-                            args.repeats, log=lambda line: print(line, file=sys.stderr))  # fmt: skip
+        rows = time_backend(
+            _timed_models(args.out, keys),
+            args.network_of,
+            _size(args.time_size, "--time-size"),
+            args.repeats,
+            log=lambda line: print(line, file=sys.stderr),
+        )
         print(json.dumps(rows))
         return args.out
     if args.all:
@@ -581,8 +688,9 @@ def main(argv: Sequence[str] | None = None) -> Path:
     return args.out / "timing.json" if args.time else run_training(args)
 
 
-def ship(out: Path, key: str, seeds: Sequence[int], assets: Path = SHIPPED, log: Callable[[str], None] = print
-         ) -> list[Path]:  # fmt: skip
+def ship(
+    out: Path, key: str, seeds: Sequence[int], assets: Path = SHIPPED, log: Callable[[str], None] = print
+) -> list[Path]:
     """``--ship KEY``: each seed's trained checkpoint of variant ``key`` packed as the demo references are
     (:func:`~semattnet.apps.demo.reference.package_reference`: quantised, scored on the training tree's own
     validation scenes beside the classical completion, the recipe and command recorded) into ``assets`` as
@@ -594,8 +702,11 @@ def ship(out: Path, key: str, seeds: Sequence[int], assets: Path = SHIPPED, log:
         if not ckpt.is_file():
             raise InputError(f"{ckpt}: no trained checkpoint of {key}, seed {seed}; train it first")
         target = assets / f"{key}_demo_seed{seed}.safetensors.gz"
-        made.append(package_reference(ckpt, held, target, dataclasses.replace(REFERENCE_RECIPE, seed=seed),
-                                      log=log, command=COMMAND))  # fmt: skip
+        made.append(
+            package_reference(
+                ckpt, held, target, dataclasses.replace(REFERENCE_RECIPE, seed=seed), log=log, command=COMMAND
+            )
+        )
     return made
 
 

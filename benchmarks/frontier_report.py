@@ -32,8 +32,11 @@ MEMORY_NOTE = (
     "one forward in a fresh process, on the variant's fastest backend (Linux's VmHWM, reset through "
     "/proc/self/clear_refs once the engine is built)"
 )
-LABELS = {"classical": "classical completion", "paper_w1_8": "paper model, width 1/8",
-          "paper_w1_4": "paper model, width 1/4"}  # fmt: skip
+LABELS = {
+    "classical": "classical completion",
+    "paper_w1_8": "paper model, width 1/8",
+    "paper_w1_4": "paper model, width 1/4",
+}
 
 
 def read_run(out: Path) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -81,8 +84,19 @@ def _cell(value: float | None, fmt: str = "{:.0f}") -> str:
 def table(results: Mapping[str, Any], timing: Mapping[str, Any]) -> str:
     """The frontier as a Markdown table: one row per variant (the classical completion first)."""
     res = results["results"]
-    head = ["variant", "GMAC", "params", "RMSE [mm]", "MAE [mm]", "iRMSE [1/km]", "iMAE [1/km]", "AUSE (RMSE)",
-            *(f"{h} [ms]" for h in COLUMNS.values()), "whole frame [ms]", "memory [MB]: growth / peak"]  # fmt: skip
+    head = [
+        "variant",
+        "GMAC",
+        "params",
+        "RMSE [mm]",
+        "MAE [mm]",
+        "iRMSE [1/km]",
+        "iMAE [1/km]",
+        "AUSE (RMSE)",
+        *(f"{h} [ms]" for h in COLUMNS.values()),
+        "whole frame [ms]",
+        "memory [MB]: growth / peak",
+    ]
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join(["---"] + ["---:"] * (len(head) - 1)) + "|"]
     for key, entry in res.items():
         counts = timing.get("models", {}).get(key, {})
@@ -97,9 +111,16 @@ def table(results: Mapping[str, Any], timing: Mapping[str, Any]) -> str:
         if key == "classical":
             times = [_cell(timing.get("classical_ms")), *["–"] * (len(COLUMNS) - 1)]
         label = LABELS.get(key, f"`{key}`") + (" (convex kernel)" if entry.get("affinity") == "convex" else "")
-        cells = [label, _cell(counts.get("gmac"), "{:.2f}"),
-                 "–" if params is None else f"{params / 1e6:.2f} M", *(_score(entry, m) for m in METRICS),
-                 _cell(ause, "{:.3f}"), *times, _cell(frame), memory]  # fmt: skip
+        cells = [
+            label,
+            _cell(counts.get("gmac"), "{:.2f}"),
+            "–" if params is None else f"{params / 1e6:.2f} M",
+            *(_score(entry, m) for m in METRICS),
+            _cell(ause, "{:.3f}"),
+            *times,
+            _cell(frame),
+            memory,
+        ]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -125,25 +146,34 @@ def verdict(results: Mapping[str, Any], timing: Mapping[str, Any], key: str) -> 
         parts.append("not timed;")
     else:
         ms, backend = fastest
-        parts.append(f"{ms:.0f} ms network + propagation ({BACKENDS[backend]}), "
-                     f"{'within' if ms <= BUDGET_MS else 'over'} the {BUDGET_MS:.0f} ms budget;")  # fmt: skip
+        parts.append(
+            f"{ms:.0f} ms network + propagation ({BACKENDS[backend]}), "
+            f"{'within' if ms <= BUDGET_MS else 'over'} the {BUDGET_MS:.0f} ms budget;"
+        )
         if (capped := _ms(timing, key, "openvino-f32-avx2")) is not None:
             parts.append(f"{capped:.0f} ms with AVX2 kernels only;")
     worse = [m for m in METRICS if scores[m] >= classical[m]]
-    parts.append("beats the classical completion on all four metrics;" if not worse else
-                 f"does not beat the classical completion on {', '.join(m.upper() for m in worse)};")  # fmt: skip
+    parts.append(
+        "beats the classical completion on all four metrics;"
+        if not worse
+        else f"does not beat the classical completion on {', '.join(m.upper() for m in worse)};"
+    )
     if "paper_w1_8" in res:
         rel = scores["rmse"] / res["paper_w1_8"]["scores"]["rmse"] - 1
-        parts.append(f"RMSE {_pct(rel)} against the width-1/8 paper model "
-                     f"({'within' if rel <= RMSE_SLACK else 'outside'} {100 * RMSE_SLACK:.0f} %);")  # fmt: skip
+        parts.append(
+            f"RMSE {_pct(rel)} against the width-1/8 paper model "
+            f"({'within' if rel <= RMSE_SLACK else 'outside'} {100 * RMSE_SLACK:.0f} %);"
+        )
     int8 = timing.get("int8", {}).get(key)
     if int8 is None:
         parts.append("int8 accuracy not measured.")
     else:
         metric, change = max(int8["change"].items(), key=lambda kv: abs(kv[1]))
         ok = abs(change) <= INT8_SLACK
-        parts.append(f"int8 {'within' if ok else 'outside'} {100 * INT8_SLACK:.0f} % of float32 (largest change "
-                     f"{_pct(change)}, {metric.upper()}).")  # fmt: skip
+        parts.append(
+            f"int8 {'within' if ok else 'outside'} {100 * INT8_SLACK:.0f} % of float32 (largest change "
+            f"{_pct(change)}, {metric.upper()})."
+        )
     return " ".join(parts)
 
 
@@ -155,10 +185,14 @@ def passes(results: Mapping[str, Any], timing: Mapping[str, Any], key: str) -> b
     fastest = best(timing, key)
     scores = res[key]["scores"]
     int8 = timing.get("int8", {}).get(key)
-    return (fastest is not None and fastest[0] <= BUDGET_MS
-            and all(scores[m] < res["classical"]["scores"][m] for m in METRICS)
-            and "paper_w1_8" in res and scores["rmse"] <= (1 + RMSE_SLACK) * res["paper_w1_8"]["scores"]["rmse"]
-            and (int8 is None or all(abs(c) <= INT8_SLACK for c in int8["change"].values())))  # fmt: skip
+    return (
+        fastest is not None
+        and fastest[0] <= BUDGET_MS
+        and all(scores[m] < res["classical"]["scores"][m] for m in METRICS)
+        and "paper_w1_8" in res
+        and scores["rmse"] <= (1 + RMSE_SLACK) * res["paper_w1_8"]["scores"]["rmse"]
+        and (int8 is None or all(abs(c) <= INT8_SLACK for c in int8["change"].values()))
+    )
 
 
 def summary(results: Mapping[str, Any], timing: Mapping[str, Any], keys: list[str]) -> str:
@@ -166,9 +200,11 @@ def summary(results: Mapping[str, Any], timing: Mapping[str, Any], keys: list[st
     ok = [f"`{k}`" for k in keys if passes(results, timing, k)]
     if not ok:
         return "**Acceptance: no real-time variant meets all of it** (each one's reading below)."
-    return (f"**Acceptance: met by {', '.join(ok)}**: within {BUDGET_MS:.0f} ms network + propagation, better than "
-            f"the classical completion on all four metrics, RMSE within {100 * RMSE_SLACK:.0f} % of the width-1/8 "
-            "paper model's (and int8 within 1 % of float32 where measured).")  # fmt: skip
+    return (
+        f"**Acceptance: met by {', '.join(ok)}**: within {BUDGET_MS:.0f} ms network + propagation, better than "
+        f"the classical completion on all four metrics, RMSE within {100 * RMSE_SLACK:.0f} % of the width-1/8 "
+        "paper model's (and int8 within 1 % of float32 where measured)."
+    )
 
 
 def bound(timing: Mapping[str, Any], keys: list[str]) -> str:
@@ -191,8 +227,10 @@ def bound(timing: Mapping[str, Any], keys: list[str]) -> str:
             f"({peak:.0f} GFLOP/s): bound by memory traffic and small operations, not by arithmetic"
         )
     rate += "." if rate else ""
-    return (f"No real-time variant is within the {BUDGET_MS:.0f} ms budget: the best reached is {ms:.0f} ms "
-            f"(`{key}`, {BACKENDS[backend]}); its whole frame: {where or 'not measured'}.{rate}")  # fmt: skip
+    return (
+        f"No real-time variant is within the {BUDGET_MS:.0f} ms budget: the best reached is {ms:.0f} ms "
+        f"(`{key}`, {BACKENDS[backend]}); its whole frame: {where or 'not measured'}.{rate}"
+    )
 
 
 def plot(results: Mapping[str, Any], timing: Mapping[str, Any], path: Path) -> Path:
@@ -220,10 +258,13 @@ def plot(results: Mapping[str, Any], timing: Mapping[str, Any], path: Path) -> P
     ax.axhline(1000 * res["classical"]["scores"]["rmse"], color="grey")
     ax.axvline(BUDGET_MS, color="grey", linestyle="--")
     # two keys beside the axes: colour = variant (and the two lines), marker = backend
-    handles = [Line2D([], [], color=f"C{i}", marker="o", linestyle="", label=LABELS.get(k, k))
-               for i, k in enumerate(variants)]  # fmt: skip
-    handles += [Line2D([], [], color="grey", label=LABELS["classical"]),
-                Line2D([], [], color="grey", linestyle="--", label=f"{BUDGET_MS:.0f} ms (10 Hz)")]  # fmt: skip
+    handles = [
+        Line2D([], [], color=f"C{i}", marker="o", linestyle="", label=LABELS.get(k, k)) for i, k in enumerate(variants)
+    ]
+    handles += [
+        Line2D([], [], color="grey", label=LABELS["classical"]),
+        Line2D([], [], color="grey", linestyle="--", label=f"{BUDGET_MS:.0f} ms (10 Hz)"),
+    ]
     handles += [Line2D([], [], color="black", marker=m, linestyle="", label=COLUMNS[b]) for b, m in markers.items()]
     ax.legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     ax.set_xscale("log")
@@ -245,32 +286,37 @@ def section(results: Mapping[str, Any], timing: Mapping[str, Any], image: str) -
     h, w = timing["size"]
     recipe = results.get("recipe", {})
     seeds = ", ".join(str(s) for s in results.get("seeds", []))
-    frame_note = ("whole frame: the library's `predict --stream` loop on synthetic scenes as a folder input (read "
-                  "ahead, network, propagation, depth and colour PNGs written), median of the frames' summed stages, "
-                  "on the variant's fastest backend")  # fmt: skip
-    return "\n".join([
-        BEGIN,
-        "",
-        f"Measured on **{cpu_line(timing)}**, at {h}x{w}, batch 1, the median of {timing['repeats']} rounds in turns; "
-        f"trained on {recipe.get('train_frames', '?')} synthetic scenes at {'x'.join(map(str, recipe.get('size', [])))}"
-        f", seeds {seeds} (scores: mean ± half the seeds' range on the held-out scenes).",
-        "",
-        table(results, timing),
-        "",
-        f"ms: network + propagation (median); {frame_note}; memory: the resident set during {MEMORY_NOTE}, its growth "
-        "over the set before the forward and its high-water mark. The classical completion's time is in the torch "
-        "f32 column; int8 scores are in timing.json.",
-        "",
-        summary(results, timing, keys),
-        "",
-        *(f"- {verdict(results, timing, k)}" for k in keys),
-        "",
-        bound(timing, keys),
-        "",
-        f"![RMSE against milliseconds, log scale]({image})",
-        "",
-        END,
-    ])  # fmt: skip
+    frame_note = (
+        "whole frame: the library's `predict --stream` loop on synthetic scenes as a folder input (read "
+        "ahead, network, propagation, depth and colour PNGs written), median of the frames' summed stages, "
+        "on the variant's fastest backend"
+    )
+    return "\n".join(
+        [
+            BEGIN,
+            "",
+            f"Measured on **{cpu_line(timing)}**, at {h}x{w}, batch 1, the median of {timing['repeats']} rounds in "
+            f"turns; trained on {recipe.get('train_frames', '?')} synthetic scenes at "
+            f"{'x'.join(map(str, recipe.get('size', [])))}, seeds {seeds} (scores: mean ± half the seeds' range on the "
+            "held-out scenes).",
+            "",
+            table(results, timing),
+            "",
+            f"ms: network + propagation (median); {frame_note}; memory: the resident set during {MEMORY_NOTE}, its "
+            "growth over the set before the forward and its high-water mark. The classical completion's time is in "
+            "the torch f32 column; int8 scores are in timing.json.",
+            "",
+            summary(results, timing, keys),
+            "",
+            *(f"- {verdict(results, timing, k)}" for k in keys),
+            "",
+            bound(timing, keys),
+            "",
+            f"![RMSE against milliseconds, log scale]({image})",
+            "",
+            END,
+        ]
+    )
 
 
 def replace_between(text: str, body: str, where: str) -> str:

@@ -83,8 +83,9 @@ def build(name: str, model: torch.nn.Module, device: torch.device, size: tuple[i
     if name in ("tensorrt", "torch"):
         return optimize_for_inference(model, backend=name, size=size, device=device)
     precision = name if name in ("fp16", "bf16") else "f32"
-    engine = optimize_for_inference(model, backend="torch", precision=precision, device=device,
-                                    compile_propagation=False)  # fmt: skip
+    engine = optimize_for_inference(
+        model, backend="torch", precision=precision, device=device, compile_propagation=False
+    )
     if name not in ("compile", "cudagraphs"):
         return engine
     mode = "reduce-overhead" if name == "cudagraphs" else None
@@ -122,16 +123,24 @@ def latency(fn: Callable[[], Any], device: torch.device, repeats: int) -> dict[s
         times.append(now(device) - t0)
     times.sort()
     peak = torch.cuda.max_memory_allocated(device) / 2**20 if device.type == "cuda" else float("nan")
-    return {"median_s": statistics.median(times), "p95_s": times[min(len(times) - 1, int(0.95 * len(times)))],
-            "peak_mib": peak}  # fmt: skip
+    return {
+        "median_s": statistics.median(times),
+        "p95_s": times[min(len(times) - 1, int(0.95 * len(times)))],
+        "peak_mib": peak,
+    }
 
 
 def plan(device: torch.device, train_batch: int) -> list[dict[str, Any]]:
     """The steps in order, each with what it runs and whether it can run here."""
-    steps = [{"step": "parity", "backend": n, "what": what, "tol": tol, "skip": available(n, device)}
-             for n, what, tol in BACKENDS]  # fmt: skip
-    steps += [{"step": "latency", "backend": n, "batch": b, "skip": available(n, device)}
-              for b in (1, 8) for n, _, _ in BACKENDS]  # fmt: skip
+    steps = [
+        {"step": "parity", "backend": n, "what": what, "tol": tol, "skip": available(n, device)}
+        for n, what, tol in BACKENDS
+    ]
+    steps += [
+        {"step": "latency", "backend": n, "batch": b, "skip": available(n, device)}
+        for b in (1, 8)
+        for n, _, _ in BACKENDS
+    ]
     steps.append({"step": "propagation", "skip": None})
     steps += [{"step": "training", "checkpointing": c, "batch": train_batch, "skip": None} for c in (False, True)]
     return steps
@@ -148,8 +157,14 @@ def check_plan(steps: list[dict[str, Any]], budget: float) -> None:
     assert sum(STEP_BUDGET.values()) <= budget <= 480, f"budget {budget} s vs steps {STEP_BUDGET}"
 
 
-def training_step(device: torch.device, batch: int, checkpointing: bool, size: tuple[int, int] = TRAIN_SIZE,
-                  width: float = 1.0, steps: int = 3) -> dict[str, float]:  # fmt: skip
+def training_step(
+    device: torch.device,
+    batch: int,
+    checkpointing: bool,
+    size: tuple[int, int] = TRAIN_SIZE,
+    width: float = 1.0,
+    steps: int = 3,
+) -> dict[str, float]:
     """Median seconds of our training step, samples/s and peak memory (CUDA: allocator peak)."""
     import semattnet
     from semattnet.training.checkpointing import set_activation_checkpointing
@@ -206,8 +221,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     return rows
 
 
-def _propagation(model: torch.nn.Module, x: dict[str, torch.Tensor], device: torch.device, repeats: int,
-                 propagate: Callable[..., Any]) -> dict[str, Any]:  # fmt: skip
+def _propagation(
+    model: torch.nn.Module,
+    x: dict[str, torch.Tensor],
+    device: torch.device,
+    repeats: int,
+    propagate: Callable[..., Any],
+) -> dict[str, Any]:
     """The propagation alone: eager (shifted), compiled and the authors' pad-and-sum, with parity."""
     from semattnet.inference.backends.compiled_propagation import compiled_propagation
 
@@ -215,8 +235,11 @@ def _propagation(model: torch.nn.Module, x: dict[str, torch.Tensor], device: tor
         _, heads = model.forward_network(**x)
         n = model.config.iterations
         ref = propagate(heads, n, "naive")[1]
-        fns = {"naive": lambda: propagate(heads, n, "naive"), "eager": lambda: propagate(heads, n, "pytorch"),
-               "compiled": lambda: compiled_propagation()(heads, n)}  # fmt: skip
+        fns = {
+            "naive": lambda: propagate(heads, n, "naive"),
+            "eager": lambda: propagate(heads, n, "pytorch"),
+            "compiled": lambda: compiled_propagation()(heads, n),
+        }
         out = {k: latency(f, device, repeats) for k, f in fns.items()}
         for k, f in fns.items():
             out[k]["max_rel_diff"] = float((f()[1] - ref).abs().max() / ref.abs().max())

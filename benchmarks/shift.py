@@ -83,8 +83,13 @@ FACTORS: dict[str, tuple[str, ...]] = {
 METRICS = ("rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km")
 #: Adapted rows: key -> the ``--loss`` of ``semattnet adapt``. ``all`` is the recipe (``adapt_steps``); the others
 #: are its ablation, each loss alone and all together, at ``ablation_steps``.
-LOSSES = {"all": "sparse,photometric,smoothness", "all_short": "sparse,photometric,smoothness", "sparse": "sparse",
-          "photometric": "photometric", "smoothness": "smoothness"}  # fmt: skip
+LOSSES = {
+    "all": "sparse,photometric,smoothness",
+    "all_short": "sparse,photometric,smoothness",
+    "sparse": "sparse",
+    "photometric": "photometric",
+    "smoothness": "smoothness",
+}
 #: Rows of the table, in order, with their labels.
 ROWS = {
     "classical": "classical completion",
@@ -132,10 +137,26 @@ class ShiftSettings:
 
 def tiny(seeds: tuple[int, ...] = (0,)) -> ShiftSettings:
     """Every step at a toy size: a check that the whole benchmark runs (seconds on a CPU)."""
-    recipe = dataclasses.replace(REFERENCE_RECIPE, train_frames=4, val_frames=2, size=(64, 96), batch_size=2,
-                                 backbone_steps=1, refine_init_steps=1, full_steps=1)  # fmt: skip
-    return ShiftSettings(recipe=recipe, target_size=(64, 128), held_out_frames=2, streets=2, street_frames=3,
-                         adapt_steps=2, ablation_steps=1, seeds=seeds)  # fmt: skip
+    recipe = dataclasses.replace(
+        REFERENCE_RECIPE,
+        train_frames=4,
+        val_frames=2,
+        size=(64, 96),
+        batch_size=2,
+        backbone_steps=1,
+        refine_init_steps=1,
+        full_steps=1,
+    )
+    return ShiftSettings(
+        recipe=recipe,
+        target_size=(64, 128),
+        held_out_frames=2,
+        streets=2,
+        street_frames=3,
+        adapt_steps=2,
+        ablation_steps=1,
+        seeds=seeds,
+    )
 
 
 class Clock:
@@ -153,14 +174,23 @@ class Clock:
             self.seconds[name] = round(self.seconds.get(name, 0.0) + time.perf_counter() - start, 2)
 
 
-def _tree(root: Path, frames: int, eval_frames: int, size: tuple[int, int], seed: int, style: str,
-          domain: str | Domain) -> HeldOut:  # fmt: skip
+def _tree(
+    root: Path, frames: int, eval_frames: int, size: tuple[int, int], seed: int, style: str, domain: str | Domain
+) -> HeldOut:
     """A synthetic tree (:func:`~semattnet.data.synthetic.tree.write_synthetic_kitti`): the one an earlier run
     completed, else written anew; its held-out scenes."""
     done = (root / "scenes.json").is_file() and incomplete_tree(root) is None
     if not done:
-        write_synthetic_kitti(root, frames=frames, size=size, seed=seed, eval_frames=eval_frames, style=style,
-                              domain=domain, overwrite=root.exists())  # fmt: skip
+        write_synthetic_kitti(
+            root,
+            frames=frames,
+            size=size,
+            seed=seed,
+            eval_frames=eval_frames,
+            style=style,
+            domain=domain,
+            overwrite=root.exists(),
+        )
     return load_held_out(root)
 
 
@@ -171,15 +201,17 @@ def make_data(out: Path, s: ShiftSettings, clock: Clock) -> dict[str, Any]:
     rec = out / "data" / "recording"
     with clock("data"):
         _tree(data["source_train"], r.train_frames, r.val_frames, r.size, r.data_seed, s.style, "source")
-        _tree(data["target_train"], r.train_frames, r.val_frames, s.target_size, s.target_data_seed, s.style,
-              "target")  # fmt: skip
-        data["held_target"] = _tree(out / "data" / "held_out_target", 2, s.held_out_frames, s.target_size,
-                                    s.held_out_seed, s.style, "target")  # fmt: skip
-        data["held_source"] = _tree(out / "data" / "held_out_source", 2, s.held_out_frames, r.size,
-                                    s.held_out_seed, s.style, "source")  # fmt: skip
+        _tree(data["target_train"], r.train_frames, r.val_frames, s.target_size, s.target_data_seed, s.style, "target")
+        data["held_target"] = _tree(
+            out / "data" / "held_out_target", 2, s.held_out_frames, s.target_size, s.held_out_seed, s.style, "target"
+        )
+        data["held_source"] = _tree(
+            out / "data" / "held_out_source", 2, s.held_out_frames, r.size, s.held_out_seed, s.style, "source"
+        )
         if not (rec / "drives.json").is_file() or incomplete_tree(rec) is not None:
-            write_synthetic_drives(rec, 1, s.street_frames, s.target_size, s.drive_seed, s.style, "target",
-                                   rec.exists(), streets=s.streets)  # fmt: skip
+            write_synthetic_drives(
+                rec, 1, s.street_frames, s.target_size, s.drive_seed, s.style, "target", rec.exists(), streets=s.streets
+            )
     data["drive"] = rec / "kitti_raw" / SYNTH_DATE / drive_name(0)
     data["semantic"] = rec / "semantic" / SYNTH_DATE / drive_name(0) / "image_02" / "data"
     return data
@@ -193,8 +225,16 @@ def load_model(path: Path) -> torch.nn.Module:
     return model.eval()
 
 
-def train_model(out: Path, key: str, data: Path, size: tuple[int, int], s: ShiftSettings, seed: int,
-                device: torch.device, log: Callable[[str], None]) -> Path:  # fmt: skip
+def train_model(
+    out: Path,
+    key: str,
+    data: Path,
+    size: tuple[int, int],
+    s: ShiftSettings,
+    seed: int,
+    device: torch.device,
+    log: Callable[[str], None],
+) -> Path:
     """Step 2, one model and seed by the recipe: ``checkpoints/<key>_seed<S>.safetensors`` (read back when an
     earlier run left it)."""
     saved = out / "checkpoints" / f"{key}_seed{seed}.safetensors"
@@ -207,10 +247,24 @@ def train_model(out: Path, key: str, data: Path, size: tuple[int, int], s: Shift
         save_safetensors(load_checkpoint(shipped), saved)
         return saved
     log(f"[shift] {key}, seed {seed}: training on {data} at {size[0]}x{size[1]} ...")
-    last = _train_variant(out / "runs" / f"{key}_seed{seed}", data, r.backbone_steps, r.full_steps, size=size,
-                          width=r.width, batch_size=r.batch_size, lr=r.lr, seed=seed, device=device, log=log,
-                          refine_init_steps=r.refine_init_steps, head_lr_factor=r.head_lr_factor, loss=r.loss,
-                          semantic_dropout=r.semantic_dropout, branches=3)  # fmt: skip
+    last = _train_variant(
+        out / "runs" / f"{key}_seed{seed}",
+        data,
+        r.backbone_steps,
+        r.full_steps,
+        size=size,
+        width=r.width,
+        batch_size=r.batch_size,
+        lr=r.lr,
+        seed=seed,
+        device=device,
+        log=log,
+        refine_init_steps=r.refine_init_steps,
+        head_lr_factor=r.head_lr_factor,
+        loss=r.loss,
+        semantic_dropout=r.semantic_dropout,
+        branches=3,
+    )
     save_safetensors(load_checkpoint(last), saved)
     return saved
 
@@ -239,22 +293,45 @@ def adapt_available() -> bool:
     return "adapt" in getattr(main, "commands", {})
 
 
-def adapt_one(weights: Path, drive: Path, run: Path, steps: int, loss: str, seed: int, semantic: Path | None,
-              lr: float = 1e-3) -> Path:  # fmt: skip
+def adapt_one(
+    weights: Path, drive: Path, run: Path, steps: int, loss: str, seed: int, semantic: Path | None, lr: float = 1e-3
+) -> Path:
     """``semattnet adapt`` (through the CLI's ``main``) of ``weights`` on the recording ``drive``; returns
     ``run/adapted.safetensors``."""
     from semattnet.cli import main
 
-    args = ["adapt", "--weights", str(weights), "--kitti-raw", str(drive), "--out", str(run), "--steps", str(steps),
-            "--loss", loss, "--seed", str(seed), "--lr", str(lr)]  # fmt: skip
+    args = [
+        "adapt",
+        "--weights",
+        str(weights),
+        "--kitti-raw",
+        str(drive),
+        "--out",
+        str(run),
+        "--steps",
+        str(steps),
+        "--loss",
+        loss,
+        "--seed",
+        str(seed),
+        "--lr",
+        str(lr),
+    ]
     if semantic is not None:
         args += ["--semantic", str(semantic)]
     main.main(args=args, prog_name="semattnet", standalone_mode=False)
     return run / "adapted.safetensors"
 
 
-def adapt_rows(out: Path, source: dict[int, Path], data: dict[str, Any], s: ShiftSettings, device: torch.device,
-               clock: Clock, log: Callable[[str], None] = print) -> dict[str, Any]:  # fmt: skip
+def adapt_rows(
+    out: Path,
+    source: dict[int, Path],
+    data: dict[str, Any],
+    s: ShiftSettings,
+    device: torch.device,
+    clock: Clock,
+    log: Callable[[str], None] = print,
+) -> dict[str, Any]:
     """Step 3: each source model adapted on the target recording with each loss of :data:`LOSSES` (no ground
     truth read), scored; ``{}`` and one line where ``semattnet adapt`` is not available."""
     if not adapt_available():
@@ -269,8 +346,16 @@ def adapt_rows(out: Path, source: dict[int, Path], data: dict[str, Any], s: Shif
             if not saved.is_file():
                 log(f"[shift] adapting seed {seed} with {loss} ...")
                 with clock(f"adapt_{key}"):
-                    adapted = adapt_one(weights, data["drive"], out / "adapt" / f"{key}_seed{seed}",
-                                        s.steps_for(key), loss, seed, semantic, s.adapt_lr)  # fmt: skip
+                    adapted = adapt_one(
+                        weights,
+                        data["drive"],
+                        out / "adapt" / f"{key}_seed{seed}",
+                        s.steps_for(key),
+                        loss,
+                        seed,
+                        semantic,
+                        s.adapt_lr,
+                    )
                 with atomic_path(saved, suffix=".safetensors") as tmp:
                     shutil.copyfile(adapted, tmp)
             per_seed[str(seed)] = score_model(saved, data["held_target"], s, device)
@@ -297,18 +382,25 @@ def estimate(s: ShiftSettings, device: torch.device) -> dict[str, float]:
     start = time.perf_counter()
     list(make_drive(2, s.target_size, 1, s.style, "target"))
     drive_frame = (time.perf_counter() - start) / 2
-    frames = {"source": r.train_frames + 4 * r.val_frames + 2 + 3 * s.held_out_frames,
-              "target": r.train_frames + 4 * r.val_frames + 2 + 3 * s.held_out_frames}  # fmt: skip
+    frames = {
+        "source": r.train_frames + 4 * r.val_frames + 2 + 3 * s.held_out_frames,
+        "target": r.train_frames + 4 * r.val_frames + 2 + 3 * s.held_out_frames,
+    }
     data = frames["source"] * per_frame(r.size, "source") + frames["target"] * per_frame(s.target_size, "target")
     data += s.streets * s.street_frames * drive_frame
     steps = r.backbone_steps + r.refine_init_steps + r.full_steps
-    step = {k: step_seconds(size, r.batch_size, device, repeats=2, width=r.width)
-            for k, size in (("source", r.size), ("target", s.target_size))}  # fmt: skip
+    step = {
+        k: step_seconds(size, r.batch_size, device, repeats=2, width=r.width)
+        for k, size in (("source", r.size), ("target", s.target_size))
+    }
     n = len(s.seeds)
-    return {"data_min": round(data / 60, 1), "seconds_per_training_step_source": round(step["source"], 3),
-            "seconds_per_training_step_target": round(step["target"], 3),
-            "train_min": round(n * steps * (step["source"] + step["target"]) / 60, 1),
-            "adapt_min": round(n * sum(map(s.steps_for, LOSSES)) * 2.5 * step["target"] / 60, 1)}  # fmt: skip
+    return {
+        "data_min": round(data / 60, 1),
+        "seconds_per_training_step_source": round(step["source"], 3),
+        "seconds_per_training_step_target": round(step["target"], 3),
+        "train_min": round(n * steps * (step["source"] + step["target"]) / 60, 1),
+        "adapt_min": round(n * sum(map(s.steps_for, LOSSES)) * 2.5 * step["target"] / 60, 1),
+    }
 
 
 def summary(rows: dict[str, Any]) -> dict[str, Any]:
@@ -323,8 +415,15 @@ def summary(rows: dict[str, Any]) -> dict[str, Any]:
     return {"gap_closed": closed, "beats_classical": beats, "accepted": bool(closed >= 0.5 and beats)}
 
 
-def run(out: Path, s: ShiftSettings, device: torch.device, overwrite: bool = False, command: str = COMMAND,
-        extra: dict[str, Any] | None = None, log: Callable[[str], None] = print) -> dict[str, Any]:  # fmt: skip
+def run(
+    out: Path,
+    s: ShiftSettings,
+    device: torch.device,
+    overwrite: bool = False,
+    command: str = COMMAND,
+    extra: dict[str, Any] | None = None,
+    log: Callable[[str], None] = print,
+) -> dict[str, Any]:
     """Every step (see the module doc); returns what ``out/results.json`` holds (``command``: how it was run;
     ``extra``: more to record)."""
     target = out / "results.json"
@@ -338,22 +437,32 @@ def run(out: Path, s: ShiftSettings, device: torch.device, overwrite: bool = Fal
         with clock("train_source"):
             source[seed] = train_model(out, "source", data["source_train"], s.recipe.size, s, seed, device, log)
         with clock("train_supervised"):
-            supervised[seed] = train_model(out, "supervised", data["target_train"], s.target_size, s, seed, device,
-                                           log)  # fmt: skip
+            supervised[seed] = train_model(out, "supervised", data["target_train"], s.target_size, s, seed, device, log)
     with clock("score"):
-        classical = {n: complete_classical(x["sparse"][None])[0, 0].numpy()
-                     for n, x in zip(held.names, held.samples, strict=True)}  # fmt: skip
+        classical = {
+            n: complete_classical(x["sparse"][None])[0, 0].numpy()
+            for n, x in zip(held.names, held.samples, strict=True)
+        }
         rows: dict[str, Any] = {"classical": {"scores": scores(classical, held)}}
         rows["unadapted"] = _row({str(k): score_model(p, held, s, device) for k, p in source.items()})
-        rows["unadapted_on_source"] = _row({str(k): score_model(p, data["held_source"], s, device)
-                                            for k, p in source.items()})  # fmt: skip
+        rows["unadapted_on_source"] = _row(
+            {str(k): score_model(p, data["held_source"], s, device) for k, p in source.items()}
+        )
     rows |= adapt_rows(out, source, data, s, device, clock, log)
     with clock("score"):
         rows["supervised"] = _row({str(k): score_model(p, held, s, device) for k, p in supervised.items()})
-    results = {"command": command, "settings": dataclasses.asdict(s), "domains": {"source": dataclasses.asdict(SOURCE),
-               "target": dataclasses.asdict(TARGET)}, "device": str(device), "machine": machine_line(),
-               "torch": torch.__version__, "seconds": {**clock.seconds, "total": round(time.perf_counter() - start, 1)},
-               "rows": rows, "summary": summary(rows), **(extra or {})}  # fmt: skip
+    results = {
+        "command": command,
+        "settings": dataclasses.asdict(s),
+        "domains": {"source": dataclasses.asdict(SOURCE), "target": dataclasses.asdict(TARGET)},
+        "device": str(device),
+        "machine": machine_line(),
+        "torch": torch.__version__,
+        "seconds": {**clock.seconds, "total": round(time.perf_counter() - start, 1)},
+        "rows": rows,
+        "summary": summary(rows),
+        **(extra or {}),
+    }
     with atomic_path(target) as tmp:
         tmp.write_text(json.dumps(results, indent=1, default=str) + "\n")
     log(f"[shift] wrote {target}")
@@ -371,16 +480,20 @@ def table(results: dict[str, Any]) -> str:
         label = row_label(key, results["settings"])
         m, per = rows[key]["scores"], rows[key].get("per_seed", {})
         per_seed = ", ".join(f"{per[str(k)]['rmse_mm']:.0f}" for k in seeds if str(k) in per)
-        lines.append(f"| {label} | {m['rmse_mm']:.0f} | {m['mae_mm']:.0f} | {m['irmse_per_km']:.2f} | "
-                     f"{m['imae_per_km']:.2f} | {per_seed} |")  # fmt: skip
+        lines.append(
+            f"| {label} | {m['rmse_mm']:.0f} | {m['mae_mm']:.0f} | {m['irmse_per_km']:.2f} | "
+            f"{m['imae_per_km']:.2f} | {per_seed} |"
+        )
     out = "\n".join(head + lines) + "\n"
     summ = results.get("summary") or {}
     if summ:
-        out += (f"\nAdaptation by the recipe (all three losses, {results['settings']['adapt_steps']} steps) closes "
-                f"**{100 * summ['gap_closed']:.0f} %** of the RMSE gap "
-                f"between the unadapted model and the supervised upper bound (the aim: at least 50 %) and "
-                f"{'beats' if summ['beats_classical'] else 'does not beat'} the classical completion on all four "
-                "metrics.\n")  # fmt: skip
+        out += (
+            f"\nAdaptation by the recipe (all three losses, {results['settings']['adapt_steps']} steps) closes "
+            f"**{100 * summ['gap_closed']:.0f} %** of the RMSE gap "
+            f"between the unadapted model and the supervised upper bound (the aim: at least 50 %) and "
+            f"{'beats' if summ['beats_classical'] else 'does not beat'} the classical completion on all four "
+            "metrics.\n"
+        )
     else:
         out += "\nNo adapted rows: the run's checkout had no `semattnet adapt` command.\n"
     return out
@@ -430,9 +543,11 @@ def update_docs(page: Path, results: dict[str, Any], plot_path: Path) -> Path:
     """Put the table and a link to the plot between the page's :data:`MARKERS`."""
     rel = Path("..") / plot_path.name if plot_path.parent == page.parent.parent else Path(plot_path.name)
     s = results["settings"]
-    body = (f"\nRun: `{results['command']}`, seeds {', '.join(map(str, s['seeds']))}, {results['device']} "
-            f"({results['machine']}), {results['seconds']['total'] / 60:.0f} minutes.\n\n{table(results)}\n"
-            f"![RMSE and MAE per method on the held-out target scenes]({rel.as_posix()})\n\n")  # fmt: skip
+    body = (
+        f"\nRun: `{results['command']}`, seeds {', '.join(map(str, s['seeds']))}, {results['device']} "
+        f"({results['machine']}), {results['seconds']['total'] / 60:.0f} minutes.\n\n{table(results)}\n"
+        f"![RMSE and MAE per method on the held-out target scenes]({rel.as_posix()})\n\n"
+    )
     return replace_between(page, MARKERS, body)
 
 
@@ -445,8 +560,9 @@ def factor_domains() -> dict[str, Domain]:
     return {**out, "all: the target": TARGET}
 
 
-def reference_gap(out: Path, s: ShiftSettings, device: torch.device, log: Callable[[str], None] = print
-                  ) -> dict[str, Any]:  # fmt: skip
+def reference_gap(
+    out: Path, s: ShiftSettings, device: torch.device, log: Callable[[str], None] = print
+) -> dict[str, Any]:
     """How big the shift is, without training: the shipped reference checkpoints and the classical completion on
     the held-out scenes of the source (at the source size) and of each of :func:`factor_domains` (at the target
     size); ``out/reference_gap.json``."""
@@ -458,15 +574,19 @@ def reference_gap(out: Path, s: ShiftSettings, device: torch.device, log: Callab
     for name, (domain, size) in cases.items():
         root = out / "data" / f"held_out_{domain.name}"
         held = _tree(root, 2, s.held_out_frames, size, s.held_out_seed, s.style, domain)
-        classical = {n: complete_classical(x["sparse"][None])[0, 0].numpy()
-                     for n, x in zip(held.names, held.samples, strict=True)}  # fmt: skip
+        classical = {
+            n: complete_classical(x["sparse"][None])[0, 0].numpy()
+            for n, x in zip(held.names, held.samples, strict=True)
+        }
         per_seed = {}
         for seed, model in refs.items():
             outputs = complete_held_out(model, held, device, fallback_semantic if s.fallback_map else None)
             per_seed[str(seed)] = scores({n: o["refined_depth"] for n, o in outputs.items()}, held)
         rows[name] = {"classical": scores(classical, held), "reference": _row(per_seed)}
-        log(f"[shift] {name}: reference RMSE {rows[name]['reference']['scores']['rmse_mm']:.0f} mm, classical "
-            f"{rows[name]['classical']['rmse_mm']:.0f} mm")  # fmt: skip
+        log(
+            f"[shift] {name}: reference RMSE {rows[name]['reference']['scores']['rmse_mm']:.0f} mm, classical "
+            f"{rows[name]['classical']['rmse_mm']:.0f} mm"
+        )
     with atomic_path(out / "reference_gap.json") as tmp:
         tmp.write_text(json.dumps({"settings": dataclasses.asdict(s), "rows": rows}, indent=1, default=str) + "\n")
     return rows
@@ -474,13 +594,16 @@ def reference_gap(out: Path, s: ShiftSettings, device: torch.device, log: Callab
 
 def gap_table(rows: dict[str, Any]) -> str:
     """The markdown table of :func:`reference_gap`."""
-    lines = ["| held-out scenes | reference RMSE mm | reference MAE mm | classical RMSE mm | classical MAE mm |",
-             "|---|---:|---:|---:|---:|"]  # fmt: skip
+    lines = [
+        "| held-out scenes | reference RMSE mm | reference MAE mm | classical RMSE mm | classical MAE mm |",
+        "|---|---:|---:|---:|---:|",
+    ]
     for name, row in rows.items():
         ref, cl = row["reference"]["scores"], row["classical"]
         label = name if name in ("source", "all: the target") else f"source rig, the target's {name}"
-        lines.append(f"| {label} | {ref['rmse_mm']:.0f} | {ref['mae_mm']:.0f} | {cl['rmse_mm']:.0f} | "
-                     f"{cl['mae_mm']:.0f} |")  # fmt: skip
+        lines.append(
+            f"| {label} | {ref['rmse_mm']:.0f} | {ref['mae_mm']:.0f} | {cl['rmse_mm']:.0f} | {cl['mae_mm']:.0f} |"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -491,14 +614,23 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--seeds", default="", help="training seeds, e.g. 0,1 (default: 0,1; --tiny: 0)")
     ap.add_argument("--tiny", action="store_true", help="every step at a toy size (a check; docs left alone)")
     ap.add_argument("--fallback-map", action="store_true", help="score and adapt with the no-segmenter map")
-    ap.add_argument("--docs", type=Path, default=None, help=f"the page to update (default: {DOC_PAGE.name}; "
-                    "--tiny: none)")  # fmt: skip
+    ap.add_argument(
+        "--docs", type=Path, default=None, help=f"the page to update (default: {DOC_PAGE.name}; --tiny: none)"
+    )
     ap.add_argument("--plot", type=Path, default=None, help=f"the plot to write (default: docs/{PLOT.name})")
     ap.add_argument("--overwrite", action="store_true", help="replace results.json (checkpoints are reused)")
-    ap.add_argument("--references", action="store_true", help="only score the shipped references on the source "
-                    "and on each factor of the shift (no training): the page's first table")  # fmt: skip
-    ap.add_argument("--estimate", action="store_true", help="first time a frame and a training step per size on "
-                    "--device and record the full run's minutes estimated from them")  # fmt: skip
+    ap.add_argument(
+        "--references",
+        action="store_true",
+        help="only score the shipped references on the source "
+        "and on each factor of the shift (no training): the page's first table",
+    )
+    ap.add_argument(
+        "--estimate",
+        action="store_true",
+        help="first time a frame and a training step per size on "
+        "--device and record the full run's minutes estimated from them",
+    )
     args = ap.parse_args(argv)
     try:
         seeds = tuple(int(v) for v in args.seeds.split(",")) if args.seeds else None

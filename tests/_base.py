@@ -47,14 +47,17 @@ class BaseTester:
             raise TypeError(f"{cls.__name__} must define {', '.join(missing)} (see tests/_base.py)")
 
     @staticmethod
-    def assert_close(actual: torch.Tensor, expected: torch.Tensor, rtol: float | None = None,
-                     atol: float | None = None) -> None:  # fmt: skip
+    def assert_close(
+        actual: torch.Tensor, expected: torch.Tensor, rtol: float | None = None, atol: float | None = None
+    ) -> None:
         """``torch.testing.assert_close`` with this suite's tolerance for ``actual``'s dtype."""
         default_rtol, default_atol = TOLERANCES.get(actual.dtype, (1e-4, 1e-5))
         torch.testing.assert_close(
-            actual, expected.to(actual.dtype), rtol=default_rtol if rtol is None else rtol,
+            actual,
+            expected.to(actual.dtype),
+            rtol=default_rtol if rtol is None else rtol,
             atol=default_atol if atol is None else atol,
-        )  # fmt: skip
+        )
 
     @staticmethod
     def gradcheck(fn: Callable[..., torch.Tensor], *inputs: torch.Tensor, **kwargs: Any) -> bool:

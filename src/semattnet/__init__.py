@@ -8,7 +8,7 @@ The package is laid out as the system is (see the README's "Architecture" sectio
 The names below are the stable public API.
 """
 
-from semattnet import palette
+from semattnet import palette, robotics  # robotics: enrols the bag source and the robot sinks
 from semattnet._errors import DataError, InputError, MissingDependencyError, SemAttNetError
 from semattnet._utils.version import __version__
 from semattnet.inference import DepthCompleter, crop_padding, pad_to_multiple
@@ -54,5 +54,6 @@ __all__ = [
     "pad_to_multiple",
     "palette",
     "push_to_hub",
+    "robotics",
     "save_pretrained",
 ]

@@ -1,5 +1,7 @@
-"""A registry imports the modules of its entries itself (a source or sink registered anywhere is listed without
-its module imported first), lists them in the order of those modules, and lets an entry declare its options."""
+"""The one registry shape: names refused twice, one unknown-name error that lists the names (and aliases), a class
+registry that imports its homes itself (a source or sink of its layer is listed without its module imported first)
+and lists them in the order of those modules, an entry that declares its options; the layers above enrol their
+own entries."""
 
 from __future__ import annotations
 
@@ -9,10 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from semattnet._utils.registry import Registry, option, volatile
+from semattnet._utils.registry import ClassRegistry, DuplicateEntryError, Registry, UnknownEntryError, option, volatile
 
 #: The registry of the test's home module (written below); the home registers into it when imported.
-THINGS: Registry[object] = Registry("thing", homes=("_registry_home_b", "_registry_home_a"))
+THINGS: ClassRegistry[object] = ClassRegistry("thing", homes=("_registry_home_b", "_registry_home_a"))
 
 HOME = """
 from tests._utils.test_registry import THINGS
@@ -41,13 +43,33 @@ def test_a_registry_imports_its_homes_in_their_order(tmp_path: Path, monkeypatch
             sys.modules.pop(name, None)
 
 
-def test_every_source_and_sink_lives_in_a_home_of_its_registry() -> None:
+def test_every_source_and_sink_lives_in_a_home_or_a_layer_above() -> None:
     from semattnet.data.sources.registry import SOURCES
     from semattnet.inference.sinks import SINKS
 
     for registry in (SOURCES, SINKS):
-        assert {e.cls.__module__ for e in registry.values()} <= set(registry.homes), registry
-    assert "bag" in SOURCES and {"bag", "rerun", "live"} <= set(SINKS)
+        outside = {e.cls.__module__ for e in registry.values()} - set(registry.homes)
+        assert {m.split(".")[1] for m in outside} <= {"robotics"}, registry
+    assert "bag" in SOURCES and {"bag", "rerun", "live"} <= set(SINKS)  # robotics enrolled them (import semattnet)
+
+
+def test_a_name_is_taken_once_and_an_unknown_one_lists_the_names() -> None:
+    sizes: Registry[int] = Registry("size")
+    sizes.add("small", 1)
+    sizes.add("large", 3)
+    sizes.alias("s", "small")
+    assert sizes["s"] == 1 and "s" in sizes and list(sizes) == ["small", "large"] and len(sizes) == 2
+    assert sizes.resolve("s") == "small" and sizes.aliases == {"s": "small"}
+    with pytest.raises(DuplicateEntryError, match="size 'small' is already registered"):
+        sizes.add("small", 2)
+    with pytest.raises(DuplicateEntryError, match="alias 's' is already taken"):
+        sizes.alias("s", "large")
+    with pytest.raises(UnknownEntryError) as err:
+        sizes["medium"]
+    assert str(err.value) == "unknown size 'medium'; available: small, large (aliases: s)"
+    assert sizes.add("small", 5, replace=True) == 5 and sizes["small"] == 5
+    sizes.remove("small")
+    assert sizes.names() == ["large"] and "s" not in sizes
 
 
 def test_an_option_is_a_dataclass_field_with_its_metadata() -> None:

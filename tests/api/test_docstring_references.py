@@ -74,8 +74,11 @@ def _resolves(target: str, seen: int = 0) -> bool:
             return False
         if isinstance(node, ast.ImportFrom):
             base = _absolute(node, module)
-            return any(_resolves(".".join([f"{base}.{a.name}", *rest[k + 1 :]]), seen + 1)
-                       for a in node.names if (a.asname or a.name) == part)  # fmt: skip
+            return any(
+                _resolves(".".join([f"{base}.{a.name}", *rest[k + 1 :]]), seen + 1)
+                for a in node.names
+                if (a.asname or a.name) == part
+            )
         if not isinstance(node, ast.ClassDef):
             return k == len(rest) - 1
     return True
@@ -101,13 +104,19 @@ def _qualified(target: str, module: str) -> str | None:
 
 
 def _broken(text: str, module: str) -> list[str]:
-    return [m.group(0) for m in ROLE.finditer(text)
-            if (q := _qualified(m.group(1), module)) is not None and not _resolves(q)]  # fmt: skip
+    return [
+        m.group(0)
+        for m in ROLE.finditer(text)
+        if (q := _qualified(m.group(1), module)) is not None and not _resolves(q)
+    ]
 
 
 def test_every_qualified_cross_reference_resolves() -> None:
-    broken = [f"{path.relative_to(SRC)}: {ref}" for name, path in _modules().items()
-              for ref in _broken(path.read_text(encoding="utf-8"), name)]  # fmt: skip
+    broken = [
+        f"{path.relative_to(SRC)}: {ref}"
+        for name, path in _modules().items()
+        for ref in _broken(path.read_text(encoding="utf-8"), name)
+    ]
     assert broken == []
 
 

@@ -11,8 +11,19 @@ from semattnet import SemAttNetError
 
 
 def test_top_level_names() -> None:
-    for name in ("build_model", "list_models", "load_checkpoint", "load_model", "load_weights", "pad_to_multiple",
-                 "crop_padding", "DepthCompleter", "SemAttNetConfig", "DepthCompletionOutput", "palette"):  # fmt: skip
+    for name in (
+        "build_model",
+        "list_models",
+        "load_checkpoint",
+        "load_model",
+        "load_weights",
+        "pad_to_multiple",
+        "crop_padding",
+        "DepthCompleter",
+        "SemAttNetConfig",
+        "DepthCompletionOutput",
+        "palette",
+    ):
         assert hasattr(semattnet, name), name
     assert set(semattnet.__all__) <= set(dir(semattnet))
 

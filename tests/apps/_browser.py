@@ -11,8 +11,15 @@ from typing import Any
 
 import pytest
 
-ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-        "--disable-component-update", "--disable-sync", "--no-first-run"]  # fmt: skip
+ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
 
 
 def _unavailable(why: str) -> None:
@@ -59,8 +66,10 @@ def hover_pixel(page: Any, u: int, v: int) -> dict[str, float | None]:
     """Hover over pixel (u, v) of the viewer's image; the readout as key -> metres (None: no depth)."""
     scale = float(page.get_attribute("#view", "data-scale"))
     page.hover("#view", position={"x": (u + 0.5) * scale, "y": (v + 0.5) * scale})
-    page.wait_for_function(f"() => document.getElementById('pixel').dataset.u === '{u}' "
-                           f"&& document.getElementById('pixel').dataset.v === '{v}'")  # fmt: skip
+    page.wait_for_function(
+        f"() => document.getElementById('pixel').dataset.u === '{u}' "
+        f"&& document.getElementById('pixel').dataset.v === '{v}'"
+    )
     js = "rows => rows.map(r => [r.dataset.key, r.querySelector('td').dataset.value])"
     cells = page.eval_on_selector_all("#readout tr", js)
     return {key: (float(value) if value else None) for key, value in cells}

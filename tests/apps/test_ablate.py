@@ -16,10 +16,21 @@ from semattnet._errors import DataError, InputError
 from semattnet.apps.ablate import CLAIM_CONFIGS, CLAIMS, SCHEMA, AblationSettings, run_ablation
 from semattnet.cli import main
 
-TINY = {"size": (32, 64), "train_frames": 6, "eval_frames": 4, "backbone_steps": 2, "full_steps": 2,
-        "device": "cpu"}  # fmt: skip
-CLI_TINY = ["--size", "32x64", "--frames", "6", "--eval-frames", "4", "--backbone-steps", "2", "--full-steps", "2",
-            "--device", "cpu"]  # fmt: skip
+TINY = {"size": (32, 64), "train_frames": 6, "eval_frames": 4, "backbone_steps": 2, "full_steps": 2, "device": "cpu"}
+CLI_TINY = [
+    "--size",
+    "32x64",
+    "--frames",
+    "6",
+    "--eval-frames",
+    "4",
+    "--backbone-steps",
+    "2",
+    "--full-steps",
+    "2",
+    "--device",
+    "cpu",
+]
 
 
 @pytest.fixture(scope="module")
@@ -65,8 +76,10 @@ def test_results_keep_per_image_metrics(ablated: tuple[Path, dict[str, Any], lis
     assert record["protocol"]["eval_frames"] == 4 and "seeds" not in record["protocol"]
 
 
-def test_resume_does_not_retrain(ablated: tuple[Path, dict[str, Any], list[str]], monkeypatch: pytest.MonkeyPatch,
-                                 ) -> None:  # fmt: skip
+def test_resume_does_not_retrain(
+    ablated: tuple[Path, dict[str, Any], list[str]],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     out, first, _ = ablated
     calls: list[Any] = []
     monkeypatch.setattr(ablate_mod, "train_variant", lambda *a, **k: calls.append(a))
@@ -107,8 +120,7 @@ def test_seed_rules(tmp_path: Path) -> None:
 def test_cli_claims_shortcut(ablated: tuple[Path, dict[str, Any], list[str]]) -> None:
     out, _, _ = ablated
     stamp = (out / "results" / "table2_b_seed0.json").stat().st_mtime_ns
-    result = CliRunner().invoke(main, ["ablate", "--out", str(out), "--configs", "claims", "--seeds", "0,1",
-                                       *CLI_TINY])  # fmt: skip
+    result = CliRunner().invoke(main, ["ablate", "--out", str(out), "--configs", "claims", "--seeds", "0,1", *CLI_TINY])
     assert result.exit_code == 0, result.output
     assert (out / "results" / "table2_b_seed0.json").stat().st_mtime_ns == stamp  # reused, not retrained
     summary = json.loads((out / "ablation.json").read_text())

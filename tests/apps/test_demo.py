@@ -78,8 +78,16 @@ def _chromium() -> str | None:
 
 
 def _headless(browser: str, *args: str) -> subprocess.CompletedProcess[str]:
-    flags = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--no-first-run",
-             "--disable-background-networking", "--disable-extensions", "--hide-scrollbars"]  # fmt: skip
+    flags = [
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-extensions",
+        "--hide-scrollbars",
+    ]
     return subprocess.run([browser, *flags, *args], capture_output=True, text=True, timeout=120, check=True)
 
 
@@ -195,8 +203,14 @@ def test_demo_viewer_in_chromium(demo_run) -> None:  # type: ignore[no-untyped-d
         wait_ready(page)
         values = hover_pixel(page, int(u), int(v))
         assert values["gt"] == pytest.approx(gt[v, u], abs=0.01)
-        assert {"lidar", "depth_semattnet", "depth_two_branch", "depth_classical", "depth_reference",
-                "out_color_conf"} <= set(values)  # fmt: skip
+        assert {
+            "lidar",
+            "depth_semattnet",
+            "depth_two_branch",
+            "depth_classical",
+            "depth_reference",
+            "out_color_conf",
+        } <= set(values)
         layers = page.eval_on_selector_all("#layers input", "xs => xs.map((x) => x.value)")
         assert {"rgb", "semantic", "out_color_depth", "out_fused_depth", "error_semattnet"} <= set(layers)
         counts = page.evaluate("document.getElementById('cloud').data.map((t) => t.x.length)")

@@ -38,8 +38,11 @@ def test_save_and_load_round_trip(tmp_path: Path) -> None:
     path = ref.save_reference(model, tmp_path / "r.safetensors.gz", {"command": "x", "recipe": {}}, levels=127)
     loaded, info = ref.load_reference(path)
     assert info == {"command": "x", "recipe": {}}
-    x = {"rgb": torch.rand(1, 3, 32, 64) * 255, "semantic": torch.rand(1, 3, 32, 64) * 255,
-         "sparse": torch.rand(1, 1, 32, 64) * 40 * (torch.rand(1, 1, 32, 64) < 0.1)}  # fmt: skip
+    x = {
+        "rgb": torch.rand(1, 3, 32, 64) * 255,
+        "semantic": torch.rand(1, 3, 32, 64) * 255,
+        "sparse": torch.rand(1, 1, 32, 64) * 40 * (torch.rand(1, 1, 32, 64) < 0.1),
+    }
     with torch.no_grad():
         a, b = model(**x).refined_depth, loaded(**x).refined_depth
     assert 0 < (a - b).abs().mean() < 0.05 * a.abs().mean()  # int8 weights: close on average, not equal
@@ -83,8 +86,17 @@ def test_the_shipped_references_are_small_load_and_record_their_recipe(seed: int
 
 def test_train_reference_tiny_recipe(tmp_path: Path) -> None:
     """The whole --train-reference path on a tiny recipe: three stages, then the packaged file."""
-    tiny = dataclasses.replace(ref.REFERENCE_RECIPE, train_frames=4, val_frames=2, size=(32, 64), batch_size=2,
-                               backbone_steps=2, refine_init_steps=1, full_steps=1, semantic_dropout=0.5)  # fmt: skip
+    tiny = dataclasses.replace(
+        ref.REFERENCE_RECIPE,
+        train_frames=4,
+        val_frames=2,
+        size=(32, 64),
+        batch_size=2,
+        backbone_steps=2,
+        refine_init_steps=1,
+        full_steps=1,
+        semantic_dropout=0.5,
+    )
     lines: list[str] = []
     target = ref.train_reference(tmp_path / "work", tmp_path / "out.safetensors.gz", tiny, log=lines.append)
     for stage in ("backbone", "refine_init", "full"):
@@ -120,9 +132,16 @@ def test_cli_semantic_dropout_belongs_to_train_reference(tmp_path: Path) -> None
 
 def _out(refined: torch.Tensor | None, fused: torch.Tensor) -> DepthCompletionOutput:
     ones = torch.ones_like(fused)
-    return DepthCompletionOutput(color_depth=fused, semantic_depth=fused, guided_depth=fused, color_conf=ones,
-                                 semantic_conf=ones, guided_conf=ones, fused_depth=fused,
-                                 refined_depth=refined)  # fmt: skip
+    return DepthCompletionOutput(
+        color_depth=fused,
+        semantic_depth=fused,
+        guided_depth=fused,
+        color_conf=ones,
+        semantic_conf=ones,
+        guided_conf=ones,
+        fused_depth=fused,
+        refined_depth=refined,
+    )
 
 
 def test_l1_plus_l2_loss_by_hand() -> None:

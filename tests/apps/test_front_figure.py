@@ -17,8 +17,9 @@ from semattnet.apps.front_figure import WEIGHTS, make_front_figure
 @pytest.mark.slow  # two shipped models and the classical completion, swept and scored: about a minute on 2 cores
 def test_tiny_front_figure(tmp_path: Path) -> None:
     tiny = DemoSettings(train_frames=1, eval_frames=2, size=(64, 96))
-    numbers = make_front_figure(tmp_path / "out", tmp_path / "work", ("beams=64", "keep=0.5"), demo=tiny,
-                                log=lambda _: None)  # fmt: skip
+    numbers = make_front_figure(
+        tmp_path / "out", tmp_path / "work", ("beams=64", "keep=0.5"), demo=tiny, log=lambda _: None
+    )
     png = tmp_path / "out" / "sparsity-sweep.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
     saved = json.loads((tmp_path / "out" / "sparsity-sweep.json").read_text())

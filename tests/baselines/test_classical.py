@@ -42,14 +42,18 @@ def test_constant_scene_and_empty_input() -> None:
 
 def test_predict_method_classical_on_the_real_frame(tmp_path: Path) -> None:
     rgb = SAMPLE / "kitti_raw/2011_09_26/2011_09_26_drive_0035_sync/image_02/data/0000000005.png"
-    sparse = SAMPLE / ("data_depth_velodyne/train/2011_09_26_drive_0035_sync/proj_depth/velodyne_raw/image_02/"
-                       "0000000005.png")  # fmt: skip
-    result = CliRunner().invoke(main, ["predict", "--method", "classical", "--rgb", str(rgb), "--sparse", str(sparse),
-                                       "--out", str(tmp_path)])  # fmt: skip
+    sparse = SAMPLE / (
+        "data_depth_velodyne/train/2011_09_26_drive_0035_sync/proj_depth/velodyne_raw/image_02/0000000005.png"
+    )
+    result = CliRunner().invoke(
+        main, ["predict", "--method", "classical", "--rgb", str(rgb), "--sparse", str(sparse), "--out", str(tmp_path)]
+    )
     assert result.exit_code == 0, result.output
     d = read_depth(tmp_path / "0000000005.png")
     assert d.shape == (375, 1242) and (d > 0).all()
-    gt = read_depth(SAMPLE / ("data_depth_annotated/train/2011_09_26_drive_0035_sync/proj_depth/groundtruth/image_02/"
-                              "0000000005.png"))  # fmt: skip
+    gt = read_depth(
+        SAMPLE
+        / ("data_depth_annotated/train/2011_09_26_drive_0035_sync/proj_depth/groundtruth/image_02/0000000005.png")
+    )
     valid = gt > 0
     assert np.sqrt(np.mean((d[valid] - gt[valid]) ** 2)) < 3.0  # metres, on real KITTI

@@ -56,8 +56,26 @@ def test_the_same_weights_in_their_model_and_ours(authors_code: ModuleType, src:
 def test_bench_authors_times_theirs_and_ours_with_parity(src: Path, tmp_path: Path) -> None:
     bench = load_script("bench_authors")
     out = tmp_path / "r.json"
-    assert bench.main(["--authors-src", str(src), "--size", "32x64", "--rounds", "1", "--engines", "torch",
-                       "--width", str(WIDTH), "--no-memory", "--json", str(out)]) == 0  # fmt: skip
+    assert (
+        bench.main(
+            [
+                "--authors-src",
+                str(src),
+                "--size",
+                "32x64",
+                "--rounds",
+                "1",
+                "--engines",
+                "torch",
+                "--width",
+                str(WIDTH),
+                "--no-memory",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     r = json.loads(out.read_text())
     speed = r["speed"]
     assert set(speed["seconds"]) == {"authors", "ours-torch"} and set(speed["speedup"]) == {"ours-torch"}
@@ -74,8 +92,24 @@ def test_bench_authors_times_theirs_and_ours_with_parity(src: Path, tmp_path: Pa
 def test_bench_authors_whole_run_with_memory(src: Path, tmp_path: Path) -> None:
     bench = load_script("bench_authors")
     out = tmp_path / "r.json"
-    assert bench.main(["--authors-src", str(src), "--size", "32x64", "--rounds", "1", "--width", str(WIDTH),
-                       "--no-int8", "--json", str(out)]) == 0  # fmt: skip
+    assert (
+        bench.main(
+            [
+                "--authors-src",
+                str(src),
+                "--size",
+                "32x64",
+                "--rounds",
+                "1",
+                "--width",
+                str(WIDTH),
+                "--no-int8",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     r = json.loads(out.read_text())
     assert set(r["memory"]["peaks"]) == {"authors", "ours-torch", "ours-openvino"}
     assert set(r["memory"]["ratio"]) == {"ours-torch", "ours-openvino"}
@@ -91,8 +125,10 @@ def test_bench_training_authors_code_variant(src: Path, capsys: pytest.CaptureFi
     r = bench.child("authors-code", 1, (32, 64), WIDTH, "cpu", steps=1, warmup=0, authors_src=src)
     assert r["variant"] == "authors-code" and r["seconds"] > 0 and r["peak_mib"] > r["before_mib"] > 0
     assert r["params"] == sum(p.numel() for p in semattnet.build_model("semattnet", width=WIDTH).parameters())
-    fake = [{"variant": v, "batch": 1, "seconds": s, "peak_mib": m, "before_mib": 100.0, "params": 10**6}
-            for v, s, m in (("authors-code", 4.0, 2000.0), ("ours", 2.0, 1000.0))]  # fmt: skip
+    fake = [
+        {"variant": v, "batch": 1, "seconds": s, "peak_mib": m, "before_mib": 100.0, "params": 10**6}
+        for v, s, m in (("authors-code", 4.0, 2000.0), ("ours", 2.0, 1000.0))
+    ]
     table = " ".join("\n".join(bench.summarise(fake, ("authors-code", "ours"))).split())
     assert "ratios to authors-code" in table and "ours 1 2.00 2.00 0.98 0.50" in table
 
@@ -108,8 +144,19 @@ def test_bench_training_profile_bounds_the_speed_up_by_the_convolutions() -> Non
     """``--profile``: the convolutions' self seconds of one more step, and reference step time / them."""
     bench = load_script("bench_training")
     runs = (("authors-code", 8.0, 5.0), ("ours", 6.0, 4.0))
-    fake = [{"variant": v, "batch": 1, "seconds": s, "peak_mib": 1000.0, "before_mib": 100.0, "params": 10**6,
-             "conv_seconds": c, "profiled_seconds": s} for v, s, c in runs]  # fmt: skip
+    fake = [
+        {
+            "variant": v,
+            "batch": 1,
+            "seconds": s,
+            "peak_mib": 1000.0,
+            "before_mib": 100.0,
+            "params": 10**6,
+            "conv_seconds": c,
+            "profiled_seconds": s,
+        }
+        for v, s, c in runs
+    ]
     table = "\n".join(bench.summarise(fake, ("authors-code", "ours")))
     row = next(line for line in table.splitlines() if line.startswith("ours ") and "%" in line)
     assert row.split() == ["ours", "1", "4.00", "2.00", "66.7%", "2.00x"]  # 8 s / 4 s of convolutions

@@ -9,8 +9,12 @@ from tests.benchmarks._scripts import load_script
 
 def test_loss_is_time_minus_macs_at_the_best_large_layer_rate() -> None:
     bench = load_script("bench_layers")
-    times = {("a", "Convolution", "k"): 0.020, ("b", "Convolution", "k"): 0.010, ("c", "Reorder", "r"): 0.005,
-             ("d", "Convolution", "k"): 0.004}  # fmt: skip
+    times = {
+        ("a", "Convolution", "k"): 0.020,
+        ("b", "Convolution", "k"): 0.010,
+        ("c", "Reorder", "r"): 0.005,
+        ("d", "Convolution", "k"): 0.004,
+    }
     macs = {"a": 2_000_000_000, "b": 1_500_000_000, "d": 100_000_000}  # b: 150 GMAC/s, the best large one; d small
     r = bench.analyse(times, macs)
     assert r["attainable_gmac_s"] == pytest.approx(150.0)

@@ -19,8 +19,23 @@ def test_bench_realtime_writes_a_10_hz_bag_and_reports_the_counts_and_stages(tmp
 
     bench = load_script("bench_realtime")
     out = tmp_path / "r.json"
-    args = ["--frames", "3", "--size", "32x96", "--scenes", "2", "--speed", "10", "--warmup", "1", "--serial",
-            "--out", str(tmp_path / "w"), "--json", str(out)]  # fmt: skip
+    args = [
+        "--frames",
+        "3",
+        "--size",
+        "32x96",
+        "--scenes",
+        "2",
+        "--speed",
+        "10",
+        "--warmup",
+        "1",
+        "--serial",
+        "--out",
+        str(tmp_path / "w"),
+        "--json",
+        str(out),
+    ]
     assert bench.main(args) == 0
     topics = BagTopics()
     source = BagSource(tmp_path / "w" / "recording.mcap", topics.image, topics.points)

@@ -65,8 +65,24 @@ def bare_machine(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
 
 @pytest.mark.slow  # trains two models through the three stages: ~40 s on 2 cores
 def test_training_half_tiny(frontier: ModuleType, tmp_path: Path, bare_machine: None) -> None:
-    frontier.main(["--out", str(tmp_path), "--device", "cpu", "--steps", "1,1,1", "--frames", "4", "--size", "64x96",
-                   "--seeds", "0", "--variants", "paper_w1_8,semattnet_rt_s"])  # fmt: skip
+    frontier.main(
+        [
+            "--out",
+            str(tmp_path),
+            "--device",
+            "cpu",
+            "--steps",
+            "1,1,1",
+            "--frames",
+            "4",
+            "--size",
+            "64x96",
+            "--seeds",
+            "0",
+            "--variants",
+            "paper_w1_8,semattnet_rt_s",
+        ]
+    )
     results = json.loads((tmp_path / "results.json").read_text())
     assert results["recipe"]["head_lr_factor"] == 5.0 and results["command"] == frontier.COMMAND
     scores = results["results"]
@@ -89,9 +105,31 @@ def tiny_run(frontier: ModuleType, tmp_path_factory: pytest.TempPathFactory) -> 
     (docs / "performance.md").write_text(f"# P\n\n{report_module().BEGIN}\nPLACEHOLDER\n{report_module().END}\n")
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(frontier, "_backends", lambda: [frontier.BACKENDS[0]])
-        frontier.main(["--out", str(root / "run"), "--all", "--device", "cpu", "--frames", "4", "--steps", "2,1,2",
-                       "--size", "32x64", "--seeds", "0", "--variants", "semattnet_rt_s", "--time-size", "64x96",
-                       "--repeats", "1", "--docs", str(docs)])  # fmt: skip
+        frontier.main(
+            [
+                "--out",
+                str(root / "run"),
+                "--all",
+                "--device",
+                "cpu",
+                "--frames",
+                "4",
+                "--steps",
+                "2,1,2",
+                "--size",
+                "32x64",
+                "--seeds",
+                "0",
+                "--variants",
+                "semattnet_rt_s",
+                "--time-size",
+                "64x96",
+                "--repeats",
+                "1",
+                "--docs",
+                str(docs),
+            ]
+        )
     return root / "run"
 
 
@@ -114,8 +152,10 @@ def test_all_tiny_trains_times_and_reports(tiny_run: Path) -> None:
 
 
 @pytest.mark.slow  # exports, quantises (NNCF) and runs the tiny variant at 32x64: about a minute on 2 busy cores
-@pytest.mark.skipif(importlib.util.find_spec("openvino") is None or importlib.util.find_spec("nncf") is None,
-                    reason="int8 needs openvino and nncf (pip install 'semattnet[openvino]')")  # fmt: skip
+@pytest.mark.skipif(
+    importlib.util.find_spec("openvino") is None or importlib.util.find_spec("nncf") is None,
+    reason="int8 needs openvino and nncf (pip install 'semattnet[openvino]')",
+)
 def test_int8_scores_beside_float32(frontier: ModuleType, tiny_run: Path) -> None:
     found = frontier.int8_accuracy(tiny_run, ["paper_w1_8", "semattnet_rt_s"], log=lambda _: None)
     assert set(found) == {"semattnet_rt_s"}  # the paper model was not trained in this run
@@ -167,8 +207,9 @@ def test_a_synthetic_tree_of_other_settings_is_refused_not_reused(frontier: Modu
 
 
 @pytest.mark.slow  # reuses the tiny run (trained in its fixture)
-def test_ship_packs_a_trained_variant_that_loads_by_its_config(frontier: ModuleType, tiny_run: Path,
-                                                               tmp_path: Path) -> None:  # fmt: skip
+def test_ship_packs_a_trained_variant_that_loads_by_its_config(
+    frontier: ModuleType, tiny_run: Path, tmp_path: Path
+) -> None:
     from semattnet.apps.demo.reference import load_reference
 
     (made,) = frontier.ship(tiny_run, "semattnet_rt_s", [0], assets=tmp_path, log=lambda _: None)
@@ -180,15 +221,25 @@ def test_ship_packs_a_trained_variant_that_loads_by_its_config(frontier: ModuleT
         frontier.ship(tiny_run, "semattnet_rt_m", [0], assets=tmp_path)
 
 
-def test_retiming_some_variants_keeps_the_others_rows_of_the_same_machine(frontier: ModuleType,
-                                                                         tmp_path: Path) -> None:  # fmt: skip
+def test_retiming_some_variants_keeps_the_others_rows_of_the_same_machine(frontier: ModuleType, tmp_path: Path) -> None:
     path = tmp_path / "timing.json"
     machine = {"cpu": "Xeon", "threads": 2, "isa": ["avx2"], "size": [352, 1216]}
-    old = {**machine, "models": {"a": 1, "b": 2}, "frames": {"a": 1, "b": 2}, "int8": {"b": 2},
-           "rows": {"a/torch-f32": 1, "b/torch-f32": 2, "b/openvino-f32": 2}}  # fmt: skip
+    old = {
+        **machine,
+        "models": {"a": 1, "b": 2},
+        "frames": {"a": 1, "b": 2},
+        "int8": {"b": 2},
+        "rows": {"a/torch-f32": 1, "b/torch-f32": 2, "b/openvino-f32": 2},
+    }
     path.write_text(json.dumps(old))
-    new = {**machine, "size": (352, 1216), "models": {"b": 9}, "frames": {"b": 9}, "int8": {"b": 9},
-           "rows": {"b/torch-f32": 9}}  # fmt: skip
+    new = {
+        **machine,
+        "size": (352, 1216),
+        "models": {"b": 9},
+        "frames": {"b": 9},
+        "int8": {"b": 9},
+        "rows": {"b/torch-f32": 9},
+    }
     merged = frontier.kept_from_earlier(path, new, ["b"])
     assert merged["rows"] == {"a/torch-f32": 1, "b/torch-f32": 9} and merged["models"] == {"a": 1, "b": 9}
     assert merged["int8"] == {"b": 9} and merged["frames"] == {"a": 1, "b": 9}

@@ -26,13 +26,25 @@ def _scores(rmse: float, mae: float, irmse: float, imae: float) -> dict[str, flo
 def _results() -> dict[str, Any]:
     """Metres and 1/m, as the training half writes them; the real-time variant trained with two seeds."""
     rt = {"0": _scores(1.1, 0.5, 0.004, 0.0019), "1": _scores(1.3, 0.5, 0.004, 0.0021)}
-    return {"seeds": [0, 1], "recipe": {"train_frames": 400, "size": [96, 320]}, "results": {
-        "classical": {"scores": _scores(2.0, 0.9, 0.01, 0.004), "uncertainty": {"ause_rmse": 0.5}},
-        "paper_w1_8": {"params": 2_000_000, "scores": _scores(1.1, 0.4, 0.003, 0.0015),
-                       "per_seed": {"0": _scores(1.1, 0.4, 0.003, 0.0015)}, "uncertainty": {"ause_rmse": 0.2}},
-        "semattnet_rt_s": {"params": 150_000, "scores": _scores(1.2, 0.5, 0.004, 0.002), "per_seed": rt,
-                           "uncertainty": {"ause_rmse": 0.3}},
-    }}  # fmt: skip
+    return {
+        "seeds": [0, 1],
+        "recipe": {"train_frames": 400, "size": [96, 320]},
+        "results": {
+            "classical": {"scores": _scores(2.0, 0.9, 0.01, 0.004), "uncertainty": {"ause_rmse": 0.5}},
+            "paper_w1_8": {
+                "params": 2_000_000,
+                "scores": _scores(1.1, 0.4, 0.003, 0.0015),
+                "per_seed": {"0": _scores(1.1, 0.4, 0.003, 0.0015)},
+                "uncertainty": {"ause_rmse": 0.2},
+            },
+            "semattnet_rt_s": {
+                "params": 150_000,
+                "scores": _scores(1.2, 0.5, 0.004, 0.002),
+                "per_seed": rt,
+                "uncertainty": {"ause_rmse": 0.3},
+            },
+        },
+    }
 
 
 def _timing(rt_ms: float = 80.0) -> dict[str, Any]:
@@ -45,13 +57,25 @@ def _timing(rt_ms: float = 80.0) -> dict[str, Any]:
         "semattnet_rt_s/openvino-f32-avx2": {"ms": 105.0, "ratio": 0.2},  # --isa-cap AVX2: no memory figure
     }
     change = {"rmse": 0.004, "mae": -0.002, "irmse": 0.008, "imae": 0.001}
-    return {"cpu": "Test CPU", "threads": 2, "isa": ["avx2", "fma"], "size": [352, 1216], "repeats": 5,
-            "memory": "growth", "models": {"paper_w1_8": {"gmac": 8.2, "params": 2_000_000},
-                                           "semattnet_rt_s": {"gmac": 0.95, "params": 150_000}},
-            "rows": rows, "classical_ms": 30.0,
-            "frames": {"paper_w1_8": {"frame_ms": 600.0}, "semattnet_rt_s": {"frame_ms": 140.0, "stages_ms": {
-                "read": 10.0, "network": 110.0, "writing": 20.0}}},
-            "int8": {"semattnet_rt_s": {"change": change}}}  # fmt: skip
+    return {
+        "cpu": "Test CPU",
+        "threads": 2,
+        "isa": ["avx2", "fma"],
+        "size": [352, 1216],
+        "repeats": 5,
+        "memory": "growth",
+        "models": {
+            "paper_w1_8": {"gmac": 8.2, "params": 2_000_000},
+            "semattnet_rt_s": {"gmac": 0.95, "params": 150_000},
+        },
+        "rows": rows,
+        "classical_ms": 30.0,
+        "frames": {
+            "paper_w1_8": {"frame_ms": 600.0},
+            "semattnet_rt_s": {"frame_ms": 140.0, "stages_ms": {"read": 10.0, "network": 110.0, "writing": 20.0}},
+        },
+        "int8": {"semattnet_rt_s": {"change": change}},
+    }
 
 
 def test_table_rows_in_kitti_units_with_the_seeds_spread(report: ModuleType) -> None:
@@ -120,8 +144,9 @@ def _run(tmp_path: Path) -> tuple[Path, Path]:
     return out, docs
 
 
-def test_report_replaces_only_the_text_between_the_markers(report: ModuleType, tmp_path: Path,
-                                                           monkeypatch: pytest.MonkeyPatch) -> None:  # fmt: skip
+def test_report_replaces_only_the_text_between_the_markers(
+    report: ModuleType, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """What --report runs (with the plot: the tiny --all run, slow; matplotlib's import alone is seconds)."""
     out, docs = _run(tmp_path)
     doc = docs / "performance.md"

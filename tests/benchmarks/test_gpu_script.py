@@ -93,13 +93,24 @@ def test_bench_training_dry_run_and_one_child(capsys) -> None:  # type: ignore[n
         bench.check_plan([("ours", 1), ("recipe-reconstruction", 1), ("ours+ckpt", 1)], bench.VARIANTS, (1,))
     r = bench.child("ours+ckpt", 1, (32, 64), 0.125, "cpu", steps=1, warmup=0)
     assert r["seconds"] > 0 and r["peak_mib"] > r["before_mib"] > 0 and r["params"] > 10**5
-    fake = [{"variant": "recipe-reconstruction", "batch": b, "seconds": 2.0 * b, "peak_mib": 1000.0 + 500 * b,
-             "before_mib": 100.0, "params": 10**6} for b in (1, 2)]  # fmt: skip
+    fake = [
+        {
+            "variant": "recipe-reconstruction",
+            "batch": b,
+            "seconds": 2.0 * b,
+            "peak_mib": 1000.0 + 500 * b,
+            "before_mib": 100.0,
+            "params": 10**6,
+        }
+        for b in (1, 2)
+    ]
     table = "\n".join(bench.summarise(fake, ("recipe-reconstruction",)))
     # 500 MiB per sample, 1000 MiB fixed: 24 GB = 22888 MiB -> 43 samples
     assert "0.49" in table and "43" in table and "measured" in table
-    pair = [{"variant": v, "batch": 2, "seconds": t, "peak_mib": m, "before_mib": 100.0, "params": 10**6}
-            for v, t, m in (("ours", 10.0, 4000.0), ("ours+ckpt", 13.0, 1800.0))]  # fmt: skip
+    pair = [
+        {"variant": v, "batch": 2, "seconds": t, "peak_mib": m, "before_mib": 100.0, "params": 10**6}
+        for v, t, m in (("ours", 10.0, 4000.0), ("ours+ckpt", 13.0, 1800.0))
+    ]
     table = "\n".join(bench.summarise(pair, ("ours", "ours+ckpt")))
     assert "ours+ckpt / ours batch 2: step time 1.30x, peak memory 0.45x" in " ".join(table.split())
     assert bench.main(["--dry-run", "--variants", "ours,ours+ckpt", "--batches", "4"]) == 0

@@ -32,15 +32,28 @@ def _row(rmse: float, mae: float = 1000.0, irmse: float = 5.0, imae: float = 3.0
 
 def _results(**rows: dict[str, Any]) -> dict[str, Any]:
     settings = {"seeds": [0, 1], "adapt_steps": 800, "ablation_steps": 400}
-    return {"command": "python benchmarks/shift.py --tiny", "settings": settings, "device": "cpu",
-            "machine": "a CPU", "seconds": {"total": 60.0}, "rows": rows}  # fmt: skip
+    return {
+        "command": "python benchmarks/shift.py --tiny",
+        "settings": settings,
+        "device": "cpu",
+        "machine": "a CPU",
+        "seconds": {"total": 60.0},
+        "rows": rows,
+    }
 
 
 def test_summary_is_the_share_of_the_gap_closed_and_the_classical_comparison(shift: ModuleType) -> None:
-    rows = {"classical": _row(3000, 900, 9, 4), "unadapted": _row(8000), "adapted_all": _row(4000, 800, 4, 2),
-            "supervised": _row(2000)}  # fmt: skip
-    assert shift.summary(rows) == {"gap_closed": pytest.approx(4000 / 6000), "beats_classical": False,
-                                   "accepted": False}  # fmt: skip
+    rows = {
+        "classical": _row(3000, 900, 9, 4),
+        "unadapted": _row(8000),
+        "adapted_all": _row(4000, 800, 4, 2),
+        "supervised": _row(2000),
+    }
+    assert shift.summary(rows) == {
+        "gap_closed": pytest.approx(4000 / 6000),
+        "beats_classical": False,
+        "accepted": False,
+    }
     rows["adapted_all"] = _row(2900, 800, 4, 2)
     assert shift.summary(rows)["beats_classical"] and shift.summary(rows)["accepted"]
     rows["adapted_all"] = _row(2900, 901, 4, 2)  # worse than classical on MAE alone
@@ -49,8 +62,13 @@ def test_summary_is_the_share_of_the_gap_closed_and_the_classical_comparison(shi
 
 
 def test_table_and_docs_between_the_markers(shift: ModuleType, tmp_path: Path) -> None:
-    rows = {"classical": _row(3000, 2000, 9, 4), "unadapted": _row(8000), "adapted_all": _row(2500),
-            "adapted_sparse": _row(2700), "supervised": _row(2000)}  # fmt: skip
+    rows = {
+        "classical": _row(3000, 2000, 9, 4),
+        "unadapted": _row(8000),
+        "adapted_all": _row(2500),
+        "adapted_sparse": _row(2700),
+        "supervised": _row(2000),
+    }
     results = _results(**rows) | {"summary": shift.summary(rows)}
     text = shift.table(results)
     assert "| adapted: all three losses, 800 steps (the recipe) | 2500 | 1000 | 5.00 | 3.00 | 2500, 2500 |" in text
@@ -71,8 +89,9 @@ def test_table_and_docs_between_the_markers(shift: ModuleType, tmp_path: Path) -
     assert all(shipped.count(m) == 1 for m in shift.MARKERS) and shift.COMMAND in shipped
 
 
-def test_adapt_rows_call_semattnet_adapt_per_loss_and_seed(shift: ModuleType, tmp_path: Path,
-                                                           monkeypatch: pytest.MonkeyPatch) -> None:  # fmt: skip
+def test_adapt_rows_call_semattnet_adapt_per_loss_and_seed(
+    shift: ModuleType, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """With an `adapt` command in the CLI, every row and seed is adapted once with the documented options (the
     recipe's steps for `all`, the ablation's for the others), the result saved under checkpoints/ and scored; an
     earlier result is read back, not adapted again."""
@@ -93,9 +112,24 @@ def test_adapt_rows_call_semattnet_adapt_per_loss_and_seed(shift: ModuleType, tm
     s = shift.tiny(seeds=(0, 1))
     rows = shift.adapt_rows(tmp_path, weights, data, s, torch.device("cpu"), shift.Clock(), log=lambda _: None)
     assert list(rows) == [f"adapted_{k}" for k in shift.LOSSES] and len(calls) == 10
-    assert calls[1] == ["--weights", str(weights[1]), "--kitti-raw", str(tmp_path / "drive"), "--out",
-                        str(tmp_path / "adapt" / "all_seed1"), "--steps", "2", "--loss", LOSS_ALL, "--seed", "1",
-                        "--lr", "0.001", "--semantic", str(tmp_path / "sem")]  # fmt: skip
+    assert calls[1] == [
+        "--weights",
+        str(weights[1]),
+        "--kitti-raw",
+        str(tmp_path / "drive"),
+        "--out",
+        str(tmp_path / "adapt" / "all_seed1"),
+        "--steps",
+        "2",
+        "--loss",
+        LOSS_ALL,
+        "--seed",
+        "1",
+        "--lr",
+        "0.001",
+        "--semantic",
+        str(tmp_path / "sem"),
+    ]
     assert calls[2][calls[2].index("--out") + 1 :][:3] == [str(tmp_path / "adapt" / "all_short_seed0"), "--steps", "1"]
     assert [c[c.index("--loss") + 1] for c in calls[::2]] == [LOSS_ALL, LOSS_ALL, "sparse", "photometric", "smoothness"]
     assert (tmp_path / "checkpoints" / "adapted_photometric_seed0.safetensors").read_bytes() == b"weights 7"
@@ -126,8 +160,11 @@ def test_tiny_run(shift: ModuleType, tmp_path: Path) -> None:
     shutil.copy(shift.DOC_PAGE, page)
     results = shift.main(["--out", str(tmp_path / "run"), "--tiny", "--device", "cpu", "--docs", str(page)])
     saved = json.loads((tmp_path / "run" / "results.json").read_text())
-    assert saved["rows"].keys() == results["rows"].keys() >= {"classical", "unadapted", "supervised",
-                                                               "unadapted_on_source"}  # fmt: skip
+    assert (
+        saved["rows"].keys()
+        == results["rows"].keys()
+        >= {"classical", "unadapted", "supervised", "unadapted_on_source"}
+    )
     assert ("adapted_all" in saved["rows"]) == shift.adapt_available()
     assert set(saved["rows"]["unadapted"]["scores"]) == set(shift.METRICS)
     assert {"data", "train_source", "train_supervised", "score", "total"} <= set(saved["seconds"])
@@ -153,8 +190,10 @@ def test_factor_domains_take_one_group_of_the_target_rig_each(shift: ModuleType)
     grouped = [f for fields in shift.FACTORS.values() for f in fields]
     differing = [f.name for f in shift.dataclasses.fields(TARGET) if getattr(TARGET, f.name) != getattr(SOURCE, f.name)]
     assert sorted(grouped) == sorted(f for f in differing if f != "name")  # every difference in one group
-    rows = {"source": {"reference": _row(1500, 600), "classical": _row(4500, 1300)["scores"]},
-            "lens": {"reference": _row(6900, 4500), "classical": _row(3800, 985)["scores"]}}  # fmt: skip
+    rows = {
+        "source": {"reference": _row(1500, 600), "classical": _row(4500, 1300)["scores"]},
+        "lens": {"reference": _row(6900, 4500), "classical": _row(3800, 985)["scores"]},
+    }
     text = shift.gap_table(rows)
     assert "| source | 1500 | 600 | 4500 | 1300 |" in text and "| source rig, the target's lens | 6900 |" in text
     shipped = shift.DOC_PAGE.read_text()

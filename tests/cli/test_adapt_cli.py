@@ -68,9 +68,13 @@ def test_adapt_on_a_folder_skips_and_counts_a_bad_frame_and_predict_reads_the_re
 
 @pytest.mark.parametrize(
     ("args", "message"),
-    [(["--crop", "30x64"], "multiples of 32"), (["--hide", "1.5"], "--hide"), (["--loss", "sparse,depth"], "--loss"),
-     (["--hide", "a..b"], "--hide")],
-)  # fmt: skip
+    [
+        (["--crop", "30x64"], "multiples of 32"),
+        (["--hide", "1.5"], "--hide"),
+        (["--loss", "sparse,depth"], "--loss"),
+        (["--hide", "a..b"], "--hide"),
+    ],
+)
 def test_adapt_options_are_checked_before_any_work(
     tiny_weights: Path, tmp_path: Path, args: list[str], message: str
 ) -> None:

@@ -18,8 +18,21 @@ from semattnet.cli import main
 
 @pytest.mark.slow  # ~10 s; tests/apps/test_demo.py runs the demo by default
 def test_demo_cli(tmp_path: Path) -> None:
-    args = ["demo", "--out", str(tmp_path), "--size", "64x128", "--frames", "6", "--eval-frames", "2",
-            "--steps", "2,1", "--device", "cpu"]  # fmt: skip
+    args = [
+        "demo",
+        "--out",
+        str(tmp_path),
+        "--size",
+        "64x128",
+        "--frames",
+        "6",
+        "--eval-frames",
+        "2",
+        "--steps",
+        "2,1",
+        "--device",
+        "cpu",
+    ]
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     assert "Report: " in result.output and (tmp_path / "report.html").is_file()
@@ -33,8 +46,25 @@ def test_demo_cli(tmp_path: Path) -> None:
 
 
 def test_ablate_cli_resumes(tmp_path: Path) -> None:
-    base = ["ablate", "--out", str(tmp_path), "--size", "64x96", "--frames", "4", "--eval-frames", "2",
-            "--seeds", "0", "--backbone-steps", "2", "--full-steps", "1", "--device", "cpu"]  # fmt: skip
+    base = [
+        "ablate",
+        "--out",
+        str(tmp_path),
+        "--size",
+        "64x96",
+        "--frames",
+        "4",
+        "--eval-frames",
+        "2",
+        "--seeds",
+        "0",
+        "--backbone-steps",
+        "2",
+        "--full-steps",
+        "1",
+        "--device",
+        "cpu",
+    ]
     first = CliRunner().invoke(main, [*base, "--configs", "table2_a"])
     assert first.exit_code == 0, first.output
     done = tmp_path / "results" / "table2_a_seed0.json"

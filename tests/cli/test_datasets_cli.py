@@ -35,16 +35,45 @@ def trees(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 def test_check_train_evaluate_predict(dataset: str, trees: dict[str, Path], tmp_path: Path) -> None:
     root = trees[dataset]
     assert "ok" in run("data", "check", "--dataset", dataset, root)
-    run("train", "--dataset", dataset, "--data", root, "--out", tmp_path / "run", "--width", "0.125",
-        "--batch-size", "2", "--workers", "0", "--max-steps", "2", "--set", "depth_head_init=[2,2]")  # fmt: skip
+    run(
+        "train",
+        "--dataset",
+        dataset,
+        "--data",
+        root,
+        "--out",
+        tmp_path / "run",
+        "--width",
+        "0.125",
+        "--batch-size",
+        "2",
+        "--workers",
+        "0",
+        "--max-steps",
+        "2",
+        "--set",
+        "depth_head_init=[2,2]",
+    )
     cfg = json.loads((tmp_path / "run" / "config.json").read_text())
     assert cfg["dataset"] == dataset and cfg["epochs"] == (25 if dataset == "nyuv2" else 10)  # the recipe
     ckpt = tmp_path / "run" / "checkpoints" / "last.pt"
     from semattnet.weights.checkpoint import load_checkpoint
 
     assert load_checkpoint(ckpt).config.palette == ("nyu40" if dataset == "nyuv2" else "cityscapes")
-    out = run("evaluate", "--dataset", dataset, "--checkpoint", ckpt, "--data", root, "--workers", "0",
-              "--out", tmp_path / "ev", "--save-predictions")  # fmt: skip
+    out = run(
+        "evaluate",
+        "--dataset",
+        dataset,
+        "--checkpoint",
+        ckpt,
+        "--data",
+        root,
+        "--workers",
+        "0",
+        "--out",
+        tmp_path / "ev",
+        "--save-predictions",
+    )
     metrics = json.loads((tmp_path / "ev" / "metrics.json").read_text())
     assert metrics["dataset"] == dataset and metrics["split"] == "test" and metrics["images"] == 2
     if dataset == "nyuv2":
@@ -57,8 +86,19 @@ def test_check_train_evaluate_predict(dataset: str, trees: dict[str, Path], tmp_
     assert len(preds) == 2 and read_depth(preds[0]).shape == size
     run("predict", "--dataset", dataset, "--data", root, "--checkpoint", ckpt, "--out", tmp_path / "pred")
     assert len(list((tmp_path / "pred").glob("*.png"))) >= 2
-    run("evaluate", "--dataset", dataset, "--data", root, "--method", "classical", "--sparsity", "keep=1,0.5",
-        "--out", tmp_path / "sweep")  # fmt: skip
+    run(
+        "evaluate",
+        "--dataset",
+        dataset,
+        "--data",
+        root,
+        "--method",
+        "classical",
+        "--sparsity",
+        "keep=1,0.5",
+        "--out",
+        tmp_path / "sweep",
+    )
     rows = json.loads((tmp_path / "sweep" / "sparsity.json").read_text())
     assert [r["setting"] for r in rows] == ["keep=1", "keep=0.5"]
 
@@ -76,8 +116,18 @@ def test_palette_mismatch_is_one_line(trees: dict[str, Path], tmp_path: Path) ->
         assert "NYU-40 palette, but the model was trained with the Cityscapes palette" in out
         assert "Traceback" not in out and len(out.strip().splitlines()) == 1
     assert not (tmp_path / "p").exists() and not any((tmp_path / "s").iterdir())  # the sweep: no file, no stage
-    run(*sweep, "--overwrite", "--dataset", "nyuv2", "--data", trees["nyuv2"], "--checkpoint", ckpt,
-        "--palette-mismatch", "recolour")  # the sweep converts maps as evaluate does  # fmt: skip
+    run(
+        *sweep,
+        "--overwrite",
+        "--dataset",
+        "nyuv2",
+        "--data",
+        trees["nyuv2"],
+        "--checkpoint",
+        ckpt,
+        "--palette-mismatch",
+        "recolour",
+    )  # the sweep converts maps as evaluate does
     rows = json.loads((tmp_path / "s" / "sparsity.json").read_text())
     assert [r["method"] for r in rows] == ["semattnet", "classical"]
 

@@ -19,7 +19,6 @@ from semattnet.inference.backends import (
     EngineEntry,
     EngineRequest,
     InferenceEngine,
-    engine_entries,
     register_engine,
     registry,
 )
@@ -36,8 +35,9 @@ class EchoEngine(InferenceEngine):
         super().__init__(request.size, request.precision, request.needs_semantic)
         self.net = model.to(request.device)
 
-    def forward(self, rgb: torch.Tensor, semantic: torch.Tensor | None = None,
-                sparse: torch.Tensor | None = None) -> DepthCompletionOutput:  # fmt: skip
+    def forward(
+        self, rgb: torch.Tensor, semantic: torch.Tensor | None = None, sparse: torch.Tensor | None = None
+    ) -> DepthCompletionOutput:
         EchoEngine.calls += 1
         with torch.inference_mode():
             out: DepthCompletionOutput = self.net(rgb=rgb, semantic=semantic, sparse=sparse)
@@ -47,11 +47,16 @@ class EchoEngine(InferenceEngine):
 @pytest.fixture
 def echo(monkeypatch: pytest.MonkeyPatch) -> Iterator[EngineEntry]:
     """The new engine's module: one :func:`register_engine` call (the table is restored afterwards)."""
-    monkeypatch.setattr(registry, "_ENGINES", dict(engine_entries()))
-    entry = register_engine(EngineEntry("echo", precisions=("f32",), devices=("cpu",), build=EchoEngine,
-                                        summary="the eager model, for a test"))  # fmt: skip
+    entry = register_engine(
+        EngineEntry(
+            "echo", precisions=("f32",), devices=("cpu",), build=EchoEngine, summary="the eager model, for a test"
+        )
+    )
     EchoEngine.calls = 0
-    yield entry
+    try:
+        yield entry
+    finally:
+        registry.unregister_engine("echo")
 
 
 @pytest.fixture

@@ -50,17 +50,20 @@ def _one_line(args: list[str], extra: str, package: str) -> None:
         (("huggingface_hub", "pooch"), "http://127.0.0.1:9/w.safetensors", "pooch"),
     ],
 )
-def test_hub(monkeypatch: pytest.MonkeyPatch, tmp_path: Path, hidden: tuple[str, ...], weights: str,
-             package: str) -> None:  # fmt: skip
+def test_hub(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, hidden: tuple[str, ...], weights: str, package: str
+) -> None:
     monkeypatch.setenv("SEMATTNET_CACHE", str(tmp_path / "cache"))
     _hide(monkeypatch, *hidden)
     _one_line(["info", "--weights", weights], "hub", package)
 
 
-@pytest.mark.parametrize(("backend", "module", "extra"), [("onnxruntime", "onnxruntime", "onnx"),
-                                                          ("openvino", "openvino", "openvino")])  # fmt: skip
-def test_engines(monkeypatch: pytest.MonkeyPatch, tmp_path: Path, frames: list[str], backend: str, module: str,
-                 extra: str) -> None:  # fmt: skip
+@pytest.mark.parametrize(
+    ("backend", "module", "extra"), [("onnxruntime", "onnxruntime", "onnx"), ("openvino", "openvino", "openvino")]
+)
+def test_engines(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, frames: list[str], backend: str, module: str, extra: str
+) -> None:
     _hide(monkeypatch, module)
     args = ["predict", *frames, "--weights", "semattnet-demo-ref-seed0", "--backend", backend]
     _one_line([*args, "--out", str(tmp_path / "out")], extra, module)
@@ -69,16 +72,29 @@ def test_engines(monkeypatch: pytest.MonkeyPatch, tmp_path: Path, frames: list[s
 
 def test_segmenter(monkeypatch: pytest.MonkeyPatch, tmp_path: Path, frames: list[str]) -> None:
     _hide(monkeypatch, "transformers")
-    _one_line(["segment", "--model", "hf:default", "--images", frames[0].split("=", 1)[1], "--out",
-               str(tmp_path / "maps")], "segment", "transformers")  # fmt: skip
+    _one_line(
+        ["segment", "--model", "hf:default", "--images", frames[0].split("=", 1)[1], "--out", str(tmp_path / "maps")],
+        "segment",
+        "transformers",
+    )
 
 
-@pytest.mark.parametrize(("option", "module", "extra", "package"), [
-    (["--rerun", "rec.rrd"], "rerun", "rerun", "rerun-sdk"),
-    (["--live", "127.0.0.1:0"], "foxglove", "live", "foxglove-sdk"),
-])  # fmt: skip
-def test_run_outputs(monkeypatch: pytest.MonkeyPatch, tmp_path: Path, frames: list[str], option: list[str],
-                     module: str, extra: str, package: str) -> None:  # fmt: skip
+@pytest.mark.parametrize(
+    ("option", "module", "extra", "package"),
+    [
+        (["--rerun", "rec.rrd"], "rerun", "rerun", "rerun-sdk"),
+        (["--live", "127.0.0.1:0"], "foxglove", "live", "foxglove-sdk"),
+    ],
+)
+def test_run_outputs(
+    monkeypatch: pytest.MonkeyPatch,
+    tmp_path: Path,
+    frames: list[str],
+    option: list[str],
+    module: str,
+    extra: str,
+    package: str,
+) -> None:
     _hide(monkeypatch, module)
     option = [o if not o.endswith(".rrd") else str(tmp_path / o) for o in option]
     args = ["predict", *frames, "--method", "classical", "--K", "50,50,32,16", *option]
@@ -90,8 +106,11 @@ def test_bags(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     bag = tmp_path / "in.bag"
     bag.write_bytes(b"#ROSBAG V2.0\n")
     topics = ["--image-topic", "/cam", "--points-topic", "/lidar"]
-    _one_line(["predict", "--bag", str(bag), *topics, "--method", "classical", "--out", str(tmp_path / "out")],
-              "ros", "rosbags")  # fmt: skip
+    _one_line(
+        ["predict", "--bag", str(bag), *topics, "--method", "classical", "--out", str(tmp_path / "out")],
+        "ros",
+        "rosbags",
+    )
 
 
 def test_nyu(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:

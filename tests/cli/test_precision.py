@@ -54,8 +54,15 @@ def test_rules(frames: list[str], tmp_path: Path, options: list[str], words: str
 
 def test_bf16_on_the_torch_backend_is_autocast(frames: list[str], tmp_path: Path) -> None:
     for precision in ("f32", "bf16"):
-        res = _predict(*frames, "--weights", "semattnet-demo-ref-seed0", "--precision", precision,
-                       "--out", str(tmp_path / precision))  # fmt: skip
+        res = _predict(
+            *frames,
+            "--weights",
+            "semattnet-demo-ref-seed0",
+            "--precision",
+            precision,
+            "--out",
+            str(tmp_path / precision),
+        )
         assert res.exit_code == 0, res.output  # type: ignore[attr-defined]
     a, b = (read_depth(tmp_path / p / "f0.png") for p in ("f32", "bf16"))
     assert 0 < np.abs(a - b).max() < 0.1 * a.max()  # bfloat16 arithmetic: close, not equal

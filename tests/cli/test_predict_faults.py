@@ -49,14 +49,23 @@ def test_folder_with_bad_frames(tmp_path: Path) -> None:
     out = tmp_path / "out"
     res = _predict("--rgb", rgb, "--sparse", sparse, "--method", "classical", "--out", out)
     assert res.exit_code == 3, res.output
-    reasons = {"f2": "f2.png: sparse has no valid depth point", "f3": "f3.png: not a readable PNG",
-               "f4": "f4.png: PNG file not found"}  # fmt: skip
+    reasons = {
+        "f2": "f2.png: sparse has no valid depth point",
+        "f3": "f3.png: not a readable PNG",
+        "f4": "f4.png: PNG file not found",
+    }
     for name, reason in reasons.items():
         assert reason in _skip_line(res.output, name), res.output
     assert "6 frame(s): 3 done, 3 skipped" in res.output
     journal = _statuses(out)
     assert {n: s for n, (s, _) in journal.items()} == {
-        "f0": "done", "f1": "done", "f2": "skipped", "f3": "skipped", "f4": "skipped", "f5": "done"}  # fmt: skip
+        "f0": "done",
+        "f1": "done",
+        "f2": "skipped",
+        "f3": "skipped",
+        "f4": "skipped",
+        "f5": "done",
+    }
     assert all(reasons[n] in journal[n][1] for n in reasons)
     want = tmp_path / "want"  # the good frames: as a run over the good frames alone does them
     res = _predict("--rgb", rgb, "--sparse", clean, "--method", "classical", "--out", want)
@@ -78,7 +87,14 @@ def test_kitti_raw_drive_with_a_bad_scan(tmp_path: Path) -> None:
     line = _skip_line(res.output, "0000000006")
     assert "0000000006.bin: 1005 bytes is not a multiple of 16" in line, line
     assert {n: s for n, (s, _) in _statuses(out).items()} == {
-        "0000000005": "done", "0000000006": "skipped", "0000000007": "done"}  # fmt: skip
+        "0000000005": "done",
+        "0000000006": "skipped",
+        "0000000007": "done",
+    }
     assert (out / "0000000005.png").read_bytes() == (out / "0000000007.png").read_bytes()
     assert sorted(p.name for p in out.glob("*.png")) == [
-        "0000000005.png", "0000000005_color.png", "0000000007.png", "0000000007_color.png"]  # fmt: skip
+        "0000000005.png",
+        "0000000005_color.png",
+        "0000000007.png",
+        "0000000007_color.png",
+    ]

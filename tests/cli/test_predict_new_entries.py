@@ -83,8 +83,8 @@ def toys() -> Iterator[None]:
     register_source("toy", option="--toy", options=ToyOptions)(ToySource)
     register_sink("mean-depth", option="--mean-depth", options=MeanOptions)(MeanSink)
     yield
-    SOURCES.unregister("toy")
-    SINKS.unregister("mean-depth")
+    SOURCES.remove("toy")
+    SINKS.remove("mean-depth")
 
 
 def _predict(*args: str) -> tuple[int, str]:
@@ -101,20 +101,24 @@ def test_new_entries_are_on_predict_help(toys: None) -> None:
 
 
 def test_new_entries_run_end_to_end(toys: None, tmp_path: Path) -> None:
-    code, said = _predict("--toy", "2", "--toy-depth", "7.5", "--mean-depth", "--method", "classical",
-                          "--out", str(tmp_path / "out"))  # fmt: skip
+    code, said = _predict(
+        "--toy", "2", "--toy-depth", "7.5", "--mean-depth", "--method", "classical", "--out", str(tmp_path / "out")
+    )
     assert code == 0, said
     for name in ("toy0", "toy1"):
         assert float((tmp_path / "out" / f"{name}_mean.txt").read_text()) == pytest.approx(7.5, abs=0.01)
         assert (tmp_path / "out" / f"{name}.png").is_file()
 
 
-@pytest.mark.parametrize(("args", "said"), [
-    (["--toy", "1", "--toy-depth", "0"], "--toy-depth must be positive"),
-    (["--toy", "1", "--frames", "1"], "--frames is an option of --kitti-raw, not of --toy"),
-    (["--rgb", ".", "--sparse", ".", "--toy-depth", "3"], "--toy-depth is an option of --toy, not of --rgb"),
-    (["--data", ".", "--toy", "1"], "or --toy (one of them: not --data and --toy)"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("args", "said"),
+    [
+        (["--toy", "1", "--toy-depth", "0"], "--toy-depth must be positive"),
+        (["--toy", "1", "--frames", "1"], "--frames is an option of --kitti-raw, not of --toy"),
+        (["--rgb", ".", "--sparse", ".", "--toy-depth", "3"], "--toy-depth is an option of --toy, not of --rgb"),
+        (["--data", ".", "--toy", "1"], "or --toy (one of them: not --data and --toy)"),
+    ],
+)
 def test_new_source_gets_the_input_rules(toys: None, tmp_path: Path, args: list[str], said: str) -> None:
     code, output = _predict(*args, "--method", "classical", "--out", str(tmp_path / "out"))
     assert code == 2 and said in output, output

@@ -19,8 +19,17 @@ from semattnet.cli._params import OTHER, SectionedCommand, heading_of
 from semattnet.cli.predict import predict
 from semattnet.data.sources.registry import SourceOptions
 
-HEADINGS = ["Inputs: files", "Inputs: KITTI raw drive", "Inputs: ROS bag", "Inputs: dataset", "Semantic maps",
-            "Model", "Outputs", "Run", OTHER]  # fmt: skip
+HEADINGS = [
+    "Inputs: files",
+    "Inputs: KITTI raw drive",
+    "Inputs: dataset",
+    "Inputs: ROS bag",
+    "Semantic maps",
+    "Model",
+    "Outputs",
+    "Run",
+    OTHER,
+]
 
 
 def _help() -> str:
@@ -85,8 +94,9 @@ def _misplaced() -> list[tuple[str, str, str]]:
 
 
 @pytest.mark.parametrize(("name", "with_kind", "owners"), _misplaced())
-def test_an_option_of_another_input_kind_is_one_usage_error(tmp_path: Path, name: str, with_kind: str,
-                                                            owners: str) -> None:  # fmt: skip
+def test_an_option_of_another_input_kind_is_one_usage_error(
+    tmp_path: Path, name: str, with_kind: str, owners: str
+) -> None:
     (tmp_path / "folder").mkdir()
     (tmp_path / "file.json").write_text("{}")
     kind = next(k for k in INPUTS if k.name == with_kind)
@@ -101,7 +111,7 @@ def test_an_option_of_another_input_kind_is_one_usage_error(tmp_path: Path, name
 
 
 def test_exactly_one_input_kind() -> None:
-    wanted = "give --rgb and --sparse, or --kitti-raw, or --bag, or --data (with --dataset)"
+    wanted = "give --rgb and --sparse, or --kitti-raw, or --data (with --dataset), or --bag"
     result = CliRunner().invoke(main, ["predict", "--method", "classical", "--out", "o"])
     assert result.exit_code == 2 and wanted in result.output, result.output
     result = CliRunner().invoke(main, ["predict", "--rgb", ".", "--sparse", ".", "--bag", ".", "--out", "o"])
@@ -148,13 +158,16 @@ def _toy_command(**params: object) -> None:
     click.echo(f"{chosen.kind.name}: {chosen.values}")
 
 
-@pytest.mark.parametrize(("args", "code", "said"), [
-    (["--toy", "t", "--toy-level", "3", "--segment", "s"], 0, "toy: _ToyInput(toy='t', toy_level='3')"),
-    (["--rgb", ".", "--sparse", ".", "--toy-level", "3"], 2, "--toy-level is an option of --toy, not of --rgb"),
-    (["--toy", "t", "--frames", "1"], 2, "--frames is an option of --kitti-raw, not of --toy"),
-    (["--toy", "t", "--semantic", "."], 2, "--semantic is an option of --rgb, --kitti-raw or --data, not of --toy"),
-    (["--data", ".", "--toy", "t"], 2, "or --toy (one of them: not --data and --toy)"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("args", "code", "said"),
+    [
+        (["--toy", "t", "--toy-level", "3", "--segment", "s"], 0, "toy: _ToyInput(toy='t', toy_level='3')"),
+        (["--rgb", ".", "--sparse", ".", "--toy-level", "3"], 2, "--toy-level is an option of --toy, not of --rgb"),
+        (["--toy", "t", "--frames", "1"], 2, "--frames is an option of --kitti-raw, not of --toy"),
+        (["--toy", "t", "--semantic", "."], 2, "--semantic is an option of --rgb, --kitti-raw or --data, not of --toy"),
+        (["--data", ".", "--toy", "t"], 2, "or --toy (one of them: not --data and --toy)"),
+    ],
+)
 def test_a_new_input_kind_gets_the_rule_with_no_other_code(args: list[str], code: int, said: str) -> None:
     result = CliRunner().invoke(_toy_command, args)
     assert result.exit_code == code and said in result.output, result.output

@@ -17,9 +17,28 @@ MAX_DEPTH, TOP_CROP = 60.0, 100
 
 
 def _predict(out: Path, *args: str) -> str:
-    result = CliRunner().invoke(main, ["predict", "--kitti-raw", str(DRIVE), "--frames", "5", "--camera", "2", "--ply",
-                                       "--max-depth", str(MAX_DEPTH), "--top-crop", str(TOP_CROP), "--device", "cpu",
-                                       "--out", str(out), *args])  # fmt: skip
+    result = CliRunner().invoke(
+        main,
+        [
+            "predict",
+            "--kitti-raw",
+            str(DRIVE),
+            "--frames",
+            "5",
+            "--camera",
+            "2",
+            "--ply",
+            "--max-depth",
+            str(MAX_DEPTH),
+            "--top-crop",
+            str(TOP_CROP),
+            "--device",
+            "cpu",
+            "--out",
+            str(out),
+            *args,
+        ],
+    )
     assert result.exit_code == 0, result.output
     assert "0000000005: 18956 LiDAR pixels" in result.output
     return result.output
@@ -50,8 +69,9 @@ def test_classical_on_the_raw_drive(tmp_path: Path) -> None:
     _predict(tmp_path, "--method", "classical", "--panel")
     _check_outputs(tmp_path, confidence=False)
     assert (tmp_path / "0000000005_panel.png").is_file()
-    again = CliRunner().invoke(main, ["predict", "--kitti-raw", str(DRIVE), "--method", "classical", "--out",
-                                      str(tmp_path)])  # fmt: skip
+    again = CliRunner().invoke(
+        main, ["predict", "--kitti-raw", str(DRIVE), "--method", "classical", "--out", str(tmp_path)]
+    )
     assert again.exit_code != 0 and "--overwrite" in again.output
 
 

@@ -33,8 +33,21 @@ def _folder(root: Path) -> tuple[Path, Path]:
 def test_sigterm_drains_the_writer_then_resume_finishes(tmp_path: Path) -> None:
     rgb, sparse = _folder(tmp_path)
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "semattnet", "predict", "--rgb", str(rgb), "--sparse", str(sparse), "--method",
-           "classical", "--out", str(out), "--stream"]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "semattnet",
+        "predict",
+        "--rgb",
+        str(rgb),
+        "--sparse",
+        str(sparse),
+        "--method",
+        "classical",
+        "--out",
+        str(out),
+        "--stream",
+    ]
     src = str(Path(__file__).resolve().parents[2] / "src")
     env = {**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONPATH": src + os.pathsep + os.environ.get("PYTHONPATH", "")}
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)

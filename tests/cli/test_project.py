@@ -24,8 +24,9 @@ def _project(*args: str) -> tuple[int, str]:
 @pytest.mark.parametrize("camera", ["2", "3"])
 def test_project_matches_official_velodyne_raw(tmp_path: Path, camera: str) -> None:
     out = tmp_path / "sparse.png"
-    code, output = _project("--velodyne", str(SCAN), "--calib-dir", str(RAW_DATE), "--camera", camera,
-                            "--out", str(out))  # fmt: skip
+    code, output = _project(
+        "--velodyne", str(SCAN), "--calib-dir", str(RAW_DATE), "--camera", camera, "--out", str(out)
+    )
     assert code == 0, output
     ours, ref = read_depth(out), read_depth(official_velodyne_raw(f"0{camera}"))
     assert ours.shape == ref.shape == (375, 1242)
@@ -43,8 +44,18 @@ def test_deskew_oxts_reproduces_kitti_pixels(tmp_path: Path, period: str, at_lea
     """0.1033 s is this frame's timestamps_end - timestamps_start (measured: 93 % same pixel within 1 cm; 88 %
     with the default 0.1 s), against 13 % without deskewing."""
     out = tmp_path / "deskewed.png"
-    code, output = _project("--velodyne", str(SCAN), "--calib-dir", str(RAW_DATE), "--deskew-oxts", str(OXTS),
-                            "--scan-period", period, "--out", str(out))  # fmt: skip
+    code, output = _project(
+        "--velodyne",
+        str(SCAN),
+        "--calib-dir",
+        str(RAW_DATE),
+        "--deskew-oxts",
+        str(OXTS),
+        "--scan-period",
+        period,
+        "--out",
+        str(out),
+    )
     assert code == 0, output
     ref = read_depth(official_velodyne_raw("02"))
     assert agreement(read_depth(out), ref, 0, tol=0.01) >= at_least
@@ -101,7 +112,11 @@ def test_bad_inputs_give_one_line_errors(tmp_path: Path, case: str) -> None:
     assert "Traceback" not in output and len(output.strip().splitlines()) == 1, output
     if case != "two_sources":
         assert named in output, output
-    expected = {"missing_camera": "no camera '02'", "bad_size": "not a multiple of 16", "empty": "empty scan",
-                "two_sources": "exactly one calibration source"}[case]  # fmt: skip
+    expected = {
+        "missing_camera": "no camera '02'",
+        "bad_size": "not a multiple of 16",
+        "empty": "empty scan",
+        "two_sources": "exactly one calibration source",
+    }[case]
     assert expected in output, output
     assert not (tmp_path / "o.png").exists()

@@ -60,8 +60,25 @@ def test_trains_a_real_time_model(tmp_path: Path) -> None:
     """Two real steps of ``semattnet_rt_s``: its checkpoint holds that architecture."""
     data = tmp_path / "data"
     write_synthetic_kitti(data, frames=2, size=(64, 128), seed=0, eval_frames=0, workers=1)
-    args = ["train", "--model", "semattnet_rt_s", "--data", str(data), "--out", str(tmp_path / "run"), "--crop",
-            "64x128", "--batch-size", "2", "--workers", "0", "--max-steps", "2", "--set", "val_split="]  # fmt: skip
+    args = [
+        "train",
+        "--model",
+        "semattnet_rt_s",
+        "--data",
+        str(data),
+        "--out",
+        str(tmp_path / "run"),
+        "--crop",
+        "64x128",
+        "--batch-size",
+        "2",
+        "--workers",
+        "0",
+        "--max-steps",
+        "2",
+        "--set",
+        "val_split=",
+    ]
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     ckpt = load_checkpoint(tmp_path / "run" / "checkpoints" / "last.pt")

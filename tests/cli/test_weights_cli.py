@@ -47,13 +47,24 @@ def served(weights_file: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) 
     httpd = ThreadingHTTPServer(("127.0.0.1", 0), handler)
     threading.Thread(target=httpd.serve_forever, daemon=True).start()
     url = f"http://127.0.0.1:{httpd.server_address[1]}/{weights_file.name}"
-    record = PretrainedWeights(name=NAME, arch="semattnet", urls=(url,), file_name="tiny.safetensors",
-                               format="safetensors", license="test only: not for release", config=CONFIG,
-                               num_params=5_700_000, paper_metrics={"synthetic/val": {"rmse_mm": 1234.5}})  # fmt: skip
-    monkeypatch.setitem(pretrained._REGISTRY, NAME, record)
-    yield url
-    httpd.shutdown()
-    httpd.server_close()
+    record = PretrainedWeights(
+        name=NAME,
+        arch="semattnet",
+        urls=(url,),
+        file_name="tiny.safetensors",
+        format="safetensors",
+        license="test only: not for release",
+        config=CONFIG,
+        num_params=5_700_000,
+        paper_metrics={"synthetic/val": {"rmse_mm": 1234.5}},
+    )
+    pretrained.register_weights(record)
+    try:
+        yield url
+    finally:
+        pretrained.WEIGHTS.remove(NAME)
+        httpd.shutdown()
+        httpd.server_close()
 
 
 def run(*args: str) -> str:
@@ -170,8 +181,19 @@ def test_predict_with_a_shipped_name_end_to_end(tmp_path: Path) -> None:
     sparse = np.where(rng.random((32, 64)) < 0.1, rng.uniform(1, 50, (32, 64)), 0).astype(np.float32)
     write_depth(tmp_path / "sparse" / "f.png", sparse)
     out = tmp_path / "out"
-    run("predict", "--weights", "semattnet-demo-ref-seed0", "--rgb", str(tmp_path / "rgb"), "--sparse",
-        str(tmp_path / "sparse"), "--semantic", str(tmp_path / "semantic"), "--out", str(out))  # fmt: skip
+    run(
+        "predict",
+        "--weights",
+        "semattnet-demo-ref-seed0",
+        "--rgb",
+        str(tmp_path / "rgb"),
+        "--sparse",
+        str(tmp_path / "sparse"),
+        "--semantic",
+        str(tmp_path / "semantic"),
+        "--out",
+        str(out),
+    )
     depth = read_depth(out / "f.png")
     assert depth.shape == (32, 64) and np.isfinite(depth).all() and (depth > 0).mean() > 0.9
 
@@ -179,8 +201,9 @@ def test_predict_with_a_shipped_name_end_to_end(tmp_path: Path) -> None:
 def test_info_reads_names_and_folders_with_their_config(tmp_path: Path) -> None:
     shown = run("info", "semattnet-demo-ref-seed1")
     assert "(packed)" in shown and '"width": 0.125' in shown
-    folder = semattnet.weights.save_pretrained(semattnet.build_model("semattnet", **CONFIG, refinement_mode="clean"),
-                                               tmp_path / "folder")  # fmt: skip
+    folder = semattnet.weights.save_pretrained(
+        semattnet.build_model("semattnet", **CONFIG, refinement_mode="clean"), tmp_path / "folder"
+    )
     shown = run("info", str(folder))
     assert "model.safetensors" in shown and '"refinement_mode": "clean"' in shown  # config.json, not dropped
     bad = CliRunner().invoke(main, ["info", str(tmp_path / "nothing-here")])
@@ -197,14 +220,31 @@ def test_bench_takes_precision_and_outputs_through_the_shared_options(monkeypatc
     monkeypatch.setattr(
         benchmark, "optimize_for_inference", lambda *a, **k: asked.append(k["outputs"]) or real(*a, **k)
     )
-    out = run("bench", "--parts", "backends", "--precision", "f32", "--size", "32x64", "--repeats", "1",
-              "--device", "cpu", "--width", "0.125", "--outputs", "refined_depth")  # fmt: skip
+    out = run(
+        "bench",
+        "--parts",
+        "backends",
+        "--precision",
+        "f32",
+        "--size",
+        "32x64",
+        "--repeats",
+        "1",
+        "--device",
+        "cpu",
+        "--width",
+        "0.125",
+        "--outputs",
+        "refined_depth",
+    )
     rows = [line for line in out.splitlines() if "backend " in line]
     assert rows and all("(f32)" in line for line in rows), out
     assert asked and set(asked) == {("refined_depth",)}
-    refused = ((["--calibration", "."], "--calibration only mean(s) something with --precision int8"),
-               (["--precision", "f32", "--parts", "full"], "backends is not in --parts"),
-               (["--outputs", "refined_depth,depth_map"], "--outputs: unknown output(s) ['depth_map']"))  # fmt: skip
+    refused = (
+        (["--calibration", "."], "--calibration only mean(s) something with --precision int8"),
+        (["--precision", "f32", "--parts", "full"], "backends is not in --parts"),
+        (["--outputs", "refined_depth,depth_map"], "--outputs: unknown output(s) ['depth_map']"),
+    )
     for args, message in refused:
         res = CliRunner().invoke(main, ["bench", *args])
         assert res.exit_code != 0 and message in res.output, res.output

@@ -44,15 +44,17 @@ def _png16(path: Path, metres: np.ndarray) -> None:
     Image.fromarray(np.round(metres * 256).astype(np.uint16)).save(path)
 
 
-def make_void(root: Path, train: int = 2, test: int = 2, seed: int = 0, h: int = 480, w: int = 640,
-              k_format: str = "txt") -> Path:  # fmt: skip
+def make_void(
+    root: Path, train: int = 2, test: int = 2, seed: int = 0, h: int = 480, w: int = 640, k_format: str = "txt"
+) -> Path:
     """``root/void_1500/{split}_*.txt`` listing ``void_1500/data/<seq>/{image,...}/<t>.png`` (release layout)."""
     rng = np.random.default_rng(seed)
     base = root / "void_1500"
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
     for split, n in (("train", train), ("test", test)):
-        lists: dict[str, list[str]] = {r: [] for r in ("image", "sparse_depth", "validity_map", "ground_truth",
-                                                        "intrinsics")}  # fmt: skip
+        lists: dict[str, list[str]] = {
+            r: [] for r in ("image", "sparse_depth", "validity_map", "ground_truth", "intrinsics")
+        }
         seq = f"{split}_room"
         seq_dir = base / "data" / seq
         K = np.array([[500.0, 0, w / 2], [0, 500.0, h / 2], [0, 0, 1]])
@@ -63,8 +65,10 @@ def make_void(root: Path, train: int = 2, test: int = 2, seed: int = 0, h: int =
             stamp = f"{1552097915 + i}.{i:04d}"
             gt = (0.5 + 3.0 * xx / w + yy / h).astype(np.float32)
             valid = rng.random((h, w)) < 1500 / (h * w)
-            rel = {r: f"void_1500/data/{seq}/{r}/{stamp}.png" for r in ("image", "sparse_depth", "validity_map",
-                                                                          "ground_truth")}  # fmt: skip
+            rel = {
+                r: f"void_1500/data/{seq}/{r}/{stamp}.png"
+                for r in ("image", "sparse_depth", "validity_map", "ground_truth")
+            }
             (root / rel["image"]).parent.mkdir(parents=True, exist_ok=True)
             Image.fromarray(rng.integers(0, 256, (h, w, 3), dtype=np.uint8)).save(root / rel["image"])
             _png16(root / rel["sparse_depth"], np.where(valid, gt, 0))

@@ -36,8 +36,19 @@ def test_void_root_one_level_too_high_names_the_folder(tmp_path: Path) -> None:
 
 def test_evaluate_with_a_root_too_high_is_one_line(tmp_path: Path) -> None:
     inner = make_nyu(tmp_path / "nyu" / "nyudepthv2", train=0, test=1)
-    args = ["evaluate", "--dataset", "nyuv2", "--data", tmp_path / "nyu", "--method", "classical", "--sparsity",
-            "keep=1", "--out", tmp_path / "o"]  # fmt: skip
+    args = [
+        "evaluate",
+        "--dataset",
+        "nyuv2",
+        "--data",
+        tmp_path / "nyu",
+        "--method",
+        "classical",
+        "--sparsity",
+        "keep=1",
+        "--out",
+        tmp_path / "o",
+    ]
     res = CliRunner().invoke(main, [str(a) for a in args])
     assert res.exit_code == 1 and len(res.output.strip().splitlines()) == 1, res.output
     assert f"pass {inner}" in res.output and "Traceback" not in res.output

@@ -22,7 +22,7 @@ def test_registry_entries_and_unknown_name() -> None:
     nyu, void = get_dataset("nyuv2"), get_dataset("void")
     assert (nyu.crop, nyu.depth_range, nyu.sparse_samples, nyu.palette) == ((228, 304), (0.1, 10.0), 500, "nyu40")
     assert void.depth_range == (0.2, 5.0) and void.units == "mm"
-    with pytest.raises(InputError, match="choose one of kitti-dc, nyuv2, void"):
+    with pytest.raises(InputError, match="unknown dataset .nyu.; available: kitti-dc, nyuv2, void"):
         get_dataset("nyu")
     with pytest.raises(InputError, match="nyuv2 has no split 'val_select'"):
         nyu.source("x", "val_select")

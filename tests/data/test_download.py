@@ -66,11 +66,17 @@ def _zip(path: Path, members: dict[str, bytes | Path]) -> Path:
 def _kitti_archives(root: Path, tmp: Path) -> Path:
     """KITTI's server layout with one frame (the real sample); returns a semantic-maps zip."""
     cams = ("02", "03")
-    gt = {f"train/{DRIVE}/proj_depth/groundtruth/image_{c}/0000000005.png":
-          SAMPLE / f"data_depth_annotated/train/{DRIVE}/proj_depth/groundtruth/image_{c}/0000000005.png"
-          for c in cams}  # fmt: skip
-    velo = {k.replace("groundtruth", "velodyne_raw"): Path(str(v).replace("annotated", "velodyne").replace(
-        "groundtruth", "velodyne_raw")) for k, v in gt.items()}  # fmt: skip
+    gt = {
+        f"train/{DRIVE}/proj_depth/groundtruth/image_{c}/0000000005.png": SAMPLE
+        / f"data_depth_annotated/train/{DRIVE}/proj_depth/groundtruth/image_{c}/0000000005.png"
+        for c in cams
+    }
+    velo = {
+        k.replace("groundtruth", "velodyne_raw"): Path(
+            str(v).replace("annotated", "velodyne").replace("groundtruth", "velodyne_raw")
+        )
+        for k, v in gt.items()
+    }
     _zip(root / "data_depth_annotated.zip", gt)
     _zip(root / "data_depth_velodyne.zip", velo)
     _zip(root / "data_depth_selection.zip", {"depth_selection/README.txt": b"selection"})
@@ -96,21 +102,34 @@ def test_download_unpacks_into_loader_layout_and_check_passes(mirror, env, tmp_p
     prefix, root, seen = mirror
     sem = _kitti_archives(root, tmp_path)
     out = tmp_path / "kitti"
-    args = ["data", "download", "--what", "all", "--out", str(out), "--accept-kitti-license",
-            "--mirror", prefix, "--semantic-archive", str(sem)]  # fmt: skip
+    args = [
+        "data",
+        "download",
+        "--what",
+        "all",
+        "--out",
+        str(out),
+        "--accept-kitti-license",
+        "--mirror",
+        prefix,
+        "--semantic-archive",
+        str(sem),
+    ]
     res = CliRunner().invoke(main, args)
     assert res.exit_code == 0, res.output
     assert "CC BY-NC-SA 3.0" in res.output
     raw = out / "kitti_raw/2011_09_26" / DRIVE
     assert (raw / "image_02/data/0000000005.png").read_bytes() == (
-        SAMPLE / "kitti_raw/2011_09_26" / DRIVE / "image_02/data/0000000005.png").read_bytes()  # fmt: skip
+        SAMPLE / "kitti_raw/2011_09_26" / DRIVE / "image_02/data/0000000005.png"
+    ).read_bytes()
     assert not (raw / "velodyne_points").exists() and not (raw / "image_00").exists()
     assert (out / "kitti_raw/2011_09_26/calib_cam_to_cam.txt").is_file()
     assert (out / "data_depth_selection/README.txt").is_file()
     assert (out / "semantic/2011_09_26" / DRIVE / "image_03/data/0000000005.png").is_file()
     # only the drive found in the unpacked annotations was fetched
     assert [p for p in seen if p.startswith("/raw_data/") and "calib" not in p] == [
-        "/raw_data/2011_09_26_drive_0035/2011_09_26_drive_0035_sync.zip"]  # fmt: skip
+        "/raw_data/2011_09_26_drive_0035/2011_09_26_drive_0035_sync.zip"
+    ]
     assert CliRunner().invoke(main, ["data", "check", str(out)]).exit_code == 0
     # a second run downloads nothing (cached) and unpacks nothing new
     n = len(seen)
@@ -122,8 +141,9 @@ def test_download_unpacks_into_loader_layout_and_check_passes(mirror, env, tmp_p
 def test_dry_run_lists_everything_and_downloads_nothing(tmp_path: Path) -> None:
     out = tmp_path / "kitti"
     prefix = "http://127.0.0.1:9/kitti/"
-    res = CliRunner().invoke(main, ["data", "download", "--what", "all", "--out", str(out), "--dry-run",
-                                    "--mirror", prefix])  # fmt: skip
+    res = CliRunner().invoke(
+        main, ["data", "download", "--what", "all", "--out", str(out), "--dry-run", "--mirror", prefix]
+    )
     assert res.exit_code == 0, res.output
     lines = res.output.splitlines()
     for a in kf.DEPTH_COMPLETION_ARCHIVES:
@@ -138,8 +158,9 @@ def test_dry_run_lists_everything_and_downloads_nothing(tmp_path: Path) -> None:
 
 
 def test_default_prefix_is_kittis_server(tmp_path: Path) -> None:
-    res = CliRunner().invoke(main, ["data", "download", "--what", "depth-completion", "--out", str(tmp_path),
-                                    "--dry-run"])  # fmt: skip
+    res = CliRunner().invoke(
+        main, ["data", "download", "--what", "depth-completion", "--out", str(tmp_path), "--dry-run"]
+    )
     assert "https://s3.eu-central-1.amazonaws.com/avg-kitti/data_depth_annotated.zip" in res.output
 
 
@@ -165,8 +186,20 @@ def test_unsafe_archive_through_the_command(mirror, env, tmp_path: Path) -> None
     prefix, root, _ = mirror
     _zip(root / "data_depth_annotated.zip", {"../evil.txt": b"evil"})
     out = tmp_path / "kitti"
-    res = CliRunner().invoke(main, ["data", "download", "--what", "depth-completion", "--out", str(out),
-                                    "--accept-kitti-license", "--mirror", prefix])  # fmt: skip
+    res = CliRunner().invoke(
+        main,
+        [
+            "data",
+            "download",
+            "--what",
+            "depth-completion",
+            "--out",
+            str(out),
+            "--accept-kitti-license",
+            "--mirror",
+            prefix,
+        ],
+    )
     assert res.exit_code == 1 and "refusing" in res.output
     assert not list(tmp_path.rglob("evil.txt"))
 

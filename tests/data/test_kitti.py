@@ -50,8 +50,9 @@ def test_real_frame_pairing_and_units(kitti: Path) -> None:
 
 def test_bottom_crop_geometry(kitti: Path) -> None:
     full = KittiDepthCompletion(kitti, "train", transform=EvalTransform(crop=None))[0]
-    crop = KittiDepthCompletion(kitti, "train", transform=TrainTransform(random_crop_height=352, flip=False,
-                                                                       jitter=0.0))[0]  # fmt: skip
+    crop = KittiDepthCompletion(
+        kitti, "train", transform=TrainTransform(random_crop_height=352, flip=False, jitter=0.0)
+    )[0]
     top, left = 375 - 352, (1242 - 1216) // 2
     for key in ("rgb", "semantic", "sparse", "gt"):
         assert torch.equal(crop[key], full[key][:, top:, left : left + 1216]), key
@@ -95,8 +96,9 @@ def synth_tree(tmp_path_factory) -> Path:
     return out
 
 
-@pytest.mark.parametrize(("split", "n", "has_gt"), [("train", 4, True), ("val", 2, True), ("val_select", 2, True),
-                                                    ("test", 2, False)])  # fmt: skip
+@pytest.mark.parametrize(
+    ("split", "n", "has_gt"), [("train", 4, True), ("val", 2, True), ("val_select", 2, True), ("test", 2, False)]
+)
 def test_synthetic_tree_reads_with_the_kitti_loader(synth_tree: Path, split: str, n: int, has_gt: bool) -> None:
     ds = KittiDepthCompletion(synth_tree, split, transform=EvalTransform(crop=None))
     assert len(ds) == n
@@ -108,14 +110,19 @@ def test_synthetic_tree_reads_with_the_kitti_loader(synth_tree: Path, split: str
 @pytest.mark.parametrize(
     ("split", "victim", "action"),
     [
-        ("train", "data_depth_annotated/train/2000_01_01_drive_0000_sync/proj_depth/groundtruth/image_02/"
-         "0000000002.png",
-         "remove"),
-        ("val_select", "data_depth_selection/val_selection_cropped/image/"
-         "2000_01_01_drive_2000_sync_image_0000000001_image_02.png", "rename"),
+        (
+            "train",
+            "data_depth_annotated/train/2000_01_01_drive_0000_sync/proj_depth/groundtruth/image_02/0000000002.png",
+            "remove",
+        ),
+        (
+            "val_select",
+            "data_depth_selection/val_selection_cropped/image/2000_01_01_drive_2000_sync_image_0000000001_image_02.png",
+            "rename",
+        ),
         ("test", "data_depth_selection/test_depth_completion_anonymous/semantic/0000000000.png", "remove"),
     ],
-)  # fmt: skip
+)
 def test_synthetic_tree_with_a_file_gone_is_refused(synth_tree: Path, tmp_path: Path, split, victim, action) -> None:
     tree = tmp_path / "t"
     shutil.copytree(synth_tree, tree)

@@ -13,11 +13,22 @@ from semattnet.palette import NYU40_CLASSES, colors_to_ids, nyu894_to_nyu40
 from semattnet.palette.nyu40_map import NYU894_TO_40, RAW_CLASSES, RAW_NAMES
 
 # raw id, raw name (allClassName), NYU-40 class (className), read from classMapping40.mat at commit b92d15c
-PUBLISHED = [(21, "wall", "wall"), (11, "floor", "floor"), (4, "ceiling", "ceiling"), (5, "chair", "chair"),
-             (157, "bed", "bed"), (85, "books", "books"), (1, "book", "otherprop"), (172, "television", "television"),
-             (331, "person", "person"), (12, "garbage bin", "otherfurniture"), (8, "dishwasher", "otherstructure"),
-             (17, "refridgerator", "refrigerator"), (143, "floor mat", "floor mat"),
-             (158, "night stand", "night stand")]  # fmt: skip
+PUBLISHED = [
+    (21, "wall", "wall"),
+    (11, "floor", "floor"),
+    (4, "ceiling", "ceiling"),
+    (5, "chair", "chair"),
+    (157, "bed", "bed"),
+    (85, "books", "books"),
+    (1, "book", "otherprop"),
+    (172, "television", "television"),
+    (331, "person", "person"),
+    (12, "garbage bin", "otherfurniture"),
+    (8, "dishwasher", "otherstructure"),
+    (17, "refridgerator", "refrigerator"),
+    (143, "floor mat", "floor mat"),
+    (158, "night stand", "night stand"),
+]
 NAMES = [name for name, _ in NYU40_CLASSES]
 
 

@@ -123,8 +123,24 @@ def test_camera_rays_go_through_integer_pixel_centres() -> None:
 def test_synth_and_check_commands(tmp_path: Path) -> None:
     runner = CliRunner()
     out = tmp_path / "syn"
-    r = runner.invoke(main, ["synth", "--out", str(out), "--frames", "4", "--size", "64x128", "--seed", "1",
-                             "--eval-frames", "2", "--workers", "2"])  # fmt: skip
+    r = runner.invoke(
+        main,
+        [
+            "synth",
+            "--out",
+            str(out),
+            "--frames",
+            "4",
+            "--size",
+            "64x128",
+            "--seed",
+            "1",
+            "--eval-frames",
+            "2",
+            "--workers",
+            "2",
+        ],
+    )
     assert r.exit_code == 0, r.output
     manifest = json.loads((out / "scenes.json").read_text())
     assert manifest["counts"] == {"train": 4, "val": 2, "val_select": 2, "test": 2}
@@ -150,8 +166,9 @@ def test_style_reaches_the_tree_and_the_manifest(tmp_path: Path) -> None:
     from semattnet.data.io import read_depth
     from semattnet.data.synthetic.tree import SYNTH_DATE, frame_seed, write_synthetic_kitti
 
-    manifest = write_synthetic_kitti(tmp_path / "t", frames=2, size=(64, 128), seed=3, eval_frames=1, workers=1,
-                                     style="realistic")  # fmt: skip
+    manifest = write_synthetic_kitti(
+        tmp_path / "t", frames=2, size=(64, 128), seed=3, eval_frames=1, workers=1, style="realistic"
+    )
     assert manifest["style"] == json.loads((tmp_path / "t" / "scenes.json").read_text())["style"] == "realistic"
     first = next(e for e in manifest["frames"] if e["split"] == "train" and e["index"] == 0)
     expected = make_frame(64, 128, seed=frame_seed(3, "train", 0), shadow=False, style="realistic").sparse
@@ -161,8 +178,24 @@ def test_style_reaches_the_tree_and_the_manifest(tmp_path: Path) -> None:
     assert not np.array_equal(expected, make_frame(64, 128, seed=first["seed"], shadow=False).sparse)
     with pytest.raises(ValueError, match="scene style"):
         write_synthetic_kitti(tmp_path / "u", frames=1, size=(64, 128), style="nope")
-    r = CliRunner().invoke(main, ["synth", "--out", str(tmp_path / "c"), "--frames", "2", "--size", "48x96",
-                                  "--eval-frames", "2", "--workers", "1", "--style", "realistic"])  # fmt: skip
+    r = CliRunner().invoke(
+        main,
+        [
+            "synth",
+            "--out",
+            str(tmp_path / "c"),
+            "--frames",
+            "2",
+            "--size",
+            "48x96",
+            "--eval-frames",
+            "2",
+            "--workers",
+            "1",
+            "--style",
+            "realistic",
+        ],
+    )
     assert r.exit_code == 0, r.output
     assert json.loads((tmp_path / "c" / "scenes.json").read_text())["style"] == "realistic"
     bad = CliRunner().invoke(main, ["synth", "--out", str(tmp_path / "d"), "--style", "photoreal"])

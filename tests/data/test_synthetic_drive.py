@@ -32,8 +32,9 @@ def _drive(tree: Path) -> Path:
 
 
 def _gt(tree: Path, drive: Path, name: str) -> np.ndarray:
-    return read_depth(tree / "data_depth_annotated" / "train" / drive.name / "proj_depth" / "groundtruth" / "image_02"
-                      / f"{name}.png")  # fmt: skip
+    return read_depth(
+        tree / "data_depth_annotated" / "train" / drive.name / "proj_depth" / "groundtruth" / "image_02" / f"{name}.png"
+    )
 
 
 def test_the_raw_reader_reads_every_frame_and_the_scan_agrees_with_the_ground_truth(tree: Path) -> None:
@@ -80,8 +81,9 @@ def test_oxts_poses_move_the_scan_onto_the_next_frame(tree: Path) -> None:
     """The OXTS packets give 1 m forward per frame (the pose and the velocity read_oxts_motion reads agree); with
     the imu -> velo -> camera calibration they move frame 1's scan onto frame 0's ground truth."""
     drive = _drive(tree)
-    packets = [[float(x) for x in (drive / "oxts" / "data" / f"{k:010d}.txt").read_text().split()]
-               for k in range(FRAMES)]  # fmt: skip
+    packets = [
+        [float(x) for x in (drive / "oxts" / "data" / f"{k:010d}.txt").read_text().split()] for k in range(FRAMES)
+    ]
     assert all(len(p) == 30 for p in packets)
     poses = [oxts_pose(p) for p in packets]
     step = invert_T(poses[0]) @ poses[1]
@@ -103,8 +105,9 @@ def test_oxts_poses_move_the_scan_onto_the_next_frame(tree: Path) -> None:
 @pytest.mark.slow
 def test_predict_reads_the_drive_and_metrics_scores_it(tree: Path, tmp_path: Path) -> None:
     drive = _drive(tree)
-    r = CliRunner().invoke(main, ["predict", "--kitti-raw", str(drive), "--method", "classical", "--out",
-                                  str(tmp_path / "pred")])  # fmt: skip
+    r = CliRunner().invoke(
+        main, ["predict", "--kitti-raw", str(drive), "--method", "classical", "--out", str(tmp_path / "pred")]
+    )
     assert r.exit_code == 0, r.output
     assert sorted(p.name for p in (tmp_path / "pred").glob("0*[0-9].png")) == [f"{k:010d}.png" for k in range(FRAMES)]
     gt_dir = tree / "data_depth_annotated" / "train" / drive.name / "proj_depth" / "groundtruth" / "image_02"
@@ -135,7 +138,8 @@ def test_a_drive_of_several_streets_leaves_a_frame_out_between_them(tmp_path: Pa
     drive = _drive(tmp_path)
     assert RawDrive(drive).names == ["0000000000", "0000000001", "0000000003", "0000000004"]
     assert m["drives"][0]["frames"] == 4 and len(set(m["drives"][0]["seeds"])) == 2  # type: ignore[arg-type]
-    read = [oxts_pose([float(x) for x in (drive / "oxts" / "data" / f"{k:010d}.txt").read_text().split()])
-            for k in (1, 3)]  # fmt: skip
+    read = [
+        oxts_pose([float(x) for x in (drive / "oxts" / "data" / f"{k:010d}.txt").read_text().split()]) for k in (1, 3)
+    ]
     assert (invert_T(read[0]) @ read[1])[0, 3] == pytest.approx(STREET_GAP - STEP, abs=1e-5)
     assert len((drive / "oxts" / "timestamps.txt").read_text().splitlines()) == 5

@@ -12,8 +12,18 @@ import click
 from semattnet.cli import main
 
 #: The subpackages with an API page of their own (docs/reference/api/NAME.md).
-SUBPACKAGES = ["models", "weights", "data", "geometry", "segmentation", "training", "evaluation", "inference",
-               "baselines", "viz"]  # fmt: skip
+SUBPACKAGES = [
+    "models",
+    "weights",
+    "data",
+    "geometry",
+    "segmentation",
+    "training",
+    "evaluation",
+    "inference",
+    "baselines",
+    "viz",
+]
 
 
 def _commands(group: click.Group, path: tuple[str, ...] = ()) -> list[tuple[tuple[str, ...], click.Command]]:

@@ -42,9 +42,26 @@ def setup(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 @pytest.mark.parametrize("policy", ["recolour", "fallback"])
 def test_kitti_model_on_nyu(policy: str, setup: tuple[Path, Path], tmp_path: Path) -> None:
     root, ckpt = setup
-    res = CliRunner().invoke(main, ["evaluate", "--dataset", "nyuv2", "--data", str(root), "--checkpoint", str(ckpt),
-                                    "--workers", "0", "--device", "cpu", "--palette-mismatch", policy,
-                                    "--out", str(tmp_path / "ev")])  # fmt: skip
+    res = CliRunner().invoke(
+        main,
+        [
+            "evaluate",
+            "--dataset",
+            "nyuv2",
+            "--data",
+            str(root),
+            "--checkpoint",
+            str(ckpt),
+            "--workers",
+            "0",
+            "--device",
+            "cpu",
+            "--palette-mismatch",
+            policy,
+            "--out",
+            str(tmp_path / "ev"),
+        ],
+    )
     assert res.exit_code == 0, res.output + repr(res.exception)
     sem = json.loads((tmp_path / "ev" / "metrics.json").read_text())["semantic"]
     assert sem["maps_palette"] == "nyu40" and sem["model_palette"] == "cityscapes" and sem["used"] == policy
@@ -69,8 +86,21 @@ def test_recolouring_reaches_the_model(setup: tuple[Path, Path]) -> None:
 
 def test_predict_recolours_too(setup: tuple[Path, Path], tmp_path: Path) -> None:
     root, ckpt = setup
-    args = ["predict", "--dataset", "nyuv2", "--data", root, "--checkpoint", ckpt, "--device", "cpu",
-            "--palette-mismatch", "recolour", "--out", tmp_path / "p"]  # fmt: skip
+    args = [
+        "predict",
+        "--dataset",
+        "nyuv2",
+        "--data",
+        root,
+        "--checkpoint",
+        ckpt,
+        "--device",
+        "cpu",
+        "--palette-mismatch",
+        "recolour",
+        "--out",
+        tmp_path / "p",
+    ]
     res = CliRunner().invoke(main, [str(a) for a in args])
     assert res.exit_code == 0, res.output + repr(res.exception)
     assert "semantic maps: NYU-40 maps recoloured to the model's Cityscapes palette: person, wall kept" in res.output

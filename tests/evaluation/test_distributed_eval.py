@@ -31,8 +31,20 @@ def weights(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.mark.slow  # ~1 min (three torchrun launches); predict's two-process tests run by default
 def test_evaluate_two_processes_equals_one(tree: Path, weights: Path, tmp_path: Path) -> None:
-    common = ("evaluate", "--checkpoint", weights, "--data", tree, "--device", "cpu", "--workers", "0",
-              "--save-predictions", "--pictures", "3")  # fmt: skip
+    common = (
+        "evaluate",
+        "--checkpoint",
+        weights,
+        "--data",
+        tree,
+        "--device",
+        "cpu",
+        "--workers",
+        "0",
+        "--save-predictions",
+        "--pictures",
+        "3",
+    )
     one = cli(*common, "--out", tmp_path / "one")
     assert one.returncode == 0, one.stderr[-3000:]
     res = cli(*common, "--out", tmp_path / "two", nproc=2, logs=tmp_path / "logs")

@@ -47,8 +47,20 @@ def run(*args: str) -> str:
 
 def test_metrics_and_evaluate_agree(tree: Path, weights: Path, tmp_path: Path) -> None:
     out = tmp_path / "ev"
-    run("evaluate", "--checkpoint", weights, "--data", tree, "--out", out, "--save-predictions", "--pictures", "1",
-        "--workers", "0")  # fmt: skip
+    run(
+        "evaluate",
+        "--checkpoint",
+        weights,
+        "--data",
+        tree,
+        "--out",
+        out,
+        "--save-predictions",
+        "--pictures",
+        "1",
+        "--workers",
+        "0",
+    )
     ev = json.loads((out / "metrics.json").read_text())
     run("metrics", out / "predictions", tree / SEL / "groundtruth_depth", "--json", tmp_path / "m.json")
     folder = json.loads((tmp_path / "m.json").read_text())
@@ -80,51 +92,134 @@ def test_metrics_refuses_mismatched_folders(tree: Path, tmp_path: Path) -> None:
 
 
 def test_train_evaluate_predict_submit_round_trip(tree: Path, tmp_path: Path) -> None:
-    run("train", "--data", tree, "--out", tmp_path / "run", "--width", "0.125", "--crop", "64x128", "--batch-size", "2",
-        "--workers", "0", "--max-steps", "2", "--set", "depth_head_init=[10,15]")  # fmt: skip
+    run(
+        "train",
+        "--data",
+        tree,
+        "--out",
+        tmp_path / "run",
+        "--width",
+        "0.125",
+        "--crop",
+        "64x128",
+        "--batch-size",
+        "2",
+        "--workers",
+        "0",
+        "--max-steps",
+        "2",
+        "--set",
+        "depth_head_init=[10,15]",
+    )
     ckpt = tmp_path / "run" / "checkpoints" / "last.pt"
     assert "RMSE" in run("evaluate", "--checkpoint", ckpt, "--data", tree, "--workers", "0")
     sel = tree / SEL
-    out = run("predict", "--checkpoint", ckpt, "--rgb", sel / "image", "--sparse", sel / "velodyne_raw",
-              "--semantic", sel / "semantic", "--out", tmp_path / "pred")  # fmt: skip
+    out = run(
+        "predict",
+        "--checkpoint",
+        ckpt,
+        "--rgb",
+        sel / "image",
+        "--sparse",
+        sel / "velodyne_raw",
+        "--semantic",
+        sel / "semantic",
+        "--out",
+        tmp_path / "pred",
+    )
     assert out.count("->") == 0 or True
     # folder mode pairs by file name: velodyne files are named differently, so use the test split
     test = tree / "data_depth_selection/test_depth_completion_anonymous"
-    run("predict", "--checkpoint", ckpt, "--rgb", test / "image", "--sparse", test / "velodyne_raw",
-        "--semantic", test / "semantic", "--out", tmp_path / "pred2", "--npy", "--panel")  # fmt: skip
+    run(
+        "predict",
+        "--checkpoint",
+        ckpt,
+        "--rgb",
+        test / "image",
+        "--sparse",
+        test / "velodyne_raw",
+        "--semantic",
+        test / "semantic",
+        "--out",
+        tmp_path / "pred2",
+        "--npy",
+        "--panel",
+    )
     assert sorted(p.name for p in (tmp_path / "pred2").iterdir())[:4] == [
-        "0000000000.npy", "0000000000.png", "0000000000_color.png", "0000000000_panel.png"]  # fmt: skip
+        "0000000000.npy",
+        "0000000000.png",
+        "0000000000_color.png",
+        "0000000000_panel.png",
+    ]
     run("submit", "--checkpoint", ckpt, "--data", tree, "--out", tmp_path / "sub", "--expected-frames", "3")
     with zipfile.ZipFile(tmp_path / "sub.zip") as zf:
         assert sorted(zf.namelist()) == ["0000000000.png", "0000000001.png", "0000000002.png"]
     assert read_depth(tmp_path / "sub" / "0000000000.png").shape == (64, 128)
-    again = CliRunner().invoke(main, ["submit", "--checkpoint", str(ckpt), "--data", str(tree), "--out",
-                                      str(tmp_path / "sub"), "--expected-frames", "3"])  # fmt: skip
+    again = CliRunner().invoke(
+        main,
+        [
+            "submit",
+            "--checkpoint",
+            str(ckpt),
+            "--data",
+            str(tree),
+            "--out",
+            str(tmp_path / "sub"),
+            "--expected-frames",
+            "3",
+        ],
+    )
     assert again.exit_code == 1 and "--overwrite" in again.output
-    wrong = CliRunner().invoke(main, ["submit", "--checkpoint", str(ckpt), "--data", str(tree), "--out",
-                                      str(tmp_path / "sub1000")])  # fmt: skip
+    wrong = CliRunner().invoke(
+        main, ["submit", "--checkpoint", str(ckpt), "--data", str(tree), "--out", str(tmp_path / "sub1000")]
+    )
     assert wrong.exit_code == 1 and "KITTI expects 1000" in wrong.output
     assert not (tmp_path / "sub1000").exists() and not (tmp_path / "sub1000.zip").exists()
 
 
 def test_predict_real_kitti_frame(weights: Path, tmp_path: Path) -> None:
     rgb = SAMPLE / "kitti_raw/2011_09_26/2011_09_26_drive_0035_sync/image_02/data/0000000005.png"
-    sparse = SAMPLE / ("data_depth_velodyne/train/2011_09_26_drive_0035_sync/proj_depth/velodyne_raw/image_02/"
-                       "0000000005.png")  # fmt: skip
+    sparse = SAMPLE / (
+        "data_depth_velodyne/train/2011_09_26_drive_0035_sync/proj_depth/velodyne_raw/image_02/0000000005.png"
+    )
     image = read_image(rgb)
     sem = np.zeros_like(image)  # stand-in semantic map: sky above, road below
     sem[: image.shape[0] // 2] = (70, 130, 180)
     sem[image.shape[0] // 2 :] = (128, 64, 128)
     write_image(tmp_path / "sem.png", sem)
-    run("predict", "--checkpoint", weights, "--rgb", rgb, "--sparse", sparse, "--semantic", tmp_path / "sem.png",
-        "--out", tmp_path / "out")  # fmt: skip
+    run(
+        "predict",
+        "--checkpoint",
+        weights,
+        "--rgb",
+        rgb,
+        "--sparse",
+        sparse,
+        "--semantic",
+        tmp_path / "sem.png",
+        "--out",
+        tmp_path / "out",
+    )
     png = Image.open(tmp_path / "out" / "0000000005.png")
     assert png.size == (1242, 375) and png.mode.startswith("I;16")
     d = read_depth(tmp_path / "out" / "0000000005.png")
     assert (d >= 0).all() and d.max() <= 65535 / 256  # holes (no prediction) stay 0
-    again = CliRunner().invoke(main, ["predict", "--checkpoint", str(weights), "--rgb", str(rgb), "--sparse",
-                                      str(sparse), "--semantic", str(tmp_path / "sem.png"), "--out",
-                                      str(tmp_path / "out")])  # fmt: skip
+    again = CliRunner().invoke(
+        main,
+        [
+            "predict",
+            "--checkpoint",
+            str(weights),
+            "--rgb",
+            str(rgb),
+            "--sparse",
+            str(sparse),
+            "--semantic",
+            str(tmp_path / "sem.png"),
+            "--out",
+            str(tmp_path / "out"),
+        ],
+    )
     assert again.exit_code == 1 and "exist" in again.output
 
 
@@ -178,8 +273,22 @@ def test_visualize_command(tree: Path, tmp_path: Path) -> None:
 
 
 def test_evaluate_full_val_split(tree: Path, weights: Path, tmp_path: Path) -> None:
-    out = run("evaluate", "--checkpoint", weights, "--data", tree, "--split", "val", "--out", tmp_path / "v",
-              "--save-predictions", "--workers", "0", "--batch-size", "2")  # fmt: skip
+    out = run(
+        "evaluate",
+        "--checkpoint",
+        weights,
+        "--data",
+        tree,
+        "--split",
+        "val",
+        "--out",
+        tmp_path / "v",
+        "--save-predictions",
+        "--workers",
+        "0",
+        "--batch-size",
+        "2",
+    )
     assert "RMSE [mm]" in out and "(3 images)" in out
     names = sorted(p.name for p in (tmp_path / "v" / "predictions").glob("*.png"))
     assert names[0] == "2000_01_01_drive_1000_sync_image_02_0000000000.png" and len(names) == 3
@@ -191,11 +300,34 @@ def test_submit_takes_weights_and_a_backend(tree: Path, weights: Path, tmp_path:
 
     backend = "onnxruntime" if importlib.util.find_spec("onnxruntime") else "torch"
     run("submit", "--checkpoint", weights, "--data", tree, "--out", tmp_path / "a", "--expected-frames", "3")
-    run("submit", "--weights", weights, "--data", tree, "--out", tmp_path / "b", "--expected-frames", "3",
-        "--backend", backend)  # fmt: skip
+    run(
+        "submit",
+        "--weights",
+        weights,
+        "--data",
+        tree,
+        "--out",
+        tmp_path / "b",
+        "--expected-frames",
+        "3",
+        "--backend",
+        backend,
+    )
     for name in ("0000000000.png", "0000000001.png", "0000000002.png"):
         a, b = read_depth(tmp_path / "a" / name), read_depth(tmp_path / "b" / name)
         assert a.shape == b.shape and float(abs(a - b).max()) <= 2 / 256  # at most a rounding step or two
-    both = CliRunner().invoke(main, ["submit", "--checkpoint", str(weights), "--weights", str(weights), "--data",
-                                     str(tree), "--out", str(tmp_path / "c")])  # fmt: skip
+    both = CliRunner().invoke(
+        main,
+        [
+            "submit",
+            "--checkpoint",
+            str(weights),
+            "--weights",
+            str(weights),
+            "--data",
+            str(tree),
+            "--out",
+            str(tmp_path / "c"),
+        ],
+    )
     assert both.exit_code == 2 and "exactly one of --checkpoint or --weights" in both.output

@@ -15,14 +15,15 @@ def t(rows) -> torch.Tensor:  # type: ignore[no-untyped-def]
 
 
 def test_hole_filling_rows_then_columns() -> None:
-    pred = t([[0, 0, 0, 0],
-              [0, 4, 0, 2],
-              [0, 0, 0, 0],
-              [3, 0, 0, 5]])  # fmt: skip
-    expected = t([[4, 4, 2, 2],      # top row copies the first valid row below (column-wise)
-                  [4, 4, 2, 2],      # row 1: left end copies 4, the gap takes min(4, 2), right end 2
-                  [-1, -1, -1, -1],  # an empty row between filled rows stays empty (-1)
-                  [3, 3, 3, 5]])  # fmt: skip
+    pred = t([[0, 0, 0, 0], [0, 4, 0, 2], [0, 0, 0, 0], [3, 0, 0, 5]])
+    expected = t(
+        [
+            [4, 4, 2, 2],  # top row copies the first valid row below (column-wise)
+            [4, 4, 2, 2],  # row 1: left end copies 4, the gap takes min(4, 2), right end 2
+            [-1, -1, -1, -1],  # an empty row between filled rows stays empty (-1)
+            [3, 3, 3, 5],
+        ]
+    )
     assert torch.equal(fill_holes_kitti(pred), expected)
 
 

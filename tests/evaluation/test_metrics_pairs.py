@@ -55,8 +55,20 @@ def test_selection_keys() -> None:
 
 def test_predict_on_a_selection_then_metrics(tmp_path: Path) -> None:
     sel = _selection(tmp_path / "val_selection_cropped")
-    res = CliRunner().invoke(main, ["predict", "--method", "classical", "--rgb", str(sel / "image"), "--sparse",
-                                    str(sel / "velodyne_raw"), "--out", str(tmp_path / "pred")])  # fmt: skip
+    res = CliRunner().invoke(
+        main,
+        [
+            "predict",
+            "--method",
+            "classical",
+            "--rgb",
+            str(sel / "image"),
+            "--sparse",
+            str(sel / "velodyne_raw"),
+            "--out",
+            str(tmp_path / "pred"),
+        ],
+    )
     assert res.exit_code == 0, res.output
     code, output = _metrics(tmp_path / "pred", sel / "groundtruth_depth", "--json", tmp_path / "m.json")
     assert code == 0, output

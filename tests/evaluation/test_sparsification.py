@@ -90,8 +90,9 @@ def test_accumulator_averages_frames() -> None:
     gt = np.array([[10.0, 10.0], [10.0, 10.0]])
     acc.add(gt + ERROR.reshape(2, 2), gt, UNC.reshape(2, 2))
     # a second frame: a hole in gt (0) is not scored; its three pixels ranked perfectly
-    acc.add(np.array([[11.0, 12.0], [13.0, 5.0]]), np.array([[10.0, 10.0], [10.0, 0.0]]),
-            np.array([[1.0, 2.0], [3.0, 0.0]]))  # fmt: skip
+    acc.add(
+        np.array([[11.0, 12.0], [13.0, 5.0]]), np.array([[10.0, 10.0], [10.0, 0.0]]), np.array([[1.0, 2.0], [3.0, 0.0]])
+    )
     acc.add(np.ones((2, 2)), np.zeros((2, 2)), np.ones((2, 2)))  # no ground truth: skipped
     assert acc.frames == 2
     first = sparsification_curve(ERROR, UNC, "mae", 4)

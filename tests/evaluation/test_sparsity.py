@@ -41,8 +41,14 @@ def tree(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_parse_settings() -> None:
     assert parse_settings(["beams=64,8", "keep=1,0.25"]) == ["beams=64", "beams=8", "keep=1", "keep=0.25"]
-    for bad, msg in [("beams=12", "must divide 64"), ("keep=0", r"must be in \(0, 1\]"), ("keep=x", "bad value"),
-                     ("rings=8", "expected beams="), ("beams", "expected beams="), ("beams=", "expected")]:  # fmt: skip
+    for bad, msg in [
+        ("beams=12", "must divide 64"),
+        ("keep=0", r"must be in \(0, 1\]"),
+        ("keep=x", "bad value"),
+        ("rings=8", "expected beams="),
+        ("beams", "expected beams="),
+        ("beams=", "expected"),
+    ]:
         with pytest.raises(SparsityError, match=msg):
             parse_settings([bad])
 
@@ -125,8 +131,9 @@ def test_the_sweep_is_deterministic_and_leaves_only_its_files(tree: Path, tmp_pa
     assert one == two
     for out in (tmp_path / "a", tmp_path / "b"):  # no journal, no stage of the runs
         assert sorted(p.name for p in out.iterdir()) == ["sparsity.csv", "sparsity.json", "sparsity.png"]
-    seeded = run_sparsity_sweep(tree, "val_select", ["keep=0.5"], {"classical": ClassicalCompleter()},
-                                tmp_path / "c", seed=7)  # fmt: skip
+    seeded = run_sparsity_sweep(
+        tree, "val_select", ["keep=0.5"], {"classical": ClassicalCompleter()}, tmp_path / "c", seed=7
+    )
     assert seeded[0]["rmse_mm"] != one[0]["rmse_mm"]  # another seed, other points
 
 
@@ -140,8 +147,9 @@ def test_thinned_source_is_the_frames_thinned_per_frame(tree: Path) -> None:
         assert np.array_equal(thin_frame.sparse, thin(frame.sparse, "keep=0.5", seed=3 + i))
         assert np.array_equal(thin_frame.rgb, frame.rgb) and np.array_equal(thin_frame.gt, frame.gt)
         assert np.array_equal(thinned.load(name).sparse, thin_frame.sparse)  # the same points every time
-    assert not np.array_equal(thinned.load(source.names[0]).sparse, ThinnedSource(source, "keep=0.5").load(
-        source.names[0]).sparse)  # fmt: skip
+    assert not np.array_equal(
+        thinned.load(source.names[0]).sparse, ThinnedSource(source, "keep=0.5").load(source.names[0]).sparse
+    )
     for bad, msg in [("keep=0.5,0.1", "one setting"), ("beams=12", "must divide 64")]:
         with pytest.raises(SparsityError, match=msg):
             ThinnedSource(source, bad)

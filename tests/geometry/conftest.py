@@ -18,8 +18,16 @@ SCAN_PERIOD = 0.103334178
 
 
 def official_velodyne_raw(camera: str) -> Path:
-    return (SAMPLE / "data_depth_velodyne" / "train" / "2011_09_26_drive_0035_sync" / "proj_depth" / "velodyne_raw"
-            / f"image_{camera}" / "0000000005.png")  # fmt: skip
+    return (
+        SAMPLE
+        / "data_depth_velodyne"
+        / "train"
+        / "2011_09_26_drive_0035_sync"
+        / "proj_depth"
+        / "velodyne_raw"
+        / f"image_{camera}"
+        / "0000000005.png"
+    )
 
 
 @pytest.fixture(scope="session")

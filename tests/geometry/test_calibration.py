@@ -79,8 +79,10 @@ def test_cam_to_cam_file_path_and_object_style_file_agree(tmp_path: Path) -> Non
     assert np.allclose(read_kitti_calibration(RAW_DATE / "calib_cam_to_cam.txt", "02").T_cam_lidar, ref.T_cam_lidar)
     fmt = lambda a: " ".join(f"{v:.12e}" for v in np.ravel(a))  # noqa: E731
     obj = tmp_path / "000005.txt"
-    obj.write_text(f"P0: {fmt(np.zeros((3, 4)))}\nP2: {fmt(ref.P_rect)}\nR0_rect: {fmt(ref.R_rect_00)}\n"
-                   f"Tr_velo_to_cam: {fmt(ref.T_cam0_lidar[:3])}\n")  # fmt: skip
+    obj.write_text(
+        f"P0: {fmt(np.zeros((3, 4)))}\nP2: {fmt(ref.P_rect)}\nR0_rect: {fmt(ref.R_rect_00)}\n"
+        f"Tr_velo_to_cam: {fmt(ref.T_cam0_lidar[:3])}\n"
+    )
     cal = read_kitti_calibration(obj, 2, image_size=(1242, 375))
     assert np.allclose(cal.T_cam_lidar, ref.T_cam_lidar, atol=1e-12) and np.allclose(cal.K, ref.K)
     with pytest.raises(DataError, match="no camera '03'.*it has 00, 02"):

@@ -57,8 +57,10 @@ def test_npy_txt_csv(tmp_path: Path) -> None:
 
 def _pcd_header(n: int, data: str, fields: str = "x y z intensity") -> bytes:
     k = len(fields.split())
-    return (f"# .PCD v0.7\nVERSION 0.7\nFIELDS {fields}\nSIZE {'4 ' * k}\nTYPE {'F ' * k}\nCOUNT {'1 ' * k}\n"
-            f"WIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {data}\n").encode()  # fmt: skip
+    return (
+        f"# .PCD v0.7\nVERSION 0.7\nFIELDS {fields}\nSIZE {'4 ' * k}\nTYPE {'F ' * k}\nCOUNT {'1 ' * k}\n"
+        f"WIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {data}\n"
+    ).encode()
 
 
 def test_pcd_ascii_and_binary(tmp_path: Path) -> None:
@@ -67,8 +69,9 @@ def test_pcd_ascii_and_binary(tmp_path: Path) -> None:
     (tmp_path / "b.pcd").write_bytes(_pcd_header(2, "binary") + PTS.astype("<f4").tobytes())
     assert np.array_equal(read_points(tmp_path / "b.pcd"), PTS)
     # A mixed-type record (x y z float32, ring uint16) without intensity.
-    rec = np.array([(1.0, 2.0, 3.0, 7), (4.0, 5.0, 6.0, 9)], dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"),
-                                                                    ("ring", "<u2")])  # fmt: skip
+    rec = np.array(
+        [(1.0, 2.0, 3.0, 7), (4.0, 5.0, 6.0, 9)], dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("ring", "<u2")]
+    )
     head = _pcd_header(2, "binary", "x y z ring").replace(b"SIZE 4 4 4 4", b"SIZE 4 4 4 2")
     (tmp_path / "c.pcd").write_bytes(head.replace(b"TYPE F F F F", b"TYPE F F F U") + rec.tobytes())
     assert np.array_equal(read_points(tmp_path / "c.pcd"), [[1, 2, 3, 0], [4, 5, 6, 0]])

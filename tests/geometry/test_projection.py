@@ -50,14 +50,16 @@ def test_zbuffer_nearest_point_wins(order: list[int]) -> None:
 
 
 def test_behind_too_close_outside_and_too_far_are_dropped() -> None:
-    pts = np.array([
-        [10.0, 0.0, 0.0],  # kept, (50, 40)
-        [-10.0, 0.0, 0.0],  # behind the camera
-        [0.05, 0.0, 0.0],  # closer than min_depth = 0.1
-        [10.0, -6.0, 0.0],  # u = 110: right of the image
-        [10.0, 0.0, 4.5],  # v = -5: above the image
-        [50.0, -5.0, 0.0],  # beyond max_depth, (60, 40)
-    ])  # fmt: skip
+    pts = np.array(
+        [
+            [10.0, 0.0, 0.0],  # kept, (50, 40)
+            [-10.0, 0.0, 0.0],  # behind the camera
+            [0.05, 0.0, 0.0],  # closer than min_depth = 0.1
+            [10.0, -6.0, 0.0],  # u = 110: right of the image
+            [10.0, 0.0, 4.5],  # v = -5: above the image
+            [50.0, -5.0, 0.0],  # beyond max_depth, (60, 40)
+        ]
+    )
     d = project_points(pts, K, T_CAM_LIDAR, SIZE, max_depth=40.0)
     assert np.count_nonzero(d) == 1 and d[40, 50] == pytest.approx(10.0)
     assert np.count_nonzero(project_points(pts, K, T_CAM_LIDAR, SIZE)) == 2  # without max_depth
@@ -68,8 +70,10 @@ def test_r_rect_is_applied_after_the_extrinsics() -> None:
     a = np.radians(2.0)
     R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
     pts = np.random.default_rng(1).uniform([5, -3, -1], [30, 3, 1], size=(200, 3))
-    assert np.array_equal(project_points(pts, K, T_CAM_LIDAR, SIZE, R_rect=R),
-                          project_points(pts, K, make_T(R, np.zeros(3)) @ T_CAM_LIDAR, SIZE))  # fmt: skip
+    assert np.array_equal(
+        project_points(pts, K, T_CAM_LIDAR, SIZE, R_rect=R),
+        project_points(pts, K, make_T(R, np.zeros(3)) @ T_CAM_LIDAR, SIZE),
+    )
 
 
 def test_bad_input_raises_named_errors() -> None:
@@ -132,12 +136,15 @@ def test_acceptance_matches_kitti_official_velodyne_raw(scan: np.ndarray, camera
     n_ref, n_ours = int(np.count_nonzero(ref)), int(np.count_nonzero(ours))
     a0, a1, a2 = (agreement(ours, ref, r) for r in (0, 1, 2))
     motion = read_oxts_motion(OXTS)
-    deskewed = project_points(deskew_scan(scan, motion.velocity, motion.yaw_rate, SCAN_PERIOD), cal.K,
-                              cal.T_cam_lidar, cal.image_size)  # fmt: skip
+    deskewed = project_points(
+        deskew_scan(scan, motion.velocity, motion.yaw_rate, SCAN_PERIOD), cal.K, cal.T_cam_lidar, cal.image_size
+    )
     d0, d0_1cm = agreement(deskewed, ref, 0), agreement(deskewed, ref, 0, tol=0.01)
-    print(f"\ncamera {camera}: official {n_ref} points, ours {n_ours} ({100 * (n_ours / n_ref - 1):+.2f} %), "
-          f"within 0.3 m at 0/1/2 px: {a0:.4f}/{a1:.4f}/{a2:.4f}; deskewed: same pixel {d0:.4f}, "
-          f"same pixel and 1 cm {d0_1cm:.4f}, {np.count_nonzero(deskewed)} points; projection {ms:.1f} ms")  # fmt: skip
+    print(
+        f"\ncamera {camera}: official {n_ref} points, ours {n_ours} ({100 * (n_ours / n_ref - 1):+.2f} %), "
+        f"within 0.3 m at 0/1/2 px: {a0:.4f}/{a1:.4f}/{a2:.4f}; deskewed: same pixel {d0:.4f}, "
+        f"same pixel and 1 cm {d0_1cm:.4f}, {np.count_nonzero(deskewed)} points; projection {ms:.1f} ms"
+    )
     assert abs(n_ours - n_ref) <= 0.05 * n_ref
     assert a2 >= 0.93
     assert a1 >= 0.85  # measured 0.90 (02) and 0.89 (03)
@@ -148,8 +155,9 @@ def test_acceptance_matches_kitti_official_velodyne_raw(scan: np.ndarray, camera
 def test_torch_projection_matches_numpy(scan: np.ndarray) -> None:
     cal = read_kitti_calibration(RAW_DATE, "02")
     ours = project_points(scan, cal.K, cal.T_cam_lidar, cal.image_size)
-    t = project_points(torch.from_numpy(scan), torch.from_numpy(cal.K), torch.from_numpy(cal.T_cam_lidar),
-                       cal.image_size)  # fmt: skip
+    t = project_points(
+        torch.from_numpy(scan), torch.from_numpy(cal.K), torch.from_numpy(cal.T_cam_lidar), cal.image_size
+    )
     assert isinstance(t, torch.Tensor) and t.dtype == torch.float32
     # float32 torch arithmetic may move a point sitting on a pixel border; allow a handful.
     assert np.count_nonzero((t.numpy() > 0) != (ours > 0)) <= 10

@@ -30,8 +30,9 @@ def test_invert_and_compose_give_identity() -> None:
     pts = rng.normal(size=(50, 3))
     assert np.allclose(transform_points(T_b_a, transform_points(T_a_b, pts)), pts, atol=1e-12)
     T_c_b = make_T(rot_z(30), [0.5, 0, 0]) @ T_a_b  # compose: b -> a -> c
-    assert np.allclose(transform_points(T_c_b, pts), transform_points(make_T(rot_z(30), [0.5, 0, 0]),
-                                                                      transform_points(T_a_b, pts)))  # fmt: skip
+    assert np.allclose(
+        transform_points(T_c_b, pts), transform_points(make_T(rot_z(30), [0.5, 0, 0]), transform_points(T_a_b, pts))
+    )
 
 
 def test_extra_columns_kept_and_torch_matches_numpy() -> None:

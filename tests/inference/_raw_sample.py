@@ -28,8 +28,16 @@ def three_frame_drive(root: Path) -> Path:
 
 
 def official_velodyne_raw(camera: str) -> Path:
-    return (SAMPLE / "data_depth_velodyne" / "train" / "2011_09_26_drive_0035_sync" / "proj_depth" / "velodyne_raw"
-            / f"image_{camera}" / "0000000005.png")  # fmt: skip
+    return (
+        SAMPLE
+        / "data_depth_velodyne"
+        / "train"
+        / "2011_09_26_drive_0035_sync"
+        / "proj_depth"
+        / "velodyne_raw"
+        / f"image_{camera}"
+        / "0000000005.png"
+    )
 
 
 def tiny_checkpoint(path: Path) -> Path:

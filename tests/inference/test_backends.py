@@ -80,8 +80,9 @@ def test_engines_run_the_network_in_the_graph_and_the_propagation_in_torch(tmp_p
     import onnx
 
     torch.manual_seed(1)
-    net = semattnet.build_model("semattnet", width=0.125, iterations=3, refinement_mode="clean",
-                                affinity=affinity).eval()  # fmt: skip
+    net = semattnet.build_model(
+        "semattnet", width=0.125, iterations=3, refinement_mode="clean", affinity=affinity
+    ).eval()
     engine = optimize_for_inference(net, backend="onnxruntime", size=SIZE, cache_dir=tmp_path)
     outputs = [o.name for o in onnx.load(next((tmp_path / "engines").glob("*/model.onnx"))).graph.output]
     assert "refined_depth" not in outputs and "fused_depth" in outputs

@@ -11,8 +11,10 @@ from semattnet.viz.pointcloud import LIDAR_COLOR, birds_eye_view
 
 def test_a_point_lands_at_its_cell_with_its_colour() -> None:
     # 0.1 m cells: x in [-10, 10) over 200 columns, z in [0, 20) over 100 rows (far at the top)
-    cloud = PointCloud(np.array([[0.05, 0.0, 5.05], [-9.99, 0.0, 19.99]], np.float32),
-                       rgb=np.array([[10, 200, 30], [1, 2, 3]], np.uint8))  # fmt: skip
+    cloud = PointCloud(
+        np.array([[0.05, 0.0, 5.05], [-9.99, 0.0, 19.99]], np.float32),
+        rgb=np.array([[10, 200, 30], [1, 2, 3]], np.uint8),
+    )
     bev = birds_eye_view(cloud, size=(100, 200), x_range=(-10, 10), z_range=(0, 20))
     assert bev.shape == (100, 200, 3) and bev.dtype == np.uint8
     assert bev[99 - 25, 100].tolist() == [10, 200, 30]  # column floor(10.05 / 0.1), row 99 - floor(5.05 / 0.2)

@@ -43,13 +43,15 @@ def test_resolve_makes_every_choice() -> None:
 
 @pytest.mark.parametrize(
     ("spec", "words"),
-    [(EngineSpec("tpu"), "unknown backend 'tpu'; choose one of auto, torch, openvino"),
-     (EngineSpec(precision="f8"), "unknown precision 'f8'"),
-     (EngineSpec(precision="int8"), "the torch backend runs f32, bf16, fp16, not 'int8'; int8 runs on the openvino"),
-     (EngineSpec("onnxruntime", "bf16"), "the onnxruntime backend runs f32, not 'bf16'"),
-     (EngineSpec("tensorrt", device="cpu"), "device: the tensorrt backend runs on cuda, got cpu"),
-     (EngineSpec("openvino", device="meta"), "type 'meta' cannot run a model")],
-)  # fmt: skip
+    [
+        (EngineSpec("tpu"), "unknown backend 'tpu'; choose one of auto, torch, openvino"),
+        (EngineSpec(precision="f8"), "unknown precision 'f8'"),
+        (EngineSpec(precision="int8"), "the torch backend runs f32, bf16, fp16, not 'int8'; int8 runs on the openvino"),
+        (EngineSpec("onnxruntime", "bf16"), "the onnxruntime backend runs f32, not 'bf16'"),
+        (EngineSpec("tensorrt", device="cpu"), "device: the tensorrt backend runs on cuda, got cpu"),
+        (EngineSpec("openvino", device="meta"), "type 'meta' cannot run a model"),
+    ],
+)
 def test_resolve_refuses_what_does_not_go_together(spec: EngineSpec, words: str) -> None:
     with pytest.raises(InputError, match=words):
         spec.resolve()

@@ -30,9 +30,13 @@ SRC = Path(semattnet.__file__).parent
 #: The modules of the frame path: the loop, its reader, the semantic maps and the sources and sinks it reads.
 FRAME_PATH = [
     "inference/pipeline.py",
+    "inference/plan.py",
+    "inference/loop.py",
     "inference/feed.py",
     "inference/semantic.py",
-    "inference/sinks.py",
+    "inference/sinks/base.py",
+    "inference/sinks/files.py",
+    "inference/sinks/latency.py",
     "data/datasets/frames.py",
     "evaluation/evaluate.py",
     "evaluation/split.py",
@@ -86,8 +90,9 @@ class TextDepth(Sink):
 def test_the_loop_reads_the_sources_info_and_stages(tmp_path: Path) -> None:
     timer, lines = StageTimes(), []
     assert isinstance(TwoStage(), TwoStageSource) and not isinstance(Stamped(), TwoStageSource)
-    run = check_frames(TwoStage(), [TextDepth()], tmp_path / "out").run(ClassicalCompleter(), timer=timer,
-                                                                         log=lines.append)  # fmt: skip
+    run = check_frames(TwoStage(), [TextDepth()], tmp_path / "out").run(
+        ClassicalCompleter(), timer=timer, log=lines.append
+    )
     assert timer.stamps == {"a": 0.0, "b": 0.1, "c": 0.2} and timer.sensor_period_s == pytest.approx(0.1)
     assert all("projection" in timer.times[n] for n in "abc")  # assemble timed apart from read
     assert run.paths == [tmp_path / "out" / f"{n}.txt" for n in "abc"]  # the sink whose role is depth
@@ -147,8 +152,9 @@ class Labels:
 def test_the_segmenters_palette_is_asked_not_assumed(tmp_path: Path) -> None:
     assert isinstance(Labels(), MapSegmenter)
     with pytest.raises(PaletteMismatchError, match="the segmenter's maps"):  # Cityscapes ids for an NYU-40 model
-        check_frames(Stamped(), [TextDepth()], tmp_path / "out").run(Indoor(), semantic=SemanticMaps(Labels()),
-                                                                    log=lambda s: None)  # fmt: skip
+        check_frames(Stamped(), [TextDepth()], tmp_path / "out").run(
+            Indoor(), semantic=SemanticMaps(Labels()), log=lambda s: None
+        )
     with pytest.raises(InputError, match="semantic: a function is not a segmenter: it must say the palette"):
         SemanticMaps(lambda images: np.zeros(images.shape[:3], np.uint8))  # type: ignore[arg-type]
 

@@ -48,8 +48,9 @@ def test_int8_close_to_float32_and_cached(model: torch.nn.Module, tmp_path: Path
     assert 0 < float(err.max())  # really quantised
     assert len(list(tmp_path.glob("engines/*/int8-*/model.xml"))) == 1
     monkeypatch.setattr("nncf.quantize", lambda *a, **k: pytest.fail("quantised again despite the cache"))
-    again = optimize_for_inference(model, backend="openvino", precision="int8", size=SIZE, cache_dir=tmp_path,
-                                   calibration_frames=2)  # fmt: skip
+    again = optimize_for_inference(
+        model, backend="openvino", precision="int8", size=SIZE, cache_dir=tmp_path, calibration_frames=2
+    )
     torch.testing.assert_close(again(**x).refined_depth, q)
     other = resolve_calibration(None, SIZE, 3)  # another calibration: another cached IR
     assert other.key != resolve_calibration(None, SIZE, 2).key
@@ -63,9 +64,13 @@ def test_int8_is_never_the_default() -> None:
 
 @pytest.mark.parametrize(
     ("backend", "precision", "size", "words"),
-    [("torch", "int8", SIZE, "torch backend runs"), ("onnxruntime", "int8", SIZE, "onnxruntime backend runs f32, not"),
-     ("openvino", "fp16", SIZE, "openvino backend runs"), ("openvino", "int8", None, "size")],
-)  # fmt: skip
+    [
+        ("torch", "int8", SIZE, "torch backend runs"),
+        ("onnxruntime", "int8", SIZE, "onnxruntime backend runs f32, not"),
+        ("openvino", "fp16", SIZE, "openvino backend runs"),
+        ("openvino", "int8", None, "size"),
+    ],
+)
 def test_precision_rules(model: torch.nn.Module, backend: str, precision: str, size, words: str) -> None:  # type: ignore[no-untyped-def]
     with pytest.raises(ValueError, match=words):
         optimize_for_inference(model, backend=backend, precision=precision, size=size)
@@ -85,8 +90,10 @@ def test_fit_to_size_takes_bottom_rows_centred_columns() -> None:
 
 def test_calibration_from_frames_and_folders(tmp_path: Path) -> None:
     rng = np.random.default_rng(0)
-    frames = [Frame(f"f{i}", rng.integers(0, 255, (70, 100, 3), dtype=np.uint8),
-                    rng.random((70, 100)).astype(np.float32)) for i in range(3)]  # fmt: skip
+    frames = [
+        Frame(f"f{i}", rng.integers(0, 255, (70, 100, 3), dtype=np.uint8), rng.random((70, 100)).astype(np.float32))
+        for i in range(3)
+    ]
     cal = resolve_calibration(frames, SIZE, count=2)
     feeds = cal.feeds()
     assert len(feeds) == 2 and feeds[0]["rgb"].shape == (1, 3, *SIZE) and feeds[0]["sparse"].shape == (1, 1, *SIZE)
@@ -156,8 +163,22 @@ def test_int8_benchmark_dry_run(capsys: pytest.CaptureFixture[str]) -> None:
 @needs_int8
 def test_int8_benchmark_on_two_scenes(tmp_path: Path) -> None:
     out = tmp_path / "int8.json"
-    found = _bench().main(["--weights", "semattnet-demo-ref-seed0", "--scenes", "2", "--repeats", "1",
-                           "--calibration-frames", "2", "--speed-size", "64x96", "--json", str(out)])  # fmt: skip
+    found = _bench().main(
+        [
+            "--weights",
+            "semattnet-demo-ref-seed0",
+            "--scenes",
+            "2",
+            "--repeats",
+            "1",
+            "--calibration-frames",
+            "2",
+            "--speed-size",
+            "64x96",
+            "--json",
+            str(out),
+        ]
+    )
     assert found is not None and json.loads(out.read_text()) == found
     r = found["weights"]["semattnet-demo-ref-seed0"]
     assert set(r["change_pct"]) == {"rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km"}

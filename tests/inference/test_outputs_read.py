@@ -52,8 +52,11 @@ def test_each_sink_reads_what_it_writes() -> None:
     assert outputs_read(default_sinks(panel=True)) is None  # the panel draws every branch
     confidences = {"color_conf", "semantic_conf", "guided_conf"}
     assert outputs_read([PlySink()]) == {"refined_depth", *confidences}
-    assert outputs_read([PlySink(max_uncertainty=UncertaintyLimit(1.0))]) == {"refined_depth", "uncertainty",
-                                                                             *confidences}  # fmt: skip
+    assert outputs_read([PlySink(max_uncertainty=UncertaintyLimit(1.0))]) == {
+        "refined_depth",
+        "uncertainty",
+        *confidences,
+    }
     assert outputs_read([BagSink(max_uncertainty=UncertaintyLimit(1.0))]) == {"refined_depth", "uncertainty"}
 
 
@@ -161,8 +164,9 @@ def test_openvino_engine_asked_for_the_depth_computes_it_alone(name: str, tmp_pa
     model = semattnet.build_model(name, width=0.25 if name != "semattnet" else 0.125, iterations=2).eval()
     x = random_inputs(b=1, h=32, w=64)
     whole = optimize_for_inference(model, backend="openvino", size=(32, 64), cache_dir=tmp_path)(**x)
-    engine = optimize_for_inference(model, backend="openvino", size=(32, 64), cache_dir=tmp_path,
-                                    outputs={"refined_depth"})  # fmt: skip
+    engine = optimize_for_inference(
+        model, backend="openvino", size=(32, 64), cache_dir=tmp_path, outputs={"refined_depth"}
+    )
     out = engine(**x)
     assert out.refined_depth is not None and whole.refined_depth is not None
     torch.testing.assert_close(out.refined_depth, whole.refined_depth, rtol=0, atol=1e-5)
@@ -186,8 +190,8 @@ def test_png_level_of_a_run() -> None:
 def test_the_run_writes_its_pngs_at_its_level(prefetch: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from semattnet.baselines import ClassicalCompleter
     from semattnet.data.io import read_depth
-    from semattnet.inference import sinks
     from semattnet.inference.options import RunOptions
+    from semattnet.inference.sinks import files as sinks
 
     levels: list[int] = []
     for name in ("write_depth", "write_image"):

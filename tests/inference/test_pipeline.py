@@ -94,8 +94,21 @@ def test_every_source_goes_through_the_one_writer(tree: Path, tmp_path: Path, mo
     written.clear()
     from semattnet.cli import main
 
-    result = CliRunner().invoke(main, ["evaluate", "--checkpoint", str(_tiny(tmp_path)), "--data", str(tree), "--out",
-                                       str(tmp_path / "ev"), "--save-predictions", "--workers", "0"])  # fmt: skip
+    result = CliRunner().invoke(
+        main,
+        [
+            "evaluate",
+            "--checkpoint",
+            str(_tiny(tmp_path)),
+            "--data",
+            str(tree),
+            "--out",
+            str(tmp_path / "ev"),
+            "--save-predictions",
+            "--workers",
+            "0",
+        ],
+    )
     assert result.exit_code == 0, result.output
     assert sorted(written) == sorted(p.name for p in (tmp_path / "ev" / "predictions").glob("*.png")) and written
 
@@ -154,8 +167,10 @@ def test_evaluate_checks_before_loading_the_model(tree: Path, tmp_path: Path, mo
     (tmp_path / "ev" / "old.txt").write_text("x")
     weights = tmp_path / "never-read.safetensors"  # exists (the option checks that), never loaded
     weights.write_bytes(b"x")
-    result = CliRunner().invoke(main, ["evaluate", "--weights", str(weights), "--data", str(tree), "--out",
-                                       str(tmp_path / "ev"), "--workers", "0"])  # fmt: skip
+    result = CliRunner().invoke(
+        main,
+        ["evaluate", "--weights", str(weights), "--data", str(tree), "--out", str(tmp_path / "ev"), "--workers", "0"],
+    )
     assert result.exit_code == 1 and "not empty" in result.output and "the model was loaded" not in result.output
     result = CliRunner().invoke(
         main, ["evaluate", "--weights", str(weights), "--data", str(tmp_path), "--workers", "0"]

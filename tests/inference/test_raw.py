@@ -26,8 +26,10 @@ def test_raw_drive_yields_typed_frames() -> None:
     assert 0.01 < np.abs(deskewed.points[:, :3] - frame.points[:, :3]).max() < 5.0  # moved, but not far
 
 
-@pytest.mark.parametrize(("spec", "expected"), [("0-3", [0, 1, 2, 3]), ("5", [5]), ("1,4, 7", [1, 4, 7]),
-                                                ("2-3,9", [2, 3, 9]), (None, None), (6, [6])])  # fmt: skip
+@pytest.mark.parametrize(
+    ("spec", "expected"),
+    [("0-3", [0, 1, 2, 3]), ("5", [5]), ("1,4, 7", [1, 4, 7]), ("2-3,9", [2, 3, 9]), (None, None), (6, [6])],
+)
 def test_parse_frames(spec: object, expected: list[int] | None) -> None:
     assert parse_frames(spec) == expected  # type: ignore[arg-type]
 
@@ -51,8 +53,9 @@ def test_python_api_gives_the_cli_depth(tmp_path: Path) -> None:
 
     written = complete_kitti_raw(ClassicalCompleter(), DRIVE, tmp_path / "api", frames=[5], log=lambda s: None)
     assert written == [tmp_path / "api" / "0000000005.png"]
-    result = CliRunner().invoke(main, ["predict", "--method", "classical", "--kitti-raw", str(DRIVE), "--out",
-                                       str(tmp_path / "cli")])  # fmt: skip
+    result = CliRunner().invoke(
+        main, ["predict", "--method", "classical", "--kitti-raw", str(DRIVE), "--out", str(tmp_path / "cli")]
+    )
     assert result.exit_code == 0, result.output
     api, cli = read_depth(written[0]), read_depth(tmp_path / "cli" / "0000000005.png")
     assert np.array_equal(api, cli) and np.count_nonzero(api) > 0.5 * api.size

@@ -150,8 +150,12 @@ def test_predict_bad_frame_on_one_rank_stops_all(tmp_path: Path) -> None:
     res = cli(*common, "--out", tmp_path / "skip", nproc=2, logs=tmp_path / "logs2")
     assert res.returncode == 0, res.stderr[-3000:]  # torchrun takes a non-zero status for a crash
     doc = json.loads((tmp_path / "skip" / "frames.json").read_text())
-    assert [(e["name"], e["status"]) for e in doc["frames"]] == [("f0", "done"), ("f1", "done"), ("f2", "done"),
-                                                                  ("f3", "skipped")]  # fmt: skip
+    assert [(e["name"], e["status"]) for e in doc["frames"]] == [
+        ("f0", "done"),
+        ("f1", "done"),
+        ("f2", "done"),
+        ("f3", "skipped"),
+    ]
     assert "f3.png" in doc["frames"][3]["reason"] and doc["complete"]
     assert sorted(p.name for p in (tmp_path / "skip").iterdir() if p.name.startswith(".")) == []
 

@@ -58,8 +58,13 @@ def test_encoding_is_metres_times_256_with_0_for_none() -> None:
 def test_png_and_npy_sinks_round_trip(tmp_path: Path) -> None:
     pred = _prediction()
     sinks = default_sinks(npy=True, uncertainty=True)
-    assert output_files(["f0"], sinks) == ["f0.png", "f0_color.png", "f0.npy", "uncertainty/f0.png",
-                                           "uncertainty/f0.npy"]  # fmt: skip
+    assert output_files(["f0"], sinks) == [
+        "f0.png",
+        "f0_color.png",
+        "f0.npy",
+        "uncertainty/f0.png",
+        "uncertainty/f0.npy",
+    ]
     for sink in sinks:
         sink.write(tmp_path, pred)
     back = read_depth(tmp_path / "uncertainty" / "f0.png")
@@ -114,8 +119,9 @@ def test_an_empty_cloud_names_its_cause_not_a_file(tmp_path: Path) -> None:
     assert not list(tmp_path.iterdir())
 
 
-@pytest.mark.parametrize(("text", "value", "relative"), [("0.5", 0.5, False), (" 2 ", 2.0, False),
-                                                         ("5%", 0.05, True), ("250%", 2.5, True)])  # fmt: skip
+@pytest.mark.parametrize(
+    ("text", "value", "relative"), [("0.5", 0.5, False), (" 2 ", 2.0, False), ("5%", 0.05, True), ("250%", 2.5, True)]
+)
 def test_parse(text: str, value: float, relative: bool) -> None:
     limit = UncertaintyLimit.parse(text)
     assert (limit.value, limit.relative) == (pytest.approx(value), relative)
@@ -137,8 +143,9 @@ def test_viewer_has_an_uncertainty_layer(tmp_path: Path) -> None:
     from semattnet.viz.viewer import ViewerFrame, write_viewer
 
     pred = _prediction()
-    frame = ViewerFrame("f0", pred.frame.rgb, pred.frame.sparse, {"m": pred.stored}, K=K,
-                        uncertainty=pred.uncertainty_stored)  # fmt: skip
+    frame = ViewerFrame(
+        "f0", pred.frame.rgb, pred.frame.sparse, {"m": pred.stored}, K=K, uncertainty=pred.uncertainty_stored
+    )
     plain = ViewerFrame("f1", pred.frame.rgb, pred.frame.sparse, {"m": pred.stored}, K=K)
     write_viewer(tmp_path, [frame, plain])
 

@@ -219,8 +219,15 @@ def test_sigterm_drains_the_writer_and_exits_143(tmp_path: Path) -> None:
         **os.environ,
         "PYTHONPATH": os.pathsep.join([str(root), str(root / "src"), os.environ.get("PYTHONPATH", "")]),
     }
-    done = subprocess.run([sys.executable, "-c", _TERMINATED, str(tmp_path)], cwd=root, env=env, capture_output=True,
-                          text=True, timeout=120, check=False)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-c", _TERMINATED, str(tmp_path)],
+        cwd=root,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert done.returncode == 128 + signal.SIGTERM, done.stderr[-2000:]
     _stopped_with_three_written(tmp_path)
 

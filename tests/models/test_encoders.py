@@ -89,8 +89,9 @@ def test_authors_keys_load_into_the_resnet_encoder(branch: str, in_chans: int) -
     widths = {"rgb": w.base, "segment": w.sg, "depth": w.dg}[branch]
     fused = {"rgb": widths, "segment": w.fused_sg, "depth": w.fused_dg}[branch]
     scales = (2, 4, 8, 16, 32)
-    enc = ResNetEncoder(in_chans, [w.base[1], *(widths[s] for s in scales)],
-                        [fused.get(s, widths[s]) - widths[s] for s in scales])  # fmt: skip
+    enc = ResNetEncoder(
+        in_chans, [w.base[1], *(widths[s] for s in scales)], [fused.get(s, widths[s]) - widths[s] for s in scales]
+    )
     enc.load_state_dict(authors_encoder_filter(model.state_dict(), branch), strict=True)
 
 

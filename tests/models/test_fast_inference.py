@@ -81,8 +81,9 @@ def test_naive_reference_matches(k: int, dilation: int) -> None:
     from semattnet.models.propagation import propagate, propagate_pad_and_sum
 
     aff, start, h0, _, _ = _inputs(k, 2)
-    assert torch.allclose(propagate_pad_and_sum(aff, start, h0, dilation), propagate(aff, start, h0, dilation),
-                          rtol=1e-5, atol=1e-4)  # fmt: skip
+    assert torch.allclose(
+        propagate_pad_and_sum(aff, start, h0, dilation), propagate(aff, start, h0, dilation), rtol=1e-5, atol=1e-4
+    )
 
 
 @pytest.mark.parametrize(("k", "dilation"), [(3, 1), (5, 2), (7, 1)])
@@ -107,8 +108,11 @@ def _randomised_bn(model: torch.nn.Module) -> torch.nn.Module:
 def _frame(h: int = 64, w: int = 96) -> dict[str, torch.Tensor]:
     g = torch.Generator().manual_seed(1)
     sparse = torch.rand(1, 1, h, w, generator=g) * 60 * (torch.rand(1, 1, h, w, generator=g) < 0.1)
-    return {"rgb": torch.rand(1, 3, h, w, generator=g) * 255, "semantic": torch.rand(1, 3, h, w, generator=g) * 255,
-            "sparse": sparse}  # fmt: skip
+    return {
+        "rgb": torch.rand(1, 3, h, w, generator=g) * 255,
+        "semantic": torch.rand(1, 3, h, w, generator=g) * 255,
+        "sparse": sparse,
+    }
 
 
 def test_fold_batchnorm_keeps_outputs() -> None:

@@ -127,10 +127,7 @@ def test_bad_kernel_channels() -> None:
 
 
 def test_downsample_sparse_takes_nearest_valid() -> None:
-    d = torch.tensor([[[[0.0, 5.0, 0.0, 0.0],
-                        [3.0, 4.0, 0.0, 0.0],
-                        [9.0, 0.0, 1.5, 2.5],
-                        [0.0, 0.0, 0.0, 0.0]]]])  # fmt: skip
+    d = torch.tensor([[[[0.0, 5.0, 0.0, 0.0], [3.0, 4.0, 0.0, 0.0], [9.0, 0.0, 1.5, 2.5], [0.0, 0.0, 0.0, 0.0]]]])
     depth, mask = downsample_sparse(d)
     assert depth.tolist() == [[[[3.0, 0.0], [9.0, 1.5]]]]
     assert mask.tolist() == [[[[1.0, 0.0], [1.0, 1.0]]]]

@@ -30,8 +30,8 @@ def _arch(cfg: SemAttNetConfig) -> tuple:
 def test_list_models_names_each_architecture_once() -> None:
     names = list_models()
     assert names[:2] == ["semattnet", "semattnet_backbone"]
-    assert len({_arch(MODELS[n][1]) for n in names}) == len(names) == 13  # no two rows build the same model
-    assert list(MODELS) == names and len(MODELS) == 13 and set(ALIASES) == {"table2_f", "table2_g"}
+    assert len({_arch(MODELS[n].config) for n in names}) == len(names) == 14  # no two rows build the same model
+    assert list(MODELS) == names and len(MODELS) == 14 and set(ALIASES) == {"table2_f", "table2_g"}
 
 
 def test_aliases_resolve_everywhere() -> None:
@@ -46,7 +46,7 @@ def test_aliases_resolve_everywhere() -> None:
 
 def test_describe_models_lists_aliases() -> None:
     lines = describe_models().splitlines()
-    assert len(lines) == 13
+    assert len(lines) == 14
     full = next(line for line in lines if line.startswith("semattnet "))
     assert "[alias: table2_g]" in full and "Table 2 g" in full
     assert not any(line.startswith("table2_g") for line in lines)
@@ -57,8 +57,9 @@ def test_unknown_name_is_one_line_input_error() -> None:
         build_model("penet")
     assert isinstance(err.value, InputError) and isinstance(err.value, ValueError)
     assert "\n" not in str(err.value) and "semattnet_backbone" in str(err.value) and "table2_g" in str(err.value)
-    with pytest.raises(KeyError):
+    with pytest.raises(UnknownModelError):
         MODELS["penet"]
+    assert MODELS.get("penet") is None
 
 
 def test_name_selects_the_architecture_config_fills_it() -> None:
@@ -76,12 +77,12 @@ def test_name_selects_the_architecture_config_fills_it() -> None:
         build_model("semattnet", depth=3)
     # Overrides change fields of the named model, as the trainer does for the Table 2 variants.
     two = build_model("semattnet_backbone", branches=2, fusion="add", width=0.125)
-    assert _arch(two.config) == _arch(MODELS["table2_a"][1])
+    assert _arch(two.config) == _arch(MODELS["table2_a"].config)
 
 
 def test_one_home_for_the_model_class_and_arch_names() -> None:
     assert model_class(SemAttNetConfig()) is semattnet.SemAttNet
     assert model_class(SemAttNetConfig(refine=False)) is semattnet.SemAttNetBackbone
     for name in list_models():
-        assert arch_for(MODELS[name][1].replace(width=0.25)) == name
+        assert arch_for(MODELS[name].config.replace(width=0.25)) == name
     assert arch_for(SemAttNetConfig(branches=2, fusion="add")) == "semattnet"  # not a paper row: by class

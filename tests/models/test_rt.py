@@ -23,8 +23,11 @@ RT_MODELS = ("semattnet_rt_s", "semattnet_rt_m", "semattnet_rt_md", "semattnet_r
 def _frame(b: int = 1, h: int = 32, w: int = 64, seed: int = 0) -> dict[str, torch.Tensor]:
     g = torch.Generator().manual_seed(seed)
     sparse = (torch.rand(b, 1, h, w, generator=g) < 0.2) * (1 + 79 * torch.rand(b, 1, h, w, generator=g))
-    return {"rgb": 255 * torch.rand(b, 3, h, w, generator=g), "semantic": 255 * torch.rand(b, 3, h, w, generator=g),
-            "sparse": sparse}  # fmt: skip
+    return {
+        "rgb": 255 * torch.rand(b, 3, h, w, generator=g),
+        "semantic": 255 * torch.rand(b, 3, h, w, generator=g),
+        "sparse": sparse,
+    }
 
 
 def _tiny(name: str, **overrides: object) -> torch.nn.Module:
@@ -41,8 +44,17 @@ class TestSemAttNetRT(BaseTester):
             out = model(**_frame())
         assert isinstance(out, DepthCompletionOutput)
         maps = out.to_dict()
-        assert set(maps) == {"color_depth", "semantic_depth", "guided_depth", "color_conf", "semantic_conf",
-                             "guided_conf", "fused_depth", "refined_s2_depth", "refined_depth"}  # fmt: skip
+        assert set(maps) == {
+            "color_depth",
+            "semantic_depth",
+            "guided_depth",
+            "color_conf",
+            "semantic_conf",
+            "guided_conf",
+            "fused_depth",
+            "refined_s2_depth",
+            "refined_depth",
+        }
         assert all(t.shape == (1, 1, 32, 64) and torch.isfinite(t).all() for t in maps.values())
 
     @pytest.mark.parametrize(("b", "h", "w", "branches"), [(1, 64, 32, 3), (2, 32, 64, 2)])

@@ -24,8 +24,10 @@ def test_fused_depth_is_eq12() -> None:
 
 
 def test_ablation_widths_differ() -> None:
-    counts = {n: sum(p.numel() for p in build_model(n, width=0.25).parameters()) for n in ("table2_a", "table2_b",
-              "table2_d", "table2_f")}  # fmt: skip
+    counts = {
+        n: sum(p.numel() for p in build_model(n, width=0.25).parameters())
+        for n in ("table2_a", "table2_b", "table2_d", "table2_f")
+    }
     assert counts["table2_a"] < counts["table2_b"] < counts["table2_d"] < counts["table2_f"]
     assert not any(k.startswith("cbam") for k in build_model("table2_d", width=0.25).state_dict())
 
@@ -155,9 +157,14 @@ def test_pad_and_crop_round_trip() -> None:
 
 @pytest.mark.parametrize(
     ("kwargs", "message"),
-    [({"branches": 4}, "branches"), ({"fusion": "mul"}, "fusion"), ({"width": 0.05}, "width"),
-     ({"kernel_sizes": (3, 4)}, "odd"), ({"refinement_mode": "paper"}, "refinement_mode")],
-)  # fmt: skip
+    [
+        ({"branches": 4}, "branches"),
+        ({"fusion": "mul"}, "fusion"),
+        ({"width": 0.05}, "width"),
+        ({"kernel_sizes": (3, 4)}, "odd"),
+        ({"refinement_mode": "paper"}, "refinement_mode"),
+    ],
+)
 def test_bad_config_is_refused(kwargs: dict, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         SemAttNetConfig(**kwargs)

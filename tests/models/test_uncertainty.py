@@ -30,16 +30,24 @@ def _t(*values: float) -> torch.Tensor:
     return torch.tensor(values, dtype=torch.float32).view(1, 1, 1, -1)
 
 
-def _output(depths: list[list[float]], weights: list[list[float]], refined: list[float] | None = None,
-            three: bool = True) -> DepthCompletionOutput:  # fmt: skip
+def _output(
+    depths: list[list[float]], weights: list[list[float]], refined: list[float] | None = None, three: bool = True
+) -> DepthCompletionOutput:
     """A hand-made output: per branch its depths and weights along one row; D_f by eq. 12."""
     d, w = [_t(*x) for x in depths], [_t(*x) for x in weights]
     fused = sum(di * wi for di, wi in zip(d, w, strict=True))
     assert isinstance(fused, torch.Tensor)
     ref = None if refined is None else _t(*refined)
-    return DepthCompletionOutput(color_depth=d[0], semantic_depth=d[1] if three else None, guided_depth=d[-1],
-                                 color_conf=w[0], semantic_conf=w[1] if three else None, guided_conf=w[-1],
-                                 fused_depth=fused, refined_depth=ref)  # fmt: skip
+    return DepthCompletionOutput(
+        color_depth=d[0],
+        semantic_depth=d[1] if three else None,
+        guided_depth=d[-1],
+        color_conf=w[0],
+        semantic_conf=w[1] if three else None,
+        guided_conf=w[-1],
+        fused_depth=fused,
+        refined_depth=ref,
+    )
 
 
 def test_branch_spread_by_hand() -> None:
@@ -150,8 +158,9 @@ def test_classical_proxy_by_hand() -> None:
     # on a given ramp (1 m per column) the proxy is one plus the distance to the point
     ramp = torch.arange(9, dtype=torch.float32).view(1, 1, 1, 9).expand(1, 1, 5, 9) + 6
     rows, cols = np.mgrid[0:5, 0:9]
-    np.testing.assert_allclose(classical_uncertainty(sparse, ramp)[0, 0].numpy(), np.hypot(rows - 2, cols - 4) + 1,
-                               atol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(
+        classical_uncertainty(sparse, ramp)[0, 0].numpy(), np.hypot(rows - 2, cols - 4) + 1, atol=1e-6
+    )
 
 
 def test_classical_completion_carries_its_uncertainty() -> None:

@@ -14,11 +14,22 @@ from tests._reference_weights import fill_reference_weights
 #: The authors' outputs and state-dict names, kept in the repository (provenance in fixtures/README.md).
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 REFERENCE = FIXTURES / "authors_seed0_b2_64x256.npz"
-BACKBONE_OUTPUTS = {"color_depth": "rgb_depth", "semantic_depth": "semantic_depth", "guided_depth": "d_depth",
-                    "fused_depth": "output"}  # fmt: skip
-FULL_OUTPUTS = {"color_conf": "rgb_conf", "semantic_conf": "semantic_conf", "guided_conf": "d_conf",
-                "color_depth": "rgb_depth", "semantic_depth": "semantic_depth", "guided_depth": "d_depth",
-                "refined_s2_depth": "coarse_depth", "refined_depth": "refined_depth"}  # fmt: skip
+BACKBONE_OUTPUTS = {
+    "color_depth": "rgb_depth",
+    "semantic_depth": "semantic_depth",
+    "guided_depth": "d_depth",
+    "fused_depth": "output",
+}
+FULL_OUTPUTS = {
+    "color_conf": "rgb_conf",
+    "semantic_conf": "semantic_conf",
+    "guided_conf": "d_conf",
+    "color_depth": "rgb_depth",
+    "semantic_depth": "semantic_depth",
+    "guided_depth": "d_depth",
+    "refined_s2_depth": "coarse_depth",
+    "refined_depth": "refined_depth",
+}
 
 
 def _authors_entries(kind: str) -> list[tuple[str, tuple[int, ...], str]]:
@@ -36,8 +47,9 @@ def models() -> dict[str, torch.nn.Module]:
     return {name: semattnet.build_model(name) for name in ("semattnet_backbone", "semattnet")}
 
 
-@pytest.mark.parametrize(("name", "kind", "count"), [("semattnet_backbone", "backbone", 360_717_636),
-                                                      ("semattnet", "full", 360_957_784)])  # fmt: skip
+@pytest.mark.parametrize(
+    ("name", "kind", "count"), [("semattnet_backbone", "backbone", 360_717_636), ("semattnet", "full", 360_957_784)]
+)
 def test_state_dict_equals_authors(models, name: str, kind: str, count: int) -> None:
     model = models[name]
     ours = [(k, tuple(v.shape), str(v.dtype).removeprefix("torch.")) for k, v in model.state_dict().items()]
@@ -45,13 +57,17 @@ def test_state_dict_equals_authors(models, name: str, kind: str, count: int) -> 
     assert sum(p.numel() for p in model.parameters()) == count
 
 
-@pytest.mark.parametrize(("name", "prefix", "pairs"), [("semattnet_backbone", "backbone_", BACKBONE_OUTPUTS),
-                                                        ("semattnet", "full_", FULL_OUTPUTS)])  # fmt: skip
+@pytest.mark.parametrize(
+    ("name", "prefix", "pairs"),
+    [("semattnet_backbone", "backbone_", BACKBONE_OUTPUTS), ("semattnet", "full_", FULL_OUTPUTS)],
+)
 def test_outputs_match_authors_code(models, name: str, prefix: str, pairs: dict[str, str]) -> None:
     ref = np.load(REFERENCE)
     model = fill_reference_weights(models[name], seed=0).eval()
-    inputs = {k: torch.from_numpy(ref[f"input_{src}"]) for k, src in (("rgb", "rgb"), ("semantic", "semantic"),
-                                                                      ("sparse", "d"))}  # fmt: skip
+    inputs = {
+        k: torch.from_numpy(ref[f"input_{src}"])
+        for k, src in (("rgb", "rgb"), ("semantic", "semantic"), ("sparse", "d"))
+    }
     with torch.inference_mode():
         out = model(**inputs)
     for ours, theirs in pairs.items():

@@ -99,8 +99,15 @@ class _Engines(dict[str, InferenceEngine]):
         if fx.cuda and not torch.cuda.is_available():
             pytest.skip(f"{entry}: needs CUDA")
         device = "cuda" if fx.cuda else "cpu"
-        engine = optimize_for_inference(self.model, backend=backend, precision=precision, size=SIZE, device=device,
-                                        cache_dir=self.cache, calibration_frames=2)  # fmt: skip
+        engine = optimize_for_inference(
+            self.model,
+            backend=backend,
+            precision=precision,
+            size=SIZE,
+            device=device,
+            cache_dir=self.cache,
+            calibration_frames=2,
+        )
         self[entry] = engine
         return engine
 

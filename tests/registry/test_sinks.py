@@ -92,8 +92,9 @@ def _bag(path: Path, pred: Prediction) -> None:
     from semattnet.robotics.bags import open_bag
 
     with open_bag(path) as reader:
-        depth = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()
-                 if c.topic == "/semattnet/depth_image"]  # fmt: skip
+        depth = [
+            reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages() if c.topic == "/semattnet/depth_image"
+        ]
     assert len(depth) == len(NAMES)
     img = depth[0]
     got = np.frombuffer(np.asarray(img.data, np.uint8).tobytes(), "<f4").reshape(SIZE)
@@ -181,20 +182,38 @@ FIXTURES = {
     "color-png": SinkFixture(_make("color-png"), per_frame("{}_color.png"), _color),
     "npy": SinkFixture(_make("npy"), per_frame("{}.npy"), _npy),
     "ply": SinkFixture(_make("ply"), per_frame("{}.ply"), _ply, _no_K, InputError, "needs the frame's intrinsics K"),
-    "uncertainty-png": SinkFixture(_make("uncertainty-png"), per_frame("uncertainty/{}.png"), _unc_png,
-                                   _no_uncertainty, InputError, UNC),
-    "uncertainty-npy": SinkFixture(_make("uncertainty-npy"), per_frame("uncertainty/{}.npy"), _unc_npy,
-                                   _no_uncertainty, InputError, UNC),
+    "uncertainty-png": SinkFixture(
+        _make("uncertainty-png"), per_frame("uncertainty/{}.png"), _unc_png, _no_uncertainty, InputError, UNC
+    ),
+    "uncertainty-npy": SinkFixture(
+        _make("uncertainty-npy"), per_frame("uncertainty/{}.npy"), _unc_npy, _no_uncertainty, InputError, UNC
+    ),
     "panel": SinkFixture(_make("panel"), per_frame("{}_panel.png"), _panel),
-    "latency": SinkFixture(lambda out: SINKS["latency"].cls(timer=_timer()), lambda out: [out / "latency.json"],
-                           _latency),
-    "bag": SinkFixture(_bag_sink, lambda out: [out / "pred.bag"], _bag, _no_K, InputError,
-                       "the bag output needs the frame's intrinsics K", needs="rosbags"),
-    "rerun": SinkFixture(_rerun_sink, lambda out: [out / "pred.rrd"], _rerun, _no_K, InputError,
-                         "the Rerun recording needs the frame's intrinsics K", needs="rerun"),
-    "live": SinkFixture(_live_sink, lambda out: [], None, _live_bad, InputError, r"expected \[HOST:\]PORT",
-                        needs="foxglove"),
-}  # fmt: skip
+    "latency": SinkFixture(
+        lambda out: SINKS["latency"].cls(timer=_timer()), lambda out: [out / "latency.json"], _latency
+    ),
+    "bag": SinkFixture(
+        _bag_sink,
+        lambda out: [out / "pred.bag"],
+        _bag,
+        _no_K,
+        InputError,
+        "the bag output needs the frame's intrinsics K",
+        needs="rosbags",
+    ),
+    "rerun": SinkFixture(
+        _rerun_sink,
+        lambda out: [out / "pred.rrd"],
+        _rerun,
+        _no_K,
+        InputError,
+        "the Rerun recording needs the frame's intrinsics K",
+        needs="rerun",
+    ),
+    "live": SinkFixture(
+        _live_sink, lambda out: [], None, _live_bad, InputError, r"expected \[HOST:\]PORT", needs="foxglove"
+    ),
+}
 
 
 class TestSinks(RegistryTester[SinkFixture]):

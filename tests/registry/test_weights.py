@@ -73,7 +73,7 @@ class TestWeights(RegistryTester[WeightsFixture]):
         fx, w = self.fixture(entry), get_weights(entry)
         assert isinstance(w, PretrainedWeights) and w.name == entry and w.to_dict()["name"] == entry
         assert re.fullmatch(r"[a-z0-9]+(-[a-z0-9]+)*", entry) and w.arch in MODELS
-        assert w.model_config() == MODELS[w.arch][1].replace(**w.config)  # the overrides are config fields
+        assert w.model_config() == MODELS[w.arch].config.replace(**w.config)  # the overrides are config fields
         assert w.urls, "at least one URL"
         for url in w.urls:
             scheme = urlparse(url).scheme

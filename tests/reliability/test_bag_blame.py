@@ -50,8 +50,9 @@ def _tf(ts: Any, edges: Sequence[Edge]) -> Any:
     for parent, child, (qx, qy, qz, qw), (x, y, z) in edges:
         rot = g["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw)
         tr = g["geometry_msgs/msg/Transform"](translation=g["geometry_msgs/msg/Vector3"](x=x, y=y, z=z), rotation=rot)
-        out.append(g["geometry_msgs/msg/TransformStamped"](header=header(ts, T0, parent), child_frame_id=child,
-                                                           transform=tr))  # fmt: skip
+        out.append(
+            g["geometry_msgs/msg/TransformStamped"](header=header(ts, T0, parent), child_frame_id=child, transform=tr)
+        )
     return g["tf2_msgs/msg/TFMessage"](transforms=out)
 
 
@@ -66,10 +67,16 @@ def _cloud(ts: Any, i: int, stamp: int) -> Any:
     return pointcloud2_message(ts, {"x": p[:, 0], "y": p[:, 1], "z": p[:, 2]}, stamp, "lidar")
 
 
-def _bag(path: Path, *, fx: Callable[[int], float] = lambda i: 50.0, tf: Sequence[Edge] = GOOD_TF,
-         cloud: Callable[[Any, int, int], Any] = _cloud,
-         semantic: Callable[[int], np.ndarray] | None = None, image_height: Callable[[int], int] = lambda i: H,
-         fmt: str = "mcap") -> Path:  # fmt: skip
+def _bag(
+    path: Path,
+    *,
+    fx: Callable[[int], float] = lambda i: 50.0,
+    tf: Sequence[Edge] = GOOD_TF,
+    cloud: Callable[[Any, int, int], Any] = _cloud,
+    semantic: Callable[[int], np.ndarray] | None = None,
+    image_height: Callable[[int], int] = lambda i: H,
+    fmt: str = "mcap",
+) -> Path:
     """A 3-frame bag in ``fmt`` (10 Hz, each scan 2 ms after its image), a CameraInfo per image with focal length
     ``fx(i)``, ``/tf_static`` of ``tf``, scans ``cloud(ts, i, stamp)``, semantic images ``semantic(i)``, images
     ``image_height(i)`` rows high (the CameraInfo says ``H``)."""
@@ -105,8 +112,23 @@ def _outcomes(source: BagSource) -> dict[int, str]:
 
 
 def _predict(bag: Path, out: Path, *extra: str) -> Any:
-    return CliRunner().invoke(main, ["predict", "--bag", str(bag), "--image-topic", IMAGE, "--points-topic", POINTS,
-                                     "--method", "classical", "--out", str(out), *extra])  # fmt: skip
+    return CliRunner().invoke(
+        main,
+        [
+            "predict",
+            "--bag",
+            str(bag),
+            "--image-topic",
+            IMAGE,
+            "--points-topic",
+            POINTS,
+            "--method",
+            "classical",
+            "--out",
+            str(out),
+            *extra,
+        ],
+    )
 
 
 def test_the_prefix_names_bag_topic_and_message() -> None:
@@ -118,13 +140,16 @@ def test_the_prefix_names_bag_topic_and_message() -> None:
 # -- CameraInfo: the focal lengths are checked where the message is decoded ------------------------------------
 
 
-@pytest.mark.parametrize(("fx", "why"), [
-    (float("nan"), "focal length fx (K[0][0]) is NaN"),
-    (float("inf"), "focal length fx (K[0][0]) is infinite"),
-    (1e30, "focal length fx (K[0][0]) is 1e+30 pixels, more than 1000 times the image's 64-pixel side"),
-    (-50.0, "focal length fx (K[0][0]) is -50, not positive"),
-    (0.0, "focal length fx (K[0][0]) is 0, not positive"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("fx", "why"),
+    [
+        (float("nan"), "focal length fx (K[0][0]) is NaN"),
+        (float("inf"), "focal length fx (K[0][0]) is infinite"),
+        (1e30, "focal length fx (K[0][0]) is 1e+30 pixels, more than 1000 times the image's 64-pixel side"),
+        (-50.0, "focal length fx (K[0][0]) is -50, not positive"),
+        (0.0, "focal length fx (K[0][0]) is 0, not positive"),
+    ],
+)
 def test_a_bad_focal_length_in_every_camera_info_is_one_run_error(tmp_path: Path, fx: float, why: str) -> None:
     """Not "K has NaN entries" from the projection nor "no valid depth point" per frame: one line at the start."""
     bag = _bag(tmp_path / "bag", fx=lambda i: fx)
@@ -137,8 +162,11 @@ def test_a_bad_focal_length_in_every_camera_info_is_one_run_error(tmp_path: Path
 def test_a_bad_camera_info_fails_only_the_image_nearest_to_it(tmp_path: Path, fmt: str) -> None:
     bag = _bag(tmp_path / "bag", fx=lambda i: float("nan") if i == 1 else 50.0, fmt=fmt)
     got = _outcomes(_source(bag))
-    assert got == {0: "ok", 1: f"{bag}: {IMAGE} image 1: {INFO} message 1: CameraInfo focal length fx (K[0][0]) is NaN",
-                   2: "ok"}  # fmt: skip
+    assert got == {
+        0: "ok",
+        1: f"{bag}: {IMAGE} image 1: {INFO} message 1: CameraInfo focal length fx (K[0][0]) is NaN",
+        2: "ok",
+    }
 
 
 @pytest.mark.parametrize("ros1", [True, False])
@@ -169,16 +197,25 @@ def test_the_command_stops_with_one_line_naming_the_camera_info(tmp_path: Path) 
 # -- /tf_static: each transform checked where it is read; the camera-LiDAR chain must be one ------------------
 
 
-@pytest.mark.parametrize(("edge", "why"), [
-    (("cam", "lidar", (0, 0, 0, 0), (0, 0.1, 0)),
-     "rotation quaternion (x, y, z, w) = (0, 0, 0, 0) has norm 0; a rotation's has norm 1 (within 0.001)"),
-    (("cam", "lidar", (np.nan, 0, 0, 1), (0, 0.1, 0)),
-     "rotation quaternion (x, y, z, w) = (nan, 0, 0, 1) is not finite"),
-    (("cam", "lidar", Q, (np.nan, 0.1, 0)), "translation (x, y, z) = (nan, 0.1, 0) is not finite"),
-    (("cam", "lidar", Q, (0, np.inf, 0)), "translation (x, y, z) = (0, inf, 0) is not finite"),
-    (("cam", "lidar", tuple(2 * np.array(Q)), (0, 0.1, 0)),
-     "rotation quaternion (x, y, z, w) = (1, -1, 1, 1) has norm 2; a rotation's has norm 1 (within 0.001)"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("edge", "why"),
+    [
+        (
+            ("cam", "lidar", (0, 0, 0, 0), (0, 0.1, 0)),
+            "rotation quaternion (x, y, z, w) = (0, 0, 0, 0) has norm 0; a rotation's has norm 1 (within 0.001)",
+        ),
+        (
+            ("cam", "lidar", (np.nan, 0, 0, 1), (0, 0.1, 0)),
+            "rotation quaternion (x, y, z, w) = (nan, 0, 0, 1) is not finite",
+        ),
+        (("cam", "lidar", Q, (np.nan, 0.1, 0)), "translation (x, y, z) = (nan, 0.1, 0) is not finite"),
+        (("cam", "lidar", Q, (0, np.inf, 0)), "translation (x, y, z) = (0, inf, 0) is not finite"),
+        (
+            ("cam", "lidar", tuple(2 * np.array(Q)), (0, 0.1, 0)),
+            "rotation quaternion (x, y, z, w) = (1, -1, 1, 1) has norm 2; a rotation's has norm 1 (within 0.001)",
+        ),
+    ],
+)
 def test_a_broken_transform_is_blamed_on_tf_static_not_on_the_scans(tmp_path: Path, edge: Edge, why: str) -> None:
     bag = _bag(tmp_path / "bag", tf=[("base", "cam", (0, 0, 0, 1), (0, 0, 0)), edge])
     with pytest.raises(DataError) as err:
@@ -212,9 +249,11 @@ def test_two_disagreeing_chains_between_camera_and_lidar_are_refused(tmp_path: P
     bag = _bag(tmp_path / "bag", tf=loop)
     with pytest.raises(DataError) as err:
         _source(bag)
-    assert str(err.value) == (f"{bag}: /tf_static: two different transforms from frame 'lidar' to 'cam': lidar -> cam "
-                              "and lidar -> base -> cam (they differ by 5 m and 0 degrees); the static transforms "
-                              "must join two frames by one chain")  # fmt: skip
+    assert str(err.value) == (
+        f"{bag}: /tf_static: two different transforms from frame 'lidar' to 'cam': lidar -> cam "
+        "and lidar -> base -> cam (they differ by 5 m and 0 degrees); the static transforms "
+        "must join two frames by one chain"
+    )
 
 
 def test_two_chains_that_agree_are_accepted() -> None:
@@ -231,8 +270,10 @@ def test_a_lidar_a_light_year_from_the_camera_is_refused(tmp_path: Path) -> None
     bag = _bag(tmp_path / "bag", tf=[("cam", "lidar", Q, (0, 1e30, 0))])
     with pytest.raises(DataError) as err:
         _source(bag)
-    assert str(err.value) == (f"{bag}: /tf_static: the LiDAR frame 'lidar' is 1e+30 m from the camera frame 'cam'; "
-                              "a camera and a LiDAR of one rig are metres apart")  # fmt: skip
+    assert str(err.value) == (
+        f"{bag}: /tf_static: the LiDAR frame 'lidar' is 1e+30 m from the camera frame 'cam'; "
+        "a camera and a LiDAR of one rig are metres apart"
+    )
 
 
 # -- A frame's scan and semantic image: the frame fails alone, naming the message -------------------------------
@@ -263,13 +304,22 @@ def _cloud_with(fault: str) -> Callable[[Any, int, int], Any]:
     return cloud
 
 
-@pytest.mark.parametrize(("fault", "why"), [
-    ("two_x", f"{POINTS} message 1: PointCloud2 has 2 fields named 'x' (fields: x, y, z, x, third); which one holds "
-              "the values is ambiguous"),
-    ("far", f"{POINTS} message 1: PointCloud2 has 5 of 200 point(s) beyond 1000 m (up to 1e+30 m); a scan is in "
-            "metres in the LiDAR's frame (semattnet.robotics.bags.decode.MAX_POINT_COORDINATE_M)"),
-    ("inf", f"{POINTS} message 1 (200 point(s) with a NaN or infinite coordinate dropped): no points"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("fault", "why"),
+    [
+        (
+            "two_x",
+            f"{POINTS} message 1: PointCloud2 has 2 fields named 'x' (fields: x, y, z, x, third); which one holds "
+            "the values is ambiguous",
+        ),
+        (
+            "far",
+            f"{POINTS} message 1: PointCloud2 has 5 of 200 point(s) beyond 1000 m (up to 1e+30 m); a scan is in "
+            "metres in the LiDAR's frame (semattnet.robotics.bags.decode.MAX_POINT_COORDINATE_M)",
+        ),
+        ("inf", f"{POINTS} message 1 (200 point(s) with a NaN or infinite coordinate dropped): no points"),
+    ],
+)
 def test_a_bad_scan_fails_its_frame_alone_naming_it(tmp_path: Path, fault: str, why: str) -> None:
     bag = _bag(tmp_path / "bag", cloud=_cloud_with(fault))
     assert _outcomes(_source(bag)) == {0: "ok", 1: f"{bag}: {IMAGE} image 1: {why}", 2: "ok"}
@@ -286,8 +336,11 @@ def test_a_wrong_size_semantic_image_names_bag_topic_and_message(tmp_path: Path)
 
     bag = _bag(tmp_path / "bag", semantic=semantic)
     got = _outcomes(_source(bag, semantic_topic=SEMANTIC))
-    assert got == {0: "ok", 1: f"{bag}: {IMAGE} image 1: {SEMANTIC} message 1: the semantic image is 32x24, the image "
-                               "64x48", 2: "ok"}  # fmt: skip
+    assert got == {
+        0: "ok",
+        1: f"{bag}: {IMAGE} image 1: {SEMANTIC} message 1: the semantic image is 32x24, the image 64x48",
+        2: "ok",
+    }
 
 
 def test_the_command_skips_the_bad_scan_with_its_name(tmp_path: Path) -> None:
@@ -295,12 +348,17 @@ def test_the_command_skips_the_bad_scan_with_its_name(tmp_path: Path) -> None:
     res = _predict(bag, tmp_path / "out")
     assert res.exit_code == 3, res.output
     line = [ln for ln in res.output.splitlines() if ln.startswith("0000000001: skipped: ")]
-    assert line == [f"0000000001: skipped: {bag}: {IMAGE} image 1: {POINTS} message 1: PointCloud2 has 2 fields "
-                    "named 'x' (fields: x, y, z, x, third); which one holds the values is ambiguous"]  # fmt: skip
+    assert line == [
+        f"0000000001: skipped: {bag}: {IMAGE} image 1: {POINTS} message 1: PointCloud2 has 2 fields "
+        "named 'x' (fields: x, y, z, x, third); which one holds the values is ambiguous"
+    ]
     assert "3 frame(s): 2 done, 1 skipped" in res.output
 
 
 def test_an_image_of_another_size_names_the_camera_info_it_disagrees_with(tmp_path: Path) -> None:
     bag = _bag(tmp_path / "bag", image_height=lambda i: 40 if i == 2 else H)
-    assert _outcomes(_source(bag)) == {0: "ok", 1: "ok", 2: f"{bag}: {IMAGE} image 2 is 64x40, the calibration "
-                                                           f"({INFO} message 2) says 64x48"}  # fmt: skip
+    assert _outcomes(_source(bag)) == {
+        0: "ok",
+        1: "ok",
+        2: f"{bag}: {IMAGE} image 2 is 64x40, the calibration ({INFO} message 2) says 64x48",
+    }

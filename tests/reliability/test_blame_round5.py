@@ -58,9 +58,23 @@ def _calibration_cases(tmp_path: Path) -> dict[str, tuple[Path, str]]:
 def test_int8_calibration_is_blamed_not_the_frames(tmp_path: Path, case: str) -> None:
     calibration, words = _calibration_cases(tmp_path)[case]
     frames = _frames(tmp_path / "frames")
-    res = CliRunner().invoke(main, ["predict", *frames, "--weights", "semattnet-demo-ref-seed0", "--backend",
-                                    "openvino", "--precision", "int8", "--calibration", str(calibration),
-                                    "--out", str(tmp_path / "out")])  # fmt: skip
+    res = CliRunner().invoke(
+        main,
+        [
+            "predict",
+            *frames,
+            "--weights",
+            "semattnet-demo-ref-seed0",
+            "--backend",
+            "openvino",
+            "--precision",
+            "int8",
+            "--calibration",
+            str(calibration),
+            "--out",
+            str(tmp_path / "out"),
+        ],
+    )
     lines = [x for x in res.output.splitlines() if x.strip() and not x.startswith(("Usage: ", "Try '"))]
     assert res.exit_code == 2 and len(lines) == 1, res.output
     assert "'--calibration'" in lines[0] and words in lines[0] and "frame could be completed" not in lines[0]

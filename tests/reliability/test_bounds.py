@@ -18,10 +18,23 @@ from semattnet.data.kitti_raw import MAX_FRAME_INDEX, parse_frames
 from semattnet.geometry import read_points
 from semattnet.geometry.calibration import read_cam_to_cam, read_rig_json
 
-RIG = {"K": [[50, 0, 16], [0, 50, 12], [0, 0, 1]],
-       "T_cam_lidar": [[0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]], "image_size": [32, 24]}  # fmt: skip
-BAD_SIZES = [(0, 10), (-5, 10), (10.5, 10), (float("nan"), 10), (float("inf"), 10), (MAX_IMAGE_SIDE + 1, 10),
-             (16384, 16384), (10**400, 10), ("ten", 10), (None, 10)]  # fmt: skip
+RIG = {
+    "K": [[50, 0, 16], [0, 50, 12], [0, 0, 1]],
+    "T_cam_lidar": [[0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]],
+    "image_size": [32, 24],
+}
+BAD_SIZES = [
+    (0, 10),
+    (-5, 10),
+    (10.5, 10),
+    (float("nan"), 10),
+    (float("inf"), 10),
+    (MAX_IMAGE_SIDE + 1, 10),
+    (16384, 16384),
+    (10**400, 10),
+    ("ten", 10),
+    (None, 10),
+]
 
 
 def test_one_home_for_the_image_bound() -> None:
@@ -73,9 +86,22 @@ def test_calibration_s_rect_is_bounded(tmp_path: Path, size: str) -> None:
 @pytest.mark.parametrize("size", ["1000000x1000000", "0x24", "32x0"])
 def test_project_size_option_is_bounded(tmp_path: Path, size: str) -> None:
     np.save(tmp_path / "s.npy", np.array([[5.0, 0, 0]], np.float32))
-    res = CliRunner().invoke(main, ["project", "--points", str(tmp_path / "s.npy"), "--K", "50,50,16,12",
-                                    "--T", "0,-1,0,0,0,0,-1,0,1,0,0,0,0,0,0,1", "--size", size,
-                                    "--out", str(tmp_path / "o.png")])  # fmt: skip
+    res = CliRunner().invoke(
+        main,
+        [
+            "project",
+            "--points",
+            str(tmp_path / "s.npy"),
+            "--K",
+            "50,50,16,12",
+            "--T",
+            "0,-1,0,0,0,0,-1,0,1,0,0,0,0,0,0,1",
+            "--size",
+            size,
+            "--out",
+            str(tmp_path / "o.png"),
+        ],
+    )
     assert res.exit_code in (1, 2) and "Traceback" not in res.output and not (tmp_path / "o.png").exists(), res.output
 
 
@@ -100,8 +126,14 @@ def _pcd(tmp_path: Path, points: str, count: str = "1 1 1", data: bytes = b"1 2 
     return path
 
 
-BAD_PCD = [("-2", "1 1 1"), ("1", "0 1 1"), ("1", "1 -1 1"), ("99999999999999", "1 1 1"), ("x", "1 1 1"),
-           ("1", "a 1 1")]  # fmt: skip
+BAD_PCD = [
+    ("-2", "1 1 1"),
+    ("1", "0 1 1"),
+    ("1", "1 -1 1"),
+    ("99999999999999", "1 1 1"),
+    ("x", "1 1 1"),
+    ("1", "a 1 1"),
+]
 
 
 @pytest.mark.parametrize(("points", "count"), BAD_PCD)
@@ -117,9 +149,14 @@ def test_pcd_valid_still_reads(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     "array",
-    [np.zeros(3, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4")]), np.array([["a", "b", "c"]]),
-     np.array([[1 + 2j, 0, 0]]), np.ones((2, 3), bool), np.zeros((0, 3))],
-)  # fmt: skip
+    [
+        np.zeros(3, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4")]),
+        np.array([["a", "b", "c"]]),
+        np.array([[1 + 2j, 0, 0]]),
+        np.ones((2, 3), bool),
+        np.zeros((0, 3)),
+    ],
+)
 def test_npy_that_is_not_a_plain_numeric_array(tmp_path: Path, array: np.ndarray) -> None:
     np.save(tmp_path / "p.npy", array)
     with pytest.raises(SemAttNetError, match=r"p\.npy"):

@@ -38,8 +38,9 @@ def test_marker_states(tmp_path: Path) -> None:
 
 
 def test_synth_writes_the_marker_last_and_check_accepts_it(tmp_path: Path) -> None:
-    code, out = _invoke("synth", "--out", tmp_path / "t", "--frames", 2, "--eval-frames", 2, "--size", "32x64",
-                        "--workers", 1)  # fmt: skip
+    code, out = _invoke(
+        "synth", "--out", tmp_path / "t", "--frames", 2, "--eval-frames", 2, "--size", "32x64", "--workers", 1
+    )
     assert code == 0, out
     assert json.loads((tmp_path / "t" / TREE_MARKER).read_text())["complete"] is True
     code, out = _invoke("data", "check", tmp_path / "t")
@@ -52,8 +53,20 @@ def test_synth_writes_the_marker_last_and_check_accepts_it(tmp_path: Path) -> No
 def test_synth_killed_with_sigkill_is_refused_then_regenerated(tmp_path: Path) -> None:
     out = tmp_path / "t"
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    cmd = [sys.executable, "-m", "semattnet", "synth", "--out", str(out), "--frames", "400", "--size", "64x128",
-           "--workers", "1"]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "semattnet",
+        "synth",
+        "--out",
+        str(out),
+        "--frames",
+        "400",
+        "--size",
+        "64x128",
+        "--workers",
+        "1",
+    ]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         deadline = time.monotonic() + 60
@@ -66,11 +79,11 @@ def test_synth_killed_with_sigkill_is_refused_then_regenerated(tmp_path: Path) -
     assert list(out.rglob("*.png")) and not (out / "scenes.json").exists()
     code, text = _invoke("data", "check", out)
     assert code == 1 and "incomplete tree" in text and "--overwrite" in text, text
-    code, text = _invoke("synth", "--out", out, "--frames", 2, "--eval-frames", 2, "--size", "32x64",
-                         "--workers", 1)  # fmt: skip
+    code, text = _invoke("synth", "--out", out, "--frames", 2, "--eval-frames", 2, "--size", "32x64", "--workers", 1)
     assert code == 1 and "incomplete tree" in text and "--overwrite" in text and "Traceback" not in text, text
-    code, text = _invoke("synth", "--out", out, "--frames", 2, "--eval-frames", 2, "--size", "32x64",
-                         "--workers", 1, "--overwrite")  # fmt: skip
+    code, text = _invoke(
+        "synth", "--out", out, "--frames", 2, "--eval-frames", 2, "--size", "32x64", "--workers", 1, "--overwrite"
+    )
     assert code == 0, text
     code, text = _invoke("data", "check", out)
     assert code == 0, text
@@ -90,8 +103,14 @@ def test_a_failed_download_leaves_an_incomplete_tree_and_a_rerun_completes_it(tm
     out = tmp_path / "out"
     (out / "void").mkdir(parents=True)
     (out / "void" / "readme.txt").write_text("the user's own file, other size")
-    kw = {"accept_license": True, "mirror": mirror.as_uri(), "cache_dir": tmp_path / "cache", "check": False,
-          "progress": False, "log": lambda s: None}  # fmt: skip
+    kw = {
+        "accept_license": True,
+        "mirror": mirror.as_uri(),
+        "cache_dir": tmp_path / "cache",
+        "check": False,
+        "progress": False,
+        "log": lambda s: None,
+    }
     with pytest.raises(ArchiveConflictError):
         download_dataset("void", out, **kw)
     assert (out / "void" / "readme.txt").read_text() == "the user's own file, other size"

@@ -24,8 +24,9 @@ def _leftovers(fs: Path) -> list[Path]:
 
 def _cli(*args: object) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    return subprocess.run([sys.executable, "-m", "semattnet", *map(str, args)], capture_output=True, text=True,
-                          env=env, timeout=120)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-m", "semattnet", *map(str, args)], capture_output=True, text=True, env=env, timeout=120
+    )
 
 
 def _one_line(res: subprocess.CompletedProcess[str], path: object) -> str:
@@ -62,16 +63,30 @@ def test_predict_on_a_full_disk(tmp_path: Path, small_fs: Path) -> None:
         d[::3, ::4] = rng.uniform(2, 60, d[::3, ::4].shape)
         write_depth(tmp_path / "sparse" / f"f{i}.png", d)
     out = small_fs / "out"
-    res = _cli("predict", "--method", "classical", "--rgb", tmp_path / "rgb", "--sparse", tmp_path / "sparse",
-               "--npy", "--out", out)  # fmt: skip
+    res = _cli(
+        "predict",
+        "--method",
+        "classical",
+        "--rgb",
+        tmp_path / "rgb",
+        "--sparse",
+        tmp_path / "sparse",
+        "--npy",
+        "--out",
+        out,
+    )
     _one_line(res, out)
     # what is left is the frames done before the disk filled, whole and journaled (a resume keeps them)
     journal = out / "frames.json"
     done = json.loads(journal.read_text())["frames"] if journal.exists() else []
     kept = {out / f for e in done if e["status"] == "done" for f in e["files"]} | ({journal} if done else set())
     assert set(_leftovers(small_fs)) == kept
-    assert all(p.stat().st_size == e["files"][p.name]["size"] for e in done if e["status"] == "done"
-               for p in (out / f for f in e["files"]))  # fmt: skip
+    assert all(
+        p.stat().st_size == e["files"][p.name]["size"]
+        for e in done
+        if e["status"] == "done"
+        for p in (out / f for f in e["files"])
+    )
 
 
 def test_convert_on_a_full_disk(tmp_path: Path, small_fs: Path) -> None:

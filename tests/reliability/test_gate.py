@@ -179,8 +179,9 @@ def test_state_is_never_applied_to_a_shared_numpy_dtype(tmp_path: Path) -> None:
 def test_protocol4_checkpoint_with_args_and_numpy_still_loads(tmp_path: Path) -> None:
     path = tmp_path / "ok.pt"
     state = {"w": torch.arange(4.0)}
-    torch.save({"model": state, "args": argparse.Namespace(lr=0.1), "rng": np.arange(3), "epoch": 2}, path,
-               pickle_protocol=4)  # fmt: skip
+    torch.save(
+        {"model": state, "args": argparse.Namespace(lr=0.1), "rng": np.arange(3), "epoch": 2}, path, pickle_protocol=4
+    )
     assert inspect_weights_file(path).protocol == 4
     ckpt = load_checkpoint(path)
     assert ckpt.args == {"lr": 0.1} and ckpt.epoch == 2 and torch.equal(ckpt.state_dict["w"], state["w"])
@@ -295,8 +296,10 @@ def test_oversized_or_nested_config_json_is_refused(tmp_path: Path) -> None:
     folder = tmp_path / "pretrained"
     folder.mkdir()
     (folder / "model.safetensors").write_bytes(b"")
-    for text, why in (('{"width": 1.0, "x": "' + "a" * (2 << 20) + '"}', "larger than"),
-                      ('{"x": ' + "[" * 40 + "]" * 40 + "}", "nested deeper")):  # fmt: skip
+    for text, why in (
+        ('{"width": 1.0, "x": "' + "a" * (2 << 20) + '"}', "larger than"),
+        ('{"x": ' + "[" * 40 + "]" * 40 + "}", "nested deeper"),
+    ):
         (folder / "config.json").write_text(text)
         with pytest.raises(CheckpointError, match=why) as err:
             from_pretrained(folder)
@@ -336,8 +339,10 @@ def test_pickle_with_too_many_opcodes_is_refused_fast(tmp_path: Path, monkeypatc
 # ----------------------------------------------------------------------------- 6. config ranges
 
 
-@pytest.mark.parametrize(("field", "value"), [("iterations", 1e9), ("iterations", 10**9), ("width", 64),
-                                              ("kernel_sizes", [3, 99]), ("reduction", 0)])  # fmt: skip
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("iterations", 1e9), ("iterations", 10**9), ("width", 64), ("kernel_sizes", [3, 99]), ("reduction", 0)],
+)
 def test_config_from_file_out_of_range_is_refused_before_any_model(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, field: str, value: object
 ) -> None:

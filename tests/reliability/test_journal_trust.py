@@ -257,8 +257,9 @@ def test_the_cli_says_a_damaged_journal_in_one_line(done: tuple[FolderSource, Pa
     source, out = done
     _edit(out, lambda d: d.update(wall_s="abc"))
     rgb, sparse = source.given
-    res = CliRunner().invoke(main, ["predict", "--method", "classical", "--rgb", str(rgb), "--sparse", str(sparse),
-                                    "--resume", str(out)])  # fmt: skip
+    res = CliRunner().invoke(
+        main, ["predict", "--method", "classical", "--rgb", str(rgb), "--sparse", str(sparse), "--resume", str(out)]
+    )
     errors = [ln for ln in res.output.splitlines() if ln.startswith("Error:")]
     assert res.exit_code == 1 and len(errors) == 1, res.output
     assert "frames.json: damaged field wall_s: 'abc'" in errors[0], res.output

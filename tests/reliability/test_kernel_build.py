@@ -53,8 +53,9 @@ def test_a_killed_builds_lock_is_removed(fresh: list[Path], tmp_path: Path, caps
     assert f"removing {lock}, left by a build that was killed" in capsys.readouterr().err
 
 
-def test_a_running_builds_lock_is_waited_for_a_bounded_time(fresh: list[Path], tmp_path: Path,
-                                                            monkeypatch: pytest.MonkeyPatch) -> None:  # fmt: skip
+def test_a_running_builds_lock_is_waited_for_a_bounded_time(
+    fresh: list[Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setattr(cpu_kernel, "STALE_LOCK_S", 0.3)
     (tmp_path / "lock").touch()
     start = time.monotonic()
@@ -62,14 +63,17 @@ def test_a_running_builds_lock_is_waited_for_a_bounded_time(fresh: list[Path], t
     assert 0.2 < time.monotonic() - start < 5
 
 
-def test_no_compiler_falls_back_with_one_line(fresh: list[Path], monkeypatch: pytest.MonkeyPatch,
-                                              capsys: pytest.CaptureFixture[str]) -> None:  # fmt: skip
+def test_no_compiler_falls_back_with_one_line(
+    fresh: list[Path], monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     monkeypatch.setattr(cpu_kernel.shutil, "which", lambda name: None)
     monkeypatch.setenv("CXX", "g++-missing")
     assert not cpu_kernel.available() and fresh == []
     err = capsys.readouterr().err
-    assert err == ("semattnet: fused CPU propagation unavailable (no C++ compiler (g++-missing not found; install one "
-                   "or set CXX)); using the PyTorch propagation\n")  # fmt: skip
+    assert err == (
+        "semattnet: fused CPU propagation unavailable (no C++ compiler (g++-missing not found; install one "
+        "or set CXX)); using the PyTorch propagation\n"
+    )
     with pytest.raises(RuntimeError, match=r"no C\+\+ compiler"):
         cpu_kernel.normalize_affinity(torch.zeros(1, 8, 2, 2))
 

@@ -20,8 +20,13 @@ from semattnet.cli import main
 from semattnet.data.io import write_depth, write_image
 from semattnet.models.checks import MAX_INPUT_DEPTH_M, check_inputs
 
-BAD_DEPTH = {"nan": float("nan"), "inf": float("inf"), "-inf": -float("inf"), "negative": -1.0,
-             "huge": MAX_INPUT_DEPTH_M * 1.5}  # fmt: skip
+BAD_DEPTH = {
+    "nan": float("nan"),
+    "inf": float("inf"),
+    "-inf": -float("inf"),
+    "negative": -1.0,
+    "huge": MAX_INPUT_DEPTH_M * 1.5,
+}
 
 
 @pytest.fixture(scope="module")
@@ -54,8 +59,14 @@ def test_classical_and_model_refuse_bad_depth_with_one_message(kind: str, model_
     classical = _message(lambda: ClassicalCompleter()(rgb, sparse))
     model = _message(lambda: model_completer(rgb, sparse, sem))
     tensor = _message(lambda: complete_classical(torch.from_numpy(sparse)[None, None]))
-    forward = _message(lambda: check_inputs(torch.zeros(1, 3, 32, 32), torch.zeros(1, 3, 32, 32),
-                                            torch.from_numpy(sparse)[None, None], need_semantic=True))  # fmt: skip
+    forward = _message(
+        lambda: check_inputs(
+            torch.zeros(1, 3, 32, 32),
+            torch.zeros(1, 3, 32, 32),
+            torch.from_numpy(sparse)[None, None],
+            need_semantic=True,
+        )
+    )
     assert classical == model == tensor == forward
 
 
@@ -74,14 +85,35 @@ def test_valid_depths_up_to_the_bound_still_complete() -> None:
 def test_predict_cli_refuses_a_map_without_points(tmp_path: Path) -> None:
     write_image(tmp_path / "rgb" / "a.png", np.zeros((8, 12, 3), np.uint8))
     write_depth(tmp_path / "sparse" / "a.png", np.zeros((8, 12)))
-    res = CliRunner().invoke(main, ["predict", "--method", "classical", "--rgb", str(tmp_path / "rgb"),
-                                    "--sparse", str(tmp_path / "sparse"), "--out", str(tmp_path / "out")])  # fmt: skip
+    res = CliRunner().invoke(
+        main,
+        [
+            "predict",
+            "--method",
+            "classical",
+            "--rgb",
+            str(tmp_path / "rgb"),
+            "--sparse",
+            str(tmp_path / "sparse"),
+            "--out",
+            str(tmp_path / "out"),
+        ],
+    )
     assert res.exit_code == 1 and "no valid depth point" in res.output, res.output
     assert not list((tmp_path / "out").glob("*.png")) if (tmp_path / "out").exists() else True
 
 
-@pytest.mark.parametrize("K", [(float("nan"), 1, 1, 1), (1, float("inf"), 1, 1), (0, 1, 1, 1), (-5, 1, 1, 1),
-                               (1, 1, float("nan"), 1), (1, 1, 1, -float("inf"))])  # fmt: skip
+@pytest.mark.parametrize(
+    "K",
+    [
+        (float("nan"), 1, 1, 1),
+        (1, float("inf"), 1, 1),
+        (0, 1, 1, 1),
+        (-5, 1, 1, 1),
+        (1, 1, float("nan"), 1),
+        (1, 1, 1, -float("inf")),
+    ],
+)
 def test_bad_intrinsics(K: tuple[float, ...]) -> None:
     assert "fx, fy" in _message(lambda: check_pinhole(*K))
 
@@ -89,12 +121,39 @@ def test_bad_intrinsics(K: tuple[float, ...]) -> None:
 @pytest.mark.parametrize("K", ["nan,50,16,12", "50,inf,16,12", "0,50,16,12", "50,50,nan,12"])
 def test_project_and_predict_refuse_bad_K(tmp_path: Path, K: str) -> None:
     np.save(tmp_path / "s.npy", np.array([[5.0, 0, 0]], np.float32))
-    res = CliRunner().invoke(main, ["project", "--points", str(tmp_path / "s.npy"), "--K", K,
-                                    "--T", "0,-1,0,0,0,0,-1,0,1,0,0,0,0,0,0,1", "--size", "32x24",
-                                    "--out", str(tmp_path / "o.png")])  # fmt: skip
+    res = CliRunner().invoke(
+        main,
+        [
+            "project",
+            "--points",
+            str(tmp_path / "s.npy"),
+            "--K",
+            K,
+            "--T",
+            "0,-1,0,0,0,0,-1,0,1,0,0,0,0,0,0,1",
+            "--size",
+            "32x24",
+            "--out",
+            str(tmp_path / "o.png"),
+        ],
+    )
     assert res.exit_code == 1 and "--K" in res.output and not (tmp_path / "o.png").exists(), res.output
-    res = CliRunner().invoke(main, ["predict", "--method", "classical", "--rgb", str(tmp_path), "--sparse",
-                                    str(tmp_path), "--K", K, "--out", str(tmp_path / "p")])  # fmt: skip
+    res = CliRunner().invoke(
+        main,
+        [
+            "predict",
+            "--method",
+            "classical",
+            "--rgb",
+            str(tmp_path),
+            "--sparse",
+            str(tmp_path),
+            "--K",
+            K,
+            "--out",
+            str(tmp_path / "p"),
+        ],
+    )
     assert res.exit_code == 2 and "--K" in res.output and "Traceback" not in res.output, res.output
 
 
@@ -122,8 +181,10 @@ def test_classical_with_weights_is_refused(tmp_path: Path) -> None:
 @pytest.mark.parametrize("std", ["0,0,0", "1,0,1", "-1,1,1", "nan,1,1", "inf,1,1"])
 def test_segment_refuses_a_std_that_is_not_positive(tmp_path: Path, std: str) -> None:
     write_image(tmp_path / "im" / "a.png", np.zeros((4, 4, 3), np.uint8))
-    res = CliRunner().invoke(main, ["segment", "--model", "unknown", "--images", str(tmp_path / "im"), "--out",
-                                    str(tmp_path / "o"), "--std", std])  # fmt: skip
+    res = CliRunner().invoke(
+        main,
+        ["segment", "--model", "unknown", "--images", str(tmp_path / "im"), "--out", str(tmp_path / "o"), "--std", std],
+    )
     assert res.exit_code == 1 and "--std" in res.output and not (tmp_path / "o").exists(), res.output
 
 
@@ -141,7 +202,21 @@ def test_valid_devices() -> None:
 def test_predict_device_option(tmp_path: Path, name: str) -> None:
     weights = tmp_path / "w.safetensors"
     weights.write_bytes(b"x")
-    res = CliRunner().invoke(main, ["predict", "--weights", str(weights), "--device", name, "--rgb", str(tmp_path),
-                                    "--sparse", str(tmp_path), "--out", str(tmp_path / "o")])  # fmt: skip
+    res = CliRunner().invoke(
+        main,
+        [
+            "predict",
+            "--weights",
+            str(weights),
+            "--device",
+            name,
+            "--rgb",
+            str(tmp_path),
+            "--sparse",
+            str(tmp_path),
+            "--out",
+            str(tmp_path / "o"),
+        ],
+    )
     assert res.exit_code == 1 and "device" in res.output and len(res.output.strip().splitlines()) == 1, res.output
     assert isinstance(res.exception, SystemExit)

@@ -120,8 +120,20 @@ def test_a_file_a_void_list_names_is_an_input_of_predict(tmp_path: Path) -> None
     code, output = run(*args, "--overwrite")
     assert code == 1 and f"would replace the input {victim}" in one_line(output)
     assert victim.read_bytes() == before
-    sweep = ("evaluate", "--dataset", "void", "--data", root, "--method", "classical", "--sparsity", "keep=1",
-             "--out", out, "--overwrite")  # fmt: skip
+    sweep = (
+        "evaluate",
+        "--dataset",
+        "void",
+        "--data",
+        root,
+        "--method",
+        "classical",
+        "--sparsity",
+        "keep=1",
+        "--out",
+        out,
+        "--overwrite",
+    )
     code, output = run(*sweep)  # evaluate's outputs too: never in a folder holding a listed input
     assert code == 1 and f"output folder {out} holds the input {victim}" in one_line(output)
     assert victim.read_bytes() == before and not (out / "sparsity.json").exists()
@@ -153,9 +165,20 @@ def _numeric_options() -> list[tuple[str, click.Parameter]]:
 def test_every_numeric_option_has_an_upper_bound() -> None:
     options = _numeric_options()
     names = {f"{cmd} {p.opts[0]}" for cmd, p in options}
-    expected = {"predict --max-skew", "predict --speed", "predict --max-depth", "predict --top-crop",
-                "project --scan-period", "data bag-from-kitti --nan-points", "train --lr", "train --width",
-                "train --batch-size", "train --workers", "evaluate --batch-size", "evaluate --max-frames"}  # fmt: skip
+    expected = {
+        "predict --max-skew",
+        "predict --speed",
+        "predict --max-depth",
+        "predict --top-crop",
+        "project --scan-period",
+        "data bag-from-kitti --nan-points",
+        "train --lr",
+        "train --width",
+        "train --batch-size",
+        "train --workers",
+        "evaluate --batch-size",
+        "evaluate --max-frames",
+    }
     assert expected <= names
     for cmd, p in options:
         ctx = click.Context(click.Command(cmd))
@@ -200,8 +223,21 @@ def test_huge_numbers_are_one_line_naming_the_option(tmp_path: Path, args: list[
 
 
 def test_max_skew_is_bounded_in_the_cli_and_the_library(tmp_path: Path) -> None:
-    code, out = run("predict", "--bag", tmp_path, "--image-topic", "/i", "--points-topic", "/p", "--method",
-                    "classical", "--out", tmp_path / "o", "--max-skew", "1e300")  # fmt: skip
+    code, out = run(
+        "predict",
+        "--bag",
+        tmp_path,
+        "--image-topic",
+        "/i",
+        "--points-topic",
+        "/p",
+        "--method",
+        "classical",
+        "--out",
+        tmp_path / "o",
+        "--max-skew",
+        "1e300",
+    )
     assert code == 2 and "--max-skew" in out and "<= 3600" in out and "Traceback" not in out, out
     from semattnet.robotics.bags.pairs import _skew_ns
 
@@ -228,8 +264,12 @@ def test_segment_with_the_classical_method_is_refused(tmp_path: Path) -> None:
     pickle = tmp_path / "model.pkl"
     pickle.write_bytes(b"\x80\x04K\x01.")
     base = ["predict", "--kitti-raw", DRIVE, "--method", "classical", "--out", tmp_path / "o"]
-    for extra, option in ((["--segment", "bogus:spec"], "--segment"), (["--segment", pickle], "--segment"),
-                          (["--backend", "onnxruntime"], "--backend"), (["--amp", "bf16"], "--amp")):  # fmt: skip
+    for extra, option in (
+        (["--segment", "bogus:spec"], "--segment"),
+        (["--segment", pickle], "--segment"),
+        (["--backend", "onnxruntime"], "--backend"),
+        (["--amp", "bf16"], "--amp"),
+    ):
         code, out = run(*base, *extra)
         assert code == 2 and f"{option} only mean(s) something with --method semattnet" in out, out
     assert not (tmp_path / "o").exists()
@@ -251,8 +291,20 @@ def test_a_corrupt_cached_onnx_file_is_rebuilt(tmp_path: Path, monkeypatch: pyte
     sparse = np.where(rng.random((64, 96)) < 0.1, rng.uniform(2, 40, (64, 96)), 0)
     Image.fromarray(np.round(sparse * 256).astype(np.uint16)).save(tmp_path / "sparse.png")
     ckpt = tiny_checkpoint(tmp_path / "tiny.safetensors")
-    args = ("predict", "--rgb", tmp_path / "rgb.png", "--sparse", tmp_path / "sparse.png", "--weights", ckpt,
-            "--backend", "onnxruntime", "--out", tmp_path / "out", "--overwrite")  # fmt: skip
+    args = (
+        "predict",
+        "--rgb",
+        tmp_path / "rgb.png",
+        "--sparse",
+        tmp_path / "sparse.png",
+        "--weights",
+        ckpt,
+        "--backend",
+        "onnxruntime",
+        "--out",
+        tmp_path / "out",
+        "--overwrite",
+    )
     assert run(*args)[0] == 0
     first = (tmp_path / "out" / "rgb.png").read_bytes()
     (cached,) = (tmp_path / "cache" / "engines").glob("*/model.onnx")

@@ -18,8 +18,11 @@ from semattnet.baselines import ClassicalCompleter
 from semattnet.cli import main
 from semattnet.data.download import ArchiveConflictError, extract_zip
 
-RIG = {"K": [[50, 0, 16], [0, 50, 12], [0, 0, 1]],
-       "T_cam_lidar": [[0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]], "image_size": [32, 24]}  # fmt: skip
+RIG = {
+    "K": [[50, 0, 16], [0, 50, 12], [0, 0, 1]],
+    "T_cam_lidar": [[0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]],
+    "image_size": [32, 24],
+}
 
 
 def _invoke(*args: object) -> tuple[int, str]:

@@ -41,8 +41,11 @@ def _refused(code: int, output: str, *fragments: str) -> None:
 
 def _tree(root: Path) -> dict[str, str]:
     """Every file under ``root`` (hidden ones too) by its sha256: to show nothing changed."""
-    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(root.rglob("*")) if p.is_file()}  # fmt: skip
+    return {
+        str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(root.rglob("*"))
+        if p.is_file()
+    }
 
 
 @pytest.fixture(scope="module")
@@ -97,9 +100,12 @@ def test_overwrite_still_replaces_our_own_outputs(bag: Path, tmp_path: Path) -> 
 def test_bag_from_kitti_never_writes_over_or_into_the_raw_tree(tmp_path: Path) -> None:
     drive = three_frame_drive(tmp_path / "RAW")
     before = _tree(tmp_path / "RAW")
-    for out, what in ((tmp_path / "RAW", "holds the input"), (drive.parent, "holds the input"),
-                      (drive / "bag", "lies inside the input folder"),
-                      (drive.parent / "calib_cam_to_cam.txt", "would replace the input")):  # fmt: skip
+    for out, what in (
+        (tmp_path / "RAW", "holds the input"),
+        (drive.parent, "holds the input"),
+        (drive / "bag", "lies inside the input folder"),
+        (drive.parent / "calib_cam_to_cam.txt", "would replace the input"),
+    ):
         code, output = _invoke("data", "bag-from-kitti", "--drive", drive, "--out", out, "--overwrite")
         _refused(code, output, what)
     assert _tree(tmp_path / "RAW") == before
@@ -158,8 +164,11 @@ def test_the_rule_in_the_library(tmp_path: Path) -> None:
     (tmp_path / "in").mkdir()
     (tmp_path / "in" / "a.png").write_bytes(b"\x89PNG")
     inputs = [("--rgb", tmp_path / "in")]
-    for out, what in ((tmp_path, "holds the input --rgb"), (tmp_path / "in", "would replace the input"),
-                      (tmp_path / "in" / "x", "lies inside the input folder")):  # fmt: skip
+    for out, what in (
+        (tmp_path, "holds the input --rgb"),
+        (tmp_path / "in", "would replace the input"),
+        (tmp_path / "in" / "x", "lies inside the input folder"),
+    ):
         with pytest.raises(OutputError, match=what):
             check_outputs(inputs, [Output("--bag-out", out, "bag")], overwrite=True)
     folder = Output("--out", tmp_path / "o", "folder")  # a folder output may hold the run's other outputs
@@ -210,8 +219,12 @@ def test_stale_stage_folders_go_wherever_a_run_stages(bag: Path, tmp_path: Path)
 
     out, bag_out, kbag, sub = tmp_path / "out", tmp_path / "pred_bag", tmp_path / "k_bag", tmp_path / "sub"
     out.mkdir()
-    stale = [out / f".semattnet-stage.{DEAD}.abcd1234", tmp_path / f".pred_bag.semattnet-stage.{DEAD}.abcd1234",
-             tmp_path / f".k_bag.p{DEAD}.abcd1234", tmp_path / f".sub.p{DEAD}.abcd1234"]  # fmt: skip
+    stale = [
+        out / f".semattnet-stage.{DEAD}.abcd1234",
+        tmp_path / f".pred_bag.semattnet-stage.{DEAD}.abcd1234",
+        tmp_path / f".k_bag.p{DEAD}.abcd1234",
+        tmp_path / f".sub.p{DEAD}.abcd1234",
+    ]
     for s in stale:
         (s / "half").mkdir(parents=True)
         (s / "half" / "written.bin").write_bytes(b"0" * 64)
@@ -229,8 +242,9 @@ def test_stale_stage_folders_go_wherever_a_run_stages(bag: Path, tmp_path: Path)
 
 def _cli(*args: object, timeout: float = 300) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "OMP_NUM_THREADS": "1", "RUST_LOG": "off"}
-    return subprocess.run([sys.executable, "-m", "semattnet", *map(str, args)], capture_output=True, text=True,
-                          env=env, timeout=timeout)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-m", "semattnet", *map(str, args)], capture_output=True, text=True, env=env, timeout=timeout
+    )
 
 
 def _full_disk_line(res: subprocess.CompletedProcess[str], path: Path) -> None:
@@ -244,8 +258,18 @@ def test_full_disk_under_a_bag_names_it(bag: Path, tmp_path: Path, small_fs: Pat
         res = _cli("data", "bag-from-kitti", "--drive", DRIVE, "--out", small_fs / fmt)
         _full_disk_line(res, small_fs / fmt)
         assert "needed" in res.stderr
-    res = _cli("predict", "--method", "classical", "--bag", bag, *TOPICS, "--out", tmp_path / "out",
-               "--bag-out", small_fs / "pred_bag")  # fmt: skip
+    res = _cli(
+        "predict",
+        "--method",
+        "classical",
+        "--bag",
+        bag,
+        *TOPICS,
+        "--out",
+        tmp_path / "out",
+        "--bag-out",
+        small_fs / "pred_bag",
+    )
     _full_disk_line(res, small_fs / "pred_bag")
     assert list(small_fs.iterdir()) == []  # nothing staged is left
 
@@ -253,8 +277,18 @@ def test_full_disk_under_a_bag_names_it(bag: Path, tmp_path: Path, small_fs: Pat
 @pytest.mark.slow  # waits 40 s for rerun-sdk's exit, which hangs after a full disk (upstream)
 def test_full_disk_under_a_recording_names_it(bag: Path, tmp_path: Path, small_fs: Path) -> None:
     pytest.importorskip("rerun")
-    args = ["predict", "--method", "classical", "--bag", bag, *TOPICS, "--out", tmp_path / "out", "--rerun",
-            small_fs / "run.rrd"]  # fmt: skip
+    args = [
+        "predict",
+        "--method",
+        "classical",
+        "--bag",
+        bag,
+        *TOPICS,
+        "--out",
+        tmp_path / "out",
+        "--rerun",
+        small_fs / "run.rrd",
+    ]
     try:
         res = _cli(*args, timeout=40)
     except subprocess.TimeoutExpired as hung:  # the one line came, then Rerun's dead file writer blocks the exit

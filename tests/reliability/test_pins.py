@@ -42,8 +42,13 @@ def test_a_download_records_that_we_wrote_it(tmp_path: Path) -> None:
     assert record["written"] is True and path.read_bytes() == src.read_bytes()
 
 
-@pytest.mark.parametrize("page", [b"<!DOCTYPE html><html><body>Quota exceeded</body></html>",
-                                  b"\n  <html><head><title>Sign in</title></head></html>"])  # fmt: skip
+@pytest.mark.parametrize(
+    "page",
+    [
+        b"<!DOCTYPE html><html><body>Quota exceeded</body></html>",
+        b"\n  <html><head><title>Sign in</title></head></html>",
+    ],
+)
 def test_a_web_page_is_never_pinned_and_the_fixed_server_is_then_trusted(tmp_path: Path, page: bytes) -> None:
     served = tmp_path / "model.bin"
     served.write_bytes(page)

@@ -25,8 +25,11 @@ from semattnet._errors import DataError, InputError, SemAttNetError
 from semattnet.cli import main
 from tests._helpers import SAMPLE
 
-RIG = {"K": [[50, 0, 16], [0, 50, 12], [0, 0, 1]],
-       "T_cam_lidar": [[0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]], "image_size": [32, 24]}  # fmt: skip
+RIG = {
+    "K": [[50, 0, 16], [0, 50, 12], [0, 0, 1]],
+    "T_cam_lidar": [[0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]],
+    "image_size": [32, 24],
+}
 T16 = "0,-1,0,0,0,0,-1,0,1,0,0,0,0,0,0,1"
 DRIVE = ("2011_09_26", "2011_09_26_drive_0035_sync")
 
@@ -46,8 +49,11 @@ def _no_hang() -> Iterator[None]:
 
 
 def _hashes(root: Path) -> dict[str, str]:
-    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(root.rglob("*")) if p.is_file() and not p.is_symlink()}  # fmt: skip
+    return {
+        str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(root.rglob("*"))
+        if p.is_file() and not p.is_symlink()
+    }
 
 
 def _cli(root: Path, *args: object) -> tuple[int, str]:
@@ -99,9 +105,16 @@ def _readers() -> dict[str, Callable[[Path], object]]:
     from semattnet.training.config import TrainConfig
     from semattnet.weights import load_checkpoint
 
-    return {"a.png": read_image, "d.png": read_depth, "s.bin": read_points, "rig.json": read_rig_json,
-            "calib_cam_to_cam.txt": read_cam_to_cam, "oxts.txt": read_oxts_motion, "w.pt": load_checkpoint,
-            "config.json": TrainConfig.load}  # fmt: skip
+    return {
+        "a.png": read_image,
+        "d.png": read_depth,
+        "s.bin": read_points,
+        "rig.json": read_rig_json,
+        "calib_cam_to_cam.txt": read_cam_to_cam,
+        "oxts.txt": read_oxts_motion,
+        "w.pt": load_checkpoint,
+        "config.json": TrainConfig.load,
+    }
 
 
 @pytest.mark.parametrize("kind", ["fifo", "device", "folder"])
@@ -144,8 +157,18 @@ def test_a_corrupt_oxts_packet_is_blamed_on_the_oxts_file(tmp_path: Path, index:
 
     path = _oxts(tmp_path / "oxts.txt", index, value)
     assert "oxts.txt: OXTS velocity" in _one_line(lambda: read_oxts_motion(path), DataError)
-    code, msg = _cli(tmp_path, "project", "--points", _scan(tmp_path), "--rig", _rig(tmp_path), "--deskew-oxts", path,
-                     "--out", tmp_path / "o.png")  # fmt: skip
+    code, msg = _cli(
+        tmp_path,
+        "project",
+        "--points",
+        _scan(tmp_path),
+        "--rig",
+        _rig(tmp_path),
+        "--deskew-oxts",
+        path,
+        "--out",
+        tmp_path / "o.png",
+    )
     assert code == 1 and "oxts.txt" in msg and "scan.npy" not in msg, msg
     assert not (tmp_path / "o.png").exists()
 
@@ -157,14 +180,22 @@ def test_a_raw_drive_with_a_corrupt_oxts_packet_names_it(tmp_path: Path) -> None
     vals = packet.read_text().split()
     vals[8] = "nan"
     packet.write_text(" ".join(vals) + "\n")
-    code, msg = _cli(tmp_path, "predict", "--method", "classical", "--kitti-raw", drive, "--deskew", "--out",
-                     tmp_path / "o")  # fmt: skip
+    code, msg = _cli(
+        tmp_path, "predict", "--method", "classical", "--kitti-raw", drive, "--deskew", "--out", tmp_path / "o"
+    )
     assert code == 1 and "0000000005.txt" in msg and "OXTS" in msg, msg
 
 
-@pytest.mark.parametrize(("velocity", "yaw", "period"), [([np.nan, 0, 0], 0.0, 0.1), ([0, 0], 0.0, 0.1),
-                                                          ([0, 0, 0], np.inf, 0.1), ([0, 0, 0], 0.0, 0.0),
-                                                          ([0, 0, 0], 0.0, np.nan)])  # fmt: skip
+@pytest.mark.parametrize(
+    ("velocity", "yaw", "period"),
+    [
+        ([np.nan, 0, 0], 0.0, 0.1),
+        ([0, 0], 0.0, 0.1),
+        ([0, 0, 0], np.inf, 0.1),
+        ([0, 0, 0], 0.0, 0.0),
+        ([0, 0, 0], 0.0, np.nan),
+    ],
+)
 def test_deskew_refuses_meaningless_motion(velocity: list[float], yaw: float, period: float) -> None:
     from semattnet.geometry import deskew_scan
 
@@ -197,8 +228,10 @@ def test_pcd_width_times_height_must_be_points(tmp_path: Path, width: str, heigh
     from semattnet.geometry import read_points
 
     path = tmp_path / "c.pcd"
-    path.write_text(f"VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {width}\nHEIGHT {height}\n"
-                    "POINTS 1\nDATA ascii\n5 0 0\n")  # fmt: skip
+    path.write_text(
+        f"VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {width}\nHEIGHT {height}\n"
+        "POINTS 1\nDATA ascii\n5 0 0\n"
+    )
     assert "c.pcd: PCD WIDTH" in _one_line(lambda: read_points(path), DataError)
 
 
@@ -214,21 +247,39 @@ def _tree(tmp_path: Path) -> None:
     write_depth(tmp_path / "sparse" / "a.png", sparse)
 
 
-@pytest.mark.parametrize(("extra", "named", "why"), [(["--camera", "3"], "--camera", "is an option of --kitti-raw"),
-                                                     (["--K", "kitti"], "--K", "only mean"),
-                                                     (["--K", "50,50,6,4"], "--K", "only mean")])  # fmt: skip
+@pytest.mark.parametrize(
+    ("extra", "named", "why"),
+    [
+        (["--camera", "3"], "--camera", "is an option of --kitti-raw"),
+        (["--K", "kitti"], "--K", "only mean"),
+        (["--K", "50,50,6,4"], "--K", "only mean"),
+    ],
+)
 def test_predict_refuses_options_it_would_ignore(tmp_path: Path, extra: list[str], named: str, why: str) -> None:
     _tree(tmp_path)
-    code, msg = _cli(tmp_path, "predict", "--method", "classical", "--rgb", tmp_path / "rgb", "--sparse",
-                     tmp_path / "sparse", "--out", tmp_path / "o", *extra)  # fmt: skip
+    code, msg = _cli(
+        tmp_path,
+        "predict",
+        "--method",
+        "classical",
+        "--rgb",
+        tmp_path / "rgb",
+        "--sparse",
+        tmp_path / "sparse",
+        "--out",
+        tmp_path / "o",
+        *extra,
+    )
     assert code == 2 and named in msg and why in msg and not (tmp_path / "o").exists(), msg
 
 
-@pytest.mark.parametrize(("extra", "named"), [(["--scan-period", "0.2"], "--scan-period"),
-                                              (["--camera", "3"], "--camera")])  # fmt: skip
+@pytest.mark.parametrize(
+    ("extra", "named"), [(["--scan-period", "0.2"], "--scan-period"), (["--camera", "3"], "--camera")]
+)
 def test_project_refuses_options_it_would_ignore(tmp_path: Path, extra: list[str], named: str) -> None:
-    code, msg = _cli(tmp_path, "project", "--points", _scan(tmp_path), "--rig", _rig(tmp_path), "--out",
-                     tmp_path / "o.png", *extra)  # fmt: skip
+    code, msg = _cli(
+        tmp_path, "project", "--points", _scan(tmp_path), "--rig", _rig(tmp_path), "--out", tmp_path / "o.png", *extra
+    )
     assert code == 2 and named in msg and not (tmp_path / "o.png").exists(), msg
 
 
@@ -236,8 +287,20 @@ def test_project_refuses_options_it_would_ignore(tmp_path: Path, extra: list[str
 def test_project_number_options_are_named(tmp_path: Path, args: list[str], named: str) -> None:
     base = {"--K": "50,50,16,12", "--T": T16}
     base[args[0]] = args[1]
-    code, msg = _cli(tmp_path, "project", "--points", _scan(tmp_path), "--K", base["--K"], "--T", base["--T"],
-                     "--size", "32x24", "--out", tmp_path / "o.png")  # fmt: skip
+    code, msg = _cli(
+        tmp_path,
+        "project",
+        "--points",
+        _scan(tmp_path),
+        "--K",
+        base["--K"],
+        "--T",
+        base["--T"],
+        "--size",
+        "32x24",
+        "--out",
+        tmp_path / "o.png",
+    )
     assert code == 1 and msg.split(": ")[1].startswith(named), msg
 
 
@@ -264,8 +327,16 @@ def test_write_depth_refuses_what_a_kitti_png_cannot_hold(tmp_path: Path, value:
 
 @pytest.mark.parametrize("depth_m", [256.5, 1000.0, 1e5])
 def test_project_refuses_points_deeper_than_a_png_holds(tmp_path: Path, depth_m: float) -> None:
-    code, msg = _cli(tmp_path, "project", "--points", _scan(tmp_path, [[depth_m, 0, 0], [6.0, 0.5, 0.2]]), "--rig",
-                     _rig(tmp_path), "--out", tmp_path / "o.png")  # fmt: skip
+    code, msg = _cli(
+        tmp_path,
+        "project",
+        "--points",
+        _scan(tmp_path, [[depth_m, 0, 0], [6.0, 0.5, 0.2]]),
+        "--rig",
+        _rig(tmp_path),
+        "--out",
+        tmp_path / "o.png",
+    )
     assert code == 1 and "scan.npy" in msg and "deeper than" in msg and not (tmp_path / "o.png").exists(), msg
 
 
@@ -299,8 +370,9 @@ def completer():  # type: ignore[no-untyped-def]
     return semattnet.DepthCompleter(semattnet.build_model("semattnet", width=0.125).eval(), device="cpu")
 
 
-@pytest.mark.parametrize(("which", "value"), [("semantic", 1e9), ("semantic", -1.0), ("rgb", 256.0),
-                                              ("rgb", -5.0), ("semantic", np.inf)])  # fmt: skip
+@pytest.mark.parametrize(
+    ("which", "value"), [("semantic", 1e9), ("semantic", -1.0), ("rgb", 256.0), ("rgb", -5.0), ("semantic", np.inf)]
+)
 def test_depth_completer_refuses_colours_outside_0_255(completer, which: str, value: float) -> None:  # type: ignore[no-untyped-def]
     frame = {"rgb": np.zeros((16, 16, 3)), "semantic": np.zeros((16, 16, 3))}
     frame[which][2, 3, 1] = value
@@ -319,8 +391,20 @@ def test_a_mirror_that_is_not_a_url_is_refused_first(tmp_path: Path, mirror: str
 
     msg = _one_line(lambda: download_dataset("void", tmp_path / "o", accept_license=True, mirror=mirror), InputError)
     assert "--mirror" in msg and not (tmp_path / "o").exists()
-    code, msg = _cli(tmp_path, "data", "download", "--dataset", "void", "--accept-license", "--mirror", mirror,
-                     "--out", tmp_path / "o", "--cache-dir", tmp_path / "cache")  # fmt: skip
+    code, msg = _cli(
+        tmp_path,
+        "data",
+        "download",
+        "--dataset",
+        "void",
+        "--accept-license",
+        "--mirror",
+        mirror,
+        "--out",
+        tmp_path / "o",
+        "--cache-dir",
+        tmp_path / "cache",
+    )
     assert code == 1 and "--mirror" in msg and not (tmp_path / "o").exists(), msg
 
 
@@ -367,8 +451,17 @@ def test_visualize_never_replaces_a_hard_link_to_its_ground_truth(tmp_path: Path
         write_depth(tmp_path / d / "a.png", np.full((4, 6), 5.0))
     (tmp_path / "o").mkdir()
     os.link(tmp_path / "gt" / "a.png", tmp_path / "o" / "a_color.png")
-    code, msg = _cli(tmp_path, "visualize", "--pred", tmp_path / "pred", "--gt", tmp_path / "gt", "--out",
-                     tmp_path / "o", "--overwrite")  # fmt: skip
+    code, msg = _cli(
+        tmp_path,
+        "visualize",
+        "--pred",
+        tmp_path / "pred",
+        "--gt",
+        tmp_path / "gt",
+        "--out",
+        tmp_path / "o",
+        "--overwrite",
+    )
     assert code == 1 and "would replace the input" in msg and (tmp_path / "o" / "a_color.png").stat().st_nlink == 2
 
 

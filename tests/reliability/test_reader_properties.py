@@ -63,8 +63,10 @@ def _seed_npy() -> bytes:
 
 
 def _seed_ply() -> bytes:
-    head = b"ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty float x\nproperty float y\n" \
-           b"property float z\nend_header\n"  # fmt: skip
+    head = (
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+        b"property float z\nend_header\n"
+    )
     return head + struct.pack("<6f", 1, 2, 3, 4, 5, 6)
 
 
@@ -109,9 +111,11 @@ def test_text_scans(data: bytes) -> None:
     _points("scan.txt")(data)
 
 
-_CAM_TO_CAM = (b"calib_time: 09-Jan-2012 13:57:47\nS_rect_02: 1.242000e+03 3.750000e+02\n"
-               b"R_rect_02: 1 0 0 0 1 0 0 0 1\nP_rect_02: 7.2e+02 0 6.0e+02 4.4e+01 0 7.2e+02 1.7e+02 2.1e-01 0 0 1 "
-               b"2.7e-03\n")  # fmt: skip
+_CAM_TO_CAM = (
+    b"calib_time: 09-Jan-2012 13:57:47\nS_rect_02: 1.242000e+03 3.750000e+02\n"
+    b"R_rect_02: 1 0 0 0 1 0 0 0 1\nP_rect_02: 7.2e+02 0 6.0e+02 4.4e+01 0 7.2e+02 1.7e+02 2.1e-01 0 0 1 "
+    b"2.7e-03\n"
+)
 _VELO = b"calib_time: 15-Mar-2012 11:37:16\nR: 1 0 0 0 1 0 0 0 1\nT: 0.1 0.2 0.3\n"
 
 
@@ -120,8 +124,12 @@ _VELO = b"calib_time: 15-Mar-2012 11:37:16\nR: 1 0 0 0 1 0 0 0 1\nT: 0.1 0.2 0.3
 def test_cam_to_cam_calibration(data: bytes) -> None:
     from semattnet.geometry.calibration import read_cam_to_cam
 
-    _check("calib_cam_to_cam.txt", data, read_cam_to_cam, lambda cams: all(
-        0 < c.image_size[0] <= 16384 and 0 < c.image_size[1] <= 16384 for c in cams.values()))  # fmt: skip
+    _check(
+        "calib_cam_to_cam.txt",
+        data,
+        read_cam_to_cam,
+        lambda cams: all(0 < c.image_size[0] <= 16384 and 0 < c.image_size[1] <= 16384 for c in cams.values()),
+    )
 
 
 @_SETTINGS
@@ -129,12 +137,16 @@ def test_cam_to_cam_calibration(data: bytes) -> None:
 def test_velo_to_cam_calibration(data: bytes) -> None:
     from semattnet.geometry.calibration import read_velo_to_cam
 
-    _check("calib_velo_to_cam.txt", data, read_velo_to_cam,
-           lambda T: T.shape == (4, 4) and bool(np.isfinite(T).all()))  # fmt: skip
+    _check("calib_velo_to_cam.txt", data, read_velo_to_cam, lambda T: T.shape == (4, 4) and bool(np.isfinite(T).all()))
 
 
-_RIG = json.dumps({"K": [[50, 0, 16], [0, 50, 12], [0, 0, 1]], "image_size": [32, 24],
-                   "T_cam_lidar": [[0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]]}).encode()  # fmt: skip
+_RIG = json.dumps(
+    {
+        "K": [[50, 0, 16], [0, 50, 12], [0, 0, 1]],
+        "image_size": [32, 24],
+        "T_cam_lidar": [[0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]],
+    }
+).encode()
 _LEAVES = st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=8)
 _JSON_VALUES = st.recursive(
     _LEAVES,
@@ -144,8 +156,14 @@ _JSON_VALUES = st.recursive(
 
 
 @_SETTINGS
-@given(st.one_of(_mutations(_RIG), st.dictionaries(st.sampled_from(["K", "T_cam_lidar", "image_size", "camera"]),
-                                                   _JSON_VALUES).map(lambda d: json.dumps(d).encode())))  # fmt: skip
+@given(
+    st.one_of(
+        _mutations(_RIG),
+        st.dictionaries(st.sampled_from(["K", "T_cam_lidar", "image_size", "camera"]), _JSON_VALUES).map(
+            lambda d: json.dumps(d).encode()
+        ),
+    )
+)
 def test_rig_json(data: bytes) -> None:
     from semattnet.geometry.calibration import read_rig_json
 
@@ -168,9 +186,14 @@ def test_safetensors_header(data: bytes) -> None:
 
 
 @_SETTINGS
-@given(st.one_of(_mutations(json.dumps({"arch": "semattnet", "width": 0.125}).encode()),
-                 st.dictionaries(st.sampled_from(["arch", "width", "iterations", "kernel_size", "x"]),
-                                 _JSON_VALUES).map(lambda d: json.dumps(d).encode())))  # fmt: skip
+@given(
+    st.one_of(
+        _mutations(json.dumps({"arch": "semattnet", "width": 0.125}).encode()),
+        st.dictionaries(st.sampled_from(["arch", "width", "iterations", "kernel_size", "x"]), _JSON_VALUES).map(
+            lambda d: json.dumps(d).encode()
+        ),
+    )
+)
 def test_config_json(data: bytes) -> None:
     from semattnet.weights.hub import from_pretrained
 
@@ -237,5 +260,6 @@ def test_hostile_headers_are_refused_under_a_memory_cap() -> None:
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     res = subprocess.run([sys.executable, "-c", _HOSTILE], capture_output=True, text=True, env=env, timeout=60)
     assert res.returncode == 0, res.stderr[-3000:]
-    assert res.stdout.split() == [w for f in "a.ply b.ply c.pcd d.pcd e.npy f.png g.safetensors".split()
-                                  for w in (f, "refused")], res.stdout  # fmt: skip
+    assert res.stdout.split() == [
+        w for f in "a.ply b.ply c.pcd d.pcd e.npy f.png g.safetensors".split() for w in (f, "refused")
+    ], res.stdout

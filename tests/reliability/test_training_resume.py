@@ -26,9 +26,20 @@ def tree(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def _cfg(tree: Path, out: Path) -> TrainConfig:
-    return TrainConfig(data=str(tree), out=str(out), width=0.125, crop=(64, 128), batch_size=2, workers=0,
-                       log_every=1, epochs=5, max_steps=STEPS, save_every=3, val_split="",
-                       depth_head_init=(10.0, 15.0))  # fmt: skip
+    return TrainConfig(
+        data=str(tree),
+        out=str(out),
+        width=0.125,
+        crop=(64, 128),
+        batch_size=2,
+        workers=0,
+        log_every=1,
+        epochs=5,
+        max_steps=STEPS,
+        save_every=3,
+        val_split="",
+        depth_head_init=(10.0, 15.0),
+    )
 
 
 class _Killed(BaseException):
@@ -107,9 +118,24 @@ def test_sync_bn_on_cpu_is_one_clear_error(tree: Path, tmp_path: Path) -> None:
         train(cfg, log=lambda m: None)
 
 
-@pytest.mark.parametrize("override", ["lr=nan", "lr=-1", "lr=Infinity", "epochs=0", "batch_size=-2", "workers=-1",
-                                      "width=0", "betas=[1.5, 0.9]", "crop=[0, 10]", "log_every=0",
-                                      "max_steps=-5", "sync_bn=\"yes\"", "jitter=NaN"])  # fmt: skip
+@pytest.mark.parametrize(
+    "override",
+    [
+        "lr=nan",
+        "lr=-1",
+        "lr=Infinity",
+        "epochs=0",
+        "batch_size=-2",
+        "workers=-1",
+        "width=0",
+        "betas=[1.5, 0.9]",
+        "crop=[0, 10]",
+        "log_every=0",
+        "max_steps=-5",
+        'sync_bn="yes"',
+        "jitter=NaN",
+    ],
+)
 def test_config_refuses_nonsense(override: str) -> None:
     with pytest.raises(ValueError, match=override.split("=")[0]):
         TrainConfig().with_overrides([override])

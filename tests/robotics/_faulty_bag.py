@@ -67,8 +67,9 @@ class FaultyBag(NamedTuple):
 def _points(i: int, behind: bool) -> np.ndarray:
     """(300, 4) float32 LiDAR points of frame ``i`` (x, y, z, intensity), all in front or all behind."""
     rng = np.random.default_rng(100 + i)
-    pts = np.column_stack([rng.uniform(3, 30, 300), rng.uniform(-6, 6, 300), rng.uniform(-1.5, 1, 300),
-                           rng.uniform(0, 1, 300)]).astype(np.float32)  # fmt: skip
+    pts = np.column_stack(
+        [rng.uniform(3, 30, 300), rng.uniform(-6, 6, 300), rng.uniform(-1.5, 1, 300), rng.uniform(0, 1, 300)]
+    ).astype(np.float32)
     if behind:
         pts[:, 0] = -pts[:, 0]
     return pts
@@ -86,12 +87,14 @@ def _image(ts: Any, i: int, t: int, fault: str | None) -> Any:
     rgb = np.random.default_rng(i).integers(0, 256, (H, W, 3), dtype=np.uint8)
     if fault == "truncated":
         data = rgb.reshape(-1)[: rgb.size // 2]
-        return ts.types["sensor_msgs/msg/Image"](header=header(ts, t, "cam"), height=H, width=W, encoding="rgb8",
-                                                 is_bigendian=0, step=3 * W, data=data)  # fmt: skip
+        return ts.types["sensor_msgs/msg/Image"](
+            header=header(ts, t, "cam"), height=H, width=W, encoding="rgb8", is_bigendian=0, step=3 * W, data=data
+        )
     if fault == "encoding":
         data = np.zeros(H * W * 2, np.uint8)
-        return ts.types["sensor_msgs/msg/Image"](header=header(ts, t, "cam"), height=H, width=W, encoding="16UC1",
-                                                 is_bigendian=0, step=2 * W, data=data)  # fmt: skip
+        return ts.types["sensor_msgs/msg/Image"](
+            header=header(ts, t, "cam"), height=H, width=W, encoding="16UC1", is_bigendian=0, step=2 * W, data=data
+        )
     return image_message(ts, rgb, t, "cam")
 
 

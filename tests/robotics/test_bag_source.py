@@ -45,8 +45,9 @@ def kitti_rig(path: Path) -> Path:
     """KITTI's own camera-02 calibration as a rig JSON (a bag's /tf_static quaternions cannot reproduce it bit for
     bit, so exactness against the KITTI path goes through the rig)."""
     cal = read_kitti_calibration(RAW_DATE, "02")
-    path.write_text(json.dumps({"K": cal.K.tolist(), "T_cam_lidar": cal.T_cam_lidar.tolist(),
-                                "image_size": list(cal.image_size)}))  # fmt: skip
+    path.write_text(
+        json.dumps({"K": cal.K.tolist(), "T_cam_lidar": cal.T_cam_lidar.tolist(), "image_size": list(cal.image_size)})
+    )
     return path
 
 
@@ -57,8 +58,9 @@ def test_sparse_equals_project_cli_exactly(bags: dict[str, Path], fmt: str, tmp_
     assert source.names == ["0000000000", "0000000001"]
     assert "2 image(s) paired" in logged[0] and "0 dropped" in logged[0] and "0 of 2 scan(s) unused" in logged[0]
     out = tmp_path / "cli.png"
-    res = CliRunner().invoke(main, ["project", "--points", str(SCAN), "--calib-dir", str(RAW_DATE), "--camera", "2",
-                                    "--out", str(out)])  # fmt: skip
+    res = CliRunner().invoke(
+        main, ["project", "--points", str(SCAN), "--calib-dir", str(RAW_DATE), "--camera", "2", "--out", str(out)]
+    )
     assert res.exit_code == 0, res.output
     reference = project_scan_file(SCAN, tmp_path / "lib.png", calib_dir=RAW_DATE).depth
     raw = RawDriveSource(DRIVE, "5").load("0000000005")
@@ -125,14 +127,22 @@ def test_semantic_topic_paired_by_stamp(tmp_path: Path) -> None:
 def test_semantic_topic_too_far_fails_that_frame_only(tmp_path: Path) -> None:
     rig, sems = _semantic_bag(tmp_path / "b", [0, 0, 30])
     logged: list[str] = []
-    source = BagSource(tmp_path / "b", "/cam/image", "/lidar", rig=rig, semantic_topic="/cam/semantic", max_skew=0.02,
-                       log=logged.append)  # fmt: skip
+    source = BagSource(
+        tmp_path / "b",
+        "/cam/image",
+        "/lidar",
+        rig=rig,
+        semantic_topic="/cam/semantic",
+        max_skew=0.02,
+        log=logged.append,
+    )
     assert source.names == ["0000000000", "0000000001", "0000000002"]
     assert "semantic maps from /cam/semantic (1 image(s) without one within 20.0 ms)" in logged[0]
     with pytest.raises(DataError) as err:
         source.load("0000000002")
-    assert str(err.value) == (f"{tmp_path / 'b'}: /cam/image image 2: no /cam/semantic semantic image within "
-                              "20.0 ms (nearest 30.0 ms apart)")  # fmt: skip
+    assert str(err.value) == (
+        f"{tmp_path / 'b'}: /cam/image image 2: no /cam/semantic semantic image within 20.0 ms (nearest 30.0 ms apart)"
+    )
     assert np.array_equal(source.load("0000000001").semantic, sems[1])
     (tmp_path / "c").mkdir()
     rig, _ = _semantic_bag(tmp_path / "c" / "b", [30, 30, 30])  # none near enough: nothing to complete
@@ -149,6 +159,8 @@ def test_undecodable_semantic_image_fails_its_frame_only(tmp_path: Path) -> None
     for _ in range(2):  # asked again (check, then load): the same error
         with pytest.raises(DataError) as err:
             source.load("0000000001")
-        assert str(err.value) == (f"{tmp_path / 'b'}: /cam/image image 1: /cam/semantic message 1: unsupported image "
-                                  "encoding '16UC1' (semattnet reads rgb8, bgr8, mono8)")  # fmt: skip
+        assert str(err.value) == (
+            f"{tmp_path / 'b'}: /cam/image image 1: /cam/semantic message 1: unsupported image "
+            "encoding '16UC1' (semattnet reads rgb8, bgr8, mono8)"
+        )
     assert np.array_equal(source.load("0000000002").semantic, sems[2])

@@ -49,8 +49,9 @@ def bags(drive: Path) -> dict[str, Path]:
 
 
 @pytest.mark.parametrize("fmt", ["ros1", "mcap"])
-def test_the_views_of_a_kitti_drive_written_as_a_bag_are_the_drives_own(bags: dict[str, Path], drive: Path,
-                                                                         fmt: str) -> None:  # fmt: skip
+def test_the_views_of_a_kitti_drive_written_as_a_bag_are_the_drives_own(
+    bags: dict[str, Path], drive: Path, fmt: str
+) -> None:
     assert {r.topic: r.count for r in list_topics(bags[fmt])}["/tf"] == 3  # odom -> base_link, one per frame
     lines: list[str] = []
     source, raw = BagSource(bags[fmt], T.image, T.points, log=lines.append), RawDriveSource(drive)
@@ -110,25 +111,54 @@ def test_tf_is_interpolated_half_way_and_not_extrapolated_beyond_the_tolerance()
 def test_a_neighbour_outside_the_span_of_tf_is_no_view(drive: Path, tmp_path: Path) -> None:
     """/tf covers the first two frames only: the second frame has its previous neighbour alone, the third none."""
     raw = RawDrive(drive, 2)
-    recs = [SensorRecord(f.image, f.points, 10**18 + k * 10**8, 10**18 + k * 10**8,
-                         pose=make_T(np.eye(3), np.array([k, 0.0, 0])) if k < 2 else None)
-            for k, f in enumerate(raw)]  # fmt: skip
+    recs = [
+        SensorRecord(
+            f.image,
+            f.points,
+            10**18 + k * 10**8,
+            10**18 + k * 10**8,
+            pose=make_T(np.eye(3), np.array([k, 0.0, 0])) if k < 2 else None,
+        )
+        for k, f in enumerate(raw)
+    ]
     bag = write_sensor_bag(tmp_path / "part", recs, raw.calib, fmt="mcap", topics=T).path
     source = BagSource(bag, T.image, T.points)
     assert [[v.name for v in source.views(n)] for n in NAMES] == [NAMES[1:2], NAMES[:1], []]
 
 
 def _adapt(bag: Path, weights: Path, out: Path, *extra: str) -> Any:
-    args = ["adapt", "--bag", bag, "--image-topic", T.image, "--points-topic", T.points, "--weights", weights,
-            "--out", out, "--crop", "32x64", "--batch-size", "1", "--steps", "1", "--device", "cpu"]  # fmt: skip
+    args = [
+        "adapt",
+        "--bag",
+        bag,
+        "--image-topic",
+        T.image,
+        "--points-topic",
+        T.points,
+        "--weights",
+        weights,
+        "--out",
+        out,
+        "--crop",
+        "32x64",
+        "--batch-size",
+        "1",
+        "--steps",
+        "1",
+        "--device",
+        "cpu",
+    ]
     return CliRunner().invoke(main, list(map(str, [*args, *extra])))
 
 
 @pytest.mark.filterwarnings("ignore:no semantic maps given")
-@pytest.mark.parametrize(("bag", "photometric"), [
-    ("mcap", True),
-    pytest.param("no_tf", False, marks=pytest.mark.slow),  # seconds; the source's own test above is fast
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("bag", "photometric"),
+    [
+        ("mcap", True),
+        pytest.param("no_tf", False, marks=pytest.mark.slow),  # seconds; the source's own test above is fast
+    ],
+)
 def test_adapt_on_a_bag_uses_its_neighbouring_frames_where_tf_poses_them(
     bags: dict[str, Path], tiny_weights: Path, tmp_path: Path, bag: str, photometric: bool
 ) -> None:
@@ -150,8 +180,13 @@ def _stamped(parent: str, child: str, sec: int, x: float, w: float) -> SimpleNam
 
 def test_a_bad_tf_transform_is_left_out_and_kept_to_be_said() -> None:
     buffer = TransformBuffer()
-    msg = SimpleNamespace(transforms=[_stamped("/odom", "base", 1, 1.0, 1.0), _stamped("odom", "base", 2, np.nan, 1.0),
-                                      _stamped("odom", "base", 3, 3.0, 0.5)])  # fmt: skip
+    msg = SimpleNamespace(
+        transforms=[
+            _stamped("/odom", "base", 1, 1.0, 1.0),
+            _stamped("odom", "base", 2, np.nan, 1.0),
+            _stamped("odom", "base", 3, 3.0, 0.5),
+        ]
+    )
     buffer.add_message(msg, "b.mcap: /tf message 0")
     assert list(buffer.tracks[("odom", "base")].stamps) == [10**9]
     assert len(buffer.skipped) == 2

@@ -51,8 +51,9 @@ def bags(tmp_path_factory: pytest.TempPathFactory, frame) -> dict[str, Path]:  #
         recs = [SensorRecord(frame.image, frame.points, T0 + i * 10**8, T0 + i * 10**8 + 3 * 10**6) for i in range(3)]
         compressed = "png" if fmt == "mcap" else None
         imu = read_kitti_calibration(RAW, "02")  # any rigid T_base_lidar; KITTI's own comes from calib_imu_to_velo
-        write_sensor_bag(root / name, recs, frame.calib, fmt=fmt, nan_points=40, compressed=compressed,
-                         T_base_lidar=imu.T_cam0_lidar)  # fmt: skip
+        write_sensor_bag(
+            root / name, recs, frame.calib, fmt=fmt, nan_points=40, compressed=compressed, T_base_lidar=imu.T_cam0_lidar
+        )
         out[fmt] = root / name
     return out
 
@@ -113,14 +114,16 @@ def test_rig_overrides_bag_calibration_and_matches_kitti_project(bags: dict[str,
     """With KITTI's own calibration as a rig file, the bag gives `project --calib-dir` exactly."""
     cal = read_kitti_calibration(RAW, "02")
     rig = tmp_path / "kitti.json"
-    rig.write_text(json.dumps({"K": cal.K.tolist(), "T_cam_lidar": cal.T_cam_lidar.tolist(),
-                               "image_size": list(cal.image_size)}))  # fmt: skip
+    rig.write_text(
+        json.dumps({"K": cal.K.tolist(), "T_cam_lidar": cal.T_cam_lidar.tolist(), "image_size": list(cal.image_size)})
+    )
     p = next(iter(BagPairs(bags["mcap"], T.image + "/compressed", T.points, rig=rig, tf_topic="/none")))
     assert np.array_equal(p.T_cam_lidar, cal.T_cam_lidar)
     sparse = project_points(p.points, p.K, p.T_cam_lidar, p.image_size)
     out = tmp_path / "cli.png"
-    res = CliRunner().invoke(main, ["project", "--points", str(SCAN), "--calib-dir", str(RAW), "--camera", "2",
-                                    "--out", str(out)])  # fmt: skip
+    res = CliRunner().invoke(
+        main, ["project", "--points", str(SCAN), "--calib-dir", str(RAW), "--camera", "2", "--out", str(out)]
+    )
     assert res.exit_code == 0, res.output
     assert np.array_equal(sparse, project_scan_file(SCAN, tmp_path / "l.png", calib_dir=RAW).depth)
     from semattnet.data.io import encode_depth
@@ -148,8 +151,11 @@ def test_wrong_topic_type(bags: dict[str, Path]) -> None:
 
 
 def test_no_transform_names_both_frames(bags: dict[str, Path]) -> None:
-    with pytest.raises(NoTransformError, match=r"/tf_other: no transform between frames 'velodyne' and "
-                                               r"'camera_color_left'"):  # fmt: skip
+    with pytest.raises(
+        NoTransformError,
+        match=r"/tf_other: no transform between frames 'velodyne' and "
+        r"'camera_color_left'",
+    ):
         BagPairs(bags["sqlite3"], T.image, T.points, tf_topic="/tf_other")
 
 
@@ -160,8 +166,11 @@ def test_no_scan_within_max_skew(bags: dict[str, Path]) -> None:
 
 def test_dropped_images_are_counted(tmp_path: Path, frame) -> None:  # type: ignore[no-untyped-def]
     img, pts = frame.image, frame.points[:2000]
-    recs = [SensorRecord(img, pts, T0, T0), SensorRecord(img, pts, T0 + 10**8, T0 + 10**8),
-            SensorRecord(img, pts, T0 + 9 * 10**8, T0 + 2 * 10**8)]  # fmt: skip
+    recs = [
+        SensorRecord(img, pts, T0, T0),
+        SensorRecord(img, pts, T0 + 10**8, T0 + 10**8),
+        SensorRecord(img, pts, T0 + 9 * 10**8, T0 + 2 * 10**8),
+    ]
     write_sensor_bag(tmp_path / "b.bag", recs, frame.calib)
     pairs = BagPairs(tmp_path / "b.bag", T.image, T.points)
     assert pairs.pairing.match.tolist() == [0, 1, -1]
@@ -171,8 +180,9 @@ def test_dropped_images_are_counted(tmp_path: Path, frame) -> None:  # type: ign
     assert [p.index for p in got] == [0, 1, 2] and len(pairs) == 3
     assert [type(p) for p in got] == [BagPair, BagPair, BagFailure]
     assert isinstance(got[2], BagFailure) and got[2].name == "0000000002"
-    assert str(got[2].error) == (f"{tmp_path / 'b.bag'}: {T.image} image 2: no {T.points} scan within 50.0 ms "
-                                 "(nearest 700.0 ms apart)")  # fmt: skip
+    assert str(got[2].error) == (
+        f"{tmp_path / 'b.bag'}: {T.image} image 2: no {T.points} scan within 50.0 ms (nearest 700.0 ms apart)"
+    )
 
 
 @pytest.mark.parametrize("fmt", list(FORMATS))
@@ -197,8 +207,9 @@ def test_missing_bag(tmp_path: Path) -> None:
 
 def test_cli_bag_from_kitti_and_topics(tmp_path: Path, frame) -> None:  # type: ignore[no-untyped-def]
     out = tmp_path / "k_mcap"
-    res = CliRunner().invoke(main, ["data", "bag-from-kitti", "--drive", str(DRIVE), "--out", str(out),
-                                    "--nan-points", "7"])  # fmt: skip
+    res = CliRunner().invoke(
+        main, ["data", "bag-from-kitti", "--drive", str(DRIVE), "--out", str(out), "--nan-points", "7"]
+    )
     assert res.exit_code == 0, res.output
     assert "/kitti/velo/pointcloud 1" in res.output
     res = CliRunner().invoke(main, ["data", "bag-topics", str(out)])

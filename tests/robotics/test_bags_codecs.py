@@ -46,8 +46,9 @@ def test_image_encodings_and_step_padding() -> None:
 def test_image_message_round_trip_and_compressed() -> None:
     ts = rosbags_typestore(False)
     rgb = np.random.default_rng(0).integers(0, 255, (4, 5, 3), dtype=np.uint8)
-    msg = ts.deserialize_cdr(ts.serialize_cdr(image_message(ts, rgb, 7, "cam"), "sensor_msgs/msg/Image"),
-                             "sensor_msgs/msg/Image")  # fmt: skip
+    msg = ts.deserialize_cdr(
+        ts.serialize_cdr(image_message(ts, rgb, 7, "cam"), "sensor_msgs/msg/Image"), "sensor_msgs/msg/Image"
+    )
     assert np.array_equal(decode_image(msg, "/t"), rgb) and msg.header.frame_id == "cam"
     assert np.array_equal(decode_compressed_image(compressed_image_message(ts, rgb, 7, "cam", "png"), "/t"), rgb)
     jpg = decode_compressed_image(compressed_image_message(ts, rgb, 7, "cam", "jpeg"), "/t")
@@ -56,13 +57,25 @@ def test_image_message_round_trip_and_compressed() -> None:
         decode_compressed_image(NS(format="jpeg", data=np.zeros(10, np.uint8)), "/c")
 
 
-def _cloud(fields: list[tuple[str, int, str]], step: int, pts: dict[str, np.ndarray], big: bool = False,
-           row_pad: int = 0, height: int = 1) -> NS:  # fmt: skip
+def _cloud(
+    fields: list[tuple[str, int, str]],
+    step: int,
+    pts: dict[str, np.ndarray],
+    big: bool = False,
+    row_pad: int = 0,
+    height: int = 1,
+) -> NS:
     """A PointCloud2-like message: fields (name, offset, numpy type), ``step`` bytes per point."""
     n = len(next(iter(pts.values())))
     order = ">" if big else "<"
-    dt = np.dtype({"names": [f[0] for f in fields], "formats": [order + f[2] for f in fields],
-                   "offsets": [f[1] for f in fields], "itemsize": step})  # fmt: skip
+    dt = np.dtype(
+        {
+            "names": [f[0] for f in fields],
+            "formats": [order + f[2] for f in fields],
+            "offsets": [f[1] for f in fields],
+            "itemsize": step,
+        }
+    )
     arr = np.zeros(n, dt)
     for k, v in pts.items():
         arr[k] = v
@@ -71,8 +84,16 @@ def _cloud(fields: list[tuple[str, int, str]], step: int, pts: dict[str, np.ndar
     rows = np.hstack([rows, np.full((height, row_pad), 0xAB, np.uint8)])
     codes = {"i1": 1, "u1": 2, "i2": 3, "u2": 4, "i4": 5, "u4": 6, "f4": 7, "f8": 8}
     pf = [NS(name=f[0], offset=f[1], datatype=codes[f[2]], count=1) for f in fields]
-    return NS(height=height, width=width, fields=pf, is_bigendian=big, point_step=step, row_step=width * step + row_pad,
-              data=rows.reshape(-1), is_dense=False)  # fmt: skip
+    return NS(
+        height=height,
+        width=width,
+        fields=pf,
+        is_bigendian=big,
+        point_step=step,
+        row_step=width * step + row_pad,
+        data=rows.reshape(-1),
+        is_dense=False,
+    )
 
 
 XYZ = {"x": np.array([1.0, np.nan, 3.0, 4.0]), "y": np.array([5.0, 6.0, 7.0, 8.0]), "z": np.array([9.0, 1, 2, np.inf])}
@@ -82,8 +103,9 @@ XYZ = {"x": np.array([1.0, np.nan, 3.0, 4.0]), "y": np.array([5.0, 6.0, 7.0, 8.0
 def test_pointcloud2_any_layout(big: bool) -> None:
     # float64 z first, padding, an extra ring field, intensity uint16, point_step > fields, row padding, 2 rows
     fields = [("z", 0, "f8"), ("ring", 8, "u2"), ("x", 12, "f4"), ("intensity", 16, "u2"), ("y", 20, "f4")]
-    msg = _cloud(fields, 32, {**XYZ, "ring": np.arange(4), "intensity": np.array([10, 20, 30, 40])}, big=big,
-                 row_pad=5, height=2)  # fmt: skip
+    msg = _cloud(
+        fields, 32, {**XYZ, "ring": np.arange(4), "intensity": np.array([10, 20, 30, 40])}, big=big, row_pad=5, height=2
+    )
     pts = decode_pointcloud2(msg, "/velo")
     assert pts.dtype == np.float64  # z is float64
     assert pts.tolist() == [[1.0, 5.0, 9.0, 10.0], [3.0, 7.0, 2.0, 30.0]]  # NaN and inf points dropped
@@ -97,8 +119,7 @@ def test_pointcloud2_float32_without_intensity() -> None:
 
 def test_pointcloud2_errors() -> None:
     with pytest.raises(DataError, match=r"^/velo: PointCloud2 has no z field \(fields: x, y, rgb\)"):
-        decode_pointcloud2(_cloud([("x", 0, "f4"), ("y", 4, "f4"), ("rgb", 8, "f4")], 12,
-                                  {"x": np.ones(2)}), "/velo")  # fmt: skip
+        decode_pointcloud2(_cloud([("x", 0, "f4"), ("y", 4, "f4"), ("rgb", 8, "f4")], 12, {"x": np.ones(2)}), "/velo")
     with pytest.raises(DataError, match=r"^/velo: PointCloud2 field 'x' must be FLOAT32 or FLOAT64"):
         decode_pointcloud2(_cloud([("x", 0, "i4"), ("y", 4, "f4"), ("z", 8, "f4")], 12, {"x": np.ones(2)}), "/velo")
     short = _cloud([("x", 0, "f4"), ("y", 4, "f4"), ("z", 8, "f4")], 12, {"x": np.ones(3)})

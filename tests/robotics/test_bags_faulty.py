@@ -73,8 +73,9 @@ def test_every_image_is_a_frame(bags: dict[str, tuple[Path, Path, dict[int, str]
 
 
 @pytest.mark.parametrize("fmt", list(FORMATS))
-def test_bad_frames_fail_alone_and_the_bag_is_read_once(bags: dict[str, tuple[Path, Path, dict[int, str]]],
-                                                        fmt: str, opens: list[Path]) -> None:  # fmt: skip
+def test_bad_frames_fail_alone_and_the_bag_is_read_once(
+    bags: dict[str, tuple[Path, Path, dict[int, str]]], fmt: str, opens: list[Path]
+) -> None:
     path, clean_path, bad = bags[fmt]
     source, clean = BagSource(path, IMAGE_TOPIC, POINTS_TOPIC), BagSource(clean_path, IMAGE_TOPIC, POINTS_TOPIC)
     opens.clear()
@@ -96,8 +97,7 @@ def test_bad_frames_fail_alone_and_the_bag_is_read_once(bags: dict[str, tuple[Pa
 
 
 @pytest.mark.parametrize("fmt", list(FORMATS))
-def test_check_frame_by_frame(bags: dict[str, tuple[Path, Path, dict[int, str]]], fmt: str,
-                              opens: list[Path]) -> None:  # fmt: skip
+def test_check_frame_by_frame(bags: dict[str, tuple[Path, Path, dict[int, str]]], fmt: str, opens: list[Path]) -> None:
     """What the frame loop does: check([name]) per frame in order, then load it; one pass over the bag."""
     path, _, bad = bags[fmt]
     source = BagSource(path, IMAGE_TOPIC, POINTS_TOPIC)
@@ -120,8 +120,9 @@ def test_check_frame_by_frame(bags: dict[str, tuple[Path, Path, dict[int, str]]]
         source.check(source.names)  # several names: the first bad frame's error
 
 
-def test_check_behind_a_read_ahead_reads_once(bags: dict[str, tuple[Path, Path, dict[int, str]]],
-                                              opens: list[Path]) -> None:  # fmt: skip
+def test_check_behind_a_read_ahead_reads_once(
+    bags: dict[str, tuple[Path, Path, dict[int, str]]], opens: list[Path]
+) -> None:
     """A reader two frames ahead and check([name]) behind it share one pass (the last few outcomes are kept)."""
     path, _, bad = bags["mcap"]
     source = BagSource(path, IMAGE_TOPIC, POINTS_TOPIC)
@@ -138,8 +139,9 @@ def test_check_behind_a_read_ahead_reads_once(bags: dict[str, tuple[Path, Path, 
     assert opens == [path] and set(failed) == set(bad) - {FAULTS["empty_scan"][0]}
 
 
-def test_a_broken_bag_is_not_read_again_for_each_later_frame(bags: dict[str, tuple[Path, Path, dict[int, str]]],
-                                                            opens: list[Path]) -> None:  # fmt: skip
+def test_a_broken_bag_is_not_read_again_for_each_later_frame(
+    bags: dict[str, tuple[Path, Path, dict[int, str]]], opens: list[Path]
+) -> None:
     """A bag-level error mid-pass (a truncated file) fails every later frame without re-reading the bag."""
     _, clean_path, _ = bags["ros1"]
     source = BagSource(clean_path, IMAGE_TOPIC, POINTS_TOPIC)

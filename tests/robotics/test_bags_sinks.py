@@ -60,9 +60,12 @@ def test_bag_writer_round_trip(tmp_path: Path, name: str, fmt: str | None) -> No
         assert np.all(d[~np.isnan(d)] == 4.0 + i)
         assert (info.width, info.height) == (16, 10)
         assert [f.name for f in cloud.fields] == ["x", "y", "z", "rgb"] and cloud.width == 160 - 4
-        pts = np.frombuffer(np.asarray(cloud.data, np.uint8).tobytes(),
-                            np.dtype({"names": ["z", "rgb"], "formats": ["<f4", "<u4"], "offsets": [8, 12],
-                                      "itemsize": cloud.point_step}))  # fmt: skip
+        pts = np.frombuffer(
+            np.asarray(cloud.data, np.uint8).tobytes(),
+            np.dtype(
+                {"names": ["z", "rgb"], "formats": ["<f4", "<u4"], "offsets": [8, 12], "itemsize": cloud.point_step}
+            ),
+        )
         assert np.all(pts["z"] == 4.0 + i)
         assert np.all(pts["rgb"] == (200 << 16) | 7)  # packed as RViz reads it
 
@@ -90,9 +93,18 @@ def test_rerun_recording_loads_back(tmp_path: Path) -> None:
     with RerunLogger(path) as log:
         for i, t in enumerate(STAMPS):
             sparse = np.where(_depth(i) > 4.5, 1.0, 0.0)
-            log.log_frame(t, np.zeros((10, 16, 3), np.uint8), K, T_cam_lidar, sparse=sparse, depth=_depth(i),
-                          semantic=rng.integers(0, 19, (10, 16)), points=rng.normal(size=(30, 4)),
-                          uncertainty=_depth(i) / 10, keep=_depth(i) > 4.5)  # fmt: skip
+            log.log_frame(
+                t,
+                np.zeros((10, 16, 3), np.uint8),
+                K,
+                T_cam_lidar,
+                sparse=sparse,
+                depth=_depth(i),
+                semantic=rng.integers(0, 19, (10, 16)),
+                points=rng.normal(size=(30, 4)),
+                uncertainty=_depth(i) / 10,
+                keep=_depth(i) > 4.5,
+            )
     frames = read_rrd_frames(path)
     for role, entity in ENTITIES.items():
         assert frames[entity] == STAMPS, role

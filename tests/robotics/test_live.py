@@ -48,8 +48,16 @@ def _prediction() -> Prediction:
     sparse = np.where(rng.random((H, W)) < 0.2, rng.uniform(2, 40, (H, W)), 0).astype(np.float32)
     depth = rng.uniform(1, 60, (H, W)).astype(np.float32)
     depth[0, :5] = 0  # holes
-    info = CameraInfoData(W, H, K, np.array([0.1, -0.05, 0, 0, 0.01]), np.eye(3), np.hstack([K, np.zeros((3, 1))]),
-                          "plumb_bob", "cam_info_frame")  # fmt: skip
+    info = CameraInfoData(
+        W,
+        H,
+        K,
+        np.array([0.1, -0.05, 0, 0, 0.01]),
+        np.eye(3),
+        np.hstack([K, np.zeros((3, 1))]),
+        "plumb_bob",
+        "cam_info_frame",
+    )
     meta = SensorMeta(stamp_ns=STAMP, frame_id="cam_left", lidar_frame_id="velo", camera_info=info)
     calib = RigCalibration(K, T_CAM_LIDAR, (W, H), "left")
     frame = Frame("000042", rgb, sparse, K=K, calib=calib, meta=meta)
@@ -99,8 +107,10 @@ def _receive(ws: Any, channels: list[dict[str, Any]], count: int) -> dict[str, t
         sub, log_time = struct.unpack_from("<IQ", data, 1)
         ch = channels[sub]
         payload = data[13:]
-        out[ch["topic"]] = (log_time, classes[ch["id"]].FromString(payload) if ch["id"] in classes
-                            else json.loads(payload))  # fmt: skip
+        out[ch["topic"]] = (
+            log_time,
+            classes[ch["id"]].FromString(payload) if ch["id"] in classes else json.loads(payload),
+        )
     return out
 
 

@@ -57,9 +57,13 @@ def _depth_messages(bag: Path) -> list[tuple[int, np.ndarray]]:
     with open_bag(bag) as reader:
         conns = [c for c in reader.connections if c.topic == DEPTH_TOPIC]
         msgs = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(conns)]
-    return [(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec,
-             np.frombuffer(np.asarray(m.data, np.uint8).tobytes(), "<f4").reshape(m.height, m.width))
-            for m in msgs]  # fmt: skip
+    return [
+        (
+            m.header.stamp.sec * 10**9 + m.header.stamp.nanosec,
+            np.frombuffer(np.asarray(m.data, np.uint8).tobytes(), "<f4").reshape(m.height, m.width),
+        )
+        for m in msgs
+    ]
 
 
 def write_bag(path: Path, n: int, h: int, w: int, fmt: str = "mcap", gaps_s: dict[int, float] | None = None) -> Path:
@@ -79,8 +83,9 @@ def write_bag(path: Path, n: int, h: int, w: int, fmt: str = "mcap", gaps_s: dic
             rgb = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
             out.write(IMAGE_TOPIC, t, image_message(out.ts, rgb, t, "cam"))
             out.write("/cam/camera_info", t, camera_info_message(out.ts, info, t, "cam"))
-            pts = np.column_stack([rng.uniform(3, 30, 2000), rng.uniform(-6, 6, 2000),
-                                   rng.uniform(-1.5, 1, 2000)]).astype(np.float32)  # fmt: skip
+            pts = np.column_stack(
+                [rng.uniform(3, 30, 2000), rng.uniform(-6, 6, 2000), rng.uniform(-1.5, 1, 2000)]
+            ).astype(np.float32)
             cols = {"x": pts[:, 0], "y": pts[:, 1], "z": pts[:, 2]}
             out.write(POINTS_TOPIC, t + 2 * 10**6, pointcloud2_message(out.ts, cols, t + 2 * 10**6, "lidar"))
     return path
@@ -103,8 +108,9 @@ def test_bad_frames_are_skipped_named_and_journaled(bags: dict[str, Any], tmp_pa
     from PIL import Image
 
     faulty, out, bag_out, rrd = bags["faulty"], tmp_path / "out", tmp_path / "pred_mcap", tmp_path / "run.rrd"
-    res = _predict("--bag", faulty.path, *TOPICS, "--method", "classical", "--out", out, "--bag-out", bag_out,
-                   "--rerun", rrd)  # fmt: skip
+    res = _predict(
+        "--bag", faulty.path, *TOPICS, "--method", "classical", "--out", out, "--bag-out", bag_out, "--rerun", rrd
+    )
     assert res.exit_code == 3, res.output
     names = [f"{i:010d}" for i in range(N_FRAMES)]
     for i, reason in faulty.bad.items():  # one line per bad frame, naming it and why
@@ -153,8 +159,11 @@ def test_on_error_stop_keeps_the_frames_done_before_the_bad_one(bags: dict[str, 
     assert sorted(p.name for p in out.iterdir()) == ["0000000000.png", "0000000000_color.png", "frames.json"]
     doc = _journal(out)
     assert doc["complete"] is False
-    assert _statuses(doc) == {"0000000000": "done", "0000000001": "failed",
-                              **{f"{i:010d}": "pending" for i in range(2, N_FRAMES)}}  # fmt: skip
+    assert _statuses(doc) == {
+        "0000000000": "done",
+        "0000000001": "failed",
+        **{f"{i:010d}": "pending" for i in range(2, N_FRAMES)},
+    }
     assert (out / "0000000000.png").read_bytes() == (bags["clean_out"] / "0000000000.png").read_bytes()
     # every fault: the inputs are checked before any work, so the first one the check finds stops it at once
     args[args.index(out)] = tmp_path / "out2"
@@ -165,15 +174,17 @@ def test_on_error_stop_keeps_the_frames_done_before_the_bad_one(bags: dict[str, 
 
 def _tree(root: Path) -> dict[str, bytes]:
     skip = {"frames.json", "latency.json"}  # times: compared by statuses and files
-    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()
-            and p.name not in skip}  # fmt: skip
+    return {
+        str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file() and p.name not in skip
+    }
 
 
 def _kill_after(cmd: list[str], out: Path, done: int) -> None:
     """Start ``semattnet CMD`` and SIGKILL it once ``out/frames.json`` records ``done`` frames done."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
-    proc = subprocess.Popen([sys.executable, "-m", "semattnet.cli", *cmd], env=env, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE)  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "semattnet.cli", *cmd], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+    )
     deadline = time.monotonic() + 120
     try:
         while time.monotonic() < deadline and proc.poll() is None:

@@ -35,11 +35,13 @@ def sample(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         write_sensor_bag(path, recs, frame.calib, fmt=fmt, nan_points=25, T_base_lidar=imu.T_cam0_lidar)
     cal = read_kitti_calibration(RAW_DATE, "02")
     out["rig"] = root / "kitti_rig.json"
-    out["rig"].write_text(json.dumps({"K": cal.K.tolist(), "T_cam_lidar": cal.T_cam_lidar.tolist(),
-                                      "image_size": list(cal.image_size)}))  # fmt: skip
+    out["rig"].write_text(
+        json.dumps({"K": cal.K.tolist(), "T_cam_lidar": cal.T_cam_lidar.tolist(), "image_size": list(cal.image_size)})
+    )
     out["raw"] = root / "raw"
-    res = CliRunner().invoke(main, ["predict", "--kitti-raw", str(DRIVE), "--method", "classical", "--out",
-                                    str(out["raw"])])  # fmt: skip
+    res = CliRunner().invoke(
+        main, ["predict", "--kitti-raw", str(DRIVE), "--method", "classical", "--out", str(out["raw"])]
+    )
     assert res.exit_code == 0, res.output
     return out
 
@@ -47,8 +49,21 @@ def sample(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 @pytest.mark.parametrize("fmt", list(FORMATS))
 def test_bag_gives_byte_identical_depth_pngs_to_kitti_raw(sample: dict[str, Path], fmt: str, tmp_path: Path) -> None:
     out = tmp_path / "out"
-    res = CliRunner().invoke(main, ["predict", "--bag", str(sample[fmt]), *TOPICS, "--rig", str(sample["rig"]),
-                                    "--method", "classical", "--out", str(out)])  # fmt: skip
+    res = CliRunner().invoke(
+        main,
+        [
+            "predict",
+            "--bag",
+            str(sample[fmt]),
+            *TOPICS,
+            "--rig",
+            str(sample["rig"]),
+            "--method",
+            "classical",
+            "--out",
+            str(out),
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert "2 image(s) paired with a scan within 50.0 ms, 0 dropped" in res.output
     want = (sample["raw"] / "0000000005.png").read_bytes()
@@ -68,17 +83,21 @@ def test_bag_out_and_rerun_read_back(sample: dict[str, Path], tmp_path: Path) ->
     assert res.exit_code == 0, res.output
     assert "(read ahead)" in res.output
     with open_bag(sample["mcap"]) as reader:  # the input's header stamps and frame ids
-        heads = [(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, m.header.frame_id)
-                 for c, _, raw in reader.messages([c for c in reader.connections if c.topic == T.image])
-                 for m in [reader.deserialize(raw, c.msgtype)]]  # fmt: skip
+        heads = [
+            (m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, m.header.frame_id)
+            for c, _, raw in reader.messages([c for c in reader.connections if c.topic == T.image])
+            for m in [reader.deserialize(raw, c.msgtype)]
+        ]
     with open_bag(bag_out) as reader:
         types = {c.topic: c.msgtype for c in reader.connections}
         msgs: dict[str, list] = {}
         for conn, _, raw in reader.messages():
             msgs.setdefault(conn.topic, []).append(reader.deserialize(raw, conn.msgtype))
-    assert types == {"/semattnet/depth_image": "sensor_msgs/msg/Image",
-                     "/semattnet/point_cloud": "sensor_msgs/msg/PointCloud2",
-                     "/semattnet/camera_info": "sensor_msgs/msg/CameraInfo"}  # fmt: skip
+    assert types == {
+        "/semattnet/depth_image": "sensor_msgs/msg/Image",
+        "/semattnet/point_cloud": "sensor_msgs/msg/PointCloud2",
+        "/semattnet/camera_info": "sensor_msgs/msg/CameraInfo",
+    }
     assert {k: len(v) for k, v in msgs.items()} == dict.fromkeys(types, 2)
     for i, (img, cloud, info) in enumerate(zip(*(msgs[t] for t in types), strict=True)):
         for m in (img, cloud, info):
@@ -158,5 +177,4 @@ def test_failed_frame_leaves_no_bag_and_no_recording(sample: dict[str, Path], tm
         check_frames(source, sinks, tmp_path / "out", options=RunOptions(prefetch=2)).run(failing, log=lambda _: None)
     assert [p.name for p in tmp_path.iterdir()] == ["out"]  # no bag, no recording, nothing staged beside them
     first = source.names[0]  # the frame done before the error stays, whole and journaled (resumable)
-    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [f"{first}.png", f"{first}_color.png",
-                                                                     "frames.json"]  # fmt: skip
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [f"{first}.png", f"{first}_color.png", "frames.json"]

@@ -59,8 +59,22 @@ def test_files_journal_ply_and_bag(bag: Path, tmp_path: Path) -> None:
     from semattnet.geometry import depth_to_points
 
     out, bag_out = tmp_path / "out", tmp_path / "pred_mcap"
-    res = _predict("--bag", bag, *TOPICS, "--method", "classical", "--out", out, "--npy", "--ply", "--uncertainty",
-                   "--max-uncertainty", "0.5", "--bag-out", bag_out)  # fmt: skip
+    res = _predict(
+        "--bag",
+        bag,
+        *TOPICS,
+        "--method",
+        "classical",
+        "--out",
+        out,
+        "--npy",
+        "--ply",
+        "--uncertainty",
+        "--max-uncertainty",
+        "0.5",
+        "--bag-out",
+        bag_out,
+    )
     assert res.exit_code == 0, res.output
     frames = {e["name"]: e for e in json.loads((out / "frames.json").read_text())["frames"]}
     msgs = _messages(bag_out)
@@ -83,8 +97,9 @@ def test_files_journal_ply_and_bag(bag: Path, tmp_path: Path) -> None:
 
 def test_relative_limit_and_no_limit(bag: Path, tmp_path: Path) -> None:
     a, b = tmp_path / "rel", tmp_path / "all"
-    res = _predict("--bag", bag, *TOPICS, "--method", "classical", "--out", a, "--ply", "--uncertainty",
-                   "--max-uncertainty", "5%")  # fmt: skip
+    res = _predict(
+        "--bag", bag, *TOPICS, "--method", "classical", "--out", a, "--ply", "--uncertainty", "--max-uncertainty", "5%"
+    )
     assert res.exit_code == 0, res.output
     res = _predict("--bag", bag, *TOPICS, "--method", "classical", "--out", b, "--ply")
     assert res.exit_code == 0, res.output
@@ -98,15 +113,26 @@ def test_relative_limit_and_no_limit(bag: Path, tmp_path: Path) -> None:
 
 def _tree(root: Path) -> dict[str, bytes]:
     skip = {"frames.json", "latency.json"}
-    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()
-            and p.name not in skip}  # fmt: skip
+    return {
+        str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file() and p.name not in skip
+    }
 
 
 def test_resume_keeps_and_redoes_the_uncertainty_files(bag: Path, tmp_path: Path) -> None:
     """A resumed run (one frame's uncertainty PNG lost, the bag not written) equals an uninterrupted one."""
     whole, cut = tmp_path / "whole", tmp_path / "cut"
-    opts = ["--bag", bag, *TOPICS, "--method", "classical", "--npy", "--ply", "--uncertainty", "--max-uncertainty",
-            "1.5"]  # fmt: skip
+    opts = [
+        "--bag",
+        bag,
+        *TOPICS,
+        "--method",
+        "classical",
+        "--npy",
+        "--ply",
+        "--uncertainty",
+        "--max-uncertainty",
+        "1.5",
+    ]
     assert _predict(*opts, "--out", whole, "--bag-out", tmp_path / "w" / "b_mcap").exit_code == 0
     assert _predict(*opts, "--out", cut, "--bag-out", tmp_path / "c" / "b_mcap").exit_code == 0
     (cut / "uncertainty" / f"{NAMES[1]}.png").unlink()
@@ -122,25 +148,46 @@ def test_resume_keeps_and_redoes_the_uncertainty_files(bag: Path, tmp_path: Path
 
 @pytest.mark.parametrize("value", ["abc", "0", "-1", "300", "1500%", "nan", "0%"])
 def test_bad_limits_are_refused_in_one_line(bag: Path, tmp_path: Path, value: str) -> None:
-    res = _predict("--bag", bag, *TOPICS, "--method", "classical", "--out", tmp_path / "o", "--ply", "--uncertainty",
-                   "--max-uncertainty", value)  # fmt: skip
+    res = _predict(
+        "--bag",
+        bag,
+        *TOPICS,
+        "--method",
+        "classical",
+        "--out",
+        tmp_path / "o",
+        "--ply",
+        "--uncertainty",
+        "--max-uncertainty",
+        value,
+    )
     assert res.exit_code == 2
     errors = [line for line in res.output.splitlines() if line.startswith("Error")]
-    assert errors == [f"Error: Invalid value for '--max-uncertainty': expected metres in (0, 255] (e.g. 0.5) or a "
-                      f"percentage of the depth in (0, 1000%] (e.g. 5%), got {value!r}"], res.output  # fmt: skip
+    assert errors == [
+        f"Error: Invalid value for '--max-uncertainty': expected metres in (0, 255] (e.g. 0.5) or a "
+        f"percentage of the depth in (0, 1000%] (e.g. 5%), got {value!r}"
+    ], res.output
     assert not (tmp_path / "o").exists()
 
 
-@pytest.mark.parametrize(("args", "says"), [
-    ([], "--max-uncertainty only mean(s) something with --ply, --panel (with --kitti-raw or --bag), --bag-out, "
-                          "--rerun or --live"),
-    (["--bag-out", "B"], "--max-uncertainty with --bag-out or --rerun needs --uncertainty"),
-])  # fmt: skip
-def test_limit_without_a_cloud_or_a_stored_uncertainty_is_refused(bag: Path, tmp_path: Path, args: list[str],
-                                                                  says: str) -> None:  # fmt: skip
+@pytest.mark.parametrize(
+    ("args", "says"),
+    [
+        (
+            [],
+            "--max-uncertainty only mean(s) something with --ply, --panel (with --kitti-raw or --bag), --bag-out, "
+            "--rerun or --live",
+        ),
+        (["--bag-out", "B"], "--max-uncertainty with --bag-out or --rerun needs --uncertainty"),
+    ],
+)
+def test_limit_without_a_cloud_or_a_stored_uncertainty_is_refused(
+    bag: Path, tmp_path: Path, args: list[str], says: str
+) -> None:
     args = [str(tmp_path / a) if a == "B" else a for a in args]
-    res = _predict("--bag", bag, *TOPICS, "--method", "classical", "--out", tmp_path / "o", "--max-uncertainty", "1",
-                   *args)  # fmt: skip
+    res = _predict(
+        "--bag", bag, *TOPICS, "--method", "classical", "--out", tmp_path / "o", "--max-uncertainty", "1", *args
+    )
     assert res.exit_code == 2 and says in res.output, res.output
     assert not (tmp_path / "o").exists()
 
@@ -150,12 +197,25 @@ def test_rerun_recording_has_an_uncertainty_layer(bag: Path, tmp_path: Path) -> 
     from semattnet.robotics.rerun import ENTITIES, read_rrd_frames
 
     rrd = tmp_path / "run.rrd"
-    res = _predict("--bag", bag, *TOPICS, "--method", "classical", "--out", tmp_path / "o", "--uncertainty",
-                   "--rerun", rrd, "--max-uncertainty", "10%")  # fmt: skip
+    res = _predict(
+        "--bag",
+        bag,
+        *TOPICS,
+        "--method",
+        "classical",
+        "--out",
+        tmp_path / "o",
+        "--uncertainty",
+        "--rerun",
+        rrd,
+        "--max-uncertainty",
+        "10%",
+    )
     assert res.exit_code == 0, res.output
     frames = read_rrd_frames(rrd)
     assert len(frames[ENTITIES["uncertainty"]]) == N and frames[ENTITIES["uncertainty"]] == frames[ENTITIES["depth"]]
-    res = _predict("--bag", bag, *TOPICS, "--method", "classical", "--out", tmp_path / "p", "--rerun",
-                   tmp_path / "plain.rrd")  # fmt: skip
+    res = _predict(
+        "--bag", bag, *TOPICS, "--method", "classical", "--out", tmp_path / "p", "--rerun", tmp_path / "plain.rrd"
+    )
     assert res.exit_code == 0, res.output
     assert ENTITIES["uncertainty"] not in read_rrd_frames(tmp_path / "plain.rrd")

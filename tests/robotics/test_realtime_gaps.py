@@ -32,8 +32,9 @@ def test_an_hour_gap_is_skipped_and_counted(tmp_path: Path) -> None:
     source, timer = BagSource(bag, IMAGE_TOPIC, POINTS_TOPIC), StageTimes()
     sinks = [*default_sinks(), LatencySink(timer=timer)]
     plan = check_frames(source, sinks, out, options=RunOptions(realtime=1.0))
-    run = threading.Thread(target=plan.run, args=(ClassicalCompleter(),), daemon=True,
-                           kwargs={"log": lambda _: None, "timer": timer})  # fmt: skip
+    run = threading.Thread(
+        target=plan.run, args=(ClassicalCompleter(),), daemon=True, kwargs={"log": lambda _: None, "timer": timer}
+    )
     run.start()
     run.join(20)
     assert not run.is_alive(), "--realtime waited the recording's gap"
@@ -59,7 +60,21 @@ def test_pace_keeps_the_recorded_gaps() -> None:
 @pytest.mark.parametrize("speed", ["1e-9", "0.001"])
 def test_speed_out_of_bounds_is_one_line(tmp_path: Path, speed: str) -> None:
     bag = write_bag(tmp_path / "b_mcap", 1, 32, 48)
-    res = CliRunner().invoke(main, ["predict", "--bag", str(bag), *TOPICS, "--method", "classical",
-                                    "--out", str(tmp_path / "out"), "--realtime", "--speed", speed])  # fmt: skip
+    res = CliRunner().invoke(
+        main,
+        [
+            "predict",
+            "--bag",
+            str(bag),
+            *TOPICS,
+            "--method",
+            "classical",
+            "--out",
+            str(tmp_path / "out"),
+            "--realtime",
+            "--speed",
+            speed,
+        ],
+    )
     assert res.exit_code == 2 and "--speed" in res.output, res.output
     assert not (tmp_path / "out").exists()

@@ -26,8 +26,13 @@ def _refused(port: int) -> bool:
 
 def _log_frames(log: object) -> None:
     for t in STAMPS:
-        log.log_frame(t, np.zeros((16, 24, 3), np.uint8), K, np.eye(4),  # type: ignore[attr-defined]
-                      depth=np.full((16, 24), 5.0, np.float32))  # fmt: skip
+        log.log_frame(
+            t,
+            np.zeros((16, 24, 3), np.uint8),
+            K,
+            np.eye(4),  # type: ignore[attr-defined]
+            depth=np.full((16, 24), 5.0, np.float32),
+        )
 
 
 def test_serve_web_viewer_and_grpc(tmp_path: Path) -> None:
@@ -72,9 +77,12 @@ def test_serve_port_in_use_is_one_line() -> None:
 
 def _read_messages(port: int) -> bytes:
     """The start of the recording as a viewer reads it (gRPC-web ``ReadMessages`` over HTTP/1.1)."""
-    req = urllib.request.Request(f"http://127.0.0.1:{port}/rerun.sdk_comms.v1alpha1.MessageProxyService/ReadMessages",
-                                 data=bytes(5), method="POST",
-                                 headers={"content-type": "application/grpc-web+proto", "x-grpc-web": "1"})  # fmt: skip
+    req = urllib.request.Request(
+        f"http://127.0.0.1:{port}/rerun.sdk_comms.v1alpha1.MessageProxyService/ReadMessages",
+        data=bytes(5),
+        method="POST",
+        headers={"content-type": "application/grpc-web+proto", "x-grpc-web": "1"},
+    )
     with urllib.request.urlopen(req, timeout=5) as r:
         assert r.status == 200 and r.headers["content-type"] == "application/grpc-web+proto"
         return bytes(r.read(4096))
@@ -91,8 +99,10 @@ def test_viewers_reach_the_stream_through_the_gate() -> None:
     _log_frames(log)
     assert b"gate_check" in _read_messages(port)
     silent = socket.create_connection(("127.0.0.1", port), timeout=5)
-    silent.sendall(b"POST /rerun.sdk_comms.v1alpha1.MessageProxyService/ReadMessages HTTP/1.1\r\nHost: x\r\n"
-                   b"content-type: application/grpc-web+proto\r\ncontent-length: 5\r\n\r\n" + bytes(5))  # fmt: skip
+    silent.sendall(
+        b"POST /rerun.sdk_comms.v1alpha1.MessageProxyService/ReadMessages HTTP/1.1\r\nHost: x\r\n"
+        b"content-type: application/grpc-web+proto\r\ncontent-length: 5\r\n\r\n" + bytes(5)
+    )
     held = [socket.create_connection(("127.0.0.1", port), timeout=5) for _ in range(60)]
     try:
         closed = sum(s.recv(1) == b"" for s in held[MAX_CLIENTS:])  # past the cap (the silent one holds a place)

@@ -110,7 +110,8 @@ def test_rerun_serve_listens_on_loopback_and_ends_with_a_silent_client(tmp_path:
 @pytest.mark.parametrize("option", ["--live", "--rerun-serve"])
 def test_a_bad_address_is_one_line(tmp_path: Path, option: str) -> None:
     for bad in ("127.0.0.1:\u00b2", "127.0.0.1:70000", "host:", ":1"):
-        res = CliRunner().invoke(main, ["predict", "--bag", str(tmp_path), *TOPICS, "--out", str(tmp_path / "o"),
-                                        option, bad])  # fmt: skip
+        res = CliRunner().invoke(
+            main, ["predict", "--bag", str(tmp_path), *TOPICS, "--out", str(tmp_path / "o"), option, bad]
+        )
         assert res.exit_code == 2 and "expected [HOST:]PORT" in res.output, res.output
         assert not isinstance(res.exception, ValueError)

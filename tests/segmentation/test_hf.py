@@ -20,18 +20,43 @@ transformers = pytest.importorskip("transformers")
 
 NAMES = [name for name, _ in TRAIN_CLASSES]
 # the same 19 classes as some checkpoints spell them, in another order, plus one non-Cityscapes class
-VARIANTS = ["car", "Road", "side_walk", "Building", "wall", "fence", "pole", "Traffic-Light", "traffic_sign",
-            "vegetation", "terrain", "sky", "pedestrian", "rider", "unlabeled", "truck", "bus", "on rails",
-            "motorbike", "bicycles"]  # fmt: skip
+VARIANTS = [
+    "car",
+    "Road",
+    "side_walk",
+    "Building",
+    "wall",
+    "fence",
+    "pole",
+    "Traffic-Light",
+    "traffic_sign",
+    "vegetation",
+    "terrain",
+    "sky",
+    "pedestrian",
+    "rider",
+    "unlabeled",
+    "truck",
+    "bus",
+    "on rails",
+    "motorbike",
+    "bicycles",
+]
 
 
 def _save_tiny(folder: Path, labels: list[str], winner: int | None = None) -> Path:
     torch.manual_seed(0)
     config = transformers.SegformerConfig(
-        num_encoder_blocks=4, depths=[1, 1, 1, 1], hidden_sizes=[8, 16, 32, 64], num_attention_heads=[1, 1, 1, 1],
-        sr_ratios=[8, 4, 2, 1], decoder_hidden_size=16, num_labels=len(labels),
-        id2label=dict(enumerate(labels)), label2id={n: i for i, n in enumerate(labels)},
-    )  # fmt: skip
+        num_encoder_blocks=4,
+        depths=[1, 1, 1, 1],
+        hidden_sizes=[8, 16, 32, 64],
+        num_attention_heads=[1, 1, 1, 1],
+        sr_ratios=[8, 4, 2, 1],
+        decoder_hidden_size=16,
+        num_labels=len(labels),
+        id2label=dict(enumerate(labels)),
+        label2id={n: i for i, n in enumerate(labels)},
+    )
     model = transformers.SegformerForSemanticSegmentation(config).eval()
     if winner is not None:  # every pixel -> class `winner`
         with torch.no_grad():
@@ -58,8 +83,10 @@ def test_segments_images_with_palette_colours_and_sizes(tiny: Path, tmp_path: Pa
     for i, (h, w) in enumerate([(40, 72), (37, 61)]):
         write_image(images / f"{i:010d}.png", rng.integers(0, 256, (h, w, 3), dtype=np.uint8))
     out = tmp_path / "semantic"
-    res = CliRunner().invoke(main, ["segment", "--model", f"hf:{tiny}", "--images", str(tmp_path / "raw"),
-                                    "--out", str(out), "--device", "cpu"])  # fmt: skip
+    res = CliRunner().invoke(
+        main,
+        ["segment", "--model", f"hf:{tiny}", "--images", str(tmp_path / "raw"), "--out", str(out), "--device", "cpu"],
+    )
     assert res.exit_code == 0, res.output
     for i, (h, w) in enumerate([(40, 72), (37, 61)]):
         sem = read_image(out / f"2011_09_26/d/image_02/data/{i:010d}.png")
@@ -90,8 +117,9 @@ def test_default_is_segformer_b5_cityscapes() -> None:
 
 def test_offline_missing_model_is_one_line_error(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("SEMATTNET_OFFLINE", "1")
-    res = CliRunner().invoke(main, ["segment", "--model", "hf:no-such-org/no-such-model", "--images", ".",
-                                    "--out", "unused"])  # fmt: skip
+    res = CliRunner().invoke(
+        main, ["segment", "--model", "hf:no-such-org/no-such-model", "--images", ".", "--out", "unused"]
+    )
     assert res.exit_code == 1 and "offline" in res.output and len(res.output.strip().splitlines()) == 1
 
 

@@ -26,12 +26,22 @@ NYU = {name: i + 1 for i, (name, _) in enumerate(NYU40_CLASSES)}
 ADE = ["wall", "sky", "floor", "bed ", "windowpane", "painting", "chest of drawers", "stove", "television receiver"]
 
 
-@pytest.mark.parametrize(("label", "nyu40"), [
-    ("wall", "wall"), ("bed ", "bed"), ("windowpane", "window"), ("painting", "picture"),
-    ("chest of drawers", "dresser"), ("television receiver", "television"), ("Night_Stand", "night stand"),
-    ("stove", "otherstructure"), ("bottle", "otherprop"), ("wardrobe", "otherfurniture"),
-    ("refridgerator", "refrigerator"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("label", "nyu40"),
+    [
+        ("wall", "wall"),
+        ("bed ", "bed"),
+        ("windowpane", "window"),
+        ("painting", "picture"),
+        ("chest of drawers", "dresser"),
+        ("television receiver", "television"),
+        ("Night_Stand", "night stand"),
+        ("stove", "otherstructure"),
+        ("bottle", "otherprop"),
+        ("wardrobe", "otherfurniture"),
+        ("refridgerator", "refrigerator"),
+    ],
+)
 def test_class_names_map_to_nyu40(label: str, nyu40: str) -> None:
     assert nyu40_class(label) == NYU[nyu40]
 
@@ -62,8 +72,22 @@ def test_segmenter_in_nyu40(ade_bed: Path, tmp_path: Path) -> None:
     from semattnet.data.io import write_image
 
     write_image(images / "a.png", np.zeros((40, 72, 3), np.uint8))
-    res = CliRunner().invoke(main, ["segment", "--model", f"hf:{ade_bed}", "--images", str(images), "--out",
-                                    str(tmp_path / "sem"), "--palette", "nyu40", "--device", "cpu"])  # fmt: skip
+    res = CliRunner().invoke(
+        main,
+        [
+            "segment",
+            "--model",
+            f"hf:{ade_bed}",
+            "--images",
+            str(images),
+            "--out",
+            str(tmp_path / "sem"),
+            "--palette",
+            "nyu40",
+            "--device",
+            "cpu",
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert (colors_to_ids(read_image(tmp_path / "sem" / "a.png"), palette="nyu40") == NYU["bed"]).all()
 
@@ -94,15 +118,42 @@ def test_segment_caches_the_split_maps(ade_bed: Path, tmp_path: Path, monkeypatc
     root, spec = _nyu(tmp_path, monkeypatch), f"hf:{ade_bed}"
     ckpt = tmp_path / "city.safetensors"
     save_safetensors(semattnet.build_model("semattnet_backbone", width=0.125).state_dict(), ckpt)
-    args = ["predict", "--dataset", "nyuv2", "--data", root, "--checkpoint", ckpt, "--device", "cpu", "--segment",
-            spec, "--palette-mismatch", "recolour"]  # fmt: skip
+    args = [
+        "predict",
+        "--dataset",
+        "nyuv2",
+        "--data",
+        root,
+        "--checkpoint",
+        ckpt,
+        "--device",
+        "cpu",
+        "--segment",
+        spec,
+        "--palette-mismatch",
+        "recolour",
+    ]
     assert "1 segmented, 0 reused" in _run(*args, "--out", tmp_path / "p1")
     assert "0 segmented, 1 reused" in _run(*args, "--out", tmp_path / "p2")
     (cache,) = (tmp_path / "cache" / "semantic").glob("nyuv2-*")
     frame = get_dataset("nyuv2").source(root, "test", semantic_root=cache).load("00001")
     assert frame.semantic.shape == (228, 304, 3) and (colors_to_ids(frame.semantic, palette="nyu40") == 4).all()
-    out = _run("evaluate", "--dataset", "nyuv2", "--data", root, "--method", "classical", "--sparsity", "keep=1",
-               "--segment", spec, "--out", tmp_path / "s", code=2)  # fmt: skip
+    out = _run(
+        "evaluate",
+        "--dataset",
+        "nyuv2",
+        "--data",
+        root,
+        "--method",
+        "classical",
+        "--sparsity",
+        "keep=1",
+        "--segment",
+        spec,
+        "--out",
+        tmp_path / "s",
+        code=2,
+    )
     assert "--segment is for the model's evaluation" in out
     with pytest.raises(ValueError, match="segment must be null when semantic_root is set"):
         TrainConfig(dataset="nyuv2", segment=spec, semantic_root=str(cache))
@@ -123,17 +174,66 @@ def test_segment_on_nyu_hdf5_without_labels(ade_bed: Path, tmp_path: Path, monke
 
     monkeypatch.setattr(frames_module, "frame_sample", spy)
     spec = f"hf:{ade_bed}"
-    out = _run("train", "--dataset", "nyuv2", "--data", root, "--segment", spec, "--out", tmp_path / "run",
-               "--width", "0.125", "--batch-size", "1", "--workers", "0", "--max-steps", "1",
-               "--set", "depth_head_init=[2,2]", "--set", "val_split=null", "--device", "cpu")  # fmt: skip
+    out = _run(
+        "train",
+        "--dataset",
+        "nyuv2",
+        "--data",
+        root,
+        "--segment",
+        spec,
+        "--out",
+        tmp_path / "run",
+        "--width",
+        "0.125",
+        "--batch-size",
+        "1",
+        "--workers",
+        "0",
+        "--max-steps",
+        "1",
+        "--set",
+        "depth_head_init=[2,2]",
+        "--set",
+        "val_split=null",
+        "--device",
+        "cpu",
+    )
     assert "1 segmented, 0 reused" in out and seen and all(s == {NYU["bed"]} for s in seen)
     assert json.loads((tmp_path / "run" / "config.json").read_text())["segment"] == spec
     ckpt, seen[:] = tmp_path / "run" / "checkpoints" / "last.pt", []
-    out = _run("evaluate", "--dataset", "nyuv2", "--data", root, "--checkpoint", ckpt, "--segment", spec,
-               "--workers", "0", "--device", "cpu")  # fmt: skip
+    out = _run(
+        "evaluate",
+        "--dataset",
+        "nyuv2",
+        "--data",
+        root,
+        "--checkpoint",
+        ckpt,
+        "--segment",
+        spec,
+        "--workers",
+        "0",
+        "--device",
+        "cpu",
+    )
     assert "1 segmented, 0 reused" in out and seen and all(s == {NYU["bed"]} for s in seen)
     maps = list((tmp_path / "cache" / "semantic").glob("nyuv2-*/*.png"))
     assert len(maps) == 2 and all((colors_to_ids(read_image(m), palette="nyu40") == NYU["bed"]).all() for m in maps)
-    out = _run("predict", "--dataset", "nyuv2", "--data", root, "--checkpoint", ckpt, "--segment", spec,
-               "--out", tmp_path / "pred", "--panel", "--device", "cpu")  # fmt: skip
+    out = _run(
+        "predict",
+        "--dataset",
+        "nyuv2",
+        "--data",
+        root,
+        "--checkpoint",
+        ckpt,
+        "--segment",
+        spec,
+        "--out",
+        tmp_path / "pred",
+        "--panel",
+        "--device",
+        "cpu",
+    )
     assert "0 segmented, 1 reused" in out and "fallback" not in out

@@ -63,8 +63,9 @@ def exported(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     onnx_path = d / "seg.onnx"
     x = torch.rand(1, 3, 32, 48)
     dims = {"x": {0: "batch", 2: "height", 3: "width"}}
-    torch.onnx.export(net, (x,), str(onnx_path), input_names=["x"], output_names=["logits"], dynamic_axes=dims,
-                      dynamo=False)  # fmt: skip
+    torch.onnx.export(
+        net, (x,), str(onnx_path), input_names=["x"], output_names=["logits"], dynamic_axes=dims, dynamo=False
+    )
     return {"torchscript": ts, "onnx": onnx_path}
 
 
@@ -72,8 +73,22 @@ def exported(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 def test_segment_cli_end_to_end(kind: str, exported: dict[str, Path], tmp_path: Path) -> None:
     images, out = tmp_path / "kitti_raw", tmp_path / "semantic"
     sources = _tree(images, [(40, 64)] * 5 + [(36, 50)] * 2)  # two sizes: batches never mix them
-    res = CliRunner().invoke(main, ["segment", "--model", str(exported[kind]), "--images", str(images),
-                                    "--out", str(out), "--batch-size", "3", "--device", "cpu"])  # fmt: skip
+    res = CliRunner().invoke(
+        main,
+        [
+            "segment",
+            "--model",
+            str(exported[kind]),
+            "--images",
+            str(images),
+            "--out",
+            str(out),
+            "--batch-size",
+            "3",
+            "--device",
+            "cpu",
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert "wrote 7 maps" in res.output and "0 already there" in res.output
     _check_maps(images, out, sources)
@@ -126,8 +141,9 @@ def test_kitti_loader_reads_segmented_maps(tmp_path: Path) -> None:
     root = tmp_path / "kitti"
     write_synthetic_kitti(root, frames=3, size=(64, 96), eval_frames=2, workers=1)
     shutil.rmtree(root / "semantic")
-    res = CliRunner().invoke(main, ["segment", "--model", "unknown", "--images", str(root / "kitti_raw"),
-                                    "--out", str(root / "semantic")])  # fmt: skip
+    res = CliRunner().invoke(
+        main, ["segment", "--model", "unknown", "--images", str(root / "kitti_raw"), "--out", str(root / "semantic")]
+    )
     assert res.exit_code == 0, res.output
     sample = KittiDepthCompletion(root, "train")[0]
     assert (sample["semantic"] == torch.tensor(UNKNOWN_COLOR, dtype=torch.float32).view(3, 1, 1)).all()
@@ -152,8 +168,10 @@ def test_label_id_networks_and_id_outputs() -> None:
 def test_bad_specs_give_one_line_errors(tmp_path: Path) -> None:
     images = tmp_path / "img"
     _tree(images, [(16, 16)])
-    for spec, message in ((str(tmp_path / "missing.onnx"), "no such model file"),
-                          ("torchvision:deeplabv3_resnet50", "expected torchvision:ARCH:WEIGHTS")):  # fmt: skip
+    for spec, message in (
+        (str(tmp_path / "missing.onnx"), "no such model file"),
+        ("torchvision:deeplabv3_resnet50", "expected torchvision:ARCH:WEIGHTS"),
+    ):
         args = ["segment", "--model", spec, "--images", str(images), "--out", str(tmp_path / "o")]
         res = CliRunner().invoke(main, args)
         assert res.exit_code != 0 and message in res.output and "Traceback" not in res.output
@@ -174,8 +192,9 @@ def test_torchvision_spec(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> No
         def __init__(self, num_classes: int, aux_loss: bool) -> None:
             super().__init__()
             self.backbone = nn.Conv2d(3, 4, 1)
-            self.classifier = nn.Sequential(nn.Identity(), nn.Identity(), nn.Identity(), nn.Identity(),
-                                            nn.Conv2d(4, num_classes, 1))  # fmt: skip
+            self.classifier = nn.Sequential(
+                nn.Identity(), nn.Identity(), nn.Identity(), nn.Identity(), nn.Conv2d(4, num_classes, 1)
+            )
 
         def forward(self, x: torch.Tensor) -> dict[str, torch.Tensor]:
             return {"out": self.classifier(self.backbone(x))}

@@ -47,8 +47,9 @@ class _Frames(IndexedSource):
 
 
 def _cfg(weights: Path, out: Path, **kw: object) -> AdaptConfig:
-    return AdaptConfig(**({"weights": str(weights), "out": str(out), "steps": 2, "batch_size": 1, "crop": SIZE,
-                           "device": "cpu"} | kw))  # type: ignore[arg-type]  # fmt: skip
+    return AdaptConfig(
+        **({"weights": str(weights), "out": str(out), "steps": 2, "batch_size": 1, "crop": SIZE, "device": "cpu"} | kw)
+    )  # type: ignore[arg-type]
 
 
 def _quiet(msg: str) -> None:
@@ -147,9 +148,15 @@ def test_the_held_out_metric_uses_frames_kept_out_of_training(tiny_weights: Path
 
 @pytest.mark.parametrize(
     ("field", "value", "match"),
-    [("crop", (30, 64), "multiples of 32"), ("hide", (0.3, 0.2), "hide"), ("losses", ("sparse", "depth"), "losses"),
-     ("steps", 0, "steps"), ("amp", "fp8", "amp"), ("lr", float("nan"), "lr")],
-)  # fmt: skip
+    [
+        ("crop", (30, 64), "multiples of 32"),
+        ("hide", (0.3, 0.2), "hide"),
+        ("losses", ("sparse", "depth"), "losses"),
+        ("steps", 0, "steps"),
+        ("amp", "fp8", "amp"),
+        ("lr", float("nan"), "lr"),
+    ],
+)
 def test_the_config_refuses_what_cannot_run(field: str, value: object, match: str) -> None:
     with pytest.raises(InputError, match=match):
         AdaptConfig(**{"weights": "w", "out": "o", field: value})  # type: ignore[arg-type]
@@ -164,13 +171,28 @@ def test_a_run_killed_with_sigkill_and_resumed_ends_with_the_uninterrupted_weigh
     tiny_weights: Path, tmp_path: Path
 ) -> None:
     drive = Path(__file__).resolve().parents[1] / "data/kitti_sample/kitti_raw/2011_09_26/2011_09_26_drive_0035_sync"
-    common = ["--kitti-raw", str(drive), "--weights", str(tiny_weights), "--crop", "32x64", "--batch-size", "1",
-              "--steps", "6", "--save-every", "2", "--device", "cpu"]  # fmt: skip
+    common = [
+        "--kitti-raw",
+        str(drive),
+        "--weights",
+        str(tiny_weights),
+        "--crop",
+        "32x64",
+        "--batch-size",
+        "1",
+        "--steps",
+        "6",
+        "--save-every",
+        "2",
+        "--device",
+        "cpu",
+    ]
     env = os.environ | {"OMP_NUM_THREADS": "1"}
     subprocess.run(_cli(*common, "--out", str(tmp_path / "whole")), check=True, capture_output=True, env=env)
     cut = tmp_path / "cut"
-    proc = subprocess.Popen(_cli(*common, "--out", str(cut)), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            env=env)  # fmt: skip
+    proc = subprocess.Popen(
+        _cli(*common, "--out", str(cut)), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env
+    )
     deadline = time.time() + 300
     while not (cut / STATE).exists():
         assert proc.poll() is None and time.time() < deadline, "the run ended before it could be killed"
@@ -178,8 +200,9 @@ def test_a_run_killed_with_sigkill_and_resumed_ends_with_the_uninterrupted_weigh
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
     assert load_checkpoint(cut / STATE).extra["step"] < 6, "the run was not interrupted"
-    subprocess.run(_cli("--kitti-raw", str(drive), "--out", str(cut), "--resume"), check=True, capture_output=True,
-                   env=env)  # fmt: skip
+    subprocess.run(
+        _cli("--kitti-raw", str(drive), "--out", str(cut), "--resume"), check=True, capture_output=True, env=env
+    )
     a, b = (load_checkpoint(tmp_path / run / FINAL).state_dict for run in ("whole", "cut"))
     assert all(torch.equal(a[k], b[k]) for k in a)
 
@@ -206,8 +229,18 @@ def test_a_process_group_of_one_runs_the_ddp_path_and_resume_needs_as_many_proce
 
 
 def _torchrun(*args: str) -> list[str]:
-    return [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", "-m",
-            "semattnet.cli", "adapt", *args]  # fmt: skip
+    return [
+        sys.executable,
+        "-m",
+        "torch.distributed.run",
+        "--standalone",
+        "--nproc_per_node",
+        "2",
+        "-m",
+        "semattnet.cli",
+        "adapt",
+        *args,
+    ]
 
 
 def _kill_workers_after_the_first_state(proc: subprocess.Popen[bytes], out: Path) -> None:
@@ -226,24 +259,43 @@ def _kill_workers_after_the_first_state(proc: subprocess.Popen[bytes], out: Path
 @pytest.mark.slow  # ~40 s: three torchrun launches of two processes
 def test_torchrun_two_processes_and_a_killed_run_resumed_under_torchrun(tiny_weights: Path, tmp_path: Path) -> None:
     drive = Path(__file__).resolve().parents[1] / "data/kitti_sample/kitti_raw/2011_09_26/2011_09_26_drive_0035_sync"
-    common = ["--kitti-raw", str(drive), "--weights", str(tiny_weights), "--crop", "32x64", "--batch-size", "1",
-              "--steps", "6", "--save-every", "2", "--device", "cpu"]  # fmt: skip
+    common = [
+        "--kitti-raw",
+        str(drive),
+        "--weights",
+        str(tiny_weights),
+        "--crop",
+        "32x64",
+        "--batch-size",
+        "1",
+        "--steps",
+        "6",
+        "--save-every",
+        "2",
+        "--device",
+        "cpu",
+    ]
     env = os.environ | {"OMP_NUM_THREADS": "1"}
     whole, cut = tmp_path / "whole", tmp_path / "cut"
-    res = subprocess.run(_torchrun(*common, "--out", str(whole)), capture_output=True, text=True, env=env,
-                         timeout=300)  # fmt: skip
+    res = subprocess.run(_torchrun(*common, "--out", str(whole)), capture_output=True, text=True, env=env, timeout=300)
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-4000:]
     assert res.stdout.count("2 ranks in sync") == 1 and res.stdout.count("done: step 6") == 1  # rank 0 alone
     assert [r["step"] for r in json.loads((whole / LOG).read_text())["steps"]] == [1, 2, 3, 4, 5, 6]
     rng = load_checkpoint(whole / STATE).extra["rng"]
     draws = [torch.rand(8, generator=torch.Generator().set_state(state)) for state in rng]
     assert len(draws) == 2 and not torch.equal(*draws)  # each rank draws its own crops and points
-    proc = subprocess.Popen(_torchrun(*common, "--out", str(cut)), stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, env=env)  # fmt: skip
+    proc = subprocess.Popen(
+        _torchrun(*common, "--out", str(cut)), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env
+    )
     _kill_workers_after_the_first_state(proc, cut)
     assert load_checkpoint(cut / STATE).extra["step"] < 6, "the run was not interrupted"
-    res = subprocess.run(_torchrun("--kitti-raw", str(drive), "--out", str(cut), "--resume"), capture_output=True,
-                         text=True, env=env, timeout=300)  # fmt: skip
+    res = subprocess.run(
+        _torchrun("--kitti-raw", str(drive), "--out", str(cut), "--resume"),
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-4000:]
     a, b = (load_checkpoint(run / FINAL).state_dict for run in (whole, cut))
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)

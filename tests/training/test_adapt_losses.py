@@ -44,8 +44,9 @@ def _stereo_pair(seed: int = 0) -> tuple[torch.Tensor, ViewBatch]:
     target, partner = texture[..., :W], texture[..., 4:]
     T = torch.eye(4)
     T[0, 3] = -BASELINE  # target camera -> partner camera: the partner sits at +BASELINE on x
-    views = ViewBatch(partner[:, None], _K(), torch.zeros(1, 2), _K()[:, None], T[None, None],
-                      torch.ones(1, 1, dtype=torch.bool))  # fmt: skip
+    views = ViewBatch(
+        partner[:, None], _K(), torch.zeros(1, 2), _K()[:, None], T[None, None], torch.ones(1, 1, dtype=torch.bool)
+    )
     return target, views
 
 
@@ -61,8 +62,14 @@ def test_a_warp_with_the_true_depth_reproduces_the_target_and_a_wrong_depth_does
 
 def test_automask_masks_a_static_identical_pair() -> None:
     image = torch.rand(1, 3, H, W, generator=torch.Generator().manual_seed(1))
-    views = ViewBatch(image[:, None], _K(), torch.zeros(1, 2), _K()[:, None], torch.eye(4)[None, None],
-                      torch.ones(1, 1, dtype=torch.bool))  # fmt: skip
+    views = ViewBatch(
+        image[:, None],
+        _K(),
+        torch.zeros(1, 2),
+        _K()[:, None],
+        torch.eye(4)[None, None],
+        torch.ones(1, 1, dtype=torch.bool),
+    )
     loss, mask = photometric_loss(image, torch.full((1, 1, H, W), Z), views)
     assert not mask.any() and loss == 0
     _, unmasked = photometric_loss(image, torch.full((1, 1, H, W), Z), views, automask=False)
@@ -137,8 +144,13 @@ def test_the_real_stereo_partner_warps_onto_the_frame_with_the_annotated_depth()
     def error(scale: float) -> float:
         image = torch.from_numpy(np.array(view.rgb)).permute(2, 0, 1)[None].float() / 255
         depth = torch.where(gt > 0, gt * scale, torch.full_like(gt, 1e3))
-        warped, valid = inverse_warp(image, depth, torch.as_tensor(K)[None], torch.as_tensor(view.K)[None],
-                                     torch.as_tensor(view.T_view_cam)[None])  # fmt: skip
+        warped, valid = inverse_warp(
+            image,
+            depth,
+            torch.as_tensor(K)[None],
+            torch.as_tensor(view.K)[None],
+            torch.as_tensor(view.T_view_cam)[None],
+        )
         target = torch.from_numpy(np.array(rgb)).permute(2, 0, 1)[None].float() / 255
         keep = valid & (gt > 0)
         return float(((warped - target).abs().mean(1, keepdim=True) * keep).sum() / keep.sum())

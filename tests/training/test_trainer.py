@@ -32,8 +32,17 @@ def tree(tmp_path_factory) -> Path:
 
 
 def tiny(tree: Path, out: Path, **kw) -> TrainConfig:  # type: ignore[no-untyped-def]
-    base = {"data": str(tree), "out": str(out), "width": 0.125, "crop": (64, 128), "batch_size": 2, "workers": 0,
-            "log_every": 1, "epochs": 1000, "depth_head_init": (10.0, 15.0)}  # fmt: skip
+    base = {
+        "data": str(tree),
+        "out": str(out),
+        "width": 0.125,
+        "crop": (64, 128),
+        "batch_size": 2,
+        "workers": 0,
+        "log_every": 1,
+        "epochs": 1000,
+        "depth_head_init": (10.0, 15.0),
+    }
     return TrainConfig(**(base | kw))
 
 
@@ -58,8 +67,17 @@ def test_loss_falls(tree: Path, tmp_path: Path, steps: int) -> None:
 def test_overfits_one_sample(tmp_path: Path) -> None:
     data = tmp_path / "one"
     write_synthetic_kitti(data, frames=1, size=(64, 128), seed=1, eval_frames=0, workers=1)
-    cfg = tiny(data, tmp_path / "run", batch_size=1, max_steps=100, val_split="", flip=False, jitter=0.0,
-               branch_weights=(0.0,), lr=3e-3)  # fmt: skip
+    cfg = tiny(
+        data,
+        tmp_path / "run",
+        batch_size=1,
+        max_steps=100,
+        val_split="",
+        flip=False,
+        jitter=0.0,
+        branch_weights=(0.0,),
+        lr=3e-3,
+    )
     train(cfg, log=lambda m: None)
     losses = _losses(tmp_path / "run")
     assert np.sqrt(np.mean(losses[-5:])) < 0.25 * np.sqrt(np.mean(losses[:5]))  # RMSE far below its start
@@ -71,9 +89,25 @@ def _state(path: Path) -> dict[str, torch.Tensor]:
 
 @pytest.mark.slow  # ~25 s; tests/reliability/test_training_resume.py covers resume equality by default
 def test_exact_resume_after_sigkill(tree: Path, tmp_path: Path) -> None:
-    common = ["train", "--data", str(tree), "--width", "0.125", "--crop", "64x128", "--batch-size", "2",
-              "--workers", "0", "--epochs", "2", "--set", "save_every=3",
-              "--set", "depth_head_init=[10, 15]"]  # fmt: skip
+    common = [
+        "train",
+        "--data",
+        str(tree),
+        "--width",
+        "0.125",
+        "--crop",
+        "64x128",
+        "--batch-size",
+        "2",
+        "--workers",
+        "0",
+        "--epochs",
+        "2",
+        "--set",
+        "save_every=3",
+        "--set",
+        "depth_head_init=[10, 15]",
+    ]
     whole = tmp_path / "whole"
     subprocess.run(_cli(*common, "--out", str(whole)), check=True, capture_output=True)
 
@@ -105,9 +139,33 @@ def test_exact_resume_after_sigkill(tree: Path, tmp_path: Path) -> None:
 @pytest.mark.slow  # ~10 s; tests/inference/test_sharding.py runs torchrun by default
 def test_torchrun_two_processes(tree: Path, tmp_path: Path) -> None:
     out = tmp_path / "ddp"
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", "-m",
-           "semattnet.cli", "train", "--data", str(tree), "--out", str(out), "--width", "0.125", "--crop", "64x128",
-           "--batch-size", "2", "--workers", "0", "--epochs", "1", "--set", "log_every=1"]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "torch.distributed.run",
+        "--standalone",
+        "--nproc_per_node",
+        "2",
+        "-m",
+        "semattnet.cli",
+        "train",
+        "--data",
+        str(tree),
+        "--out",
+        str(out),
+        "--width",
+        "0.125",
+        "--crop",
+        "64x128",
+        "--batch-size",
+        "2",
+        "--workers",
+        "0",
+        "--epochs",
+        "1",
+        "--set",
+        "log_every=1",
+    ]
     env = os.environ | {"OMP_NUM_THREADS": "1"}
     res = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=300)
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-4000:]
@@ -122,16 +180,19 @@ def test_stage_chaining_and_frozen_backbone(tree: Path, tmp_path: Path) -> None:
     quiet = {"log": lambda m: None}
     train(tiny(tree, tmp_path / "s1", max_steps=2), **quiet)
     s1 = _state(tmp_path / "s1" / "checkpoints" / "last.pt")
-    train(tiny(tree, tmp_path / "s2", stage="refine-init", init=str(tmp_path / "s1/checkpoints/last.pt"),
-               max_steps=3), **quiet)  # fmt: skip
+    train(
+        tiny(tree, tmp_path / "s2", stage="refine-init", init=str(tmp_path / "s1/checkpoints/last.pt"), max_steps=3),
+        **quiet,
+    )
     s2 = _state(tmp_path / "s2" / "checkpoints" / "last.pt")
     for k, v in s1.items():  # weights and BN statistics of the backbone are untouched
         assert torch.equal(s2["backbone." + k], v), k
     head = [k for k in s2 if k.startswith("iter_guide_layer3.")]
     fresh = build_model("semattnet", width=0.125).state_dict()
     assert any(not torch.equal(s2[k], fresh[k]) for k in head if "num_batches" not in k)
-    train(tiny(tree, tmp_path / "s3", stage="full", init=str(tmp_path / "s2/checkpoints/last.pt"), max_steps=2),
-          **quiet)  # fmt: skip
+    train(
+        tiny(tree, tmp_path / "s3", stage="full", init=str(tmp_path / "s2/checkpoints/last.pt"), max_steps=2), **quiet
+    )
     s3 = _state(tmp_path / "s3" / "checkpoints" / "last.pt")
     assert not torch.equal(s3["backbone.rgb_conv_init.0.weight"], s2["backbone.rgb_conv_init.0.weight"])
     assert torch.equal(s3["att_12.0.weight"], s2["att_12.0.weight"])  # dead under the authors' aliasing

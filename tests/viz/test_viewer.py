@@ -37,13 +37,25 @@ def test_parse_intrinsics() -> None:
 def synthetic(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
     """A viewer folder with two frames: a "model" (ground-truth depth plus made-up intermediates) and a worse method."""
     fr = make_frame(H, W, seed=3, shadow=True)
-    outputs = {k: fr.depth * f for k, f in (("color_depth", 1.1), ("semantic_depth", 0.95), ("guided_depth", 1.0),
-                                            ("fused_depth", 1.02), ("refined_depth", 1.0))}  # fmt: skip
-    outputs |= {k: np.full((H, W), w, np.float32) for k, w in (("color_conf", 0.2), ("semantic_conf", 0.3),
-                                                               ("guided_conf", 0.5))}  # fmt: skip
+    outputs = {
+        k: fr.depth * f
+        for k, f in (
+            ("color_depth", 1.1),
+            ("semantic_depth", 0.95),
+            ("guided_depth", 1.0),
+            ("fused_depth", 1.02),
+            ("refined_depth", 1.0),
+        )
+    }
+    outputs |= {
+        k: np.full((H, W), w, np.float32)
+        for k, w in (("color_conf", 0.2), ("semantic_conf", 0.3), ("guided_conf", 0.5))
+    }
     depths = {"classical": fr.depth * 0.9, "semattnet": fr.depth}
-    frames = [ViewerFrame(f"scene{i}", fr.rgb, fr.sparse, depths, fr.semantic, fr.gt, outputs, "semattnet", fr.K)
-              for i in range(2)]  # fmt: skip
+    frames = [
+        ViewerFrame(f"scene{i}", fr.rgb, fr.sparse, depths, fr.semantic, fr.gt, outputs, "semattnet", fr.K)
+        for i in range(2)
+    ]
     out = tmp_path_factory.mktemp("viewer")
     return write_viewer(out, frames, {"semattnet": "SemAttNet (test)"}), fr
 
@@ -107,11 +119,24 @@ def predicted(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-unty
     (src / "sparse").mkdir()
     Image.fromarray(np.round(fr.sparse * 256).astype(np.uint16)).save(src / "sparse" / "f.png")
     outs = {}
-    for tag, extra in (("k", ["--K", ",".join(str(fr.K[i, j]) for i, j in ((0, 0), (1, 1), (0, 2), (1, 2)))]),
-                       ("nok", [])):  # fmt: skip
+    for tag, extra in (
+        ("k", ["--K", ",".join(str(fr.K[i, j]) for i, j in ((0, 0), (1, 1), (0, 2), (1, 2)))]),
+        ("nok", []),
+    ):
         outs[tag] = tmp_path_factory.mktemp(f"pred_{tag}")
-        args = ["predict", "--method", "classical", "--rgb", str(src / "f.png"), "--sparse",
-                str(src / "sparse" / "f.png"), "--out", str(outs[tag]), "--report", *extra]  # fmt: skip
+        args = [
+            "predict",
+            "--method",
+            "classical",
+            "--rgb",
+            str(src / "f.png"),
+            "--sparse",
+            str(src / "sparse" / "f.png"),
+            "--out",
+            str(outs[tag]),
+            "--report",
+            *extra,
+        ]
         args += ["--npy"] if tag == "k" else []
         result = CliRunner().invoke(main, args)
         assert result.exit_code == 0, result.output
@@ -141,7 +166,19 @@ def test_predict_report_in_chromium(predicted) -> None:  # type: ignore[no-untyp
 
 
 def test_predict_report_refuses_bad_intrinsics(tmp_path: Path) -> None:
-    args = ["predict", "--method", "classical", "--rgb", str(tmp_path), "--sparse", str(tmp_path), "--out",
-            str(tmp_path / "o"), "--report", "--K", "1,2"]  # fmt: skip
+    args = [
+        "predict",
+        "--method",
+        "classical",
+        "--rgb",
+        str(tmp_path),
+        "--sparse",
+        str(tmp_path),
+        "--out",
+        str(tmp_path / "o"),
+        "--report",
+        "--K",
+        "1,2",
+    ]
     result = CliRunner().invoke(main, args)
     assert result.exit_code != 0 and "--K" in result.output

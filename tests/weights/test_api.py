@@ -41,8 +41,16 @@ def _authors_pickle(path: Path, state_dict: dict) -> Path:
     metrics.Result = Result  # type: ignore[attr-defined]
     sys.modules["metrics"] = metrics
     try:
-        torch.save({"epoch": 95, "model": state_dict, "best_result": Result(), "optimizer": {"state": {}},
-                    "args": argparse.Namespace(lr=0.00128)}, path)  # fmt: skip
+        torch.save(
+            {
+                "epoch": 95,
+                "model": state_dict,
+                "best_result": Result(),
+                "optimizer": {"state": {}},
+                "args": argparse.Namespace(lr=0.00128),
+            },
+            path,
+        )
     finally:
         del sys.modules["metrics"]
     return path
@@ -59,8 +67,7 @@ def test_save_pretrained_folder_round_trip(tmp_path: Path, tiny_model, tiny_inpu
     loaded = from_pretrained(folder)
     assert not loaded.training and loaded.config == tiny_model.config
     assert torch.equal(predict(loaded, tiny_inputs), expected)
-    assert torch.equal(predict(from_pretrained(str(folder / "model.safetensors")), tiny_inputs),
-                       expected)  # fmt: skip
+    assert torch.equal(predict(from_pretrained(str(folder / "model.safetensors")), tiny_inputs), expected)
 
 
 def test_folder_with_bad_config_is_refused(tmp_path: Path, tiny_model) -> None:
@@ -130,10 +137,14 @@ def test_authors_pickle_by_url_is_converted_once(
 ) -> None:
     pth = _authors_pickle(tmp_path / "model_best_backup.pth.tar", tiny_model.state_dict())
     entry = PretrainedWeights(
-        name="tiny-authors", arch="semattnet", config={"width": 0.125, "iterations": 2}, format="authors-pth",
-        license="test", urls=(server.add("/w/model_best_backup.pth.tar", pth.read_bytes()),),
+        name="tiny-authors",
+        arch="semattnet",
+        config={"width": 0.125, "iterations": 2},
+        format="authors-pth",
+        license="test",
+        urls=(server.add("/w/model_best_backup.pth.tar", pth.read_bytes()),),
         file_name="model_best_backup.pth.tar",
-    )  # fmt: skip
+    )
     reads: list[str] = []
     real_load = torch.load
 
@@ -208,9 +219,14 @@ def test_unknown_source_is_one_line() -> None:
 def test_registry_arch_mismatch_is_refused(tmp_path: Path, cache: Path, tiny_model) -> None:
     folder = save_pretrained(tiny_model, tmp_path / "export")
     entry = PretrainedWeights(
-        name="wrong", arch="semattnet", config={"width": 0.25}, format="safetensors", license="t",
-        urls=((folder / "model.safetensors").as_uri(),), file_name="model.safetensors",
-    )  # fmt: skip
+        name="wrong",
+        arch="semattnet",
+        config={"width": 0.25},
+        format="safetensors",
+        license="t",
+        urls=((folder / "model.safetensors").as_uri(),),
+        file_name="model.safetensors",
+    )
     with pytest.raises(StateDictMismatchError) as err:  # the record is checked against the tensors' shapes
         hub_api.from_pretrained(entry)
     assert isinstance(err.value, WeightsMismatchError) and "\n" not in str(err.value)

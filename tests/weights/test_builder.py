@@ -71,8 +71,15 @@ def test_every_build_path_goes_through_the_builder(
         assert len(calls) == before + 1, label
         assert calls[-1]["weights"] is not None, label
         assert torch.equal(predict(model, tiny_inputs), expected), label
-    record = PretrainedWeights(name="tiny", arch="semattnet", urls=("file:///nowhere",), file_name="t.safetensors",
-                               format="safetensors", license="t", config={"width": 0.125})  # fmt: skip
+    record = PretrainedWeights(
+        name="tiny",
+        arch="semattnet",
+        urls=("file:///nowhere",),
+        file_name="t.safetensors",
+        format="safetensors",
+        license="t",
+        config={"width": 0.125},
+    )
     fresh = [record.build(), _hubconf().semattnet(pretrained=False, width=0.125)]
     assert [c["weights"] for c in calls[-2:]] == [None, None]
     assert [m.config.width for m in fresh] == [0.125, 0.125] and all(m.training for m in fresh)
@@ -88,9 +95,13 @@ def test_config_from_the_weights_then_overrides(files: dict[str, Path], tiny_mod
 
 @pytest.mark.parametrize(
     ("override", "shown"),
-    [({"width": 0.5}, "width=0.5 (the weights have 0.125)"), ({"refine": False}, "refine=False"),
-     ({"branches": 2}, "branches=2"), ({"kernel_sizes": (3, 5)}, "kernel_sizes=(3, 5)")],
-)  # fmt: skip
+    [
+        ({"width": 0.5}, "width=0.5 (the weights have 0.125)"),
+        ({"refine": False}, "refine=False"),
+        ({"branches": 2}, "branches=2"),
+        ({"kernel_sizes": (3, 5)}, "kernel_sizes=(3, 5)"),
+    ],
+)
 def test_an_override_that_contradicts_the_weights_is_one_line(files: dict[str, Path], override, shown) -> None:
     for load in (load_model, from_pretrained):
         with pytest.raises(SemAttNetError) as err:
@@ -137,8 +148,9 @@ def test_a_file_contradicting_itself_is_refused_beside_a_record(tiny_model) -> N
     ckpt = Checkpoint(path=Path("mine.gz"), state_dict=tiny_model.state_dict(), format="packed", config=lying)
     with pytest.raises(WeightsMismatchError) as err:
         builder.build_model_with_weights(ckpt, config=tiny_model.config)
-    assert str(err.value) == ("mine.gz: the config in the file's metadata contradicts the weights: width 0.25 "
-                              "recorded, 0.125 in the tensors")  # fmt: skip
+    assert str(err.value) == (
+        "mine.gz: the config in the file's metadata contradicts the weights: width 0.25 recorded, 0.125 in the tensors"
+    )
 
 
 def test_no_private_names_cross_modules_in_weights_and_the_cache() -> None:
@@ -159,6 +171,7 @@ def test_a_record_contradicting_the_kernel_the_file_was_trained_with_is_refused(
     ckpt = Checkpoint(path=Path("rt.gz"), state_dict=tiny_model.state_dict(), format="packed", config=tiny_model.config)
     with pytest.raises(WeightsMismatchError) as err:
         builder.build_model_with_weights(ckpt, config=tiny_model.config.replace(affinity="convex"))
-    assert str(err.value) == ("rt.gz: the recorded config contradicts the file's own: affinity 'convex' recorded, "
-                              "'eq13' in the file")  # fmt: skip
+    assert str(err.value) == (
+        "rt.gz: the recorded config contradicts the file's own: affinity 'convex' recorded, 'eq13' in the file"
+    )
     assert builder.build_model_with_weights(ckpt, config=tiny_model.config).config.affinity == "eq13"

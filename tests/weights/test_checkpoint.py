@@ -38,9 +38,16 @@ def _authors_checkpoint(path: Path, state_dict: dict) -> Path:
     metrics.Result = Result
     sys.modules["metrics"] = metrics
     try:
-        torch.save({"epoch": 95, "model": state_dict, "best_result": Result(),
-                    "optimizer": {"state": {}, "param_groups": [{"lr": 1e-3}]},
-                    "args": argparse.Namespace(lr=0.00128, batch_size=8, network_model="e")}, path)  # fmt: skip
+        torch.save(
+            {
+                "epoch": 95,
+                "model": state_dict,
+                "best_result": Result(),
+                "optimizer": {"state": {}, "param_groups": [{"lr": 1e-3}]},
+                "args": argparse.Namespace(lr=0.00128, batch_size=8, network_model="e"),
+            },
+            path,
+        )
     finally:
         del sys.modules["metrics"]
     return path

@@ -144,15 +144,24 @@ def test_cached_file_damaged_is_downloaded_again(server: Server, cache: Path) ->
 def test_mirror_used_when_primary_fails(server: Server, cache: Path) -> None:
     mirror = server.add("/mirror/m.bin", BLOB)
     entry = PretrainedWeights(
-        name="mirrored", arch="semattnet", urls=(server.url("/gone/m.bin"), mirror), file_name="m.bin",
-        format="torch", license="x", sha256=SHA,
-    )  # fmt: skip
+        name="mirrored",
+        arch="semattnet",
+        urls=(server.url("/gone/m.bin"), mirror),
+        file_name="m.bin",
+        format="torch",
+        license="x",
+        sha256=SHA,
+    )
     path = fetch(entry, progress=False)
     assert path == cache / "mirrored" / "m.bin" and path.read_bytes() == BLOB
     dead = PretrainedWeights(
-        name="dead", arch="semattnet", urls=(server.url("/gone/a"), server.url("/gone/b")), file_name="d.bin",
-        format="torch", license="x",
-    )  # fmt: skip
+        name="dead",
+        arch="semattnet",
+        urls=(server.url("/gone/a"), server.url("/gone/b")),
+        file_name="d.bin",
+        format="torch",
+        license="x",
+    )
     with pytest.raises(DownloadError) as err:
         fetch(dead, progress=False)
     assert "/gone/a" in str(err.value) and "/gone/b" in str(err.value)
@@ -177,9 +186,14 @@ def test_gdrive_through_gdown(cache: Path, monkeypatch: pytest.MonkeyPatch) -> N
 
     monkeypatch.setattr(gdown, "download", fake_download)
     entry = PretrainedWeights(
-        name="drive", arch="semattnet", urls=("gdrive://abc_DEF-123",), file_name="w.pth.tar", format="torch",
-        license="x", sha256=SHA,
-    )  # fmt: skip
+        name="drive",
+        arch="semattnet",
+        urls=("gdrive://abc_DEF-123",),
+        file_name="w.pth.tar",
+        format="torch",
+        license="x",
+        sha256=SHA,
+    )
     assert fetch(entry, progress=False).read_bytes() == BLOB
     link = fetch("https://drive.google.com/file/d/XyZ-9/view?usp=sharing", progress=False)
     assert calls == [("abc_DEF-123", True), ("XyZ-9", True)]

@@ -142,10 +142,16 @@ def test_our_safetensors_with_4kib_corrupted_is_refused_by_its_sha256(tmp_path: 
 
 
 def test_corrupt_safetensors_through_the_cli_is_one_line(tmp_path: Path) -> None:
-    path = _safetensors(tmp_path / "bad.safetensors", {"w": {"dtype": "F32", "shape": [9], "data_offsets": [0, 36]}},
-                        b"\0" * 4)  # fmt: skip
-    res = subprocess.run([sys.executable, "-m", "semattnet.cli", "info", str(path)], capture_output=True, text=True,
-                         env={**os.environ, "PYTHONPATH": SRC}, timeout=300)  # fmt: skip
+    path = _safetensors(
+        tmp_path / "bad.safetensors", {"w": {"dtype": "F32", "shape": [9], "data_offsets": [0, 36]}}, b"\0" * 4
+    )
+    res = subprocess.run(
+        [sys.executable, "-m", "semattnet.cli", "info", str(path)],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": SRC},
+        timeout=300,
+    )
     lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
     assert res.returncode == 1 and "Traceback" not in res.stderr
     assert len(lines) == 1 and str(path) in lines[0]

@@ -95,8 +95,9 @@ def test_torchscript_named_safetensors_in_a_folder_is_refused(
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "PYTHONPATH": SRC}
-    return subprocess.run([sys.executable, "-m", "semattnet.cli", *args], capture_output=True, text=True,
-                          env=env, timeout=300)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-m", "semattnet.cli", *args], capture_output=True, text=True, env=env, timeout=300
+    )
 
 
 def test_cli_info_refuses_torchscript_in_one_line(torchscript_file: Path) -> None:
@@ -181,8 +182,12 @@ def test_protocol_4_pickle_goes_through_the_safe_unpickler(tmp_path: Path, torch
     """torch's weights_only unpickler cannot read protocol 4; the project's unpickler refuses the payload."""
     marker = tmp_path / "marker"
     path = tmp_path / "p4.pth"
-    torch.save({"model": {"w": torch.zeros(3)}, "x": _Reduce(os.system, (f"touch {marker}",))}, path,
-               _use_new_zipfile_serialization=False, pickle_protocol=4)  # fmt: skip
+    torch.save(
+        {"model": {"w": torch.zeros(3)}, "x": _Reduce(os.system, (f"touch {marker}",))},
+        path,
+        _use_new_zipfile_serialization=False,
+        pickle_protocol=4,
+    )
     with pytest.raises(UnsafeCheckpointError, match="os.system|posix.system"):
         load_checkpoint(path)
     assert not marker.exists()

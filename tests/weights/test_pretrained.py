@@ -16,8 +16,11 @@ def test_authors_release() -> None:
     assert w.urls[0] == "gdrive://1plg4zGCLYndP0xtkh_gjG1RZ4YzPeiDN"
     assert w.format == "authors-pth" and w.file_name == "model_best_backup.pth.tar" and w.arch == "semattnet"
     assert dict(w.paper_metrics["kitti/test"]) == {
-        "rmse_mm": 709.41, "mae_mm": 205.49, "irmse_per_km": 2.03, "imae_per_km": 0.90
-    }  # fmt: skip
+        "rmse_mm": 709.41,
+        "mae_mm": 205.49,
+        "irmse_per_km": 2.03,
+        "imae_per_km": 0.90,
+    }
     assert w.doi == "10.1109/ACCESS.2022.3214316"
     assert w.num_params == 360_957_784  # spec ARCHITECTURE.md
     assert "semattnet-kitti-backbone" not in list_pretrained()  # the authors released no backbone weights
@@ -36,7 +39,7 @@ def test_records_are_read_only() -> None:
 def test_unknown_name_is_one_line_listing_known() -> None:
     with pytest.raises(UnknownWeightsError) as err:
         get_weights("semattnet-nyu")
-    assert str(err.value) == "unknown pretrained weights 'semattnet-nyu'; known: " + ", ".join(list_pretrained())
+    assert str(err.value) == "unknown pretrained weights 'semattnet-nyu'; available: " + ", ".join(list_pretrained())
     with pytest.raises(UnknownWeightsError, match="released only the full model"):
         default_weights("semattnet_backbone")
 

@@ -38,8 +38,10 @@ def _spec_tests(tree: ast.AST) -> list[tuple[int, str]]:
             sides = [node.left, *node.comparators]
             if any(isinstance(s, ast.Constant) and s.value == "://" for s in sides):
                 found.append((node.lineno, '"://" in'))
-            if any(isinstance(s, ast.Call) and getattr(s.func, "id", getattr(s.func, "attr", "")) == "list_pretrained"
-                   for s in sides):  # fmt: skip
+            if any(
+                isinstance(s, ast.Call) and getattr(s.func, "id", getattr(s.func, "attr", "")) == "list_pretrained"
+                for s in sides
+            ):
                 found.append((node.lineno, "in list_pretrained()"))
         if isinstance(node, ast.Call) and getattr(node.func, "id", getattr(node.func, "attr", "")) == "is_url":
             found.append((node.lineno, "is_url("))
@@ -118,8 +120,10 @@ def test_a_local_folder_named_like_a_registry_name_never_shadows_it(
     capsys.readouterr()
     assert WEIGHTS_SPEC.convert(name, None, None) == name  # what every --weights does first
     notes = capsys.readouterr().err.splitlines()
-    assert notes == [f"note: weights {name!r}: the registered weights are used, not the local {name} here (pass "
-                     f"./{name} for that one)"]  # fmt: skip
+    assert notes == [
+        f"note: weights {name!r}: the registered weights are used, not the local {name} here (pass "
+        f"./{name} for that one)"
+    ]
 
 
 def test_load_model_takes_a_folder_with_its_config(tmp_path: Path, tiny_model: torch.nn.Module) -> None:

@@ -54,7 +54,8 @@ def disk_full_error(path: str | os.PathLike[str], needed: int | None = None) -> 
     except OSError:
         free = None
     facts = ([f"{_mib(free)} free"] if free is not None else []) + (
-        [f"at least {_mib(needed)} needed"] if needed else [])  # fmt: skip
+        [f"at least {_mib(needed)} needed"] if needed else []
+    )
     detail = f" ({', '.join(facts)})" if facts else ""
     return OSError(errno.ENOSPC, f"no space left on the device{detail}; nothing was written", str(path))
 

@@ -15,8 +15,15 @@ from typing import SupportsFloat
 
 from semattnet._errors import DataError, InputError, SemAttNetError
 
-__all__ = ["MAX_ADDED_POINTS", "MAX_IMAGE_PIXELS", "MAX_IMAGE_SIDE", "MAX_SKEW_S", "check_image_size", "check_pinhole",
-           "regular_file"]  # fmt: skip
+__all__ = [
+    "MAX_ADDED_POINTS",
+    "MAX_IMAGE_PIXELS",
+    "MAX_IMAGE_SIDE",
+    "MAX_SKEW_S",
+    "check_image_size",
+    "check_pinhole",
+    "regular_file",
+]
 
 #: Largest width or height accepted, checked before decoding or allocating (KITTI: 1242).
 MAX_IMAGE_SIDE = 16384
@@ -47,8 +54,10 @@ def check_image_size(width: SupportsFloat | str, height: SupportsFloat | str, wh
     if not all(math.isfinite(v) and v >= 1 and v == int(v) for v in (w, h)):
         raise DataError(f"{where} must be two positive integers (width, height), got {_short(width)} {_short(height)}")
     if w > MAX_IMAGE_SIDE or h > MAX_IMAGE_SIDE or w * h > MAX_IMAGE_PIXELS:
-        raise DataError(f"{where}: {int(w)}x{int(h)} is above the limit of {MAX_IMAGE_SIDE} a side "
-                        f"and {MAX_IMAGE_PIXELS} pixels in all (semattnet._utils.bounds)")  # fmt: skip
+        raise DataError(
+            f"{where}: {int(w)}x{int(h)} is above the limit of {MAX_IMAGE_SIDE} a side "
+            f"and {MAX_IMAGE_PIXELS} pixels in all (semattnet._utils.bounds)"
+        )
     return int(w), int(h)
 
 
@@ -65,8 +74,9 @@ def check_pinhole(fx: float, fy: float, cx: float, cy: float, where: str = "--K"
     """
     vals = (fx, fy, cx, cy)
     if not all(math.isfinite(v) for v in vals) or not (fx > 0 and fy > 0):
-        raise InputError(f"{where}: fx, fy must be finite and positive and cx, cy finite; got "
-                         f"{', '.join(f'{v:g}' for v in vals)}")  # fmt: skip
+        raise InputError(
+            f"{where}: fx, fy must be finite and positive and cx, cy finite; got {', '.join(f'{v:g}' for v in vals)}"
+        )
 
 
 def regular_file(path: str | os.PathLike[str], what: str = "file", error: type[SemAttNetError] = DataError) -> Path:

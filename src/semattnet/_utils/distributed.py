@@ -186,14 +186,16 @@ def gather_rows(rows: list[T], key: Callable[[T], SupportsRichComparison]) -> li
     return sorted((row for part in parts for row in part or ()), key=key)
 
 
-def wrap_model(model: nn.Module, device: torch.device, sync_bn: bool = False,
-               find_unused: bool = False) -> nn.parallel.DistributedDataParallel:  # fmt: skip
+def wrap_model(
+    model: nn.Module, device: torch.device, sync_bn: bool = False, find_unused: bool = False
+) -> nn.parallel.DistributedDataParallel:
     """``model`` (on ``device``) in DDP, its BatchNorm layers made SyncBatchNorm with ``sync_bn`` (CUDA only);
     ``find_unused``: where the loss may leave trainable parameters without a gradient."""
     if sync_bn:
         model = nn.SyncBatchNorm.convert_sync_batchnorm(model)
-    return nn.parallel.DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None,
-                                               find_unused_parameters=find_unused)  # fmt: skip
+    return nn.parallel.DistributedDataParallel(
+        model, device_ids=[device.index] if device.type == "cuda" else None, find_unused_parameters=find_unused
+    )
 
 
 def rank_seed(seed: int, rank: int) -> int:

@@ -108,8 +108,10 @@ class FolderLock:
                 return True
         os.close(fd)
         who = f"process {holder}" if holder is not None else "another process"
-        raise FolderBusyError(f"{self.folder}: another semattnet run ({who}) is writing into it ({self.path}); "
-                              "wait for it to end or choose another --out")  # fmt: skip
+        raise FolderBusyError(
+            f"{self.folder}: another semattnet run ({who}) is writing into it ({self.path}); "
+            "wait for it to end or choose another --out"
+        )
 
     def release(self) -> None:
         """Give the lock up (idempotent)."""

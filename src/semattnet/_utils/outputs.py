@@ -119,8 +119,10 @@ def check_no_input_overlap(
         o, o_ino = _resolve(out_dir), _inode(Path(out_dir))
         for folder in folders:
             if o == folder or o.is_relative_to(folder) or (o_ino is not None and o_ino == _inode(folder)):
-                raise OutputError(f"output folder {out_dir} is the input folder {folder} or inside it; "
-                                  "choose an --out outside the inputs")  # fmt: skip
+                raise OutputError(
+                    f"output folder {out_dir} is the input folder {folder} or inside it; "
+                    "choose an --out outside the inputs"
+                )
     for f in out_files:
         r = _resolve(f)
         ino = _inode(r)
@@ -310,8 +312,9 @@ def _named(option: str, path: object) -> str:
     return f"{option} {path}" if option else str(path)
 
 
-def check_outputs(inputs: Iterable[tuple[str, str | os.PathLike[str] | None]], outputs: Iterable[Output],
-                  overwrite: bool = False) -> None:  # fmt: skip
+def check_outputs(
+    inputs: Iterable[tuple[str, str | os.PathLike[str] | None]], outputs: Iterable[Output], overwrite: bool = False
+) -> None:
     """The one output rule, checked before any work. ``inputs``: (option, path) pairs (None paths ignored).
 
     * No output is an input (by resolved path or, hard links, by inode), lies inside an input, or contains one.
@@ -335,21 +338,27 @@ def check_outputs(inputs: Iterable[tuple[str, str | os.PathLike[str] | None]], o
     for o, r in outs:
         _against_inputs(o, r, ins)
         if r in by_path:
-            raise OutputError(f"{_named(o.option, o.path)} and {_named(by_path[r].option, by_path[r].path)} are "
-                              "one path; choose distinct paths")  # fmt: skip
+            raise OutputError(
+                f"{_named(o.option, o.path)} and {_named(by_path[r].option, by_path[r].path)} are "
+                "one path; choose distinct paths"
+            )
         by_path[r] = o
     for o, r in outs:
         outer = next((by_path[p] for p in r.parents if p in by_path and by_path[p].kind != "folder"), None)
         if outer is not None:
             what = "the output folder" if o.kind == "folder" else "the output"
-            raise OutputError(f"{_named(outer.option, outer.path)} would replace {what} {_named(o.option, o.path)} "
-                              "(it holds it); choose distinct paths")  # fmt: skip
+            raise OutputError(
+                f"{_named(outer.option, outer.path)} would replace {what} {_named(o.option, o.path)} "
+                "(it holds it); choose distinct paths"
+            )
     _inside_folders(outs)
     for (option, given), r in ((v, k) for k, v in ins.items() if isinstance(k, Path)):
         holder = next((by_path[p] for p in r.parents if p in by_path), None)
         if holder is not None:
-            raise OutputError(f"{_named(holder.option, holder.path)} holds the input {_named(option, given)}; "
-                              "choose an output path that holds no input")  # fmt: skip
+            raise OutputError(
+                f"{_named(holder.option, holder.path)} holds the input {_named(option, given)}; "
+                "choose an output path that holds no input"
+            )
     _check_replaceable([o for o, _ in outs], overwrite)
 
 
@@ -365,9 +374,11 @@ def _inside_folders(outs: list[tuple[Output, Path]]) -> None:
             if named != f_named and named.is_relative_to(f_named) and not lands.is_relative_to(f_resolved):
                 steps = [p for p in [*reversed(named.parents), named] if p != f_named and p.is_relative_to(f_named)]
                 link = next((p for p in steps if p.is_symlink()), named)
-                raise OutputError(f"{_named(o.option, o.path)} lies outside {_named(f.option, f.path)}: {link} "
-                                  f"is a symbolic link to {_resolve(link)}; remove the link or choose another "
-                                  "--out")  # fmt: skip
+                raise OutputError(
+                    f"{_named(o.option, o.path)} lies outside {_named(f.option, f.path)}: {link} "
+                    f"is a symbolic link to {_resolve(link)}; remove the link or choose another "
+                    "--out"
+                )
 
 
 def _against_inputs(o: Output, r: Path, ins: dict[Path | tuple[int, int], tuple[str, Path]]) -> None:
@@ -379,8 +390,10 @@ def _against_inputs(o: Output, r: Path, ins: dict[Path | tuple[int, int], tuple[
         raise OutputError(f"{_named(o.option, o.path)} would replace {what} {_named(*hit)}; choose another path")
     inside = next((ins[p] for p in r.parents if p in ins), None)
     if inside is not None:
-        raise OutputError(f"{_named(o.option, o.path)} lies inside the input folder {_named(*inside)}; "
-                          "choose a path outside the inputs")  # fmt: skip
+        raise OutputError(
+            f"{_named(o.option, o.path)} lies inside the input folder {_named(*inside)}; "
+            "choose a path outside the inputs"
+        )
 
 
 def _check_replaceable(outs: list[Output], overwrite: bool) -> None:
@@ -395,6 +408,8 @@ def _check_replaceable(outs: list[Output], overwrite: bool) -> None:
         what, test = KINDS[o.kind]
         p = Path(o.path)
         if not test(p) and not (p.is_dir() and not p.is_symlink() and not any(p.iterdir())):  # empty: nothing lost
-            raise OutputError(f"{_named(o.option, p)} exists and is not {what}; --overwrite replaces only an "
-                              "earlier output of semattnet, never a user's folder or file: move it or choose "
-                              "another path")  # fmt: skip
+            raise OutputError(
+                f"{_named(o.option, p)} exists and is not {what}; --overwrite replaces only an "
+                "earlier output of semattnet, never a user's folder or file: move it or choose "
+                "another path"
+            )

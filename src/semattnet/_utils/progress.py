@@ -57,5 +57,15 @@ def progress(
     """
     stream = sys.stderr if file is None else file
     shown = enabled and (force if force is not None else is_interactive(stream))
-    return tqdm(iterable, file=stream, disable=not shown, total=total, initial=initial, desc=desc, unit=unit,
-                leave=leave, dynamic_ncols=dynamic_ncols, mininterval=mininterval)  # fmt: skip
+    return tqdm(
+        iterable,
+        file=stream,
+        disable=not shown,
+        total=total,
+        initial=initial,
+        desc=desc,
+        unit=unit,
+        leave=leave,
+        dynamic_ncols=dynamic_ncols,
+        mininterval=mininterval,
+    )

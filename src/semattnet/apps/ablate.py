@@ -44,6 +44,7 @@ from semattnet._utils.device import resolve_device
 from semattnet.apps.experiment import (
     GROUPS,
     HeldOut,
+    VariantRecipe,
     complete_held_out,
     fallback_semantic,
     load_held_out,
@@ -104,18 +105,22 @@ class AblationSettings:
     def protocol(self) -> dict[str, Any]:
         """The settings a (configuration, seed) result depends on (all but seeds, configs, device)."""
         d = asdict(self)
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()
-                if k not in ("seeds", "configs", "device")}  # fmt: skip
+        return {
+            k: list(v) if isinstance(v, tuple) else v for k, v in d.items() if k not in ("seeds", "configs", "device")
+        }
 
 
 def _variant(name: str) -> tuple[str, dict[str, Any]]:
     """Description and model options of a configuration."""
     if name == NO_SEMANTICS:
-        return "(g) trained and tested with the no-segmenter fallback map", {"branches": 3, "fusion": "sammafb",
-                                                                             "refine": True}  # fmt: skip
+        return "(g) trained and tested with the no-segmenter fallback map", {
+            "branches": 3,
+            "fusion": "sammafb",
+            "refine": True,
+        }
     if name not in MODELS or not name.startswith("table2_"):
         raise InputError(f"unknown configuration {name!r}; choose from {', '.join(CONFIGS)}")
-    description, cfg = MODELS[name]
+    description, cfg = MODELS[name].description, MODELS[name].config
     return description, {"branches": cfg.branches, "fusion": cfg.fusion, "refine": cfg.refine}
 
 
@@ -150,8 +155,14 @@ def run_ablation(
     results = {name: {seed: run.result(name, seed) for seed in s.seeds} for name in s.configs}
     summary = {name: _summary(name, runs) for name, runs in results.items()}
     claims = _claims(results, s.seeds)
-    result = {"schema": SCHEMA, "settings": asdict(s), "device": str(device),
-              "units": {"rmse": "mm", "mae": "mm"}, "configs": summary, "claims": claims}  # fmt: skip
+    result = {
+        "schema": SCHEMA,
+        "settings": asdict(s),
+        "device": str(device),
+        "units": {"rmse": "mm", "mae": "mm"},
+        "configs": summary,
+        "claims": claims,
+    }
     (out / "ablation.json").write_text(json.dumps(result, indent=2) + "\n")
     (out / "ablation.md").write_text(_markdown(summary, claims, s))
     log(f"wrote {out / 'ablation.md'}")
@@ -163,13 +174,20 @@ def _held_out(data: Path, s: AblationSettings, log: Callable[[str], None]) -> He
     if (data / "scenes.json").is_file():
         manifest = json.loads((data / "scenes.json").read_text())
         counts = manifest.get("counts", {})
-        found = (counts.get("train"), counts.get("val_select"), tuple(manifest.get("size", ())), manifest.get("seed"),
-                 manifest.get("style", "ideal"))  # fmt: skip
+        found = (
+            counts.get("train"),
+            counts.get("val_select"),
+            tuple(manifest.get("size", ())),
+            manifest.get("seed"),
+            manifest.get("style", "ideal"),
+        )
         wanted = (s.train_frames, s.eval_frames, tuple(s.size), s.data_seed, s.style)
         if found != wanted:
-            msg = (f"{data} holds {found[0]} training and {found[1]} held-out {found[4]} scenes of {found[2]} from "
-                   f"data seed {found[3]}, not {wanted[0]} and {wanted[1]} {wanted[4]} ones of {wanted[2]} from seed "
-                   f"{wanted[3]}; use another --out for other data settings")  # fmt: skip
+            msg = (
+                f"{data} holds {found[0]} training and {found[1]} held-out {found[4]} scenes of {found[2]} from "
+                f"data seed {found[3]}, not {wanted[0]} and {wanted[1]} {wanted[4]} ones of {wanted[2]} from seed "
+                f"{wanted[3]}; use another --out for other data settings"
+            )
             raise DataError(msg)
         return load_held_out(data)
     log(f"generating {s.train_frames} training and {s.eval_frames} held-out scenes at {s.size[0]}x{s.size[1]} ...")
@@ -182,8 +200,7 @@ def _per_image(preds: Mapping[str, np.ndarray], held: HeldOut) -> dict[str, dict
     for n, pred in preds.items():
         m.update(torch.from_numpy(pred)[None, None], torch.from_numpy(held.gts[n])[None, None], names=[n])
     keys = {k: (f"{k}_{'mm' if unit == 'mm' else 'per_km'}", scale) for k, (_, unit, scale) in LEADERBOARD.items()}
-    return {str(row["name"]): {key: float(row[k]) * scale for k, (key, scale) in keys.items()}
-            for row in m.per_image}  # fmt: skip
+    return {str(row["name"]): {key: float(row[k]) * scale for k, (key, scale) in keys.items()} for row in m.per_image}
 
 
 @dataclass(frozen=True)
@@ -208,9 +225,14 @@ class _Run:
         self.log(f"{name} ({_variant(name)[0]}), seed {seed} ...")
         t0 = time.perf_counter()
         metrics, per_image = self.train_and_score(name, seed)
-        record: dict[str, Any] = {"schema": _RESULT_SCHEMA, "protocol": self.settings.protocol(),
-                  **{k: {g: metrics[g][k] for g in GROUPS} for k in ("rmse_mm", "mae_mm")},
-                  "metrics": metrics, "per_image": per_image, "seconds": time.perf_counter() - t0}  # fmt: skip
+        record: dict[str, Any] = {
+            "schema": _RESULT_SCHEMA,
+            "protocol": self.settings.protocol(),
+            **{k: {g: metrics[g][k] for g in GROUPS} for k in ("rmse_mm", "mae_mm")},
+            "metrics": metrics,
+            "per_image": per_image,
+            "seconds": time.perf_counter() - t0,
+        }
         with atomic_path(path, suffix=".json") as tmp:
             tmp.write_text(json.dumps(record, indent=1))
         rmse = record["rmse_mm"]
@@ -221,14 +243,19 @@ class _Run:
         """A saved result, refused if it lacks per-image metrics or was made with other settings."""
         record = json.loads(path.read_text())
         if record.get("schema") != _RESULT_SCHEMA or "per_image" not in record:
-            raise DataError(f"{path} was written by an older semattnet ablate without per-image metrics, which "
-                             "the paired tests need; move results/ away or use another --out")  # fmt: skip
+            raise DataError(
+                f"{path} was written by an older semattnet ablate without per-image metrics, which "
+                "the paired tests need; move results/ away or use another --out"
+            )
         expected = json.loads(json.dumps(self.settings.protocol()))
-        changed = sorted(k for k in expected.keys() | record["protocol"].keys()
-                         if expected.get(k) != record["protocol"].get(k))  # fmt: skip
+        changed = sorted(
+            k for k in expected.keys() | record["protocol"].keys() if expected.get(k) != record["protocol"].get(k)
+        )
         if changed:
-            raise DataError(f"{path} was made with other settings ({', '.join(changed)}); "
-                             "rerun with the same settings or use another --out")  # fmt: skip
+            raise DataError(
+                f"{path} was made with other settings ({', '.join(changed)}); "
+                "rerun with the same settings or use another --out"
+            )
         return record
 
     def train_and_score(self, name: str, seed: int) -> tuple[dict[str, dict[str, float]], dict[str, dict[str, float]]]:
@@ -242,12 +269,19 @@ class _Run:
             segment_folder(Segmenter(None, "unknown"), data / "kitti_raw", blank_root, progress=False)
             extra["semantic_root"], semantic = str(blank_root), fallback_semantic
         refine = opts["refine"]
-        ckpt = train_variant(
-            self.out / "runs" / name / f"seed{seed}", data,
-            s.backbone_steps if refine else s.backbone_steps + s.full_steps, s.full_steps,
-            size=s.size, width=s.width, batch_size=s.batch_size, lr=s.lr, seed=seed, device=self.device,
-            refine=refine, log=lambda _m: None, branches=opts["branches"], fusion=opts["fusion"], **extra,
-        )  # fmt: skip
+        steps = s.backbone_steps if refine else s.backbone_steps + s.full_steps
+        recipe = VariantRecipe(
+            steps,
+            s.full_steps,
+            s.size,
+            s.width,
+            s.batch_size,
+            s.lr,
+            seed,
+            refine=refine,
+            fields={"branches": opts["branches"], "fusion": opts["fusion"], **extra},
+        )
+        ckpt = train_variant(self.out / "runs" / name / f"seed{seed}", data, recipe, self.device, log=lambda _m: None)
         outputs = complete_held_out(ckpt, self.held, self.device, semantic=semantic)
         key = "refined_depth" if refine else "fused_depth"
         preds = {n: o[key] for n, o in outputs.items()}
@@ -260,8 +294,10 @@ def _summary(name: str, runs: dict[int, dict[str, Any]]) -> dict[str, Any]:
     seeds = sorted(runs)
 
     def block(metric: str) -> dict[str, Any]:
-        return {**{g: _stats([runs[sd][metric][g] for sd in seeds]) for g in GROUPS},
-                "per_seed": {str(sd): runs[sd][metric] for sd in seeds}}  # fmt: skip
+        return {
+            **{g: _stats([runs[sd][metric][g] for sd in seeds]) for g in GROUPS},
+            "per_seed": {str(sd): runs[sd][metric] for sd in seeds},
+        }
 
     return {"description": _variant(name)[0], "seeds": seeds, **block("rmse_mm"), "mae_mm": block("mae_mm")}
 
@@ -277,14 +313,28 @@ def _claims(results: dict[str, dict[int, dict[str, Any]]], seeds: tuple[int, ...
             continue
         tests = {}
         for metric in ("rmse_mm", "mae_mm"):
-            per_image = {c: {sd: {n: v[metric] for n, v in results[c][sd]["per_image"].items()} for sd in seeds}
-                         for c in (better, worse)}  # fmt: skip
+            per_image = {
+                c: {sd: {n: v[metric] for n, v in results[c][sd]["per_image"].items()} for sd in seeds}
+                for c in (better, worse)
+            }
             d, common, _ = differences(per_image[worse], per_image[better])
             tests[metric] = compare(d, common)
         r = tests["rmse_mm"]
-        out.append({**row, "verdict": r["verdict"], "mean_diff_mm": r["mean_diff"], "ci95": r["ci95"], "p": r["p"],
-                    "test_units": r["test_units"], "per_seed": r["per_seed"], "seeds_agreeing": r["seeds_agreeing"],
-                    "n_seeds": r["n_seeds"], "n_pairs": r["n_pairs"], "mae": tests["mae_mm"]})  # fmt: skip
+        out.append(
+            {
+                **row,
+                "verdict": r["verdict"],
+                "mean_diff_mm": r["mean_diff"],
+                "ci95": r["ci95"],
+                "p": r["p"],
+                "test_units": r["test_units"],
+                "per_seed": r["per_seed"],
+                "seeds_agreeing": r["seeds_agreeing"],
+                "n_seeds": r["n_seeds"],
+                "n_pairs": r["n_pairs"],
+                "mae": tests["mae_mm"],
+            }
+        )
     return out
 
 
@@ -304,13 +354,20 @@ def _markdown(summary: dict[str, Any], claims: list[dict[str, Any]], s: Ablation
     ]
     for name, row in summary.items():
         seeds = ", ".join(f"{row['per_seed'][str(sd)]['all']:.0f}" for sd in row["seeds"])
-        lines.append(f"| {name} | {row['description']} | {_cell(row['all'])} | {_cell(row['shadowed'])} | "
-                     f"{_cell(row['unshadowed'])} | {_cell(row['mae_mm']['all'])} | {seeds} |")  # fmt: skip
-    lines += ["", "Claims: d = RMSE(worse) - RMSE(better) per (seed, held-out image); > 0 favours the claim. "
-              "95 % CI: crossed seed x image bootstrap; p: two-sided sign-flip test. Supported: CI above 0 and "
-              "p < 0.05; contradicted: CI below 0 and p < 0.05; otherwise not separated.", "",
-              "| Claim | better vs worse | ΔRMSE [mm] (95 % CI) | p | seeds agreeing | per-seed ΔRMSE | ΔMAE [mm] "
-              "(95 % CI) | verdict |", "|---|---|---:|---:|---:|---|---:|---|"]  # fmt: skip
+        lines.append(
+            f"| {name} | {row['description']} | {_cell(row['all'])} | {_cell(row['shadowed'])} | "
+            f"{_cell(row['unshadowed'])} | {_cell(row['mae_mm']['all'])} | {seeds} |"
+        )
+    lines += [
+        "",
+        "Claims: d = RMSE(worse) - RMSE(better) per (seed, held-out image); > 0 favours the claim. "
+        "95 % CI: crossed seed x image bootstrap; p: two-sided sign-flip test. Supported: CI above 0 and "
+        "p < 0.05; contradicted: CI below 0 and p < 0.05; otherwise not separated.",
+        "",
+        "| Claim | better vs worse | ΔRMSE [mm] (95 % CI) | p | seeds agreeing | per-seed ΔRMSE | ΔMAE [mm] "
+        "(95 % CI) | verdict |",
+        "|---|---|---:|---:|---:|---|---:|---|",
+    ]
     lines += [_claim_row(c) for c in claims]
     return "\n".join(lines) + "\n"
 
@@ -321,6 +378,8 @@ def _claim_row(c: dict[str, Any]) -> str:
     if c["verdict"] == "skipped":
         return f"| {c['claim']} | {pair} | | | | | | skipped: {c['note']} |"
     m, per_seed = c["mae"], ", ".join(f"{v:+.0f}" for v in c["per_seed"].values())
-    return (f"| {c['claim']} | {pair} | {c['mean_diff_mm']:+.0f} ({c['ci95'][0]:+.0f}, {c['ci95'][1]:+.0f}) | "
-            f"{c['p']:.3g} | {c['seeds_agreeing']}/{c['n_seeds']} | {per_seed} | "
-            f"{m['mean_diff']:+.0f} ({m['ci95'][0]:+.0f}, {m['ci95'][1]:+.0f}) | **{c['verdict']}** |")  # fmt: skip
+    return (
+        f"| {c['claim']} | {pair} | {c['mean_diff_mm']:+.0f} ({c['ci95'][0]:+.0f}, {c['ci95'][1]:+.0f}) | "
+        f"{c['p']:.3g} | {c['seeds_agreeing']}/{c['n_seeds']} | {per_seed} | "
+        f"{m['mean_diff']:+.0f} ({m['ci95'][0]:+.0f}, {m['ci95'][1]:+.0f}) | **{c['verdict']}** |"
+    )

@@ -75,8 +75,11 @@ class BenchResult:
 
     def header(self) -> list[str]:
         head = f"{'what':52s} {'seconds':>9s} {'frames/s':>9s} {'peak MiB':>9s} {'x naive':>8s} {'max rel diff':>12s}"
-        return [f"device {self.device}, {self.threads} threads, {self.size[0]}x{self.size[1]}, batch 1",
-                f"CPU: {self.cpu}", head]  # fmt: skip
+        return [
+            f"device {self.device}, {self.threads} threads, {self.size[0]}x{self.size[1]}, batch 1",
+            f"CPU: {self.cpu}",
+            head,
+        ]
 
     @staticmethod
     def row(r: BenchRow) -> str:
@@ -95,8 +98,11 @@ def random_frame(size: tuple[int, int], device: torch.device) -> dict[str, torch
     """A fixed random KITTI-like input (seed 0): colours and semantic colours 0..255, 5 % LiDAR pixels up to 80 m."""
     h, w = size
     g = torch.Generator().manual_seed(0)
-    x = {"rgb": torch.rand(1, 3, h, w, generator=g) * 255, "semantic": torch.rand(1, 3, h, w, generator=g) * 255,
-         "sparse": torch.rand(1, 1, h, w, generator=g) * 80 * (torch.rand(1, 1, h, w, generator=g) < 0.05)}  # fmt: skip
+    x = {
+        "rgb": torch.rand(1, 3, h, w, generator=g) * 255,
+        "semantic": torch.rand(1, 3, h, w, generator=g) * 255,
+        "sparse": torch.rand(1, 1, h, w, generator=g) * 80 * (torch.rand(1, 1, h, w, generator=g) < 0.05),
+    }
     return {k: v.to(device) for k, v in x.items()}
 
 
@@ -249,12 +255,19 @@ def _bench_inference(
         kind = what.split(",")[0]
         base = f"{kind}, naive" + (" (BN layers)" if kind == "backbone" else " reference")  # the kind's reference
         naive = what == base
-        bench.add(what, seconds[what], peaks[what], None if naive else seconds[base] / seconds[what],
-                  None if naive else _rel(outputs[what], outputs[base]))  # fmt: skip
+        bench.add(
+            what,
+            seconds[what],
+            peaks[what],
+            None if naive else seconds[base] / seconds[what],
+            None if naive else _rel(outputs[what], outputs[base]),
+        )
     if "full" in parts:
         achieved = 2 * gmacs / seconds["full model, ours (float32)"]
-        bench.res.notes.append(f"ours (float32): {achieved:.3g} GFLOP/s over the whole forward "
-                               f"({100 * achieved / peak:.0f} % of the measured conv peak)")  # fmt: skip
+        bench.res.notes.append(
+            f"ours (float32): {achieved:.3g} GFLOP/s over the whole forward "
+            f"({100 * achieved / peak:.0f} % of the measured conv peak)"
+        )
     bench.kept += [net, fast_net, outputs, last]
 
 
@@ -315,9 +328,15 @@ def _backend_candidates(
         if not entry.installed() or dev.type not in entry.devices:
             continue
         for precision in [p for p in entry.precisions if p in wanted and only in (None, p)]:
-            engine = optimize_for_inference(net, backend=backend, size=size, precision=precision, device=dev,
-                                            calibration=calibration if precision == "int8" else None,
-                                            outputs=outputs)  # fmt: skip
+            engine = optimize_for_inference(
+                net,
+                backend=backend,
+                size=size,
+                precision=precision,
+                device=dev,
+                calibration=calibration if precision == "int8" else None,
+                outputs=outputs,
+            )
             runs[f"full model, backend {backend} ({precision})"] = functools.partial(engine, **x)
     return runs
 

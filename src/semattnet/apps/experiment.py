@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import functools
 import json
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +32,7 @@ from semattnet.training.trainer import train
 __all__ = [
     "GROUPS",
     "HeldOut",
+    "VariantRecipe",
     "complete_held_out",
     "load_held_out",
     "make_synthetic",
@@ -67,8 +68,9 @@ def make_synthetic(
 ) -> HeldOut:
     """Write a synthetic tree at ``root`` (half of each split shadowed, scenes of ``style`` seen by the rig of
     ``domain``, see :mod:`semattnet.data.synthetic.domain`) and load its held-out scenes."""
-    write_synthetic_kitti(root, frames=frames, size=size, seed=seed, eval_frames=eval_frames, style=style,
-                          domain=domain)  # fmt: skip
+    write_synthetic_kitti(
+        root, frames=frames, size=size, seed=seed, eval_frames=eval_frames, style=style, domain=domain
+    )
     return load_held_out(root)
 
 
@@ -107,10 +109,13 @@ def step_seconds(
     two warm-up steps (the minimum, because on a shared machine every disturbance only adds time)."""
     h, w = size
     g = torch.Generator().manual_seed(0)
-    x = {"rgb": torch.rand(batch_size, 3, h, w, generator=g) * 255,
-         "semantic": torch.rand(batch_size, 3, h, w, generator=g) * 255,
-         "sparse": torch.rand(batch_size, 1, h, w, generator=g) * 50
-         * (torch.rand(batch_size, 1, h, w, generator=g) < 0.05)}  # fmt: skip
+    x = {
+        "rgb": torch.rand(batch_size, 3, h, w, generator=g) * 255,
+        "semantic": torch.rand(batch_size, 3, h, w, generator=g) * 255,
+        "sparse": torch.rand(batch_size, 1, h, w, generator=g)
+        * 50
+        * (torch.rand(batch_size, 1, h, w, generator=g) < 0.05),
+    }
     x = {k: v.to(device) for k, v in x.items()}
     gt = torch.full((batch_size, 1, h, w), 20.0, device=device)
     net = build_model(model, **overrides).to(device).train()
@@ -126,52 +131,88 @@ def step_seconds(
     return float(np.min(times[2:]))
 
 
-def train_variant(
-    run_dir: Path,
-    data: Path,
-    backbone_steps: int,
-    full_steps: int,
-    *,
-    size: tuple[int, int],
-    width: float,
-    batch_size: int,
-    lr: float,
-    seed: int,
-    device: torch.device,
-    refine: bool = True,
-    log: Callable[[str], None] = print,
-    refine_init_steps: int = 0,
-    head_lr_factor: float = 1.0,
-    loss: str = "l2",
-    semantic_dropout: float = 0.0,
-    **model: Any,
-) -> Path:
-    """Train one variant (``model``: ``branches``, ``fusion``) and return its final checkpoint.
+@dataclass(frozen=True)
+class VariantRecipe:
+    """How :func:`train_variant` trains one variant: the stages' steps (``backbone_steps``, then, with ``refine``,
+    ``refine_init_steps`` of the refinement initialisation when > 0 and ``full_steps`` of the full model), the crop
+    ``size``, the model ``width``, ``batch_size``, the learning rate ``lr`` (the CSPN++ head's times
+    ``head_lr_factor``), the training ``seed``, the ``loss`` (:func:`~semattnet.training.losses.semattnet_loss`),
+    ``semantic_dropout`` (the share of frames given the fallback semantic map) and ``fields``: further
+    :class:`~semattnet.training.TrainConfig` fields (``branches``, ``fusion``, ``model``, ...)."""
 
-    Backbone stage for ``backbone_steps`` (heads started at street scale, cosine schedule), then,
-    if ``refine``: the refinement initialisation for ``refine_init_steps`` when > 0 (the authors'
-    stage 2a: backbone frozen, CSPN++ head at ``lr * head_lr_factor``), then the full model for
-    ``full_steps`` (backbone at lr / 4, CSPN++ head at ``lr * head_lr_factor``). ``loss``: see
-    :func:`~semattnet.training.losses.semattnet_loss`. ``semantic_dropout``: the share of training frames
-    given the fallback semantic map (:class:`~semattnet.training.TrainConfig`).
-    """
+    backbone_steps: int
+    full_steps: int
+    size: tuple[int, int]
+    width: float
+    batch_size: int
+    lr: float
+    seed: int = 0
+    refine: bool = True
+    refine_init_steps: int = 0
+    head_lr_factor: float = 1.0
+    loss: str = "l2"
+    semantic_dropout: float = 0.0
+    fields: Mapping[str, object] = field(default_factory=dict)
+
+
+def train_variant(
+    run_dir: Path, data: Path, recipe: VariantRecipe, device: torch.device, log: Callable[[str], None] = print
+) -> Path:
+    """Train one variant by ``recipe`` on the synthetic tree ``data`` into ``run_dir`` and return its final
+    checkpoint: the backbone stage (heads started at street scale, cosine schedule), then, if ``recipe.refine``,
+    the refinement initialisation (the authors' stage 2a: backbone frozen, CSPN++ head at ``lr * head_lr_factor``)
+    when it has steps, then the full model (backbone at lr / 4, CSPN++ head at ``lr * head_lr_factor``)."""
+    r = recipe
     common: dict[str, Any] = {
-        "data": str(data), "width": width, "batch_size": batch_size, "crop": size, "workers": 0,
-        "epochs": 10**6, "lr_schedule": "cosine", "val_split": "val_select", "seed": seed,
-        "device": str(device), "log_every": 1, "loss": loss,
-        "semantic_dropout": semantic_dropout, **model,
-    }  # fmt: skip
-    train(TrainConfig(stage="backbone", out=str(run_dir / "backbone"), lr=lr, max_steps=backbone_steps,
-                      depth_head_init=(10.0, 15.0), **common), log=log)  # fmt: skip
+        "data": str(data),
+        "width": r.width,
+        "batch_size": r.batch_size,
+        "crop": r.size,
+        "workers": 0,
+        "epochs": 10**6,
+        "lr_schedule": "cosine",
+        "val_split": "val_select",
+        "seed": r.seed,
+        "device": str(device),
+        "log_every": 1,
+        "loss": r.loss,
+        "semantic_dropout": r.semantic_dropout,
+        **r.fields,
+    }
+    backbone = TrainConfig(
+        stage="backbone",
+        out=str(run_dir / "backbone"),
+        lr=r.lr,
+        max_steps=r.backbone_steps,
+        depth_head_init=(10.0, 15.0),
+        **common,
+    )
+    train(backbone, log=log)
     last = run_dir / "backbone" / "checkpoints" / "last.pt"
-    if not refine:
+    if not r.refine:
         return last
-    if refine_init_steps > 0:
-        train(TrainConfig(stage="refine-init", out=str(run_dir / "refine_init"), init=str(last),
-                          lr=lr * head_lr_factor, max_steps=refine_init_steps, **common), log=log)  # fmt: skip
+    head_lr = r.lr * r.head_lr_factor
+    if r.refine_init_steps > 0:
+        init = TrainConfig(
+            stage="refine-init",
+            out=str(run_dir / "refine_init"),
+            init=str(last),
+            lr=head_lr,
+            max_steps=r.refine_init_steps,
+            **common,
+        )
+        train(init, log=log)
         last = run_dir / "refine_init" / "checkpoints" / "last.pt"
-    train(TrainConfig(stage="full", out=str(run_dir / "full"), init=str(last), lr=lr / 4,
-                      head_lr=lr * head_lr_factor, max_steps=full_steps, **common), log=log)  # fmt: skip
+    full = TrainConfig(
+        stage="full",
+        out=str(run_dir / "full"),
+        init=str(last),
+        lr=r.lr / 4,
+        head_lr=head_lr,
+        max_steps=r.full_steps,
+        **common,
+    )
+    train(full, log=log)
     return run_dir / "full" / "checkpoints" / "last.pt"
 
 

@@ -69,8 +69,9 @@ def _completers(device: str) -> dict[str, Completer]:
     return found | {"classical completion": ClassicalCompleter()}
 
 
-def uncertainty_curves(data_root: Path, completers: dict[str, Completer], split: str = "val_select",
-                       max_frames: int | None = None) -> dict[str, Sparsification]:  # fmt: skip
+def uncertainty_curves(
+    data_root: Path, completers: dict[str, Completer], split: str = "val_select", max_frames: int | None = None
+) -> dict[str, Sparsification]:
     """Each completer's :class:`Sparsification` of its ``Completion.uncertainty`` over the frames of ``split``."""
     ds = eval_dataset(data_root, split)
     found = {name: Sparsification() for name in completers}
@@ -97,21 +98,33 @@ def plot_front(rows: Sequence[Mapping[str, Any]], curves: dict[str, Sparsificati
     for i, method in enumerate(curves):
         for kind, style in (("beams", "o-"), ("keep", "s--")):
             mine = [r for r in rows if r["method"] == method]
-            pts = sorted((r["density"], r["rmse_mm"] / 1000) for r in mine
-                         if r["setting"].startswith(kind) or r["setting"] == "beams=64")  # fmt: skip
+            pts = sorted(
+                (r["density"], r["rmse_mm"] / 1000)
+                for r in mine
+                if r["setting"].startswith(kind) or r["setting"] == "beams=64"
+            )
             label = f"{method} ({'fewer beams' if kind == 'beams' else 'random points'})"
             left.plot(*zip(*pts, strict=True), style, color=f"C{i}", label=label, ms=4)
         c, summary = curves[method].curves(), curves[method].compute()
         x = np.arange(len(c["rmse_curve"])) / len(c["rmse_curve"])
-        right.plot(x, c["rmse_curve"], "-", color=f"C{i}", label=f"{method}: AUSE {summary['ause_rmse']:.3f}, "
-                   f"AURG {summary['aurg_rmse']:.3f}")  # fmt: skip
+        right.plot(
+            x,
+            c["rmse_curve"],
+            "-",
+            color=f"C{i}",
+            label=f"{method}: AUSE {summary['ause_rmse']:.3f}, AURG {summary['aurg_rmse']:.3f}",
+        )
         right.plot(x, c["rmse_oracle"], ":", color=f"C{i}", lw=1)
     left.set(xscale="log", xlabel="input density (valid pixels)", ylabel="RMSE [m]", title="Sparser LiDAR")
     left.xaxis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
     left.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{100 * v:g} %"))
     left.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-    right.set(xlabel="fraction of pixels removed, most uncertain first", ylabel="RMSE / RMSE of all pixels",
-              title="Per-pixel uncertainty (dotted: oracle)", ylim=(0, None))  # fmt: skip
+    right.set(
+        xlabel="fraction of pixels removed, most uncertain first",
+        ylabel="RMSE / RMSE of all pixels",
+        title="Per-pixel uncertainty (dotted: oracle)",
+        ylim=(0, None),
+    )
     for ax in (left, right):
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=6.5)
@@ -127,9 +140,14 @@ def _rmse_curves(s: Sparsification) -> dict[str, list[float]]:
     return {k: [round(float(v), 5) for v in a] for k, a in s.curves().items() if k.startswith("rmse")}
 
 
-def make_front_figure(out: Path, work: Path, settings: tuple[str, ...] = SETTINGS, device: str = "cpu",
-                      demo: DemoSettings | None = None,
-                      log: Callable[[str], object] = print) -> FrontNumbers:  # fmt: skip
+def make_front_figure(
+    out: Path,
+    work: Path,
+    settings: tuple[str, ...] = SETTINGS,
+    device: str = "cpu",
+    demo: DemoSettings | None = None,
+    log: Callable[[str], object] = print,
+) -> FrontNumbers:
     """Write ``out/sparsity-sweep.png`` and ``out/sparsity-sweep.json`` from the demo's held-out scenes (made in
     ``work``); returns the numbers."""
     s = demo or DemoSettings()
@@ -140,14 +158,22 @@ def make_front_figure(out: Path, work: Path, settings: tuple[str, ...] = SETTING
     rows = run_sparsity_sweep(work / "data", "val_select", settings, completers, work / "sweep")
     log("uncertainty: sparsification curves at full density ...")
     curves = uncertainty_curves(work / "data", completers)
-    caption = (f"The shipped reference checkpoints (SemAttNet, width 1/8, trained on synthetic scenes) and the "
-               f"classical completion on the demo's {s.eval_frames} held-out synthetic scenes; remade by "
-               f"`{FIGURE_COMMAND}`.")  # fmt: skip
+    caption = (
+        f"The shipped reference checkpoints (SemAttNet, width 1/8, trained on synthetic scenes) and the "
+        f"classical completion on the demo's {s.eval_frames} held-out synthetic scenes; remade by "
+        f"`{FIGURE_COMMAND}`."
+    )
     out.mkdir(parents=True, exist_ok=True)
     plot_front(rows, curves, out / "sparsity-sweep.png", caption)
-    numbers = FrontNumbers(command=FIGURE_COMMAND, scenes=s.eval_frames, size=list(s.size), weights=WEIGHTS,
-                           sweep=rows, uncertainty={name: c.compute() for name, c in curves.items()},
-                           curves={name: _rmse_curves(c) for name, c in curves.items()})  # fmt: skip
+    numbers = FrontNumbers(
+        command=FIGURE_COMMAND,
+        scenes=s.eval_frames,
+        size=list(s.size),
+        weights=WEIGHTS,
+        sweep=rows,
+        uncertainty={name: c.compute() for name, c in curves.items()},
+        curves={name: _rmse_curves(c) for name, c in curves.items()},
+    )
     with atomic_path(out / "sparsity-sweep.json") as tmp:
         tmp.write_text(json.dumps(numbers, indent=1) + "\n")
     return numbers

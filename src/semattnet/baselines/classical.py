@@ -20,8 +20,9 @@ from semattnet.models.uncertainty import anchor_term
 __all__ = ["FILL_STEPS", "ClassicalCompleter", "classical_fill_step", "classical_uncertainty", "complete_classical"]
 
 
-def classical_uncertainty(sparse: torch.Tensor, depth: torch.Tensor | None = None,
-                          max_depth: float = 100.0) -> torch.Tensor:  # fmt: skip
+def classical_uncertainty(
+    sparse: torch.Tensor, depth: torch.Tensor | None = None, max_depth: float = 100.0
+) -> torch.Tensor:
     """A per-pixel uncertainty of :func:`complete_classical` in metres, (B, 1, H, W), from its own construction.
 
     Every filled pixel copies (a maximum, median or mean of) measurements up to ``r`` pixels away, ``r`` the

@@ -154,8 +154,9 @@ def pin_record(path: Path, sha: str, origin: str, trust: str, written: bool = Fa
     ``written`` (this library wrote the file and hashed it as it wrote it)."""
     st = path.stat()
     now = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
-    return PinRecord(written=written, sha256=sha, size=st.st_size, mtime_ns=st.st_mtime_ns, origin=origin,
-                     trust=trust, verified=now)  # fmt: skip
+    return PinRecord(
+        written=written, sha256=sha, size=st.st_size, mtime_ns=st.st_mtime_ns, origin=origin, trust=trust, verified=now
+    )
 
 
 def verify_cached(root: Path, path: Path, expected: str | None, origin: str = "", *, announce: bool = True) -> str:

@@ -17,5 +17,6 @@ _F = TypeVar("_F", bound=Callable[..., object])
 
 def dataset_option(help_text: str = "The dataset and its protocol.") -> Callable[[_F], _F]:
     """``--dataset`` (default ``kitti-dc``; an unknown name lists the valid ones)."""
-    return click.option("--dataset", type=click.Choice(list(DATASETS)), default=DEFAULT_DATASET,
-                        show_default=True, help=help_text)  # fmt: skip
+    return click.option(
+        "--dataset", type=click.Choice(list(DATASETS)), default=DEFAULT_DATASET, show_default=True, help=help_text
+    )

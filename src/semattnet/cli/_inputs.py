@@ -71,12 +71,19 @@ class Address(click.ParamType):
 #: existing folder or file, an output folder, file or path, seconds, metres, pixels, a speed factor, a server's
 #: ``[HOST:]PORT``.
 TYPES: dict[str, click.ParamType | None] = {
-    "text": None, "input": _INPUT, "folder": click.Path(exists=True, file_okay=False, path_type=Path),
+    "text": None,
+    "input": _INPUT,
+    "folder": click.Path(exists=True, file_okay=False, path_type=Path),
     "file": click.Path(exists=True, dir_okay=False, path_type=Path),
-    "out-folder": click.Path(file_okay=False, path_type=Path), "out-file": click.Path(dir_okay=False, path_type=Path),
-    "out-path": click.Path(path_type=Path), "seconds": SECONDS, "metres": DEPTH_M, "pixels": PIXELS, "speed": SPEED,
+    "out-folder": click.Path(file_okay=False, path_type=Path),
+    "out-file": click.Path(dir_okay=False, path_type=Path),
+    "out-path": click.Path(path_type=Path),
+    "seconds": SECONDS,
+    "metres": DEPTH_M,
+    "pixels": PIXELS,
+    "speed": SPEED,
     "address": Address(),
-}  # fmt: skip
+}
 
 
 def usage_error(exc: OptionError) -> click.UsageError:
@@ -98,8 +105,9 @@ def _click_option(name: str, spec: Option, default: object, heading: str) -> cli
 def field_options(cls: type, heading: str) -> tuple[click.Option, ...]:
     """The click options of a dataclass whose fields carry :func:`~semattnet._utils.registry.option` metadata,
     under ``heading``, in field order."""
-    return tuple(_click_option(f.name, f.metadata["option"], f.default, heading) for f in fields(cls)
-                 if "option" in f.metadata)  # fmt: skip
+    return tuple(
+        _click_option(f.name, f.metadata["option"], f.default, heading) for f in fields(cls) if "option" in f.metadata
+    )
 
 
 @dataclass(frozen=True)
@@ -120,14 +128,22 @@ class Maps:
 
 #: The semantic-map options: --semantic and --segment belong to the kinds whose ``accepts`` names them.
 MAP_OPTIONS = (
-    section(SEMANTIC)(["--semantic"], type=_INPUT, default=None,
-                      help="PNG file or folder of colour-coded semantic maps (with --rgb, --kitti-raw or --data)."),
-    section(SEMANTIC)(["--segment", "segment_spec"], default=None, metavar="SPEC",
-                      help="With --kitti-raw or --bag: segment each image with this model (see `semattnet segment "
-                      "--model`); with --data (nyuv2, void): the split's frames segmented once into a cache folder "
-                      "and reused."),
+    section(SEMANTIC)(
+        ["--semantic"],
+        type=_INPUT,
+        default=None,
+        help="PNG file or folder of colour-coded semantic maps (with --rgb, --kitti-raw or --data).",
+    ),
+    section(SEMANTIC)(
+        ["--segment", "segment_spec"],
+        default=None,
+        metavar="SPEC",
+        help="With --kitti-raw or --bag: segment each image with this model (see `semattnet segment "
+        "--model`); with --data (nyuv2, void): the split's frames segmented once into a cache folder "
+        "and reused.",
+    ),
     palette_mismatch_option(section(SEMANTIC)),
-)  # fmt: skip
+)
 
 
 @dataclass(frozen=True)

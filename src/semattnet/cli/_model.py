@@ -62,18 +62,26 @@ def _precisions() -> tuple[str, ...]:
     return precisions()
 
 
-def device_option(default: str | None = "auto", help: str = "Where the network runs: auto, cpu, cuda[:N] or mps.",
-                  cls: type[click.Option] = click.Option) -> Callable[[_F], _F]:  # fmt: skip
+def device_option(
+    default: str | None = "auto",
+    help: str = "Where the network runs: auto, cpu, cuda[:N] or mps.",
+    cls: type[click.Option] = click.Option,
+) -> Callable[[_F], _F]:
     """``--device``, the one declaration of every command's device option."""
     return click.option("--device", cls=cls, default=default, show_default=default is not None, help=help)
 
 
 def palette_mismatch_option(cls: type[click.Option] = click.Option) -> click.Option:
     """``--palette-mismatch``: what to do with semantic maps of another palette than the model's."""
-    return cls(["--palette-mismatch"], type=click.Choice(["refuse", "recolour", "fallback"]), default="refuse",
-               show_default=True, help="Maps of another palette than the model's (a KITTI model on nyuv2): refuse, "
-               "recolour the classes both palettes name (the rest unknown), or use the fallback map (evaluate: "
-               "metrics.json's 'semantic' says which).")  # fmt: skip
+    return cls(
+        ["--palette-mismatch"],
+        type=click.Choice(["refuse", "recolour", "fallback"]),
+        default="refuse",
+        show_default=True,
+        help="Maps of another palette than the model's (a KITTI model on nyuv2): refuse, "
+        "recolour the classes both palettes name (the rest unknown), or use the fallback map (evaluate: "
+        "metrics.json's 'semantic' says which).",
+    )
 
 
 def precision_options(f: _F) -> _F:
@@ -102,18 +110,34 @@ def model_options(method: bool = True) -> Callable[[_F], _F]:
     The command receives the fields of :class:`ModelOptions` (``values_of(ModelOptions, params)``)."""
 
     def decorate(f: _F) -> _F:
-        f = click.option("--amp", cls=_MODEL, type=click.Choice(["none", "bf16", "fp16"]), default=None,
-                         help="Deprecated: the older name of --precision (none = f32).")(f)  # fmt: skip
+        f = click.option(
+            "--amp",
+            cls=_MODEL,
+            type=click.Choice(["none", "bf16", "fp16"]),
+            default=None,
+            help="Deprecated: the older name of --precision (none = f32).",
+        )(f)
         f = precision_options(f)
-        f = click.option("--backend", cls=_MODEL, type=RegistryChoice(_backends), default="torch", show_default=True,
-                         help="Inference engine: torch (BN folded, fused propagation), openvino / onnxruntime "
-                         "(exported once per frame size, cached on disk; worth it over many frames), tensorrt "
-                         "(CUDA) or auto.")(f)  # fmt: skip
+        f = click.option(
+            "--backend",
+            cls=_MODEL,
+            type=RegistryChoice(_backends),
+            default="torch",
+            show_default=True,
+            help="Inference engine: torch (BN folded, fused propagation), openvino / onnxruntime "
+            "(exported once per frame size, cached on disk; worth it over many frames), tensorrt "
+            "(CUDA) or auto.",
+        )(f)
         f = device_option(cls=_MODEL)(f)
         if method:
-            f = click.option("--method", cls=_MODEL, type=click.Choice(["semattnet", "classical"]),
-                             default="semattnet", show_default=True,
-                             help="classical: the non-learned IP-Basic-style baseline (no weights).")(f)  # fmt: skip
+            f = click.option(
+                "--method",
+                cls=_MODEL,
+                type=click.Choice(["semattnet", "classical"]),
+                default="semattnet",
+                show_default=True,
+                help="classical: the non-learned IP-Basic-style baseline (no weights).",
+            )(f)
         return weights_option(f)
 
     return decorate

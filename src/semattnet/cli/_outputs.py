@@ -56,29 +56,62 @@ _OUT, _RUN = section(OUTPUTS), section(RUN)
 OUTPUT_OPTIONS = (
     _OUT(["--out"], default=None, type=click.Path(file_okay=False, path_type=Path), help="Output folder [required]."),
     _OUT(["--npy"], is_flag=True, help="Also write float32 .npy depth (and uncertainty, with --uncertainty)."),
-    _OUT(["--uncertainty"], is_flag=True,
-         help="Also write the per-pixel uncertainty: OUT/uncertainty/NAME.png (metres * 256, 0 = none), in the bag "
-         "(--bag-out) and the Rerun recording, and in the viewer (--report)."),
-    _OUT(["--max-uncertainty"], type=MaxUncertainty(), default=None,
-         help="Point clouds (--ply, bird's-eye view, --bag-out, --rerun, --live) leave out pixels whose uncertainty "
-         "exceeds METRES, or PERCENT% of their depth; depth maps stay dense."),
-    _OUT(["--max-depth"], type=DEPTH_M, default=80.0, show_default=True,
-         help="PLY / bird's-eye view: drop deeper pixels, m."),
-    _OUT(["--top-crop"], type=PIXELS, default=0, show_default=True,
-         help="PLY / bird's-eye view: drop the top N rows (sky)."),
+    _OUT(
+        ["--uncertainty"],
+        is_flag=True,
+        help="Also write the per-pixel uncertainty: OUT/uncertainty/NAME.png (metres * 256, 0 = none), in the bag "
+        "(--bag-out) and the Rerun recording, and in the viewer (--report).",
+    ),
+    _OUT(
+        ["--max-uncertainty"],
+        type=MaxUncertainty(),
+        default=None,
+        help="Point clouds (--ply, bird's-eye view, --bag-out, --rerun, --live) leave out pixels whose uncertainty "
+        "exceeds METRES, or PERCENT% of their depth; depth maps stay dense.",
+    ),
+    _OUT(
+        ["--max-depth"],
+        type=DEPTH_M,
+        default=80.0,
+        show_default=True,
+        help="PLY / bird's-eye view: drop deeper pixels, m.",
+    ),
+    _OUT(
+        ["--top-crop"],
+        type=PIXELS,
+        default=0,
+        show_default=True,
+        help="PLY / bird's-eye view: drop the top N rows (sky).",
+    ),
     _OUT(["--report"], is_flag=True, help="Also write viewer.html: hover depths, layers, 3D view (with --K)."),
     _OUT(["--overwrite"], is_flag=True, help="Replace existing outputs."),
-    _OUT(["--resume"], is_flag=False, flag_value="", default=None, metavar="[OUT]",
-         help="Continue the killed or failed run in OUT (or --out): keep its completed frames, do the rest."),
-    _RUN(["--on-error"], type=click.Choice(["skip", "stop"]), default=None,
-         help="A frame that cannot be completed: skip it (named, counted; the default for several frames) or stop "
-         "the run (the default for one frame; the frames done are kept)."),
-    _RUN(["--stream"], is_flag=True,
-         help="Read, project and segment the next frames in a background thread while one is completed."),
-    _RUN(["--realtime"], is_flag=True,
-         help="Replay at the recorded rate: frames that come while the completer is busy are dropped."),
+    _OUT(
+        ["--resume"],
+        is_flag=False,
+        flag_value="",
+        default=None,
+        metavar="[OUT]",
+        help="Continue the killed or failed run in OUT (or --out): keep its completed frames, do the rest.",
+    ),
+    _RUN(
+        ["--on-error"],
+        type=click.Choice(["skip", "stop"]),
+        default=None,
+        help="A frame that cannot be completed: skip it (named, counted; the default for several frames) or stop "
+        "the run (the default for one frame; the frames done are kept).",
+    ),
+    _RUN(
+        ["--stream"],
+        is_flag=True,
+        help="Read, project and segment the next frames in a background thread while one is completed.",
+    ),
+    _RUN(
+        ["--realtime"],
+        is_flag=True,
+        help="Replay at the recorded rate: frames that come while the completer is busy are dropped.",
+    ),
     _RUN(["--speed"], type=SPEED, default=None, help="With --realtime: replay this many times faster (0.01-1000)."),
-)  # fmt: skip
+)
 
 _F = TypeVar("_F", bound=Callable[..., object])
 
@@ -198,8 +231,10 @@ class Outputs:
         require_with(or_list(names), clouds, "max_uncertainty")
         if self.max_uncertainty is not None and asked.any(_replays) and not self.uncertainty:
             replayed = or_list(asked.named(_replays))
-            raise click.UsageError(f"--max-uncertainty with {replayed} needs --uncertainty (a resumed run rebuilds "
-                                   "the kept frames' clouds from OUT/uncertainty/)")  # fmt: skip
+            raise click.UsageError(
+                f"--max-uncertainty with {replayed} needs --uncertainty (a resumed run rebuilds "
+                "the kept frames' clouds from OUT/uncertainty/)"
+            )
 
     def spec(self, resuming: bool, identity: Mapping[str, object], inputs: Sequence[Path | None]) -> OutputSpec:
         """The library's :class:`~semattnet.inference.options.OutputSpec` of these options: ``resuming`` (from
@@ -212,8 +247,9 @@ class Outputs:
         without the pixels above ``--max-uncertainty``)."""
         from semattnet.inference.sinks import OutputSettings
 
-        settings = OutputSettings(self.npy, self.uncertainty, self.limit, self.max_depth, self.top_crop, timer,
-                                  click.echo)  # fmt: skip
+        settings = OutputSettings(
+            self.npy, self.uncertainty, self.limit, self.max_depth, self.top_crop, timer, click.echo
+        )
         return [sink for values in asked.values.values() for sink in values.sinks(settings)]
 
 

@@ -69,8 +69,9 @@ class GeneratedCommand(SectionedCommand):
     make) pairs; ``make()`` gives options, inserted at the start (``after`` ``""``) or after the option named
     ``after``."""
 
-    def __init__(self, *args: Any, generated: Sequence[tuple[str, Callable[[], Sequence[click.Parameter]]]] = (),
-                 **kwargs: Any) -> None:  # fmt: skip
+    def __init__(
+        self, *args: Any, generated: Sequence[tuple[str, Callable[[], Sequence[click.Parameter]]]] = (), **kwargs: Any
+    ) -> None:
         super().__init__(*args, **kwargs)
         self._generated, self._static = tuple(generated), list(self.params)
         self.refresh()

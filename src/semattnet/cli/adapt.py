@@ -71,53 +71,111 @@ def _hide(text: str) -> tuple[float, float]:
         low, _, high = text.partition("..")
         values = (float(low), float(high or low))
     except ValueError:
-        raise click.BadParameter(f"expected a share like 0.25 or a range like 0.2..0.3, got {text!r}",
-                                 param_hint="--hide") from None  # fmt: skip
+        raise click.BadParameter(
+            f"expected a share like 0.25 or a range like 0.2..0.3, got {text!r}", param_hint="--hide"
+        ) from None
     if not 0 < values[0] <= values[1] < 1:
         raise click.BadParameter(f"the share must lie in (0, 1), low <= high; got {text!r}", param_hint="--hide")
     return values
 
 
 ADAPT_OPTIONS = (
-    _OPTION(["--out"], required=True, type=click.Path(file_okay=False, path_type=Path),
-            help="The run folder: adapted.safetensors, checkpoints/last.pt (to resume), log.json."),
+    _OPTION(
+        ["--out"],
+        required=True,
+        type=click.Path(file_okay=False, path_type=Path),
+        help="The run folder: adapted.safetensors, checkpoints/last.pt (to resume), log.json.",
+    ),
     _OPTION(["--steps"], type=POSITIVE_INT, default=1000, show_default=True, help="Optimiser steps in total."),
     _OPTION(["--batch-size"], type=BATCH_SIZE, default=2, show_default=True, help="Random crops per step."),
     _OPTION(["--lr"], type=LEARNING_RATE, default=1e-4, show_default=True, help="Adam's rate, cosine to 0."),
-    _OPTION(["--crop"], default="256x512", show_default=True,
-            help="Crop HxW, multiples of 32 (smaller frames: their size, rounded down)."),
-    _OPTION(["--loss", "losses"], default="sparse,photometric,smoothness", show_default=True,
-            help="The losses, comma-separated: sparse (hidden LiDAR points), photometric (the frames' other views: "
-            "KITTI raw's stereo partner and neighbours, a bag's neighbours posed by /tf), smoothness."),
-    _OPTION(["--odom-frame"], default=None,
-            help="With --bag: the fixed frame of /tf that poses the neighbouring frames [odom if /tf has it, else the "
-            "root of /tf's tree]."),
-    _OPTION(["--hide"], default="0.2..0.3", show_default=True,
-            help="The share of LiDAR points hidden from the input each step: 0.25, or a range drawn from."),
-    _OPTION(["--w-kept"], type=NONNEGATIVE_FLOAT, default=0.5, show_default=True,
-            help="Weight of the sparse loss at the kept (input) points; the hidden ones weigh 1."),
-    _OPTION(["--w-photometric"], type=NONNEGATIVE_FLOAT, default=1.0, show_default=True,
-            help="Weight of the photometric loss."),
-    _OPTION(["--w-smooth"], type=NONNEGATIVE_FLOAT, default=1e-3, show_default=True,
-            help="Weight of the smoothness loss."),
+    _OPTION(
+        ["--crop"],
+        default="256x512",
+        show_default=True,
+        help="Crop HxW, multiples of 32 (smaller frames: their size, rounded down).",
+    ),
+    _OPTION(
+        ["--loss", "losses"],
+        default="sparse,photometric,smoothness",
+        show_default=True,
+        help="The losses, comma-separated: sparse (hidden LiDAR points), photometric (the frames' other views: "
+        "KITTI raw's stereo partner and neighbours, a bag's neighbours posed by /tf), smoothness.",
+    ),
+    _OPTION(
+        ["--odom-frame"],
+        default=None,
+        help="With --bag: the fixed frame of /tf that poses the neighbouring frames [odom if /tf has it, else the "
+        "root of /tf's tree].",
+    ),
+    _OPTION(
+        ["--hide"],
+        default="0.2..0.3",
+        show_default=True,
+        help="The share of LiDAR points hidden from the input each step: 0.25, or a range drawn from.",
+    ),
+    _OPTION(
+        ["--w-kept"],
+        type=NONNEGATIVE_FLOAT,
+        default=0.5,
+        show_default=True,
+        help="Weight of the sparse loss at the kept (input) points; the hidden ones weigh 1.",
+    ),
+    _OPTION(
+        ["--w-photometric"],
+        type=NONNEGATIVE_FLOAT,
+        default=1.0,
+        show_default=True,
+        help="Weight of the photometric loss.",
+    ),
+    _OPTION(
+        ["--w-smooth"], type=NONNEGATIVE_FLOAT, default=1e-3, show_default=True, help="Weight of the smoothness loss."
+    ),
     _OPTION(["--no-automask"], is_flag=True, help="Keep every pixel in the photometric loss (no auto-masking)."),
-    _OPTION(["--train-bn"], is_flag=True,
-            help="Let BatchNorm update its running statistics (default: frozen); under torchrun as SyncBatchNorm, "
-            "which needs CUDA."),
-    _OPTION(["--amp"], type=click.Choice(["none", "bf16", "fp16"]), default="none", show_default=True,
-            help="Autocast, as train's: fp16 needs CUDA, bf16 on a CPU needs native bfloat16."),
+    _OPTION(
+        ["--train-bn"],
+        is_flag=True,
+        help="Let BatchNorm update its running statistics (default: frozen); under torchrun as SyncBatchNorm, "
+        "which needs CUDA.",
+    ),
+    _OPTION(
+        ["--amp"],
+        type=click.Choice(["none", "bf16", "fp16"]),
+        default="none",
+        show_default=True,
+        help="Autocast, as train's: fp16 needs CUDA, bf16 on a CPU needs native bfloat16.",
+    ),
     _OPTION(["--seed"], type=COUNT, default=0, show_default=True, help="Frames, crops and hidden points follow it."),
-    _OPTION(["--gt-every"], type=COUNT, default=0, show_default=True,
-            help="Where frames have ground truth: the KITTI metrics on held-out ones every N steps (0: never)."),
-    _OPTION(["--gt-frames"], type=POSITIVE_INT, default=1, show_default=True,
-            help="With --gt-every: frames with ground truth held out of training for the metric."),
-    _OPTION(["--save-every"], type=POSITIVE_INT, default=100, show_default=True,
-            help="Write the resumable state every N steps (and at the end)."),
-    _OPTION(["--on-error"], type=click.Choice(["skip", "stop"]), default=None,
-            help="A frame that cannot be read: skip it (one line; the default for several frames) or stop."),
+    _OPTION(
+        ["--gt-every"],
+        type=COUNT,
+        default=0,
+        show_default=True,
+        help="Where frames have ground truth: the KITTI metrics on held-out ones every N steps (0: never).",
+    ),
+    _OPTION(
+        ["--gt-frames"],
+        type=POSITIVE_INT,
+        default=1,
+        show_default=True,
+        help="With --gt-every: frames with ground truth held out of training for the metric.",
+    ),
+    _OPTION(
+        ["--save-every"],
+        type=POSITIVE_INT,
+        default=100,
+        show_default=True,
+        help="Write the resumable state every N steps (and at the end).",
+    ),
+    _OPTION(
+        ["--on-error"],
+        type=click.Choice(["skip", "stop"]),
+        default=None,
+        help="A frame that cannot be read: skip it (one line; the default for several frames) or stop.",
+    ),
     _OPTION(["--resume"], is_flag=True, help="Continue the run in --out exactly where it stopped."),
     _OPTION(["--overwrite"], is_flag=True, help="Start over in a folder that holds a run."),
-)  # fmt: skip
+)
 
 
 @dataclass(frozen=True)
@@ -159,15 +217,31 @@ class AdaptOptions:
             raise click.BadParameter(f"{crop[0]}x{crop[1]}: both sides must be multiples of 32", param_hint="--crop")
         losses = tuple(t.strip() for t in self.losses.split(",") if t.strip())
         if not losses or any(t not in LOSS_TERMS for t in losses) or len(set(losses)) != len(losses):
-            raise click.BadParameter(f"expected distinct names of {', '.join(LOSS_TERMS)}, got {self.losses!r}",
-                                     param_hint="--loss")  # fmt: skip
+            raise click.BadParameter(
+                f"expected distinct names of {', '.join(LOSS_TERMS)}, got {self.losses!r}", param_hint="--loss"
+            )
         return AdaptConfig(
-            weights=self.weights or "", out=str(self.out), steps=self.steps, batch_size=self.batch_size, lr=self.lr,
-            crop=crop, losses=losses, hide=_hide(self.hide), w_kept=self.w_kept, w_photometric=self.w_photometric,
-            w_smooth=self.w_smooth, automask=not self.no_automask, freeze_bn=not self.train_bn, amp=self.amp,
-            device=self.device, seed=self.seed, gt_every=self.gt_every, gt_frames=self.gt_frames,
-            save_every=self.save_every, on_error=RunOptions(on_error=self.on_error).policy(frames),
-        )  # fmt: skip
+            weights=self.weights or "",
+            out=str(self.out),
+            steps=self.steps,
+            batch_size=self.batch_size,
+            lr=self.lr,
+            crop=crop,
+            losses=losses,
+            hide=_hide(self.hide),
+            w_kept=self.w_kept,
+            w_photometric=self.w_photometric,
+            w_smooth=self.w_smooth,
+            automask=not self.no_automask,
+            freeze_bn=not self.train_bn,
+            amp=self.amp,
+            device=self.device,
+            seed=self.seed,
+            gt_every=self.gt_every,
+            gt_frames=self.gt_frames,
+            save_every=self.save_every,
+            on_error=RunOptions(on_error=self.on_error).policy(frames),
+        )
 
 
 @main.command(cls=GeneratedCommand, generated=[("", input_params)])
@@ -207,7 +281,9 @@ def adapt(**params: object) -> None:
     if launch_rank() == 0:  # under torchrun, rank 0 alone reports
         skipped = f", {len(result.skipped)} frame(s) skipped" if result.skipped else ""
         metric = f", held-out RMSE {result.metrics['rmse_mm']:.0f} mm" if result.metrics else ""
-        click.echo(f"done: step {result.step} on {result.frames} frame(s){skipped}{metric}, "
-                   f"{result.seconds_per_step:.2f} s/step; weights: {result.weights}")  # fmt: skip
+        click.echo(
+            f"done: step {result.step} on {result.frames} frame(s){skipped}{metric}, "
+            f"{result.seconds_per_step:.2f} s/step; weights: {result.weights}"
+        )
     if result.skipped:
         ctx.exit(3)

@@ -12,27 +12,63 @@ from semattnet.cli.data import data
 
 
 @data.command("bag-from-kitti")
-@click.option("--drive", "drive_dir", required=True, type=click.Path(exists=True, file_okay=False, path_type=Path),
-              help="KITTI raw drive folder (DATE/DATE_drive_NNNN_sync; calibration in its parent).")  # fmt: skip
-@click.option("--out", required=True, type=click.Path(path_type=Path),
-              help="The bag: NAME.bag (ROS 1) or a ROS 2 bag folder.")  # fmt: skip
-@click.option("--format", "fmt", type=click.Choice(["ros1", "sqlite3", "mcap"]), default=None,
-              help="Bag format [ros1 for .bag, else mcap].")  # fmt: skip
+@click.option(
+    "--drive",
+    "drive_dir",
+    required=True,
+    type=click.Path(exists=True, file_okay=False, path_type=Path),
+    help="KITTI raw drive folder (DATE/DATE_drive_NNNN_sync; calibration in its parent).",
+)
+@click.option(
+    "--out", required=True, type=click.Path(path_type=Path), help="The bag: NAME.bag (ROS 1) or a ROS 2 bag folder."
+)
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(["ros1", "sqlite3", "mcap"]),
+    default=None,
+    help="Bag format [ros1 for .bag, else mcap].",
+)
 @click.option("--camera", default="2", show_default=True, help="KITTI colour camera (2 left, 3 right).")
 @click.option("--frames", default=None, help="Frame indices, e.g. 0-10 or 1,3,5 [all].")
-@click.option("--compressed", type=click.Choice(["png", "jpeg"]), default=None,
-              help="Also write the images as sensor_msgs/CompressedImage (IMAGE_TOPIC/compressed).")  # fmt: skip
-@click.option("--nan-points", type=click.IntRange(min=0, max=MAX_ADDED_POINTS), default=0, show_default=True,
-              help="NaN points added to each scan (is_dense false), for testing readers.")  # fmt: skip
+@click.option(
+    "--compressed",
+    type=click.Choice(["png", "jpeg"]),
+    default=None,
+    help="Also write the images as sensor_msgs/CompressedImage (IMAGE_TOPIC/compressed).",
+)
+@click.option(
+    "--nan-points",
+    type=click.IntRange(min=0, max=MAX_ADDED_POINTS),
+    default=0,
+    show_default=True,
+    help="NaN points added to each scan (is_dense false), for testing readers.",
+)
 @click.option("--overwrite", is_flag=True, help="Replace an existing bag.")
-def bag_from_kitti(drive_dir: Path, out: Path, fmt: str | None, camera: str, frames: str | None,
-                   compressed: str | None, nan_points: int, overwrite: bool) -> None:  # fmt: skip
+def bag_from_kitti(
+    drive_dir: Path,
+    out: Path,
+    fmt: str | None,
+    camera: str,
+    frames: str | None,
+    compressed: str | None,
+    nan_points: int,
+    overwrite: bool,
+) -> None:
     """Write a ROS bag of a KITTI raw drive: images, Velodyne scans, CameraInfo, /tf_static and /tf (the OXTS
     poses)."""
     from semattnet.robotics.bags import write_kitti_bag
 
-    written = write_kitti_bag(drive_dir, out, camera=camera, frames=frames, fmt=fmt, compressed=compressed,
-                              nan_points=nan_points, overwrite=overwrite)  # fmt: skip
+    written = write_kitti_bag(
+        drive_dir,
+        out,
+        camera=camera,
+        frames=frames,
+        fmt=fmt,
+        compressed=compressed,
+        nan_points=nan_points,
+        overwrite=overwrite,
+    )
     click.echo(written.describe())
     t = written.topics
     click.echo(f"image topic {t.image}, points topic {t.points}, camera info topic {t.camera_info}")

@@ -44,13 +44,22 @@ from semattnet.data.synthetic.scenes import SCENE_STYLES
     help="ideal: LiDAR on every surface; realistic: LiDAR fails on dark/glossy paint and glass, far and grazing "
     "surfaces, road markings and posters, grey cars before grey walls (semantics carry information).",
 )
-def synth(out_dir: Path, frames: int, eval_frames: int | None, size: str, seed: int, workers: int | None,
-          overwrite: bool, style: str) -> None:  # fmt: skip
+def synth(
+    out_dir: Path,
+    frames: int,
+    eval_frames: int | None,
+    size: str,
+    seed: int,
+    workers: int | None,
+    overwrite: bool,
+    style: str,
+) -> None:
     """Generate synthetic KITTI-like scenes in the KITTI depth completion layout."""
     from semattnet.data.synthetic.tree import write_synthetic_kitti
 
-    manifest = write_synthetic_kitti(out_dir, frames, parse_size(size), seed, eval_frames, workers, overwrite,
-                                     style=style)  # fmt: skip
+    manifest = write_synthetic_kitti(
+        out_dir, frames, parse_size(size), seed, eval_frames, workers, overwrite, style=style
+    )
     counts = ", ".join(f"{k} {v}" for k, v in manifest["counts"].items())
     click.echo(f"wrote {out_dir}: {counts} (manifest: {out_dir / 'scenes.json'})")
 
@@ -76,8 +85,9 @@ def data() -> None:
 )
 @click.option("--sample", type=POSITIVE_INT, default=None, help="Decode at most N frames per split [all].")
 @dataset_option("The layout to check.")
-def data_check(roots: tuple[Path, ...], raw_root: Path | None, semantic_root: Path | None, sample: int | None,
-               dataset: str) -> None:  # fmt: skip
+def data_check(
+    roots: tuple[Path, ...], raw_root: Path | None, semantic_root: Path | None, sample: int | None, dataset: str
+) -> None:
     """Check dataset trees (KITTI depth completion by default); exits 1 if anything is missing, unpaired or broken."""
     from semattnet.data.datasets import get_dataset
 
@@ -86,25 +96,56 @@ def data_check(roots: tuple[Path, ...], raw_root: Path | None, semantic_root: Pa
 
 
 @data.command("download")
-@click.option("--what", default="depth-completion,raw-subset", show_default=True,
-              help="Comma list of depth-completion, raw-subset, semantic (or all).")  # fmt: skip
-@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
-              help="Root of the KITTI tree (data_depth_*, kitti_raw, semantic).")  # fmt: skip
+@click.option(
+    "--what",
+    default="depth-completion,raw-subset",
+    show_default=True,
+    help="Comma list of depth-completion, raw-subset, semantic (or all).",
+)
+@click.option(
+    "--out",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Root of the KITTI tree (data_depth_*, kitti_raw, semantic).",
+)
 @click.option("--accept-kitti-license", is_flag=True, help="Accept KITTI's CC BY-NC-SA 3.0 terms (required).")
 @click.option("--dry-run", is_flag=True, help="Print every URL, size and target folder; download nothing.")
-@click.option("--mirror", default=None, metavar="URL_PREFIX",
-              help="Fetch from this prefix instead of KITTI's server (same paths below it).")  # fmt: skip
-@click.option("--semantic-archive", default=None, metavar="PATH|URL",
-              help="The authors' semantic maps (a zip you downloaded), unpacked into OUT/semantic.")  # fmt: skip
-@click.option("--cache-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="Download cache [$SEMATTNET_CACHE or the user cache].")  # fmt: skip
+@click.option(
+    "--mirror",
+    default=None,
+    metavar="URL_PREFIX",
+    help="Fetch from this prefix instead of KITTI's server (same paths below it).",
+)
+@click.option(
+    "--semantic-archive",
+    default=None,
+    metavar="PATH|URL",
+    help="The authors' semantic maps (a zip you downloaded), unpacked into OUT/semantic.",
+)
+@click.option(
+    "--cache-dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Download cache [$SEMATTNET_CACHE or the user cache].",
+)
 @click.option("--delete-archives", is_flag=True, help="Delete each downloaded archive once it is unpacked.")
 @click.option("--check/--no-check", default=True, show_default=True, help="Run `data check` on OUT at the end.")
 @dataset_option("What to download (nyuv2, void: their archives into OUT; --what is KITTI's).")
 @click.option("--accept-license", is_flag=True, help="Accept the dataset's terms (nyuv2, void; printed first).")
-def data_download(what: str, out_dir: Path, accept_kitti_license: bool, dry_run: bool, mirror: str | None,
-                  semantic_archive: str | None, cache_dir: Path | None, delete_archives: bool,
-                  check: bool, dataset: str, accept_license: bool) -> None:  # fmt: skip
+def data_download(
+    what: str,
+    out_dir: Path,
+    accept_kitti_license: bool,
+    dry_run: bool,
+    mirror: str | None,
+    semantic_archive: str | None,
+    cache_dir: Path | None,
+    delete_archives: bool,
+    check: bool,
+    dataset: str,
+    accept_license: bool,
+) -> None:
     """Download a dataset (KITTI depth completion and the raw drives it needs by default) into the loader
     layout; exits 1 on problems."""
     from semattnet.cache import DownloadError
@@ -112,15 +153,32 @@ def data_download(what: str, out_dir: Path, accept_kitti_license: bool, dry_run:
 
     try:
         if dataset != "kitti-dc":
-            problems = download_dataset(dataset, out_dir, accept_license=accept_license, dry_run=dry_run,
-                                        mirror=mirror, cache_dir=cache_dir, delete_archives=delete_archives,
-                                        check=check, log=click.echo)  # fmt: skip
+            problems = download_dataset(
+                dataset,
+                out_dir,
+                accept_license=accept_license,
+                dry_run=dry_run,
+                mirror=mirror,
+                cache_dir=cache_dir,
+                delete_archives=delete_archives,
+                check=check,
+                log=click.echo,
+            )
             if problems:
                 raise SystemExit(1)
             return
-        problems = download_kitti(out_dir, what, accept_license=accept_kitti_license, dry_run=dry_run,
-                                  mirror=mirror, semantic_archive=semantic_archive, cache_dir=cache_dir,
-                                  delete_archives=delete_archives, check=check, log=click.echo)  # fmt: skip
+        problems = download_kitti(
+            out_dir,
+            what,
+            accept_license=accept_kitti_license,
+            dry_run=dry_run,
+            mirror=mirror,
+            semantic_archive=semantic_archive,
+            cache_dir=cache_dir,
+            delete_archives=delete_archives,
+            check=check,
+            log=click.echo,
+        )
     except DownloadError as exc:
         raise click.ClickException(f"{exc} (run the same command again to resume)") from None
     if problems:

@@ -61,8 +61,12 @@ def metrics(
 @model_options()
 @click.option("--data", "data_root", required=True, type=click.Path(exists=True, file_okay=False, path_type=Path))
 @dataset_option("The dataset and its protocol (split, crop, depth range, metrics).")
-@click.option("--split", type=click.Choice(["val_select", "val", "test"]), default=None,
-              help="[val_select for kitti-dc; test for nyuv2 and void]")  # fmt: skip
+@click.option(
+    "--split",
+    type=click.Choice(["val_select", "val", "test"]),
+    default=None,
+    help="[val_select for kitti-dc; test for nyuv2 and void]",
+)
 @click.option(
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
@@ -76,9 +80,13 @@ def metrics(
     metavar="beams=64,32,..|keep=1,0.5,..",
     help="Sweep sparser inputs (repeatable): the model and the classical baseline side by side; needs --out.",
 )
-@click.option("--segment", default=None, metavar="SPEC",
-              help="nyuv2 / void: semantic maps from this segmenter (e.g. hf:indoor; see `semattnet segment`), "
-              "segmented once into a cache folder and reused.")  # fmt: skip
+@click.option(
+    "--segment",
+    default=None,
+    metavar="SPEC",
+    help="nyuv2 / void: semantic maps from this segmenter (e.g. hf:indoor; see `semattnet segment`), "
+    "segmented once into a cache folder and reused.",
+)
 @with_options([palette_mismatch_option()])
 @click.option("--save-predictions", is_flag=True, help="Write 16-bit PNG predictions (needs --out).")
 @click.option(
@@ -88,9 +96,22 @@ def metrics(
 @click.option("--workers", type=WORKERS, default=2, show_default=True, help="Frames read ahead in a background thread.")
 @click.option("--max-frames", type=POSITIVE_INT, default=None)
 @click.option("--overwrite", is_flag=True)
-def evaluate(data_root: Path, dataset: str, split: str | None, out: Path | None, sparsity: tuple[str, ...],
-             segment: str | None, palette_mismatch: str, save_predictions: bool, pictures: int, batch_size: int,
-             workers: int, max_frames: int | None, overwrite: bool, **params: object) -> None:  # fmt: skip
+def evaluate(
+    data_root: Path,
+    dataset: str,
+    split: str | None,
+    out: Path | None,
+    sparsity: tuple[str, ...],
+    segment: str | None,
+    palette_mismatch: str,
+    save_predictions: bool,
+    pictures: int,
+    batch_size: int,
+    workers: int,
+    max_frames: int | None,
+    overwrite: bool,
+    **params: object,
+) -> None:
     """Evaluate weights on a split with its dataset's metrics (KITTI: the devkit's), or sweep sparser inputs
     (--method classical: the baseline alone, with --sparsity only)."""
     model = values_of(ModelOptions, params)
@@ -103,8 +124,9 @@ def evaluate(data_root: Path, dataset: str, split: str | None, out: Path | None,
         _one_process("evaluate --sparsity")
         if out is None:
             raise click.UsageError("--sparsity needs --out")
-        _sweep(weights, data_root, split, out, sparsity, method, device, max_frames, overwrite, dataset,
-               palette_mismatch)  # fmt: skip
+        _sweep(
+            weights, data_root, split, out, sparsity, method, device, max_frames, overwrite, dataset, palette_mismatch
+        )
         return
     from semattnet.evaluation.evaluate import EvalOutputs, EvalSplit, evaluate_split
     from semattnet.inference.contract import CompleterFactory
@@ -146,8 +168,10 @@ def _report(res: Evaluation, out: Path | None) -> None:
     click.echo(res.metrics.table())
     r = res.result
     if "ause_rmse" in r:
-        click.echo(f"uncertainty: AUSE RMSE {r['ause_rmse']:.4f}  MAE {r['ause_mae']:.4f}; "
-                   f"AURG RMSE {r['aurg_rmse']:.4f}  MAE {r['aurg_mae']:.4f} (docs/guides/uncertainty.md)")  # fmt: skip
+        click.echo(
+            f"uncertainty: AUSE RMSE {r['ause_rmse']:.4f}  MAE {r['ause_mae']:.4f}; "
+            f"AURG RMSE {r['aurg_rmse']:.4f}  MAE {r['aurg_mae']:.4f} (docs/guides/uncertainty.md)"
+        )
     if out is not None:
         click.echo(f"wrote {out / 'metrics.json'} and {out / 'per_image.csv'}")
 
@@ -158,8 +182,9 @@ def _split(dataset: str, split: str | None) -> str:
 
     spec = get_dataset(dataset)
     if dataset == "kitti-dc" and split == "test":
-        raise click.BadParameter("kitti-dc's test split has no ground truth (use `semattnet submit`)",
-                                 param_hint="--split")  # fmt: skip
+        raise click.BadParameter(
+            "kitti-dc's test split has no ground truth (use `semattnet submit`)", param_hint="--split"
+        )
     try:
         return spec.check_split(split)
     except ValueError as exc:  # InputError: the split is not the dataset's
@@ -172,9 +197,19 @@ def _one_process(command: str) -> None:
         raise click.UsageError(f"{command} runs in one process; start it without torchrun")
 
 
-def _sweep(weights: str | None, data_root: Path, split: str, out: Path, sparsity: tuple[str, ...], method: str,
-           device: str, max_frames: int | None, overwrite: bool, dataset: str = "kitti-dc",
-           palette_mismatch: str = "refuse") -> None:  # fmt: skip
+def _sweep(
+    weights: str | None,
+    data_root: Path,
+    split: str,
+    out: Path,
+    sparsity: tuple[str, ...],
+    method: str,
+    device: str,
+    max_frames: int | None,
+    overwrite: bool,
+    dataset: str = "kitti-dc",
+    palette_mismatch: str = "refuse",
+) -> None:
     from semattnet.evaluation.sparsity import format_sweep, parse_settings, sweep_model
     from semattnet.weights.hub import load_model
 
@@ -182,8 +217,18 @@ def _sweep(weights: str | None, data_root: Path, split: str, out: Path, sparsity
     if method == "classical" and weights is not None:
         raise click.UsageError("--method classical takes no --checkpoint / --weights")
     model = partial(load_model, _required_weights(weights)) if method == "semattnet" else None
-    rows = sweep_model(data_root, split, settings, model, out, device, max_frames, overwrite, dataset=dataset,
-                       palette_mismatch=palette_mismatch)  # fmt: skip
+    rows = sweep_model(
+        data_root,
+        split,
+        settings,
+        model,
+        out,
+        device,
+        max_frames,
+        overwrite,
+        dataset=dataset,
+        palette_mismatch=palette_mismatch,
+    )
     click.echo(format_sweep(rows))
     click.echo(f"wrote {out / 'sparsity.csv'}, {out / 'sparsity.json'} and {out / 'sparsity.png'}")
 

@@ -72,8 +72,7 @@ def convert(paths: tuple[Path, ...], weights: str | None, overwrite: bool) -> No
 
     source = _one_spec(str(src) if src is not None else None, weights, "SRC").file  # NAME|URL: a cached file
     check_no_input_overlap([source], out_files=[dst])
-    check_outputs([("SRC" if src is not None else "--weights", source)], [Output("DST", dst, "safetensors")],
-                  overwrite)  # fmt: skip
+    check_outputs([("SRC" if src is not None else "--weights", source)], [Output("DST", dst, "safetensors")], overwrite)
     ckpt = load_checkpoint(source)
     save_safetensors(ckpt, dst)
     click.echo(f"wrote {dst} ({len(ckpt.state_dict)} tensors, {dst.stat().st_size / 2**20:.1f} MiB)")

@@ -91,8 +91,14 @@ def predict(**params: object) -> None:
         ctx.exit(result.exit_code)
 
 
-def _run_frames(chosen: ChosenInput, outputs_asked: tuple[Outputs, AskedSinks], run: RunOptions, model: ModelOptions,
-                folder: tuple[Path, bool], identity: dict[str, object]) -> FrameRun:  # fmt: skip
+def _run_frames(
+    chosen: ChosenInput,
+    outputs_asked: tuple[Outputs, AskedSinks],
+    run: RunOptions,
+    model: ModelOptions,
+    folder: tuple[Path, bool],
+    identity: dict[str, object],
+) -> FrameRun:
     """Check everything, load the completer, run the one frame loop; then the table (and the report).
     ``outputs_asked``: the shared output options and the sinks' own; ``folder``: the output folder and whether to
     resume; ``identity``: the run's, for a resume to check."""

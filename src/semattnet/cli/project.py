@@ -63,16 +63,35 @@ _EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
 )
 @click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path), help="16-bit PNG to write.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing output.")
-def project(scan: Path, calib_dir: Path | None, camera: str, rig: Path | None, K: str | None, T: str | None,
-            size: str | None, deskew_oxts: Path | None, scan_period: float, out: Path,
-            overwrite: bool) -> None:  # fmt: skip
+def project(
+    scan: Path,
+    calib_dir: Path | None,
+    camera: str,
+    rig: Path | None,
+    K: str | None,
+    T: str | None,
+    size: str | None,
+    deskew_oxts: Path | None,
+    scan_period: float,
+    out: Path,
+    overwrite: bool,
+) -> None:
     """Project a LiDAR scan into a camera: a KITTI-encoded 16-bit sparse depth map (depth * 256)."""
     from semattnet.data.scans import project_scan_file
 
     require_with("--deskew-oxts", deskew_oxts is not None, "scan_period")
     require_with("--calib-dir", calib_dir is not None, "camera")
-    summary = project_scan_file(scan, out, calib_dir=calib_dir, camera=camera, rig=rig, K=_numbers(K, "--K"),
-                                T=_numbers(T, "--T"), image_size=_size(size), deskew_oxts=deskew_oxts,
-                                scan_period=scan_period,
-                                overwrite=overwrite)  # fmt: skip
+    summary = project_scan_file(
+        scan,
+        out,
+        calib_dir=calib_dir,
+        camera=camera,
+        rig=rig,
+        K=_numbers(K, "--K"),
+        T=_numbers(T, "--T"),
+        image_size=_size(size),
+        deskew_oxts=deskew_oxts,
+        scan_period=scan_period,
+        overwrite=overwrite,
+    )
     click.echo(summary.describe())

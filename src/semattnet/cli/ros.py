@@ -48,39 +48,72 @@ def viewer_options() -> Sequence[click.Parameter]:
 SEGMENT_OPTIONS = tuple(p for p in MAP_OPTIONS if p.name in ("segment_spec", "palette_mismatch"))
 
 ROS2_OPTIONS = (
-    _ROS(["--image-topic"], default="~/input/image", show_default=True,
-         help="sensor_msgs/Image (rgb8, bgr8, mono8); a name ending in /compressed: CompressedImage."),
+    _ROS(
+        ["--image-topic"],
+        default="~/input/image",
+        show_default=True,
+        help="sensor_msgs/Image (rgb8, bgr8, mono8); a name ending in /compressed: CompressedImage.",
+    ),
     _ROS(["--camera-info-topic"], default="~/input/camera_info", show_default=True, help="sensor_msgs/CameraInfo."),
-    _ROS(["--points-topic"], default="~/input/point_cloud", show_default=True,
-         help="sensor_msgs/PointCloud2 (x, y, z), or with --sparse-depth a sparse depth Image (32FC1 m, 16UC1 mm)."),
+    _ROS(
+        ["--points-topic"],
+        default="~/input/point_cloud",
+        show_default=True,
+        help="sensor_msgs/PointCloud2 (x, y, z), or with --sparse-depth a sparse depth Image (32FC1 m, 16UC1 mm).",
+    ),
     _ROS(["--sparse-depth"], is_flag=True, help="--points-topic is a sparse depth image in the camera's frame."),
-    _ROS(["--output-prefix"], default="~/output", show_default=True,
-         help="Where depth_image, point_cloud, uncertainty and camera_info are published."),
+    _ROS(
+        ["--output-prefix"],
+        default="~/output",
+        show_default=True,
+        help="Where depth_image, point_cloud, uncertainty and camera_info are published.",
+    ),
     _ROS(["--namespace"], default="", help="The node's namespace (~ is NAMESPACE/NODE) [/]."),
     _ROS(["--node-name"], default="semattnet", show_default=True, help="The node's name."),
-    _ROS(["--rig"], type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
-         help="Rig JSON (K, T_cam_lidar, image_size) overriding CameraInfo and /tf_static."),
-    _ROS(["--max-skew"], type=SECONDS, default=None, help="Seconds between an image and its scan at most "
-         "[half the scan period]."),
+    _ROS(
+        ["--rig"],
+        type=click.Path(exists=True, dir_okay=False, path_type=Path),
+        default=None,
+        help="Rig JSON (K, T_cam_lidar, image_size) overriding CameraInfo and /tf_static.",
+    ),
+    _ROS(
+        ["--max-skew"],
+        type=SECONDS,
+        default=None,
+        help="Seconds between an image and its scan at most [half the scan period].",
+    ),
     _ROS(["--max-depth"], type=DEPTH_M, default=None, help="The point cloud leaves out deeper pixels, m [none]."),
-    _ROS(["--max-uncertainty"], type=MaxUncertainty(), default=None,
-         help="The point cloud leaves out pixels whose uncertainty exceeds METRES or PERCENT% of their depth."),
-    _ROS(["--report-every"], type=POSITIVE_FLOAT, default=5.0, show_default=True,
-         help="Seconds between two latency and drop lines."),
+    _ROS(
+        ["--max-uncertainty"],
+        type=MaxUncertainty(),
+        default=None,
+        help="The point cloud leaves out pixels whose uncertainty exceeds METRES or PERCENT% of their depth.",
+    ),
+    _ROS(
+        ["--report-every"],
+        type=POSITIVE_FLOAT,
+        default=5.0,
+        show_default=True,
+        help="Seconds between two latency and drop lines.",
+    ),
     _ROS(["--frames"], type=POSITIVE_INT, default=None, help="Stop after this many frames [run until Ctrl-C]."),
-)  # fmt: skip
+)
 #: The DDS transport's options (``ros2``).
 DDS_OPTIONS = (
     _ROS(["--domain-id"], type=click.IntRange(0, 232), default=None, help="DDS domain [ROS_DOMAIN_ID, else 0]."),
     _ROS(["--loopback"], is_flag=True, help="DDS on 127.0.0.1 only (unicast; one machine, no multicast)."),
-)  # fmt: skip
+)
 #: The ROS 1 transport's options (``ros1``).
 ROS1_OPTIONS = (
-    _ROS(["--master"], default=None, metavar="URI",
-         help="The ROS master [ROS_MASTER_URI, else http://127.0.0.1:11311]."),
-    _ROS(["--host"], default=None, help="The address peers reach this node at [ROS_IP, else ROS_HOSTNAME, else "
-         "127.0.0.1]."),
-)  # fmt: skip
+    _ROS(
+        ["--master"], default=None, metavar="URI", help="The ROS master [ROS_MASTER_URI, else http://127.0.0.1:11311]."
+    ),
+    _ROS(
+        ["--host"],
+        default=None,
+        help="The address peers reach this node at [ROS_IP, else ROS_HOSTNAME, else 127.0.0.1].",
+    ),
+)
 
 
 def _domain_id(given: int | None) -> int:
@@ -146,11 +179,23 @@ class NodeOptions:
             resolve_name(name, namespace, self.node_name, option)  # a bad name: one line, before the transport starts
         rig = read_rig_json(self.rig) if self.rig is not None else None
         limit = None if self.max_uncertainty is None else UncertaintyLimit.parse(self.max_uncertainty)
-        return DepthNode(transport(), completer, topics, namespace=namespace, node=self.node_name, rig=rig,
-                         max_skew_ns=None if self.max_skew is None else round(self.max_skew * 1e9),
-                         compressed=self.image_topic.rstrip("/").endswith("/compressed"), sparse=self.sparse_depth,
-                         semantic=semantic, max_depth=self.max_depth, max_uncertainty=limit,
-                         report_s=self.report_every, say=click.echo, sinks=self.viewers(limit))  # fmt: skip
+        return DepthNode(
+            transport(),
+            completer,
+            topics,
+            namespace=namespace,
+            node=self.node_name,
+            rig=rig,
+            max_skew_ns=None if self.max_skew is None else round(self.max_skew * 1e9),
+            compressed=self.image_topic.rstrip("/").endswith("/compressed"),
+            sparse=self.sparse_depth,
+            semantic=semantic,
+            max_depth=self.max_depth,
+            max_uncertainty=limit,
+            report_s=self.report_every,
+            say=click.echo,
+            sinks=self.viewers(limit),
+        )
 
 
 def _run(params: dict[str, object], transport: Callable[[], Transport]) -> None:

@@ -70,6 +70,7 @@ def _weights_rows() -> list[tuple[str, ...]]:
         pinned = pins.get(f"{w.name}/{w.file_name}", {}).get("sha256")
         sha = w.sha256 or (f"{pinned} (pinned)" if pinned else _UNKNOWN_SHA)
         params = f"{w.num_params / 1e6:.1f} M" if w.num_params else "?"
-        rows.append((w.name, w.arch, params, w.trained_on or "-", w.file_name, sha, _licence(w.license),
-                     _rmse(w.paper_metrics)))  # fmt: skip
+        rows.append(
+            (w.name, w.arch, params, w.trained_on or "-", w.file_name, sha, _licence(w.license), _rmse(w.paper_metrics))
+        )
     return rows

@@ -98,9 +98,14 @@ def drives_for(root: str | Path) -> tuple[list[str], str]:
     """
     annotated = Path(root) / "data_depth_annotated"
     found = sorted(
-        {p.name for split in ("train", "val") if (annotated / split).is_dir() for p in (annotated / split).iterdir()
-         if p.is_dir() and re.fullmatch(r"\d{4}_\d\d_\d\d_drive_\d{4}_sync", p.name)}
-    )  # fmt: skip
+        {
+            p.name
+            for split in ("train", "val")
+            if (annotated / split).is_dir()
+            for p in (annotated / split).iterdir()
+            if p.is_dir() and re.fullmatch(r"\d{4}_\d\d_\d\d_drive_\d{4}_sync", p.name)
+        }
+    )
     if found:
         return found, f"{annotated}/{{train,val}}"
     shipped = sorted(kf.TRAIN_DRIVES + kf.VAL_DRIVES)
@@ -118,8 +123,10 @@ def check_mirror(mirror: str | None) -> str | None:
         InputError: anything else, naming ``--mirror`` (a bare path or text would be taken for a weights name).
     """
     if mirror is not None and not re.match(r"^(https?|file)://[^\s]*$", mirror):
-        raise InputError(f"--mirror: expected an http(s):// or file:// URL prefix (a local folder: "
-                         f"file:///path/to/it), got {mirror!r}")  # fmt: skip
+        raise InputError(
+            f"--mirror: expected an http(s):// or file:// URL prefix (a local folder: "
+            f"file:///path/to/it), got {mirror!r}"
+        )
     return mirror
 
 
@@ -231,12 +238,16 @@ def _refuse_bombs(path: Path, sizes: Sequence[tuple[str, int, int]]) -> None:
     """(name, inflated, compressed) of each member: a zip bomb is refused before anything is written."""
     for name, full, packed in sizes:
         if full > ARCHIVE_RATIO_FLOOR and full > MAX_ARCHIVE_RATIO * max(packed, 1):
-            raise UnsafeArchiveError(f"{path}: member {name!r} inflates {packed} bytes to {full} (more than "
-                                     f"{MAX_ARCHIVE_RATIO}:1); refusing a zip bomb; nothing unpacked")  # fmt: skip
+            raise UnsafeArchiveError(
+                f"{path}: member {name!r} inflates {packed} bytes to {full} (more than "
+                f"{MAX_ARCHIVE_RATIO}:1); refusing a zip bomb; nothing unpacked"
+            )
     total, limit = sum(s[1] for s in sizes), MAX_ARCHIVE_RATIO * path.stat().st_size + ARCHIVE_RATIO_FLOOR
     if total > limit:
-        raise UnsafeArchiveError(f"{path}: members inflate to {total} bytes, more than the {limit} accepted for "
-                                 f"this archive's size; refusing a bomb; nothing unpacked")  # fmt: skip
+        raise UnsafeArchiveError(
+            f"{path}: members inflate to {total} bytes, more than the {limit} accepted for "
+            f"this archive's size; refusing a bomb; nothing unpacked"
+        )
 
 
 def _refuse_links_and_duplicates(zf: zipfile.ZipFile, path: Path) -> None:
@@ -272,8 +283,11 @@ def extract_zip(
         _refuse_links_and_duplicates(zf, path)
         _refuse_bombs(path, [(i.filename, i.file_size, i.compress_size) for i in zf.infolist()])
         members = [(info, _strip(_safe_member(info.filename, path), strip)) for info in zf.infolist()]
-        items = [(info, rel, info.file_size) for info, rel in members
-                 if not info.is_dir() and rel.parts and (not keep or set(keep) & set(rel.parts[:-1]))]  # fmt: skip
+        items = [
+            (info, rel, info.file_size)
+            for info, rel in members
+            if not info.is_dir() and rel.parts and (not keep or set(keep) & set(rel.parts[:-1]))
+        ]
         dest.mkdir(parents=True, exist_ok=True)
         todo, skipped = _plan(path, dest, items)
         return _write(zf.open, todo), skipped  # type: ignore[arg-type]
@@ -409,9 +423,17 @@ def download_dataset(
     spec, out = get_dataset(dataset), Path(out)
     check_mirror(mirror)
     if spec.name == "kitti-dc":
-        return download_kitti(out, accept_license=accept_license, dry_run=dry_run, mirror=mirror,
-                              cache_dir=cache_dir, delete_archives=delete_archives, check=check,
-                              progress=progress, log=log)  # fmt: skip
+        return download_kitti(
+            out,
+            accept_license=accept_license,
+            dry_run=dry_run,
+            mirror=mirror,
+            cache_dir=cache_dir,
+            delete_archives=delete_archives,
+            check=check,
+            progress=progress,
+            log=log,
+        )
     log(f"{spec.title}: {spec.licence}")
     if not accept_license and not dry_run:
         raise LicenseNotAcceptedError(f"{spec.name}: {spec.licence} -- pass --accept-license to accept the terms")
@@ -420,8 +442,10 @@ def download_dataset(
     for a in spec.archives:
         url = mirror.rstrip("/") + "/" + a.file if mirror else a.url
         if url is None:
-            log(f"  {a.file}: no URL recorded for {spec.name} (the authors share it by a link): "
-                f"download it by hand and pass --mirror file:///FOLDER/HOLDING/IT, or an HTTP mirror")  # fmt: skip
+            log(
+                f"  {a.file}: no URL recorded for {spec.name} (the authors share it by a link): "
+                f"download it by hand and pass --mirror file:///FOLDER/HOLDING/IT, or an HTTP mirror"
+            )
             continue
         if dry_run:
             log(f"  {url}  [{a.size or 'size unknown'}]  -> {out}")
@@ -434,8 +458,9 @@ def download_dataset(
     return spec.check([out], log=log)
 
 
-def _get_archive(url: str, archive: object, out: Path, cache_dir: str | Path | None, progress: bool,
-                 delete: bool, log: Log) -> None:  # fmt: skip
+def _get_archive(
+    url: str, archive: object, out: Path, cache_dir: str | Path | None, progress: bool, delete: bool, log: Log
+) -> None:
     from semattnet.cache import fetch
 
     local = fetch(url, cache_dir=cache_dir, file_name=url.rsplit("/", 1)[-1] or None, progress=progress)

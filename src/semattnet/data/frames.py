@@ -83,8 +83,10 @@ class View:
         if self.rgb.ndim != 3 or self.rgb.shape[2] != 3:
             raise DataError(f"view {self.name}: the image must be (h, w, 3), got {self.rgb.shape}")
         if np.shape(self.K) != (3, 3) or np.shape(self.T_view_cam) != (4, 4):
-            raise DataError(f"view {self.name}: K must be 3x3 and T_view_cam 4x4, got {np.shape(self.K)} and "
-                            f"{np.shape(self.T_view_cam)}")  # fmt: skip
+            raise DataError(
+                f"view {self.name}: K must be 3x3 and T_view_cam 4x4, got {np.shape(self.K)} and "
+                f"{np.shape(self.T_view_cam)}"
+            )
 
 
 @dataclass(frozen=True)
@@ -128,8 +130,9 @@ class Frame:
         h, w = self.rgb.shape[:2]
         for role, a in (("sparse", self.sparse), ("gt", self.gt), ("semantic", self.semantic)):
             if a is not None and a.shape[:2] != (h, w):
-                raise DataError(f"{self.paths.get(role, self.name)}: {role} is {a.shape[1]}x{a.shape[0]}, "
-                                f"the image {w}x{h}")  # fmt: skip
+                raise DataError(
+                    f"{self.paths.get(role, self.name)}: {role} is {a.shape[1]}x{a.shape[0]}, the image {w}x{h}"
+                )
 
     @property
     def size(self) -> tuple[int, int]:
@@ -252,7 +255,9 @@ def unique_names(items: Iterable[tuple[str, _T]], where: object) -> dict[str, _T
     out: dict[str, _T] = {}
     for name, item in items:
         if name in out:
-            raise DuplicateFrameError(f"{where}: {out[name]} and {item} both make the frame name {name!r}; "
-                                      "rename one (each frame's outputs are named after it)")  # fmt: skip
+            raise DuplicateFrameError(
+                f"{where}: {out[name]} and {item} both make the frame name {name!r}; "
+                "rename one (each frame's outputs are named after it)"
+            )
         out[name] = item
     return out

@@ -60,8 +60,10 @@ def _check_header(path: Path, img: Image.Image) -> None:
     if w <= 0 or h <= 0:
         raise DataError(f"{path}: the header gives an empty image ({w}x{h})")
     if w > MAX_IMAGE_SIDE or h > MAX_IMAGE_SIDE or w * h > MAX_IMAGE_PIXELS:
-        raise DataError(f"{path}: the header gives {w}x{h} pixels, above the limit of {MAX_IMAGE_SIDE} a side "
-                        f"and {MAX_IMAGE_PIXELS} in all (semattnet.data.io.MAX_IMAGE_*); not decoding")  # fmt: skip
+        raise DataError(
+            f"{path}: the header gives {w}x{h} pixels, above the limit of {MAX_IMAGE_SIDE} a side "
+            f"and {MAX_IMAGE_PIXELS} in all (semattnet.data.io.MAX_IMAGE_*); not decoding"
+        )
 
 
 def _open(path: str | os.PathLike[str]) -> Image.Image:
@@ -190,11 +192,17 @@ def clamp_for_png(depth: Array, name: str = "prediction") -> Array:
     holes = int(hole.sum())
     low, high = int((~hole & (d < MIN_DEPTH_M)).sum()), int((~hole & (d > MAX_DEPTH_M)).sum())
     if holes:
-        warnings.warn(f"{name}: {holes} hole(s) (no prediction: 0, negative or not finite) written as 0, "
-                      "which the KITTI devkit fills", stacklevel=2)  # fmt: skip
+        warnings.warn(
+            f"{name}: {holes} hole(s) (no prediction: 0, negative or not finite) written as 0, "
+            "which the KITTI devkit fills",
+            stacklevel=2,
+        )
     if low or high:
-        warnings.warn(f"{name}: clamped {low} pixel(s) below {MIN_DEPTH_M:.4f} m and {high} above "
-                      f"{MAX_DEPTH_M:.2f} m to KITTI's 16-bit range", stacklevel=2)  # fmt: skip
+        warnings.warn(
+            f"{name}: clamped {low} pixel(s) below {MIN_DEPTH_M:.4f} m and {high} above "
+            f"{MAX_DEPTH_M:.2f} m to KITTI's 16-bit range",
+            stacklevel=2,
+        )
     clamped = xp.clip(xp.nan_to_num(d, nan=0.0, posinf=0.0, neginf=0.0), MIN_DEPTH_M, MAX_DEPTH_M)
     out: Array = xp.where(hole, xp.zeros_like(clamped), clamped)
     return out
@@ -237,8 +245,10 @@ def write_depth(
         finite = bool(np.all(np.isfinite(d)))
         if d.size and not (finite and d.min() >= 0 and np.round(d.max() * DEPTH_SCALE) <= MAX_DEPTH_VALUE):
             bad = d[~np.isfinite(d)] if not finite else d[(d < 0) | (d > MAX_DEPTH_M)]
-            raise DataError(f"{path}: depth to write has {bad.size} value(s) like {bad.flat[0]:g} m; a KITTI "
-                            f"16-bit PNG holds 0 (none) to {MAX_DEPTH_M:.2f} m (clamp_for_png clamps)")  # fmt: skip
+            raise DataError(
+                f"{path}: depth to write has {bad.size} value(s) like {bad.flat[0]:g} m; a KITTI "
+                f"16-bit PNG holds 0 (none) to {MAX_DEPTH_M:.2f} m (clamp_for_png clamps)"
+            )
     values = depth if depth.dtype == np.uint16 else encode_depth(depth)
     return _atomic_save(Image.fromarray(values), Path(path), overwrite, compress_level)
 

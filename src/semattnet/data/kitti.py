@@ -85,8 +85,11 @@ def _find_train_val(root: Path, split: str, raw_root: Path | None, semantic_root
         if missing:
             problems.append((f"{drive}/image_{camera}/{frame}", missing))
             continue
-        frames.append(FrameFiles(f"{drive}_image_{camera}_{frame}", rgb, sem, sparse, gt,
-                                 calib if calib.is_file() else None, camera))  # fmt: skip
+        frames.append(
+            FrameFiles(
+                f"{drive}_image_{camera}_{frame}", rgb, sem, sparse, gt, calib if calib.is_file() else None, camera
+            )
+        )
     for gt in sorted(gts):  # ground truth without a LiDAR map
         drive, camera, frame = gt.parts[-5], gt.parent.name[-2:], gt.stem
         problems.append((f"{drive}/image_{camera}/{frame}", [layout.velodyne_path(root, split, drive, camera, frame)]))
@@ -208,8 +211,10 @@ class KittiDepthCompletion(Dataset[dict[str, object]]):
         if self.skipped and on_missing == "error":
             raise DataError(f"{root} ({split}): {len(self.skipped)} incomplete frame(s): {_describe(self.skipped)}")
         if self.skipped:
-            warnings.warn(f"{root} ({split}): skipped {len(self.skipped)} incomplete frame(s): "
-                          f"{_describe(self.skipped, 3)}", stacklevel=2)  # fmt: skip
+            warnings.warn(
+                f"{root} ({split}): skipped {len(self.skipped)} incomplete frame(s): {_describe(self.skipped, 3)}",
+                stacklevel=2,
+            )
         if not self.frames:  # no file of the split at all (an incomplete frame was refused above)
             raise MissingSplitError(f"{root}: no {split} frames found (is this the KITTI depth completion folder?)")
         self.transform = transform

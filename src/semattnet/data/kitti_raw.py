@@ -66,8 +66,9 @@ def parse_frames(spec: str | int | Sequence[int] | None, limit: int | None = Non
                 raise ValueError  # caught below: reported as the DataError of a bad spec
             spans.append((a, b))
     except ValueError:
-        raise DataError(f"frames (--frames): expected a range a-b or a comma list, e.g. 0-10 or 1,3,5; "
-                        f"got {spec!r}") from None  # fmt: skip
+        raise DataError(
+            f"frames (--frames): expected a range a-b or a comma list, e.g. 0-10 or 1,3,5; got {spec!r}"
+        ) from None
     if not spans or min(a for a, _ in spans) < 0:
         raise DataError(f"frames (--frames): no valid (non-negative) index in {spec!r}")
     _bounded([b for _, b in spans], limit, spec)  # before any range is expanded
@@ -86,8 +87,9 @@ def _bounded(indices: list[int], limit: int | None, spec: object) -> list[int]:
     top = MAX_FRAME_INDEX if limit is None else limit
     if indices and max(indices) >= top:
         what = "the drive's frame count" if limit is not None else "MAX_FRAME_INDEX"
-        raise FrameRangeError(f"frames: index {max(indices)} in {str(spec)[:40]!r} is beyond {what} ({top})",
-                              max(indices))  # fmt: skip
+        raise FrameRangeError(
+            f"frames: index {max(indices)} in {str(spec)[:40]!r} is beyond {what} ({top})", max(indices)
+        )
     return indices
 
 
@@ -169,8 +171,10 @@ class RawDrive:
         if missing:
             have = f"{self.names[0]}..{self.names[-1]}" if len(self.names) > 1 else self.names[0]
             missed = ", ".join(map(str, missing[:5]))
-            raise DataError(f"{self.drive_dir}: no image_{self.camera} image and scan for frame(s) {missed}; "
-                            f"it has {len(self.names)} frame(s), {have}")  # fmt: skip
+            raise DataError(
+                f"{self.drive_dir}: no image_{self.camera} image and scan for frame(s) {missed}; "
+                f"it has {len(self.names)} frame(s), {have}"
+            )
         return [by_index[i] for i in indices]
 
     def _by_index(self) -> dict[int, str]:
@@ -181,11 +185,14 @@ class RawDrive:
         by_index: dict[int, str] = {}
         for name in self.names:
             if not (name.isascii() and name.isdigit()):
-                raise DataError(f"{self.image_dir / name}.png: not a frame number (KITTI raw frames are numbered, "
-                                "0000000000.png ...); --frames selects by number")  # fmt: skip
+                raise DataError(
+                    f"{self.image_dir / name}.png: not a frame number (KITTI raw frames are numbered, "
+                    "0000000000.png ...); --frames selects by number"
+                )
             if int(name) in by_index:
-                raise DuplicateFrameError(f"{self.image_dir}: {by_index[int(name)]}.png and {name}.png are both "
-                                          f"frame {int(name)}; rename one")  # fmt: skip
+                raise DuplicateFrameError(
+                    f"{self.image_dir}: {by_index[int(name)]}.png and {name}.png are both frame {int(name)}; rename one"
+                )
             by_index[int(name)] = name
         return by_index
 
@@ -203,8 +210,10 @@ class RawDrive:
         image, points = read_image(image_path), read_points(scan_path)
         if self.calib.image_size is not None and image.shape[:2] != self.calib.image_size[::-1]:
             w, h = self.calib.image_size
-            raise DataError(f"{image_path}: image is {image.shape[1]}x{image.shape[0]}, "
-                            f"the calibration says {w}x{h} for camera {self.camera}")  # fmt: skip
+            raise DataError(
+                f"{image_path}: image is {image.shape[1]}x{image.shape[0]}, "
+                f"the calibration says {w}x{h} for camera {self.camera}"
+            )
         if self.deskew:
             motion = read_oxts_motion(self.oxts_dir / f"{name}.txt")
             i, period = int(name), DEFAULT_SCAN_PERIOD

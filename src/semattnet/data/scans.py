@@ -72,8 +72,10 @@ def project_scan_file(
     points = read_points(scan)
     depth = project_scan(points, calib, deskew_oxts, scan_period, name=str(scan))
     if (deep := int((depth > MAX_DEPTH_M).sum())) > 0:
-        raise DataError(f"{scan}: {deep} point(s) project deeper than {MAX_DEPTH_M:.2f} m (up to {depth.max():g} m), "
-                        "more than a KITTI 16-bit PNG holds; crop the scan or check its units (metres)")  # fmt: skip
+        raise DataError(
+            f"{scan}: {deep} point(s) project deeper than {MAX_DEPTH_M:.2f} m (up to {depth.max():g} m), "
+            "more than a KITTI 16-bit PNG holds; crop the scan or check its units (metres)"
+        )
     out.parent.mkdir(parents=True, exist_ok=True)
     write_depth(out, depth, overwrite=overwrite)
     projected = int(np.count_nonzero(depth))

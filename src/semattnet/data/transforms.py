@@ -52,8 +52,7 @@ class Sample:
             K = self.K.copy()
             K[0, 2] -= left
             K[1, 2] -= top
-        return Sample(self.rgb[win], self.semantic[win], self.sparse[win],
-                      None if self.gt is None else self.gt[win], K)  # fmt: skip
+        return Sample(self.rgb[win], self.semantic[win], self.sparse[win], None if self.gt is None else self.gt[win], K)
 
     def to_tensors(self) -> dict[str, torch.Tensor]:
         def image(a: np.ndarray) -> torch.Tensor:
@@ -89,8 +88,13 @@ def hflip(sample: Sample) -> Sample:
     if sample.K is not None:
         K = sample.K.copy()
         K[0, 2] = sample.size[1] - 1 - K[0, 2]
-    return Sample(sample.rgb[:, ::-1], sample.semantic[:, ::-1], sample.sparse[:, ::-1],
-                  None if sample.gt is None else sample.gt[:, ::-1], K)  # fmt: skip
+    return Sample(
+        sample.rgb[:, ::-1],
+        sample.semantic[:, ::-1],
+        sample.sparse[:, ::-1],
+        None if sample.gt is None else sample.gt[:, ::-1],
+        K,
+    )
 
 
 def _gray(rgb: np.ndarray) -> np.ndarray:

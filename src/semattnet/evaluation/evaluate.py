@@ -37,8 +37,16 @@ from semattnet.inference.semantic import SemanticMaps
 from semattnet.inference.sharding import gather_rows, on_main, process_group, shared_stage
 from semattnet.inference.sinks import ColorPngSink, DepthPngSink, PanelSink, Sink, output_files
 
-__all__ = ["SPARSIFICATION_PNG", "EvalOutputs", "EvalSplit", "Evaluation", "evaluate_split", "resolve_completer",
-           "score_folders", "score_folders_to_json"]  # fmt: skip
+__all__ = [
+    "SPARSIFICATION_PNG",
+    "EvalOutputs",
+    "EvalSplit",
+    "Evaluation",
+    "evaluate_split",
+    "resolve_completer",
+    "score_folders",
+    "score_folders_to_json",
+]
 
 PathLike = str | os.PathLike[str]
 #: The sparsification curves' picture in ``evaluate``'s output folder.
@@ -49,8 +57,12 @@ def _previews(folder: Path) -> set[Path]:
     """The pictures ``predict`` writes beside a depth PNG ``NAME.png`` (``NAME_color.png``, ``NAME_panel.png``):
     not predictions."""
     suffixes = (ColorPngSink.suffix, PanelSink.suffix)
-    return {p for p in folder.glob("*.png") for s in suffixes
-            if p.name.endswith(s) and (folder / (p.name.removesuffix(s) + ".png")).is_file()}  # fmt: skip
+    return {
+        p
+        for p in folder.glob("*.png")
+        for s in suffixes
+        if p.name.endswith(s) and (folder / (p.name.removesuffix(s) + ".png")).is_file()
+    }
 
 
 def _pngs_by_key(folder: Path, skip: Collection[Path] = ()) -> dict[str, Path]:
@@ -73,8 +85,9 @@ def _pairs(pred: Path, gt: Path) -> dict[str, tuple[Path, Path]]:
     if pred.is_file() and gt.is_file():
         return {gt.name: (pred, gt)}
     if pred.is_dir() != gt.is_dir() or not pred.is_dir():
-        kinds = " and ".join(f"{p} is {'a folder' if p.is_dir() else 'a file' if p.is_file() else 'neither'}"
-                             for p in (pred, gt))  # fmt: skip
+        kinds = " and ".join(
+            f"{p} is {'a folder' if p.is_dir() else 'a file' if p.is_file() else 'neither'}" for p in (pred, gt)
+        )
         raise DataError(f"PRED and GT must be two PNG files or two folders: {kinds}")
     preds, gts = _pngs_by_key(pred, _previews(pred)), _pngs_by_key(gt)
     if not gts:
@@ -82,14 +95,17 @@ def _pairs(pred: Path, gt: Path) -> dict[str, tuple[Path, Path]]:
     if preds.keys() != gts.keys():
         only_p = sorted(preds[k].name for k in preds.keys() - gts.keys())
         only_g = sorted(gts[k].name for k in gts.keys() - preds.keys())
-        raise DataError(f"{pred} has {len(preds)} files, {gt} {len(gts)}; "
-                        f"without ground truth: {only_p[:5]}{' ...' if len(only_p) > 5 else ''}; "
-                        f"without prediction: {only_g[:5]}{' ...' if len(only_g) > 5 else ''}")  # fmt: skip
+        raise DataError(
+            f"{pred} has {len(preds)} files, {gt} {len(gts)}; "
+            f"without ground truth: {only_p[:5]}{' ...' if len(only_p) > 5 else ''}; "
+            f"without prediction: {only_g[:5]}{' ...' if len(only_g) > 5 else ''}"
+        )
     return {gts[k].name: (preds[k], gts[k]) for k in gts}
 
 
-def score_folders(pred_dir: str | Path, gt_dir: str | Path, fill_holes: bool = True, min_gt: float = 0.0,
-                  progress: bool = True) -> KittiMetrics:  # fmt: skip
+def score_folders(
+    pred_dir: str | Path, gt_dir: str | Path, fill_holes: bool = True, min_gt: float = 0.0, progress: bool = True
+) -> KittiMetrics:
     """Score 16-bit PNG predictions against ground truth: one pair of files, or two folders whose files pair by
     name (a KITTI selection prediction named like its image, ``..._image_...``, pairs with
     ``..._groundtruth_depth_...``).
@@ -113,9 +129,14 @@ def score_folders(pred_dir: str | Path, gt_dir: str | Path, fill_holes: bool = T
     return metrics
 
 
-def score_folders_to_json(pred_dir: str | Path, gt_dir: str | Path, json_path: str | Path | None = None,
-                          overwrite: bool = False, fill_holes: bool = True,
-                          min_gt: float = 0.0) -> KittiMetrics:  # fmt: skip
+def score_folders_to_json(
+    pred_dir: str | Path,
+    gt_dir: str | Path,
+    json_path: str | Path | None = None,
+    overwrite: bool = False,
+    fill_holes: bool = True,
+    min_gt: float = 0.0,
+) -> KittiMetrics:
     """:func:`score_folders`, then (optionally) the metrics as JSON in ``json_path``: never an input
     file, never replacing an existing file unless ``overwrite`` (both checked before scoring)."""
     if json_path is not None:
@@ -170,8 +191,13 @@ class EvalOutputs:
     inputs: Sequence[PathLike | None] = ()
 
 
-def evaluate_split(completer: Completer | CompleterFactory, frames: EvalSplit, out_dir: PathLike | None = None,
-                   outputs: EvalOutputs | None = None, options: RunOptions | None = None) -> Evaluation:  # fmt: skip
+def evaluate_split(
+    completer: Completer | CompleterFactory,
+    frames: EvalSplit,
+    out_dir: PathLike | None = None,
+    outputs: EvalOutputs | None = None,
+    options: RunOptions | None = None,
+) -> Evaluation:
     """Complete a split with ``completer`` through the one frame loop
     (:func:`~semattnet.inference.pipeline.complete_frames`) and score it with the dataset's metrics
     (:class:`~.sink.MetricsSink`); optionally write predictions and panels.
@@ -195,8 +221,14 @@ def evaluate_split(completer: Completer | CompleterFactory, frames: EvalSplit, o
         split = spec.check_split(frames.split)
         given = [frames.data, frames.raw_root, frames.semantic_root, *outputs.inputs]
         out = on_main(prepare_out, Path(out_dir), outputs.overwrite, given) if out_dir is not None else None
-        source = eval_source(spec, frames.data, split, raw_root=frames.raw_root, semantic_root=frames.semantic_root,
-                             max_frames=frames.max_frames)  # fmt: skip
+        source = eval_source(
+            spec,
+            frames.data,
+            split,
+            raw_root=frames.raw_root,
+            semantic_root=frames.semantic_root,
+            max_frames=frames.max_frames,
+        )
         refuse_listed_inputs(out, source)
         scores = MetricsSink(metrics=protocol_metrics(spec))
         sinks = [*(_file_sinks(source, outputs.save_predictions, outputs.pictures) if out is not None else []), scores]
@@ -229,8 +261,7 @@ def resolve_completer(completer: Completer | CompleterFactory, command: str = "e
         return completer.build()
     if callable(completer):
         return completer
-    raise InputError(f"{command}: {completer!r} is neither a completer (rgb, sparse, semantic) nor a "
-                     "CompleterFactory")  # fmt: skip
+    raise InputError(f"{command}: {completer!r} is neither a completer (rgb, sparse, semantic) nor a CompleterFactory")
 
 
 def _quiet(line: str) -> None:

@@ -36,17 +36,36 @@ import torch
 
 from semattnet._errors import DataError, InputError
 
-__all__ = ["LEADERBOARD", "TABLE_COLUMNS", "KittiMetrics", "RangeMetrics", "fill_holes_kitti", "image_metrics",
-           "range_metrics"]  # fmt: skip
+__all__ = [
+    "LEADERBOARD",
+    "TABLE_COLUMNS",
+    "KittiMetrics",
+    "RangeMetrics",
+    "fill_holes_kitti",
+    "image_metrics",
+    "range_metrics",
+]
 
 #: Names, units and scale of the official metrics (internal values are metres and 1/m).
-LEADERBOARD = {"rmse": ("RMSE", "mm", 1000.0), "mae": ("MAE", "mm", 1000.0),
-               "irmse": ("iRMSE", "1/km", 1000.0), "imae": ("iMAE", "1/km", 1000.0)}  # fmt: skip
+LEADERBOARD = {
+    "rmse": ("RMSE", "mm", 1000.0),
+    "mae": ("MAE", "mm", 1000.0),
+    "irmse": ("iRMSE", "1/km", 1000.0),
+    "imae": ("iMAE", "1/km", 1000.0),
+}
 #: Column title and scale of each key of :meth:`KittiMetrics.compute` a table may show.
-TABLE_COLUMNS = {"rmse_mm": ("RMSE [mm]", 1.0), "mae_mm": ("MAE [mm]", 1.0), "irmse_per_km": ("iRMSE [1/km]", 1.0),
-                 "imae_per_km": ("iMAE [1/km]", 1.0), "rmse": ("RMSE [m]", 1.0), "mae": ("MAE [m]", 1.0),
-                 "abs_rel": ("REL", 1.0), "delta1": ("d<1.25", 1.0), "delta2": ("d<1.25^2", 1.0),
-                 "delta3": ("d<1.25^3", 1.0)}  # fmt: skip
+TABLE_COLUMNS = {
+    "rmse_mm": ("RMSE [mm]", 1.0),
+    "mae_mm": ("MAE [mm]", 1.0),
+    "irmse_per_km": ("iRMSE [1/km]", 1.0),
+    "imae_per_km": ("iMAE [1/km]", 1.0),
+    "rmse": ("RMSE [m]", 1.0),
+    "mae": ("MAE [m]", 1.0),
+    "abs_rel": ("REL", 1.0),
+    "delta1": ("d<1.25", 1.0),
+    "delta2": ("d<1.25^2", 1.0),
+    "delta3": ("d<1.25^3", 1.0),
+}
 _VALID_GT = 1e-4  # NLSPN's t_valid: gt at or below it counts as missing
 EXTRAS = ("delta1", "delta2", "delta3", "abs_rel", "sq_rel", "log10", "silog")
 _INVALID = -1.0  # the devkit's depth for pixels without a prediction
@@ -75,8 +94,9 @@ def fill_holes_kitti(pred: torch.Tensor) -> torch.Tensor:
     valid = rows > 0
     above, below, (has_above, has_below) = _fill_along(rows, valid, dim=-2)
     # Columns only extrapolate: the top copies the first valid pixel, the bottom the last.
-    filled = torch.where(valid, rows, torch.where(~has_above & has_below, below,
-                                                  torch.where(has_above & ~has_below, above, 0.0)))  # fmt: skip
+    filled = torch.where(
+        valid, rows, torch.where(~has_above & has_below, below, torch.where(has_above & ~has_below, above, 0.0))
+    )
     return torch.where(filled > 0, filled, torch.full_like(filled, _INVALID))
 
 
@@ -125,8 +145,13 @@ def image_metrics(
     return out
 
 
-def range_metrics(pred: torch.Tensor, gt: torch.Tensor, min_depth: float = 0.0, max_depth: float = math.inf,
-                  clamp: tuple[float, float] | None = None) -> dict[str, torch.Tensor]:  # fmt: skip
+def range_metrics(
+    pred: torch.Tensor,
+    gt: torch.Tensor,
+    min_depth: float = 0.0,
+    max_depth: float = math.inf,
+    clamp: tuple[float, float] | None = None,
+) -> dict[str, torch.Tensor]:
     """Per-image metrics (same keys as :func:`image_metrics`) of (B, 1, H, W) or (B, H, W) depths in
     metres over gt > 1e-4 within ``[min_depth, max_depth]``, the prediction clamped to ``clamp`` first and
     never hole-filled (NLSPN's ``metric.py``; KBNet's ``eval_utils``). Images without such a pixel get NaN."""
@@ -150,13 +175,19 @@ def range_metrics(pred: torch.Tensor, gt: torch.Tensor, min_depth: float = 0.0, 
     ratio = torch.maximum(gt_s / p, p / gt_s)
     log_diff = torch.log(pred.clamp_min(1e-3)) - torch.log(gt_s)
     return {
-        "rmse": mean(err**2).sqrt(), "mae": mean(err.abs()), "irmse": mean(inv_err**2).sqrt(),
-        "imae": mean(inv_err.abs()), "delta1": mean((ratio < 1.25).double()),
-        "delta2": mean((ratio < 1.25**2).double()), "delta3": mean((ratio < 1.25**3).double()),
-        "abs_rel": mean(err.abs() / gt_s), "sq_rel": mean((err / gt_s) ** 2),
+        "rmse": mean(err**2).sqrt(),
+        "mae": mean(err.abs()),
+        "irmse": mean(inv_err**2).sqrt(),
+        "imae": mean(inv_err.abs()),
+        "delta1": mean((ratio < 1.25).double()),
+        "delta2": mean((ratio < 1.25**2).double()),
+        "delta3": mean((ratio < 1.25**3).double()),
+        "abs_rel": mean(err.abs() / gt_s),
+        "sq_rel": mean((err / gt_s) ** 2),
         "log10": mean((torch.log10(pred.clamp_min(1e-3)) - torch.log10(gt_s)).abs()),
-        "silog": (mean(log_diff**2) - mean(log_diff) ** 2).clamp_min(0).sqrt() * 100, "valid_pixels": n,
-    }  # fmt: skip
+        "silog": (mean(log_diff**2) - mean(log_diff) ** 2).clamp_min(0).sqrt() * 100,
+        "valid_pixels": n,
+    }
 
 
 @dataclass

@@ -22,13 +22,24 @@ def protocol_metrics(dataset: str | DatasetSpec = "kitti-dc", keep_per_image: bo
     spec = get_dataset(dataset)
     if spec.clamp is None:
         return KittiMetrics(keep_per_image=keep_per_image)
-    return RangeMetrics(keep_per_image=keep_per_image, min_depth=spec.depth_range[0],
-                        max_depth=spec.depth_range[1], clamp=spec.clamp, columns=spec.columns)  # fmt: skip
+    return RangeMetrics(
+        keep_per_image=keep_per_image,
+        min_depth=spec.depth_range[0],
+        max_depth=spec.depth_range[1],
+        clamp=spec.clamp,
+        columns=spec.columns,
+    )
 
 
-def eval_source(dataset: str | DatasetSpec, data: PathLike, split: str | None = None, *,
-                raw_root: PathLike | None = None, semantic_root: PathLike | None = None,
-                max_frames: int | None = None) -> IndexedSource:  # fmt: skip
+def eval_source(
+    dataset: str | DatasetSpec,
+    data: PathLike,
+    split: str | None = None,
+    *,
+    raw_root: PathLike | None = None,
+    semantic_root: PathLike | None = None,
+    max_frames: int | None = None,
+) -> IndexedSource:
     """The frames of ``split`` (default: the entry's evaluation split; ``max_frames``: the first ones) as the
     protocol scores them: the entry's frame source, bottom-cropped where
     :meth:`~semattnet.data.datasets.DatasetSpec.eval_crop` says (KITTI's full ``val``: 352x1216)."""

@@ -66,8 +66,13 @@ def _per_pixel(error: torch.Tensor, metric: str) -> torch.Tensor:
     raise InputError(f"unknown metric {metric!r}; one of {METRICS}")
 
 
-def sparsification_curve(error: torch.Tensor | np.ndarray, uncertainty: torch.Tensor | np.ndarray,
-                         metric: str = "rmse", steps: int = 100, normalize: bool = True) -> np.ndarray:  # fmt: skip
+def sparsification_curve(
+    error: torch.Tensor | np.ndarray,
+    uncertainty: torch.Tensor | np.ndarray,
+    metric: str = "rmse",
+    steps: int = 100,
+    normalize: bool = True,
+) -> np.ndarray:
     """The metric of the pixels left after removing the most uncertain ``r`` of them, for each of
     :func:`fractions` (``steps`` values), normalised by the value at ``r = 0`` unless ``normalize=False``.
 
@@ -105,8 +110,9 @@ def sparsification_curve(error: torch.Tensor | np.ndarray, uncertainty: torch.Te
     return out
 
 
-def oracle_curve(error: torch.Tensor | np.ndarray, metric: str = "rmse", steps: int = 100,
-                 normalize: bool = True) -> np.ndarray:  # fmt: skip
+def oracle_curve(
+    error: torch.Tensor | np.ndarray, metric: str = "rmse", steps: int = 100, normalize: bool = True
+) -> np.ndarray:
     """:func:`sparsification_curve` with the pixels removed in order of decreasing true error (the best ordering)."""
     e = torch.as_tensor(np.asarray(error) if isinstance(error, np.ndarray) else error)
     return sparsification_curve(e, e.double().abs(), metric, steps, normalize)
@@ -143,8 +149,9 @@ class Sparsification:
     frames: int = 0
     _sums: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
-    def add(self, pred: torch.Tensor | np.ndarray, gt: torch.Tensor | np.ndarray,
-            uncertainty: torch.Tensor | np.ndarray) -> None:  # fmt: skip
+    def add(
+        self, pred: torch.Tensor | np.ndarray, gt: torch.Tensor | np.ndarray, uncertainty: torch.Tensor | np.ndarray
+    ) -> None:
         """One frame: ``pred``, ``gt`` and ``uncertainty`` of the same shape (metres; gt 0 = none)."""
         p, g, u = (torch.as_tensor(np.asarray(a)) if isinstance(a, np.ndarray) else a for a in (pred, gt, uncertainty))
         if not (p.shape == g.shape == u.shape):
@@ -155,8 +162,10 @@ class Sparsification:
         err = (p.double() - g.double())[valid]
         unc = u[valid]
         for m in self.metrics:
-            for kind, curve in (("curve", sparsification_curve(err, unc, m, self.steps)),
-                                ("oracle", oracle_curve(err, m, self.steps))):  # fmt: skip
+            for kind, curve in (
+                ("curve", sparsification_curve(err, unc, m, self.steps)),
+                ("oracle", oracle_curve(err, m, self.steps)),
+            ):
                 key = f"{m}_{kind}"
                 self._sums[key] = self._sums.get(key, 0.0) + curve
         self.frames += 1

@@ -142,8 +142,15 @@ def _quiet(line: str) -> None:
     """The loop's per-frame lines are not printed: the sweep reports its table."""
 
 
-def _score_setting(source: FrameSource, setting: str, completers: dict[str, Completer], stage: Path, seed: int = 0,
-                   dataset: str = "kitti-dc", palette_mismatch: str = "refuse") -> list[SweepRow]:  # fmt: skip
+def _score_setting(
+    source: FrameSource,
+    setting: str,
+    completers: dict[str, Completer],
+    stage: Path,
+    seed: int = 0,
+    dataset: str = "kitti-dc",
+    palette_mismatch: str = "refuse",
+) -> list[SweepRow]:
     """One row per method for one setting, each method through the one frame loop
     (:func:`~semattnet.inference.pipeline.complete_frames`, into a run folder of ``stage``) on the same thinned
     frames (:class:`ThinnedSource`): the mean density of the thinned input and the four metrics of what the
@@ -156,9 +163,17 @@ def _score_setting(source: FrameSource, setting: str, completers: dict[str, Comp
         plan = RunPlan.trusted(thinned, [scores, density], stage / f"run{k}", RunOptions(on_error="stop"))
         plan.run(completer, semantic=SemanticMaps(mismatch=palette_mismatch), log=_quiet)
         r = scores.metrics.compute()
-        rows.append(SweepRow(method=name, setting=setting, density=float(np.mean(density.values)),
-                             rmse_mm=r["rmse_mm"], mae_mm=r["mae_mm"], irmse_per_km=r["irmse_per_km"],
-                             imae_per_km=r["imae_per_km"]))  # fmt: skip
+        rows.append(
+            SweepRow(
+                method=name,
+                setting=setting,
+                density=float(np.mean(density.values)),
+                rmse_mm=r["rmse_mm"],
+                mae_mm=r["mae_mm"],
+                irmse_per_km=r["irmse_per_km"],
+                imae_per_km=r["imae_per_km"],
+            )
+        )
     return rows
 
 
@@ -183,9 +198,11 @@ def plot_sweep(rows: list[SweepRow], path: Path) -> Path:
     for ax, key, label in zip(axes, ("rmse_mm", "mae_mm"), ("RMSE [mm]", "MAE [mm]"), strict=True):
         for i, method in enumerate(methods):
             for kind, style in (("beams", "o-"), ("keep", "s--")):
-                pts = sorted((r["density"], r["rmse_mm" if key == "rmse_mm" else "mae_mm"]) for r in rows
-                             if r["method"] == method
-                             and r["setting"].startswith(kind))  # fmt: skip
+                pts = sorted(
+                    (r["density"], r["rmse_mm" if key == "rmse_mm" else "mae_mm"])
+                    for r in rows
+                    if r["method"] == method and r["setting"].startswith(kind)
+                )
                 if pts:
                     ax.plot(*zip(*pts, strict=True), style, color=f"C{i}", label=f"{method} ({kind})")
         ax.set_xscale("log")
@@ -225,9 +242,18 @@ def run_sparsity_sweep(
     return _sweep(data_root, split, settings, lambda: completers, out_dir, seed, max_frames, overwrite, dataset)
 
 
-def _sweep(data_root: str | Path, split: str, settings: Iterable[str], make: Callable[[], dict[str, Completer]],
-           out_dir: str | Path, seed: int, max_frames: int | None, overwrite: bool, dataset: str,
-           palette_mismatch: str = "refuse") -> list[SweepRow]:  # fmt: skip
+def _sweep(
+    data_root: str | Path,
+    split: str,
+    settings: Iterable[str],
+    make: Callable[[], dict[str, Completer]],
+    out_dir: str | Path,
+    seed: int,
+    max_frames: int | None,
+    overwrite: bool,
+    dataset: str,
+    palette_mismatch: str = "refuse",
+) -> list[SweepRow]:
     """The sweep: settings, split and ``out_dir`` checked, every input decoded, then ``make()`` (the completers:
     a model is loaded after every check), every (setting, method) run, the tables and the plot written."""
     settings = parse_settings(settings)
@@ -281,6 +307,8 @@ def format_sweep(rows: list[SweepRow]) -> str:
     """The sweep's rows as a text table (method, setting, density, the four metrics in KITTI units)."""
     lines = [f"{'method':>10} {'setting':>10} {'density':>8} {'RMSE':>8} {'MAE':>8} {'iRMSE':>7} {'iMAE':>6}"]
     for r in rows:
-        lines.append(f"{r['method']:>10} {r['setting']:>10} {r['density']:8.4f} {r['rmse_mm']:8.1f} "
-                     f"{r['mae_mm']:8.1f} {r['irmse_per_km']:7.2f} {r['imae_per_km']:6.2f}")  # fmt: skip
+        lines.append(
+            f"{r['method']:>10} {r['setting']:>10} {r['density']:8.4f} {r['rmse_mm']:8.1f} "
+            f"{r['mae_mm']:8.1f} {r['irmse_per_km']:7.2f} {r['imae_per_km']:6.2f}"
+        )
     return "\n".join(lines)

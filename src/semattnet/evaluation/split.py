@@ -19,8 +19,13 @@ __all__ = ["eval_dataset", "prepare_out", "refuse_listed_inputs"]
 PathLike = str | os.PathLike[str]
 
 
-def eval_dataset(data: PathLike, split: str, raw_root: PathLike | None = None, semantic_root: PathLike | None = None,
-                 dataset: str = "kitti-dc") -> SplitDataset:  # fmt: skip
+def eval_dataset(
+    data: PathLike,
+    split: str,
+    raw_root: PathLike | None = None,
+    semantic_root: PathLike | None = None,
+    dataset: str = "kitti-dc",
+) -> SplitDataset:
     """The split as the registry entry's protocol scores it, as a torch Dataset
     (:meth:`~semattnet.data.datasets.DatasetSpec.dataset`: KITTI's val_select at full size, its full val
     cropped to 352x1216 unless the frames are smaller)."""
@@ -47,5 +52,7 @@ def refuse_listed_inputs(out: Path | None, source: FrameSource) -> None:
     root = Path(out).resolve()
     for path in source.info.listed_files:
         if Path(path).resolve().is_relative_to(root):
-            raise OutputError(f"output folder {out} holds the input {path} (named by the dataset's lists); "
-                              "choose an --out outside the inputs")  # fmt: skip
+            raise OutputError(
+                f"output folder {out} holds the input {path} (named by the dataset's lists); "
+                "choose an --out outside the inputs"
+            )

@@ -46,8 +46,11 @@ def _read_back(folder: Path, names: list[str], expected: dict[str, tuple[int, in
             holes[name] = n
     if holes:
         shown = ", ".join(f"{k} ({v})" for k, v in list(holes.items())[:5])
-        warnings.warn(f"submission: {sum(holes.values())} hole(s) (0 = no prediction, filled by the devkit) in "
-                      f"{len(holes)} file(s): {shown}{' ...' if len(holes) > 5 else ''}", stacklevel=4)  # fmt: skip
+        warnings.warn(
+            f"submission: {sum(holes.values())} hole(s) (0 = no prediction, filled by the devkit) in "
+            f"{len(holes)} file(s): {shown}{' ...' if len(holes) > 5 else ''}",
+            stacklevel=4,
+        )
     return sum(holes.values())
 
 
@@ -62,20 +65,25 @@ def _check_replaceable(out: Path, zip_path: Path, expected: dict[str, tuple[int,
         raise FileExistsError(f"{out} is a file, not a submission folder; remove it or choose another --out")
     foreign = sorted(p.name for p in out.iterdir() if p.name not in expected) if out.exists() else []
     if foreign:
-        raise SubmissionError(f"{out} holds {len(foreign)} file(s) a submission does not write, e.g. "
-                              f"{out / foreign[0]}; --overwrite only replaces submission files: "
-                              "move them or choose another --out")  # fmt: skip
+        raise SubmissionError(
+            f"{out} holds {len(foreign)} file(s) a submission does not write, e.g. "
+            f"{out / foreign[0]}; --overwrite only replaces submission files: "
+            "move them or choose another --out"
+        )
 
 
-def _write_predictions(predictions: Iterable[tuple[str, np.ndarray]], tmp: Path,
-                       expected: dict[str, tuple[int, int]]) -> None:  # fmt: skip
+def _write_predictions(
+    predictions: Iterable[tuple[str, np.ndarray]], tmp: Path, expected: dict[str, tuple[int, int]]
+) -> None:
     """Write ``(file name, depth)`` pairs into ``tmp``, each a test frame's name and size."""
     for name, depth in predictions:
         if name not in expected:
             raise SubmissionError(f"unexpected prediction {name!r} (not a test frame)")
         if depth.shape != expected[name]:
-            raise SubmissionError(f"{name}: prediction is {depth.shape[1]}x{depth.shape[0]}, "
-                                  f"the input is {expected[name][1]}x{expected[name][0]}")  # fmt: skip
+            raise SubmissionError(
+                f"{name}: prediction is {depth.shape[1]}x{depth.shape[0]}, "
+                f"the input is {expected[name][1]}x{expected[name][0]}"
+            )
         write_depth(tmp / name, clamp_for_png(depth, name))
 
 
@@ -85,8 +93,10 @@ def _check_stage(tmp: Path, expected: dict[str, tuple[int, int]]) -> None:
     written = sorted(p.name for p in tmp.glob("*.png"))
     if written != sorted(expected):
         missing, extra = sorted(set(expected) - set(written)), sorted(set(written) - set(expected))
-        raise SubmissionError(f"{len(written)} predictions for {len(expected)} test frames; missing {missing[:5]}"
-                              + (f"; not test frames: {extra[:5]}" if extra else ""))  # fmt: skip
+        raise SubmissionError(
+            f"{len(written)} predictions for {len(expected)} test frames; missing {missing[:5]}"
+            + (f"; not test frames: {extra[:5]}" if extra else "")
+        )
     _read_back(tmp, written, expected)
 
 
@@ -109,8 +119,9 @@ def write_submission_files(
     return _publish(out, expected, overwrite, lambda tmp: _write_predictions(predictions, tmp, expected))
 
 
-def _publish(out: PathLike, expected: dict[str, tuple[int, int]], overwrite: bool,
-             fill: Callable[[Path], None]) -> Path:  # fmt: skip
+def _publish(
+    out: PathLike, expected: dict[str, tuple[int, int]], overwrite: bool, fill: Callable[[Path], None]
+) -> Path:
     """``fill`` a temporary folder beside ``out`` with the PNGs, check them (:func:`_check_stage`), then move it
     into place as ``out`` and zip it: ``out`` and the zip appear only when every check passed."""
     out = Path(out)
@@ -159,8 +170,11 @@ def write_submission(
     zip_path = Path(out).with_suffix(".zip")
     check_no_input_overlap(given, out_dir=out)
     check_no_input_overlap(given, out_files=[zip_path])
-    check_outputs([("--data", data), ("--semantic-root", semantic_root), *(("--weights", p) for p in inputs)],
-                  [Output("--out", out, "folder"), Output("--out", zip_path, "zip")], overwrite)  # fmt: skip
+    check_outputs(
+        [("--data", data), ("--semantic-root", semantic_root), *(("--weights", p) for p in inputs)],
+        [Output("--out", out, "folder"), Output("--out", zip_path, "zip")],
+        overwrite,
+    )
     source = KittiSplitSource(data, "test", semantic_root=semantic_root)
     if expected_frames is not None and len(source) != expected_frames:
         raise SubmissionError(f"{data}: the test split has {len(source)} frames, KITTI expects {expected_frames}")

@@ -211,8 +211,9 @@ def _from_cam_to_cam(cam_file: Path, velo_file: Path, camera: str) -> RigCalibra
     T_cam0_lidar = read_velo_to_cam(velo_file)
     cal, R00 = cams[camera], cams["00"].R_rect
     T_cam_lidar = cal.T_cam_rect @ make_T(R00, np.zeros(3)) @ T_cam0_lidar
-    return RigCalibration(cal.K, T_cam_lidar, cal.image_size, camera, cal.P_rect, R00, T_cam0_lidar,
-                          f"{cam_file}, {velo_file}")  # fmt: skip
+    return RigCalibration(
+        cal.K, T_cam_lidar, cal.image_size, camera, cal.P_rect, R00, T_cam0_lidar, f"{cam_file}, {velo_file}"
+    )
 
 
 def _from_object_calib(path: Path, camera: str, image_size: tuple[int, int] | None) -> RigCalibration:
@@ -292,5 +293,4 @@ def read_rig_json(path: str | os.PathLike[str]) -> RigCalibration:
     w, h = vals["image_size"]
     size = check_image_size(w, h, f"{path}: image_size")
     name = doc.get("camera")
-    return RigCalibration(vals["K"], vals["T_cam_lidar"], size, None if name is None else str(name),
-                          source=str(path))  # fmt: skip
+    return RigCalibration(vals["K"], vals["T_cam_lidar"], size, None if name is None else str(name), source=str(path))

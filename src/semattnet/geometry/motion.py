@@ -68,9 +68,11 @@ def read_oxts_motion(path: str | os.PathLike[str]) -> VehicleMotion:
         raise DataError(f"{path}: expected 30 OXTS fields, found {len(vals)}")
     velocity, yaw_rate = np.array(vals[8:11], dtype=np.float64), float(vals[22])
     if not (np.all(np.abs(velocity) <= MAX_SPEED_MPS) and abs(yaw_rate) <= MAX_YAW_RATE):  # False for NaN too
-        raise DataError(f"{path}: OXTS velocity (vf, vl, vu) = {', '.join(f'{v:g}' for v in velocity)} m/s and "
-                        f"yaw rate wu = {yaw_rate:g} rad/s must be finite, at most {MAX_SPEED_MPS:g} m/s and "
-                        f"{MAX_YAW_RATE:g} rad/s")  # fmt: skip
+        raise DataError(
+            f"{path}: OXTS velocity (vf, vl, vu) = {', '.join(f'{v:g}' for v in velocity)} m/s and "
+            f"yaw rate wu = {yaw_rate:g} rad/s must be finite, at most {MAX_SPEED_MPS:g} m/s and "
+            f"{MAX_YAW_RATE:g} rad/s"
+        )
     return VehicleMotion(velocity, yaw_rate)
 
 
@@ -89,8 +91,9 @@ def deskew_scan(
     """
     vel = np.asarray(velocity, dtype=np.float64).reshape(-1)
     if vel.shape != (3,) or not np.all(np.isfinite(vel)) or not np.isfinite(yaw_rate):
-        raise InputError(f"deskew_scan: velocity must be 3 finite numbers and yaw_rate finite, "
-                         f"got {vel} and {yaw_rate}")  # fmt: skip
+        raise InputError(
+            f"deskew_scan: velocity must be 3 finite numbers and yaw_rate finite, got {vel} and {yaw_rate}"
+        )
     if not (np.isfinite(scan_period) and scan_period > 0):
         raise InputError(f"deskew_scan: scan_period must be a positive number of seconds, got {scan_period}")
     pts = np.asarray(points)
@@ -141,8 +144,11 @@ def read_oxts_pose(path: str | os.PathLike[str], lat0_deg: float | None = None) 
     if abs(lat) > 85 or abs(lon) > 180:
         raise DataError(f"{path}: OXTS latitude {lat:g} / longitude {lon:g} out of range")
     scale = np.cos(np.deg2rad(lat if lat0_deg is None else lat0_deg))
-    t = [scale * EARTH_RADIUS_M * np.deg2rad(lon), scale * EARTH_RADIUS_M * np.log(np.tan(np.pi * (90 + lat) / 360)),
-         alt]  # fmt: skip
+    t = [
+        scale * EARTH_RADIUS_M * np.deg2rad(lon),
+        scale * EARTH_RADIUS_M * np.log(np.tan(np.pi * (90 + lat) / 360)),
+        alt,
+    ]
 
     def rot(axis: int, a: float) -> np.ndarray:
         c, s, (i, j) = np.cos(a), np.sin(a), [(1, 2), (2, 0), (0, 1)][axis]

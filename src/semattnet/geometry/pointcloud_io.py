@@ -27,8 +27,18 @@ from .projection import PointCloud
 __all__ = ["read_points", "write_ply"]
 
 _INTENSITY_NAMES = ("intensity", "reflectance", "scalar_intensity", "remission", "i")
-_PCD_TYPES = {("F", 4): "<f4", ("F", 8): "<f8", ("I", 1): "i1", ("I", 2): "<i2", ("I", 4): "<i4", ("I", 8): "<i8",
-              ("U", 1): "u1", ("U", 2): "<u2", ("U", 4): "<u4", ("U", 8): "<u8"}  # fmt: skip
+_PCD_TYPES = {
+    ("F", 4): "<f4",
+    ("F", 8): "<f8",
+    ("I", 1): "i1",
+    ("I", 2): "<i2",
+    ("I", 4): "<i4",
+    ("I", 8): "<i8",
+    ("U", 1): "u1",
+    ("U", 2): "<u2",
+    ("U", 4): "<u4",
+    ("U", 8): "<u8",
+}
 
 
 def _finish(xyz: np.ndarray, inten: np.ndarray | None, path: Path) -> np.ndarray:
@@ -95,8 +105,10 @@ def _check_ply_counts(path: Path) -> None:
         if len(words) == 3 and words[0] == b"element":
             count = words[2].decode("ascii", "replace")
             if not count.isdigit() or int(count) > size:
-                raise DataError(f"{path}: PLY element {words[1].decode('ascii', 'replace')!r} count {count[:24]} is "
-                                f"out of range (0..{size} for this file's size)")  # fmt: skip
+                raise DataError(
+                    f"{path}: PLY element {words[1].decode('ascii', 'replace')!r} count {count[:24]} is "
+                    f"out of range (0..{size} for this file's size)"
+                )
 
 
 def _read_ply(path: Path) -> np.ndarray:
@@ -142,8 +154,10 @@ def _check_pcd_counts(header: dict[str, list[str]], counts: list[str], size: int
     except (ValueError, IndexError):
         raise DataError(f"{path}: PCD POINTS / COUNT are not integers ({header['POINTS']} / {counts})") from None
     if not 0 <= n <= size or min(per, default=1) < 1:
-        raise DataError(f"{path}: PCD POINTS {n} / COUNT {' '.join(counts)} out of range "
-                        f"(POINTS in [0, {size}] for this file's size, each COUNT >= 1)")  # fmt: skip
+        raise DataError(
+            f"{path}: PCD POINTS {n} / COUNT {' '.join(counts)} out of range "
+            f"(POINTS in [0, {size}] for this file's size, each COUNT >= 1)"
+        )
     try:
         wh = [int(header[k][0]) for k in ("WIDTH", "HEIGHT") if k in header]
     except (ValueError, IndexError):
@@ -186,8 +200,10 @@ def _read_pcd(path: Path) -> np.ndarray:
         rec = np.frombuffer(raw, dtype=dtype, count=n, offset=start)
         cols = {f: rec[f"{f}_{i}"][:, 0].astype(np.float64) for i, f in enumerate(fields)}
     else:
-        raise DataError(f"{path}: PCD 'DATA {mode}' is not supported (ascii, binary); "
-                        "convert it, e.g. with PCL's pcl_convert_pcd_ascii_binary")  # fmt: skip
+        raise DataError(
+            f"{path}: PCD 'DATA {mode}' is not supported (ascii, binary); "
+            "convert it, e.g. with PCL's pcl_convert_pcd_ascii_binary"
+        )
     if not {"x", "y", "z"} <= set(cols):
         raise DataError(f"{path}: PCD lacks x, y, z fields (has {', '.join(fields)})")
     inten = next((cols[k] for k in _INTENSITY_NAMES if k in cols), None)

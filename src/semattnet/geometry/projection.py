@@ -259,8 +259,14 @@ class PointCloud:
             return None if a is None else a[keep]
 
         values = {k: v[keep] for k, v in self.values.items()}
-        return replace(self, xyz=self.xyz[keep], rgb=pick(self.rgb), uv=pick(self.uv),
-                       confidence=pick(self.confidence), values=values)  # fmt: skip
+        return replace(
+            self,
+            xyz=self.xyz[keep],
+            rgb=pick(self.rgb),
+            uv=pick(self.uv),
+            confidence=pick(self.confidence),
+            values=values,
+        )
 
 
 def _as_map(x: ArrayInput, what: str, ndim: int = 2) -> np.ndarray:

@@ -66,8 +66,11 @@ def load_rig(
     Raises:
         DataError: none or several sources, or what the readers raise (naming the file).
     """
-    given = [name for name, v in (("calib_dir", calib_dir), ("rig", rig), ("K/T", K if K is not None else T))
-             if v is not None]  # fmt: skip
+    given = [
+        name
+        for name, v in (("calib_dir", calib_dir), ("rig", rig), ("K/T", K if K is not None else T))
+        if v is not None
+    ]
     if len(given) != 1:
         raise DataError(f"give exactly one calibration source (KITTI calib dir, rig file, or K and T); got {given}")
     if calib_dir is not None:
@@ -100,6 +103,8 @@ def project_scan(
     depth = project_points(points, calib.K, calib.T_cam_lidar, calib.image_size, name=name)
     if not depth.any():
         w, h = calib.image_size
-        raise DataError(f"{name}: none of its {len(points)} points projects in front of the camera inside the "
-                        f"{w}x{h} image; check the calibration ({calib.source or 'T_cam_lidar, K'})")  # fmt: skip
+        raise DataError(
+            f"{name}: none of its {len(points)} points projects in front of the camera inside the "
+            f"{w}x{h} image; check the calibration ({calib.source or 'T_cam_lidar, K'})"
+        )
     return depth

@@ -24,8 +24,11 @@ def pixel_coordinates(shape: tuple[int, int, int], offset: torch.Tensor | None =
     ``offset`` (B, 2) ``(x0, y0)`` (a crop's top-left corner in the full image; None: no shift), float32."""
     b, h, w = shape
     device = offset.device if offset is not None else None
-    v, u = torch.meshgrid(torch.arange(h, dtype=torch.float32, device=device),
-                          torch.arange(w, dtype=torch.float32, device=device), indexing="ij")  # fmt: skip
+    v, u = torch.meshgrid(
+        torch.arange(h, dtype=torch.float32, device=device),
+        torch.arange(w, dtype=torch.float32, device=device),
+        indexing="ij",
+    )
     grid = torch.stack([u.reshape(-1), v.reshape(-1), torch.ones(h * w, device=device)]).expand(b, 3, h * w).clone()
     if offset is not None:
         grid[:, :2] += offset.to(torch.float32)[:, :, None]
@@ -74,8 +77,9 @@ def sample_at_pixels(
     return _sample(view, pix[:, 0], pix[:, 1], torch.ones_like(pix[:, 0], dtype=torch.bool), size)
 
 
-def _sample(view: torch.Tensor, u: torch.Tensor, v: torch.Tensor, front: torch.Tensor,
-            size: tuple[int, int]) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
+def _sample(
+    view: torch.Tensor, u: torch.Tensor, v: torch.Tensor, front: torch.Tensor, size: tuple[int, int]
+) -> tuple[torch.Tensor, torch.Tensor]:
     """``view`` sampled bilinearly at pixels (u, v) (B, N) reshaped to ``size``; invalid where not ``front`` or
     outside the image (those samples are zeros)."""
     b, (h, w), (hv, wv) = view.shape[0], size, view.shape[-2:]

@@ -10,6 +10,19 @@ from semattnet.inference.padding import crop_padding, pad_to_multiple
 from semattnet.inference.pipeline import RunPlan, check_frames, complete_frames
 from semattnet.inference.timing import StageTimes
 
-__all__ = ["CompleterFactory", "Completion", "DepthCompleter", "EngineSpec", "OutputSpec", "RunOptions", "RunPlan",
-           "StageTimes", "check_frames", "complete_folder", "complete_frames", "crop_padding", "load_completer",
-           "pad_to_multiple"]  # fmt: skip
+__all__ = [
+    "CompleterFactory",
+    "Completion",
+    "DepthCompleter",
+    "EngineSpec",
+    "OutputSpec",
+    "RunOptions",
+    "RunPlan",
+    "StageTimes",
+    "check_frames",
+    "complete_folder",
+    "complete_frames",
+    "crop_padding",
+    "load_completer",
+    "pad_to_multiple",
+]

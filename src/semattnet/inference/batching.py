@@ -58,8 +58,13 @@ def groups(items: Iterator[T], size: int) -> Iterator[list[T]]:
         yield group
 
 
-def complete_group(completer: BatchCompleter, group: Sequence[Frame], timer: Timer, current: list[str],
-                   fault: Callable[[Frame, Exception], None]) -> Iterator[tuple[Frame, Completion]]:  # fmt: skip
+def complete_group(
+    completer: BatchCompleter,
+    group: Sequence[Frame],
+    timer: Timer,
+    current: list[str],
+    fault: Callable[[Frame, Exception], None],
+) -> Iterator[tuple[Frame, Completion]]:
     """Frames of one size through ``completer.complete_batch`` in one call: each checked first (``fault`` gets a
     frame whose check raised), the call timed as ``network`` and its times shared out evenly over the frames."""
     ok = []

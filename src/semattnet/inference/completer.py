@@ -96,9 +96,18 @@ class DepthCompleter:
         InputError: a backend, precision and device that do not go together (:meth:`EngineSpec.resolve`).
     """
 
-    def __init__(self, model: nn.Module, device: str | torch.device = "auto", amp: str = "none",
-                 backend: str = "torch", inplace: bool = False, precision: str | None = None,
-                 calibration: CalibrationFrames = None, *, spec: EngineSpec | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        model: nn.Module,
+        device: str | torch.device = "auto",
+        amp: str = "none",
+        backend: str = "torch",
+        inplace: bool = False,
+        precision: str | None = None,
+        calibration: CalibrationFrames = None,
+        *,
+        spec: EngineSpec | None = None,
+    ) -> None:
         if spec is None:
             spec = EngineSpec(backend, precision, device, calibration, None if amp == "none" else amp)
         elif (device, amp, backend, precision, calibration) != ("auto", "none", "torch", None, None):
@@ -124,17 +133,31 @@ class DepthCompleter:
         self._engines: dict[tuple[tuple[int, int] | None, frozenset[str] | None], InferenceEngine] = {}
 
     @classmethod
-    def from_checkpoint(cls, path: str | os.PathLike[str], device: str | torch.device = "auto", amp: str = "none",
-                        backend: str = "torch") -> DepthCompleter:  # fmt: skip
+    def from_checkpoint(
+        cls,
+        path: str | os.PathLike[str],
+        device: str | torch.device = "auto",
+        amp: str = "none",
+        backend: str = "torch",
+    ) -> DepthCompleter:
         """A completer for the weights at ``path``: a file, a ``save_pretrained`` folder, a registered name or a
         URL, read by :func:`semattnet.weights.resolve_weights` (see :func:`semattnet.weights.load_model`)."""
         return cls(load_model(path), device, amp, backend, inplace=True)
 
     @classmethod
-    def from_pretrained(cls, name_or_path: str | os.PathLike[str], device: str | torch.device = "auto",
-                        amp: str = "none", backend: str = "torch", *, sha256: str | None = None,
-                        cache_dir: str | os.PathLike[str] | None = None, progress: bool = True, arch: str | None = None,
-                        **overrides: object) -> DepthCompleter:  # fmt: skip
+    def from_pretrained(
+        cls,
+        name_or_path: str | os.PathLike[str],
+        device: str | torch.device = "auto",
+        amp: str = "none",
+        backend: str = "torch",
+        *,
+        sha256: str | None = None,
+        cache_dir: str | os.PathLike[str] | None = None,
+        progress: bool = True,
+        arch: str | None = None,
+        **overrides: object,
+    ) -> DepthCompleter:
         """A completer for released weights by name, a local file or folder, or a URL, read by
         :func:`semattnet.weights.resolve_weights` (:func:`semattnet.weights.from_pretrained` explains
         ``sha256``, ``cache_dir``, ``progress``, ``arch`` and the config ``overrides``)."""
@@ -164,10 +187,16 @@ class DepthCompleter:
         fixed = self.spec.entry.fixed_size
         key = (size, outputs_to_compute(self._outputs)) if fixed else (None, None)
         if key not in self._engines:
-            self._engines[key] = optimize_for_inference(self._source, backend=self.backend, size=key[0],
-                                                        precision=self.spec.engine_precision, device=self.device,
-                                                        inplace=self._inplace and not fixed,
-                                                        calibration=self.calibration, outputs=key[1])  # fmt: skip
+            self._engines[key] = optimize_for_inference(
+                self._source,
+                backend=self.backend,
+                size=key[0],
+                precision=self.spec.engine_precision,
+                device=self.device,
+                inplace=self._inplace and not fixed,
+                calibration=self.calibration,
+                outputs=key[1],
+            )
         return self._engines[key]
 
     @contextmanager
@@ -219,12 +248,15 @@ class DepthCompleter:
         rgb_p, pad = pad_to_multiple(rgb)
         sparse_p, _ = pad_to_multiple(sparse)
         sem_p = pad_to_multiple(semantic)[0] if semantic is not None else None
-        with torch.inference_mode(), torch.autocast(self.device.type, dtype=self.amp or torch.float32,
-                                                    enabled=self.amp is not None):  # fmt: skip
+        with (
+            torch.inference_mode(),
+            torch.autocast(self.device.type, dtype=self.amp or torch.float32, enabled=self.amp is not None),
+        ):
             engine = self.engine((int(rgb_p.shape[-2]), int(rgb_p.shape[-1])))
             semantic_in = None if sem_p is None else sem_p.to(self.device)
-            out: DepthCompletionOutput = engine(rgb=rgb_p.to(self.device), semantic=semantic_in,
-                                                sparse=sparse_p.to(self.device))  # fmt: skip
+            out: DepthCompletionOutput = engine(
+                rgb=rgb_p.to(self.device), semantic=semantic_in, sparse=sparse_p.to(self.device)
+            )
         return out.map(lambda t: crop_padding(t.float(), pad))
 
     def __call__(self, rgb: np.ndarray, sparse: np.ndarray, semantic: np.ndarray | None = None) -> Completion:
@@ -270,14 +302,21 @@ class DepthCompleter:
         if len({x[0].shape for x in inputs}) > 1 or len({x[1] is None for x in inputs}) > 1:
             raise InputError("complete_batch: a batch's frames must have one size and all (or none) a semantic map")
         semantic = [x[1] for x in inputs if x[1] is not None]
-        out = self.run(_batch([x[0] for x in inputs]), _batch(semantic) if semantic else None,
-                       _batch([x[2] for x in inputs]))  # fmt: skip
+        out = self.run(
+            _batch([x[0] for x in inputs]), _batch(semantic) if semantic else None, _batch([x[2] for x in inputs])
+        )
         out = out.map(lambda t: t.cpu())
         return [Completion(out.depth[i, 0].numpy(), out.map(partial(_item, i=i))) for i in range(len(inputs))]
 
-    def stream(self, source: FrameSource, semantic: SemanticMaps | None = None, *,
-               timer: StageTimes | None = None, prefetch: int = 2,
-               names: Sequence[str] | None = None) -> Iterator[tuple[Frame, Completion]]:  # fmt: skip
+    def stream(
+        self,
+        source: FrameSource,
+        semantic: SemanticMaps | None = None,
+        *,
+        timer: StageTimes | None = None,
+        prefetch: int = 2,
+        names: Sequence[str] | None = None,
+    ) -> Iterator[tuple[Frame, Completion]]:
         """``(frame, completion)`` for every frame of ``source`` (a :class:`~semattnet.data.frames.FrameSource`;
         ``names``: some of its frames), in order, while the next ``prefetch`` frames are read, decoded, projected
         and segmented in a background thread (bounded: at most ``prefetch`` frames ahead).
@@ -293,10 +332,12 @@ class DepthCompleter:
         yield from completions(source, self, names, maps, timer, prefetch)
 
 
-def load_completer(weights: str | os.PathLike[str], spec: EngineSpec | None = None, *,
-                   progress: bool = True) -> DepthCompleter:  # fmt: skip
+def load_completer(
+    weights: str | os.PathLike[str], spec: EngineSpec | None = None, *, progress: bool = True
+) -> DepthCompleter:
     """The completer of ``weights`` (a released name, a file or folder, a URL:
     :func:`semattnet.weights.from_pretrained`) on the engine ``spec`` says (default: ``torch`` on the best
     device), folded in place: the one builder every command (and a live node) runs its model through."""
-    return DepthCompleter(from_pretrained(weights, map_location="cpu", progress=progress), spec=spec or EngineSpec(),
-                          inplace=True)  # fmt: skip
+    return DepthCompleter(
+        from_pretrained(weights, map_location="cpu", progress=progress), spec=spec or EngineSpec(), inplace=True
+    )

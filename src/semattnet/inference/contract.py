@@ -51,8 +51,9 @@ class Completion:
         from an engine not asked for them)."""
         if self.output is None:
             return None
-        confs = [c for c in (self.output.color_conf, self.output.semantic_conf, self.output.guided_conf)
-                 if c is not None]  # fmt: skip
+        confs = [
+            c for c in (self.output.color_conf, self.output.semantic_conf, self.output.guided_conf) if c is not None
+        ]
         if not confs:
             return None
         return torch.stack([c[0, 0].float().cpu() for c in confs]).amax(0).numpy()

@@ -133,8 +133,9 @@ _DONE = _End.DONE
 _Item = Frame | _Failed | FrameFault
 
 
-def _prefetched(source: FrameSource, names: Sequence[str], semantic: SemanticMaps | None, timer: StageTimes,
-                depth: int) -> Generator[Frame | _Failed, None, None]:  # fmt: skip
+def _prefetched(
+    source: FrameSource, names: Sequence[str], semantic: SemanticMaps | None, timer: StageTimes, depth: int
+) -> Generator[Frame | _Failed, None, None]:
     """The frames of ``names`` in order, read in a background thread at most ``depth`` frames ahead."""
     slots, stop = threading.Semaphore(depth), threading.Event()
     items: queue.Queue[Frame | _Failed | BaseException | _End] = queue.Queue()
@@ -228,8 +229,9 @@ class _Pace:
         return max(0.0, self.due - time.monotonic())
 
 
-def _paced(source: FrameSource, names: Sequence[str], semantic: SemanticMaps | None, timer: StageTimes,
-           speed: float) -> Generator[_Item, None, None]:  # fmt: skip
+def _paced(
+    source: FrameSource, names: Sequence[str], semantic: SemanticMaps | None, timer: StageTimes, speed: float
+) -> Generator[_Item, None, None]:
     """The frames at their sensor pace (``timestamp``, else :data:`~.timing.DEFAULT_SENSOR_PERIOD_S` apart, ``speed``
     times faster; long gaps skipped, :class:`_Pace`): a thread reads each frame and hands it over at its time;
     when the loop is still busy the newest frame wins and the older one is dropped (a ``dropped``
@@ -283,8 +285,14 @@ def _inner_stages(completer: Completer, timer: StageTimes, current: list[str]) -
         yield
 
 
-def _frames(source: FrameSource, names: Sequence[str], semantic: SemanticMaps | None, timer: StageTimes,
-            prefetch: int, realtime: float | None) -> Generator[_Item, None, None]:  # fmt: skip
+def _frames(
+    source: FrameSource,
+    names: Sequence[str],
+    semantic: SemanticMaps | None,
+    timer: StageTimes,
+    prefetch: int,
+    realtime: float | None,
+) -> Generator[_Item, None, None]:
     """The reader the options ask for: paced (``realtime``), read ahead (``prefetch``) or in line."""
     if realtime is not None:
         return _paced(source, names, semantic, timer, realtime)
@@ -293,8 +301,13 @@ def _frames(source: FrameSource, names: Sequence[str], semantic: SemanticMaps | 
     return (_attempt(source, name, semantic, timer) for name in names)
 
 
-def _complete_one(completer: Completer, group: Sequence[Frame], timer: StageTimes, current: list[str],
-                  fault: Callable[[Frame, Exception], None]) -> Iterator[tuple[Frame, Completion]]:  # fmt: skip
+def _complete_one(
+    completer: Completer,
+    group: Sequence[Frame],
+    timer: StageTimes,
+    current: list[str],
+    fault: Callable[[Frame, Exception], None],
+) -> Iterator[tuple[Frame, Completion]]:
     """The one frame of ``group`` through ``completer``, timed as ``network`` (``fault`` gets what it raised)."""
     frame = group[0]
     current[0] = frame.name
@@ -318,10 +331,48 @@ def _start_timer(timer: StageTimes | None, reader: str) -> StageTimes:
     return timer
 
 
-def completions(source: FrameSource, completer: Completer, names: Sequence[str] | None = None,
-                semantic: SemanticMaps | None = None, timer: StageTimes | None = None, prefetch: int = 0, *,
-                report: Callable[[FrameFault], None] | None = None, stop_on_fault: bool = True,
-                realtime: float | None = None, batch_size: int = 1) -> Iterator[tuple[Frame, Completion]]:  # fmt: skip
+@dataclass
+class _FaultRule:
+    """What :func:`completions` does with a frame's fault: reported as a :class:`FrameFault` (``failed`` when it
+    stops the run, else ``skipped``), then raised (``stop_on_fault``, or no ``report``) with the input named."""
+
+    timer: StageTimes
+    report: Callable[[FrameFault], None] | None
+    stop_on_fault: bool
+
+    def __call__(self, name: str, exc: BaseException, where: str = "") -> None:
+        self.timer.discard(name)
+        reason = fault_reason(exc)
+        reason = f"{where}: {reason}" if where and where not in reason else reason
+        if self.report is not None:
+            self.report(FrameFault(name, "failed" if self.stop_on_fault else "skipped", reason))
+        if self.stop_on_fault or self.report is None:
+            if reason != fault_reason(exc):  # the file named: the same error, with where it comes from
+                from semattnet._errors import DataError
+
+                raise DataError(reason) from exc
+            raise exc
+
+    def of_frame(self, frame: Frame, exc: Exception) -> None:
+        """A fault completing ``frame`` (anything else raised as it is)."""
+        if not is_frame_fault(exc):
+            raise exc
+        self(frame.name, exc, _input_of(frame))
+
+
+def completions(
+    source: FrameSource,
+    completer: Completer,
+    names: Sequence[str] | None = None,
+    semantic: SemanticMaps | None = None,
+    timer: StageTimes | None = None,
+    prefetch: int = 0,
+    *,
+    report: Callable[[FrameFault], None] | None = None,
+    stop_on_fault: bool = True,
+    realtime: float | None = None,
+    batch_size: int = 1,
+) -> Iterator[tuple[Frame, Completion]]:
     """``(frame, completion)`` for each of ``names`` (default: all of ``source``), in order, every stage timed
     into ``timer``; ``prefetch`` > 0 reads that many frames ahead in a background thread (module doc).
     ``semantic``: a bound :class:`~.semantic.SemanticMaps` (None: frames as the source gives them).
@@ -335,25 +386,7 @@ def completions(source: FrameSource, completer: Completer, names: Sequence[str] 
     timer = _start_timer(timer, "sensor" if realtime is not None else "reader" if prefetch > 0 else "")
     names = list(source.names if names is None else names)
     current = [""]
-
-    def fault(name: str, exc: BaseException, where: str = "") -> None:
-        timer.discard(name)
-        reason = fault_reason(exc)
-        reason = f"{where}: {reason}" if where and where not in reason else reason
-        if report is not None:
-            report(FrameFault(name, "failed" if stop_on_fault else "skipped", reason))
-        if stop_on_fault or report is None:
-            if reason != fault_reason(exc):  # the file named: the same error, with where it comes from
-                from semattnet._errors import DataError
-
-                raise DataError(reason) from exc
-            raise exc
-
-    def frame_fault(frame: Frame, exc: Exception) -> None:
-        if not is_frame_fault(exc):
-            raise exc
-        fault(frame.name, exc, _input_of(frame))
-
+    fault = _FaultRule(timer, report, stop_on_fault)
     batched = batch_size > 1 and realtime is None
     try:
         frames = _frames(source, names, semantic, timer, prefetch, realtime)
@@ -371,9 +404,9 @@ def completions(source: FrameSource, completer: Completer, names: Sequence[str] 
                     continue
                 batch = [f for f in group if isinstance(f, Frame)]
                 if batched and isinstance(completer, BatchCompleter):
-                    yield from complete_group(completer, batch, timer, current, frame_fault)
+                    yield from complete_group(completer, batch, timer, current, fault.of_frame)
                 else:
-                    yield from _complete_one(completer, batch, timer, current, frame_fault)
+                    yield from _complete_one(completer, batch, timer, current, fault.of_frame)
     finally:
         timer.end()
 

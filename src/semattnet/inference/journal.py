@@ -131,8 +131,9 @@ def _read(path: Path) -> _Journal | None:
     except OSError as exc:
         raise ResumeError(f"{path}: cannot be read ({exc.strerror}); fix it or choose a new --out") from None
     if not stat.S_ISREG(mode):
-        raise ResumeError(f"{path} is {_what(mode)}, not a frames journal semattnet wrote; move it away "
-                          "or choose a new --out")  # fmt: skip
+        raise ResumeError(
+            f"{path} is {_what(mode)}, not a frames journal semattnet wrote; move it away or choose a new --out"
+        )
     try:
         doc = json.loads(path.read_text())
     except RecursionError:
@@ -162,8 +163,10 @@ def _checked(path: Path, doc: object) -> _Journal:
     """``doc`` when it is a journal of :data:`SCHEMA` whose every field has its type and range."""
     schema = doc.get("schema") if isinstance(doc, dict) else None
     if schema in OLD_SCHEMAS:
-        raise ResumeError(f"{path}: written by an earlier semattnet ({schema}) that recorded no digest of "
-                          "the outputs, so it cannot be verified; rerun with --overwrite or a new --out")  # fmt: skip
+        raise ResumeError(
+            f"{path}: written by an earlier semattnet ({schema}) that recorded no digest of "
+            "the outputs, so it cannot be verified; rerun with --overwrite or a new --out"
+        )
     if not isinstance(doc, dict) or schema != SCHEMA:
         raise ResumeError(f"{path}: not a semattnet frames journal (schema {SCHEMA}); start a new --out")
     run = doc.get("run")
@@ -268,9 +271,16 @@ class RunJournal:
         ResumeError: ``resume`` without a journal in ``out``, a damaged one or another identity.
     """
 
-    def __init__(self, out: str | Path, names: Sequence[str], run: Mapping[str, object] | None = None,
-                 resume: bool = False, rank: int = 0, world: int = 1,
-                 expect: Callable[[str], Sequence[str]] | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        out: str | Path,
+        names: Sequence[str],
+        run: Mapping[str, object] | None = None,
+        resume: bool = False,
+        rank: int = 0,
+        world: int = 1,
+        expect: Callable[[str], Sequence[str]] | None = None,
+    ) -> None:
         self.out, self.names, self.run = Path(out), list(names), {**_DEFAULT_RUN, **(run or {})}
         self.rank, self.world, self.expect = rank, world, expect
         self.frames: dict[str, FrameEntry] = {n: {"name": n, "status": "pending"} for n in self.names}
@@ -299,13 +309,17 @@ class RunJournal:
         parts = [d for r in range(max(self.world, 1)) if (d := _read(self.out / _rank_file(r))) is not None]
         found = [d for d in (main, *parts) if d is not None]
         if not found:
-            raise ResumeError(f"{self.out}: no {FRAMES_FILE} to resume from (not a semattnet predict folder, or "
-                              "its run was killed before the first frame); run without --resume")  # fmt: skip
+            raise ResumeError(
+                f"{self.out}: no {FRAMES_FILE} to resume from (not a semattnet predict folder, or "
+                "its run was killed before the first frame); run without --resume"
+            )
         for doc in found:
             why = _difference(doc["run"], self.run)
             if why is not None:
-                raise ResumeError(f"{self.out / FRAMES_FILE}: cannot resume: {why}; resume with the first run's "
-                                  "options and weights, or choose a new --out")  # fmt: skip
+                raise ResumeError(
+                    f"{self.out / FRAMES_FILE}: cannot resume: {why}; resume with the first run's "
+                    "options and weights, or choose a new --out"
+                )
         self.earlier_wall_s = max(float(d["wall_s"]) for d in found)
         for doc in found:
             for entry in [*doc["earlier"], *doc["frames"]]:
@@ -326,8 +340,13 @@ class RunJournal:
             return None  # not the files this run writes (an edited journal): done again
         if not files or not all(self._whole(rel, record) for rel, record in files.items()):
             return None
-        return {"name": name, "status": "done", "files": dict(files), "inputs": dict(stamps),
-                "stage_ms": dict(entry.get("stage_ms", {}))}  # fmt: skip
+        return {
+            "name": name,
+            "status": "done",
+            "files": dict(files),
+            "inputs": dict(stamps),
+            "stage_ms": dict(entry.get("stage_ms", {})),
+        }
 
     def _whole(self, rel: str, record: FileRecord) -> bool:
         """``out/rel`` is a regular file (no symlink) inside ``out`` with the recorded size and digest."""
@@ -350,12 +369,19 @@ class RunJournal:
         """
         record = self.frames[name].get("files", {}).get(rel)
         if record is None or not self._whole(rel, record):
-            raise ResumeError(f"{self.out / rel}: changed or replaced while the resume ran (not the file "
-                              f"{FRAMES_FILE} records); run the resume again")  # fmt: skip
+            raise ResumeError(
+                f"{self.out / rel}: changed or replaced while the resume ran (not the file "
+                f"{FRAMES_FILE} records); run the resume again"
+            )
         return self.out / rel
 
-    def done(self, name: str, files: Sequence[str], stage_ms: Mapping[str, float],
-             inputs: Iterable[str | os.PathLike[str]] = ()) -> None:  # fmt: skip
+    def done(
+        self,
+        name: str,
+        files: Sequence[str],
+        stage_ms: Mapping[str, float],
+        inputs: Iterable[str | os.PathLike[str]] = (),
+    ) -> None:
         """Frame ``name``'s outputs (paths relative to ``out``, already in place), its stage times and the input
         files (or folders) it was read from."""
         records = {rel: _record(self.out / rel) for rel in files}
@@ -378,9 +404,15 @@ class RunJournal:
         return [(n, e.get("reason", "")) for n, e in self.frames.items() if e["status"] == status]
 
     def to_doc(self, complete: bool, wall_s: float = 0.0) -> dict[str, object]:
-        return {"schema": SCHEMA, "complete": complete, "run": self.run, "counts": self.counts(),
-                "wall_s": round(self.earlier_wall_s + wall_s, 3),
-                "frames": [self.frames[n] for n in self.names], "earlier": list(self.earlier.values())}  # fmt: skip
+        return {
+            "schema": SCHEMA,
+            "complete": complete,
+            "run": self.run,
+            "counts": self.counts(),
+            "wall_s": round(self.earlier_wall_s + wall_s, 3),
+            "frames": [self.frames[n] for n in self.names],
+            "earlier": list(self.earlier.values()),
+        }
 
     def save(self, complete: bool = False, wall_s: float = 0.0, force: bool = True) -> None:
         """Write this process's file atomically (``force=False``: only when it is due, see the module doc)."""

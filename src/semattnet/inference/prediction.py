@@ -78,9 +78,16 @@ class Prediction:
         if key not in self._clouds:
             camera = None if self.frame.calib is None else self.frame.calib.camera
             name = (f"cam{camera}" if str(camera).isdigit() else str(camera)) if camera else "cam"  # KITTI "02"
-            self._clouds[key] = depth_to_points(self.stored, self.frame.K, rgb=self.frame.rgb,
-                                                confidence=self.completion.confidence, max_depth=max_depth,
-                                                top_crop=top_crop, frame=name, mask=self.keep(limit))  # fmt: skip
+            self._clouds[key] = depth_to_points(
+                self.stored,
+                self.frame.K,
+                rgb=self.frame.rgb,
+                confidence=self.completion.confidence,
+                max_depth=max_depth,
+                top_crop=top_crop,
+                frame=name,
+                mask=self.keep(limit),
+            )
         return self._clouds[key]
 
 

@@ -24,8 +24,9 @@ from semattnet.inference.sinks import default_sinks, fusion_confidence, output_f
 __all__ = ["complete_kitti_raw", "fusion_confidence", "project_frame", "raw_output_paths"]
 
 
-def raw_output_paths(names: Sequence[str], out: Path, ply: bool = False, npy: bool = False,
-                     panel: bool = False) -> list[Path]:  # fmt: skip
+def raw_output_paths(
+    names: Sequence[str], out: Path, ply: bool = False, npy: bool = False, panel: bool = False
+) -> list[Path]:
     """Every file :func:`complete_kitti_raw` writes for ``names``."""
     return [Path(out) / p for p in output_files(names, default_sinks(npy, panel, ply))]
 

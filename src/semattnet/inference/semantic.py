@@ -26,13 +26,16 @@ class SemanticMaps:
     says what they became). :meth:`bind` the completer before :meth:`fill`.
     """
 
-    def __init__(self, segmenter: MapSegmenter | str | None = None, folder: bool = False,
-                 mismatch: str = "refuse") -> None:  # fmt: skip
+    def __init__(
+        self, segmenter: MapSegmenter | str | None = None, folder: bool = False, mismatch: str = "refuse"
+    ) -> None:
         if folder and segmenter is not None:
             raise InputError("semantic: give a semantic folder or a segmenter, not both")
         if not (segmenter is None or isinstance(segmenter, str | MapSegmenter)):
-            raise InputError(f"semantic: a {type(segmenter).__name__} is not a segmenter: it must say the palette "
-                             "of its maps (as semattnet.segmentation.Segmenter does)")  # fmt: skip
+            raise InputError(
+                f"semantic: a {type(segmenter).__name__} is not a segmenter: it must say the palette "
+                "of its maps (as semattnet.segmentation.Segmenter does)"
+            )
         self.segmenter, self.folder, self.needed = segmenter, folder, False
         self.mismatch = mismatch
         self.cross: CrossPalette | None = None
@@ -42,8 +45,10 @@ class SemanticMaps:
     def bind(self, completer: Completer) -> SemanticMaps:
         """Decide for ``completer``: whether it needs maps; a segmenter SPEC is loaded on its device."""
         if not isinstance(completer, Completer):
-            raise InputError(f"completer: a {type(completer).__name__} is not a Completer: it must say its "
-                             "needs_semantic, palette and device (as ClassicalCompleter does)")  # fmt: skip
+            raise InputError(
+                f"completer: a {type(completer).__name__} is not a Completer: it must say its "
+                "needs_semantic, palette and device (as ClassicalCompleter does)"
+            )
         self.needed = bool(completer.needs_semantic)
         if self.needed and isinstance(self.segmenter, str):
             from semattnet.segmentation.segmenter import load_segmenter
@@ -85,7 +90,10 @@ class SemanticMaps:
         if frame.semantic is not None:
             return frame if self.cross is None else frame.with_semantic(self.cross.map(frame.semantic, frame.name))
         if not self._warned:
-            warnings.warn("no semantic maps given (--semantic or --segment): using the 'unknown' fallback map, "
-                          "which costs accuracy", stacklevel=3)  # fmt: skip
+            warnings.warn(
+                "no semantic maps given (--semantic or --segment): using the 'unknown' fallback map, "
+                "which costs accuracy",
+                stacklevel=3,
+            )
             self._warned = True
         return frame.with_semantic(unknown_map(*frame.rgb.shape[:2]))

@@ -47,13 +47,16 @@ def _check_complete(stage: Path, expected: Iterable[str | os.PathLike[str]]) -> 
     """Raise :class:`OutputError` unless every expected file (relative to the stage) is in ``stage``."""
     missing = [str(p) for p in expected if not (stage / p).is_file()]
     if missing:
-        raise OutputError(f"{len(missing)} output file(s) missing from {stage} (first: {missing[0]}); with several "
-                          "nodes --out must be on a file system every node shares")  # fmt: skip
+        raise OutputError(
+            f"{len(missing)} output file(s) missing from {stage} (first: {missing[0]}); with several "
+            "nodes --out must be on a file system every node shares"
+        )
 
 
 @contextmanager
-def shared_stage(out: str | os.PathLike[str], overwrite: bool = False,
-                 expected: Iterable[str | os.PathLike[str]] = ()) -> Iterator[Path]:  # fmt: skip
+def shared_stage(
+    out: str | os.PathLike[str], overwrite: bool = False, expected: Iterable[str | os.PathLike[str]] = ()
+) -> Iterator[Path]:
     """:func:`~semattnet._utils.outputs.staged_outputs` for all ranks (collective): yields the same
     hidden folder inside ``out`` on every rank. After the block, if it succeeded on every rank,
     rank 0 checks that every ``expected`` file (relative path) was written and moves the stage

@@ -172,8 +172,11 @@ class StageTimes:
 
     def _stage_summary(self, stage: str) -> StageSummary:
         v = self.stage(stage)
-        row: StageSummary = ({"median_ms": 1e3 * float(np.median(v)), "p95_ms": 1e3 * float(np.percentile(v, 95)),
-                              "frames": len(v)} if len(v) else {"note": self.notes.get(stage, "not run")})  # fmt: skip
+        row: StageSummary = (
+            {"median_ms": 1e3 * float(np.median(v)), "p95_ms": 1e3 * float(np.percentile(v, 95)), "frames": len(v)}
+            if len(v)
+            else {"note": self.notes.get(stage, "not run")}
+        )
         if stage in self.beside and len(v):
             row["beside"] = self.beside[stage]
         return row
@@ -186,14 +189,23 @@ class StageTimes:
             serial = [sum(v for k, v in t.items() if k not in self.beside) for t in self.times.values()]
         period = self.sensor_period_s
         fps = self.frames / self.wall_s if self.wall_s > 0 else 0.0
-        return {"frames": self.frames, "stages": stages,
-                "sum_of_stages_s": float(sum(per_frame)), "wall_s": self.wall_s, "overlapped": self.overlapped,
-                "per_frame_median_ms": 1e3 * float(np.median(per_frame)) if per_frame else 0.0,
-                "serial_median_ms": 1e3 * float(np.median(serial)) if serial else 0.0,
-                "write_waited_s": self.write_waited_s, "throughput_hz": fps, "sensor_period_s": period,
-                "realtime_factor": fps * period,
-                "not_done": dict(self.not_done), "queue_most": self.queue_most, "gaps_skipped": self.gaps_skipped,
-                "cpu": cpu_name()}  # fmt: skip
+        return {
+            "frames": self.frames,
+            "stages": stages,
+            "sum_of_stages_s": float(sum(per_frame)),
+            "wall_s": self.wall_s,
+            "overlapped": self.overlapped,
+            "per_frame_median_ms": 1e3 * float(np.median(per_frame)) if per_frame else 0.0,
+            "serial_median_ms": 1e3 * float(np.median(serial)) if serial else 0.0,
+            "write_waited_s": self.write_waited_s,
+            "throughput_hz": fps,
+            "sensor_period_s": period,
+            "realtime_factor": fps * period,
+            "not_done": dict(self.not_done),
+            "queue_most": self.queue_most,
+            "gaps_skipped": self.gaps_skipped,
+            "cpu": cpu_name(),
+        }
 
     def table(self) -> str:
         """The per-stage latency table (what ``semattnet predict`` prints)."""
@@ -213,9 +225,11 @@ class StageTimes:
             rows.append(f"{'serial path':<14}{s['serial_median_ms']:>11.1f}  (what bounds the frames/s)")
         if s["write_waited_s"] > 0.0005:
             rows.append(f"the loop waited {s['write_waited_s']:.2f} s in all for the writer (it fell behind)")
-        rows.append(f"{s['frames']} frame(s) in {s['wall_s']:.2f} s{' (read ahead)' if s['overlapped'] else ''}: "
-                    f"{s['throughput_hz']:.2f} frames/s against a sensor period of {1e3 * period:.1f} ms "
-                    f"({1 / period:.1f} Hz): {s['realtime_factor']:.2g}x real time, {verdict}")  # fmt: skip
+        rows.append(
+            f"{s['frames']} frame(s) in {s['wall_s']:.2f} s{' (read ahead)' if s['overlapped'] else ''}: "
+            f"{s['throughput_hz']:.2f} frames/s against a sensor period of {1e3 * period:.1f} ms "
+            f"({1 / period:.1f} Hz): {s['realtime_factor']:.2g}x real time, {verdict}"
+        )
         if any(s["not_done"].values()):
             held = f"; at most {s['queue_most']} frame(s) waited" if s["queue_most"] is not None else ""
             rows.append("not completed: " + ", ".join(f"{n} {k}" for k, n in s["not_done"].items() if n) + held)

@@ -71,8 +71,10 @@ class UncertaintyLimit:
             x = math.nan
         high = MAX_RELATIVE_PERCENT if percent else MAX_ABSOLUTE_M
         if not (math.isfinite(x) and 0 < x <= high):
-            raise InputError(f"expected metres in (0, {MAX_ABSOLUTE_M:g}] (e.g. 0.5) or a percentage of the depth in "
-                             f"(0, {MAX_RELATIVE_PERCENT:g}%] (e.g. 5%), got {text!r}")  # fmt: skip
+            raise InputError(
+                f"expected metres in (0, {MAX_ABSOLUTE_M:g}] (e.g. 0.5) or a percentage of the depth in "
+                f"(0, {MAX_RELATIVE_PERCENT:g}%] (e.g. 5%), got {text!r}"
+            )
         return cls(x / 100 if percent else x, percent)
 
     def __str__(self) -> str:

@@ -47,8 +47,7 @@ def stacked_heads(x: torch.Tensor, heads: list[nn.Sequential]) -> torch.Tensor:
     bias = None  # the training form has none; the folded form has all: zeros only for a mix
     if any(c.bias is not None for c in convs):
         bias = torch.cat([c.bias if c.bias is not None else c.weight.new_zeros(c.out_channels) for c in convs])
-    y = nn.functional.conv2d(x, torch.cat([c.weight for c in convs]), bias, first.stride,
-                             first.padding, first.dilation)  # fmt: skip
+    y = nn.functional.conv2d(x, torch.cat([c.weight for c in convs]), bias, first.stride, first.padding, first.dilation)
     if all(type(m) is nn.Identity for h in heads for m in list(h)[1:]):
         return y
     parts = torch.split(y, [c.out_channels for c in convs], dim=1)

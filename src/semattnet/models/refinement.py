@@ -229,8 +229,13 @@ class PropagationSettings(NamedTuple):
     affinity: AffinityForm = "eq13"
 
 
-def affinity_kernel(guide: torch.Tensor, impl: PropagationImpl = "auto", workspace: Workspace | None = None,
-                    name: str = "", form: AffinityForm = "eq13") -> torch.Tensor:  # fmt: skip
+def affinity_kernel(
+    guide: torch.Tensor,
+    impl: PropagationImpl = "auto",
+    workspace: Workspace | None = None,
+    name: str = "",
+    form: AffinityForm = "eq13",
+) -> torch.Tensor:
     """The kernel of ``guide`` (:func:`~semattnet.models.propagation.normalise_affinity`: eq. 13 or the convex
     form); eq. 13 in one pass of the compiled kernel for float32 CPU inference (``impl="auto"``), equal to float
     rounding, written into ``workspace[name]`` when a workspace is given (allocated there on the first call)."""
@@ -273,12 +278,15 @@ class RefinementHeads:
         """Channels of each head in a stage's stacked tensor: kernel confidences, mask, guidance per kernel size."""
         return [len(self.kernel_sizes), 1, *(k * k - 1 for k in self.kernel_sizes)]
 
-    def _stage(self, stacked: torch.Tensor, valid: torch.Tensor, impl: PropagationImpl, workspace: Workspace | None,
-               stage: str) -> tuple[list[torch.Tensor], torch.Tensor, torch.Tensor]:  # fmt: skip
+    def _stage(
+        self, stacked: torch.Tensor, valid: torch.Tensor, impl: PropagationImpl, workspace: Workspace | None, stage: str
+    ) -> tuple[list[torch.Tensor], torch.Tensor, torch.Tensor]:
         sizes = self.split_sizes()
         if stacked.shape[1] != sum(sizes):
-            raise InputError(f"refinement heads: {stacked.shape[1]} channels, expected {sum(sizes)} for kernel "
-                             f"sizes {self.kernel_sizes}")  # fmt: skip
+            raise InputError(
+                f"refinement heads: {stacked.shape[1]} channels, expected {sum(sizes)} for kernel "
+                f"sizes {self.kernel_sizes}"
+            )
         conf, mask, *guides = torch.split(stacked, sizes, dim=1)
         affinities = [affinity_kernel(g, impl, workspace, f"{stage}.{i}", self.affinity) for i, g in enumerate(guides)]
         return affinities, torch.softmax(conf, dim=1), torch.sigmoid(mask) * valid
@@ -296,16 +304,22 @@ class RefinementHeads:
             affinities_s2, conf_s2, mask_s2 = self._stage(self.heads_s2.float(), valid_s2, impl, workspace, "s2")
             valid = (sparse > 0).to(sparse.dtype)
             affinities, conf, mask = self._stage(self.heads.float(), valid, impl, workspace, "s1")
-        return RefinementInputs(self.depth.float(), sparse, sparse_s2, affinities_s2, conf_s2, mask_s2,
-                                affinities, conf, mask, self.att)  # fmt: skip
+        return RefinementInputs(
+            self.depth.float(), sparse, sparse_s2, affinities_s2, conf_s2, mask_s2, affinities, conf, mask, self.att
+        )
 
     def to_dict(self, prefix: str = HEADS_PREFIX) -> dict[str, torch.Tensor]:
         """The tensors by name (``att`` only when set), e.g. for an exported graph's outputs."""
         return {f"{prefix}{n}": v for n in (*_HEAD_TENSORS, "att") if (v := getattr(self, n)) is not None}
 
     @classmethod
-    def from_dict(cls, tensors: Mapping[str, torch.Tensor], kernel_sizes: Sequence[int], prefix: str = HEADS_PREFIX,
-                  affinity: AffinityForm = "eq13") -> RefinementHeads:  # fmt: skip
+    def from_dict(
+        cls,
+        tensors: Mapping[str, torch.Tensor],
+        kernel_sizes: Sequence[int],
+        prefix: str = HEADS_PREFIX,
+        affinity: AffinityForm = "eq13",
+    ) -> RefinementHeads:
         """The inverse of :meth:`to_dict` (other keys are ignored; ``affinity`` is the model's form)."""
         missing = [n for n in _HEAD_TENSORS if f"{prefix}{n}" not in tensors]
         if missing:
@@ -334,8 +348,9 @@ def propagate_refinement(
     ri = inputs
     with torch.autocast(device_type=ri.depth.device.type, enabled=False):
         grids = F.pixel_unshuffle(ri.depth, 2)  # (B, 4, H/2, W/2): D[a::2, b::2] at channel 2a + b
-        refined_grids = run_cspn_stage(grids, grids, ri.affinities_s2, ri.kernel_conf_s2, ri.sparse_s2, ri.mask_s2,
-                                       iterations, impl)  # fmt: skip
+        refined_grids = run_cspn_stage(
+            grids, grids, ri.affinities_s2, ri.kernel_conf_s2, ri.sparse_s2, ri.mask_s2, iterations, impl
+        )
         refined_s2 = F.pixel_shuffle(refined_grids, 2)
         if ri.att is None:
             start = h0 = refined_s2

@@ -15,13 +15,14 @@ place, :func:`model_class`, from the config's ``refine`` and ``encoder`` fields.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import torch
 from torch import nn
 
 from semattnet._errors import InputError
+from semattnet._utils.registry import Registry, UnknownEntryError
 from semattnet.models.backbone import SemAttNetBackbone
 from semattnet.models.config import SemAttNetConfig
 from semattnet.models.generalist import Generalist
@@ -49,8 +50,8 @@ __all__ = [
 ARCH_FIELDS = ("branches", "fusion", "refine", "encoder", "anchor")
 
 
-class UnknownModelError(InputError):
-    """A model name that is neither a registered model nor an alias."""
+#: The registry's one unknown-name error (the old name kept).
+UnknownModelError = UnknownEntryError
 
 
 @dataclass(frozen=True)
@@ -64,36 +65,73 @@ class ModelSpec:
 
 
 _SPECS = (
-    ModelSpec("semattnet", "Full SemAttNet: three branches, SAMMAFB, CSPN++ refinement (Table 2 g)",
-              SemAttNetConfig(), ("table2_g",)),
-    ModelSpec("semattnet_backbone", "Three-branch backbone with SAMMAFB, no refinement (Table 2 f)",
-              SemAttNetConfig(refine=False), ("table2_f",)),
+    ModelSpec(
+        "semattnet",
+        "Full SemAttNet: three branches, SAMMAFB, CSPN++ refinement (Table 2 g)",
+        SemAttNetConfig(),
+        ("table2_g",),
+    ),
+    ModelSpec(
+        "semattnet_backbone",
+        "Three-branch backbone with SAMMAFB, no refinement (Table 2 f)",
+        SemAttNetConfig(refine=False),
+        ("table2_f",),
+    ),
     ModelSpec("table2_a", "CG + DG, fusion by addition", SemAttNetConfig(branches=2, fusion="add", refine=False)),
-    ModelSpec("table2_b", "CG + DG, fusion by concatenation",
-              SemAttNetConfig(branches=2, fusion="concat", refine=False)),
+    ModelSpec(
+        "table2_b", "CG + DG, fusion by concatenation", SemAttNetConfig(branches=2, fusion="concat", refine=False)
+    ),
     ModelSpec("table2_c", "CG + DG, concatenation, CSPN++ refinement", SemAttNetConfig(branches=2, fusion="concat")),
     ModelSpec("table2_d", "CG + SG + DG, concatenation", SemAttNetConfig(fusion="concat", refine=False)),
     ModelSpec("table2_e", "CG + SG + DG, concatenation, CSPN++ refinement", SemAttNetConfig(fusion="concat")),
-    ModelSpec("semattnet_rt_s", "Real-time: the paper's structure at 1/4 resolution, separable blocks, CSPN++ at 1/4",
-              SemAttNetConfig(encoder="lite_s4", reduction=4, kernel_sizes=(3,), iterations=4)),
-    ModelSpec("semattnet_rt_m", "Real-time: the paper's structure at 1/2 resolution, separable blocks, CSPN++ at 1/2",
-              SemAttNetConfig(encoder="lite_s2", reduction=4, kernel_sizes=(3,), iterations=4)),
-    ModelSpec("semattnet_rt_md", "Real-time: rt_m with channels doubling at every stage (1/2 resolution), convex "
-              "propagation kernels", SemAttNetConfig(encoder="lite_s2_deep", reduction=4, kernel_sizes=(3,),
-                                                     iterations=4, affinity="convex")),
-    ModelSpec("semattnet_rt_l", "Real-time: semattnet_rt_s with twice its channels (1/4 resolution, CSPN++ at 1/4)",
-              SemAttNetConfig(encoder="lite_s4_wide", reduction=4, kernel_sizes=(3,), iterations=4)),
-    ModelSpec("semattnet_generalist", "Generalist: the full model, scale-free, correcting the classical completion "
-              "(models.generalist)", SemAttNetConfig(width=0.125, anchor="classical")),
-    ModelSpec("semattnet_rt_generalist", "Generalist: semattnet_rt_md, scale-free, correcting the classical "
-              "completion (models.generalist)", SemAttNetConfig(encoder="lite_s2_deep", reduction=4,
-                                                                kernel_sizes=(3,), iterations=4, affinity="convex",
-                                                                anchor="classical")),
-)  # fmt: skip
-_BY_NAME = {s.name: s for s in _SPECS}
+    ModelSpec(
+        "semattnet_rt_s",
+        "Real-time: the paper's structure at 1/4 resolution, separable blocks, CSPN++ at 1/4",
+        SemAttNetConfig(encoder="lite_s4", reduction=4, kernel_sizes=(3,), iterations=4),
+    ),
+    ModelSpec(
+        "semattnet_rt_m",
+        "Real-time: the paper's structure at 1/2 resolution, separable blocks, CSPN++ at 1/2",
+        SemAttNetConfig(encoder="lite_s2", reduction=4, kernel_sizes=(3,), iterations=4),
+    ),
+    ModelSpec(
+        "semattnet_rt_md",
+        "Real-time: rt_m with channels doubling at every stage (1/2 resolution), convex propagation kernels",
+        SemAttNetConfig(encoder="lite_s2_deep", reduction=4, kernel_sizes=(3,), iterations=4, affinity="convex"),
+    ),
+    ModelSpec(
+        "semattnet_rt_l",
+        "Real-time: semattnet_rt_s with twice its channels (1/4 resolution, CSPN++ at 1/4)",
+        SemAttNetConfig(encoder="lite_s4_wide", reduction=4, kernel_sizes=(3,), iterations=4),
+    ),
+    ModelSpec(
+        "semattnet_generalist",
+        "Generalist: the full model, scale-free, correcting the classical completion (models.generalist)",
+        SemAttNetConfig(width=0.125, anchor="classical"),
+    ),
+    ModelSpec(
+        "semattnet_rt_generalist",
+        "Generalist: semattnet_rt_md, scale-free, correcting the classical completion (models.generalist)",
+        SemAttNetConfig(
+            encoder="lite_s2_deep", reduction=4, kernel_sizes=(3,), iterations=4, affinity="convex", anchor="classical"
+        ),
+    ),
+    ModelSpec(
+        "semattnet_rt_l_generalist",
+        "Generalist: semattnet_rt_l, scale-free, correcting the classical completion (models.generalist)",
+        SemAttNetConfig(encoder="lite_s4_wide", reduction=4, kernel_sizes=(3,), iterations=4, anchor="classical"),
+    ),
+)
+#: Name -> :class:`ModelSpec`, each architecture once; its aliases (``table2_f``, ``table2_g``) are accepted as keys
+#: (``MODELS["table2_g"]``) but iteration, ``len`` and ``names()`` give each architecture once.
+MODELS: Registry[ModelSpec] = Registry("model")
+for _spec in _SPECS:
+    MODELS.add(_spec.name, _spec)
+    for _alias in _spec.aliases:
+        MODELS.alias(_alias, _spec.name)
 
 #: alias -> registered name.
-ALIASES: Mapping[str, str] = {a: s.name for s in _SPECS for a in s.aliases}
+ALIASES: Mapping[str, str] = MODELS.aliases
 #: The rows (a) ... (g) of the paper's Table 2, in order (``table2_f``/``table2_g`` are aliases).
 TABLE2: tuple[str, ...] = tuple(f"table2_{row}" for row in "abcdefg")
 
@@ -102,51 +140,19 @@ def resolve_model_name(name: str) -> str:
     """The registered name for ``name`` (itself, or what the alias stands for).
 
     Raises:
-        UnknownModelError: one line listing the names and aliases.
+        UnknownEntryError: one line listing the names and aliases.
     """
-    if name in _BY_NAME:
-        return name
-    if isinstance(name, str) and name in ALIASES:
-        return ALIASES[name]
-    raise UnknownModelError(f"unknown model {name!r}; available: {', '.join(_BY_NAME)} (aliases: {', '.join(ALIASES)})")
-
-
-class _Registry(Mapping[str, tuple[str, SemAttNetConfig]]):
-    """``MODELS``: name or alias -> ``(description, config)``; iterates each architecture once."""
-
-    def __getitem__(self, name: str) -> tuple[str, SemAttNetConfig]:
-        try:
-            spec = _BY_NAME[resolve_model_name(name)]
-        except UnknownModelError:
-            raise KeyError(name) from None
-        return spec.description, spec.config
-
-    def __contains__(self, name: object) -> bool:
-        return name in _BY_NAME or name in ALIASES
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(_BY_NAME)
-
-    def __len__(self) -> int:
-        return len(_BY_NAME)
-
-    def __repr__(self) -> str:
-        return f"MODELS({list(_BY_NAME)}, aliases={dict(ALIASES)})"
-
-
-#: name -> (description, config), read-only. Aliases are accepted as keys (``MODELS["table2_g"]``)
-#: but iteration, ``len`` and ``keys()`` give each architecture once.
-MODELS: Mapping[str, tuple[str, SemAttNetConfig]] = _Registry()
+    return MODELS.resolve(name)
 
 
 def list_models() -> list[str]:
     """The registered names, each architecture once (aliases: :data:`ALIASES`)."""
-    return list(_BY_NAME)
+    return MODELS.names()
 
 
 def model_config(name: str) -> SemAttNetConfig:
     """The registered config of ``name`` (or an alias)."""
-    return _BY_NAME[resolve_model_name(name)].config
+    return MODELS[name].config
 
 
 def model_class(cfg: SemAttNetConfig) -> type[nn.Module]:
@@ -210,11 +216,16 @@ def build_model(name: str | None = None, config: SemAttNetConfig | None = None, 
     else:
         base = model_config(name)
         cfg = base if config is None else config
-        wrong = [f"{f}={getattr(cfg, f)!r} (the model has {getattr(base, f)!r})" for f in ARCH_FIELDS
-                 if getattr(cfg, f) != getattr(base, f)]  # fmt: skip
+        wrong = [
+            f"{f}={getattr(cfg, f)!r} (the model has {getattr(base, f)!r})"
+            for f in ARCH_FIELDS
+            if getattr(cfg, f) != getattr(base, f)
+        ]
         if wrong:
-            raise InputError(f"build_model({name!r}, config=...): the config is not of that architecture: "
-                             f"{', '.join(wrong)}; pass config alone, or name {arch_for(cfg)!r}")  # fmt: skip
+            raise InputError(
+                f"build_model({name!r}, config=...): the config is not of that architecture: "
+                f"{', '.join(wrong)}; pass config alone, or name {arch_for(cfg)!r}"
+            )
     if overrides:
         _check_overrides(cfg, overrides)
         cfg = cfg.replace(**overrides)

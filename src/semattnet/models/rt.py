@@ -84,8 +84,15 @@ class RTBranch(nn.Module):
         fusion, reduction: the feature fusion (:func:`~semattnet.models.fusion.make_fusion_block`).
     """
 
-    def __init__(self, encoder: str, in_chans: int, channels: Sequence[int], guide_channels: Sequence[int],
-                 fusion: str, reduction: int) -> None:  # fmt: skip
+    def __init__(
+        self,
+        encoder: str,
+        in_chans: int,
+        channels: Sequence[int],
+        guide_channels: Sequence[int],
+        fusion: str,
+        reduction: int,
+    ) -> None:
         super().__init__()
         concat = fusion != "add"
         extra = [g if concat else 0 for g in guide_channels] + [0]
@@ -109,8 +116,9 @@ class RTBranch(nn.Module):
     def feature_info(self) -> FeatureInfo:
         return self.encoder.feature_info
 
-    def forward(self, x: torch.Tensor, guides: Sequence[Sequence[torch.Tensor]] = (),
-                deep: torch.Tensor | None = None) -> RTFeatures:  # fmt: skip
+    def forward(
+        self, x: torch.Tensor, guides: Sequence[Sequence[torch.Tensor]] = (), deep: torch.Tensor | None = None
+    ) -> RTFeatures:
         """``guides[i]``: tensors fused (SAMMAFB, in the paper's [CG, SG, DG] order) with stage i's output;
         ``deep``: the earlier branches' deepest features, added to this branch's before decoding."""
 
@@ -278,6 +286,14 @@ class SemAttNetRT(AtrousCSPNRefinement, nn.Module):
         start = convex_upsample(refined_lr, self.convex(feature_s1), s)
         valid = (sparse > 0).to(sparse.dtype)
         affinity = affinity_kernel(guide.float(), self.propagation_impl, form=self.config.affinity)
-        refined = run_cspn_stage(start, start, [affinity], torch.ones_like(start), sparse, torch.sigmoid(mask) * valid,
-                                 FINAL_ITERATIONS, self.propagation_impl)  # fmt: skip
+        refined = run_cspn_stage(
+            start,
+            start,
+            [affinity],
+            torch.ones_like(start),
+            sparse,
+            torch.sigmoid(mask) * valid,
+            FINAL_ITERATIONS,
+            self.propagation_impl,
+        )
         return dataclasses.replace(out, refined_s2_depth=start, refined_depth=refined)

@@ -58,8 +58,11 @@ def branch_spread(output: DepthCompletionOutput) -> torch.Tensor:
     ``w_i`` are the fusion weights (``*_conf``, after the softmax, summing to 1) and ``D_i`` the branch
     depths of eqs. 4, 7 and 10 (two of them for the two-branch variants, where ``semantic_depth`` is None).
     """
-    pairs = [(output.color_depth, output.color_conf), (output.semantic_depth, output.semantic_conf),
-             (output.guided_depth, output.guided_conf)]  # fmt: skip
+    pairs = [
+        (output.color_depth, output.color_conf),
+        (output.semantic_depth, output.semantic_conf),
+        (output.guided_depth, output.guided_conf),
+    ]
     fused = output.fused_depth.float()
     var = torch.zeros_like(fused)
     for depth, weight in pairs:

@@ -81,26 +81,71 @@ PALETTE.flags.writeable = False
 #: Cityscapes labelId (0-33) -> trainId (255 = not evaluated), from cityscapesScripts' labels.py.
 LABEL_TO_TRAIN: dict[int, int] = {
     **dict.fromkeys(range(34), IGNORE_ID),
-    7: 0, 8: 1, 11: 2, 12: 3, 13: 4, 17: 5, 19: 6, 20: 7, 21: 8, 22: 9,
-    23: 10, 24: 11, 25: 12, 26: 13, 27: 14, 28: 15, 31: 16, 32: 17, 33: 18,
-}  # fmt: skip
+    7: 0,
+    8: 1,
+    11: 2,
+    12: 3,
+    13: 4,
+    17: 5,
+    19: 6,
+    20: 7,
+    21: 8,
+    22: 9,
+    23: 10,
+    24: 11,
+    25: 12,
+    26: 13,
+    27: 14,
+    28: 15,
+    31: 16,
+    32: 17,
+    33: 18,
+}
 
 
 #: NYU-40 classes (Gupta et al.; ids 1..40, 0 = unlabelled) with ScanNet's colours.
 NYU40_CLASSES: tuple[tuple[str, tuple[int, int, int]], ...] = (
-    ("wall", (174, 199, 232)), ("floor", (152, 223, 138)), ("cabinet", (31, 119, 180)), ("bed", (255, 187, 120)),
-    ("chair", (188, 189, 34)), ("sofa", (140, 86, 75)), ("table", (255, 152, 150)), ("door", (214, 39, 40)),
-    ("window", (197, 176, 213)), ("bookshelf", (148, 103, 189)), ("picture", (196, 156, 148)),
-    ("counter", (23, 190, 207)), ("blinds", (178, 76, 76)), ("desk", (247, 182, 210)), ("shelves", (66, 188, 102)),
-    ("curtain", (219, 219, 141)), ("dresser", (140, 57, 197)), ("pillow", (202, 185, 52)), ("mirror", (51, 176, 203)),
-    ("floor mat", (200, 54, 131)), ("clothes", (92, 193, 61)), ("ceiling", (78, 71, 183)), ("books", (172, 114, 82)),
-    ("refrigerator", (255, 127, 14)), ("television", (91, 163, 138)), ("paper", (153, 98, 156)),
-    ("towel", (140, 153, 101)), ("shower curtain", (158, 218, 229)), ("box", (100, 125, 154)),
-    ("whiteboard", (178, 127, 135)), ("person", (120, 185, 128)), ("night stand", (146, 111, 194)),
-    ("toilet", (44, 160, 44)), ("sink", (112, 128, 144)), ("lamp", (96, 207, 209)), ("bathtub", (227, 119, 194)),
-    ("bag", (213, 92, 176)), ("otherstructure", (94, 106, 211)), ("otherfurniture", (82, 84, 163)),
+    ("wall", (174, 199, 232)),
+    ("floor", (152, 223, 138)),
+    ("cabinet", (31, 119, 180)),
+    ("bed", (255, 187, 120)),
+    ("chair", (188, 189, 34)),
+    ("sofa", (140, 86, 75)),
+    ("table", (255, 152, 150)),
+    ("door", (214, 39, 40)),
+    ("window", (197, 176, 213)),
+    ("bookshelf", (148, 103, 189)),
+    ("picture", (196, 156, 148)),
+    ("counter", (23, 190, 207)),
+    ("blinds", (178, 76, 76)),
+    ("desk", (247, 182, 210)),
+    ("shelves", (66, 188, 102)),
+    ("curtain", (219, 219, 141)),
+    ("dresser", (140, 57, 197)),
+    ("pillow", (202, 185, 52)),
+    ("mirror", (51, 176, 203)),
+    ("floor mat", (200, 54, 131)),
+    ("clothes", (92, 193, 61)),
+    ("ceiling", (78, 71, 183)),
+    ("books", (172, 114, 82)),
+    ("refrigerator", (255, 127, 14)),
+    ("television", (91, 163, 138)),
+    ("paper", (153, 98, 156)),
+    ("towel", (140, 153, 101)),
+    ("shower curtain", (158, 218, 229)),
+    ("box", (100, 125, 154)),
+    ("whiteboard", (178, 127, 135)),
+    ("person", (120, 185, 128)),
+    ("night stand", (146, 111, 194)),
+    ("toilet", (44, 160, 44)),
+    ("sink", (112, 128, 144)),
+    ("lamp", (96, 207, 209)),
+    ("bathtub", (227, 119, 194)),
+    ("bag", (213, 92, 176)),
+    ("otherstructure", (94, 106, 211)),
+    ("otherfurniture", (82, 84, 163)),
     ("otherprop", (100, 85, 144)),
-)  # fmt: skip
+)
 
 
 class UnknownColorError(DataError):
@@ -152,8 +197,10 @@ def get_palette(name: str | Palette) -> Palette:
 def check_palette(model_palette: str, maps_palette: str, where: str = "semantic maps") -> None:
     """Refuse maps of ``maps_palette`` for a model trained with ``model_palette`` (one line)."""
     if get_palette(model_palette).name != get_palette(maps_palette).name:
-        raise PaletteMismatchError(f"{where}: {get_palette(maps_palette).title} palette, but the model was trained "
-                                   f"with the {get_palette(model_palette).title} palette")  # fmt: skip
+        raise PaletteMismatchError(
+            f"{where}: {get_palette(maps_palette).title} palette, but the model was trained "
+            f"with the {get_palette(model_palette).title} palette"
+        )
 
 
 def _lut_label_to_train() -> np.ndarray:
@@ -200,8 +247,9 @@ def _fits(code: np.ndarray, stray: np.ndarray, pal: Palette) -> bool:
     return bool(np.isin(code, np.append(classes, unknown_code)).all() and np.isin(code[stray], classes).all())
 
 
-def colors_to_ids(colors: np.ndarray, allow_unknown: bool = True, source: str = "semantic map",
-                  palette: str | Palette = "cityscapes") -> np.ndarray:  # fmt: skip
+def colors_to_ids(
+    colors: np.ndarray, allow_unknown: bool = True, source: str = "semantic map", palette: str | Palette = "cityscapes"
+) -> np.ndarray:
     """Invert :func:`ids_to_colors`: (H, W, 3) uint8 -> (H, W) uint8 ids (255 = unknown colour).
 
     Colours must match exactly (a resampled or JPEG-compressed map does not). Raises
@@ -223,8 +271,10 @@ def colors_to_ids(colors: np.ndarray, allow_unknown: bool = True, source: str = 
     if stray.any():
         other = [p for p in PALETTES.values() if p.name != pal.name and _fits(code, stray, p)]
         if other:
-            raise PaletteMismatchError(f"{source}: the colours are the {other[0].title} palette, but the "
-                                       f"{pal.title} palette was expected (the model's training palette)")  # fmt: skip
+            raise PaletteMismatchError(
+                f"{source}: the colours are the {other[0].title} palette, but the "
+                f"{pal.title} palette was expected (the model's training palette)"
+            )
         values, counts = np.unique(code[stray], return_counts=True)
         top = np.argsort(-counts)[:5]
         listed = ", ".join(
@@ -260,8 +310,9 @@ def palette_mapping(source: str | Palette, target: str | Palette) -> dict[int, i
     return {i + src.first_id: ids[norm(n)] for i, (n, _) in enumerate(src.classes) if norm(n) in ids}
 
 
-def recolor(colors: np.ndarray, source: str | Palette, target: str | Palette,
-            where: str = "semantic map") -> np.ndarray:  # fmt: skip
+def recolor(
+    colors: np.ndarray, source: str | Palette, target: str | Palette, where: str = "semantic map"
+) -> np.ndarray:
     """A map of ``source``'s colours in ``target``'s: classes of :func:`palette_mapping` keep their meaning,
     every other pixel becomes :data:`UNKNOWN_COLOR` (what a model reads as "no class")."""
     ids = colors_to_ids(colors, source=where, palette=source).astype(np.int64)

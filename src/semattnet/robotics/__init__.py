@@ -9,13 +9,21 @@
 - :class:`LiveSink` (:mod:`.live`): each completed frame served over the Foxglove WebSocket protocol
   (``semattnet predict --live``; ``foxglove-sdk``, extra ``live``).
 
-Importing this package imports no optional dependency (and not torch): each class is loaded on first use.
+Importing this package enrols its frame source and its sinks in the frame loop's registries
+(:data:`~semattnet.data.sources.registry.SOURCES`, :data:`~semattnet.inference.sinks.SINKS`); it imports no optional
+dependency: ``rosbags``, ``rerun-sdk`` and ``foxglove-sdk`` are loaded on first use.
 """
 
 from __future__ import annotations
 
 import importlib
 from typing import TYPE_CHECKING
+
+#: The modules that enrol the bag source and the robot sinks, imported with the package (in the order ``predict
+#: --help`` lists them).
+ENROLLING = (".bag_source", ".sinks", ".live")
+for _home in ENROLLING:
+    importlib.import_module(_home, __name__)
 
 if TYPE_CHECKING:
     from .bag_source import BagSource
@@ -25,8 +33,13 @@ if TYPE_CHECKING:
 
 __all__ = ["BagSink", "BagSource", "LiveSink", "RerunLogger", "RerunSink"]
 
-_HOMES = {"BagSink": ".sinks", "BagSource": ".bag_source", "LiveSink": ".live", "RerunLogger": ".rerun",
-          "RerunSink": ".sinks"}  # fmt: skip
+_HOMES = {
+    "BagSink": ".sinks",
+    "BagSource": ".bag_source",
+    "LiveSink": ".live",
+    "RerunLogger": ".rerun",
+    "RerunSink": ".sinks",
+}
 
 
 def __getattr__(name: str) -> object:

@@ -46,8 +46,11 @@ class BagOptions(SourceOptions):
     accepts: ClassVar[tuple[str, ...]] = ("segment_spec",)
     recording: ClassVar[bool] = True
 
-    bag: Path | None = option("--bag", type="input", help="A ROS 1 .bag, a ROS 2 bag folder or a .db3 / .mcap file "
-                              "(instead of --rgb/--sparse).")  # fmt: skip
+    bag: Path | None = option(
+        "--bag",
+        type="input",
+        help="A ROS 1 .bag, a ROS 2 bag folder or a .db3 / .mcap file (instead of --rgb/--sparse).",
+    )
     image_topic: str | None = option("--image-topic", help="sensor_msgs/Image or CompressedImage topic.")
     points_topic: str | None = option("--points-topic", help="sensor_msgs/PointCloud2 topic (x, y, z).")
     camera_info_topic: str | None = option(
@@ -81,8 +84,16 @@ class BagOptions(SourceOptions):
 
     def source(self, semantic: Path | None, log: Callable[[str], None]) -> BagSource:
         assert self.bag is not None and self.image_topic is not None and self.points_topic is not None  # checked
-        return BagSource(self.bag, self.image_topic, self.points_topic, self.camera_info_topic, self.rig,
-                         self.max_skew, self.semantic_topic, log=log)  # fmt: skip
+        return BagSource(
+            self.bag,
+            self.image_topic,
+            self.points_topic,
+            self.camera_info_topic,
+            self.rig,
+            self.max_skew,
+            self.semantic_topic,
+            log=log,
+        )
 
 
 @register_source("bag", option="--bag", options=BagOptions)
@@ -110,10 +121,18 @@ class BagSource(IndexedSource):
     #: few frames (``check([name])`` behind a read-ahead of two frames, then ``load``) does not restart the bag.
     keep = 4
 
-    def __init__(self, path: str | os.PathLike[str], image_topic: str, points_topic: str,
-                 camera_info_topic: str | None = None, rig: str | os.PathLike[str] | RigCalibration | None = None,
-                 max_skew: float | None = None, semantic_topic: str | None = None,
-                 log: Callable[[str], None] | None = None, odom_frame: str | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        image_topic: str,
+        points_topic: str,
+        camera_info_topic: str | None = None,
+        rig: str | os.PathLike[str] | RigCalibration | None = None,
+        max_skew: float | None = None,
+        semantic_topic: str | None = None,
+        log: Callable[[str], None] | None = None,
+        odom_frame: str | None = None,
+    ) -> None:
         self.path = Path(path)
         self.odom_frame = odom_frame
         self._log = log
@@ -177,9 +196,11 @@ class BagSource(IndexedSource):
         skew = None if max_skew is None else round(max_skew * 1e9)
         p = pair_stamps(self.pairs.image_stamps, np.array(stamps, dtype=np.int64), skew)
         if not np.any((p.match >= 0) & (self.pairs.pairing.match >= 0)):
-            raise DataError(f"{self.path}: no {topic} semantic image within {p.max_skew_ns / 1e6:.1f} ms of any "
-                            f"{self.pairs.image_topic} image with a scan (nearest {p.skew_ns.min() / 1e6:.1f} ms "
-                            "apart); raise the max skew")  # fmt: skip
+            raise DataError(
+                f"{self.path}: no {topic} semantic image within {p.max_skew_ns / 1e6:.1f} ms of any "
+                f"{self.pairs.image_topic} image with a scan (nearest {p.skew_ns.min() / 1e6:.1f} ms "
+                "apart); raise the max skew"
+            )
         return p
 
     def _semantic_images(self) -> Iterator[tuple[int, np.ndarray | DataError]]:
@@ -219,14 +240,18 @@ class BagSource(IndexedSource):
         j = int(self.semantic_pairing.match[i])
         if j < 0:
             p = self.semantic_pairing
-            raise DataError(f"{where}: no {self.semantic_topic} semantic image within {p.max_skew_ns / 1e6:.1f} ms "
-                            f"(nearest {p.skew_ns[i] / 1e6:.1f} ms apart)")  # fmt: skip
+            raise DataError(
+                f"{where}: no {self.semantic_topic} semantic image within {p.max_skew_ns / 1e6:.1f} ms "
+                f"(nearest {p.skew_ns[i] / 1e6:.1f} ms apart)"
+            )
         image = self._semantic_message(j)
         if isinstance(image, DataError):
             raise DataError(f"{where}: {image}")
         if (image.shape[1], image.shape[0]) != size:
-            raise DataError(f"{where}: {message_where(str(self.semantic_topic), j)}: the semantic image is "
-                            f"{image.shape[1]}x{image.shape[0]}, the image {size[0]}x{size[1]}")  # fmt: skip
+            raise DataError(
+                f"{where}: {message_where(str(self.semantic_topic), j)}: the semantic image is "
+                f"{image.shape[1]}x{image.shape[0]}, the image {size[0]}x{size[1]}"
+            )
         return image
 
     def _semantic_message(self, j: int) -> np.ndarray | DataError:
@@ -292,8 +317,18 @@ class BagSource(IndexedSource):
             where += f" ({p.dropped_points} point(s) with a NaN or infinite coordinate dropped)"
         sparse = project_points(p.points, p.K, p.T_cam_lidar, p.image_size, name=where)
         meta = SensorMeta(p.stamp_ns, p.frame_id, p.lidar_frame_id, p.scan_stamp_ns, p.camera_info, p.dropped_points)
-        return Frame(p.name, p.image, sparse, semantic, K=p.K, timestamp=p.stamp_ns / 1e9, points=p.points,
-                     calib=p.calibration, paths={"bag": self.path}, meta=meta)  # fmt: skip
+        return Frame(
+            p.name,
+            p.image,
+            sparse,
+            semantic,
+            K=p.K,
+            timestamp=p.stamp_ns / 1e9,
+            points=p.points,
+            calib=p.calibration,
+            paths={"bag": self.path},
+            meta=meta,
+        )
 
     def load(self, name: str) -> Frame:
         return self.assemble(self.read(name))
@@ -365,8 +400,10 @@ class BagSource(IndexedSource):
                 if isinstance(tf, DataError):
                     raise tf
                 fixed = tf.fixed_frame(camera_frame, self.odom_frame)
-                self._say(f"{self.path}: neighbouring frames as views, posed by /tf from {fixed!r} to the camera "
-                          f"{camera_frame!r}")  # fmt: skip
+                self._say(
+                    f"{self.path}: neighbouring frames as views, posed by /tf from {fixed!r} to the camera "
+                    f"{camera_frame!r}"
+                )
             except DataError as exc:
                 self._say(f"{exc}; the frames get no neighbouring views")
             self._fixed[camera_frame] = fixed

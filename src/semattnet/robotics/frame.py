@@ -65,8 +65,9 @@ def stamp_ns(frame: Frame, index: int) -> int:
 def pinhole_info(K: np.ndarray, width: int, height: int) -> CameraInfoData:
     """A distortion-free CameraInfo of intrinsics ``K`` for a ``width`` x ``height`` image (frame id ``camera``)."""
     K = np.asarray(K, dtype=np.float64)
-    return CameraInfoData(width, height, K, np.zeros(5), np.eye(3), np.hstack([K, np.zeros((3, 1))]), "plumb_bob",
-                          "camera")  # fmt: skip
+    return CameraInfoData(
+        width, height, K, np.zeros(5), np.eye(3), np.hstack([K, np.zeros((3, 1))]), "plumb_bob", "camera"
+    )
 
 
 def frame_camera(frame: Frame) -> tuple[str, CameraInfoData | None]:
@@ -107,9 +108,18 @@ class RobotFrame:
     T_cam_lidar: np.ndarray | None = None
 
     @classmethod
-    def build(cls, stamp: int, frame_id: str, depth: np.ndarray, info: CameraInfoData, rgb: np.ndarray | None = None,
-              K: np.ndarray | None = None, uncertainty: np.ndarray | None = None, keep: np.ndarray | None = None,
-              max_depth: float | None = None) -> RobotFrame:  # fmt: skip
+    def build(
+        cls,
+        stamp: int,
+        frame_id: str,
+        depth: np.ndarray,
+        info: CameraInfoData,
+        rgb: np.ndarray | None = None,
+        K: np.ndarray | None = None,
+        uncertainty: np.ndarray | None = None,
+        keep: np.ndarray | None = None,
+        max_depth: float | None = None,
+    ) -> RobotFrame:
         """A frame of arrays: ``depth`` (H, W) metres (<= 0 or NaN = hole) of ``info``'s size, ``rgb`` the
         cloud's colours, ``K`` (default ``info``'s), ``keep`` the pixels the cloud keeps (default all)."""
         from semattnet.geometry import depth_to_points
@@ -121,8 +131,7 @@ class RobotFrame:
         if unc is not None and unc.shape != d.shape:
             raise InputError(f"uncertainty: shape {unc.shape} differs from the depth's {d.shape}")
         K = info.intrinsics() if K is None else np.asarray(K, dtype=np.float64)
-        cloud = depth_to_points(np.nan_to_num(d, nan=0.0), K, rgb=rgb, max_depth=max_depth, frame=frame_id,
-                                mask=keep)  # fmt: skip
+        cloud = depth_to_points(np.nan_to_num(d, nan=0.0), K, rgb=rgb, max_depth=max_depth, frame=frame_id, mask=keep)
         return cls(int(stamp), frame_id, "", d, unc, cloud, info)
 
     @staticmethod
@@ -134,8 +143,15 @@ class RobotFrame:
         return DEPTH_OUTPUTS | ({"uncertainty"} if uncertainty or max_uncertainty is not None else set())
 
     @classmethod
-    def of(cls, pred: Prediction, index: int = 0, uncertainty: bool = False, max_depth: float | None = None,
-           max_uncertainty: UncertaintyLimit | None = None, output: str = "a robot output") -> RobotFrame:  # fmt: skip
+    def of(
+        cls,
+        pred: Prediction,
+        index: int = 0,
+        uncertainty: bool = False,
+        max_depth: float | None = None,
+        max_uncertainty: UncertaintyLimit | None = None,
+        output: str = "a robot output",
+    ) -> RobotFrame:
         """The frame of a prediction: the stored depth (and, with ``uncertainty``, the stored uncertainty);
         ``output`` names what needs it in the errors."""
         from dataclasses import replace
@@ -150,8 +166,17 @@ class RobotFrame:
             unc = pred.uncertainty_stored
             if unc is None:
                 raise InputError(f"{frame.name}: --uncertainty: the method gives no per-pixel uncertainty")
-        out = cls.build(stamp_ns(frame, index), frame_id, pred.stored, info, rgb=frame.rgb, K=frame.K,
-                        uncertainty=unc, keep=pred.keep(max_uncertainty), max_depth=max_depth)  # fmt: skip
+        out = cls.build(
+            stamp_ns(frame, index),
+            frame_id,
+            pred.stored,
+            info,
+            rgb=frame.rgb,
+            K=frame.K,
+            uncertainty=unc,
+            keep=pred.keep(max_uncertainty),
+            max_depth=max_depth,
+        )
         T = None if frame.calib is None else np.asarray(frame.calib.T_cam_lidar, dtype=np.float64)
         return replace(out, lidar_frame_id=frame.meta.lidar_frame_id, T_cam_lidar=T)
 

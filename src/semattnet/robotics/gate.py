@@ -70,8 +70,15 @@ class Gate:
         handshake_s: seconds for a client's first request (:data:`HANDSHAKE_S`).
     """
 
-    def __init__(self, host: str, port: int, upstream: tuple[str, int], *, max_clients: int = MAX_CLIENTS,
-                 handshake_s: float = HANDSHAKE_S) -> None:  # fmt: skip
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        upstream: tuple[str, int],
+        *,
+        max_clients: int = MAX_CLIENTS,
+        handshake_s: float = HANDSHAKE_S,
+    ) -> None:
         self.host, self.upstream = host, upstream
         self.max_clients, self.handshake_s = max_clients, handshake_s
         self.port = port
@@ -107,8 +114,13 @@ class Gate:
         self._clients.add(task)
         try:
             await self._relay(reader, writer)
-        except (OSError, asyncio.TimeoutError, asyncio.IncompleteReadError, asyncio.LimitOverrunError,
-                asyncio.CancelledError):  # fmt: skip
+        except (
+            OSError,
+            asyncio.TimeoutError,
+            asyncio.IncompleteReadError,
+            asyncio.LimitOverrunError,
+            asyncio.CancelledError,
+        ):
             pass  # a client that went away, never finished its request or sent too much, or close(): closed below
         finally:
             self._clients.discard(task)

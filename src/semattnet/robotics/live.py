@@ -94,8 +94,15 @@ def _image(m: ModuleType, stamp: object, frame_id: str, data: np.ndarray, encodi
     """A RawImage of a (H, W) float32 map (``32FC1``) or an (H, W, 3) uint8 image (``rgb8``)."""
     data = np.ascontiguousarray(data)
     h, w = data.shape[:2]
-    return m.RawImage(timestamp=stamp, frame_id=frame_id, width=w, height=h, encoding=encoding,
-                      step=data.strides[0], data=data.tobytes())  # fmt: skip
+    return m.RawImage(
+        timestamp=stamp,
+        frame_id=frame_id,
+        width=w,
+        height=h,
+        encoding=encoding,
+        step=data.strides[0],
+        data=data.tobytes(),
+    )
 
 
 def _depth_image(m: ModuleType, stamp: object, frame_id: str, depth: np.ndarray) -> object:
@@ -105,8 +112,9 @@ def _depth_image(m: ModuleType, stamp: object, frame_id: str, depth: np.ndarray)
 
 
 #: The PointCloud layout: x, y, z float32 and red, green, blue, alpha uint8 (16 bytes a point).
-_CLOUD_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"),
-                         ("red", "u1"), ("green", "u1"), ("blue", "u1"), ("alpha", "u1")])  # fmt: skip
+_CLOUD_DTYPE = np.dtype(
+    [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1"), ("alpha", "u1")]
+)
 
 
 def _cloud(m: ModuleType, stamp: object, frame_id: str, cloud: PointCloud) -> object:
@@ -119,11 +127,19 @@ def _cloud(m: ModuleType, stamp: object, frame_id: str, cloud: PointCloud) -> ob
         packed[channel] = rgb[:, i]
     packed["alpha"] = 255
     T = m.PackedElementFieldNumericType
-    fields = [m.PackedElementField(name=name, offset=offset, type=T.Float32 if name in "xyz" else T.Uint8)
-              for name, (_, offset, *_) in (_CLOUD_DTYPE.fields or {}).items()]  # fmt: skip
+    fields = [
+        m.PackedElementField(name=name, offset=offset, type=T.Float32 if name in "xyz" else T.Uint8)
+        for name, (_, offset, *_) in (_CLOUD_DTYPE.fields or {}).items()
+    ]
     pose = m.Pose(position=m.Vector3(x=0.0, y=0.0, z=0.0), orientation=m.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
-    return m.PointCloud(timestamp=stamp, frame_id=frame_id, pose=pose, point_stride=_CLOUD_DTYPE.itemsize,
-                        fields=fields, data=packed.tobytes())  # fmt: skip
+    return m.PointCloud(
+        timestamp=stamp,
+        frame_id=frame_id,
+        pose=pose,
+        point_stride=_CLOUD_DTYPE.itemsize,
+        fields=fields,
+        data=packed.tobytes(),
+    )
 
 
 def _calibration(m: ModuleType, stamp: object, frame_id: str, info: CameraInfoData) -> object:
@@ -132,9 +148,17 @@ def _calibration(m: ModuleType, stamp: object, frame_id: str, info: CameraInfoDa
     def flat(a: np.ndarray) -> list[float]:
         return [float(v) for v in np.asarray(a, dtype=np.float64).ravel()]
 
-    return m.CameraCalibration(timestamp=stamp, frame_id=frame_id, width=int(info.width), height=int(info.height),
-                               distortion_model=str(info.distortion_model or "plumb_bob"), D=flat(info.D),
-                               K=flat(info.K), R=flat(info.R), P=flat(info.P))  # fmt: skip
+    return m.CameraCalibration(
+        timestamp=stamp,
+        frame_id=frame_id,
+        width=int(info.width),
+        height=int(info.height),
+        distortion_model=str(info.distortion_model or "plumb_bob"),
+        D=flat(info.D),
+        K=flat(info.K),
+        R=flat(info.R),
+        P=flat(info.P),
+    )
 
 
 def _transform(m: ModuleType, stamp: object, parent: str, child: str, T_parent_child: np.ndarray) -> object:
@@ -144,9 +168,13 @@ def _transform(m: ModuleType, stamp: object, parent: str, child: str, T_parent_c
     T = np.asarray(T_parent_child, dtype=np.float64)
     x, y, z, w = matrix_to_quaternion(T[:3, :3])
     t = [float(v) for v in T[:3, 3]]
-    tf = m.FrameTransform(timestamp=stamp, parent_frame_id=parent, child_frame_id=child,
-                          translation=m.Vector3(x=t[0], y=t[1], z=t[2]),
-                          rotation=m.Quaternion(x=x, y=y, z=z, w=w))  # fmt: skip
+    tf = m.FrameTransform(
+        timestamp=stamp,
+        parent_frame_id=parent,
+        child_frame_id=child,
+        translation=m.Vector3(x=t[0], y=t[1], z=t[2]),
+        rotation=m.Quaternion(x=x, y=y, z=z, w=w),
+    )
     return m.FrameTransforms(transforms=[tf])
 
 
@@ -189,9 +217,13 @@ class LiveOptions(SinkOptions):
 
     needs_intrinsics: ClassVar[bool] = True
     clouds: ClassVar[str] = "always"
-    live: str | None = option("--live", type="address", identity=False,
-                              help="Serve the frames as they are completed over the Foxglove WebSocket protocol "
-                              "(HOST: 127.0.0.1 unless given).  [extra: live]")  # fmt: skip
+    live: str | None = option(
+        "--live",
+        type="address",
+        identity=False,
+        help="Serve the frames as they are completed over the Foxglove WebSocket protocol "
+        "(HOST: 127.0.0.1 unless given).  [extra: live]",
+    )
 
     def sinks(self, settings: OutputSettings) -> list[Sink]:
         if self.live is None:
@@ -255,8 +287,9 @@ class LiveSink(RunSink):
         self._context = context = fg.Context()
         newer = {"message_backlog_size": BACKLOG}  # older foxglove-sdk releases lack it
         try:  # the server on a private loopback port, the clients through the gate on the address asked for
-            self._server = server = call_with_newer(fg.start_server, newer, name="semattnet", host="127.0.0.1", port=0,
-                                                    context=context)  # fmt: skip
+            self._server = server = call_with_newer(
+                fg.start_server, newer, name="semattnet", host="127.0.0.1", port=0, context=context
+            )
             self._gate = Gate(host, port, ("127.0.0.1", int(server.port)))
             self._gate.start()
         except (RuntimeError, OSError) as e:
@@ -318,8 +351,9 @@ class LiveSink(RunSink):
         self._log("latency", t_ns, lambda: {"frame": frame.name, "stamp_ns": t_ns, "stages_ms": stages})
 
     def _robot(self, pred: Prediction) -> RobotFrame:
-        return RobotFrame.of(pred, self._count, max_depth=self.max_depth, max_uncertainty=self.max_uncertainty,
-                             output="the live view")  # fmt: skip
+        return RobotFrame.of(
+            pred, self._count, max_depth=self.max_depth, max_uncertainty=self.max_uncertainty, output="the live view"
+        )
 
     def _stop(self) -> None:
         """Drop the clients (the gate), then stop the server: bounded whatever the clients do."""

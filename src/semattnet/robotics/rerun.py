@@ -88,9 +88,18 @@ class RerunLogger:
             viewer), None without ``serve``.
     """
 
-    def __init__(self, path: str | os.PathLike[str] | None = None, spawn: bool = False, overwrite: bool = False,
-                 app_id: str = "semattnet", max_depth: float | None = None, serve: bool = False,
-                 grpc_port: int = 9876, web_port: int | None = None, host: str = "127.0.0.1") -> None:  # fmt: skip
+    def __init__(
+        self,
+        path: str | os.PathLike[str] | None = None,
+        spawn: bool = False,
+        overwrite: bool = False,
+        app_id: str = "semattnet",
+        max_depth: float | None = None,
+        serve: bool = False,
+        grpc_port: int = 9876,
+        web_port: int | None = None,
+        host: str = "127.0.0.1",
+    ) -> None:
         if path is None and not spawn and not serve:
             raise InputError("RerunLogger: give a .rrd path, spawn=True, serve=True, or several")
         self.path = None if path is None else Path(path)
@@ -115,8 +124,9 @@ class RerunLogger:
             raise
         self._log_static(rr)
 
-    def _set_sinks(self, rr: ModuleType, spawn: bool, serve: bool, host: str, grpc_port: int,
-                   web_port: int | None) -> None:  # fmt: skip
+    def _set_sinks(
+        self, rr: ModuleType, spawn: bool, serve: bool, host: str, grpc_port: int, web_port: int | None
+    ) -> None:
         """The file, the spawned viewer and the served stream + web viewer, as asked."""
         if spawn:
             self.rec.spawn(connect=self._tmp is None and not serve)
@@ -155,11 +165,21 @@ class RerunLogger:
     def __enter__(self) -> RerunLogger:
         return self
 
-    def log_frame(self, stamp_ns: int, rgb: np.ndarray, K: np.ndarray, T_cam_lidar: np.ndarray, *,
-                  sparse: np.ndarray | None = None, depth: np.ndarray | None = None,
-                  semantic: np.ndarray | None = None, points: np.ndarray | None = None,
-                  uncertainty: np.ndarray | None = None, keep: np.ndarray | None = None,
-                  cloud: PointCloud | None = None) -> None:  # fmt: skip
+    def log_frame(
+        self,
+        stamp_ns: int,
+        rgb: np.ndarray,
+        K: np.ndarray,
+        T_cam_lidar: np.ndarray,
+        *,
+        sparse: np.ndarray | None = None,
+        depth: np.ndarray | None = None,
+        semantic: np.ndarray | None = None,
+        points: np.ndarray | None = None,
+        uncertainty: np.ndarray | None = None,
+        keep: np.ndarray | None = None,
+        cloud: PointCloud | None = None,
+    ) -> None:
         """One frame at sensor time ``stamp_ns``: ``rgb`` (H, W, 3) uint8, ``K`` (3, 3), ``T_cam_lidar`` (4, 4);
         optional ``sparse`` / ``depth`` / ``uncertainty`` (H, W) metres (0 = none), ``semantic`` (H, W) trainIds
         or (H, W, 3) palette colours, ``points`` (N, 3|4) LiDAR frame; ``keep`` (H, W) bool: the pixels of
@@ -230,8 +250,9 @@ class RerunLogger:
             if self._tmp is not None and self._tmp.exists():
                 self._tmp.unlink()
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:  # fmt: skip
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
         self._finish(ok=exc_type is None)
 
 

@@ -98,15 +98,21 @@ class BagOutOptions(SinkOptions):
 
     needs_intrinsics: ClassVar[bool] = True
     clouds: ClassVar[str] = "always"
-    bag_out: Path | None = option("--bag-out", type="out-path", help="Also write a ROS 2 bag (MCAP; ROS 1 for .bag): "
-                                  "depth 32FC1, coloured cloud, CameraInfo.")  # fmt: skip
+    bag_out: Path | None = option(
+        "--bag-out",
+        type="out-path",
+        help="Also write a ROS 2 bag (MCAP; ROS 1 for .bag): depth 32FC1, coloured cloud, CameraInfo.",
+    )
 
     def sinks(self, settings: OutputSettings) -> list[Sink]:
         if self.bag_out is None:
             return []
         s = settings
-        return [BagSink(target=self.bag_out, max_depth=s.max_depth, uncertainty=s.uncertainty,
-                        max_uncertainty=s.max_uncertainty)]  # fmt: skip
+        return [
+            BagSink(
+                target=self.bag_out, max_depth=s.max_depth, uncertainty=s.uncertainty, max_uncertainty=s.max_uncertainty
+            )
+        ]
 
 
 #: Where ``--rerun-serve`` without a value serves the recording (Rerun's own default port, this machine only).
@@ -119,22 +125,38 @@ class RerunOptions(SinkOptions):
 
     needs_intrinsics: ClassVar[bool] = True
     clouds: ClassVar[str] = "always"
-    rerun_file: Path | None = option("--rerun", type="out-file",
-                                     help="Also write a Rerun recording FILE.rrd.  [extra: rerun]")  # fmt: skip
-    rerun_spawn: bool = option("--rerun-spawn", type="flag", identity=False,
-                               help="Stream the frames to a spawned Rerun viewer.")  # fmt: skip
-    rerun_serve: str | None = option("--rerun-serve", type="address", flag_value=RERUN_SERVE, identity=False,
-                                     metavar="[[HOST:]PORT]",
-                                     help=f"Serve the frames to Rerun viewers as they are completed, on [HOST:]PORT "
-                                     f"(alone: {RERUN_SERVE}; a HOST other than this machine's also serves the web "
-                                     "viewer).  [extra: rerun]")  # fmt: skip
+    rerun_file: Path | None = option(
+        "--rerun", type="out-file", help="Also write a Rerun recording FILE.rrd.  [extra: rerun]"
+    )
+    rerun_spawn: bool = option(
+        "--rerun-spawn", type="flag", identity=False, help="Stream the frames to a spawned Rerun viewer."
+    )
+    rerun_serve: str | None = option(
+        "--rerun-serve",
+        type="address",
+        flag_value=RERUN_SERVE,
+        identity=False,
+        metavar="[[HOST:]PORT]",
+        help=f"Serve the frames to Rerun viewers as they are completed, on [HOST:]PORT "
+        f"(alone: {RERUN_SERVE}; a HOST other than this machine's also serves the web "
+        "viewer).  [extra: rerun]",
+    )
 
     def sinks(self, settings: OutputSettings) -> list[Sink]:
         if not self.asked():
             return []
         s = settings
-        return [RerunSink(target=self.rerun_file, spawn=self.rerun_spawn, serve=self.rerun_serve, max_depth=s.max_depth,
-                          log=s.log, uncertainty=s.uncertainty, max_uncertainty=s.max_uncertainty)]  # fmt: skip
+        return [
+            RerunSink(
+                target=self.rerun_file,
+                spawn=self.rerun_spawn,
+                serve=self.rerun_serve,
+                max_depth=s.max_depth,
+                log=s.log,
+                uncertainty=s.uncertainty,
+                max_uncertainty=s.max_uncertainty,
+            )
+        ]
 
 
 @register_sink("bag", option="--bag-out", options=BagOutOptions)
@@ -248,9 +270,15 @@ class RerunSink(_StagedTarget):
             host, port = parse_address(self.serve, "--rerun-serve")
             web_port = None if is_loopback(host) else WEB_PORT  # rerun binds its web viewer to every interface
         with self._full_disk():
-            self._logger = logger = RerunLogger(path, spawn=self.spawn, max_depth=self.max_depth,
-                                                serve=self.serve is not None, grpc_port=port, web_port=web_port,
-                                                host=host)  # fmt: skip
+            self._logger = logger = RerunLogger(
+                path,
+                spawn=self.spawn,
+                max_depth=self.max_depth,
+                serve=self.serve is not None,
+                grpc_port=port,
+                web_port=web_port,
+                host=host,
+            )
         if self.log is not None and logger.grpc_url is not None:
             if not is_loopback(host):
                 self.log(exposed("--rerun-serve", host, logger.grpc_url))
@@ -267,11 +295,25 @@ class RerunSink(_StagedTarget):
         if self._logger is None:
             raise InputError("the Rerun recording is not open (call open() first)")
         with self._full_disk():
-            robot = RobotFrame.of(pred, self._count, max_depth=self.max_depth, max_uncertainty=self.max_uncertainty,
-                                  output="the Rerun recording")  # fmt: skip
-            self._logger.log_frame(stamp_ns(frame, self._count), frame.rgb, frame.K, np.eye(4) if T is None else T,
-                                   sparse=frame.sparse, depth=pred.stored, semantic=frame.semantic,
-                                   points=frame.points, uncertainty=unc, cloud=robot.cloud)  # fmt: skip
+            robot = RobotFrame.of(
+                pred,
+                self._count,
+                max_depth=self.max_depth,
+                max_uncertainty=self.max_uncertainty,
+                output="the Rerun recording",
+            )
+            self._logger.log_frame(
+                stamp_ns(frame, self._count),
+                frame.rgb,
+                frame.K,
+                np.eye(4) if T is None else T,
+                sparse=frame.sparse,
+                depth=pred.stored,
+                semantic=frame.semantic,
+                points=frame.points,
+                uncertainty=unc,
+                cloud=robot.cloud,
+            )
         self._count += 1
 
     def finish(self, stage: Path) -> None:

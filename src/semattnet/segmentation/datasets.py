@@ -32,9 +32,16 @@ def semantic_cache(dataset: str, root: PathLike, spec: str, palette: str, cache_
     return get_cache_dir(cache_dir) / "semantic" / f"{dataset}-{key}"
 
 
-def segment_split(dataset: str, root: PathLike, splits: tuple[str, ...], spec: str, device: str = "auto",
-                  cache_dir: PathLike | None = None, log: Callable[[str], None] = print,
-                  max_frames: int | None = None) -> Path:  # fmt: skip
+def segment_split(
+    dataset: str,
+    root: PathLike,
+    splits: tuple[str, ...],
+    spec: str,
+    device: str = "auto",
+    cache_dir: PathLike | None = None,
+    log: Callable[[str], None] = print,
+    max_frames: int | None = None,
+) -> Path:
     """Segment the frames of ``splits`` of ``dataset`` under ``root`` with ``spec`` (a
     :func:`~semattnet.segmentation.load_segmenter` SPEC; its maps in the dataset's palette) into
     :func:`semantic_cache`; returns that folder. The segmenter is loaded only when a map is missing.

@@ -29,8 +29,14 @@ from semattnet._errors import DataError, InputError
 from semattnet._utils.extras import require
 from semattnet.palette import NUM_CLASSES, TRAIN_CLASSES
 
-__all__ = ["HF_SEGMENTERS", "HFSegmenterRecord", "cityscapes_indices", "hf_palette", "load_hf_network",
-           "resolve_hf_source"]  # fmt: skip
+__all__ = [
+    "HF_SEGMENTERS",
+    "HFSegmenterRecord",
+    "cityscapes_indices",
+    "hf_palette",
+    "load_hf_network",
+    "resolve_hf_source",
+]
 
 
 @dataclass(frozen=True)
@@ -212,8 +218,9 @@ def _groups(rest: str, id2label: Mapping[int, str] | Mapping[str, str], palette:
     return groups
 
 
-def load_hf_network(rest: str, device: torch.device | str = "cpu",
-                    palette: str | None = None) -> Callable[[torch.Tensor], torch.Tensor]:  # fmt: skip
+def load_hf_network(
+    rest: str, device: torch.device | str = "cpu", palette: str | None = None
+) -> Callable[[torch.Tensor], torch.Tensor]:
     """The network of ``hf:<rest>``: normalised (B, 3, H, W) RGB -> (B, C, h, w) scores of ``palette``'s
     classes (None: :func:`hf_palette`): C = 19 Cityscapes trainIds, or 40 NYU-40 ids 1..40 in order.
 

@@ -22,13 +22,30 @@ __all__ = ["NYU40_VARIANTS", "nyu40_class", "nyu40_indices"]
 
 #: Normalised model label -> NYU-40 class name, for ADE20K names that neither NYU-40 nor NYU's raw names hold.
 NYU40_VARIANTS: Mapping[str, str] = {
-    "windowpane": "window", "window": "window", "painting": "picture", "poster": "picture", "shelf": "shelves",
-    "armchair": "chair", "swivelchair": "chair", "seat": "chair", "cushion": "pillow", "chestofdrawers": "dresser",
-    "bookcase": "bookshelf", "blind": "blinds", "countertop": "counter", "televisionreceiver": "television",
-    "crtscreen": "television", "apparel": "clothes", "screendoor": "door", "stairway": "otherstructure",
-    "bannister": "otherstructure", "ashcan": "otherfurniture", "buffet": "otherfurniture", "sconce": "lamp",
+    "windowpane": "window",
+    "window": "window",
+    "painting": "picture",
+    "poster": "picture",
+    "shelf": "shelves",
+    "armchair": "chair",
+    "swivelchair": "chair",
+    "seat": "chair",
+    "cushion": "pillow",
+    "chestofdrawers": "dresser",
+    "bookcase": "bookshelf",
+    "blind": "blinds",
+    "countertop": "counter",
+    "televisionreceiver": "television",
+    "crtscreen": "television",
+    "apparel": "clothes",
+    "screendoor": "door",
+    "stairway": "otherstructure",
+    "bannister": "otherstructure",
+    "ashcan": "otherfurniture",
+    "buffet": "otherfurniture",
+    "sconce": "lamp",
     "refridgerator": "refrigerator",
-}  # fmt: skip
+}
 
 
 def _norm(name: str) -> str:

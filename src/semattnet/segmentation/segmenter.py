@@ -142,8 +142,10 @@ class Segmenter:
 
     def _nyu40_ids(self, out: torch.Tensor, size: tuple[int, int]) -> np.ndarray:
         if out.dim() != 4 or out.shape[1] not in (NYU40, NYU40 + 1):
-            raise DataError(f"{self.name}: expected (B, 40, H, W) NYU-40 scores (or 41 with unlabelled first), got "
-                            f"shape {tuple(out.shape)}")  # fmt: skip
+            raise DataError(
+                f"{self.name}: expected (B, 40, H, W) NYU-40 scores (or 41 with unlabelled first), got "
+                f"shape {tuple(out.shape)}"
+            )
         ids = F.interpolate(out.float(), size=size, mode="bilinear", align_corners=False).argmax(dim=1)
         return (ids + (1 if out.shape[1] == NYU40 else 0)).to(torch.uint8).cpu().numpy()
 
@@ -317,8 +319,14 @@ def segment_folder(
     check_outputs([("--images", images), *model], [Output("--out", out, "folder"), *replaced], overwrite)
     todo = [(f, t) for f, t in zip(files, targets, strict=True) if overwrite or not t.exists()]
     written = 0
-    with progress_bar(total=len(files), initial=len(files) - len(todo), desc="segmenting", unit="image",
-                  enabled=progress, dynamic_ncols=True) as bar:  # fmt: skip
+    with progress_bar(
+        total=len(files),
+        initial=len(files) - len(todo),
+        desc="segmenting",
+        unit="image",
+        enabled=progress,
+        dynamic_ncols=True,
+    ) as bar:
         for batch in _batches(((f, t, read_image(f)) for f, t in todo), batch_size):
             ids = segmenter(np.stack([img for _, _, img in batch]))
             for (_, target, _), m in zip(batch, ids, strict=True):

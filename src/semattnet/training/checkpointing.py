@@ -64,9 +64,11 @@ class BranchCheckpointing:
         if not (self.module.training and torch.is_grad_enabled()):
             return branch(*inputs)
         return torch.utils.checkpoint.checkpoint(
-            branch, *inputs, use_reentrant=False,
+            branch,
+            *inputs,
+            use_reentrant=False,
             context_fn=lambda: (contextlib.nullcontext(), _frozen_running_stats(self.module)),
-        )  # fmt: skip
+        )
 
 
 def set_activation_checkpointing(model: nn.Module, enabled: bool = True) -> int:

@@ -31,14 +31,20 @@ ParamGroup = dict[str, list[nn.Parameter] | float | None]
 _INPUTS = ("rgb", "semantic", "sparse")
 
 
-def authors_adam(params: ParamsT, lr: float, betas: tuple[float, float] = (0.9, 0.99),
-                 weight_decay: float = 1e-6) -> torch.optim.Adam:  # fmt: skip
+def authors_adam(
+    params: ParamsT, lr: float, betas: tuple[float, float] = (0.9, 0.99), weight_decay: float = 1e-6
+) -> torch.optim.Adam:
     """The authors' optimiser: ``torch.optim.Adam`` in its single-tensor form."""
     return torch.optim.Adam(params, lr=lr, betas=betas, weight_decay=weight_decay, foreach=False, fused=False)
 
 
-def make_adam(params: Iterable[torch.Tensor] | list[ParamGroup], device: torch.device, lr: float = 1e-3,
-              betas: tuple[float, float] = (0.9, 0.999), weight_decay: float = 0.0) -> torch.optim.Adam:  # fmt: skip
+def make_adam(
+    params: Iterable[torch.Tensor] | list[ParamGroup],
+    device: torch.device,
+    lr: float = 1e-3,
+    betas: tuple[float, float] = (0.9, 0.999),
+    weight_decay: float = 0.0,
+) -> torch.optim.Adam:
     """Our optimiser: the same Adam, fused (one kernel over all parameters) where PyTorch has it for
     ``device`` (CUDA, and the CPU since PyTorch 2.4), else ``foreach`` (multi-tensor). ``lr``,
     ``betas`` and ``weight_decay`` are Adam's (and its defaults); parameter groups may set their own ``lr``."""
@@ -51,8 +57,13 @@ def make_adam(params: Iterable[torch.Tensor] | list[ParamGroup], device: torch.d
     return torch.optim.Adam(params, lr=lr, betas=betas, weight_decay=weight_decay, foreach=True)
 
 
-def authors_step(model: nn.Module, optimizer: torch.optim.Optimizer, batch: Mapping[str, torch.Tensor],
-                 device: torch.device, branch_weight: float = 0.0) -> float:  # fmt: skip
+def authors_step(
+    model: nn.Module,
+    optimizer: torch.optim.Optimizer,
+    batch: Mapping[str, torch.Tensor],
+    device: torch.device,
+    branch_weight: float = 0.0,
+) -> float:
     """One step as the authors train: batch copied to the device, naive propagation, ``zero_grad()`` in place."""
     batch = {k: v.to(device) for k, v in batch.items()}
     refined = model if isinstance(model, AtrousCSPNRefinement) else None
@@ -71,9 +82,16 @@ def authors_step(model: nn.Module, optimizer: torch.optim.Optimizer, batch: Mapp
     return loss.item()
 
 
-def our_step(model: nn.Module, optimizer: torch.optim.Optimizer, batch: Mapping[str, torch.Tensor],
-             device: torch.device, branch_weight: float = 0.0, amp: str = "none",
-             scaler: torch.amp.GradScaler | None = None, loss: str = "l2") -> torch.Tensor:  # fmt: skip
+def our_step(
+    model: nn.Module,
+    optimizer: torch.optim.Optimizer,
+    batch: Mapping[str, torch.Tensor],
+    device: torch.device,
+    branch_weight: float = 0.0,
+    amp: str = "none",
+    scaler: torch.amp.GradScaler | None = None,
+    loss: str = "l2",
+) -> torch.Tensor:
     """One step of our trainer: the batch moved (not copied) to the device, the shifted propagation
     with its hand-written backward, gradients set to ``None``, AMP-aware; returns the loss tensor."""
     x = {k: batch[k].to(device, non_blocking=True) for k in _INPUTS}

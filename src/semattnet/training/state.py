@@ -2,13 +2,19 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TypedDict
 
 import numpy as np
 import numpy.typing as npt
 import torch
 
-__all__ = ["ResumeState", "RngStates", "TrainResult", "TrainState"]
+from semattnet.weights.checkpoint import CheckpointError, load_checkpoint
+
+__all__ = ["TRAIN_FORMAT", "ResumeState", "RngStates", "TrainResult", "TrainState", "read_train_state"]
+
+#: The ``format`` of a training checkpoint's state.
+TRAIN_FORMAT = "semattnet-train-v1"
 
 
 class TrainResult(TypedDict):
@@ -49,3 +55,27 @@ class TrainState(ResumeState):
     """A training checkpoint besides its digest: the resume state and the model's config (for ``load_model``)."""
 
     config: dict[str, object]
+
+
+def read_train_state(path: Path) -> ResumeState:
+    """The state of a training run's checkpoint ``path`` that :meth:`~.trainer.Trainer` resumes from (a one-line
+    :class:`~semattnet.weights.checkpoint.CheckpointError` when it is missing or not a training checkpoint)."""
+    if not path.is_file():
+        raise CheckpointError(f"{path}: nothing to resume from")
+    ckpt = load_checkpoint(path)
+    extra = ckpt.extra
+    if extra.get("format") != TRAIN_FORMAT or ckpt.epoch is None:
+        raise CheckpointError(f"{path}: not a semattnet training checkpoint (no optimiser state to resume)")
+    return ResumeState(
+        format=extra["format"],
+        model=ckpt.state_dict,
+        train_config=extra["train_config"],
+        optimizer=extra["optimizer"],
+        scheduler=extra["scheduler"],
+        scaler=extra["scaler"],
+        rng=extra["rng"],
+        epoch=ckpt.epoch,
+        batch_in_epoch=extra["batch_in_epoch"],
+        global_step=extra["global_step"],
+        best_metric=extra["best_metric"],
+    )

@@ -9,11 +9,8 @@ order are restored (data order and augmentation are functions of (seed, epoch, i
 
 from __future__ import annotations
 
-import csv
 import math
-import os
 import random
-import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import partial
@@ -43,9 +40,10 @@ from semattnet.models.semattnet import SemAttNet
 from semattnet.training.checkpointing import set_activation_checkpointing
 from semattnet.training.config import TrainConfig
 from semattnet.training.reference import ParamGroup, make_adam, our_step
-from semattnet.training.state import ResumeState, RngStates, TrainResult, TrainState
+from semattnet.training.state import TRAIN_FORMAT, ResumeState, RngStates, TrainResult, TrainState, read_train_state
+from semattnet.training.train_folder import RUN_FILES, prepare_run_folder, run_files, truncate_log, write_log_row
 from semattnet.training.validation import validate_model
-from semattnet.weights.checkpoint import CheckpointError, load_checkpoint, load_weights
+from semattnet.weights.checkpoint import load_checkpoint, load_weights
 from semattnet.weights.gate import DIGEST_KEY, tensor_digest
 
 if TYPE_CHECKING:
@@ -53,9 +51,6 @@ if TYPE_CHECKING:
 
 __all__ = ["RUN_FILES", "TrainResult", "Trainer", "prepare_run_folder", "train"]
 
-_TRAIN_FORMAT = "semattnet-train-v1"
-#: What a run writes into its folder (``--overwrite`` removes exactly these, nothing else).
-RUN_FILES = ("config.json", "log.csv", "curves.png", "checkpoints/last.pt", "checkpoints/best.pt")
 _SYNC_BN_CPU = (
     "sync_bn needs CUDA (NCCL); set sync_bn=false: on CPU each process keeps its own BatchNorm "
     "statistics (a multi-process CPU run averages gradients, not BatchNorm statistics)"
@@ -96,7 +91,7 @@ class Trainer:
         self.ckpt_dir = self.out / "checkpoints"
         state = None
         if resume:
-            state = self._read_state(self.ckpt_dir / "last.pt")
+            state = read_train_state(self.ckpt_dir / "last.pt")
             # The run may have moved: keep writing where it is now.
             cfg = TrainConfig.from_dict(state["train_config"] | {"out": str(cfg.out)})
         self.cfg = cfg
@@ -117,24 +112,36 @@ class Trainer:
             self._restore(state)
         self.tb = self._open_run_folder() if self.main else None
         if state is not None and self.main:
-            _truncate_log(self.out / "log.csv", self.pos.step)
+            truncate_log(self.out / "log.csv", self.pos.step)
 
     # ----------------------------------------------------------------------------- setup
     def _build_data(self) -> None:
         """The training set, its resumable sampler and loader, and the validation loader."""
         cfg = self.cfg
         self.semantic_root = self._segmented() if cfg.segment else cfg.semantic_root
-        self.train_set = get_dataset(cfg.dataset).dataset(cfg.data, "train", train=True, seed=cfg.seed,
-                                                          raw_root=cfg.raw_root, semantic_root=self.semantic_root,
-                                                          config=cfg)  # fmt: skip
+        self.train_set = get_dataset(cfg.dataset).dataset(
+            cfg.data,
+            "train",
+            train=True,
+            seed=cfg.seed,
+            raw_root=cfg.raw_root,
+            semantic_root=self.semantic_root,
+            config=cfg,
+        )
         self.sampler = dist_utils.ResumableSampler(len(self.train_set), seed=cfg.seed)
         # The loader's own generator: starting an epoch's iterator must not draw from the global RNG,
         # or a resumed run (which starts a new iterator mid-epoch) would diverge from an uninterrupted one.
         self.loader_rng = torch.Generator()
-        self.loader = DataLoader(self.train_set, batch_size=cfg.batch_size, sampler=self.sampler,
-                                 generator=self.loader_rng,
-                                 num_workers=cfg.workers, drop_last=True, pin_memory=self.device.type == "cuda",
-                                 persistent_workers=False)  # fmt: skip
+        self.loader = DataLoader(
+            self.train_set,
+            batch_size=cfg.batch_size,
+            sampler=self.sampler,
+            generator=self.loader_rng,
+            num_workers=cfg.workers,
+            drop_last=True,
+            pin_memory=self.device.type == "cuda",
+            persistent_workers=False,
+        )
         if len(self.loader) == 0:
             raise DataError(
                 f"{len(self.train_set)} training frames per process is fewer than one batch of {cfg.batch_size}"
@@ -153,8 +160,9 @@ class Trainer:
                 self.optimizer, lambda step: 0.5 * (1.0 + math.cos(math.pi * min(step, total) / total))
             )
         else:  # the paper's: x0.1 when the validation RMSE stops improving
-            self.scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(self.optimizer, mode="min", factor=0.1,
-                                                                        patience=cfg.patience)  # fmt: skip
+            self.scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(
+                self.optimizer, mode="min", factor=0.1, patience=cfg.patience
+            )
         self.scaler = torch.amp.GradScaler(self.device.type, enabled=cfg.amp == "fp16")
 
     def _open_run_folder(self) -> SummaryWriter | None:
@@ -181,8 +189,14 @@ class Trainer:
     def _build_model(self, init_weights: bool) -> nn.Module:
         cfg = self.cfg
         arch = model_config(cfg.model).replace(refine=cfg.stage != "backbone")
-        model = build_model(config=arch, width=cfg.width, branches=cfg.branches, fusion=cfg.fusion,
-                            refinement_mode=cfg.refinement_mode, palette=get_dataset(cfg.dataset).palette)  # fmt: skip
+        model = build_model(
+            config=arch,
+            width=cfg.width,
+            branches=cfg.branches,
+            fusion=cfg.fusion,
+            refinement_mode=cfg.refinement_mode,
+            palette=get_dataset(cfg.dataset).palette,
+        )
         if isinstance(model, SemAttNet | SemAttNetRT):  # the refine-init and full stages
             if init_weights and not cfg.init:
                 raise InputError(f"stage {cfg.stage!r} starts from the previous stage's checkpoint: pass --init PATH")
@@ -221,14 +235,24 @@ class Trainer:
         if not cfg.val_split:
             return None
         if cfg.dataset == "kitti-dc":
-            ds: Dataset = KittiDepthCompletion(cfg.data, cfg.val_split, cfg.raw_root, cfg.semantic_root,
-                                               transform=EvalTransform(tuple(cfg.crop)))  # type: ignore[arg-type]  # fmt: skip
+            ds: Dataset = KittiDepthCompletion(
+                cfg.data,
+                cfg.val_split,
+                cfg.raw_root,
+                cfg.semantic_root,
+                transform=EvalTransform(tuple(cfg.crop)),  # type: ignore[arg-type]
+            )
         else:  # the protocol's frames, padded to multiples of 32 (validate_model crops them back)
             ds = get_dataset(cfg.dataset).dataset(cfg.data, cfg.val_split, semantic_root=self.semantic_root)
         if cfg.val_max_frames:
             ds = Subset(ds, range(min(cfg.val_max_frames, len(ds))))  # type: ignore[arg-type]
-        return DataLoader(ds, batch_size=1, sampler=dist_utils.ShardSampler(len(ds)), num_workers=cfg.workers,  # type: ignore[arg-type]
-                          generator=torch.Generator().manual_seed(cfg.seed))  # fmt: skip
+        return DataLoader(
+            ds,
+            batch_size=1,
+            sampler=dist_utils.ShardSampler(len(ds)),  # type: ignore[arg-type]
+            num_workers=cfg.workers,
+            generator=torch.Generator().manual_seed(cfg.seed),
+        )
 
     def _segmented(self) -> str:
         """``--segment``: the cached maps of the train and validation frames (rank 0 segments the missing)."""
@@ -236,8 +260,11 @@ class Trainer:
 
         cfg = self.cfg
         splits = ("train", *([cfg.val_split] if cfg.val_split and cfg.val_split != "train" else []))
-        return str(dist_utils.on_main(segment_split, cfg.dataset, cfg.data, splits, str(cfg.segment),
-                                      str(self.device), log=self.log))  # fmt: skip
+        return str(
+            dist_utils.on_main(
+                segment_split, cfg.dataset, cfg.data, splits, str(cfg.segment), str(self.device), log=self.log
+            )
+        )
 
     def _set_train_mode(self) -> None:
         self.model.train()
@@ -252,7 +279,7 @@ class Trainer:
         if torch.cuda.is_available():
             rng["cuda"] = torch.cuda.get_rng_state_all()
         return {
-            "format": _TRAIN_FORMAT,
+            "format": TRAIN_FORMAT,
             "model": _unwrap(self.model).state_dict(),
             "config": _unwrap(self.model).config.to_dict(),  # what load_checkpoint/load_model read
             "train_config": self.cfg.to_dict(),
@@ -265,19 +292,6 @@ class Trainer:
             "global_step": self.pos.step,
             "best_metric": self.pos.best,
         }
-
-    @staticmethod
-    def _read_state(path: Path) -> ResumeState:
-        if not path.is_file():
-            raise CheckpointError(f"{path}: nothing to resume from")
-        ckpt = load_checkpoint(path)
-        extra = ckpt.extra
-        if extra.get("format") != _TRAIN_FORMAT or ckpt.epoch is None:
-            raise CheckpointError(f"{path}: not a semattnet training checkpoint (no optimiser state to resume)")
-        return ResumeState(format=extra["format"], model=ckpt.state_dict, train_config=extra["train_config"],
-                            optimizer=extra["optimizer"], scheduler=extra["scheduler"], scaler=extra["scaler"],
-                            rng=extra["rng"], epoch=ckpt.epoch, batch_in_epoch=extra["batch_in_epoch"],
-                            global_step=extra["global_step"], best_metric=extra["best_metric"])  # fmt: skip
 
     def _restore(self, state: ResumeState) -> None:
         load_weights(_unwrap(self.model), state["model"])
@@ -322,20 +336,8 @@ class Trainer:
 
     # ----------------------------------------------------------------------------- loop
     def _write_row(self, row: Mapping[str, float | str]) -> None:
-        if not self.main:
-            return
-        path = self.out / "log.csv"
-        fields = ["time", "epoch", "step", "split", "loss", "lr", "rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km"]
-        new = not path.exists()
-        with open(path, "a", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
-            if new:
-                w.writeheader()
-            w.writerow({"time": f"{time.time():.1f}", **row})
-        if self.tb is not None:
-            for key in ("loss", "lr", "rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km"):
-                if row.get(key) not in (None, ""):
-                    self.tb.add_scalar(f"{row['split']}/{key}", float(row[key]), int(row["step"]))
+        if self.main:
+            write_log_row(self.out / "log.csv", row, self.tb)
 
     def validate(self) -> dict[str, float] | None:
         if self.val_loader is None:
@@ -344,8 +346,10 @@ class Trainer:
         result = validate_model(self.model, self.val_loader, self.device, self.cfg.amp, metrics).compute()
         row: dict[str, float | str] = {"epoch": self.pos.epoch, "step": self.pos.step, "split": self.cfg.val_split}
         self._write_row(row | result)
-        self.log(f"epoch {self.pos.epoch}: {self.cfg.val_split} RMSE {result['rmse_mm']:.1f} mm, "
-                 f"MAE {result['mae_mm']:.1f} mm")  # fmt: skip
+        self.log(
+            f"epoch {self.pos.epoch}: {self.cfg.val_split} RMSE {result['rmse_mm']:.1f} mm, "
+            f"MAE {result['mae_mm']:.1f} mm"
+        )
         return result
 
     def fit(self) -> TrainResult:
@@ -381,8 +385,14 @@ class Trainer:
         self.loader_rng.manual_seed(cfg.seed * 1_000_003 + epoch)  # worker seeds: a function of (seed, epoch)
         weight = cfg.branch_weight(epoch)
         self._set_train_mode()
-        bar = progress(total=len(self.loader), initial=self.pos.batch, desc=f"epoch {epoch}",
-                       enabled=self.main, unit="batch", dynamic_ncols=True)  # fmt: skip
+        bar = progress(
+            total=len(self.loader),
+            initial=self.pos.batch,
+            desc=f"epoch {epoch}",
+            enabled=self.main,
+            unit="batch",
+            dynamic_ncols=True,
+        )
         loss = float("nan")
         with bar:
             for batch in self.loader:
@@ -391,22 +401,37 @@ class Trainer:
                 bar.set_postfix(loss=f"{loss:.3f}", lr=f"{self.optimizer.param_groups[0]['lr']:.2e}")
                 if self.pos.step % cfg.log_every == 0 or self.pos.batch == len(self.loader):
                     lr = self.optimizer.param_groups[0]["lr"]
-                    row: dict[str, float | str] = {"epoch": epoch, "step": self.pos.step, "split": "train",
-                                                   "loss": loss, "lr": lr}  # fmt: skip
+                    row: dict[str, float | str] = {
+                        "epoch": epoch,
+                        "step": self.pos.step,
+                        "split": "train",
+                        "loss": loss,
+                        "lr": lr,
+                    }
                     self._write_row(row)
                 if cfg.save_every and self.pos.step % cfg.save_every == 0:
                     self.save(periodic=True)
                 if cfg.max_steps and self.pos.step >= cfg.max_steps:
                     break
         if bar.disable:  # no bar (not a terminal): one line for the epoch instead
-            self.log(f"epoch {epoch}: batch {self.pos.batch}/{len(self.loader)}, step {self.pos.step}, "
-                     f"loss {loss:.3f}, lr {self.optimizer.param_groups[0]['lr']:.2e}")  # fmt: skip
+            self.log(
+                f"epoch {epoch}: batch {self.pos.batch}/{len(self.loader)}, step {self.pos.step}, "
+                f"loss {loss:.3f}, lr {self.optimizer.param_groups[0]['lr']:.2e}"
+            )
         return self.pos.batch >= len(self.loader)
 
     def _step(self, batch: Mapping[str, torch.Tensor], branch_weight: float) -> float:
         """One optimiser step on ``batch`` (eq. 14 loss, AMP-aware); returns the loss."""
-        loss = our_step(self.model, self.optimizer, batch, self.device, branch_weight, self.cfg.amp,
-                        self.scaler if self.scaler.is_enabled() else None, self.cfg.loss)  # fmt: skip
+        loss = our_step(
+            self.model,
+            self.optimizer,
+            batch,
+            self.device,
+            branch_weight,
+            self.cfg.amp,
+            self.scaler if self.scaler.is_enabled() else None,
+            self.cfg.loss,
+        )
         if isinstance(self.scheduler, torch.optim.lr_scheduler.LambdaLR):  # cosine: per step
             self.scheduler.step()
         self.pos.batch += 1
@@ -434,44 +459,9 @@ class Trainer:
         self.log(f"{dist_utils.world_size()} ranks in sync (parameter checksum {total:.6e})")
 
 
-def _truncate_log(path: Path, step: int) -> None:
-    """Drop the ``log.csv`` rows written after ``step`` (by a run killed after its last checkpoint):
-    a resumed run writes them again, so the log never holds a step twice."""
-    if not path.is_file():
-        return
-    with open(path, newline="") as f:
-        rows = list(csv.reader(f))
-    if len(rows) < 2 or "step" not in rows[0]:
-        return
-    col = rows[0].index("step")
-    kept = [rows[0]] + [r for r in rows[1:] if len(r) > col and r[col].isdigit() and int(r[col]) <= step]
-    if len(kept) == len(rows):
-        return
-    with atomic_path(path, suffix=".csv") as tmp, open(tmp, "w", newline="") as f:
-        csv.writer(f).writerows(kept)
-
-
-def run_files(folder: Path) -> list[str]:
-    """The files of a run in ``folder`` (:data:`RUN_FILES`, ``checkpoints/step-*.pt``, ``tensorboard/``), relative."""
-    steps = [f"checkpoints/{p.name}" for p in sorted((folder / "checkpoints").glob("step-*.pt"))]
-    return [f for f in (*RUN_FILES, *steps, "tensorboard") if (folder / f).exists() or (folder / f).is_symlink()]
-
-
-def prepare_run_folder(out: str | os.PathLike[str], overwrite: bool = False) -> bool:
-    """A new run (not ``resume``) refuses a folder that already holds a run. With ``overwrite`` it removes nothing:
-    returns whether there is one, which the new run replaces at its first state (:meth:`Trainer.save`); the earlier
-    run's files (:func:`run_files`) stay until then, and only they go."""
-    existing = run_files(Path(out))
-    if any(f != "tensorboard" for f in existing) and not overwrite:
-        raise FileExistsError(
-            f"{out} already holds a run ({Path(out) / existing[0]} exists); pass --resume to continue "
-            "it or --overwrite to start over"
-        )
-    return overwrite and bool(existing)
-
-
-def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = print,
-          overwrite: bool = False) -> TrainResult:  # fmt: skip
+def train(
+    cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = print, overwrite: bool = False
+) -> TrainResult:
     """Run one stage; joins/leaves the process group when launched by torchrun.
 
     Without ``resume`` the run folder must not hold a run yet (``overwrite`` starts over, replacing the earlier run
@@ -483,10 +473,18 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
     # the run folder is never (inside) the data, nor is the --init checkpoint one of the run's files
     check_no_input_overlap([cfg.data or None, cfg.raw_root, cfg.semantic_root], out_dir=cfg.out)
     init = cfg.init if cfg.init and Path(cfg.init).exists() else None
-    check_outputs([("--data", cfg.data or None), ("--raw-root", cfg.raw_root), ("--semantic-root", cfg.semantic_root),
-                   ("--init", init)], [Output("--out", cfg.out, "folder")])  # fmt: skip
-    check_no_input_overlap([cfg.init if cfg.init and Path(cfg.init).exists() else None],
-                           out_files=[Path(cfg.out) / f for f in RUN_FILES])  # fmt: skip
+    check_outputs(
+        [
+            ("--data", cfg.data or None),
+            ("--raw-root", cfg.raw_root),
+            ("--semantic-root", cfg.semantic_root),
+            ("--init", init),
+        ],
+        [Output("--out", cfg.out, "folder")],
+    )
+    check_no_input_overlap(
+        [cfg.init if cfg.init and Path(cfg.init).exists() else None], out_files=[Path(cfg.out) / f for f in RUN_FILES]
+    )
     if dist_utils.launch_rank() == 0:
         finish_replacements(Path(cfg.out), run_files)  # a replacement a kill cut short, committed or not
     replaces = not resume and prepare_run_folder(cfg.out, overwrite)

@@ -20,9 +20,14 @@ from semattnet.inference.padding import crop_padding
 __all__ = ["validate_model"]
 
 
-def validate_model(model: nn.Module, loader: DataLoader, device: torch.device, amp: str = "none",
-                   metrics: Callable[[], KittiMetrics] = KittiMetrics,
-                   progress: bool = True) -> KittiMetrics:  # fmt: skip
+def validate_model(
+    model: nn.Module,
+    loader: DataLoader,
+    device: torch.device,
+    amp: str = "none",
+    metrics: Callable[[], KittiMetrics] = KittiMetrics,
+    progress: bool = True,
+) -> KittiMetrics:
     """Score ``model`` over ``loader`` on every rank (each its shard), the metrics summed over the ranks.
 
     Items that carry a ``pad`` (padded to the model's multiple of 32 by

@@ -43,8 +43,12 @@ def plot_training_curves(csv_path: str | Path, out_path: str | Path) -> Path | N
     return out_path
 
 
-def plot_sparsification(curves: Mapping[str, Mapping[str, np.ndarray | float]], out_path: str | Path,
-                        metrics: tuple[str, ...] = ("rmse", "mae"), title: str = "") -> Path:  # fmt: skip
+def plot_sparsification(
+    curves: Mapping[str, Mapping[str, np.ndarray | float]],
+    out_path: str | Path,
+    metrics: tuple[str, ...] = ("rmse", "mae"),
+    title: str = "",
+) -> Path:
     """One panel per metric: each method's normalised sparsification curve (solid) and its oracle (dashed),
     a random ordering's (the constant 1, dotted), AUSE and AURG in the legend.
 

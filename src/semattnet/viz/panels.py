@@ -59,8 +59,13 @@ def branch_panel(
     tiles.append(("sparse LiDAR", colorize_depth(sparse)))
     if gt is not None:
         tiles.append(("ground truth", colorize_depth(gt)))
-    for key, label in (("color_depth", "CG depth"), ("semantic_depth", "SG depth"), ("guided_depth", "DG depth"),
-                       ("fused_depth", "fused depth"), ("refined_depth", "refined depth")):  # fmt: skip
+    for key, label in (
+        ("color_depth", "CG depth"),
+        ("semantic_depth", "SG depth"),
+        ("guided_depth", "DG depth"),
+        ("fused_depth", "fused depth"),
+        ("refined_depth", "refined depth"),
+    ):
         if key in outputs:
             tiles.append((label, colorize_depth(outputs[key])))
     for key, label in (("color_conf", "CG weight"), ("semantic_conf", "SG weight"), ("guided_conf", "DG weight")):
@@ -74,8 +79,9 @@ def branch_panel(
     return save_panel(tiles, path, columns=columns)
 
 
-def birds_eye_tile(cloud: PointCloud, points: np.ndarray, calib: RigCalibration, shape: tuple[int, int],
-                   max_depth: float) -> np.ndarray:  # fmt: skip
+def birds_eye_tile(
+    cloud: PointCloud, points: np.ndarray, calib: RigCalibration, shape: tuple[int, int], max_depth: float
+) -> np.ndarray:
     """A square bird's-eye view of ``cloud`` (ahead up to min(max_depth, 50) m) centred in an (H, W) tile, with
     the LiDAR ``points`` (LiDAR frame) that land in the image overlaid: in front of the camera and in a pixel
     by :func:`semattnet.geometry.projection.pixel_indices` (the projection's own rule)."""

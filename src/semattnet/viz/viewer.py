@@ -56,11 +56,18 @@ __all__ = [
 MAX_POINTS = 12000
 
 #: (output key, label) of a model's intermediate depths and fusion weights.
-_DEPTHS = (("color_depth", "Colour-guided depth"), ("semantic_depth", "Semantic-guided depth"),
-           ("guided_depth", "Depth-guided depth"), ("fused_depth", "Fused depth"),
-           ("refined_depth", "Refined depth"))  # fmt: skip
-_WEIGHTS = (("color_conf", "Colour-guided weight"), ("semantic_conf", "Semantic-guided weight"),
-            ("guided_conf", "Depth-guided weight"))  # fmt: skip
+_DEPTHS = (
+    ("color_depth", "Colour-guided depth"),
+    ("semantic_depth", "Semantic-guided depth"),
+    ("guided_depth", "Depth-guided depth"),
+    ("fused_depth", "Fused depth"),
+    ("refined_depth", "Refined depth"),
+)
+_WEIGHTS = (
+    ("color_conf", "Colour-guided weight"),
+    ("semantic_conf", "Semantic-guided weight"),
+    ("guided_conf", "Depth-guided weight"),
+)
 
 
 @dataclass
@@ -144,16 +151,16 @@ class _Builder:
         if picture:
             self.layer(key, label, colorize_depth(depth))
         self.array(key, _cm(depth), "u16")
-        self.values.append({"key": key, "label": label, "scale": 0.01, "unit": "m", "digits": 2,
-                            "zero_is_empty": True})  # fmt: skip
+        self.values.append({"key": key, "label": label, "scale": 0.01, "unit": "m", "digits": 2, "zero_is_empty": True})
 
     def weight(self, key: str, label: str, conf: np.ndarray) -> None:
         from semattnet.viz.depth import confidence_image
 
         self.layer(key, label, confidence_image(conf))
         self.array(key, np.clip(np.round(np.nan_to_num(conf) * 255), 0, 255).astype(np.uint8), "u8")
-        self.values.append({"key": key, "label": label, "scale": 1 / 255, "unit": "", "digits": 2,
-                            "zero_is_empty": False})  # fmt: skip
+        self.values.append(
+            {"key": key, "label": label, "scale": 1 / 255, "unit": "", "digits": 2, "zero_is_empty": False}
+        )
 
     def uncertainty(self, key: str, label: str, unc: np.ndarray) -> None:
         """A per-pixel uncertainty (metres, 0 = none) on "magma" from 0 to its 99th percentile (named in the label)."""
@@ -164,8 +171,7 @@ class _Builder:
         top = max(top, 0.01)
         self.layer(key, f"{label} (0 to {top:.2f} m)", colorize_depth(u, vmax=top, cmap="magma"))
         self.array(key, np.where(u > 0, np.maximum(_cm(u), 1), 0).astype("<u2"), "u16")  # under 1 cm: 1 cm
-        self.values.append({"key": key, "label": label, "scale": 0.01, "unit": "m", "digits": 2,
-                            "zero_is_empty": True})  # fmt: skip
+        self.values.append({"key": key, "label": label, "scale": 0.01, "unit": "m", "digits": 2, "zero_is_empty": True})
 
 
 def _frame_layers(b: _Builder, f: ViewerFrame, labels: dict[str, str]) -> None:
@@ -221,11 +227,21 @@ def _frame_cloud(b: _Builder, f: ViewerFrame, labels: dict[str, str], max_points
     assert pred.rgb is not None  # cloud_points was given the colours
     b.array("cloud_rgb", pred.rgb, "u8")
     name = labels.get(method, method).split(" (")[0]
-    note = (f"{name}: {len(pred)} points (a pixel grid of step {stride}), "
-            f"LiDAR: {len(lidar.xyz[keep])} points; back-projected with fx {f.K[0, 0]:.1f}, fy {f.K[1, 1]:.1f}, "
-            f"cx {f.K[0, 2]:.1f}, cy {f.K[1, 2]:.1f}.")  # fmt: skip
-    return {"cloud": {"label": f"{name} (predicted)", "points": len(pred), "stride": stride,
-                      "lidar_points": len(lidar.xyz[keep]), "note": note}, "cloud_note": ""}  # fmt: skip
+    note = (
+        f"{name}: {len(pred)} points (a pixel grid of step {stride}), "
+        f"LiDAR: {len(lidar.xyz[keep])} points; back-projected with fx {f.K[0, 0]:.1f}, fy {f.K[1, 1]:.1f}, "
+        f"cx {f.K[0, 2]:.1f}, cy {f.K[1, 2]:.1f}."
+    )
+    return {
+        "cloud": {
+            "label": f"{name} (predicted)",
+            "points": len(pred),
+            "stride": stride,
+            "lidar_points": len(lidar.xyz[keep]),
+            "note": note,
+        },
+        "cloud_note": "",
+    }
 
 
 def _frame_data(f: ViewerFrame, labels: dict[str, str], max_points: int) -> dict[str, object]:
@@ -236,8 +252,18 @@ def _frame_data(f: ViewerFrame, labels: dict[str, str], max_points: int) -> dict
     keys = [layer["key"] for layer in b.layers]
     default = next((k for k in (f"depth_{f.cloud_of}", f"depth_{list(f.depths)[-1]}") if k in keys), keys[0])
     h, w = f.sparse.shape
-    return {"name": f.name, "note": f.note, "width": w, "height": h, "layers": b.layers, "values": b.values,
-            "arrays": b.arrays, "default_layer": default, "lidar_overlay": _overlay(f.sparse), **cloud}  # fmt: skip
+    return {
+        "name": f.name,
+        "note": f.note,
+        "width": w,
+        "height": h,
+        "layers": b.layers,
+        "values": b.values,
+        "arrays": b.arrays,
+        "default_layer": default,
+        "lidar_overlay": _overlay(f.sparse),
+        **cloud,
+    }
 
 
 def _write(path: Path, text: str) -> None:
@@ -318,8 +344,17 @@ def write_prediction_report(
         if depth is None:
             depth = read_depth(out / f"{fr.name}.png")  # missing: read_depth's one-line error
         sem = read_image(fr.semantic) if fr.semantic is not None else None
-        shown.append(ViewerFrame(fr.name, read_image(fr.rgb), read_depth(fr.sparse), {"prediction": depth},
-                                 semantic=sem, K=K, uncertainty=read(out / "uncertainty" / fr.name)))  # fmt: skip
+        shown.append(
+            ViewerFrame(
+                fr.name,
+                read_image(fr.rgb),
+                read_depth(fr.sparse),
+                {"prediction": depth},
+                semantic=sem,
+                K=K,
+                uncertainty=read(out / "uncertainty" / fr.name),
+            )
+        )
     page = write_viewer(out, shown, {"prediction": "Completed depth"}, title="semattnet predict: viewer")
     log(f"viewer: {page.resolve()}")
     return page

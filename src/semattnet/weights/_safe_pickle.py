@@ -107,12 +107,51 @@ _NUMPY_MODULES = {"numpy", "numpy.core.multiarray", "numpy._core.multiarray"}
 
 # Modules whose members can run code, touch files or the network, or import other code.
 _DANGEROUS_ROOTS = {
-    "os", "posix", "nt", "subprocess", "sys", "builtins", "__builtin__", "shutil", "socket",
-    "importlib", "runpy", "pickle", "_pickle", "marshal", "ctypes", "code", "codeop", "pty",
-    "webbrowser", "multiprocessing", "asyncio", "tempfile", "pathlib", "types", "functools",
-    "operator", "platform", "signal", "threading", "urllib", "http", "ftplib", "smtplib", "requests",
-    "pdb", "timeit", "trace", "inspect", "gc", "io", "shelve", "dbm", "sqlite3", "zipimport",
-}  # fmt: skip
+    "os",
+    "posix",
+    "nt",
+    "subprocess",
+    "sys",
+    "builtins",
+    "__builtin__",
+    "shutil",
+    "socket",
+    "importlib",
+    "runpy",
+    "pickle",
+    "_pickle",
+    "marshal",
+    "ctypes",
+    "code",
+    "codeop",
+    "pty",
+    "webbrowser",
+    "multiprocessing",
+    "asyncio",
+    "tempfile",
+    "pathlib",
+    "types",
+    "functools",
+    "operator",
+    "platform",
+    "signal",
+    "threading",
+    "urllib",
+    "http",
+    "ftplib",
+    "smtplib",
+    "requests",
+    "pdb",
+    "timeit",
+    "trace",
+    "inspect",
+    "gc",
+    "io",
+    "shelve",
+    "dbm",
+    "sqlite3",
+    "zipimport",
+}
 
 
 def _resolve_numpy(module: str, name: str) -> object:
@@ -132,8 +171,20 @@ def _resolve_numpy(module: str, name: str) -> object:
 # Libraries whose functions are code, not data: a name from them that is not allowed above is refused
 # rather than neutralised (e.g. ``torch.load`` or ``torch.jit.load`` named by a pickle).
 _LIBRARY_ROOTS = {"torch", "numpy", "safetensors", "semattnet", "torchvision", "scipy", "PIL", "cv2", "yaml"}
-_CODE_NAMES = {"eval", "exec", "system", "__import__", "popen", "compile", "getattr", "setattr", "open", "load",
-               "loads", "apply"}  # fmt: skip
+_CODE_NAMES = {
+    "eval",
+    "exec",
+    "system",
+    "__import__",
+    "popen",
+    "compile",
+    "getattr",
+    "setattr",
+    "open",
+    "load",
+    "loads",
+    "apply",
+}
 
 
 def _torch_weights_only_allowed() -> dict[str, object]:

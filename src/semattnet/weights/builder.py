@@ -89,8 +89,9 @@ def weights_config(
         if cfg is not None:
             _refuse_differences(inferred, "in the tensors", cfg, _INFERRED, f"{name}: {where} contradicts the weights")
     if recorded is not None and ckpt.config is not None:
-        _refuse_differences(ckpt.config, "in the file", recorded, _TRAINED,
-                            f"{name}: the recorded config contradicts the file's own")  # fmt: skip
+        _refuse_differences(
+            ckpt.config, "in the file", recorded, _TRAINED, f"{name}: the recorded config contradicts the file's own"
+        )
     return given
 
 

@@ -151,8 +151,13 @@ def _load_packed(path: Path) -> Checkpoint:
 
     sd, meta = read_packed(path)
     info = loads_json(meta.get("info", "{}"), f"{path} (packed metadata 'info')", error=CheckpointError)
-    return Checkpoint(path=path, state_dict=sd, format="packed", config=_config_from_metadata(meta.get("config"), path),
-                      extra={"info": info, "levels": meta.get("levels")})  # fmt: skip
+    return Checkpoint(
+        path=path,
+        state_dict=sd,
+        format="packed",
+        config=_config_from_metadata(meta.get("config"), path),
+        extra={"info": info, "levels": meta.get("levels")},
+    )
 
 
 _SAFE_GLOBALS_LOCK = threading.Lock()  # torch's safe-globals list is process-wide
@@ -212,8 +217,17 @@ def load_checkpoint(path: str | os.PathLike[str]) -> Checkpoint:
         raise UnsafeCheckpointError(msg if msg.startswith(str(path)) else f"{path}: {msg}") from None
     except CheckpointError:
         raise
-    except (RuntimeError, pickle.UnpicklingError, EOFError, OSError, ValueError, KeyError, TypeError,
-            AttributeError, zipfile.BadZipFile) as exc:  # fmt: skip
+    except (
+        RuntimeError,
+        pickle.UnpicklingError,
+        EOFError,
+        OSError,
+        ValueError,
+        KeyError,
+        TypeError,
+        AttributeError,
+        zipfile.BadZipFile,
+    ) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise CheckpointError(f"{path}: not a readable PyTorch checkpoint (truncated or corrupt?): {first}") from None
     if isinstance(obj, Mapping):
@@ -286,8 +300,12 @@ def load_weights(model: nn.Module, state_dict: Mapping[str, torch.Tensor] | Chec
     if strict and (missing or unexpected or mismatched):
         parts = []
         shapes = mismatched[: len(mismatched) - len(retyped)]
-        for label, items in (("missing", missing), ("unexpected", unexpected), ("shape mismatch", shapes),
-                             ("dtype mismatch", retyped)):  # fmt: skip
+        for label, items in (
+            ("missing", missing),
+            ("unexpected", unexpected),
+            ("shape mismatch", shapes),
+            ("dtype mismatch", retyped),
+        ):
             if items:
                 shown = ", ".join(items[:8]) + (f", ... ({len(items) - 8} more)" if len(items) > 8 else "")
                 parts.append(f"{len(items)} {label}: {shown}")
@@ -321,9 +339,12 @@ def config_from_state_dict(
     else:
         fusion = "add" if bb["depth_layer3.conv1.weight"].shape[1] == 2 * base else "concat"
     kernel_sizes = tuple(
-        sorted(int(k.split(".")[0].removeprefix("iter_guide_layer")) for k in sd if k.endswith("generate.0.weight")
-               and k.split(".")[0].removeprefix("iter_guide_layer").isdigit())
-    )  # fmt: skip
+        sorted(
+            int(k.split(".")[0].removeprefix("iter_guide_layer"))
+            for k in sd
+            if k.endswith("generate.0.weight") and k.split(".")[0].removeprefix("iter_guide_layer").isdigit()
+        )
+    )
     try:  # sizes read from the tensors are held to the config's ranges
         cfg = SemAttNetConfig(branches=branches, fusion=fusion, refine=refine, width=base / 32)  # type: ignore[arg-type]
         return cfg.replace(kernel_sizes=kernel_sizes) if kernel_sizes else cfg

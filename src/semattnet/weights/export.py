@@ -92,8 +92,15 @@ def export_onnx(
         # the tracer's notes on shape checks and constant folding are expected here (fixed-size export)
         warnings.simplefilter("ignore", torch.jit.TracerWarning)
         warnings.filterwarnings("ignore", message="Constant folding")
-        torch.onnx.export(flat, example, str(tmp), input_names=_input_names(flat.semantic), output_names=names,
-                          opset_version=opset, dynamo=False)  # fmt: skip
+        torch.onnx.export(
+            flat,
+            example,
+            str(tmp),
+            input_names=_input_names(flat.semantic),
+            output_names=names,
+            opset_version=opset,
+            dynamo=False,
+        )
     return path
 
 

@@ -176,8 +176,9 @@ def save_pretrained(
     entry = get_weights(weights) if isinstance(weights, str) else weights
     arch = arch_for(cfg)
     folder.mkdir(parents=True, exist_ok=True)
-    save_safetensors(Checkpoint(path=folder / WEIGHTS_NAME, state_dict=sd, format="state_dict", config=cfg),
-                     folder / WEIGHTS_NAME)  # fmt: skip
+    save_safetensors(
+        Checkpoint(path=folder / WEIGHTS_NAME, state_dict=sd, format="state_dict", config=cfg), folder / WEIGHTS_NAME
+    )
     meta = {"arch": arch, "library_name": "semattnet", "library_version": library_version(), **cfg.to_dict()}
     with atomic_path(folder / CONFIG_NAME) as tmp:
         tmp.write_text(json.dumps(meta, indent=2) + "\n")
@@ -235,8 +236,12 @@ def hub_model(arch: str, pretrained: bool | str | os.PathLike[str] = False, **kw
         return builder.build_model_with_weights(None, arch=arch, overrides=kwargs)
     options = {k: kwargs.pop(k) for k in _LOAD_OPTIONS if k in kwargs}
     source = default_weights(arch) if pretrained is True else pretrained
-    resolved = resolve_weights(source, sha256=_text(options, "sha256"), cache_dir=_text(options, "cache_dir"),
-                               progress=options.get("progress") is not False)  # fmt: skip
+    resolved = resolve_weights(
+        source,
+        sha256=_text(options, "sha256"),
+        cache_dir=_text(options, "cache_dir"),
+        progress=options.get("progress") is not False,
+    )
     device = options.get("map_location", "cpu")
     if not isinstance(device, str | torch.device):
         raise InputError(f"torch.hub: map_location must be a device name or torch.device, got {device!r}")

@@ -97,8 +97,9 @@ def dequantise(tensors: dict[str, torch.Tensor], where: str = "packed weights") 
     return sd
 
 
-def encode_packed(state_dict: dict[str, torch.Tensor], config: Mapping[str, object], info: Mapping[str, object],
-                  levels: int = 127) -> bytes:  # fmt: skip
+def encode_packed(
+    state_dict: dict[str, torch.Tensor], config: Mapping[str, object], info: Mapping[str, object], levels: int = 127
+) -> bytes:
     """The bytes of a packed file: :func:`quantise`'s tensors with ``config`` and ``info``, gzip-compressed."""
     from safetensors.torch import save
 
@@ -154,6 +155,8 @@ def read_packed(path: str | Path) -> tuple[dict[str, torch.Tensor], dict[str, st
     except (SafetensorError, ValueError, AttributeError) as exc:
         raise CheckpointError(f"{path}: gzip of something that is not safetensors ({exc})") from None
     if meta.get("format") != PACKED_FORMAT:
-        raise CheckpointError(f"{path}: a gzip'd safetensors file, but not packed weights "
-                              f"(format {meta.get('format')!r}, expected {PACKED_FORMAT!r})")  # fmt: skip
+        raise CheckpointError(
+            f"{path}: a gzip'd safetensors file, but not packed weights "
+            f"(format {meta.get('format')!r}, expected {PACKED_FORMAT!r})"
+        )
     return dequantise(tensors, str(path)), meta

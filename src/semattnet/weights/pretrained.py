@@ -21,15 +21,16 @@ from typing import Literal
 
 from torch import nn
 
-from semattnet._errors import InputError
+from semattnet._utils.registry import Registry, UnknownEntryError
 from semattnet.models.config import SemAttNetConfig
-from semattnet.models.registry import UnknownModelError, model_config, resolve_model_name
+from semattnet.models.registry import model_config, resolve_model_name
 from semattnet.weights import builder
 from semattnet.weights.packed import shipped_path
 
 __all__ = [
     "DEFAULT_WEIGHTS",
     "FORMATS",
+    "WEIGHTS",
     "PretrainedWeights",
     "UnknownWeightsError",
     "default_weights",
@@ -84,8 +85,8 @@ FINDINGS = (
 )
 
 
-class UnknownWeightsError(InputError):
-    """A weights name that is not in the registry."""
+#: The registry's one unknown-name error (the old name kept).
+UnknownWeightsError = UnknownEntryError
 
 
 @dataclass(frozen=True)
@@ -165,43 +166,37 @@ class PretrainedWeights:
         return out
 
 
-_REGISTRY: dict[str, PretrainedWeights] = {}
+#: Name -> :class:`PretrainedWeights`: the released checkpoints and those shipped in the package.
+WEIGHTS: Registry[PretrainedWeights] = Registry("pretrained weights")
 
 #: Default weights per architecture, used by ``pretrained=True`` in ``hubconf.py``.
 DEFAULT_WEIGHTS: dict[str, str] = {"semattnet": "semattnet-kitti"}
 
 
 def register_weights(weights: PretrainedWeights, *, overwrite: bool = False) -> PretrainedWeights:
-    """Add a record (e.g. your own mirror or fine-tuned weights) to the registry."""
-    if weights.name in _REGISTRY and not overwrite:
-        raise InputError(f"weights {weights.name!r} are already registered (pass overwrite=True to replace them)")
+    """Add a record (e.g. your own mirror or fine-tuned weights) to :data:`WEIGHTS` (``overwrite``: replace a record
+    of the same name); its ``arch`` must be a registered model."""
     try:
         resolve_model_name(weights.arch)
-    except UnknownModelError as exc:
-        raise UnknownModelError(
+    except UnknownEntryError as exc:
+        raise UnknownEntryError(
             f"weights {weights.name!r}: unknown arch {weights.arch!r}; {str(exc).split('; ', 1)[1]}"
         ) from None
-    _REGISTRY[weights.name] = weights
-    return weights
+    return WEIGHTS.add(weights.name, weights, replace=overwrite)
 
 
 def list_pretrained() -> list[str]:
     """Names accepted by :func:`get_weights` and :func:`semattnet.weights.from_pretrained`."""
-    return list(_REGISTRY)
+    return WEIGHTS.names()
 
 
 def get_weights(name: str) -> PretrainedWeights:
     """The record called ``name``.
 
     Raises:
-        UnknownWeightsError: one line naming the known records.
+        UnknownEntryError: one line naming the known records.
     """
-    try:
-        return _REGISTRY[name]
-    except KeyError:
-        raise UnknownWeightsError(
-            f"unknown pretrained weights {name!r}; known: {', '.join(_REGISTRY) or '(none)'}"
-        ) from None
+    return WEIGHTS[name]
 
 
 def default_weights(arch: str) -> PretrainedWeights:
@@ -264,19 +259,40 @@ _DEMO_NOTES = (
 )
 
 
-def _shipped(name: str, arch: str, file_name: str, description: str, sha: str, size: int, params: int,
-             scores: tuple[float, float, float, float], notes: str, config: Mapping[str, object] | None = None
-             ) -> PretrainedWeights:  # fmt: skip
+def _shipped(
+    name: str,
+    arch: str,
+    file_name: str,
+    description: str,
+    sha: str,
+    size: int,
+    params: int,
+    scores: tuple[float, float, float, float],
+    notes: str,
+    config: Mapping[str, object] | None = None,
+) -> PretrainedWeights:
     """The record of a packed file shipped in the package's assets, scored on its own validation scenes."""
     rmse, mae, irmse, imae = scores
     return PretrainedWeights(
-        name=name, arch=arch, description=description, urls=(shipped_path(file_name).as_uri(),), file_name=file_name,
-        format="packed", trained_on="synthetic street scenes (demo)", config=dict(config or {}), sha256=sha,
-        size_bytes=size, num_params=params, license="MIT, as the package: trained here on synthetic scenes only",
-        paper_metrics={"synthetic/own-val": {"rmse_mm": rmse, "mae_mm": mae, "irmse_per_km": irmse,
-                                             "imae_per_km": imae}},
-        paper=_PAPER, source="shipped inside the package (semattnet/weights/assets)", notes=notes,
-    )  # fmt: skip
+        name=name,
+        arch=arch,
+        description=description,
+        urls=(shipped_path(file_name).as_uri(),),
+        file_name=file_name,
+        format="packed",
+        trained_on="synthetic street scenes (demo)",
+        config=dict(config or {}),
+        sha256=sha,
+        size_bytes=size,
+        num_params=params,
+        license="MIT, as the package: trained here on synthetic scenes only",
+        paper_metrics={
+            "synthetic/own-val": {"rmse_mm": rmse, "mae_mm": mae, "irmse_per_km": irmse, "imae_per_km": imae}
+        },
+        paper=_PAPER,
+        source="shipped inside the package (semattnet/weights/assets)",
+        notes=notes,
+    )
 
 
 #: The same recipe with semantic dropout 0.7 (70 % of the training frames get the fallback semantic map), for
@@ -295,20 +311,32 @@ _ROBUST_NOTES = (
 #: Each shipped family of demo references: (name and file tag, its table, description after "street scenes", notes).
 _REFERENCE_FAMILIES = (
     ("", _DEMO_REFERENCES, " (demo reference, seed {seed})", _DEMO_NOTES),
-    ("robust", _ROBUST_REFERENCES, ", 70 % of them without their semantic map (demo reference for frames without a "
-     "segmenter, seed {seed})", _ROBUST_NOTES + _DEMO_NOTES),
-)  # fmt: skip
+    (
+        "robust",
+        _ROBUST_REFERENCES,
+        ", 70 % of them without their semantic map (demo reference for frames without a segmenter, seed {seed})",
+        _ROBUST_NOTES + _DEMO_NOTES,
+    ),
+)
 
 
 def _register_demo_references() -> None:
     for tag, table, what, notes in _REFERENCE_FAMILIES:
         for seed, sha, size, scores in table:
-            register_weights(_shipped(
-                f"semattnet-demo-ref-{tag + '-' if tag else ''}seed{seed}", "semattnet",
-                f"demo_reference_{tag + '_' if tag else ''}seed{seed}.safetensors.gz",
-                "SemAttNet at width 1/8 trained on synthetic street scenes" + what.format(seed=seed),
-                sha, size, 5_676_121, scores, notes, config={"width": 0.125},
-            ))  # fmt: skip
+            register_weights(
+                _shipped(
+                    f"semattnet-demo-ref-{tag + '-' if tag else ''}seed{seed}",
+                    "semattnet",
+                    f"demo_reference_{tag + '_' if tag else ''}seed{seed}.safetensors.gz",
+                    "SemAttNet at width 1/8 trained on synthetic street scenes" + what.format(seed=seed),
+                    sha,
+                    size,
+                    5_676_121,
+                    scores,
+                    notes,
+                    config={"width": 0.125},
+                )
+            )
 
 
 _register_demo_references()
@@ -318,15 +346,39 @@ _register_demo_references()
 #: sha256, bytes, parameters, scores on their own 16 validation scenes as shipped: RMSE, MAE [mm], iRMSE, iMAE
 #: [1/km]). Made by ``python benchmarks/frontier.py --out frontier-run --ship MODEL`` after its training half.
 _RT_DEMO: tuple[tuple[str, int, str, int, int, tuple[float, float, float, float]], ...] = (
-    ("semattnet_rt_l", 0, "0d9d2f9f579308c7f8a3e827a1399edf35935e370f54e3fc125f42c6567560e3",
-     349_878, 305_028, (2301.5, 801.4, 6.33, 3.40)),
-    ("semattnet_rt_l", 1, "4c484fc9d629cb26327f3b64c8233f14f17cd487f701e7683d968d5fa03ec934",
-     350_107, 305_028, (2226.3, 804.1, 6.64, 3.65)),
-    ("semattnet_rt_md", 0, "de02e5de46361f9f4651ec80483ad804649ae0b8cddd795ab41fcb7e24381eb2",
-     590_158, 537_530, (1847.6, 524.1, 4.03, 1.95)),
-    ("semattnet_rt_md", 1, "3dbb837aab9a69dccf1390825b413e1583d19ec1aba5895f17628223c108ddc3",
-     591_432, 537_530, (1862.3, 524.4, 4.04, 1.88)),
-)  # fmt: skip
+    (
+        "semattnet_rt_l",
+        0,
+        "0d9d2f9f579308c7f8a3e827a1399edf35935e370f54e3fc125f42c6567560e3",
+        349_878,
+        305_028,
+        (2301.5, 801.4, 6.33, 3.40),
+    ),
+    (
+        "semattnet_rt_l",
+        1,
+        "4c484fc9d629cb26327f3b64c8233f14f17cd487f701e7683d968d5fa03ec934",
+        350_107,
+        305_028,
+        (2226.3, 804.1, 6.64, 3.65),
+    ),
+    (
+        "semattnet_rt_md",
+        0,
+        "de02e5de46361f9f4651ec80483ad804649ae0b8cddd795ab41fcb7e24381eb2",
+        590_158,
+        537_530,
+        (1847.6, 524.1, 4.03, 1.95),
+    ),
+    (
+        "semattnet_rt_md",
+        1,
+        "3dbb837aab9a69dccf1390825b413e1583d19ec1aba5895f17628223c108ddc3",
+        591_432,
+        537_530,
+        (1862.3, 524.4, 4.04, 1.88),
+    ),
+)
 _RT_NOTES = (
     "Trained by `python benchmarks/frontier.py` with the demo references' recipe (the same 400 synthetic street "
     "scenes at 96x320, 600 backbone, 60 refinement-initialisation and 200 full-model steps, batch 4, L1 + L2 loss). "
@@ -339,11 +391,19 @@ _RT_NOTES = (
 def _register_rt_demo() -> None:
     for arch, seed, sha, size, params, scores in _RT_DEMO:
         short = arch.removeprefix("semattnet_").replace("_", "-")
-        register_weights(_shipped(
-            f"semattnet-{short}-demo-seed{seed}", arch, f"{arch}_demo_seed{seed}.safetensors.gz",
-            f"{arch} trained on synthetic street scenes (real-time demo checkpoint, seed {seed})",
-            sha, size, params, scores, _RT_NOTES,
-        ))  # fmt: skip
+        register_weights(
+            _shipped(
+                f"semattnet-{short}-demo-seed{seed}",
+                arch,
+                f"{arch}_demo_seed{seed}.safetensors.gz",
+                f"{arch} trained on synthetic street scenes (real-time demo checkpoint, seed {seed})",
+                sha,
+                size,
+                params,
+                scores,
+                _RT_NOTES,
+            )
+        )
 
 
 _register_rt_demo()

@@ -118,8 +118,12 @@ def parse_weights_spec(spec: str | os.PathLike[str] | PretrainedWeights) -> Weig
     path = Path(spec).expanduser()
     if spec in list_pretrained():  # a name is the registry's: a local NAME is ./NAME (never a silent shadow)
         if path.exists():
-            warnings.warn(f"weights {spec!r}: the registered weights are used, not the local {spec} here "
-                          f"(pass ./{spec} for that one)", ShadowedNameWarning, stacklevel=3)  # fmt: skip
+            warnings.warn(
+                f"weights {spec!r}: the registered weights are used, not the local {spec} here "
+                f"(pass ./{spec} for that one)",
+                ShadowedNameWarning,
+                stacklevel=3,
+            )
         return get_weights(spec)
     if path.exists():
         return path
@@ -167,8 +171,9 @@ class ResolvedWeights:
     ) -> nn.Module:
         """The model of these weights, in eval mode, through :func:`~semattnet.weights.build_model_with_weights`
         (``arch``: the model name they must be for; ``overrides``: config fields that keep the shapes)."""
-        return builder.build_model_with_weights(self.load(), config=self.config, arch=arch, overrides=overrides,
-                                        device=device, source=self.source)  # fmt: skip
+        return builder.build_model_with_weights(
+            self.load(), config=self.config, arch=arch, overrides=overrides, device=device, source=self.source
+        )
 
     def load(self) -> Checkpoint:
         """The weights read without running code (:func:`~semattnet.weights.load_checkpoint`); a downloaded
@@ -315,7 +320,7 @@ def read_folder_config(folder: Path) -> tuple[str, SemAttNetConfig]:
     if unknown:
         raise CheckpointError(f"{path}: unknown config field(s) {unknown}; fields: {sorted(known)}")
     try:
-        cfg = MODELS[arch][1].replace(**fields)
+        cfg = MODELS[arch].config.replace(**fields)
     except (TypeError, ValueError) as exc:
         raise CheckpointError(f"{path}: invalid config: {exc}") from exc
     return arch, cfg

@@ -52,10 +52,34 @@ def peers(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     fast.mkdir()
     cyc.mkdir()
     _run(["fastddsgen", "-replace", "-d", str(fast), str(HERE / "sensor_msgs.idl")], root, "fastddsgen")
-    _run(["cmake", "-S", str(HERE), "-B", str(fast / "build"), "-DCMAKE_BUILD_TYPE=Release",
-          f"-DPEER_SOURCE={HERE / 'fastdds_peer.cpp'}", f"-DGENERATED={fast}"], root, "cmake")  # fmt: skip
+    _run(
+        [
+            "cmake",
+            "-S",
+            str(HERE),
+            "-B",
+            str(fast / "build"),
+            "-DCMAKE_BUILD_TYPE=Release",
+            f"-DPEER_SOURCE={HERE / 'fastdds_peer.cpp'}",
+            f"-DGENERATED={fast}",
+        ],
+        root,
+        "cmake",
+    )
     _run(["cmake", "--build", str(fast / "build"), "-j2"], root, "building the Fast DDS peer")
     _run(["idlc", str(HERE / "sensor_msgs.idl")], cyc, "idlc")
-    _run(["cc", "-O1", f"-I{cyc}", "-o", str(cyc / "cyclone_sub"), str(HERE / "cyclone_sub.c"),
-          str(cyc / "sensor_msgs.c"), "-lddsc"], cyc, "building the Cyclone subscriber")  # fmt: skip
+    _run(
+        [
+            "cc",
+            "-O1",
+            f"-I{cyc}",
+            "-o",
+            str(cyc / "cyclone_sub"),
+            str(HERE / "cyclone_sub.c"),
+            str(cyc / "sensor_msgs.c"),
+            "-lddsc",
+        ],
+        cyc,
+        "building the Cyclone subscriber",
+    )
     return {"fastdds": fast / "build" / "fastdds_peer", "cyclone": cyc / "cyclone_sub"}

@@ -19,8 +19,10 @@ def main(bag: str, image: str, points: str, info: str, timeout: float) -> int:
     with open_bag(bag) as reader:
         msgs = [(c.topic, c.msgtype, reader.deserialize(raw, c.msgtype)) for c, _, raw in reader.messages()]
     transport = DdsTransport(0, loopback=True)
-    pubs = {topic: transport.advertise(topic, msgtype, TF_STATIC_QOS if topic == "/tf_static" else SENSOR_QOS)
-            for topic, msgtype, _ in msgs}  # fmt: skip
+    pubs = {
+        topic: transport.advertise(topic, msgtype, TF_STATIC_QOS if topic == "/tf_static" else SENSOR_QOS)
+        for topic, msgtype, _ in msgs
+    }
     for topic, _, msg in msgs:
         if topic == "/tf_static":
             pubs[topic].publish(msg)

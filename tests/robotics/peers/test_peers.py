@@ -60,12 +60,28 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     model = root / "tiny.safetensors"
     _tiny_model(model)
     want = {}
-    runs = (("bag", ["--method", "classical"]), ("rig", ["--rig", str(rig), "--method", "classical"]),
-            ("semattnet", ["--weights", str(model), "--device", "cpu"]))  # fmt: skip
+    runs = (
+        ("bag", ["--method", "classical"]),
+        ("rig", ["--rig", str(rig), "--method", "classical"]),
+        ("semattnet", ["--weights", str(model), "--device", "cpu"]),
+    )
     for key, extra in runs:
         out = root / f"predict_{key}"
-        res = CliRunner().invoke(main, ["predict", "--bag", str(bag), "--image-topic", TOPICS.image, "--points-topic",
-                                        TOPICS.points, *extra, "--out", str(out)])  # fmt: skip
+        res = CliRunner().invoke(
+            main,
+            [
+                "predict",
+                "--bag",
+                str(bag),
+                "--image-topic",
+                TOPICS.image,
+                "--points-topic",
+                TOPICS.points,
+                *extra,
+                "--out",
+                str(out),
+            ],
+        )
         assert res.exit_code == 0, res.output
         want[key] = {T0 + i * STEP: read_depth(out / f"{i:010d}.png") for i in range(FRAMES)}
     return {"bag": bag, "rig": rig, "raw": raw, "want": want, "model": model}
@@ -85,9 +101,25 @@ def _tiny_model(path: Path) -> None:
 def _node(*extra: str, model: tuple[str, ...] = ("--method", "classical")) -> dict[str, object]:
     """The node under test. ``--max-skew``: the frames repeat, so a lost scan must not widen the tolerance
     estimated from the few distinct stamps received (half the period) to the next frame."""
-    argv = [sys.executable, "-m", "semattnet", "ros2", "--loopback", *model, "--image-topic",
-            TOPICS.image, "--points-topic", TOPICS.points, "--camera-info-topic", TOPICS.camera_info,
-            "--report-every", "1", "--max-skew", "0.02", *extra]  # fmt: skip
+    argv = [
+        sys.executable,
+        "-m",
+        "semattnet",
+        "ros2",
+        "--loopback",
+        *model,
+        "--image-topic",
+        TOPICS.image,
+        "--points-topic",
+        TOPICS.points,
+        "--camera-info-topic",
+        TOPICS.camera_info,
+        "--report-every",
+        "1",
+        "--max-skew",
+        "0.02",
+        *extra,
+    ]
     return {"name": "node", "argv": argv}
 
 
@@ -99,8 +131,13 @@ def _check(out: Path, got_name: str, want: dict[int, np.ndarray], count: int, at
     for n, line in enumerate(lines):
         sec, nsec, frame_id, w, h, encoding, step = line.split()
         stamp = int(sec) * 10**9 + int(nsec)
-        assert stamp in want and (frame_id, int(w), int(h), encoding, int(step)) == (TOPICS.camera_frame, W, H,
-                                                                                        "32FC1", 4 * W)  # fmt: skip
+        assert stamp in want and (frame_id, int(w), int(h), encoding, int(step)) == (
+            TOPICS.camera_frame,
+            W,
+            H,
+            "32FC1",
+            4 * W,
+        )
         pixels = np.fromfile(out / "rx" / f"{n}.bin", "<f4").reshape(H, W)
         np.testing.assert_allclose(pixels, np.where(want[stamp] > 0, want[stamp], np.nan), rtol=0, atol=atol)
     node_out = (out / "node.out").read_text()
@@ -108,8 +145,9 @@ def _check(out: Path, got_name: str, want: dict[int, np.ndarray], count: int, at
 
 
 @pytest.mark.parametrize("method", ["classical", "semattnet"])
-def test_cyclone_c_subscriber_receives_predict_bag_depth(peers: dict[str, Path], recorded: dict, tmp_path: Path,
-                                                         method: str) -> None:  # fmt: skip
+def test_cyclone_c_subscriber_receives_predict_bag_depth(
+    peers: dict[str, Path], recorded: dict, tmp_path: Path, method: str
+) -> None:
     """Our player (bag -> DDS, /tf_static transient local) drives the node; Cyclone 0.10 C receives its depth:
     classical bit for bit, the network within float rounding (one 1/256 m step of the PNG)."""
     from semattnet.robotics.ros.dds import loopback_config
@@ -119,25 +157,47 @@ def test_cyclone_c_subscriber_receives_predict_bag_depth(peers: dict[str, Path],
         model = ("--weights", str(recorded["model"]), "--device", "cpu")
     out = tmp_path / "run"
     (out / "rx").mkdir(parents=True)
-    player = [sys.executable, str(HERE / "play.py"), str(recorded["bag"]), TOPICS.image, TOPICS.points,
-              TOPICS.camera_info, "60"]  # fmt: skip
+    player = [
+        sys.executable,
+        str(HERE / "play.py"),
+        str(recorded["bag"]),
+        TOPICS.image,
+        TOPICS.points,
+        TOPICS.camera_info,
+        "60",
+    ]
     sub = [str(peers["cyclone"]), "rt" + OUT_TOPIC, "2", str(out / "rx"), "60"]
     env = {"CYCLONEDDS_URI": loopback_config(0)}
-    status = run_isolated(out, [_node(model=model), {"name": "sub", "argv": sub, "env": env, "wait": True},
-                                {"name": "player", "argv": player, "delay": 1}], 70)  # fmt: skip
+    status = run_isolated(
+        out,
+        [
+            _node(model=model),
+            {"name": "sub", "argv": sub, "env": env, "wait": True},
+            {"name": "player", "argv": player, "delay": 1},
+        ],
+        70,
+    )
     assert status["sub"] == 0 and status["node"] == 0, status
     want = recorded["want"]["bag" if method == "classical" else "semattnet"]
     _check(out, "sub", want, 2, atol=0.0 if method == "classical" else 1 / 256)
 
 
-def test_fastdds_camera_drives_the_node_and_fastdds_receives(peers: dict[str, Path], recorded: dict,
-                                                             tmp_path: Path) -> None:  # fmt: skip
+def test_fastdds_camera_drives_the_node_and_fastdds_receives(
+    peers: dict[str, Path], recorded: dict, tmp_path: Path
+) -> None:
     """Fast DDS (Humble's and Jazzy's default middleware) on both sides: a camera + LiDAR publisher, a subscriber."""
     out = tmp_path / "run"
     (out / "rx").mkdir(parents=True)
     pub = [str(peers["fastdds"]), "pub", "rt" + TOPICS.image, "rt" + TOPICS.points, str(recorded["raw"]), "60"]
     sub = [str(peers["fastdds"]), "sub", "rt" + OUT_TOPIC, "2", str(out / "rx"), "60"]
-    status = run_isolated(out, [_node("--rig", str(recorded["rig"])), {"name": "sub", "argv": sub, "wait": True},
-                                {"name": "camera", "argv": pub, "delay": 1}], 70)  # fmt: skip
+    status = run_isolated(
+        out,
+        [
+            _node("--rig", str(recorded["rig"])),
+            {"name": "sub", "argv": sub, "wait": True},
+            {"name": "camera", "argv": pub, "delay": 1},
+        ],
+        70,
+    )
     assert status["sub"] == 0 and status["node"] == 0, status
     _check(out, "sub", recorded["want"]["rig"], 2)

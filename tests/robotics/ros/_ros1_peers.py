@@ -109,10 +109,15 @@ def pub(workdir: Path) -> dict[str, Any]:
             keep = functools.partial(received.setdefault, topic)
             transport.subscribe(topic, f"sensor_msgs/msg/{msgtype}", SENSOR_QOS, keep)
         peers = [
-            subprocess.Popen(["rostopic", "pub", "-r", "5", topic, f"sensor_msgs/{msgtype}", text], env=env,
-                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, text=True)
+            subprocess.Popen(
+                ["rostopic", "pub", "-r", "5", topic, f"sensor_msgs/{msgtype}", text],
+                env=env,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+                text=True,
+            )
             for topic, msgtype, text in PEER_MESSAGES
-        ]  # fmt: skip
+        ]
         deadline = time.monotonic() + DEADLINE_S
         while len(received) < 2 and time.monotonic() < deadline:
             time.sleep(0.05)
@@ -120,13 +125,24 @@ def pub(workdir: Path) -> dict[str, Any]:
             _stop(peer)
     image, info = received.get("/camera/image_raw"), received.get("/camera/camera_info")
     return {
-        "image": None if image is None else {
-            "stamp": [image.header.stamp.sec, image.header.stamp.nanosec], "frame_id": image.header.frame_id,
-            "size": [image.height, image.width], "encoding": image.encoding, "data": image.data.tolist()},
-        "info": None if info is None else {
-            "stamp": [info.header.stamp.sec, info.header.stamp.nanosec], "frame_id": info.header.frame_id,
-            "K": info.K.tolist(), "distortion_model": info.distortion_model},
-    }  # fmt: skip
+        "image": None
+        if image is None
+        else {
+            "stamp": [image.header.stamp.sec, image.header.stamp.nanosec],
+            "frame_id": image.header.frame_id,
+            "size": [image.height, image.width],
+            "encoding": image.encoding,
+            "data": image.data.tolist(),
+        },
+        "info": None
+        if info is None
+        else {
+            "stamp": [info.header.stamp.sec, info.header.stamp.nanosec],
+            "frame_id": info.header.frame_id,
+            "K": info.K.tolist(),
+            "distortion_model": info.distortion_model,
+        },
+    }
 
 
 #: How many frames ``semattnet ros1 --frames`` completes before it stops on its own.
@@ -137,9 +153,18 @@ NODE_DEPTH = "/semattnet/output/depth_image"
 def _camera_info_yaml(info: Any) -> str:
     """A bag's (ROS 2) CameraInfo as ``rostopic pub``'s YAML (JSON is YAML), in ROS 1's field names."""
     stamp = {"secs": int(info.header.stamp.sec), "nsecs": int(info.header.stamp.nanosec)}
-    return json.dumps({"header": {"stamp": stamp, "frame_id": info.header.frame_id}, "height": int(info.height),
-                       "width": int(info.width), "distortion_model": info.distortion_model, "D": info.d.tolist(),
-                       "K": info.k.tolist(), "R": info.r.tolist(), "P": info.p.tolist()})  # fmt: skip
+    return json.dumps(
+        {
+            "header": {"stamp": stamp, "frame_id": info.header.frame_id},
+            "height": int(info.height),
+            "width": int(info.width),
+            "distortion_model": info.distortion_model,
+            "D": info.d.tolist(),
+            "K": info.k.tolist(),
+            "R": info.r.tolist(),
+            "P": info.p.tolist(),
+        }
+    )
 
 
 def _subscribed(env: dict[str, str], topic: str) -> bool:
@@ -148,8 +173,12 @@ def _subscribed(env: dict[str, str], topic: str) -> bool:
     return code == 1 and any(name == topic and nodes for name, nodes in subscribers)
 
 
-def _drive(env: dict[str, str], static: TcprosPublisher, frames: list[tuple[TcprosPublisher, Any]],
-           procs: dict[str, subprocess.Popen[str]]) -> None:  # fmt: skip
+def _drive(
+    env: dict[str, str],
+    static: TcprosPublisher,
+    frames: list[tuple[TcprosPublisher, Any]],
+    procs: dict[str, subprocess.Popen[str]],
+) -> None:
     """Once the node has subscribed (/tf_static, its last input) and ``rostopic echo`` waits for its depth,
     publish the bag's images and clouds at 10 Hz, round and round, until the node has stopped (bounded)."""
     deadline = time.monotonic() + DEADLINE_S
@@ -170,8 +199,10 @@ def node(workdir: Path) -> dict[str, Any]:
     the node's exit status and output."""
     topics = BagTopics()
     with open_bag(workdir / "drive_mcap") as reader:
-        msgs = {c.topic: [reader.deserialize(raw, c.msgtype) for _, _, raw in reader.messages([c])]
-                for c in reader.connections}  # fmt: skip
+        msgs = {
+            c.topic: [reader.deserialize(raw, c.msgtype) for _, _, raw in reader.messages([c])]
+            for c in reader.connections
+        }
     with _roscore(workdir, "/camera_driver") as (env, transport):
         static = transport.advertise(topics.tf_static, "tf2_msgs/msg/TFMessage", TF_STATIC_QOS)
         static.publish(msgs[topics.tf_static][0])
@@ -180,16 +211,36 @@ def node(workdir: Path) -> dict[str, Any]:
         frames = [(image, m) for m in msgs[topics.image]] + [(cloud, m) for m in msgs[topics.points]]
         frames.sort(key=lambda frame: stamp_ns(frame[1].header.stamp))
         info = _camera_info_yaml(msgs[topics.camera_info][0])
-        argv = {"info": ["rostopic", "pub", "-l", topics.camera_info, "sensor_msgs/CameraInfo", info],
-                "echo": ["rostopic", "echo", "-n", "1", NODE_DEPTH],
-                "node": [sys.executable, "-m", "semattnet", "ros1", "--master", env["ROS_MASTER_URI"], "--method",
-                         "classical", "--frames", str(NODE_FRAMES), "--image-topic", topics.image, "--points-topic",
-                         topics.points, "--camera-info-topic", topics.camera_info, "--max-skew", "0.02"]}  # fmt: skip
+        argv = {
+            "info": ["rostopic", "pub", "-l", topics.camera_info, "sensor_msgs/CameraInfo", info],
+            "echo": ["rostopic", "echo", "-n", "1", NODE_DEPTH],
+            "node": [
+                sys.executable,
+                "-m",
+                "semattnet",
+                "ros1",
+                "--master",
+                env["ROS_MASTER_URI"],
+                "--method",
+                "classical",
+                "--frames",
+                str(NODE_FRAMES),
+                "--image-topic",
+                topics.image,
+                "--points-topic",
+                topics.points,
+                "--camera-info-topic",
+                topics.camera_info,
+                "--max-skew",
+                "0.02",
+            ],
+        }
         procs = {}
         for name, cmd in argv.items():
             with (workdir / f"{name}.out").open("w") as out:
-                procs[name] = subprocess.Popen(cmd, env=os.environ if name == "node" else env, text=True,
-                                               stdout=out, stderr=subprocess.STDOUT)  # fmt: skip
+                procs[name] = subprocess.Popen(
+                    cmd, env=os.environ if name == "node" else env, text=True, stdout=out, stderr=subprocess.STDOUT
+                )
         _drive(env, static, frames, procs)
         for name in ("node", "echo", "info"):  # the node and echo end on their own; stragglers by their PID
             if name != "info":

@@ -46,6 +46,7 @@ def test_ros1_node_name_is_in_its_namespace(monkeypatch: pytest.MonkeyPatch) -> 
         raise InputError("stop here")
 
     monkeypatch.setattr(tcpros, "TcprosTransport", transport)
-    res = CliRunner().invoke(main, ["ros1", "--method", "classical", "--namespace", "robot1/", "--master",
-                                    "http://127.0.0.1:9"])  # fmt: skip
+    res = CliRunner().invoke(
+        main, ["ros1", "--method", "classical", "--namespace", "robot1/", "--master", "http://127.0.0.1:9"]
+    )
     assert "stop here" in res.output and names == ["/robot1/semattnet"], res.output

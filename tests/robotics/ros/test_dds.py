@@ -63,8 +63,12 @@ def test_garbage_and_callback_errors_are_one_line(caplog: pytest.LogCaptureFixtu
     try:
         with caplog.at_level(logging.WARNING, logger="semattnet.robotics.ros.dds"):
             t._deliver("/t/img", "sensor_msgs/msg/Image", b"\x00\x01\x00\x00\xff\xff", lambda m: None)
-            t._deliver("/t/img", "sensor_msgs/msg/Image", bytes(t.ts.serialize_cdr(_image(t), "sensor_msgs/msg/Image")),
-                       lambda m: (_ for _ in ()).throw(MemoryError("too big")))  # fmt: skip
+            t._deliver(
+                "/t/img",
+                "sensor_msgs/msg/Image",
+                bytes(t.ts.serialize_cdr(_image(t), "sensor_msgs/msg/Image")),
+                lambda m: (_ for _ in ()).throw(MemoryError("too big")),
+            )
     finally:
         t.close()
     lines = [r.getMessage() for r in caplog.records]

@@ -81,8 +81,12 @@ def test_messages_are_built_in_the_transports_type_store() -> None:
     del fake.ts
     fake.typestore = ros1 = rosbags_typestore(True)
     node = DepthNode(fake, _complete, NodeTopics(camera_info="cam/info"), namespace=NS).start()
-    for topic, message in ((INFO_T, camera_info()), ("/tf_static", tf_static()), (IMAGE, image(T0)),
-                           (SCAN, scan(T0 + 5_000_000))):  # fmt: skip
+    for topic, message in (
+        (INFO_T, camera_info()),
+        ("/tf_static", tf_static()),
+        (IMAGE, image(T0)),
+        (SCAN, scan(T0 + 5_000_000)),
+    ):
         fake.deliver(topic, message)
     _spin(node)
     info = fake.published[OUT + "/camera_info"][0]
@@ -124,11 +128,23 @@ def _bad_cases() -> list[tuple[str, object, str]]:
     odd = replace(image(T0), encoding="yuv422")  # type: ignore[type-var]
     nan_info = camera_info()
     nan_info.k[0] = np.nan  # type: ignore[attr-defined]
-    no_xyz = TS.types["sensor_msgs/msg/PointCloud2"](header=scan(T0).header, height=1, width=0, fields=[],  # type: ignore[attr-defined]
-                                                     is_bigendian=False, point_step=0, row_step=0,
-                                                     data=np.zeros(0, np.uint8), is_dense=True)  # fmt: skip
-    return [(IMAGE, trunc, "holds 10 bytes"), (IMAGE, odd, "unsupported image encoding 'yuv422'"),
-            (INFO_T, nan_info, "is NaN"), (SCAN, no_xyz, "no x/y/z field")]  # fmt: skip
+    no_xyz = TS.types["sensor_msgs/msg/PointCloud2"](
+        header=scan(T0).header,
+        height=1,
+        width=0,
+        fields=[],  # type: ignore[attr-defined]
+        is_bigendian=False,
+        point_step=0,
+        row_step=0,
+        data=np.zeros(0, np.uint8),
+        is_dense=True,
+    )
+    return [
+        (IMAGE, trunc, "holds 10 bytes"),
+        (IMAGE, odd, "unsupported image encoding 'yuv422'"),
+        (INFO_T, nan_info, "is NaN"),
+        (SCAN, no_xyz, "no x/y/z field"),
+    ]
 
 
 def test_bad_messages_are_one_line_each_and_the_node_goes_on(caplog: pytest.LogCaptureFixture) -> None:
@@ -201,8 +217,9 @@ def test_viewers_run_beside_the_node() -> None:
 
     viewer = Recorder()
     fake = FakeTransport()
-    node = DepthNode(fake, _complete, NodeTopics(camera_info="cam/info"), namespace=NS, say=[].append,
-                     sinks=[viewer]).start()  # fmt: skip
+    node = DepthNode(
+        fake, _complete, NodeTopics(camera_info="cam/info"), namespace=NS, say=[].append, sinks=[viewer]
+    ).start()
     fake.deliver(INFO_T, camera_info())
     fake.deliver("/tf_static", tf_static())
     fake.deliver(IMAGE, image(T0))
@@ -223,8 +240,9 @@ def test_compressed_image_and_sparse_depth_inputs() -> None:
         return _complete(rgb, sparse, semantic)
 
     fake = FakeTransport()
-    node = DepthNode(fake, complete, NodeTopics(image="camera/image/compressed"), compressed=True, sparse=True,
-                     say=[].append).start()  # fmt: skip
+    node = DepthNode(
+        fake, complete, NodeTopics(image="camera/image/compressed"), compressed=True, sparse=True, say=[].append
+    ).start()
     assert fake.subs["/camera/image/compressed"][0] == "sensor_msgs/msg/CompressedImage"
     assert fake.subs["/semattnet/input/point_cloud"][0] == "sensor_msgs/msg/Image" and "/tf_static" not in fake.subs
     sparse = np.zeros((INFO.height, INFO.width), np.float32)
@@ -242,6 +260,13 @@ def test_sparse_depth_16uc1_is_millimetres() -> None:
 
     mm = np.array([[0, 1500], [65535, 250]], "<u2")
     data = np.frombuffer(mm.tobytes(), np.uint8)
-    msg = TS.types["sensor_msgs/msg/Image"](header=image(T0).header, height=2, width=2, encoding="16UC1",  # type: ignore[attr-defined]
-                                            is_bigendian=0, step=4, data=data)  # fmt: skip
+    msg = TS.types["sensor_msgs/msg/Image"](
+        header=image(T0).header,
+        height=2,
+        width=2,
+        encoding="16UC1",  # type: ignore[attr-defined]
+        is_bigendian=0,
+        step=4,
+        data=data,
+    )
     np.testing.assert_allclose(decode_sparse_depth(msg, "/d"), [[0, 1.5], [65.535, 0.25]], rtol=1e-6)

@@ -63,8 +63,9 @@ def _scenario(name: str, workdir: Path) -> dict[str, Any]:
     env = dict(os.environ, PYTHONPATH=str(Path(semattnet.__file__).parents[1]))
     cmd = [*_isolation(), sys.executable, str(SCENARIOS), name, str(workdir)]
     # Its own process group: if it ever outlives its bounded waits, it goes with its roscore and rostopic.
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)  # fmt: skip
+    proc = subprocess.Popen(
+        cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+    )
     try:
         out, err = proc.communicate(timeout=120)
     except subprocess.TimeoutExpired:
@@ -91,13 +92,18 @@ def test_rostopic_pub_reaches_our_subscriber(tmp_path: Path) -> None:
     """An Image and a CameraInfo from ``rostopic pub`` arrive in our subscribers' callbacks, fields intact."""
     result = _scenario("pub", tmp_path)
     assert result["image"] == {
-        "stamp": [1700000001, 5], "frame_id": "camera_optical", "size": [2, 2], "encoding": "rgb8",
+        "stamp": [1700000001, 5],
+        "frame_id": "camera_optical",
+        "size": [2, 2],
+        "encoding": "rgb8",
         "data": list(range(1, 13)),
-    }  # fmt: skip
+    }
     assert result["info"] == {
-        "stamp": [1700000002, 7], "frame_id": "camera_optical", "distortion_model": "plumb_bob",
+        "stamp": [1700000002, 7],
+        "frame_id": "camera_optical",
+        "distortion_model": "plumb_bob",
         "K": [500.0, 0.0, 1.0, 0.0, 500.0, 1.0, 0.0, 0.0, 1.0],
-    }  # fmt: skip
+    }
 
 
 @pytest.fixture
@@ -108,8 +114,19 @@ def drive(tmp_path: Path) -> dict[int, np.ndarray]:
     records = [_record(i, rng) for i in range(3)]
     bag = write_sensor_bag(tmp_path / "drive_mcap", records, RigCalibration(K, T_CAM_LIDAR, (W, H))).path
     out = tmp_path / "predict"
-    argv = ["predict", "--bag", str(bag), "--image-topic", TOPICS.image, "--points-topic", TOPICS.points,
-            "--method", "classical", "--out", str(out)]  # fmt: skip
+    argv = [
+        "predict",
+        "--bag",
+        str(bag),
+        "--image-topic",
+        TOPICS.image,
+        "--points-topic",
+        TOPICS.points,
+        "--method",
+        "classical",
+        "--out",
+        str(out),
+    ]
     result = CliRunner().invoke(main, argv)
     assert result.exit_code == 0, result.output
     return {T0 + i * STEP: read_depth(out / f"{i:010d}.png") for i in range(3)}

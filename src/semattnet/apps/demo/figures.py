@@ -36,13 +36,21 @@ def viewer(out: Path, held: HeldOut, preds: dict[str, dict[str, np.ndarray]], tr
     frames = []
     for n in held.names[:count]:
         smp = held.samples[held.names.index(n)]
-        frames.append(ViewerFrame(
-            name=n, rgb=smp["rgb"].permute(1, 2, 0).numpy().astype(np.uint8), sparse=smp["sparse"][0].numpy(),
-            depths={m: preds[m][n] for m in _shown_methods(preds)},
-            semantic=smp["semantic"].permute(1, 2, 0).numpy().astype(np.uint8), gt=held.gts[n],
-            outputs=trained.outputs["semattnet"][n], outputs_of="semattnet", K=_intrinsics(smp),
-            cloud_of="semattnet", note="shadowed" if held.shadowed[n] else "unshadowed",
-        ))  # fmt: skip
+        frames.append(
+            ViewerFrame(
+                name=n,
+                rgb=smp["rgb"].permute(1, 2, 0).numpy().astype(np.uint8),
+                sparse=smp["sparse"][0].numpy(),
+                depths={m: preds[m][n] for m in _shown_methods(preds)},
+                semantic=smp["semantic"].permute(1, 2, 0).numpy().astype(np.uint8),
+                gt=held.gts[n],
+                outputs=trained.outputs["semattnet"][n],
+                outputs_of="semattnet",
+                K=_intrinsics(smp),
+                cloud_of="semattnet",
+                note="shadowed" if held.shadowed[n] else "unshadowed",
+            )
+        )
     return write_viewer(out, frames, LABELS, title="SemAttNet demo: held-out scenes", back=("report", "report.html"))
 
 
@@ -70,8 +78,9 @@ def _scene_figures(
     rgb = smp["rgb"].permute(1, 2, 0).numpy().astype(np.uint8)
     sem = smp["semantic"].permute(1, 2, 0).numpy().astype(np.uint8)
     kind = "shadowed" if held.shadowed[n] else "unshadowed"
-    branch_panel(pictures / f"branches_{kind}.png", rgb, sem, smp["sparse"][0].numpy(), semattnet_outputs, gt,
-                 columns=4)  # fmt: skip
+    branch_panel(
+        pictures / f"branches_{kind}.png", rgb, sem, smp["sparse"][0].numpy(), semattnet_outputs, gt, columns=4
+    )
     tiles = [("RGB", rgb), ("ground truth", colorize_depth(gt))]
     for method in _shown_methods(preds):
         rmse = score({n: preds[method][n]}, held)["all"]["rmse_mm"]
@@ -81,11 +90,19 @@ def _scene_figures(
         tiles.append((f"{short}: depth, RMSE {rmse / 1000:.2f} m", colorize_depth(preds[method][n])))
         tiles.append((f"{short}: error", error_map(preds[method][n], gt)))
     save_panel(tiles, pictures / f"compare_{kind}.png", columns=2)
-    return [(f"Comparison on a held-out {kind} scene: depth and KITTI error map per method "
-             "(error colours: blue = small, red = large)", f"pictures/compare_{kind}.png"),
-            (f"SemAttNet's intermediate depths on the {kind} scene (the model trained by this run, seed of the "
-             "first row): colour-, semantic- and depth-guided branches, their fusion, the CSPN++ refinement and "
-             "the branch confidences", f"pictures/branches_{kind}.png")]  # fmt: skip
+    return [
+        (
+            f"Comparison on a held-out {kind} scene: depth and KITTI error map per method "
+            "(error colours: blue = small, red = large)",
+            f"pictures/compare_{kind}.png",
+        ),
+        (
+            f"SemAttNet's intermediate depths on the {kind} scene (the model trained by this run, seed of the "
+            "first row): colour-, semantic- and depth-guided branches, their fusion, the CSPN++ refinement and "
+            "the branch confidences",
+            f"pictures/branches_{kind}.png",
+        ),
+    ]
 
 
 def _curve_figures(pictures: Path, runs: dict[str, Path]) -> list[tuple[str, str]]:

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from semattnet.apps.experiment import HeldOut, complete_held_out, step_seconds, train_variant
+from semattnet.apps.experiment import HeldOut, VariantRecipe, complete_held_out, step_seconds, train_variant
 
 __all__ = [
     "LABELS",
@@ -134,8 +134,10 @@ def step_plan(s: DemoSettings, device: torch.device) -> dict[str, tuple[int, int
         n = (max(5, int(budget * s.backbone_share / t_bb)), max(5, int(budget * (1.0 - s.backbone_share) / t_full)))
         return dict.fromkeys(times, n)
     share = budget / len(MODELS)
-    return {key: (max(5, int(share * s.backbone_share / t_bb)), max(5, int(share * (1.0 - s.backbone_share) / t_full)))
-            for key, (t_bb, t_full) in times.items()}  # fmt: skip
+    return {
+        key: (max(5, int(share * s.backbone_share / t_bb)), max(5, int(share * (1.0 - s.backbone_share) / t_full)))
+        for key, (t_bb, t_full) in times.items()
+    }
 
 
 def step_times(s: DemoSettings, device: torch.device, overrides: dict[str, Any]) -> tuple[float, float]:
@@ -160,9 +162,8 @@ def train_models(
         for seed in seeds:
             run = trained.runs[key] if seed == seeds[0] else out / "runs" / f"{key}_seed{seed}"
             log(f"[3/5] training {label} (seed {seed}): {n_bb} backbone steps, then {n_full} full-model steps ...")
-            ckpt = train_variant(run, out / "data", n_bb, n_full, size=s.size, width=s.width,
-                                 batch_size=s.batch_size, lr=s.lr, seed=seed, device=device, log=log,
-                                 **overrides)  # fmt: skip
+            recipe = VariantRecipe(n_bb, n_full, s.size, s.width, s.batch_size, s.lr, seed, fields=overrides)
+            ckpt = train_variant(run, out / "data", recipe, device, log=log)
             log(f"[4/5] completing the held-out scenes with {label} (seed {seed}) ...")
             outputs = complete_held_out(ckpt, held, device)
             trained.per_seed.setdefault(seed, {})[key] = {n: o["refined_depth"] for n, o in outputs.items()}

@@ -26,6 +26,7 @@ from torch import nn
 from semattnet._errors import DataError
 from semattnet.apps.experiment import (
     HeldOut,
+    VariantRecipe,
     complete_held_out,
     fallback_semantic,
     make_synthetic,
@@ -127,6 +128,24 @@ class ReferenceRecipe:
     semantic_dropout: float = 0.0
     seed: int = 0
 
+    def variant(self, width: float, **fields: object) -> VariantRecipe:
+        """This recipe for :func:`~semattnet.apps.experiment.train_variant` at ``width`` (``fields``: further
+        :class:`~semattnet.training.TrainConfig` fields)."""
+        return VariantRecipe(
+            self.backbone_steps,
+            self.full_steps,
+            self.size,
+            width,
+            self.batch_size,
+            self.lr,
+            self.seed,
+            refine_init_steps=self.refine_init_steps,
+            head_lr_factor=self.head_lr_factor,
+            loss=self.loss,
+            semantic_dropout=self.semantic_dropout,
+            fields=fields,
+        )
+
 
 REFERENCE_RECIPE = ReferenceRecipe()
 
@@ -192,10 +211,7 @@ def train_reference(
     r = recipe
     log(f"reference: {r.train_frames} training scenes (data seed {r.data_seed}) at {r.size[0]}x{r.size[1]} ...")
     held = make_synthetic(work / "data", r.train_frames, r.val_frames, r.size, r.data_seed, style=r.style)
-    ckpt = train_variant(work / "run", work / "data", r.backbone_steps, r.full_steps, size=r.size, width=r.width,
-                         batch_size=r.batch_size, lr=r.lr, seed=r.seed, device=torch.device(device), log=log,
-                         refine_init_steps=r.refine_init_steps, head_lr_factor=r.head_lr_factor, loss=r.loss,
-                         semantic_dropout=r.semantic_dropout, branches=3)  # fmt: skip
+    ckpt = train_variant(work / "run", work / "data", r.variant(r.width, branches=3), torch.device(device), log=log)
     return package_reference(ckpt, held, target, r, time.perf_counter() - start, log, reference_command(r))
 
 
@@ -225,14 +241,22 @@ def package_reference(
     cpu = torch.device("cpu")
     preds = {n: o["refined_depth"] for n, o in complete_held_out(model, held, cpu).items()}
     blind = {n: o["refined_depth"] for n, o in complete_held_out(model, held, cpu, fallback_semantic).items()}
-    classical = {n: complete_classical(s["sparse"][None])[0, 0].numpy()
-                 for n, s in zip(held.names, held.samples, strict=True)}  # fmt: skip
-    info = {"recipe": asdict(recipe), "command": command, "torch": torch.__version__,
-            "machine": machine_line(), "levels": levels,
-            "train_seconds": None if train_seconds is None else round(train_seconds, 1),
-            "val": {"reference": _metrics(score(preds, held)["all"]),
-                    "reference_fallback_map": _metrics(score(blind, held)["all"]),
-                    "classical": _metrics(score(classical, held)["all"])}}  # fmt: skip
+    classical = {
+        n: complete_classical(s["sparse"][None])[0, 0].numpy() for n, s in zip(held.names, held.samples, strict=True)
+    }
+    info = {
+        "recipe": asdict(recipe),
+        "command": command,
+        "torch": torch.__version__,
+        "machine": machine_line(),
+        "levels": levels,
+        "train_seconds": None if train_seconds is None else round(train_seconds, 1),
+        "val": {
+            "reference": _metrics(score(preds, held)["all"]),
+            "reference_fallback_map": _metrics(score(blind, held)["all"]),
+            "classical": _metrics(score(classical, held)["all"]),
+        },
+    }
     save_reference(model, target, info, levels)
     log(
         f"reference: written {target} ({target.stat().st_size / 1e6:.2f} MB, {levels} levels); "
@@ -253,8 +277,11 @@ def machine_line() -> str:
 
     cpu = platform.processor() or platform.machine()
     try:
-        cpu = next(line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
-                   if line.lower().startswith("model name"))  # fmt: skip
+        cpu = next(
+            line.split(":", 1)[1].strip()
+            for line in Path("/proc/cpuinfo").read_text().splitlines()
+            if line.lower().startswith("model name")
+        )
     except (OSError, StopIteration):
         pass
     return f"{cpu}, {os.cpu_count()} cores"

@@ -87,8 +87,10 @@ Runs = dict[str, dict[int, dict[str, dict[str, float]]]]
 def mean_over_seeds(runs: dict[int, dict[str, dict[str, float]]]) -> dict[str, dict[str, float]]:
     """group -> metric: the mean over seeds of one method's numbers (seed -> group -> metric)."""
     first = next(iter(runs.values()))
-    return {group: {k: float(np.mean([run[group][k] for run in runs.values()])) for k in values}
-            for group, values in first.items()}  # fmt: skip
+    return {
+        group: {k: float(np.mean([run[group][k] for run in runs.values()])) for k in values}
+        for group, values in first.items()
+    }
 
 
 def _learned() -> set[str]:
@@ -159,8 +161,13 @@ def machine() -> Machine:
                 break
     except OSError:
         pass
-    return Machine(cpu=cpu, cores=os.cpu_count(), torch=torch.__version__, python=platform.python_version(),
-                   platform=platform.platform())  # fmt: skip
+    return Machine(
+        cpu=cpu,
+        cores=os.cpu_count(),
+        torch=torch.__version__,
+        python=platform.python_version(),
+        platform=platform.platform(),
+    )
 
 
 def write_results(
@@ -172,22 +179,29 @@ def write_results(
 ) -> Path:
     """Write ``results.json`` (schema in :mod:`semattnet.apps.demo`)."""
     methods = {
-        m: {"label": LABELS[m], **record(metrics[m]),
-            "per_seed": {str(seed): record(run) for seed, run in runs[m].items()}}
+        m: {
+            "label": LABELS[m],
+            **record(metrics[m]),
+            "per_seed": {str(seed): record(run) for seed, run in runs[m].items()},
+        }
         for m in metrics
-    }  # fmt: skip
+    }
     comparisons_doc = {"semattnet_better_than": setup["comparisons"], "verdicts": setup["verdicts"]}
     if "reference" in setup:
         comparisons_doc["reference_better_than"] = setup["reference"]["comparisons"]
     doc = {
         "schema": RESULTS_SCHEMA,
         "units": {"rmse": "mm", "mae": "mm", "irmse": "1/km", "imae": "1/km"},
-        "seeds": setup["seeds"], "methods": methods, "steps": trained.steps,
+        "seeds": setup["seeds"],
+        "methods": methods,
+        "steps": trained.steps,
         "wall_seconds": {"total": setup["seconds"], "models": {k: round(v, 1) for k, v in trained.seconds.items()}},
         "machine": {**machine(), "device": setup["device"], "torch_threads": setup["torch_threads"]},
-        "held_out": setup["held_out"], "settings": setup["settings"], "recipe": setup["recipe"],
+        "held_out": setup["held_out"],
+        "settings": setup["settings"],
+        "recipe": setup["recipe"],
         "comparisons": comparisons_doc,
-    }  # fmt: skip
+    }
     if "reference" in setup:
         doc["reference"] = {k: v for k, v in setup["reference"].items() if k != "comparisons"}
     if "uncertainty" in setup:

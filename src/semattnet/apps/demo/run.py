@@ -93,32 +93,57 @@ def run_demo(
     unc_figure, unc_lines = unc.uncertainty_report(unc_scores, out / "pictures")
     viewer = figs.viewer(out, held, preds, trained, s.viewer_frames)
     seconds = time.perf_counter() - t_start
+    setup, notes = _setup(s, device, seconds, held, trained, metrics, unc_scores, unc_lines, reference)
+    (out / "metrics.json").write_text(json.dumps({"metrics": metrics, "setup": setup}, indent=2) + "\n")
+    results = write_results(out / "results.json", runs, metrics, trained, setup)
+    links = [
+        ("Interactive viewer of the held-out scenes (hover for depths, layers, 3D point cloud)", "viewer.html"),
+        ("All numbers as JSON", "results.json"),
+    ]
+    table, labels = with_seed_rows(metrics, runs)
+    md, html = write_report(
+        out, table, labels, [*figures, unc_figure], setup | {"verdicts": setup["verdicts"] + notes}, links=links
+    )
+    _summarise(metrics, order, seconds, html, log)
+    mark_tree(out, "demo", True)
+    return DemoResult(out, md, html, metrics, trained.steps, seconds, viewer, results)
+
+
+def _setup(
+    s: DemoSettings,
+    device: torch.device,
+    seconds: float,
+    held: HeldOut,
+    trained: Trained,
+    metrics: dict[str, dict[str, dict[str, float]]],
+    unc_scores: dict[str, Any],
+    unc_lines: list[str],
+    reference: tuple[dict[int, dict[str, np.ndarray]], ReferenceRecord, dict[int, dict[str, np.ndarray]]] | None,
+) -> tuple[DemoSetup, list[str]]:
+    """What the report says of the run (device, settings, steps, seeds, comparisons and verdicts, the uncertainty's
+    scores, the recipes) and its notes."""
     setup: DemoSetup = {
-        "device": str(device), "torch_threads": torch.get_num_threads(), "seconds": round(seconds, 1),
+        "device": str(device),
+        "torch_threads": torch.get_num_threads(),
+        "seconds": round(seconds, 1),
         "held_out": {"frames": len(held.names), "shadowed": sum(held.shadowed.values())},
-        "settings": asdict(s), "steps": trained.steps, "seeds": list(s.training_seeds()),
+        "settings": asdict(s),
+        "steps": trained.steps,
+        "seeds": list(s.training_seeds()),
         "recipe": {"live": list(RECIPE_NOTES)},
-    }  # fmt: skip
+    }
     setup["comparisons"] = comparisons(metrics)
     setup["verdicts"] = verdict_sentences(setup["comparisons"], setup["seeds"])
     setup["uncertainty"] = unc_scores
     notes = [*unc_lines, *RECIPE_NOTES]
     if reference is not None:
         setup["reference"] = reference[1] | {"comparisons": comparisons(metrics, REFERENCE_KEY)}
-        setup["verdicts"] += verdict_sentences(setup["reference"]["comparisons"], setup["seeds"], REFERENCE_KEY,
-                                               reference[1]["seeds"])  # fmt: skip
+        setup["verdicts"] += verdict_sentences(
+            setup["reference"]["comparisons"], setup["seeds"], REFERENCE_KEY, reference[1]["seeds"]
+        )
         setup["recipe"]["reference"] = reference[1]["recipe_notes"]
         notes += reference[1]["recipe_notes"]
-    (out / "metrics.json").write_text(json.dumps({"metrics": metrics, "setup": setup}, indent=2) + "\n")
-    results = write_results(out / "results.json", runs, metrics, trained, setup)
-    links = [("Interactive viewer of the held-out scenes (hover for depths, layers, 3D point cloud)", "viewer.html"),
-             ("All numbers as JSON", "results.json")]  # fmt: skip
-    table, labels = with_seed_rows(metrics, runs)
-    md, html = write_report(out, table, labels, [*figures, unc_figure], setup | {"verdicts": setup["verdicts"] + notes},
-                            links=links)  # fmt: skip
-    _summarise(metrics, order, seconds, html, log)
-    mark_tree(out, "demo", True)
-    return DemoResult(out, md, html, metrics, trained.steps, seconds, viewer, results)
+    return setup, notes
 
 
 def _reference(
@@ -141,16 +166,27 @@ def _reference(
         outputs = complete_held_out(model, held, device)
         preds[seed] = {n: o["refined_depth"] for n, o in outputs.items()}
         uncs[seed] = {n: o["uncertainty"] for n, o in outputs.items()}
-        records.append({"seed": seed, "file": path.name, "bytes": path.stat().st_size,
-                        "sha256": sha256_file(path),
-                        "train_seconds": info.get("train_seconds"), "trained_on": info.get("machine"),
-                        "own_validation": info.get("val")})  # fmt: skip
+        records.append(
+            {
+                "seed": seed,
+                "file": path.name,
+                "bytes": path.stat().st_size,
+                "sha256": sha256_file(path),
+                "train_seconds": info.get("train_seconds"),
+                "trained_on": info.get("machine"),
+                "own_validation": info.get("val"),
+            }
+        )
     recipe = {k: v for k, v in info.get("recipe", {}).items() if k != "seed"}
     record = ReferenceRecord(
-        label=LABELS[REFERENCE_KEY], seeds=list(files), files=records, storage=ref.REFERENCE_STORAGE,
-        command=info.get("command", ref.REFERENCE_COMMAND), recipe=recipe,
+        label=LABELS[REFERENCE_KEY],
+        seeds=list(files),
+        files=records,
+        storage=ref.REFERENCE_STORAGE,
+        command=info.get("command", ref.REFERENCE_COMMAND),
+        recipe=recipe,
         recipe_notes=ref.recipe_notes(info.get("recipe", {})),
-    )  # fmt: skip
+    )
     return preds, record, uncs
 
 
@@ -187,10 +223,15 @@ def train_reference_run(
     ``semantic_dropout``: the recipe's share of frames trained with the fallback semantic map."""
     out = Path(out_dir)
     make_empty(out, overwrite)
-    recipes = [dataclasses.replace(ref.REFERENCE_RECIPE, seed=seed, semantic_dropout=semantic_dropout)
-               for seed in seeds]  # fmt: skip
-    paths = [ref.train_reference(out / f"seed{r.seed}", ref.reference_path(r.seed, out), r,
-                                 device=resolve_device(device), log=log) for r in recipes]  # fmt: skip
+    recipes = [
+        dataclasses.replace(ref.REFERENCE_RECIPE, seed=seed, semantic_dropout=semantic_dropout) for seed in seeds
+    ]
+    paths = [
+        ref.train_reference(
+            out / f"seed{r.seed}", ref.reference_path(r.seed, out), r, device=resolve_device(device), log=log
+        )
+        for r in recipes
+    ]
     mark_tree(out, "demo --train-reference", True)
     return paths
 

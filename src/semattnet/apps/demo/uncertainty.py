@@ -31,8 +31,10 @@ BySeed = dict[str, dict[int, dict[str, np.ndarray]]]
 
 def classical_uncertainties(held: HeldOut, depths: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """scene -> the classical completion's uncertainty (metres), from its ``depths`` (scene -> completion)."""
-    return {n: classical_uncertainty(smp["sparse"][None], torch.from_numpy(depths[n])[None, None])[0, 0].numpy()
-            for n, smp in zip(held.names, held.samples, strict=True)}  # fmt: skip
+    return {
+        n: classical_uncertainty(smp["sparse"][None], torch.from_numpy(depths[n])[None, None])[0, 0].numpy()
+        for n, smp in zip(held.names, held.samples, strict=True)
+    }
 
 
 def score_uncertainty(preds: BySeed, uncertainty: BySeed, held: HeldOut) -> dict[str, dict[str, Any]]:
@@ -51,8 +53,12 @@ def score_uncertainty(preds: BySeed, uncertainty: BySeed, held: HeldOut) -> dict
             curves.append(acc.curves())
         mean_curves = {k: np.mean([c[k] for c in curves], axis=0) for k in curves[0]}
         # the areas are linear in the curve: the AUSE / AURG of the mean curves are the means over seeds
-        out[method] = {"label": LABELS.get(method, method), **summary(mean_curves), "per_seed": per_seed,
-                       "curves": {k: [round(float(x), 6) for x in v] for k, v in mean_curves.items()}}  # fmt: skip
+        out[method] = {
+            "label": LABELS.get(method, method),
+            **summary(mean_curves),
+            "per_seed": per_seed,
+            "curves": {k: [round(float(x), 6) for x in v] for k, v in mean_curves.items()},
+        }
     return out
 
 
@@ -63,17 +69,24 @@ def uncertainty_report(scores: dict[str, dict[str, Any]], pictures: Path) -> tup
 
     short = {m: LABELS[m].split(" (")[0] for m in scores}
     curves = {short[m]: figure_data({k: np.asarray(v) for k, v in s["curves"].items()}) for m, s in scores.items()}
-    plot_sparsification(curves, pictures / Path(UNCERTAINTY_FIGURE).name,
-                        title="Sparsification on the held-out scenes (mean over seeds)")  # fmt: skip
-    caption = ("Sparsification curves of each method's per-pixel uncertainty on the held-out scenes: the metric "
-               "of the pixels left after removing the most uncertain ones (solid), the oracle that removes the "
-               "largest errors first (dashed), a random removal (dotted); normalised by the metric of all pixels, "
-               "mean over seeds (docs/guides/uncertainty.md)")  # fmt: skip
+    plot_sparsification(
+        curves,
+        pictures / Path(UNCERTAINTY_FIGURE).name,
+        title="Sparsification on the held-out scenes (mean over seeds)",
+    )
+    caption = (
+        "Sparsification curves of each method's per-pixel uncertainty on the held-out scenes: the metric "
+        "of the pixels left after removing the most uncertain ones (solid), the oracle that removes the "
+        "largest errors first (dashed), a random removal (dotted); normalised by the metric of all pixels, "
+        "mean over seeds (docs/guides/uncertainty.md)"
+    )
     lines = []
     for m, s in scores.items():
         runs = list(s["per_seed"].values())
         seeds = "; ".join(f"seed {k}: {v['ause_rmse']:.3f} / {v['aurg_rmse']:.3f}" for k, v in s["per_seed"].items())
         how = f"mean over seeds ({seeds})" if any(r != runs[0] for r in runs) else "the same for every seed"
-        lines.append(f"Uncertainty of {short[m]}, AUSE / AURG of RMSE: {s['ause_rmse']:.3f} / {s['aurg_rmse']:.3f}, "
-                     f"{how}; lower AUSE and higher AURG rank the errors better.")  # fmt: skip
+        lines.append(
+            f"Uncertainty of {short[m]}, AUSE / AURG of RMSE: {s['ause_rmse']:.3f} / {s['aurg_rmse']:.3f}, "
+            f"{how}; lower AUSE and higher AURG rank the errors better."
+        )
     return (caption, UNCERTAINTY_FIGURE), lines

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar, Protocol
 
 from semattnet._errors import InputError
-from semattnet._utils.registry import option
+from semattnet._utils.registry import Registry, UnknownEntryError, option
 from semattnet.data.datasets.frames import check_split_in
 from semattnet.data.datasets.nyuv2 import NYU_SPLITS, NyuV2Source
 from semattnet.data.datasets.void import VOID_SPLITS, VoidSource
@@ -35,18 +35,28 @@ if TYPE_CHECKING:
     #: The torch Dataset of a split (:meth:`DatasetSpec.dataset`): dicts of tensors, ``load(i)`` the raw sample.
     SplitDataset = KittiDepthCompletion | FrameDataset
 
-__all__ = ["DATASETS", "DEFAULT_DATASET", "DatasetArchive", "DatasetOptions", "DatasetSpec", "UnknownDatasetError",
-           "check_split", "get_dataset"]  # fmt: skip
+__all__ = [
+    "DATASETS",
+    "DEFAULT_DATASET",
+    "DatasetArchive",
+    "DatasetOptions",
+    "DatasetSpec",
+    "UnknownDatasetError",
+    "check_split",
+    "get_dataset",
+]
 
 PathLike = str | os.PathLike[str]
 DEFAULT_DATASET = "kitti-dc"
 #: Where alexklwong/void-dataset's README (at b17f271) says the release zip is (OneDrive; its wget command).
-VOID_RELEASE_URL = ("https://yaleedu-my.sharepoint.com/:u:/g/personal/alex_wong_yale_edu/"
-                    "Ebwvk0Ji8HhNinmAcKI5vSkBEjJTIWlA8PXwKNQX_FvB7g?e=0Zqe7g&download=1")  # fmt: skip
+VOID_RELEASE_URL = (
+    "https://yaleedu-my.sharepoint.com/:u:/g/personal/alex_wong_yale_edu/"
+    "Ebwvk0Ji8HhNinmAcKI5vSkBEjJTIWlA8PXwKNQX_FvB7g?e=0Zqe7g&download=1"
+)
 
 
-class UnknownDatasetError(InputError):
-    """A ``--dataset`` name that is not in :data:`DATASETS`."""
+#: The registry's one unknown-name error (the old name kept).
+UnknownDatasetError = UnknownEntryError
 
 
 @dataclass(frozen=True)
@@ -103,9 +113,16 @@ class DatasetSpec:
         """``split`` (default: the train / eval split) if this dataset has it."""
         return check_split_in(self.name, split or (self.train_split if train else self.eval_split), self.splits)
 
-    def source(self, root: PathLike, split: str | None = None, *, semantic_root: PathLike | None = None,
-               raw_root: PathLike | None = None, max_frames: int | None = None,
-               seed: int = 0) -> IndexedSource:  # fmt: skip
+    def source(
+        self,
+        root: PathLike,
+        split: str | None = None,
+        *,
+        semantic_root: PathLike | None = None,
+        raw_root: PathLike | None = None,
+        max_frames: int | None = None,
+        seed: int = 0,
+    ) -> IndexedSource:
         """The frames of ``split`` as a :class:`~semattnet.data.frames.FrameSource` (full KITTI frames).
 
         Raises:
@@ -114,8 +131,9 @@ class DatasetSpec:
         split = self.check_split(split)
         if self.make_source is None:
             raise InputError(f"dataset {self.name}: no frame reader registered")
-        return self.make_source(root, split, raw_root=raw_root, semantic_root=semantic_root, max_frames=max_frames,
-                                seed=seed)  # fmt: skip
+        return self.make_source(
+            root, split, raw_root=raw_root, semantic_root=semantic_root, max_frames=max_frames, seed=seed
+        )
 
     def eval_crop(self, split: str, size: tuple[int, int]) -> tuple[int, int] | None:
         """The (H, W) bottom crop the protocol scores frames of ``size`` in ``split`` at, or None (as they are):
@@ -126,9 +144,17 @@ class DatasetSpec:
             return None
         return None if size == self.crop else self.crop
 
-    def dataset(self, root: PathLike, split: str | None = None, *, train: bool = False, seed: int = 0,
-                raw_root: PathLike | None = None, semantic_root: PathLike | None = None,
-                config: TrainRecipe | None = None) -> SplitDataset:  # fmt: skip
+    def dataset(
+        self,
+        root: PathLike,
+        split: str | None = None,
+        *,
+        train: bool = False,
+        seed: int = 0,
+        raw_root: PathLike | None = None,
+        semantic_root: PathLike | None = None,
+        config: TrainRecipe | None = None,
+    ) -> SplitDataset:
         """The torch Dataset of ``split``: augmented for training (``train``; ``config`` a
         :class:`~semattnet.training.TrainConfig` for KITTI's crop and jitter), else as the protocol scores it
         (:meth:`eval_crop`; the model's padding to multiples of 32 is the evaluation loop's)."""
@@ -144,9 +170,14 @@ class DatasetSpec:
         source = self.source(root, split, semantic_root=semantic_root, seed=seed)
         return FrameDataset(source, transform, seed)
 
-    def check(self, roots: Sequence[PathLike], raw_root: PathLike | None = None,
-              semantic_root: PathLike | None = None, sample: int | None = None,
-              log: Callable[[str], None] = print) -> int:  # fmt: skip
+    def check(
+        self,
+        roots: Sequence[PathLike],
+        raw_root: PathLike | None = None,
+        semantic_root: PathLike | None = None,
+        sample: int | None = None,
+        log: Callable[[str], None] = print,
+    ) -> int:
         """``data check``: every split found under each root decoded; returns the number of problems
         (:func:`semattnet.data.datasets.check.check_dataset`, the one loop for every dataset)."""
         from semattnet.data.datasets.check import check_dataset
@@ -173,8 +204,16 @@ class TrainRecipe(Protocol):
     def semantic_dropout(self) -> float: ...
 
 
-def _kitti_dataset(spec: DatasetSpec, root: PathLike, split: str, train: bool, seed: int, raw_root: PathLike | None,
-                   semantic_root: PathLike | None, cfg: TrainRecipe | None) -> SplitDataset:  # fmt: skip
+def _kitti_dataset(
+    spec: DatasetSpec,
+    root: PathLike,
+    split: str,
+    train: bool,
+    seed: int,
+    raw_root: PathLike | None,
+    semantic_root: PathLike | None,
+    cfg: TrainRecipe | None,
+) -> SplitDataset:
     from semattnet.data.kitti import KittiDepthCompletion
     from semattnet.data.transforms import EvalTransform, TrainTransform
 
@@ -182,58 +221,135 @@ def _kitti_dataset(spec: DatasetSpec, root: PathLike, split: str, train: bool, s
         ds = KittiDepthCompletion(root, split, raw_root, semantic_root)
         ds.transform = EvalTransform(spec.eval_crop(split, ds.load(0).size))
         return ds
-    t = TrainTransform(cfg.crop, cfg.random_crop_height or cfg.crop[0], cfg.flip, cfg.jitter,
-                       cfg.semantic_dropout) if cfg else TrainTransform()  # fmt: skip
+    t = (
+        TrainTransform(cfg.crop, cfg.random_crop_height or cfg.crop[0], cfg.flip, cfg.jitter, cfg.semantic_dropout)
+        if cfg
+        else TrainTransform()
+    )
     return KittiDepthCompletion(root, split, raw_root, semantic_root, seed=seed, transform=t)
 
 
-def _kitti_source(root: PathLike, split: str, *, raw_root: PathLike | None, semantic_root: PathLike | None,
-                  max_frames: int | None, seed: int) -> IndexedSource:  # fmt: skip
+def _kitti_source(
+    root: PathLike,
+    split: str,
+    *,
+    raw_root: PathLike | None,
+    semantic_root: PathLike | None,
+    max_frames: int | None,
+    seed: int,
+) -> IndexedSource:
     from semattnet.data.sources import KittiSplitSource
 
     return KittiSplitSource(root, split, raw_root, semantic_root, max_frames)
 
 
-def _nyu_source(root: PathLike, split: str, *, raw_root: PathLike | None, semantic_root: PathLike | None,
-                max_frames: int | None, seed: int) -> IndexedSource:  # fmt: skip
+def _nyu_source(
+    root: PathLike,
+    split: str,
+    *,
+    raw_root: PathLike | None,
+    semantic_root: PathLike | None,
+    max_frames: int | None,
+    seed: int,
+) -> IndexedSource:
     return NyuV2Source(root, split, semantic_root=semantic_root, max_frames=max_frames, seed=seed)
 
 
-def _void_source(root: PathLike, split: str, *, raw_root: PathLike | None, semantic_root: PathLike | None,
-                 max_frames: int | None, seed: int) -> IndexedSource:  # fmt: skip
+def _void_source(
+    root: PathLike,
+    split: str,
+    *,
+    raw_root: PathLike | None,
+    semantic_root: PathLike | None,
+    max_frames: int | None,
+    seed: int,
+) -> IndexedSource:
     return VoidSource(root, split, semantic_root=semantic_root, max_frames=max_frames)
 
 
 _KITTI = DatasetSpec(
-    "kitti-dc", "KITTI depth completion", "data_depth_{velodyne,annotated,selection}/, kitti_raw/, semantic/",
-    ("train", "val", "val_select", "test"), "train", "val_select", (352, 1216), (0.0, 255.0), None, None, "mm",
-    ("rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km"), "cityscapes", "CC BY-NC-SA 3.0 (KITTI)",
-    make_source=_kitti_source, crop_splits=("train", "val", "test"), make_dataset=_kitti_dataset,
-)  # fmt: skip
+    "kitti-dc",
+    "KITTI depth completion",
+    "data_depth_{velodyne,annotated,selection}/, kitti_raw/, semantic/",
+    ("train", "val", "val_select", "test"),
+    "train",
+    "val_select",
+    (352, 1216),
+    (0.0, 255.0),
+    None,
+    None,
+    "mm",
+    ("rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km"),
+    "cityscapes",
+    "CC BY-NC-SA 3.0 (KITTI)",
+    make_source=_kitti_source,
+    crop_splits=("train", "val", "test"),
+    make_dataset=_kitti_dataset,
+)
 _NYU = DatasetSpec(
-    "nyuv2", "NYU Depth v2 (sparse-to-dense HDF5)", "train/<scene>/<NNNNN>.h5, val/official/<NNNNN>.h5",
-    tuple(NYU_SPLITS), "train", "test", (228, 304), (0.1, 10.0), (0.0, 10.0), 500, "m",
-    ("rmse", "abs_rel", "delta1", "delta2", "delta3", "mae", "irmse_per_km", "imae_per_km"), "nyu40",
+    "nyuv2",
+    "NYU Depth v2 (sparse-to-dense HDF5)",
+    "train/<scene>/<NNNNN>.h5, val/official/<NNNNN>.h5",
+    tuple(NYU_SPLITS),
+    "train",
+    "test",
+    (228, 304),
+    (0.1, 10.0),
+    (0.0, 10.0),
+    500,
+    "m",
+    ("rmse", "abs_rel", "delta1", "delta2", "delta3", "mae", "irmse_per_km", "imae_per_km"),
+    "nyu40",
     "NYU Depth v2: research use, cite Silberman et al. (ECCV 2012); the HDF5 conversion: Ma & Karaman",
-    recipe={"epochs": 25, "batch_size": 12, "lr": 0.001, "lr_schedule": "cosine", "crop": (228, 304),
-            "val_split": "test"},
-    archives=(DatasetArchive("nyudepthv2.tar.gz", "http://datasets.lids.mit.edu/sparse-to-dense/data/nyudepthv2.tar.gz",
-                             ("nyudepthv2",), "about 32 GB"),),
+    recipe={
+        "epochs": 25,
+        "batch_size": 12,
+        "lr": 0.001,
+        "lr_schedule": "cosine",
+        "crop": (228, 304),
+        "val_split": "test",
+    },
+    archives=(
+        DatasetArchive(
+            "nyudepthv2.tar.gz",
+            "http://datasets.lids.mit.edu/sparse-to-dense/data/nyudepthv2.tar.gz",
+            ("nyudepthv2",),
+            "about 32 GB",
+        ),
+    ),
     make_source=_nyu_source,
-)  # fmt: skip
+)
 _VOID = DatasetSpec(
-    "void", "VOID (visual-inertial odometry sparse depth)", "void_NNNN/{train,test}_{image,sparse_depth,"
-    "validity_map,ground_truth,intrinsics}.txt + data/<sequence>/...", VOID_SPLITS, "train", "test", None,
-    (0.2, 5.0), (0.0, math.inf), None, "mm", ("mae_mm", "rmse_mm", "imae_per_km", "irmse_per_km"), "cityscapes",
+    "void",
+    "VOID (visual-inertial odometry sparse depth)",
+    "void_NNNN/{train,test}_{image,sparse_depth,validity_map,ground_truth,intrinsics}.txt + data/<sequence>/...",
+    VOID_SPLITS,
+    "train",
+    "test",
+    None,
+    (0.2, 5.0),
+    (0.0, math.inf),
+    None,
+    "mm",
+    ("mae_mm", "rmse_mm", "imae_per_km", "irmse_per_km"),
+    "cityscapes",
     "VOID: see github.com/alexklwong/void-dataset (research use; cite Wong et al., RA-L 2020)",
-    recipe={"epochs": 10, "batch_size": 8, "lr": 0.0001, "lr_schedule": "cosine", "crop": (480, 640),
-            "val_split": "test"},
+    recipe={
+        "epochs": 10,
+        "batch_size": 8,
+        "lr": 0.0001,
+        "lr_schedule": "cosine",
+        "crop": (480, 640),
+        "val_split": "test",
+    },
     archives=(DatasetArchive("void_release.zip", VOID_RELEASE_URL, ("void_release",), None),),
     make_source=_void_source,
-)  # fmt: skip
+)
 
 #: Every dataset by name.
-DATASETS: dict[str, DatasetSpec] = {d.name: d for d in (_KITTI, _NYU, _VOID)}
+DATASETS: Registry[DatasetSpec] = Registry("dataset")
+for _spec in (_KITTI, _NYU, _VOID):
+    DATASETS.add(_spec.name, _spec)
 
 
 def get_dataset(name: str | DatasetSpec | None = None) -> DatasetSpec:
@@ -241,8 +357,6 @@ def get_dataset(name: str | DatasetSpec | None = None) -> DatasetSpec:
     if isinstance(name, DatasetSpec):
         return name
     name = name or DEFAULT_DATASET
-    if name not in DATASETS:
-        raise UnknownDatasetError(f"dataset: unknown dataset {name!r}; choose one of {', '.join(DATASETS)}")
     return DATASETS[name]
 
 
@@ -264,8 +378,14 @@ class DatasetOptions(SourceOptions):
     data_root: Path | None = option(
         "--data", type="folder", help="A dataset root (instead of --rgb/--sparse): the frames of --split."
     )
-    dataset: str = option("--dataset", type="choice", choices=tuple(DATASETS), default=DEFAULT_DATASET,
-                          show_default=True, help="The dataset whose root --data is.")  # fmt: skip
+    dataset: str = option(
+        "--dataset",
+        type="choice",
+        choices=tuple(DATASETS),
+        default=DEFAULT_DATASET,
+        show_default=True,
+        help="The dataset whose root --data is.",
+    )
     split: str | None = option("--split", help="The split [the dataset's evaluation split].")
 
     def segment_split(self) -> tuple[str, Path, str] | None:

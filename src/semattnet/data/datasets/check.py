@@ -36,9 +36,16 @@ class CheckedDataset(Protocol):
     @property
     def splits(self) -> tuple[str, ...]: ...
 
-    def source(self, root: PathLike, split: str | None = None, *, semantic_root: PathLike | None = None,
-               raw_root: PathLike | None = None, max_frames: int | None = None,
-               seed: int = 0) -> IndexedSource: ...  # fmt: skip
+    def source(
+        self,
+        root: PathLike,
+        split: str | None = None,
+        *,
+        semantic_root: PathLike | None = None,
+        raw_root: PathLike | None = None,
+        max_frames: int | None = None,
+        seed: int = 0,
+    ) -> IndexedSource: ...
 
 
 @dataclass
@@ -57,12 +64,15 @@ class SplitReport:
             return f"{100 * np.mean(v):5.2f} %" if v else "   -   "
 
         status = "ok" if not self.problems else f"{len(self.problems)} problem(s)"
-        return (f"{self.split:10s} {self.frames:7d} frames  checked {self.checked:7d}  "
-                f"sparse valid {pct(self.sparse_valid)}  gt valid {pct(self.gt_valid)}  {status}")  # fmt: skip
+        return (
+            f"{self.split:10s} {self.frames:7d} frames  checked {self.checked:7d}  "
+            f"sparse valid {pct(self.sparse_valid)}  gt valid {pct(self.gt_valid)}  {status}"
+        )
 
 
-def check_split_source(source: IndexedSource, split: str, sample: int | None = None,
-                       progress: bool = True) -> SplitReport:  # fmt: skip
+def check_split_source(
+    source: IndexedSource, split: str, sample: int | None = None, progress: bool = True
+) -> SplitReport:
     """Decode the frames of ``source`` (at most ``sample``, evenly spaced): problems name the files."""
     names = list(source.names)
     rep = SplitReport(split, frames=len(names))
@@ -90,8 +100,12 @@ def log_report(rep: SplitReport, log: Callable[[str], None]) -> int:
     return len(rep.problems)
 
 
-def check_roots(roots: Sequence[PathLike], check_root: Callable[[PathLike], int], log: Callable[[str], None] = print,
-                heading: Callable[[PathLike], str] = lambda root: f"{root}:") -> int:  # fmt: skip
+def check_roots(
+    roots: Sequence[PathLike],
+    check_root: Callable[[PathLike], int],
+    log: Callable[[str], None] = print,
+    heading: Callable[[PathLike], str] = lambda root: f"{root}:",
+) -> int:
     """Log ``heading(root)`` and run ``check_root`` (which logs and returns its problem count) on each
     root; a generated tree that was cut short (:func:`semattnet._utils.outputs.incomplete_tree`)
     counts as one problem and is not read further. Returns the total."""
@@ -107,9 +121,14 @@ def check_roots(roots: Sequence[PathLike], check_root: Callable[[PathLike], int]
     return bad
 
 
-def check_dataset(spec: CheckedDataset, roots: Sequence[PathLike], raw_root: PathLike | None = None,
-                  semantic_root: PathLike | None = None, sample: int | None = None,
-                  log: Callable[[str], None] = print) -> int:  # fmt: skip
+def check_dataset(
+    spec: CheckedDataset,
+    roots: Sequence[PathLike],
+    raw_root: PathLike | None = None,
+    semantic_root: PathLike | None = None,
+    sample: int | None = None,
+    log: Callable[[str], None] = print,
+) -> int:
     """Every split of ``spec`` found under each root, read through its frame source: a split that cannot be
     indexed (an incomplete KITTI frame, a bad list) is one line naming the files, the frames of the others
     decoded (at most ``sample`` per split; at most 20 problems listed per split). A root without any of the

@@ -34,11 +34,14 @@ MAX_DATASET_BYTES = 4 * MAX_IMAGE_PIXELS
 
 def _refuse_link(path: Path, key: str, link: object, h5py: ModuleType) -> None:
     if isinstance(link, h5py.ExternalLink):
-        raise DataError(f"{path}: '{key}' is an external link to {link.filename}:{link.path}; only datasets "
-                        "stored in the file itself are read")  # fmt: skip
+        raise DataError(
+            f"{path}: '{key}' is an external link to {link.filename}:{link.path}; only datasets "
+            "stored in the file itself are read"
+        )
     if isinstance(link, h5py.SoftLink):
-        raise DataError(f"{path}: '{key}' is a soft link to {link.path}; only datasets stored under their own "
-                        "name are read")  # fmt: skip
+        raise DataError(
+            f"{path}: '{key}' is a soft link to {link.path}; only datasets stored under their own name are read"
+        )
     if not isinstance(link, h5py.HardLink):
         raise DataError(f"{path}: '{key}' is a {type(link).__name__}, not a dataset stored in the file")
 
@@ -61,12 +64,16 @@ def plain_dataset(f: h5py.File, key: str, path: Path) -> h5py.Dataset | None:
     if not isinstance(obj, h5py.Dataset):
         raise DataError(f"{path}: '{key}' is an HDF5 {type(obj).__name__.lower()}, not a dataset")
     if obj.is_virtual:
-        raise DataError(f"{path}: '{key}' is a virtual dataset (its data lie in other files); only datasets "
-                        "stored in the file itself are read")  # fmt: skip
+        raise DataError(
+            f"{path}: '{key}' is a virtual dataset (its data lie in other files); only datasets "
+            "stored in the file itself are read"
+        )
     if obj.external:
         files = ", ".join(os.fsdecode(e[0]) for e in obj.external)
-        raise DataError(f"{path}: '{key}' keeps its data in external file(s) {files}; only datasets stored in "
-                        "the file itself are read")  # fmt: skip
+        raise DataError(
+            f"{path}: '{key}' keeps its data in external file(s) {files}; only datasets stored in "
+            "the file itself are read"
+        )
     layout = obj.id.get_create_plist().get_layout()
     if layout not in (h5py.h5d.CONTIGUOUS, h5py.h5d.CHUNKED, h5py.h5d.COMPACT):
         raise DataError(f"{path}: '{key}' has a storage layout ({layout}) other than contiguous, chunked or compact")
@@ -85,6 +92,8 @@ def read_bounded(ds: h5py.Dataset, key: str, path: Path) -> np.ndarray:
         raise DataError(f"{path}: '{key}' holds {dtype}, not plain numbers")
     size = math.prod(int(n) for n in ds.shape) * dtype.itemsize
     if size > MAX_DATASET_BYTES:
-        raise DataError(f"{path}: '{key}' declares {'x'.join(map(str, ds.shape))} {dtype} "
-                        f"({size / 2**20:.0f} MiB), above the limit of {MAX_DATASET_BYTES // 2**20} MiB")  # fmt: skip
+        raise DataError(
+            f"{path}: '{key}' declares {'x'.join(map(str, ds.shape))} {dtype} "
+            f"({size / 2**20:.0f} MiB), above the limit of {MAX_DATASET_BYTES // 2**20} MiB"
+        )
     return np.asarray(ds[()])

@@ -67,8 +67,10 @@ def _read(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
             found = {k: plain_dataset(f, k, path) for k in ("rgb", "depth", "label")}
             missing = [k for k in ("rgb", "depth") if found[k] is None]
             if missing:
-                raise DataError(f"{path}: missing HDF5 key(s) {missing}; found {sorted(f.keys())} "
-                                "(expected 'rgb' and 'depth', the sparse-to-dense layout)")  # fmt: skip
+                raise DataError(
+                    f"{path}: missing HDF5 key(s) {missing}; found {sorted(f.keys())} "
+                    "(expected 'rgb' and 'depth', the sparse-to-dense layout)"
+                )
             _check_layout(path, found["rgb"], found["depth"], found["label"])
             rgb, depth = read_bounded(found["rgb"], "rgb", path), read_bounded(found["depth"], "depth", path)
             label = read_bounded(found["label"], "label", path) if found["label"] is not None else None
@@ -93,11 +95,15 @@ def read_nyu_h5(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray, n
     rgb, depth, label = _read(path)
     valid = depth[np.isfinite(depth) & (depth > 0)]
     if valid.size and float(np.median(valid)) > MAX_MEDIAN_M:
-        raise DataError(f"{path}: 'depth' median {float(np.median(valid)):.1f} is above {MAX_MEDIAN_M:g}: "
-                        "millimetres? expected metres")  # fmt: skip
+        raise DataError(
+            f"{path}: 'depth' median {float(np.median(valid)):.1f} is above {MAX_MEDIAN_M:g}: "
+            "millimetres? expected metres"
+        )
     if label is not None and label.size and (label.min() < 0 or label.max() > RAW_LABELS):
-        raise DataError(f"{path}: 'label' must hold NYU-40 ids 0..40 or raw NYU ids 0..{RAW_LABELS}, found "
-                        f"{label.min()}..{label.max()}")  # fmt: skip
+        raise DataError(
+            f"{path}: 'label' must hold NYU-40 ids 0..40 or raw NYU ids 0..{RAW_LABELS}, found "
+            f"{label.min()}..{label.max()}"
+        )
     depth = np.where(np.isfinite(depth), depth, 0).astype(np.float32)
     return np.ascontiguousarray(rgb.transpose(1, 2, 0)), depth, label
 
@@ -124,8 +130,10 @@ def check_root(root: Path) -> None:
         return
     below = sorted(c for c in root.iterdir() if c.is_dir() and any((c / f).is_dir() for f in folders))
     if below:
-        raise DataError(f"{root}: not a NYU v2 root (no {' or '.join(sorted(folders))} inside), but {below[0]} is "
-                        f"one: pass {below[0]}")  # fmt: skip
+        raise DataError(
+            f"{root}: not a NYU v2 root (no {' or '.join(sorted(folders))} inside), but {below[0]} is "
+            f"one: pass {below[0]}"
+        )
 
 
 def label_colors(label: np.ndarray) -> np.ndarray:
@@ -158,15 +166,23 @@ class NyuV2Source(IndexedSource):
 
     palette = "nyu40"
 
-    def __init__(self, root: str | os.PathLike[str], split: str = "test", samples: int = SAMPLES, seed: int = 0,
-                 semantic_root: str | os.PathLike[str] | None = None,
-                 max_frames: int | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        root: str | os.PathLike[str],
+        split: str = "test",
+        samples: int = SAMPLES,
+        seed: int = 0,
+        semantic_root: str | os.PathLike[str] | None = None,
+        max_frames: int | None = None,
+    ) -> None:
         self.root, self.split = Path(root), check_split_in("nyuv2", split, tuple(NYU_SPLITS))
         folder = self.root / NYU_SPLITS[self.split]
         check_root(self.root)
         if not folder.is_dir():
-            raise MissingSplitError(f"{folder}: split folder not found (expected {folder}/"
-                                    f"{'<scene>/' if self.split == 'train' else ''}<NNNNN>.h5)")  # fmt: skip
+            raise MissingSplitError(
+                f"{folder}: split folder not found (expected {folder}/"
+                f"{'<scene>/' if self.split == 'train' else ''}<NNNNN>.h5)"
+            )
         files = sorted(folder.glob("*/*.h5" if self.split == "train" else "*.h5"))
         if not files:
             raise DataError(f"{folder}: no .h5 files")
@@ -183,8 +199,10 @@ class NyuV2Source(IndexedSource):
         path = self.files[name]
         rgb, depth, label = read_nyu_h5(path)
         if rgb.shape[:2] != KINECT:  # a 1x1 image would be upsampled to the crop, under the wrong intrinsics
-            raise DataError(f"{path}: 'rgb' is {rgb.shape[1]}x{rgb.shape[0]}; the NYU v2 protocol (NYU_K, the resize "
-                            f"to {RESIZED[1]}x{RESIZED[0]}) is for {KINECT[1]}x{KINECT[0]} Kinect frames")  # fmt: skip
+            raise DataError(
+                f"{path}: 'rgb' is {rgb.shape[1]}x{rgb.shape[0]}; the NYU v2 protocol (NYU_K, the resize "
+                f"to {RESIZED[1]}x{RESIZED[0]}) is for {KINECT[1]}x{KINECT[0]} Kinect frames"
+            )
         rgb, gt = _crop(_resize(rgb, False)), _crop(_resize(depth, False))
         paths = {"rgb": path, "gt": path, "sparse": path}
         sem = None
@@ -194,8 +212,9 @@ class NyuV2Source(IndexedSource):
             paths["semantic"] = self.semantic_root / f"{name}.png"
             sem = read_semantic(paths["semantic"], palette="nyu40")
         sparse = draw_samples(gt, self.samples, np.random.default_rng(frame_seed(name, self.seed)))
-        return Frame(name, np.ascontiguousarray(rgb), sparse, sem, K=protocol_K(), gt=np.ascontiguousarray(gt),
-                     paths=paths)  # fmt: skip
+        return Frame(
+            name, np.ascontiguousarray(rgb), sparse, sem, K=protocol_K(), gt=np.ascontiguousarray(gt), paths=paths
+        )
 
     def inputs(self) -> list[Path]:
         return [self.root, *([self.semantic_root] if self.semantic_root is not None else [])]

@@ -72,8 +72,10 @@ def _folder(root: Path) -> Path:
     if found is None and root.is_dir():
         below = sorted(c for c in root.iterdir() if c.is_dir() and _holds_release(c))
         if below:
-            raise DataError(f"{root}: no VOID list files nor {'/'.join(VOID_VARIANTS)} inside, but {below[0]} "
-                            f"holds them: pass {below[0]}")  # fmt: skip
+            raise DataError(
+                f"{root}: no VOID list files nor {'/'.join(VOID_VARIANTS)} inside, but {below[0]} "
+                f"holds them: pass {below[0]}"
+            )
     return found or root
 
 
@@ -117,9 +119,13 @@ class VoidSource(IndexedSource):
 
     palette: str | None = None  # "cityscapes" when it reads maps from semantic_root
 
-    def __init__(self, root: str | os.PathLike[str], split: str = "test",
-                 semantic_root: str | os.PathLike[str] | None = None,
-                 max_frames: int | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        root: str | os.PathLike[str],
+        split: str = "test",
+        semantic_root: str | os.PathLike[str] | None = None,
+        max_frames: int | None = None,
+    ) -> None:
 
         self.split = check_split_in("void", split, VOID_SPLITS)
         self.lists = _folder(Path(root))
@@ -132,8 +138,10 @@ class VoidSource(IndexedSource):
         entries = {r: _read_list(p, self.lists) for r, p in files.items() if p.exists()}
         counts = {r: len(v) for r, v in entries.items()}
         if len(set(counts.values())) > 1:
-            raise DataError(f"{self.lists}: the {self.split} lists differ in length: "
-                            + ", ".join(f"{files[r].name} {n}" for r, n in counts.items()))  # fmt: skip
+            raise DataError(
+                f"{self.lists}: the {self.split} lists differ in length: "
+                + ", ".join(f"{files[r].name} {n}" for r, n in counts.items())
+            )
         if counts["image"] == 0:
             raise DataError(f"{files['image']}: lists no frames (one path per line expected)")
         n = min(counts["image"], max_frames or counts["image"])
@@ -151,13 +159,17 @@ class VoidSource(IndexedSource):
         rgb, sparse, gt = read_image(f["image"]), read_depth(f["sparse_depth"]), read_depth(f["ground_truth"])
         valid = gt[gt > 0]
         if valid.size and float(np.median(valid)) > MAX_MEDIAN_M:
-            raise DataError(f"{f['ground_truth']}: median depth {float(np.median(valid)):.1f} m is above "
-                            f"{MAX_MEDIAN_M:g} m: millimetres? expected 1/256 m units")  # fmt: skip
+            raise DataError(
+                f"{f['ground_truth']}: median depth {float(np.median(valid)):.1f} m is above "
+                f"{MAX_MEDIAN_M:g} m: millimetres? expected 1/256 m units"
+            )
         if "validity_map" in f:
             validity = _read_validity(f["validity_map"])
             if validity.shape[:2] != sparse.shape:
-                raise DataError(f"{f['validity_map']}: {validity.shape[1]}x{validity.shape[0]}, the sparse map "
-                                f"{sparse.shape[1]}x{sparse.shape[0]}")  # fmt: skip
+                raise DataError(
+                    f"{f['validity_map']}: {validity.shape[1]}x{validity.shape[0]}, the sparse map "
+                    f"{sparse.shape[1]}x{sparse.shape[0]}"
+                )
             sparse = np.where(validity.reshape(sparse.shape[0], sparse.shape[1], -1).max(-1) > 0, sparse, 0)
         K = read_void_intrinsics(f["intrinsics"]) if "intrinsics" in f else None
         paths = {"rgb": f["image"], "sparse": f["sparse_depth"], "gt": f["ground_truth"]}

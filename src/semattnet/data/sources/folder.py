@@ -31,9 +31,12 @@ class FolderOptions(SourceOptions):
 
     rgb: Path | None = option("--rgb", type="input", help="PNG file or folder (with --sparse).")
     sparse: Path | None = option("--sparse", type="input", help="16-bit PNG file or folder (with --rgb).")
-    intrinsics: str | None = option("--K", metavar="fx,fy,cx,cy|kitti",
-                                    help="The camera's intrinsics ('kitti': KITTI's camera 02): for --report's 3D "
-                                    "view and the clouds of --bag-out, --rerun and --live.")  # fmt: skip
+    intrinsics: str | None = option(
+        "--K",
+        metavar="fx,fy,cx,cy|kitti",
+        help="The camera's intrinsics ('kitti': KITTI's camera 02): for --report's 3D "
+        "view and the clouds of --bag-out, --rerun and --live.",
+    )
 
     def check(self, segment_spec: str | None) -> None:
         if self.rgb is None or self.sparse is None:
@@ -66,8 +69,12 @@ class FolderSource(IndexedSource):
     pairs files or folders by name). ``K``: the (3, 3) intrinsics of every frame, if known.
     ``given``: the paths the user named (files or folders), protected from outputs too."""
 
-    def __init__(self, frames: Sequence[FramePaths], K: np.ndarray | None = None,
-                 given: Sequence[str | os.PathLike[str] | None] = ()) -> None:  # fmt: skip
+    def __init__(
+        self,
+        frames: Sequence[FramePaths],
+        K: np.ndarray | None = None,
+        given: Sequence[str | os.PathLike[str] | None] = (),
+    ) -> None:
         rgb = unique_names(((f.name, f.rgb) for f in frames), "frames")
         self.frames = {f.name: f for f in frames}
         self.names = list(rgb)
@@ -75,9 +82,14 @@ class FolderSource(IndexedSource):
         self.given = [Path(p) for p in given if p is not None]
 
     @classmethod
-    def pair(cls, rgb: str | os.PathLike[str], sparse: str | os.PathLike[str],
-             semantic: str | os.PathLike[str] | None = None, K: np.ndarray | None = None,
-             missing_ok: bool = False) -> FolderSource:  # fmt: skip
+    def pair(
+        cls,
+        rgb: str | os.PathLike[str],
+        sparse: str | os.PathLike[str],
+        semantic: str | os.PathLike[str] | None = None,
+        K: np.ndarray | None = None,
+        missing_ok: bool = False,
+    ) -> FolderSource:
         """The frames of ``rgb``/``sparse``/``semantic`` (three files or three folders), paired by name
         (``missing_ok``: an image without a partner is a frame that fails when read; see ``pair_frames``)."""
         sem = Path(semantic) if semantic is not None else None
@@ -86,8 +98,14 @@ class FolderSource(IndexedSource):
     def load(self, name: str) -> Frame:
         f = self.frames[name]
         paths = {"rgb": f.rgb, "sparse": f.sparse} | ({"semantic": f.semantic} if f.semantic is not None else {})
-        return Frame(name, read_image(f.rgb), read_depth(f.sparse),
-                     read_semantic(f.semantic) if f.semantic is not None else None, K=self.K, paths=paths)  # fmt: skip
+        return Frame(
+            name,
+            read_image(f.rgb),
+            read_depth(f.sparse),
+            read_semantic(f.semantic) if f.semantic is not None else None,
+            K=self.K,
+            paths=paths,
+        )
 
     def inputs(self) -> list[Path]:
         files = [p for f in self.frames.values() for p in (f.rgb, f.sparse, f.semantic) if p is not None]

@@ -28,8 +28,9 @@ def project_frame(frame: RawFrame) -> np.ndarray:
     size = frame.calib.image_size
     if size is None:  # a raw drive's calibration always has S_rect; say which file lacks it if not
         raise DataError(f"{frame.scan_path}: the drive's calibration gives no image size (S_rect_0X)")
-    depth: np.ndarray = project_points(frame.points, frame.calib.K, frame.calib.T_cam_lidar, size,
-                                       name=str(frame.scan_path))  # fmt: skip
+    depth: np.ndarray = project_points(
+        frame.points, frame.calib.K, frame.calib.T_cam_lidar, size, name=str(frame.scan_path)
+    )
     return depth
 
 
@@ -43,12 +44,20 @@ class RawDriveOptions(SourceOptions):
     accepts: ClassVar[tuple[str, ...]] = ("semantic", "segment_spec")
     recording: ClassVar[bool] = True
 
-    kitti_raw: Path | None = option("--kitti-raw", type="folder",
-                                    help="A KITTI raw drive folder RAW_ROOT/DATE/DATE_drive_NNNN_sync (instead of "
-                                    "--rgb/--sparse).")  # fmt: skip
+    kitti_raw: Path | None = option(
+        "--kitti-raw",
+        type="folder",
+        help="A KITTI raw drive folder RAW_ROOT/DATE/DATE_drive_NNNN_sync (instead of --rgb/--sparse).",
+    )
     frames: str | None = option("--frames", help="Indices, a range a-b or a comma list (default all).")
-    camera: str = option("--camera", type="choice", choices=("2", "3"), default="2", show_default=True,
-                         help="The colour camera: image_02 or image_03.")  # fmt: skip
+    camera: str = option(
+        "--camera",
+        type="choice",
+        choices=("2", "3"),
+        default="2",
+        show_default=True,
+        help="The colour camera: image_02 or image_03.",
+    )
     deskew: bool = option("--deskew", type="flag", help="Ego-motion compensate the scans with their OXTS data.")
 
     def source(self, semantic: Path | None, log: Callable[[str], None]) -> RawDriveSource:
@@ -66,9 +75,14 @@ class RawDriveSource(IndexedSource):
         DataError: missing drive files, frames or semantic folder (naming them).
     """
 
-    def __init__(self, drive_dir: str | os.PathLike[str], frames: str | int | Sequence[int] | None = None,
-                 camera: str | int = 2, semantic: str | os.PathLike[str] | None = None,
-                 deskew: bool = False) -> None:  # fmt: skip
+    def __init__(
+        self,
+        drive_dir: str | os.PathLike[str],
+        frames: str | int | Sequence[int] | None = None,
+        camera: str | int = 2,
+        semantic: str | os.PathLike[str] | None = None,
+        deskew: bool = False,
+    ) -> None:
         self.drive = RawDrive(drive_dir, camera, deskew=deskew)
         self.names = self.drive.names_for(frames)
         self.semantic_dir = Path(semantic) if semantic is not None else None
@@ -80,8 +94,9 @@ class RawDriveSource(IndexedSource):
         sem_path = self.semantic_dir / f"{name}.png" if self.semantic_dir is not None else None
         sem = read_semantic(sem_path) if sem_path is not None else None
         paths = {"rgb": raw.image_path, "scan": raw.scan_path} | ({"semantic": sem_path} if sem_path else {})
-        return Frame(name, raw.image, project_frame(raw), sem, K=raw.calib.K, points=raw.points,
-                     calib=raw.calib, paths=paths)  # fmt: skip
+        return Frame(
+            name, raw.image, project_frame(raw), sem, K=raw.calib.K, points=raw.points, calib=raw.calib, paths=paths
+        )
 
     def views(self, name: str) -> tuple[View, ...]:
         """Frame ``name``'s other views: its stereo partner (camera 03 for 02 and back; ``T_view_cam`` the rectified
@@ -99,8 +114,10 @@ class RawDriveSource(IndexedSource):
     def _image(self, path: Path, size: tuple[int, int] | None, camera: str) -> np.ndarray:
         image = read_image(path)
         if size is not None and image.shape[:2] != size[::-1]:
-            raise DataError(f"{path}: image is {image.shape[1]}x{image.shape[0]}, the calibration says "
-                            f"{size[0]}x{size[1]} for camera {camera}")  # fmt: skip
+            raise DataError(
+                f"{path}: image is {image.shape[1]}x{image.shape[0]}, the calibration says "
+                f"{size[0]}x{size[1]} for camera {camera}"
+            )
         return image
 
     def _partner(self, name: str, partner: str) -> View | None:

@@ -23,9 +23,14 @@ class KittiSplitSource(IndexedSource):
 
     palette = "cityscapes"
 
-    def __init__(self, root: str | os.PathLike[str], split: str = "val_select",
-                 raw_root: str | os.PathLike[str] | None = None, semantic_root: str | os.PathLike[str] | None = None,
-                 max_frames: int | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        root: str | os.PathLike[str],
+        split: str = "val_select",
+        raw_root: str | os.PathLike[str] | None = None,
+        semantic_root: str | os.PathLike[str] | None = None,
+        max_frames: int | None = None,
+    ) -> None:
         ds = KittiDepthCompletion(root, split, raw_root, semantic_root)
         self.split = ds.split
         self.files: list[FrameFiles] = ds.frames[:max_frames] if max_frames else list(ds.frames)

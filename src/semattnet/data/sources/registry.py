@@ -5,9 +5,9 @@
 source's command-line options, listed under its ``heading`` in ``predict --help``, and whose values build the
 source (:meth:`SourceOptions.source`). Its class facts say what the frames offer the outputs.
 
-:data:`SOURCES` imports the modules its entries live in on first read (the ROS bag's is in
-:mod:`semattnet.robotics`, a layer above, named here by its module); every registered source runs through the
-suite in ``tests/registry/test_sources.py``.
+:data:`SOURCES` imports the modules of this layer that hold its entries on first read; the ROS bag's source
+enrols itself when :mod:`semattnet.robotics`, a layer above, is imported (``import semattnet`` does). Every
+registered source runs through the suite in ``tests/registry/test_sources.py``.
 """
 
 from __future__ import annotations
@@ -17,18 +17,24 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
-from semattnet._utils.registry import Registry
+from semattnet._utils.registry import ClassRegistry
 from semattnet.data.frames import IndexedSource
 
 __all__ = ["SOURCES", "SourceOptions", "list_sources", "register_source"]
 
 #: Source name -> :class:`~semattnet._utils.registry.Entry` (the class, the ``predict`` option making it and
 #: the :class:`SourceOptions` of its options).
-SOURCES: Registry[IndexedSource] = Registry("source", homes=(
-    "semattnet.data.sources.folder", "semattnet.data.sources.kitti_raw", "semattnet.robotics.bag_source",
-    "semattnet.data.sources.kitti_split", "semattnet.data.datasets.nyuv2", "semattnet.data.datasets.void",
-    "semattnet.data.datasets",
-))  # fmt: skip
+SOURCES: ClassRegistry[IndexedSource] = ClassRegistry(
+    "source",
+    homes=(
+        "semattnet.data.sources.folder",
+        "semattnet.data.sources.kitti_raw",
+        "semattnet.data.sources.kitti_split",
+        "semattnet.data.datasets.nyuv2",
+        "semattnet.data.datasets.void",
+        "semattnet.data.datasets",
+    ),
+)
 
 
 def register_source(

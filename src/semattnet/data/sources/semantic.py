@@ -65,9 +65,16 @@ class CrossPalette:
 
         src, dst = get_palette(self.maps_palette).title, get_palette(self.palette).title
         if self.policy == "recolour":
-            line = (f"{src} maps recoloured to the model's {dst} palette: {', '.join(self.kept)} kept, every other "
-                    "class unknown")  # fmt: skip
+            line = (
+                f"{src} maps recoloured to the model's {dst} palette: {', '.join(self.kept)} kept, every other "
+                "class unknown"
+            )
         else:
             line = f"{src} maps replaced by the fallback (unknown) map: the model was trained with {dst}"
-        return {"maps_palette": self.maps_palette, "model_palette": self.palette, "used": self.policy,
-                "classes_kept": self.kept if self.policy == "recolour" else [], "summary": line}  # fmt: skip
+        return {
+            "maps_palette": self.maps_palette,
+            "model_palette": self.palette,
+            "used": self.policy,
+            "classes_kept": self.kept if self.policy == "recolour" else [],
+            "summary": line,
+        }

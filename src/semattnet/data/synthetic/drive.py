@@ -115,8 +115,16 @@ def make_drive(
         left_pose = Pose.of_camera(dom, forward)
         left = shoot(scene, K, size, left_pose, rng)
         right = shoot(scene, K, size, Pose.of_camera(dom, forward, right=BASELINE), rng)
-        scan = simulate_lidar(height, width, K, scene.boxes, rng, scene.dressing is not None, dom,
-                              poses=(Pose.of_lidar(dom, forward), left_pose))  # fmt: skip
+        scan = simulate_lidar(
+            height,
+            width,
+            K,
+            scene.boxes,
+            rng,
+            scene.dressing is not None,
+            dom,
+            poses=(Pose.of_lidar(dom, forward), left_pose),
+        )
         points = np.hstack([scan.points, _reflectance(scan, scene.boxes)[:, None]])
         yield DriveFrame(left, right, scan, points, ground_truth_of(left.depth, K, rng, dom), forward)
 
@@ -164,21 +172,33 @@ def _numbers(values: npt.ArrayLike) -> str:
     return " ".join(f"{v:.12e}" for v in np.asarray(values, float).ravel())
 
 
-def _write_calibration(date_dir: Path, K: np.ndarray, size: tuple[int, int], T_cam_lidar: np.ndarray,
-                       domain: Domain) -> None:  # fmt: skip
+def _write_calibration(
+    date_dir: Path, K: np.ndarray, size: tuple[int, int], T_cam_lidar: np.ndarray, domain: Domain
+) -> None:
     """The date folder's KITTI calibration: cameras 00 and 02 at the left camera, 01 and 03 at the right."""
     height, width = size
     rows = ["calib_time: 01-Jan-2000 00:00:00", "corner_dist: 9.950000e-02"]
     for cam, dx in (("00", 0.0), ("01", -BASELINE), ("02", 0.0), ("03", -BASELINE)):
         P = np.hstack([K, K @ np.array([[dx], [0.0], [0.0]])])
-        rows += [f"S_{cam}: {width} {height}", f"K_{cam}: {_numbers(K)}", f"D_{cam}: 0 0 0 0 0",
-                 f"R_{cam}: {_numbers(np.eye(3))}", f"T_{cam}: {_numbers([dx, 0.0, 0.0])}",
-                 f"S_rect_{cam}: {width} {height}", f"R_rect_{cam}: {_numbers(np.eye(3))}",
-                 f"P_rect_{cam}: {_numbers(P)}"]  # fmt: skip
+        rows += [
+            f"S_{cam}: {width} {height}",
+            f"K_{cam}: {_numbers(K)}",
+            f"D_{cam}: 0 0 0 0 0",
+            f"R_{cam}: {_numbers(np.eye(3))}",
+            f"T_{cam}: {_numbers([dx, 0.0, 0.0])}",
+            f"S_rect_{cam}: {width} {height}",
+            f"R_rect_{cam}: {_numbers(np.eye(3))}",
+            f"P_rect_{cam}: {_numbers(P)}",
+        ]
     date_dir.mkdir(parents=True, exist_ok=True)
     (date_dir / "calib_cam_to_cam.txt").write_text("\n".join(rows) + "\n")
-    velo = ["calib_time: 01-Jan-2000 00:00:00", f"R: {_numbers(T_cam_lidar[:3, :3])}",
-            f"T: {_numbers(T_cam_lidar[:3, 3])}", "delta_f: 0 0", "delta_c: 0 0"]  # fmt: skip
+    velo = [
+        "calib_time: 01-Jan-2000 00:00:00",
+        f"R: {_numbers(T_cam_lidar[:3, :3])}",
+        f"T: {_numbers(T_cam_lidar[:3, 3])}",
+        "delta_f: 0 0",
+        "delta_c: 0 0",
+    ]
     (date_dir / "calib_velo_to_cam.txt").write_text("\n".join(velo) + "\n")
     imu = _imu_to_velo(domain)
     (date_dir / "calib_imu_to_velo.txt").write_text(
@@ -280,8 +300,15 @@ def write_synthetic_drives(
                 _write_frame(out, name, j * (frames + 1) + k, fr, j * STREET_GAP)
         _write_timestamps(out / "kitti_raw" / SYNTH_DATE / name, streets * (frames + 1) - 1)
         entries.append({"drive": name, "seeds": seeds, "frames": streets * frames})
-    manifest: DriveManifest = {"generator": "semattnet.data.synthetic.drive", "style": style, "domain": dom.name,
-                               "seed": seed, "size": [height, width], "frames": frames, "drives": entries}  # fmt: skip
+    manifest: DriveManifest = {
+        "generator": "semattnet.data.synthetic.drive",
+        "style": style,
+        "domain": dom.name,
+        "seed": seed,
+        "size": [height, width],
+        "frames": frames,
+        "drives": entries,
+    }
     (out / "drives.json").write_text(json.dumps(manifest, indent=1))
     mark_tree(out, "synth-drives", True)
     return manifest

@@ -45,16 +45,31 @@ def _street_sides(rng: np.random.Generator, boxes: list[Box], road_half: float, 
             if rng.random() < 0.25:  # a tree: trunk and crown
                 cx = inner + side * 1.5
                 _add(boxes, [cx - 0.2, -2.5, z + 2], [cx + 0.2, CAM_HEIGHT, z + 2.4], "vegetation", [70, 55, 40])
-                _add(boxes, [cx - 2, -6.5, z], [cx + 2, -2.5, z + 4.4], "vegetation",
-                     rng.uniform([40, 80, 20], [80, 130, 50]))  # fmt: skip
+                _add(
+                    boxes,
+                    [cx - 2, -6.5, z],
+                    [cx + 2, -2.5, z + 4.4],
+                    "vegetation",
+                    rng.uniform([40, 80, 20], [80, 130, 50]),
+                )
             else:
                 height = rng.uniform(5, 18)
-                _add(boxes, [x0, CAM_HEIGHT - height, z], [x1, CAM_HEIGHT, z + length], "building",
-                     rng.uniform([110, 90, 70], [200, 170, 150]))  # fmt: skip
+                _add(
+                    boxes,
+                    [x0, CAM_HEIGHT - height, z],
+                    [x1, CAM_HEIGHT, z + length],
+                    "building",
+                    rng.uniform([110, 90, 70], [200, 170, 150]),
+                )
             z += length + rng.uniform(0, 5)
     end = rng.uniform(70, 100)  # the street ends in a facade, so depth stays within ~100 m
-    _add(boxes, [-60, CAM_HEIGHT - rng.uniform(8, 20), end], [60, CAM_HEIGHT, end + 5], "building",
-         rng.uniform([110, 90, 70], [200, 170, 150]))  # fmt: skip
+    _add(
+        boxes,
+        [-60, CAM_HEIGHT - rng.uniform(8, 20), end],
+        [60, CAM_HEIGHT, end + 5],
+        "building",
+        rng.uniform([110, 90, 70], [200, 170, 150]),
+    )
 
 
 def _street_objects(rng: np.random.Generator, boxes: list[Box], road_half: float, walk: float) -> None:
@@ -63,15 +78,25 @@ def _street_objects(rng: np.random.Generator, boxes: list[Box], road_half: float
         lane = rng.choice([-1, 1]) * rng.choice([road_half - 1.2, road_half / 3])
         z = rng.uniform(5, 55)
         w, h, length = rng.uniform(1.6, 2.0), rng.uniform(1.3, 1.7), rng.uniform(3.8, 4.8)
-        _add(boxes, [lane - w / 2, CAM_HEIGHT - h, z], [lane + w / 2, CAM_HEIGHT, z + length], "car",
-             rng.uniform([20, 20, 20], [220, 220, 220]))  # fmt: skip
+        _add(
+            boxes,
+            [lane - w / 2, CAM_HEIGHT - h, z],
+            [lane + w / 2, CAM_HEIGHT, z + length],
+            "car",
+            rng.uniform([20, 20, 20], [220, 220, 220]),
+        )
     for _ in range(int(rng.integers(1, 5))):
         x, z = rng.choice([-1, 1]) * (road_half + 0.4), rng.uniform(4, 50)
         _add(boxes, [x - 0.08, CAM_HEIGHT - 5.5, z], [x + 0.08, CAM_HEIGHT, z + 0.16], "pole", [120, 120, 125])
     for _ in range(int(rng.integers(0, 5))):
         x, z = rng.choice([-1, 1]) * (road_half + rng.uniform(0.5, walk)), rng.uniform(4, 35)
-        _add(boxes, [x - 0.25, CAM_HEIGHT - rng.uniform(1.5, 1.9), z], [x + 0.25, CAM_HEIGHT, z + 0.4], "person",
-             rng.uniform([40, 30, 30], [200, 160, 160]))  # fmt: skip
+        _add(
+            boxes,
+            [x - 0.25, CAM_HEIGHT - rng.uniform(1.5, 1.9), z],
+            [x + 0.25, CAM_HEIGHT, z + 0.4],
+            "person",
+            rng.uniform([40, 30, 30], [200, 160, 160]),
+        )
 
 
 def make_boxes(rng: np.random.Generator) -> list[Box]:

@@ -160,8 +160,11 @@ def sensor_effects(
     out[mirror] = t[mirror] + _reflected_range(points[mirror], dirs[mirror], axis[mirror], boxes)
     out[through] = _through_range(dirs[through], idx[through], boxes, origin)
     out[interior] += inside[interior]
-    dropped = {"dark": dark & (v >= _P_DARK_RETURN), "glossy": glossy & (v < _P_GLOSSY_DROP),
-               "glass": (car_glass & ~through) | (window & ~interior)}  # fmt: skip
+    dropped = {
+        "dark": dark & (v >= _P_DARK_RETURN),
+        "glossy": glossy & (v < _P_GLOSSY_DROP),
+        "glass": (car_glass & ~through) | (window & ~interior),
+    }
     # Weak echoes: fewer returns at grazing incidence (cosine to the normal below ~0.12) and beyond 25 m.
     cos_in = np.abs(dirs[np.arange(n), np.where(idx >= 0, axis, 1)])
     rng_m = np.where(np.isfinite(out), out, 0.0)
@@ -170,8 +173,13 @@ def sensor_effects(
     dropped["range_grazing"] = hit & ~gone & np.isfinite(out) & (u >= p)
     out[gone | dropped["range_grazing"]] = np.inf
     kept = np.isfinite(out) & (out < MAX_RANGE)
-    stats = {"rays": n, "first_surface_hits": int(hit.sum()), "returns": int(kept.sum()),
-             **{f"dropped_{k}": int(m.sum()) for k, m in dropped.items()},
-             "wrong_glossy": int((mirror & kept).sum()), "wrong_car_glass": int((through & kept).sum()),
-             "wrong_window": int((interior & kept).sum())}  # fmt: skip
+    stats = {
+        "rays": n,
+        "first_surface_hits": int(hit.sum()),
+        "returns": int(kept.sum()),
+        **{f"dropped_{k}": int(m.sum()) for k, m in dropped.items()},
+        "wrong_glossy": int((mirror & kept).sum()),
+        "wrong_car_glass": int((through & kept).sum()),
+        "wrong_window": int((interior & kept).sum()),
+    }
     return out, stats

@@ -14,8 +14,16 @@ from semattnet.palette import TRAIN_CLASSES
 
 from .layout import Box, window
 
-__all__ = ["CITYSCAPES_PALETTE", "CLASS_IDS", "CLASS_NAMES", "LABEL_COLOURS", "MATERIALS", "MATERIAL_IDS",
-           "posters", "surfaces"]  # fmt: skip
+__all__ = [
+    "CITYSCAPES_PALETTE",
+    "CLASS_IDS",
+    "CLASS_NAMES",
+    "LABEL_COLOURS",
+    "MATERIALS",
+    "MATERIAL_IDS",
+    "posters",
+    "surfaces",
+]
 
 #: Cityscapes trainId colours of the classes the generator uses (class name -> RGB).
 CITYSCAPES_PALETTE: dict[str, tuple[int, int, int]] = {

@@ -130,8 +130,12 @@ def dress(rng: np.random.Generator, boxes: list[Box]) -> tuple[list[Box], Dress]
     markings = _markings(rng)
     bodies = [b.material for b in boxes if b.cls == "car" and b.material != "glass"]
     cars = {"cars": len(bodies), "dark": bodies.count("dark"), "glossy": bodies.count("glossy")}
-    meta = {"cars": {**cars, "camouflaged": int(grey_side != 0)}, "posters": posters,
-            "camouflaged_poles": len(poles), "markings": markings}  # fmt: skip
+    meta = {
+        "cars": {**cars, "camouflaged": int(grey_side != 0)},
+        "posters": posters,
+        "camouflaged_poles": len(poles),
+        "markings": markings,
+    }
     return boxes, Dress(road_half, markings, poles, meta)
 
 

@@ -61,8 +61,20 @@ from .raycast import View, camera_view
 from .realistic import Dress, camouflage_poles, decorate, dress
 from .shading import albedo, labels, overpass, overpass_band, render, sun_direction, sunlight
 
-__all__ = ["CITYSCAPES_PALETTE", "KITTI_K", "MATERIALS", "SCENE_STYLES", "Scene", "Shot", "SyntheticFrame",
-           "check_style", "intrinsics", "make_frame", "make_scene", "shoot"]  # fmt: skip
+__all__ = [
+    "CITYSCAPES_PALETTE",
+    "KITTI_K",
+    "MATERIALS",
+    "SCENE_STYLES",
+    "Scene",
+    "Shot",
+    "SyntheticFrame",
+    "check_style",
+    "intrinsics",
+    "make_frame",
+    "make_scene",
+    "shoot",
+]
 
 #: Scene styles of :func:`make_frame` (the first is the default).
 SCENE_STYLES: tuple[str, ...] = ("ideal", "realistic")
@@ -195,8 +207,13 @@ def shoot(scene: Scene, K: np.ndarray, size: tuple[int, int], pose: Pose, rng: n
     if scene.domain.albedo_gain != SOURCE.albedo_gain:
         colour = colour * np.asarray(scene.domain.albedo_gain)
     rgb = render(view, colour, light, scene.exposure, rng, scene.domain.noise)
-    return Shot(rgb, label.reshape(height, width), view.depth.reshape(height, width),
-                material.astype(np.uint8).reshape(height, width), paint.reshape(height, width))  # fmt: skip
+    return Shot(
+        rgb,
+        label.reshape(height, width),
+        view.depth.reshape(height, width),
+        material.astype(np.uint8).reshape(height, width),
+        paint.reshape(height, width),
+    )
 
 
 def make_frame(
@@ -231,8 +248,13 @@ def make_frame(
     shot = shoot(scene, K, (height, width), Pose.of_camera(dom), rng)
     scan = simulate_lidar(height, width, K, scene.boxes, rng, realistic=scene.dressing is not None, domain=dom)
     gt = ground_truth_of(shot.depth, K, rng, dom)
-    meta = {"seed": seed, "style": style, "shadow_band_z": list(scene.band), "sun": scene.sun.tolist(),
-            "exposure": scene.exposure} | ({"domain": dom.name} if dom != SOURCE else {})  # fmt: skip
+    meta = {
+        "seed": seed,
+        "style": style,
+        "shadow_band_z": list(scene.band),
+        "sun": scene.sun.tolist(),
+        "exposure": scene.exposure,
+    } | ({"domain": dom.name} if dom != SOURCE else {})
     if scene.dressing is not None:
         meta |= {**scene.dressing.meta, "lidar": scan.stats}
     return SyntheticFrame(

@@ -12,8 +12,17 @@ from .layout import CAM_HEIGHT, Box, road_half_width, window
 from .materials import CLASS_IDS
 from .raycast import View
 
-__all__ = ["albedo", "convex_hull", "ground_shadow", "labels", "overpass", "overpass_band", "render", "sun_direction",
-           "sunlight"]  # fmt: skip
+__all__ = [
+    "albedo",
+    "convex_hull",
+    "ground_shadow",
+    "labels",
+    "overpass",
+    "overpass_band",
+    "render",
+    "sun_direction",
+    "sunlight",
+]
 
 
 def convex_hull(points: np.ndarray) -> np.ndarray:
@@ -42,8 +51,9 @@ def ground_shadow(xz: np.ndarray, boxes: list[Box], sun: np.ndarray) -> np.ndarr
     """Which ground points (N, 2: x, z) lie in the shadow some box casts along ``sun``."""
     shadow = np.zeros(len(xz), dtype=bool)
     for box in boxes:
-        corners = np.array([[x, y, z] for x in (box.lo[0], box.hi[0]) for y in (box.lo[1], box.hi[1])
-                            for z in (box.lo[2], box.hi[2])])  # fmt: skip
+        corners = np.array(
+            [[x, y, z] for x in (box.lo[0], box.hi[0]) for y in (box.lo[1], box.hi[1]) for z in (box.lo[2], box.hi[2])]
+        )
         t = (CAM_HEIGHT - corners[:, 1]) / sun[1]  # slide each corner along the sun ray to the ground
         hull = convex_hull(corners[:, [0, 2]] + t[:, None] * sun[[0, 2]])
         lo, hi = hull.min(0), hull.max(0)
@@ -64,8 +74,9 @@ def labels(view: View, boxes: list[Box]) -> np.ndarray:
     box_cls = np.array([CLASS_IDS[b.cls] for b in boxes] or [0], dtype=np.int64)
     out[view.on_box] = box_cls[view.idx[view.on_box]]
     road_half = road_half_width(boxes)
-    out[view.ground] = np.where(np.abs(view.points[view.ground, 0]) < road_half, CLASS_IDS["road"],
-                                CLASS_IDS["sidewalk"])  # fmt: skip
+    out[view.ground] = np.where(
+        np.abs(view.points[view.ground, 0]) < road_half, CLASS_IDS["road"], CLASS_IDS["sidewalk"]
+    )
     return out
 
 

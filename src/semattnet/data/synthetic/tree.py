@@ -67,7 +67,12 @@ class SceneManifest(TypedDict):
     frames: list[dict[str, object]]
 
 
-def _job(args: tuple[Path, str, int, int, int, int, bool | None, str, Domain]) -> dict[str, object]:
+#: One frame to write: the tree, the split, the index, the seed, height, width, shadowed (None: at random), style
+#: and domain.
+_Job = tuple[Path, str, int, int, int, int, bool | None, str, Domain]
+
+
+def _job(args: _Job) -> dict[str, object]:
     out, split, index, seed, height, width, shadow, style, domain = args
     fseed = frame_seed(seed, split, index)
     fr = make_frame(height, width, seed=fseed, shadow=shadow, style=style, domain=domain)
@@ -113,6 +118,34 @@ def check_out_folder(out: Path, overwrite: bool) -> None:
         raise FileExistsError(f"{out} is not empty; pass overwrite=True (--overwrite) to write into it")
 
 
+def _jobs(
+    out: Path,
+    frames: int,
+    n_eval: int,
+    seed: int,
+    size: tuple[int, int],
+    shadow_fraction: float,
+    style: str,
+    dom: Domain,
+) -> list[_Job]:
+    """One job per frame of every split (shadowed on odd frames when ``shadow_fraction`` is 0.5)."""
+    jobs = []
+    for split, n in (("train", frames), ("val", n_eval), ("val_select", n_eval), ("test", n_eval)):
+        for i in range(n):
+            shadow = (i % 2 == 1) if shadow_fraction == 0.5 else None
+            jobs.append((out, split, i, seed, size[0], size[1], shadow, style, dom))
+    return jobs
+
+
+def _run_jobs(jobs: list[_Job], workers: int | None) -> list[dict[str, object]]:
+    """The frames' manifest entries, the jobs spread over ``workers`` processes (default: one per CPU)."""
+    workers = workers if workers is not None else min(len(jobs), os.cpu_count() or 1)
+    if workers > 1:
+        with ProcessPoolExecutor(workers) as pool:
+            return list(pool.map(_job, jobs, chunksize=4))
+    return [_job(j) for j in jobs]
+
+
 def write_synthetic_kitti(
     out: str | os.PathLike[str],
     frames: int = 100,
@@ -147,28 +180,23 @@ def write_synthetic_kitti(
     check_out_folder(out, overwrite)
     height, width = size
     n_eval = max(2, frames // 5) if eval_frames is None else eval_frames
-    jobs = []
-    for split, n in (("train", frames), ("val", n_eval), ("val_select", n_eval), ("test", n_eval)):
-        for i in range(n):
-            shadow = (i % 2 == 1) if shadow_fraction == 0.5 else None
-            jobs.append((out, split, i, seed, height, width, shadow, style, dom))
+    jobs = _jobs(out, frames, n_eval, seed, size, shadow_fraction, style, dom)
     if overwrite and out.exists():
         for sub in ("data_depth_velodyne", "data_depth_annotated", "kitti_raw", "semantic", layout.SELECTION):
             shutil.rmtree(out / sub, ignore_errors=True)
     mark_tree(out, "synth", False, resume=f"run synth again into {out} with --overwrite (overwrite=True)")
-    workers = workers if workers is not None else min(len(jobs), os.cpu_count() or 1)
-    if workers > 1:
-        with ProcessPoolExecutor(workers) as pool:
-            entries = list(pool.map(_job, jobs, chunksize=4))
-    else:
-        entries = [_job(j) for j in jobs]
+    entries = _run_jobs(jobs, workers)
     K0 = np.array(entries[0]["K"])
     _write_calib(out / "kitti_raw" / SYNTH_DATE / "calib_cam_to_cam.txt", K0)  # train and val drives share it
     manifest: SceneManifest = {
-        "generator": "semattnet.data.synthetic.scenes", "style": style, "domain": dom.name, "seed": seed,
+        "generator": "semattnet.data.synthetic.scenes",
+        "style": style,
+        "domain": dom.name,
+        "seed": seed,
         "size": [height, width],
         "counts": {s: sum(e["split"] == s for e in entries) for s in layout.SPLITS},
-        "frames": [{k: v for k, v in e.items() if k != "K"} for e in entries]}  # fmt: skip
+        "frames": [{k: v for k, v in e.items() if k != "K"} for e in entries],
+    }
     (out / "scenes.json").write_text(json.dumps(manifest, indent=1))
     mark_tree(out, "synth", True)
     return manifest

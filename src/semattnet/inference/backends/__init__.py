@@ -47,9 +47,22 @@ from semattnet.inference.backends.registry import (
 from semattnet.inference.backends.spec import EngineSpec
 from semattnet.models.outputs import check_output_names
 
-__all__ = ["EngineEntry", "EngineRequest", "EngineSpec", "InferenceEngine", "available_backends", "choose_backend",
-           "engine_entries", "get_engine", "needs_semantic", "optimize_for_inference", "output_from_arrays",
-           "precisions", "register_engine", "unregister_engine"]  # fmt: skip
+__all__ = [
+    "EngineEntry",
+    "EngineRequest",
+    "EngineSpec",
+    "InferenceEngine",
+    "available_backends",
+    "choose_backend",
+    "engine_entries",
+    "get_engine",
+    "needs_semantic",
+    "optimize_for_inference",
+    "output_from_arrays",
+    "precisions",
+    "register_engine",
+    "unregister_engine",
+]
 
 
 def needs_semantic(model: object) -> bool:
@@ -108,8 +121,17 @@ def optimize_for_inference(
     entry = spec.entry
     if entry.fixed_size and size is None:
         raise InputError(f"size: the {entry.name} backend compiles for one input size: pass size=(H, W)")
-    request = EngineRequest(None if size is None else (int(size[0]), int(size[1])), spec.precision or "f32",
-                            torch.device(spec.device), needs_semantic(model), cache_dir, log, inplace, calibration,
-                            calibration_frames, compile_propagation,
-                            None if outputs is None else check_output_names(outputs, "outputs"))  # fmt: skip
+    request = EngineRequest(
+        None if size is None else (int(size[0]), int(size[1])),
+        spec.precision or "f32",
+        torch.device(spec.device),
+        needs_semantic(model),
+        cache_dir,
+        log,
+        inplace,
+        calibration,
+        calibration_frames,
+        compile_propagation,
+        None if outputs is None else check_output_names(outputs, "outputs"),
+    )
     return entry.build(model.eval(), request)

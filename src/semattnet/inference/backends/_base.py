@@ -14,8 +14,15 @@ from semattnet._errors import InputError
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.refinement import HEADS_PREFIX, PropagationSettings, RefinementHeads, Workspace, refine
 
-__all__ = ["HEADS_PREFIX", "ExportedGraphEngine", "InferenceEngine", "LogFn", "StageHook", "graph_outputs",
-           "output_from_arrays"]  # fmt: skip
+__all__ = [
+    "HEADS_PREFIX",
+    "ExportedGraphEngine",
+    "InferenceEngine",
+    "LogFn",
+    "StageHook",
+    "graph_outputs",
+    "output_from_arrays",
+]
 
 #: A progress logger the backends call with one line of text (e.g. ``print`` or ``logger.info``).
 LogFn = Callable[[str], object]

@@ -146,16 +146,18 @@ def _source_of_folder(path: Path) -> FrameSource:
     from semattnet.data.sources import FolderSource, KittiSplitSource
 
     if not path.is_dir():
-        raise CalibrationError(f"calibration: {path} is not a folder (expected rgb/ + sparse/ subfolders or a KITTI "
-                               "root)")  # fmt: skip
+        raise CalibrationError(
+            f"calibration: {path} is not a folder (expected rgb/ + sparse/ subfolders or a KITTI root)"
+        )
     if (path / "rgb").is_dir() and (path / "sparse").is_dir():
         semantic = path / "semantic" if (path / "semantic").is_dir() else None
         return FolderSource.pair(path / "rgb", path / "sparse", semantic)
     try:
         return KittiSplitSource(path, "val_select")
     except MissingSplitError:
-        raise CalibrationError(f"calibration: {path}: neither rgb/ + sparse/ subfolders nor a KITTI root with "
-                               "val_select frames") from None  # fmt: skip
+        raise CalibrationError(
+            f"calibration: {path}: neither rgb/ + sparse/ subfolders nor a KITTI root with val_select frames"
+        ) from None
 
 
 def _checked(frames: Sequence[CalibrationFrame], what: str) -> list[CalibrationFrame]:
@@ -165,8 +167,9 @@ def _checked(frames: Sequence[CalibrationFrame], what: str) -> list[CalibrationF
     for i, f in enumerate(frames):
         if not np.any(np.asarray(f.sparse) > 0):
             name = getattr(f, "name", f"frame {i}")
-            raise CalibrationError(f"calibration: {what}: {name} has no LiDAR point (an empty sparse map calibrates "
-                                   "nothing)")  # fmt: skip
+            raise CalibrationError(
+                f"calibration: {what}: {name} has no LiDAR point (an empty sparse map calibrates nothing)"
+            )
     return list(frames)
 
 
@@ -180,8 +183,10 @@ def calibration_frames(
             raise CalibrationError("calibration: expected Frames (with .rgb and .sparse) in the sequence")
         return _checked(list(calibration)[:count], "the given frames"), "the given frames"
     if calibration is None or (not isinstance(calibration, str | os.PathLike) and not hasattr(calibration, "load")):
-        raise CalibrationError("calibration: expected None, a FrameSource, a sequence of Frames or a folder path, "
-                               f"got {type(calibration).__name__}")  # fmt: skip
+        raise CalibrationError(
+            "calibration: expected None, a FrameSource, a sequence of Frames or a folder path, "
+            f"got {type(calibration).__name__}"
+        )
     try:
         if isinstance(calibration, str | os.PathLike):
             calibration, what = _source_of_folder(Path(calibration)), str(calibration)

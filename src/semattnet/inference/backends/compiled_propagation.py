@@ -40,8 +40,11 @@ def compiled_propagation(mode: str | None = None) -> Propagation:
         if key in seen:
             return compiled(heads, iterations)
         size = "x".join(map(str, key[0][-2:]))
-        print(f"semattnet: compiling the propagation for {size}, {iterations} iteration(s) (once per size) ...",
-              file=sys.stderr, flush=True)  # fmt: skip
+        print(
+            f"semattnet: compiling the propagation for {size}, {iterations} iteration(s) (once per size) ...",
+            file=sys.stderr,
+            flush=True,
+        )
         start = time.perf_counter()
         out = compiled(heads, iterations)
         seen.add(key)
@@ -60,8 +63,9 @@ def traced_propagation(heads: RefinementHeads, iterations: int) -> tuple[torch.T
     names = list(flat)
 
     def run(*tensors: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        rebuilt = RefinementHeads.from_dict(dict(zip(names, tensors, strict=True)), heads.kernel_sizes,
-                                            affinity=heads.affinity)  # fmt: skip
+        rebuilt = RefinementHeads.from_dict(
+            dict(zip(names, tensors, strict=True)), heads.kernel_sizes, affinity=heads.affinity
+        )
         return refine(rebuilt, iterations)
 
     with torch.no_grad():

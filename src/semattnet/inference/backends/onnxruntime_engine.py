@@ -21,8 +21,14 @@ class OnnxRuntimeEngine(ExportedGraphEngine):
 
     backend = "onnxruntime"
 
-    def __init__(self, model: nn.Module, size: tuple[int, int], needs_semantic: bool,
-                 cache_dir: str | os.PathLike[str] | None = None, log: LogFn | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        model: nn.Module,
+        size: tuple[int, int],
+        needs_semantic: bool,
+        cache_dir: str | os.PathLike[str] | None = None,
+        log: LogFn | None = None,
+    ) -> None:
         super().__init__(size, "f32", needs_semantic)
         ort = require("onnxruntime", "the onnxruntime backend")
         folder = engine_dir(engine_key(model, size), cache_dir)
@@ -44,7 +50,14 @@ def _build(model: nn.Module, r: EngineRequest) -> OnnxRuntimeEngine:
     return OnnxRuntimeEngine(model.cpu(), r.fixed_size(), r.needs_semantic, r.cache_dir, r.log)
 
 
-ENTRY = register_engine(EngineEntry(
-    "onnxruntime", precisions=("f32",), devices=("cpu",), build=_build, package="onnxruntime", fixed_size=True,
-    summary="the ONNX export run by ONNX Runtime (exported once per frame size, cached on disk)",
-))  # fmt: skip
+ENTRY = register_engine(
+    EngineEntry(
+        "onnxruntime",
+        precisions=("f32",),
+        devices=("cpu",),
+        build=_build,
+        package="onnxruntime",
+        fixed_size=True,
+        summary="the ONNX export run by ONNX Runtime (exported once per frame size, cached on disk)",
+    )
+)

@@ -77,11 +77,18 @@ class OpenVinoEngine(ExportedGraphEngine):
 
     backend = "openvino"
 
-    def __init__(self, model: nn.Module, size: tuple[int, int], needs_semantic: bool, precision: str = "f32",
-                 cache_dir: str | os.PathLike[str] | None = None, log: LogFn | None = None,
-                 calibration: CalibrationFrames = None,
-                 calibration_frames: int = DEFAULT_CALIBRATION_FRAMES,
-                 outputs: frozenset[str] | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        model: nn.Module,
+        size: tuple[int, int],
+        needs_semantic: bool,
+        precision: str = "f32",
+        cache_dir: str | os.PathLike[str] | None = None,
+        log: LogFn | None = None,
+        calibration: CalibrationFrames = None,
+        calibration_frames: int = DEFAULT_CALIBRATION_FRAMES,
+        outputs: frozenset[str] | None = None,
+    ) -> None:
         super().__init__(size, precision, needs_semantic)
         ov = require("openvino", "the openvino backend")
         folder = engine_dir(engine_key(model, size, extra=f"openvino-{ov.__version__}"), cache_dir)
@@ -101,8 +108,12 @@ class OpenVinoEngine(ExportedGraphEngine):
                 frames = anchored(frames)
             xml = quantized_ir(ov, xml, frames, log)
         hint = "f32" if precision == "int8" else precision
-        config = {"PERFORMANCE_HINT": "LATENCY", "INFERENCE_PRECISION_HINT": hint,
-                  "INFERENCE_NUM_THREADS": torch.get_num_threads(), "CACHE_DIR": str(xml.parent / "blobs")}  # fmt: skip
+        config = {
+            "PERFORMANCE_HINT": "LATENCY",
+            "INFERENCE_PRECISION_HINT": hint,
+            "INFERENCE_NUM_THREADS": torch.get_num_threads(),
+            "CACHE_DIR": str(xml.parent / "blobs"),
+        }
         if outputs is None:
             self.compiled = core.compile_model(str(xml), "CPU", config)
             self.output_names = _output_names(self.compiled.outputs)
@@ -123,13 +134,29 @@ class OpenVinoEngine(ExportedGraphEngine):
 
 
 def _build(model: nn.Module, r: EngineRequest) -> OpenVinoEngine:
-    return OpenVinoEngine(model.cpu(), r.fixed_size(), r.needs_semantic, r.precision, r.cache_dir, r.log,
-                          calibration=r.calibration, calibration_frames=r.calibration_frames,
-                          outputs=r.outputs)  # fmt: skip
+    return OpenVinoEngine(
+        model.cpu(),
+        r.fixed_size(),
+        r.needs_semantic,
+        r.precision,
+        r.cache_dir,
+        r.log,
+        calibration=r.calibration,
+        calibration_frames=r.calibration_frames,
+        outputs=r.outputs,
+    )
 
 
 #: int8 is NNCF's quantisation of the IR (:mod:`~semattnet.inference.backends.openvino_int8`; needs ``nncf``).
-ENTRY = register_engine(EngineEntry(
-    "openvino", precisions=("f32", "bf16", "int8"), devices=("cpu",), build=_build, package="openvino",
-    fixed_size=True, auto=True, summary="OpenVINO IR compiled for the CPU at one size (cached on disk); int8: NNCF",
-))  # fmt: skip
+ENTRY = register_engine(
+    EngineEntry(
+        "openvino",
+        precisions=("f32", "bf16", "int8"),
+        devices=("cpu",),
+        build=_build,
+        package="openvino",
+        fixed_size=True,
+        auto=True,
+        summary="OpenVINO IR compiled for the CPU at one size (cached on disk); int8: NNCF",
+    )
+)

@@ -80,8 +80,11 @@ def _consumers(op: Any) -> list[Any]:
 def _name_heads(model: Any) -> None:
     """``refinement_heads/<name>``: every node from a refinement head output back to its convolution (one
     convolution per stage serves all the heads: :func:`semattnet.models.layers.stacked_heads`)."""
-    todo = [out.get_node().input_value(0).get_node() for out in model.outputs
-            if any(n.startswith(_HEAD_OUTPUTS) for n in out.get_names())]  # fmt: skip
+    todo = [
+        out.get_node().input_value(0).get_node()
+        for out in model.outputs
+        if any(n.startswith(_HEAD_OUTPUTS) for n in out.get_names())
+    ]
     seen: set[str] = set()
     while todo:
         op = todo.pop()

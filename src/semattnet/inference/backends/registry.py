@@ -5,8 +5,8 @@ whether it compiles for one input size) and how it is built from a model (:class
 table loads its own entries (:data:`ENGINE_MODULES`) the first time it is read, so ``--backend``'s choices,
 ``backend="auto"`` and :func:`~semattnet.inference.backends.optimize_for_inference` all read one table.
 
-A new engine is one module that calls :func:`register_engine` (and its line in :data:`ENGINE_MODULES`, or an
-import of the module before the table is read)::
+A new engine is one module that calls :func:`register_engine` (a built-in one also has its line in
+:data:`ENGINE_MODULES`; a plugin's module is imported before the table is read)::
 
     register_engine(EngineEntry("myengine", precisions=("f32",), devices=("cpu",), build=MyEngine.build))
 """
@@ -25,11 +25,21 @@ from torch import nn
 
 from semattnet._errors import InputError
 from semattnet._utils.extras import install_hint
+from semattnet._utils.registry import DuplicateEntryError, Registry, UnknownEntryError
 from semattnet.inference.backends._base import InferenceEngine, LogFn
 from semattnet.inference.backends.calibration import DEFAULT_CALIBRATION_FRAMES, CalibrationFrames
 
-__all__ = ["ENGINE_MODULES", "EngineEntry", "EngineRequest", "choose_backend", "engine_entries", "get_engine",
-           "precisions", "register_engine"]  # fmt: skip
+__all__ = [
+    "ENGINES",
+    "ENGINE_MODULES",
+    "EngineEntry",
+    "EngineRequest",
+    "choose_backend",
+    "engine_entries",
+    "get_engine",
+    "precisions",
+    "register_engine",
+]
 
 #: The modules of :mod:`semattnet.inference.backends` that declare the built-in engines (each its ``ENTRY``), in the
 #: table's order.
@@ -104,46 +114,40 @@ class EngineEntry:
         return precision in self.precisions and device_type in self.devices
 
 
-_ENGINES: dict[str, EngineEntry] = {}
-_loaded = False
+def _home_of(entry: EngineEntry) -> str:
+    return getattr(entry.build, "__module__", "")
+
+
+#: Engine name -> :class:`EngineEntry`: the built-in engines first (:data:`ENGINE_MODULES`' order, their modules
+#: imported on first read), then those registered elsewhere.
+ENGINES: Registry[EngineEntry] = Registry(
+    "backend", homes=tuple(f"{__package__}.{m}" for m in ENGINE_MODULES), home_of=_home_of
+)
 
 
 def register_engine(entry: EngineEntry) -> EngineEntry:
-    """Add ``entry`` to the table (a second entry of one name, or one named ``auto``, is a bug: ``ValueError``);
-    gives ``entry``."""
-    known = _ENGINES.get(entry.name)
-    if entry.name == "auto" or (known is not None and known != entry):
-        why = "registered twice" if known is not None else "auto names the choice among engines"
-        # an engine module's own mistake (the name taken, or auto's), found at import: not a user's input
-        raise ValueError(f"engine {entry.name!r}: {why}")
-    _ENGINES[entry.name] = entry
-    return entry
+    """Add ``entry`` to :data:`ENGINES` (a second entry of one name, or one named ``auto``, is refused); gives
+    ``entry``."""
+    if entry.name == "auto":
+        raise DuplicateEntryError("backend 'auto' names the choice among engines: an engine cannot take it")
+    return ENGINES.add(entry.name, entry)
 
 
 def unregister_engine(name: str) -> None:
-    """Remove engine ``name`` from the table (a plugin's or a test's own; a built-in one comes back on the next
-    :func:`engine_entries` only if this process had not read the table yet)."""
-    _ENGINES.pop(name, None)
+    """Remove engine ``name`` from :data:`ENGINES` (a plugin's or a test's own)."""
+    ENGINES.remove(name)
 
 
 def engine_entries() -> Mapping[str, EngineEntry]:
-    """Every engine by name (the built-in ones imported on first use), installed or not."""
-    global _loaded
-    if not _loaded:  # the built-in entries first, in ENGINE_MODULES' order, whatever imported them before
-        _loaded = True
-        builtin = {e.name: e for e in (importlib.import_module(f"{__package__}.{m}").ENTRY for m in ENGINE_MODULES)}
-        others = {name: e for name, e in _ENGINES.items() if name not in builtin}
-        _ENGINES.clear()
-        _ENGINES.update(builtin | others)
-    return MappingProxyType(_ENGINES)
+    """Every engine by name (:data:`ENGINES`), installed or not."""
+    return MappingProxyType({name: ENGINES[name] for name in ENGINES})
 
 
 def get_engine(name: str) -> EngineEntry:
-    """The entry of backend ``name``; an unknown name is an :class:`InputError` listing the choices."""
-    entries = engine_entries()
-    if name not in entries:
-        raise InputError(f"unknown backend {name!r}; choose one of auto, {', '.join(entries)}")
-    return entries[name]
+    """The entry of backend ``name``; an unknown name is one :class:`UnknownEntryError` line listing the choices."""
+    if name in ENGINES:
+        return ENGINES[name]
+    raise UnknownEntryError(f"unknown backend {name!r}; choose one of auto, {', '.join(ENGINES)}")
 
 
 def precisions() -> tuple[str, ...]:

@@ -84,8 +84,9 @@ class EngineSpec:
         if self.amp not in AMP_DTYPES:
             raise InputError(f"amp must be one of {', '.join(AMP_DTYPES)}, got {self.amp!r}")
         if self.precision is not None and self.amp not in ("none", self.precision):
-            raise InputError(f"precision {self.precision!r} and amp {self.amp!r} disagree: give one (amp is the "
-                             "older name)")  # fmt: skip
+            raise InputError(
+                f"precision {self.precision!r} and amp {self.amp!r} disagree: give one (amp is the older name)"
+            )
         return self.precision or ("f32" if self.amp == "none" else self.amp)
 
     @property
@@ -109,7 +110,9 @@ def _check(entry: EngineEntry, precision: str, device: torch.device) -> None:
     """``entry`` runs ``precision`` on ``device`` (one-line errors naming what to give instead)."""
     if precision not in entry.precisions:
         runners = [e.name for e in engine_entries().values() if precision in e.precisions]
-        raise InputError(f"precision: the {entry.name} backend runs {', '.join(entry.precisions)}, not {precision!r}; "
-                         f"{precision} runs on the {' or '.join(runners)} backend")  # fmt: skip
+        raise InputError(
+            f"precision: the {entry.name} backend runs {', '.join(entry.precisions)}, not {precision!r}; "
+            f"{precision} runs on the {' or '.join(runners)} backend"
+        )
     if device.type not in entry.devices:
         raise InputError(f"device: the {entry.name} backend runs on {' or '.join(entry.devices)}, got {device}")

@@ -24,8 +24,9 @@ from semattnet.models.semattnet import SemAttNet
 __all__ = ["TensorRTEngine", "network_outputs"]
 
 
-def network_outputs(net: SemAttNet, rgb: torch.Tensor, semantic: torch.Tensor | None,
-                    sparse: torch.Tensor) -> dict[str, torch.Tensor]:  # fmt: skip
+def network_outputs(
+    net: SemAttNet, rgb: torch.Tensor, semantic: torch.Tensor | None, sparse: torch.Tensor
+) -> dict[str, torch.Tensor]:
     """The network part's outputs by name (the backbone's maps and the ``refinement.*`` heads)."""
     out, heads = net.forward_network(rgb=rgb, semantic=semantic, sparse=sparse)
     return out.to_dict() | heads.to_dict(HEADS_PREFIX)
@@ -49,8 +50,14 @@ class TensorRTEngine(InferenceEngine):
 
     backend = "tensorrt"
 
-    def __init__(self, model: nn.Module, size: tuple[int, int], needs_semantic: bool, precision: str = "f32",
-                 device: torch.device | str = "cuda") -> None:  # fmt: skip
+    def __init__(
+        self,
+        model: nn.Module,
+        size: tuple[int, int],
+        needs_semantic: bool,
+        precision: str = "f32",
+        device: torch.device | str = "cuda",
+    ) -> None:
         super().__init__(size, precision, needs_semantic)
         device = torch.device(device)
         if device.type != "cuda":
@@ -66,8 +73,9 @@ class TensorRTEngine(InferenceEngine):
             sem = example[1] if needs_semantic else None
             names = list(network_outputs(net, example[0], sem, example[-1]))
         precisions = {torch.float32} | ({torch.float16} if precision == "fp16" else set())
-        self.graph = trt.compile(_Network(net, names, needs_semantic).eval(), ir="dynamo", inputs=example,
-                                 enabled_precisions=precisions)  # fmt: skip
+        self.graph = trt.compile(
+            _Network(net, names, needs_semantic).eval(), ir="dynamo", inputs=example, enabled_precisions=precisions
+        )
         self.names, self.settings = names, propagation_settings(model)
 
     def forward(
@@ -84,7 +92,14 @@ def _build(model: nn.Module, r: EngineRequest) -> TensorRTEngine:
     return TensorRTEngine(model, r.fixed_size(), r.needs_semantic, r.precision, r.device)
 
 
-ENTRY = register_engine(EngineEntry(
-    "tensorrt", precisions=("f32", "fp16"), devices=("cuda",), build=_build, package="torch_tensorrt",
-    fixed_size=True, summary="CUDA: the network compiled by Torch-TensorRT at one size",
-))  # fmt: skip
+ENTRY = register_engine(
+    EngineEntry(
+        "tensorrt",
+        precisions=("f32", "fp16"),
+        devices=("cuda",),
+        build=_build,
+        package="torch_tensorrt",
+        fixed_size=True,
+        summary="CUDA: the network compiled by Torch-TensorRT at one size",
+    )
+)

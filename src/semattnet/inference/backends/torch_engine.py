@@ -38,8 +38,14 @@ class TorchEngine(InferenceEngine):
 
     backend = "torch"
 
-    def __init__(self, model: nn.Module, precision: str = "f32", needs_semantic: bool = True,
-                 inplace: bool = False, compile_propagation: bool | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        model: nn.Module,
+        precision: str = "f32",
+        needs_semantic: bool = True,
+        inplace: bool = False,
+        compile_propagation: bool | None = None,
+    ) -> None:
         super().__init__(None, precision, needs_semantic)
         self.net = fold_batchnorm(model, inplace=inplace).eval()
         on_cuda = any(p.is_cuda for p in self.net.parameters())
@@ -81,8 +87,11 @@ class TorchEngine(InferenceEngine):
             if net is not None and (self.compile_propagation or self.on_stage is not None):
                 out, heads = net.forward_network(rgb=rgb, semantic=semantic, sparse=sparse)
                 with self._stage("propagation", rgb.device):  # compiled: network eagerly, propagation (float32)
-                    s2, refined = (compiled_propagation()(heads, net.config.iterations) if self.compile_propagation
-                                   else net.propagation(heads))  # fmt: skip
+                    s2, refined = (
+                        compiled_propagation()(heads, net.config.iterations)
+                        if self.compile_propagation
+                        else net.propagation(heads)
+                    )
                 out = dataclasses.replace(out, refined_s2_depth=s2, refined_depth=refined)
             else:
                 out = self.net(rgb=rgb, semantic=semantic, sparse=sparse)
@@ -93,7 +102,13 @@ def _build(model: nn.Module, r: EngineRequest) -> TorchEngine:
     return TorchEngine(model.to(r.device), r.precision, r.needs_semantic, r.inplace, r.compile_propagation)
 
 
-ENTRY = register_engine(EngineEntry(
-    "torch", precisions=("f32", "bf16", "fp16"), devices=("cpu", "cuda", "mps"), build=_build, auto=True,
-    summary="eager PyTorch on a BatchNorm-folded copy, fused propagation; any size, any device",
-))  # fmt: skip
+ENTRY = register_engine(
+    EngineEntry(
+        "torch",
+        precisions=("f32", "bf16", "fp16"),
+        devices=("cpu", "cuda", "mps"),
+        build=_build,
+        auto=True,
+        summary="eager PyTorch on a BatchNorm-folded copy, fused propagation; any size, any device",
+    )
+)

@@ -41,14 +41,33 @@ register_encoder(
         channels=(16, 24, 32, 48),
     )
 )
-register_encoder(EncoderSpec("lite_s2", partial(LiteEncoder, stem_stride=2), "depthwise-separable, stem to 1/2",
-                             stem_stride=2, channels=(12, 16, 24, 32, 48)))  # fmt: skip
-register_encoder(EncoderSpec("lite_s2_deep", partial(LiteEncoder, stem_stride=2),
-                             "depthwise-separable, stem to 1/2, channels doubling with each stage", stem_stride=2,
-                             channels=(12, 24, 48, 96, 192)))  # fmt: skip
-register_encoder(EncoderSpec("lite_s4_wide", partial(LiteEncoder, stem_stride=4),
-                             "depthwise-separable, stem to 1/4, twice lite_s4's channels", stem_stride=4,
-                             channels=(32, 48, 64, 96)))  # fmt: skip
+register_encoder(
+    EncoderSpec(
+        "lite_s2",
+        partial(LiteEncoder, stem_stride=2),
+        "depthwise-separable, stem to 1/2",
+        stem_stride=2,
+        channels=(12, 16, 24, 32, 48),
+    )
+)
+register_encoder(
+    EncoderSpec(
+        "lite_s2_deep",
+        partial(LiteEncoder, stem_stride=2),
+        "depthwise-separable, stem to 1/2, channels doubling with each stage",
+        stem_stride=2,
+        channels=(12, 24, 48, 96, 192),
+    )
+)
+register_encoder(
+    EncoderSpec(
+        "lite_s4_wide",
+        partial(LiteEncoder, stem_stride=4),
+        "depthwise-separable, stem to 1/4, twice lite_s4's channels",
+        stem_stride=4,
+        channels=(32, 48, 64, 96),
+    )
+)
 
 __all__ = [
     "Encoder",

@@ -19,8 +19,10 @@ from typing import Protocol, runtime_checkable
 import torch
 
 from semattnet._errors import InputError
+from semattnet._utils.registry import Registry, UnknownEntryError
 
 __all__ = [
+    "ENCODERS",
     "Encoder",
     "EncoderFactory",
     "EncoderSpec",
@@ -95,35 +97,30 @@ class EncoderSpec:
     channels: tuple[int, ...]  # stem, then one per stage (stride 2x the previous)
 
 
-class UnknownEncoderError(InputError):
-    """An encoder name that is not registered."""
+#: The registry's one unknown-name error (the old name kept).
+UnknownEncoderError = UnknownEntryError
 
-
-_ENCODERS: dict[str, EncoderSpec] = {}
+#: Encoder name -> :class:`EncoderSpec`, in registration order (the authors' ResNet first).
+ENCODERS: Registry[EncoderSpec] = Registry("encoder")
 
 
 def register_encoder(spec: EncoderSpec) -> EncoderSpec:
-    """Add ``spec`` to the registry (a name is registered once)."""
-    if spec.name in _ENCODERS:
-        raise InputError(f"encoder {spec.name!r} is already registered")
-    _ENCODERS[spec.name] = spec
-    return spec
+    """Add ``spec`` to :data:`ENCODERS` (a name is registered once)."""
+    return ENCODERS.add(spec.name, spec)
 
 
 def list_encoders() -> list[str]:
     """The registered encoder names, in registration order (the authors' ResNet first)."""
-    return list(_ENCODERS)
+    return ENCODERS.names()
 
 
 def encoder_spec(name: str) -> EncoderSpec:
     """The registry row of ``name``.
 
     Raises:
-        UnknownEncoderError: one line listing the registered names.
+        UnknownEntryError: one line listing the registered names.
     """
-    if name not in _ENCODERS:
-        raise UnknownEncoderError(f"unknown encoder {name!r}; available: {', '.join(_ENCODERS)}")
-    return _ENCODERS[name]
+    return ENCODERS[name]
 
 
 def create_encoder(

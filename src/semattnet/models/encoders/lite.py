@@ -68,8 +68,14 @@ class LiteEncoder(nn.Module):
         (B, in_chans, H, W) -> stem (B, channels[0], H / s, W / s), stage i (B, channels[i + 1], H / (s 2**(i+1)), ...).
     """
 
-    def __init__(self, in_chans: int, channels: Sequence[int], extra: Sequence[int] | None = None,
-                 stem_stride: int = 4, depth: int = 1) -> None:  # fmt: skip
+    def __init__(
+        self,
+        in_chans: int,
+        channels: Sequence[int],
+        extra: Sequence[int] | None = None,
+        stem_stride: int = 4,
+        depth: int = 1,
+    ) -> None:
         super().__init__()
         if stem_stride not in (2, 4):
             raise InputError(f"stem_stride must be 2 or 4, got {stem_stride!r}")
@@ -78,8 +84,9 @@ class LiteEncoder(nn.Module):
             stem.append(dwsep(channels[0], channels[0], stride=2))
         self.stem = nn.Sequential(*stem)
         n = len(channels) - 1
-        self.feature_info = FeatureInfo(channels[0], stem_stride, tuple(stem_stride * 2 ** (i + 1) for i in range(n)),
-                                        tuple(channels[1:]))  # fmt: skip
+        self.feature_info = FeatureInfo(
+            channels[0], stem_stride, tuple(stem_stride * 2 ** (i + 1) for i in range(n)), tuple(channels[1:])
+        )
         stages = []
         prev = channels[0]
         for i, c in enumerate(channels[1:]):

@@ -70,8 +70,9 @@ class ResNetEncoder(nn.Module):
     def __init__(self, in_chans: int, channels: Sequence[int], extra: Sequence[int] | None = None) -> None:
         super().__init__()
         self.stages = len(channels) - 1
-        self.feature_info = FeatureInfo(channels[0], 1, tuple(2 ** (i + 1) for i in range(self.stages)),
-                                        tuple(channels[1:]))  # fmt: skip
+        self.feature_info = FeatureInfo(
+            channels[0], 1, tuple(2 ** (i + 1) for i in range(self.stages)), tuple(channels[1:])
+        )
         add_resnet_layers(self, "stem", "layer", in_chans, channels, extra)
 
     def forward(self, x: torch.Tensor, hook: StageHook | None = None) -> tuple[torch.Tensor, list[torch.Tensor]]:

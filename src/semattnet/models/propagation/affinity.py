@@ -15,8 +15,16 @@ from semattnet._errors import InputError
 from semattnet.models.layers import convbn
 from semattnet.models.propagation._common import kernel_size, window
 
-__all__ = ["AFFINITY_FORMS", "AffinityForm", "AffinityHead", "check_affinity_form", "convex_affinity", "cspn_affinity",
-           "downsample_sparse", "normalise_affinity"]  # fmt: skip
+__all__ = [
+    "AFFINITY_FORMS",
+    "AffinityForm",
+    "AffinityHead",
+    "check_affinity_form",
+    "convex_affinity",
+    "cspn_affinity",
+    "downsample_sparse",
+    "normalise_affinity",
+]
 
 #: How raw guidance becomes a propagation kernel: ``"eq13"`` (the paper's, :func:`cspn_affinity`) or ``"convex"``
 #: (:func:`convex_affinity`).

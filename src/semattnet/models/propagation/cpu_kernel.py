@@ -219,8 +219,13 @@ def _build() -> object:
     if fresh:
         _say("building the fused CPU propagation kernel (once; about a minute) ...")
     start = time.perf_counter()
-    module = load_inline(name=NAME, cpp_sources=[_SOURCE], functions=["propagate_iterations", "normalize_affinity"],
-                         extra_cflags=["-O3", "-march=native", "-fno-math-errno"], verbose=False)  # fmt: skip
+    module = load_inline(
+        name=NAME,
+        cpp_sources=[_SOURCE],
+        functions=["propagate_iterations", "normalize_affinity"],
+        extra_cflags=["-O3", "-march=native", "-fno-math-errno"],
+        verbose=False,
+    )
     if fresh:
         _say(f"built the fused CPU propagation kernel in {time.perf_counter() - start:.1f} s ({build})")
     return module
@@ -298,7 +303,8 @@ def normalize_affinity(guide: torch.Tensor, out: torch.Tensor | None = None) -> 
     if out is None:
         out = torch.empty(b, h, n + 1, w)
     elif out.shape != (b, h, n + 1, w) or out.dtype != torch.float32 or not out.is_contiguous():
-        raise InputError(f"out must be a contiguous float32 {(b, h, n + 1, w)} tensor, got {tuple(out.shape)} "
-                         f"{out.dtype}")  # fmt: skip
+        raise InputError(
+            f"out must be a contiguous float32 {(b, h, n + 1, w)} tensor, got {tuple(out.shape)} {out.dtype}"
+        )
     module.normalize_affinity(guide.contiguous().float(), out)  # type: ignore[attr-defined]
     return out.transpose(1, 2)

@@ -127,8 +127,10 @@ def _point_dtype(msg: PointCloud2Msg, topic: str) -> tuple[np.dtype, dict[str, P
     fields = {name: f for name, f in zip(listed, msg.fields, strict=True)}
     twice = [n for n in ("x", "y", "z", *_INTENSITY_NAMES) if listed.count(n) > 1]
     if twice:
-        raise DataError(f"{topic}: PointCloud2 has {listed.count(twice[0])} fields named {twice[0]!r} (fields: "
-                        f"{', '.join(listed)}); which one holds the values is ambiguous")  # fmt: skip
+        raise DataError(
+            f"{topic}: PointCloud2 has {listed.count(twice[0])} fields named {twice[0]!r} (fields: "
+            f"{', '.join(listed)}); which one holds the values is ambiguous"
+        )
     missing = [n for n in ("x", "y", "z") if n not in fields]
     if missing:
         have = ", ".join(fields) or "none"
@@ -181,9 +183,11 @@ def decode_pointcloud2(msg: PointCloud2Msg, topic: str) -> np.ndarray:
     far = np.abs(out[:, :3]).max(1) > MAX_POINT_COORDINATE_M if len(out) else np.zeros(0, bool)
     if far.any():
         top = float(np.abs(out[far, :3]).max())
-        raise DataError(f"{topic}: PointCloud2 has {int(far.sum())} of {len(pts)} point(s) beyond "
-                        f"{MAX_POINT_COORDINATE_M:g} m (up to {top:.3g} m); a scan is in metres in the LiDAR's frame "
-                        "(semattnet.robotics.bags.decode.MAX_POINT_COORDINATE_M)")  # fmt: skip
+        raise DataError(
+            f"{topic}: PointCloud2 has {int(far.sum())} of {len(pts)} point(s) beyond "
+            f"{MAX_POINT_COORDINATE_M:g} m (up to {top:.3g} m); a scan is in metres in the LiDAR's frame "
+            "(semattnet.robotics.bags.decode.MAX_POINT_COORDINATE_M)"
+        )
     return out
 
 
@@ -209,15 +213,21 @@ def _intrinsics_set(name: str, M: np.ndarray, size: tuple[int, int], topic: str)
         if not value > 0:
             raise DataError(f"{topic}: CameraInfo focal length {label} ({cell}) is {value:g}, not positive")
         if value > MAX_FOCAL_PER_PIXEL * max(size):
-            raise DataError(f"{topic}: CameraInfo focal length {label} ({cell}) is {value:.3g} pixels, more than "
-                            f"{MAX_FOCAL_PER_PIXEL:g} times the image's {max(size)}-pixel side")  # fmt: skip
+            raise DataError(
+                f"{topic}: CameraInfo focal length {label} ({cell}) is {value:.3g} pixels, more than "
+                f"{MAX_FOCAL_PER_PIXEL:g} times the image's {max(size)}-pixel side"
+            )
     return True
 
 
 def _check_finite(matrices: dict[str, np.ndarray], topic: str) -> None:
     """Refuse the first NaN or infinite entry of CameraInfo's matrices, naming it (``fx (K[0][0])``)."""
-    labels = {(0, 0): "focal length fx ", (1, 1): "focal length fy ", (0, 2): "principal point cx ",
-              (1, 2): "principal point cy "}  # fmt: skip
+    labels = {
+        (0, 0): "focal length fx ",
+        (1, 1): "focal length fy ",
+        (0, 2): "principal point cx ",
+        (1, 2): "principal point cy ",
+    }
     for name, M in matrices.items():
         bad = np.argwhere(~np.isfinite(M))
         if len(bad):
@@ -245,5 +255,6 @@ def decode_camera_info(msg: CameraInfoMsg, topic: str) -> CameraInfoData:
     _check_finite({"K": K, "P": P, "R": R, "D": D.reshape(1, -1)}, topic)
     if not (_intrinsics_set("K", K, (w, h), topic) | _intrinsics_set("P", P, (w, h), topic)):
         raise DataError(f"{topic}: CameraInfo is uncalibrated (K and P are all zero)")
-    return CameraInfoData(w, h, K, D, R, P, str(msg.distortion_model), str(msg.header.frame_id).lstrip("/"),
-                          stamp_ns(msg.header.stamp))  # fmt: skip
+    return CameraInfoData(
+        w, h, K, D, R, P, str(msg.distortion_model), str(msg.header.frame_id).lstrip("/"), stamp_ns(msg.header.stamp)
+    )

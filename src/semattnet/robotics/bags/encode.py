@@ -52,9 +52,15 @@ def _image(ts: Typestore, pixels: np.ndarray, encoding: str, stamp_ns: int, fram
     """``sensor_msgs/Image`` of C-contiguous little-endian ``pixels`` (H, W[, C]), rows unpadded."""
     h, w = pixels.shape[:2]
     step = int(np.prod(pixels.shape[1:])) * pixels.itemsize
-    return ts.types["sensor_msgs/msg/Image"](header=header(ts, stamp_ns, frame_id), height=h, width=w,
-                                             encoding=encoding, is_bigendian=0, step=step,
-                                             data=pixels.reshape(-1).view(np.uint8))  # fmt: skip
+    return ts.types["sensor_msgs/msg/Image"](
+        header=header(ts, stamp_ns, frame_id),
+        height=h,
+        width=w,
+        encoding=encoding,
+        is_bigendian=0,
+        step=step,
+        data=pixels.reshape(-1).view(np.uint8),
+    )
 
 
 def image_message(ts: Typestore, rgb: np.ndarray, stamp_ns: int, frame_id: str) -> object:
@@ -82,8 +88,9 @@ def compressed_image_message(ts: Typestore, rgb: np.ndarray, stamp_ns: int, fram
         raise InputError(f"compressed image format: expected 'png' or 'jpeg', got {fmt!r}")
     buf = io.BytesIO()
     Image.fromarray(np.ascontiguousarray(rgb, dtype=np.uint8)).save(buf, format=fmt.upper(), quality=95)
-    return ts.types["sensor_msgs/msg/CompressedImage"](header=header(ts, stamp_ns, frame_id), format=fmt,
-                                                       data=np.frombuffer(buf.getvalue(), np.uint8))  # fmt: skip
+    return ts.types["sensor_msgs/msg/CompressedImage"](
+        header=header(ts, stamp_ns, frame_id), format=fmt, data=np.frombuffer(buf.getvalue(), np.uint8)
+    )
 
 
 def pack_rgb(rgb: np.ndarray) -> np.ndarray:
@@ -93,8 +100,9 @@ def pack_rgb(rgb: np.ndarray) -> np.ndarray:
     return ((c[:, 0] << 16) | (c[:, 1] << 8) | c[:, 2]).astype("<u4").view("<f4")
 
 
-def pointcloud2_message(ts: Typestore, fields: dict[str, np.ndarray], stamp_ns: int, frame_id: str,
-                        is_dense: bool | None = None) -> object:  # fmt: skip
+def pointcloud2_message(
+    ts: Typestore, fields: dict[str, np.ndarray], stamp_ns: int, frame_id: str, is_dense: bool | None = None
+) -> object:
     """An unorganised (height 1) little-endian ``sensor_msgs/PointCloud2`` with one (N,) column per field,
     packed without padding in the given order (e.g. ``{"x": ..., "y": ..., "z": ..., "intensity": ...}``).
 
@@ -110,16 +118,24 @@ def pointcloud2_message(ts: Typestore, fields: dict[str, np.ndarray], stamp_ns: 
     for k, v in cols.items():
         arr[k] = v
     Field = ts.types["sensor_msgs/msg/PointField"]
-    pf = [Field(name=k, offset=dtype.fields[k][1], datatype=_FIELD_TYPES[(v.dtype.kind, v.dtype.itemsize)], count=1)
-          for k, v in cols.items()]  # fmt: skip
+    pf = [
+        Field(name=k, offset=dtype.fields[k][1], datatype=_FIELD_TYPES[(v.dtype.kind, v.dtype.itemsize)], count=1)
+        for k, v in cols.items()
+    ]
     if is_dense is None:
         xyz = [cols[k] for k in ("x", "y", "z") if k in cols]
         is_dense = bool(all(np.isfinite(c).all() for c in xyz))
-    return ts.types["sensor_msgs/msg/PointCloud2"](header=header(ts, stamp_ns, frame_id), height=1, width=len(arr),
-                                                   fields=pf, is_bigendian=False, point_step=dtype.itemsize,
-                                                   row_step=dtype.itemsize * len(arr),
-                                                   data=np.frombuffer(arr.tobytes(), np.uint8),
-                                                   is_dense=is_dense)  # fmt: skip
+    return ts.types["sensor_msgs/msg/PointCloud2"](
+        header=header(ts, stamp_ns, frame_id),
+        height=1,
+        width=len(arr),
+        fields=pf,
+        is_bigendian=False,
+        point_step=dtype.itemsize,
+        row_step=dtype.itemsize * len(arr),
+        data=np.frombuffer(arr.tobytes(), np.uint8),
+        is_dense=is_dense,
+    )
 
 
 def camera_info_message(
@@ -132,8 +148,16 @@ def camera_info_message(
     kw = {(k if ros1 else k.lower()): np.array(v, dtype=np.float64).reshape(-1) for k, v in mats.items()}  # copies
     roi = ts.types["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
     hdr = header(ts, info.stamp_ns if stamp_ns is None else stamp_ns, info.frame_id if frame_id is None else frame_id)
-    return cls(header=hdr, height=int(info.height), width=int(info.width), distortion_model=info.distortion_model,
-               binning_x=0, binning_y=0, roi=roi, **kw)  # fmt: skip
+    return cls(
+        header=hdr,
+        height=int(info.height),
+        width=int(info.width),
+        distortion_model=info.distortion_model,
+        binning_x=0,
+        binning_y=0,
+        roi=roi,
+        **kw,
+    )
 
 
 def tf_message(ts: Typestore, transforms: Sequence[tuple[str, str, np.ndarray]], stamp_ns: int) -> object:

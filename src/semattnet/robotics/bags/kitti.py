@@ -95,8 +95,9 @@ def _camera_info(calib: RigCalibration, frame_id: str) -> CameraInfoData:
         raise DataError(f"{calib.source or 'calibration'}: no image size for the CameraInfo")
     P = calib.P_rect if calib.P_rect is not None else np.hstack([calib.K, np.zeros((3, 1))])
     w, h = calib.image_size
-    return CameraInfoData(w, h, np.asarray(P)[:, :3].copy(), np.zeros(5), np.eye(3), np.asarray(P, np.float64),
-                          "plumb_bob", frame_id)  # fmt: skip
+    return CameraInfoData(
+        w, h, np.asarray(P)[:, :3].copy(), np.zeros(5), np.eye(3), np.asarray(P, np.float64), "plumb_bob", frame_id
+    )
 
 
 def _with_nans(points: np.ndarray, n: int) -> np.ndarray:
@@ -109,10 +110,18 @@ def _with_nans(points: np.ndarray, n: int) -> np.ndarray:
     return np.insert(points, at, nan, axis=0)
 
 
-def write_sensor_bag(path: str | os.PathLike[str], records: Iterable[SensorRecord], calib: RigCalibration, *,
-                     T_base_lidar: np.ndarray | None = None, topics: BagTopics | None = None, fmt: str | None = None,
-                     compressed: str | None = None, nan_points: int = 0,
-                     overwrite: bool = False) -> WrittenBag:  # fmt: skip
+def write_sensor_bag(
+    path: str | os.PathLike[str],
+    records: Iterable[SensorRecord],
+    calib: RigCalibration,
+    *,
+    T_base_lidar: np.ndarray | None = None,
+    topics: BagTopics | None = None,
+    fmt: str | None = None,
+    compressed: str | None = None,
+    nan_points: int = 0,
+    overwrite: bool = False,
+) -> WrittenBag:
     """Write ``records`` with ``calib`` (K, T_cam_lidar, image size; ``P_rect`` for the CameraInfo when set) as
     a bag (module doc). ``fmt``: ros1, sqlite3 or mcap (default from the suffix, see ``bag_format``);
     ``compressed``: also a CompressedImage ("png" or "jpeg"); ``nan_points``: NaN points added per scan.
@@ -132,13 +141,16 @@ def write_sensor_bag(path: str | os.PathLike[str], records: Iterable[SensorRecor
         for n, rec in enumerate(records):
             img, pts = np.asarray(rec.image), np.asarray(rec.points, dtype=np.float32)
             if img.shape != (info.height, info.width, 3) or img.dtype != np.uint8:
-                raise InputError(f"record {n}: image must be ({info.height}, {info.width}, 3) uint8, got "
-                                 f"{img.shape} {img.dtype}")  # fmt: skip
+                raise InputError(
+                    f"record {n}: image must be ({info.height}, {info.width}, 3) uint8, got {img.shape} {img.dtype}"
+                )
             if pts.ndim != 2 or pts.shape[1] not in (3, 4):
                 raise InputError(f"record {n}: points must be (N, 3) or (N, 4), got {pts.shape}")
             if n == 0:
-                edges = [(topics.base_frame, topics.lidar_frame, T_base_lidar),
-                         (topics.base_frame, topics.camera_frame, T_base_cam)]  # fmt: skip
+                edges = [
+                    (topics.base_frame, topics.lidar_frame, T_base_lidar),
+                    (topics.base_frame, topics.camera_frame, T_base_cam),
+                ]
                 out.write(topics.tf_static, rec.image_stamp_ns, tf_message(ts, edges, rec.image_stamp_ns))
             t_img, t_scan, cam = rec.image_stamp_ns, rec.scan_stamp_ns, topics.camera_frame
             out.write(topics.image, t_img, image_message(ts, img, t_img, cam))
@@ -185,9 +197,17 @@ def kitti_stamps_ns(drive_dir: str | os.PathLike[str], folder: str, names: Seque
     return [stamps[int(n)] if int(n) < len(stamps) else t0 + int(n) * 100_000_000 for n in names]
 
 
-def write_kitti_bag(drive_dir: str | os.PathLike[str], out: str | os.PathLike[str], *, camera: str | int = 2,
-                    frames: str | Sequence[int] | None = None, fmt: str | None = None, compressed: str | None = None,
-                    nan_points: int = 0, overwrite: bool = False) -> WrittenBag:  # fmt: skip
+def write_kitti_bag(
+    drive_dir: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    camera: str | int = 2,
+    frames: str | Sequence[int] | None = None,
+    fmt: str | None = None,
+    compressed: str | None = None,
+    nan_points: int = 0,
+    overwrite: bool = False,
+) -> WrittenBag:
     """A bag of a KITTI raw drive (:class:`semattnet.data.kitti_raw.RawDrive`): frames ``frames`` (e.g. "0-10";
     None: all) of colour camera ``camera`` with the Velodyne scans, CameraInfo, ``/tf_static`` and, where the drive
     has ``calib_imu_to_velo.txt`` and the frame its OXTS packet, ``/tf`` (``odom -> base_link``, module doc).
@@ -200,8 +220,9 @@ def write_kitti_bag(drive_dir: str | os.PathLike[str], out: str | os.PathLike[st
     from semattnet.data.kitti_raw import RawDrive
 
     calib = sorted(Path(drive_dir).parent.glob("calib_*.txt"))  # the drive's calibration, beside it
-    check_outputs([("--drive", drive_dir), *(("calibration", c) for c in calib)], [Output("--out", out, "bag")],
-                  overwrite)  # fmt: skip
+    check_outputs(
+        [("--drive", drive_dir), *(("calibration", c) for c in calib)], [Output("--out", out, "bag")], overwrite
+    )
     drive = RawDrive(drive_dir, camera)
     names = drive.names_for(frames)
     imu = drive.drive_dir.parent / "calib_imu_to_velo.txt"
@@ -210,11 +231,21 @@ def write_kitti_bag(drive_dir: str | os.PathLike[str], out: str | os.PathLike[st
     scan_ns = kitti_stamps_ns(drive.drive_dir, "velodyne_points", names)
     poses = _odom_poses(drive.oxts_dir, names) if imu.is_file() else [None] * len(names)
     pose_ns = kitti_stamps_ns(drive.drive_dir, "oxts", names)
-    records = (SensorRecord(f.image, f.points, ti, ts, T, tp) for f, ti, ts, T, tp in
-               zip((drive.frame(n) for n in names), img_ns, scan_ns, poses, pose_ns, strict=True))  # fmt: skip
-    return write_sensor_bag(out, records, drive.calib, T_base_lidar=T_base_lidar,
-                            topics=BagTopics.for_camera(drive.camera), fmt=fmt, compressed=compressed,
-                            nan_points=nan_points, overwrite=overwrite)  # fmt: skip
+    records = (
+        SensorRecord(f.image, f.points, ti, ts, T, tp)
+        for f, ti, ts, T, tp in zip((drive.frame(n) for n in names), img_ns, scan_ns, poses, pose_ns, strict=True)
+    )
+    return write_sensor_bag(
+        out,
+        records,
+        drive.calib,
+        T_base_lidar=T_base_lidar,
+        topics=BagTopics.for_camera(drive.camera),
+        fmt=fmt,
+        compressed=compressed,
+        nan_points=nan_points,
+        overwrite=overwrite,
+    )
 
 
 def _odom_poses(oxts_dir: Path, names: Sequence[str]) -> list[np.ndarray | None]:

@@ -59,9 +59,11 @@ class StampPairing:
 
     def describe(self) -> str:
         """One line: paired, dropped and unused counts and the tolerance."""
-        return (f"{self.paired} image(s) paired with a scan within {self.max_skew_ns / 1e6:.1f} ms, "
-                f"{self.dropped_images} dropped (no scan near enough), {self.unused_scans} of {self.n_scans} "
-                f"scan(s) unused (scan period {self.scan_period_ns / 1e6:.1f} ms)")  # fmt: skip
+        return (
+            f"{self.paired} image(s) paired with a scan within {self.max_skew_ns / 1e6:.1f} ms, "
+            f"{self.dropped_images} dropped (no scan near enough), {self.unused_scans} of {self.n_scans} "
+            f"scan(s) unused (scan period {self.scan_period_ns / 1e6:.1f} ms)"
+        )
 
 
 def pair_stamps(image_ns: np.ndarray, scan_ns: np.ndarray, max_skew_ns: int | None = None) -> StampPairing:

@@ -126,8 +126,9 @@ def rig_camera_info(rig: RigCalibration, frame_id: str = "", stamp: int = 0) -> 
         raise DataError(f"{rig.source or 'rig'}: the calibration does not give the image size")
     K = np.asarray(rig.K, dtype=np.float64)
     w, h = rig.image_size
-    return CameraInfoData(w, h, K, np.zeros(5), np.eye(3), np.hstack([K, np.zeros((3, 1))]), "plumb_bob", frame_id,
-                          stamp)  # fmt: skip
+    return CameraInfoData(
+        w, h, K, np.zeros(5), np.eye(3), np.hstack([K, np.zeros((3, 1))]), "plumb_bob", frame_id, stamp
+    )
 
 
 def _skew_ns(max_skew: float) -> int:
@@ -164,10 +165,17 @@ class BagPairs:
             images that need it, not an exception.
     """
 
-    def __init__(self, path: str | os.PathLike[str], image_topic: str, points_topic: str,
-                 camera_info_topic: str | None = None, rig: str | os.PathLike[str] | RigCalibration | None = None,
-                 max_skew: float | None = None, rectified: bool = True,
-                 tf_topic: str = TF_STATIC_TOPIC) -> None:  # fmt: skip
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        image_topic: str,
+        points_topic: str,
+        camera_info_topic: str | None = None,
+        rig: str | os.PathLike[str] | RigCalibration | None = None,
+        max_skew: float | None = None,
+        rectified: bool = True,
+        tf_topic: str = TF_STATIC_TOPIC,
+    ) -> None:
         skew = None if max_skew is None else _skew_ns(max_skew)  # a bad tolerance: before the bag is opened
         self.path, self.image_topic, self.points_topic = Path(path), image_topic, points_topic
         self.rig = read_rig_json(rig) if isinstance(rig, (str, os.PathLike)) else rig
@@ -202,8 +210,10 @@ class BagPairs:
     def _find_camera_info(self, reader: Any) -> str:
         topics: list[str] = sorted({c.topic for c in reader.connections if c.msgtype == CAMERA_INFO_TYPE})
         if not topics:
-            raise DataError(f"{self.path}: no sensor_msgs/CameraInfo topic for {self.image_topic!r}; "
-                            "give the camera-info topic or a rig file")  # fmt: skip
+            raise DataError(
+                f"{self.path}: no sensor_msgs/CameraInfo topic for {self.image_topic!r}; "
+                "give the camera-info topic or a rig file"
+            )
         if len(topics) == 1:
             return topics[0]
         ns = self.image_topic.rsplit("/", 1)[0]
@@ -252,9 +262,11 @@ class BagPairs:
                 raise DataError(f"{self.path}: topic {topic!r} has no message")
         p = self.pairing
         if p.paired == 0:
-            raise DataError(f"{self.path}: no {self.points_topic} scan within {p.max_skew_ns / 1e6:.1f} ms of any "
-                            f"{self.image_topic} image ({len(self.image_stamps)} images, {p.n_scans} scans, nearest "
-                            f"{p.skew_ns.min() / 1e6:.1f} ms apart); raise the max skew")  # fmt: skip
+            raise DataError(
+                f"{self.path}: no {self.points_topic} scan within {p.max_skew_ns / 1e6:.1f} ms of any "
+                f"{self.image_topic} image ({len(self.image_stamps)} images, {p.n_scans} scans, nearest "
+                f"{p.skew_ns.min() / 1e6:.1f} ms apart); raise the max skew"
+            )
 
     def _camera_frame(self, i: int) -> str:
         if self.image_frames[i]:
@@ -285,8 +297,17 @@ class BagPairs:
         if self.rig is not None:
             info = rig_camera_info(self.rig, self.image_frames[i], int(self.image_stamps[i]))
             if near is not None:  # keep the bag's own message for the sink, with the rig's intrinsics
-                info = CameraInfoData(info.width, info.height, info.K, near.D, near.R, info.P, near.distortion_model,
-                                      near.frame_id, near.stamp_ns)  # fmt: skip
+                info = CameraInfoData(
+                    info.width,
+                    info.height,
+                    info.K,
+                    near.D,
+                    near.R,
+                    info.P,
+                    near.distortion_model,
+                    near.frame_id,
+                    near.stamp_ns,
+                )
             return info
         assert near is not None  # without a rig the CameraInfo topic is found or given, and has messages
         return near
@@ -301,9 +322,11 @@ class BagPairs:
             T = self.tree.lookup(camera_frame, lidar_frame)
             metres = float(np.linalg.norm(T[:3, 3]))
             if metres > MAX_POINT_COORDINATE_M:
-                raise DataError(f"{self.tree.source}: the LiDAR frame {lidar_frame!r} is {metres:.3g} m from the "
-                                f"camera frame {camera_frame!r}; a camera and a LiDAR of one rig are metres "
-                                "apart")  # fmt: skip
+                raise DataError(
+                    f"{self.tree.source}: the LiDAR frame {lidar_frame!r} is {metres:.3g} m from the "
+                    f"camera frame {camera_frame!r}; a camera and a LiDAR of one rig are metres "
+                    "apart"
+                )
             self._transforms[key] = T
         return self._transforms[key]
 
@@ -313,8 +336,10 @@ class BagPairs:
     def no_scan_error(self, i: int) -> DataError:
         """The error of image ``i`` that has no scan within the max skew."""
         p = self.pairing
-        return DataError(f"{self._frame_where(i)}: no {self.points_topic} scan within "
-                         f"{p.max_skew_ns / 1e6:.1f} ms (nearest {p.skew_ns[i] / 1e6:.1f} ms apart)")  # fmt: skip
+        return DataError(
+            f"{self._frame_where(i)}: no {self.points_topic} scan within "
+            f"{p.max_skew_ns / 1e6:.1f} ms (nearest {p.skew_ns[i] / 1e6:.1f} ms apart)"
+        )
 
     def _decode_image(self, reader: Any, conn: Any, raw: Any, i: int) -> np.ndarray | DataError:
         where = message_where(conn.topic, i, self.path, "image")
@@ -348,15 +373,31 @@ class BagPairs:
             said = "the rig"
             if self.rig is None:
                 said = message_where(str(self.camera_info_topic), self._nearest_index(i))
-            raise DataError(f"{self._frame_where(i)} is {image.shape[1]}x{image.shape[0]}, the calibration ({said}) "
-                            f"says {size[0]}x{size[1]}")  # fmt: skip
+            raise DataError(
+                f"{self._frame_where(i)} is {image.shape[1]}x{image.shape[0]}, the calibration ({said}) "
+                f"says {size[0]}x{size[1]}"
+            )
         K = np.asarray(self.rig.K, dtype=np.float64) if self.rig is not None else info.intrinsics(self.rectified)
-        return BagPair(f"{i:010d}", i, int(self.image_stamps[i]), scan_stamp, image, points, frame, lidar_frame, K,
-                       (int(size[0]), int(size[1])), self.T_cam_lidar(frame, lidar_frame), info,
-                       int(self.pairing.match[i]), dropped)  # fmt: skip
+        return BagPair(
+            f"{i:010d}",
+            i,
+            int(self.image_stamps[i]),
+            scan_stamp,
+            image,
+            points,
+            frame,
+            lidar_frame,
+            K,
+            (int(size[0]), int(size[1])),
+            self.T_cam_lidar(frame, lidar_frame),
+            info,
+            int(self.pairing.match[i]),
+            dropped,
+        )
 
-    def _outcome(self, i: int, image: np.ndarray | DataError | None,
-                 scans: dict[int, _Scan | DataError]) -> BagPair | BagFailure:  # fmt: skip
+    def _outcome(
+        self, i: int, image: np.ndarray | DataError | None, scans: dict[int, _Scan | DataError]
+    ) -> BagPair | BagFailure:
         """Image ``i``'s pair, or its failure: no scan near enough, a bad image, a bad scan, a wrong size."""
         j = int(self.pairing.match[i])
         scan = scans.get(j) if j >= 0 else None

@@ -60,8 +60,19 @@ def _reader_errors() -> tuple[type[BaseException], ...]:
     rosbag2 = require("rosbags.rosbag2", "reading ROS bags")
     highlevel = require("rosbags.highlevel", "reading ROS bags")
     serde = require("rosbags.serde", "reading ROS bags")
-    return (highlevel.AnyReaderError, rosbag1.ReaderError, rosbag2.ReaderError, serde.SerdeError, sqlite3.Error,
-            struct.error, EOFError, zlib.error, KeyError, IndexError, UnicodeDecodeError)  # fmt: skip
+    return (
+        highlevel.AnyReaderError,
+        rosbag1.ReaderError,
+        rosbag2.ReaderError,
+        serde.SerdeError,
+        sqlite3.Error,
+        struct.error,
+        EOFError,
+        zlib.error,
+        KeyError,
+        IndexError,
+        UnicodeDecodeError,
+    )
 
 
 @contextmanager

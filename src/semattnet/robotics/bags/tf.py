@@ -50,11 +50,13 @@ class NoTransformError(DataError):
 def quaternion_to_matrix(q: Iterable[float]) -> np.ndarray:
     """(3, 3) rotation of a quaternion ``(x, y, z, w)`` (normalised first)."""
     x, y, z, w = np.asarray(list(q), dtype=np.float64) / np.linalg.norm(np.asarray(list(q), dtype=np.float64))
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])  # fmt: skip
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def matrix_to_quaternion(R: np.ndarray) -> tuple[float, float, float, float]:
@@ -96,8 +98,10 @@ def checked_transform(translation: Iterable[float], quaternion: Iterable[float])
         raise DataError(f"rotation quaternion (x, y, z, w) = {_numbers(q)} is not finite")
     norm = float(np.linalg.norm(q))
     if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
-        raise DataError(f"rotation quaternion (x, y, z, w) = {_numbers(q)} has norm {norm:.6g}; a rotation's has "
-                        f"norm 1 (within {QUATERNION_NORM_TOLERANCE:g})")  # fmt: skip
+        raise DataError(
+            f"rotation quaternion (x, y, z, w) = {_numbers(q)} has norm {norm:.6g}; a rotation's has "
+            f"norm 1 (within {QUATERNION_NORM_TOLERANCE:g})"
+        )
     return make_T(quaternion_to_matrix(q), t)
 
 
@@ -183,14 +187,17 @@ class TransformTree:
         chains = self._chains(source, target)
         if not chains:
             have = ", ".join(self.frames) or "none"
-            raise NoTransformError(f"{self.source}: no transform between frames {source!r} and {target!r} "
-                                   f"(frames: {have})")  # fmt: skip
+            raise NoTransformError(
+                f"{self.source}: no transform between frames {source!r} and {target!r} (frames: {have})"
+            )
         T = self._chained(chains[0])
         for other in chains[1:]:
             metres, radians = _disagreement(T, self._chained(other))
             if metres > _AGREE_M or radians > _AGREE_RAD:
-                raise DataError(f"{self.source}: two different transforms from frame {source!r} to {target!r}: "
-                                f"{' -> '.join(chains[0])} and {' -> '.join(other)} (they differ by {metres:.3g} m "
-                                f"and {np.degrees(radians):.3g} degrees); the static transforms must join two "
-                                "frames by one chain")  # fmt: skip
+                raise DataError(
+                    f"{self.source}: two different transforms from frame {source!r} to {target!r}: "
+                    f"{' -> '.join(chains[0])} and {' -> '.join(other)} (they differ by {metres:.3g} m "
+                    f"and {np.degrees(radians):.3g} degrees); the static transforms must join two "
+                    "frames by one chain"
+                )
         return T

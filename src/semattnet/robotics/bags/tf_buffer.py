@@ -61,8 +61,9 @@ def slerp(q0: Iterable[float], q1: Iterable[float], s: float) -> np.ndarray:
     return out
 
 
-def interpolate_transform(stamps: np.ndarray, translations: np.ndarray, quaternions: np.ndarray, stamp: int,
-                          tolerance_ns: int) -> np.ndarray | None:  # fmt: skip
+def interpolate_transform(
+    stamps: np.ndarray, translations: np.ndarray, quaternions: np.ndarray, stamp: int, tolerance_ns: int
+) -> np.ndarray | None:
     """(4, 4) transform at ``stamp`` (ns) of samples sorted by ``stamps`` (N,), with ``translations`` (N, 3) and
     ``quaternions`` (N, 4) ``(x, y, z, w)``: linear in the translation, slerp in the rotation between the two samples
     around it; beyond the first or last sample by at most ``tolerance_ns``, the line through the two nearest (a
@@ -96,8 +97,12 @@ class TransformBuffer:
     the extrapolation allowed (:data:`EXTRAPOLATION_TOLERANCE_S`). ``skipped``: the errors of the transforms left
     out by :func:`read_tf_buffer`."""
 
-    def __init__(self, static: TransformTree | None = None, source: str = TF_TOPIC,
-                 tolerance_s: float = EXTRAPOLATION_TOLERANCE_S) -> None:  # fmt: skip
+    def __init__(
+        self,
+        static: TransformTree | None = None,
+        source: str = TF_TOPIC,
+        tolerance_s: float = EXTRAPOLATION_TOLERANCE_S,
+    ) -> None:
         self.static = static if static is not None else TransformTree()
         self.source = source
         self.tolerance_ns = round(tolerance_s * 1e9)
@@ -111,8 +116,9 @@ class TransformBuffer:
         T = np.asarray(T_parent_child, dtype=np.float64)
         self._add(parent, child, stamp_ns, T[:3, 3], matrix_to_quaternion(T[:3, :3]))
 
-    def _add(self, parent: str, child: str, stamp_ns: int, translation: Iterable[float],
-             quaternion: Iterable[float]) -> None:  # fmt: skip
+    def _add(
+        self, parent: str, child: str, stamp_ns: int, translation: Iterable[float], quaternion: Iterable[float]
+    ) -> None:
         stamps, values = self._samples.setdefault((parent.lstrip("/"), child.lstrip("/")), (array("q"), array("d")))
         stamps.append(int(stamp_ns))
         values.extend([*map(float, translation), *map(float, quaternion)])
@@ -158,8 +164,9 @@ class TransformBuffer:
         track = self.tracks.get((parent.lstrip("/"), child.lstrip("/")))
         if track is None:
             return None
-        return interpolate_transform(track.stamps, track.translations, track.quaternions, int(stamp_ns),
-                                     self.tolerance_ns)  # fmt: skip
+        return interpolate_transform(
+            track.stamps, track.translations, track.quaternions, int(stamp_ns), self.tolerance_ns
+        )
 
     def tree_at(self, stamp_ns: int | None) -> TransformTree:
         """The static tree with every ``/tf`` edge that has a transform at ``stamp_ns`` (None: each edge's first
@@ -203,8 +210,10 @@ class TransformBuffer:
             except NoTransformError:
                 continue
         have = ", ".join(sorted(named))
-        raise NoTransformError(f"{self.source}: no chain from {' or '.join(map(repr, candidates)) or 'a root frame'} "
-                               f"to the camera frame {camera_frame!r} (/tf frames: {have})")  # fmt: skip
+        raise NoTransformError(
+            f"{self.source}: no chain from {' or '.join(map(repr, candidates)) or 'a root frame'} "
+            f"to the camera frame {camera_frame!r} (/tf frames: {have})"
+        )
 
 
 def read_tf_buffer(

@@ -137,8 +137,14 @@ class BagWriter:
         max_depth: cloud points deeper than this are left out (None: all), metres.
     """
 
-    def __init__(self, path: str | os.PathLike[str], overwrite: bool = False, fmt: str | None = None,
-                 prefix: str = "/semattnet", max_depth: float | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        overwrite: bool = False,
+        fmt: str | None = None,
+        prefix: str = "/semattnet",
+        max_depth: float | None = None,
+    ) -> None:
         self.path, self.fmt = Path(path), bag_format(path, fmt)
         self.topics = topic_names(prefix, tuple(ROS_TYPES))
         self.max_depth = max_depth
@@ -164,17 +170,36 @@ class BagWriter:
         """Start writing (what entering the ``with`` block does); finish with :meth:`close`."""
         return self.__enter__()
 
-    def write(self, stamp_ns: int, frame_id: str, depth: np.ndarray, camera_info: CameraInfoData,
-              rgb: np.ndarray | None = None, K: np.ndarray | None = None, uncertainty: np.ndarray | None = None,
-              keep: np.ndarray | None = None) -> None:  # fmt: skip
+    def write(
+        self,
+        stamp_ns: int,
+        frame_id: str,
+        depth: np.ndarray,
+        camera_info: CameraInfoData,
+        rgb: np.ndarray | None = None,
+        K: np.ndarray | None = None,
+        uncertainty: np.ndarray | None = None,
+        keep: np.ndarray | None = None,
+    ) -> None:
         """One frame: ``depth`` (H, W) metres (<= 0 or NaN = hole), the input ``camera_info``, optional ``rgb``
         (H, W, 3) uint8 colours for the cloud, ``K`` the depth's intrinsics (default: ``camera_info``'s ``P``),
         ``uncertainty`` (H, W) metres (<= 0 or NaN = none) for the uncertainty topic, ``keep`` (H, W) bool: the
         pixels the cloud keeps (default all; the depth image stays whole)."""
         from semattnet.robotics.frame import RobotFrame
 
-        self.write_frame(RobotFrame.build(stamp_ns, frame_id, depth, camera_info, rgb=rgb, K=K, uncertainty=uncertainty,
-                                          keep=keep, max_depth=self.max_depth))  # fmt: skip
+        self.write_frame(
+            RobotFrame.build(
+                stamp_ns,
+                frame_id,
+                depth,
+                camera_info,
+                rgb=rgb,
+                K=K,
+                uncertainty=uncertainty,
+                keep=keep,
+                max_depth=self.max_depth,
+            )
+        )
 
     def write_frame(self, frame: RobotFrame) -> None:
         """One :class:`~semattnet.robotics.frame.RobotFrame`: its messages, on :attr:`topics`."""
@@ -184,8 +209,9 @@ class BagWriter:
             self._out.write(self.topics[role], frame.stamp_ns, msg)
         self.frames += 1
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:  # fmt: skip
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
         out, self._out = self._out, None
         try:
             if out is not None:

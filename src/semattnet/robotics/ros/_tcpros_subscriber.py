@@ -45,8 +45,9 @@ class Inbound:
     def _connect(self) -> socket.socket:
         sub = self.sub
         check_http_uri(self.uri, f"{sub.topic}: publisher URI")
-        code, status, proto = xmlrpc_call(self.uri, "requestTopic", sub.caller_id, sub.topic, [["TCPROS"]],
-                                          timeout=sub.timeout)  # fmt: skip
+        code, status, proto = xmlrpc_call(
+            self.uri, "requestTopic", sub.caller_id, sub.topic, [["TCPROS"]], timeout=sub.timeout
+        )
         if code != 1 or not isinstance(proto, list) or len(proto) != 3 or proto[0] != "TCPROS":
             raise TcprosError(f"requestTopic refused or not TCPROS ({status!r})")
         if not isinstance(proto[1], str) or not isinstance(proto[2], int):
@@ -76,8 +77,13 @@ class Inbound:
             except (TcprosError, OSError, xmlrpc.client.Error) as exc:
                 if not self.stop.is_set():  # one line per outage; the retries after it are debug lines
                     level = logging.WARNING if attempt == 0 else logging.DEBUG
-                    _log.log(level, "%s: publisher %r: %s (retrying while the master lists it)", self.sub.topic,
-                             self.uri, exc)  # fmt: skip
+                    _log.log(
+                        level,
+                        "%s: publisher %r: %s (retrying while the master lists it)",
+                        self.sub.topic,
+                        self.uri,
+                        exc,
+                    )
                 attempt += 1
             finally:
                 if self.sock is not None:
@@ -112,8 +118,14 @@ class Subscription:
         self.caller_id, self.timeout = transport.node_name, transport.timeout
         self.max_message_bytes = transport.max_message_bytes
         definition, self.md5sum = self.store.generate_msgdef(msgtype)
-        self.fields = {"callerid": transport.node_name, "topic": topic, "type": ros1_type_name(msgtype),
-                       "md5sum": self.md5sum, "message_definition": definition, "tcp_nodelay": "1"}  # fmt: skip
+        self.fields = {
+            "callerid": transport.node_name,
+            "topic": topic,
+            "type": ros1_type_name(msgtype),
+            "md5sum": self.md5sum,
+            "message_definition": definition,
+            "tcp_nodelay": "1",
+        }
         self._track = transport._track
         self._inbound: dict[str, Inbound] = {}
         self._lock = threading.Lock()

@@ -52,11 +52,15 @@ def dds_type_name(msgtype: str) -> str:
 def loopback_config(domain_id: int) -> str:
     """The Cyclone XML for unicast DDS on ``lo`` only (module doc)."""
     general = '<Interfaces><NetworkInterface name="lo"/></Interfaces><AllowMulticast>false</AllowMulticast>'
-    discovery = ("<ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>30</MaxAutoParticipantIndex>"
-                 '<Peers><Peer address="127.0.0.1"/></Peers>')  # fmt: skip
+    discovery = (
+        "<ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>30</MaxAutoParticipantIndex>"
+        '<Peers><Peer address="127.0.0.1"/></Peers>'
+    )
     buffers = "".join(f'<Socket{k}BufferSize min="default" max="{SOCKET_BUFFER}"/>' for k in ("Receive", "Send"))
-    return (f'<CycloneDDS><Domain id="{domain_id}"><General>{general}</General><Discovery>{discovery}</Discovery>'
-            f"<Internal>{buffers}</Internal></Domain></CycloneDDS>")  # fmt: skip
+    return (
+        f'<CycloneDDS><Domain id="{domain_id}"><General>{general}</General><Discovery>{discovery}</Discovery>'
+        f"<Internal>{buffers}</Internal></Domain></CycloneDDS>"
+    )
 
 
 class _RawSample(Protocol):
@@ -111,9 +115,22 @@ class _Types:
         idl = require("cyclonedds.idl", "semattnet ros2 (DDS)")
         self.idl, self.t = idl, require("cyclonedds.idl.types", "semattnet ros2 (DDS)")
         t = self.t
-        self.base = {"bool": bool, "byte": t.byte, "char": t.byte, "int8": t.byte, "uint8": t.byte,
-                     "int16": t.int16, "uint16": t.uint16, "int32": t.int32, "uint32": t.uint32, "int64": t.int64,
-                     "uint64": t.uint64, "float32": t.float32, "float64": t.float64, "string": str}  # fmt: skip
+        self.base = {
+            "bool": bool,
+            "byte": t.byte,
+            "char": t.byte,
+            "int8": t.byte,
+            "uint8": t.byte,
+            "int16": t.int16,
+            "uint16": t.uint16,
+            "int32": t.int32,
+            "uint32": t.uint32,
+            "int64": t.int64,
+            "uint64": t.uint64,
+            "float32": t.float32,
+            "float64": t.float64,
+            "string": str,
+        }
 
     def _field(self, node: Any) -> Any:
         kind, spec = node
@@ -147,8 +164,9 @@ def _qos(qos: QoS) -> object:
     P = core.Policy
     reliability = P.Reliability.Reliable(max_blocking_time=100_000_000) if qos.reliable else P.Reliability.BestEffort
     durability = P.Durability.TransientLocal if qos.durable else P.Durability.Volatile
-    return core.Qos(reliability, durability, P.History.KeepLast(qos.depth),
-                    P.DataRepresentation(use_cdrv0_representation=True))  # fmt: skip
+    return core.Qos(
+        reliability, durability, P.History.KeepLast(qos.depth), P.DataRepresentation(use_cdrv0_representation=True)
+    )
 
 
 class _Writer:
@@ -209,8 +227,9 @@ class DdsTransport:
                 self._deliver(topic, msgtype, sample.cdr, callback)
 
         listener = core.Listener(on_data_available=on_data)
-        reader = sub.DataReader(self._participant, tp.Topic(self._participant, dds_topic(topic), cls), qos=_qos(qos),
-                                listener=listener)  # fmt: skip
+        reader = sub.DataReader(
+            self._participant, tp.Topic(self._participant, dds_topic(topic), cls), qos=_qos(qos), listener=listener
+        )
         self._entities.append(reader)
 
     def _deliver(self, topic: str, msgtype: str, cdr: bytes, callback: Callable[[object], None]) -> None:

@@ -123,8 +123,14 @@ class PairingInputs:
         max_skew_ns: image-scan tolerance (None: half the scan period).
     """
 
-    def __init__(self, topics: dict[str, str], on_pair: Callable[[Pair], None], compressed: bool = False,
-                 sparse: bool = False, max_skew_ns: int | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        topics: dict[str, str],
+        on_pair: Callable[[Pair], None],
+        compressed: bool = False,
+        sparse: bool = False,
+        max_skew_ns: int | None = None,
+    ) -> None:
         self.topics, self.on_pair = topics, on_pair
         self.compressed, self.sparse, self.max_skew_ns = compressed, sparse, max_skew_ns
         self.counts = Counts()
@@ -200,8 +206,13 @@ class PairingInputs:
             self._images.popleft()
         self.counts.unpaired += k + int(p.match[0] < 0)
         if p.match[0] < 0:
-            log.warning("%s: no %s scan within %.1f ms (nearest %.1f ms apart)", image.where, self.topics["scan"],
-                        p.max_skew_ns / 1e6, p.skew_ns[0] / 1e6)  # fmt: skip
+            log.warning(
+                "%s: no %s scan within %.1f ms (nearest %.1f ms apart)",
+                image.where,
+                self.topics["scan"],
+                p.max_skew_ns / 1e6,
+                p.skew_ns[0] / 1e6,
+            )
             return
         self.counts.paired += 1
         self.on_pair(Pair(image, scans[int(p.match[0])], self.camera_info))

@@ -114,12 +114,25 @@ class DepthNode:
         sinks: run outputs fed each completed frame beside the topics (``--live``, ``--rerun-serve``).
     """
 
-    def __init__(self, transport: Transport, completer: Completer, topics: NodeTopics | None = None, *,
-                 namespace: str = "", node: str = "semattnet", rig: RigCalibration | None = None,
-                 max_skew_ns: int | None = None, compressed: bool = False, sparse: bool = False,
-                 semantic: SemanticMaps | None = None, max_depth: float | None = None,
-                 max_uncertainty: UncertaintyLimit | None = None, report_s: float = 5.0,
-                 say: Callable[[str], object] = print, sinks: Sequence[RunSink] = ()) -> None:  # fmt: skip
+    def __init__(
+        self,
+        transport: Transport,
+        completer: Completer,
+        topics: NodeTopics | None = None,
+        *,
+        namespace: str = "",
+        node: str = "semattnet",
+        rig: RigCalibration | None = None,
+        max_skew_ns: int | None = None,
+        compressed: bool = False,
+        sparse: bool = False,
+        semantic: SemanticMaps | None = None,
+        max_depth: float | None = None,
+        max_uncertainty: UncertaintyLimit | None = None,
+        report_s: float = 5.0,
+        say: Callable[[str], object] = print,
+        sinks: Sequence[RunSink] = (),
+    ) -> None:
         self.transport, self.completer, self.rig, self.semantic = transport, completer, rig, semantic
         self.names = (topics or NodeTopics()).resolved(namespace, node)
         self.max_depth, self.max_uncertainty, self.report_s, self.say = max_depth, max_uncertainty, report_s, say
@@ -183,9 +196,11 @@ class DepthNode:
         """One line: frames published, drops, bad messages and per-stage latency."""
         c = self.inputs.counts
         head = "ros node stopped: " if final else "ros node: "
-        return (f"{head}{self.published} frame(s) published, {c.stale} stale pair(s) dropped, {c.unpaired} image(s) "
-                f"without a scan, {self.failed} frame(s) failed, {c.bad} bad message(s); "
-                f"{self.stats.line(table)}")  # fmt: skip
+        return (
+            f"{head}{self.published} frame(s) published, {c.stale} stale pair(s) dropped, {c.unpaired} image(s) "
+            f"without a scan, {self.failed} frame(s) failed, {c.bad} bad message(s); "
+            f"{self.stats.line(table)}"
+        )
 
     def process(self, pair: Pair) -> None:
         """Complete one pair and publish it; a frame's fault is one logged line."""
@@ -238,8 +253,16 @@ class DepthNode:
         self.stats.add("projection", (time.perf_counter() - start) * 1e3)
         meta = SensorMeta(image.stamp_ns, image.frame_id or info.frame_id, scan.frame_id, scan.stamp_ns, info)
         calib = RigCalibration(K, T, (w, h), camera=image.frame_id or None)
-        return Frame(str(image.stamp_ns), image.data, sparse, K=K, timestamp=image.stamp_ns / 1e9, points=points,
-                     calib=calib, meta=meta)  # fmt: skip
+        return Frame(
+            str(image.stamp_ns),
+            image.data,
+            sparse,
+            K=K,
+            timestamp=image.stamp_ns / 1e9,
+            points=points,
+            calib=calib,
+            meta=meta,
+        )
 
     def _complete(self, frame: Frame) -> None:
         from semattnet.inference.sinks import predict_frame
@@ -253,8 +276,12 @@ class DepthNode:
             pred = predict_frame(frame, completion)
         self.stats.add("network", (time.perf_counter() - start) * 1e3)
         start = time.perf_counter()
-        robot = RobotFrame.of(pred, uncertainty=pred.uncertainty_png is not None, max_depth=self.max_depth,
-                              max_uncertainty=self.max_uncertainty)  # fmt: skip
+        robot = RobotFrame.of(
+            pred,
+            uncertainty=pred.uncertainty_png is not None,
+            max_depth=self.max_depth,
+            max_uncertainty=self.max_uncertainty,
+        )
         for role, msg in robot.messages(self.transport_typestore).items():
             self._publishers[role].publish(msg)
         for sink in self.sinks:

@@ -87,9 +87,14 @@ class TcprosPublisher:
         self.topic, self.msgtype, self.qos = topic, msgtype, qos
         self._store = store
         definition, self.md5sum = store.generate_msgdef(msgtype)
-        self.fields = {"callerid": caller_id, "topic": topic, "type": ros1_type_name(msgtype),
-                       "md5sum": self.md5sum, "message_definition": definition,
-                       "latching": "1" if qos.durable else "0"}  # fmt: skip
+        self.fields = {
+            "callerid": caller_id,
+            "topic": topic,
+            "type": ros1_type_name(msgtype),
+            "md5sum": self.md5sum,
+            "message_definition": definition,
+            "latching": "1" if qos.durable else "0",
+        }
         self._outboxes: list[Outbox] = []
         self._latched: tuple[bytes, memoryview] | None = None  # a durable topic's last message, for late subscribers
         self._lock = threading.Lock()
@@ -169,8 +174,15 @@ class TcprosTransport:
 
     name = "tcpros"
 
-    def __init__(self, master_uri: str, node_name: str = "/semattnet", host: str | None = None, *,
-                 timeout: float = 5.0, max_message_bytes: int = DEFAULT_MAX_MESSAGE_BYTES) -> None:  # fmt: skip
+    def __init__(
+        self,
+        master_uri: str,
+        node_name: str = "/semattnet",
+        host: str | None = None,
+        *,
+        timeout: float = 5.0,
+        max_message_bytes: int = DEFAULT_MAX_MESSAGE_BYTES,
+    ) -> None:
         check_http_uri(master_uri, "ROS master URI")
         self.node_name = "/" + node_name.strip("/")
         if not _NAME.fullmatch(self.node_name):
@@ -366,12 +378,15 @@ class TcprosTransport:
             "getPid": lambda caller: [1, "", os.getpid()],
             "getPublications": lambda caller: [1, "", [[t, p.fields["type"]] for t, p in self._publishers.items()]],
             "getSubscriptions": lambda caller: [
-                1, "", [[t, ros1_type_name(s.msgtype)] for t, s in self._subscriptions.items()]],
+                1,
+                "",
+                [[t, ros1_type_name(s.msgtype)] for t, s in self._subscriptions.items()],
+            ],
             "paramUpdate": lambda caller, key, value: [1, "", 0],
             "publisherUpdate": self._publisher_update,
             "requestTopic": self._request_topic,
             "shutdown": self._remote_shutdown,
-        }  # fmt: skip
+        }
         for method, function in api.items():
             self._slave.register_function(function, method)
 

@@ -20,8 +20,18 @@ from semattnet.inference.semantic import SemanticMaps
 from semattnet.training.adapt.config import LOSS_TERMS, AdaptConfig
 from semattnet.training.adapt.run import FINAL, LOG, RUN_FILES, STATE, Adapter, AdaptResult, run_files
 
-__all__ = ["FINAL", "LOG", "LOSS_TERMS", "RUN_FILES", "STATE", "AdaptConfig", "AdaptResult", "Adapter", "adapt",
-           "prepare_run_folder"]  # fmt: skip
+__all__ = [
+    "FINAL",
+    "LOG",
+    "LOSS_TERMS",
+    "RUN_FILES",
+    "STATE",
+    "AdaptConfig",
+    "AdaptResult",
+    "Adapter",
+    "adapt",
+    "prepare_run_folder",
+]
 
 
 def prepare_run_folder(out: str | os.PathLike[str], overwrite: bool = False) -> bool:

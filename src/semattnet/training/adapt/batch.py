@@ -36,8 +36,9 @@ class ViewBatch:
     present: torch.Tensor
 
     def to(self, device: torch.device) -> ViewBatch:
-        return ViewBatch(*(t.to(device) for t in (self.images, self.K, self.offset, self.K_view, self.T_view_cam,
-                                                  self.present)))  # fmt: skip
+        return ViewBatch(
+            *(t.to(device) for t in (self.images, self.K, self.offset, self.K_view, self.T_view_cam, self.present))
+        )
 
 
 @dataclass(frozen=True)

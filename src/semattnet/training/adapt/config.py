@@ -92,8 +92,11 @@ class AdaptConfig:
         check("lr", number(self.lr) and self.lr > 0, "a finite number > 0")
         for name in ("w_kept", "w_photometric", "w_smooth"):
             check(name, number(getattr(self, name)) and getattr(self, name) >= 0, "a finite number >= 0")
-        check("crop", len(self.crop) == 2 and all(whole(v, 32) and v % 32 == 0 for v in self.crop),
-              "two multiples of 32 (HxW)")  # fmt: skip
+        check(
+            "crop",
+            len(self.crop) == 2 and all(whole(v, 32) and v % 32 == 0 for v in self.crop),
+            "two multiples of 32 (HxW)",
+        )
         low_high = len(self.hide) == 2 and all(number(v) for v in self.hide)
         check("hide", low_high and 0 < self.hide[0] <= self.hide[1] < 1, "a share or a range low..high in (0, 1)")
 

@@ -53,8 +53,11 @@ class TrainingCompleter:
         def image(a: np.ndarray) -> torch.Tensor:
             return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32)).permute(2, 0, 1)[None]
 
-        x = [image(rgb), None if semantic is None else image(semantic),
-             torch.from_numpy(np.ascontiguousarray(sparse, dtype=np.float32))[None, None]]  # fmt: skip
+        x = [
+            image(rgb),
+            None if semantic is None else image(semantic),
+            torch.from_numpy(np.ascontiguousarray(sparse, dtype=np.float32))[None, None],
+        ]
         padded = [None if t is None else pad_to_multiple(t.to(self._device)) for t in x]
         modes = {m: m.training for m in self.model.modules()}
         self.model.eval()

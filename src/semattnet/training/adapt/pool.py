@@ -40,8 +40,14 @@ class FramePool:
         DataError: no usable frame is left (or ``stop`` and a bad frame).
     """
 
-    def __init__(self, source: FrameSource, semantic: SemanticMaps | None, on_error: str = "skip",
-                 held_out: int = 0, log: Callable[[str], None] = print) -> None:  # fmt: skip
+    def __init__(
+        self,
+        source: FrameSource,
+        semantic: SemanticMaps | None,
+        on_error: str = "skip",
+        held_out: int = 0,
+        log: Callable[[str], None] = print,
+    ) -> None:
         self.source, self.semantic, self.log = source, semantic, log
         self.faults: list[FrameFault] = []
         self._cache: OrderedDict[str, Frame] = OrderedDict()
@@ -78,8 +84,9 @@ class FramePool:
         """One frame with its semantic map and views; a frame without any LiDAR point is its fault."""
         frame = read_frame(self.source, name, self.semantic, StageTimes())
         if not (frame.sparse > 0).any():
-            raise DataError(f"{frame.paths.get('sparse') or frame.paths.get('scan') or name}: no LiDAR point "
-                            "in the image")  # fmt: skip
+            raise DataError(
+                f"{frame.paths.get('sparse') or frame.paths.get('scan') or name}: no LiDAR point in the image"
+            )
         if isinstance(self.source, ViewSource):
             frame = replace(frame, views=self.source.views(name))
         return frame

@@ -162,12 +162,16 @@ class Adapter:
         self._write_log(folder)
         model_config = getattr(self.model, "config", None)
         state: dict[str, object] = {
-            "format": FORMAT, "model": self.model.state_dict(),
+            "format": FORMAT,
+            "model": self.model.state_dict(),
             "config": model_config.to_dict() if model_config is not None else None,
-            "adapt_config": self.cfg.to_dict(), "optimizer": self.optimizer.state_dict(),
-            "scheduler": self.scheduler.state_dict(), "scaler": self.scaler.state_dict(),
-            "rng": rngs, "step": self.step,
-        }  # fmt: skip
+            "adapt_config": self.cfg.to_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "scheduler": self.scheduler.state_dict(),
+            "scaler": self.scaler.state_dict(),
+            "rng": rngs,
+            "step": self.step,
+        }
         state[DIGEST_KEY] = tensor_digest(state)
         path = folder / STATE
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -176,9 +180,15 @@ class Adapter:
 
     def _write_log(self, folder: Path) -> None:
         faults = [{"name": f.name, "status": f.status, "reason": f.reason} for f in self.pool.faults]
-        doc = {"config": self.cfg.to_dict(), "crop": list(self.crop), "frames": len(self.pool.names),
-               "held_out": self.pool.held_out, "skipped": faults, "steps": self.rows,
-               "metrics": self.metrics}  # fmt: skip
+        doc = {
+            "config": self.cfg.to_dict(),
+            "crop": list(self.crop),
+            "frames": len(self.pool.names),
+            "held_out": self.pool.held_out,
+            "skipped": faults,
+            "steps": self.rows,
+            "metrics": self.metrics,
+        }
         with atomic_path(folder / LOG, suffix=".json") as tmp:
             tmp.write_text(json.dumps(doc, indent=1) + "\n")
 
@@ -187,8 +197,9 @@ class Adapter:
         """Train from the current step to ``cfg.steps``; the final weights to ``adapted.safetensors``."""
         cfg, times = self.cfg, []
         self.out.mkdir(parents=True, exist_ok=True)
-        bar = progress(total=cfg.steps, initial=self.step, desc="adapt", unit="step", dynamic_ncols=True,
-                       enabled=self.main)  # fmt: skip
+        bar = progress(
+            total=cfg.steps, initial=self.step, desc="adapt", unit="step", dynamic_ncols=True, enabled=self.main
+        )
         with bar:
             while self.step < cfg.steps:
                 start = time.perf_counter()
@@ -206,13 +217,22 @@ class Adapter:
         if not times:
             self.save()  # nothing left to do: the log at least
         if self.distributed:
-            self.log(f"{dist_utils.world_size()} ranks in sync (parameter checksum "
-                     f"{dist_utils.check_in_sync(self.model):.6e})")  # fmt: skip
+            self.log(
+                f"{dist_utils.world_size()} ranks in sync (parameter checksum "
+                f"{dist_utils.check_in_sync(self.model):.6e})"
+            )
         weights = dist_utils.on_main(self._write_final)
         last = self.metrics[-1] if self.metrics and self.metrics[-1]["step"] == self.step else None
         losses = {k: v for k, v in (self.rows[-1] if self.rows else {}).items() if k not in ("step", "lr")}
-        return AdaptResult(self.step, weights, len(self.pool.names), tuple(self.pool.faults),
-                           last, sum(times) / len(times) if times else math.nan, losses)  # fmt: skip
+        return AdaptResult(
+            self.step,
+            weights,
+            len(self.pool.names),
+            tuple(self.pool.faults),
+            last,
+            sum(times) / len(times) if times else math.nan,
+            losses,
+        )
 
     def _write_final(self) -> Path:
         config = getattr(self.model, "config", None)
@@ -249,8 +269,9 @@ class Adapter:
             values /= dist_utils.world_size()
         return {"step": self.step, **dict(zip(["loss", *terms], values.tolist(), strict=True)), "lr": lr}
 
-    def _terms(self, pred: torch.Tensor, batch: AdaptBatch, kept: torch.Tensor,
-               hidden: torch.Tensor | None) -> dict[str, torch.Tensor]:  # fmt: skip
+    def _terms(
+        self, pred: torch.Tensor, batch: AdaptBatch, kept: torch.Tensor, hidden: torch.Tensor | None
+    ) -> dict[str, torch.Tensor]:
         """The weighted loss terms asked for (the photometric one only where the batch has other views)."""
         cfg, dev, terms = self.cfg, self.device, {}
         image = batch.rgb.to(dev) / 255.0
@@ -297,11 +318,15 @@ def _check_processes(cfg: AdaptConfig, device: torch.device, state: AdaptState |
     trained BatchNorm is synchronised (SyncBatchNorm), which needs CUDA."""
     world = dist_utils.world_size()
     if state is not None and len(state["rng"]) != world:
-        raise InputError(f"{Path(cfg.out) / STATE}: the run ran as {len(state['rng'])} process(es), this is {world}; "
-                         f"resume it with as many (torchrun --nproc_per_node {len(state['rng'])})")  # fmt: skip
+        raise InputError(
+            f"{Path(cfg.out) / STATE}: the run ran as {len(state['rng'])} process(es), this is {world}; "
+            f"resume it with as many (torchrun --nproc_per_node {len(state['rng'])})"
+        )
     if world > 1 and not cfg.freeze_bn and device.type != "cuda":
-        raise InputError("--train-bn with several processes needs CUDA (SyncBatchNorm across the ranks); on a CPU "
-                         "leave BatchNorm frozen")  # fmt: skip
+        raise InputError(
+            "--train-bn with several processes needs CUDA (SyncBatchNorm across the ranks); on a CPU "
+            "leave BatchNorm frozen"
+        )
 
 
 def _silent(line: str) -> None:
