@@ -31,7 +31,7 @@ from semattnet._utils.cpu import cpu_summary
 from semattnet.apps.experiment import HeldOut, load_held_out, score
 from semattnet.data.sources import KittiSplitSource
 from semattnet.inference.backends import available_backends, optimize_for_inference
-from semattnet.weights import load_model
+from semattnet.weights import from_pretrained
 
 
 def _complete(engine, held: HeldOut, device: torch.device) -> tuple[dict[str, np.ndarray], float]:  # type: ignore[no-untyped-def]
@@ -55,7 +55,7 @@ def main() -> None:
     p.add_argument("--calibration-frames", type=int, default=32, help="training scenes the int8 engine calibrates on")
     args = p.parse_args()
     device = torch.device(args.device)
-    model = load_model(args.checkpoint).eval()
+    model = from_pretrained(args.checkpoint, progress=False).eval()
     held = load_held_out(args.data)
     size = tuple(held.samples[0]["rgb"].shape[-2:])
     backends = ["torch"] + ([b for b in available_backends() if b == "openvino"] if device.type == "cpu" else [])

@@ -123,6 +123,7 @@ def measure(
     import semattnet
     from semattnet.data.sources import RawDriveSource
     from semattnet.inference import DepthCompleter
+    from semattnet.inference.backends import EngineSpec
     from semattnet.inference.feed import read_frame
     from semattnet.inference.semantic import SemanticMaps
     from semattnet.inference.timing import StageTimes
@@ -130,10 +131,8 @@ def measure(
     torch.manual_seed(0)
     completer = DepthCompleter(
         semattnet.build_model("semattnet", width=width),
-        device="cpu",
-        backend=backend,
+        EngineSpec(backend=backend, precision=precision, device="cpu"),
         inplace=True,
-        precision=precision,
     )
     source = RawDriveSource(drive)
     maps = SemanticMaps().bind(completer)

@@ -41,9 +41,14 @@ def _predictions(weights: str, held: HeldOut) -> list[tuple[Prediction, np.ndarr
     """(what predict writes, ground truth) per held-out scene."""
     from semattnet.baselines.classical import ClassicalCompleter
     from semattnet.inference import DepthCompleter
-    from semattnet.weights.hub import load_model
+    from semattnet.inference.backends import EngineSpec
+    from semattnet.weights.hub import from_pretrained
 
-    completer: Any = ClassicalCompleter() if weights == "classical" else DepthCompleter(load_model(weights), "cpu")
+    completer: Any = (
+        ClassicalCompleter()
+        if weights == "classical"
+        else DepthCompleter(from_pretrained(weights, progress=False), EngineSpec(device="cpu"))
+    )
     out = []
     for s in held.samples:
         rgb = s["rgb"].permute(1, 2, 0).numpy().astype(np.uint8)

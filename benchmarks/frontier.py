@@ -502,12 +502,13 @@ def time_stream(model: torch.nn.Module, backend: str, precision: str, source: An
     network, the propagation, the depth and colour PNGs written) on ``source``; its latency table's per-frame
     median (the stages of one frame, summed), its throughput and each stage's median."""
     from semattnet.inference import DepthCompleter
+    from semattnet.inference.backends import EngineSpec
     from semattnet.inference.options import OutputSpec, RunOptions
     from semattnet.inference.pipeline import check_frames
     from semattnet.inference.sinks import default_sinks
     from semattnet.inference.timing import StageTimes
 
-    completer = DepthCompleter(model, device="cpu", backend=backend, precision=precision)
+    completer = DepthCompleter(model, EngineSpec(backend=backend, precision=precision, device="cpu"))
     timer = StageTimes()
     plan = check_frames(source, default_sinks(), out, OutputSpec(overwrite=True), RunOptions(prefetch=2))
     with warnings.catch_warnings():  # an untrained model's holes and clamped pixels, one line per frame
@@ -541,6 +542,7 @@ def int8_accuracy(out: Path, keys: Sequence[str], log: Callable[[str], None] = p
     of the training tree, never the held-out ones) beside its float32 scores of ``results.json``, over the seeds
     both have: ``key`` -> per_seed, scores (their mean), f32 (the same seeds' mean), change (int8 / f32 - 1)."""
     from semattnet.inference import DepthCompleter
+    from semattnet.inference.backends import EngineSpec
 
     results = json.loads((out / "results.json").read_text())["results"]
     held = load_held_out(out / "held_out")
@@ -553,7 +555,8 @@ def int8_accuracy(out: Path, keys: Sequence[str], log: Callable[[str], None] = p
                 continue
             log(f"[frontier] {key}, seed {seed}: int8 on the held-out scenes ...")
             completer = DepthCompleter(
-                load_model(path), device="cpu", backend="openvino", precision="int8", calibration=out / "data"
+                load_model(path),
+                EngineSpec(backend="openvino", precision="int8", device="cpu", calibration=out / "data"),
             )
             preds = {
                 n: completer.run(s["rgb"][None], s["semantic"][None], s["sparse"][None]).refined_depth[0, 0].numpy()

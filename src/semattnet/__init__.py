@@ -5,7 +5,8 @@ The package is laid out as the system is (see the README's "Architecture" sectio
 (class colours), :mod:`semattnet.data` (KITTI, synthetic scenes, PNG I/O), :mod:`semattnet.segmentation`,
 :mod:`semattnet.training`, :mod:`semattnet.evaluation`, :mod:`semattnet.inference`,
 :mod:`semattnet.baselines`, :mod:`semattnet.viz`, :mod:`semattnet.apps` and :mod:`semattnet.cli`.
-The names below are the stable public API.
+The names below are the stable public API; :func:`from_pretrained` is the one loader (the lower-level ones live in
+:mod:`semattnet.weights`).
 """
 
 from semattnet import palette, robotics  # robotics: enrols the bag source and the robot sinks
@@ -20,16 +21,7 @@ from semattnet.models import (
     build_model,
     list_models,
 )
-from semattnet.weights import (
-    from_pretrained,
-    get_weights,
-    list_pretrained,
-    load_checkpoint,
-    load_model,
-    load_weights,
-    push_to_hub,
-    save_pretrained,
-)
+from semattnet.weights import from_pretrained, list_pretrained, push_to_hub, save_pretrained
 
 __all__ = [
     "DataError",
@@ -45,15 +37,35 @@ __all__ = [
     "build_model",
     "crop_padding",
     "from_pretrained",
-    "get_weights",
     "list_models",
     "list_pretrained",
-    "load_checkpoint",
-    "load_model",
-    "load_weights",
     "pad_to_multiple",
     "palette",
     "push_to_hub",
     "robotics",
     "save_pretrained",
 ]
+
+#: The loaders that were at the root before 0.2 -> where they live now (deprecated here, gone in 0.3).
+_MOVED = {
+    "get_weights": "semattnet.weights.get_weights",
+    "load_checkpoint": "semattnet.weights.load_checkpoint",
+    "load_weights": "semattnet.weights.load_weights",
+    "load_model": "semattnet.from_pretrained",
+}
+
+
+def __getattr__(name: str) -> object:
+    """The loaders moved off the root, with a ``DeprecationWarning`` naming their home."""
+    if name in _MOVED:
+        import warnings
+
+        from semattnet import weights
+
+        warnings.warn(
+            f"semattnet.{name} is deprecated since 0.2 and goes in 0.3: use {_MOVED[name]}",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return getattr(weights, name)
+    raise AttributeError(f"module 'semattnet' has no attribute {name!r}")

@@ -14,9 +14,7 @@ def test_top_level_names() -> None:
     for name in (
         "build_model",
         "list_models",
-        "load_checkpoint",
-        "load_model",
-        "load_weights",
+        "from_pretrained",
         "pad_to_multiple",
         "crop_padding",
         "DepthCompleter",
@@ -26,6 +24,19 @@ def test_top_level_names() -> None:
     ):
         assert hasattr(semattnet, name), name
     assert set(semattnet.__all__) <= set(dir(semattnet))
+
+
+def test_one_loader_at_the_root_the_others_in_weights_with_a_deprecation_window() -> None:
+    import semattnet.weights
+
+    assert not {"load_model", "load_checkpoint", "load_weights", "get_weights"} & set(semattnet.__all__)
+    for name in ("load_checkpoint", "load_weights", "get_weights"):
+        with pytest.warns(DeprecationWarning, match=f"semattnet.{name} is deprecated since 0.2.*semattnet.weights"):
+            assert getattr(semattnet, name) is getattr(semattnet.weights, name)
+    with pytest.warns(DeprecationWarning, match="use semattnet.from_pretrained"):
+        semattnet.load_model  # noqa: B018
+    with pytest.raises(AttributeError):
+        semattnet.no_such_loader  # noqa: B018
 
 
 def test_palette_is_its_own_module() -> None:

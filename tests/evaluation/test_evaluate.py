@@ -17,6 +17,7 @@ from semattnet.cli import main
 from semattnet.data.io import read_depth, read_image, write_image
 from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.evaluation.submission import SubmissionError, write_submission_files
+from semattnet.inference.backends import EngineSpec
 from semattnet.inference.completer import DepthCompleter
 from semattnet.viz.depth import error_map
 from semattnet.weights.checkpoint import save_safetensors
@@ -224,7 +225,7 @@ def test_predict_real_kitti_frame(weights: Path, tmp_path: Path) -> None:
 
 
 def test_python_api_any_size_and_clamping(weights: Path) -> None:
-    completer = DepthCompleter.from_checkpoint(weights, device="cpu")
+    completer = DepthCompleter.from_pretrained(weights, EngineSpec(device="cpu"))
     rgb = np.random.default_rng(0).integers(0, 255, (50, 77, 3), dtype=np.uint8)
     sparse = np.zeros((50, 77), np.float32)
     sparse[::7, ::5] = 12.5

@@ -13,6 +13,7 @@ from semattnet._errors import InputError
 from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.evaluation import EvalSplit, evaluate_split
 from semattnet.inference import DepthCompleter, RunOptions
+from semattnet.inference.backends import EngineSpec
 from semattnet.inference.batching import groups
 
 
@@ -31,7 +32,7 @@ def test_evaluate_batched_equals_one_per_call(tmp_path: Path) -> None:
     write_synthetic_kitti(tmp_path / "t", frames=1, size=(64, 128), seed=4, eval_frames=3, workers=1)
     model = semattnet.build_model("semattnet", width=0.125)
     model.backbone.init_depth_heads()
-    completer = DepthCompleter(model, device="cpu")
+    completer = DepthCompleter(model, EngineSpec(device="cpu"))
     one = evaluate_split(completer, EvalSplit(tmp_path / "t")).result
     three = evaluate_split(completer, EvalSplit(tmp_path / "t"), options=RunOptions(batch_size=3)).result
     assert one.keys() == three.keys() and one["images"] == three["images"] == 3

@@ -77,7 +77,9 @@ def test_a_completer_runs_its_spec() -> None:
     completer = DepthCompleter(model, spec=spec)
     assert completer.spec == spec.resolve() and completer.amp is torch.bfloat16 and completer.device.type == "cpu"
     with pytest.warns(FutureWarning):
-        assert DepthCompleter(model, device="cpu", amp="fp16").spec.precision == "fp16"
+        assert DepthCompleter(model, EngineSpec(device="cpu", amp="fp16")).spec.precision == "fp16"
     with pytest.raises(InputError, match="give spec or device"):
-        DepthCompleter(model, backend="openvino", spec=spec)
+        DepthCompleter(model, spec, backend="openvino")
+    with pytest.warns(DeprecationWarning, match="deprecated since 0.2"):
+        assert DepthCompleter(model, "cpu").spec.device == "cpu"  # the older form, until 0.3
     assert get_engine(completer.backend).name == "torch"

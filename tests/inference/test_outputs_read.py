@@ -14,6 +14,7 @@ import semattnet
 from semattnet._errors import InputError
 from semattnet.data.frames import Frame, IndexedSource
 from semattnet.inference import completer as completer_module
+from semattnet.inference.backends import EngineSpec
 from semattnet.inference.backends._base import graph_outputs
 from semattnet.inference.completer import Completion, DepthCompleter
 from semattnet.inference.options import OutputSpec
@@ -89,7 +90,7 @@ def test_completion_without_fusion_weights_has_no_confidence() -> None:
 @pytest.fixture(scope="module")
 def completer() -> DepthCompleter:
     torch.manual_seed(0)
-    return DepthCompleter(semattnet.build_model("semattnet_rt_s", width=0.5, branches=2), device="cpu")
+    return DepthCompleter(semattnet.build_model("semattnet_rt_s", width=0.5, branches=2), EngineSpec(device="cpu"))
 
 
 @pytest.mark.parametrize("uncertainty", [False, True])

@@ -12,6 +12,7 @@ import torch
 
 import semattnet
 from semattnet._errors import InputError
+from semattnet.inference.backends import EngineSpec
 from semattnet.models.generalist import (
     REFERENCE_DEPTH,
     Generalist,
@@ -137,7 +138,7 @@ def test_the_completer_runs_the_network_between_the_generalists_own_steps() -> N
     torch.manual_seed(0)
     model = build_model("semattnet_rt_generalist").eval()
     rgb, semantic, sparse = _frame(h=70, w=100)  # padded to 96x128 inside the completer
-    completer = semattnet.DepthCompleter(model, device="cpu")
+    completer = semattnet.DepthCompleter(model, EngineSpec(device="cpu"))
     c = completer(
         rgb[0].permute(1, 2, 0).numpy(), sparse[0, 0].numpy(), semantic[0].permute(1, 2, 0).numpy().astype(np.uint8)
     )
@@ -157,10 +158,10 @@ def test_openvino_runs_the_network_and_int8_calibrates_on_prepared_inputs() -> N
     model = build_model("semattnet_rt_generalist").eval()
     rgb, semantic, sparse = _frame()
     args = (rgb[0].permute(1, 2, 0).numpy(), sparse[0, 0].numpy(), semantic[0].permute(1, 2, 0).numpy())
-    ref = semattnet.DepthCompleter(model, device="cpu")(*args)
+    ref = semattnet.DepthCompleter(model, EngineSpec(device="cpu"))(*args)
     spec = {"device": "cpu", "backend": "openvino"}
-    f32 = semattnet.DepthCompleter(model, **spec)(*args)  # the suite's engines go to a temporary cache
-    int8 = semattnet.DepthCompleter(model, precision="int8", **spec)(*args)
+    f32 = semattnet.DepthCompleter(model, EngineSpec(**spec))(*args)  # the suite's engines go to a temporary cache
+    int8 = semattnet.DepthCompleter(model, EngineSpec(precision="int8", **spec))(*args)
     np.testing.assert_allclose(f32.depth, ref.depth, rtol=1e-4, atol=1e-3)
     assert np.abs(np.log(int8.depth / ref.depth)).mean() < 0.05 and int8.uncertainty is not None
 

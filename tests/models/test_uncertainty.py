@@ -11,7 +11,7 @@ import torch
 import semattnet
 from semattnet.baselines.classical import ClassicalCompleter, classical_fill_step, classical_uncertainty
 from semattnet.inference import DepthCompleter
-from semattnet.inference.backends import available_backends
+from semattnet.inference.backends import EngineSpec, available_backends
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.registry import list_models
 from semattnet.models.uncertainty import (
@@ -125,7 +125,7 @@ def test_combination_by_hand() -> None:
 def test_every_variant_gets_an_uncertainty(name: str) -> None:
     torch.manual_seed(0)
     model = semattnet.build_model(name, width=0.125, iterations=2).eval()
-    completer = DepthCompleter(model, device="cpu")
+    completer = DepthCompleter(model, EngineSpec(device="cpu"))
     x = random_inputs(b=2, h=30, w=45)
     out = completer.run(x["rgb"], x["semantic"] if completer.needs_semantic else None, x["sparse"])
     assert out.uncertainty is not None and out.uncertainty.shape == (2, 1, 30, 45)
@@ -135,7 +135,7 @@ def test_every_variant_gets_an_uncertainty(name: str) -> None:
 
 
 def test_completion_uncertainty_is_an_array_in_metres() -> None:
-    completer = DepthCompleter(semattnet.build_model("semattnet", width=0.125, iterations=2), device="cpu")
+    completer = DepthCompleter(semattnet.build_model("semattnet", width=0.125, iterations=2), EngineSpec(device="cpu"))
     rgb = np.full((20, 30, 3), 90, np.uint8)
     sparse = np.zeros((20, 30), np.float32)
     sparse[15, 5], sparse[12, 25] = 12.5, 30.0
@@ -179,8 +179,8 @@ def test_uncertainty_is_the_same_for_every_engine(backend: str) -> None:
     torch.manual_seed(0)
     model = semattnet.build_model("semattnet", width=0.125, iterations=2).eval()
     x = random_inputs(b=1, h=32, w=64)
-    ref = DepthCompleter(model, device="cpu").run(x["rgb"], x["semantic"], x["sparse"])
-    out = DepthCompleter(model, device="cpu", backend=backend).run(x["rgb"], x["semantic"], x["sparse"])
+    ref = DepthCompleter(model, EngineSpec(device="cpu")).run(x["rgb"], x["semantic"], x["sparse"])
+    out = DepthCompleter(model, EngineSpec(backend=backend, device="cpu")).run(x["rgb"], x["semantic"], x["sparse"])
     assert ref.uncertainty is not None and out.uncertainty is not None
     scale = float(ref.uncertainty.abs().max())
     assert float((out.uncertainty - ref.uncertainty).abs().max()) <= 1e-3 * scale + 1e-4

@@ -44,7 +44,7 @@ def _one_line_refusal(path: Path, cls: type[SemAttNetError] = SemAttNetError, se
     """Load ``path`` through the public API: a one-line ``cls`` naming the file, in ``seconds``."""
     start = time.monotonic()
     with pytest.raises(cls) as err:
-        semattnet.load_checkpoint(path)
+        semattnet.weights.load_checkpoint(path)
     msg = str(err.value)
     assert str(path) in msg and "\n" not in msg, msg
     assert "weights_only" not in msg.lower() and "weights only" not in msg.lower(), msg

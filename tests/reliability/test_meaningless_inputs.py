@@ -33,9 +33,10 @@ BAD_DEPTH = {
 def model_completer():  # type: ignore[no-untyped-def]
     import semattnet
     from semattnet.inference import DepthCompleter
+    from semattnet.inference.backends import EngineSpec
 
     torch.manual_seed(0)
-    return DepthCompleter(semattnet.build_model("semattnet", width=0.125).eval(), device="cpu")
+    return DepthCompleter(semattnet.build_model("semattnet", width=0.125).eval(), EngineSpec(device="cpu"))
 
 
 def _frame(value: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

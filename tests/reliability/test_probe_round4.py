@@ -23,6 +23,7 @@ from click.testing import CliRunner
 
 from semattnet._errors import DataError, InputError, SemAttNetError
 from semattnet.cli import main
+from semattnet.inference.backends import EngineSpec
 from tests._helpers import SAMPLE
 
 RIG = {
@@ -214,7 +215,7 @@ def test_not_a_semattnet_state_dict_names_the_file(tmp_path: Path, fmt: str) -> 
     path = tmp_path / f"other.{fmt}"
     sd = {"conv.weight": torch.zeros(2, 2, 3, 3)}
     save_file(sd, str(path)) if fmt == "safetensors" else torch.save({"state_dict": sd}, path)
-    msg = _one_line(lambda: semattnet.load_model(path))
+    msg = _one_line(lambda: semattnet.from_pretrained(path, progress=False))
     assert str(path) in msg and "not a SemAttNet state dict" in msg, msg
     code, msg = _cli(tmp_path, "convert", path, tmp_path / "o.safetensors")
     assert code == 1 and str(path) in msg, msg
@@ -367,7 +368,7 @@ def completer():  # type: ignore[no-untyped-def]
     import semattnet
 
     torch.manual_seed(0)
-    return semattnet.DepthCompleter(semattnet.build_model("semattnet", width=0.125).eval(), device="cpu")
+    return semattnet.DepthCompleter(semattnet.build_model("semattnet", width=0.125).eval(), EngineSpec(device="cpu"))
 
 
 @pytest.mark.parametrize(

@@ -14,6 +14,7 @@ from semattnet._errors import DataError
 from semattnet.baselines.classical import ClassicalCompleter
 from semattnet.data.frames import Frame, IndexedSource
 from semattnet.inference import DepthCompleter
+from semattnet.inference.backends import EngineSpec
 from semattnet.inference.completer import Completion
 from semattnet.inference.feed import completions
 from semattnet.inference.pipeline import RunOptions, check_frames
@@ -134,7 +135,7 @@ def test_depth_completer_stream_times_network_and_propagation() -> None:
     import torch
 
     torch.manual_seed(0)
-    completer = DepthCompleter(semattnet.build_model("semattnet", width=0.125), device="cpu")
+    completer = DepthCompleter(semattnet.build_model("semattnet", width=0.125), EngineSpec(device="cpu"))
     source = SlowSource(3, delay=0.0)
     times = StageTimes()
     got = list(completer.stream(source, timer=times, prefetch=2))

@@ -20,7 +20,7 @@ from semattnet.models.registry import build_model
 from semattnet.training.config import TrainConfig
 from semattnet.training.trainer import Trainer, train
 from semattnet.weights.checkpoint import CheckpointError, load_checkpoint
-from semattnet.weights.hub import load_model
+from semattnet.weights.hub import from_pretrained
 from tests._helpers import random_inputs
 
 
@@ -207,7 +207,7 @@ def test_weights_only_export_of_a_training_checkpoint(tree: Path, tmp_path: Path
     ckpt = load_checkpoint(tmp_path / "run" / "checkpoints" / "last.pt")
     assert {"optimizer", "scheduler", "rng", "train_config"} <= set(ckpt.extra)
     out = save_safetensors(ckpt, tmp_path / "release.safetensors")
-    model = load_model(out)
+    model = from_pretrained(out, progress=False)
     assert model.config.width == 0.125 and not model.config.refine
     assert out.stat().st_size < (tmp_path / "run" / "checkpoints" / "last.pt").stat().st_size / 2
 

@@ -73,11 +73,11 @@ def test_a_stray_tensor_name_is_refused(tmp_path: Path) -> None:
 def test_load_model_takes_a_save_pretrained_folder_and_a_name(tmp_path: Path) -> None:
     model = _model()
     folder = save_pretrained(model, tmp_path / "folder")
-    loaded = semattnet.load_model(folder)
+    loaded = semattnet.from_pretrained(folder)
     assert all(
         torch.equal(a, b) for a, b in zip(model.state_dict().values(), loaded.state_dict().values(), strict=True)
     )
-    assert semattnet.load_model("semattnet-demo-ref-seed1").config.width == 0.125
+    assert semattnet.from_pretrained("semattnet-demo-ref-seed1").config.width == 0.125
 
 
 @pytest.mark.slow  # packing and reading 5.7 M parameters: ~8 s on 2 cores; test_builder checks the rule fast
@@ -87,7 +87,7 @@ def test_a_packed_file_whose_config_contradicts_its_tensors_is_refused_beside_a_
     lying = model.config.replace(width=0.25).to_dict()
     (folder / "model.safetensors").write_bytes(packed_mod.encode_packed(model.state_dict(), lying, {}))
     with pytest.raises(WeightsMismatchError) as err:
-        semattnet.load_model(folder)
+        semattnet.from_pretrained(folder)
     assert "config in the file's metadata contradicts the weights: width 0.25 recorded" in str(err.value)
     assert str(folder / "model.safetensors") in str(err.value) and "\n" not in str(err.value)
 

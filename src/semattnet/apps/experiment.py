@@ -22,6 +22,7 @@ from semattnet.data.kitti import KittiDepthCompletion
 from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.data.transforms import EvalTransform
 from semattnet.evaluation.metrics import KittiMetrics
+from semattnet.inference.backends import EngineSpec
 from semattnet.inference.completer import DepthCompleter
 from semattnet.models.registry import build_model
 from semattnet.palette import unknown_map
@@ -234,9 +235,9 @@ def complete_held_out(
     ``semantic`` optionally replaces each scene's semantic map (e.g. the no-segmenter fallback).
     """
     if isinstance(model, torch.nn.Module):
-        completer = DepthCompleter(model, device=device)
+        completer = DepthCompleter(model, EngineSpec(device=device))
     else:
-        completer = DepthCompleter.from_checkpoint(model, device=device)
+        completer = DepthCompleter.from_pretrained(model, EngineSpec(device=device))
     out = {}
     for n, smp in zip(held.names, held.samples, strict=True):
         sem = smp["semantic"][None] if semantic is None else semantic(smp["semantic"][None])

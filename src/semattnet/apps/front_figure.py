@@ -60,11 +60,12 @@ class FrontNumbers(TypedDict):
 
 def _completers(device: str) -> dict[str, Completer]:
     from semattnet.baselines.classical import ClassicalCompleter
+    from semattnet.inference.backends import EngineSpec
     from semattnet.inference.completer import DepthCompleter
     from semattnet.weights import from_pretrained
 
     found: dict[str, Completer] = {
-        label: DepthCompleter(from_pretrained(name), device=device) for label, name in WEIGHTS.items()
+        label: DepthCompleter(from_pretrained(name), EngineSpec(device=device)) for label, name in WEIGHTS.items()
     }
     return found | {"classical completion": ClassicalCompleter()}
 

@@ -292,12 +292,13 @@ def sweep_model(
 
     def make() -> dict[str, Completer]:
         from semattnet.baselines.classical import ClassicalCompleter
+        from semattnet.inference.backends import EngineSpec
         from semattnet.inference.completer import DepthCompleter
 
         completers: dict[str, Completer] = {}
         if model is not None:
             net = model if isinstance(model, torch.nn.Module) else model()
-            completers["semattnet"] = DepthCompleter(net, device=device)
+            completers["semattnet"] = DepthCompleter(net, EngineSpec(device=device))
         return completers | {"classical": ClassicalCompleter()}
 
     return _sweep(data_root, split, settings, make, out_dir, 0, max_frames, overwrite, dataset, palette_mismatch)

@@ -1,10 +1,10 @@
 """Depth completion for your own frames: NumPy in, NumPy out, any image size.
 
-With trained weights: ``DepthCompleter.from_checkpoint("semattnet.safetensors")``. Here a tiny
-untrained model shows the shapes:
+With trained weights: ``DepthCompleter.from_pretrained("semattnet-rt-generalist")`` (a name, a file, a folder or
+a URL). Here a tiny untrained model shows the shapes:
 
     >>> import numpy as np, semattnet
-    >>> completer = DepthCompleter(semattnet.build_model("semattnet", width=0.125), device="cpu")
+    >>> completer = DepthCompleter(semattnet.build_model("semattnet", width=0.125), EngineSpec(device="cpu"))
     >>> rgb = np.zeros((50, 70, 3), np.uint8)              # (H, W, 3) 0..255
     >>> semantic = np.zeros((50, 70, 3), np.uint8)         # Cityscapes colours
     >>> sparse = np.zeros((50, 70), np.float32); sparse[40, 10] = 12.5   # metres, 0 = none
@@ -31,14 +31,13 @@ from torch import nn
 from semattnet._errors import InputError
 from semattnet.inference.backends import EngineSpec, needs_semantic, optimize_for_inference
 from semattnet.inference.backends._base import InferenceEngine, StageHook
-from semattnet.inference.backends.calibration import CalibrationFrames
 from semattnet.inference.contract import Completer, Completion, StageTimed
 from semattnet.inference.padding import crop_padding, pad_to_multiple
 from semattnet.models.checks import check_has_points, check_sparse_depth
 from semattnet.models.generalist import Generalist
 from semattnet.models.outputs import DepthCompletionOutput, check_output_names
 from semattnet.models.uncertainty import outputs_to_compute, with_uncertainty
-from semattnet.weights.hub import from_pretrained, load_model
+from semattnet.weights.hub import from_pretrained
 from semattnet.weights.resolve import resolve_weights
 
 if TYPE_CHECKING:
@@ -74,44 +73,69 @@ def _check_colour_range(name: str, a: np.ndarray | None) -> None:
         raise InputError(f"{name} must hold colours 0..255, got values in [{lo:g}, {hi:g}]")
 
 
+#: The engine arguments ``DepthCompleter`` took one by one before :class:`EngineSpec` (accepted until 0.3, with a
+#: ``DeprecationWarning``), in their old positional order after ``model``.
+LEGACY_ENGINE_ARGS = ("device", "amp", "backend", "precision", "calibration")
+
+
+def legacy_spec(given: dict[str, object], where: str) -> EngineSpec:
+    """The :class:`EngineSpec` of the engine arguments given one by one (``device``, ``amp``, ``backend``,
+    ``precision``, ``calibration``; deprecated in 0.2, removed in 0.3), with a ``DeprecationWarning`` naming
+    ``where``."""
+    import warnings
+
+    unknown = set(given) - set(LEGACY_ENGINE_ARGS)
+    if unknown:
+        raise InputError(f"{where}: unknown argument(s) {sorted(unknown)}; give spec=EngineSpec(...)")
+    warnings.warn(
+        f"{where}({', '.join(f'{k}=' for k in given)}...): the engine's arguments one by one are deprecated since "
+        "0.2 and go in 0.3; give spec=EngineSpec(device=..., backend=..., precision=...)",
+        DeprecationWarning,
+        stacklevel=3,
+    )
+    amp = str(given.get("amp", "none"))
+    return EngineSpec(
+        str(given.get("backend", "torch")),
+        None if given.get("precision") is None else str(given["precision"]),
+        given.get("device", "auto"),  # type: ignore[arg-type]
+        given.get("calibration"),  # type: ignore[arg-type]
+        None if amp == "none" else amp,
+    )
+
+
 class DepthCompleter:
-    """A model ready for inference on NumPy frames of any size.
+    """A model ready for inference on NumPy frames of any size: ``DepthCompleter(model, spec)``, or
+    :meth:`from_pretrained` for weights by name, file or URL.
 
     Args:
-        model: a SemAttNet (full or backbone) model.
-        device: ``auto``, ``cpu`` or ``cuda[:N]``.
-        amp: deprecated, the older name of ``precision``: ``none``, ``bf16`` or ``fp16``.
-        backend: the inference engine (:func:`semattnet.inference.backends.optimize_for_inference`):
-            ``torch`` (default: BatchNorm folded, fused propagation), ``openvino``, ``onnxruntime``,
-            another registered engine or ``auto``; the fixed-size backends build (and cache on disk) one engine
+        model: a SemAttNet model (full or backbone, paper or real-time, or a generalist).
+        spec: the engine (:class:`~semattnet.inference.backends.EngineSpec`: backend, precision, device, int8's
+            calibration frames; default: ``torch``, f32, the best device). The ``torch`` backend folds BatchNorm
+            and fuses the propagation; the fixed-size backends (``openvino``) build (and cache on disk) one engine
             per padded frame size, so they pay off over many frames of one size.
-        inplace: fold ``model`` itself instead of a copy (saves memory; ``from_checkpoint`` does).
-        precision: ``f32`` (default), ``bf16``, ``fp16`` (``torch``: autocast; the propagation stays float32)
-            or ``int8`` (OpenVINO + NNCF), as the backend runs.
-        calibration: int8's calibration frames (a folder, a FrameSource or Frames; default: synthetic scenes).
-        spec: all of ``device``, ``backend``, ``precision`` and ``calibration`` as one
-            :class:`~semattnet.inference.backends.EngineSpec` (then give none of them).
+        inplace: fold ``model`` itself instead of a copy (saves memory; :meth:`from_pretrained` does).
+        legacy: ``device``, ``amp``, ``backend``, ``precision``, ``calibration`` one by one (or positionally after
+            ``model``), the older form: deprecated since 0.2, accepted until 0.3 (a ``DeprecationWarning``).
 
     Raises:
-        InputError: a backend, precision and device that do not go together (:meth:`EngineSpec.resolve`).
+        InputError: a backend, precision and device that do not go together (:meth:`EngineSpec.resolve`), or a
+            spec and the older arguments both.
     """
 
     def __init__(
         self,
         model: nn.Module,
-        device: str | torch.device = "auto",
-        amp: str = "none",
-        backend: str = "torch",
-        inplace: bool = False,
-        precision: str | None = None,
-        calibration: CalibrationFrames = None,
-        *,
         spec: EngineSpec | None = None,
+        *args: object,
+        inplace: bool = False,
+        **legacy: object,
     ) -> None:
-        if spec is None:
-            spec = EngineSpec(backend, precision, device, calibration, None if amp == "none" else amp)
-        elif (device, amp, backend, precision, calibration) != ("auto", "none", "torch", None, None):
-            raise InputError("give spec or device / amp / backend / precision / calibration, not both")
+        if args or legacy or (spec is not None and not isinstance(spec, EngineSpec)):
+            old = dict(zip(LEGACY_ENGINE_ARGS, (spec, *args), strict=False)) if spec is not None else {}
+            if isinstance(spec, EngineSpec) or len(args) >= len(LEGACY_ENGINE_ARGS) or set(old) & set(legacy):
+                raise InputError("DepthCompleter: give spec or device / amp / backend / precision / calibration")
+            spec = legacy_spec(old | legacy, "DepthCompleter")
+        spec = spec if spec is not None else EngineSpec()
         #: The engine's spec, resolved: a concrete backend, precision and device.
         self.spec = spec.resolve()
         self.device = torch.device(self.spec.device)
@@ -133,24 +157,10 @@ class DepthCompleter:
         self._engines: dict[tuple[tuple[int, int] | None, frozenset[str] | None], InferenceEngine] = {}
 
     @classmethod
-    def from_checkpoint(
-        cls,
-        path: str | os.PathLike[str],
-        device: str | torch.device = "auto",
-        amp: str = "none",
-        backend: str = "torch",
-    ) -> DepthCompleter:
-        """A completer for the weights at ``path``: a file, a ``save_pretrained`` folder, a registered name or a
-        URL, read by :func:`semattnet.weights.resolve_weights` (see :func:`semattnet.weights.load_model`)."""
-        return cls(load_model(path), device, amp, backend, inplace=True)
-
-    @classmethod
     def from_pretrained(
         cls,
         name_or_path: str | os.PathLike[str],
-        device: str | torch.device = "auto",
-        amp: str = "none",
-        backend: str = "torch",
+        spec: EngineSpec | None = None,
         *,
         sha256: str | None = None,
         cache_dir: str | os.PathLike[str] | None = None,
@@ -159,10 +169,31 @@ class DepthCompleter:
         **overrides: object,
     ) -> DepthCompleter:
         """A completer for released weights by name, a local file or folder, or a URL, read by
-        :func:`semattnet.weights.resolve_weights` (:func:`semattnet.weights.from_pretrained` explains
-        ``sha256``, ``cache_dir``, ``progress``, ``arch`` and the config ``overrides``)."""
+        :func:`semattnet.weights.resolve_weights`, on the engine ``spec`` says
+        (:func:`semattnet.weights.from_pretrained` explains ``sha256``, ``cache_dir``, ``progress``, ``arch`` and
+        the config ``overrides``; ``device``, ``amp``, ``backend`` among them: the older form, deprecated)."""
+        old = {k: overrides.pop(k) for k in LEGACY_ENGINE_ARGS if k in overrides}
+        if old:
+            if spec is not None:
+                raise InputError("DepthCompleter.from_pretrained: give spec or device / amp / backend, not both")
+            spec = legacy_spec(old, "DepthCompleter.from_pretrained")
         resolved = resolve_weights(name_or_path, sha256=sha256, cache_dir=cache_dir, progress=progress)
-        return cls(resolved.build(arch, overrides=overrides), device, amp, backend, inplace=True)
+        return cls(resolved.build(arch, overrides=overrides), spec, inplace=True)
+
+    @classmethod
+    def from_checkpoint(cls, path: str | os.PathLike[str], *args: object, **legacy: object) -> DepthCompleter:
+        """Deprecated since 0.2 (goes in 0.3): :meth:`from_pretrained` under its older name."""
+        import warnings
+
+        warnings.warn(
+            "DepthCompleter.from_checkpoint is deprecated since 0.2 and goes in 0.3: use "
+            "DepthCompleter.from_pretrained(path, spec=EngineSpec(...))",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        old = dict(zip(("device", "amp", "backend"), args, strict=False)) | legacy
+        spec = legacy_spec(old, "DepthCompleter.from_checkpoint") if old else None
+        return cls.from_pretrained(path, spec, progress=False)
 
     @property
     def outputs(self) -> frozenset[str] | None:
@@ -338,6 +369,4 @@ def load_completer(
     """The completer of ``weights`` (a released name, a file or folder, a URL:
     :func:`semattnet.weights.from_pretrained`) on the engine ``spec`` says (default: ``torch`` on the best
     device), folded in place: the one builder every command (and a live node) runs its model through."""
-    return DepthCompleter(
-        from_pretrained(weights, map_location="cpu", progress=progress), spec=spec or EngineSpec(), inplace=True
-    )
+    return DepthCompleter(from_pretrained(weights, map_location="cpu", progress=progress), spec, inplace=True)

@@ -97,12 +97,15 @@ def from_pretrained(
 def load_model(
     path: str | os.PathLike[str] | PretrainedWeights, device: str | torch.device = "cpu", **overrides: object
 ) -> nn.Module:
-    """The model of a weights file, a ``save_pretrained`` folder, a registry name or a URL, in eval mode.
+    """Deprecated since 0.2 (goes in 0.3): :func:`from_pretrained` under its older name (the model of a weights
+    file, a ``save_pretrained`` folder, a registry name or a URL, in eval mode)."""
+    import warnings
 
-    :func:`from_pretrained` under its older name: the config recorded with the weights (else inferred
-    from their shapes), then ``overrides``, which may change only fields that keep the shapes (e.g.
-    ``refinement_mode="clean"``), then a strict load.
-    """
+    warnings.warn(
+        "semattnet.weights.load_model is deprecated since 0.2 and goes in 0.3: use semattnet.from_pretrained",
+        DeprecationWarning,
+        stacklevel=2,
+    )
     return resolve_weights(path, progress=False).build(None, overrides, device)
 
 
