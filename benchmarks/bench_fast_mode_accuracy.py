@@ -28,7 +28,7 @@ import numpy as np
 import torch
 
 from semattnet._utils.cpu import cpu_summary
-from semattnet.apps.experiment import HeldOut, load_held_out, score
+from semattnet.apps.experiment import HeldOut, load_held_out, score_held_out
 from semattnet.data.sources import KittiSplitSource
 from semattnet.inference.backends import available_backends, optimize_for_inference
 from semattnet.weights import from_pretrained
@@ -80,9 +80,9 @@ def main() -> None:
     print(f"{cpu_summary()}; {len(held.names)} held-out scenes at {size[0]}x{size[1]}")
     header = ("engine", "RMSE mm", "MAE mm", "iRMSE", "iMAE", "max |d| vs torch f32", "ms/frame")
     print("  ".join(header))
-    base = score(ref, held)["all"]
+    base = score_held_out(ref, held)["all"]
     for name, (preds, sec) in rows.items():
-        m = score(preds, held)["all"]
+        m = score_held_out(preds, held)["all"]
         change = max(abs(m[k] / base[k] - 1) for k in ("rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km"))
         diff = max(float(np.abs(preds[n] - ref[n]).max()) for n in held.names)
         print(

@@ -8,7 +8,7 @@ does, so no demo run is needed; the reference checkpoints were trained on data s
 and OpenVINO int8 (``optimize_for_inference(..., precision="int8")``: NNCF calibrated on what
 ``--calibration`` names, by default what a user gets, the default synthetic scenes; never on the held-out
 scenes), and prints per checkpoint the metrics as the demo scores them
-(:func:`semattnet.apps.experiment.score`, "all"), their relative change, the largest per-pixel change and the
+(:func:`semattnet.apps.experiment.score_held_out`, "all"), their relative change, the largest per-pixel change and the
 median time per frame of each engine, the two timed in turns in this process, with the CPU named.
 
     python benchmarks/bench_int8_accuracy.py [--weights semattnet-demo-ref-seed0,semattnet-demo-ref-seed1]
@@ -83,7 +83,7 @@ def _timed(engine: Any, sample: dict[str, Any]) -> tuple[np.ndarray, float]:
 
 def compare(model: Any, held: Any, args: argparse.Namespace, cache: Path) -> dict[str, Any]:
     """float32 and int8 OpenVINO engines of ``model`` on ``held``: metrics, changes, times."""
-    from semattnet.apps.experiment import score
+    from semattnet.apps.experiment import score_held_out
     from semattnet.inference.backends import optimize_for_inference
     from semattnet.inference.backends.calibration import DEFAULT_CALIBRATION_FRAMES
 
@@ -110,7 +110,7 @@ def compare(model: Any, held: Any, args: argparse.Namespace, cache: Path) -> dic
                 preds[p].setdefault(name, depth)
                 if r:
                     times[p].append(sec)
-    m = {p: score(preds[p], held)["all"] for p in engines}
+    m = {p: score_held_out(preds[p], held)["all"] for p in engines}
     ms = {p: 1e3 * statistics.median(times[p]) if times[p] else float("nan") for p in engines}
     return {
         "f32": {k: m["f32"][k] for k in KEYS},

@@ -76,7 +76,7 @@ from semattnet.apps.experiment import (
     complete_held_out,
     load_held_out,
     make_synthetic,
-    score,
+    score_held_out,
     train_variant,
 )
 from semattnet.apps.timing import conv_peak_gflops
@@ -149,7 +149,7 @@ def shipped_reference(key: str, seed: int, recipe: ReferenceRecipe | None) -> Pa
 
 
 def _scores(preds: dict[str, np.ndarray], held: HeldOut) -> dict[str, float]:
-    return {k: float(score(preds, held)["all"][k]) for k in METRICS}
+    return {k: float(score_held_out(preds, held)["all"][k]) for k in METRICS}
 
 
 def _mean(per_seed: dict[str, dict[str, float]]) -> dict[str, float]:

@@ -55,7 +55,7 @@ from semattnet._utils.atomic import atomic_path
 from semattnet._utils.device import resolve_device
 from semattnet._utils.outputs import incomplete_tree
 from semattnet.apps.demo.reference import REFERENCE_RECIPE, ReferenceRecipe, machine_line, reference_for
-from semattnet.apps.experiment import HeldOut, complete_held_out, fallback_semantic, load_held_out, score
+from semattnet.apps.experiment import HeldOut, complete_held_out, fallback_semantic, load_held_out, score_held_out
 from semattnet.apps.experiment import train_variant as _train_variant
 from semattnet.baselines.classical import complete_classical
 from semattnet.data.synthetic.domain import SOURCE, TARGET, Domain
@@ -271,7 +271,7 @@ def train_model(
 
 def scores(preds: dict[str, np.ndarray], held: HeldOut) -> dict[str, float]:
     """The four metrics (means over the held-out scenes)."""
-    return {k: float(score(preds, held)["all"][k]) for k in METRICS}
+    return {k: float(score_held_out(preds, held)["all"][k]) for k in METRICS}
 
 
 def score_model(path: Path, held: HeldOut, s: ShiftSettings, device: torch.device) -> dict[str, float]:

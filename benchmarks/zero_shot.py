@@ -36,7 +36,7 @@ import numpy as np
 import torch
 
 from semattnet._utils.atomic import atomic_path
-from semattnet.evaluation.zero_shot import BenchFrame, Completer, mean_scores, real_frames, score, world_frames
+from semattnet.evaluation.zero_shot import BenchFrame, DepthMethod, mean_scores, real_frames, score, world_frames
 
 DEFAULT_METHODS = (
     "classical",
@@ -70,9 +70,9 @@ def _cell_frames(cells: tuple, count: int) -> dict[str, list[BenchFrame]]:
     return out
 
 
-def method(name: str, device: str = "cpu") -> Completer:
+def method(name: str, device: str = "cpu") -> DepthMethod:
     """``classical``, ``anchor`` (the generalist's anchor alone: :func:`~semattnet.models.generalist.prepare_inputs`)
-    or weights (a registered name or a file), as a :data:`Completer`; the fallback semantic map for models that
+    or weights (a registered name or a file), as a :data:`DepthMethod`; the fallback semantic map for models that
     read one."""
     if name == "classical":
         from semattnet.baselines.classical import ClassicalCompleter

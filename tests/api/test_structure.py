@@ -371,6 +371,50 @@ def test_the_homes_rule_sees_a_home_above() -> None:
     assert [h for _, h in _registry_homes(tree)] == ["semattnet.robotics.sinks", "semattnet.data.io"]
 
 
+# one meaning per name ------------------------------------------------------------------------------
+
+#: Public module-level names defined in more than one module with the same meaning (issue 55, item 5).
+SAME_MEANING = {
+    "ENTRY": "each engine module's registry entry",
+    "T": "a type variable",
+    "F": "a type variable",
+    "PathLike": "str | os.PathLike[str]",
+    "log": "the module's logger",
+    "MAX_MEDIAN_M": "each dataset's largest median depth",
+    "RUN_FILES": "the files a run writes (a training run, an adapt run)",
+    "run_files": "the files of a run a folder holds (a training run, an adapt run)",
+    "prepare_run_folder": "a new run's folder refused or replaced (a training run, an adapt run)",
+    "train": "the command and the library function it calls",
+    "adapt": "the command and the library function it calls",
+}
+
+
+def _public_definitions() -> dict[str, set[str]]:
+    """Public module-level name -> the modules that define it (functions, classes, assignments)."""
+    found: dict[str, set[str]] = {}
+    for module, (_, tree) in _sources().items():
+        for node in tree.body:
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+                names = [node.name]
+            elif isinstance(node, ast.Assign):
+                names = [t.id for t in node.targets if isinstance(t, ast.Name)]
+            elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+                names = [node.target.id]
+            else:
+                names = []
+            for name in names:
+                if not name.startswith("_"):
+                    found.setdefault(name, set()).add(module)
+    return found
+
+
+def test_no_public_name_is_defined_twice_with_two_meanings() -> None:
+    twice = {name: sorted(mods) for name, mods in _public_definitions().items() if len(mods) > 1}
+    unexplained = {name: mods for name, mods in twice.items() if name not in SAME_MEANING}
+    assert not unexplained, f"names defined in several modules (rename one, or list it in SAME_MEANING): {unexplained}"
+    assert set(SAME_MEANING) <= set(twice), f"no longer twice: {sorted(set(SAME_MEANING) - set(twice))}"
+
+
 # (e), (f) sizes -------------------------------------------------------------------------------------
 
 

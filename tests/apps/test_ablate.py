@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 import semattnet.apps.ablate as ablate_mod
 from semattnet._errors import DataError, InputError
-from semattnet.apps.ablate import CLAIM_CONFIGS, CLAIMS, SCHEMA, AblationSettings, run_ablation
+from semattnet.apps.ablate import ABLATION_SCHEMA, CLAIM_CONFIGS, CLAIMS, AblationSettings, run_ablation
 from semattnet.cli import main
 
 TINY = {"size": (32, 64), "train_frames": 6, "eval_frames": 4, "backbone_steps": 2, "full_steps": 2, "device": "cpu"}
@@ -44,7 +44,7 @@ def ablated(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, A
 def test_ablation_json_has_claims(ablated: tuple[Path, dict[str, Any], list[str]]) -> None:
     out, result, messages = ablated
     assert json.loads((out / "ablation.json").read_text()) == json.loads(json.dumps(result))
-    assert result["schema"] == SCHEMA and set(result["configs"]) == {"table2_b", "table2_d"}
+    assert result["schema"] == ABLATION_SCHEMA and set(result["configs"]) == {"table2_b", "table2_d"}
     assert any(m.startswith("warning: only 2 seeds") for m in messages)
     row = result["configs"]["table2_d"]
     assert row["seeds"] == [0, 1] and row["all"]["mean"] > 0 and row["mae_mm"]["all"]["mean"] > 0

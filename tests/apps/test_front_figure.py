@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from semattnet.apps.demo.recipe import DemoSettings
-from semattnet.apps.front_figure import WEIGHTS, make_front_figure
+from semattnet.apps.front_figure import FIGURE_WEIGHTS, make_front_figure
 
 
 @pytest.mark.slow  # two shipped models and the classical completion, swept and scored: about a minute on 2 cores
@@ -24,7 +24,7 @@ def test_tiny_front_figure(tmp_path: Path) -> None:
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
     saved = json.loads((tmp_path / "out" / "sparsity-sweep.json").read_text())
     assert saved == json.loads(json.dumps(numbers))
-    methods = [*WEIGHTS, "classical completion"]
+    methods = [*FIGURE_WEIGHTS, "classical completion"]
     assert sorted({r["method"] for r in saved["sweep"]}) == sorted(methods)
     assert {r["setting"] for r in saved["sweep"]} == {"beams=64", "keep=0.5"}
     for name in methods:

@@ -164,14 +164,14 @@ def test_synth_and_check_commands(tmp_path: Path) -> None:
 def test_style_reaches_the_tree_and_the_manifest(tmp_path: Path) -> None:
     from semattnet.data import layout
     from semattnet.data.io import read_depth
-    from semattnet.data.synthetic.tree import SYNTH_DATE, frame_seed, write_synthetic_kitti
+    from semattnet.data.synthetic.tree import SYNTH_DATE, scene_seed, write_synthetic_kitti
 
     manifest = write_synthetic_kitti(
         tmp_path / "t", frames=2, size=(64, 128), seed=3, eval_frames=1, workers=1, style="realistic"
     )
     assert manifest["style"] == json.loads((tmp_path / "t" / "scenes.json").read_text())["style"] == "realistic"
     first = next(e for e in manifest["frames"] if e["split"] == "train" and e["index"] == 0)
-    expected = make_frame(64, 128, seed=frame_seed(3, "train", 0), shadow=False, style="realistic").sparse
+    expected = make_frame(64, 128, seed=scene_seed(3, "train", 0), shadow=False, style="realistic").sparse
     drive = f"{SYNTH_DATE}_drive_0000_sync"
     written = layout.velodyne_path(tmp_path / "t", "train", drive, "02", "0000000000")
     np.testing.assert_array_equal(read_depth(written), expected)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
@@ -24,3 +25,17 @@ def small_fs(tmp_path: Path) -> Iterator[Path]:
         yield fs
     finally:
         subprocess.run(["umount", "-l", str(fs)], check=False)
+
+
+@pytest.fixture
+def no_hang() -> Iterator[None]:
+    """A reader that opened a FIFO would block forever: fail the test after 20 s instead."""
+
+    def fail(*_: object) -> None:
+        raise TimeoutError("blocked: a special file was opened")
+
+    old = signal.signal(signal.SIGALRM, fail)
+    signal.alarm(20)
+    yield
+    signal.alarm(0)
+    signal.signal(signal.SIGALRM, old)

@@ -1,5 +1,6 @@
 """LOST cases: a command that writes never replaces one of its inputs (by path, symlink or hard link, even
-with --overwrite), an archive never replaces a file it did not write, a failed multi-file run replaces nothing."""
+with --overwrite) nor a special file, training never writes its run into its data, an archive never replaces a
+file it did not write, a failed multi-file run replaces nothing."""
 
 from __future__ import annotations
 
@@ -17,6 +18,8 @@ from semattnet._utils.outputs import OutputError, check_no_input_overlap
 from semattnet.baselines import ClassicalCompleter
 from semattnet.cli import main
 from semattnet.data.download import ArchiveConflictError, extract_zip
+from tests.reliability._helpers import cli as _cli
+from tests.reliability._helpers import one_line as _one_line
 
 RIG = {
     "K": [[50, 0, 16], [0, 50, 12], [0, 0, 1]],
@@ -195,3 +198,51 @@ def test_sweeps_and_metrics_never_write_into_their_inputs(tmp_path: Path) -> Non
     pred = next(root.rglob("*.png"))
     code, output = _invoke("metrics", pred.parent, pred.parent, "--json", pred, "--overwrite")
     assert code == 1 and "would replace the input" in output and pred.read_bytes()[:4] == b"\x89PNG", output
+
+
+@pytest.mark.usefixtures("no_hang")
+@pytest.mark.parametrize("kind", ["fifo", "hardlink-into-gt"])
+def test_metrics_json_never_replaces_a_special_file_or_an_input(tmp_path: Path, kind: str) -> None:
+    from semattnet.data.io import write_depth
+
+    for d in ("pred", "gt"):
+        write_depth(tmp_path / d / "a.png", np.full((4, 6), 5.0))
+    json_path = tmp_path / "m.json"
+    os.mkfifo(json_path) if kind == "fifo" else os.link(tmp_path / "gt" / "a.png", json_path)
+    code, msg = _cli(tmp_path, "metrics", tmp_path / "pred", tmp_path / "gt", "--json", json_path, "--overwrite")
+    assert code == 1 and "m.json" in msg, msg
+    assert json_path.is_fifo() if kind == "fifo" else json_path.stat().st_nlink == 2
+
+
+def test_visualize_never_replaces_a_hard_link_to_its_ground_truth(tmp_path: Path) -> None:
+    from semattnet.data.io import write_depth
+
+    for d in ("pred", "gt"):
+        write_depth(tmp_path / d / "a.png", np.full((4, 6), 5.0))
+    (tmp_path / "o").mkdir()
+    os.link(tmp_path / "gt" / "a.png", tmp_path / "o" / "a_color.png")
+    code, msg = _cli(
+        tmp_path,
+        "visualize",
+        "--pred",
+        tmp_path / "pred",
+        "--gt",
+        tmp_path / "gt",
+        "--out",
+        tmp_path / "o",
+        "--overwrite",
+    )
+    assert code == 1 and "would replace the input" in msg and (tmp_path / "o" / "a_color.png").stat().st_nlink == 2
+
+
+@pytest.mark.parametrize("where", ["data", "data/run", "semantic"])
+def test_train_never_writes_its_run_into_the_data(tmp_path: Path, where: str) -> None:
+    from semattnet.training.config import TrainConfig
+    from semattnet.training.trainer import train
+
+    for d in ("data", "semantic"):
+        (tmp_path / d).mkdir()
+        (tmp_path / d / "keep.txt").write_text(d)
+    cfg = TrainConfig(data=str(tmp_path / "data"), semantic_root=str(tmp_path / "semantic"), out=str(tmp_path / where))
+    assert "input folder" in _one_line(lambda: train(cfg, overwrite=True))
+    assert sorted(p.name for p in (tmp_path / "data").iterdir()) == ["keep.txt"]

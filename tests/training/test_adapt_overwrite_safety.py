@@ -17,7 +17,7 @@ import torch
 
 from semattnet._errors import DataError, InputError
 from semattnet._utils.outputs import OutputError
-from semattnet._utils.run_folder import READY, STAGE_PREFIX, finish_replacements
+from semattnet._utils.run_folder import READY, REPLACE_PREFIX, finish_replacements
 from semattnet.data.frames import Frame
 from semattnet.training.adapt import FINAL, LOG, RUN_FILES, STATE, Adapter, adapt
 from semattnet.training.adapt.run import run_files
@@ -132,7 +132,7 @@ def test_an_overwrite_that_fails_before_its_first_state_keeps_the_earlier_run(
     with pytest.raises(RuntimeError, match="step 2"):
         adapt(_cfg(rt_weights, out, save_every=2, seed=1), _Frames(), overwrite=True, log=_quiet)
     assert digests(out) == before
-    assert not list(out.glob(f"{STAGE_PREFIX}*"))
+    assert not list(out.glob(f"{REPLACE_PREFIX}*"))
 
 
 def test_a_finished_overwrite_replaces_the_run_files_only(
@@ -210,7 +210,7 @@ def _ops(trace: Path) -> list[list[str]]:
 def _one_run(out: Path, before: dict[str, str], committed: bool) -> None:
     """After the next run's recovery, ``out`` holds the earlier run untouched or the new run's state, whole."""
     finish_replacements(out, run_files)
-    assert not list(out.glob(f"{STAGE_PREFIX}*"))
+    assert not list(out.glob(f"{REPLACE_PREFIX}*"))
     if not committed:
         assert digests(out) == before
         return
@@ -259,7 +259,7 @@ def test_a_stage_left_by_a_killed_overwrite_is_cleared_and_a_damaged_mark_refuse
     out = tmp_path / "run"
     (out / "checkpoints").mkdir(parents=True)
     (out / "log.json").write_text("{}")
-    dead = out / f"{STAGE_PREFIX}999999999.abcdefgh"
+    dead = out / f"{REPLACE_PREFIX}999999999.abcdefgh"
     dead.mkdir()
     (dead / "log.json").write_text("new")
     finish_replacements(out, run_files)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from semattnet._utils.run_folder import STAGE_PREFIX
+from semattnet._utils.run_folder import REPLACE_PREFIX
 from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.training.config import TrainConfig
 from semattnet.training.trainer import Trainer, run_files, train
@@ -107,4 +107,4 @@ def test_a_finished_overwrite_replaces_the_earlier_runs_files_and_nothing_else(
     assert after["notes.txt"] == before["notes.txt"]
     assert not any(f.startswith("checkpoints/step-") for f in after)  # the earlier run's numbered checkpoints
     assert after["checkpoints/last.pt"] != before["checkpoints/last.pt"] and after["log.csv"] != before["log.csv"]
-    assert not list(out.glob(f"{STAGE_PREFIX}*"))
+    assert not list(out.glob(f"{REPLACE_PREFIX}*"))

@@ -25,7 +25,7 @@ from semattnet._utils.outputs import OutputError
 
 __all__ = [
     "READY",
-    "STAGE_PREFIX",
+    "REPLACE_PREFIX",
     "Owned",
     "commit_stage",
     "drop_stages",
@@ -36,7 +36,7 @@ __all__ = [
 ]
 
 #: The stage folder of a run replacing an earlier one: ``OUT/.semattnet-replace.PID.XXXXXXXX``.
-STAGE_PREFIX = ".semattnet-replace."
+REPLACE_PREFIX = ".semattnet-replace."
 
 #: The commit mark inside a stage: JSON, ``{"move": [relative paths]}``, written once the stage holds the first state.
 READY = ".ready.json"
@@ -68,7 +68,7 @@ def open_stage(out: Path) -> Path:
     """A fresh stage folder inside ``out`` for a run that replaces the earlier one there: the run writes into it (with
     the names its files have in ``out``) until :func:`commit_stage`."""
     out.mkdir(parents=True, exist_ok=True)
-    return Path(tempfile.mkdtemp(prefix=f"{STAGE_PREFIX}{os.getpid()}.", dir=out))
+    return Path(tempfile.mkdtemp(prefix=f"{REPLACE_PREFIX}{os.getpid()}.", dir=out))
 
 
 def commit_stage(stage: Path, out: Path, owned: Owned) -> None:
@@ -103,8 +103,8 @@ def finish_replacements(out: Path, owned: Owned) -> None:
     ready) and remove the stages it had not (the earlier run stays). Stages of live processes are left alone."""
     if not out.is_dir():
         return
-    for stage in sorted(out.glob(f"{STAGE_PREFIX}*")):
-        pid = stage.name[len(STAGE_PREFIX) :].split(".")[0]
+    for stage in sorted(out.glob(f"{REPLACE_PREFIX}*")):
+        pid = stage.name[len(REPLACE_PREFIX) :].split(".")[0]
         if stage.is_symlink() or not stage.is_dir() or not pid.isdigit() or pid_alive(int(pid)):
             continue
         if (stage / READY).is_file():
@@ -116,7 +116,7 @@ def finish_replacements(out: Path, owned: Owned) -> None:
 def drop_stages(out: Path) -> None:
     """Remove this process's stages in ``out`` that are not committed (a run that failed before its first state):
     the earlier run stays as it was. A committed one is left for :func:`finish_replacements`."""
-    for stage in out.glob(f"{STAGE_PREFIX}{os.getpid()}.*"):
+    for stage in out.glob(f"{REPLACE_PREFIX}{os.getpid()}.*"):
         if stage.is_dir() and not stage.is_symlink() and not (stage / READY).exists():
             shutil.rmtree(stage, ignore_errors=True)
 

@@ -49,7 +49,7 @@ from semattnet.apps.experiment import (
     fallback_semantic,
     load_held_out,
     make_synthetic,
-    score,
+    score_held_out,
     train_variant,
 )
 from semattnet.evaluation.metrics import LEADERBOARD, KittiMetrics
@@ -57,7 +57,7 @@ from semattnet.evaluation.paired import compare, differences
 from semattnet.models.registry import MODELS, TABLE2
 from semattnet.segmentation.segmenter import Segmenter, segment_folder
 
-__all__ = ["CLAIMS", "CLAIM_CONFIGS", "CONFIGS", "SCHEMA", "AblationSettings", "run_ablation"]
+__all__ = ["ABLATION_SCHEMA", "CLAIMS", "CLAIM_CONFIGS", "CONFIGS", "AblationSettings", "run_ablation"]
 
 NO_SEMANTICS = "g_unknown_semantics"
 #: Configurations: Table 2 rows plus the no-semantics variant of (g).
@@ -72,7 +72,7 @@ CLAIMS: tuple[tuple[str, str, str, str], ...] = (
 #: The configurations the claims need (``--configs claims``).
 CLAIM_CONFIGS: tuple[str, ...] = ("table2_b", "table2_d", "table2_e", "table2_g", NO_SEMANTICS)
 #: Schema of ``ablation.json``.
-SCHEMA = "semattnet.ablation/2"
+ABLATION_SCHEMA = "semattnet.ablation/2"
 _RESULT_SCHEMA = 2  # of results/NAME_seedS.json: per-image metrics and the protocol that made them
 
 
@@ -156,7 +156,7 @@ def run_ablation(
     summary = {name: _summary(name, runs) for name, runs in results.items()}
     claims = _claims(results, s.seeds)
     result = {
-        "schema": SCHEMA,
+        "schema": ABLATION_SCHEMA,
         "settings": asdict(s),
         "device": str(device),
         "units": {"rmse": "mm", "mae": "mm"},
@@ -285,7 +285,7 @@ class _Run:
         outputs = complete_held_out(ckpt, self.held, self.device, semantic=semantic)
         key = "refined_depth" if refine else "fused_depth"
         preds = {n: o[key] for n, o in outputs.items()}
-        return score(preds, self.held), _per_image(preds, self.held)
+        return score_held_out(preds, self.held), _per_image(preds, self.held)
 
 
 def _summary(name: str, runs: dict[int, dict[str, Any]]) -> dict[str, Any]:

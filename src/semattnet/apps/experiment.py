@@ -1,7 +1,7 @@
 """Small synthetic experiments shared by ``semattnet demo`` and ``semattnet ablate``.
 
 Generate a synthetic KITTI tree, train a model variant through the real training engine
-(backbone stage, then the full model when it refines), complete the held-out scenes and score
+(backbone stage, then the full model when it refines), complete the held-out scenes and score_held_out
 them with the KITTI metrics, overall and separately for shadowed and unshadowed scenes.
 """
 
@@ -37,7 +37,7 @@ __all__ = [
     "complete_held_out",
     "load_held_out",
     "make_synthetic",
-    "score",
+    "score_held_out",
     "step_seconds",
     "train_variant",
 ]
@@ -83,7 +83,7 @@ def load_held_out(root: Path) -> HeldOut:
     return HeldOut([f.name for f in ds.frames], [ds[i] for i in range(len(ds))], shadowed)
 
 
-def score(preds: dict[str, np.ndarray], held: HeldOut) -> dict[str, dict[str, float]]:
+def score_held_out(preds: dict[str, np.ndarray], held: HeldOut) -> dict[str, dict[str, float]]:
     """KITTI metrics (means over images, devkit hole filling) per group of :data:`GROUPS`."""
     gts = held.gts
     out: dict[str, dict[str, float]] = {}

@@ -33,14 +33,14 @@ from semattnet.evaluation.split import eval_dataset
 from semattnet.inference.backends import needs_semantic
 from semattnet.inference.contract import Completer
 
-__all__ = ["FIGURE_COMMAND", "SETTINGS", "WEIGHTS", "make_front_figure", "plot_front", "uncertainty_curves"]
+__all__ = ["FIGURE_COMMAND", "FIGURE_WEIGHTS", "SETTINGS", "make_front_figure", "plot_front", "uncertainty_curves"]
 
 #: The documented command that remakes the figure.
 FIGURE_COMMAND = "make figures"
 #: The thinning settings of the left panel (``keep=1`` is ``beams=64``: the full scan).
 SETTINGS = ("beams=64", "beams=32", "beams=16", "beams=8", "keep=0.5", "keep=0.1")
 #: The shipped trained weights drawn, by label.
-WEIGHTS = {
+FIGURE_WEIGHTS = {
     "SemAttNet reference, seed 0": "semattnet-demo-ref-seed0",
     "SemAttNet reference, seed 1": "semattnet-demo-ref-seed1",
 }
@@ -65,7 +65,8 @@ def _completers(device: str) -> dict[str, Completer]:
     from semattnet.weights import from_pretrained
 
     found: dict[str, Completer] = {
-        label: DepthCompleter(from_pretrained(name), EngineSpec(device=device)) for label, name in WEIGHTS.items()
+        label: DepthCompleter(from_pretrained(name), EngineSpec(device=device))
+        for label, name in FIGURE_WEIGHTS.items()
     }
     return found | {"classical completion": ClassicalCompleter()}
 
@@ -170,7 +171,7 @@ def make_front_figure(
         command=FIGURE_COMMAND,
         scenes=s.eval_frames,
         size=list(s.size),
-        weights=WEIGHTS,
+        weights=FIGURE_WEIGHTS,
         sweep=rows,
         uncertainty={name: c.compute() for name, c in curves.items()},
         curves={name: _rmse_curves(c) for name, c in curves.items()},

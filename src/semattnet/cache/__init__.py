@@ -22,7 +22,7 @@ Cache layout (``$SEMATTNET_CACHE``, default ``platformdirs.user_cache_dir("semat
     .locks/                                inter-process locks
 
 The public face of the cache for every layer above it (weights, data, segmentation, the engines'
-export cache, the demo); :func:`semattnet.weights.fetch` adds registry names, ``semattnet data download``
+export cache, the demo); :func:`semattnet.weights.fetch_weights` adds registry names, ``semattnet data download``
 the datasets' archives.
 """
 

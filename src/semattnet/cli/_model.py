@@ -84,8 +84,9 @@ def palette_mismatch_option(cls: type[click.Option] = click.Option) -> click.Opt
     )
 
 
-def precision_options(f: _F) -> _F:
-    """``--precision`` (the engine table's) and ``--calibration PATH`` (int8 only)."""
+def precision_options(f: _F, backend: bool = True) -> _F:
+    """``--precision`` (the engine table's) and ``--calibration PATH`` (int8 only); ``backend``: whether the command
+    has ``--backend`` (without it, the arithmetic of every backend it runs)."""
     f = click.option(
         "--calibration",
         cls=_MODEL,
@@ -99,9 +100,14 @@ def precision_options(f: _F) -> _F:
         cls=_MODEL,
         type=RegistryChoice(_precisions),
         default=None,
-        help="The network's arithmetic, as --backend runs it: f32 [default], bf16 (faster only on CPUs with native "
-        "bfloat16), fp16 (CUDA), int8 (OpenVINO + NNCF: --backend openvino; quantised once per weights, size and "
-        "calibration, then cached).",
+        help=(
+            "The network's arithmetic, as --backend runs it: "
+            if backend
+            else "The network's arithmetic, for each backend that runs it: "
+        )
+        + "f32 [default], bf16 (faster only on CPUs with native bfloat16), fp16 (CUDA), int8 (OpenVINO + NNCF"
+        + (": --backend openvino" if backend else "")
+        + "; quantised once per weights, size and calibration, then cached).",
     )(f)
 
 

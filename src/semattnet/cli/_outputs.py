@@ -29,7 +29,7 @@ if TYPE_CHECKING:
     from semattnet.inference.timing import StageTimes
     from semattnet.inference.uncertainty import UncertaintyLimit
 
-__all__ = ["OUTPUTS", "RUN", "AskedSinks", "Outputs", "RunOptions", "output_options", "sink_params"]
+__all__ = ["OUTPUTS", "RUN", "AskedSinks", "Outputs", "RunCommandOptions", "output_options", "sink_params"]
 
 OUTPUTS, RUN = "Outputs", "Run"
 
@@ -117,8 +117,8 @@ _F = TypeVar("_F", bound=Callable[..., object])
 
 
 def output_options(f: _F) -> _F:
-    """The shared output and run options of ``predict`` (read back with ``values_of(Outputs | RunOptions, params)``);
-    the sinks' own: :func:`sink_params`."""
+    """The shared output and run options of ``predict`` (read back with ``values_of(Outputs | RunCommandOptions,
+    params)``); the sinks' own: :func:`sink_params`."""
     return with_options(OUTPUT_OPTIONS)(f)
 
 
@@ -254,7 +254,7 @@ class Outputs:
 
 
 @dataclass(frozen=True)
-class RunOptions:
+class RunCommandOptions:
     """How the frames are run: a faulty frame, reading ahead, a real-time replay."""
 
     on_error: str | None

@@ -20,7 +20,16 @@ from semattnet.cli._group import Command
 if TYPE_CHECKING:
     from _typeshed import DataclassInstance
 
-__all__ = ["GeneratedCommand", "SectionOption", "SectionedCommand", "given", "section", "values_of", "with_options"]
+__all__ = [
+    "GeneratedCommand",
+    "SectionOption",
+    "SectionedCommand",
+    "given",
+    "rehelp",
+    "section",
+    "values_of",
+    "with_options",
+]
 
 #: The heading of the options that name none (``--help``).
 OTHER = "Other options"
@@ -118,3 +127,17 @@ _D = TypeVar("_D", bound="DataclassInstance")
 def values_of(cls: type[_D], params: Mapping[str, object]) -> _D:
     """The dataclass ``cls`` made from the parsed options its fields name."""
     return cls(**{f.name: params[f.name] for f in fields(cls)})
+
+
+def rehelp(params: Sequence[click.Parameter], helps: Mapping[str, str]) -> list[click.Parameter]:
+    """``params`` with the help of those named in ``helps`` (parameter name -> text) replaced, on copies: a shared
+    option says what it does for the command it is on."""
+    import copy
+
+    out = []
+    for p in params:
+        if p.name in helps and isinstance(p, click.Option):
+            p = copy.copy(p)
+            p.help = helps[p.name]
+        out.append(p)
+    return out

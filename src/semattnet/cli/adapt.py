@@ -25,7 +25,7 @@ from semattnet.cli._options import (
     parse_size,
     weights_option,
 )
-from semattnet.cli._params import GeneratedCommand, section, values_of, with_options
+from semattnet.cli._params import GeneratedCommand, rehelp, section, values_of, with_options
 
 if TYPE_CHECKING:
     from semattnet.training.adapt import AdaptConfig
@@ -244,7 +244,15 @@ class AdaptOptions:
         )
 
 
-@main.command(cls=GeneratedCommand, generated=[("", input_params)])
+def _input_params() -> list[click.Parameter]:
+    """``predict``'s input options, with the help of those that name outputs ``adapt`` lacks said for ``adapt``."""
+    return rehelp(
+        input_params(),
+        {"intrinsics": "The camera's intrinsics of the --rgb / --sparse frames ('kitti': KITTI's camera 02)."},
+    )
+
+
+@main.command(cls=GeneratedCommand, generated=[("", _input_params)])
 @with_options(MAP_OPTIONS)
 @weights_option
 @device_option(help="Where training runs: auto, cpu, cuda[:N].", cls=section(MODEL))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from functools import partial
 from pathlib import Path
 
 import click
@@ -228,7 +229,7 @@ def ablate(
     help="Also write the results as JSON.",
 )
 @click.option("--overwrite", is_flag=True, help="Replace an existing --json file.")
-@precision_options
+@partial(precision_options, backend=False)
 @click.option(
     "--outputs",
     "output_fields",

@@ -17,7 +17,7 @@ from semattnet.cli._group import main
 from semattnet.cli._inputs import MAP_OPTIONS, ChosenInput, choose_input, input_params
 from semattnet.cli._model import ModelOptions, model_options
 from semattnet.cli._options import DEPTH_M, weights_input
-from semattnet.cli._outputs import AskedSinks, Outputs, RunOptions, output_options, sink_params
+from semattnet.cli._outputs import AskedSinks, Outputs, RunCommandOptions, output_options, sink_params
 from semattnet.cli._params import GeneratedCommand, values_of, with_options
 
 if TYPE_CHECKING:
@@ -78,7 +78,11 @@ def predict(**params: object) -> None:
     if listing is not None:
         click.echo(listing)
         return
-    outputs, run, model = values_of(Outputs, params), values_of(RunOptions, params), values_of(ModelOptions, params)
+    outputs, run, model = (
+        values_of(Outputs, params),
+        values_of(RunCommandOptions, params),
+        values_of(ModelOptions, params),
+    )
     asked = AskedSinks.of(params)
     out, resuming = outputs.check(chosen, asked)
     run.check(chosen)
@@ -94,7 +98,7 @@ def predict(**params: object) -> None:
 def _run_frames(
     chosen: ChosenInput,
     outputs_asked: tuple[Outputs, AskedSinks],
-    run: RunOptions,
+    run: RunCommandOptions,
     model: ModelOptions,
     folder: tuple[Path, bool],
     identity: dict[str, object],

@@ -21,7 +21,7 @@ from semattnet.cli._inputs import MAP_OPTIONS, Maps, field_options
 from semattnet.cli._model import ModelOptions, model_options
 from semattnet.cli._options import DEPTH_M, POSITIVE_FLOAT, POSITIVE_INT, SECONDS
 from semattnet.cli._outputs import MaxUncertainty
-from semattnet.cli._params import GeneratedCommand, section, values_of, with_options
+from semattnet.cli._params import GeneratedCommand, rehelp, section, values_of, with_options
 
 if TYPE_CHECKING:
     from semattnet.inference.contract import Completer
@@ -45,7 +45,15 @@ def viewer_options() -> Sequence[click.Parameter]:
 
 
 #: The semantic-map options a live node takes (a segmenter; no map files).
-SEGMENT_OPTIONS = tuple(p for p in MAP_OPTIONS if p.name in ("segment_spec", "palette_mismatch"))
+SEGMENT_OPTIONS = tuple(
+    rehelp(
+        [p for p in MAP_OPTIONS if p.name in ("segment_spec", "palette_mismatch")],
+        {
+            "segment_spec": "Segment each camera image with this model (see `semattnet segment --model`) before it is "
+            "completed [no segmenter: the fallback map].",
+        },
+    )
+)
 
 ROS2_OPTIONS = (
     _ROS(

@@ -67,7 +67,7 @@ TABLE_COLUMNS = {
     "delta3": ("d<1.25^3", 1.0),
 }
 _VALID_GT = 1e-4  # NLSPN's t_valid: gt at or below it counts as missing
-EXTRAS = ("delta1", "delta2", "delta3", "abs_rel", "sq_rel", "log10", "silog")
+EXTRA_METRICS = ("delta1", "delta2", "delta3", "abs_rel", "sq_rel", "log10", "silog")
 _INVALID = -1.0  # the devkit's depth for pixels without a prediction
 
 
@@ -253,7 +253,7 @@ class KittiMetrics:
         out = {"images": float(self._count)}
         for k, (_, unit, scale) in LEADERBOARD.items():
             out[f"{k}_{'mm' if unit == 'mm' else 'per_km'}"] = mean[k] * scale
-        out.update({k: mean[k] for k in (*LEADERBOARD, *EXTRAS)})
+        out.update({k: mean[k] for k in (*LEADERBOARD, *EXTRA_METRICS)})
         return out
 
     def table(self) -> str:

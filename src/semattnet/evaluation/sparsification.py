@@ -36,7 +36,7 @@ import torch
 from semattnet._errors import InputError
 
 __all__ = [
-    "METRICS",
+    "CURVE_METRICS",
     "Sparsification",
     "aurg",
     "ause",
@@ -48,7 +48,7 @@ __all__ = [
 ]
 
 #: The metrics a curve can score: name -> per-pixel value from the error e (the mean of it, then ``root``).
-METRICS = ("rmse", "mae")
+CURVE_METRICS = ("rmse", "mae")
 
 
 def fractions(steps: int = 100) -> np.ndarray:
@@ -63,7 +63,7 @@ def _per_pixel(error: torch.Tensor, metric: str) -> torch.Tensor:
         return error.double() ** 2
     if metric == "mae":
         return error.double().abs()
-    raise InputError(f"unknown metric {metric!r}; one of {METRICS}")
+    raise InputError(f"unknown metric {metric!r}; one of {CURVE_METRICS}")
 
 
 def sparsification_curve(
@@ -145,7 +145,7 @@ class Sparsification:
     """
 
     steps: int = 100
-    metrics: tuple[str, ...] = METRICS
+    metrics: tuple[str, ...] = CURVE_METRICS
     frames: int = 0
     _sums: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
@@ -193,7 +193,7 @@ class Sparsification:
         return summary(self.curves(), self.metrics)
 
 
-def summary(curves: Mapping[str, np.ndarray], metrics: tuple[str, ...] = METRICS) -> dict[str, float]:
+def summary(curves: Mapping[str, np.ndarray], metrics: tuple[str, ...] = CURVE_METRICS) -> dict[str, float]:
     """``ause_{m}`` and ``aurg_{m}`` from mean curves ``{m}_curve`` / ``{m}_oracle``
     (as :meth:`Sparsification.curves` returns them)."""
     out: dict[str, float] = {}
@@ -204,7 +204,9 @@ def summary(curves: Mapping[str, np.ndarray], metrics: tuple[str, ...] = METRICS
     return out
 
 
-def figure_data(curves: Mapping[str, np.ndarray], metrics: tuple[str, ...] = METRICS) -> dict[str, np.ndarray | float]:
+def figure_data(
+    curves: Mapping[str, np.ndarray], metrics: tuple[str, ...] = CURVE_METRICS
+) -> dict[str, np.ndarray | float]:
     """What :func:`semattnet.viz.curves.plot_sparsification` draws for one method: the mean curves, their
     ``fractions`` (the x axis) and :func:`summary`'s AUSE / AURG."""
     steps = len(next(iter(curves.values())))

@@ -22,7 +22,7 @@ import torch
 from semattnet.evaluation.metrics import image_metrics
 from semattnet.evaluation.sparsification import ause, oracle_curve, sparsification_curve
 
-__all__ = ["BenchFrame", "Completer", "real_frames", "score", "world_frames"]
+__all__ = ["BenchFrame", "DepthMethod", "real_frames", "score", "world_frames"]
 
 #: The bundled real frame, relative to a KITTI sample root (``tests/data/kitti_sample``).
 REAL_DRIVE = "kitti_raw/2011_09_26/2011_09_26_drive_0035_sync"
@@ -32,7 +32,7 @@ REAL_GT = "data_depth_annotated/train/2011_09_26_drive_0035_sync/proj_depth/grou
 GATE = 0.10
 
 #: rgb (H, W, 3), sparse (H, W) metres -> (depth, uncertainty or None), (H, W) metres.
-Completer = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray | None]]
+DepthMethod = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray | None]]
 
 
 @dataclass

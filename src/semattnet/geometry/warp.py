@@ -16,7 +16,7 @@ import torch.nn.functional as F
 __all__ = ["inverse_warp", "pixel_coordinates", "sample_at_pixels"]
 
 #: Points nearer the view's camera than this (metres) are invalid: behind it, or too close to project stably.
-MIN_DEPTH_M = 1e-3
+MIN_VIEW_DEPTH_M = 1e-3
 
 
 def pixel_coordinates(shape: tuple[int, int, int], offset: torch.Tensor | None = None) -> torch.Tensor:
@@ -62,7 +62,7 @@ def inverse_warp(
     T = T_view_cam.float()
     seen = K_view.float() @ (T[:, :3, :3] @ points + T[:, :3, 3:])
     z = seen[:, 2]
-    front = z > MIN_DEPTH_M
+    front = z > MIN_VIEW_DEPTH_M
     z_safe = torch.where(front, z, torch.ones_like(z))
     return _sample(view, seen[:, 0] / z_safe, seen[:, 1] / z_safe, front, (h, w))
 

@@ -30,7 +30,7 @@ from torch import nn
 
 from semattnet._errors import InputError
 from semattnet.inference.backends import EngineSpec, needs_semantic, optimize_for_inference
-from semattnet.inference.backends._base import InferenceEngine, StageHook
+from semattnet.inference.backends._base import InferenceEngine, StageClock
 from semattnet.inference.contract import Completer, Completion, StageTimed
 from semattnet.inference.padding import crop_padding, pad_to_multiple
 from semattnet.models.checks import check_has_points, check_sparse_depth
@@ -45,7 +45,7 @@ if TYPE_CHECKING:
     from semattnet.inference.semantic import SemanticMaps
     from semattnet.inference.timing import StageTimes
 
-__all__ = ["Completer", "Completion", "DepthCompleter", "EngineSpec", "StageHook", "StageTimed", "load_completer"]
+__all__ = ["Completer", "Completion", "DepthCompleter", "EngineSpec", "StageClock", "StageTimed", "load_completer"]
 
 
 def _item(t: torch.Tensor, i: int) -> torch.Tensor:
@@ -231,7 +231,7 @@ class DepthCompleter:
         return self._engines[key]
 
     @contextmanager
-    def timing(self, hook: StageHook) -> Iterator[tuple[str, ...]]:
+    def timing(self, hook: StageClock) -> Iterator[tuple[str, ...]]:
         """While active, the stages the engine runs inside a call (the ``torch`` engine's ``propagation``) run
         inside ``hook(stage)``; gives those stages (empty: this engine does not split its call)."""
         engine = None if self.spec.entry.fixed_size else self.engine(None)

@@ -13,7 +13,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 import torch
 
-from semattnet.inference.backends._base import StageHook
+from semattnet.inference.backends._base import StageClock
 from semattnet.models.outputs import DepthCompletionOutput
 
 __all__ = ["Completer", "CompleterFactory", "Completion", "SelectsOutputs", "StageTimed", "reading_only"]
@@ -96,7 +96,7 @@ class CompleterFactory:
 class StageTimed(Protocol):
     """A completer that times the stages it runs inside a call (e.g. ``propagation``) through a hook."""
 
-    def timing(self, hook: StageHook) -> AbstractContextManager[tuple[str, ...]]:
+    def timing(self, hook: StageClock) -> AbstractContextManager[tuple[str, ...]]:
         """While active, the inner stages of every call run inside ``hook(stage)``; gives those stages (empty:
         the call is not split)."""
         ...

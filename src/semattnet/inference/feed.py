@@ -43,7 +43,7 @@ from semattnet.inference.timing import DEFAULT_SENSOR_PERIOD_S, GAP_PERIODS, MAX
 if TYPE_CHECKING:
     from semattnet.inference.semantic import SemanticMaps
 
-__all__ = ["FrameFault", "check_inputs", "completions", "fault_reason", "is_frame_fault", "read_frame"]
+__all__ = ["FrameFault", "check_frame_inputs", "completions", "fault_reason", "is_frame_fault", "read_frame"]
 
 
 def is_frame_fault(exc: BaseException) -> bool:
@@ -411,7 +411,7 @@ def completions(
         timer.end()
 
 
-def check_inputs(source: FrameSource, names: Sequence[str], on_error: str) -> dict[str, str]:
+def check_frame_inputs(source: FrameSource, names: Sequence[str], on_error: str) -> dict[str, str]:
     """Decode the inputs of ``names``: ``stop`` raises the first fault, ``skip`` returns every faulty frame's
     reason (frame by frame, in order)."""
     if on_error == "stop":

@@ -12,7 +12,7 @@ from semattnet.inference import pipeline
 from semattnet.inference.pipeline import Completer, OutputSpec, RunOptions
 from semattnet.inference.sinks import default_sinks, output_files
 
-__all__ = ["Completer", "check_frames", "complete_folder", "output_paths"]
+__all__ = ["Completer", "check_frame_paths", "complete_folder", "output_paths"]
 
 
 def output_paths(frames: Sequence[FramePaths], out: Path, npy: bool = False, panel: bool = False) -> list[Path]:
@@ -21,7 +21,7 @@ def output_paths(frames: Sequence[FramePaths], out: Path, npy: bool = False, pan
     return [Path(out) / p for p in output_files([f.name for f in frames], default_sinks(npy, panel))]
 
 
-def check_frames(frames: Sequence[FramePaths]) -> None:
+def check_frame_paths(frames: Sequence[FramePaths]) -> None:
     """Decode every input of every frame (raising :class:`DataError` / ``UnknownColorError`` naming
     the file) before anything is written."""
     FolderSource(frames).check()

@@ -226,7 +226,7 @@ class _FrameLoop:
             self.out.rmdir()
 
 
-def _run_frames(loop: _FrameLoop, completer: Completer) -> None:
+def _frames_into_sinks(loop: _FrameLoop, completer: Completer) -> None:
     """The frames of this process through the completer into ``loop`` (the run outputs opened before and
     finished after; aborted on any error)."""
     plan, options, timer = loop.plan, loop.plan.options, loop.timer
@@ -282,11 +282,11 @@ def execute(
 
 
 def _attempt_run(loop: _FrameLoop, completer: Completer) -> Exception | None:
-    """:func:`_run_frames`, its error returned (for every rank to agree on); on any error the frames done
+    """:func:`_frames_into_sinks`, its error returned (for every rank to agree on); on any error the frames done
     stay journaled. Ctrl-C and SIGTERM are raised (once the frames handed to the writer are written)."""
     try:
         with terminate_as_exit(), reading_only(completer, outputs_read(loop.sinks)):
-            _run_frames(loop, completer)
+            _frames_into_sinks(loop, completer)
     except BaseException as exc:
         loop.forget()
         if not isinstance(exc, Exception):

@@ -15,7 +15,7 @@ from semattnet._utils.lock import FolderLock
 from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs
 from semattnet.data.frames import FrameSource
 from semattnet.inference.completer import Completer
-from semattnet.inference.feed import check_inputs
+from semattnet.inference.feed import check_frame_inputs
 from semattnet.inference.journal import FRAMES_FILE, FrameEntry, RunJournal
 from semattnet.inference.loop import FrameRun, execute, nothing_done
 from semattnet.inference.options import OutputSpec, RunOptions
@@ -146,7 +146,7 @@ def _plan(source: FrameSource, sinks: Sequence[Sink], out: Path, output: OutputS
         on_main(_refuse_earlier_run, out)
     on_main(_check_outputs, source, sinks, out, output.overwrite or output.resume, output.inputs)
     todo = [n for n in shard(source.names) if n not in journal.kept]
-    faults = agree(check_inputs, source, todo, policy)
+    faults = agree(check_frame_inputs, source, todo, policy)
     position = {n: i for i, n in enumerate(source.names)}
     rows: list[FrameEntry] = [{"name": n, "status": "skipped", "reason": r} for n, r in faults.items()]
     bad = gather_rows(rows, key=lambda e: position[e["name"]])

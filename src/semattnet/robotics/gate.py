@@ -7,7 +7,7 @@ loopback port, but only after the client's first request (an HTTP upgrade, a gRP
 preface) came in full, within :data:`HANDSHAKE_S`; at most :data:`MAX_CLIENTS` clients at once (more are
 closed at once). A client that stops reading holds at most a socket buffer here: the relay stops reading
 from the server, whose own per-client queue then drops its oldest messages (foxglove-sdk keeps
-:data:`~semattnet.robotics.live.BACKLOG`). :meth:`Gate.close` drops every client at once.
+:data:`~semattnet.robotics.live.CLIENT_BACKLOG`). :meth:`Gate.close` drops every client at once.
 """
 
 from __future__ import annotations

@@ -22,7 +22,7 @@ topic                         schema                 what
 
 Each sink logs into its own :class:`foxglove.Context`, so two sinks in one process never mix. A message
 is built only when a client is subscribed to its channel: with no client :meth:`LiveSink.write` costs
-next to nothing, and the server drops the oldest messages of a slow client (:data:`BACKLOG` kept; it never
+next to nothing, and the server drops the oldest messages of a slow client (:data:`CLIENT_BACKLOG` kept; it never
 blocks the loop). The clients reach the server through a :class:`~semattnet.robotics.gate.Gate` (at most
 32 at once, 5 s for a handshake), so the server stops within seconds whatever they do: silent, half-open
 or many.
@@ -55,7 +55,7 @@ if TYPE_CHECKING:
 __all__ = ["LATENCY_SCHEMA", "LiveOptions", "LiveSink", "parse_address"]
 
 #: Topics by role; ``PREFIX`` is :attr:`LiveSink.prefix` (the outputs' names: :data:`semattnet.robotics.frame.TOPICS`).
-TOPICS = {
+CHANNEL_TOPICS = {
     **{role: f"PREFIX/{name}" for role, name in OUTPUT_TOPICS.items()},
     "tf": "/tf",
     "rgb": "/input/image",
@@ -72,7 +72,7 @@ LATENCY_SCHEMA = {
     },
 }
 #: Messages kept per client before the oldest is dropped (a few frames of every channel).
-BACKLOG = 64
+CLIENT_BACKLOG = 64
 
 
 def _foxglove() -> ModuleType:
@@ -264,8 +264,8 @@ class LiveSink(RunSink):
 
     @property
     def topics(self) -> dict[str, str]:
-        """Topic by role (:data:`TOPICS` with the prefix)."""
-        return {k: v.replace("PREFIX", self.prefix.rstrip("/")) for k, v in TOPICS.items()}
+        """Topic by role (:data:`CHANNEL_TOPICS` with the prefix)."""
+        return {k: v.replace("PREFIX", self.prefix.rstrip("/")) for k, v in CHANNEL_TOPICS.items()}
 
     @property
     def port(self) -> int:
@@ -285,7 +285,7 @@ class LiveSink(RunSink):
         fg = _foxglove()
         host, port = parse_address(self.address, "live address")
         self._context = context = fg.Context()
-        newer = {"message_backlog_size": BACKLOG}  # older foxglove-sdk releases lack it
+        newer = {"message_backlog_size": CLIENT_BACKLOG}  # older foxglove-sdk releases lack it
         try:  # the server on a private loopback port, the clients through the gate on the address asked for
             self._server = server = call_with_newer(
                 fg.start_server, newer, name="semattnet", host="127.0.0.1", port=0, context=context
@@ -314,7 +314,7 @@ class LiveSink(RunSink):
             self.log(f"live view: {self.url} (Foxglove: Open connection, Foxglove WebSocket, this URL)")
 
     def subscribed(self, role: str = "depth") -> bool:
-        """Whether a client is subscribed to ``role``'s channel (:data:`TOPICS`) now."""
+        """Whether a client is subscribed to ``role``'s channel (:data:`CHANNEL_TOPICS`) now."""
         channel = self._channels.get(role)
         return channel is not None and bool(channel.has_sinks())
 

@@ -17,10 +17,10 @@ from typing import Any, Literal
 from semattnet._errors import InputError
 from semattnet.training.losses import LOSSES
 
-__all__ = ["STAGES", "TrainConfig"]
+__all__ = ["TRAIN_STAGES", "TrainConfig"]
 
 Stage = Literal["backbone", "refine-init", "full"]
-STAGES: tuple[str, ...] = ("backbone", "refine-init", "full")
+TRAIN_STAGES: tuple[str, ...] = ("backbone", "refine-init", "full")
 
 # Authors' values: per-stage epochs, batch, learning rates and plateau patience.
 _STAGE_DEFAULTS: dict[str, dict[str, float | None]] = {
@@ -122,8 +122,8 @@ class TrainConfig:
     loss: str = "l2"
 
     def __post_init__(self) -> None:
-        if self.stage not in STAGES:
-            raise InputError(f"stage must be one of {STAGES}, got {self.stage!r}")
+        if self.stage not in TRAIN_STAGES:
+            raise InputError(f"stage must be one of {TRAIN_STAGES}, got {self.stage!r}")
         for key, value in _STAGE_DEFAULTS[self.stage].items():
             if getattr(self, key) is None:
                 setattr(self, key, value)

@@ -67,7 +67,7 @@ from semattnet.weights.resolve import (
     ResolvedWeights,
     ShadowedNameWarning,
     WeightsSpecError,
-    fetch,
+    fetch_weights,
     parse_weights_spec,
     resolve_weights,
 )
@@ -95,7 +95,7 @@ __all__ = [
     "build_model_with_weights",
     "config_from_state_dict",
     "default_weights",
-    "fetch",
+    "fetch_weights",
     "filter_state_dict",
     "from_pretrained",
     "get_cache_dir",

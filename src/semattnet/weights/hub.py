@@ -73,7 +73,7 @@ def from_pretrained(
               ``hf://owner/repo[@revision]`` (a saved folder on the Hugging Face Hub) /
               ``hf://owner/repo[@revision]/file``.
         sha256: expected sha256 of the downloaded file (for ``hf://owner/repo``: of its
-            ``model.safetensors``); see :func:`~semattnet.weights.fetch` for pinning.
+            ``model.safetensors``); see :func:`~semattnet.weights.fetch_weights` for pinning.
         cache_dir: cache root (default ``$SEMATTNET_CACHE``, else the user cache folder).
         map_location: device to put the model on (default CPU).
         progress: show download progress.
@@ -88,7 +88,7 @@ def from_pretrained(
     Raises:
         UnsafeCheckpointError: a pickle that would run code (it is removed from the cache).
         CheckpointError: not a readable checkpoint, or weights that do not fit.
-        semattnet.cache.DownloadError: see :func:`~semattnet.weights.fetch`.
+        semattnet.cache.DownloadError: see :func:`~semattnet.weights.fetch_weights`.
     """
     resolved = resolve_weights(name_or_path_or_url, sha256=sha256, cache_dir=cache_dir, progress=progress)
     return resolved.build(arch, overrides, map_location if map_location is not None else "cpu")

@@ -3,7 +3,7 @@
 Every way to name weights goes through :func:`parse_weights_spec`, the only place that tells a
 registry name, a local file or folder and a URL apart: :func:`~semattnet.weights.from_pretrained`,
 :func:`~semattnet.weights.load_model`, ``DepthCompleter.from_pretrained`` / ``from_checkpoint``,
-``torch.hub``, :func:`fetch`, and every ``--weights`` of the command line (``semattnet info``,
+``torch.hub``, :func:`fetch_weights`, and every ``--weights`` of the command line (``semattnet info``,
 ``weights fetch``, ``train --init`` included).
 
 A spec is one of
@@ -73,7 +73,7 @@ __all__ = [
     "ShadowedNameWarning",
     "WeightsSpec",
     "WeightsSpecError",
-    "fetch",
+    "fetch_weights",
     "packed_file",
     "parse_weights_spec",
     "resolve_weights",
@@ -219,7 +219,7 @@ def resolve_weights(
     return ResolvedWeights(path, source, cache_root=root, digest=digest)
 
 
-def fetch(
+def fetch_weights(
     url_or_entry: str | PretrainedWeights,
     *,
     sha256: str | None = None,

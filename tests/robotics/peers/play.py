@@ -10,7 +10,7 @@ import sys
 import time
 
 from semattnet.robotics.bags import open_bag
-from semattnet.robotics.bags.decode import stamp_ns
+from semattnet.robotics.bags.decode import msg_stamp_ns
 from semattnet.robotics.ros.dds import DdsTransport
 from semattnet.robotics.ros.transport import SENSOR_QOS, TF_STATIC_QOS
 
@@ -27,7 +27,7 @@ def main(bag: str, image: str, points: str, info: str, timeout: float) -> int:
         if topic == "/tf_static":
             pubs[topic].publish(msg)
     order = {info: 0, image: 1, points: 2}
-    frames = sorted((m for m in msgs if m[0] in order), key=lambda m: (stamp_ns(m[2].header.stamp), order[m[0]]))
+    frames = sorted((m for m in msgs if m[0] in order), key=lambda m: (msg_stamp_ns(m[2].header.stamp), order[m[0]]))
     end = time.monotonic() + timeout
     try:
         while time.monotonic() < end:

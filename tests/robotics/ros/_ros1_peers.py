@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from semattnet.robotics.bags import BagTopics, open_bag
-from semattnet.robotics.bags.decode import stamp_ns
+from semattnet.robotics.bags.decode import msg_stamp_ns
 from semattnet.robotics.bags.encode import depth_image_message
 from semattnet.robotics.ros.tcpros import TcprosError, TcprosPublisher, TcprosTransport
 from semattnet.robotics.ros.transport import OUTPUT_QOS, SENSOR_QOS, TF_STATIC_QOS
@@ -209,7 +209,7 @@ def node(workdir: Path) -> dict[str, Any]:
         image = transport.advertise(topics.image, "sensor_msgs/msg/Image", SENSOR_QOS)
         cloud = transport.advertise(topics.points, "sensor_msgs/msg/PointCloud2", SENSOR_QOS)
         frames = [(image, m) for m in msgs[topics.image]] + [(cloud, m) for m in msgs[topics.points]]
-        frames.sort(key=lambda frame: stamp_ns(frame[1].header.stamp))
+        frames.sort(key=lambda frame: msg_stamp_ns(frame[1].header.stamp))
         info = _camera_info_yaml(msgs[topics.camera_info][0])
         argv = {
             "info": ["rostopic", "pub", "-l", topics.camera_info, "sensor_msgs/CameraInfo", info],

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from semattnet.apps.demo.recipe import LABELS, MODELS, REFERENCE_KEY, Trained
-from semattnet.apps.experiment import HeldOut, score
+from semattnet.apps.demo.recipe import DEMO_MODELS, LABELS, REFERENCE_KEY, Trained
+from semattnet.apps.experiment import HeldOut, score_held_out
 from semattnet.viz.depth import colorize_depth, error_map
 from semattnet.viz.panels import branch_panel, save_panel
 from semattnet.viz.viewer import ViewerFrame, write_viewer
@@ -83,7 +83,7 @@ def _scene_figures(
     )
     tiles = [("RGB", rgb), ("ground truth", colorize_depth(gt))]
     for method in _shown_methods(preds):
-        rmse = score({n: preds[method][n]}, held)["all"]["rmse_mm"]
+        rmse = score_held_out({n: preds[method][n]}, held)["all"]["rmse_mm"]
         short = (
             "SemAttNet reference (shipped, first seed)" if method == REFERENCE_KEY else LABELS[method].split(" (")[0]
         )
@@ -108,7 +108,7 @@ def _scene_figures(
 def _curve_figures(pictures: Path, runs: dict[str, Path]) -> list[tuple[str, str]]:
     """Copy each model's training curves (per stage, where written) beside the pictures."""
     out = []
-    for key, label, _ in MODELS:
+    for key, label, _ in DEMO_MODELS:
         for stage in STAGES_SHOWN:
             curve = runs[key] / stage / "curves.png"
             if curve.is_file():

@@ -14,8 +14,8 @@ import torch
 from semattnet.apps.experiment import HeldOut, VariantRecipe, complete_held_out, step_seconds, train_variant
 
 __all__ = [
+    "DEMO_MODELS",
     "LABELS",
-    "MODELS",
     "MODEL_KEYS",
     "OVERHEAD",
     "RECIPE_NOTES",
@@ -72,13 +72,13 @@ class DemoSettings:
 
 
 #: (key, label, model overrides) of the learned models the demo trains.
-MODELS: tuple[tuple[str, str, dict[str, Any]], ...] = (
+DEMO_MODELS: tuple[tuple[str, str, dict[str, Any]], ...] = (
     ("semattnet", "SemAttNet (CG + SG + DG, SAMMAFB, CSPN++)", {"branches": 3}),
     ("two_branch", "Two-branch ablation (CG + DG, SAMMAFB, CSPN++)", {"branches": 2}),
 )
 
-#: The result keys of the learned models, in :data:`MODELS`' order.
-MODEL_KEYS: tuple[str, ...] = tuple(key for key, _, _ in MODELS)
+#: The result keys of the learned models, in :data:`DEMO_MODELS`' order.
+MODEL_KEYS: tuple[str, ...] = tuple(key for key, _, _ in DEMO_MODELS)
 
 #: The result key of the shipped reference checkpoint.
 REFERENCE_KEY = "reference"
@@ -88,7 +88,7 @@ LABELS: dict[str, str] = {
     "sparse": "Sparse input",
     "classical": "Classical completion",
     REFERENCE_KEY: "SemAttNet reference checkpoints (shipped, trained once for longer; not trained by this run)",
-    **{key: label for key, label, _ in MODELS},
+    **{key: label for key, label, _ in DEMO_MODELS},
 }
 
 #: How the live recipe differs from the paper's (the report and results.json show these).
@@ -126,14 +126,14 @@ def step_plan(s: DemoSettings, device: torch.device) -> dict[str, tuple[int, int
     """(backbone, full) steps per model: as set, or what the time budget allows here, at equal
     steps for both models (``equal_steps``) or an equal share of the time each."""
     if s.steps is not None:
-        return {key: (s.steps[0], s.steps[1]) for key, _, _ in MODELS}
+        return {key: (s.steps[0], s.steps[1]) for key, _, _ in DEMO_MODELS}
     budget = s.minutes * 60.0 / len(s.training_seeds())
-    times = {key: tuple(OVERHEAD * t for t in step_times(s, device, overrides)) for key, _, overrides in MODELS}
+    times = {key: tuple(OVERHEAD * t for t in step_times(s, device, overrides)) for key, _, overrides in DEMO_MODELS}
     if s.equal_steps:  # one step of every model per "round": as many rounds as the budget holds
         t_bb, t_full = (sum(t[i] for t in times.values()) for i in (0, 1))
         n = (max(5, int(budget * s.backbone_share / t_bb)), max(5, int(budget * (1.0 - s.backbone_share) / t_full)))
         return dict.fromkeys(times, n)
-    share = budget / len(MODELS)
+    share = budget / len(DEMO_MODELS)
     return {
         key: (max(5, int(share * s.backbone_share / t_bb)), max(5, int(share * (1.0 - s.backbone_share) / t_full)))
         for key, (t_bb, t_full) in times.items()
@@ -150,11 +150,11 @@ def step_times(s: DemoSettings, device: torch.device, overrides: dict[str, Any])
 def train_models(
     s: DemoSettings, device: torch.device, out: Path, held: HeldOut, log: Callable[[str], None]
 ) -> Trained:
-    """Train each model of :data:`MODELS` with the same budget per seed, then complete the held-out scenes."""
+    """Train each model of :data:`DEMO_MODELS` with the same budget per seed, then complete the held-out scenes."""
     trained = Trained()
     seeds = s.training_seeds()
     plan = step_plan(s, device)
-    for key, label, overrides in MODELS:
+    for key, label, overrides in DEMO_MODELS:
         n_bb, n_full = plan[key]
         trained.steps[key] = {"backbone": n_bb, "full": n_full}
         trained.runs[key] = out / "runs" / key

@@ -30,7 +30,7 @@ from semattnet.apps.experiment import (
     complete_held_out,
     fallback_semantic,
     make_synthetic,
-    score,
+    score_held_out,
     train_variant,
 )
 from semattnet.baselines.classical import complete_classical
@@ -252,9 +252,9 @@ def package_reference(
         "levels": levels,
         "train_seconds": None if train_seconds is None else round(train_seconds, 1),
         "val": {
-            "reference": _metrics(score(preds, held)["all"]),
-            "reference_fallback_map": _metrics(score(blind, held)["all"]),
-            "classical": _metrics(score(classical, held)["all"]),
+            "reference": _metrics(score_held_out(preds, held)["all"]),
+            "reference_fallback_map": _metrics(score_held_out(blind, held)["all"]),
+            "classical": _metrics(score_held_out(classical, held)["all"]),
         },
     }
     save_reference(model, target, info, levels)

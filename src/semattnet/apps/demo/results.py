@@ -16,7 +16,7 @@ from semattnet.viz.report import ReportSetup
 
 __all__ = [
     "COMPARED",
-    "METRICS",
+    "DEMO_METRICS",
     "RESULTS_SCHEMA",
     "DemoSetup",
     "Machine",
@@ -73,7 +73,7 @@ class Machine(TypedDict):
 
 #: The demo's comparisons: SemAttNet against each of these, on these metrics (issue 16's bar).
 COMPARED: dict[str, tuple[str, ...]] = {"classical": ("rmse", "mae", "irmse", "imae"), "two_branch": ("rmse", "mae")}
-METRICS = ("rmse", "mae", "irmse", "imae")
+DEMO_METRICS = ("rmse", "mae", "irmse", "imae")
 _NAMES = {"rmse": "RMSE", "mae": "MAE", "irmse": "iRMSE", "imae": "iMAE"}
 #: results.json metric name -> key of :meth:`~semattnet.evaluation.metrics.KittiMetrics.compute`.
 _RESULT_KEYS = {"rmse": "rmse_mm", "mae": "mae_mm", "irmse": "irmse_per_km", "imae": "imae_per_km", "images": "images"}
@@ -116,7 +116,7 @@ def with_seed_rows(
 def comparisons(metrics: dict[str, dict[str, dict[str, float]]], ours: str = "semattnet") -> dict[str, dict[str, bool]]:
     """other method -> metric -> whether ``ours``'s held-out mean (over seeds) is lower (better)."""
     mine = record(metrics[ours])["all"]
-    return {other: {k: mine[k] < record(metrics[other])["all"][k] for k in METRICS} for other in COMPARED}
+    return {other: {k: mine[k] < record(metrics[other])["all"][k] for k in DEMO_METRICS} for other in COMPARED}
 
 
 def _mean_of(seeds: list[int]) -> str:
@@ -137,8 +137,8 @@ def verdict_sentences(
     out = []
     for other, wins in comparison.items():
         vs = LABELS[other] + (f" ({live})" if ours == REFERENCE_KEY and other == "two_branch" else "")
-        better = [_NAMES[k] for k in METRICS if wins[k]]
-        worse = [_NAMES[k] for k in METRICS if not wins[k]]
+        better = [_NAMES[k] for k in DEMO_METRICS if wins[k]]
+        worse = [_NAMES[k] for k in DEMO_METRICS if not wins[k]]
         text = f"{who} vs {vs}: "
         text += f"better on {', '.join(better)}" if better else "better on no metric"
         out.append(text + (f"; not better on {', '.join(worse)}." if worse else "."))

@@ -38,7 +38,7 @@ from semattnet.apps.demo.results import (
     with_seed_rows,
     write_results,
 )
-from semattnet.apps.experiment import HeldOut, complete_held_out, make_synthetic, score
+from semattnet.apps.experiment import HeldOut, complete_held_out, make_synthetic, score_held_out
 from semattnet.baselines.classical import complete_classical
 from semattnet.cache import sha256_file
 from semattnet.viz.report import write_report
@@ -80,10 +80,10 @@ def run_demo(
     trained = train_models(s, device, out, held, log)  # [3/5] and [4/5]
     reference = _reference(s, held, device, log)
     order = ("sparse", "classical", *reversed(MODEL_KEYS), *([REFERENCE_KEY] if reference else []))
-    runs = {m: {seed: score(preds[m], held) for seed, preds in trained.per_seed.items()} for m in MODEL_KEYS}
-    runs |= {m: dict.fromkeys(trained.per_seed, score(base[m], held)) for m in base}  # the same for every seed
+    runs = {m: {seed: score_held_out(preds[m], held) for seed, preds in trained.per_seed.items()} for m in MODEL_KEYS}
+    runs |= {m: dict.fromkeys(trained.per_seed, score_held_out(base[m], held)) for m in base}  # the same for every seed
     if reference is not None:
-        runs[REFERENCE_KEY] = {seed: score(preds, held) for seed, preds in reference[0].items()}
+        runs[REFERENCE_KEY] = {seed: score_held_out(preds, held) for seed, preds in reference[0].items()}
         base[REFERENCE_KEY] = next(iter(reference[0].values()))  # pictures and viewer: the first seed's
     metrics = {m: mean_over_seeds(runs[m]) for m in order}
     log("[5/5] writing pictures, the report and the viewer ...")

@@ -41,7 +41,7 @@ from .layout import Box
 from .lidar import LidarScan, lidar_to_camera, simulate_lidar
 from .materials import LABEL_COLOURS
 from .scenes import Shot, check_style, ground_truth_of, intrinsics, make_scene, shoot
-from .tree import SYNTH_DATE, check_out_folder, frame_seed, write_depth, write_image
+from .tree import SYNTH_DATE, check_out_folder, scene_seed, write_fast_depth, write_fast_image
 
 __all__ = [
     "BASELINE",
@@ -238,17 +238,17 @@ def _write_frame(out: Path, drive: str, k: int, fr: DriveFrame, offset: float = 
 
     name = f"{k:010d}"
     raw = out / "kitti_raw" / SYNTH_DATE / drive
-    write_image(layout.raw_image_path(out / "kitti_raw", drive, "02", name), fr.left.rgb)
-    write_image(layout.raw_image_path(out / "kitti_raw", drive, "03", name), fr.right.rgb)
+    write_fast_image(layout.raw_image_path(out / "kitti_raw", drive, "02", name), fr.left.rgb)
+    write_fast_image(layout.raw_image_path(out / "kitti_raw", drive, "03", name), fr.right.rgb)
     scan = raw / "velodyne_points" / "data" / f"{name}.bin"
     scan.parent.mkdir(parents=True, exist_ok=True)
     fr.points.astype("<f4").tofile(scan)
     oxts = raw / "oxts" / "data" / f"{name}.txt"
     oxts.parent.mkdir(parents=True, exist_ok=True)
     oxts.write_text(" ".join(f"{v:.14g}" for v in oxts_packet(offset + fr.forward, STEP * FRAME_RATE)) + "\n")
-    write_depth(layout.velodyne_path(out, "train", drive, "02", name), quantize_depth(fr.scan.sparse))
-    write_depth(layout.groundtruth_path(out, "train", drive, "02", name), quantize_depth(fr.gt))
-    write_image(layout.semantic_path(out / "semantic", drive, "02", name), LABEL_COLOURS[fr.left.labels])
+    write_fast_depth(layout.velodyne_path(out, "train", drive, "02", name), quantize_depth(fr.scan.sparse))
+    write_fast_depth(layout.groundtruth_path(out, "train", drive, "02", name), quantize_depth(fr.gt))
+    write_fast_image(layout.semantic_path(out / "semantic", drive, "02", name), LABEL_COLOURS[fr.left.labels])
 
 
 def _write_timestamps(raw: Path, frames: int) -> None:
@@ -270,11 +270,11 @@ def write_synthetic_drives(
 ) -> DriveManifest:
     """Write ``drives`` drives of ``frames`` frames each (see the module doc) under ``out``: the raw drives in
     ``out/kitti_raw/DATE/``, the depth-completion ``train`` split and semantic maps beside them, and the manifest
-    ``out/drives.json``. Drive ``i`` is the scene of seed ``frame_seed(seed, "drive", i)`` whatever ``drives``.
+    ``out/drives.json``. Drive ``i`` is the scene of seed ``scene_seed(seed, "drive", i)`` whatever ``drives``.
 
     ``streets`` > 1: each drive folder holds that many streets (``frames`` frames each) one after another, as a
     recording that drives through several places: street ``j`` of drive ``i`` is the scene of seed
-    ``frame_seed(seed, "drive", i * streets + j)``, its frames numbered from ``j * (frames + 1)`` (one number
+    ``scene_seed(seed, "drive", i * streets + j)``, its frames numbered from ``j * (frames + 1)`` (one number
     left out between streets, so no reader takes the last frame of a street and the first of the next for
     neighbours) and its OXTS positions :data:`STREET_GAP` further along the road.
 
@@ -294,9 +294,9 @@ def write_synthetic_drives(
     _write_calibration(out / "kitti_raw" / SYNTH_DATE, K, size, T_cam_lidar, dom)
     entries: list[dict[str, object]] = []
     for d in range(drives):
-        name, seeds = drive_name(d), [frame_seed(seed, "drive", d * streets + j) for j in range(streets)]
-        for j, scene_seed in enumerate(seeds):
-            for k, fr in enumerate(make_drive(frames, size, scene_seed, style, dom)):
+        name, seeds = drive_name(d), [scene_seed(seed, "drive", d * streets + j) for j in range(streets)]
+        for j, street_seed in enumerate(seeds):
+            for k, fr in enumerate(make_drive(frames, size, street_seed, style, dom)):
                 _write_frame(out, name, j * (frames + 1) + k, fr, j * STREET_GAP)
         _write_timestamps(out / "kitti_raw" / SYNTH_DATE / name, streets * (frames + 1) - 1)
         entries.append({"drive": name, "seeds": seeds, "frames": streets * frames})

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["CAM_HEIGHT", "Box", "make_boxes", "road_half_width", "window"]
+__all__ = ["CAM_HEIGHT", "Box", "make_boxes", "road_half_width", "window_corners"]
 
 #: Height of the camera above the ground plane, metres (KITTI's camera 02: 1.65 m).
 CAM_HEIGHT = 1.65
@@ -115,7 +115,7 @@ def road_half_width(boxes: list[Box]) -> float:
     return min(poles) - 0.4 if poles else 5.0
 
 
-def window(points: np.ndarray) -> np.ndarray:
+def window_corners(points: np.ndarray) -> np.ndarray:
     """Which points (N, 3) of a facade lie on a window (a grid of 1.2 x 1.2 m panes)."""
     wy, wz = np.mod(points[:, 1], 3.0), np.mod(points[:, 2] + points[:, 0], 2.5)
     on: np.ndarray = (wy > 1.2) & (wy < 2.4) & (wz > 0.6) & (wz < 1.8)

@@ -12,7 +12,7 @@ import numpy as np
 
 from semattnet.palette import TRAIN_CLASSES
 
-from .layout import Box, window
+from .layout import Box, window_corners
 
 __all__ = [
     "CITYSCAPES_PALETTE",
@@ -72,5 +72,5 @@ def surfaces(
     material[(material == MATERIAL_IDS["glass"]) & (axis == 1)] = MATERIAL_IDS["matte"]  # a cabin's roof
     poster, colour = posters(points, idx, axis, boxes)
     facade = np.flatnonzero(on_box & is_building[safe] & (axis != 1) & ~poster)
-    material[facade[window(points[facade])]] = MATERIAL_IDS["glass"]
+    material[facade[window_corners(points[facade])]] = MATERIAL_IDS["glass"]
     return material, poster, colour

@@ -13,7 +13,7 @@ import numpy as np
 from .domain import Pose
 from .layout import CAM_HEIGHT, Box
 
-__all__ = ["View", "camera_view", "cast", "cast_camera", "pixel_rays"]
+__all__ = ["RayView", "camera_view", "cast", "cast_camera", "pixel_rays"]
 
 
 def cast(origin: np.ndarray, dirs: np.ndarray, boxes: list[Box]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -106,7 +106,7 @@ def cast_camera(
 
 
 @dataclass
-class View:
+class RayView:
     """What the camera sees, per pixel (flattened row-major): ray, what it hits and where."""
 
     height: int
@@ -121,7 +121,7 @@ class View:
     depth: np.ndarray  # (N,) depth in the camera (z of the camera frame), 0 where far
 
 
-def camera_view(K: np.ndarray, height: int, width: int, boxes: list[Box], pose: Pose | None = None) -> View:
+def camera_view(K: np.ndarray, height: int, width: int, boxes: list[Box], pose: Pose | None = None) -> RayView:
     """Cast the camera's rays (from ``pose``, see :func:`cast_camera`); hits beyond 150 m count as sky."""
     dirs, t, idx, axis = cast_camera(K, height, width, boxes, pose)
     far = ~np.isfinite(t) | (t > 150)  # t is the depth: the rays have z = 1 in the camera
@@ -130,4 +130,4 @@ def camera_view(K: np.ndarray, height: int, width: int, boxes: list[Box], pose: 
     points = dirs * depth[:, None]
     if pose is not None and not pose.identity:
         points += pose.position
-    return View(height, width, dirs, idx, axis, far, points, idx >= 0, idx == -1, depth)
+    return RayView(height, width, dirs, idx, axis, far, points, idx >= 0, idx == -1, depth)

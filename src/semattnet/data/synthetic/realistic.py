@@ -15,7 +15,7 @@ import numpy as np
 
 from .layout import CAM_HEIGHT, Box, road_half_width
 from .materials import CLASS_IDS, MATERIAL_IDS
-from .raycast import View
+from .raycast import RayView
 
 __all__ = ["Dress", "camouflage_poles", "decorate", "dress"]
 
@@ -168,7 +168,7 @@ def _road_markings(points: np.ndarray, road: np.ndarray, dress: Dress) -> np.nda
 
 
 def decorate(
-    view: View, labels: np.ndarray, albedo: np.ndarray, surfaces: tuple[np.ndarray, ...], dress: Dress
+    view: RayView, labels: np.ndarray, albedo: np.ndarray, surfaces: tuple[np.ndarray, ...], dress: Dress
 ) -> tuple[np.ndarray, np.ndarray]:
     """Realistic albedo (glass dark bluish, posters, road markings) and where paint lies (no depth edges)."""
     material, poster, colour = surfaces

@@ -21,7 +21,7 @@ import numpy as np
 from .domain import Pose, pitch_down
 from .layout import CAM_HEIGHT, Box
 from .materials import CLASS_IDS
-from .raycast import View, camera_view
+from .raycast import RayView, camera_view
 from .scenes import Shot
 from .shading import render
 
@@ -299,7 +299,7 @@ def _floor_albedo(room: Finish, points: np.ndarray) -> np.ndarray:
     return out
 
 
-def _box_albedo(room: Room, view: View, on: np.ndarray) -> np.ndarray:
+def _box_albedo(room: Room, view: RayView, on: np.ndarray) -> np.ndarray:
     """(len(on), 3) colours of the box hits ``on``, by texture (see the module's docstring)."""
     idx, axis, p, fin = view.idx[on], view.axis[on], view.points[on], room.finish
     code = np.array([TEXTURES.index(t) for t in room.textures])[idx]
@@ -330,7 +330,7 @@ def _box_albedo(room: Room, view: View, on: np.ndarray) -> np.ndarray:
     return out
 
 
-def _light(room: Room, view: View, exposure: float) -> np.ndarray:
+def _light(room: Room, view: RayView, exposure: float) -> np.ndarray:
     """(N,) light: ``exposure`` x (ambient, less near walls and under furniture, + the lamps); windows glow."""
     n, p = view.height * view.width, view.points
     normal, on = np.zeros((n, 3)), np.flatnonzero(view.on_box)
@@ -355,7 +355,7 @@ def _light(room: Room, view: View, exposure: float) -> np.ndarray:
     return light
 
 
-def _view(room: Room, K: np.ndarray, height: int, width: int) -> View:
+def _view(room: Room, K: np.ndarray, height: int, width: int) -> RayView:
     """The camera's view of ``room``: the boxes inside that may be in view by :func:`~.raycast.camera_view`, the walls
     and the ceiling (boxes 0-4) here, as the inside of the room's box (cheaper than boxes all around the camera)."""
     lo, hi = np.array([b.lo for b in room.boxes[5:]]), np.array([b.hi for b in room.boxes[5:]])

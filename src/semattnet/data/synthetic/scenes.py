@@ -57,7 +57,7 @@ from .domain import SOURCE, Domain, Pose, get_domain
 from .layout import Box, make_boxes
 from .lidar import MAX_RANGE, simulate_lidar
 from .materials import CITYSCAPES_PALETTE, LABEL_COLOURS, MATERIAL_IDS, MATERIALS, surfaces
-from .raycast import View, camera_view
+from .raycast import RayView, camera_view
 from .realistic import Dress, camouflage_poles, decorate, dress
 from .shading import albedo, labels, overpass, overpass_band, render, sun_direction, sunlight
 
@@ -129,7 +129,7 @@ def intrinsics(height: int, width: int, size_of_kitti: bool = True, domain: Doma
 
 
 def _colours(
-    view: View, labels: np.ndarray, boxes: list[Box], dress: Dress | None
+    view: RayView, labels: np.ndarray, boxes: list[Box], dress: Dress | None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(N, 3) albedo, (N,) material codes and (N,) paint mask, with the realistic style's glass, posters,
     markings and camouflage (the ideal style: all matte, no paint beyond the centre line)."""

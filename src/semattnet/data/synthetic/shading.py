@@ -8,9 +8,9 @@ from typing import Any
 
 import numpy as np
 
-from .layout import CAM_HEIGHT, Box, road_half_width, window
+from .layout import CAM_HEIGHT, Box, road_half_width, window_corners
 from .materials import CLASS_IDS
-from .raycast import View
+from .raycast import RayView
 
 __all__ = [
     "albedo",
@@ -68,7 +68,7 @@ def ground_shadow(xz: np.ndarray, boxes: list[Box], sun: np.ndarray) -> np.ndarr
     return shadow
 
 
-def labels(view: View, boxes: list[Box]) -> np.ndarray:
+def labels(view: RayView, boxes: list[Box]) -> np.ndarray:
     """(N,) class ids: boxes by class, the ground by its distance from the road's centre line."""
     out = np.full(view.height * view.width, CLASS_IDS["sky"], dtype=np.int64)
     box_cls = np.array([CLASS_IDS[b.cls] for b in boxes] or [0], dtype=np.int64)
@@ -80,7 +80,7 @@ def labels(view: View, boxes: list[Box]) -> np.ndarray:
     return out
 
 
-def albedo(view: View, labels: np.ndarray, boxes: list[Box]) -> np.ndarray:
+def albedo(view: RayView, labels: np.ndarray, boxes: list[Box]) -> np.ndarray:
     """(N, 3) surface colours: box albedos, road with lane markings, sidewalk, facades with windows."""
     points, on_box = view.points, view.on_box
     out = np.zeros((view.height * view.width, 3))
@@ -91,7 +91,7 @@ def albedo(view: View, labels: np.ndarray, boxes: list[Box]) -> np.ndarray:
     lane = road & (np.abs(points[:, 0]) < 0.08) & (np.mod(points[:, 2], 6.0) < 3.0)
     out[lane] = [235, 235, 230]
     facade = on_box & (labels == CLASS_IDS["building"]) & (view.axis != 1)
-    out[facade & window(points)] *= 0.45  # windows
+    out[facade & window_corners(points)] *= 0.45  # windows
     return out
 
 
@@ -104,7 +104,7 @@ def sun_direction(
     return sun
 
 
-def sunlight(view: View, boxes: list[Box], sun: np.ndarray, exposure: float) -> np.ndarray:
+def sunlight(view: RayView, boxes: list[Box], sun: np.ndarray, exposure: float) -> np.ndarray:
     """(N,) light: ``exposure`` x (ambient + Lambertian sun), no sun where a box shades the ground."""
     normal = np.zeros((view.height * view.width, 3))
     normal[view.ground] = [0, -1, 0]
@@ -123,7 +123,7 @@ def overpass_band(rng: np.random.Generator) -> tuple[float, float]:
     return z0, z0 + rng.uniform(4, 9)
 
 
-def overpass(view: View, light: np.ndarray, band: tuple[float, float]) -> np.ndarray:
+def overpass(view: RayView, light: np.ndarray, band: tuple[float, float]) -> np.ndarray:
     """Shade the overpass ``band`` of the street (:func:`overpass_band`), whatever the surface: the new light."""
     z = view.points[:, 2]
     shaded: np.ndarray = np.where(~view.far & (z > band[0]) & (z < band[1]), light * 0.3, light)
@@ -131,7 +131,7 @@ def overpass(view: View, light: np.ndarray, band: tuple[float, float]) -> np.nda
 
 
 def render(
-    view: View, albedo: np.ndarray, light: np.ndarray, exposure: float, rng: np.random.Generator, noise: float = 0.06
+    view: RayView, albedo: np.ndarray, light: np.ndarray, exposure: float, rng: np.random.Generator, noise: float = 0.06
 ) -> np.ndarray:
     """(H, W, 3) uint8 image: albedo x light x (1 + ``noise`` x a normal draw), and a vertical gradient for the sky."""
     h, w, far = view.height, view.width, view.far

@@ -27,7 +27,7 @@ from semattnet.data.io import write_image as _write_image
 from semattnet.data.synthetic.domain import Domain, get_domain
 from semattnet.data.synthetic.scenes import check_style, make_frame
 
-__all__ = ["SYNTH_DATE", "frame_seed", "write_synthetic_kitti"]
+__all__ = ["SYNTH_DATE", "scene_seed", "write_synthetic_kitti"]
 
 #: The date in synthetic drive names: clearly not a KITTI recording day.
 SYNTH_DATE = "2000_01_01"
@@ -35,15 +35,17 @@ _FRAMES_PER_DRIVE = 10
 _DRIVE_BASE = {"train": 0, "val": 1000}
 
 
-def write_depth(path: Path, depth: np.ndarray) -> None:
+def write_fast_depth(path: Path, depth: np.ndarray) -> None:
+    """A depth PNG at zlib level 1 (fast; the encoding is unchanged)."""
     _write_depth(path, depth, compress_level=1)  # fast; the encoding is unchanged
 
 
-def write_image(path: Path, image: np.ndarray) -> None:
+def write_fast_image(path: Path, image: np.ndarray) -> None:
+    """An image PNG at zlib level 1."""
     _write_image(path, image, compress_level=1)
 
 
-def frame_seed(seed: int, split: str, index: int) -> int:
+def scene_seed(seed: int, split: str, index: int) -> int:
     """The scene seed of frame ``index`` of ``split`` in a tree written with ``seed``."""
     return int(zlib.crc32(f"{seed}/{split}/{index}".encode()))
 
@@ -74,16 +76,16 @@ _Job = tuple[Path, str, int, int, int, int, bool | None, str, Domain]
 
 def _job(args: _Job) -> dict[str, object]:
     out, split, index, seed, height, width, shadow, style, domain = args
-    fseed = frame_seed(seed, split, index)
+    fseed = scene_seed(seed, split, index)
     fr = make_frame(height, width, seed=fseed, shadow=shadow, style=style, domain=domain)
     entry: dict[str, object] = {"split": split, "index": index, "seed": fseed, "shadowed": fr.shadowed}
     if split in ("train", "val"):
         drive = f"{SYNTH_DATE}_drive_{_DRIVE_BASE[split] + index // _FRAMES_PER_DRIVE:04d}_sync"
         frame = f"{index % _FRAMES_PER_DRIVE:010d}"
-        write_depth(layout.velodyne_path(out, split, drive, "02", frame), fr.sparse)
-        write_depth(layout.groundtruth_path(out, split, drive, "02", frame), fr.gt)
-        write_image(layout.raw_image_path(out / "kitti_raw", drive, "02", frame), fr.rgb)
-        write_image(layout.semantic_path(out / "semantic", drive, "02", frame), fr.semantic)
+        write_fast_depth(layout.velodyne_path(out, split, drive, "02", frame), fr.sparse)
+        write_fast_depth(layout.groundtruth_path(out, split, drive, "02", frame), fr.gt)
+        write_fast_image(layout.raw_image_path(out / "kitti_raw", drive, "02", frame), fr.rgb)
+        write_fast_image(layout.semantic_path(out / "semantic", drive, "02", frame), fr.semantic)
         entry["name"] = f"{drive}_image_02_{frame}"
     else:
         sub = layout.VAL_SELECT_DIR if split == "val_select" else layout.TEST_DIR
@@ -91,15 +93,17 @@ def _job(args: _Job) -> dict[str, object]:
         if split == "val_select":
             drive, frame = f"{SYNTH_DATE}_drive_{2000 + index // _FRAMES_PER_DRIVE:04d}_sync", f"{index:010d}"
             image_name = layout.selection_name(drive, "image", frame, "02")
-            write_depth(base / "velodyne_raw" / layout.selection_name(drive, "velodyne_raw", frame, "02"), fr.sparse)
-            write_depth(
+            write_fast_depth(
+                base / "velodyne_raw" / layout.selection_name(drive, "velodyne_raw", frame, "02"), fr.sparse
+            )
+            write_fast_depth(
                 base / "groundtruth_depth" / layout.selection_name(drive, "groundtruth_depth", frame, "02"), fr.gt
             )
         else:
             image_name = f"{index:010d}.png"
-            write_depth(base / "velodyne_raw" / image_name, fr.sparse)
-        write_image(base / "image" / image_name, fr.rgb)
-        write_image(base / "semantic" / image_name, fr.semantic)
+            write_fast_depth(base / "velodyne_raw" / image_name, fr.sparse)
+        write_fast_image(base / "image" / image_name, fr.rgb)
+        write_fast_image(base / "semantic" / image_name, fr.semantic)
         (base / "intrinsics").mkdir(parents=True, exist_ok=True)
         (base / "intrinsics" / (Path(image_name).stem + ".txt")).write_text(" ".join(f"{v:.6e}" for v in fr.K.ravel()))
         entry["name"] = Path(image_name).stem

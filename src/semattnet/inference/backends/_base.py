@@ -19,7 +19,7 @@ __all__ = [
     "ExportedGraphEngine",
     "InferenceEngine",
     "LogFn",
-    "StageHook",
+    "StageClock",
     "graph_outputs",
     "output_from_arrays",
 ]
@@ -28,7 +28,7 @@ __all__ = [
 LogFn = Callable[[str], object]
 #: The timing hook of a stage an engine runs inside its call: ``hook(stage)`` is the context the stage runs in
 #: (e.g. :meth:`semattnet.inference.timing.StageTimes.time` of the current frame).
-StageHook = Callable[[str], AbstractContextManager[object]]
+StageClock = Callable[[str], AbstractContextManager[object]]
 
 _FIELDS = tuple(f.name for f in fields(DepthCompletionOutput))
 
@@ -47,12 +47,12 @@ class InferenceEngine(nn.Module):
         needs_semantic: whether ``semantic`` is required.
         inner_stages: the stages run inside a call that go through ``on_stage`` when it is set (the ``torch``
             engine's ``propagation``); empty when the call is not split.
-        on_stage: the timing hook of those stages (:data:`StageHook`), or None.
+        on_stage: the timing hook of those stages (:data:`StageClock`), or None.
     """
 
     backend: str = "?"
     inner_stages: tuple[str, ...] = ()
-    on_stage: StageHook | None = None
+    on_stage: StageClock | None = None
 
     def __init__(self, size: tuple[int, int] | None, precision: str, needs_semantic: bool) -> None:
         super().__init__()

@@ -28,7 +28,7 @@ __all__ = [
     "decode_image",
     "decode_pointcloud2",
     "header_stamp_frame",
-    "stamp_ns",
+    "msg_stamp_ns",
 ]
 
 #: ``sensor_msgs/Image`` encodings read as colour: encoding -> (channels, channel order to RGB).
@@ -50,7 +50,7 @@ MAX_POINT_COORDINATE_M = 1000.0
 MAX_FOCAL_PER_PIXEL = 1000.0
 
 
-def stamp_ns(stamp: TimeMsg) -> int:
+def msg_stamp_ns(stamp: TimeMsg) -> int:
     """Nanoseconds of a ``builtin_interfaces/Time`` (``sec``, ``nanosec``)."""
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
@@ -256,5 +256,13 @@ def decode_camera_info(msg: CameraInfoMsg, topic: str) -> CameraInfoData:
     if not (_intrinsics_set("K", K, (w, h), topic) | _intrinsics_set("P", P, (w, h), topic)):
         raise DataError(f"{topic}: CameraInfo is uncalibrated (K and P are all zero)")
     return CameraInfoData(
-        w, h, K, D, R, P, str(msg.distortion_model), str(msg.header.frame_id).lstrip("/"), stamp_ns(msg.header.stamp)
+        w,
+        h,
+        K,
+        D,
+        R,
+        P,
+        str(msg.distortion_model),
+        str(msg.header.frame_id).lstrip("/"),
+        msg_stamp_ns(msg.header.stamp),
     )

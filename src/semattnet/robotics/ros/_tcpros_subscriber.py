@@ -16,8 +16,8 @@ from ._tcpros_wire import (
     TcprosError,
     check_http_uri,
     encode_header,
-    read_frame,
     read_header,
+    read_wire_frame,
     shutdown_socket,
     xmlrpc_call,
 )
@@ -70,7 +70,7 @@ class Inbound:
             try:
                 sock = self._connect()
                 attempt = 0
-                while (frame := read_frame(sock, self.sub.max_message_bytes, self.stop)) is not None:
+                while (frame := read_wire_frame(sock, self.sub.max_message_bytes, self.stop)) is not None:
                     self.sub.deliver(frame)
                 if not self.stop.is_set():
                     _log.info("%s: publisher %r closed the connection; reconnecting", self.sub.topic, self.uri)

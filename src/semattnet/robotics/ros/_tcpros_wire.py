@@ -32,8 +32,8 @@ __all__ = [
     "check_http_uri",
     "decode_header",
     "encode_header",
-    "read_frame",
     "read_header",
+    "read_wire_frame",
     "shutdown_socket",
     "xmlrpc_call",
 ]
@@ -139,7 +139,7 @@ def read_header(sock: socket.socket) -> dict[str, str]:
     return decode_header(block)
 
 
-def read_frame(sock: socket.socket, limit: int, stop: threading.Event) -> bytes | None:
+def read_wire_frame(sock: socket.socket, limit: int, stop: threading.Event) -> bytes | None:
     """One serialised message of at most ``limit`` bytes; None when the peer closed or ``stop`` is set."""
     return _read_block(sock, limit, "message", stop)
 

@@ -27,7 +27,7 @@ from semattnet.robotics.bags.decode import (
     decode_compressed_image,
     decode_image,
     decode_pointcloud2,
-    stamp_ns,
+    msg_stamp_ns,
 )
 from semattnet.robotics.bags.messages import (
     CameraInfoMsg,
@@ -164,7 +164,7 @@ class PairingInputs:
         if got is not None:
             head = cast(_Headed, msg).header
             with self._lock:
-                self._images.append(Stamped(stamp_ns(head.stamp), str(head.frame_id).lstrip("/"), got[0], got[1]))
+                self._images.append(Stamped(msg_stamp_ns(head.stamp), str(head.frame_id).lstrip("/"), got[0], got[1]))
                 self._match()
 
     def on_scan(self, msg: object) -> None:
@@ -176,7 +176,7 @@ class PairingInputs:
         if got is not None:
             head = cast(_Headed, msg).header
             with self._lock:
-                self._scans.append(Stamped(stamp_ns(head.stamp), str(head.frame_id).lstrip("/"), got[0], got[1]))
+                self._scans.append(Stamped(msg_stamp_ns(head.stamp), str(head.frame_id).lstrip("/"), got[0], got[1]))
                 self._match()
 
     def on_camera_info(self, msg: object) -> None:

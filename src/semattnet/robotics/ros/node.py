@@ -51,7 +51,7 @@ __all__ = ["DepthNode", "NodeTopics", "StageStats", "run_node"]
 log = logging.getLogger("semattnet.ros")
 
 #: The worker's stages, in order.
-STAGES = ("projection", "network", "publish")
+NODE_STAGES = ("projection", "network", "publish")
 
 
 @dataclass(frozen=True)
@@ -87,8 +87,8 @@ class StageStats:
 
     @staticmethod
     def line(table: dict[str, list[float]]) -> str:
-        """``stage mean/max ms, ...`` in :data:`STAGES` order."""
-        parts = [f"{s} {c[1] / c[0]:.1f}/{c[2]:.1f}" for s in STAGES if (c := table.get(s)) and c[0]]
+        """``stage mean/max ms, ...`` in :data:`NODE_STAGES` order."""
+        parts = [f"{s} {c[1] / c[0]:.1f}/{c[2]:.1f}" for s in NODE_STAGES if (c := table.get(s)) and c[0]]
         return "ms mean/max: " + (", ".join(parts) or "none yet")
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from semattnet.cache.errors import ChecksumError, DownloadError
 from semattnet.cache.store import read_pins, verify_cached
-from semattnet.weights import fetch
+from semattnet.weights import fetch_weights
 
 
 def _same_size_and_time(path: Path, data: bytes) -> None:
@@ -37,7 +37,7 @@ def test_a_file_placed_by_hand_is_hashed_again_on_every_hit(tmp_path: Path) -> N
 def test_a_download_records_that_we_wrote_it(tmp_path: Path) -> None:
     src = tmp_path / "model.bin"
     src.write_bytes(b"\x00weights" * 100)
-    path = fetch(src.as_uri(), cache_dir=tmp_path / "cache", progress=False)
+    path = fetch_weights(src.as_uri(), cache_dir=tmp_path / "cache", progress=False)
     (record,) = read_pins(tmp_path / "cache").values()
     assert record["written"] is True and path.read_bytes() == src.read_bytes()
 
@@ -54,10 +54,10 @@ def test_a_web_page_is_never_pinned_and_the_fixed_server_is_then_trusted(tmp_pat
     served.write_bytes(page)
     cache = tmp_path / "cache"
     with pytest.raises(DownloadError, match="web page"):
-        fetch(served.as_uri(), cache_dir=cache, progress=False)
+        fetch_weights(served.as_uri(), cache_dir=cache, progress=False)
     pins = cache / "pins.json"
     assert not pins.exists() or json.loads(pins.read_text()) == {}
     assert not [p for p in cache.rglob("*") if p.is_file() and p.name != "pins.json" and ".lock" not in p.name]
     served.write_bytes(b"\x00real weights" * 50)  # the mirror is fixed
-    path = fetch(served.as_uri(), cache_dir=cache, progress=False)
+    path = fetch_weights(served.as_uri(), cache_dir=cache, progress=False)
     assert path.read_bytes() == served.read_bytes()

@@ -1,8 +1,7 @@
-"""Issue 48, round 5: int8 calibration frames that cannot be used (a file, an empty folder, empty subfolders, a
-corrupt PNG, a frame without a LiDAR point) are one line naming ``--calibration`` and the file, before any work,
-never "no frame could be completed" about every frame. (The other findings of the round are tested beside
-their code: tests/evaluation/test_metrics_pairs.py, tests/data/test_datasets.py, tests/weights/,
-tests/inference/test_uncertainty_outputs.py.)"""
+"""int8 calibration frames that cannot be used (a file, an empty folder, empty subfolders, a corrupt PNG, a frame
+without a LiDAR point) are blamed on the calibration, not on the frames: one line naming ``--calibration`` and the
+file, before any work, never "no frame could be completed" about every frame; in the library, a run error, not a
+frame's fault (issue 48)."""
 
 from __future__ import annotations
 
