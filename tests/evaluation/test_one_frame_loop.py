@@ -1,6 +1,8 @@
-"""Evaluation has no frame loop of its own (issue 34): every module of ``semattnet.evaluation`` that completes
-frames does it through :func:`~semattnet.inference.pipeline.complete_frames` (or ``plan.run``, a
-:class:`~semattnet.inference.pipeline.RunPlan`'s run: the same loop), read from the source with ``ast``.
+"""One frame loop (issues 34, 55): every module of ``semattnet.evaluation`` that completes frames does it through
+:func:`~semattnet.inference.pipeline.complete_frames` (or ``plan.run``, a
+:class:`~semattnet.inference.pipeline.RunPlan`'s run: the same loop), and no module of any subpackage (the live
+node's included) has a loop of its own but the loop's own modules and those listed with why they may
+(:data:`WHY_IT_MAY`), read from the source with ``ast``.
 
 A private loop shows in one of four ways: a completer, engine or model called on inputs (``completer(rgb,
 ...)``, ``engine.run(...)``), the loop's own parts used (``completions``, ``read_frame``, ``predict_frame``,
@@ -127,3 +129,56 @@ def test_the_scoring_modules_run_the_one_loop(module: str) -> None:
     without frames)."""
     tree = ast.parse((EVALUATION / module).read_text(encoding="utf-8"))
     assert any(isinstance(n, ast.Call) and _runs_the_loop(n) for n in ast.walk(tree)), module
+
+
+SRC = EVALUATION.parent
+#: The modules that show a sign of a frame loop and why that is not a second one (module -> why).
+WHY_IT_MAY = {
+    "inference/feed.py": "the loop's reader and completion: the one loop",
+    "inference/loop.py": "the loop itself",
+    "inference/live.py": "the loop for frames a sensor pushes: feed's live reader, the sinks' lifecycle",
+    "inference/pipeline.py": "complete_frames: plan.run, the loop",
+    "inference/sinks/base.py": "write_prediction, the loop's one writer",
+    "inference/completer.py": "DepthCompleter: the engine call on one frame or a batch, and stream() = completions",
+    "inference/backends/onnxruntime_engine.py": "an engine: runs the network on one padded batch",
+    "inference/backends/openvino_engine.py": "an engine: runs the network on one padded batch",
+    "inference/backends/torch_engine.py": "an engine: runs the network on one padded batch",
+    "inference/backends/calibration.py": "int8's calibration frames read once to quantise (no completion)",
+    "models/generalist.py": "the generalist's forward calls its network",
+    "models/macs.py": "counts a forward's multiply-accumulates",
+    "models/rt.py": "layers indexed in a forward",
+    "models/bn_folding.py": "modules indexed while folding",
+    "weights/export.py": "traces a forward to export it",
+    "segmentation/hf.py": "a segmenter's forward",
+    "segmentation/segmenter.py": "a segmenter's forward",
+    "segmentation/datasets.py": "a split's maps segmented once into a cache (no depth completion)",
+    "data/frames.py": "IndexedSource.load over its own items (the source side)",
+    "data/datasets/check.py": "decodes every frame of a split to check it (no completion)",
+    "training/trainer.py": "training batches (a DataLoader), not frames to complete",
+    "training/validation.py": "validation batches of the training loop",
+    "training/reference.py": "the authors' training step, for the benchmark",
+    "training/generalist.py": "the generalist's training batches and calibration",
+    "training/adapt/model.py": "adapt's forward on training crops",
+    "training/adapt/pool.py": "adapt's frame pool read once through read_frame (no completion)",
+    "training/adapt/run.py": "adapt's training steps and its held-out metric on a few frames",
+    "apps/experiment.py": "the demo's held-out scenes, completed in batches by a trained network",
+    "apps/benchmark.py": "times a forward",
+    "apps/front_figure.py": "the README figure's few scenes",
+    "cli/weights.py": "lists registry rows by index",
+    "robotics/bag_source.py": "numbers the bag's pairs (no completion)",
+}
+
+
+def _modules() -> list[str]:
+    return sorted(str(p.relative_to(SRC)) for p in SRC.rglob("*.py"))
+
+
+@pytest.mark.parametrize("module", [m for m in _modules() if m not in WHY_IT_MAY])
+def test_no_module_of_any_subpackage_has_a_frame_loop_of_its_own(module: str) -> None:
+    found = private_loops((SRC / module).read_text(encoding="utf-8"))
+    assert found == [], f"{module}: complete frames through the one loop (or say in WHY_IT_MAY why it may): {found}"
+
+
+def test_every_listed_module_exists_and_still_needs_its_reason() -> None:
+    stale = [m for m in WHY_IT_MAY if not (SRC / m).is_file() or not private_loops((SRC / m).read_text())]
+    assert stale == [], f"no longer a sign of a loop (drop from WHY_IT_MAY): {stale}"

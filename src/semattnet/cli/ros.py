@@ -26,7 +26,7 @@ from semattnet.cli._params import GeneratedCommand, rehelp, section, values_of, 
 if TYPE_CHECKING:
     from semattnet.inference.contract import Completer
     from semattnet.inference.semantic import SemanticMaps
-    from semattnet.inference.sinks import RunSink
+    from semattnet.inference.sinks import Sink
     from semattnet.inference.uncertainty import UncertaintyLimit
     from semattnet.robotics.ros.node import DepthNode
     from semattnet.robotics.ros.transport import Transport
@@ -154,20 +154,21 @@ class NodeOptions:
     live: str | None
     rerun_serve: str | None
 
-    def viewers(self, limit: UncertaintyLimit | None) -> list[RunSink]:
-        """The live viewers asked for (``--live``, ``--rerun-serve``), fed every published frame."""
-        sinks: list[RunSink] = []
-        if self.live is not None:
-            from semattnet.robotics.live import LiveSink
+    def viewers(self, limit: UncertaintyLimit | None) -> list[Sink]:
+        """The live viewers asked for (``--live``, ``--rerun-serve``), made by their sink entries' options as
+        ``predict`` makes them, fed every published frame."""
+        import math
 
-            sinks.append(LiveSink(address=self.live, max_depth=self.max_depth, log=click.echo, max_uncertainty=limit))
-        if self.rerun_serve is not None:
-            from semattnet.robotics.sinks import RerunSink
+        from semattnet.inference.sinks import OutputSettings
+        from semattnet.robotics.live import LiveOptions
+        from semattnet.robotics.sinks import RerunOptions
 
-            sinks.append(
-                RerunSink(serve=self.rerun_serve, max_depth=self.max_depth, log=click.echo, max_uncertainty=limit)
-            )
-        return sinks
+        depth = self.max_depth if self.max_depth is not None else math.inf
+        settings = OutputSettings(max_uncertainty=limit, max_depth=depth, log=click.echo)
+        return [
+            *LiveOptions(live=self.live).sinks(settings),
+            *RerunOptions(rerun_serve=self.rerun_serve).sinks(settings),
+        ]
 
     def node(self, completer: Completer, semantic: SemanticMaps, transport: Callable[[], Transport]) -> DepthNode:
         """The node on the transport ``transport()`` makes (the names and the rig checked first)."""

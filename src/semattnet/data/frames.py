@@ -24,15 +24,18 @@ from semattnet.geometry.calibration import RigCalibration
 from semattnet.geometry.cameras import CameraInfoData
 
 __all__ = [
+    "Dropped",
     "DuplicateFrameError",
     "Frame",
     "FrameSource",
     "IndexedSource",
+    "LiveSource",
     "SensorMeta",
     "SourceInfo",
     "TwoStageSource",
     "View",
     "ViewSource",
+    "sensor_frame",
     "unique_names",
 ]
 
@@ -202,6 +205,31 @@ class TwoStageSource(FrameSource, Protocol[_R]):
     def assemble(self, raw: _R) -> Frame: ...
 
 
+@dataclass(frozen=True)
+class Dropped:
+    """An item of a :class:`LiveSource` that a newer one replaced before the loop took it: its frame ``name`` and
+    why."""
+
+    name: str
+    reason: str
+
+
+class LiveSource(Protocol[_R]):
+    """Frames a sensor pushes, as a live node receives them: no names ahead, the newest item waits and a newer one
+    replaces it. The frame loop takes what came (:func:`semattnet.inference.feed.live_completions`).
+
+    ``take(timeout)``: the next note that an item was replaced before the loop took it (:class:`Dropped`, in
+    order), else the newest item; None when nothing came within ``timeout`` seconds. ``name(raw)``: the item's frame
+    name. ``assemble(raw)``: its :class:`Frame` (the scan projected: :func:`sensor_frame`; timed as the loop's
+    ``projection``)."""
+
+    def take(self, timeout: float) -> _R | Dropped | None: ...
+
+    def name(self, raw: _R) -> str: ...
+
+    def assemble(self, raw: _R) -> Frame: ...
+
+
 @runtime_checkable
 class ViewSource(Protocol):
     """A source that can also give a frame's other calibrated views (:class:`View`: a stereo partner, neighbouring
@@ -261,3 +289,47 @@ def unique_names(items: Iterable[tuple[str, _T]], where: object) -> dict[str, _T
             )
         out[name] = item
     return out
+
+
+def sensor_frame(
+    name: str,
+    image: np.ndarray,
+    meta: SensorMeta,
+    calib: RigCalibration,
+    *,
+    points: np.ndarray | None = None,
+    sparse: np.ndarray | None = None,
+    where: str = "",
+    semantic: np.ndarray | None = None,
+    paths: Mapping[str, Path] | None = None,
+) -> Frame:
+    """The frame of one camera image and its scan from a sensor stream (a bag, a live node): the scan's ``points``
+    (LiDAR frame, metres) projected into the image by ``calib`` (:func:`~semattnet.geometry.project_points`), or a
+    ``sparse`` depth image of the image's size as it is; ``where`` names the scan in errors.
+
+    Raises:
+        DataError: a sparse depth image of another size than the image, or no point of the scan in front of the
+            camera and inside the image (the projection's error, naming ``where``).
+    """
+    h, w = image.shape[:2]
+    if points is not None:
+        from semattnet.geometry import project_points
+
+        sparse = project_points(points, calib.K, calib.T_cam_lidar, (w, h), name=where)
+    elif sparse is None or sparse.shape != (h, w):
+        got = "none" if sparse is None else f"{sparse.shape[1]}x{sparse.shape[0]}"
+        raise DataError(f"{where}: the sparse depth is {got}, the image {w}x{h}")
+    stamp = None if meta.stamp_ns is None else meta.stamp_ns / 1e9
+    K = np.asarray(calib.K, np.float64)
+    return Frame(
+        name,
+        image,
+        sparse,
+        semantic,
+        K=K,
+        timestamp=stamp,
+        points=points,
+        calib=calib,
+        paths=dict(paths or {}),
+        meta=meta,
+    )

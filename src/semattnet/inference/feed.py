@@ -33,9 +33,9 @@ from collections.abc import Callable, Generator, Iterator, Sequence
 from contextlib import AbstractContextManager, closing, contextmanager, nullcontext
 from dataclasses import dataclass
 from enum import Enum
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
-from semattnet.data.frames import Frame, FrameSource, TwoStageSource
+from semattnet.data.frames import Dropped, Frame, FrameSource, LiveSource, TwoStageSource
 from semattnet.inference.batching import BatchCompleter, complete_group, groups
 from semattnet.inference.contract import Completer, Completion, StageTimed
 from semattnet.inference.timing import DEFAULT_SENSOR_PERIOD_S, GAP_PERIODS, MAX_WAIT_S, StageTimes
@@ -43,7 +43,17 @@ from semattnet.inference.timing import DEFAULT_SENSOR_PERIOD_S, GAP_PERIODS, MAX
 if TYPE_CHECKING:
     from semattnet.inference.semantic import SemanticMaps
 
-__all__ = ["FrameFault", "check_frame_inputs", "completions", "fault_reason", "is_frame_fault", "read_frame"]
+_R = TypeVar("_R")
+
+__all__ = [
+    "FrameFault",
+    "check_frame_inputs",
+    "completions",
+    "fault_reason",
+    "is_frame_fault",
+    "live_completions",
+    "read_frame",
+]
 
 
 def is_frame_fault(exc: BaseException) -> bool:
@@ -88,12 +98,17 @@ def read_frame(source: FrameSource, name: str, semantic: SemanticMaps | None, ti
     else:
         with timer.time(name, "read"):
             frame = source.load(name)
+    return _with_semantic(frame, semantic, timer)
+
+
+def _with_semantic(frame: Frame, semantic: SemanticMaps | None, timer: StageTimes) -> Frame:
+    """``frame`` given its semantic map (timed as ``segmentation`` when a segmenter runs) and its stamp noted."""
     if semantic is not None and semantic.needed and semantic.segmenter is not None and frame.semantic is None:
-        with timer.time(name, "segmentation"):
+        with timer.time(frame.name, "segmentation"):
             frame = semantic.fill(frame)
     elif semantic is not None:
         frame = semantic.fill(frame)
-    timer.stamp(name, frame.timestamp)
+    timer.stamp(frame.name, frame.timestamp)
     return frame
 
 
@@ -426,3 +441,52 @@ def check_frame_inputs(source: FrameSource, names: Sequence[str], on_error: str)
                 raise
             faults[name] = " ".join(str(exc).split())
     return faults
+
+
+def live_completions(
+    source: LiveSource[_R],
+    completer: Completer,
+    stop: threading.Event,
+    timer: StageTimes,
+    *,
+    semantic: SemanticMaps | None = None,
+    report: Callable[[FrameFault], None] | None = None,
+    frames: int | None = None,
+    tick: Callable[[], None] | None = None,
+) -> Iterator[tuple[Frame, Completion]]:
+    """:func:`completions` for frames a sensor pushes (:class:`~semattnet.data.frames.LiveSource`): until ``stop``
+    is set (or ``frames`` frames were completed or skipped), the newest item is taken, assembled (timed as
+    ``projection``), given its semantic map and completed; an item replaced before it was taken goes to ``report``
+    as ``dropped``, the way ``--realtime`` drops frames. A frame's own fault (:func:`is_frame_fault`) goes to
+    ``report`` as ``skipped`` and the loop goes on; any other error ends it. ``tick`` runs between items (a report
+    line's clock)."""
+    fault = _FaultRule(timer, report, stop_on_fault=False)
+    timer = _start_timer(timer, "")
+    current, done = [""], 0
+    with _inner_stages(completer, timer, current):
+        timer.begin()
+        try:
+            while not stop.is_set() and (frames is None or done < frames):
+                item = source.take(0.1)
+                if tick is not None:
+                    tick()
+                if item is None:
+                    continue
+                if isinstance(item, Dropped):
+                    if report is not None:
+                        report(FrameFault(item.name, "dropped", item.reason))
+                    continue
+                done += 1
+                name = source.name(item)
+                try:
+                    with timer.time(name, "projection"):
+                        frame = source.assemble(item)
+                    frame = _with_semantic(frame, semantic, timer)
+                except Exception as exc:
+                    if not is_frame_fault(exc):
+                        raise
+                    fault(name, exc)
+                    continue
+                yield from _complete_one(completer, [frame], timer, current, fault.of_frame)
+        finally:
+            timer.end()

@@ -22,6 +22,7 @@ __all__ = [
     "STAGES",
     "LatencySummary",
     "StageSummary",
+    "StageTally",
     "StageTimes",
     "cpu_name",
 ]
@@ -140,6 +141,13 @@ class StageTimes:
         with self._lock:
             self.times.pop(name, None)
 
+    def settle(self, name: str) -> dict[str, float]:
+        """Frame ``name``'s seconds per stage, forgotten here (a live run hands each frame to a
+        :class:`StageTally` this way, so its memory stays the same however long it runs)."""
+        with self._lock:
+            self.stamps.pop(name, None)
+            return self.times.pop(name, {})
+
     def stamp(self, name: str, seconds: float | None) -> None:
         """Record frame ``name``'s sensor time (seconds), for the sensor period."""
         if seconds is not None:
@@ -242,3 +250,28 @@ class StageTimes:
 
     def to_json(self) -> str:
         return json.dumps(self.summary(), indent=2) + "\n"
+
+
+class StageTally:
+    """Count, sum and maximum per stage of the frames settled so far (:meth:`StageTimes.settle`): since the last
+    :meth:`line` and in total, in constant memory (a live node's report lines)."""
+
+    def __init__(self) -> None:
+        self.period: dict[str, list[float]] = {}  # stage -> [count, sum ms, max ms]
+        self.total: dict[str, list[float]] = {}
+
+    def add(self, seconds: dict[str, float]) -> None:
+        """One frame's seconds per stage."""
+        for stage, s in seconds.items():
+            for table in (self.period, self.total):
+                c = table.setdefault(stage, [0.0, 0.0, 0.0])
+                c[0], c[1], c[2] = c[0] + 1, c[1] + 1e3 * s, max(c[2], 1e3 * s)
+
+    def line(self, total: bool = False) -> str:
+        """``ms mean/max: stage mean/max, ...`` in :data:`STAGES` order, since the last line (``total``: of all),
+        which starts a new period."""
+        table = self.total if total else self.period
+        parts = [f"{_LABELS.get(s, s)} {c[1] / c[0]:.1f}/{c[2]:.1f}" for s in STAGES if (c := table.get(s)) and c[0]]
+        if not total:
+            self.period = {}
+        return "ms mean/max: " + (", ".join(parts) or "none yet")

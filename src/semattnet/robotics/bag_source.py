@@ -26,7 +26,7 @@ import numpy as np
 
 from semattnet._errors import DataError
 from semattnet._utils.registry import OptionError, option
-from semattnet.data.frames import Frame, IndexedSource, SensorMeta, SourceInfo, View
+from semattnet.data.frames import Frame, IndexedSource, SensorMeta, SourceInfo, View, sensor_frame
 from semattnet.data.sources.registry import SourceOptions, register_source
 from semattnet.geometry import RigCalibration
 from semattnet.robotics.bags import BagFailure, BagPair, BagPairs, StampPairing
@@ -307,27 +307,21 @@ class BagSource(IndexedSource):
             return item, self._semantic(i, (item.image.shape[1], item.image.shape[0]))
 
     def assemble(self, raw: tuple[BagPair, np.ndarray | None]) -> Frame:
-        """The frame of what :meth:`read` returned: the scan projected into the image."""
-        from semattnet.geometry import project_points
-
+        """The frame of what :meth:`read` returned: the scan projected into the image (:func:`sensor_frame`)."""
         p, semantic = raw
-        bag = self.pairs
-        where = f"{self._frame_where(p.index)}: {message_where(bag.points_topic, p.scan_index)}"
+        where = f"{self._frame_where(p.index)}: {message_where(self.pairs.points_topic, p.scan_index)}"
         if p.dropped_points:  # named when nothing is left to project
             where += f" ({p.dropped_points} point(s) with a NaN or infinite coordinate dropped)"
-        sparse = project_points(p.points, p.K, p.T_cam_lidar, p.image_size, name=where)
         meta = SensorMeta(p.stamp_ns, p.frame_id, p.lidar_frame_id, p.scan_stamp_ns, p.camera_info, p.dropped_points)
-        return Frame(
+        return sensor_frame(
             p.name,
             p.image,
-            sparse,
-            semantic,
-            K=p.K,
-            timestamp=p.stamp_ns / 1e9,
+            meta,
+            p.calibration,
             points=p.points,
-            calib=p.calibration,
+            where=where,
+            semantic=semantic,
             paths={"bag": self.path},
-            meta=meta,
         )
 
     def load(self, name: str) -> Frame:

@@ -26,7 +26,7 @@ class FakeTransport:
     name = "fake"
 
     def __init__(self) -> None:
-        self.ts = TS
+        self.typestore = TS
         self.subs: dict[str, tuple[str, QoS, Callable[[object], None]]] = {}
         self.published: dict[str, list[object]] = {}
         self.closed = False

@@ -37,7 +37,7 @@ def test_image_round_trip_is_rosbags_cdr() -> None:
         b.subscribe("/t/depth", "sensor_msgs/msg/Image", SENSOR_QOS, lambda m: (got.append(m), arrived.set()))
         pub = a.advertise("/t/depth", "sensor_msgs/msg/Image", OUTPUT_QOS)
         depth = np.arange(48 * 64, dtype=np.float32).reshape(48, 64) / 7 + 1
-        msg = depth_image_message(a.ts, depth, 1_700_000_000_123_456_789, "cam_left")
+        msg = depth_image_message(a.typestore, depth, 1_700_000_000_123_456_789, "cam_left")
         for _ in range(50):  # discovery takes a moment: publish until the reader has one
             pub.publish(msg)
             if arrived.wait(0.05):
@@ -66,7 +66,7 @@ def test_garbage_and_callback_errors_are_one_line(caplog: pytest.LogCaptureFixtu
             t._deliver(
                 "/t/img",
                 "sensor_msgs/msg/Image",
-                bytes(t.ts.serialize_cdr(_image(t), "sensor_msgs/msg/Image")),
+                bytes(t.typestore.serialize_cdr(_image(t), "sensor_msgs/msg/Image")),
                 lambda m: (_ for _ in ()).throw(MemoryError("too big")),
             )
     finally:
@@ -77,4 +77,4 @@ def test_garbage_and_callback_errors_are_one_line(caplog: pytest.LogCaptureFixtu
 
 
 def _image(t: DdsTransport) -> object:
-    return depth_image_message(t.ts, np.ones((2, 3), np.float32), 5, "cam")
+    return depth_image_message(t.typestore, np.ones((2, 3), np.float32), 5, "cam")

@@ -78,7 +78,6 @@ def test_messages_are_built_in_the_transports_type_store() -> None:
     from semattnet.robotics.bags.deps import rosbags_typestore
 
     fake = FakeTransport()
-    del fake.ts
     fake.typestore = ros1 = rosbags_typestore(True)
     node = DepthNode(fake, _complete, NodeTopics(camera_info="cam/info"), namespace=NS).start()
     for topic, message in (
@@ -196,6 +195,44 @@ def test_sigterm_stops_cleanly_and_prints_the_summary() -> None:
     repo = Path(__file__).resolve().parents[3]
     r = subprocess.run([sys.executable, "-c", code], cwd=repo, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0 and r.stdout.strip().endswith("stopped cleanly"), r.stderr[-2000:]
+
+
+@pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
+def test_a_signal_closes_the_live_viewer_beside_the_node(signame: str) -> None:
+    """``--live`` beside the node is a sink of the loop: SIGINT or SIGTERM stops the node and the loop closes the
+    viewer, so its port is free again (in a fresh process, as above)."""
+    import subprocess
+    import sys
+    import textwrap
+
+    pytest.importorskip("foxglove")
+    code = textwrap.dedent(
+        f"""
+        import os, signal, socket, threading
+        from semattnet.robotics.live import LiveSink
+        from semattnet.robotics.ros.node import run_node
+        from tests.robotics.ros.test_node import DepthNode, FakeTransport, _complete
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+        viewer = LiveSink(address=f"127.0.0.1:{{port}}", log=lambda _: None)
+        node = DepthNode(FakeTransport(), _complete, say=[].append, sinks=[viewer])
+
+        def kill():
+            with socket.create_connection(("127.0.0.1", port), timeout=5):  # the viewer serves while the node runs
+                pass
+            os.kill(os.getpid(), signal.{signame})
+
+        threading.Timer(1.0, kill).start()
+        run_node(node)
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", port))  # free again: the loop closed the viewer
+        print("port free")
+        """
+    )
+    repo = Path(__file__).resolve().parents[3]
+    r = subprocess.run([sys.executable, "-c", code], cwd=repo, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stdout.strip().endswith("port free"), r.stderr[-2000:]
 
 
 def test_viewers_run_beside_the_node() -> None:

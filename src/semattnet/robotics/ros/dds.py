@@ -195,8 +195,8 @@ class DdsTransport:
         if not 0 <= int(domain_id) <= MAX_DOMAIN_ID:
             raise InputError(f"--domain-id: expected 0-{MAX_DOMAIN_ID}, got {domain_id}")
         domain = require("cyclonedds.domain", "semattnet ros2 (DDS)")
-        self.domain_id, self.ts = int(domain_id), rosbags_typestore(False)
-        self._types = _Types(self.ts)
+        self.domain_id, self.typestore = int(domain_id), rosbags_typestore(False)
+        self._types = _Types(self.typestore)
         self._loopback = bool(loopback)
         if loopback:
             _open_domain(self.domain_id)
@@ -211,7 +211,7 @@ class DdsTransport:
         cls = self._types.struct(msgtype, raw=True)
         writer = pub.DataWriter(self._participant, tp.Topic(self._participant, dds_topic(topic), cls), qos=_qos(qos))
         self._entities.append(writer)
-        return _Writer(writer, cls, self.ts, msgtype)
+        return _Writer(writer, cls, self.typestore, msgtype)
 
     def subscribe(self, topic: str, msgtype: str, qos: QoS, callback: Callable[[object], None]) -> None:
         """Deliver each message of ``topic`` to ``callback`` from Cyclone's listener thread; a message that does
@@ -236,7 +236,7 @@ class DdsTransport:
         if self._closed:
             return
         try:
-            message = self.ts.deserialize_cdr(cdr, msgtype)
+            message = self.typestore.deserialize_cdr(cdr, msgtype)
         except Exception as exc:  # whatever a peer sends: one line, never an exception in DDS' thread
             log.warning("%s: cannot deserialise a %s (%d bytes): %s", topic, msgtype, len(cdr), exc)
             return

@@ -14,6 +14,10 @@ worker completes the newest pair and publishes, under ``~/output``, the topics o
 ``uncertainty`` when the method gives one, ``camera_info``), each with the image's stamp and frame id, built
 once by :class:`~semattnet.robotics.frame.RobotFrame`. A frame that cannot be completed (no transform, no point
 in front of the camera, a size the CameraInfo disagrees with) is one logged line; the node goes on.
+
+The node is a :class:`~semattnet.data.frames.LiveSource` (the newest pair, a replaced one ``dropped``) run by the
+one frame loop for live frames (:func:`semattnet.inference.live.run_live`): the loop's fault rule, stage times and
+sink lifecycle; publishing is a sink (:class:`RosPublishSink`) beside the viewers.
 """
 
 from __future__ import annotations
@@ -21,18 +25,20 @@ from __future__ import annotations
 import logging
 import threading
 import time
-import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from semattnet._errors import DataError
-from semattnet.data.frames import Frame, SensorMeta
+from semattnet.data.frames import Dropped, Frame, SensorMeta, sensor_frame
 from semattnet.geometry import RigCalibration
 from semattnet.geometry.cameras import CameraInfoData
+from semattnet.inference.feed import FrameFault
+from semattnet.inference.live import LiveRun, run_live
+from semattnet.inference.sinks import Prediction, RunSink, Sink
 from semattnet.robotics.frame import ROS_TYPES, TOPICS, RobotFrame
 
 from .inputs import Pair, PairingInputs
@@ -42,16 +48,12 @@ from .transport import OUTPUT_QOS, SENSOR_QOS, TF_STATIC_QOS, Publisher, Transpo
 if TYPE_CHECKING:
     from semattnet.inference.contract import Completer
     from semattnet.inference.semantic import SemanticMaps
-    from semattnet.inference.sinks import RunSink
     from semattnet.inference.uncertainty import UncertaintyLimit
     from semattnet.robotics.bags.deps import Typestore
 
-__all__ = ["DepthNode", "NodeTopics", "StageStats", "run_node"]
+__all__ = ["DepthNode", "NodeTopics", "RosPublishSink", "run_node"]
 
 log = logging.getLogger("semattnet.ros")
-
-#: The worker's stages, in order.
-NODE_STAGES = ("projection", "network", "publish")
 
 
 @dataclass(frozen=True)
@@ -73,28 +75,44 @@ class NodeTopics:
         return names
 
 
-@dataclass
-class StageStats:
-    """Per-stage latency since the last report and in total (constant memory, however long the node runs)."""
+class RosPublishSink(RunSink):
+    """The node's topics as a run sink: each completed frame's messages (:class:`RobotFrame`, built once in the
+    transport's type store) published under ``~/output``; the clouds leave out pixels deeper than ``max_depth``
+    or above ``max_uncertainty``."""
 
-    period: dict[str, list[float]] = field(default_factory=dict)  # stage -> [count, sum ms, max ms]
-    total: dict[str, list[float]] = field(default_factory=dict)
+    replays = False
 
-    def add(self, stage: str, ms: float) -> None:
-        for table in (self.period, self.total):
-            c = table.setdefault(stage, [0.0, 0.0, 0.0])
-            c[0], c[1], c[2] = c[0] + 1, c[1] + ms, max(c[2], ms)
+    def __init__(
+        self,
+        transport: Transport,
+        names: dict[str, str],
+        max_depth: float | None = None,
+        max_uncertainty: UncertaintyLimit | None = None,
+    ) -> None:
+        self.transport, self.names = transport, names
+        self.max_depth, self.max_uncertainty = max_depth, max_uncertainty
+        self.publishers: dict[str, Publisher] = {}
 
-    @staticmethod
-    def line(table: dict[str, list[float]]) -> str:
-        """``stage mean/max ms, ...`` in :data:`NODE_STAGES` order."""
-        parts = [f"{s} {c[1] / c[0]:.1f}/{c[2]:.1f}" for s in NODE_STAGES if (c := table.get(s)) and c[0]]
-        return "ms mean/max: " + (", ".join(parts) or "none yet")
+    def advertise(self) -> None:
+        """Advertise every output topic (before the inputs are subscribed)."""
+        for role, msgtype in ROS_TYPES.items():
+            self.publishers[role] = self.transport.advertise(self.names[f"out:{role}"], msgtype, OUTPUT_QOS)
+
+    def write(self, stage: Path, pred: Prediction) -> None:
+        robot = RobotFrame.of(
+            pred,
+            uncertainty=pred.uncertainty_png is not None,
+            max_depth=self.max_depth,
+            max_uncertainty=self.max_uncertainty,
+        )
+        for role, msg in robot.messages(cast("Typestore", self.transport.typestore)).items():
+            self.publishers[role].publish(msg)
 
 
 class DepthNode:
-    """The node (module doc). :meth:`start` subscribes and advertises; :meth:`spin` runs the worker until a stop
-    event; :meth:`close` ends the transport.
+    """The node (module doc). :meth:`start` advertises and subscribes; :meth:`spin` runs the frame loop until a stop
+    event; :meth:`close` ends the transport. As a :class:`~semattnet.data.frames.LiveSource`: :meth:`take` (the
+    newest pair), :meth:`name`, :meth:`assemble` (the pair's frame).
 
     Args:
         transport: what moves the messages.
@@ -131,26 +149,37 @@ class DepthNode:
         max_uncertainty: UncertaintyLimit | None = None,
         report_s: float = 5.0,
         say: Callable[[str], object] = print,
-        sinks: Sequence[RunSink] = (),
+        sinks: Sequence[Sink] = (),
     ) -> None:
-        self.transport, self.completer, self.rig, self.semantic = transport, completer, rig, semantic
+        self.transport = transport
+        self.completer = completer
+        self.rig = rig
+        self.semantic = semantic
         self.names = (topics or NodeTopics()).resolved(namespace, node)
-        self.max_depth, self.max_uncertainty, self.report_s, self.say = max_depth, max_uncertainty, report_s, say
+        self.report_s = report_s
+        self.say = say
         self.inputs = PairingInputs(self.names, self._put, compressed, sparse, max_skew_ns)
-        self.stats = StageStats()
-        self.published = self.failed = 0
+        self.publisher = RosPublishSink(transport, self.names, max_depth, max_uncertainty)
+        self.sinks: list[Sink] = [self.publisher, *sinks]
+        self.run = LiveRun()
         self._slot: Pair | None = None
+        self._dropped: list[Dropped] = []
         self._ready = threading.Condition()
-        self._publishers: dict[str, Publisher] = {}
-        self.sinks = list(sinks)
+
+    @property
+    def published(self) -> int:
+        """Frames published so far."""
+        return self.run.done
+
+    @property
+    def failed(self) -> int:
+        """Frames that could not be completed so far."""
+        return self.run.skipped
 
     def start(self) -> DepthNode:
-        """Open the sinks, advertise the outputs and subscribe the inputs."""
-        for sink in self.sinks:
-            sink.open()
+        """Advertise the outputs and subscribe the inputs."""
         t, n, inp = self.transport, self.names, self.inputs
-        for role, msgtype in ROS_TYPES.items():
-            self._publishers[role] = t.advertise(n[f"out:{role}"], msgtype, OUTPUT_QOS)
+        self.publisher.advertise()
         image_type = "sensor_msgs/msg/CompressedImage" if inp.compressed else "sensor_msgs/msg/Image"
         t.subscribe(n["image"], image_type, SENSOR_QOS, inp.on_image)
         scan_type = "sensor_msgs/msg/Image" if inp.sparse else "sensor_msgs/msg/PointCloud2"
@@ -166,145 +195,102 @@ class DepthNode:
         with self._ready:
             if self._slot is not None:
                 self.inputs.counts.stale += 1
+                why = "a newer pair arrived while the completer was busy (the node completes the newest)"
+                self._dropped.append(Dropped(self.name(self._slot), why))
             self._slot = pair
             self._ready.notify()
 
-    def _take(self, timeout: float) -> Pair | None:
+    def take(self, timeout: float) -> Pair | Dropped | None:
+        """The next note of a dropped pair, else the newest pair, waiting up to ``timeout`` seconds."""
         with self._ready:
-            if self._slot is None:
+            if self._slot is None and not self._dropped:
                 self._ready.wait(timeout)
+            if self._dropped:
+                return self._dropped.pop(0)
             pair, self._slot = self._slot, None
             return pair
 
-    def spin(self, stop: threading.Event, frames: int | None = None) -> None:
-        """Complete the newest pair until ``stop`` is set (or ``frames`` pairs were done, published or failed); a
-        report line every ``report_s`` seconds and a summary at the end."""
-        last = time.monotonic()
-        try:
-            while not stop.is_set() and (frames is None or self.published + self.failed < frames):
-                pair = self._take(0.1)
-                if pair is not None:
-                    self.process(pair)
-                if time.monotonic() - last >= self.report_s:
-                    last = time.monotonic()
-                    self.say(self.report(self.stats.period))
-                    self.stats.period = {}
-        finally:
-            self.say(self.report(self.stats.total, final=True))
+    def name(self, pair: Pair) -> str:
+        """A pair's frame name: its image's stamp, nanoseconds."""
+        return str(pair.image.stamp_ns)
 
-    def report(self, table: dict[str, list[float]], final: bool = False) -> str:
-        """One line: frames published, drops, bad messages and per-stage latency."""
+    def spin(self, stop: threading.Event, frames: int | None = None) -> None:
+        """Complete the newest pair until ``stop`` is set (or ``frames`` pairs were done, published or failed, in
+        all); a report line every ``report_s`` seconds and a summary at the end."""
+        last = [time.monotonic()]
+
+        def tick() -> None:
+            if time.monotonic() - last[0] >= self.report_s:
+                last[0] = time.monotonic()
+                self.say(self.report())
+
+        left = None if frames is None else max(0, frames - self.published - self.failed)
+        try:
+            run_live(
+                self,
+                self.completer,
+                self.sinks,
+                stop,
+                self.run,
+                semantic=self.semantic,
+                frames=left,
+                report=self._note,
+                tick=tick,
+            )
+        finally:
+            self.say(self.report(final=True))
+
+    def _note(self, fault: FrameFault) -> None:
+        if fault.status != "dropped":
+            log.warning("%s", fault.reason)
+
+    def report(self, final: bool = False) -> str:
+        """One line: frames published, drops, bad messages and per-stage latency (since the last line; ``final``:
+        in total)."""
         c = self.inputs.counts
         head = "ros node stopped: " if final else "ros node: "
         return (
             f"{head}{self.published} frame(s) published, {c.stale} stale pair(s) dropped, {c.unpaired} image(s) "
             f"without a scan, {self.failed} frame(s) failed, {c.bad} bad message(s); "
-            f"{self.stats.line(table)}"
+            f"{self.run.tally.line(total=final)}"
         )
 
-    def process(self, pair: Pair) -> None:
-        """Complete one pair and publish it; a frame's fault is one logged line."""
-        from semattnet._errors import SemAttNetError
-
-        try:
-            frame = self._frame(pair)
-            self._complete(frame)
-        except (SemAttNetError, ValueError) as exc:
-            self.failed += 1
-            text = str(exc)
-            log.warning("%s", text if text.startswith(pair.image.where) else f"{pair.image.where}: {text}")
-
-    def _calibration(self, pair: Pair) -> tuple[np.ndarray, np.ndarray, CameraInfoData]:
-        """(K, T_cam_lidar, CameraInfo) of a pair: the rig's, else its CameraInfo and ``/tf_static``."""
+    def _calibration(self, pair: Pair) -> tuple[RigCalibration, CameraInfoData]:
+        """The pair's calibration and CameraInfo: the rig's, else its CameraInfo and ``/tf_static``."""
         from semattnet.robotics.bags.pairs import rig_camera_info
 
         image, scan = pair.image, pair.scan
+        h, w = image.data.shape[:2]
         if self.rig is not None:
-            rig_info = rig_camera_info(self.rig, image.frame_id, image.stamp_ns)
-            return np.asarray(self.rig.K, np.float64), np.asarray(self.rig.T_cam_lidar, np.float64), rig_info
+            return self.rig, rig_camera_info(self.rig, image.frame_id, image.stamp_ns)
         info = pair.camera_info
         if info is None:
             raise DataError(f"no CameraInfo on {self.names['camera_info']} yet")
-        if self.inputs.sparse:
-            return info.intrinsics(True), np.eye(4), info
         camera = image.frame_id or info.frame_id
-        return info.intrinsics(True), self.inputs.tree.lookup(camera, scan.frame_id), info
+        T = np.eye(4) if self.inputs.sparse else self.inputs.tree.lookup(camera, scan.frame_id)
+        return RigCalibration(info.intrinsics(True), T, (w, h), camera=camera or None), info
 
-    def _frame(self, pair: Pair) -> Frame:
-        """The frame of a pair: the scan projected into the image (a sparse depth image as it is)."""
-        from semattnet.geometry import project_points
-
+    def assemble(self, pair: Pair) -> Frame:
+        """The frame of a pair (:func:`~semattnet.data.frames.sensor_frame`): the scan projected into the image, a
+        sparse depth image as it is; a fault names the image."""
         image, scan = pair.image, pair.scan
-        K, T, info = self._calibration(pair)
-        h, w = image.data.shape[:2]
-        if (info.width, info.height) != (w, h):
-            raise DataError(f"the image is {w}x{h}, the calibration says {info.width}x{info.height}")
-        start = time.perf_counter()
-        if self.inputs.sparse:
-            sparse = scan.data
-            if sparse.shape != (h, w):
-                raise DataError(
-                    f"{scan.where}: the sparse depth is {sparse.shape[1]}x{sparse.shape[0]}, the image {w}x{h}"
-                )
-            points = None
-        else:
-            sparse = project_points(scan.data, K, T, (w, h), name=scan.where)
-            points = scan.data
-        self.stats.add("projection", (time.perf_counter() - start) * 1e3)
-        meta = SensorMeta(image.stamp_ns, image.frame_id or info.frame_id, scan.frame_id, scan.stamp_ns, info)
-        calib = RigCalibration(K, T, (w, h), camera=image.frame_id or None)
-        return Frame(
-            str(image.stamp_ns),
-            image.data,
-            sparse,
-            K=K,
-            timestamp=image.stamp_ns / 1e9,
-            points=points,
-            calib=calib,
-            meta=meta,
-        )
-
-    def _complete(self, frame: Frame) -> None:
-        from semattnet.inference.sinks import predict_frame
-
-        if self.semantic is not None:
-            frame = self.semantic.fill(frame)
-        start = time.perf_counter()
-        completion = self.completer(frame.rgb, frame.sparse, frame.semantic)
-        with warnings.catch_warnings():  # holes are NaN on the wire: the PNG's note on them is not for a node
-            warnings.simplefilter("ignore", UserWarning)
-            pred = predict_frame(frame, completion)
-        self.stats.add("network", (time.perf_counter() - start) * 1e3)
-        start = time.perf_counter()
-        robot = RobotFrame.of(
-            pred,
-            uncertainty=pred.uncertainty_png is not None,
-            max_depth=self.max_depth,
-            max_uncertainty=self.max_uncertainty,
-        )
-        for role, msg in robot.messages(self.transport_typestore).items():
-            self._publishers[role].publish(msg)
-        for sink in self.sinks:
-            sink.write(Path("."), pred)  # the live viewers write no file
-        self.stats.add("publish", (time.perf_counter() - start) * 1e3)
-        self.published += 1
-
-    @property
-    def transport_typestore(self) -> Typestore:
-        """The type store the transport's messages belong to (TCPROS's ``typestore``, ROS 1 Noetic's; DDS's ``ts``;
-        else ROS 2 Humble's): the messages are built in it, never converted on each publish."""
-        from semattnet.robotics.bags.deps import rosbags_typestore
-
-        store = getattr(self.transport, "typestore", None) or getattr(self.transport, "ts", None)
-        return cast("Typestore", store or rosbags_typestore(False))
+        try:
+            calib, info = self._calibration(pair)
+            h, w = image.data.shape[:2]
+            if (info.width, info.height) != (w, h):
+                raise DataError(f"the image is {w}x{h}, the calibration says {info.width}x{info.height}")
+            meta = SensorMeta(image.stamp_ns, image.frame_id or info.frame_id, scan.frame_id, scan.stamp_ns, info)
+            points, sparse = (None, scan.data) if self.inputs.sparse else (scan.data, None)
+            return sensor_frame(
+                self.name(pair), image.data, meta, calib, points=points, sparse=sparse, where=scan.where
+            )
+        except DataError as exc:
+            text = str(exc)
+            raise DataError(text if text.startswith(image.where) else f"{image.where}: {text}") from None
 
     def close(self) -> None:
-        """End the sinks and the transport (its threads and sockets)."""
-        try:
-            for sink in self.sinks:
-                sink.finish(Path("."))
-        finally:
-            self.transport.close()
+        """End the transport (its threads and sockets); the sinks were closed by the loop."""
+        self.transport.close()
 
 
 def run_node(node: DepthNode, frames: int | None = None) -> None:

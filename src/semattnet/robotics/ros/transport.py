@@ -51,6 +51,11 @@ class Transport(Protocol):
 
     name: str
 
+    @property
+    def typestore(self) -> object:
+        """The ``rosbags`` type store its messages belong to (ROS 2 Humble's for DDS, ROS 1 Noetic's for TCPROS):
+        the node builds its messages in it, never converting them on each publish."""
+
     def advertise(self, topic: str, msgtype: str, qos: QoS) -> Publisher:
         """Announce ``topic`` (absolute ROS name, e.g. ``/semattnet/depth_image``) of ``msgtype``."""
 
