@@ -116,6 +116,7 @@ def _latencies(*trees: dict[str, bytes]) -> None:
     assert all(j == journals[0] for j in journals), journals
 
 
+@pytest.mark.slow  # ~15 s: two processes; the sharding itself is tested in one process above
 def test_predict_two_processes_equals_one(tmp_path: Path) -> None:
     rgb, sparse = _frames(tmp_path)
     common = ("predict", "--method", "classical", "--rgb", rgb, "--sparse", sparse, "--npy")

@@ -136,7 +136,7 @@ def test_models_listing_counts_macs_of_the_real_time_rows() -> None:
     [
         pytest.param("openvino", "semattnet_rt_s", marks=pytest.mark.slow),
         ("onnxruntime", "semattnet_rt_s"),
-        ("onnxruntime", "semattnet_rt_md"),
+        pytest.param("onnxruntime", "semattnet_rt_md", marks=pytest.mark.slow),  # ~6 s; rt_s covers the export
     ],
 )
 def test_exports_through_the_engines(backend: str, name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

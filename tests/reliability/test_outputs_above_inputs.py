@@ -253,6 +253,7 @@ def _full_disk_line(res: subprocess.CompletedProcess[str], path: Path) -> None:
     assert f"Error: {path}: no space left on the device (" in errors[0] and "free" in errors[0], errors[0]
 
 
+@pytest.mark.slow  # ~10 s: two bags on a tiny file system; test_disk_full.py runs predict on a full disk by default
 def test_full_disk_under_a_bag_names_it(bag: Path, tmp_path: Path, small_fs: Path) -> None:
     for fmt in ("k_bag", "k.bag"):
         res = _cli("data", "bag-from-kitti", "--drive", DRIVE, "--out", small_fs / fmt)

@@ -98,6 +98,7 @@ def test_resume_equals_the_uninterrupted_run_in_every_saved_field(
     assert _steps(tmp_path / "cut") == _steps(tmp_path / "whole") == list(range(1, STEPS + 1))
 
 
+@pytest.mark.slow  # ~9 s: trains twice; test_train_overwrite_safety.py tests the refusal by default
 def test_a_finished_run_folder_is_not_reused_without_resume_or_overwrite(tree: Path, tmp_path: Path) -> None:
     run = tmp_path / "run"
     train(_cfg(tree, run), log=lambda m: None)

@@ -222,6 +222,8 @@ def _one_run(out: Path, before: dict[str, str], committed: bool) -> None:
     assert not (out / FINAL).exists() or digests(out)[FINAL] != before[FINAL]
 
 
+# ~19 s: a SIGKILL at each of ~14 points; the default suite runs the overwrite, the unreadable frames, the refusals
+@pytest.mark.slow
 def test_sigkill_at_each_step_of_an_overwrite_leaves_the_earlier_run_whole_until_the_new_one_is(
     earlier: tuple[Path, dict[str, str]], rt_weights: Path, tmp_path: Path
 ) -> None:
