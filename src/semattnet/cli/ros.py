@@ -9,7 +9,7 @@ as their sink entries declare them; the node is :class:`semattnet.robotics.ros.n
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -109,7 +109,12 @@ ROS2_OPTIONS = (
 #: The DDS transport's options (``ros2``).
 DDS_OPTIONS = (
     _ROS(["--domain-id"], type=click.IntRange(0, 232), default=None, help="DDS domain [ROS_DOMAIN_ID, else 0]."),
-    _ROS(["--loopback"], is_flag=True, help="DDS on 127.0.0.1 only (unicast; one machine, no multicast)."),
+    _ROS(
+        ["--loopback"],
+        is_flag=True,
+        help="DDS traffic on the loopback interface only: unicast to 127.0.0.1, no multicast (also with "
+        "ROS_LOCALHOST_ONLY=1 or ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST).",
+    ),
 )
 #: The ROS 1 transport's options (``ros1``).
 ROS1_OPTIONS = (
@@ -207,6 +212,13 @@ class NodeOptions:
         )
 
 
+def localhost_only(env: Mapping[str, str]) -> bool:
+    """Whether the environment asks ROS 2 nodes to stay on this machine: ``ROS_LOCALHOST_ONLY=1`` (Humble) or
+    ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (Jazzy on), as ``rmw`` implementations honour them."""
+    range_ = env.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "").strip().upper()
+    return env.get("ROS_LOCALHOST_ONLY", "").strip() == "1" or range_ == "LOCALHOST"
+
+
 def _run(params: dict[str, object], transport: Callable[[], Transport]) -> None:
     """Check the model options, load the completer and spin the node on ``transport()`` until stopped."""
     from semattnet.robotics.ros.node import run_node
@@ -230,11 +242,12 @@ def ros2(**params: object) -> None:
     Completes the newest image-scan pair (older pairs are dropped and counted), publishes under
     --output-prefix with the image's stamp and frame id; Ctrl-C or SIGTERM stops it."""
     domain = _domain_id(params["domain_id"])  # type: ignore[arg-type]
+    loopback = bool(params["loopback"]) or localhost_only(os.environ)
 
     def dds() -> Transport:
         from semattnet.robotics.ros.dds import DdsTransport
 
-        return DdsTransport(domain, loopback=bool(params["loopback"]))
+        return DdsTransport(domain, loopback=loopback)
 
     _run(params, dds)
 

@@ -50,3 +50,33 @@ def test_ros1_node_name_is_in_its_namespace(monkeypatch: pytest.MonkeyPatch) -> 
         main, ["ros1", "--method", "classical", "--namespace", "robot1/", "--master", "http://127.0.0.1:9"]
     )
     assert "stop here" in res.output and names == ["/robot1/semattnet"], res.output
+
+
+@pytest.mark.parametrize(
+    "env,loopback",
+    [
+        ({}, False),
+        ({"ROS_LOCALHOST_ONLY": "1"}, True),
+        ({"ROS_LOCALHOST_ONLY": "0"}, False),
+        ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}, True),
+        ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}, False),
+    ],
+)
+def test_ros2_honours_the_localhost_only_environment(
+    env: dict[str, str], loopback: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """ROS 2 nodes stay on the machine with ROS_LOCALHOST_ONLY=1 (Humble) or ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+    (Jazzy on): the node's DDS then runs as with --loopback."""
+    from semattnet.robotics.ros import dds
+
+    asked: list[bool] = []
+
+    def transport(domain_id: int = 0, loopback: bool = False) -> None:
+        asked.append(loopback)
+        raise InputError("stop here")
+
+    for name in ("ROS_LOCALHOST_ONLY", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setattr(dds, "DdsTransport", transport)
+    res = CliRunner().invoke(main, ["ros2", "--method", "classical"], env=env)
+    assert "stop here" in res.output and asked == [loopback], res.output
