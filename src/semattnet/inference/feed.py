@@ -368,11 +368,16 @@ class _FaultRule:
                 raise DataError(reason) from exc
             raise exc
 
-    def of_frame(self, frame: Frame, exc: Exception) -> None:
-        """A fault completing ``frame`` (anything else raised as it is)."""
+    def of_input(self, name: str, exc: Exception, where: str = "") -> None:
+        """``exc``, raised reading or completing frame ``name``: the frame's fault (:func:`is_frame_fault`), else
+        raised as it is."""
         if not is_frame_fault(exc):
             raise exc
-        self(frame.name, exc, _input_of(frame))
+        self(name, exc, where)
+
+    def of_frame(self, frame: Frame, exc: Exception) -> None:
+        """A fault completing ``frame``, its input named (anything else raised as it is)."""
+        self.of_input(frame.name, exc, _input_of(frame))
 
 
 def completions(
@@ -483,9 +488,7 @@ def live_completions(
                         frame = source.assemble(item)
                     frame = _with_semantic(frame, semantic, timer)
                 except Exception as exc:
-                    if not is_frame_fault(exc):
-                        raise
-                    fault(name, exc)
+                    fault.of_input(name, exc)
                     continue
                 yield from _complete_one(completer, [frame], timer, current, fault.of_frame)
         finally:

@@ -50,7 +50,7 @@ class LiveRun:
             self.dropped += 1
         else:
             self.skipped += 1
-            self.tally.add(self.timer.settle(fault.name))
+            self.timer.settle(fault.name)  # forgotten: its times and stamp (a frame not completed is not tallied)
 
 
 def run_live(
@@ -83,11 +83,10 @@ def run_live(
         )
         for frame, completion in completed:
             try:
-                _write(frame.name, frame, completion, sinks, run.timer)
+                _write(frame, completion, sinks, run.timer)
             except Exception as exc:
                 if not is_frame_fault(exc):
                     raise
-                run.timer.discard(frame.name)
                 note(FrameFault(frame.name, "skipped", fault_reason(exc)))
                 continue
             run.done += 1
@@ -106,9 +105,9 @@ def run_live(
     return run
 
 
-def _write(name: str, frame: Frame, completion: Completion, sinks: Sequence[Sink], timer: StageTimes) -> None:
+def _write(frame: Frame, completion: Completion, sinks: Sequence[Sink], timer: StageTimes) -> None:
     """Every sink gets the frame (timed as ``writing``); nothing is written into a folder (run sinks only)."""
-    stage_ms = {k: 1e3 * v for k, v in timer.times.get(name, {}).items()}
-    with timer.time(name, "writing"), warnings.catch_warnings():
+    stage_ms = {k: 1e3 * v for k, v in timer.times.get(frame.name, {}).items()}
+    with timer.time(frame.name, "writing"), warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # holes are NaN on the wire: the PNG's note is not for a node
         write_prediction(Path("."), frame, completion, sinks, stage_ms)
