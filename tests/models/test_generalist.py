@@ -175,3 +175,61 @@ def test_bench_times_the_generalists_network_and_notes_its_anchor() -> None:
     res = run_benchmark((64, 96), "cpu", repeats=1, parts=("full",), model=model, log=lines.append)
     assert [r["what"] for r in res.rows] == ["full model, naive reference", "full model, ours (float32)"]
     assert any(n.startswith("generalist: the rows time its network") for n in res.notes)
+
+
+def test_the_work_resolution_keeps_each_blocks_nearest_point_mean_colour_and_one_class() -> None:
+    """work_resolution at 2 of a 3x5 frame (padded to 4x6): hand-computed blocks."""
+    from semattnet.models.generalist import work_resolution
+
+    sparse = torch.zeros(1, 1, 3, 5)
+    sparse[0, 0, 0, 0], sparse[0, 0, 1, 1], sparse[0, 0, 1, 0] = 9.0, 4.0, 0.0  # block (0, 0): 9 and 4 -> 4
+    sparse[0, 0, 2, 4] = 7.0  # the padded corner block: its only point
+    rgb = torch.arange(15.0).view(1, 1, 3, 5).expand(1, 3, 3, 5).clone()
+    semantic = torch.arange(15.0).view(1, 1, 3, 5).expand(1, 3, 3, 5).clone()
+    colour, small, labels = work_resolution(rgb, sparse, semantic, 2)
+    assert small.shape == (1, 1, 2, 3)
+    assert small[0, 0].tolist() == [[4.0, 0.0, 0.0], [0.0, 0.0, 7.0]]
+    assert colour[0, 0, 0, 0].item() == (0 + 1 + 5 + 6) / 4
+    assert colour[0, 0, 1, 2].item() == (14 + 14 + 14 + 14) / 4  # rows and columns replicated at the edges
+    assert labels is not None and labels[0, 0].tolist() == [[0.0, 2.0, 4.0], [10.0, 12.0, 14.0]]
+
+
+def test_a_half_resolution_generalist_is_the_full_one_on_the_smaller_frame_upsampled() -> None:
+    """work_scale 2: the same network on work_resolution's frame, every output upsampled to the input's size."""
+    from semattnet.models.generalist import work_resolution
+
+    torch.manual_seed(0)
+    half = build_model("semattnet_rt_half_generalist").eval()
+    full = build_model("semattnet_rt_generalist").eval()
+    full.load_state_dict(half.state_dict())
+    rgb, semantic, sparse = _frame(h=128, w=192)
+    with torch.no_grad():
+        out = half(rgb, semantic, sparse)
+        small = full(*(lambda c, s, m: (c, m, s))(*work_resolution(rgb, sparse, semantic, 2)))
+    assert out.depth.shape == (1, 1, 128, 192) and out.uncertainty is not None
+    for got, ref in ((out.depth, small.depth), (out.uncertainty, small.uncertainty)):
+        assert ref is not None
+        up = torch.nn.functional.interpolate(ref, scale_factor=2, mode="bilinear", align_corners=False)
+        torch.testing.assert_close(got, up, rtol=1e-5, atol=1e-5)
+
+
+def test_the_completer_gives_a_half_resolution_generalists_depth_at_the_frames_odd_size() -> None:
+    model = build_model("semattnet_rt_half_generalist").eval()
+    rgb, semantic, sparse = _frame(h=75, w=101)
+    c = semattnet.DepthCompleter(model, EngineSpec(device="cpu"))(
+        rgb[0].permute(1, 2, 0).numpy(), sparse[0, 0].numpy(), semantic[0].permute(1, 2, 0).numpy().astype(np.uint8)
+    )
+    assert c.depth.shape == (75, 101) and c.uncertainty is not None and c.uncertainty.shape == (75, 101)
+    assert np.isfinite(c.depth).all() and (c.depth > 0).all()
+
+
+def test_a_plain_model_cannot_work_at_a_lower_resolution_and_the_crop_follows_the_work_scale() -> None:
+    from semattnet.training.generalist import GeneralistTrainConfig
+
+    with pytest.raises(InputError, match="work_scale"):
+        model_config("semattnet_rt_md").replace(work_scale=2)
+    with pytest.raises(InputError, match="work_scale"):
+        model_config("semattnet_rt_generalist").replace(work_scale=3)
+    with pytest.raises(InputError, match="multiples of 64"):
+        GeneralistTrainConfig(model="semattnet_rt_half_generalist", crop=(160, 256))
+    assert GeneralistTrainConfig(model="semattnet_rt_half_generalist", crop=(192, 256)).crop == (192, 256)

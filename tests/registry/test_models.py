@@ -61,6 +61,7 @@ class TestModels(RegistryTester[ModelFixture]):
         # the generalists set their own calibrated uncertainty (models.generalist)
         "semattnet_generalist": ModelFixture(BRANCHES | SEMANTIC | REFINED | {"uncertainty"}),
         "semattnet_rt_generalist": ModelFixture(BRANCHES | SEMANTIC | REFINED | {"uncertainty"}),
+        "semattnet_rt_half_generalist": ModelFixture(BRANCHES | SEMANTIC | REFINED | {"uncertainty"}),
         "semattnet_rt_l_generalist": ModelFixture(BRANCHES | SEMANTIC | REFINED | {"uncertainty"}),
     }
 

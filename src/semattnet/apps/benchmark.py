@@ -31,7 +31,7 @@ from semattnet._errors import InputError
 from semattnet._utils.cpu import cpu_summary
 from semattnet.inference.backends import engine_entries, optimize_for_inference
 from semattnet.models.bn_folding import fold_batchnorm
-from semattnet.models.generalist import Generalist
+from semattnet.models.generalist import Generalist, GeneralistInputs
 from semattnet.models.layers import set_gradient_checkpointing
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.propagation import cspn_affinity
@@ -397,6 +397,17 @@ def _time_training_step(
     return seconds, pm["peak_mib"]
 
 
+def _network_frame(prepared: GeneralistInputs) -> tuple[dict[str, torch.Tensor], tuple[int, int]]:
+    """What a generalist's network reads (the prepared colours and depth, the fallback-free semantic colours at the
+    network's resolution), padded as the completer pads it, and that size."""
+    from semattnet.inference.padding import pad_to_multiple
+
+    rgb, _ = pad_to_multiple(prepared.rgb)
+    depth, _ = pad_to_multiple(prepared.depth)
+    semantic = torch.full_like(rgb, 128.0) if prepared.semantic is None else pad_to_multiple(prepared.semantic)[0]
+    return {"rgb": rgb, "semantic": semantic, "sparse": depth}, (int(rgb.shape[-2]), int(rgb.shape[-1]))
+
+
 def _run_generalist(
     model: Generalist,
     size: tuple[int, int],
@@ -413,15 +424,15 @@ def _run_generalist(
     x = random_frame(size, torch.device(device))
     model = model.to(device).eval()
     with torch.inference_mode():
-        prepared = model.prepare(x["rgb"], x["sparse"])
+        prepared = model.prepare(x["rgb"], x["sparse"], x["semantic"])
         seconds = []
         for _ in range(max(1, repeats)):
             t0 = time.perf_counter()
-            model.prepare(x["rgb"], x["sparse"])
+            model.prepare(x["rgb"], x["sparse"], x["semantic"])
             seconds.append(time.perf_counter() - t0)
-    frame = {"rgb": prepared.rgb, "semantic": x["semantic"], "sparse": prepared.depth}
+    frame, net_size = _network_frame(prepared)
     res = run_benchmark(
-        size,
+        net_size,
         device,
         repeats,
         1.0,
@@ -434,7 +445,10 @@ def _run_generalist(
         outputs,
         frame,
     )
-    note = "generalist: the rows time its network; its anchor (two classical completions, scale, colours) takes "
+    note = "generalist: the rows time its network"
+    if prepared.size is not None:
+        note += f" at {net_size[0]}x{net_size[1]} (1/{model.config.work_scale} of the frame, padded to 32)"
+    note += "; its anchor (two classical completions, scale, colours) takes "
     res.notes.append(note + f"{1000 * min(seconds):.0f} ms beside it (best of {len(seconds)})")
     log(res.notes[-1])
     return res

@@ -13,7 +13,9 @@ from semattnet.cli._options import BATCH_SIZE, COUNT, LEARNING_RATE, POSITIVE_IN
 @main.command("train-generalist", context_settings={"show_default": True})
 @click.option(
     "--model",
-    type=click.Choice(["semattnet_rt_generalist", "semattnet_rt_l_generalist", "semattnet_generalist"]),
+    type=click.Choice(
+        ["semattnet_rt_generalist", "semattnet_rt_half_generalist", "semattnet_rt_l_generalist", "semattnet_generalist"]
+    ),
     default="semattnet_rt_generalist",
     help="The generalist to train: the real-time variant or the paper's model.",
 )

@@ -263,8 +263,9 @@ class DepthCompleter:
         want_uncertainty = self.compute_uncertainty and (self._outputs is None or "uncertainty" in self._outputs)
         if self.generalist is not None:  # scale, colour and anchor around the network (models.generalist)
             with torch.inference_mode():
-                inputs = self.generalist.prepare(rgb.to(self.device), sparse.to(self.device))
-                out = self._run_network(inputs.rgb, semantic, inputs.depth)
+                sem = None if semantic is None else semantic.to(self.device)
+                inputs = self.generalist.prepare(rgb.to(self.device), sparse.to(self.device), sem)
+                out = self._run_network(inputs.rgb, inputs.semantic, inputs.depth)
                 return self.generalist.finish(out.map(lambda t: t.to(self.device)), inputs, want_uncertainty)
         out = self._run_network(rgb, semantic, sparse)
         if not want_uncertainty:

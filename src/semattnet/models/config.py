@@ -36,6 +36,7 @@ RANGES: dict[str, tuple[float, float]] = {
     "iterations": (0, 32),
     "residual_bound": (0.05, 5.0),
     "trust_radius": (0.0, 64.0),
+    "work_scale": (1, 4),
 }
 MAX_KERNELS = 8
 
@@ -80,6 +81,9 @@ class SemAttNetConfig:
             (``log(depth / anchor)`` lies in ``(-b, b)``); unused without an anchor.
         trust_radius: the generalist's bound shrinks near the measurements: times ``1 - exp(-r / R)`` at ``r``
             pixels from the nearest point (0: the same bound everywhere).
+        work_scale: the generalist's anchor and network run at ``1 / work_scale`` of the input's resolution (1, 2
+            or 4) and its outputs are upsampled to the input's size (a quarter of the work at 2); unused without an
+            anchor.
     """
 
     branches: Literal[2, 3] = 3
@@ -96,6 +100,7 @@ class SemAttNetConfig:
     anchor: AnchorMode = "none"
     residual_bound: float = 1.0
     trust_radius: float = 4.0
+    work_scale: int = 1
 
     def __post_init__(self) -> None:
         if self.branches not in (2, 3):
@@ -123,6 +128,9 @@ class SemAttNetConfig:
             raise InputError(f"anchor must be one of {ANCHOR_MODES}, got {self.anchor!r}")
         _in_range("residual_bound", self.residual_bound, integer=False)
         _in_range("trust_radius", self.trust_radius, integer=False)
+        _in_range("work_scale", self.work_scale)
+        if self.work_scale not in (1, 2, 4) or (self.work_scale != 1 and self.anchor == "none"):
+            raise InputError(f"work_scale: 1, or 2 or 4 for a generalist (anchor='classical'), got {self.work_scale!r}")
         if self.anchor != "none" and not self.refine:
             raise InputError("anchor: the generalist is the refined model; set refine=True")
         from semattnet.models.encoders import encoder_spec

@@ -117,6 +117,19 @@ _SPECS = (
         ),
     ),
     ModelSpec(
+        "semattnet_rt_half_generalist",
+        "Generalist: semattnet_rt_generalist working at half the input's resolution, upsampled (a quarter of the work)",
+        SemAttNetConfig(
+            encoder="lite_s2_deep",
+            reduction=4,
+            kernel_sizes=(3,),
+            iterations=4,
+            affinity="convex",
+            anchor="classical",
+            work_scale=2,
+        ),
+    ),
+    ModelSpec(
         "semattnet_rt_l_generalist",
         "Generalist: semattnet_rt_l, scale-free, correcting the classical completion (models.generalist)",
         SemAttNetConfig(encoder="lite_s4_wide", reduction=4, kernel_sizes=(3,), iterations=4, anchor="classical"),

@@ -66,8 +66,11 @@ class GeneralistTrainConfig:
     init: str | None = None
 
     def __post_init__(self) -> None:
-        if self.crop[0] % 32 or self.crop[1] % 32 or min(self.crop) < 32:
-            raise InputError(f"crop must be multiples of 32, got {self.crop}")
+        from semattnet.models.registry import model_config
+
+        m = 32 * model_config(self.model).work_scale  # the network's multiple, at its own resolution
+        if self.crop[0] % m or self.crop[1] % m:
+            raise InputError(f"crop must be multiples of {m} for {self.model}, got {self.crop}")
         if self.steps < 1 or self.batch < 1:
             raise InputError(f"steps and batch must be >= 1, got {self.steps}, {self.batch}")
         if not 0.0 <= self.fallback_share <= 1.0:
@@ -157,10 +160,11 @@ def generalist_loss(
     model: Generalist, rgb: torch.Tensor, semantic: torch.Tensor, sparse: torch.Tensor, gt: torch.Tensor
 ) -> torch.Tensor:
     """Mean |log D - log gt| plus 0.1 mean |log D_n - log gt| over the pixels with truth (module docstring)."""
-    inputs = model.prepare(rgb, sparse)
-    out = model.net(inputs.rgb, semantic, inputs.depth)
+    inputs = model.prepare(rgb, sparse, semantic)
+    out = model.net(inputs.rgb, inputs.semantic, inputs.depth)
     net_depth = out.depth.float() * inputs.scale
-    depth = model.correct(inputs.anchor, net_depth, inputs.distance)
+    depth = model.to_full(model.correct(inputs.anchor, net_depth, inputs.distance), inputs)
+    net_depth = model.to_full(net_depth, inputs)
     valid = gt > 0
     log_gt = torch.log(gt[valid])
     main = (torch.log(depth[valid].clamp_min(1e-3)) - log_gt).abs().mean()
