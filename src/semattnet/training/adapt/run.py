@@ -27,7 +27,7 @@ import torch
 
 from semattnet._errors import InputError
 from semattnet._utils import distributed as dist_utils
-from semattnet._utils.atomic import atomic_path
+from semattnet._utils.atomic import atomic_path, full_disk_named
 from semattnet._utils.device import autocast
 from semattnet._utils.progress import progress
 from semattnet._utils.run_folder import replace_run
@@ -175,8 +175,8 @@ class Adapter:
         state[DIGEST_KEY] = tensor_digest(state)
         path = folder / STATE
         path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(path) as tmp:
-            torch.save(state, tmp)
+        with atomic_path(path) as tmp, full_disk_named(path):
+            torch.save(state, tmp)  # torch's writer says a full disk as a RuntimeError: one line naming the file
 
     def _write_log(self, folder: Path) -> None:
         faults = [{"name": f.name, "status": f.status, "reason": f.reason} for f in self.pool.faults]
