@@ -4,8 +4,10 @@ The live servers (``--live``: :mod:`~semattnet.robotics.live`; ``--rerun-serve``
 run in libraries that may wait for every connection when they stop (foxglove-sdk waits on a half-open one).
 :class:`Gate` listens on the user's address instead and relays each client to the server on a private
 loopback port, but only after the client's first request (an HTTP upgrade, a gRPC-web request or the HTTP/2
-preface) came in full, within :data:`HANDSHAKE_S`; at most :data:`MAX_CLIENTS` clients at once (more are
-closed at once). A client that stops reading holds at most a socket buffer here: the relay stops reading
+preface) came in full, within :data:`HANDSHAKE_S`; at most :data:`MAX_CLIENTS` clients at once. A connection
+beyond the cap takes the place of the oldest one still waiting for its first request (which is closed), so idle or
+half-open connections, however many, never lock a real client out; only when every client is relayed is a new
+one closed at once. A client that stops reading holds at most a socket buffer here: the relay stops reading
 from the server, whose own per-client queue then drops its oldest messages (foxglove-sdk keeps
 :data:`~semattnet.robotics.live.CLIENT_BACKLOG`). :meth:`Gate.close` drops every client at once.
 """
@@ -82,11 +84,13 @@ class Gate:
         self.host, self.upstream = host, upstream
         self.max_clients, self.handshake_s = max_clients, handshake_s
         self.port = port
-        self.refused = 0  #: connections closed because :attr:`max_clients` were being served
+        self.refused = 0  #: connections closed because :attr:`max_clients` were being relayed
+        self.evicted = 0  #: connections still without their first request closed to make room for a newer one
         self._loop = asyncio.new_event_loop()
         self._thread = threading.Thread(target=self._loop.run_forever, name="semattnet-gate", daemon=True)
         self._server: asyncio.Server | None = None
         self._clients: set[asyncio.Task[None]] = set()
+        self._waiting: dict[asyncio.Task[None], None] = {}  # clients without their first request, oldest first
 
     def start(self) -> int:
         """Start listening; returns the port. Raises :class:`OSError` when the address cannot be served."""
@@ -107,11 +111,12 @@ class Gate:
 
     async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         task = asyncio.current_task()
-        if task is None or len(self._clients) >= self.max_clients:
+        if task is None or not self._make_room():
             self.refused += 1
             writer.transport.abort()
             return
         self._clients.add(task)
+        self._waiting[task] = None
         try:
             await self._relay(reader, writer)
         except (
@@ -124,11 +129,29 @@ class Gate:
             pass  # a client that went away, never finished its request or sent too much, or close(): closed below
         finally:
             self._clients.discard(task)
+            self._waiting.pop(task, None)
             writer.transport.abort()
+
+    def _make_room(self) -> bool:
+        """Whether a new client fits: under the cap, or in the place of the oldest client still waiting for its
+        first request (closed now)."""
+        if len(self._clients) < self.max_clients:
+            return True
+        oldest = next(iter(self._waiting), None)
+        if oldest is None:
+            return False
+        del self._waiting[oldest]
+        self._clients.discard(oldest)
+        oldest.cancel()
+        self.evicted += 1
+        return True
 
     async def _relay(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         """The client's first request within the handshake time, then both directions until either side ends."""
         request = await asyncio.wait_for(reader.readuntil(b"\r\n\r\n"), self.handshake_s)
+        task = asyncio.current_task()
+        if task is not None:
+            self._waiting.pop(task, None)  # relayed from now on: not to be evicted
         up_reader, up_writer = await asyncio.wait_for(asyncio.open_connection(*self.upstream), self.handshake_s)
         try:
             up_writer.write(request)
