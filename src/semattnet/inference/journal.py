@@ -7,7 +7,8 @@ The journal is how a long run survives bad frames and kills (:func:`semattnet.in
   before the completer was free), ``failed`` (the frame that stopped an ``on_error="stop"`` run) or
   ``pending`` (not reached);
 * a done frame records its output files (path relative to the folder -> size and SHA-256, taken when they
-  were written), its input files (path -> size and modification time) and its stage times (milliseconds);
+  were written), its input files (path -> size, modification time and SHA-256:
+  :mod:`~semattnet.inference.stamps`) and its stage times (milliseconds);
 * ``earlier`` keeps the records of done frames of an earlier run that a resume no longer has (their input
   is gone), so that no resume loses the record of a frame whose files are in the folder;
 * ``run`` is the run's identity (the command's options, the weights' digest, the version): a resume with
@@ -40,6 +41,7 @@ from semattnet._errors import SemAttNetError
 from semattnet._utils.atomic import atomic_path
 from semattnet._utils.version import __version__
 from semattnet.cache.store import sha256_file
+from semattnet.inference.stamps import InputDigests, InputStamp, input_stamps, inputs_unchanged, is_input_stamp
 
 __all__ = [
     "FRAMES_FILE",
@@ -70,6 +72,11 @@ SAVE_INTERVAL_S = 1.0
 _DEFAULT_RUN: dict[str, object] = {"command": "predict", "version": __version__}
 #: The largest number of seconds or milliseconds a journal may hold (about 30 years).
 _MAX_TIME = 1e9
+#: A journal read back may be at most this many bytes, plus :data:`MAX_BYTES_PER_FRAME` per frame of the run: judged
+#: from its size before it is read (a 512 MB ``frames.json`` would take gigabytes to parse).
+MAX_JOURNAL_BYTES = 64 * 2**20
+#: What one frame's record may add to :data:`MAX_JOURNAL_BYTES` (a done frame with several outputs is under 1 KiB).
+MAX_BYTES_PER_FRAME = 4096
 
 
 class _Entry(TypedDict):
@@ -86,12 +93,12 @@ class FileRecord(TypedDict):
 
 class FrameEntry(_Entry, total=False):
     """One frame of the journal: ``name``, ``status`` (:data:`STATUSES`), and ``reason`` (not done) or ``files``
-    (relative path -> :class:`FileRecord`), ``inputs`` (path -> [size, mtime_ns]) and ``stage_ms`` (stage ->
-    milliseconds) (done)."""
+    (relative path -> :class:`FileRecord`), ``inputs`` (path -> :data:`~semattnet.inference.stamps.InputStamp`)
+    and ``stage_ms`` (stage -> milliseconds) (done)."""
 
     reason: str
     files: dict[str, FileRecord]
-    inputs: dict[str, list[int]]
+    inputs: dict[str, InputStamp]
     stage_ms: dict[str, float]
 
 
@@ -121,11 +128,13 @@ def _what(mode: int) -> str:
     return "a FIFO" if stat.S_ISFIFO(mode) else "a special file"
 
 
-def _read(path: Path) -> _Journal | None:
+def _read(path: Path, limit: int = MAX_JOURNAL_BYTES) -> _Journal | None:
     """A journal file's content, checked (:func:`_checked`); None when absent. Anything else (a folder, a
-    FIFO, a symlink, bad JSON, a damaged field) is a one-line :class:`ResumeError` naming the file."""
+    FIFO, a symlink, a file over ``limit`` bytes, bad JSON, a damaged field) is a one-line :class:`ResumeError`
+    naming the file."""
     try:
-        mode = path.lstat().st_mode
+        st = path.lstat()
+        mode = st.st_mode
     except FileNotFoundError:
         return None
     except OSError as exc:
@@ -134,12 +143,21 @@ def _read(path: Path) -> _Journal | None:
         raise ResumeError(
             f"{path} is {_what(mode)}, not a frames journal semattnet wrote; move it away or choose a new --out"
         )
+    if st.st_size > limit:
+        raise ResumeError(
+            f"{path}: {st.st_size} bytes, more than a frames journal of this run can hold ({limit} bytes at most); "
+            "not read: move it away or choose a new --out"
+        )
     try:
-        doc = json.loads(path.read_text())
+        with path.open("rb") as f:
+            text = f.read(limit + 1)  # the file may have grown since: never more than the limit
+        doc = json.loads(text) if len(text) <= limit else None
     except RecursionError:
         raise ResumeError(f"{path}: not a frames journal (its JSON is nested too deeply); choose a new --out") from None
     except (OSError, ValueError) as exc:
         raise ResumeError(f"{path}: not a readable frames journal ({exc}); start a new --out") from None
+    if len(text) > limit:
+        raise ResumeError(f"{path}: grew past {limit} bytes while it was read; not read: choose a new --out")
     return _checked(path, doc)
 
 
@@ -185,10 +203,6 @@ def _checked(path: Path, doc: object) -> _Journal:
     return cast(_Journal, doc)
 
 
-def _is_stamp(value: object) -> bool:
-    return isinstance(value, list) and len(value) == 2 and all(type(v) is int and v >= 0 for v in value)
-
-
 def _check_entry(path: Path, where: str, entry: object) -> None:
     """One frame record: a name and a status; a done one's files (inside the folder) and stage times."""
     if not isinstance(entry, dict) or not isinstance(entry.get("name"), str) or entry.get("status") not in STATUSES:
@@ -196,7 +210,7 @@ def _check_entry(path: Path, where: str, entry: object) -> None:
     if entry["status"] != "done":
         return
     files, stage_ms, stamps = entry.get("files"), entry.get("stage_ms", {}), entry.get("inputs")
-    if not isinstance(stamps, dict) or not all(_is_stamp(v) for v in stamps.values()):
+    if not isinstance(stamps, dict) or not all(is_input_stamp(v) for v in stamps.values()):
         raise _damaged(path, f"{where}.inputs", f"{_shown(stamps)} is not a table of input files (path -> stamp)")
     if not isinstance(files, dict):
         raise _damaged(path, f"{where}.files", f"{_shown(files)} is not a table of output files")
@@ -220,22 +234,6 @@ def _check_relative(path: Path, where: str, rel: str) -> None:
 
 def _is_digest(value: object) -> bool:
     return isinstance(value, str) and len(value) == 64 and all(c in "0123456789abcdef" for c in value)
-
-
-def input_stamps(paths: Iterable[str | os.PathLike[str]]) -> dict[str, list[int]]:
-    """Size and modification time (ns) of every input file of ``paths`` (the files, and the files directly
-    inside the folders, e.g. a ROS 2 bag's), by resolved path: what a resume compares to see an input changed."""
-    stamps: dict[str, list[int]] = {}
-    for given in paths:
-        p = Path(given).resolve()
-        for f in sorted(p.iterdir()) if p.is_dir() else [p]:
-            try:
-                st = f.stat()
-            except OSError:
-                continue
-            if stat.S_ISREG(st.st_mode):
-                stamps[str(f)] = [st.st_size, st.st_mtime_ns]
-    return stamps
 
 
 def _record(path: Path) -> FileRecord:
@@ -288,9 +286,10 @@ class RunJournal:
         self.kept: set[str] = set()
         self.earlier: dict[str, FrameEntry] = {}  # done frames of earlier runs that this run does not have
         self._saved_at = 0.0
-        self._before = self._snapshot()
+        self._digests = InputDigests()  # each input hashed once per run (a bag every frame reads, too)
         if resume:
-            self._resume()
+            self._resume()  # first: a journal too large to resume is refused before any of it is read
+        self._before = self._snapshot()
 
     @property
     def path(self) -> Path:
@@ -305,8 +304,9 @@ class RunJournal:
             return None
 
     def _resume(self) -> None:
-        main = _read(self.out / FRAMES_FILE)
-        parts = [d for r in range(max(self.world, 1)) if (d := _read(self.out / _rank_file(r))) is not None]
+        limit = MAX_JOURNAL_BYTES + MAX_BYTES_PER_FRAME * len(self.names)
+        main = _read(self.out / FRAMES_FILE, limit)
+        parts = [d for r in range(max(self.world, 1)) if (d := _read(self.out / _rank_file(r), limit)) is not None]
         found = [d for d in (main, *parts) if d is not None]
         if not found:
             raise ResumeError(
@@ -334,7 +334,7 @@ class RunJournal:
         """A done frame of an earlier run (checked by :func:`_read`) whose inputs are unchanged and whose every
         output is whole, else None."""
         name, files, stamps = entry["name"], entry.get("files", {}), entry.get("inputs", {})
-        if entry["status"] != "done" or name not in self.frames or input_stamps(stamps) != stamps:
+        if entry["status"] != "done" or name not in self.frames or not inputs_unchanged(stamps, self._digests):
             return None
         if self.expect is not None and set(files) != set(self.expect(name)):
             return None  # not the files this run writes (an edited journal): done again
@@ -386,7 +386,7 @@ class RunJournal:
         files (or folders) it was read from."""
         records = {rel: _record(self.out / rel) for rel in files}
         times = {k: round(float(v), 3) for k, v in stage_ms.items()}
-        stamps = input_stamps(inputs)
+        stamps = input_stamps(inputs, self._digests)
         self.frames[name] = {"name": name, "status": "done", "files": records, "inputs": stamps, "stage_ms": times}
 
     def mark(self, name: str, status: str, reason: str) -> None:

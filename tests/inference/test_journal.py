@@ -1,0 +1,79 @@
+"""The frames journal read back on ``--resume``: its size judged before a byte of it is read; an input replaced by
+one of the same size and mtime told by its digest (hashed once per run)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from semattnet.inference import journal, stamps
+from tests.reliability.test_journal_trust import _edit, _frames, _kept, _refusal, _run
+
+
+def test_a_512_mb_journal_is_refused_in_one_line_without_being_read(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    source, out = _frames(tmp_path), tmp_path / "out"
+    _run(source, out)
+    big = out / "frames.json"
+    with big.open("r+b") as f:
+        f.truncate(512 * 2**20)  # sparse: no disk used
+
+    def never(*_: object, **__: object) -> object:
+        raise AssertionError("the oversized journal was read")
+
+    monkeypatch.setattr(journal.json, "loads", never)
+    monkeypatch.setattr(Path, "read_bytes", never)
+    monkeypatch.setattr(Path, "read_text", never)
+    message = _refusal(source, out)
+    assert str(big) in message and f"{512 * 2**20} bytes" in message and "not read" in message, message
+    assert os.path.getsize(big) == 512 * 2**20  # left as it was
+
+
+def test_a_journal_within_the_bound_of_a_large_run_is_read(tmp_path: Path) -> None:
+    names = [f"f{i}" for i in range(1000)]
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "frames.json").write_text(" " * (journal.MAX_JOURNAL_BYTES + 2 * journal.MAX_BYTES_PER_FRAME) + "{}")
+    with pytest.raises(journal.ResumeError, match="not a semattnet frames journal"):  # read, then judged by content
+        journal.RunJournal(out, names, resume=True)
+    with pytest.raises(journal.ResumeError, match="more than a frames journal of this run can hold"):
+        journal.RunJournal(out, names[:1], resume=True)
+
+
+def test_an_input_replaced_by_one_of_the_same_size_and_mtime_is_done_again(tmp_path: Path) -> None:
+    source, out = _frames(tmp_path), tmp_path / "out"
+    _run(source, out)
+    image = tmp_path / "rgb" / "f1.png"
+    before = image.stat()
+    data = bytearray(image.read_bytes())
+    data[-20] ^= 0xFF  # other bytes, the same size
+    image.write_bytes(bytes(data))
+    os.utime(image, ns=(before.st_atime_ns, before.st_mtime_ns))  # and the same mtime
+    assert image.stat().st_size == before.st_size and image.stat().st_mtime_ns == before.st_mtime_ns
+    assert _kept(source, out) == {"f0", "f2"}
+
+
+def test_a_record_without_the_inputs_digest_is_done_again(tmp_path: Path) -> None:
+    source, out = _frames(tmp_path), tmp_path / "out"
+    _run(source, out)
+
+    def drop_digests(doc: dict[str, Any]) -> None:
+        for entry in doc["frames"]:
+            entry["inputs"] = {k: v[:2] for k, v in entry["inputs"].items()}
+
+    _edit(out, drop_digests)
+    assert _kept(source, out) == set()
+
+
+def test_an_input_every_frame_reads_is_hashed_once_per_run(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    bag = tmp_path / "drive.bag"
+    bag.write_bytes(os.urandom(4096))
+    hashed: list[Path] = []
+    monkeypatch.setattr(stamps, "sha256_file", lambda p: hashed.append(p) or "0" * 64)
+    digests = stamps.InputDigests()
+    records = [stamps.input_stamps([bag], digests) for _ in range(100)]
+    assert len(hashed) == 1 and all(stamps.inputs_unchanged(r, digests) for r in records) and len(hashed) == 1
