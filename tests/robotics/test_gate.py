@@ -109,3 +109,31 @@ def test_a_new_client_is_refused_only_when_every_place_is_relayed(upstream: tupl
         for s in held:
             s.close()
         g.close()
+
+
+def test_a_relayed_client_that_takes_nothing_is_dropped_after_the_stall_time() -> None:
+    """A viewer gone without a word (half-open after its handshake) or that stopped reading frees its place."""
+    listener = socket.create_server(("127.0.0.1", 0))
+
+    def flood() -> None:  # a server that answers, then streams without end
+        conn, _ = listener.accept()
+        conn.recv(4096)
+        try:
+            while True:
+                conn.sendall(b"\0" * 65536)
+        except OSError:
+            conn.close()
+
+    threading.Thread(target=flood, daemon=True).start()
+    g = Gate("127.0.0.1", 0, listener.getsockname(), max_clients=1, stall_s=0.3)
+    port = g.start()
+    try:
+        with _connect(port) as silent:
+            silent.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+            silent.sendall(REQUEST)  # relayed, then never reads
+            _wait_for(lambda: g.clients == 1, "the client to be relayed")
+            _wait_for(lambda: g.clients == 0, "the stalled client to be dropped")
+            assert g.refused == 0
+    finally:
+        g.close()
+        listener.close()

@@ -9,7 +9,9 @@ beyond the cap takes the place of the oldest one still waiting for its first req
 half-open connections, however many, never lock a real client out; only when every client is relayed is a new
 one closed at once. A client that stops reading holds at most a socket buffer here: the relay stops reading
 from the server, whose own per-client queue then drops its oldest messages (foxglove-sdk keeps
-:data:`~semattnet.robotics.live.CLIENT_BACKLOG`). :meth:`Gate.close` drops every client at once.
+:data:`~semattnet.robotics.live.CLIENT_BACKLOG`), and after :data:`STALL_S` without taking a byte (a peer gone
+without a word: a half-open connection) it is dropped, its place freed. :meth:`Gate.close` drops every client at
+once.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import threading
 
 from semattnet._errors import InputError
 
-__all__ = ["HANDSHAKE_S", "MAX_CLIENTS", "Gate", "exposed", "is_loopback", "parse_address"]
+__all__ = ["HANDSHAKE_S", "MAX_CLIENTS", "STALL_S", "Gate", "exposed", "is_loopback", "parse_address"]
 
 #: Seconds a client has to send its first request in full before it is closed.
 HANDSHAKE_S = 5.0
@@ -31,6 +33,9 @@ MAX_CLIENTS = 32
 MAX_REQUEST = 16 * 1024
 #: Connections the system queues before the gate takes them.
 BACKLOG = 512
+#: Seconds a relayed client may leave the bytes sent to it unread (a peer gone without a word, a client that stopped
+#: reading) before it is dropped: its place is not held for ever.
+STALL_S = 30.0
 #: Seconds :meth:`Gate.close` (and :meth:`Gate.start`) wait at most.
 CLOSE_S = 2.0
 
@@ -70,6 +75,7 @@ class Gate:
         upstream: the (host, port) of the server the clients are relayed to.
         max_clients: clients at once (:data:`MAX_CLIENTS`).
         handshake_s: seconds for a client's first request (:data:`HANDSHAKE_S`).
+        stall_s: seconds a relayed client may leave what is sent to it unread (:data:`STALL_S`).
     """
 
     def __init__(
@@ -80,9 +86,10 @@ class Gate:
         *,
         max_clients: int = MAX_CLIENTS,
         handshake_s: float = HANDSHAKE_S,
+        stall_s: float = STALL_S,
     ) -> None:
         self.host, self.upstream = host, upstream
-        self.max_clients, self.handshake_s = max_clients, handshake_s
+        self.max_clients, self.handshake_s, self.stall_s = max_clients, handshake_s, stall_s
         self.port = port
         self.refused = 0  #: connections closed because :attr:`max_clients` were being relayed
         self.evicted = 0  #: connections still without their first request closed to make room for a newer one
@@ -155,7 +162,10 @@ class Gate:
         up_reader, up_writer = await asyncio.wait_for(asyncio.open_connection(*self.upstream), self.handshake_s)
         try:
             up_writer.write(request)
-            pumps = [asyncio.ensure_future(_pump(reader, up_writer)), asyncio.ensure_future(_pump(up_reader, writer))]
+            pumps = [
+                asyncio.ensure_future(_pump(reader, up_writer, None)),
+                asyncio.ensure_future(_pump(up_reader, writer, self.stall_s)),
+            ]
             try:
                 await asyncio.wait(pumps, return_when=asyncio.FIRST_COMPLETED)
             finally:
@@ -187,8 +197,9 @@ class Gate:
             self._loop.close()
 
 
-async def _pump(src: asyncio.StreamReader, dst: asyncio.StreamWriter) -> None:
-    """Bytes from ``src`` to ``dst`` until ``src`` ends; waits while ``dst`` is full (so ``src`` is not read)."""
+async def _pump(src: asyncio.StreamReader, dst: asyncio.StreamWriter, stall_s: float | None) -> None:
+    """Bytes from ``src`` to ``dst`` until ``src`` ends; waits while ``dst`` is full (so ``src`` is not read), at
+    most ``stall_s`` seconds at a time (then it ends: the client is dropped)."""
     while data := await src.read(64 * 1024):
         dst.write(data)
-        await dst.drain()
+        await asyncio.wait_for(dst.drain(), stall_s)
