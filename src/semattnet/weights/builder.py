@@ -173,5 +173,25 @@ def build_model_with_weights(
     if arch is not None:
         _check_arch(cfg, arch, label)
     model = build_model(config=cfg)
-    load_weights(model, weights)
+    try:
+        load_weights(model, weights)
+    except StateDictMismatchError as exc:
+        if config is not None or weights.config is None or isinstance(exc, WeightsMismatchError):
+            raise
+        raise _metadata_mismatch(label, cfg, str(exc)) from None
     return model.to(device if device is not None else "cpu").eval()
+
+
+#: The fields that name a variant in a message about a file whose metadata names another variant than its tensors.
+_VARIANT_FIELDS = ("encoder", "anchor", "refine", "width", "branches", "fusion", "kernel_sizes")
+
+
+def _metadata_mismatch(label: str, cfg: SemAttNetConfig, found: str) -> WeightsMismatchError:
+    """The one line for a file whose own config (its metadata) builds a model its tensors do not fit: the file
+    contradicts itself, whatever variant it names."""
+    named = ", ".join(f"{f} {getattr(cfg, f)!r}" for f in _VARIANT_FIELDS)
+    detail = found.split(" does not fit the model: ", 1)[-1]
+    return WeightsMismatchError(
+        f"{label}: the config in the file's metadata ({named}) is not the model its tensors are of ({detail}); "
+        "the file contradicts itself: not loaded"
+    )
