@@ -44,12 +44,16 @@ def roomy_fs(tmp_path: Path) -> Iterator[Path]:
     yield from _tmpfs(tmp_path / "fs", "2m")
 
 
+@pytest.fixture(scope="module")
+def weights(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return rt_checkpoint(tmp_path_factory.mktemp("rt-weights") / "rt.safetensors")
+
+
 def _temps(folder: Path) -> list[Path]:
     return [p for p in folder.rglob(".*.p*") if p.is_file()]
 
 
-def test_a_full_disk_at_the_first_state_is_one_line_naming_the_state(tiny_fs: Path, tmp_path: Path) -> None:
-    weights = rt_checkpoint(tmp_path / "rt.safetensors")
+def test_a_full_disk_at_the_first_state_is_one_line_naming_the_state(tiny_fs: Path, weights: Path) -> None:
     out = tiny_fs / "run"
     with pytest.raises(OSError) as info:
         adapt(_cfg(weights, out), _Frames(), log=_quiet)
@@ -60,9 +64,8 @@ def test_a_full_disk_at_the_first_state_is_one_line_naming_the_state(tiny_fs: Pa
 
 
 def test_a_full_disk_at_the_final_weights_is_one_line_naming_them(
-    roomy_fs: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    roomy_fs: Path, weights: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    weights = rt_checkpoint(tmp_path / "rt.safetensors")
     write_final = adapt_run.Adapter._write_final
 
     def fill_then_write(self: adapt_run.Adapter) -> Path:
