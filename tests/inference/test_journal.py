@@ -1,5 +1,6 @@
 """The frames journal read back on ``--resume``: its size judged before a byte of it is read; an input replaced by
-one of the same size and mtime told by its digest (hashed once per run)."""
+one of the same size and mtime told by its digest (hashed once per run); a kept depth read back from the bytes
+checked, never through a link."""
 
 from __future__ import annotations
 
@@ -7,9 +8,13 @@ import os
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
+from semattnet.data.io import read_depth, write_depth
 from semattnet.inference import journal, stamps
+from semattnet.inference.pipeline import OutputSpec, check_frames
+from semattnet.inference.sinks import default_sinks
 from tests.reliability.test_journal_trust import _edit, _frames, _kept, _refusal, _run
 
 
@@ -77,3 +82,28 @@ def test_an_input_every_frame_reads_is_hashed_once_per_run(tmp_path: Path, monke
     digests = stamps.InputDigests()
     records = [stamps.input_stamps([bag], digests) for _ in range(100)]
     assert len(hashed) == 1 and all(stamps.inputs_unchanged(r, digests) for r in records) and len(hashed) == 1
+
+
+def test_a_kept_depth_swapped_for_a_link_after_its_check_is_never_read_back(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The bytes checked are the bytes decoded: a link to a file out of OUT, swapped in between the check and the
+    decoding, is not what the bag (or any replay) gets; one swapped in before is refused."""
+    source, out = _frames(tmp_path), tmp_path / "out"
+    _run(source, out)
+    plan = check_frames(source, default_sinks(), out, OutputSpec(resume=True))
+    plan.release()
+    mine = read_depth(out / "f0.png")
+    foreign = tmp_path / "foreign.png"
+    write_depth(foreign, np.full(mine.shape, 7.0, np.float32))
+
+    def swap_then_read(path: Path) -> np.ndarray:
+        if not (out / "f0.png").is_symlink():
+            (out / "f0.png").unlink()
+            (out / "f0.png").symlink_to(foreign)  # the race: after the check, before the decoding
+        return read_depth(path)
+
+    monkeypatch.setattr(journal, "read_depth", swap_then_read)
+    assert np.array_equal(plan.journal.stored_depth("f0", "f0.png"), mine)
+    with pytest.raises(journal.ResumeError, match="f0.png: changed or replaced while the resume ran"):
+        plan.journal.stored_depth("f0", "f0.png")  # the link is there now: refused, not followed

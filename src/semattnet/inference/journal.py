@@ -28,19 +28,24 @@ keeps ``.frames.rankR.json`` while it runs and process 0 merges them into ``fram
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import stat
+import tempfile
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path, PurePosixPath
 from typing import TypedDict, cast
 
+import numpy as np
+
 from semattnet._errors import SemAttNetError
 from semattnet._utils.atomic import atomic_path
 from semattnet._utils.version import __version__
 from semattnet.cache.store import sha256_file
+from semattnet.data.io import read_depth
 from semattnet.inference.stamps import InputDigests, InputStamp, input_stamps, inputs_unchanged, is_input_stamp
 
 __all__ = [
@@ -236,6 +241,24 @@ def _is_digest(value: object) -> bool:
     return isinstance(value, str) and len(value) == 64 and all(c in "0123456789abcdef" for c in value)
 
 
+def _read_inside(out: Path, rel: str, size: int) -> bytes | None:
+    """The bytes of ``out/rel`` when it is a regular file of ``size`` bytes, every folder of ``rel`` and the file
+    opened without following a symbolic link (None otherwise); :class:`OSError` where one is a link."""
+    parts = PurePosixPath(rel).parts
+    fd = os.open(out, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        for part in parts[:-1]:
+            inner = os.open(part, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW, dir_fd=fd)
+            os.close(fd)
+            fd = inner
+        file_fd = os.open(parts[-1], os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK, dir_fd=fd)
+    finally:
+        os.close(fd)
+    with os.fdopen(file_fd, "rb") as f:
+        st = os.fstat(f.fileno())
+        return f.read(size + 1) if stat.S_ISREG(st.st_mode) and st.st_size == size else None
+
+
 def _record(path: Path) -> FileRecord:
     return {"size": path.stat().st_size, "sha256": sha256_file(path)}
 
@@ -374,6 +397,29 @@ class RunJournal:
                 f"{FRAMES_FILE} records); run the resume again"
             )
         return self.out / rel
+
+    def stored_depth(self, name: str, rel: str) -> np.ndarray:
+        """The depth PNG ``rel`` of the kept frame ``name``, decoded from the bytes whose size and digest were just
+        checked: read once, each folder of ``rel`` and the file opened without following a link, so a link swapped in
+        after the resume's check (to a file out of ``out``) is never read back (e.g. into a bag).
+
+        Raises:
+            ResumeError: it changed since, is a link or is not among the frame's recorded files.
+        """
+        record = self.frames[name].get("files", {}).get(rel)
+        try:
+            data = _read_inside(self.out, rel, record["size"]) if record is not None else None
+        except OSError:
+            data = None
+        if record is None or data is None or hashlib.sha256(data).hexdigest() != record["sha256"]:
+            raise ResumeError(
+                f"{self.out / rel}: changed or replaced while the resume ran (not the file "
+                f"{FRAMES_FILE} records); run the resume again"
+            )
+        with tempfile.TemporaryDirectory(prefix="semattnet-replay.") as private:
+            copy = Path(private) / Path(rel).name
+            copy.write_bytes(data)
+            return read_depth(copy)
 
     def done(
         self,

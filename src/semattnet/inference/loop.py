@@ -20,7 +20,7 @@ from semattnet._utils.atomic import fsync_dir
 from semattnet._utils.distributed import first_error, is_main, world_size
 from semattnet._utils.outputs import stage_folder
 from semattnet.data.frames import Frame, FrameSource
-from semattnet.data.io import encode_depth, read_depth
+from semattnet.data.io import encode_depth
 from semattnet.inference.completer import Completer, Completion
 from semattnet.inference.contract import reading_only
 from semattnet.inference.feed import FrameFault, completions, fault_reason, is_frame_fault, read_frame
@@ -154,10 +154,10 @@ class _FrameLoop:
         if not self.replays or self.depth_sink is None:
             return
         frame = read_frame(self.source, name, self.semantic, StageTimes())
-        stored = read_depth(self.journal.stored(name, str(self.depth_sink.path(name))))  # never a link's target
+        stored = self.journal.stored_depth(name, str(self.depth_sink.path(name)))  # never a link's target
         pred = Prediction(frame, Completion(stored), stored, encode_depth(stored), stored)
         if self.uncertainty_sink is not None:
-            pred.uncertainty = read_depth(self.journal.stored(name, str(self.uncertainty_sink.path(name))))
+            pred.uncertainty = self.journal.stored_depth(name, str(self.uncertainty_sink.path(name)))
             pred.uncertainty_png = encode_depth(pred.uncertainty)
         for sink in self.replays:
             sink.write(self.out, pred)
