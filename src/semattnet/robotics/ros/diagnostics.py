@@ -20,19 +20,21 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from semattnet.robotics.bags.encode import header
 
 from .transport import QoS, Transport
 
 if TYPE_CHECKING:
+    from semattnet.geometry import RigCalibration
+    from semattnet.inference.live import LiveRun
     from semattnet.robotics.bags.deps import Typestore
 
-    from .node import DepthNode
+    from .inputs import PairingInputs
     from .transport import Publisher
 
-__all__ = ["DIAGNOSTICS_QOS", "KEYS", "MISSING_PERIODS", "Diagnostics", "NodeHealth", "node_health"]
+__all__ = ["DIAGNOSTICS_QOS", "KEYS", "MISSING_PERIODS", "Diagnostics", "HealthSource", "NodeHealth", "node_health"]
 
 #: The topic (absolute, never remapped by the node's namespace, as ``diagnostic_updater`` publishes it).
 DIAGNOSTICS_TOPIC = "/diagnostics"
@@ -75,7 +77,21 @@ class NodeHealth:
     expected: tuple[str, ...] = ("image", "scan")
 
 
-def node_health(node: DepthNode) -> NodeHealth:
+class HealthSource(Protocol):
+    """What :func:`node_health` reads of the node (:class:`~.node.DepthNode`)."""
+
+    inputs: PairingInputs
+    run: LiveRun
+    rig: RigCalibration | None
+
+    @property
+    def published(self) -> int: ...
+
+    @property
+    def failed(self) -> int: ...
+
+
+def node_health(node: HealthSource) -> NodeHealth:
     """The one adapter from the node's counts (``node.inputs.counts``, ``node.run``: its stage tally of the
     current interval, read before the report line starts a new one) to :class:`NodeHealth`."""
     c = node.inputs.counts
