@@ -121,6 +121,22 @@ def test_publisher_to_subscriber(node: Callable[[str], TcprosTransport], subscri
     assert publisher.subscriber_count == 1
 
 
+def test_get_bus_info_lists_the_connections_as_rospy_does(node: Callable[[str], TcprosTransport]) -> None:
+    """``rosnode info`` reads getBusInfo: [id, destination, direction, transport, topic, connected, info] per
+    connection; the subscriber's caller id on the publisher's side, the publisher's URI on the subscriber's."""
+    talker, listener = node("/talker"), node("/listener")
+    received: list[Any] = []
+    publisher = talker.advertise("/depth", IMAGE, OUTPUT_QOS)
+    listener.subscribe("/depth", IMAGE, SENSOR_QOS, received.append)
+    _publish_until(publisher, _depth_message(talker), received)
+    code, _, rows = xmlrpc.client.ServerProxy(talker.uri).getBusInfo("/rosnode")
+    assert code == 1 and [row[1:6] for row in rows] == [["/listener", "o", "TCPROS", "/depth", True]], rows
+    code, _, inbound = xmlrpc.client.ServerProxy(listener.uri).getBusInfo("/rosnode")
+    assert code == 1 and [row[1:6] for row in inbound] == [[talker.uri, "i", "TCPROS", "/depth", True]], inbound
+    assert isinstance(rows[0][0], int) and isinstance(inbound[0][0], int) and rows[0][0] != inbound[0][0]
+    assert isinstance(rows[0][6], str) and xmlrpc.client.ServerProxy(talker.uri).getBusInfo("/x")[2] == rows
+
+
 def test_durable_topic_is_latched_for_a_late_subscriber(node: Callable[[str], TcprosTransport]) -> None:
     """/tf_static's QoS (transient local) is a latched ROS 1 topic: published once, before anyone subscribed,
     the message still reaches a subscriber that connects later (and the handshake says latching=1)."""

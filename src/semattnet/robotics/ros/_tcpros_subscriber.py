@@ -11,6 +11,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Protocol
 
 from ._tcpros_wire import (
+    CONNECTION_IDS,
     MAX_PEERS,
     POLL_S,
     TcprosError,
@@ -40,6 +41,7 @@ class Inbound:
         self.sub, self.uri = subscription, uri
         self.stop = threading.Event()
         self.sock: socket.socket | None = None
+        self.connection: int | None = None  # this connection's id while it is open (getBusInfo)
         self.thread = threading.Thread(target=self._run, name=f"tcpros-in{subscription.topic}", daemon=True)
 
     def _connect(self) -> socket.socket:
@@ -61,6 +63,7 @@ class Inbound:
         if reply.get("md5sum") not in (sub.md5sum, "*"):
             raise TcprosError(f"md5sum {reply.get('md5sum')!r} is not {sub.md5sum} ({ros1_type_name(sub.msgtype)})")
         sock.settimeout(POLL_S)
+        self.connection = next(CONNECTION_IDS)
         return sock
 
     def _run(self) -> None:
@@ -86,6 +89,7 @@ class Inbound:
                     )
                 attempt += 1
             finally:
+                self.connection = None
                 if self.sock is not None:
                     self.sock.close()
             self.stop.wait(_RETRY_S[min(attempt, len(_RETRY_S) - 1)])
@@ -145,6 +149,18 @@ class Subscription:
                 if uri not in self._inbound or not self._inbound[uri].thread.is_alive():
                     self._inbound[uri] = inbound = Inbound(self, uri)
                     self._track(inbound.thread)
+
+    def bus_info(self) -> list[list[object]]:
+        """``getBusInfo``'s rows of this topic's open connections: [connection id, the publisher's URI, "i"
+        (inbound), "TCPROS", topic, connected, what the connection is]."""
+        with self._lock:
+            inbound = list(self._inbound.values())
+        rows: list[list[object]] = []
+        for peer in inbound:
+            cid = peer.connection
+            if cid is not None:
+                rows.append([cid, peer.uri, "i", "TCPROS", self.topic, True, f"TCPROS connection to {peer.uri}"])
+        return rows
 
     def deliver(self, frame: bytes) -> None:
         """Deserialise one frame and call back; a bad frame or a failing callback is one logged line."""
