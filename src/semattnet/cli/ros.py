@@ -247,10 +247,15 @@ def ros2(**params: object) -> None:
     domain = _domain_id(params["domain_id"])  # type: ignore[arg-type]
     loopback = bool(params["loopback"]) or localhost_only(os.environ)
 
+    enclave = str(click.get_current_context().meta.get("semattnet.enclave", "/"))
+
     def dds() -> Transport:
         from semattnet.robotics.ros.dds import DdsTransport
+        from semattnet.robotics.ros.names import check_namespace
 
-        return DdsTransport(domain, loopback=loopback)
+        # the node in the ROS 2 graph (ros_discovery_info) by the names it runs under
+        namespace, node = check_namespace(str(params["namespace"])), str(params["node_name"]).strip("/")
+        return DdsTransport(domain, loopback=loopback, namespace=namespace, node_name=node, enclave=enclave)
 
     _run(params, dds)
 
