@@ -16,6 +16,7 @@ from ._tcpros_wire import (
     POLL_S,
     TcprosError,
     check_http_uri,
+    connection_info,
     encode_header,
     read_header,
     read_wire_frame,
@@ -41,7 +42,7 @@ class Inbound:
         self.sub, self.uri = subscription, uri
         self.stop = threading.Event()
         self.sock: socket.socket | None = None
-        self.connection: int | None = None  # this connection's id while it is open (getBusInfo)
+        self.connection: tuple[int, str] | None = None  # this connection's id and description while it is open
         self.thread = threading.Thread(target=self._run, name=f"tcpros-in{subscription.topic}", daemon=True)
 
     def _connect(self) -> socket.socket:
@@ -63,7 +64,7 @@ class Inbound:
         if reply.get("md5sum") not in (sub.md5sum, "*"):
             raise TcprosError(f"md5sum {reply.get('md5sum')!r} is not {sub.md5sum} ({ros1_type_name(sub.msgtype)})")
         sock.settimeout(POLL_S)
-        self.connection = next(CONNECTION_IDS)
+        self.connection = (next(CONNECTION_IDS), connection_info(sock))
         return sock
 
     def _run(self) -> None:
@@ -157,9 +158,9 @@ class Subscription:
             inbound = list(self._inbound.values())
         rows: list[list[object]] = []
         for peer in inbound:
-            cid = peer.connection
-            if cid is not None:
-                rows.append([cid, peer.uri, "i", "TCPROS", self.topic, True, f"TCPROS connection to {peer.uri}"])
+            if peer.connection is not None:
+                cid, info = peer.connection
+                rows.append([cid, peer.uri, "i", "TCPROS", self.topic, True, info])
         return rows
 
     def deliver(self, frame: bytes) -> None:

@@ -32,6 +32,7 @@ __all__ = [
     "SlaveServer",
     "TcprosError",
     "check_http_uri",
+    "connection_info",
     "decode_header",
     "encode_header",
     "read_header",
@@ -53,6 +54,16 @@ MAX_PEERS = 64
 POLL_S = 0.1
 #: Connection ids of this process, as rospy numbers its connections for ``getBusInfo`` (from 1).
 CONNECTION_IDS = itertools.count(1)
+
+
+def connection_info(sock: socket.socket) -> str:
+    """A connection as rospy describes it in ``getBusInfo`` (``rosnode info`` parses it): ``TCPROS connection on
+    port LOCAL to [HOST:PORT on socket FD]``."""
+    try:
+        host, port = sock.getpeername()[:2]
+        return f"TCPROS connection on port {sock.getsockname()[1]} to [{host}:{port} on socket {sock.fileno()}]"
+    except OSError:
+        return "TCPROS connection (closed)"
 
 
 class TcprosError(DataError):

@@ -52,6 +52,7 @@ from ._tcpros_wire import (
     SlaveServer,
     TcprosError,
     check_http_uri,
+    connection_info,
     encode_header,
     read_header,
     xmlrpc_call,
@@ -97,7 +98,7 @@ class TcprosPublisher:
             "latching": "1" if qos.durable else "0",
         }
         self._outboxes: list[Outbox] = []
-        self._peers: dict[Outbox, tuple[int, str]] = {}  # connection id and the subscriber's caller id
+        self._peers: dict[Outbox, tuple[int, str, str]] = {}  # connection id, the subscriber's caller id, its info
         self._latched: tuple[bytes, memoryview] | None = None  # a durable topic's last message, for late subscribers
         self._lock = threading.Lock()
         self._dropped_gone = 0
@@ -149,11 +150,8 @@ class TcprosPublisher:
         """``getBusInfo``'s rows of this topic's open connections, as rospy gives them: [connection id, the
         subscriber's caller id, "o" (outbound), "TCPROS", topic, connected, what the connection is]."""
         with self._lock:
-            peers = [(o, *self._peers[o]) for o in self._outboxes if o.alive and o in self._peers]
-        return [
-            [cid, caller, "o", "TCPROS", self.topic, True, f"TCPROS connection to {o.label}"]
-            for o, cid, caller in peers
-        ]
+            peers = [self._peers[o] for o in self._outboxes if o.alive and o in self._peers]
+        return [[cid, caller, "o", "TCPROS", self.topic, True, info] for cid, caller, info in peers]
 
     def attach(self, sock: socket.socket, label: str, stop: threading.Event, caller: str = "") -> Outbox | None:
         """A new subscriber's outbox (``caller``: its caller id), or None (the socket closed) beyond
@@ -168,7 +166,7 @@ class TcprosPublisher:
                 outbox.put(*self._latched)
             self._outboxes.append(outbox)
             self._peers = {o: p for o, p in self._peers.items() if o.alive}
-            self._peers[outbox] = (next(CONNECTION_IDS), caller or label)
+            self._peers[outbox] = (next(CONNECTION_IDS), caller or label, connection_info(sock))
             return outbox
 
     def abort(self) -> None:
