@@ -161,8 +161,8 @@ def yaml_value(text: str, where: str) -> object:
 def matches_node(pattern: str, fqn: str) -> bool:
     """Whether a parameter file's NODE key selects the node ``fqn`` (``/ns/name``), as ``rcl`` matches it.
 
-    >>> [matches_node(k, "/robot/depth") for k in ("/**", "/robot/depth", "depth", "/*/depth", "/**/depth")]
-    [True, True, False, True, True]
+    >>> tuple(k for k in ("/**", "/robot/depth", "depth", "/*/depth", "/**/x") if matches_node(k, "/robot/depth"))
+    ('/**', '/robot/depth', '/*/depth')
     """
     key = pattern if pattern.startswith("/") else "/" + pattern
     parts = []
