@@ -17,6 +17,7 @@ the interval, ``latency_STAGE_mean_ms`` / ``latency_STAGE_max_ms``. What it read
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -35,6 +36,8 @@ if TYPE_CHECKING:
     from .transport import Publisher
 
 __all__ = ["DIAGNOSTICS_QOS", "KEYS", "MISSING_PERIODS", "Diagnostics", "HealthSource", "NodeHealth", "node_health"]
+
+log = logging.getLogger("semattnet.ros")
 
 #: The topic (absolute, never remapped by the node's namespace, as ``diagnostic_updater`` publishes it).
 DIAGNOSTICS_TOPIC = "/diagnostics"
@@ -147,7 +150,10 @@ class Diagnostics:
             header=header(ts, time.time_ns(), ""), status=[status]
         )
         if self.publisher is not None:
-            self.publisher.publish(message)
+            try:
+                self.publisher.publish(message)
+            except Exception as exc:  # the node's health report never stops the node: one line
+                log.warning("/diagnostics: not published (%s: %s)", type(exc).__name__, exc)
         return message
 
     def status(self, health: NodeHealth, now: float) -> tuple[int, str, dict[str, str]]:
