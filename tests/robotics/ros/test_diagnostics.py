@@ -89,3 +89,19 @@ def test_the_guide_documents_every_key() -> None:
     documented = set(re.findall(r"`(\w+)`", text))
     assert set(KEYS) <= documented, sorted(set(KEYS) - documented)
     assert "latency_STAGE_mean_ms" in text and "/diagnostics" in text
+
+
+def test_the_node_types_are_registered_from_their_msg_text_where_rosbags_lacks_them() -> None:
+    """A store without diagnostic_msgs and rmw_dds_common (an older rosbags) gets them from Humble's .msg text,
+    field for field as rosbags' own Humble store defines them."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    from semattnet.robotics.bags.deps import NODE_MSGS, add_missing_types
+
+    humble = rosbags_typestore(False)
+    bare = get_typestore(Stores.EMPTY)
+    bare.register(get_types_from_msg("int32 sec\nuint32 nanosec", "builtin_interfaces/msg/Time"))
+    bare.register(get_types_from_msg("builtin_interfaces/Time stamp\nstring frame_id", "std_msgs/msg/Header"))
+    add_missing_types(bare)
+    for name in NODE_MSGS:
+        assert bare.fielddefs[name] == humble.fielddefs[name], name
