@@ -12,6 +12,7 @@ given). Topic remaps replace the topic options they match (compared as resolved 
 from __future__ import annotations
 
 import logging
+import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -75,6 +76,9 @@ class RosNodeCommand(GeneratedCommand):
 
         params = settable_params(self, ctx)
         given = {name for name in params if ctx.get_parameter_source(name) == click.core.ParameterSource.COMMANDLINE}
+        namespace = os.environ.get("ROS_NAMESPACE", "").strip()
+        if self.ros1 and namespace and "namespace" not in given:  # roslaunch's <node ns=...>, as rospy reads it
+            ros.settings.setdefault("namespace", namespace)
         for name, setting in ros.settings.items():
             if name not in params:
                 raise InputError(f"{name}: not a setting of semattnet {ctx.info_name}")
@@ -101,7 +105,9 @@ class RosNodeCommand(GeneratedCommand):
 
 
 class Ros1NodeCommand(RosNodeCommand):
-    """``ros1``: ROS 1's ``NAME:=VALUE`` words (``__ns:=``, ``__name:=``, ``_key:=``, remaps) read too."""
+    """``ros1``: ROS 1's ``NAME:=VALUE`` words (``__ns:=``, ``__name:=``, ``_key:=``, remaps) read too, and
+    ``ROS_NAMESPACE`` (what roslaunch sets for ``<node ns=...>``) where neither ``__ns:=`` nor ``--namespace``
+    names the namespace."""
 
     ros1 = True
 

@@ -193,3 +193,12 @@ def test_ros1_takes_rosrun_words(ran: dict[str, object]) -> None:
     assert (ran["image_topic"], ran["master"], ran["host"]) == ("/cam/img", "http://10.0.0.1:11311", "10.0.0.2")
     assert "__foo" in invoke(["ros1", "__foo:=1"])
     assert "unexpected extra argument" in invoke(["ros2", "__ns:=/robot"])  # ROS 2 takes them after --ros-args
+
+
+def test_ros1_reads_roslaunchs_namespace(ran: dict[str, object], monkeypatch: pytest.MonkeyPatch) -> None:
+    """roslaunch gives a node's namespace in ROS_NAMESPACE; __ns:= and --namespace win over it, as in rospy."""
+    monkeypatch.setenv("ROS_NAMESPACE", "/fleet/r2")
+    assert invoke(["ros1"]) == "" and ran["namespace"] == "/fleet/r2"
+    assert invoke(["ros1", "__ns:=/r3"]) == "" and ran["namespace"] == "/r3"
+    assert invoke(["ros1", "--namespace", "/r4"]) == "" and ran["namespace"] == "/r4"
+    assert invoke(["ros2"]) == "" and ran["namespace"] == ""
