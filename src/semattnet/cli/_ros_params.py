@@ -98,7 +98,8 @@ class RosNodeCommand(GeneratedCommand):
             converted = _converted(ctx, params[key], value, where)
             if key not in given:
                 ctx.params[key] = converted
-        _remap_topics(ctx, ros.remaps)
+        node = str(ctx.params["node_name"]).strip("/")
+        _remap_topics(ctx, [(source, to) for source, to, target in ros.remaps if target in ("", node)])
         if ros.log_level is not None:
             _log_level(ros.log_level)
         ctx.meta["semattnet.enclave"] = ros.enclave or "/"

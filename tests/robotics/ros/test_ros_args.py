@@ -59,6 +59,10 @@ def test_a_launch_files_command_line_names_and_remaps_the_node(ran: dict[str, ob
         "input/x:=/y",
         "-r",
         "/robot/depth/input/point_cloud:=velodyne_points",
+        "-r",
+        "other:~/input/camera_info:=/x",
+        "-r",
+        "depth:~/output:=/robot/out",
         "--log-level",
         "warn",
         "--",
@@ -67,7 +71,8 @@ def test_a_launch_files_command_line_names_and_remaps_the_node(ran: dict[str, ob
     assert ran["namespace"] == "/robot" and ran["node_name"] == "depth"
     assert (ran["max_skew"], ran["method"], ran["frames"], ran["report_every"]) == (0.05, "classical", 7, 2.0)
     assert ran["image_topic"] == "/camera/image_raw" and ran["points_topic"] == "/robot/velodyne_points"
-    assert ran["camera_info_topic"] == "~/input/camera_info"
+    assert ran["camera_info_topic"] == "~/input/camera_info"  # the rule for node "other" is not ours
+    assert ran["output_prefix"] == "/robot/out"
 
 
 def test_who_wins_files_in_order_then_p_then_the_command_line(ran: dict[str, object], tmp_path: Path) -> None:

@@ -35,10 +35,11 @@ _TOKEN = re.compile(r"[A-Za-z_~/][A-Za-z0-9_/~.]*")
 
 @dataclass
 class RosArgs:
-    """What the ROS arguments asked: remaps (FROM, TO), parameters (NAME, VALUE as YAML text, where), files, and
-    the node's settings (``namespace``, ``node_name``, ``master``, ``host``) a special remap gave."""
+    """What the ROS arguments asked: remaps (FROM, TO, and the node a ``NODE:FROM:=TO`` rule is for, else ""),
+    parameters (NAME, VALUE as YAML text, where), files, and the node's settings (``namespace``, ``node_name``,
+    ``master``, ``host``) a special remap gave."""
 
-    remaps: list[tuple[str, str]] = field(default_factory=list)
+    remaps: list[tuple[str, str, str]] = field(default_factory=list)
     params: list[tuple[str, str, str]] = field(default_factory=list)
     params_files: list[Path] = field(default_factory=list)
     settings: dict[str, str] = field(default_factory=dict)
@@ -54,15 +55,15 @@ def _rule(text: str, flag: str) -> tuple[str, str]:
     return left, right
 
 
-def _remap(ros: RosArgs, text: str, node_name: str | None) -> None:
-    """One ``-r`` rule: ``__ns`` / ``__node`` / ``__name`` set the node's names; ``NODE:FROM:=TO`` only if NODE is
-    this node."""
+def _remap(ros: RosArgs, text: str) -> None:
+    """One ``-r`` rule: ``__ns`` / ``__node`` / ``__name`` set the node's names; ``NODE:FROM:=TO`` is kept with
+    its NODE (it applies to that node only)."""
     left, right = _rule(text, "--remap")
     target, colon, name = left.rpartition(":")
     if colon and target and not target.startswith("__"):
-        if node_name is not None and target != node_name:
-            return  # a rule for another node (rcl ignores it here)
         left = name
+    else:
+        target = ""
     if left == "__ns":
         ros.settings["namespace"] = right
     elif left in ("__node", "__name"):
@@ -72,10 +73,10 @@ def _remap(ros: RosArgs, text: str, node_name: str | None) -> None:
     elif not _TOKEN.fullmatch(left) or not _TOKEN.fullmatch(right):
         raise InputError(f"--remap {text!r}: expected FROM:=TO of ROS names (e.g. ~/input/image:=/camera/image_raw)")
     else:
-        ros.remaps.append((left, right))
+        ros.remaps.append((left, right, target))
 
 
-def _section(words: list[str], at: int, ros: RosArgs, node_name: str | None) -> int:
+def _section(words: list[str], at: int, ros: RosArgs) -> int:
     """Read one ``--ros-args`` section from ``words[at]`` (after the flag); the index after it."""
     takes = {"-r", "--remap", "-p", "--param", "--params-file", "--log-level", "-e", "--enclave", "--log-config-file"}
     i = at
@@ -95,7 +96,7 @@ def _section(words: list[str], at: int, ros: RosArgs, node_name: str | None) -> 
             raise InputError(f"--ros-args: {word} needs a value")
         value = words[i + 1]
         if word in ("-r", "--remap"):
-            _remap(ros, value, node_name)
+            _remap(ros, value)
         elif word in ("-p", "--param"):
             name, text = _rule(value, "--param")
             ros.params.append((name, text, f"-p {value}"))
@@ -111,9 +112,8 @@ def _section(words: list[str], at: int, ros: RosArgs, node_name: str | None) -> 
     return i
 
 
-def split_ros_args(argv: list[str], ros1: bool = False, node_name: str | None = None) -> tuple[list[str], RosArgs]:
+def split_ros_args(argv: list[str], ros1: bool = False) -> tuple[list[str], RosArgs]:
     """``argv`` without its ROS arguments, and what they asked (module doc); ``ros1``: ``NAME:=VALUE`` words too.
-    ``node_name`` selects ``NODE:FROM:=TO`` rules.
 
     >>> rest, ros = split_ros_args(["--frames", "3", "--ros-args", "-r", "__ns:=/robot", "-p", "max_skew:=0.05"])
     >>> rest, ros.settings, ros.params
@@ -123,7 +123,7 @@ def split_ros_args(argv: list[str], ros1: bool = False, node_name: str | None = 
     while i < len(argv):
         word = argv[i]
         if word == "--ros-args":
-            i = _section(argv, i + 1, ros, node_name)
+            i = _section(argv, i + 1, ros)
             continue
         if ros1 and ":=" in word and not word.startswith("-"):
             _ros1_word(ros, word)
@@ -145,7 +145,7 @@ def _ros1_word(ros: RosArgs, word: str) -> None:
     elif name.startswith("_"):
         ros.params.append((name[1:], value, word))
     else:
-        _remap(ros, word, None)
+        _remap(ros, word)
 
 
 def yaml_value(text: str, where: str) -> object:
