@@ -21,7 +21,8 @@ from semattnet.cli._inputs import MAP_OPTIONS, Maps, field_options
 from semattnet.cli._model import ModelOptions, model_options
 from semattnet.cli._options import DEPTH_M, POSITIVE_FLOAT, POSITIVE_INT, SECONDS
 from semattnet.cli._outputs import MaxUncertainty
-from semattnet.cli._params import GeneratedCommand, rehelp, section, values_of, with_options
+from semattnet.cli._params import rehelp, section, values_of, with_options
+from semattnet.cli._ros_params import PARAMS_OPTIONS, Ros1NodeCommand, RosNodeCommand
 
 if TYPE_CHECKING:
     from semattnet.inference.contract import Completer
@@ -231,8 +232,8 @@ def _run(params: dict[str, object], transport: Callable[[], Transport]) -> None:
     run_node(node, options.frames)
 
 
-@main.command(cls=GeneratedCommand, generated=[("frames", viewer_options)])
-@with_options(ROS2_OPTIONS + DDS_OPTIONS)
+@main.command(cls=RosNodeCommand, generated=[("frames", viewer_options)])
+@with_options(ROS2_OPTIONS + DDS_OPTIONS + PARAMS_OPTIONS)
 @model_options()
 @with_options(SEGMENT_OPTIONS)
 def ros2(**params: object) -> None:
@@ -240,25 +241,33 @@ def ros2(**params: object) -> None:
 
     Speaks DDS itself (cyclonedds: pip install 'semattnet[ros2]'), no ROS installation or sourced workspace.
     Completes the newest image-scan pair (older pairs are dropped and counted), publishes under
-    --output-prefix with the image's stamp and frame id; Ctrl-C or SIGTERM stops it."""
+    --output-prefix with the image's stamp and frame id; Ctrl-C or SIGTERM stops it. Takes ROS 2's
+    `--ros-args -r __ns:=/robot -r __node:=depth -r FROM:=TO -p KEY:=VALUE --params-file FILE` (what a launch
+    file's Node() passes); each option is a parameter named with _ for -."""
     domain = _domain_id(params["domain_id"])  # type: ignore[arg-type]
     loopback = bool(params["loopback"]) or localhost_only(os.environ)
 
+    enclave = str(click.get_current_context().meta.get("semattnet.enclave", "/"))
+
     def dds() -> Transport:
         from semattnet.robotics.ros.dds import DdsTransport
+        from semattnet.robotics.ros.names import check_namespace
 
-        return DdsTransport(domain, loopback=loopback)
+        # the node in the ROS 2 graph (ros_discovery_info) by the names it runs under
+        namespace, node = check_namespace(str(params["namespace"])), str(params["node_name"]).strip("/")
+        return DdsTransport(domain, loopback=loopback, namespace=namespace, node_name=node, enclave=enclave)
 
     _run(params, dds)
 
 
-@main.command(cls=GeneratedCommand, generated=[("frames", viewer_options)])
-@with_options(ROS2_OPTIONS + ROS1_OPTIONS)
+@main.command(cls=Ros1NodeCommand, generated=[("frames", viewer_options)])
+@with_options(ROS2_OPTIONS + ROS1_OPTIONS + PARAMS_OPTIONS)
 @model_options()
 @with_options(SEGMENT_OPTIONS)
 def ros1(**params: object) -> None:
     """Run a ROS 1 depth-completion node: the same node as ros2, registered with a ROS master and speaking TCPROS
-    itself (any Python, no rospy; pip install 'semattnet[ros]'). Topics, pairing, drops and outputs as ros2."""
+    itself (any Python, no rospy; pip install 'semattnet[ros]'). Topics, pairing, drops and outputs as ros2.
+    Takes rosrun's words too (__ns:=/robot __name:=depth _KEY:=VALUE FROM:=TO), and --ros-args as ros2."""
     master = str(params["master"] or os.environ.get("ROS_MASTER_URI") or "http://127.0.0.1:11311")
     host = params["host"]
 

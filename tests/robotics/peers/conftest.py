@@ -1,7 +1,8 @@
 """Foreign DDS peers of the ROS 2 node, built once per session into a temporary folder (never committed):
 a Fast DDS C++ camera publisher and subscriber (fastddsgen types) and a Cyclone DDS C subscriber (idlc types),
-all of ``sensor_msgs.idl``. Every run happens in its own loopback-only network namespace (:func:`run_isolated`).
-Missing tools (``bash scripts/setup-ros-peers.sh`` installs them) skip the tests with the reason (fail them with
+all of ``sensor_msgs.idl``, and a Cyclone DDS C reader of the ROS 2 graph (``ros_graph.idl``). Every run happens
+in its own loopback-only network namespace (:func:`run_isolated`). Missing tools (``bash
+scripts/setup-ros-peers.sh`` installs them) skip the tests with the reason (fail them with
 ``SEMATTNET_REQUIRE_ROS_PEERS=1``, as ``make test-ros-peers`` sets)."""
 
 from __future__ import annotations
@@ -41,7 +42,8 @@ def _run(argv: list[str], cwd: Path, what: str) -> None:
 
 @pytest.fixture(scope="session")
 def peers(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """{"fastdds": the Fast DDS peer, "cyclone": the Cyclone C subscriber}, built from the IDL."""
+    """{"fastdds": the Fast DDS peer, "cyclone": the Cyclone C subscriber, "graph": the Cyclone C reader of
+    ros_discovery_info, /diagnostics and the built-in topics}, built from the IDL files."""
     why = _missing()
     if why is not None:
         if os.environ.get("SEMATTNET_REQUIRE_ROS_PEERS"):  # CI: a missing peer is a failure, not a skip
@@ -82,4 +84,13 @@ def peers(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         cyc,
         "building the Cyclone subscriber",
     )
-    return {"fastdds": fast / "build" / "fastdds_peer", "cyclone": cyc / "cyclone_sub"}
+    graph = root / "graph"
+    graph.mkdir()
+    _run(["idlc", str(HERE / "ros_graph.idl")], graph, "idlc")
+    argv = ["cc", "-O1", f"-I{graph}", "-o", str(graph / "cyclone_graph"), str(HERE / "cyclone_graph.c")]
+    _run([*argv, str(graph / "ros_graph.c"), "-lddsc"], graph, "building the Cyclone graph reader")
+    return {
+        "fastdds": fast / "build" / "fastdds_peer",
+        "cyclone": cyc / "cyclone_sub",
+        "graph": graph / "cyclone_graph",
+    }

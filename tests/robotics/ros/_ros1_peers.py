@@ -98,6 +98,31 @@ def echo(workdir: Path) -> dict[str, Any]:
         return {"echo": _stop(peer), "returncode": peer.returncode}
 
 
+def bus(workdir: Path) -> dict[str, Any]:
+    """``rosnode info`` of our node while ``rostopic echo`` subscribes its depth and ``rostopic pub`` feeds its
+    image subscriber: the connections getBusInfo lists."""
+    with _roscore(workdir) as (env, transport):
+        publisher = transport.advertise("/semattnet/depth_image", "sensor_msgs/msg/Image", OUTPUT_QOS)
+        transport.subscribe("/camera/image_raw", "sensor_msgs/msg/Image", SENSOR_QOS, lambda message: None)
+        message = depth_image_message(transport.typestore, np.full((4, 4), 2.5, np.float32), STAMP, "camera")
+        commands = (
+            ["rostopic", "echo", "--noarr", "/semattnet/depth_image"],
+            ["rostopic", "pub", "-r", "5", "/camera/image_raw", "sensor_msgs/Image", IMAGE_YAML],
+        )
+        peers = [
+            subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, text=True)
+            for cmd in commands
+        ]
+        deadline = time.monotonic() + DEADLINE_S
+        while time.monotonic() < deadline and {row[2] for row in transport.bus_info()} != {"i", "o"}:
+            publisher.publish(message)
+            time.sleep(0.1)
+        info = subprocess.run(["rosnode", "info", "/semattnet"], env=env, capture_output=True, text=True, timeout=30)
+        for peer in peers:
+            _stop(peer)
+    return {"info": info.stdout + info.stderr}
+
+
 PEER_MESSAGES = (("/camera/image_raw", "Image", IMAGE_YAML), ("/camera/camera_info", "CameraInfo", INFO_YAML))
 
 
@@ -252,5 +277,5 @@ def node(workdir: Path) -> dict[str, Any]:
 
 
 if __name__ == "__main__":
-    scenario = {"echo": echo, "pub": pub, "node": node}[sys.argv[1]]
+    scenario = {"echo": echo, "pub": pub, "node": node, "bus": bus}[sys.argv[1]]
     print(json.dumps(scenario(Path(sys.argv[2]))))

@@ -71,7 +71,7 @@ def test_ros2_honours_the_localhost_only_environment(
 
     asked: list[bool] = []
 
-    def transport(domain_id: int = 0, loopback: bool = False) -> None:
+    def transport(domain_id: int = 0, loopback: bool = False, **names: str) -> None:
         asked.append(loopback)
         raise InputError("stop here")
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+from typing import Any
 
 import numpy as np
 import pytest
@@ -78,3 +79,67 @@ def test_garbage_and_callback_errors_are_one_line(caplog: pytest.LogCaptureFixtu
 
 def _image(t: DdsTransport) -> object:
     return depth_image_message(t.typestore, np.ones((2, 3), np.float32), 5, "cam")
+
+
+def test_ros_discovery_info_names_the_node_and_its_endpoints_gids() -> None:
+    """A reader of ``ros_discovery_info`` whose types are declared here from rmw_dds_common's Humble .msg text (not
+    from rosbags) gets the node's namespace, name and the GIDs of its readers and writers: each the DDS entity's
+    GUID padded with 8 zero bytes, as rmw_cyclonedds makes them; the node's end empties the participant's nodes."""
+    from cyclonedds.core import Policy, Qos
+    from cyclonedds.domain import DomainParticipant
+    from cyclonedds.idl import annotations, make_idl_struct
+    from cyclonedds.idl.types import array, bounded_str, byte, sequence
+    from cyclonedds.sub import DataReader
+    from cyclonedds.topic import Topic
+
+    def struct(name: str, fields: dict[str, object]) -> type:
+        return annotations.final(make_idl_struct(name, f"rmw_dds_common::msg::dds_::{name}_", fields))
+
+    gid_t = struct("Gid", {"data": array[byte, 24]})  # char[24] data
+    node_t = struct(
+        "NodeEntitiesInfo",
+        {
+            "node_namespace": bounded_str[256],
+            "node_name": bounded_str[256],
+            "reader_gid_seq": sequence[gid_t],
+            "writer_gid_seq": sequence[gid_t],
+        },
+    )
+    info_t = struct("ParticipantEntitiesInfo", {"gid": gid_t, "node_entities_info_seq": sequence[node_t]})
+
+    keeper = DdsTransport(43, loopback=True, node_name="peer")  # the loopback domain outlives the node's close
+    node = DdsTransport(43, loopback=True, namespace="/robot", node_name="depth")
+    guid = node.guid
+    try:
+        depth = node.advertise("/robot/depth/output/depth_image", "sensor_msgs/msg/Image", OUTPUT_QOS)
+        node.subscribe("/camera/image_raw", "sensor_msgs/msg/Image", SENSOR_QOS, lambda m: None)
+        peer = DomainParticipant(43)
+        qos = Qos(Policy.Reliability.Reliable(0), Policy.Durability.TransientLocal, Policy.History.KeepAll)
+        reader = DataReader(peer, Topic(peer, "ros_discovery_info", info_t), qos=qos)
+        infos: list[Any] = []
+        for _ in range(100):
+            infos += [s for s in reader.take(N=8) if isinstance(s, info_t) and bytes(s.gid.data)[:16] == guid]
+            if infos:
+                break
+            threading.Event().wait(0.05)
+        assert infos, "no ros_discovery_info in 5 s"
+        info = infos[-1]
+        pad = bytes(8)
+        assert bytes(info.gid.data) == guid + pad
+        (entry,) = info.node_entities_info_seq
+        assert (entry.node_namespace, entry.node_name) == ("/robot", "depth")
+        assert [bytes(g.data) for g in entry.writer_gid_seq] == [depth.guid.bytes + pad]
+        assert len(entry.reader_gid_seq) == 1 and bytes(entry.reader_gid_seq[0].data).endswith(pad)
+        assert node.graph.readers == [bytes(entry.reader_gid_seq[0].data)[:16]]
+    finally:
+        node.close()
+    for _ in range(100):
+        left = [s for s in reader.take(N=8) if isinstance(s, info_t) and bytes(s.gid.data)[:16] == guid]
+        if left:
+            assert left[-1].node_entities_info_seq == []
+            break
+        threading.Event().wait(0.05)
+    else:
+        pytest.fail("no announcement of the node's end")
+    peer.__del__()
+    keeper.close()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import re
 import socket
 import struct
 import threading
@@ -119,6 +120,24 @@ def test_publisher_to_subscriber(node: Callable[[str], TcprosTransport], subscri
     _publish_until(publisher, _depth_message(talker), received)
     _check_depth(received[0])
     assert publisher.subscriber_count == 1
+
+
+def test_get_bus_info_lists_the_connections_as_rospy_does(node: Callable[[str], TcprosTransport]) -> None:
+    """``rosnode info`` reads getBusInfo: [id, destination, direction, transport, topic, connected, info] per
+    connection; the subscriber's caller id on the publisher's side, the publisher's URI on the subscriber's."""
+    talker, listener = node("/talker"), node("/listener")
+    received: list[Any] = []
+    publisher = talker.advertise("/depth", IMAGE, OUTPUT_QOS)
+    listener.subscribe("/depth", IMAGE, SENSOR_QOS, received.append)
+    _publish_until(publisher, _depth_message(talker), received)
+    code, _, rows = xmlrpc.client.ServerProxy(talker.uri).getBusInfo("/rosnode")
+    assert code == 1 and [row[1:6] for row in rows] == [["/listener", "o", "TCPROS", "/depth", True]], rows
+    code, _, inbound = xmlrpc.client.ServerProxy(listener.uri).getBusInfo("/rosnode")
+    assert code == 1 and [row[1:6] for row in inbound] == [[talker.uri, "i", "TCPROS", "/depth", True]], inbound
+    assert isinstance(rows[0][0], int) and isinstance(inbound[0][0], int) and rows[0][0] != inbound[0][0]
+    pattern = re.compile(r"\w+ connection on port (\d+) to \[(.*) on socket (\d+)\]")  # rosnode's
+    assert pattern.fullmatch(rows[0][6]) and pattern.fullmatch(inbound[0][6]), (rows, inbound)
+    assert xmlrpc.client.ServerProxy(talker.uri).getBusInfo("/x")[2] == rows
 
 
 def test_durable_topic_is_latched_for_a_late_subscriber(node: Callable[[str], TcprosTransport]) -> None:

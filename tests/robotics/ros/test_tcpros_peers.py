@@ -106,6 +106,18 @@ def test_rostopic_pub_reaches_our_subscriber(tmp_path: Path) -> None:
     }
 
 
+def test_rosnode_info_lists_our_connections(tmp_path: Path) -> None:
+    """Debian's ``rosnode info`` shows the node's connections from its getBusInfo: the depth topic outbound to
+    ``rostopic echo``, the image topic inbound from ``rostopic pub``, each over TCPROS with rospy's description."""
+    text = _scenario("bus", tmp_path)["info"]
+    assert "Connections:" in text, text
+    outbound = re.search(r"\* topic: /semattnet/depth_image\n +\* to: /rostopic_\w+\n +\* direction: outbound \(", text)
+    inbound = re.search(
+        r"\* topic: /camera/image_raw\n +\* to: /rostopic_\w+ \(http://[\d.:]+/\)\n +\* direction: inbound \(", text
+    )
+    assert outbound and inbound and text.count("* transport: TCPROS") == 2, text
+
+
 @pytest.fixture
 def drive(tmp_path: Path) -> dict[int, np.ndarray]:
     """A 3-frame camera + LiDAR bag (``tmp_path/drive_mcap``, what the node's inputs play) and ``predict --bag``'s

@@ -11,10 +11,12 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Protocol
 
 from ._tcpros_wire import (
+    CONNECTION_IDS,
     MAX_PEERS,
     POLL_S,
     TcprosError,
     check_http_uri,
+    connection_info,
     encode_header,
     read_header,
     read_wire_frame,
@@ -40,6 +42,7 @@ class Inbound:
         self.sub, self.uri = subscription, uri
         self.stop = threading.Event()
         self.sock: socket.socket | None = None
+        self.connection: tuple[int, str] | None = None  # this connection's id and description while it is open
         self.thread = threading.Thread(target=self._run, name=f"tcpros-in{subscription.topic}", daemon=True)
 
     def _connect(self) -> socket.socket:
@@ -61,6 +64,7 @@ class Inbound:
         if reply.get("md5sum") not in (sub.md5sum, "*"):
             raise TcprosError(f"md5sum {reply.get('md5sum')!r} is not {sub.md5sum} ({ros1_type_name(sub.msgtype)})")
         sock.settimeout(POLL_S)
+        self.connection = (next(CONNECTION_IDS), connection_info(sock))
         return sock
 
     def _run(self) -> None:
@@ -86,6 +90,7 @@ class Inbound:
                     )
                 attempt += 1
             finally:
+                self.connection = None
                 if self.sock is not None:
                     self.sock.close()
             self.stop.wait(_RETRY_S[min(attempt, len(_RETRY_S) - 1)])
@@ -145,6 +150,18 @@ class Subscription:
                 if uri not in self._inbound or not self._inbound[uri].thread.is_alive():
                     self._inbound[uri] = inbound = Inbound(self, uri)
                     self._track(inbound.thread)
+
+    def bus_info(self) -> list[list[object]]:
+        """``getBusInfo``'s rows of this topic's open connections: [connection id, the publisher's URI, "i"
+        (inbound), "TCPROS", topic, connected, what the connection is]."""
+        with self._lock:
+            inbound = list(self._inbound.values())
+        rows: list[list[object]] = []
+        for peer in inbound:
+            if peer.connection is not None:
+                cid, info = peer.connection
+                rows.append([cid, peer.uri, "i", "TCPROS", self.topic, True, info])
+        return rows
 
     def deliver(self, frame: bytes) -> None:
         """Deserialise one frame and call back; a bad frame or a failing callback is one logged line."""

@@ -8,6 +8,7 @@ that stalls past its timeout or an XML-RPC document over :data:`MAX_XMLRPC_BYTES
 from __future__ import annotations
 
 import http.client
+import itertools
 import logging
 import socket
 import struct
@@ -22,6 +23,7 @@ from xmlrpc.server import SimpleXMLRPCRequestHandler, SimpleXMLRPCServer
 from semattnet._errors import DataError, InputError
 
 __all__ = [
+    "CONNECTION_IDS",
     "MAX_HEADER_BYTES",
     "MAX_PEERS",
     "MAX_XMLRPC_BYTES",
@@ -30,6 +32,7 @@ __all__ = [
     "SlaveServer",
     "TcprosError",
     "check_http_uri",
+    "connection_info",
     "decode_header",
     "encode_header",
     "read_header",
@@ -49,6 +52,18 @@ _LEN = struct.Struct("<I")
 MAX_PEERS = 64
 #: How often waiting threads look whether the transport stops, seconds.
 POLL_S = 0.1
+#: Connection ids of this process, as rospy numbers its connections for ``getBusInfo`` (from 1).
+CONNECTION_IDS = itertools.count(1)
+
+
+def connection_info(sock: socket.socket) -> str:
+    """A connection as rospy describes it in ``getBusInfo`` (``rosnode info`` parses it): ``TCPROS connection on
+    port LOCAL to [HOST:PORT on socket FD]``."""
+    try:
+        host, port = sock.getpeername()[:2]
+        return f"TCPROS connection on port {sock.getsockname()[1]} to [{host}:{port} on socket {sock.fileno()}]"
+    except OSError:
+        return "TCPROS connection (closed)"
 
 
 class TcprosError(DataError):

@@ -7,6 +7,10 @@ as octets (Cyclone 0.10, what Humble and Jazzy ship, cannot parse the XTypes obj
 are the same). The samples carry ``rosbags``' CDR bytes as they are (``serialize_cdr`` /
 ``deserialize_cdr``): cyclonedds' own Python serialiser is ~30x slower on images.
 
+The node is in the ROS 2 graph as ``rmw_cyclonedds`` puts it there (:mod:`.discovery`): the participant's
+USER_DATA ``enclave=/;`` and, on ``ros_discovery_info``, its node's namespace, name and endpoint GIDs,
+published again whenever an endpoint is added and emptied on close.
+
 ``loopback=True`` keeps DDS on ``lo`` by unicast (no multicast, peer 127.0.0.1): what the tests use, and
 what two processes on one machine need where multicast is off. On a robot's LAN the defaults are right and
 ``domain_id`` is ``ROS_DOMAIN_ID``.
@@ -16,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -24,6 +29,7 @@ from semattnet._errors import InputError
 from semattnet._utils.extras import require
 from semattnet.robotics.bags.deps import Typestore, rosbags_typestore
 
+from .discovery import DISCOVERY_QOS, DISCOVERY_TOPIC, DISCOVERY_TYPE, NodeEntities, enclave_user_data
 from .transport import QoS
 
 __all__ = ["DdsTransport", "dds_topic", "dds_type_name", "loopback_config"]
@@ -70,7 +76,10 @@ class _RawSample(Protocol):
 
 
 class _Entity(Protocol):
-    """A Cyclone DDS entity (participant, reader, writer, domain): deleted explicitly."""
+    """A Cyclone DDS entity (participant, reader, writer, domain): deleted explicitly; its GUID."""
+
+    @property
+    def guid(self) -> uuid.UUID: ...
 
     def __del__(self) -> None: ...
 
@@ -175,6 +184,11 @@ class _Writer:
     def __init__(self, writer: _DataWriter, cls: type[_RawSample], ts: Typestore, msgtype: str) -> None:
         self._writer, self._cls, self._ts, self._msgtype = writer, cls, ts, msgtype
 
+    @property
+    def guid(self) -> uuid.UUID:
+        """The DDS writer's GUID."""
+        return self._writer.guid
+
     def publish(self, message: object) -> None:
         sample = self._cls.__new__(self._cls)
         sample.cdr = bytes(self._ts.serialize_cdr(message, self._msgtype))
@@ -191,27 +205,55 @@ class DdsTransport:
 
     name = "dds"
 
-    def __init__(self, domain_id: int = 0, loopback: bool = False) -> None:
+    def __init__(
+        self,
+        domain_id: int = 0,
+        loopback: bool = False,
+        *,
+        namespace: str = "",
+        node_name: str = "semattnet",
+        enclave: str = "/",
+    ) -> None:
         if not 0 <= int(domain_id) <= MAX_DOMAIN_ID:
             raise InputError(f"--domain-id: expected 0-{MAX_DOMAIN_ID}, got {domain_id}")
         domain = require("cyclonedds.domain", "semattnet ros2 (DDS)")
+        core = require("cyclonedds.core", "semattnet ros2 (DDS)")
         self.domain_id, self.typestore = int(domain_id), rosbags_typestore(False)
         self._types = _Types(self.typestore)
         self._loopback = bool(loopback)
         if loopback:
             _open_domain(self.domain_id)
-        self._participant = domain.DomainParticipant(self.domain_id)
+        qos = core.Qos(core.Policy.Userdata(data=enclave_user_data(enclave)))
+        self._participant = domain.DomainParticipant(self.domain_id, qos=qos)
         self._entities: list[_Entity] = []
         self._lock = threading.Lock()
         self._closed = False
+        self.graph = NodeEntities(namespace, node_name)
+        self._graph_writer = self._writer(DISCOVERY_TOPIC, DISCOVERY_TYPE, DISCOVERY_QOS)
+        self._announce()
 
-    def advertise(self, topic: str, msgtype: str, qos: QoS) -> _Writer:
-        """A writer of ``topic`` (see :class:`~.transport.Transport`)."""
+    @property
+    def guid(self) -> bytes:
+        """The participant's DDS GUID (16 bytes)."""
+        return bytes(self._participant.guid.bytes)
+
+    def _writer(self, dds_name: str, msgtype: str, qos: QoS) -> _Writer:
         pub, tp = require("cyclonedds.pub", "semattnet ros2"), require("cyclonedds.topic", "semattnet ros2")
         cls = self._types.struct(msgtype, raw=True)
-        writer = pub.DataWriter(self._participant, tp.Topic(self._participant, dds_topic(topic), cls), qos=_qos(qos))
+        writer = pub.DataWriter(self._participant, tp.Topic(self._participant, dds_name, cls), qos=_qos(qos))
         self._entities.append(writer)
         return _Writer(writer, cls, self.typestore, msgtype)
+
+    def _announce(self, present: bool = True) -> None:
+        """Publish the node's ``ros_discovery_info`` (``present``: False, the node left)."""
+        self._graph_writer.publish(self.graph.message(self.typestore, self.guid, present))
+
+    def advertise(self, topic: str, msgtype: str, qos: QoS) -> _Writer:
+        """A writer of ``topic`` (see :class:`~.transport.Transport`), announced in ``ros_discovery_info``."""
+        writer = self._writer(dds_topic(topic), msgtype, qos)
+        self.graph.writers.append(bytes(writer.guid.bytes))
+        self._announce()
+        return writer
 
     def subscribe(self, topic: str, msgtype: str, qos: QoS, callback: Callable[[object], None]) -> None:
         """Deliver each message of ``topic`` to ``callback`` from Cyclone's listener thread; a message that does
@@ -231,6 +273,8 @@ class DdsTransport:
             self._participant, tp.Topic(self._participant, dds_topic(topic), cls), qos=_qos(qos), listener=listener
         )
         self._entities.append(reader)
+        self.graph.readers.append(bytes(reader.guid.bytes))
+        self._announce()
 
     def _deliver(self, topic: str, msgtype: str, cdr: bytes, callback: Callable[[object], None]) -> None:
         if self._closed:
@@ -251,6 +295,10 @@ class DdsTransport:
             if self._closed:
                 return
             self._closed = True
+        try:
+            self._announce(present=False)  # as rmw does when a node goes: the participant holds no node
+        except Exception as exc:  # closing whatever happened: one line
+            log.info("ros_discovery_info: could not announce the node's end (%s)", exc)
         entities, self._entities = self._entities, []
         for entity in (*reversed(entities), self._participant):
             entity.__del__()  # dds_delete now, not when the garbage collector gets to it

@@ -41,6 +41,7 @@ from semattnet.inference.live import LiveRun, run_live
 from semattnet.inference.sinks import Prediction, RunSink, Sink
 from semattnet.robotics.frame import ROS_TYPES, TOPICS, RobotFrame
 
+from .diagnostics import Diagnostics, node_health
 from .inputs import Pair, PairingInputs
 from .names import resolve_name
 from .transport import OUTPUT_QOS, SENSOR_QOS, TF_STATIC_QOS, Publisher, Transport
@@ -162,6 +163,8 @@ class DepthNode:
         self.publisher = RosPublishSink(transport, self.names, max_depth, max_uncertainty)
         self.sinks: list[Sink] = [self.publisher, *sinks]
         self.run = LiveRun()
+        # /diagnostics: published from the report tick (and on stop) with what node_health() reads of the node
+        self.diagnostics = Diagnostics(transport, resolve_name("~", namespace, node).rstrip("/"), report_s)
         self._slot: Pair | None = None
         self._dropped: list[Dropped] = []
         self._ready = threading.Condition()
@@ -180,6 +183,7 @@ class DepthNode:
         """Advertise the outputs and subscribe the inputs."""
         t, n, inp = self.transport, self.names, self.inputs
         self.publisher.advertise()
+        self.diagnostics.advertise()
         image_type = "sensor_msgs/msg/CompressedImage" if inp.compressed else "sensor_msgs/msg/Image"
         t.subscribe(n["image"], image_type, SENSOR_QOS, inp.on_image)
         scan_type = "sensor_msgs/msg/Image" if inp.sparse else "sensor_msgs/msg/PointCloud2"
@@ -222,6 +226,7 @@ class DepthNode:
         def tick() -> None:
             if time.monotonic() - last[0] >= self.report_s:
                 last[0] = time.monotonic()
+                self.diagnostics.publish(node_health(self))  # before the report line starts a new interval
                 self.say(self.report())
 
         left = None if frames is None else max(0, frames - self.published - self.failed)
@@ -238,6 +243,7 @@ class DepthNode:
                 tick=tick,
             )
         finally:
+            self.diagnostics.publish(node_health(self), final=True)
             self.say(self.report(final=True))
 
     def _note(self, fault: FrameFault) -> None:

@@ -45,12 +45,14 @@ if TYPE_CHECKING:
 from ..bags.deps import rosbags_typestore
 from ._tcpros_subscriber import Subscription
 from ._tcpros_wire import (
+    CONNECTION_IDS,
     MAX_PEERS,
     POLL_S,
     Outbox,
     SlaveServer,
     TcprosError,
     check_http_uri,
+    connection_info,
     encode_header,
     read_header,
     xmlrpc_call,
@@ -96,6 +98,7 @@ class TcprosPublisher:
             "latching": "1" if qos.durable else "0",
         }
         self._outboxes: list[Outbox] = []
+        self._peers: dict[Outbox, tuple[int, str, str]] = {}  # connection id, the subscriber's caller id, its info
         self._latched: tuple[bytes, memoryview] | None = None  # a durable topic's last message, for late subscribers
         self._lock = threading.Lock()
         self._dropped_gone = 0
@@ -143,8 +146,16 @@ class TcprosPublisher:
         numbered = dataclasses.replace(cast("DataclassInstance", header), seq=seq)
         return dataclasses.replace(message, header=numbered)
 
-    def attach(self, sock: socket.socket, label: str, stop: threading.Event) -> Outbox | None:
-        """A new subscriber's outbox, or None (the socket closed) beyond :data:`MAX_PEERS` connections."""
+    def bus_info(self) -> list[list[object]]:
+        """``getBusInfo``'s rows of this topic's open connections, as rospy gives them: [connection id, the
+        subscriber's caller id, "o" (outbound), "TCPROS", topic, connected, what the connection is]."""
+        with self._lock:
+            peers = [self._peers[o] for o in self._outboxes if o.alive and o in self._peers]
+        return [[cid, caller, "o", "TCPROS", self.topic, True, info] for cid, caller, info in peers]
+
+    def attach(self, sock: socket.socket, label: str, stop: threading.Event, caller: str = "") -> Outbox | None:
+        """A new subscriber's outbox (``caller``: its caller id), or None (the socket closed) beyond
+        :data:`MAX_PEERS` connections."""
         with self._lock:
             if sum(o.alive for o in self._outboxes) >= MAX_PEERS:
                 _log.warning("%s: refused %s: already %d subscribers", self.topic, label, MAX_PEERS)
@@ -154,6 +165,8 @@ class TcprosPublisher:
             if self._latched is not None:
                 outbox.put(*self._latched)
             self._outboxes.append(outbox)
+            self._peers = {o: p for o, p in self._peers.items() if o.alive}
+            self._peers[outbox] = (next(CONNECTION_IDS), caller or label, connection_info(sock))
             return outbox
 
     def abort(self) -> None:
@@ -356,7 +369,8 @@ class TcprosTransport:
             return
         if request.get("tcp_nodelay") == "1":
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        outbox = publisher.attach(sock, repr(request.get("callerid", label)), self._stop)
+        caller = str(request.get("callerid", label))
+        outbox = publisher.attach(sock, repr(caller), self._stop, caller)
         if outbox is not None:
             outbox.run()
 
@@ -373,7 +387,7 @@ class TcprosTransport:
         """The slave API peers and the master call (ROS's Slave API; each reply is [code, status, value])."""
         api: dict[str, Callable[..., list[object]]] = {
             "getBusStats": lambda caller: [1, "", [[], [], []]],
-            "getBusInfo": lambda caller: [1, "", []],
+            "getBusInfo": lambda caller: [1, "bus info", self.bus_info()],
             "getMasterUri": lambda caller: [1, "", self.master_uri],
             "getPid": lambda caller: [1, "", os.getpid()],
             "getPublications": lambda caller: [1, "", [[t, p.fields["type"]] for t, p in self._publishers.items()]],
@@ -389,6 +403,14 @@ class TcprosTransport:
         }
         for method, function in api.items():
             self._slave.register_function(function, method)
+
+    def bus_info(self) -> list[list[object]]:
+        """The node's connections as rospy's ``getBusInfo`` lists them (``rosnode info``): outbound ones per
+        published topic, inbound ones per subscribed topic (the publisher's URI as the destination)."""
+        with self._lock:
+            publishers, subscriptions = list(self._publishers.values()), list(self._subscriptions.values())
+        rows = [row for p in publishers for row in p.bus_info()]
+        return rows + [row for s in subscriptions for row in s.bus_info()]
 
     def _publisher_update(self, caller: str, topic: str, publishers: object) -> list[object]:
         subscription = self._subscriptions.get(topic)
