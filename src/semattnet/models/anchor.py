@@ -71,17 +71,40 @@ def _fill(x: torch.Tensor, dilated: torch.Tensor) -> torch.Tensor:
     return torch.where(x > 0, x, dilated.clamp_min(0))
 
 
-def _extend_along(x: torch.Tensor, dim: int) -> torch.Tensor:
-    """Empty pixels copy the nearest filled pixel along ``dim`` (the one before, else the one after)."""
-    n = x.shape[dim]
-    shape = [1] * x.dim()
+def _nearest(has: torch.Tensor, dim: int) -> torch.Tensor:
+    """For each position along ``dim``, the index of the nearest ``True`` of ``has`` (the one before, else the one
+    after; ``n - 1`` where there is none)."""
+    n = has.shape[dim]
+    shape = [1] * has.dim()
     shape[dim] = n
-    pos = torch.arange(n, device=x.device).view(shape).expand_as(x)
-    has = x > 0
+    pos = torch.arange(n, device=has.device, dtype=torch.int32).view(shape).expand_as(has)
     before = torch.where(has, pos, torch.full_like(pos, -1)).cummax(dim=dim).values
     after = torch.where(has, pos, torch.full_like(pos, n)).flip(dim).cummin(dim=dim).values.flip(dim)
     near = torch.where((before >= 0) & ((pos - before <= after - pos) | (after >= n)), before, after)
-    return _fill(x, torch.gather(x, dim, near.clamp(0, n - 1)))
+    return near.clamp(0, n - 1).long()
+
+
+def _extend_along(x: torch.Tensor, dim: int) -> torch.Tensor:
+    """Empty pixels copy the nearest filled pixel along ``dim`` (the one before, else the one after)."""
+    return _fill(x, torch.gather(x, dim, _nearest(x > 0, dim)))
+
+
+def _extend_rows_then_columns(x: torch.Tensor) -> torch.Tensor:
+    """:func:`_extend_along` the rows, then the columns, of (B, 1, H, W) ``x``, touching only what is empty: the
+    rows with a hole and a filled pixel, then, as each row is then all filled or all empty, whole rows copied from
+    the nearest filled row (the same values as extending every column)."""
+    w = x.shape[-1]
+    rows = x.reshape(-1, w)
+    has = rows > 0
+    todo = ((~has).any(-1) & has.any(-1)).nonzero().squeeze(1)
+    if todo.numel():
+        rows = rows.clone()
+        rows[todo] = _extend_along(rows[todo], -1)
+    x = rows.view_as(x)
+    filled = (x > 0).any(-1, keepdim=True)  # (B, 1, H, 1)
+    if bool(filled.all()):
+        return x
+    return _fill(x, torch.gather(x, -2, _nearest(filled, -2).expand_as(x)))
 
 
 def _extend_top(x: torch.Tensor) -> torch.Tensor:
@@ -156,7 +179,7 @@ def _complete(sparse: torch.Tensor, max_depth: float) -> tuple[torch.Tensor, tor
     for size in _LARGE_FILLS:
         inv = _fill(inv, _square(inv, size))
     mark(inv, 4)
-    inv = _extend_along(_extend_along(inv, -1), -2)
+    inv = _extend_rows_then_columns(inv)
     inv = _gauss5(_median5(inv))
     big = torch.finfo(d.dtype).max
     lo = torch.where(valid, d, torch.full_like(d, big)).amin(dim=(-2, -1), keepdim=True)
