@@ -9,6 +9,7 @@ as their sink entries declare them; the node is :class:`semattnet.robotics.ros.n
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -254,7 +255,10 @@ def _run(params: dict[str, object], transport: Callable[[], Transport]) -> None:
     maps = Maps(None, params["segment_spec"], str(params["palette_mismatch"]))  # type: ignore[arg-type]
     completer = model.completer()
     node = options.node(completer, maps.semantic_maps(folder=False).bind(completer), transport)
-    run_node(node, options.frames)
+    if run_node(node, options.frames):  # a frame abandoned mid-model: end now, not when the model returns
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(0)
 
 
 @main.command(cls=GeneratedCommand, generated=[("frames", viewer_options)])

@@ -41,9 +41,10 @@ from semattnet.inference.live import LiveRun, run_live
 from semattnet.inference.sinks import Prediction, RunSink, Sink
 from semattnet.robotics.frame import ROS_TYPES, TOPICS, RobotFrame
 
-from .inputs import Pair, PairingInputs
+from .inputs import Pair, PairingInputs, Stamped
 from .names import resolve_name
-from .transport import LATCHED_QOS, OUTPUT_QOS, SENSOR_QOS, TF_STATIC_QOS, Publisher, Transport
+from .status import NodeStatus, TopicStatus, udp_drops
+from .transport import LATCHED_QOS, OUTPUT_QOS, SENSOR_QOS, TF_QOS, TF_STATIC_QOS, Publisher, Transport
 
 if TYPE_CHECKING:
     from semattnet.inference.contract import Completer
@@ -78,11 +79,13 @@ class NodeTopics:
     scan: str = "~/input/point_cloud"
     tf_static: str = "/tf_static"
     output: str = "~/output"
+    tf: str = "/tf"
 
     def resolved(self, namespace: str = "", node: str = "semattnet") -> dict[str, str]:
         """Absolute names by role: the inputs and each output role of :data:`TOPICS` (``out:ROLE``)."""
         names = {k: resolve_name(getattr(self, k), namespace, node) for k in ("image", "camera_info", "scan")}
         names["tf_static"] = resolve_name(self.tf_static, namespace, node)
+        names["tf"] = resolve_name(self.tf, namespace, node)
         out = resolve_name(self.output, namespace, node)
         names.update({f"out:{role}": f"{out}/{TOPICS[role]}" for role in ROS_TYPES})
         return names
@@ -150,6 +153,11 @@ class RosPublishSink(RunSink):
         if latch_camera_info:
             self.qos["camera_info"] = LATCHED_QOS
         self.publishers: dict[str, Publisher] = {}
+        self.closed = False
+
+    def close(self) -> None:
+        """Publish nothing more (a frame finished after the node stopped is not sent)."""
+        self.closed = True
 
     def reads(self) -> frozenset[str] | None:
         return RobotFrame.reads("uncertainty" in self.roles, self.max_uncertainty)
@@ -167,6 +175,8 @@ class RosPublishSink(RunSink):
         return pub
 
     def write(self, stage: Path, pred: Prediction) -> None:
+        if self.closed:
+            return
         robot = RobotFrame.of(
             pred,
             uncertainty=pred.uncertainty is not None and "uncertainty" in self.roles,
@@ -250,6 +260,9 @@ class DepthNode:
         self._slot: Pair | None = None
         self._dropped: list[Dropped] = []
         self._ready = threading.Condition()
+        self._taken = 0  # pairs the worker took (done, skipped or in hand)
+        self._in_hand = ""  # the frame the worker took last
+        self._said_final = False
 
     @property
     def published(self) -> int:
@@ -273,13 +286,13 @@ class DepthNode:
             t.subscribe(n["camera_info"], "sensor_msgs/msg/CameraInfo", SENSOR_QOS, inp.on_camera_info)
             if not inp.sparse:
                 t.subscribe(n["tf_static"], "tf2_msgs/msg/TFMessage", TF_STATIC_QOS, inp.on_tf_static)
+                t.subscribe(n["tf"], "tf2_msgs/msg/TFMessage", TF_QOS, inp.on_tf)
         return self
 
     def _put(self, pair: Pair) -> None:
-        """The single slot: a newer pair replaces one still waiting (dropped, counted)."""
+        """The single slot: a newer pair replaces one still waiting (a note of it for the loop, which counts it)."""
         with self._ready:
             if self._slot is not None:
-                self.inputs.counts.stale += 1
                 why = "a newer pair arrived while the completer was busy (the node completes the newest)"
                 self._dropped.append(Dropped(self.name(self._slot), why))
             self._slot = pair
@@ -293,6 +306,9 @@ class DepthNode:
             if self._dropped:
                 return self._dropped.pop(0)
             pair, self._slot = self._slot, None
+            if pair is not None:
+                self._taken += 1
+                self._in_hand = self.name(pair)
             return pair
 
     def name(self, pair: Pair) -> str:
@@ -323,75 +339,145 @@ class DepthNode:
                 tick=tick,
             )
         finally:
-            self.say(self.report(final=True))
+            with self._ready:
+                said, self._said_final = self._said_final, True
+            if not said:
+                self.say(self.report(final=True))
 
     def _note(self, fault: FrameFault) -> None:
         if fault.status != "dropped":
             log.warning("%s", fault.reason)
 
-    def report(self, final: bool = False) -> str:
-        """One line: frames published, drops, bad messages and per-stage latency (since the last line; ``final``:
-        in total)."""
+    def status(self) -> NodeStatus:
+        """A snapshot of the counts (:class:`~.status.NodeStatus`): what a report line or a diagnostics publisher
+        reads. The stale pairs are the loop's ``dropped`` and the notes it has not taken yet (one count)."""
         c = self.inputs.counts
-        head = "ros node stopped: " if final else "ros node: "
-        return (
-            f"{head}{self.published} frame(s) published, {c.stale} stale pair(s) dropped, {c.unpaired} image(s) "
-            f"without a scan, {self.failed} frame(s) failed, {c.bad} bad message(s); "
-            f"{self.run.tally.line(total=final)}"
-        )
+        waiting = self.inputs.waiting
+        with self._ready:
+            stale, slot, taken = self.run.dropped + len(self._dropped), int(self._slot is not None), self._taken
+        done, failed = self.run.done, self.run.skipped
+        frames = {"stale": stale, "completed": done, "failed": failed}
+        topics = {
+            role: TopicStatus(t.received, t.decoded, t.bad, t.lost, **(frames if role in ("image", "scan") else {}))
+            for role, t in c.topics.items()
+            if role in ("image", "scan") or t.received
+        }
+        drops = udp_drops() if self.transport.name == "dds" else None
+        in_flight = waiting + slot + max(0, taken - done - failed)
+        return NodeStatus(topics, done, failed, stale, c.unpaired, in_flight, drops, self.run.tally)
 
-    def _calibration(self, pair: Pair) -> tuple[RigCalibration, CameraInfoData]:
-        """The pair's calibration and CameraInfo: the rig's, else its CameraInfo and ``/tf_static``."""
+    def report(self, final: bool = False) -> str:
+        """One line (:meth:`~.status.NodeStatus.line`): what became of the images received, bad messages, socket
+        drops and per-stage latency (since the last line; ``final``: in total)."""
+        return self.status().line(final)
+
+    def in_hand(self) -> str | None:
+        """The frame the worker is completing (its name), or None."""
+        with self._ready:
+            busy = self._taken > self.run.done + self.run.skipped
+            return self._in_hand if busy else None
+
+    def abandon(self) -> None:
+        """The stop does not wait for the frame in hand: the sinks closed now (the publisher sends nothing more, the
+        viewers stop serving), the summary said (not again if the worker ends)."""
+        with self._ready:
+            said, self._said_final = self._said_final, True
+        self.publisher.close()
+        for sink in self.sinks[1:]:
+            try:
+                sink.abort()
+            except Exception as exc:  # a viewer that will not stop must not keep the node up
+                log.warning("closing %s: %s", type(sink).__name__, exc)
+        if not said:
+            self.say(self.report(final=True))
+
+    def _calibration(self, pair: Pair, size: tuple[int, int]) -> tuple[RigCalibration, CameraInfoData]:
+        """The pair's calibration and CameraInfo: the rig's, else its CameraInfo and the transforms."""
         from semattnet.robotics.bags.pairs import rig_camera_info
 
         image, scan = pair.image, pair.scan
-        h, w = image.data.shape[:2]
         if self.rig is not None:
             return self.rig, rig_camera_info(self.rig, image.frame_id, image.stamp_ns)
         info = pair.camera_info
         if info is None:
             raise DataError(f"no CameraInfo on {self.names['camera_info']} yet")
         camera = image.frame_id or info.frame_id
-        T = np.eye(4) if self.inputs.sparse else self.inputs.tree.lookup(camera, scan.frame_id)
-        return RigCalibration(info.intrinsics(True), T, (w, h), camera=camera or None), info
+        T = np.eye(4) if self.inputs.sparse else self.inputs.lookup(camera, scan.frame_id)
+        return RigCalibration(info.intrinsics(True), T, size, camera=camera or None), info
+
+    def _decoded(self, item: Stamped, role: str) -> np.ndarray:
+        try:
+            data = item.decode()
+        except DataError:
+            self.inputs.note_bad(role)
+            raise
+        self.inputs.note_decoded(role)
+        return data
 
     def assemble(self, pair: Pair) -> Frame:
-        """The frame of a pair (:func:`~semattnet.data.frames.sensor_frame`): the scan projected into the image, a
-        sparse depth image as it is; a fault names the image."""
+        """The frame of a pair (:func:`~semattnet.data.frames.sensor_frame`): the image and the scan decoded (here,
+        in the worker: only the pairs completed are), the scan projected into the image, a sparse depth image as it
+        is; a fault names the image (or the scan that cannot be decoded)."""
         image, scan = pair.image, pair.scan
         try:
-            calib, info = self._calibration(pair)
-            h, w = image.data.shape[:2]
+            rgb, data = self._decoded(image, "image"), self._decoded(scan, "scan")
+            h, w = rgb.shape[:2]
+            calib, info = self._calibration(pair, (w, h))
             if (info.width, info.height) != (w, h):
                 raise DataError(f"the image is {w}x{h}, the calibration says {info.width}x{info.height}")
             meta = SensorMeta(image.stamp_ns, image.frame_id or info.frame_id, scan.frame_id, scan.stamp_ns, info)
-            points, sparse = (None, scan.data) if self.inputs.sparse else (scan.data, None)
-            return sensor_frame(
-                self.name(pair), image.data, meta, calib, points=points, sparse=sparse, where=scan.where
-            )
+            points, sparse = (None, data) if self.inputs.sparse else (data, None)
+            return sensor_frame(self.name(pair), rgb, meta, calib, points=points, sparse=sparse, where=scan.where)
         except DataError as exc:
             text = str(exc)
-            raise DataError(text if text.startswith(image.where) else f"{image.where}: {text}") from None
+            named = text.startswith((image.where, scan.where))
+            raise DataError(text if named else f"{image.where}: {text}") from None
 
     def close(self) -> None:
         """End the transport (its threads and sockets); the sinks were closed by the loop."""
         self.transport.close()
 
 
-def run_node(node: DepthNode, frames: int | None = None) -> None:
-    """Start ``node`` and spin it until Ctrl-C or SIGTERM (or ``frames`` done), then close it: the signal only
-    sets the stop event, so the frame in hand finishes, the summary is printed and the transport ends."""
+#: Seconds a stop waits for the frame in hand before it abandons it (SIGINT / SIGTERM end the node within 2 s).
+STOP_GRACE_S = 1.0
+
+
+def run_node(node: DepthNode, frames: int | None = None, grace_s: float = STOP_GRACE_S) -> bool:
+    """Start ``node``, run its frame loop in a worker thread until Ctrl-C or SIGTERM (or ``frames`` done), then
+    close it. A signal sets the stop event; the frame in hand gets ``grace_s`` seconds to finish, else it is
+    abandoned (one line naming it), the summary is said, the viewers and the publisher closed and the transport
+    ended all the same. Returns whether a frame was abandoned: its worker may still be inside the model, and the
+    caller ends the process (the CLI: ``os._exit(0)`` after flushing)."""
     import signal
 
     stop = threading.Event()
     previous = {}
-    on_main = threading.current_thread() is threading.main_thread()
-    if on_main:
+    if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGINT, signal.SIGTERM):
             previous[sig] = signal.signal(sig, lambda *_: stop.set())
+    errors: list[BaseException] = []
+
+    def work() -> None:
+        try:
+            node.spin(stop, frames)
+        except BaseException as exc:  # raised in the caller's thread below
+            errors.append(exc)
+
     try:
         node.start()
-        node.spin(stop, frames)
+        worker = threading.Thread(target=work, name="semattnet-node-loop", daemon=True)
+        worker.start()
+        while worker.is_alive() and not stop.wait(0.1):
+            pass
+        worker.join(grace_s)
+        if worker.is_alive():
+            frame = node.in_hand()
+            node.say(f"stopped mid-frame: frame {frame or '(none)'} abandoned after {grace_s:g} s")
+            node.abandon()
+            return True
+        if errors:
+            raise errors[0]
+        return False
     finally:
         node.close()
         for sig, handler in previous.items():
