@@ -61,7 +61,8 @@ ROS2_OPTIONS = (
         ["--image-topic"],
         default="~/input/image",
         show_default=True,
-        help="sensor_msgs/Image (rgb8, bgr8, mono8); a name ending in /compressed: CompressedImage.",
+        help="sensor_msgs/Image (rgb8, bgr8, rgba8, bgra8, mono8, mono16, bayer_rggb8/bggr8/gbrg8/grbg8, yuv422, "
+        "yuv422_yuy2); a name ending in /compressed: CompressedImage.",
     ),
     _ROS(["--camera-info-topic"], default="~/input/camera_info", show_default=True, help="sensor_msgs/CameraInfo."),
     _ROS(

@@ -127,7 +127,7 @@ def test_image_waits_for_its_scan_and_unpaired_are_counted() -> None:
 def _bad_cases() -> list[tuple[str, object, str]]:
     trunc = image(T0)
     trunc = replace(trunc, data=trunc.data[:10])  # type: ignore[type-var]
-    odd = replace(image(T0), encoding="yuv422")  # type: ignore[type-var]
+    odd = replace(image(T0), encoding="nv21")  # type: ignore[type-var]
     nan_info = camera_info()
     nan_info.k[0] = np.nan  # type: ignore[attr-defined]
     no_xyz = TS.types["sensor_msgs/msg/PointCloud2"](
@@ -143,7 +143,7 @@ def _bad_cases() -> list[tuple[str, object, str]]:
     )
     return [
         (IMAGE, trunc, "holds 10 bytes"),
-        (IMAGE, odd, "unsupported image encoding 'yuv422'"),
+        (IMAGE, odd, "unsupported image encoding 'nv21'"),
         (INFO_T, nan_info, "is NaN"),
         (SCAN, no_xyz, "no x/y/z field"),
     ]

@@ -15,6 +15,7 @@ import numpy as np
 from semattnet._errors import DataError
 from semattnet.geometry.cameras import CameraInfoData  # its home (a frame's metadata carries it)
 
+from .image_encodings import BYTES_PER_PIXEL, to_rgb
 from .messages import CameraInfoMsg, CompressedImageMsg, ImageMsg, PointCloud2Msg, PointFieldMsg, TimeMsg
 
 __all__ = [
@@ -31,12 +32,8 @@ __all__ = [
     "msg_stamp_ns",
 ]
 
-#: ``sensor_msgs/Image`` encodings read as colour: encoding -> (channels, channel order to RGB).
-IMAGE_ENCODINGS: dict[str, tuple[int, tuple[int, ...]]] = {
-    "rgb8": (3, (0, 1, 2)),
-    "bgr8": (3, (2, 1, 0)),
-    "mono8": (1, (0, 0, 0)),
-}
+#: ``sensor_msgs/Image`` encodings read as colour: encoding -> bytes per pixel (:mod:`.image_encodings`).
+IMAGE_ENCODINGS: dict[str, int] = BYTES_PER_PIXEL
 
 #: ``sensor_msgs/PointField`` datatype constants -> NumPy type (byte order applied per message).
 POINTFIELD_DTYPES: dict[int, str] = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
@@ -84,22 +81,22 @@ def _rows(data: np.ndarray, height: int, step: int, row_bytes: int, topic: str, 
 
 
 def decode_image(msg: ImageMsg, topic: str) -> np.ndarray:
-    """(H, W, 3) uint8 RGB of a ``sensor_msgs/Image`` in rgb8, bgr8 or mono8 (mono is repeated), honouring
-    ``step`` (row padding).
+    """(H, W, 3) uint8 RGB of a ``sensor_msgs/Image`` in any encoding of :data:`IMAGE_ENCODINGS` (rgb8, bgr8,
+    rgba8, bgra8, mono8, mono16, the four Bayer patterns, yuv422 and yuv422_yuy2: :mod:`.image_encodings`),
+    honouring ``step`` (row padding).
 
     Raises:
         DataError: another encoding, or fewer bytes than ``height * step``; the message names the topic.
     """
-    enc = str(msg.encoding)
-    if enc.lower() not in IMAGE_ENCODINGS:
+    enc = str(msg.encoding).lower()
+    if enc not in IMAGE_ENCODINGS:
         have = ", ".join(IMAGE_ENCODINGS)
-        raise DataError(f"{topic}: unsupported image encoding {enc!r} (semattnet reads {have})")
-    channels, order = IMAGE_ENCODINGS[enc.lower()]
+        raise DataError(f"{topic}: unsupported image encoding {str(msg.encoding)!r} (semattnet reads {have})")
     h, w = int(msg.height), int(msg.width)
     data = np.ascontiguousarray(np.asarray(msg.data, dtype=np.uint8).reshape(-1))
-    rows = _rows(data, h, int(msg.step), w * channels, topic, "image")
-    img = rows.reshape(h, w, channels)
-    return np.ascontiguousarray(img[..., list(order)])
+    rows = _rows(data, h, int(msg.step), w * IMAGE_ENCODINGS[enc], topic, "image")
+    bigendian = enc == "mono16" and bool(msg.is_bigendian)  # the one multi-byte encoding
+    return to_rgb(rows, h, w, enc, bigendian, topic)
 
 
 def decode_compressed_image(msg: CompressedImageMsg, topic: str) -> np.ndarray:

@@ -3,10 +3,12 @@
 One :class:`DepthNode` over any :class:`~.transport.Transport` (DDS for ROS 2, ...). Inputs (names as
 ``rclcpp`` resolves them, :mod:`.names`; remappable):
 
-- ``~/input/image``: ``sensor_msgs/Image`` (rgb8, bgr8, mono8), or ``CompressedImage`` (``compressed``);
+- ``~/input/image``: ``sensor_msgs/Image`` (rgb8, bgr8, rgba8, bgra8, mono8, mono16, the Bayer patterns, yuv422:
+  :data:`~semattnet.robotics.bags.decode.IMAGE_ENCODINGS`), or ``CompressedImage`` (``compressed``);
 - ``~/input/camera_info``: ``sensor_msgs/CameraInfo`` (not needed with a rig);
 - ``~/input/point_cloud``: ``sensor_msgs/PointCloud2`` (x, y, z), or a sparse depth ``Image`` (``sparse``);
-- ``/tf_static``: camera <- LiDAR (not needed with a rig or a sparse depth image).
+- ``/tf_static`` and ``/tf`` (the newest per child frame): camera <- LiDAR (not needed with a rig or a sparse
+  depth image).
 
 Pairs are made by :class:`~.inputs.PairingInputs` (the bag pairing rules) into a single slot; the node's one
 worker completes the newest pair and publishes, under ``~/output``, the topics of
