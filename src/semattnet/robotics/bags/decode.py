@@ -19,6 +19,7 @@ from .image_encodings import BYTES_PER_PIXEL, to_rgb
 from .messages import CameraInfoMsg, CompressedImageMsg, ImageMsg, PointCloud2Msg, PointFieldMsg, TimeMsg
 
 __all__ = [
+    "EXACT_ENCODINGS",
     "IMAGE_ENCODINGS",
     "MAX_FOCAL_PER_PIXEL",
     "MAX_POINT_COORDINATE_M",
@@ -34,6 +35,8 @@ __all__ = [
 
 #: ``sensor_msgs/Image`` encodings read as colour: encoding -> bytes per pixel (:mod:`.image_encodings`).
 IMAGE_ENCODINGS: dict[str, int] = BYTES_PER_PIXEL
+#: The encodings whose colours are read exactly (a semantic image's: a demosaiced or YUV one's are not).
+EXACT_ENCODINGS = ("rgb8", "bgr8", "rgba8", "bgra8", "mono8")
 
 #: ``sensor_msgs/PointField`` datatype constants -> NumPy type (byte order applied per message).
 POINTFIELD_DTYPES: dict[int, str] = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
@@ -80,17 +83,18 @@ def _rows(data: np.ndarray, height: int, step: int, row_bytes: int, topic: str, 
     return np.lib.stride_tricks.as_strided(data, (height, row_bytes), (step, 1))
 
 
-def decode_image(msg: ImageMsg, topic: str) -> np.ndarray:
+def decode_image(msg: ImageMsg, topic: str, encodings: tuple[str, ...] | None = None) -> np.ndarray:
     """(H, W, 3) uint8 RGB of a ``sensor_msgs/Image`` in any encoding of :data:`IMAGE_ENCODINGS` (rgb8, bgr8,
     rgba8, bgra8, mono8, mono16, the four Bayer patterns, yuv422 and yuv422_yuy2: :mod:`.image_encodings`),
-    honouring ``step`` (row padding).
+    honouring ``step`` (row padding); ``encodings``: those only (e.g. :data:`EXACT_ENCODINGS`).
 
     Raises:
         DataError: another encoding, or fewer bytes than ``height * step``; the message names the topic.
     """
     enc = str(msg.encoding).lower()
-    if enc not in IMAGE_ENCODINGS:
-        have = ", ".join(IMAGE_ENCODINGS)
+    allowed = tuple(IMAGE_ENCODINGS) if encodings is None else encodings
+    if enc not in allowed:
+        have = ", ".join(allowed)
         raise DataError(f"{topic}: unsupported image encoding {str(msg.encoding)!r} (semattnet reads {have})")
     h, w = int(msg.height), int(msg.width)
     data = np.ascontiguousarray(np.asarray(msg.data, dtype=np.uint8).reshape(-1))
