@@ -98,3 +98,21 @@ def test_strided_cloud_is_every_nth_pixel_of_the_full_one(stride: int) -> None:
     np.testing.assert_allclose(got.xyz, full.xyz, rtol=1e-6, atol=1e-6)
     np.testing.assert_array_equal(got.rgb, full.rgb)  # type: ignore[arg-type]
     assert cloud_rays(Ks, h, w, stride) is cloud_rays(Ks.copy(), h, w, stride)  # cached per (K, size, stride)
+
+
+def test_a_node_spun_again_publishes_again() -> None:
+    """The loop closes its sinks at the end of each spin; the publisher is muted only by an abandoned stop."""
+    fake = FakeTransport()
+    node = DepthNode(fake, _fine, say=[].append).start()
+    fake.deliver("/semattnet/input/camera_info", camera_info())
+    fake.deliver("/tf_static", tf_static())
+    for k in range(2):
+        fake.deliver("/semattnet/input/point_cloud", scan(T0 + k))
+        fake.deliver("/semattnet/input/image", image(T0 + k))
+        stop = threading.Event()
+        threading.Timer(5.0, stop.set).start()
+        node.spin(stop, frames=k + 1)
+        stop.set()
+    assert len(fake.published[f"{OUT}/depth_image"]) == 2
+    node.abandon()
+    assert node.publisher.muted

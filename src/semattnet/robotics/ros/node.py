@@ -155,11 +155,12 @@ class RosPublishSink(RunSink):
         if latch_camera_info:
             self.qos["camera_info"] = LATCHED_QOS
         self.publishers: dict[str, Publisher] = {}
-        self.closed = False
+        self.muted = False
 
-    def close(self) -> None:
-        """Publish nothing more (a frame finished after the node stopped is not sent)."""
-        self.closed = True
+    def mute(self) -> None:
+        """Publish nothing more: the node stopped without waiting for the frame in hand, which is not sent if it
+        ever finishes (the loop's ``close`` ends a spin only: a node spun again publishes again)."""
+        self.muted = True
 
     def reads(self) -> frozenset[str] | None:
         return RobotFrame.reads("uncertainty" in self.roles, self.max_uncertainty)
@@ -177,7 +178,7 @@ class RosPublishSink(RunSink):
         return pub
 
     def write(self, stage: Path, pred: Prediction) -> None:
-        if self.closed:
+        if self.muted:
             return
         robot = RobotFrame.of(
             pred,
@@ -384,7 +385,7 @@ class DepthNode:
         viewers stop serving), the summary said (not again if the worker ends)."""
         with self._ready:
             said, self._said_final = self._said_final, True
-        self.publisher.close()
+        self.publisher.mute()
         for sink in self.sinks[1:]:
             try:
                 sink.abort()
