@@ -161,6 +161,6 @@ def test_undecodable_semantic_image_fails_its_frame_only(tmp_path: Path) -> None
             source.load("0000000001")
         assert str(err.value) == (
             f"{tmp_path / 'b'}: /cam/image image 1: /cam/semantic message 1: unsupported image "
-            "encoding '16UC1' (semattnet reads rgb8, bgr8, mono8)"
+            "encoding '16UC1' (semattnet reads rgb8, bgr8, rgba8, bgra8, mono8)"
         )
     assert np.array_equal(source.load("0000000002").semantic, sems[2])

@@ -37,8 +37,8 @@ def test_image_encodings_and_step_padding() -> None:
     assert np.array_equal(decode_image(_img("rgb8", 2, 3, 9, rgb.reshape(-1)), "/t"), rgb)
     mono = decode_image(_img("mono8", 2, 3, 4, np.array([1, 2, 3, 0, 4, 5, 6, 0], np.uint8)), "/t")
     assert mono.shape == (2, 3, 3) and mono[1, 2].tolist() == [6, 6, 6]
-    with pytest.raises(DataError, match=r"^/cam: unsupported image encoding 'yuv422' \(semattnet reads rgb8"):
-        decode_image(_img("yuv422", 2, 3, 6, np.zeros(12, np.uint8)), "/cam")
+    with pytest.raises(DataError, match=r"^/cam: unsupported image encoding 'nv21' \(semattnet reads rgb8"):
+        decode_image(_img("nv21", 2, 3, 6, np.zeros(12, np.uint8)), "/cam")
     with pytest.raises(DataError, match=r"^/cam: image holds 5 bytes"):
         decode_image(_img("rgb8", 2, 3, 9, np.zeros(5, np.uint8)), "/cam")
 

@@ -43,6 +43,8 @@ class ClassicalCompleter:
     ``completer(rgb, sparse, semantic=None)`` -> ``Completion`` (the image and semantics are unused)."""
 
     needs_semantic = False
+    #: Every completion has its uncertainty (:func:`classical_uncertainty`): a live node advertises it.
+    gives_uncertainty = True
     #: Unused (it reads no semantic map); the frame loop's :class:`~semattnet.inference.pipeline.Completer` asks.
     palette = "cityscapes"
     device = "cpu"

@@ -9,6 +9,7 @@ as their sink entries declare them; the node is :class:`semattnet.robotics.ros.n
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -61,7 +62,8 @@ ROS2_OPTIONS = (
         ["--image-topic"],
         default="~/input/image",
         show_default=True,
-        help="sensor_msgs/Image (rgb8, bgr8, mono8); a name ending in /compressed: CompressedImage.",
+        help="sensor_msgs/Image (rgb8, bgr8, rgba8, bgra8, mono8, mono16, bayer_rggb8/bggr8/gbrg8/grbg8, yuv422, "
+        "yuv422_yuy2); a name ending in /compressed: CompressedImage.",
     ),
     _ROS(["--camera-info-topic"], default="~/input/camera_info", show_default=True, help="sensor_msgs/CameraInfo."),
     _ROS(
@@ -106,6 +108,25 @@ ROS2_OPTIONS = (
         help="Seconds between two latency and drop lines.",
     ),
     _ROS(["--frames"], type=POSITIVE_INT, default=None, help="Stop after this many frames [run until Ctrl-C]."),
+    _ROS(
+        ["--publish"],
+        default="depth_image,point_cloud,uncertainty,camera_info",
+        show_default=True,
+        metavar="ROLE[,ROLE...]",
+        help="The outputs published (uncertainty only when the method gives one).",
+    ),
+    _ROS(
+        ["--cloud-stride"],
+        type=POSITIVE_INT,
+        default=4,
+        show_default=True,
+        help="The point cloud keeps every N-th pixel in both directions (1: every pixel).",
+    ),
+    _ROS(
+        ["--latch-camera-info"],
+        is_flag=True,
+        help="Publish camera_info reliable and transient local, depth 1: a late subscriber gets it at once.",
+    ),
 )
 #: The DDS transport's options (``ros2``).
 DDS_OPTIONS = (
@@ -159,6 +180,9 @@ class NodeOptions:
     frames: int | None
     live: str | None
     rerun_serve: str | None
+    publish: str = "depth_image,point_cloud,uncertainty,camera_info"
+    cloud_stride: int = 4
+    latch_camera_info: bool = False
 
     def viewers(self, limit: UncertaintyLimit | None) -> list[Sink]:
         """The live viewers asked for (``--live``, ``--rerun-serve``), made by their sink entries' options as
@@ -181,7 +205,7 @@ class NodeOptions:
         from semattnet.geometry import read_rig_json
         from semattnet.inference.uncertainty import UncertaintyLimit
         from semattnet.robotics.ros.names import check_namespace, resolve_name
-        from semattnet.robotics.ros.node import DepthNode, NodeTopics
+        from semattnet.robotics.ros.node import DepthNode, NodeTopics, output_roles
 
         topics = NodeTopics(self.image_topic, self.camera_info_topic, self.points_topic, output=self.output_prefix)
         namespace = check_namespace(self.namespace)
@@ -192,6 +216,7 @@ class NodeOptions:
             ("--output-prefix", self.output_prefix),
         ):
             resolve_name(name, namespace, self.node_name, option)  # a bad name: one line, before the transport starts
+        roles = output_roles([r.strip() for r in self.publish.split(",") if r.strip()])
         rig = read_rig_json(self.rig) if self.rig is not None else None
         limit = None if self.max_uncertainty is None else UncertaintyLimit.parse(self.max_uncertainty)
         return DepthNode(
@@ -210,6 +235,9 @@ class NodeOptions:
             report_s=self.report_every,
             say=click.echo,
             sinks=self.viewers(limit),
+            publish=roles,
+            cloud_stride=self.cloud_stride,
+            latch_camera_info=self.latch_camera_info,
         )
 
 
@@ -229,7 +257,10 @@ def _run(params: dict[str, object], transport: Callable[[], Transport]) -> None:
     maps = Maps(None, params["segment_spec"], str(params["palette_mismatch"]))  # type: ignore[arg-type]
     completer = model.completer()
     node = options.node(completer, maps.semantic_maps(folder=False).bind(completer), transport)
-    run_node(node, options.frames)
+    if run_node(node, options.frames):  # a frame abandoned mid-model: end now, not when the model returns
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(0)
 
 
 @main.command(cls=RosNodeCommand, generated=[("frames", viewer_options)])

@@ -207,6 +207,7 @@ class BagSource(IndexedSource):
         """Every semantic message in order: the image, or the DataError of one that cannot be decoded."""
         from semattnet.palette import colors_to_ids
         from semattnet.robotics.bags import decode_compressed_image, decode_image, open_bag
+        from semattnet.robotics.bags.decode import EXACT_ENCODINGS
         from semattnet.robotics.bags.pairs import IMAGE_TYPES, decode_message
         from semattnet.robotics.bags.reader import topic_connections
 
@@ -218,7 +219,10 @@ class BagSource(IndexedSource):
 
                 def decode(conn: Any = conn, raw: Any = raw, where: str = where) -> np.ndarray:
                     msg = reader.deserialize(raw, conn.msgtype)
-                    image = (decode_compressed_image if conn.msgtype == IMAGE_TYPES[1] else decode_image)(msg, where)
+                    if conn.msgtype == IMAGE_TYPES[1]:
+                        image = decode_compressed_image(msg, where)
+                    else:  # colours read exactly: no demosaicing or YUV for a semantic image
+                        image = decode_image(msg, where, EXACT_ENCODINGS)
                     colors_to_ids(image, allow_unknown=True, source=where)
                     return image
 

@@ -28,7 +28,17 @@ if TYPE_CHECKING:
     from semattnet.inference.uncertainty import UncertaintyLimit
     from semattnet.robotics.bags.deps import Typestore
 
-__all__ = ["ROS_TYPES", "TOPICS", "RobotFrame", "frame_camera", "pinhole_info", "stamp_ns", "topic_names"]
+__all__ = [
+    "ROS_TYPES",
+    "TOPICS",
+    "RobotFrame",
+    "cloud_rays",
+    "frame_camera",
+    "pinhole_info",
+    "stamp_ns",
+    "strided_cloud",
+    "topic_names",
+]
 
 #: Output topic names by role, relative to an output's prefix (one table for the bag, Foxglove and ROS).
 TOPICS = {
@@ -83,8 +93,70 @@ def frame_camera(frame: Frame) -> tuple[str, CameraInfoData | None]:
 
 
 def _nan_holes(depth: np.ndarray) -> np.ndarray:
+    """float32 metres with every hole (<= 0 or infinite) NaN; NaN stays NaN (no copy when there is no other)."""
     d = np.asarray(depth, dtype=np.float32)
-    return np.where(np.isfinite(d) & (d > 0), d, np.float32(np.nan)).astype(np.float32)
+    bad = (d <= 0) | (d == np.inf)  # NaN compares False: already a hole
+    return np.where(bad, np.float32(np.nan), d) if bad.any() else d
+
+
+#: The rays of :func:`cloud_rays` by (K, height, width, stride): a node's camera needs one entry, a few at most.
+_RAYS: dict[tuple[bytes, int, int, int], np.ndarray] = {}
+_MAX_RAYS = 8
+
+
+def cloud_rays(K: np.ndarray, height: int, width: int, stride: int = 1) -> np.ndarray:
+    """(ceil(H / stride) * ceil(W / stride), 3) float32 rays ``(x / z, y / z, 1)`` of every ``stride``-th pixel in
+    both directions, row-major (pixel centres at integer coordinates, skew honoured as
+    :func:`~semattnet.geometry.depth_to_points` does): a pixel of depth ``z`` is the point ``z`` times its ray.
+    Computed once per (K, size, stride), cached, read-only."""
+    K = np.asarray(K, dtype=np.float64)
+    key = (K.tobytes(), int(height), int(width), int(stride))
+    rays = _RAYS.get(key)
+    if rays is None:
+        v, u = np.mgrid[0:height:stride, 0:width:stride].astype(np.float64)
+        b = (v - K[1, 2]) / K[1, 1]
+        a = (u - K[0, 2] - K[0, 1] * b) / K[0, 0]
+        rays = np.stack([a, b, np.ones_like(a)], -1).reshape(-1, 3).astype(np.float32)
+        rays.flags.writeable = False
+        if len(_RAYS) >= _MAX_RAYS:
+            _RAYS.pop(next(iter(_RAYS)))
+        _RAYS[key] = rays
+    return rays
+
+
+def strided_cloud(
+    depth: np.ndarray,
+    K: np.ndarray,
+    stride: int,
+    rgb: np.ndarray | None = None,
+    keep: np.ndarray | None = None,
+    max_depth: float | None = None,
+    frame: str = "cam",
+) -> PointCloud:
+    """The cloud of every ``stride``-th pixel of ``depth`` (H, W) metres (NaN or <= 0: none) in both directions,
+    from the cached :func:`cloud_rays`; ``rgb`` its colours, ``keep`` (H, W) bool the pixels it may keep,
+    ``max_depth`` leaves out deeper ones. Vectorised by flat pixel indices (``take``, not boolean masks of
+    (H, W, 3) arrays: several times faster)."""
+    from semattnet.geometry import PointCloud
+
+    if stride < 1:
+        raise InputError(f"cloud stride: expected a positive number of pixels, got {stride}")
+    h, w = depth.shape
+    d = depth[::stride, ::stride]
+    with np.errstate(invalid="ignore"):
+        sel = np.isfinite(d) & (d > 0)
+        if max_depth is not None:
+            sel &= d <= max_depth
+    if keep is not None:
+        sel &= np.asarray(keep, dtype=bool)[::stride, ::stride]
+    idx = np.flatnonzero(sel)
+    z = np.ascontiguousarray(d).reshape(-1).take(idx).astype(np.float32, copy=False)
+    xyz = cloud_rays(K, h, w, stride).take(idx, axis=0)
+    xyz *= z[:, None]
+    colours = None
+    if rgb is not None:
+        colours = np.ascontiguousarray(np.asarray(rgb, dtype=np.uint8)[::stride, ::stride]).reshape(-1, 3).take(idx, 0)
+    return PointCloud(xyz, colours, frame=frame)
 
 
 @dataclass(frozen=True)
@@ -119,10 +191,13 @@ class RobotFrame:
         uncertainty: np.ndarray | None = None,
         keep: np.ndarray | None = None,
         max_depth: float | None = None,
+        cloud_stride: int | None = None,
     ) -> RobotFrame:
         """A frame of arrays: ``depth`` (H, W) metres (<= 0 or NaN = hole) of ``info``'s size, ``rgb`` the
-        cloud's colours, ``K`` (default ``info``'s), ``keep`` the pixels the cloud keeps (default all)."""
-        from semattnet.geometry import depth_to_points
+        cloud's colours, ``K`` (default ``info``'s), ``keep`` the pixels the cloud keeps (default all);
+        ``cloud_stride``: None every pixel (:func:`~semattnet.geometry.depth_to_points`), N every N-th pixel both
+        ways (:func:`strided_cloud`), 0 no cloud (an empty one)."""
+        from semattnet.geometry import PointCloud, depth_to_points
 
         d = _nan_holes(depth)
         if d.shape != (info.height, info.width):
@@ -131,7 +206,13 @@ class RobotFrame:
         if unc is not None and unc.shape != d.shape:
             raise InputError(f"uncertainty: shape {unc.shape} differs from the depth's {d.shape}")
         K = info.intrinsics() if K is None else np.asarray(K, dtype=np.float64)
-        cloud = depth_to_points(np.nan_to_num(d, nan=0.0), K, rgb=rgb, max_depth=max_depth, frame=frame_id, mask=keep)
+        if cloud_stride is None:
+            cloud = depth_to_points(np.nan_to_num(d, nan=0.0), K, rgb, mask=keep, max_depth=max_depth, frame=frame_id)
+        elif cloud_stride == 0:
+            none = np.zeros((0, 3), np.float32)
+            cloud = PointCloud(none, None if rgb is None else none.astype(np.uint8), frame=frame_id)
+        else:
+            cloud = strided_cloud(d, K, cloud_stride, rgb, keep, max_depth, frame_id)
         return cls(int(stamp), frame_id, "", d, unc, cloud, info)
 
     @staticmethod
@@ -151,9 +232,13 @@ class RobotFrame:
         max_depth: float | None = None,
         max_uncertainty: UncertaintyLimit | None = None,
         output: str = "a robot output",
+        float_depth: bool = False,
+        cloud_stride: int | None = None,
     ) -> RobotFrame:
         """The frame of a prediction: the stored depth (and, with ``uncertainty``, the stored uncertainty);
-        ``output`` names what needs it in the errors."""
+        ``float_depth``: the float depth and uncertainty instead (``pred.depth``, what ``predict --npy`` writes,
+        not quantised to the PNG's 1/256 m: a live node's); ``cloud_stride``: see :meth:`build`; ``output`` names
+        what needs it in the errors."""
         from dataclasses import replace
 
         frame = pred.frame
@@ -163,26 +248,27 @@ class RobotFrame:
         assert info is not None  # K is known
         unc = None
         if uncertainty:
-            unc = pred.uncertainty_stored
+            unc = pred.uncertainty if float_depth else pred.uncertainty_stored
             if unc is None:
                 raise InputError(f"{frame.name}: --uncertainty: the method gives no per-pixel uncertainty")
         out = cls.build(
             stamp_ns(frame, index),
             frame_id,
-            pred.stored,
+            pred.depth if float_depth else pred.stored,
             info,
             rgb=frame.rgb,
             K=frame.K,
             uncertainty=unc,
             keep=pred.keep(max_uncertainty),
             max_depth=max_depth,
+            cloud_stride=cloud_stride,
         )
         T = None if frame.calib is None else np.asarray(frame.calib.T_cam_lidar, dtype=np.float64)
         return replace(out, lidar_frame_id=frame.meta.lidar_frame_id, T_cam_lidar=T)
 
-    def messages(self, ts: Typestore) -> dict[str, object]:
-        """``{role: message}`` (:data:`ROS_TYPES`; ``uncertainty`` only when the frame has one), all stamped
-        with the input's stamp and frame id."""
+    def messages(self, ts: Typestore, roles: frozenset[str] | None = None) -> dict[str, object]:
+        """``{role: message}`` (:data:`ROS_TYPES`; ``uncertainty`` only when the frame has one; ``roles``: those
+        only), all stamped with the input's stamp and frame id."""
         from semattnet.robotics.bags.encode import (
             camera_info_message,
             depth_image_message,
@@ -191,12 +277,17 @@ class RobotFrame:
         )
 
         t, fid, xyz = self.stamp_ns, self.frame_id, self.cloud.xyz
-        out = {"depth": depth_image_message(ts, self.depth, t, fid)}
-        if self.uncertainty is not None:
+        want = frozenset(ROS_TYPES) if roles is None else roles
+        out: dict[str, object] = {}
+        if "depth" in want:
+            out["depth"] = depth_image_message(ts, self.depth, t, fid)
+        if self.uncertainty is not None and "uncertainty" in want:
             out["uncertainty"] = depth_image_message(ts, self.uncertainty, t, fid)
-        fields = {"x": xyz[:, 0], "y": xyz[:, 1], "z": xyz[:, 2]}
-        if self.cloud.rgb is not None:
-            fields["rgb"] = pack_rgb(self.cloud.rgb)
-        out["points"] = pointcloud2_message(ts, fields, t, fid)
-        out["camera_info"] = camera_info_message(ts, self.camera_info, t, fid)
+        if "points" in want:
+            fields = {"x": xyz[:, 0], "y": xyz[:, 1], "z": xyz[:, 2]}
+            if self.cloud.rgb is not None:
+                fields["rgb"] = pack_rgb(self.cloud.rgb)
+            out["points"] = pointcloud2_message(ts, fields, t, fid)
+        if "camera_info" in want:
+            out["camera_info"] = camera_info_message(ts, self.camera_info, t, fid)
         return out

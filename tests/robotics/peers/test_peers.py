@@ -1,7 +1,7 @@
 """The ROS 2 node against DDS implementations that are not ours, each run in its own loopback-only network
 namespace: a Cyclone DDS C subscriber and a Fast DDS C++ camera publisher and subscriber (``conftest.py``).
-The depth they receive equals ``predict --bag`` on the same frames (classical method: exact), with the input's
-stamp and frame id. ``pytest -m ros_peers`` (after ``bash scripts/setup-ros-peers.sh``)."""
+The depth they receive equals ``predict --bag``'s float depth (``--npy``) on the same frames (classical method:
+exact), with the input's stamp and frame id. ``pytest -m ros_peers`` (after ``bash scripts/setup-ros-peers.sh``)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,6 @@ import pytest
 from click.testing import CliRunner
 
 from semattnet.cli import main
-from semattnet.data.io import read_depth
 from semattnet.geometry import RigCalibration, make_T
 from semattnet.robotics.bags import BagTopics, SensorRecord, write_sensor_bag
 
@@ -41,8 +40,8 @@ def _record(i: int, rng: np.random.Generator) -> SensorRecord:
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
-    """The bag, its rig file, the frames as raw files (for the Fast DDS camera) and ``predict --bag``'s depth
-    per stamp (with the bag's CameraInfo and /tf_static, and with the rig)."""
+    """The bag, its rig file, the frames as raw files (for the Fast DDS camera) and ``predict --bag --npy``'s float
+    depth per stamp (with the bag's CameraInfo and /tf_static, and with the rig)."""
     root = tmp_path_factory.mktemp("recorded")
     rng = np.random.default_rng(5)
     records = [_record(i, rng) for i in range(FRAMES)]
@@ -78,12 +77,13 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
                 "--points-topic",
                 TOPICS.points,
                 *extra,
+                "--npy",
                 "--out",
                 str(out),
             ],
         )
         assert res.exit_code == 0, res.output
-        want[key] = {T0 + i * STEP: read_depth(out / f"{i:010d}.png") for i in range(FRAMES)}
+        want[key] = {T0 + i * STEP: np.load(out / f"{i:010d}.npy") for i in range(FRAMES)}  # the float depth
     return {"bag": bag, "rig": rig, "raw": raw, "want": want, "model": model}
 
 
@@ -149,7 +149,7 @@ def test_cyclone_c_subscriber_receives_predict_bag_depth(
     peers: dict[str, Path], recorded: dict, tmp_path: Path, method: str
 ) -> None:
     """Our player (bag -> DDS, /tf_static transient local) drives the node; Cyclone 0.10 C receives its depth:
-    classical bit for bit, the network within float rounding (one 1/256 m step of the PNG)."""
+    classical bit for bit, the network within float rounding (bounded by one 1/256 m step)."""
     from semattnet.robotics.ros.dds import loopback_config
 
     model: tuple[str, ...] = ("--method", "classical")

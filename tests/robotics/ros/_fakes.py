@@ -29,10 +29,11 @@ class FakeTransport:
         self.typestore = TS
         self.subs: dict[str, tuple[str, QoS, Callable[[object], None]]] = {}
         self.published: dict[str, list[object]] = {}
+        self.qos: dict[str, QoS] = {}
         self.closed = False
 
     def advertise(self, topic: str, msgtype: str, qos: QoS) -> _Pub:
-        self.published[topic] = []
+        self.published[topic], self.qos[topic] = [], qos
         return _Pub(self.published[topic])
 
     def subscribe(self, topic: str, msgtype: str, qos: QoS, callback: Callable[[object], None]) -> None:

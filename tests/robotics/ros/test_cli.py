@@ -13,6 +13,7 @@ from semattnet.cli.ros import ros1, ros2
 def test_each_node_takes_the_model_section_and_its_own_transports_options() -> None:
     model = {"weights", "method", "device", "amp", "backend", "precision", "calibration"}
     shared = model | {"segment_spec", "palette_mismatch", "namespace", "image_topic", "live", "rerun_serve"}
+    shared |= {"publish", "cloud_stride", "latch_camera_info"}
     assert {p.name for p in ros2.params} >= shared | {"domain_id", "loopback"}
     assert {p.name for p in ros1.params} >= shared | {"master", "host"}
     assert not {p.name for p in ros1.params} & {"domain_id", "loopback"}
@@ -26,6 +27,8 @@ def test_each_node_takes_the_model_section_and_its_own_transports_options() -> N
         (["--method", "classical", "--namespace", "/bad name"], {}, "--namespace '/bad name': expected names"),
         (["--method", "classical", "--image-topic", "cam//x y"], {}, "--image-topic 'cam//x y': expected names"),
         ([], {}, "--checkpoint or --weights is required (or --method classical)"),
+        (["--method", "classical", "--publish", "depth,cloud"], {}, "--publish 'depth,cloud': expected one or more of"),
+        (["--method", "classical", "--cloud-stride", "0"], {}, "--cloud-stride': 0 is not in the range 1<=x"),
     ],
 )
 def test_bad_options_are_one_line(args: list[str], env: dict[str, str], why: str) -> None:

@@ -143,3 +143,25 @@ def test_ros_discovery_info_names_the_node_and_its_endpoints_gids() -> None:
         pytest.fail("no announcement of the node's end")
     peer.__del__()
     keeper.close()
+
+
+def test_a_latched_topic_reaches_a_late_reader() -> None:
+    """``--latch-camera-info``'s QoS (reliable, transient local, depth 1): a reader that comes after the only
+    message was written still gets it, as a late ``ros2 topic echo --qos-durability transient_local`` does."""
+    import time
+
+    from semattnet.robotics.ros.transport import LATCHED_QOS
+
+    a, b = DdsTransport(43, loopback=True), DdsTransport(43, loopback=True)
+    got: list[object] = []
+    arrived = threading.Event()
+    try:
+        pub = a.advertise("/t/info", "sensor_msgs/msg/Image", LATCHED_QOS)
+        pub.publish(_image(a))  # before any reader exists
+        time.sleep(0.2)
+        b.subscribe("/t/info", "sensor_msgs/msg/Image", LATCHED_QOS, lambda m: (got.append(m), arrived.set()))
+        arrived.wait(5.0)
+    finally:
+        a.close()
+        b.close()
+    assert len(got) == 1 and got[0].header.stamp.nanosec == 5  # type: ignore[attr-defined]

@@ -12,7 +12,7 @@ import pytest
 
 from semattnet.inference.contract import Completion
 from semattnet.robotics.ros.node import DepthNode, NodeTopics
-from semattnet.robotics.ros.transport import OUTPUT_QOS, SENSOR_QOS, TF_STATIC_QOS
+from semattnet.robotics.ros.transport import OUTPUT_QOS, SENSOR_QOS, TF_QOS, TF_STATIC_QOS
 
 from ._fakes import INFO, TS, FakeTransport, camera_info, image, scan, tf_static
 
@@ -57,19 +57,21 @@ def test_topics_qos_and_one_frame() -> None:
         SCAN: ("sensor_msgs/msg/PointCloud2", SENSOR_QOS),
         INFO_T: ("sensor_msgs/msg/CameraInfo", SENSOR_QOS),
         "/tf_static": ("tf2_msgs/msg/TFMessage", TF_STATIC_QOS),
+        "/tf": ("tf2_msgs/msg/TFMessage", TF_QOS),
     }
+    assert TF_QOS.reliable and not TF_QOS.durable and TF_QOS.depth == 100
     assert OUTPUT_QOS.reliable and OUTPUT_QOS.depth == 1
     fake.deliver(IMAGE, image(T0))
     fake.deliver(SCAN, scan(T0 + 5_000_000))
     _spin(node)
     out = {t.removeprefix(OUT + "/"): m for t, m in fake.published.items() if t.startswith(OUT)}
-    assert sorted(out) == ["camera_info", "depth_image", "point_cloud", "uncertainty"]
+    assert sorted(out) == ["camera_info", "depth_image", "point_cloud"]  # a completer that gives no uncertainty
     depth = out["depth_image"][0]
     assert (depth.header.stamp.sec, depth.header.stamp.nanosec, depth.header.frame_id) == (T0 // 10**9, 0, "cam")
     pixels = np.frombuffer(depth.data.tobytes(), "<f4").reshape(INFO.height, INFO.width)
     assert np.isnan(pixels[0, 0]) and (pixels.ravel()[1:] == 7.5).all()
     assert out["camera_info"][0].header == depth.header == out["point_cloud"][0].header
-    assert out["point_cloud"][0].width == INFO.height * INFO.width - 1 and out["uncertainty"] == []
+    assert out["point_cloud"][0].width == 3 * 4 - 1  # every 4th pixel both ways (the default stride), one hole
 
 
 def test_messages_are_built_in_the_transports_type_store() -> None:
@@ -104,8 +106,9 @@ def test_newest_pair_only_stale_pairs_counted() -> None:
     _spin(node)
     (depth,) = fake.published[f"{OUT}/depth_image"]
     assert depth.header.stamp.nanosec == 3 * STEP  # the newest
-    c = node.inputs.counts
-    assert (c.paired, c.stale, c.unpaired, c.bad, node.published) == (4, 3, 0, 0, 1)
+    c, status = node.inputs.counts, node.status()
+    assert (c.paired, status.stale, c.unpaired, c.bad, node.published) == (4, 3, 0, 0, 1)
+    assert status.accounted and status.in_flight == 0 and status.topics["image"].decoded == 1  # the one completed
     assert "1 frame(s) published, 3 stale pair(s) dropped" in lines[-1] and "network" in lines[-1]
 
 
@@ -124,7 +127,7 @@ def test_image_waits_for_its_scan_and_unpaired_are_counted() -> None:
 def _bad_cases() -> list[tuple[str, object, str]]:
     trunc = image(T0)
     trunc = replace(trunc, data=trunc.data[:10])  # type: ignore[type-var]
-    odd = replace(image(T0), encoding="yuv422")  # type: ignore[type-var]
+    odd = replace(image(T0), encoding="nv21")  # type: ignore[type-var]
     nan_info = camera_info()
     nan_info.k[0] = np.nan  # type: ignore[attr-defined]
     no_xyz = TS.types["sensor_msgs/msg/PointCloud2"](
@@ -140,31 +143,43 @@ def _bad_cases() -> list[tuple[str, object, str]]:
     )
     return [
         (IMAGE, trunc, "holds 10 bytes"),
-        (IMAGE, odd, "unsupported image encoding 'yuv422'"),
+        (IMAGE, odd, "unsupported image encoding 'nv21'"),
         (INFO_T, nan_info, "is NaN"),
         (SCAN, no_xyz, "no x/y/z field"),
     ]
 
 
 def test_bad_messages_are_one_line_each_and_the_node_goes_on(caplog: pytest.LogCaptureFixture) -> None:
+    """A CameraInfo that does not decode is one line when it comes; an image or a scan is decoded only when its
+    pair is completed, so a bad one fails its frame (one line naming its topic and message) and the node goes on."""
     node, fake = _node()
+    done = 0
     with caplog.at_level(logging.WARNING, logger="semattnet.ros"):
-        for topic, msg, why in _bad_cases():
+        for i, (topic, msg, why) in enumerate(_bad_cases()):
             caplog.clear()
-            fake.deliver(topic, msg)
+            stamp = T0 + i * STEP
+            if topic == INFO_T:
+                fake.deliver(topic, msg)
+            else:
+                good = {IMAGE: image(stamp), SCAN: scan(stamp)}
+                good[topic] = replace(msg, header=replace(msg.header, stamp=good[topic].header.stamp))  # type: ignore[type-var, attr-defined]
+                fake.deliver(IMAGE, good[IMAGE])
+                fake.deliver(SCAN, good[SCAN])
+                done += 1
+                _spin(node, frames=done)
             (rec,) = caplog.records
             assert rec.getMessage().startswith(f"{topic} message ") and why in rec.getMessage(), rec.getMessage()
             assert "\n" not in rec.getMessage()
         behind = np.array([[-5.0, 0, 0], [-6.0, 1, 0]], np.float32)  # every point behind the camera
         caplog.clear()
-        fake.deliver(IMAGE, image(T0))
-        fake.deliver(SCAN, scan(T0, behind))
-        _spin(node)  # the frame fails
-    assert node.failed == 1 and "no point in front of the camera" in caplog.text
-    fake.deliver(IMAGE, image(T0 + STEP))
-    fake.deliver(SCAN, scan(T0 + STEP))
-    _spin(node, frames=2)  # one failed, one published
-    assert node.published == 1 and node.failed == 1 and node.inputs.counts.bad == 4
+        fake.deliver(IMAGE, image(T0 + 10 * STEP))
+        fake.deliver(SCAN, scan(T0 + 10 * STEP, behind))
+        _spin(node, frames=done + 1)  # the frame fails
+    assert node.failed == 4 and "no point in front of the camera" in caplog.text
+    fake.deliver(SCAN, scan(T0 + 11 * STEP))  # first: the image is paired when it comes
+    fake.deliver(IMAGE, image(T0 + 11 * STEP))
+    _spin(node, frames=done + 2)  # one failed, one published
+    assert node.published == 1 and node.failed == 4 and node.inputs.counts.bad == 4
 
 
 def test_sigterm_stops_cleanly_and_prints_the_summary() -> None:

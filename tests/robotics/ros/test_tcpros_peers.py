@@ -25,7 +25,6 @@ from click.testing import CliRunner
 
 import semattnet
 from semattnet.cli import main
-from semattnet.data.io import read_depth
 from semattnet.geometry import RigCalibration
 
 from ..peers.test_peers import STEP, T0, T_CAM_LIDAR, TOPICS, H, K, W, _record
@@ -121,7 +120,8 @@ def test_rosnode_info_lists_our_connections(tmp_path: Path) -> None:
 @pytest.fixture
 def drive(tmp_path: Path) -> dict[int, np.ndarray]:
     """A 3-frame camera + LiDAR bag (``tmp_path/drive_mcap``, what the node's inputs play) and ``predict --bag``'s
-    depth of it (classical), by image stamp."""
+    float depth of it (classical, ``--npy``: what the node publishes, not the PNG's 1/256 m steps), by image
+    stamp."""
     rng = np.random.default_rng(5)
     records = [_record(i, rng) for i in range(3)]
     bag = write_sensor_bag(tmp_path / "drive_mcap", records, RigCalibration(K, T_CAM_LIDAR, (W, H))).path
@@ -136,12 +136,13 @@ def drive(tmp_path: Path) -> dict[int, np.ndarray]:
         TOPICS.points,
         "--method",
         "classical",
+        "--npy",
         "--out",
         str(out),
     ]
     result = CliRunner().invoke(main, argv)
     assert result.exit_code == 0, result.output
-    return {T0 + i * STEP: read_depth(out / f"{i:010d}.png") for i in range(3)}
+    return {T0 + i * STEP: np.load(out / f"{i:010d}.npy") for i in range(3)}  # the float depth the node publishes
 
 
 def test_ros1_node_driven_by_rostopic_pub_reaches_rostopic_echo(tmp_path: Path, drive: dict[int, np.ndarray]) -> None:

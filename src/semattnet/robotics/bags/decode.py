@@ -15,9 +15,11 @@ import numpy as np
 from semattnet._errors import DataError
 from semattnet.geometry.cameras import CameraInfoData  # its home (a frame's metadata carries it)
 
+from .image_encodings import BYTES_PER_PIXEL, to_rgb
 from .messages import CameraInfoMsg, CompressedImageMsg, ImageMsg, PointCloud2Msg, PointFieldMsg, TimeMsg
 
 __all__ = [
+    "EXACT_ENCODINGS",
     "IMAGE_ENCODINGS",
     "MAX_FOCAL_PER_PIXEL",
     "MAX_POINT_COORDINATE_M",
@@ -31,12 +33,10 @@ __all__ = [
     "msg_stamp_ns",
 ]
 
-#: ``sensor_msgs/Image`` encodings read as colour: encoding -> (channels, channel order to RGB).
-IMAGE_ENCODINGS: dict[str, tuple[int, tuple[int, ...]]] = {
-    "rgb8": (3, (0, 1, 2)),
-    "bgr8": (3, (2, 1, 0)),
-    "mono8": (1, (0, 0, 0)),
-}
+#: ``sensor_msgs/Image`` encodings read as colour: encoding -> bytes per pixel (:mod:`.image_encodings`).
+IMAGE_ENCODINGS: dict[str, int] = BYTES_PER_PIXEL
+#: The encodings whose colours are read exactly (a semantic image's: a demosaiced or YUV one's are not).
+EXACT_ENCODINGS = ("rgb8", "bgr8", "rgba8", "bgra8", "mono8")
 
 #: ``sensor_msgs/PointField`` datatype constants -> NumPy type (byte order applied per message).
 POINTFIELD_DTYPES: dict[int, str] = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
@@ -83,23 +83,24 @@ def _rows(data: np.ndarray, height: int, step: int, row_bytes: int, topic: str, 
     return np.lib.stride_tricks.as_strided(data, (height, row_bytes), (step, 1))
 
 
-def decode_image(msg: ImageMsg, topic: str) -> np.ndarray:
-    """(H, W, 3) uint8 RGB of a ``sensor_msgs/Image`` in rgb8, bgr8 or mono8 (mono is repeated), honouring
-    ``step`` (row padding).
+def decode_image(msg: ImageMsg, topic: str, encodings: tuple[str, ...] | None = None) -> np.ndarray:
+    """(H, W, 3) uint8 RGB of a ``sensor_msgs/Image`` in any encoding of :data:`IMAGE_ENCODINGS` (rgb8, bgr8,
+    rgba8, bgra8, mono8, mono16, the four Bayer patterns, yuv422 and yuv422_yuy2: :mod:`.image_encodings`),
+    honouring ``step`` (row padding); ``encodings``: those only (e.g. :data:`EXACT_ENCODINGS`).
 
     Raises:
         DataError: another encoding, or fewer bytes than ``height * step``; the message names the topic.
     """
-    enc = str(msg.encoding)
-    if enc.lower() not in IMAGE_ENCODINGS:
-        have = ", ".join(IMAGE_ENCODINGS)
-        raise DataError(f"{topic}: unsupported image encoding {enc!r} (semattnet reads {have})")
-    channels, order = IMAGE_ENCODINGS[enc.lower()]
+    enc = str(msg.encoding).lower()
+    allowed = tuple(IMAGE_ENCODINGS) if encodings is None else encodings
+    if enc not in allowed:
+        have = ", ".join(allowed)
+        raise DataError(f"{topic}: unsupported image encoding {str(msg.encoding)!r} (semattnet reads {have})")
     h, w = int(msg.height), int(msg.width)
     data = np.ascontiguousarray(np.asarray(msg.data, dtype=np.uint8).reshape(-1))
-    rows = _rows(data, h, int(msg.step), w * channels, topic, "image")
-    img = rows.reshape(h, w, channels)
-    return np.ascontiguousarray(img[..., list(order)])
+    rows = _rows(data, h, int(msg.step), w * IMAGE_ENCODINGS[enc], topic, "image")
+    bigendian = enc == "mono16" and bool(msg.is_bigendian)  # the one multi-byte encoding
+    return to_rgb(rows, h, w, enc, bigendian, topic)
 
 
 def decode_compressed_image(msg: CompressedImageMsg, topic: str) -> np.ndarray:

@@ -76,7 +76,9 @@ def depth_image_message(ts: Typestore, depth: np.ndarray, stamp_ns: int, frame_i
     d = np.asarray(depth, dtype=np.float32)
     if d.ndim != 2:
         raise InputError(f"depth: expected (H, W) metres, got shape {d.shape}")
-    d = np.where(np.isfinite(d) & (d > 0), d, np.float32(np.nan)).astype("<f4")
+    bad = (d <= 0) | (d == np.inf)  # NaN compares False: already a hole
+    d = np.where(bad, np.float32(np.nan), d) if bad.any() else d
+    d = np.ascontiguousarray(d.astype("<f4", copy=False))
     return _image(ts, d, "32FC1", stamp_ns, frame_id)
 
 
@@ -133,7 +135,7 @@ def pointcloud2_message(
         is_bigendian=False,
         point_step=dtype.itemsize,
         row_step=dtype.itemsize * len(arr),
-        data=np.frombuffer(arr.tobytes(), np.uint8),
+        data=arr.view(np.uint8).reshape(-1),  # the packed array's bytes, not a copy of them
         is_dense=is_dense,
     )
 

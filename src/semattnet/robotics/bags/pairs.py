@@ -143,7 +143,7 @@ class BagPairs:
 
     Args:
         path: a ROS 1 ``.bag``, a ROS 2 bag folder, or a ``.db3`` / ``.mcap`` file.
-        image_topic: ``sensor_msgs/Image`` (rgb8, bgr8, mono8) or ``sensor_msgs/CompressedImage``.
+        image_topic: ``sensor_msgs/Image`` (:data:`~.decode.IMAGE_ENCODINGS`) or ``sensor_msgs/CompressedImage``.
         points_topic: ``sensor_msgs/PointCloud2`` with x, y, z.
         camera_info_topic: ``sensor_msgs/CameraInfo``; None: the bag's only CameraInfo topic (or the one sharing
             the image topic's namespace). Not needed with ``rig``.

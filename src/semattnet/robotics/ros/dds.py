@@ -262,7 +262,12 @@ class DdsTransport:
         tp = require("cyclonedds.topic", "semattnet ros2")
         cls = self._types.struct(msgtype, raw=True)
 
-        def on_data(reader: _DataReader) -> None:
+        made: list[_DataReader] = []
+
+        def on_data(reader: _DataReader | None) -> None:
+            reader = reader if reader is not None else (made[0] if made else None)
+            if reader is None:  # called while the reader is made (a durable topic's history): taken below
+                return
             for sample in reader.take(N=64):
                 if not getattr(sample, "cdr", b""):  # a writer went away: a sample without data
                     continue
@@ -272,9 +277,11 @@ class DdsTransport:
         reader = sub.DataReader(
             self._participant, tp.Topic(self._participant, dds_topic(topic), cls), qos=_qos(qos), listener=listener
         )
+        made.append(reader)
         self._entities.append(reader)
         self.graph.readers.append(bytes(reader.guid.bytes))
         self._announce()
+        on_data(reader)  # what arrived before the listener could name its reader
 
     def _deliver(self, topic: str, msgtype: str, cdr: bytes, callback: Callable[[object], None]) -> None:
         if self._closed:

@@ -11,7 +11,8 @@ Every report interval (and once on stop) the node publishes one ``DiagnosticStat
 
 Its values (``KeyValue``, strings) are :data:`KEYS` (``since_*_s``: seconds since the report at which that
 input's count had last grown, so to the report interval; ``never`` before the first) and, per stage timed in
-the interval, ``latency_STAGE_mean_ms`` / ``latency_STAGE_max_ms``. What it reads of the node is one snapshot,
+the interval, ``latency_STAGE_mean_ms`` / ``latency_STAGE_max_ms``; ``socket_drops``: the datagrams the kernel
+dropped at the node's UDP sockets (``unknown`` off Linux or over TCPROS). What it reads of the node is one snapshot,
 :class:`NodeHealth`, made by one adapter, :func:`node_health`.
 """
 
@@ -29,10 +30,9 @@ from .transport import QoS, Transport
 
 if TYPE_CHECKING:
     from semattnet.geometry import RigCalibration
-    from semattnet.inference.live import LiveRun
     from semattnet.robotics.bags.deps import Typestore
 
-    from .inputs import PairingInputs
+    from .status import NodeStatus
     from .transport import Publisher
 
 __all__ = ["DIAGNOSTICS_QOS", "KEYS", "MISSING_PERIODS", "Diagnostics", "HealthSource", "NodeHealth", "node_health"]
@@ -55,6 +55,7 @@ KEYS = (
     "frames_stale",
     "images_unpaired",
     "bad_messages",
+    "socket_drops",
     "received_image",
     "received_scan",
     "received_camera_info",
@@ -78,29 +79,25 @@ class NodeHealth:
     received: Mapping[str, int]
     stages_ms: Mapping[str, tuple[float, float]]
     expected: tuple[str, ...] = ("image", "scan")
+    socket_drops: int | None = None  # datagrams the kernel dropped at the node's UDP sockets (None: not known)
 
 
 class HealthSource(Protocol):
-    """What :func:`node_health` reads of the node (:class:`~.node.DepthNode`)."""
+    """What :func:`node_health` reads of the node (:class:`~.node.DepthNode`): its snapshot and its rig."""
 
-    inputs: PairingInputs
-    run: LiveRun
     rig: RigCalibration | None
 
-    @property
-    def published(self) -> int: ...
-
-    @property
-    def failed(self) -> int: ...
+    def status(self) -> NodeStatus: ...
 
 
 def node_health(node: HealthSource) -> NodeHealth:
-    """The one adapter from the node's counts (``node.inputs.counts``, ``node.run``: its stage tally of the
-    current interval, read before the report line starts a new one) to :class:`NodeHealth`."""
-    c = node.inputs.counts
-    stages = {s: (v[1] / v[0], v[2]) for s, v in node.run.tally.period.items() if v[0]}
+    """The one adapter from the node's snapshot (:meth:`~.node.DepthNode.status`: its counts and the stage tally of
+    the current interval, read before the report line starts a new one) to :class:`NodeHealth`."""
+    s = node.status()
+    stages = {k: (v[1] / v[0], v[2]) for k, v in s.tally.period.items() if v[0]}
     expected = ("image", "scan") if node.rig is not None else _ROLES
-    return NodeHealth(node.published, node.failed, c.stale, c.unpaired, c.bad, dict(c.received), stages, expected)
+    received = {role: t.received for role, t in s.topics.items() if t.received}
+    return NodeHealth(s.completed, s.failed, s.stale, s.lost, s.bad, received, stages, expected, s.socket_drops)
 
 
 @dataclass
@@ -186,7 +183,8 @@ class Diagnostics:
     def _values(health: NodeHealth, rate: float, since: Mapping[str, float]) -> dict[str, str]:
         counts = (health.completed, health.failed, health.stale, health.unpaired, health.bad)
         values = dict(zip(KEYS[1:6], map(str, counts), strict=True))
-        values = {"rate_hz": f"{rate:.2f}", **values}
+        drops = "unknown" if health.socket_drops is None else str(health.socket_drops)
+        values = {"rate_hz": f"{rate:.2f}", **values, "socket_drops": drops}
         values |= {f"received_{r}": str(health.received.get(r, 0)) for r in _ROLES}
         values |= {f"since_{r}_s": f"{since[r]:.2f}" if r in since else "never" for r in _ROLES}
         for stage, (mean, worst) in health.stages_ms.items():

@@ -1,12 +1,19 @@
-"""What a live node receives, decoded and paired: the newest image with its scan, by header stamp.
+"""What a live node receives, kept raw and paired: the newest image with its scan, by header stamp.
 
-Messages arrive on the transport's threads; :class:`PairingInputs` decodes each one at once (a bad one is one
-logged line naming the topic and the message, then forgotten) and pairs images with scans by the bag's rule
-(:func:`~semattnet.robotics.bags.pairing.pair_stamps`: the nearest scan within the max skew, default half the
-scan period). An image is decided once a scan at or after its stamp has arrived, or a newer image has: images
-and scans arrive in stamp order, so the nearest scan is known then. Only the newest decided image is kept
-(older undecided ones are dropped and counted), and the pair goes to a single slot: a pair still waiting
-there when a newer one comes is dropped and counted, never queued.
+Messages arrive on the transport's threads, deserialised. :class:`PairingInputs` keeps each image and scan as it
+came (:class:`Stamped`: its header stamp and frame id, the message not decoded) and pairs images with scans by the
+bag's rule (:func:`~semattnet.robotics.bags.pairing.pair_stamps`: the nearest scan within the max skew, default half
+the scan period). An image is decided once a scan at or after its stamp has arrived, or a newer image has (images
+and scans arrive in stamp order, so the nearest scan is known then), or at once when the newest scan precedes it
+within the max skew and, by the scan period estimated from the recent scans, the next scan cannot be nearer
+(``image - last <= last + period - image``: a LiDAR stamped just before the camera is not waited a period for).
+Only the newest decided image is kept (older undecided ones are lost before pairing, counted), and the pair goes
+to a single slot. Images and scans are decoded only for the pair the worker takes (:meth:`Stamped.decode`), so a
+pair that goes stale costs its deserialisation only; CameraInfo and transforms are decoded as they come (a bad one
+is one logged line naming the topic and the message, then forgotten).
+
+Transforms: ``/tf_static`` into a :class:`~semattnet.robotics.bags.tf.TransformTree`; ``/tf``, the newest
+transform per child frame (bounded memory), over the static ones (:meth:`PairingInputs.lookup`).
 """
 
 from __future__ import annotations
@@ -15,7 +22,7 @@ import logging
 import threading
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Protocol, TypeVar, cast
 
 import numpy as np
@@ -37,8 +44,10 @@ from semattnet.robotics.bags.messages import (
     PointCloud2Msg,
     TFMessageMsg,
 )
-from semattnet.robotics.bags.pairing import pair_stamps
-from semattnet.robotics.bags.tf import TransformTree
+from semattnet.robotics.bags.pairing import estimate_period_ns, pair_stamps
+from semattnet.robotics.bags.tf import TransformTree, checked_transform
+
+from .status import TopicCounts
 
 __all__ = ["Counts", "Pair", "PairingInputs", "Stamped", "decode_sparse_depth"]
 
@@ -46,16 +55,34 @@ log = logging.getLogger("semattnet.ros")
 
 #: Images and scans kept while waiting to be paired (a second at 10 Hz is far more than a skew needs).
 KEEP = 8
+#: Child frames whose newest ``/tf`` transform is kept, at most (a robot has tens).
+MAX_TF_FRAMES = 1000
+#: The input roles counted.
+ROLES = ("image", "scan", "camera_info", "tf_static", "tf")
 
 
 @dataclass(frozen=True)
 class Stamped:
-    """One decoded input: header stamp (ns), frame id, the data, and ``where`` (topic + message) for errors."""
+    """One input as it came: header stamp (ns), frame id, the deserialised message (not decoded), ``where`` (topic
+    and message, for errors) and the decoder of its kind (:meth:`decode`)."""
 
     stamp_ns: int
     frame_id: str
-    data: np.ndarray
+    message: object
     where: str
+    decoder: Callable[[object, str], np.ndarray]
+
+    def decode(self) -> np.ndarray:
+        """The message decoded (an image's (H, W, 3) uint8 RGB, a scan's points or sparse depth).
+
+        Raises:
+            DataError: it cannot be decoded; one line starting with ``where``.
+        """
+        try:
+            return self.decoder(self.message, self.where)
+        except (SemAttNetError, ValueError, TypeError, AttributeError, IndexError) as exc:
+            text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise DataError(text if text.startswith(self.where) else f"{self.where}: {text}") from None
 
 
 @dataclass(frozen=True)
@@ -67,15 +94,28 @@ class Pair:
     camera_info: CameraInfoData | None
 
 
-@dataclass
 class Counts:
-    """What happened to the inputs (totals since the start)."""
+    """What happened to the inputs (totals since the start): per role (``image``, ``scan``, ``camera_info``,
+    ``tf_static``, ``tf``) a :class:`~.status.TopicCounts`, and the pairs made."""
 
-    received: dict[str, int] = field(default_factory=dict)
-    bad: int = 0
-    paired: int = 0
-    unpaired: int = 0  # images with no scan within the max skew (or overtaken before one came)
-    stale: int = 0  # pairs dropped from the slot by a newer one (the completer was busy)
+    def __init__(self) -> None:
+        self.topics = {role: TopicCounts() for role in ROLES}
+        self.paired = 0
+
+    @property
+    def received(self) -> dict[str, int]:
+        """Messages received by role."""
+        return {role: c.received for role, c in self.topics.items() if c.received}
+
+    @property
+    def bad(self) -> int:
+        """Messages refused, all roles."""
+        return sum(c.bad for c in self.topics.values())
+
+    @property
+    def unpaired(self) -> int:
+        """Images lost before pairing (overtaken before a scan came, or none within the max skew)."""
+        return self.topics["image"].lost
 
 
 def decode_sparse_depth(msg: ImageMsg, topic: str) -> np.ndarray:
@@ -112,11 +152,23 @@ class _Headed(Protocol):
     def header(self) -> HeaderMsg: ...
 
 
+def _image_decoder(compressed: bool) -> Callable[[object, str], np.ndarray]:
+    if compressed:
+        return lambda msg, where: decode_compressed_image(cast(CompressedImageMsg, msg), where)
+    return lambda msg, where: decode_image(cast(ImageMsg, msg), where)
+
+
+def _scan_decoder(sparse: bool) -> Callable[[object, str], np.ndarray]:
+    if sparse:
+        return lambda msg, where: decode_sparse_depth(cast(ImageMsg, msg), where)
+    return lambda msg, where: decode_pointcloud2(cast(PointCloud2Msg, msg), where)
+
+
 class PairingInputs:
     """The node's inputs (module doc). ``on_pair`` is called (from a transport thread) with each new pair.
 
     Args:
-        topics: ``{"image", "scan", "camera_info"}`` resolved names (the errors name them).
+        topics: ``{"image", "scan", "camera_info", "tf_static", "tf"}`` resolved names (the errors name them).
         on_pair: called with each new pair.
         compressed: the image topic is ``CompressedImage``.
         sparse: the scan topic is a sparse depth image.
@@ -136,48 +188,76 @@ class PairingInputs:
         self.counts = Counts()
         self.tree = TransformTree(topics.get("tf_static", "/tf_static"))
         self.camera_info: CameraInfoData | None = None
-        self._images: deque[Stamped] = deque(maxlen=KEEP)
-        self._scans: deque[Stamped] = deque(maxlen=KEEP)
+        self._dynamic: dict[str, tuple[int, str, np.ndarray]] = {}  # child -> (stamp, parent, T_parent_child)
+        self._images: deque[Stamped] = deque()
+        self._scans: deque[Stamped] = deque()
+        self._used: set[int] = set()  # ids of the scans in the buffer that were paired
+        self._decoders = {"image": _image_decoder(compressed), "scan": _scan_decoder(sparse)}
         self._lock = threading.Lock()
+
+    def _where(self, role: str) -> str:
+        """Count a message of ``role`` received; ``TOPIC message N`` (N from 0 per topic)."""
+        c = self.counts.topics[role]
+        c.received += 1
+        return f"{self.topics.get(role, role)} message {c.received - 1}"
 
     def _decoded(self, role: str, msg: _M, decode: Callable[[_M, str], _T]) -> tuple[_T, str] | None:
         """``decode(msg, where)`` and ``where``; a failure is one logged line and None (the message is forgotten)."""
         with self._lock:  # the transport may call from several threads
-            n = self.counts.received.get(role, 0)
-            self.counts.received[role] = n + 1
-        where = f"{self.topics[role]} message {n}"
+            where = self._where(role)
         try:
-            return decode(msg, where), where
+            got = decode(msg, where), where
         except (SemAttNetError, ValueError, TypeError, AttributeError, IndexError) as exc:
             with self._lock:
-                self.counts.bad += 1
+                self.counts.topics[role].bad += 1
             log.warning("%s", exc if str(exc).startswith(where) else f"{where}: {exc}")
             return None
+        with self._lock:
+            self.counts.topics[role].decoded += 1
+        return got
+
+    def _keep(self, role: str, msg: object) -> None:
+        """An image or scan kept as it came (not decoded), then pairing tried."""
+        head = cast(_Headed, msg).header
+        with self._lock:
+            where = self._where(role)
+            item = Stamped(msg_stamp_ns(head.stamp), str(head.frame_id).lstrip("/"), msg, where, self._decoders[role])
+            buffer = self._images if role == "image" else self._scans
+            if len(buffer) >= KEEP:
+                self._evict(role, buffer.popleft())
+            buffer.append(item)
+            self._match()
+
+    def _evict(self, role: str, item: Stamped) -> None:
+        """An image or scan pushed out of a full buffer: lost before pairing (a scan only if never paired)."""
+        if role == "image" or id(item) not in self._used:
+            self.counts.topics[role].lost += 1
+        self._used.discard(id(item))
+
+    def note_decoded(self, role: str) -> None:
+        """An image or scan of a pair taken by the worker was decoded."""
+        with self._lock:
+            self.counts.topics[role].decoded += 1
+
+    def note_bad(self, role: str) -> None:
+        """An image or scan of a pair taken by the worker could not be decoded."""
+        with self._lock:
+            self.counts.topics[role].bad += 1
+
+    @property
+    def waiting(self) -> int:
+        """Images waiting to be paired."""
+        with self._lock:
+            return len(self._images)
 
     def on_image(self, msg: object) -> None:
-        """A ``sensor_msgs/Image`` (rgb8, bgr8, mono8) or ``CompressedImage`` (the transport deserialised the
-        topic's type: the casts below say which)."""
-        if self.compressed:
-            got = self._decoded("image", cast(CompressedImageMsg, msg), decode_compressed_image)
-        else:
-            got = self._decoded("image", cast(ImageMsg, msg), decode_image)
-        if got is not None:
-            head = cast(_Headed, msg).header
-            with self._lock:
-                self._images.append(Stamped(msg_stamp_ns(head.stamp), str(head.frame_id).lstrip("/"), got[0], got[1]))
-                self._match()
+        """A ``sensor_msgs/Image`` (rgb8, bgr8, mono8, ...) or ``CompressedImage`` (the transport deserialised the
+        topic's type), kept raw."""
+        self._keep("image", msg)
 
     def on_scan(self, msg: object) -> None:
-        """A ``sensor_msgs/PointCloud2`` (x, y, z), or a sparse depth ``Image`` with ``sparse``."""
-        if self.sparse:
-            got = self._decoded("scan", cast(ImageMsg, msg), decode_sparse_depth)
-        else:
-            got = self._decoded("scan", cast(PointCloud2Msg, msg), decode_pointcloud2)
-        if got is not None:
-            head = cast(_Headed, msg).header
-            with self._lock:
-                self._scans.append(Stamped(msg_stamp_ns(head.stamp), str(head.frame_id).lstrip("/"), got[0], got[1]))
-                self._match()
+        """A ``sensor_msgs/PointCloud2`` (x, y, z), or a sparse depth ``Image`` with ``sparse``, kept raw."""
+        self._keep("scan", msg)
 
     def on_camera_info(self, msg: object) -> None:
         """A ``sensor_msgs/CameraInfo``: the newest good one is used."""
@@ -189,13 +269,68 @@ class PairingInputs:
         """A ``tf2_msgs/TFMessage`` of static transforms."""
         self._decoded("tf_static", cast(TFMessageMsg, msg), self.tree.add_message)
 
+    def on_tf(self, msg: object) -> None:
+        """A ``tf2_msgs/TFMessage`` of dynamic transforms: the newest per child frame is kept."""
+        self._decoded("tf", cast(TFMessageMsg, msg), self._add_dynamic)
+
+    def _add_dynamic(self, msg: TFMessageMsg, where: str) -> None:
+        checked = []
+        for t in msg.transforms:
+            parent, child = str(t.header.frame_id).lstrip("/"), str(t.child_frame_id).lstrip("/")
+            tr, rot = t.transform.translation, t.transform.rotation
+            try:
+                T = checked_transform((tr.x, tr.y, tr.z), (rot.x, rot.y, rot.z, rot.w))
+            except DataError as exc:
+                raise DataError(f"{where}: transform {parent!r} -> {child!r}: {exc}") from None
+            checked.append((child, (msg_stamp_ns(t.header.stamp), parent, T)))
+        with self._lock:
+            for child, edge in checked:
+                old = self._dynamic.get(child)
+                if old is not None and old[0] > edge[0]:
+                    continue  # an older transform than the one kept
+                if old is None and len(self._dynamic) >= MAX_TF_FRAMES:
+                    raise DataError(f"{where}: more than {MAX_TF_FRAMES} child frames on /tf; {child!r} ignored")
+                self._dynamic[child] = edge
+
+    def lookup(self, target: str, source: str) -> np.ndarray:
+        """(4, 4) ``T_target_source`` through the static transforms and the newest dynamic ones (``/tf`` over
+        ``/tf_static`` where both give a child frame's parent).
+
+        Raises:
+            DataError: no chain joins the frames, or two disagree (:meth:`TransformTree.lookup`).
+        """
+        with self._lock:
+            dynamic = dict(self._dynamic)
+        if not dynamic:
+            return self.tree.lookup(target, source)
+        names = f"{self.tree.source} and {self.topics.get('tf', '/tf')}"
+        tree = self.tree.copy(names)
+        for child, (_, parent, T) in dynamic.items():
+            tree.add(parent, child, T)
+        return tree.lookup(target, source)
+
+    def _skew(self, period: int) -> int:
+        return period // 2 if self.max_skew_ns is None else self.max_skew_ns
+
+    def _decided(self, images: list[Stamped], newest_scan: int) -> list[int]:
+        """The indices of the images decided (module doc)."""
+        last = len(images) - 1
+        out = [i for i, im in enumerate(images) if im.stamp_ns <= newest_scan or i < last]
+        if out and out[-1] == last:
+            return out
+        gap = images[last].stamp_ns - newest_scan
+        if len(self._scans) > 1:
+            period = estimate_period_ns(np.array([s.stamp_ns for s in self._scans]))
+            if gap <= min(self._skew(period), newest_scan + period - images[last].stamp_ns):
+                out.append(last)
+        return out
+
     def _match(self) -> None:
         """Pair the newest decided image (module doc); called with the lock held."""
         if not self._images or not self._scans:
             return
-        newest_scan = max(s.stamp_ns for s in self._scans)
         images = list(self._images)
-        decided = [i for i, im in enumerate(images) if im.stamp_ns <= newest_scan or i < len(images) - 1]
+        decided = self._decided(images, max(s.stamp_ns for s in self._scans))
         if not decided:
             return
         k = decided[-1]
@@ -204,7 +339,7 @@ class PairingInputs:
         p = pair_stamps(np.array([image.stamp_ns]), np.array([s.stamp_ns for s in scans]), self.max_skew_ns)
         for _ in range(k + 1):
             self._images.popleft()
-        self.counts.unpaired += k + int(p.match[0] < 0)
+        self.counts.topics["image"].lost += k + int(p.match[0] < 0)
         if p.match[0] < 0:
             log.warning(
                 "%s: no %s scan within %.1f ms (nearest %.1f ms apart)",
@@ -215,4 +350,6 @@ class PairingInputs:
             )
             return
         self.counts.paired += 1
-        self.on_pair(Pair(image, scans[int(p.match[0])], self.camera_info))
+        scan = scans[int(p.match[0])]
+        self._used.add(id(scan))
+        self.on_pair(Pair(image, scan, self.camera_info))

@@ -13,7 +13,16 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
-__all__ = ["OUTPUT_QOS", "SENSOR_QOS", "TF_STATIC_QOS", "Publisher", "QoS", "Transport"]
+__all__ = [
+    "LATCHED_QOS",
+    "OUTPUT_QOS",
+    "SENSOR_QOS",
+    "TF_QOS",
+    "TF_STATIC_QOS",
+    "Publisher",
+    "QoS",
+    "Transport",
+]
 
 
 @dataclass(frozen=True)
@@ -30,6 +39,11 @@ class QoS:
 SENSOR_QOS = QoS(reliable=False, depth=5)
 #: What depth nodes publish with: reliable, keep-last 1 (a late subscriber gets only the newest frame).
 OUTPUT_QOS = QoS(reliable=True, depth=1)
+#: A latched output (``--latch-camera-info``): reliable, transient local, keep-last 1 (a late subscriber gets the
+#: last message at once).
+LATCHED_QOS = QoS(reliable=True, depth=1, durable=True)
+#: What ``/tf`` is subscribed with (tf2's listener profile: reliable, volatile, keep-last 100).
+TF_QOS = QoS(reliable=True, depth=100)
 #: What ``/tf_static`` is subscribed with (tf2's static profile: reliable, transient local).
 TF_STATIC_QOS = QoS(reliable=True, depth=100, durable=True)
 
