@@ -59,6 +59,7 @@ def docs_workspace(tmp_path_factory: pytest.TempPathFactory) -> Path:
     _tiny_model(root / "model.safetensors")
     _frames(root / "data" / "kitti", root)
     shutil.copytree(REPO / "tests" / "data" / "kitti_sample" / "kitti_raw", root / "RAW_ROOT")
+    (root / "benchmarks").symlink_to(REPO / "benchmarks")  # the pages run `python benchmarks/...` as a user would
     from tests.data._datasets import make_void
 
     make_void(root / "VOID_ROOT", train=2, test=2, h=64, w=96)  # VOID's folders and list files, tiny
