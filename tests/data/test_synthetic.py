@@ -162,8 +162,8 @@ def test_synth_and_check_commands(tmp_path: Path) -> None:
 
 
 def test_style_reaches_the_tree_and_the_manifest(tmp_path: Path) -> None:
-    from semattnet.data import layout
     from semattnet.data.io import read_depth
+    from semattnet.data.kitti import layout
     from semattnet.data.synthetic.tree import SYNTH_DATE, scene_seed, write_synthetic_kitti
 
     manifest = write_synthetic_kitti(

@@ -11,7 +11,7 @@ from torch.utils.data import DataLoader
 
 from semattnet.data.datasets.frames import IndoorTrainTransform
 from semattnet.data.io import DataError
-from semattnet.data.kitti import KittiDepthCompletion
+from semattnet.data.kitti.splits import KittiDepthCompletion
 from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.data.transforms import (
     EvalTransform,

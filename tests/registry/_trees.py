@@ -44,7 +44,7 @@ def folder_frames(root: Path, n: int = 2) -> tuple[Path, Path]:
 
 def sensor_bag(root: Path, n: int = 2) -> Path:
     """The bundled KITTI raw frame ``n`` times, 0.1 s apart, as a ROS 1 bag (scans 3 ms after the images)."""
-    from semattnet.data.kitti_raw import RawDrive
+    from semattnet.data.kitti.raw import RawDrive
     from semattnet.robotics.bags import SensorRecord, write_sensor_bag
     from tests.inference._raw_sample import DRIVE
 

@@ -69,7 +69,7 @@ def test_folder_frames_with_one_name_are_refused() -> None:
 
 
 def test_raw_drive_frames_of_one_number_are_refused(tmp_path: Path) -> None:
-    from semattnet.data.kitti_raw import RawDrive
+    from semattnet.data.kitti.raw import RawDrive
     from tests.inference._raw_sample import three_frame_drive
 
     drive = three_frame_drive(tmp_path)  # frames 5, 6, 7

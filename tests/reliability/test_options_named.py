@@ -86,14 +86,14 @@ def test_project_number_options_are_named(tmp_path: Path, args: list[str], named
 
 @pytest.mark.parametrize("frames", ["0-5,abc", "-1", "3-1"])
 def test_frame_specs_name_the_option(frames: str) -> None:
-    from semattnet.data.kitti_raw import parse_frames
+    from semattnet.data.kitti.raw import parse_frames
 
     assert "--frames" in _one_line(lambda: parse_frames(frames), DataError)
 
 
 @pytest.mark.parametrize("mirror", ["not a url", "/some/folder", "ftp://host/x", ""])
 def test_a_mirror_that_is_not_a_url_is_refused_first(tmp_path: Path, mirror: str) -> None:
-    from semattnet.data.download import download_dataset
+    from semattnet.data.kitti.download import download_dataset
 
     msg = _one_line(lambda: download_dataset("void", tmp_path / "o", accept_license=True, mirror=mirror), InputError)
     assert "--mirror" in msg and not (tmp_path / "o").exists()

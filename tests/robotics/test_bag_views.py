@@ -14,7 +14,7 @@ import pytest
 from click.testing import CliRunner
 
 from semattnet.cli import main
-from semattnet.data.kitti_raw import RawDrive
+from semattnet.data.kitti.raw import RawDrive
 from semattnet.data.sources import RawDriveSource
 from semattnet.data.synthetic.drive import write_synthetic_drives
 from semattnet.geometry import make_T

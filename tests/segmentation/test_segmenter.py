@@ -135,7 +135,7 @@ def test_interrupted_run_resumes_without_redoing(exported: dict[str, Path], tmp_
 
 
 def test_kitti_loader_reads_segmented_maps(tmp_path: Path) -> None:
-    from semattnet.data.kitti import KittiDepthCompletion
+    from semattnet.data.kitti.splits import KittiDepthCompletion
     from semattnet.data.synthetic.tree import write_synthetic_kitti
 
     root = tmp_path / "kitti"

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from semattnet._utils.device import now
-from semattnet.data.kitti import KittiDepthCompletion
+from semattnet.data.kitti.splits import KittiDepthCompletion
 from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.data.transforms import EvalTransform
 from semattnet.evaluation.metrics import KittiMetrics

@@ -54,7 +54,7 @@ def real_frames(sample_root: str | Path) -> list[BenchFrame]:
 
 def _real_frame(root: Path, camera: str) -> BenchFrame:
     from semattnet.data.io import read_depth
-    from semattnet.data.sources.kitti_raw import RawDriveSource
+    from semattnet.data.sources.raw_drive import RawDriveSource
 
     frame = RawDriveSource(root / REAL_DRIVE, "5", camera).load("0000000005")
     gt = read_depth(root / REAL_GT.format(camera=camera))

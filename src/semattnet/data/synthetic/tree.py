@@ -21,9 +21,9 @@ from typing import TypedDict
 import numpy as np
 
 from semattnet._utils.outputs import Output, check_outputs, incomplete_tree, mark_tree
-from semattnet.data import layout
 from semattnet.data.io import write_depth as _write_depth
 from semattnet.data.io import write_image as _write_image
+from semattnet.data.kitti import layout
 from semattnet.data.synthetic.domain import Domain, get_domain
 from semattnet.data.synthetic.scenes import check_style, make_frame
 

@@ -4,9 +4,9 @@ What ``semattnet data download`` runs. Three parts, chosen with ``what``:
 
 * ``depth-completion``: ``data_depth_annotated.zip``, ``data_depth_velodyne.zip`` and
   ``data_depth_selection.zip`` into ``ROOT/data_depth_annotated``, ``ROOT/data_depth_velodyne`` and
-  ``ROOT/data_depth_selection`` (:mod:`semattnet.data.layout`).
+  ``ROOT/data_depth_selection`` (:mod:`semattnet.data.kitti.layout`).
 * ``raw-subset``: the raw drive of every drive folder found under ``ROOT/data_depth_annotated/{train,val}``
-  (or, before that archive is unpacked, the lists in :mod:`semattnet.data.kitti_files`), of which
+  (or, before that archive is unpacked, the lists in :mod:`semattnet.data.kitti.server`), of which
   only ``image_02`` / ``image_03`` are unpacked, into ``ROOT/kitti_raw/<date>/<drive>/``, and each
   day's calibration files into ``ROOT/kitti_raw/<date>/``.
 * ``semantic``: the authors' semantic maps, from an archive the user names (their Google Drive
@@ -16,7 +16,7 @@ Every file goes through :func:`semattnet.cache.fetch` (resumable, atomic, checke
 its pin: KITTI publishes no checksums, so the first download of each archive is pinned), then is
 unpacked safely (a member with an absolute path or ``..`` refuses the whole archive; files already
 unpacked with the right size are skipped, so a second run resumes) and finally
-:func:`semattnet.data.check.check_trees` checks the tree.
+:func:`semattnet.data.kitti.check.check_trees` checks the tree.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from semattnet._errors import DataError, InputError
 from semattnet._utils.atomic import disk_full_error, is_disk_full
 from semattnet._utils.outputs import mark_tree
 from semattnet.cache import fetch
-from semattnet.data import kitti_files as kf
+from semattnet.data.kitti import server as kf
 
 __all__ = [
     "WHAT",
@@ -94,7 +94,7 @@ def drives_for(root: str | Path) -> tuple[list[str], str]:
     """Drives whose raw images the benchmark needs, and where the list came from.
 
     The drive folders under ``root/data_depth_annotated/{train,val}`` when there are any, else the
-    lists shipped in :mod:`semattnet.data.kitti_files`.
+    lists shipped in :mod:`semattnet.data.kitti.server`.
     """
     annotated = Path(root) / "data_depth_annotated"
     found = sorted(
@@ -109,7 +109,7 @@ def drives_for(root: str | Path) -> tuple[list[str], str]:
     if found:
         return found, f"{annotated}/{{train,val}}"
     shipped = sorted(kf.TRAIN_DRIVES + kf.VAL_DRIVES)
-    return shipped, "the drive list shipped with semattnet (semattnet.data.kitti_files)"
+    return shipped, "the drive list shipped with semattnet (semattnet.data.kitti.server)"
 
 
 def _url(prefix: str, archive: kf.KittiArchive) -> str:
@@ -390,7 +390,7 @@ def download_kitti(
         mark_tree(out, "data download", True)
     if dry_run or not check:
         return 0
-    from semattnet.data.check import check_trees
+    from semattnet.data.kitti.check import check_trees
 
     raw, sem = out / "kitti_raw", out / str(kf.SEMANTIC_MAPS["target"])
     return check_trees([out], raw if raw.is_dir() else None, sem if sem.is_dir() else None, log=log)

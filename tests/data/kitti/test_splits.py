@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from semattnet.data.io import DataError, read_image, write_image
-from semattnet.data.kitti import KittiDepthCompletion
+from semattnet.data.kitti.splits import KittiDepthCompletion
 from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.data.transforms import EvalTransform, TrainTransform
 from tests._helpers import SAMPLE
