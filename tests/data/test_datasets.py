@@ -186,7 +186,7 @@ def test_palettes_one_home_and_mismatch() -> None:
 
 def test_download_nyu_through_a_file_mirror(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from semattnet.cache import read_pins
-    from semattnet.data.kitti.download import download_dataset
+    from semattnet.data.download import download_dataset
     from tests._helpers import online_cache
 
     cache = online_cache(monkeypatch, tmp_path / "cache")
@@ -208,7 +208,7 @@ def test_download_nyu_through_a_file_mirror(tmp_path: Path, monkeypatch: pytest.
 def test_tar_members_leaving_the_folder_are_refused(tmp_path: Path) -> None:
     import io
 
-    from semattnet.data.kitti.download import UnsafeArchiveError, extract_tar
+    from semattnet.data.archives import UnsafeArchiveError, extract_tar
 
     path = tmp_path / "evil.tar"
     with tarfile.open(path, "w") as tf:

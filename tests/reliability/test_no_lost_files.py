@@ -17,7 +17,7 @@ from semattnet._errors import SemAttNetError
 from semattnet._utils.outputs import OutputError, check_no_input_overlap
 from semattnet.baselines import ClassicalCompleter
 from semattnet.cli import main
-from semattnet.data.kitti.download import ArchiveConflictError, extract_zip
+from semattnet.data.archives import ArchiveConflictError, extract_zip
 from tests.reliability._helpers import cli as _cli
 from tests.reliability._helpers import one_line as _one_line
 

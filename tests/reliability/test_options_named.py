@@ -93,7 +93,7 @@ def test_frame_specs_name_the_option(frames: str) -> None:
 
 @pytest.mark.parametrize("mirror", ["not a url", "/some/folder", "ftp://host/x", ""])
 def test_a_mirror_that_is_not_a_url_is_refused_first(tmp_path: Path, mirror: str) -> None:
-    from semattnet.data.kitti.download import download_dataset
+    from semattnet.data.download import download_dataset
 
     msg = _one_line(lambda: download_dataset("void", tmp_path / "o", accept_license=True, mirror=mirror), InputError)
     assert "--mirror" in msg and not (tmp_path / "o").exists()

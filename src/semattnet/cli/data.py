@@ -149,7 +149,8 @@ def data_download(
     """Download a dataset (KITTI depth completion and the raw drives it needs by default) into the loader
     layout; exits 1 on problems."""
     from semattnet.cache import DownloadError
-    from semattnet.data.kitti.download import download_dataset, download_kitti
+    from semattnet.data.download import download_dataset
+    from semattnet.data.kitti.download import download_kitti
 
     try:
         if dataset != "kitti-dc":
