@@ -16,7 +16,7 @@ SIZE = (32, 64)
 
 def kitti_tree(root: Path) -> Path:
     """A synthetic KITTI depth-completion tree: one frame in train and in each evaluation split."""
-    from semattnet.data.synthetic.tree import write_synthetic_kitti
+    from semattnet.synthetic.tree import write_synthetic_kitti
 
     write_synthetic_kitti(root, frames=1, size=SIZE, eval_frames=1, workers=1)
     return root

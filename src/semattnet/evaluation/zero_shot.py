@@ -65,8 +65,8 @@ def world_frames(
     kind: str, pattern: str, frames: int, size: tuple[int, int] | None = None, first: int = 0, **draw: object
 ) -> Iterator[BenchFrame]:
     """``frames`` held-out world frames of one ``kind`` and sparse ``pattern`` (``draw``: the pattern's own
-    settings, e.g. ``beams=16`` or ``count=500``: :data:`~semattnet.data.synthetic.world.PATTERN_OPTIONS`)."""
-    from semattnet.data.synthetic.world import make_world_frame, world_seed
+    settings, e.g. ``beams=16`` or ``count=500``: :data:`~semattnet.synthetic.world.PATTERN_OPTIONS`)."""
+    from semattnet.synthetic.world import make_world_frame, world_seed
 
     for i in range(first, first + frames):
         f = make_world_frame(world_seed("heldout", i), kind=kind, pattern=pattern, size=size, **draw)

@@ -13,9 +13,9 @@ from semattnet.cli import main
 from semattnet.data.io import read_depth, read_image
 from semattnet.data.kitti.raw import RawDrive
 from semattnet.data.sources.raw_drive import project_frame
-from semattnet.data.synthetic.drive import BASELINE, FRAME_RATE, STEP, oxts_pose, write_synthetic_drives
 from semattnet.geometry import invert_T, project_points, read_kitti_calibration, read_oxts_motion, transform_points
 from semattnet.geometry.calibration import read_velo_to_cam
+from semattnet.synthetic.drive import BASELINE, FRAME_RATE, STEP, oxts_pose, write_synthetic_drives
 
 FRAMES, SIZE = 3, (96, 224)
 
@@ -132,7 +132,7 @@ def test_drives_are_deterministic_and_refuse_a_full_folder(tree: Path, tmp_path:
 
 
 def test_a_drive_of_several_streets_leaves_a_frame_out_between_them(tmp_path: Path) -> None:
-    from semattnet.data.synthetic.drive import STREET_GAP
+    from semattnet.synthetic.drive import STREET_GAP
 
     m = write_synthetic_drives(tmp_path, drives=1, frames=2, size=(32, 64), seed=1, streets=2)
     drive = _drive(tmp_path)

@@ -301,7 +301,7 @@ def write_synthetic_drives(
         _write_timestamps(out / "kitti_raw" / SYNTH_DATE / name, streets * (frames + 1) - 1)
         entries.append({"drive": name, "seeds": seeds, "frames": streets * frames})
     manifest: DriveManifest = {
-        "generator": "semattnet.data.synthetic.drive",
+        "generator": "semattnet.synthetic.drive",
         "style": style,
         "domain": dom.name,
         "seed": seed,
