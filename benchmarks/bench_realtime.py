@@ -3,7 +3,7 @@ time goes per stage.
 
 Writes an MCAP bag (the repository's bag writer, :func:`semattnet.robotics.bags.write_sensor_bag`) of ``--frames``
 frames at ``--size`` (default 352x1216), 10 Hz, cycling over ``--scenes`` synthetic street scenes
-(:func:`semattnet.data.synthetic.scenes.make_frame`: an image and its simulated LiDAR scan), then replays it as
+(:func:`semattnet.synthetic.scenes.make_frame`: an image and its simulated LiDAR scan), then replays it as
 ``semattnet predict --bag BAG --realtime`` does, through the library (the bag as frames, depth and colour PNGs and
 ``latency.json`` written), with ``--weights W``, ``--model NAME`` (that registered model with random weights:
 times do not depend on the weights) or the classical completion (the default), after ``--warmup`` completions of
@@ -35,9 +35,9 @@ T0_NS = 1_700_000_000 * 10**9
 
 def write_recording(path: Path, frames: int, size: tuple[int, int], scenes: int = 4) -> Path:
     """An MCAP bag of ``frames`` frames of ``size`` (H, W) at 10 Hz, cycling over ``scenes`` synthetic scenes."""
-    from semattnet.data.synthetic.scenes import make_frame
     from semattnet.geometry.calibration import RigCalibration
     from semattnet.robotics.bags import SensorRecord, write_sensor_bag
+    from semattnet.synthetic.scenes import make_frame
 
     made = [make_frame(*size, seed=s) for s in range(max(1, min(scenes, frames)))]
     first = made[0]

@@ -34,7 +34,7 @@ def rss_mib() -> float:
 
 def write_bag(path: Path, frames: int) -> Path:
     """``frames`` copies of the bundled KITTI frame at 10 Hz (scan 3 ms after its image), MCAP."""
-    from semattnet.data.kitti_raw import RawDrive
+    from semattnet.data.kitti.raw import RawDrive
     from semattnet.robotics.bags import SensorRecord, write_sensor_bag
 
     raw = RawDrive(DRIVE, 2).frame(RawDrive(DRIVE, 2).names_for(None)[0])

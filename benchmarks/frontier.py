@@ -482,7 +482,7 @@ def write_stream_frames(folder: Path, size: tuple[int, int], count: int = STREAM
     ``semantic/`` PNGs, as ``predict`` reads them): its :class:`~semattnet.data.sources.FolderSource`."""
     from semattnet.data.io import write_depth, write_image
     from semattnet.data.sources import FolderSource
-    from semattnet.data.synthetic import make_frame
+    from semattnet.synthetic import make_frame
 
     for sub in ("rgb", "sparse", "semantic"):
         (folder / sub).mkdir(parents=True, exist_ok=True)

@@ -5,7 +5,7 @@ One command (a GPU machine; from the repository root, the package installed or `
 
     python benchmarks/shift.py --out shift-run --device cuda
 
-Domains (:mod:`semattnet.data.synthetic.domain`): ``source`` is the generator's original rig (64 beams, KITTI's
+Domains (:mod:`semattnet.synthetic.domain`): ``source`` is the generator's original rig (64 beams, KITTI's
 camera and mounting), ``target`` another car's (a lower, tilted 32-beam LiDAR, a lower camera pitched down with
 a wider lens and another image size, other light and paint); the same kind of streets (the realistic style).
 
@@ -58,10 +58,10 @@ from semattnet.apps.demo.reference import REFERENCE_RECIPE, ReferenceRecipe, mac
 from semattnet.apps.experiment import HeldOut, complete_held_out, fallback_semantic, load_held_out, score_held_out
 from semattnet.apps.experiment import train_variant as _train_variant
 from semattnet.baselines.classical import complete_classical
-from semattnet.data.synthetic.domain import SOURCE, TARGET, Domain
-from semattnet.data.synthetic.drive import drive_name, write_synthetic_drives
-from semattnet.data.synthetic.tree import SYNTH_DATE, write_synthetic_kitti
 from semattnet.models.registry import build_model
+from semattnet.synthetic.domain import SOURCE, TARGET, Domain
+from semattnet.synthetic.drive import drive_name, write_synthetic_drives
+from semattnet.synthetic.tree import SYNTH_DATE, write_synthetic_kitti
 from semattnet.weights.checkpoint import load_checkpoint, load_weights, save_safetensors
 
 #: The command of the full run (results.json records it).
@@ -71,7 +71,7 @@ DOC_PAGE = REPO / "docs" / "guides" / "domain-shift.md"
 PLOT = REPO / "docs" / "domain-shift.png"
 MARKERS = ("<!-- shift-results:start -->", "<!-- shift-results:end -->")
 GAP_MARKERS = ("<!-- shift-gap:start -->", "<!-- shift-gap:end -->")
-#: The groups of :class:`~semattnet.data.synthetic.domain.Domain` fields the rigs differ in (``--references``).
+#: The groups of :class:`~semattnet.synthetic.domain.Domain` fields the rigs differ in (``--references``).
 FACTORS: dict[str, tuple[str, ...]] = {
     "image size": (),
     "LiDAR": ("beams", "elevation", "lidar_offset", "lidar_pitch"),
@@ -177,7 +177,7 @@ class Clock:
 def _tree(
     root: Path, frames: int, eval_frames: int, size: tuple[int, int], seed: int, style: str, domain: str | Domain
 ) -> HeldOut:
-    """A synthetic tree (:func:`~semattnet.data.synthetic.tree.write_synthetic_kitti`): the one an earlier run
+    """A synthetic tree (:func:`~semattnet.synthetic.tree.write_synthetic_kitti`): the one an earlier run
     completed, else written anew; its held-out scenes."""
     done = (root / "scenes.json").is_file() and incomplete_tree(root) is None
     if not done:
@@ -369,8 +369,8 @@ def estimate(s: ShiftSettings, device: torch.device) -> dict[str, float]:
     the fastest of 2) times the recipe's steps; adaptation as 2.5 training steps per step (two views rendered
     through the model and back for the photometric loss: an assumption until ``semattnet adapt`` is timed)."""
     from semattnet.apps.experiment import step_seconds
-    from semattnet.data.synthetic.drive import make_drive
-    from semattnet.data.synthetic.scenes import make_frame
+    from semattnet.synthetic.drive import make_drive
+    from semattnet.synthetic.scenes import make_frame
 
     r = s.recipe
 

@@ -2,14 +2,15 @@
 
 The package is laid out as the system is (see the README's "Architecture" section):
 :mod:`semattnet.models` (the network), :mod:`semattnet.weights` (checkpoints), :mod:`semattnet.palette`
-(class colours), :mod:`semattnet.data` (KITTI, synthetic scenes, PNG I/O), :mod:`semattnet.segmentation`,
-:mod:`semattnet.training`, :mod:`semattnet.evaluation`, :mod:`semattnet.inference`,
+(class colours), :mod:`semattnet.data` (KITTI, PNG I/O), :mod:`semattnet.synthetic` (synthetic scenes),
+:mod:`semattnet.segmentation`, :mod:`semattnet.training`, :mod:`semattnet.evaluation`, :mod:`semattnet.inference`,
 :mod:`semattnet.baselines`, :mod:`semattnet.viz`, :mod:`semattnet.apps` and :mod:`semattnet.cli`.
 The names below are the stable public API; :func:`from_pretrained` is the one loader (the lower-level ones live in
 :mod:`semattnet.weights`).
 """
 
-from semattnet import palette, robotics  # robotics: enrols the bag source and the robot sinks
+# robotics: enrols the bag source and the robot sinks; _moved: the synthetic scenes' old paths (deprecated until 0.3)
+from semattnet import _moved, palette, robotics  # noqa: F401
 from semattnet._errors import DataError, InputError, MissingDependencyError, SemAttNetError
 from semattnet._utils.version import __version__
 from semattnet.inference import DepthCompleter, crop_padding, pad_to_multiple

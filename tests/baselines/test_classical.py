@@ -12,8 +12,8 @@ from click.testing import CliRunner
 from semattnet.baselines.classical import complete_classical
 from semattnet.cli import main
 from semattnet.data.io import read_depth
-from semattnet.data.synthetic.scenes import make_frame
 from semattnet.evaluation.metrics import KittiMetrics
+from semattnet.synthetic.scenes import make_frame
 from tests._helpers import SAMPLE
 
 

@@ -180,7 +180,7 @@ def test_tiny_run(shift: ModuleType, tmp_path: Path) -> None:
 
 
 def test_factor_domains_take_one_group_of_the_target_rig_each(shift: ModuleType) -> None:
-    from semattnet.data.synthetic.domain import SOURCE, TARGET
+    from semattnet.synthetic.domain import SOURCE, TARGET
 
     domains = shift.factor_domains()
     assert list(domains) == [*shift.FACTORS, "all: the target"] and domains["all: the target"] == TARGET

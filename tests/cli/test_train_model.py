@@ -10,8 +10,8 @@ import pytest
 from click.testing import CliRunner
 
 from semattnet.cli import main
-from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.models.registry import list_models
+from semattnet.synthetic.tree import write_synthetic_kitti
 from semattnet.training.config import TrainConfig
 from semattnet.weights.checkpoint import load_checkpoint
 

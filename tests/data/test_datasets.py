@@ -208,7 +208,7 @@ def test_download_nyu_through_a_file_mirror(tmp_path: Path, monkeypatch: pytest.
 def test_tar_members_leaving_the_folder_are_refused(tmp_path: Path) -> None:
     import io
 
-    from semattnet.data.download import UnsafeArchiveError, extract_tar
+    from semattnet.data.archives import UnsafeArchiveError, extract_tar
 
     path = tmp_path / "evil.tar"
     with tarfile.open(path, "w") as tf:

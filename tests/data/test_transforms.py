@@ -11,8 +11,7 @@ from torch.utils.data import DataLoader
 
 from semattnet.data.datasets.frames import IndoorTrainTransform
 from semattnet.data.io import DataError
-from semattnet.data.kitti import KittiDepthCompletion
-from semattnet.data.synthetic.tree import write_synthetic_kitti
+from semattnet.data.kitti.splits import KittiDepthCompletion
 from semattnet.data.transforms import (
     EvalTransform,
     Sample,
@@ -23,6 +22,7 @@ from semattnet.data.transforms import (
     hflip,
 )
 from semattnet.palette import UNKNOWN_COLOR
+from semattnet.synthetic.tree import write_synthetic_kitti
 from semattnet.training import TrainConfig
 
 

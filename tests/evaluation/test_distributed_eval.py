@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 import semattnet
-from semattnet.data.synthetic.tree import write_synthetic_kitti
+from semattnet.synthetic.tree import write_synthetic_kitti
 from semattnet.weights.checkpoint import save_safetensors
 from tests.inference.test_sharding import assert_one_line_error, cli, rank_logs, tree_bytes
 

@@ -15,10 +15,10 @@ from PIL import Image
 import semattnet
 from semattnet.cli import main
 from semattnet.data.io import read_depth, read_image, write_image
-from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.evaluation.submission import SubmissionError, write_submission_files
 from semattnet.inference.backends import EngineSpec
 from semattnet.inference.completer import DepthCompleter
+from semattnet.synthetic.tree import write_synthetic_kitti
 from semattnet.viz.depth import error_map
 from semattnet.weights.checkpoint import save_safetensors
 from tests._helpers import SAMPLE

@@ -12,12 +12,12 @@ import torch
 from semattnet.baselines.classical import ClassicalCompleter
 from semattnet.data.io import MIN_DEPTH_M, clamp_for_png, read_depth
 from semattnet.data.pairing import FramePaths
-from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.evaluation.evaluate import EvalOutputs, EvalSplit, evaluate_split, score_folders
 from semattnet.evaluation.protocols import eval_source
 from semattnet.evaluation.submission import write_submission_files
 from semattnet.inference.completer import Completion
 from semattnet.inference.folder import complete_folder
+from semattnet.synthetic.tree import write_synthetic_kitti
 
 
 def _holes(shape: tuple[int, ...]) -> np.ndarray:

@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 from semattnet.cli import main
 from semattnet.data.io import write_depth, write_image
-from semattnet.data.layout import selection_key, selection_name
+from semattnet.data.kitti.layout import selection_key, selection_name
 
 DRIVE = "2011_09_26_drive_0002_sync"
 FRAMES = ("0000000005", "0000000020")

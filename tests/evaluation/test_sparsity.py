@@ -16,7 +16,6 @@ from semattnet._utils.outputs import OutputError
 from semattnet.baselines.classical import ClassicalCompleter
 from semattnet.cli import main
 from semattnet.data.io import clamp_for_png, quantize_depth
-from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.evaluation.metrics import KittiMetrics
 from semattnet.evaluation.protocols import eval_source
 from semattnet.evaluation.sparsity import (
@@ -28,6 +27,7 @@ from semattnet.evaluation.sparsity import (
     sweep_model,
     thin,
 )
+from semattnet.synthetic.tree import write_synthetic_kitti
 
 SETTINGS = ["beams=64,32,16,8", "keep=1,0.5,0.1"]
 

@@ -12,11 +12,11 @@ from semattnet._errors import InputError
 from semattnet.baselines.classical import ClassicalCompleter
 from semattnet.data.io import encode_depth, read_depth
 from semattnet.data.sources import KittiSplitSource
-from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.evaluation.submission import SubmissionError, write_submission
 from semattnet.inference.completer import Completion
 from semattnet.inference.contract import CompleterFactory
 from semattnet.inference.sinks import predict_frame
+from semattnet.synthetic.tree import write_synthetic_kitti
 
 
 @pytest.fixture(scope="module")

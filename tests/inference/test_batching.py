@@ -10,11 +10,11 @@ import pytest
 
 import semattnet
 from semattnet._errors import InputError
-from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.evaluation import EvalSplit, evaluate_split
 from semattnet.inference import DepthCompleter, RunOptions
 from semattnet.inference.backends import EngineSpec
 from semattnet.inference.batching import groups
+from semattnet.synthetic.tree import write_synthetic_kitti
 
 
 def test_groups_keep_order_size_and_faults() -> None:

@@ -11,11 +11,11 @@ from click.testing import CliRunner
 
 from semattnet.baselines import ClassicalCompleter
 from semattnet.data.io import MAX_DEPTH_M, read_depth, write_depth, write_image
-from semattnet.data.kitti_raw import RawDrive
+from semattnet.data.kitti.raw import RawDrive
 from semattnet.data.sources import FolderSource, KittiSplitSource, RawDriveSource
-from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.inference import Completion, check_frames, complete_frames
 from semattnet.inference.sinks import DepthPngSink, default_sinks, predict_frame
+from semattnet.synthetic.tree import write_synthetic_kitti
 from tests.inference._raw_sample import DRIVE
 
 

@@ -10,7 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 from semattnet.data.io import DataError, read_depth
-from semattnet.data.kitti_raw import RawDrive, parse_frames
+from semattnet.data.kitti.raw import RawDrive, parse_frames
 from semattnet.inference.raw import complete_kitti_raw, fusion_confidence
 from tests.inference._raw_sample import DRIVE, SCAN
 

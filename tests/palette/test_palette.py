@@ -43,7 +43,7 @@ def test_ids_colors_round_trip() -> None:
 
 
 def test_synthetic_palette_agrees() -> None:
-    from semattnet.data.synthetic.scenes import CITYSCAPES_PALETTE
+    from semattnet.synthetic.scenes import CITYSCAPES_PALETTE
 
     table = dict(TRAIN_CLASSES)
     for name, color in CITYSCAPES_PALETTE.items():

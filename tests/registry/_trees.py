@@ -16,7 +16,7 @@ SIZE = (32, 64)
 
 def kitti_tree(root: Path) -> Path:
     """A synthetic KITTI depth-completion tree: one frame in train and in each evaluation split."""
-    from semattnet.data.synthetic.tree import write_synthetic_kitti
+    from semattnet.synthetic.tree import write_synthetic_kitti
 
     write_synthetic_kitti(root, frames=1, size=SIZE, eval_frames=1, workers=1)
     return root
@@ -44,7 +44,7 @@ def folder_frames(root: Path, n: int = 2) -> tuple[Path, Path]:
 
 def sensor_bag(root: Path, n: int = 2) -> Path:
     """The bundled KITTI raw frame ``n`` times, 0.1 s apart, as a ROS 1 bag (scans 3 ms after the images)."""
-    from semattnet.data.kitti_raw import RawDrive
+    from semattnet.data.kitti.raw import RawDrive
     from semattnet.robotics.bags import SensorRecord, write_sensor_bag
     from tests.inference._raw_sample import DRIVE
 

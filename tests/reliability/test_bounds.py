@@ -14,7 +14,7 @@ from semattnet._errors import SemAttNetError
 from semattnet._utils.bounds import MAX_IMAGE_SIDE, check_image_size
 from semattnet.cli import main
 from semattnet.data import io
-from semattnet.data.kitti_raw import MAX_FRAME_INDEX, parse_frames
+from semattnet.data.kitti.raw import MAX_FRAME_INDEX, parse_frames
 from semattnet.geometry import read_points
 from semattnet.geometry.calibration import read_cam_to_cam, read_rig_json
 

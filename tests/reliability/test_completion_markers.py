@@ -90,7 +90,8 @@ def test_synth_killed_with_sigkill_is_refused_then_regenerated(tmp_path: Path) -
 
 
 def test_a_failed_download_leaves_an_incomplete_tree_and_a_rerun_completes_it(tmp_path: Path) -> None:
-    from semattnet.data.download import ArchiveConflictError, download_dataset
+    from semattnet.data.archives import ArchiveConflictError
+    from semattnet.data.download import download_dataset
 
     mirror = tmp_path / "mirror"
     mirror.mkdir()

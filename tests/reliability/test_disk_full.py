@@ -101,7 +101,7 @@ def test_convert_on_a_full_disk(tmp_path: Path, small_fs: Path) -> None:
 
 def test_unpacking_and_downloading_on_a_full_disk(tmp_path: Path, small_fs: Path) -> None:
     from semattnet.cache import fetch
-    from semattnet.data.download import extract_zip
+    from semattnet.data.archives import extract_zip
 
     blob = np.random.default_rng(0).bytes(400_000)
     with zipfile.ZipFile(tmp_path / "a.zip", "w") as zf:

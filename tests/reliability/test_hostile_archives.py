@@ -38,7 +38,7 @@ def _bomb(zf: zipfile.ZipFile) -> None:
 
 @pytest.mark.parametrize("write", [_link, _twice, _bomb], ids=["symlink", "duplicate", "bomb"])
 def test_hostile_dataset_archives_unpack_nothing(tmp_path: Path, write: Callable[[zipfile.ZipFile], None]) -> None:
-    from semattnet.data.download import UnsafeArchiveError, extract_zip
+    from semattnet.data.archives import UnsafeArchiveError, extract_zip
 
     archive = _void_zip(tmp_path / "a.zip", write)
     msg = _one_line(lambda: extract_zip(archive, tmp_path / "dest"), UnsafeArchiveError)

@@ -69,7 +69,7 @@ def test_folder_frames_with_one_name_are_refused() -> None:
 
 
 def test_raw_drive_frames_of_one_number_are_refused(tmp_path: Path) -> None:
-    from semattnet.data.kitti_raw import RawDrive
+    from semattnet.data.kitti.raw import RawDrive
     from tests.inference._raw_sample import three_frame_drive
 
     drive = three_frame_drive(tmp_path)  # frames 5, 6, 7
@@ -249,7 +249,7 @@ def test_max_skew_is_bounded_in_the_cli_and_the_library(tmp_path: Path) -> None:
 
 def test_nan_points_are_bounded_in_the_library(tmp_path: Path) -> None:
     pytest.importorskip("rosbags")
-    from semattnet.robotics.bags.kitti import write_sensor_bag
+    from semattnet.robotics.bags.sensor_bag import write_sensor_bag
 
     with pytest.raises(InputError, match="nan_points: must be a whole number in 0..1000000, got 2000000000"):
         write_sensor_bag(tmp_path / "b.mcap", [], None, nan_points=2_000_000_000)  # type: ignore[arg-type]

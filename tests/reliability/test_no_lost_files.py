@@ -17,7 +17,7 @@ from semattnet._errors import SemAttNetError
 from semattnet._utils.outputs import OutputError, check_no_input_overlap
 from semattnet.baselines import ClassicalCompleter
 from semattnet.cli import main
-from semattnet.data.download import ArchiveConflictError, extract_zip
+from semattnet.data.archives import ArchiveConflictError, extract_zip
 from tests.reliability._helpers import cli as _cli
 from tests.reliability._helpers import one_line as _one_line
 
@@ -186,8 +186,8 @@ def test_predict_overwrite_keeps_whole_frames_when_a_late_frame_fails(tmp_path: 
 
 
 def test_sweeps_and_metrics_never_write_into_their_inputs(tmp_path: Path) -> None:
-    from semattnet.data.synthetic.tree import write_synthetic_kitti
     from semattnet.evaluation.sparsity import sweep_model
+    from semattnet.synthetic.tree import write_synthetic_kitti
 
     root = tmp_path / "kitti"
     write_synthetic_kitti(root, 2, (32, 64), eval_frames=2, workers=1)

@@ -86,7 +86,7 @@ def test_project_number_options_are_named(tmp_path: Path, args: list[str], named
 
 @pytest.mark.parametrize("frames", ["0-5,abc", "-1", "3-1"])
 def test_frame_specs_name_the_option(frames: str) -> None:
-    from semattnet.data.kitti_raw import parse_frames
+    from semattnet.data.kitti.raw import parse_frames
 
     assert "--frames" in _one_line(lambda: parse_frames(frames), DataError)
 

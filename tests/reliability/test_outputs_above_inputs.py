@@ -303,7 +303,7 @@ def test_full_disk_under_a_recording_names_it(bag: Path, tmp_path: Path, small_f
 def test_a_plain_write_that_fills_the_disk_names_the_output(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     import errno
 
-    import semattnet.data.synthetic.tree as tree
+    import semattnet.synthetic.tree as tree
 
     def full(*args: object, **kwargs: object) -> None:
         raise OSError(errno.ENOSPC, "No space left on device")  # what a plain write() says: no path

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import torch
 
-from semattnet.data.synthetic.tree import write_synthetic_kitti
+from semattnet.synthetic.tree import write_synthetic_kitti
 from semattnet.training.config import TrainConfig
 from semattnet.training.trainer import Trainer, train
 

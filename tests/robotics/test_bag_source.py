@@ -13,7 +13,7 @@ from PIL import Image
 from semattnet._errors import DataError
 from semattnet.cli import main
 from semattnet.data.io import encode_depth
-from semattnet.data.kitti_raw import RawDrive
+from semattnet.data.kitti.raw import RawDrive
 from semattnet.data.scans import project_scan_file
 from semattnet.data.sources import RawDriveSource
 from semattnet.geometry import read_kitti_calibration

@@ -14,14 +14,14 @@ import pytest
 from click.testing import CliRunner
 
 from semattnet.cli import main
-from semattnet.data.kitti_raw import RawDrive
+from semattnet.data.kitti.raw import RawDrive
 from semattnet.data.sources import RawDriveSource
-from semattnet.data.synthetic.drive import write_synthetic_drives
 from semattnet.geometry import make_T
 from semattnet.robotics import BagSource
 from semattnet.robotics.bags import BagTopics, SensorRecord, list_topics, write_kitti_bag, write_sensor_bag
 from semattnet.robotics.bags.tf import TransformTree
 from semattnet.robotics.bags.tf_buffer import TransformBuffer, interpolate_transform
+from semattnet.synthetic.drive import write_synthetic_drives
 
 pytest.importorskip("rosbags")
 

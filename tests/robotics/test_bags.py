@@ -12,7 +12,7 @@ from PIL import Image
 
 from semattnet._errors import DataError
 from semattnet.cli import main
-from semattnet.data.kitti_raw import RawDrive
+from semattnet.data.kitti.raw import RawDrive
 from semattnet.data.scans import project_scan_file
 from semattnet.geometry import project_points, read_kitti_calibration
 from semattnet.robotics.bags import (

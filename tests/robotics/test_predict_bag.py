@@ -10,7 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 from semattnet.cli import main
-from semattnet.data.kitti_raw import RawDrive
+from semattnet.data.kitti.raw import RawDrive
 from semattnet.geometry import read_kitti_calibration
 from semattnet.robotics.bags import BagTopics, SensorRecord, open_bag, write_sensor_bag
 from tests.inference._raw_sample import DRIVE, RAW_DATE

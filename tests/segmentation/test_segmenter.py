@@ -135,8 +135,8 @@ def test_interrupted_run_resumes_without_redoing(exported: dict[str, Path], tmp_
 
 
 def test_kitti_loader_reads_segmented_maps(tmp_path: Path) -> None:
-    from semattnet.data.kitti import KittiDepthCompletion
-    from semattnet.data.synthetic.tree import write_synthetic_kitti
+    from semattnet.data.kitti.splits import KittiDepthCompletion
+    from semattnet.synthetic.tree import write_synthetic_kitti
 
     root = tmp_path / "kitti"
     write_synthetic_kitti(root, frames=3, size=(64, 96), eval_frames=2, workers=1)

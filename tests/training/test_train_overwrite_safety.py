@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from semattnet._utils.run_folder import REPLACE_PREFIX
-from semattnet.data.synthetic.tree import write_synthetic_kitti
+from semattnet.synthetic.tree import write_synthetic_kitti
 from semattnet.training.config import TrainConfig
 from semattnet.training.trainer import Trainer, run_files, train
 

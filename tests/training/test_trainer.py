@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 import torch
 
-from semattnet.data.synthetic.tree import write_synthetic_kitti
 from semattnet.models.layers import set_gradient_checkpointing
 from semattnet.models.registry import build_model
+from semattnet.synthetic.tree import write_synthetic_kitti
 from semattnet.training.config import TrainConfig
 from semattnet.training.trainer import Trainer, train
 from semattnet.weights.checkpoint import CheckpointError, load_checkpoint

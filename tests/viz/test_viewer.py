@@ -11,7 +11,7 @@ from PIL import Image
 
 from semattnet.cli import main
 from semattnet.data.io import read_depth
-from semattnet.data.synthetic import make_frame
+from semattnet.synthetic import make_frame
 from semattnet.viz.viewer import ViewerFrame, cloud_points, cloud_stride, parse_intrinsics, write_viewer
 from tests.apps._browser import hover_pixel, open_page, wait_ready
 

@@ -1,7 +1,7 @@
 """Bounds checked before anything is allocated from a size read in a file or an option: one home per kind.
 
 Image sizes (PNG headers, a calibration's ``S_rect``, a rig's ``image_size``, ``--size``) are bounded
-here; frame ranges by the drive's frame count (:func:`semattnet.data.kitti_raw.parse_frames`); point
+here; frame ranges by the drive's frame count (:func:`semattnet.data.kitti.raw.parse_frames`); point
 counts by the file's length (:mod:`semattnet.geometry.pointcloud_io`).
 """
 

@@ -81,7 +81,7 @@ class AblationSettings:
     """Common budget: ``backbone_steps + full_steps`` optimiser steps for every configuration
     (refining ones: backbone stage then full model; the others: all in the backbone stage).
 
-    ``style`` is the synthetic scene style (:data:`semattnet.data.synthetic.SCENE_STYLES`; the
+    ``style`` is the synthetic scene style (:data:`semattnet.synthetic.SCENE_STYLES`; the
     default ``"realistic"`` has the sensor failures and misleading colour edges where semantics
     carry information); ``extra`` holds further ``TrainConfig`` options for every training run
     (e.g. ``{"amp": True}``).

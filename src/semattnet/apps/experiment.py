@@ -18,14 +18,14 @@ import numpy as np
 import torch
 
 from semattnet._utils.device import now
-from semattnet.data.kitti import KittiDepthCompletion
-from semattnet.data.synthetic.tree import write_synthetic_kitti
+from semattnet.data.kitti.splits import KittiDepthCompletion
 from semattnet.data.transforms import EvalTransform
 from semattnet.evaluation.metrics import KittiMetrics
 from semattnet.inference.backends import EngineSpec
 from semattnet.inference.completer import DepthCompleter
 from semattnet.models.registry import build_model
 from semattnet.palette import unknown_map
+from semattnet.synthetic.tree import write_synthetic_kitti
 from semattnet.training.config import TrainConfig
 from semattnet.training.losses import semattnet_loss
 from semattnet.training.trainer import train
@@ -68,7 +68,7 @@ def make_synthetic(
     domain: str = "source",
 ) -> HeldOut:
     """Write a synthetic tree at ``root`` (half of each split shadowed, scenes of ``style`` seen by the rig of
-    ``domain``, see :mod:`semattnet.data.synthetic.domain`) and load its held-out scenes."""
+    ``domain``, see :mod:`semattnet.synthetic.domain`) and load its held-out scenes."""
     write_synthetic_kitti(
         root, frames=frames, size=size, seed=seed, eval_frames=eval_frames, style=style, domain=domain
     )

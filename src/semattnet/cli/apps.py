@@ -23,7 +23,7 @@ from semattnet.cli._options import (
     weights_input,
     weights_option,
 )
-from semattnet.data.synthetic.scenes import SCENE_STYLES
+from semattnet.synthetic.scenes import SCENE_STYLES
 
 
 @main.command()

@@ -9,7 +9,7 @@ import click
 from semattnet.cli._dataset import dataset_option
 from semattnet.cli._group import main
 from semattnet.cli._options import COUNT, MAX_COUNT, POSITIVE_INT, SIZE, parse_size
-from semattnet.data.synthetic.scenes import SCENE_STYLES
+from semattnet.synthetic.scenes import SCENE_STYLES
 
 
 @main.command()
@@ -55,7 +55,7 @@ def synth(
     style: str,
 ) -> None:
     """Generate synthetic KITTI-like scenes in the KITTI depth completion layout."""
-    from semattnet.data.synthetic.tree import write_synthetic_kitti
+    from semattnet.synthetic.tree import write_synthetic_kitti
 
     manifest = write_synthetic_kitti(
         out_dir, frames, parse_size(size), seed, eval_frames, workers, overwrite, style=style
@@ -149,7 +149,8 @@ def data_download(
     """Download a dataset (KITTI depth completion and the raw drives it needs by default) into the loader
     layout; exits 1 on problems."""
     from semattnet.cache import DownloadError
-    from semattnet.data.download import download_dataset, download_kitti
+    from semattnet.data.download import download_dataset
+    from semattnet.data.kitti.download import download_kitti
 
     try:
         if dataset != "kitti-dc":

@@ -66,9 +66,10 @@ def _previews(folder: Path) -> set[Path]:
 
 
 def _pngs_by_key(folder: Path, skip: Collection[Path] = ()) -> dict[str, Path]:
-    """The PNGs of ``folder`` (but ``skip``) by the name that pairs them (:func:`~semattnet.data.layout.selection_key`:
-    a KITTI selection image or scan is keyed as its ground truth); two files of one frame are refused."""
-    from semattnet.data.layout import selection_key
+    """The PNGs of ``folder`` (but ``skip``) by the name that pairs them
+    (:func:`~semattnet.data.kitti.layout.selection_key`: a KITTI selection image or scan is keyed as its ground
+    truth); two files of one frame are refused."""
+    from semattnet.data.kitti.layout import selection_key
 
     found: dict[str, Path] = {}
     for p in sorted(p for p in folder.glob("*.png") if p not in skip):

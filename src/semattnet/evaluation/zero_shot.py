@@ -54,7 +54,7 @@ def real_frames(sample_root: str | Path) -> list[BenchFrame]:
 
 def _real_frame(root: Path, camera: str) -> BenchFrame:
     from semattnet.data.io import read_depth
-    from semattnet.data.sources.kitti_raw import RawDriveSource
+    from semattnet.data.sources.raw_drive import RawDriveSource
 
     frame = RawDriveSource(root / REAL_DRIVE, "5", camera).load("0000000005")
     gt = read_depth(root / REAL_GT.format(camera=camera))
@@ -65,8 +65,8 @@ def world_frames(
     kind: str, pattern: str, frames: int, size: tuple[int, int] | None = None, first: int = 0, **draw: object
 ) -> Iterator[BenchFrame]:
     """``frames`` held-out world frames of one ``kind`` and sparse ``pattern`` (``draw``: the pattern's own
-    settings, e.g. ``beams=16`` or ``count=500``: :data:`~semattnet.data.synthetic.world.PATTERN_OPTIONS`)."""
-    from semattnet.data.synthetic.world import make_world_frame, world_seed
+    settings, e.g. ``beams=16`` or ``count=500``: :data:`~semattnet.synthetic.world.PATTERN_OPTIONS`)."""
+    from semattnet.synthetic.world import make_world_frame, world_seed
 
     for i in range(first, first + frames):
         f = make_world_frame(world_seed("heldout", i), kind=kind, pattern=pattern, size=size, **draw)

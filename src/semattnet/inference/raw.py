@@ -15,7 +15,7 @@ import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from semattnet.data.sources.kitti_raw import RawDriveSource, project_frame
+from semattnet.data.sources.raw_drive import RawDriveSource, project_frame
 from semattnet.data.sources.semantic import MapSegmenter
 from semattnet.inference.pipeline import Completer, OutputSpec, RunOptions, check_frames
 from semattnet.inference.semantic import SemanticMaps
@@ -50,7 +50,7 @@ def complete_kitti_raw(
     log: Callable[[str], None] = print,
     on_error: str = "stop",
 ) -> list[Path]:
-    """Complete frames of a KITTI raw drive (see :class:`semattnet.data.kitti_raw.RawDrive`) into ``out``.
+    """Complete frames of a KITTI raw drive (see :class:`semattnet.data.kitti.raw.RawDrive`) into ``out``.
 
     Args:
         completer: a :class:`~semattnet.inference.DepthCompleter`, :class:`~semattnet.baselines.ClassicalCompleter` or

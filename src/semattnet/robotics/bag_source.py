@@ -1,7 +1,7 @@
 """A ROS bag (ROS 1, ROS 2 sqlite3 or MCAP) as frames: images paired with scans by
 :class:`~semattnet.robotics.bags.BagPairs`, each scan projected into the camera here with
 :func:`semattnet.geometry.project_points` (exactly as
-:class:`~semattnet.data.sources.kitti_raw.RawDriveSource` projects a KITTI scan).
+:class:`~semattnet.data.sources.raw_drive.RawDriveSource` projects a KITTI scan).
 
 Every image of the image topic is a frame. One that cannot be completed (no scan within the max skew, an
 undecodable image or scan, no semantic image near enough, an empty scan) is that frame's fault: its

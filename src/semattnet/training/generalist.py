@@ -2,7 +2,7 @@
 
 One recipe for both shipped generalists (``semattnet-generalist`` and ``semattnet-rt-generalist``):
 
-* a **bank** of world frames (:func:`semattnet.data.synthetic.world.make_world_frame`: streets and rooms, random
+* a **bank** of world frames (:func:`semattnet.synthetic.world.make_world_frame`: streets and rooms, random
   rigs, image sizes and sparse patterns), written once as ``.npz`` files and shared by every run
   (:func:`write_bank`);
 * random crops of :attr:`GeneralistTrainConfig.crop` (any frame size), horizontal flips, and for a share of the
@@ -82,7 +82,7 @@ def write_bank(
 ) -> Path:
     """Write world frames ``start`` .. ``count - 1`` of ``split`` as ``out/{split}_{index:05d}.npz`` (frames already
     there are kept: a killed run goes on)."""
-    from semattnet.data.synthetic.world import make_world_frame, world_seed
+    from semattnet.synthetic.world import make_world_frame, world_seed
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -282,9 +282,9 @@ def calibrate_uncertainty(
     """Fit ``model.calibration`` (:func:`~semattnet.models.generalist.fit_calibration`: 95 % of the errors within
     2 sigma) on ``frames`` held-out world frames from :data:`CALIBRATION_FIRST` on (half of them with the fallback
     semantic map), whole frames as inference sees them; sets the buffer and returns ``(k, f)``."""
-    from semattnet.data.synthetic.world import make_world_frame, world_seed
     from semattnet.models.generalist import fit_calibration
     from semattnet.palette import unknown_map
+    from semattnet.synthetic.world import make_world_frame, world_seed
 
     model.eval()
     rng = np.random.default_rng(0)

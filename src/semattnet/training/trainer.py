@@ -29,7 +29,7 @@ from semattnet._utils.extras import optional
 from semattnet._utils.progress import progress
 from semattnet._utils.run_folder import commit_stage, drop_stages, finish_replacements, open_stage
 from semattnet.data.datasets import get_dataset
-from semattnet.data.kitti import KittiDepthCompletion
+from semattnet.data.kitti.splits import KittiDepthCompletion
 from semattnet.data.transforms import EvalTransform
 from semattnet.evaluation.protocols import protocol_metrics
 from semattnet.models.backbone import SemAttNetBackbone

@@ -61,7 +61,7 @@ class DemoSettings:
     viewer_frames: int = 16
     #: the same optimiser steps for both models (the paper's protocol), else the same time
     equal_steps: bool = True
-    #: synthetic scene style (:data:`semattnet.data.synthetic.SCENE_STYLES`): "realistic" has the
+    #: synthetic scene style (:data:`semattnet.synthetic.SCENE_STYLES`): "realistic" has the
     #: sensor failures and misleading colour edges where semantics carry information
     style: str = "realistic"
     #: evaluate the shipped reference checkpoint beside the live models

@@ -30,7 +30,7 @@ from semattnet.data.sources.registry import SOURCES, SourceOptions
 
 if TYPE_CHECKING:
     from semattnet.data.datasets.frames import FrameDataset
-    from semattnet.data.kitti import KittiDepthCompletion
+    from semattnet.data.kitti.splits import KittiDepthCompletion
 
     #: The torch Dataset of a split (:meth:`DatasetSpec.dataset`): dicts of tensors, ``load(i)`` the raw sample.
     SplitDataset = KittiDepthCompletion | FrameDataset
@@ -214,7 +214,7 @@ def _kitti_dataset(
     semantic_root: PathLike | None,
     cfg: TrainRecipe | None,
 ) -> SplitDataset:
-    from semattnet.data.kitti import KittiDepthCompletion
+    from semattnet.data.kitti.splits import KittiDepthCompletion
     from semattnet.data.transforms import EvalTransform, TrainTransform
 
     if not train:

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from semattnet.data.frames import Frame, IndexedSource, SourceInfo, unique_names
-from semattnet.data.kitti import FrameFiles, KittiDepthCompletion, load_frame
+from semattnet.data.kitti.splits import FrameFiles, KittiDepthCompletion, load_frame
 from semattnet.data.sources.registry import register_source
 
 __all__ = ["KittiSplitSource", "prediction_name"]

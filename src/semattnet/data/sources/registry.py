@@ -28,7 +28,7 @@ SOURCES: ClassRegistry[IndexedSource] = ClassRegistry(
     "source",
     homes=(
         "semattnet.data.sources.folder",
-        "semattnet.data.sources.kitti_raw",
+        "semattnet.data.sources.raw_drive",
         "semattnet.data.sources.kitti_split",
         "semattnet.data.datasets.nyuv2",
         "semattnet.data.datasets.void",

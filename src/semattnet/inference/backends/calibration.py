@@ -3,7 +3,7 @@
 A calibration is given to ``optimize_for_inference(..., precision="int8", calibration=...)`` as
 
 * ``None`` (the default): :data:`DEFAULT_CALIBRATION_FRAMES` synthetic scenes
-  (:func:`semattnet.data.synthetic.make_frame`, seeds 0, 1, ...) at the engine's size;
+  (:func:`semattnet.synthetic.make_frame`, seeds 0, 1, ...) at the engine's size;
 * a :class:`~semattnet.data.frames.FrameSource` (``semattnet.data.sources``: a folder, a KITTI split,
   a raw drive), or any sequence of :class:`~semattnet.data.frames.Frame`;
 * a folder path: ``rgb/`` + ``sparse/`` (+ ``semantic/``) subfolders paired by name
@@ -123,7 +123,7 @@ class Calibration:
 
 def _synthetic(size: tuple[int, int], count: int) -> Calibration:
     def make() -> list[dict[str, np.ndarray]]:
-        from semattnet.data.synthetic import make_frame
+        from semattnet.synthetic import make_frame
 
         frames = (make_frame(size[0], size[1], seed=s) for s in range(count))
         return [_feed(f.rgb, f.semantic, f.sparse, size) for f in frames]

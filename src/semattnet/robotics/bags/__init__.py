@@ -19,10 +19,10 @@ from .decode import (
     decode_pointcloud2,
     header_stamp_frame,
 )
-from .kitti import BagTopics, SensorRecord, WrittenBag, kitti_stamps_ns, write_kitti_bag, write_sensor_bag
 from .pairing import StampPairing, pair_stamps
 from .pairs import BagFailure, BagPair, BagPairs
 from .reader import TopicRow, format_topics, list_topics, open_bag
+from .sensor_bag import BagTopics, SensorRecord, WrittenBag, kitti_stamps_ns, write_kitti_bag, write_sensor_bag
 from .tf import NoTransformError, TransformTree
 from .writer import BagWriter, MessageWriter, bag_format
 

@@ -11,11 +11,11 @@ from click.testing import CliRunner
 
 from semattnet.cli import main
 from semattnet.data.io import read_depth, read_image
-from semattnet.data.kitti_raw import RawDrive
-from semattnet.data.sources.kitti_raw import project_frame
-from semattnet.data.synthetic.drive import BASELINE, FRAME_RATE, STEP, oxts_pose, write_synthetic_drives
+from semattnet.data.kitti.raw import RawDrive
+from semattnet.data.sources.raw_drive import project_frame
 from semattnet.geometry import invert_T, project_points, read_kitti_calibration, read_oxts_motion, transform_points
 from semattnet.geometry.calibration import read_velo_to_cam
+from semattnet.synthetic.drive import BASELINE, FRAME_RATE, STEP, oxts_pose, write_synthetic_drives
 
 FRAMES, SIZE = 3, (96, 224)
 
@@ -51,7 +51,7 @@ def test_the_raw_reader_reads_every_frame_and_the_scan_agrees_with_the_ground_tr
         # sub-pixel positions on the steep near road, 2 cm range noise; a few points see past edges
         assert np.mean(np.abs(sparse[both] - gt[both]) < 0.05 * gt[both]) > 0.93
     assert RawDrive(drive, camera=3).frame("0000000000").image.shape == (*SIZE, 3)
-    from semattnet.data.kitti import KittiDepthCompletion  # the same frames as a depth-completion train split
+    from semattnet.data.kitti.splits import KittiDepthCompletion  # the same frames as a depth-completion train split
 
     split = KittiDepthCompletion(tree, "train")
     assert len(split) == FRAMES
@@ -132,7 +132,7 @@ def test_drives_are_deterministic_and_refuse_a_full_folder(tree: Path, tmp_path:
 
 
 def test_a_drive_of_several_streets_leaves_a_frame_out_between_them(tmp_path: Path) -> None:
-    from semattnet.data.synthetic.drive import STREET_GAP
+    from semattnet.synthetic.drive import STREET_GAP
 
     m = write_synthetic_drives(tmp_path, drives=1, frames=2, size=(32, 64), seed=1, streets=2)
     drive = _drive(tmp_path)

@@ -208,7 +208,7 @@ def write_kitti_bag(
     nan_points: int = 0,
     overwrite: bool = False,
 ) -> WrittenBag:
-    """A bag of a KITTI raw drive (:class:`semattnet.data.kitti_raw.RawDrive`): frames ``frames`` (e.g. "0-10";
+    """A bag of a KITTI raw drive (:class:`semattnet.data.kitti.raw.RawDrive`): frames ``frames`` (e.g. "0-10";
     None: all) of colour camera ``camera`` with the Velodyne scans, CameraInfo, ``/tf_static`` and, where the drive
     has ``calib_imu_to_velo.txt`` and the frame its OXTS packet, ``/tf`` (``odom -> base_link``, module doc).
 
@@ -217,7 +217,7 @@ def write_kitti_bag(
         OutputError: ``out`` is, holds or lies inside the drive or its calibration, or is not a bag we wrote.
     """
     from semattnet._utils.outputs import Output, check_outputs
-    from semattnet.data.kitti_raw import RawDrive
+    from semattnet.data.kitti.raw import RawDrive
 
     calib = sorted(Path(drive_dir).parent.glob("calib_*.txt"))  # the drive's calibration, beside it
     check_outputs(

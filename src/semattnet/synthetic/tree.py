@@ -21,11 +21,11 @@ from typing import TypedDict
 import numpy as np
 
 from semattnet._utils.outputs import Output, check_outputs, incomplete_tree, mark_tree
-from semattnet.data import layout
 from semattnet.data.io import write_depth as _write_depth
 from semattnet.data.io import write_image as _write_image
-from semattnet.data.synthetic.domain import Domain, get_domain
-from semattnet.data.synthetic.scenes import check_style, make_frame
+from semattnet.data.kitti import layout
+from semattnet.synthetic.domain import Domain, get_domain
+from semattnet.synthetic.scenes import check_style, make_frame
 
 __all__ = ["SYNTH_DATE", "scene_seed", "write_synthetic_kitti"]
 
@@ -167,8 +167,8 @@ def write_synthetic_kitti(
 
     Every frame alternates shadowed / unshadowed deterministically when ``shadow_fraction`` is
     0.5 (exactly half of each split); otherwise each frame is shadowed with that probability.
-    ``style`` is a scene style of :data:`~semattnet.data.synthetic.scenes.SCENE_STYLES`, ``domain`` the rig and
-    look (:mod:`semattnet.data.synthetic.domain`; ``"source"``, the default, is the original generator's).
+    ``style`` is a scene style of :data:`~semattnet.synthetic.scenes.SCENE_STYLES`, ``domain`` the rig and
+    look (:mod:`semattnet.synthetic.domain`; ``"source"``, the default, is the original generator's).
 
     Returns the manifest (also written to ``out/scenes.json``). The tree's completion marker
     (:data:`semattnet._utils.outputs.TREE_MARKER`) is written first as "started" and last as "complete".
@@ -193,7 +193,7 @@ def write_synthetic_kitti(
     K0 = np.array(entries[0]["K"])
     _write_calib(out / "kitti_raw" / SYNTH_DATE / "calib_cam_to_cam.txt", K0)  # train and val drives share it
     manifest: SceneManifest = {
-        "generator": "semattnet.data.synthetic.scenes",
+        "generator": "semattnet.synthetic.scenes",
         "style": style,
         "domain": dom.name,
         "seed": seed,

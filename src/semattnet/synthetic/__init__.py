@@ -1,8 +1,8 @@
 """Synthetic KITTI-like scenes: ray-cast street scenes with a simulated LiDAR (:mod:`.scenes`), seen by the rig
 of a domain (:mod:`.domain`), written as a KITTI depth-completion tree (:mod:`.tree`)."""
 
-from semattnet.data.synthetic.domain import DOMAINS, SOURCE, TARGET, Domain
-from semattnet.data.synthetic.patterns import (
+from semattnet.synthetic.domain import DOMAINS, SOURCE, TARGET, Domain
+from semattnet.synthetic.patterns import (
     PATTERNS,
     LidarRig,
     apply_pattern,
@@ -10,8 +10,8 @@ from semattnet.data.synthetic.patterns import (
     lidar_pattern,
     points_pattern,
 )
-from semattnet.data.synthetic.rooms import ROOM_CLASSES, Room, make_room
-from semattnet.data.synthetic.scenes import (
+from semattnet.synthetic.rooms import ROOM_CLASSES, Room, make_room
+from semattnet.synthetic.scenes import (
     CITYSCAPES_PALETTE,
     KITTI_K,
     MATERIALS,
@@ -19,8 +19,8 @@ from semattnet.data.synthetic.scenes import (
     SyntheticFrame,
     make_frame,
 )
-from semattnet.data.synthetic.tree import write_synthetic_kitti
-from semattnet.data.synthetic.world import (
+from semattnet.synthetic.tree import write_synthetic_kitti
+from semattnet.synthetic.world import (
     WORLD_KINDS,
     WORLD_PATTERNS,
     WORLD_SPLITS,

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 
 from semattnet import InputError
-from semattnet.data.synthetic import WORLD_KINDS, WORLD_PATTERNS, WORLD_SPLITS, make_world_frame, world_seed
-from semattnet.data.synthetic.domain import Pose
-from semattnet.data.synthetic.layout import CAM_HEIGHT, Box
-from semattnet.data.synthetic.materials import CITYSCAPES_PALETTE
-from semattnet.data.synthetic.patterns import LidarRig, depth_edges, depthcam_pattern, lidar_pattern, points_pattern
-from semattnet.data.synthetic.raycast import camera_view
-from semattnet.data.synthetic.world import MIN_SPARSE, random_intrinsics, random_size
+from semattnet.synthetic import WORLD_KINDS, WORLD_PATTERNS, WORLD_SPLITS, make_world_frame, world_seed
+from semattnet.synthetic.domain import Pose
+from semattnet.synthetic.layout import CAM_HEIGHT, Box
+from semattnet.synthetic.materials import CITYSCAPES_PALETTE
+from semattnet.synthetic.patterns import LidarRig, depth_edges, depthcam_pattern, lidar_pattern, points_pattern
+from semattnet.synthetic.raycast import camera_view
+from semattnet.synthetic.world import MIN_SPARSE, random_intrinsics, random_size
 
 SIZE = (64, 112)
 

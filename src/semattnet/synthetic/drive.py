@@ -10,7 +10,7 @@ generator, so frame ``k`` of a drive is the same whatever the number of frames.
 :func:`write_synthetic_drives` writes them as KITTI raw drives (``kitti_raw/DATE/DATE_drive_NNNN_sync``:
 ``image_02/data``, ``image_03/data``, ``velodyne_points/data/*.bin`` (float32 x, y, z, reflectance),
 ``oxts/data/*.txt``, timestamps; ``calib_cam_to_cam.txt``, ``calib_velo_to_cam.txt``,
-``calib_imu_to_velo.txt`` in the date folder), so :class:`~semattnet.data.kitti_raw.RawDrive` reads them
+``calib_imu_to_velo.txt`` in the date folder), so :class:`~semattnet.data.kitti.raw.RawDrive` reads them
 unchanged, and beside them as a KITTI depth-completion ``train`` split (``data_depth_velodyne``,
 ``data_depth_annotated``, ``semantic``) for scoring.
 
@@ -33,7 +33,7 @@ import numpy as np
 import numpy.typing as npt
 
 from semattnet._utils.outputs import mark_tree
-from semattnet.data import layout
+from semattnet.data.kitti import layout
 from semattnet.geometry.transforms import invert_T, make_T
 
 from .domain import Domain, Pose, get_domain
@@ -301,7 +301,7 @@ def write_synthetic_drives(
         _write_timestamps(out / "kitti_raw" / SYNTH_DATE / name, streets * (frames + 1) - 1)
         entries.append({"drive": name, "seeds": seeds, "frames": streets * frames})
     manifest: DriveManifest = {
-        "generator": "semattnet.data.synthetic.drive",
+        "generator": "semattnet.synthetic.drive",
         "style": style,
         "domain": dom.name,
         "seed": seed,

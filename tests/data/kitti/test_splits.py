@@ -10,9 +10,9 @@ import pytest
 import torch
 
 from semattnet.data.io import DataError, read_image, write_image
-from semattnet.data.kitti import KittiDepthCompletion
-from semattnet.data.synthetic.tree import write_synthetic_kitti
+from semattnet.data.kitti.splits import KittiDepthCompletion
 from semattnet.data.transforms import EvalTransform, TrainTransform
+from semattnet.synthetic.tree import write_synthetic_kitti
 from tests._helpers import SAMPLE
 
 DRIVE = "2011_09_26_drive_0035_sync"

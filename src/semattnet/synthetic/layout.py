@@ -27,7 +27,7 @@ class Box:
     albedo: np.ndarray
     material: str = "matte"  # a name in MATERIALS; "glass" boxes are car cabins (glass but for the roof)
     group: int = -1  # boxes of one car share a group
-    poster: tuple[float, ...] | None = None  # see semattnet.data.synthetic.realistic
+    poster: tuple[float, ...] | None = None  # see semattnet.synthetic.realistic
 
 
 def _add(boxes: list[Box], lo: list[float], hi: list[float], cls: str, albedo: object) -> None:

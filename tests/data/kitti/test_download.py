@@ -14,9 +14,10 @@ import pytest
 from click.testing import CliRunner
 
 from semattnet.cli import main
-from semattnet.data import kitti_files as kf
-from semattnet.data.download import UnsafeArchiveError, drives_for, extract_zip, parse_what
+from semattnet.data.archives import UnsafeArchiveError, extract_zip
 from semattnet.data.io import read_image, write_image
+from semattnet.data.kitti import server as kf
+from semattnet.data.kitti.download import drives_for, parse_what
 from semattnet.palette import ids_to_colors
 from tests._helpers import SAMPLE, online_cache
 
@@ -219,8 +220,8 @@ def test_error_classes_and_the_shared_cache() -> None:
     import semattnet.cache as cache
     from semattnet import SemAttNetError
     from semattnet._errors import DataError, InputError
-    from semattnet.data import download as kitti_download
-    from semattnet.data.download import LicenseNotAcceptedError
+    from semattnet.data.archives import LicenseNotAcceptedError
+    from semattnet.data.kitti import download as kitti_download
 
     assert issubclass(UnsafeArchiveError, DataError) and issubclass(LicenseNotAcceptedError, InputError)
     assert issubclass(LicenseNotAcceptedError, SemAttNetError)

@@ -14,7 +14,7 @@ from semattnet._errors import DataError
 from semattnet._utils.registry import option
 from semattnet.data.frames import Frame, IndexedSource, View
 from semattnet.data.io import read_image, read_semantic
-from semattnet.data.kitti_raw import RawDrive, RawFrame
+from semattnet.data.kitti.raw import RawDrive, RawFrame
 from semattnet.data.sources.registry import SourceOptions, register_source
 
 __all__ = ["RawDriveOptions", "RawDriveSource", "project_frame"]
@@ -67,8 +67,8 @@ class RawDriveOptions(SourceOptions):
 
 @register_source("kitti-raw", option="--kitti-raw", options=RawDriveOptions)
 class RawDriveSource(IndexedSource):
-    """The frames ``frames`` (see :func:`semattnet.data.kitti_raw.parse_frames`) of a KITTI raw drive
-    (:class:`~semattnet.data.kitti_raw.RawDrive`: ``camera``, ``deskew``), with the points and calibration
+    """The frames ``frames`` (see :func:`semattnet.data.kitti.raw.parse_frames`) of a KITTI raw drive
+    (:class:`~semattnet.data.kitti.raw.RawDrive`: ``camera``, ``deskew``), with the points and calibration
     each sparse map was projected from. ``semantic``: a folder of colour-coded maps named like the images.
 
     Raises:

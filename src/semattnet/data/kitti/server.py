@@ -1,6 +1,6 @@
 """What KITTI depth completion is made of on KITTI's download server: archives, raw drives, terms.
 
-Data only (nothing here downloads); :mod:`semattnet.data.download` uses it.
+Data only (nothing here downloads); :mod:`semattnet.data.kitti.download` uses it.
 
 Server layout (KITTI's own download links, all under :data:`KITTI_PREFIX`)::
 

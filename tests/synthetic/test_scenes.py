@@ -12,10 +12,10 @@ from click.testing import CliRunner
 
 from semattnet.cli import main
 from semattnet.data.io import DEPTH_SCALE
-from semattnet.data.synthetic.layout import CAM_HEIGHT
-from semattnet.data.synthetic.materials import CLASS_IDS as _ID
-from semattnet.data.synthetic.scenes import CITYSCAPES_PALETTE, MATERIALS, SCENE_STYLES, make_frame
 from semattnet.geometry import depth_to_points, project_points
+from semattnet.synthetic.layout import CAM_HEIGHT
+from semattnet.synthetic.materials import CLASS_IDS as _ID
+from semattnet.synthetic.scenes import CITYSCAPES_PALETTE, MATERIALS, SCENE_STYLES, make_frame
 
 
 @pytest.fixture(scope="module", params=[(352, 1216, 0), (352, 1216, 1), (96, 320, 2)])
@@ -162,9 +162,9 @@ def test_synth_and_check_commands(tmp_path: Path) -> None:
 
 
 def test_style_reaches_the_tree_and_the_manifest(tmp_path: Path) -> None:
-    from semattnet.data import layout
     from semattnet.data.io import read_depth
-    from semattnet.data.synthetic.tree import SYNTH_DATE, scene_seed, write_synthetic_kitti
+    from semattnet.data.kitti import layout
+    from semattnet.synthetic.tree import SYNTH_DATE, scene_seed, write_synthetic_kitti
 
     manifest = write_synthetic_kitti(
         tmp_path / "t", frames=2, size=(64, 128), seed=3, eval_frames=1, workers=1, style="realistic"
@@ -203,7 +203,7 @@ def test_style_reaches_the_tree_and_the_manifest(tmp_path: Path) -> None:
 
 
 def test_worker_count_does_not_change_the_data(tmp_path: Path) -> None:
-    from semattnet.data.synthetic.tree import write_synthetic_kitti
+    from semattnet.synthetic.tree import write_synthetic_kitti
 
     write_synthetic_kitti(tmp_path / "a", frames=3, size=(64, 128), seed=4, eval_frames=1, workers=1)
     write_synthetic_kitti(tmp_path / "b", frames=3, size=(64, 128), seed=4, eval_frames=1, workers=2)
@@ -339,7 +339,7 @@ def test_depth_edges_without_colour_edges(realistic, ideal) -> None:  # type: ig
 
 
 def test_source_domain_is_the_default_and_names_are_checked() -> None:
-    from semattnet.data.synthetic.domain import SOURCE, Domain
+    from semattnet.synthetic.domain import SOURCE, Domain
 
     a, b = make_frame(64, 128, seed=3), make_frame(64, 128, seed=3, domain=SOURCE)
     for k in ("rgb", "sparse", "gt", "lidar_points", "T_cam_lidar"):
@@ -353,8 +353,8 @@ def test_source_domain_is_the_default_and_names_are_checked() -> None:
 def test_target_domain_has_its_own_rig() -> None:
     """The target's camera (height, pitch, K) and LiDAR (beams, mounting) are what its Domain says, and the
     depth, the scan and the ground truth agree through them."""
-    from semattnet.data.synthetic.domain import TARGET, Pose
     from semattnet.geometry import transform_points
+    from semattnet.synthetic.domain import TARGET, Pose
 
     h, w = 128, 352
     src, f = make_frame(h, w, seed=4, style="realistic"), make_frame(h, w, seed=4, style="realistic", domain="target")

@@ -234,8 +234,8 @@ def make_frame(
         size_of_kitti: scale the intrinsics so the field of view is KITTI's at this width.
         style: one of :data:`SCENE_STYLES`: ``"ideal"`` (every surface returns LiDAR, colour edges are
             depth edges but for shadows) or ``"realistic"`` (see the module docstring).
-        domain: the rig and look (:class:`~semattnet.data.synthetic.domain.Domain` or a name of
-            :data:`~semattnet.data.synthetic.domain.DOMAINS`); ``"source"`` is the original generator's.
+        domain: the rig and look (:class:`~semattnet.synthetic.domain.Domain` or a name of
+            :data:`~semattnet.synthetic.domain.DOMAINS`); ``"source"`` is the original generator's.
 
     Raises:
         InputError: unknown ``style`` or ``domain``.

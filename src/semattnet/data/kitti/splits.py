@@ -19,9 +19,9 @@ import numpy as np
 from torch.utils.data import Dataset
 
 from semattnet._errors import InputError
-from semattnet.data import layout
 from semattnet.data.datasets.frames import MissingSplitError
 from semattnet.data.io import DataError, read_depth, read_image, read_intrinsics
+from semattnet.data.kitti import layout
 from semattnet.data.transforms import Sample, Transform
 
 __all__ = ["FrameFiles", "KittiDepthCompletion", "find_frames", "load_frame"]

@@ -39,7 +39,7 @@ __all__ = [
 PATTERNS: tuple[str, ...] = ("lidar", "points", "depthcam")
 _MAX_RAYS = 48_000  # beams x azimuth steps cast per sweep (the azimuth step widens beyond)
 Info = dict[str, Any]
-#: A pattern's own settings by name (:data:`semattnet.data.synthetic.world.PATTERN_OPTIONS`), as keyword arguments.
+#: A pattern's own settings by name (:data:`semattnet.synthetic.world.PATTERN_OPTIONS`), as keyword arguments.
 Options = Info
 
 
