@@ -19,7 +19,14 @@ from semattnet.inference.backends._base import graph_outputs
 from semattnet.inference.completer import Completion, DepthCompleter
 from semattnet.inference.options import OutputSpec
 from semattnet.inference.pipeline import check_frames
-from semattnet.inference.sinks import LatencySink, PlySink, default_sinks, outputs_read
+from semattnet.inference.sinks import (
+    LatencySink,
+    OutputSettings,
+    PanelOptions,
+    PlySink,
+    default_sinks,
+    outputs_read,
+)
 from semattnet.inference.uncertainty import UncertaintyLimit
 from semattnet.models.outputs import DepthCompletionOutput
 from semattnet.models.uncertainty import UNCERTAINTY_READS, outputs_to_compute
@@ -48,9 +55,9 @@ class Frames(IndexedSource):
 
 def test_each_sink_reads_what_it_writes() -> None:
     assert outputs_read(default_sinks()) == {"refined_depth"}  # the depth and colour PNGs
-    assert outputs_read([*default_sinks(npy=True), LatencySink()]) == {"refined_depth"}
-    assert outputs_read(default_sinks(uncertainty=True)) == {"refined_depth", "uncertainty"}
-    assert outputs_read(default_sinks(panel=True)) is None  # the panel draws every branch
+    assert outputs_read([*default_sinks(OutputSettings(npy=True)), LatencySink()]) == {"refined_depth"}
+    assert outputs_read(default_sinks(OutputSettings(uncertainty=True))) == {"refined_depth", "uncertainty"}
+    assert outputs_read(default_sinks(None, PanelOptions(panel=True))) is None  # the panel draws every branch
     confidences = {"color_conf", "semantic_conf", "guided_conf"}
     assert outputs_read([PlySink()]) == {"refined_depth", *confidences}
     assert outputs_read([PlySink(max_uncertainty=UncertaintyLimit(1.0))]) == {
@@ -100,7 +107,7 @@ def test_the_run_computes_the_uncertainty_only_when_a_sink_reads_it(
     calls: list[int] = []
     real = completer_module.with_uncertainty
     monkeypatch.setattr(completer_module, "with_uncertainty", lambda *a: calls.append(1) or real(*a))
-    sinks = default_sinks(uncertainty=uncertainty)
+    sinks = default_sinks(OutputSettings(uncertainty=uncertainty))
     run = check_frames(Frames(), sinks, tmp_path / "out", OutputSpec()).run(completer, log=lambda line: None)
     assert run.counts["done"] == 2 and len(calls) == 2 * uncertainty
     assert (tmp_path / "out" / "uncertainty" / "f0.png").is_file() == uncertainty

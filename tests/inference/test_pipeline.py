@@ -14,7 +14,7 @@ from semattnet.data.io import MAX_DEPTH_M, read_depth, write_depth, write_image
 from semattnet.data.kitti.raw import RawDrive
 from semattnet.data.sources import FolderSource, KittiSplitSource, RawDriveSource
 from semattnet.inference import Completion, check_frames, complete_frames
-from semattnet.inference.sinks import DepthPngSink, default_sinks, predict_frame
+from semattnet.inference.sinks import DepthPngSink, OutputSettings, default_sinks, predict_frame
 from semattnet.synthetic.tree import write_synthetic_kitti
 from tests.inference._raw_sample import DRIVE
 
@@ -35,7 +35,7 @@ class _Bad(ClassicalCompleter):
 def _run(source, out: Path) -> list[str]:  # type: ignore[no-untyped-def]
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        check_frames(source, default_sinks(npy=True), out).run(_Bad(), log=lambda s: None)
+        check_frames(source, default_sinks(OutputSettings(npy=True)), out).run(_Bad(), log=lambda s: None)
     return sorted(str(w.message) for w in caught)
 
 

@@ -14,6 +14,7 @@ from semattnet.data.frames import Frame
 from semattnet.data.io import read_depth
 from semattnet.inference.completer import Completion
 from semattnet.inference.sinks import (
+    OutputSettings,
     PlySink,
     UncertaintyNpySink,
     UncertaintyPngSink,
@@ -57,7 +58,7 @@ def test_encoding_is_metres_times_256_with_0_for_none() -> None:
 
 def test_png_and_npy_sinks_round_trip(tmp_path: Path) -> None:
     pred = _prediction()
-    sinks = default_sinks(npy=True, uncertainty=True)
+    sinks = default_sinks(OutputSettings(npy=True, uncertainty=True))
     assert output_files(["f0"], sinks) == [
         "f0.png",
         "f0_color.png",
@@ -76,7 +77,9 @@ def test_png_and_npy_sinks_round_trip(tmp_path: Path) -> None:
     ok = (pred.stored > 0) & (u < 1e5)
     np.testing.assert_array_equal(npy[ok], u[ok])
     assert (npy[pred.stored == 0] == 0).all()
-    assert default_sinks(uncertainty=False, npy=True)[-1].__class__.__name__ == "NpySink"  # no uncertainty asked
+    assert (
+        default_sinks(OutputSettings(uncertainty=False, npy=True))[-1].__class__.__name__ == "NpySink"
+    )  # no uncertainty asked
 
 
 def test_sinks_without_uncertainty_say_so(tmp_path: Path) -> None:

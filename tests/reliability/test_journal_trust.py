@@ -24,7 +24,7 @@ from semattnet.data.io import write_depth, write_image
 from semattnet.data.sources import FolderSource
 from semattnet.inference.journal import ResumeError
 from semattnet.inference.pipeline import OutputSpec, check_frames
-from semattnet.inference.sinks import LatencySink, default_sinks
+from semattnet.inference.sinks import LatencySink, OutputSettings, default_sinks
 from semattnet.inference.timing import StageTimes
 
 N = 3
@@ -230,7 +230,7 @@ def test_an_output_subfolder_linked_out_of_out_is_refused_with_overwrite_too(tmp
     out.mkdir()
     (out / "uncertainty").symlink_to(foreign)
     with pytest.raises(OutputError, match=r"out/uncertainty is a symbolic link to .*foreign; remove the link"):
-        check_frames(source, default_sinks(uncertainty=True), out, OutputSpec(overwrite=True))
+        check_frames(source, default_sinks(OutputSettings(uncertainty=True)), out, OutputSpec(overwrite=True))
     assert (foreign / "f0.png").read_bytes() == b"a user's file" and sorted(os.listdir(out)) == ["uncertainty"]
 
 

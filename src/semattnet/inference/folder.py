@@ -10,7 +10,7 @@ from semattnet.data.pairing import FramePaths
 from semattnet.data.sources.folder import FolderSource
 from semattnet.inference import pipeline
 from semattnet.inference.pipeline import Completer, OutputSpec, RunOptions
-from semattnet.inference.sinks import default_sinks, output_files
+from semattnet.inference.sinks import OutputSettings, PanelOptions, default_sinks, output_files
 
 __all__ = ["Completer", "check_frame_paths", "complete_folder", "output_paths"]
 
@@ -18,7 +18,10 @@ __all__ = ["Completer", "check_frame_paths", "complete_folder", "output_paths"]
 def output_paths(frames: Sequence[FramePaths], out: Path, npy: bool = False, panel: bool = False) -> list[Path]:
     """The files :func:`complete_folder` writes: ``NAME.png`` (16-bit depth) and ``NAME_color.png``,
     with ``NAME.npy`` / ``NAME_panel.png`` when asked."""
-    return [Path(out) / p for p in output_files([f.name for f in frames], default_sinks(npy, panel))]
+    return [
+        Path(out) / p
+        for p in output_files([f.name for f in frames], default_sinks(OutputSettings(npy=npy), PanelOptions(panel)))
+    ]
 
 
 def check_frame_paths(frames: Sequence[FramePaths]) -> None:
@@ -61,5 +64,11 @@ def complete_folder(
         OutputError: ``out`` is an input folder or inside one.
     """
     source = FolderSource(frames, given=inputs or ())
-    plan = pipeline.check_frames(source, default_sinks(npy, panel), out, OutputSpec(overwrite), RunOptions(on_error))
+    plan = pipeline.check_frames(
+        source,
+        default_sinks(OutputSettings(npy=npy), PanelOptions(panel)),
+        out,
+        OutputSpec(overwrite),
+        RunOptions(on_error),
+    )
     return plan.run(completer, log=log).paths

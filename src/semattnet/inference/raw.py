@@ -19,7 +19,14 @@ from semattnet.data.sources.raw_drive import RawDriveSource, project_frame
 from semattnet.data.sources.semantic import MapSegmenter
 from semattnet.inference.pipeline import Completer, OutputSpec, RunOptions, check_frames
 from semattnet.inference.semantic import SemanticMaps
-from semattnet.inference.sinks import default_sinks, fusion_confidence, output_files
+from semattnet.inference.sinks import (
+    OutputSettings,
+    PanelOptions,
+    PlyOptions,
+    default_sinks,
+    fusion_confidence,
+    output_files,
+)
 
 __all__ = ["complete_kitti_raw", "fusion_confidence", "project_frame", "raw_output_paths"]
 
@@ -28,7 +35,10 @@ def raw_output_paths(
     names: Sequence[str], out: Path, ply: bool = False, npy: bool = False, panel: bool = False
 ) -> list[Path]:
     """Every file :func:`complete_kitti_raw` writes for ``names``."""
-    return [Path(out) / p for p in output_files(names, default_sinks(npy, panel, ply))]
+    return [
+        Path(out) / p
+        for p in output_files(names, default_sinks(OutputSettings(npy=npy), PlyOptions(ply), PanelOptions(panel)))
+    ]
 
 
 def complete_kitti_raw(
@@ -77,6 +87,7 @@ def complete_kitti_raw(
     """
     maps = SemanticMaps(segmenter, folder=semantic is not None)
     source = RawDriveSource(drive_dir, frames, camera, semantic, deskew)
-    sinks = default_sinks(npy, panel, ply, max_depth, top_crop)
+    settings = OutputSettings(npy=npy, max_depth=max_depth, top_crop=top_crop)
+    sinks = default_sinks(settings, PlyOptions(ply), PanelOptions(panel))
     plan = check_frames(source, sinks, out, OutputSpec(overwrite), RunOptions(on_error))
     return plan.run(completer, semantic=maps, log=log).paths

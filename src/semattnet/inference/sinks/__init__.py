@@ -36,6 +36,7 @@ from semattnet.inference.sinks.base import (
     write_prediction,
 )
 from semattnet.inference.sinks.files import (
+    FILE_OPTIONS,
     ColorPngSink,
     DepthPngSink,
     NpySink,
@@ -50,6 +51,7 @@ from semattnet.inference.sinks.files import (
 from semattnet.inference.sinks.latency import LatencySink
 
 __all__ = [
+    "FILE_OPTIONS",
     "SINKS",
     "ColorPngSink",
     "DepthPngSink",

@@ -18,6 +18,7 @@ from semattnet.inference.uncertainty import UncertaintyLimit
 from semattnet.models.outputs import CONFIDENCE_OUTPUTS, DEPTH_OUTPUTS
 
 __all__ = [
+    "FILE_OPTIONS",
     "ColorPngSink",
     "DepthPngSink",
     "NpySink",
@@ -235,19 +236,30 @@ class PanelSink(Sink):
         branch_panel(path, frame.rgb, frame.semantic, frame.sparse, outputs, gt=frame.gt, extra=extra)
 
 
-def default_sinks(
-    npy: bool = False,
-    panel: bool = False,
-    ply: bool = False,
-    max_depth: float = 80.0,
-    top_crop: int = 0,
-    uncertainty: bool = False,
-    max_uncertainty: UncertaintyLimit | None = None,
-) -> list[Sink]:
-    """What ``semattnet predict`` writes: ``NAME.png`` and ``NAME_color.png``, then as asked ``NAME.ply``,
-    ``NAME.npy``, ``NAME_panel.png`` and (``uncertainty``) ``uncertainty/NAME.png`` (and ``.npy`` with
-    ``npy``); ``max_uncertainty``: the PLY and the bird's-eye view leave out the pixels above it."""
-    sinks: list[Sink] = [DepthPngSink(), ColorPngSink()]
-    sinks += [PlySink(max_depth=max_depth, top_crop=top_crop, max_uncertainty=max_uncertainty)] * ply
-    sinks += [NpySink()] * npy + [UncertaintyPngSink()] * uncertainty + [UncertaintyNpySink()] * (uncertainty and npy)
-    return sinks + [PanelSink(max_depth=max_depth, top_crop=top_crop, max_uncertainty=max_uncertainty)] * panel
+#: The options of the files ``predict`` writes into OUT, in the order their sinks write (the registry's).
+FILE_OPTIONS: tuple[type[SinkOptions], ...] = (
+    _DepthPng,
+    _ColorPng,
+    PlyOptions,
+    _Npy,
+    _UncertaintyPng,
+    _UncertaintyNpy,
+    PanelOptions,
+)
+
+
+def default_sinks(settings: OutputSettings | None = None, *asked: SinkOptions) -> list[Sink]:
+    """What ``semattnet predict`` writes into OUT, each sink made by its options as ``predict`` makes it:
+    ``NAME.png`` and ``NAME_color.png``, the ``.npy`` and ``uncertainty/`` files ``settings`` asks for, and what
+    ``asked`` options add (``PlyOptions(ply=True)``: ``NAME.ply``; ``PanelOptions(panel=True)``:
+    ``NAME_panel.png``); ``settings``' ``max_depth``, ``top_crop`` and ``max_uncertainty`` select the clouds' pixels.
+
+    Raises:
+        InputError: an option that is not one of :data:`FILE_OPTIONS`, or given twice.
+    """
+    given = {type(o): o for o in asked}
+    if len(given) != len(asked) or not set(given) <= set(FILE_OPTIONS):
+        names = ", ".join(type(o).__name__ for o in asked)
+        raise InputError(f"default_sinks: options {names}: each of {[c.__name__ for c in FILE_OPTIONS]} once")
+    s = settings or OutputSettings()
+    return [sink for cls in FILE_OPTIONS for sink in given.get(cls, cls()).sinks(s)]
