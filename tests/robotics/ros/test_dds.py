@@ -28,6 +28,46 @@ def test_wire_names() -> None:
         DdsTransport(300)
 
 
+class _Configured(Exception):
+    """Raised by the stand-in domain: the configuration was seen, no participant made."""
+
+
+@pytest.mark.parametrize(
+    ("loopback", "uri", "kind"), [(False, "", "network"), (True, "", "loopback"), (False, "x.xml", None)]
+)
+def test_the_socket_buffers_are_asked_for_on_every_network_unless_the_user_configures_cyclone(
+    monkeypatch: pytest.MonkeyPatch, loopback: bool, uri: str, kind: str | None
+) -> None:
+    """4 MB socket buffers on a robot's network too (Cyclone's other defaults kept), on lo with the loopback
+    settings; a CYCLONEDDS_URI of the user's rules alone."""
+    from semattnet.robotics.ros import dds
+
+    seen: list[str] = []
+
+    def configure(domain_id: int, config: str) -> None:
+        seen.append(config)
+        raise _Configured
+
+    monkeypatch.setattr(dds, "_open_domain", configure)
+    monkeypatch.setenv("CYCLONEDDS_URI", uri)
+    import cyclonedds.domain
+
+    def participant(*args: object, **kwargs: object) -> None:  # reached only when no domain of ours was made
+        raise _Configured
+
+    monkeypatch.setattr(cyclonedds.domain, "DomainParticipant", participant)
+    with pytest.raises(_Configured):
+        DdsTransport(7, loopback=loopback)
+    if kind is None:
+        assert seen == []
+        return
+    (config,) = seen
+    assert '<SocketReceiveBufferSize min="default" max="4MB"/>' in config and 'Domain id="7"' in config
+    assert ('<NetworkInterface name="lo"/>' in config) == (kind == "loopback")
+    assert ("AllowMulticast" in config) == (kind == "loopback")
+    assert config == (dds.loopback_config(7) if loopback else dds.network_config(7))
+
+
 def test_image_round_trip_is_rosbags_cdr() -> None:
     """A reliable keep-last-1 writer to a best-effort reader: the message arrives whole, stamp and frame id kept,
     and the DDS type holds no ``uint8`` (octets), so Cyclone 0.10 peers can parse it."""

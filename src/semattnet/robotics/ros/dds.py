@@ -12,13 +12,15 @@ USER_DATA ``enclave=/;`` and, on ``ros_discovery_info``, its node's namespace, n
 published again whenever an endpoint is added and emptied on close.
 
 ``loopback=True`` keeps DDS on ``lo`` by unicast (no multicast, peer 127.0.0.1): what the tests use, and
-what two processes on one machine need where multicast is off. On a robot's LAN the defaults are right and
-``domain_id`` is ``ROS_DOMAIN_ID``.
+what two processes on one machine need where multicast is off. On a robot's LAN Cyclone's defaults are kept
+(:func:`network_config`) and ``domain_id`` is ``ROS_DOMAIN_ID``. Either way the sockets ask for 4 MB buffers,
+unless ``CYCLONEDDS_URI`` is set (the user's configuration then rules).
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import uuid
 from collections.abc import Callable
@@ -32,7 +34,7 @@ from semattnet.robotics.bags.deps import Typestore, rosbags_typestore
 from .discovery import DISCOVERY_QOS, DISCOVERY_TOPIC, DISCOVERY_TYPE, NodeEntities, enclave_user_data
 from .transport import QoS
 
-__all__ = ["DdsTransport", "dds_topic", "dds_type_name", "loopback_config"]
+__all__ = ["DdsTransport", "dds_topic", "dds_type_name", "loopback_config", "network_config"]
 
 log = logging.getLogger(__name__)
 
@@ -55,14 +57,24 @@ def dds_type_name(msgtype: str) -> str:
     return f"{pkg}::{kind}::dds_::{name}_"
 
 
+def _buffers() -> str:
+    return "".join(f'<Socket{k}BufferSize min="default" max="{SOCKET_BUFFER}"/>' for k in ("Receive", "Send"))
+
+
+def network_config(domain_id: int) -> str:
+    """The Cyclone XML for a robot's network: Cyclone's defaults (every interface, multicast discovery) with the
+    socket buffers large images need (:data:`SOCKET_BUFFER`; the kernel's 212 KB default loses frames)."""
+    return f'<CycloneDDS><Domain id="{domain_id}"><Internal>{_buffers()}</Internal></Domain></CycloneDDS>'
+
+
 def loopback_config(domain_id: int) -> str:
-    """The Cyclone XML for unicast DDS on ``lo`` only (module doc)."""
+    """The Cyclone XML for unicast DDS on ``lo`` only (module doc), with the same socket buffers."""
     general = '<Interfaces><NetworkInterface name="lo"/></Interfaces><AllowMulticast>false</AllowMulticast>'
     discovery = (
         "<ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>30</MaxAutoParticipantIndex>"
         '<Peers><Peer address="127.0.0.1"/></Peers>'
     )
-    buffers = "".join(f'<Socket{k}BufferSize min="default" max="{SOCKET_BUFFER}"/>' for k in ("Receive", "Send"))
+    buffers = _buffers()
     return (
         f'<CycloneDDS><Domain id="{domain_id}"><General>{general}</General><Discovery>{discovery}</Discovery>'
         f"<Internal>{buffers}</Internal></Domain></CycloneDDS>"
@@ -220,9 +232,11 @@ class DdsTransport:
         core = require("cyclonedds.core", "semattnet ros2 (DDS)")
         self.domain_id, self.typestore = int(domain_id), rosbags_typestore(False)
         self._types = _Types(self.typestore)
-        self._loopback = bool(loopback)
-        if loopback:
-            _open_domain(self.domain_id)
+        # the domain configured by this process (socket buffers; loopback), unless the user's CYCLONEDDS_URI rules
+        self._configured = bool(loopback) or not os.environ.get("CYCLONEDDS_URI", "").strip()
+        if self._configured:
+            config = loopback_config if loopback else network_config
+            _open_domain(self.domain_id, config(self.domain_id))
         qos = core.Qos(core.Policy.Userdata(data=enclave_user_data(enclave)))
         self._participant = domain.DomainParticipant(self.domain_id, qos=qos)
         self._entities: list[_Entity] = []
@@ -309,29 +323,30 @@ class DdsTransport:
         entities, self._entities = self._entities, []
         for entity in (*reversed(entities), self._participant):
             entity.__del__()  # dds_delete now, not when the garbage collector gets to it
-        if self._loopback:
+        if self._configured:
             _close_domain(self.domain_id)
 
 
 @dataclass
 class _Domain:
-    """A loopback domain this process configured, and how many transports use it."""
+    """A domain this process configured, and how many transports use it."""
 
     domain: _Entity
     users: int = 0
 
 
-#: The loopback domains this process configured, by domain id.
+#: The domains this process configured, by domain id.
 _DOMAINS: dict[int, _Domain] = {}
 _DOMAINS_LOCK = threading.Lock()
 
 
-def _open_domain(domain_id: int) -> None:
-    """Configure ``domain_id`` for loopback once per process (Cyclone allows one configuration per domain)."""
+def _open_domain(domain_id: int, config: str) -> None:
+    """Configure ``domain_id`` with ``config`` once per process (Cyclone allows one configuration per domain: the
+    first transport's stands while any uses it)."""
     with _DOMAINS_LOCK:
         if domain_id not in _DOMAINS:
             domain = require("cyclonedds.domain", "semattnet ros2 (DDS)")
-            _DOMAINS[domain_id] = _Domain(domain.Domain(domain_id, loopback_config(domain_id)))
+            _DOMAINS[domain_id] = _Domain(domain.Domain(domain_id, config))
         _DOMAINS[domain_id].users += 1
 
 
