@@ -30,8 +30,8 @@ def _arch(cfg: SemAttNetConfig) -> tuple:
 def test_list_models_names_each_architecture_once() -> None:
     names = list_models()
     assert names[:2] == ["semattnet", "semattnet_backbone"]
-    assert len({_arch(MODELS[n].config) for n in names}) == len(names) == 14  # no two rows build the same model
-    assert list(MODELS) == names and len(MODELS) == 14 and set(ALIASES) == {"table2_f", "table2_g"}
+    assert len({_arch(MODELS[n].config) for n in names}) == len(names) == 15  # no two rows build the same model
+    assert list(MODELS) == names and len(MODELS) == 15 and set(ALIASES) == {"table2_f", "table2_g"}
 
 
 def test_aliases_resolve_everywhere() -> None:

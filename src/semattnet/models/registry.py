@@ -47,7 +47,7 @@ __all__ = [
 ]
 
 #: The config fields a registered name fixes (the rest, e.g. ``width``, are free).
-ARCH_FIELDS = ("branches", "fusion", "refine", "encoder", "anchor")
+ARCH_FIELDS = ("branches", "fusion", "refine", "encoder", "anchor", "work_scale")
 
 
 #: The registry's one unknown-name error (the old name kept).
