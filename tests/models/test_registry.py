@@ -46,7 +46,7 @@ def test_aliases_resolve_everywhere() -> None:
 
 def test_describe_models_lists_aliases() -> None:
     lines = describe_models().splitlines()
-    assert len(lines) == 14
+    assert len(lines) == 15
     full = next(line for line in lines if line.startswith("semattnet "))
     assert "[alias: table2_g]" in full and "Table 2 g" in full
     assert not any(line.startswith("table2_g") for line in lines)
