@@ -41,6 +41,10 @@ QUATERNION_NORM_TOLERANCE = 1e-3
 _AGREE_M, _AGREE_RAD = 1e-3, 2e-3
 #: Chains compared per lookup at most (a static tree has one; a cycle adds a few).
 _MAX_CHAINS = 16
+#: Frames a transform tree holds at most (a robot's static tree has tens; a peer naming thousands is refused).
+MAX_FRAMES = 512
+#: Frames an error message lists at most (the rest counted).
+_LISTED = 20
 
 
 class NoTransformError(DataError):
@@ -141,9 +145,18 @@ class TransformTree:
         """Add every ``geometry_msgs/TransformStamped`` of a ``tf2_msgs/TFMessage``.
 
         Raises:
-            DataError: a transform :func:`checked_transform` refuses: ``WHERE: transform 'PARENT' -> 'CHILD': WHY``.
+            DataError: a transform :func:`checked_transform` refuses: ``WHERE: transform 'PARENT' -> 'CHILD': WHY``;
+                or the message would bring the tree beyond :data:`MAX_FRAMES` frames (nothing of it added).
         """
-        for t in msg.transforms:
+        transforms = list(msg.transforms)
+        named = {f for t in transforms for f in (str(t.header.frame_id).lstrip("/"), str(t.child_frame_id).lstrip("/"))}
+        new = named - set(self._edges)
+        if len(self._edges) + len(new) > MAX_FRAMES:
+            raise DataError(
+                f"{where or self.source}: {len(transforms)} transform(s) naming {len(new)} new frame(s), beyond the "
+                f"{MAX_FRAMES} frames a tree holds (it has {len(self._edges)}); the message is refused"
+            )
+        for t in transforms:
             parent, child = str(t.header.frame_id), str(t.child_frame_id)
             tr, rot = t.transform.translation, t.transform.rotation
             try:
@@ -155,6 +168,8 @@ class TransformTree:
     def _chains(self, source: str, target: str) -> list[list[str]]:
         """The simple chains of frames from ``source`` to ``target`` (at most :data:`_MAX_CHAINS`), shortest first."""
         found: list[list[str]] = []
+        if target not in self._edges:  # a frame the tree does not have: no search
+            return found
         stack: list[tuple[str, list[str]]] = [(source, [source])] if source in self._edges else []
         steps = 0
         while stack and len(found) < _MAX_CHAINS and steps < 100 * _MAX_CHAINS * len(self._edges):
@@ -186,7 +201,10 @@ class TransformTree:
             return np.eye(4)
         chains = self._chains(source, target)
         if not chains:
-            have = ", ".join(self.frames) or "none"
+            frames = self.frames
+            have = ", ".join(frames[:_LISTED]) or "none"
+            if len(frames) > _LISTED:
+                have += f" and {len(frames) - _LISTED} more"
             raise NoTransformError(
                 f"{self.source}: no transform between frames {source!r} and {target!r} (frames: {have})"
             )
