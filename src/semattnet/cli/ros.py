@@ -216,6 +216,7 @@ class NodeOptions:
             ("--output-prefix", self.output_prefix),
         ):
             resolve_name(name, namespace, self.node_name, option)  # a bad name: one line, before the transport starts
+        refuse_topic_clashes(topics.resolved(namespace, self.node_name))
         roles = output_roles([r.strip() for r in self.publish.split(",") if r.strip()])
         rig = read_rig_json(self.rig) if self.rig is not None else None
         limit = None if self.max_uncertainty is None else UncertaintyLimit.parse(self.max_uncertainty)
@@ -239,6 +240,26 @@ class NodeOptions:
             cloud_stride=self.cloud_stride,
             latch_camera_info=self.latch_camera_info,
         )
+
+
+#: The node's input topics by role, with the option naming each.
+_INPUT_OPTIONS = {"image": "--image-topic", "camera_info": "--camera-info-topic", "scan": "--points-topic"}
+
+
+def refuse_topic_clashes(names: Mapping[str, str]) -> None:
+    """One line, before the transport starts, for a node that could only read what it should not: two inputs on one
+    topic, or an input on one of its own outputs (``names``: :meth:`NodeTopics.resolved`)."""
+    seen: dict[str, str] = {}
+    outputs = {name for role, name in names.items() if role.startswith("out:")}
+    for role, option in _INPUT_OPTIONS.items():
+        name = names[role]
+        if name in seen:
+            raise click.UsageError(f"{option} {name} is also {seen[name]}: each input needs its own topic")
+        if name in outputs:
+            raise click.UsageError(
+                f"{option} {name} is one of the node's own outputs (--output-prefix): it would read what it publishes"
+            )
+        seen[name] = option
 
 
 def localhost_only(env: Mapping[str, str]) -> bool:

@@ -29,6 +29,21 @@ def test_each_node_takes_the_model_section_and_its_own_transports_options() -> N
         ([], {}, "--checkpoint or --weights is required (or --method classical)"),
         (["--method", "classical", "--publish", "depth,cloud"], {}, "--publish 'depth,cloud': expected one or more of"),
         (["--method", "classical", "--cloud-stride", "0"], {}, "--cloud-stride': 0 is not in the range 1<=x"),
+        (
+            ["--method", "classical", "--points-topic", "/cam/image", "--image-topic", "/cam/image"],
+            {},
+            "--points-topic /cam/image is also --image-topic: each input needs its own topic",
+        ),
+        (
+            ["--method", "classical", "--image-topic", "~/output/depth_image"],
+            {},
+            "--image-topic /semattnet/output/depth_image is one of the node's own outputs (--output-prefix)",
+        ),
+        (
+            ["--method", "classical", "--namespace", "/r", "--points-topic", "/r/semattnet/output/point_cloud"],
+            {},
+            "--points-topic /r/semattnet/output/point_cloud is one of the node's own outputs",
+        ),
     ],
 )
 def test_bad_options_are_one_line(args: list[str], env: dict[str, str], why: str) -> None:
