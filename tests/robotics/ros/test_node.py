@@ -322,3 +322,25 @@ def test_sparse_depth_16uc1_is_millimetres() -> None:
         data=data,
     )
     np.testing.assert_allclose(decode_sparse_depth(msg, "/d"), [[0, 1.5], [65.535, 0.25]], rtol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("step", "why"), [(160, "rows of 40 pixels take 80 bytes, the message's rows 160"), (80, "make 160")]
+)
+def test_sparse_depth_whose_data_is_not_its_encoding_is_refused(step: int, why: str) -> None:
+    """32FC1 data (4 bytes a pixel) sent as 16UC1: by its step, or by its size against a 16UC1 step."""
+    from semattnet._errors import DataError
+    from semattnet.robotics.ros.inputs import decode_sparse_depth
+
+    metres = np.arange(1, 81, dtype="<f4")  # 2 rows of 40 float32 pixels: 320 bytes
+    msg = TS.types["sensor_msgs/msg/Image"](
+        header=image(T0).header,
+        height=2,
+        width=40,
+        encoding="16UC1",  # type: ignore[attr-defined]
+        is_bigendian=0,
+        step=step,
+        data=np.frombuffer(metres.tobytes(), np.uint8),
+    )
+    with pytest.raises(DataError, match=why):
+        decode_sparse_depth(msg, "/d")

@@ -123,7 +123,8 @@ def decode_sparse_depth(msg: ImageMsg, topic: str) -> np.ndarray:
     millimetres (NaN, infinite, <= 0: no depth).
 
     Raises:
-        DataError: another encoding, or fewer bytes than the header says; naming the topic.
+        DataError: another encoding, other than the bytes the header says, or rows twice as long as the encoding
+            makes them (e.g. ``32FC1`` data sent as ``16UC1``); naming the topic.
     """
     enc = str(msg.encoding).upper()
     kinds = {"32FC1": ("f4", 1.0), "16UC1": ("u2", 0.001)}
@@ -133,8 +134,14 @@ def decode_sparse_depth(msg: ImageMsg, topic: str) -> np.ndarray:
     dtype = np.dtype((">" if msg.is_bigendian else "<") + kind)
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
     data = np.asarray(msg.data, dtype=np.uint8).reshape(-1)
-    if step < w * dtype.itemsize or data.size < h * step:
-        raise DataError(f"{topic}: sparse depth holds {data.size} bytes, {h} rows of {step} need {h * step}")
+    row = w * dtype.itemsize
+    if step < row or data.size != h * step:
+        raise DataError(f"{topic}: sparse depth holds {data.size} bytes, {h} rows of {step} make {h * step}")
+    if step - row >= max(64, row):  # row padding as long as the row: the pixels are not the encoding's size
+        raise DataError(
+            f"{topic}: {msg.encoding} rows of {w} pixels take {row} bytes, the message's rows {step}: "
+            "its data is not of that encoding"
+        )
     rows = data[: h * step].reshape(h, step)[:, : w * dtype.itemsize]
     d = np.ascontiguousarray(rows).view(dtype).reshape(h, w).astype(np.float32) * np.float32(scale)
     depth: np.ndarray = np.where(np.isfinite(d) & (d > 0), d, np.float32(0)).astype(np.float32)
