@@ -104,6 +104,7 @@ def test_viewers_reach_the_stream_through_the_gate() -> None:
         b"POST /rerun.sdk_comms.v1alpha1.MessageProxyService/ReadMessages HTTP/1.1\r\nHost: x\r\n"
         b"content-type: application/grpc-web+proto\r\ncontent-length: 5\r\n\r\n" + bytes(5)
     )
+    assert silent.recv(1)  # its request read and relayed (else it could be the oldest without one), then no more
     held = [socket.create_connection(("127.0.0.1", port), timeout=5) for _ in range(60)]
     try:
         # past the cap, each new one takes the place of the oldest one without a request (the silent one keeps its)
