@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -50,3 +51,23 @@ def online_cache(monkeypatch, root: Path) -> Path:  # type: ignore[no-untyped-de
         return root
     monkeypatch.setattr(constants, "HF_HUB_OFFLINE", False)
     return root
+
+
+def mounted_tmpfs(folder: Path, size: str) -> Iterator[Path]:
+    """A tmpfs of ``size`` (e.g. ``"256k"``) mounted at ``folder`` for a test, unmounted after: a disk that fills up.
+    Skips the test without root or ``mount``."""
+    import os
+    import subprocess
+
+    import pytest
+
+    folder.mkdir()
+    if os.geteuid() != 0:
+        pytest.skip("mounting a small tmpfs needs root")
+    res = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(folder)], capture_output=True)
+    if res.returncode != 0:
+        pytest.skip(f"mount -t tmpfs failed: {res.stderr.decode(errors='replace').strip()}")
+    try:
+        yield folder
+    finally:
+        subprocess.run(["umount", "-l", str(folder)], check=False)

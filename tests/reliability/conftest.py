@@ -2,29 +2,19 @@
 
 from __future__ import annotations
 
-import os
 import signal
-import subprocess
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
+from tests._helpers import mounted_tmpfs
+
 
 @pytest.fixture
 def small_fs(tmp_path: Path) -> Iterator[Path]:
     """A 256 KiB tmpfs at ``tmp_path/fs``: a disk that fills up (needs root and ``mount``; skipped otherwise)."""
-    fs = tmp_path / "fs"
-    fs.mkdir()
-    if os.geteuid() != 0:
-        pytest.skip("mounting a small tmpfs needs root")
-    res = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(fs)], capture_output=True)
-    if res.returncode != 0:
-        pytest.skip(f"mount -t tmpfs failed: {res.stderr.decode(errors='replace').strip()}")
-    try:
-        yield fs
-    finally:
-        subprocess.run(["umount", "-l", str(fs)], check=False)
+    yield from mounted_tmpfs(tmp_path / "fs", "256k")
 
 
 @pytest.fixture

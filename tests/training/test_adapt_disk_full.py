@@ -5,7 +5,6 @@ could not write (never torch's ``inline_container`` ``RuntimeError``), and no te
 from __future__ import annotations
 
 import os
-import subprocess
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -13,35 +12,23 @@ import pytest
 
 from semattnet.training.adapt import FINAL, STATE, adapt
 from semattnet.training.adapt import run as adapt_run
+from tests._helpers import mounted_tmpfs
 from tests.training._adapt_runs import rt_checkpoint
 from tests.training.test_adapt import _cfg, _Frames, _quiet
 
 pytestmark = pytest.mark.filterwarnings("ignore:no semantic maps given")
 
 
-def _tmpfs(folder: Path, size: str) -> Iterator[Path]:
-    folder.mkdir()
-    if os.geteuid() != 0:
-        pytest.skip("mounting a small tmpfs needs root")
-    res = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(folder)], capture_output=True)
-    if res.returncode != 0:
-        pytest.skip(f"mount -t tmpfs failed: {res.stderr.decode(errors='replace').strip()}")
-    try:
-        yield folder
-    finally:
-        subprocess.run(["umount", "-l", str(folder)], check=False)
-
-
 @pytest.fixture
 def tiny_fs(tmp_path: Path) -> Iterator[Path]:
     """64 KiB: the log fits, the first state (~550 KiB) does not."""
-    yield from _tmpfs(tmp_path / "fs", "64k")
+    yield from mounted_tmpfs(tmp_path / "fs", "64k")
 
 
 @pytest.fixture
 def roomy_fs(tmp_path: Path) -> Iterator[Path]:
     """2 MiB: the run's states fit."""
-    yield from _tmpfs(tmp_path / "fs", "2m")
+    yield from mounted_tmpfs(tmp_path / "fs", "2m")
 
 
 @pytest.fixture(scope="module")
