@@ -194,23 +194,38 @@ def test_the_work_resolution_keeps_each_blocks_nearest_point_mean_colour_and_one
     assert labels is not None and labels[0, 0].tolist() == [[0.0, 2.0, 4.0], [10.0, 12.0, 14.0]]
 
 
-def test_a_half_resolution_generalist_is_the_full_one_on_the_smaller_frame_upsampled() -> None:
-    """work_scale 2: the same network on work_resolution's frame, every output upsampled to the input's size."""
-    from semattnet.models.generalist import work_resolution
+def test_a_half_resolution_generalist_corrects_the_full_resolution_anchor_by_its_upsampled_log_ratio() -> None:
+    """work_scale 2, written out step by step: scale, outliers, anchor and distances at full resolution; the
+    network on each block's nearest point, mean colour, one class and the anchor's block mean; its log ratio to
+    that half-resolution anchor upsampled bilinearly and bounded onto the full-resolution anchor."""
+    import torch.nn.functional as F
+
+    from semattnet.models.anchor import complete_classical
+    from semattnet.models.generalist import consistent_points
+    from semattnet.models.uncertainty import lidar_distance
 
     torch.manual_seed(0)
     half = build_model("semattnet_rt_half_generalist").eval()
-    full = build_model("semattnet_rt_generalist").eval()
-    full.load_state_dict(half.state_dict())
     rgb, semantic, sparse = _frame(h=128, w=192)
     with torch.no_grad():
         out = half(rgb, semantic, sparse)
-        small = full(*(lambda c, s, m: (c, m, s))(*work_resolution(rgb, sparse, semantic, 2)))
+        s = frame_scale(sparse) / REFERENCE_DEPTH
+        points = consistent_points(sparse / s, complete_classical(sparse / s))
+        anchor = complete_classical(points)
+        far = torch.where(points > 0, points, torch.full_like(points, 1e9))
+        nearest = -F.max_pool2d(-far, 2)
+        small = torch.cat((torch.where(nearest < 1e8, nearest, 0.0), F.avg_pool2d(anchor, 2)), dim=1)
+        colour = standardise_colour(F.avg_pool2d(rgb, 2))
+        net = half.net(colour, semantic[..., ::2, ::2], small).depth
+    ratio = torch.log((net * s).clamp_min(1e-3)) - torch.log((small[:, 1:] * s).clamp_min(1e-3))
+    ratio = F.interpolate(ratio, scale_factor=2, mode="bilinear", align_corners=False)
+    trust = 1 - torch.exp(-lidar_distance(points) / half.config.trust_radius)
+    expected = anchor * s * torch.exp(trust * torch.tanh(ratio))  # residual_bound 1
     assert out.depth.shape == (1, 1, 128, 192) and out.uncertainty is not None
-    for got, ref in ((out.depth, small.depth), (out.uncertainty, small.uncertainty)):
-        assert ref is not None
-        up = torch.nn.functional.interpolate(ref, scale_factor=2, mode="bilinear", align_corners=False)
-        torch.testing.assert_close(got, up, rtol=1e-5, atol=1e-5)
+    assert out.uncertainty.shape == (1, 1, 128, 192)
+    torch.testing.assert_close(out.depth, expected, rtol=1e-5, atol=1e-5)
+    measured = points > 0  # no trust in the network there: the output is the anchor
+    torch.testing.assert_close(out.depth[measured], (anchor * s)[measured], rtol=1e-5, atol=1e-5)
 
 
 def test_the_completer_gives_a_half_resolution_generalists_depth_at_the_frames_odd_size() -> None:

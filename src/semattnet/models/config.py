@@ -81,9 +81,9 @@ class SemAttNetConfig:
             (``log(depth / anchor)`` lies in ``(-b, b)``); unused without an anchor.
         trust_radius: the generalist's bound shrinks near the measurements: times ``1 - exp(-r / R)`` at ``r``
             pixels from the nearest point (0: the same bound everywhere).
-        work_scale: the generalist's anchor and network run at ``1 / work_scale`` of the input's resolution (1, 2
-            or 4) and its outputs are upsampled to the input's size (a quarter of the work at 2); unused without an
-            anchor.
+        work_scale: the generalist's network runs at ``1 / work_scale`` of the input's resolution (1, 2 or 4), its
+            anchor at full resolution; the network's outputs and its correction of the anchor are upsampled to the
+            input's size (a quarter of the network's work at 2); unused without an anchor.
     """
 
     branches: Literal[2, 3] = 3

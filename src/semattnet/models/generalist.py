@@ -24,10 +24,14 @@ model or a real-time variant, whose depth input has two channels instead of one,
    ``R`` the bound shrinks near the measurements: ``b`` becomes ``t b``, ``t = 1 - exp(-r / R)`` at ``r``
    pixels from the nearest point the network reads (0 on a measured pixel, where the anchor is the measurement).
 
-With ``config.work_scale`` ``k`` > 1 the three steps and the network run at ``1 / k`` of the input's resolution
-(:func:`work_resolution`: the nearest sparse point of each ``k`` x ``k`` block, the block's mean colour, its
-top-left semantic colour; padded to the network's multiple of 32) and every output is upsampled bilinearly to
-the input's size (:meth:`Generalist.to_full`): a quarter of the work at ``k = 2``, for a CPU at sensor rate.
+With ``config.work_scale`` ``k`` > 1 only the network runs at ``1 / k`` of the input's resolution: the scale,
+the outlier rule, the anchor and the distances stay at full resolution (a classical completion at half
+resolution, upsampled, loses its sharp depth edges: the finding on the real frame, docs/guides/generalist.md).
+The network reads the frame at its resolution (:func:`work_resolution`: each ``k`` x ``k`` block's nearest
+consistent point, its mean colour, its top-left semantic colour, the anchor's block mean; padded to the network's
+multiple of 32), and its correction, ``log(D_n / A_k)`` against the anchor at its own resolution, is upsampled
+bilinearly onto the full-resolution anchor before the bound (:meth:`Generalist.refine`): a quarter of the
+network's work at ``k = 2``, for a CPU at sensor rate.
 
 Nothing depends on the camera's intrinsics or the image size. The uncertainty (:meth:`Generalist.uncertainty`)
 adds the correction of the anchor to the model's own terms (:func:`~semattnet.models.uncertainty.depth_uncertainty`)
@@ -109,14 +113,15 @@ def consistent_points(sparse: torch.Tensor, anchor: torch.Tensor) -> torch.Tenso
 class GeneralistInputs(NamedTuple):
     """What :meth:`Generalist.prepare` gives the network, and what :meth:`Generalist.finish` needs back."""
 
-    rgb: torch.Tensor  # (B, 3, H, W), standardised colours
-    depth: torch.Tensor  # (B, 2, H, W): consistent sparse points and anchor, normalised to REFERENCE_DEPTH
+    rgb: torch.Tensor  # (B, 3, h, w), standardised colours, at the network's resolution
+    depth: torch.Tensor  # (B, 2, h, w): consistent sparse points and anchor, normalised to REFERENCE_DEPTH
     sparse: torch.Tensor  # (B, 1, H, W) metres, as given
     anchor: torch.Tensor  # (B, 1, H, W) metres
     scale: torch.Tensor  # (B, 1, 1, 1): metres per normalised unit
     distance: torch.Tensor  # (B, 1, H, W): pixels to the nearest point the network reads
-    semantic: torch.Tensor | None = None  # (B, 3, H, W) colours at the network's resolution, or None
+    semantic: torch.Tensor | None = None  # (B, 3, h, w) colours at the network's resolution, or None
     size: tuple[int, int] | None = None  # the input's (H, W) when the network works at a lower resolution
+    net_anchor: torch.Tensor | None = None  # (B, 1, h, w) metres: the anchor at the network's lower resolution
 
 
 def _pad_to(x: torch.Tensor, k: int, mode: str) -> torch.Tensor:
@@ -154,21 +159,27 @@ def _network_size(
 def prepare_inputs(
     rgb: torch.Tensor, sparse: torch.Tensor, semantic: torch.Tensor | None = None, work_scale: int = 1
 ) -> GeneralistInputs:
-    """Steps 1-3 of the module docstring before the network: scale, outliers, anchor, colour, at ``1 /
-    work_scale`` of the input's resolution. Its ``anchor`` alone is a non-learned completion (the benchmark's
-    ``anchor`` row)."""
-    size = (int(sparse.shape[-2]), int(sparse.shape[-1]))
-    if work_scale > 1:
-        rgb, sparse, semantic = _network_size(*work_resolution(rgb, sparse, semantic, work_scale))
+    """Steps 1-3 of the module docstring before the network: scale, outliers, anchor (at the input's resolution)
+    and the network's inputs at ``1 / work_scale`` of it. Its ``anchor`` alone is a non-learned completion (the
+    benchmark's ``anchor`` row)."""
     scale = frame_scale(sparse) / REFERENCE_DEPTH
     normalised = sparse.float() / scale
     points = consistent_points(normalised, classical_anchor(normalised))
     anchor = classical_anchor(points)  # in normalised units too: the classical's depth bands become scale-free
-    depth = torch.cat((points, anchor), dim=1)
     distance = lidar_distance(points)
-    full = size if work_scale > 1 else None
-    colour = standardise_colour(rgb.float())
-    return GeneralistInputs(colour, depth, sparse, anchor * scale, scale, distance, semantic, full)
+    if work_scale == 1:
+        depth = torch.cat((points, anchor), dim=1)
+        return GeneralistInputs(
+            standardise_colour(rgb.float()), depth, sparse, anchor * scale, scale, distance, semantic
+        )
+    size = (int(sparse.shape[-2]), int(sparse.shape[-1]))
+    colour, small, labels = _network_size(*work_resolution(rgb, points, semantic, work_scale))
+    small_anchor = _pad_to(
+        F.avg_pool2d(_pad_to(anchor, work_scale, "replicate"), work_scale), SIZE_MULTIPLE, "replicate"
+    )
+    depth = torch.cat((small, small_anchor), dim=1)
+    colour = standardise_colour(colour)
+    return GeneralistInputs(colour, depth, sparse, anchor * scale, scale, distance, labels, size, small_anchor * scale)
 
 
 def _network(config: SemAttNetConfig) -> nn.Module:
@@ -219,28 +230,42 @@ class Generalist(nn.Module):
     def finish(
         self, out: DepthCompletionOutput, inputs: GeneralistInputs, uncertainty: bool = True
     ) -> DepthCompletionOutput:
-        """The network's output in metres, the refined depth as the bounded correction of the anchor, and the
-        calibrated uncertainty (``uncertainty=False``: left None), at the input's size (:meth:`to_full`)."""
+        """The network's output in metres at the input's size (:meth:`to_full`), the refined depth as the bounded
+        correction of the anchor (:meth:`refine`), and the calibrated uncertainty (``uncertainty=False``: None)."""
         scale = inputs.scale
-
         depth_fields = ("color_depth", "semantic_depth", "guided_depth", "fused_depth", "refined_s2_depth")
         changes = {f: getattr(out, f).float() * scale for f in depth_fields if getattr(out, f) is not None}
         net_depth = out.depth.float() * scale
-        changes["refined_depth"] = self.correct(inputs.anchor, net_depth, inputs.distance)
-        result = dataclasses.replace(out, **changes)
+        result = dataclasses.replace(out, **changes, refined_depth=net_depth)
+        if inputs.size is not None:
+            result = result.map(lambda t: self.to_full(t, inputs))
+        result = dataclasses.replace(result, refined_depth=self.refine(net_depth, inputs))
         if uncertainty:
             result = dataclasses.replace(result, uncertainty=self.uncertainty(result, inputs))
-        return result if inputs.size is None else result.map(lambda t: self.to_full(t, inputs))
+        return result
+
+    def refine(self, net_depth: torch.Tensor, inputs: GeneralistInputs) -> torch.Tensor:
+        """The generalist's depth (metres, the input's size) from the network's (metres, its resolution): the
+        bounded correction of the anchor (:meth:`correct`); below full resolution the network's log ratio to the
+        anchor at its resolution, upsampled, corrects the full-resolution anchor."""
+        if inputs.net_anchor is None:
+            return self.correct(inputs.anchor, net_depth, inputs.distance)
+        ratio = torch.log(net_depth.clamp_min(_EPS)) - torch.log(inputs.net_anchor.clamp_min(_EPS))
+        return self.bound(inputs.anchor, self.to_full(ratio, inputs), inputs.distance)
 
     def correct(self, anchor: torch.Tensor, net_depth: torch.Tensor, distance: torch.Tensor) -> torch.Tensor:
         """``A * exp(t * b * tanh(log(D_n / A) / b))``: the network's depth pulled within a factor ``e^(t b)`` of the
-        anchor (both metres), ``t = 1 - exp(-r / R)`` the trust in the network at ``distance`` ``r`` pixels from the
-        nearest point (``R`` = ``config.trust_radius``; 0: ``t = 1``); 0 where the anchor is 0 (no points)."""
+        anchor (both metres) by :meth:`bound`."""
+        ratio = torch.log(net_depth.clamp_min(_EPS)) - torch.log(anchor.clamp_min(_EPS))
+        return self.bound(anchor, ratio, distance)
+
+    def bound(self, anchor: torch.Tensor, ratio: torch.Tensor, distance: torch.Tensor) -> torch.Tensor:
+        """``A * exp(t * b * tanh(r / b))`` for the log ratio ``r``: ``t = 1 - exp(-d / R)`` the trust in the
+        network at ``distance`` ``d`` pixels from the nearest point (``R`` = ``config.trust_radius``; 0: ``t = 1``),
+        ``b`` = ``config.residual_bound``; 0 where the anchor is 0 (no points)."""
         b, radius = self.config.residual_bound, self.config.trust_radius
         trust = 1.0 - torch.exp(-distance / radius) if radius > 0 else torch.ones_like(distance)
-        a = anchor.clamp_min(_EPS)
-        r = torch.log(net_depth.clamp_min(_EPS)) - torch.log(a)
-        out = a * torch.exp(trust * b * torch.tanh(r / b))
+        out = anchor.clamp_min(_EPS) * torch.exp(trust * b * torch.tanh(ratio / b))
         return torch.where(anchor > 0, out, torch.zeros_like(out))
 
     def uncertainty(self, out: DepthCompletionOutput, inputs: GeneralistInputs) -> torch.Tensor:

@@ -118,7 +118,7 @@ _SPECS = (
     ),
     ModelSpec(
         "semattnet_rt_half_generalist",
-        "Generalist: semattnet_rt_generalist working at half the input's resolution, upsampled (a quarter of the work)",
+        "Generalist: semattnet_rt_generalist whose network works at half resolution (its anchor at full)",
         SemAttNetConfig(
             encoder="lite_s2_deep",
             reduction=4,

@@ -163,7 +163,7 @@ def generalist_loss(
     inputs = model.prepare(rgb, sparse, semantic)
     out = model.net(inputs.rgb, inputs.semantic, inputs.depth)
     net_depth = out.depth.float() * inputs.scale
-    depth = model.to_full(model.correct(inputs.anchor, net_depth, inputs.distance), inputs)
+    depth = model.refine(net_depth, inputs)
     net_depth = model.to_full(net_depth, inputs)
     valid = gt > 0
     log_gt = torch.log(gt[valid])
