@@ -205,7 +205,8 @@ class NodeOptions:
         from semattnet.geometry import read_rig_json
         from semattnet.inference.uncertainty import UncertaintyLimit
         from semattnet.robotics.ros.names import check_namespace, resolve_name
-        from semattnet.robotics.ros.node import DepthNode, NodeTopics, output_roles
+        from semattnet.robotics.ros.node import DepthNode, NodeTopics
+        from semattnet.robotics.ros.publish import output_roles
 
         topics = NodeTopics(self.image_topic, self.camera_info_topic, self.points_topic, output=self.output_prefix)
         namespace = check_namespace(self.namespace)
