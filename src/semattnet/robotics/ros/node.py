@@ -27,7 +27,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -46,8 +46,9 @@ from .diagnostics import Diagnostics, node_health
 from .inputs import Pair, PairingInputs, Stamped
 from .names import resolve_name
 from .publish import CLOUD_STRIDE, RosPublishSink, gives_uncertainty
+from .qos import default_qos
 from .status import NodeStatus, TopicStatus, udp_drops
-from .transport import SENSOR_QOS, TF_QOS, TF_STATIC_QOS, Transport
+from .transport import QoS, Transport
 
 if TYPE_CHECKING:
     from semattnet.inference.contract import Completer
@@ -104,6 +105,8 @@ class DepthNode:
         publish: the output roles published (:func:`output_roles`; default all).
         cloud_stride: the cloud's stride, pixels both ways.
         latch_camera_info: the CameraInfo published transient local (a late subscriber gets it at once).
+        qos: the QoS of the topics by role (:meth:`NodeTopics.resolved`'s keys; :func:`~.qos.node_qos`), over
+            :func:`~.qos.default_qos`.
     """
 
     def __init__(
@@ -127,6 +130,7 @@ class DepthNode:
         publish: frozenset[str] = frozenset(ROS_TYPES),
         cloud_stride: int = CLOUD_STRIDE,
         latch_camera_info: bool = False,
+        qos: Mapping[str, QoS] | None = None,
     ) -> None:
         self.transport = transport
         self.completer = completer
@@ -135,6 +139,7 @@ class DepthNode:
         self.names = (topics or NodeTopics()).resolved(namespace, node)
         self.report_s = report_s
         self.say = say
+        self.qos = {**default_qos(latch_camera_info), **(qos or {})}
         self.inputs = PairingInputs(self.names, self._put, compressed, sparse, max_skew_ns)
         self.publisher = RosPublishSink(
             transport,
@@ -145,6 +150,7 @@ class DepthNode:
             cloud_stride=cloud_stride,
             latch_camera_info=latch_camera_info,
             uncertainty=gives_uncertainty(completer),
+            qos={role: self.qos[f"out:{role}"] for role in ROS_TYPES},
         )
         self.sinks: list[Sink] = [self.publisher, *sinks]
         self.run = LiveRun()
@@ -169,19 +175,21 @@ class DepthNode:
 
     def start(self) -> DepthNode:
         """Advertise the outputs and subscribe the inputs."""
-        t, n, inp = self.transport, self.names, self.inputs
+        inp = self.inputs
         self.publisher.advertise()
         self.diagnostics.advertise()
         image_type = "sensor_msgs/msg/CompressedImage" if inp.compressed else "sensor_msgs/msg/Image"
-        t.subscribe(n["image"], image_type, SENSOR_QOS, inp.on_image)
-        scan_type = "sensor_msgs/msg/Image" if inp.sparse else "sensor_msgs/msg/PointCloud2"
-        t.subscribe(n["scan"], scan_type, SENSOR_QOS, inp.on_scan)
+        self._subscribe("image", image_type, inp.on_image)
+        self._subscribe("scan", "sensor_msgs/msg/Image" if inp.sparse else "sensor_msgs/msg/PointCloud2", inp.on_scan)
         if self.rig is None:
-            t.subscribe(n["camera_info"], "sensor_msgs/msg/CameraInfo", SENSOR_QOS, inp.on_camera_info)
+            self._subscribe("camera_info", "sensor_msgs/msg/CameraInfo", inp.on_camera_info)
             if not inp.sparse:
-                t.subscribe(n["tf_static"], "tf2_msgs/msg/TFMessage", TF_STATIC_QOS, inp.on_tf_static)
-                t.subscribe(n["tf"], "tf2_msgs/msg/TFMessage", TF_QOS, inp.on_tf)
+                self._subscribe("tf_static", "tf2_msgs/msg/TFMessage", inp.on_tf_static)
+                self._subscribe("tf", "tf2_msgs/msg/TFMessage", inp.on_tf)
         return self
+
+    def _subscribe(self, role: str, msgtype: str, callback: Callable[[object], None]) -> None:
+        self.transport.subscribe(self.names[role], msgtype, self.qos[role], callback)
 
     def _put(self, pair: Pair) -> None:
         """The single slot: a newer pair replaces one still waiting (a note of it for the loop, which counts it)."""

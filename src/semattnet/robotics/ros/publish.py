@@ -4,7 +4,7 @@ what chooses them (``--publish``'s roles, the cloud's stride, whether the comple
 
 from __future__ import annotations
 
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
 
@@ -12,7 +12,7 @@ from semattnet._errors import InputError
 from semattnet.inference.sinks import Prediction, RunSink
 from semattnet.robotics.frame import ROS_TYPES, TOPICS, RobotFrame
 
-from .transport import LATCHED_QOS, OUTPUT_QOS, Publisher, Transport
+from .transport import LATCHED_QOS, OUTPUT_QOS, Publisher, QoS, Transport
 
 if TYPE_CHECKING:
     from semattnet.inference.uncertainty import UncertaintyLimit
@@ -60,8 +60,9 @@ class RosPublishSink(RunSink):
     transport's type store) published under ``~/output``: the float depth (``predict --npy``'s, not the PNG's
     1/256 m steps), the cloud of every ``cloud_stride``-th pixel both ways leaving out pixels deeper than
     ``max_depth`` or above ``max_uncertainty``, the uncertainty, the CameraInfo (latched with ``latch_camera_info``);
-    ``roles`` the ones published. ``uncertainty``: whether the completer gives one (False: never advertised; None,
-    not known: advertised with the first frame that has one)."""
+    ``roles`` the ones published; ``qos`` the QoS of some of them by role, over the defaults (:mod:`.qos`).
+    ``uncertainty``: whether the completer gives one (False: never advertised; None, not known: advertised with the
+    first frame that has one)."""
 
     replays = False
 
@@ -76,6 +77,7 @@ class RosPublishSink(RunSink):
         cloud_stride: int = CLOUD_STRIDE,
         latch_camera_info: bool = False,
         uncertainty: bool | None = True,
+        qos: Mapping[str, QoS] | None = None,
     ) -> None:
         if cloud_stride < 1:
             raise InputError(f"--cloud-stride: expected a positive number of pixels, got {cloud_stride}")
@@ -86,6 +88,7 @@ class RosPublishSink(RunSink):
         self.qos = {role: OUTPUT_QOS for role in ROS_TYPES}
         if latch_camera_info:
             self.qos["camera_info"] = LATCHED_QOS
+        self.qos.update(qos or {})
         self.publishers: dict[str, Publisher] = {}
         self.muted = False
 
