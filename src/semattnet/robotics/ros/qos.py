@@ -48,14 +48,14 @@ ROS1_NO_QOS = (
     "latches camera_info); QoS overrides are semattnet ros2's"
 )
 #: The values each policy takes (``depth``: a positive integer).
-CHOICES = {
+QOS_CHOICES = {
     "reliability": ("reliable", "best_effort"),
     "durability": ("volatile", "transient_local"),
     "history": ("keep_last",),
     "depth": (),
 }
 #: The DDS entity the node has on a topic, by its kind (``rclcpp``'s words).
-ENTITIES = ("publisher", "subscription")
+QOS_ENTITIES = ("publisher", "subscription")
 
 
 @dataclass(frozen=True)
@@ -72,8 +72,8 @@ class QosOverride:
 
 def _checked(policy: str, value: object, where: str) -> str | int:
     """``value`` of ``policy`` as the node takes it; a one-line error naming ``where`` else."""
-    if policy not in CHOICES:
-        raise InputError(f"{where}: {policy!r} is not a QoS policy this node takes ({', '.join(CHOICES)})")
+    if policy not in QOS_CHOICES:
+        raise InputError(f"{where}: {policy!r} is not a QoS policy this node takes ({', '.join(QOS_CHOICES)})")
     if policy == "depth":
         text = str(value).strip()
         if isinstance(value, bool) or not text.isdigit() or int(text) < 1:
@@ -81,8 +81,8 @@ def _checked(policy: str, value: object, where: str) -> str | int:
         return int(text)
     if value == "keep_all" and policy == "history":
         raise InputError(f"{where}: history keep_all: not taken (the node keeps the last DEPTH messages; set depth)")
-    if value not in CHOICES[policy]:
-        raise InputError(f"{where}: {policy} {value!r}: expected one of {', '.join(CHOICES[policy])}")
+    if value not in QOS_CHOICES[policy]:
+        raise InputError(f"{where}: {policy} {value!r}: expected one of {', '.join(QOS_CHOICES[policy])}")
     return str(value)
 
 
@@ -93,7 +93,7 @@ def qos_override_param(key: str, value: object, where: str) -> QosOverride:
     2
     """
     parts = key.removeprefix(QOS_PREFIX).split(".")
-    if len(parts) != 3 or parts[1] not in ENTITIES or not parts[0]:
+    if len(parts) != 3 or parts[1] not in QOS_ENTITIES or not parts[0]:
         raise InputError(f"{where}: expected qos_overrides.TOPIC.publisher|subscription.POLICY")
     topic, entity, policy = parts
     return QosOverride(topic, policy, _checked(policy, value, where), where, entity)
