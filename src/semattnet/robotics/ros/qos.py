@@ -102,8 +102,8 @@ def qos_override_param(key: str, value: object, where: str) -> QosOverride:
 def parse_qos_option(text: str) -> tuple[QosOverride, ...]:
     """``--qos TOPIC:POLICY=VALUE[,POLICY=VALUE...]`` (module doc).
 
-    >>> [(o.policy, o.value) for o in parse_qos_option("~/output/point_cloud:reliability=best_effort,depth=2")]
-    [('reliability', 'best_effort'), ('depth', 2)]
+    >>> tuple((o.policy, o.value) for o in parse_qos_option("~/output/point_cloud:reliability=best_effort,depth=2"))
+    (('reliability', 'best_effort'), ('depth', 2))
     """
     where = f"--qos {text!r}"
     topic, colon, rest = text.rpartition(":")
