@@ -89,6 +89,7 @@ class RosNodeCommand(GeneratedCommand):
         for path in [*ctx.params.get("params_file", ()), *ros.params_files]:
             values += params_file_values(Path(path), fqn)
         values += [(name, yaml_value(text, where), where) for name, text, where in ros.params]
+        values = _qos_overrides(ctx, values, self.ros1)
         for key, value, where in values:
             if key not in params:
                 raise InputError(
@@ -111,6 +112,26 @@ class Ros1NodeCommand(RosNodeCommand):
     names the namespace."""
 
     ros1 = True
+
+
+def _qos_overrides(
+    ctx: click.Context, values: list[tuple[str, object, str]], ros1: bool
+) -> list[tuple[str, object, str]]:
+    """The ``values`` other than ``qos_overrides.TOPIC.ENTITY.POLICY`` ones, which become ``--qos`` overrides before
+    the command line's (a ``--qos`` given wins); ``ros1`` refuses them (ROS 1 has no QoS)."""
+    from semattnet.robotics.ros.qos import QOS_PREFIX, ROS1_NO_QOS, qos_override_param
+
+    rest, overrides = [], []
+    for key, value, where in values:
+        if not key.startswith(QOS_PREFIX):
+            rest.append((key, value, where))
+        elif ros1:
+            raise InputError(f"{where}: {ROS1_NO_QOS}")
+        else:
+            overrides.append(qos_override_param(key, value, where))
+    if overrides:
+        ctx.params["qos"] = (tuple(overrides), *ctx.params.get("qos", ()))
+    return rest
 
 
 def _converted(ctx: click.Context, param: click.Parameter, value: object, where: str) -> object:

@@ -31,6 +31,7 @@ if TYPE_CHECKING:
     from semattnet.inference.sinks import Sink
     from semattnet.inference.uncertainty import UncertaintyLimit
     from semattnet.robotics.ros.node import DepthNode
+    from semattnet.robotics.ros.qos import QosOverride
     from semattnet.robotics.ros.transport import Transport
 
 _ROS = section("ROS")
@@ -128,8 +129,47 @@ ROS2_OPTIONS = (
         help="Publish camera_info reliable and transient local, depth 1: a late subscriber gets it at once.",
     ),
 )
+
+
+class QosType(click.ParamType):
+    """``--qos TOPIC:POLICY=VALUE[,POLICY=VALUE...]``: its overrides (:mod:`semattnet.robotics.ros.qos`)."""
+
+    name = "qos"
+
+    def convert(self, value: object, param: click.Parameter | None, ctx: click.Context | None) -> object:
+        from semattnet._errors import InputError
+        from semattnet.robotics.ros.qos import parse_qos_option
+
+        if isinstance(value, tuple):  # already converted (a parameter file's qos_overrides)
+            return value
+        try:
+            return parse_qos_option(str(value))
+        except InputError as exc:
+            self.fail(str(exc), param, ctx)
+
+
+def _no_qos(ctx: click.Context, param: click.Parameter, value: tuple[object, ...]) -> tuple[object, ...]:
+    """``ros1``'s ``--qos``: refused in one line (ROS 1 has no QoS)."""
+    from semattnet.robotics.ros.qos import ROS1_NO_QOS
+
+    if value:
+        raise click.BadParameter(ROS1_NO_QOS, ctx, param)
+    return value
+
+
 #: The DDS transport's options (``ros2``).
 DDS_OPTIONS = (
+    _ROS(
+        ["--qos"],
+        type=QosType(),
+        multiple=True,
+        metavar="TOPIC:POLICY=VALUE[,...]",
+        help="Override the QoS of one of the node's topics (an input's subscription or an output's publisher, "
+        "named as the node resolves it: ~/output/point_cloud, /camera/image_raw): reliability=reliable|best_effort, "
+        "durability=volatile|transient_local, depth=N, history=keep_last; the same as the rclcpp parameters "
+        "qos_overrides.TOPIC.publisher|subscription.POLICY; repeatable, a later one wins "
+        "[inputs best effort depth 5, outputs reliable depth 1].",
+    ),
     _ROS(["--domain-id"], type=click.IntRange(0, 232), default=None, help="DDS domain [ROS_DOMAIN_ID, else 0]."),
     _ROS(
         ["--loopback"],
@@ -143,6 +183,7 @@ ROS1_OPTIONS = (
     _ROS(
         ["--master"], default=None, metavar="URI", help="The ROS master [ROS_MASTER_URI, else http://127.0.0.1:11311]."
     ),
+    _ROS(["--qos"], multiple=True, hidden=True, callback=_no_qos),  # one line saying why, not "no such option"
     _ROS(
         ["--host"],
         default=None,
@@ -183,6 +224,7 @@ class NodeOptions:
     publish: str = "depth_image,point_cloud,uncertainty,camera_info"
     cloud_stride: int = 4
     latch_camera_info: bool = False
+    qos: tuple[tuple[QosOverride, ...], ...] = ()
 
     def viewers(self, limit: UncertaintyLimit | None) -> list[Sink]:
         """The live viewers asked for (``--live``, ``--rerun-serve``), made by their sink entries' options as
@@ -205,7 +247,9 @@ class NodeOptions:
         from semattnet.geometry import read_rig_json
         from semattnet.inference.uncertainty import UncertaintyLimit
         from semattnet.robotics.ros.names import check_namespace, resolve_name
-        from semattnet.robotics.ros.node import DepthNode, NodeTopics, output_roles
+        from semattnet.robotics.ros.node import DepthNode, NodeTopics
+        from semattnet.robotics.ros.publish import output_roles
+        from semattnet.robotics.ros.qos import node_qos
 
         topics = NodeTopics(self.image_topic, self.camera_info_topic, self.points_topic, output=self.output_prefix)
         namespace = check_namespace(self.namespace)
@@ -216,7 +260,10 @@ class NodeOptions:
             ("--output-prefix", self.output_prefix),
         ):
             resolve_name(name, namespace, self.node_name, option)  # a bad name: one line, before the transport starts
-        refuse_topic_clashes(topics.resolved(namespace, self.node_name))
+        names = topics.resolved(namespace, self.node_name)
+        refuse_topic_clashes(names)
+        overrides = [o for given in self.qos for o in given]
+        qos = node_qos(overrides, names, namespace, self.node_name, self.latch_camera_info)
         roles = output_roles([r.strip() for r in self.publish.split(",") if r.strip()])
         rig = read_rig_json(self.rig) if self.rig is not None else None
         limit = None if self.max_uncertainty is None else UncertaintyLimit.parse(self.max_uncertainty)
@@ -239,6 +286,7 @@ class NodeOptions:
             publish=roles,
             cloud_stride=self.cloud_stride,
             latch_camera_info=self.latch_camera_info,
+            qos=qos,
         )
 
 
@@ -295,7 +343,8 @@ def ros2(**params: object) -> None:
     Completes the newest image-scan pair (older pairs are dropped and counted), publishes under
     --output-prefix with the image's stamp and frame id; Ctrl-C or SIGTERM stops it. Takes ROS 2's
     `--ros-args -r __ns:=/robot -r __node:=depth -r FROM:=TO -p KEY:=VALUE --params-file FILE` (what a launch
-    file's Node() passes); each option is a parameter named with _ for -."""
+    file's Node() passes); each option is a parameter named with _ for -, and --qos is rclcpp's
+    qos_overrides./TOPIC.publisher|subscription.POLICY parameters too."""
     domain = _domain_id(params["domain_id"])  # type: ignore[arg-type]
     loopback = bool(params["loopback"]) or localhost_only(os.environ)
 
@@ -319,7 +368,8 @@ def ros2(**params: object) -> None:
 def ros1(**params: object) -> None:
     """Run a ROS 1 depth-completion node: the same node as ros2, registered with a ROS master and speaking TCPROS
     itself (any Python, no rospy; pip install 'semattnet[ros]'). Topics, pairing, drops and outputs as ros2.
-    Takes rosrun's words too (__ns:=/robot __name:=depth _KEY:=VALUE FROM:=TO), and --ros-args as ros2."""
+    Takes rosrun's words too (__ns:=/robot __name:=depth _KEY:=VALUE FROM:=TO), and --ros-args as ros2.
+    ROS 1 has no QoS: ros2's --qos and qos_overrides parameters are refused (--latch-camera-info latches)."""
     master = str(params["master"] or os.environ.get("ROS_MASTER_URI") or "http://127.0.0.1:11311")
     host = params["host"]
 

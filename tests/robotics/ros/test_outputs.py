@@ -12,7 +12,8 @@ from semattnet._errors import InputError
 from semattnet.geometry import depth_to_points
 from semattnet.inference.contract import Completion
 from semattnet.robotics.frame import cloud_rays, strided_cloud
-from semattnet.robotics.ros.node import DepthNode, gives_uncertainty, output_roles
+from semattnet.robotics.ros.node import DepthNode
+from semattnet.robotics.ros.publish import gives_uncertainty, output_roles
 from semattnet.robotics.ros.transport import LATCHED_QOS, OUTPUT_QOS
 
 from ._fakes import INFO, FakeTransport, K, camera_info, image, scan, tf_static

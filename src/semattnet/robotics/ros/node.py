@@ -19,7 +19,7 @@ in front of the camera, a size the CameraInfo disagrees with) is one logged line
 
 The node is a :class:`~semattnet.data.frames.LiveSource` (the newest pair, a replaced one ``dropped``) run by the
 one frame loop for live frames (:func:`semattnet.inference.live.run_live`): the loop's fault rule, stage times and
-sink lifecycle; publishing is a sink (:class:`RosPublishSink`) beside the viewers.
+sink lifecycle; publishing is a sink (:class:`~.publish.RosPublishSink`) beside the viewers.
 """
 
 from __future__ import annotations
@@ -27,50 +27,37 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable, Collection, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from semattnet._errors import DataError, InputError
+from semattnet._errors import DataError
 from semattnet.data.frames import Dropped, Frame, SensorMeta, sensor_frame
 from semattnet.geometry import RigCalibration
 from semattnet.geometry.cameras import CameraInfoData
 from semattnet.inference.feed import FrameFault
 from semattnet.inference.live import LiveRun, run_live
-from semattnet.inference.sinks import Prediction, RunSink, Sink
-from semattnet.robotics.frame import ROS_TYPES, TOPICS, RobotFrame
+from semattnet.inference.sinks import Sink
+from semattnet.robotics.frame import ROS_TYPES, TOPICS
 
 from .diagnostics import Diagnostics, node_health
 from .inputs import Pair, PairingInputs, Stamped
 from .names import resolve_name
+from .publish import CLOUD_STRIDE, RosPublishSink, gives_uncertainty
+from .qos import default_qos
 from .status import NodeStatus, TopicStatus, udp_drops
-from .transport import LATCHED_QOS, OUTPUT_QOS, SENSOR_QOS, TF_QOS, TF_STATIC_QOS, Publisher, Transport
+from .transport import QoS, Transport
 
 if TYPE_CHECKING:
     from semattnet.inference.contract import Completer
     from semattnet.inference.semantic import SemanticMaps
     from semattnet.inference.uncertainty import UncertaintyLimit
-    from semattnet.robotics.bags.deps import Typestore
 
-__all__ = [
-    "CLOUD_STRIDE",
-    "OUTPUT_ROLES",
-    "DepthNode",
-    "NodeTopics",
-    "RosPublishSink",
-    "gives_uncertainty",
-    "output_roles",
-    "run_node",
-]
+__all__ = ["DepthNode", "NodeTopics", "run_node"]
 
 log = logging.getLogger("semattnet.ros")
-
-#: The published cloud's default stride: every 4th pixel both ways (29k of 465k points at 375x1242, what a
-#: costmap needs).
-CLOUD_STRIDE = 4
 
 
 @dataclass(frozen=True)
@@ -92,105 +79,6 @@ class NodeTopics:
         out = resolve_name(self.output, namespace, node)
         names.update({f"out:{role}": f"{out}/{TOPICS[role]}" for role in ROS_TYPES})
         return names
-
-
-#: The outputs ``--publish`` chooses among, by their topic names under ``~/output``, and their roles.
-OUTPUT_ROLES = {TOPICS[role]: role for role in ROS_TYPES}
-
-
-def output_roles(names: Collection[str] | None) -> frozenset[str]:
-    """The roles of output topic names (``depth_image``, ``point_cloud``, ``uncertainty``, ``camera_info``;
-    None: all of them).
-
-    Raises:
-        InputError: a name that is not one of them (one line naming it and the choices).
-    """
-    if names is None:
-        return frozenset(ROS_TYPES)
-    bad = [n for n in names if n not in OUTPUT_ROLES]
-    if bad or not names:
-        have = ", ".join(OUTPUT_ROLES)
-        raise InputError(f"--publish {','.join(names)!r}: expected one or more of {have}, comma-separated")
-    return frozenset(OUTPUT_ROLES[n] for n in names)
-
-
-def gives_uncertainty(completer: object) -> bool | None:
-    """Whether ``completer`` gives a per-pixel uncertainty: its ``gives_uncertainty`` (the classical baseline), a
-    :class:`~semattnet.inference.DepthCompleter`'s ``compute_uncertainty``; None when it does not say."""
-    for attr in ("gives_uncertainty", "compute_uncertainty"):
-        value = getattr(completer, attr, None)
-        if isinstance(value, bool):
-            return value
-    return None
-
-
-class RosPublishSink(RunSink):
-    """The node's topics as a run sink: each completed frame's messages (:class:`RobotFrame`, built once in the
-    transport's type store) published under ``~/output``: the float depth (``predict --npy``'s, not the PNG's
-    1/256 m steps), the cloud of every ``cloud_stride``-th pixel both ways leaving out pixels deeper than
-    ``max_depth`` or above ``max_uncertainty``, the uncertainty, the CameraInfo (latched with ``latch_camera_info``);
-    ``roles`` the ones published. ``uncertainty``: whether the completer gives one (False: never advertised; None,
-    not known: advertised with the first frame that has one)."""
-
-    replays = False
-
-    def __init__(
-        self,
-        transport: Transport,
-        names: dict[str, str],
-        max_depth: float | None = None,
-        max_uncertainty: UncertaintyLimit | None = None,
-        *,
-        roles: frozenset[str] = frozenset(ROS_TYPES),
-        cloud_stride: int = CLOUD_STRIDE,
-        latch_camera_info: bool = False,
-        uncertainty: bool | None = True,
-    ) -> None:
-        if cloud_stride < 1:
-            raise InputError(f"--cloud-stride: expected a positive number of pixels, got {cloud_stride}")
-        self.transport, self.names = transport, names
-        self.max_depth, self.max_uncertainty = max_depth, max_uncertainty
-        self.roles = roles - ({"uncertainty"} if uncertainty is False else set())
-        self.cloud_stride, self.uncertainty = cloud_stride, uncertainty
-        self.qos = {role: OUTPUT_QOS for role in ROS_TYPES}
-        if latch_camera_info:
-            self.qos["camera_info"] = LATCHED_QOS
-        self.publishers: dict[str, Publisher] = {}
-        self.muted = False
-
-    def mute(self) -> None:
-        """Publish nothing more: the node stopped without waiting for the frame in hand, which is not sent if it
-        ever finishes (the loop's ``close`` ends a spin only: a node spun again publishes again)."""
-        self.muted = True
-
-    def reads(self) -> frozenset[str] | None:
-        return RobotFrame.reads("uncertainty" in self.roles, self.max_uncertainty)
-
-    def advertise(self) -> None:
-        """Advertise the output topics (before the inputs are subscribed); the uncertainty's only when the
-        completer is known to give one."""
-        for role in sorted(self.roles):
-            if role != "uncertainty" or self.uncertainty:
-                self._advertise(role)
-
-    def _advertise(self, role: str) -> Publisher:
-        topic = self.names[f"out:{role}"]
-        pub = self.publishers[role] = self.transport.advertise(topic, ROS_TYPES[role], self.qos[role])
-        return pub
-
-    def write(self, stage: Path, pred: Prediction) -> None:
-        if self.muted:
-            return
-        robot = RobotFrame.of(
-            pred,
-            uncertainty=pred.uncertainty is not None and "uncertainty" in self.roles,
-            max_depth=self.max_depth,
-            max_uncertainty=self.max_uncertainty,
-            float_depth=True,
-            cloud_stride=self.cloud_stride if "points" in self.roles else 0,
-        )
-        for role, msg in robot.messages(cast("Typestore", self.transport.typestore), self.roles).items():
-            (self.publishers.get(role) or self._advertise(role)).publish(msg)
 
 
 class DepthNode:
@@ -217,6 +105,8 @@ class DepthNode:
         publish: the output roles published (:func:`output_roles`; default all).
         cloud_stride: the cloud's stride, pixels both ways.
         latch_camera_info: the CameraInfo published transient local (a late subscriber gets it at once).
+        qos: the QoS of the topics by role (:meth:`NodeTopics.resolved`'s keys; :func:`~.qos.node_qos`), over
+            :func:`~.qos.default_qos`.
     """
 
     def __init__(
@@ -240,6 +130,7 @@ class DepthNode:
         publish: frozenset[str] = frozenset(ROS_TYPES),
         cloud_stride: int = CLOUD_STRIDE,
         latch_camera_info: bool = False,
+        qos: Mapping[str, QoS] | None = None,
     ) -> None:
         self.transport = transport
         self.completer = completer
@@ -248,6 +139,7 @@ class DepthNode:
         self.names = (topics or NodeTopics()).resolved(namespace, node)
         self.report_s = report_s
         self.say = say
+        self.qos = {**default_qos(latch_camera_info), **(qos or {})}
         self.inputs = PairingInputs(self.names, self._put, compressed, sparse, max_skew_ns)
         self.publisher = RosPublishSink(
             transport,
@@ -258,6 +150,7 @@ class DepthNode:
             cloud_stride=cloud_stride,
             latch_camera_info=latch_camera_info,
             uncertainty=gives_uncertainty(completer),
+            qos={role: self.qos[f"out:{role}"] for role in ROS_TYPES},
         )
         self.sinks: list[Sink] = [self.publisher, *sinks]
         self.run = LiveRun()
@@ -282,19 +175,21 @@ class DepthNode:
 
     def start(self) -> DepthNode:
         """Advertise the outputs and subscribe the inputs."""
-        t, n, inp = self.transport, self.names, self.inputs
+        inp = self.inputs
         self.publisher.advertise()
         self.diagnostics.advertise()
         image_type = "sensor_msgs/msg/CompressedImage" if inp.compressed else "sensor_msgs/msg/Image"
-        t.subscribe(n["image"], image_type, SENSOR_QOS, inp.on_image)
-        scan_type = "sensor_msgs/msg/Image" if inp.sparse else "sensor_msgs/msg/PointCloud2"
-        t.subscribe(n["scan"], scan_type, SENSOR_QOS, inp.on_scan)
+        self._subscribe("image", image_type, inp.on_image)
+        self._subscribe("scan", "sensor_msgs/msg/Image" if inp.sparse else "sensor_msgs/msg/PointCloud2", inp.on_scan)
         if self.rig is None:
-            t.subscribe(n["camera_info"], "sensor_msgs/msg/CameraInfo", SENSOR_QOS, inp.on_camera_info)
+            self._subscribe("camera_info", "sensor_msgs/msg/CameraInfo", inp.on_camera_info)
             if not inp.sparse:
-                t.subscribe(n["tf_static"], "tf2_msgs/msg/TFMessage", TF_STATIC_QOS, inp.on_tf_static)
-                t.subscribe(n["tf"], "tf2_msgs/msg/TFMessage", TF_QOS, inp.on_tf)
+                self._subscribe("tf_static", "tf2_msgs/msg/TFMessage", inp.on_tf_static)
+                self._subscribe("tf", "tf2_msgs/msg/TFMessage", inp.on_tf)
         return self
+
+    def _subscribe(self, role: str, msgtype: str, callback: Callable[[object], None]) -> None:
+        self.transport.subscribe(self.names[role], msgtype, self.qos[role], callback)
 
     def _put(self, pair: Pair) -> None:
         """The single slot: a newer pair replaces one still waiting (a note of it for the loop, which counts it)."""
