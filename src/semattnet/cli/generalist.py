@@ -14,10 +14,16 @@ from semattnet.cli._options import BATCH_SIZE, COUNT, LEARNING_RATE, POSITIVE_IN
 @click.option(
     "--model",
     type=click.Choice(
-        ["semattnet_rt_generalist", "semattnet_rt_half_generalist", "semattnet_rt_l_generalist", "semattnet_generalist"]
+        [
+            "semattnet_rt_generalist",
+            "semattnet_rt_half_generalist",
+            "semattnet_rt_l_generalist",
+            "semattnet_generalist",
+            "semattnet_half_generalist",
+        ]
     ),
     default="semattnet_rt_generalist",
-    help="The generalist to train: the real-time variant or the paper's model.",
+    help="The generalist to train: a real-time variant or the paper's model (half: its network at half resolution).",
 )
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True, help="The run's folder.")
 @click.option(

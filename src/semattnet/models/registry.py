@@ -110,6 +110,11 @@ _SPECS = (
         SemAttNetConfig(width=0.125, anchor="classical"),
     ),
     ModelSpec(
+        "semattnet_half_generalist",
+        "Generalist: semattnet_generalist whose network works at half resolution (its anchor at full)",
+        SemAttNetConfig(width=0.125, anchor="classical", work_scale=2),
+    ),
+    ModelSpec(
         "semattnet_rt_generalist",
         "Generalist: semattnet_rt_md, scale-free, correcting the classical completion (models.generalist)",
         SemAttNetConfig(
