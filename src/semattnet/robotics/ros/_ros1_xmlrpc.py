@@ -162,6 +162,7 @@ class SlaveServer(socketserver.ThreadingMixIn, SimpleXMLRPCServer):
 
     daemon_threads = True
     block_on_close = False
+    request_queue_size = 64  # a burst of callers waits in the kernel's queue, not in SYN retries
 
     def __init__(self, host: str, timeout: float) -> None:
         handler = type("_TimedSlaveHandler", (_SlaveHandler,), {"timeout": timeout})
