@@ -9,6 +9,10 @@ The names below are the stable public API; :func:`from_pretrained` is the one lo
 :mod:`semattnet.weights`).
 """
 
+# first, before anything imports torch: a Ctrl-C while the command line starts is one line, not a traceback
+from semattnet import _startup  # noqa: F401
+
+# isort: split
 # robotics: enrols the bag source and the robot sinks; _moved: the synthetic scenes' old paths (deprecated until 0.3)
 from semattnet import _moved, palette, robotics  # noqa: F401
 from semattnet._errors import DataError, InputError, MissingDependencyError, SemAttNetError

@@ -107,3 +107,28 @@ def test_a_kept_depth_swapped_for_a_link_after_its_check_is_never_read_back(
     assert np.array_equal(plan.journal.stored_depth("f0", "f0.png"), mine)
     with pytest.raises(journal.ResumeError, match="f0.png: changed or replaced while the resume ran"):
         plan.journal.stored_depth("f0", "f0.png")  # the link is there now: refused, not followed
+
+
+def test_overwrite_of_a_600_mb_journal_is_refused_in_one_line_without_reading_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--overwrite`` keeps the journal it replaces (to put back if the run fails): one too large for the run is
+    refused, naming it, before a byte of it is read, and left as it was."""
+    source, out = _frames(tmp_path), tmp_path / "out"
+    _run(source, out)
+    big = out / "frames.json"
+    with big.open("r+b") as f:
+        f.truncate(600 * 2**20)  # sparse: no disk used
+    read = Path.open
+
+    def guarded(path: Path, mode: str = "r", *args: Any, **kwargs: Any) -> Any:
+        assert path != big or "r" not in mode or "+" in mode, "the oversized journal was opened for reading"
+        return read(path, mode, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "open", guarded)
+    monkeypatch.setattr(Path, "read_bytes", lambda path: pytest.fail(f"{path} read whole"))
+    with pytest.raises(journal.ResumeError) as info:
+        check_frames(source, default_sinks(), out, OutputSpec(overwrite=True))
+    message = str(info.value)
+    assert "\n" not in message and str(big) in message and "not read" in message, message
+    assert os.path.getsize(big) == 600 * 2**20  # left as it was

@@ -12,6 +12,7 @@ from typing import Any
 import click
 
 from semattnet._errors import SemAttNetError
+from semattnet._startup import restore_interrupts
 from semattnet._utils.version import __version__
 
 #: What to do about an operating-system error, by errno.
@@ -95,6 +96,11 @@ class _Group(click.Group):
 
     command_class = Command
     group_class = type  # subgroups (``data``, ``weights``) are of this class too
+
+    def main(self, *args: Any, **kwargs: Any) -> Any:
+        """Python's SIGINT handler back (:mod:`semattnet._startup`), then the command."""
+        restore_interrupts()
+        return super().main(*args, **kwargs)
 
     def invoke(self, ctx: click.Context) -> Any:
         try:

@@ -8,7 +8,10 @@ as their sink entries declare them; the node is :class:`semattnet.robotics.ros.n
 
 from __future__ import annotations
 
+import functools
+import logging
 import os
+import signal
 import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -326,10 +329,13 @@ def _run(params: dict[str, object], transport: Callable[[], Transport]) -> None:
     maps = Maps(None, params["segment_spec"], str(params["palette_mismatch"]))  # type: ignore[arg-type]
     completer = model.completer()
     node = options.node(completer, maps.semantic_maps(folder=False).bind(completer), transport)
-    if run_node(node, options.frames):  # a frame abandoned mid-model: end now, not when the model returns
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(0)
+    run_node(node, options.frames)
+    # End now: not when an abandoned frame's model returns, nor after the seconds torch takes to tear down (the
+    # node ends within 2 s of SIGINT / SIGTERM); the node, its viewers and its transport are closed already.
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
 
 
 @main.command(cls=RosNodeCommand, generated=[("frames", viewer_options)])
@@ -379,6 +385,8 @@ def ros1(**params: object) -> None:
 
         # The node's ROS 1 name is in its namespace: two robots' nodes on one master must not share a name.
         name = check_namespace(str(params["namespace"])) + "/" + str(params["node_name"]).strip("/")
-        return TcprosTransport(master, node_name=name, host=None if host is None else str(host))
+        # A peer's shutdown call (rosnode kill; roscore on a name clash) stops the node as SIGTERM does: exit 0
+        stop = functools.partial(signal.raise_signal, signal.SIGTERM)
+        return TcprosTransport(master, node_name=name, host=None if host is None else str(host), on_shutdown=stop)
 
     _run(params, tcpros)

@@ -126,11 +126,8 @@ def _rank_file(rank: int) -> str:
 
 
 def _what(mode: int) -> str:
-    if stat.S_ISDIR(mode):
-        return "a folder"
-    if stat.S_ISLNK(mode):
-        return "a symbolic link"
-    return "a FIFO" if stat.S_ISFIFO(mode) else "a special file"
+    kinds = ((stat.S_ISDIR, "a folder"), (stat.S_ISLNK, "a symbolic link"), (stat.S_ISFIFO, "a FIFO"))
+    return next((name for test, name in kinds if test(mode)), "a special file")
 
 
 def _read(path: Path, limit: int = MAX_JOURNAL_BYTES) -> _Journal | None:
@@ -139,31 +136,36 @@ def _read(path: Path, limit: int = MAX_JOURNAL_BYTES) -> _Journal | None:
     naming the file."""
     try:
         st = path.lstat()
-        mode = st.st_mode
     except FileNotFoundError:
         return None
     except OSError as exc:
         raise ResumeError(f"{path}: cannot be read ({exc.strerror}); fix it or choose a new --out") from None
-    if not stat.S_ISREG(mode):
+    if not stat.S_ISREG(st.st_mode):
         raise ResumeError(
-            f"{path} is {_what(mode)}, not a frames journal semattnet wrote; move it away or choose a new --out"
-        )
-    if st.st_size > limit:
-        raise ResumeError(
-            f"{path}: {st.st_size} bytes, more than a frames journal of this run can hold ({limit} bytes at most); "
-            "not read: move it away or choose a new --out"
+            f"{path} is {_what(st.st_mode)}, not a frames journal semattnet wrote; move it away or choose a new --out"
         )
     try:
-        with path.open("rb") as f:
-            text = f.read(limit + 1)  # the file may have grown since: never more than the limit
-        doc = json.loads(text) if len(text) <= limit else None
+        doc = json.loads(_bounded_bytes(path, st.st_size, limit))
     except RecursionError:
         raise ResumeError(f"{path}: not a frames journal (its JSON is nested too deeply); choose a new --out") from None
     except (OSError, ValueError) as exc:
         raise ResumeError(f"{path}: not a readable frames journal ({exc}); start a new --out") from None
-    if len(text) > limit:
-        raise ResumeError(f"{path}: grew past {limit} bytes while it was read; not read: choose a new --out")
     return _checked(path, doc)
+
+
+def _bounded_bytes(path: Path, size: int, limit: int) -> bytes:
+    """The bytes of ``path`` (``size``: its size by ``lstat``), judged by its size before any is read: a file over
+    ``limit`` bytes (or grown past it while read) is a one-line :class:`ResumeError` naming it."""
+    if size > limit:
+        raise ResumeError(
+            f"{path}: {size} bytes, more than a frames journal of this run can hold ({limit} bytes at most); "
+            "not read: move it away or choose a new --out"
+        )
+    with path.open("rb") as f:
+        data = f.read(limit + 1)  # the file may have grown since: never more than the limit
+    if len(data) > limit:
+        raise ResumeError(f"{path}: grew past {limit} bytes while it was read; not read: choose a new --out")
+    return data
 
 
 def _damaged(path: Path, field: str, what: str) -> ResumeError:
@@ -320,9 +322,12 @@ class RunJournal:
         return self.out / (FRAMES_FILE if self.world == 1 else _rank_file(self.rank))
 
     def _snapshot(self) -> bytes | None:
-        """The bytes of the journal this process would replace (a regular file), to put back by :meth:`restore`."""
+        """The journal this process would replace (a regular file, judged by its size first), for :meth:`restore`."""
         try:
-            return self.path.read_bytes() if stat.S_ISREG(self.path.lstat().st_mode) else None
+            st = self.path.lstat()
+            if not stat.S_ISREG(st.st_mode):
+                return None
+            return _bounded_bytes(self.path, st.st_size, MAX_JOURNAL_BYTES + MAX_BYTES_PER_FRAME * len(self.names))
         except OSError:
             return None
 

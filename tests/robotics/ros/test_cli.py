@@ -59,7 +59,7 @@ def test_ros1_node_name_is_in_its_namespace(monkeypatch: pytest.MonkeyPatch) -> 
 
     names: list[str] = []
 
-    def transport(master: str, node_name: str, host: str | None = None) -> None:
+    def transport(master: str, node_name: str, host: str | None = None, **kwargs: object) -> None:
         names.append(node_name)
         raise InputError("stop here")
 

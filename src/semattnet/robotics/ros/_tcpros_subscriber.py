@@ -6,22 +6,24 @@ from __future__ import annotations
 import logging
 import socket
 import threading
-import xmlrpc.client
+import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Protocol
 
+from semattnet._errors import SemAttNetError
+
+from ._ros1_xmlrpc import xmlrpc_call
 from ._tcpros_wire import (
     CONNECTION_IDS,
     MAX_PEERS,
-    POLL_S,
     TcprosError,
     check_http_uri,
+    connect,
     connection_info,
     encode_header,
     read_header,
     read_wire_frame,
     shutdown_socket,
-    xmlrpc_call,
 )
 from .ros1_types import ros1_type_name
 
@@ -49,21 +51,19 @@ class Inbound:
         sub = self.sub
         check_http_uri(self.uri, f"{sub.topic}: publisher URI")
         code, status, proto = xmlrpc_call(
-            self.uri, "requestTopic", sub.caller_id, sub.topic, [["TCPROS"]], timeout=sub.timeout
+            self.uri, "requestTopic", sub.caller_id, sub.topic, [["TCPROS"]], timeout=sub.timeout, stop=self.stop
         )
         if code != 1 or not isinstance(proto, list) or len(proto) != 3 or proto[0] != "TCPROS":
-            raise TcprosError(f"requestTopic refused or not TCPROS ({status!r})")
-        if not isinstance(proto[1], str) or not isinstance(proto[2], int):
-            raise TcprosError(f"requestTopic: {proto[1:]!r} is not a host and a port")
-        sock = socket.create_connection((proto[1], proto[2]), timeout=sub.timeout)
-        self.sock = sock
+            raise TcprosError(f"requestTopic refused or not TCPROS ({str(status)[:80]!r})")
+        if not isinstance(proto[1], str) or not isinstance(proto[2], int) or isinstance(proto[2], bool):
+            raise TcprosError(f"requestTopic: {str(proto[1:])[:80]!r} is not a host and a port")
+        sock = self.sock = connect(proto[1], proto[2], time.monotonic() + sub.timeout, self.stop)
         sock.sendall(encode_header(sub.fields))
-        reply = read_header(sock)
+        reply = read_header(sock, sub.timeout, self.stop)
         if "error" in reply:
             raise TcprosError(f"the publisher refused the connection: {reply['error']!r}")
         if reply.get("md5sum") not in (sub.md5sum, "*"):
             raise TcprosError(f"md5sum {reply.get('md5sum')!r} is not {sub.md5sum} ({ros1_type_name(sub.msgtype)})")
-        sock.settimeout(POLL_S)
         self.connection = (next(CONNECTION_IDS), connection_info(sock))
         return sock
 
@@ -74,26 +74,29 @@ class Inbound:
             try:
                 sock = self._connect()
                 attempt = 0
-                while (frame := read_wire_frame(sock, self.sub.max_message_bytes, self.stop)) is not None:
+                limit, timeout = self.sub.max_message_bytes, self.sub.timeout
+                while (frame := read_wire_frame(sock, limit, self.stop, timeout)) is not None:
                     self.sub.deliver(frame)
                 if not self.stop.is_set():
                     _log.info("%s: publisher %r closed the connection; reconnecting", self.sub.topic, self.uri)
-            except (TcprosError, OSError, xmlrpc.client.Error) as exc:
-                if not self.stop.is_set():  # one line per outage; the retries after it are debug lines
-                    level = logging.WARNING if attempt == 0 else logging.DEBUG
-                    _log.log(
-                        level,
-                        "%s: publisher %r: %s (retrying while the master lists it)",
-                        self.sub.topic,
-                        self.uri,
-                        exc,
-                    )
+            except (SemAttNetError, OSError) as exc:  # TcprosError, or a URI without a port (InputError)
+                self._said(exc, attempt)
+                attempt += 1
+            except Exception as exc:  # never a traceback from this thread, whatever the peer sent
+                self._said(TcprosError(f"{type(exc).__name__}: {str(exc)[:200]}"), attempt)
                 attempt += 1
             finally:
                 self.connection = None
                 if self.sock is not None:
                     self.sock.close()
             self.stop.wait(_RETRY_S[min(attempt, len(_RETRY_S) - 1)])
+
+    def _said(self, exc: BaseException, attempt: int) -> None:
+        """One line per outage (the publisher dropped, reconnected through requestTopic); retries are debug lines."""
+        if not self.stop.is_set():
+            level = logging.WARNING if attempt == 0 else logging.DEBUG
+            topic, uri = self.sub.topic, self.uri
+            _log.log(level, "%s: publisher %r dropped: %s (reconnecting while the master lists it)", topic, uri, exc)
 
     def abort(self) -> None:
         """Stop receiving and unblock the thread."""

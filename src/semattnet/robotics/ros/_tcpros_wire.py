@@ -1,24 +1,25 @@
-"""The ROS 1 wire, bounded: TCPROS connection headers and frames, and XML-RPC with size and time limits.
+"""The ROS 1 wire, bounded: TCPROS connection headers and frames with size limits and per-call deadlines.
 
-Everything a peer sends passes through here first: a header or frame longer than its limit, a socket
-that stalls past its timeout or an XML-RPC document over :data:`MAX_XMLRPC_BYTES` is a
-:class:`TcprosError` (one line), never an unbounded allocation or a blocked thread.
+Everything a peer sends over TCPROS passes through here first: a header or frame longer than its limit, or one
+that is not whole by its deadline (however slowly the peer drips its bytes), is a :class:`TcprosError` (one
+line), never an unbounded allocation or a blocked thread; every wait also polls the transport's stop event.
+The XML-RPC side is :mod:`._ros1_xmlrpc`.
 """
 
 from __future__ import annotations
 
-import http.client
+import errno
 import itertools
 import logging
+import os
+import selectors
 import socket
 import struct
 import threading
-import xmlrpc.client
+import time
 from collections import deque
 from collections.abc import Mapping
-from typing import Any
 from urllib.parse import urlsplit
-from xmlrpc.server import SimpleXMLRPCRequestHandler, SimpleXMLRPCServer
 
 from semattnet._errors import DataError, InputError
 
@@ -26,32 +27,35 @@ __all__ = [
     "CONNECTION_IDS",
     "MAX_HEADER_BYTES",
     "MAX_PEERS",
-    "MAX_XMLRPC_BYTES",
+    "MIN_RATE",
     "POLL_S",
     "Outbox",
-    "SlaveServer",
     "TcprosError",
     "check_http_uri",
+    "connect",
     "connection_info",
     "decode_header",
     "encode_header",
     "read_header",
     "read_wire_frame",
+    "recv_exact",
     "shutdown_socket",
-    "xmlrpc_call",
 ]
 
 _log = logging.getLogger(__name__)
 
 #: The longest TCPROS connection header accepted (the largest message definitions are a few tens of KB).
 MAX_HEADER_BYTES = 1 << 20
-#: The longest XML-RPC request or response accepted (ROS's are a few KB).
-MAX_XMLRPC_BYTES = 1 << 20
+#: The slowest a message may arrive once its first byte has (bytes a second): a message of N bytes has the
+#: transport's timeout plus N / MIN_RATE seconds to arrive whole, or its publisher is dropped as stalled.
+MIN_RATE = 1 << 20
 _LEN = struct.Struct("<I")
 #: At most this many connections per topic (subscribers of a publisher, publishers of a subscription).
 MAX_PEERS = 64
 #: How often waiting threads look whether the transport stops, seconds.
 POLL_S = 0.1
+#: What a non-blocking connect says while it is under way.
+_PENDING = (errno.EINPROGRESS, errno.EALREADY, errno.EAGAIN)
 #: Connection ids of this process, as rospy numbers its connections for ``getBusInfo`` (from 1).
 CONNECTION_IDS = itertools.count(1)
 
@@ -108,21 +112,24 @@ def decode_header(block: bytes) -> dict[str, str]:
     return fields
 
 
-def _recv_exact(sock: socket.socket, size: int, stop: threading.Event | None) -> bytes | None:
+def recv_exact(sock: socket.socket, size: int, stop: threading.Event | None, deadline: float | None) -> bytes | None:
     """``size`` bytes from ``sock``; None when the peer closed before the first byte, or ``stop`` is set.
 
-    With ``stop``, a socket timeout only polls it (the socket's timeout is the poll period); without,
-    a timeout is a :class:`TcprosError`.
+    ``deadline`` (``time.monotonic()``) bounds the whole read, however the peer paces its bytes (None: a peer
+    may stay silent for ever, as a publisher between messages); past it, a :class:`TcprosError`. Each wait is
+    at most :data:`POLL_S`, so ``stop`` is seen within that.
     """
     chunks = bytearray()
     while len(chunks) < size:
         if stop is not None and stop.is_set():
             return None
+        left = POLL_S if deadline is None else deadline - time.monotonic()
+        if left <= 0:
+            raise TcprosError(f"peer sent {len(chunks)} of {size} bytes by the deadline (stalled)")
+        sock.settimeout(min(left, POLL_S))
         try:
             chunk = sock.recv(min(size - len(chunks), 1 << 20))
         except TimeoutError:
-            if stop is None:
-                raise TcprosError(f"peer sent {len(chunks)} of {size} bytes before the timeout") from None
             continue
         if not chunk:
             if chunks:
@@ -132,114 +139,78 @@ def _recv_exact(sock: socket.socket, size: int, stop: threading.Event | None) ->
     return bytes(chunks)
 
 
-def _read_block(sock: socket.socket, limit: int, what: str, stop: threading.Event | None) -> bytes | None:
-    """One length-prefixed block of at most ``limit`` bytes; None at a clean end of stream."""
-    prefix = _recv_exact(sock, 4, stop)
+def _read_block(
+    sock: socket.socket, limit: int, what: str, stop: threading.Event | None, deadline: float | None
+) -> bytes | None:
+    """One length-prefixed block of at most ``limit`` bytes by ``deadline``; None at a clean end of stream."""
+    prefix = recv_exact(sock, 4, stop, deadline)
     if prefix is None:
         return None
     (size,) = _LEN.unpack(prefix)
     if size > limit:
         raise TcprosError(f"{what} of {size} bytes is over the limit of {limit} bytes")
-    body = _recv_exact(sock, size, stop)
+    body = recv_exact(sock, size, stop, deadline)
     if body is None:
+        if stop is not None and stop.is_set():
+            return None
         raise TcprosError(f"peer closed the connection before the {what}'s {size} bytes")
     return body
 
 
-def read_header(sock: socket.socket) -> dict[str, str]:
-    """Read one connection header (the socket's timeout bounds the wait); a closed peer is a :class:`TcprosError`."""
-    block = _read_block(sock, MAX_HEADER_BYTES, "connection header", None)
+def read_header(sock: socket.socket, timeout: float, stop: threading.Event | None = None) -> dict[str, str]:
+    """Read one connection header, whole within ``timeout`` seconds; a closed peer is a :class:`TcprosError`."""
+    block = _read_block(sock, MAX_HEADER_BYTES, "connection header", stop, time.monotonic() + timeout)
     if block is None:
         raise TcprosError("peer closed the connection before its header")
     return decode_header(block)
 
 
-def read_wire_frame(sock: socket.socket, limit: int, stop: threading.Event) -> bytes | None:
-    """One serialised message of at most ``limit`` bytes; None when the peer closed or ``stop`` is set."""
-    return _read_block(sock, limit, "message", stop)
+def read_wire_frame(sock: socket.socket, limit: int, stop: threading.Event, timeout: float) -> bytes | None:
+    """One serialised message of at most ``limit`` bytes; None when the peer closed or ``stop`` is set. The
+    wait for its first byte is unbounded; from there it must be whole within ``timeout`` plus its size at
+    :data:`MIN_RATE` (a publisher that stalls mid-message is a :class:`TcprosError`)."""
+    first = recv_exact(sock, 1, stop, None)
+    if first is None:
+        return None
+    start = time.monotonic()
+    rest = recv_exact(sock, 3, stop, start + timeout)
+    if rest is None:
+        return None
+    (size,) = _LEN.unpack(first + rest)
+    if size > limit:
+        raise TcprosError(f"message of {size} bytes is over the limit of {limit} bytes")
+    body = recv_exact(sock, size, stop, start + timeout + size / MIN_RATE)
+    if body is None and not stop.is_set():
+        raise TcprosError(f"peer closed the connection before the message's {size} bytes")
+    return body
 
 
-class _BoundedTransport(xmlrpc.client.Transport):
-    """xmlrpc.client's HTTP transport with a connect/read timeout and a cap on the response's size."""
-
-    def __init__(self, timeout: float) -> None:
-        super().__init__()
-        self._timeout = timeout
-
-    def make_connection(self, host: str | tuple[str, dict[str, str]]) -> http.client.HTTPConnection:
-        conn = super().make_connection(host)
-        conn.timeout = self._timeout
-        return conn
-
-    def parse_response(self, response: http.client.HTTPResponse) -> tuple[Any, ...]:  # XML-RPC values
-        body = response.read(MAX_XMLRPC_BYTES + 1)
-        if len(body) > MAX_XMLRPC_BYTES:
-            raise TcprosError(f"XML-RPC response over {MAX_XMLRPC_BYTES} bytes")
-        parser, unmarshaller = self.getparser()
-        parser.feed(body)
-        parser.close()
-        return unmarshaller.close()
-
-
-def xmlrpc_call(uri: str, method: str, *args: object, timeout: float) -> list[object]:
-    """Call ``method`` on the XML-RPC server at ``uri``; ROS's ``[code, status, value]`` reply, checked for shape.
-
-    Raises :class:`TcprosError` for a reply that is not a 3-list, ``OSError`` for a network failure and
-    ``xmlrpc.client.Error`` for an HTTP or XML-RPC fault.
-    """
-    with xmlrpc.client.ServerProxy(uri, transport=_BoundedTransport(timeout)) as proxy:
-        reply = getattr(proxy, method)(*args)
-    if not isinstance(reply, list) or len(reply) != 3 or not isinstance(reply[0], int):
-        raise TcprosError(f"{uri} {method}: the reply is not [code, status, value]")
-    return reply
-
-
-class _SlaveHandler(SimpleXMLRPCRequestHandler):
-    """One XML-RPC request: bounded in time (``timeout``) and size (a missing or large Content-Length is refused)."""
-
-    timeout = 5.0
-    rpc_paths = ("/", "/RPC2")
-
-    def do_POST(self) -> None:
-        try:
-            size = int(self.headers.get("content-length", ""))
-        except ValueError:
-            size = -1
-        if not 0 <= size <= MAX_XMLRPC_BYTES or self.headers.get("content-encoding"):
-            self.send_response(413)
-            self.send_header("Content-length", "0")
-            self.end_headers()
-            return
-        super().do_POST()
-
-    def log_message(self, format: str, *args: object) -> None:
-        """Quiet: the base class writes every request to stderr."""
-
-
-class SlaveServer(SimpleXMLRPCServer):
-    """The node's XML-RPC API (``requestTopic``, ``publisherUpdate``, ...), one request at a time, each bounded."""
-
-    def __init__(self, host: str, timeout: float) -> None:
-        handler = type("_TimedSlaveHandler", (_SlaveHandler,), {"timeout": timeout})
-        super().__init__((host, 0), requestHandler=handler, logRequests=False, allow_none=False)
-        self._thread = threading.Thread(target=self.serve_forever, kwargs={"poll_interval": 0.1}, daemon=True)
-
-    @property
-    def port(self) -> int:
-        """The TCP port it listens on."""
-        return int(self.server_address[1])
-
-    def start(self) -> None:
-        """Serve from a thread of its own."""
-        self._thread.name = f"tcpros-xmlrpc-{self.server_address[1]}"
-        self._thread.start()
-
-    def stop(self, timeout: float) -> None:
-        """Stop serving and close the socket (waits at most for the request in progress)."""
-        if self._thread.is_alive():
-            self.shutdown()
-            self._thread.join(timeout)
-        self.server_close()
+def connect(host: str, port: int, deadline: float, stop: threading.Event | None = None) -> socket.socket:
+    """A TCP connection to ``host:port`` made by ``deadline`` (``time.monotonic()``), given up as soon as ``stop``
+    is set; a :class:`TcprosError` (one line) for a port out of range, a refusal or the deadline."""
+    if not 0 < port < 65536:
+        raise TcprosError(f"port {port} is not a TCP port")
+    try:
+        family, kind, proto, _, address = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0]
+    except (OSError, UnicodeError, ValueError) as exc:
+        raise TcprosError(f"cannot resolve {host!r} ({exc})") from None
+    sock = socket.socket(family, kind, proto)
+    try:
+        sock.setblocking(False)
+        err = sock.connect_ex(address)
+        with selectors.DefaultSelector() as selector:
+            selector.register(sock, selectors.EVENT_WRITE)
+            while err in _PENDING and not selector.select(POLL_S):
+                if (stop is not None and stop.is_set()) or time.monotonic() > deadline:
+                    raise TcprosError(f"no connection to {host}:{port} by the deadline")
+            err = sock.getsockopt(socket.SOL_SOCKET, socket.SO_ERROR) if err else 0
+        if err:
+            raise TcprosError(f"cannot connect to {host}:{port} ({os.strerror(err)})")
+    except BaseException:
+        sock.close()
+        raise
+    sock.settimeout(max(deadline - time.monotonic(), POLL_S))  # a send's bound; reads set their own
+    return sock
 
 
 class Outbox:

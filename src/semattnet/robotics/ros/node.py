@@ -361,14 +361,14 @@ def run_node(node: DepthNode, frames: int | None = None, grace_s: float = STOP_G
             previous[sig] = signal.signal(sig, lambda *_: stop.set())
     errors: list[BaseException] = []
 
-    def work() -> None:
+    def work() -> None:  # the start too: a master that answers slowly never holds a signal
         try:
+            node.start()
             node.spin(stop, frames)
         except BaseException as exc:  # raised in the caller's thread below
             errors.append(exc)
 
     try:
-        node.start()
         worker = threading.Thread(target=work, name="semattnet-node-loop", daemon=True)
         worker.start()
         while worker.is_alive() and not stop.wait(0.1):
@@ -376,7 +376,8 @@ def run_node(node: DepthNode, frames: int | None = None, grace_s: float = STOP_G
         worker.join(grace_s)
         if worker.is_alive():
             frame = node.in_hand()
-            node.say(f"stopped mid-frame: frame {frame or '(none)'} abandoned after {grace_s:g} s")
+            said = f"mid-frame: frame {frame} abandoned" if frame else "while starting: the start abandoned"
+            node.say(f"stopped {said} after {grace_s:g} s")
             node.abandon()
             return True
         if errors:

@@ -7,11 +7,13 @@ md5sum and message definition) and then carry 4-byte length-prefixed ROS 1 seria
 messages are ``rosbags`` objects of the ROS 1 Noetic type store (:attr:`TcprosTransport.typestore`);
 objects of a ROS 2 store are converted field by field (a missing ``Header.seq`` is 0).
 
-Bounded: every connect, handshake and XML-RPC call has a timeout; each subscriber connection has its
-own send queue of the QoS depth that drops the oldest message (a slow subscriber never blocks
-:meth:`TcprosPublisher.publish`); headers, frames and XML-RPC documents have size limits; at most
-:data:`MAX_PEERS` connections per topic. A malformed handshake or message is one logged line naming the
-topic, and :meth:`TcprosTransport.close` ends every thread and socket within a few timeouts. A
+Bounded: every connect, handshake, message and XML-RPC call has a deadline (however slowly a peer drips its
+bytes; a publisher that stalls mid-message is dropped and reconnected) and every wait polls the stop event;
+each subscriber connection has its own send queue of the QoS depth that drops the oldest message (a slow
+subscriber never blocks :meth:`TcprosPublisher.publish`); headers, frames and XML-RPC documents have size
+limits; at most :data:`MAX_PEERS` connections per topic. A malformed handshake or message, or a hostile peer's
+reply, is one logged line naming the topic, and :meth:`TcprosTransport.close` ends every thread and socket
+within about a second (:data:`UNREGISTER_S` for the master, :data:`JOIN_S` for the threads). A
 subscriber reconnects to a publisher whose connection dropped (with backoff) while the master lists it;
 ``subscribe``'s callback runs on that connection's thread.
 
@@ -33,7 +35,6 @@ import socket
 import struct
 import threading
 import time
-import xmlrpc.client
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, cast
 
@@ -43,19 +44,18 @@ if TYPE_CHECKING:
     from _typeshed import DataclassInstance
 
 from ..bags.deps import rosbags_typestore
+from ._ros1_xmlrpc import SlaveServer, xmlrpc_call
 from ._tcpros_subscriber import Subscription
 from ._tcpros_wire import (
     CONNECTION_IDS,
     MAX_PEERS,
     POLL_S,
     Outbox,
-    SlaveServer,
     TcprosError,
     check_http_uri,
     connection_info,
     encode_header,
     read_header,
-    xmlrpc_call,
 )
 from .ros1_types import Ros1Store, adopt_message, ros1_type_name, store_type_name
 from .transport import QoS
@@ -74,6 +74,10 @@ _log = logging.getLogger(__name__)
 
 #: The longest message accepted from a publisher (a 4K 32FC1 image is 33 MB).
 DEFAULT_MAX_MESSAGE_BYTES = 1 << 28
+#: Seconds :meth:`TcprosTransport.close` gives the master, all unregister calls together (SIGINT ends the node
+#: within 2 s whatever the master does), and then the transport's threads.
+UNREGISTER_S = 0.5
+JOIN_S = 0.5
 _LEN = struct.Struct("<I")
 _NAME = re.compile(r"/[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*")
 _MISSING = object()
@@ -181,7 +185,8 @@ class TcprosTransport:
 
     ``master_uri`` is the ROS master (``ROS_MASTER_URI``), ``node_name`` the node's caller id,
     ``host`` the address peers reach this node at (default ``ROS_IP``, else ``ROS_HOSTNAME``, else
-    127.0.0.1); ``timeout`` bounds each connect, handshake and XML-RPC call. The master must be
+    127.0.0.1); ``timeout`` bounds each connect, handshake and XML-RPC call, whole (a deadline, not a
+    read's timeout); ``on_shutdown`` is called when a peer calls ``shutdown``. The master must be
     reachable: the constructor checks it.
     """
 
@@ -195,8 +200,10 @@ class TcprosTransport:
         *,
         timeout: float = 5.0,
         max_message_bytes: int = DEFAULT_MAX_MESSAGE_BYTES,
+        on_shutdown: Callable[[], object] | None = None,
     ) -> None:
         check_http_uri(master_uri, "ROS master URI")
+        self.on_shutdown = on_shutdown
         self.node_name = "/" + node_name.strip("/")
         if not _NAME.fullmatch(self.node_name):
             raise InputError(f"ROS node name {node_name!r}: expected letters, digits, '_' and '/'")
@@ -275,12 +282,12 @@ class TcprosTransport:
             return
         self._unregister_all()
         self._stop.set()
-        self._slave.stop(self.timeout)
+        self._slave.stop()
         for publisher in self._publishers.values():
             publisher.abort()
         for subscription in self._subscriptions.values():
             subscription.abort()
-        deadline = time.monotonic() + self.timeout + 1.0
+        deadline = time.monotonic() + JOIN_S  # every wait polls the stop event: they end within POLL_S
         with self._lock:
             threads = list(self._threads)
         for thread in threads:
@@ -309,21 +316,38 @@ class TcprosTransport:
     def _master(self, method: str, *args: object) -> object:
         """Call the master as this node: its value, or a :class:`TcprosError` (unreachable, or a failure code)."""
         try:
-            code, status, value = xmlrpc_call(self.master_uri, method, self.node_name, *args, timeout=self.timeout)
-        except (OSError, xmlrpc.client.Error) as exc:
+            code, status, value = xmlrpc_call(
+                self.master_uri, method, self.node_name, *args, timeout=self.timeout, stop=self._stop
+            )
+        except TcprosError as exc:
             raise TcprosError(f"ROS master {self.master_uri} {method}: {exc}") from None
         if code != 1:
             raise TcprosError(f"ROS master {self.master_uri} {method}: {status!r}")
         return value
 
     def _unregister_all(self) -> None:
+        """Unregister every topic within :data:`UNREGISTER_S` in all; a master too slow for that is one line."""
         calls = [("unregisterPublisher", t) for t in self._publishers]
         calls += [("unregisterSubscriber", t) for t in self._subscriptions]
-        for method, topic in calls:
-            try:
-                xmlrpc_call(self.master_uri, method, self.node_name, topic, self.uri, timeout=min(self.timeout, 2.0))
-            except (TcprosError, OSError, xmlrpc.client.Error) as exc:
-                _log.info("%s: %s failed (%s)", topic, method, exc)
+        deadline = time.monotonic() + UNREGISTER_S
+        for done, (method, topic) in enumerate(calls):
+            left = deadline - time.monotonic()
+            if left > 0:
+                try:
+                    xmlrpc_call(self.master_uri, method, self.node_name, topic, self.uri, timeout=left)
+                    continue
+                except TcprosError as exc:
+                    if time.monotonic() < deadline:
+                        _log.info("%s: %s failed (%s)", topic, method, exc)
+                        continue
+            _log.warning(
+                "ROS master %s: no answer to unregister within %g s; %d topic(s) left registered (the master drops "
+                "them when it next finds this node gone)",
+                self.master_uri,
+                UNREGISTER_S,
+                len(calls) - done,
+            )
+            return
 
     def _track(self, thread: threading.Thread) -> None:
         """Start ``thread`` and remember it for close (forgetting finished ones)."""
@@ -351,7 +375,8 @@ class TcprosTransport:
         """A subscriber's connection: the handshake (bounded, checked), then its outbox until it ends."""
         sock.settimeout(self.timeout)
         try:
-            request = read_header(sock)
+            request = read_header(sock, self.timeout, self._stop)
+            sock.settimeout(self.timeout)  # each send's bound from here
             publisher = self._publishers.get(request.get("topic", ""))
             error = self._refusal(request, publisher)
             if error or publisher is None:
@@ -426,7 +451,12 @@ class TcprosTransport:
             return [0, "no supported protocol (this node speaks TCPROS)", []]
         return [1, "", ["TCPROS", self.host, self._listener.getsockname()[1]]]
 
-    def _remote_shutdown(self, caller: str, message: str = "") -> list[object]:
-        _log.warning("tcpros: %r asked this node to shut down (%r)", caller, message)
+    def _remote_shutdown(self, caller: object, message: object = "") -> list[object]:
+        """The ``shutdown`` call (``rosnode kill``; roscore on a node-name clash): one line naming the caller and its
+        reason, the transport closed and ``on_shutdown`` told (the CLI: the node stops as on SIGTERM)."""
+        said = (str(caller)[:200], str(message)[:200])
+        _log.warning("ROS 1: %r asked this node to shut down (%r); stopping", *said)
         threading.Thread(target=self.close, name="tcpros-shutdown", daemon=True).start()
+        if self.on_shutdown is not None:
+            self.on_shutdown()
         return [1, "", 0]
