@@ -421,6 +421,13 @@ _GENERALISTS: tuple[tuple[str, str, int, int, tuple[float, float, float, float]]
         (1134.8, 238.5, 6.26, 1.46),
     ),
     (
+        "semattnet_rt_half_generalist",
+        "b211e1d6d3def1128ea4e6ecc6e875d3e7d665ae8564aaf17c85bc61eb57e133",
+        578_249,
+        537_854,
+        (1122.0, 241.3, 6.18, 1.49),
+    ),
+    (
         "semattnet_generalist",
         "ef65745e873125c24a6cf77bfc7a6e02431102a99bdd86eeff869fac85d9a22c",
         4_528_189,
