@@ -386,6 +386,8 @@ SAME_MEANING = {
     "prepare_run_folder": "a new run's folder refused or replaced (a training run, an adapt run)",
     "train": "the command and the library function it calls",
     "adapt": "the command and the library function it calls",
+    "KERNEL": "each compiled C++ kernel's module: its extension (propagation, classical completion)",
+    "available": "each compiled C++ kernel's module: whether the kernel can be used",
 }
 
 

@@ -12,6 +12,7 @@ from types import SimpleNamespace
 import pytest
 import torch
 
+from semattnet._utils import cpp_build
 from semattnet.models.propagation import cpu_kernel
 
 
@@ -26,13 +27,13 @@ def fresh(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> list[Path]:
         calls.append(tmp_path)
         return object()
 
-    monkeypatch.setattr(cpu_kernel, "_module", None)
-    monkeypatch.setattr(cpu_kernel, "_failed", None)
-    monkeypatch.setattr(cpu_kernel, "_build_dir", lambda: tmp_path)
+    monkeypatch.setattr(cpu_kernel.KERNEL, "module", None)
+    monkeypatch.setattr(cpu_kernel.KERNEL, "failed", None)
+    monkeypatch.setattr(cpu_kernel.KERNEL, "build_dir", lambda: tmp_path)
     monkeypatch.setattr("torch.utils.cpp_extension.load_inline", load_inline)
     monkeypatch.delenv("SEMATTNET_NO_CPP", raising=False)
     monkeypatch.setenv("CXX", "c++")
-    monkeypatch.setattr(cpu_kernel.shutil, "which", lambda name: f"/usr/bin/{name}")
+    monkeypatch.setattr(cpp_build.shutil, "which", lambda name: f"/usr/bin/{name}")
     return calls
 
 
@@ -47,7 +48,7 @@ def test_the_first_build_is_said_once_with_its_time(fresh: list[Path], capsys: p
 def test_a_killed_builds_lock_is_removed(fresh: list[Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     lock = tmp_path / "lock"
     lock.touch()
-    old = time.time() - 2 * cpu_kernel.STALE_LOCK_S
+    old = time.time() - 2 * cpp_build.STALE_LOCK_S
     os.utime(lock, (old, old))
     assert cpu_kernel.available() and fresh == [tmp_path] and not lock.exists()
     assert f"removing {lock}, left by a build that was killed" in capsys.readouterr().err
@@ -56,7 +57,7 @@ def test_a_killed_builds_lock_is_removed(fresh: list[Path], tmp_path: Path, caps
 def test_a_running_builds_lock_is_waited_for_a_bounded_time(
     fresh: list[Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(cpu_kernel, "STALE_LOCK_S", 0.3)
+    monkeypatch.setattr(cpu_kernel.KERNEL, "stale_lock_s", 0.3)
     (tmp_path / "lock").touch()
     start = time.monotonic()
     assert cpu_kernel.available()
@@ -66,13 +67,13 @@ def test_a_running_builds_lock_is_waited_for_a_bounded_time(
 def test_no_compiler_falls_back_with_one_line(
     fresh: list[Path], monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    monkeypatch.setattr(cpu_kernel.shutil, "which", lambda name: None)
+    monkeypatch.setattr(cpp_build.shutil, "which", lambda name: None)
     monkeypatch.setenv("CXX", "g++-missing")
     assert not cpu_kernel.available() and fresh == []
     err = capsys.readouterr().err
     assert err == (
-        "semattnet: fused CPU propagation unavailable (no C++ compiler (g++-missing not found; install one "
-        "or set CXX)); using the PyTorch propagation\n"
+        "semattnet: the fused CPU propagation kernel is unavailable (no C++ compiler (g++-missing not found; "
+        "install one or set CXX)); using the PyTorch propagation\n"
     )
     with pytest.raises(RuntimeError, match=r"no C\+\+ compiler"):
         cpu_kernel.normalize_affinity(torch.zeros(1, 8, 2, 2))

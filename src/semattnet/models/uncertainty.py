@@ -29,6 +29,8 @@ from collections.abc import Collection
 import torch
 import torch.nn.functional as F
 
+from semattnet.models import anchor_kernel
+from semattnet.models.anchor_kernel import KernelImpl
 from semattnet.models.outputs import CONFIDENCE_OUTPUTS, DEPTH_OUTPUTS, DepthCompletionOutput, check_output_names
 
 __all__ = [
@@ -79,13 +81,17 @@ def refinement_change(output: DepthCompletionOutput) -> torch.Tensor:
     return (output.refined_depth.float() - fused).abs()
 
 
-def lidar_distance(sparse: torch.Tensor) -> torch.Tensor:
+def lidar_distance(sparse: torch.Tensor, impl: KernelImpl = "auto") -> torch.Tensor:
     """Euclidean distance in pixels from every pixel to the nearest measured one (``sparse > 0``), (B, 1, H, W).
 
     Exact and separable: the distance to the nearest measurement in the same column, then, along each
     row, ``d^2(y, x) = min_x' (x - x')^2 + g^2(y, x')``. An image without measurements gets ``H + W``
-    everywhere (farther than any pixel can be).
+    everywhere (farther than any pixel can be). ``impl``: "auto" runs float32 CPU tensors outside autograd through
+    the C++ kernel (:mod:`semattnet.models.anchor_kernel`, the same distances) when it can be built, "pytorch"
+    always the PyTorch path.
     """
+    if sparse.dim() == 4 and sparse.shape[1] == 1 and anchor_kernel.usable(sparse, impl):
+        return anchor_kernel.distance(sparse)
     b, _, h, w = sparse.shape
     far = float(h + w)
     valid = sparse > 0

@@ -14,26 +14,18 @@ summed in the same order as :func:`~semattnet.models.propagation.shifted.propaga
 the outputs agree to float rounding (and to the bit with the steps run one at a time).
 :func:`normalize_affinity` turns the raw guidance into that kernel (eq. 13) in one pass.
 
-It is built with :func:`torch.utils.cpp_extension.load_inline` (needs a C++ compiler and the
-``ninja`` package; the build is cached, ~30-60 s the first time, said on stderr with the time it took).
-Without them (one line on stderr), or for autograd, CUDA, or non-float32 tensors, the refinement uses
-the PyTorch implementation instead. Set ``SEMATTNET_NO_CPP=1`` to disable the kernel. A build lock that
-torch left behind when a build was killed (older than :data:`STALE_LOCK_S`) is removed instead of
-waited on forever.
+It is built with :func:`torch.utils.cpp_extension.load_inline` by :class:`~semattnet._utils.cpp_build.InlineKernel`
+(needs a C++ compiler and the ``ninja`` package; the build is cached, ~30-60 s the first time, said on stderr with
+the time it took). Without them (one line on stderr), or for autograd, CUDA, or non-float32 tensors, the refinement
+uses the PyTorch implementation instead. Set ``SEMATTNET_NO_CPP=1`` to disable the kernel.
 """
 
 from __future__ import annotations
 
-import os
-import shutil
-import sys
-import threading
-import time
-from pathlib import Path
-
 import torch
 
 from semattnet._errors import InputError
+from semattnet._utils.cpp_build import InlineKernel
 
 __all__ = ["available", "normalize_affinity", "propagate_iterations", "rows_layout"]
 
@@ -159,103 +151,19 @@ torch::Tensor normalize_affinity(torch::Tensor guide, torch::Tensor out) {
 }
 """
 
-#: The extension's name (its build folder under torch's extensions root); a new version for new sources.
-NAME = "semattnet_propagation_v5"
-#: A build lock older than this (seconds) was left by a build that was killed (a build takes about a minute).
-STALE_LOCK_S = 600.0
-
-_lock = threading.Lock()
-_module: object | None = None
-_failed: str | None = None
-
-
-def _say(text: str) -> None:
-    """One line on stderr (the build is said once per process)."""
-    print(f"semattnet: {text}", file=sys.stderr, flush=True)
-
-
-def _build_dir() -> Path:
-    """torch's build folder of the extension (``TORCH_EXTENSIONS_DIR`` or ``~/.cache/torch_extensions/...``)."""
-    from torch.utils.cpp_extension import _get_build_directory
-
-    return Path(_get_build_directory(NAME, False))
-
-
-def _missing_tools() -> str | None:
-    """What a build lacks (a C++ compiler, ninja), or None."""
-    from torch.utils.cpp_extension import is_ninja_available
-
-    compiler = os.environ.get("CXX") or "c++"
-    if shutil.which(compiler) is None:
-        return f"no C++ compiler ({compiler} not found; install one or set CXX)"
-    if not is_ninja_available():
-        return "no ninja (pip install ninja)"
-    return None
-
-
-def _clear_stale_lock(build: Path) -> None:
-    """Wait for another process's build at most until its lock is :data:`STALE_LOCK_S` old; an older lock is a
-    killed build's and is removed (torch itself would wait on it forever)."""
-    lock = build / "lock"
-    while True:
-        try:
-            age = time.time() - lock.stat().st_mtime
-        except FileNotFoundError:
-            return
-        if age > STALE_LOCK_S:
-            _say(f"removing {lock}, left by a build that was killed {age / 60:.0f} min ago")
-            lock.unlink(missing_ok=True)
-            return
-        time.sleep(min(1.0, STALE_LOCK_S - age + 0.01))
-
-
-def _build() -> object:
-    """The compiled module: built (and said so, with the time taken) when not cached yet."""
-    from torch.utils.cpp_extension import load_inline
-
-    build = _build_dir()
-    _clear_stale_lock(build)
-    fresh = not (build / f"{NAME}.so").is_file()
-    if fresh:
-        _say("building the fused CPU propagation kernel (once; about a minute) ...")
-    start = time.perf_counter()
-    module = load_inline(
-        name=NAME,
-        cpp_sources=[_SOURCE],
-        functions=["propagate_iterations", "normalize_affinity"],
-        extra_cflags=["-O3", "-march=native", "-fno-math-errno"],
-        verbose=False,
-    )
-    if fresh:
-        _say(f"built the fused CPU propagation kernel in {time.perf_counter() - start:.1f} s ({build})")
-    return module
-
-
-def _load() -> object | None:
-    global _module, _failed
-    if _module is not None or _failed is not None:
-        return _module
-    with _lock:
-        if _module is not None or _failed is not None:
-            return _module
-        if os.environ.get("SEMATTNET_NO_CPP"):
-            _failed = "disabled by SEMATTNET_NO_CPP"
-            return None
-        try:
-            built = (_build_dir() / f"{NAME}.so").is_file()
-            _failed = None if built else _missing_tools()
-            if _failed is None:
-                _module = _build()
-        except Exception as err:  # a failed build, ...: fall back to PyTorch
-            _failed = f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
-        if _failed is not None:
-            _say(f"fused CPU propagation unavailable ({_failed}); using the PyTorch propagation")
-        return _module
+#: The compiled extension (a new name for new sources), built on first use.
+KERNEL = InlineKernel(
+    "semattnet_propagation_v5",
+    _SOURCE,
+    ["propagate_iterations", "normalize_affinity"],
+    what="the fused CPU propagation kernel",
+    fallback="the PyTorch propagation",
+)
 
 
 def available() -> bool:
     """Whether the compiled kernel can be used (builds it on the first call)."""
-    return _load() is not None
+    return KERNEL.available()
 
 
 def rows_layout(affinity: torch.Tensor) -> torch.Tensor:
@@ -281,9 +189,7 @@ def propagate_iterations(
         start, h0: (B, C, H, W) initial estimate and fixed input.
         mask, sparse: (B, 1, H, W) re-injection weight and depth.
     """
-    module = _load()
-    if module is None:
-        raise RuntimeError(f"fused propagation unavailable: {_failed}")
+    module = KERNEL.require()
     args = [t.contiguous().float() for t in (start, h0.expand_as(start), mask, sparse)]
     return module.propagate_iterations(rows_layout(affinity), *args, int(iterations), int(dilation))  # type: ignore[attr-defined]
 
@@ -296,9 +202,7 @@ def normalize_affinity(guide: torch.Tensor, out: torch.Tensor | None = None) -> 
     ``out``: a contiguous float32 (B, H, k*k, W) buffer to write into, e.g. one kept across frames: writing
     a fresh 140 MB tensor costs about 10x more in page faults than the arithmetic.
     """
-    module = _load()
-    if module is None:
-        raise RuntimeError(f"fused propagation unavailable: {_failed}")
+    module = KERNEL.require()
     b, n, h, w = guide.shape
     if out is None:
         out = torch.empty(b, h, n + 1, w)
