@@ -26,7 +26,8 @@ def _named(name: str) -> SemAttNetConfig:
     """The config of variant ``name`` at width 0.125 (``width``: rt_s at width 0.25)."""
     if name == "width":
         return semattnet.build_model("semattnet_rt_s", width=0.25).config
-    config: SemAttNetConfig = semattnet.build_model(name).config
+    with torch.device("meta"):  # the config only: no full-width parameters to initialise
+        config: SemAttNetConfig = semattnet.build_model(name).config
     return config.replace(width=0.125)
 
 
