@@ -5,9 +5,10 @@ One command (from the repository root, the package installed):
     python benchmarks/zero_shot.py --out zero-shot-run
 
 Rows (``--methods``): the classical completion, the generalist's anchor alone (its non-learned part), the
-shipped street-trained demo references, the generalists (``semattnet-generalist``, ``semattnet-rt-generalist``,
-``semattnet-rt-half-generalist``) and, with ``--adapted LABEL=WEIGHTS``, weights that ``semattnet adapt`` made
-from a generalist on the real frame's own sensors (no ground truth read). Columns:
+shipped street-trained demo references, the generalists (``semattnet-generalist``,
+``semattnet-half-generalist``, ``semattnet-rt-generalist``, ``semattnet-rt-half-generalist``) and, with ``--adapted
+LABEL=WEIGHTS``, weights that ``semattnet adapt`` made from a generalist on the real frame's own sensors (no ground
+truth read). Columns:
 
 * ``real``: the bundled KITTI frame (drive 0035, frame 5), cameras 02 and 03, its own scan projected as
   ``predict --kitti-raw`` does, scored against the official annotated map; no semantic map (the fallback);
@@ -47,6 +48,7 @@ DEFAULT_METHODS = (
     "semattnet-generalist",
     "semattnet-rt-generalist",
     "semattnet-rt-half-generalist",
+    "semattnet-half-generalist",
 )
 #: (column, kind, pattern, options of the pattern): the held-out world cells.
 CELLS = (

@@ -428,6 +428,13 @@ _GENERALISTS: tuple[tuple[str, str, int, int, tuple[float, float, float, float]]
         (1122.0, 241.3, 6.18, 1.49),
     ),
     (
+        "semattnet_half_generalist",
+        "921a7f79c03e3317ab3cc36b865cd69281089d4f874c43dada8987ac3dc32052",
+        4_535_455,
+        5_676_421,
+        (1133.0, 288.7, 6.68, 1.90),
+    ),
+    (
         "semattnet_generalist",
         "ef65745e873125c24a6cf77bfc7a6e02431102a99bdd86eeff869fac85d9a22c",
         4_528_189,
