@@ -386,6 +386,7 @@ SAME_MEANING = {
     "prepare_run_folder": "a new run's folder refused or replaced (a training run, an adapt run)",
     "train": "the command and the library function it calls",
     "adapt": "the command and the library function it calls",
+    "generate_launch_description": "the entry point ROS 2's launch reads in each shipped launch file",
     "KERNEL": "each compiled C++ kernel's module: its extension (propagation, classical completion)",
     "available": "each compiled C++ kernel's module: whether the kernel can be used",
 }
