@@ -108,9 +108,8 @@ def threaded_master(drip: frozenset[str] = frozenset(), period: float = 2.0) -> 
 
 
 @contextmanager
-def raw_http(reply: bytes | Callable[[socket.socket], None]) -> Iterator[str]:
-    """A server on 127.0.0.1 answering every connection with ``reply`` (bytes, or what a function sends) once it
-    has read the request's first bytes; its URI."""
+def _serving(handle: Callable[[socket.socket], None]) -> Iterator[int]:
+    """A listener on 127.0.0.1 whose every connection ``handle`` gets, from a thread until the block ends; its port."""
     listener = socket.create_server(("127.0.0.1", 0))
     listener.settimeout(0.1)
     stop = threading.Event()
@@ -123,22 +122,34 @@ def raw_http(reply: bytes | Callable[[socket.socket], None]) -> Iterator[str]:
                 continue
             except OSError:
                 return
-            with conn:
-                conn.settimeout(2)
-                try:
-                    conn.recv(65536)
-                    reply(conn) if callable(reply) else conn.sendall(reply)
-                except OSError:
-                    pass
+            handle(conn)
 
     thread = threading.Thread(target=serve, daemon=True)
     thread.start()
     try:
-        yield f"http://127.0.0.1:{listener.getsockname()[1]}/"
+        yield listener.getsockname()[1]
     finally:
         stop.set()
         listener.close()
         thread.join(5)
+
+
+@contextmanager
+def raw_http(reply: bytes | Callable[[socket.socket], None]) -> Iterator[str]:
+    """A server on 127.0.0.1 answering every connection with ``reply`` (bytes, or what a function sends) once it
+    has read the request's first bytes; its URI."""
+
+    def answer(conn: socket.socket) -> None:
+        with conn:
+            conn.settimeout(2)
+            try:
+                conn.recv(65536)
+                reply(conn) if callable(reply) else conn.sendall(reply)
+            except OSError:
+                pass
+
+    with _serving(answer) as port:
+        yield f"http://127.0.0.1:{port}/"
 
 
 def xmlrpc_reply(value: object) -> bytes:
@@ -154,23 +165,12 @@ def tcpros_publisher(
     """A publisher: ``requestTopic`` names its TCP port; each connection is answered with ``header`` (default: a
     good one of ``md5sum``), then ``then(conn, n)`` (n: the connection's number, from 0) runs. Its URI and the
     list of the connections' numbers so far."""
-    listener = socket.create_server(("127.0.0.1", 0))
-    listener.settimeout(0.1)
-    port = listener.getsockname()[1]
-    stop = threading.Event()
     connections: list[int] = []
     good = encode_header({"md5sum": md5sum, "type": "sensor_msgs/Image", "callerid": "/fake"})
 
-    def serve() -> None:
-        while not stop.is_set():
-            try:
-                conn, _ = listener.accept()
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            connections.append(len(connections))
-            threading.Thread(target=talk, args=(conn, connections[-1]), daemon=True).start()
+    def accept(conn: socket.socket) -> None:
+        connections.append(len(connections))
+        threading.Thread(target=talk, args=(conn, connections[-1]), daemon=True).start()
 
     def talk(conn: socket.socket, n: int) -> None:
         with conn:
@@ -181,15 +181,8 @@ def tcpros_publisher(
             except OSError:
                 pass
 
-    with raw_http(xmlrpc_reply([1, "", ["TCPROS", "127.0.0.1", port]])) as api:
-        thread = threading.Thread(target=serve, daemon=True)
-        thread.start()
-        try:
-            yield api, connections
-        finally:
-            stop.set()
-            listener.close()
-            thread.join(5)
+    with _serving(accept) as port, raw_http(xmlrpc_reply([1, "", ["TCPROS", "127.0.0.1", port]])) as api:
+        yield api, connections
 
 
 def frame(data: bytes) -> bytes:
