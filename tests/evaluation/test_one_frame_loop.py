@@ -134,6 +134,9 @@ def test_the_scoring_modules_run_the_one_loop(module: str) -> None:
 SRC = EVALUATION.parent
 #: The modules that show a sign of a frame loop and why that is not a second one (module -> why).
 WHY_IT_MAY = {
+    "_startup.py": "reads the process's command-line words by index, no frames",
+    "models/anchor.py": "the classical completion calls its C++ kernel's complete() on one batch of sparse maps",
+    "models/anchor_kernel.py": "the C++ kernel's complete() on one batch of sparse maps, no frames",
     "inference/feed.py": "the loop's reader and completion: the one loop",
     "inference/loop.py": "the loop itself",
     "inference/live.py": "the loop for frames a sensor pushes: feed's live reader, the sinks' lifecycle",

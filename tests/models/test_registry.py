@@ -30,8 +30,8 @@ def _arch(cfg: SemAttNetConfig) -> tuple:
 def test_list_models_names_each_architecture_once() -> None:
     names = list_models()
     assert names[:2] == ["semattnet", "semattnet_backbone"]
-    assert len({_arch(MODELS[n].config) for n in names}) == len(names) == 15  # no two rows build the same model
-    assert list(MODELS) == names and len(MODELS) == 15 and set(ALIASES) == {"table2_f", "table2_g"}
+    assert len({_arch(MODELS[n].config) for n in names}) == len(names) == 16  # no two rows build the same model
+    assert list(MODELS) == names and len(MODELS) == 16 and set(ALIASES) == {"table2_f", "table2_g"}
 
 
 def test_aliases_resolve_everywhere() -> None:
@@ -46,7 +46,7 @@ def test_aliases_resolve_everywhere() -> None:
 
 def test_describe_models_lists_aliases() -> None:
     lines = describe_models().splitlines()
-    assert len(lines) == 15
+    assert len(lines) == 16
     full = next(line for line in lines if line.startswith("semattnet "))
     assert "[alias: table2_g]" in full and "Table 2 g" in full
     assert not any(line.startswith("table2_g") for line in lines)

@@ -60,6 +60,7 @@ class TestModels(RegistryTester[ModelFixture]):
         "semattnet_rt_md": ModelFixture(BRANCHES | SEMANTIC | REFINED),
         # the generalists set their own calibrated uncertainty (models.generalist)
         "semattnet_generalist": ModelFixture(BRANCHES | SEMANTIC | REFINED | {"uncertainty"}),
+        "semattnet_half_generalist": ModelFixture(BRANCHES | SEMANTIC | REFINED | {"uncertainty"}),
         "semattnet_rt_generalist": ModelFixture(BRANCHES | SEMANTIC | REFINED | {"uncertainty"}),
         "semattnet_rt_half_generalist": ModelFixture(BRANCHES | SEMANTIC | REFINED | {"uncertainty"}),
         "semattnet_rt_l_generalist": ModelFixture(BRANCHES | SEMANTIC | REFINED | {"uncertainty"}),

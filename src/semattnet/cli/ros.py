@@ -322,8 +322,12 @@ def localhost_only(env: Mapping[str, str]) -> bool:
 
 def _run(params: dict[str, object], transport: Callable[[], Transport]) -> None:
     """Check the model options, load the completer and spin the node on ``transport()`` until stopped."""
+    from semattnet._startup import quiet_interrupts
     from semattnet.robotics.ros.node import run_node
 
+    # Until the node's own handler (run_node): a Ctrl-C while the model loads is one line and the end, never a
+    # KeyboardInterrupt that a library could swallow, leaving the node to start deaf to the signal already sent
+    quiet_interrupts()
     model, options = values_of(ModelOptions, params), values_of(NodeOptions, params)
     model.check()
     maps = Maps(None, params["segment_spec"], str(params["palette_mismatch"]))  # type: ignore[arg-type]
