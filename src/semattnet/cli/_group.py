@@ -97,8 +97,12 @@ class _Group(click.Group):
     command_class = Command
     group_class = type  # subgroups (``data``, ``weights``) are of this class too
 
+    def main(self, *args: Any, **kwargs: Any) -> Any:
+        """Python's SIGINT handler back (:mod:`semattnet._startup`), then the command."""
+        restore_interrupts()
+        return super().main(*args, **kwargs)
+
     def invoke(self, ctx: click.Context) -> Any:
-        restore_interrupts()  # Python's SIGINT handler back (semattnet._startup): the command handles its own
         try:
             return super().invoke(ctx)
         except (click.ClickException, click.exceptions.Exit, click.exceptions.Abort):
