@@ -17,6 +17,8 @@ from xmlrpc.server import SimpleXMLRPCRequestHandler, SimpleXMLRPCServer
 
 from semattnet.robotics.ros._tcpros_wire import encode_header
 
+from ._ros1_master import serve_master_api
+
 
 def drip(conn: socket.socket, data: bytes, period: float, stop: threading.Event) -> None:
     """Send ``data`` one byte every ``period`` seconds until it is sent, the peer goes or ``stop`` is set."""
@@ -67,11 +69,7 @@ class ThreadedMaster:
         self.apis: list[str] = []
         self._server = _Server(("127.0.0.1", 0), requestHandler=_MasterHandler, logRequests=False)
         self._server.master = self  # type: ignore[attr-defined]
-        for name in ("registerPublisher", "registerSubscriber", "unregisterPublisher", "unregisterSubscriber"):
-            self._server.register_function(getattr(self, name), name)
-        self._server.register_function(lambda caller: [1, "", self.uri], "getUri")
-        self._thread = threading.Thread(target=self._server.serve_forever, kwargs={"poll_interval": 0.05})
-        self._thread.start()
+        self._thread = serve_master_api(self, self._server)
 
     @property
     def uri(self) -> str:

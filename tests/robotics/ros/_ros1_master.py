@@ -14,6 +14,17 @@ from typing import Any
 from xmlrpc.server import SimpleXMLRPCServer
 
 
+def serve_master_api(master: Any, server: SimpleXMLRPCServer) -> threading.Thread:
+    """``master``'s ``registerPublisher``/``registerSubscriber``, their ``unregister*`` and ``getUri`` (its ``uri``)
+    answered by ``server`` from a started thread (the master's ``close`` shuts it down)."""
+    for name in ("registerPublisher", "registerSubscriber", "unregisterPublisher", "unregisterSubscriber"):
+        server.register_function(getattr(master, name), name)
+    server.register_function(lambda caller: [1, "", master.uri], "getUri")
+    thread = threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.05})
+    thread.start()
+    return thread
+
+
 class FakeMaster:
     """``registerPublisher``/``registerSubscriber``, their ``unregister*`` and ``getUri``, on 127.0.0.1."""
 
@@ -23,11 +34,7 @@ class FakeMaster:
         self.subscribers: defaultdict[str, list[str]] = defaultdict(list)
         self._notifiers: list[threading.Thread] = []
         self.refuse: set[str] = set()  # topics whose registration fails (code -1), as a master's error
-        for name in ("registerPublisher", "registerSubscriber", "unregisterPublisher", "unregisterSubscriber"):
-            self._server.register_function(getattr(self, name), name)
-        self._server.register_function(lambda caller: [1, "", self.uri], "getUri")
-        self._thread = threading.Thread(target=self._server.serve_forever, kwargs={"poll_interval": 0.05})
-        self._thread.start()
+        self._thread = serve_master_api(self, self._server)
 
     @property
     def uri(self) -> str:
