@@ -236,7 +236,7 @@ class Generalist(nn.Module):
         depth_fields = ("color_depth", "semantic_depth", "guided_depth", "fused_depth", "refined_s2_depth")
         changes = {f: getattr(out, f).float() * scale for f in depth_fields if getattr(out, f) is not None}
         net_depth = out.depth.float() * scale
-        result = dataclasses.replace(out, **changes, refined_depth=net_depth)
+        result = dataclasses.replace(out, **changes, refined_depth=None)  # set below, at the input's size
         if inputs.size is not None:
             result = result.map(lambda t: self.to_full(t, inputs))
         result = dataclasses.replace(result, refined_depth=self.refine(net_depth, inputs))
