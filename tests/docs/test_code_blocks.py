@@ -28,7 +28,17 @@ def _pages() -> list[Path]:
     return [p for p in markdown_files() if any(b.counted and b.not_run is None for b in parse_blocks(p))]
 
 
-@pytest.mark.parametrize("page", _pages(), ids=lambda p: str(p.relative_to(REPO)))
+#: Pages whose blocks take minutes (the NYU page trains and evaluates with the indoor segmenter): ``make test-slow``.
+SLOW_PAGES = {"docs/datasets/nyuv2.md"}
+
+
+def _page_params() -> list[object]:
+    return [
+        pytest.param(p, marks=pytest.mark.slow) if p.relative_to(REPO).as_posix() in SLOW_PAGES else p for p in _pages()
+    ]
+
+
+@pytest.mark.parametrize("page", _page_params(), ids=lambda p: str(p.relative_to(REPO)))
 def test_page_blocks_run(page: Path, docs_workspace: Path, page_env: dict[str, str], tmp_path: Path) -> None:
     work = tmp_path / "work"
     shutil.copytree(docs_workspace, work, symlinks=True)

@@ -53,6 +53,7 @@ def test_atomic_and_staged_writes_on_a_full_disk(small_fs: Path) -> None:
     assert err.value.filename == str(small_fs / "out") and not list(small_fs.iterdir())
 
 
+@pytest.mark.slow  # about a minute; the convert, unpack and download cases of a full disk run by default
 def test_predict_on_a_full_disk(tmp_path: Path, small_fs: Path) -> None:
     from semattnet.data.io import write_depth, write_image
 

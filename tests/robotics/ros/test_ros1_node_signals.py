@@ -52,6 +52,7 @@ def _registered(master: ThreadedMaster, node: subprocess.Popen[str]) -> None:
     time.sleep(0.5)
 
 
+@pytest.mark.slow  # about 2 minutes: three whole starts of the node, one after the other
 def test_ctrl_c_at_any_moment_of_the_start_is_one_line_without_a_traceback() -> None:
     """SIGINT while Python imports torch, loads the model, registers, or runs: 'Aborted!' (status 1) before the
     node runs, its summary (status 0) after; never a traceback."""
