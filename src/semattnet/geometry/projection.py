@@ -128,9 +128,8 @@ def check_intrinsics(K: ArrayInput, where: str) -> np.ndarray:
     return k
 
 
-@overload
 def project_points(
-    points: Tensor,
+    points: _ArrayT,
     K: ArrayInput,
     T_cam_lidar: ArrayInput,
     image_size: tuple[int, int],
@@ -138,28 +137,7 @@ def project_points(
     min_depth: float = 0.1,
     max_depth: float | None = None,
     name: str = "points",
-) -> Tensor: ...
-@overload
-def project_points(
-    points: np.ndarray,
-    K: ArrayInput,
-    T_cam_lidar: ArrayInput,
-    image_size: tuple[int, int],
-    R_rect: ArrayInput | None = None,
-    min_depth: float = 0.1,
-    max_depth: float | None = None,
-    name: str = "points",
-) -> np.ndarray: ...
-def project_points(
-    points: Array,
-    K: ArrayInput,
-    T_cam_lidar: ArrayInput,
-    image_size: tuple[int, int],
-    R_rect: ArrayInput | None = None,
-    min_depth: float = 0.1,
-    max_depth: float | None = None,
-    name: str = "points",
-) -> Array:
+) -> _ArrayT:
     """Render points into a sparse depth map with a z-buffer (the nearest point wins each pixel).
 
     Args:
