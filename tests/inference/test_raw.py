@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from semattnet import InputError
 from semattnet.data.io import DataError, read_depth
 from semattnet.data.kitti.raw import RawDrive, parse_frames
-from semattnet.inference.raw import complete_kitti_raw, fusion_confidence
+from semattnet.inference.raw import RawDriveSelection, complete_kitti_raw, fusion_confidence
 from tests.inference._raw_sample import DRIVE, SCAN
 
 
@@ -51,7 +52,9 @@ def test_python_api_gives_the_cli_depth(tmp_path: Path) -> None:
     from semattnet.baselines.classical import ClassicalCompleter
     from semattnet.cli import main
 
-    written = complete_kitti_raw(ClassicalCompleter(), DRIVE, tmp_path / "api", frames=[5], log=lambda s: None)
+    written = complete_kitti_raw(
+        ClassicalCompleter(), DRIVE, tmp_path / "api", selection=RawDriveSelection(frames=[5]), log=lambda s: None
+    )
     assert written == [tmp_path / "api" / "0000000005.png"]
     result = CliRunner().invoke(
         main, ["predict", "--method", "classical", "--kitti-raw", str(DRIVE), "--out", str(tmp_path / "cli")]
@@ -59,6 +62,13 @@ def test_python_api_gives_the_cli_depth(tmp_path: Path) -> None:
     assert result.exit_code == 0, result.output
     api, cli = read_depth(written[0]), read_depth(tmp_path / "cli" / "0000000005.png")
     assert np.array_equal(api, cli) and np.count_nonzero(api) > 0.5 * api.size
+
+
+FRAME_5 = RawDriveSelection(frames="5")
+
+
+def _frame_5(**fields: object) -> RawDriveSelection:
+    return RawDriveSelection(frames="5", **fields)  # type: ignore[arg-type]
 
 
 class _Recorder:
@@ -85,7 +95,7 @@ def test_semantic_folder_fallback_and_confidence(tmp_path: Path) -> None:
 
     rec = _Recorder()
     with pytest.warns(UserWarning, match="fallback"):
-        complete_kitti_raw(rec, DRIVE, tmp_path / "a", frames="5", log=lambda s: None)
+        complete_kitti_raw(rec, DRIVE, tmp_path / "a", selection=FRAME_5, log=lambda s: None)
     assert rec.semantic.shape == (375, 1242, 3) and (rec.semantic == np.array(UNKNOWN_COLOR, np.uint8)).all()
     sem_dir = tmp_path / "sem"
     sem_dir.mkdir()
@@ -96,11 +106,13 @@ def test_semantic_folder_fallback_and_confidence(tmp_path: Path) -> None:
     write_image(sem_dir / "0000000005.png", palette_map)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        complete_kitti_raw(rec, DRIVE, tmp_path / "b", frames="5", semantic=sem_dir, log=lambda s: None)
+        complete_kitti_raw(rec, DRIVE, tmp_path / "b", selection=_frame_5(semantic=sem_dir), log=lambda s: None)
     assert np.array_equal(rec.semantic, palette_map)
     (tmp_path / "empty").mkdir()
     with pytest.raises(DataError, match="0000000005.png"):
-        complete_kitti_raw(rec, DRIVE, tmp_path / "c", frames="5", semantic=tmp_path / "empty", log=lambda s: None)
+        complete_kitti_raw(
+            rec, DRIVE, tmp_path / "c", selection=_frame_5(semantic=tmp_path / "empty"), log=lambda s: None
+        )
     conf = fusion_confidence(rec(None, np.zeros((2, 2), np.float32)).output)
     assert conf is not None and np.allclose(conf, 0.7)
     assert fusion_confidence(None) is None
@@ -112,8 +124,46 @@ def test_segmenter_spec_colours_the_semantic_map(tmp_path: Path) -> None:
     rec = _Recorder()
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # a segmenter is given: no fallback warning
-        complete_kitti_raw(rec, DRIVE, tmp_path, frames="5", segmenter="unknown", log=lambda s: None)
+        complete_kitti_raw(rec, DRIVE, tmp_path, selection=_frame_5(segmenter="unknown"), log=lambda s: None)
     assert rec.semantic.shape == (375, 1242, 3) and (rec.semantic == np.array(UNKNOWN_COLOR, np.uint8)).all()
     with pytest.raises(ValueError, match="not both"):
-        (tmp_path / "sem").mkdir()
-        complete_kitti_raw(rec, DRIVE, tmp_path / "x", frames="5", segmenter="unknown", semantic=tmp_path / "sem")
+        _frame_5(segmenter="unknown", semantic=tmp_path / "sem")
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        ({"frames": "3-1"}, "frames: not frame indices: '3-1'"),
+        ({"frames": 2.5}, "frames: not frame indices: 2.5"),
+        ({"camera": 4}, "camera: must be 0 to 3 .* got 4$"),
+        ({"camera": "left"}, "camera: .* got 'left'$"),
+        ({"camera": True}, "camera: .* got True$"),
+        ({"deskew": "yes"}, "deskew: must be True or False, got 'yes'$"),
+        ({"semantic": "sem", "segmenter": "unknown"}, "semantic: .*not both .*'sem'"),
+    ],
+)
+def test_raw_drive_selection_refuses_bad_values_in_one_line(fields: dict[str, object], message: str) -> None:
+    with pytest.raises(InputError, match=message) as caught:
+        RawDriveSelection(**fields)  # type: ignore[arg-type]
+    assert "\n" not in str(caught.value)
+
+
+def test_raw_drive_selection_takes_what_raw_drive_does() -> None:
+    for camera in (2, 3, "02", "3"):
+        assert RawDriveSelection(frames=[1, 4], camera=camera).camera == camera
+    assert RawDriveSelection(frames="0-3,9", deskew=True).frames == "0-3,9"
+
+
+def test_settings_reach_the_outputs(tmp_path: Path) -> None:
+    from semattnet.baselines.classical import ClassicalCompleter
+    from semattnet.inference.options import OutputSpec
+    from semattnet.inference.sinks import OutputSettings, PlyOptions
+
+    out = tmp_path / "out"
+    args = (ClassicalCompleter(), DRIVE, out)
+    settings = OutputSettings(npy=True, max_depth=30.0, top_crop=100)
+    complete_kitti_raw(*args, selection=FRAME_5, settings=settings, outputs=[PlyOptions(ply=True)], log=lambda s: None)
+    assert {p.name for p in out.iterdir()} >= {"0000000005.png", "0000000005.npy", "0000000005.ply"}
+    with pytest.raises(FileExistsError):
+        complete_kitti_raw(*args, selection=FRAME_5, log=lambda s: None)
+    complete_kitti_raw(*args, selection=FRAME_5, output=OutputSpec(overwrite=True), log=lambda s: None)
