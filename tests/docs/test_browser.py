@@ -35,6 +35,7 @@ def served(built_site: Path) -> Iterator[str]:
     server.shutdown()
 
 
+@pytest.mark.slow  # builds the whole site first (40 s on two busy cores); CI's make docs builds it strictly
 def test_home_and_api_page_render_and_search_finds_a_term(served: str) -> None:
     try:
         from playwright.sync_api import sync_playwright

@@ -28,8 +28,20 @@ def _pages() -> list[Path]:
     return [p for p in markdown_files() if any(b.counted and b.not_run is None for b in parse_blocks(p))]
 
 
-#: Pages whose blocks take minutes (the NYU page trains and evaluates with the indoor segmenter): ``make test-slow``.
-SLOW_PAGES = {"docs/datasets/nyuv2.md"}
+#: Pages whose blocks take 15 s to minutes on two cores (they train, adapt, convert or serve): ``make test-slow``.
+#: The README, the new-rig guides (own camera, the generalist, the ROS 2 node) and the quick pages run by default.
+SLOW_PAGES = {
+    "docs/datasets/nyuv2.md",
+    "docs/datasets/void.md",
+    "docs/guides/adapt.md",
+    "docs/guides/data.md",
+    "docs/guides/demo.md",
+    "docs/guides/robots.md",
+    "docs/guides/safety.md",
+    "docs/guides/torchrun.md",
+    "docs/guides/training.md",
+    "docs/guides/weights.md",
+}
 
 
 def _page_params() -> list[object]:

@@ -39,8 +39,9 @@ BAYER_PATTERNS: dict[str, tuple[int, int, int, int]] = {
     "bayer_gbrg8": (1, 2, 0, 1),
     "bayer_grbg8": (1, 0, 2, 1),
 }
-#: Channel order to RGB of the byte-per-channel encodings.
-_ORDER = {"rgb8": (0, 1, 2), "bgr8": (2, 1, 0), "rgba8": (0, 1, 2), "bgra8": (2, 1, 0), "mono8": (0, 0, 0)}
+#: The RGB channels of the byte-per-channel encodings, as a slice of each pixel's bytes (a view: one strided copy
+#: makes the image, where an index list gathers every byte: 3-5x slower on a 375x1242 frame).
+_CHANNELS = {"rgb8": slice(0, 3), "bgr8": slice(2, None, -1), "rgba8": slice(0, 3), "bgra8": slice(2, None, -1)}
 
 
 def to_rgb(rows: np.ndarray, height: int, width: int, encoding: str, bigendian: bool, topic: str) -> np.ndarray:
@@ -50,9 +51,12 @@ def to_rgb(rows: np.ndarray, height: int, width: int, encoding: str, bigendian: 
     Raises:
         DataError: a yuv422 image of odd width; naming ``topic``.
     """
-    if encoding in _ORDER:
-        img = rows.reshape(height, width, BYTES_PER_PIXEL[encoding])
-        return np.ascontiguousarray(img[..., list(_ORDER[encoding])])
+    if encoding in _CHANNELS:
+        out = np.empty((height, width, 3), np.uint8)  # never a view of the message's bytes
+        out[...] = rows.reshape(height, width, BYTES_PER_PIXEL[encoding])[..., _CHANNELS[encoding]]
+        return out
+    if encoding == "mono8":
+        return np.repeat(rows.reshape(height, width, 1), 3, axis=2)
     if encoding == "mono16":
         v = np.ascontiguousarray(rows).view(">u2" if bigendian else "<u2").reshape(height, width)
         g = np.rint(v.astype(np.float32) * np.float32(255 / 65535)).astype(np.uint8)
