@@ -76,6 +76,7 @@ def test_results_keep_per_image_metrics(ablated: tuple[Path, dict[str, Any], lis
     assert record["protocol"]["eval_frames"] == 4 and "seeds" not in record["protocol"]
 
 
+@pytest.mark.slow  # a second ablation run; tests/cli/test_apps_cli.py resumes one through the CLI by default
 def test_resume_does_not_retrain(
     ablated: tuple[Path, dict[str, Any], list[str]],
     monkeypatch: pytest.MonkeyPatch,

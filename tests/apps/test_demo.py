@@ -91,6 +91,7 @@ def _headless(browser: str, *args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([browser, *flags, *args], capture_output=True, text=True, timeout=120, check=True)
 
 
+@pytest.mark.slow  # a second Chromium start on the demo's report; tests/viz/test_viewer.py renders reports by default
 def test_report_renders_in_chromium(demo_run, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     browser = _chromium()
     assert browser is not None
@@ -185,6 +186,7 @@ def test_report_shows_every_seed_and_the_verdicts(demo_run) -> None:  # type: ig
     assert "|   SemAttNet reference checkpoints, seed 1 |" in md
 
 
+@pytest.mark.slow  # as above, on the demo's viewer
 def test_demo_viewer_in_chromium(demo_run) -> None:  # type: ignore[no-untyped-def]
     from semattnet.data.io import read_depth
     from tests.apps._browser import hover_pixel, open_page, wait_ready

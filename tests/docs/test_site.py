@@ -8,6 +8,7 @@ import types
 from pathlib import Path
 
 import click
+import pytest
 
 from semattnet.cli import main
 
@@ -35,6 +36,7 @@ def _commands(group: click.Group, path: tuple[str, ...] = ()) -> list[tuple[tupl
     return found
 
 
+@pytest.mark.slow  # builds the whole site (30 s on two busy cores); CI's make docs builds it strictly
 def test_cli_page_lists_every_option_of_every_command(built_site: Path) -> None:
     """Read from the click objects: a new option shows up here with no docs edit (mkdocs-click)."""
     html = (built_site / "reference" / "cli" / "index.html").read_text(encoding="utf-8")
@@ -48,6 +50,7 @@ def test_cli_page_lists_every_option_of_every_command(built_site: Path) -> None:
     assert not missing, f"not on the CLI page: {missing}"
 
 
+@pytest.mark.slow  # builds the whole site (30 s on two busy cores); CI's make docs builds it strictly
 def test_api_pages_document_every_public_name(built_site: Path) -> None:
     pages = [("semattnet", built_site / "reference" / "api")]
     pages += [(f"semattnet.{name}", built_site / "reference" / "api" / name) for name in SUBPACKAGES]
@@ -72,6 +75,7 @@ def test_every_subpackage_with_all_has_a_page() -> None:
     assert [n for n in with_all if n != "cli" and not (docs / f"{n}.md").exists()] == []
 
 
+@pytest.mark.slow  # builds the whole site (30 s on two busy cores); CI's make docs builds it strictly
 def test_no_page_loads_anything_from_the_network(built_site: Path) -> None:
     pattern = re.compile(r"<(?:script|link|img|iframe)\b[^>]*(?:src|href)=\"(?:https?:)?//", re.I)
     offenders = [
