@@ -37,6 +37,11 @@ def test_frame_scale_is_the_median_of_the_valid_points_and_one_without_points() 
     scale = frame_scale(sparse)
     assert scale.shape == (2, 1, 1, 1)
     assert scale[0].item() == 5.0 and scale[1].item() == 1.0
+    sparse[1, 0, 3, :2] = torch.tensor([7.0, 3.0])  # an even count: the lower of the two middle values
+    assert frame_scale(sparse)[1].item() == 3.0
+    dense = _frame(96, 128, seed=3)[2]  # against the NaN-masked median over every pixel
+    nan_masked = torch.where(dense > 0, dense, torch.full_like(dense, float("nan"))).reshape(1, -1)
+    assert frame_scale(dense).item() == torch.nanmedian(nan_masked, dim=1).values.item()
 
 
 def test_standardised_colours_have_the_same_statistics_whatever_the_exposure() -> None:

@@ -85,8 +85,9 @@ def frame_scale(sparse: torch.Tensor) -> torch.Tensor:
     """(B, 1, 1, 1): each image's median valid depth (metres), 1 for an image without points."""
     b = sparse.shape[0]
     flat = sparse.detach().float().reshape(b, -1)
-    masked = torch.where(flat > 0, flat, torch.full_like(flat, float("nan")))
-    med = torch.nanmedian(masked, dim=1).values
+    one = torch.ones((), dtype=flat.dtype, device=flat.device)
+    # the lower middle value of the points alone (as torch's median): a frame's few thousand points, not its pixels
+    med = torch.stack([row[row > 0].median() if bool((row > 0).any()) else one for row in flat])
     med = torch.where(torch.isfinite(med) & (med > 0), med, torch.ones_like(med))
     return med.view(b, 1, 1, 1)
 
