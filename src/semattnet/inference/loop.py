@@ -76,17 +76,28 @@ class FrameRun:
         return EXIT_SKIPPED if c["skipped"] else EXIT_DROPPED if c["dropped"] else 0
 
     def summary(self) -> str:
-        """One line (and one per skipped frame's reason, grouped): what the run did."""
+        """One line, and one per kind of skip reason naming its frames: what the run did."""
         lines = [f"{len(self.journal.names)} frame(s): {describe_counts(self.counts)}"]
-        reasons = Counter(_kind(r) for _, r in self.journal.reasons("skipped"))
-        lines += [f"  skipped x{n}: {why}" for why, n in reasons.most_common()]
+        groups: dict[str, list[str]] = {}
+        for name, reason in self.journal.reasons("skipped"):
+            groups.setdefault(_kind(reason), []).append(name)
+        kinds = Counter({why: len(names) for why, names in groups.items()})
+        lines += [f"  skipped x{n}: {why}: {_some(groups[why])}" for why, n in kinds.most_common()]
         return "\n".join(lines)
 
 
 def _kind(reason: str) -> str:
-    """What a skip reason says is wrong, without where (its last clause, parenthesised details left out, so a
-    colon inside them does not cut it): to group them."""
-    return re.sub(r" \([^()]*\)", "", reason).rsplit(": ", 1)[-1]
+    """What a skip reason says is wrong, without where (its last clause, parenthesised details left out, nested
+    ones too, so that a colon inside them does not cut it): to group them."""
+    while (shorter := re.sub(r" ?\([^()]*\)", "", reason)) != reason:
+        reason = shorter
+    return reason.rsplit(": ", 1)[-1]
+
+
+def _some(names: list[str], most: int = 5) -> str:
+    """``names`` joined, the first ``most`` of them and how many more."""
+    more = f" and {len(names) - most} more" if len(names) > most else ""
+    return ", ".join(names[:most]) + more
 
 
 class _FrameLoop:
