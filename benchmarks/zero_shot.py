@@ -38,6 +38,7 @@ import torch
 
 from semattnet._utils.atomic import atomic_path
 from semattnet.evaluation.zero_shot import BenchFrame, DepthMethod, mean_scores, real_frames, score, world_frames
+from semattnet.synthetic.world import HELDOUT_CELLS
 
 DEFAULT_METHODS = (
     "classical",
@@ -51,14 +52,7 @@ DEFAULT_METHODS = (
     "semattnet-half-generalist",
 )
 #: (column, kind, pattern, options of the pattern): the held-out world cells.
-CELLS = (
-    ("street/lidar", "street", "lidar", {}),
-    ("street/points", "street", "points", {}),
-    ("street/depthcam", "street", "depthcam", {}),
-    ("indoor/points500", "indoor", "points", {"count": 500}),
-    ("indoor/depthcam", "indoor", "depthcam", {}),
-    ("indoor/lidar", "indoor", "lidar", {}),
-)
+CELLS = HELDOUT_CELLS
 SWEEP = tuple(("street/beams", "street", "lidar", {"beams": b}) for b in (8, 16, 32, 64, 128)) + tuple(
     ("indoor/points", "indoor", "points", {"count": n}) for n in (50, 200, 500, 2000, 5000)
 )

@@ -117,12 +117,38 @@ def test_fit_calibration_covers_95_percent_at_two_sigma() -> None:
     g = torch.Generator().manual_seed(0)
     sigma = torch.rand(200_000, generator=g, dtype=torch.float64) * 2 + 0.1
     error = torch.randn(200_000, generator=g, dtype=torch.float64) * sigma * 3  # raw under-states by 3x
-    depth = torch.full_like(sigma, 10.0)
-    k, f = fit_calibration(sigma, depth, error)
+    depth, far = torch.full_like(sigma, 10.0), torch.zeros_like(sigma)
+    k, f, _ = fit_calibration(sigma, depth, far, error, coverage=(0.95, 0.99))  # no pixel is far
     covered = (error.abs() <= 2 * (k * sigma + f * depth)).double().mean().item()
     assert covered == pytest.approx(0.95, abs=0.002)
     # the sharpest fit is no wider on average than the floor-free one (k = the Gaussian's 95 % quantile / 2)
     assert (k * sigma + f * depth).mean().item() <= 3 * 1.96 / 2 * sigma.mean().item() * 1.01
+
+
+def test_fit_calibration_puts_every_cell_within_bounds_with_the_distance_term() -> None:
+    """Two cells: near the points the raw term tells the error; far from them (a share of the image's height)
+    the error grows with the distance, which the raw term does not see. Without ``g`` no ``k`` serves both."""
+    gen = torch.Generator().manual_seed(1)
+    n = 100_000
+    raw = torch.rand(2 * n, generator=gen, dtype=torch.float64) * 0.2 + 0.05
+    depth = torch.full_like(raw, 10.0)
+    far = torch.cat((torch.zeros(n, dtype=torch.float64), torch.rand(n, generator=gen, dtype=torch.float64) * 0.5))
+    scale = raw + 3.0 * depth * far  # the truth's spread: the far cell's errors are mostly the distance's
+    error = torch.randn(2 * n, generator=gen, dtype=torch.float64) * scale
+    cell = torch.cat((torch.zeros(n), torch.ones(n)))
+    k, f, far_term = fit_calibration(raw, depth, far, error, cell)
+    inside = (error.abs() <= 2 * (k * raw + f * depth + far_term * depth * far)).double()
+    shares = [inside[cell == c].mean().item() for c in (0, 1)]
+    assert all(0.91 - 1e-3 <= x <= 0.99 for x in shares), (shares, (k, f, far_term))
+    assert far_term > 0
+
+
+def test_weights_calibrated_before_the_distance_term_load_with_it_zero() -> None:
+    model = build_model("semattnet_rt_generalist")
+    state = model.state_dict()
+    state["calibration"] = torch.tensor([0.5, 0.02])
+    model.load_state_dict(state)
+    assert model.calibration.tolist() == pytest.approx([0.5, 0.02, 0.0])
 
 
 def test_a_plain_config_cannot_build_the_generalist_and_the_names_map_back() -> None:

@@ -33,6 +33,7 @@ from .rooms import make_room, shoot_room
 from .scenes import SCENE_STYLES, Shot, make_scene, shoot
 
 __all__ = [
+    "HELDOUT_CELLS",
     "MIN_SPARSE",
     "PATTERN_OPTIONS",
     "WORLD_KINDS",
@@ -62,6 +63,17 @@ PATTERN_OPTIONS: dict[str, tuple[str, ...]] = {
     "points": ("count", "noise"),
     "depthcam": ("max_range", "factor"),
 }
+#: The held-out cells, one per kind of scene and sparse pattern: ``(name, kind, pattern, options)``. The zero-shot
+#: benchmark scores each (frames from index 0 of the held-out split); the generalists' uncertainty is calibrated
+#: on each (frames from ``semattnet.training.generalist.CALIBRATION_FIRST`` on).
+HELDOUT_CELLS: tuple[tuple[str, str, str, dict[str, int]], ...] = (
+    ("street/lidar", "street", "lidar", {}),
+    ("street/points", "street", "points", {}),
+    ("street/depthcam", "street", "depthcam", {}),
+    ("indoor/points500", "indoor", "points", {"count": 500}),
+    ("indoor/depthcam", "indoor", "depthcam", {}),
+    ("indoor/lidar", "indoor", "lidar", {}),
+)
 _ODDS = {"street": (0.6, 0.2, 0.2), "indoor": (0.2, 0.45, 0.35)}  # lidar, points, depthcam
 _TAG = 0x574F524C44  # the world's own stream of seeds
 _ATTEMPTS, _PATTERN_TRIES = 8, 3

@@ -277,39 +277,65 @@ CALIBRATION_FIRST = 1000
 
 
 def calibrate_uncertainty(
-    model: Generalist, frames: int = 24, pixels: int = 200_000, log: Callable[[str], None] = print
-) -> tuple[float, float]:
-    """Fit ``model.calibration`` (:func:`~semattnet.models.generalist.fit_calibration`: 95 % of the errors within
-    2 sigma) on ``frames`` held-out world frames from :data:`CALIBRATION_FIRST` on (half of them with the fallback
-    semantic map), whole frames as inference sees them; sets the buffer and returns ``(k, f)``."""
+    model: Generalist,
+    frames: int = 24,
+    pixels: int = 240_000,
+    log: Callable[[str], None] = print,
+    size: tuple[int, int] | None = None,
+) -> tuple[float, float, float]:
+    """Fit ``model.calibration`` (:func:`~semattnet.models.generalist.fit_calibration`: in each held-out cell,
+    91-99 % of the errors within 2 sigma) on ``frames`` held-out world frames shared out over the cells of
+    :data:`~semattnet.synthetic.world.HELDOUT_CELLS` (at least one each), from :data:`CALIBRATION_FIRST` on, at
+    their own random sizes (``size``: all at that (H, W)), half of them with the fallback semantic map, whole
+    frames as inference sees them; sets the buffer and returns ``(k, f, g)``."""
     from semattnet.models.generalist import fit_calibration
-    from semattnet.palette import unknown_map
-    from semattnet.synthetic.world import make_world_frame, world_seed
+    from semattnet.synthetic.world import HELDOUT_CELLS
 
     model.eval()
     rng = np.random.default_rng(0)
-    raws, depths, errors = [], [], []
-    for i in range(frames):
-        frame = make_world_frame(world_seed("heldout", CALIBRATION_FIRST + i))
-        h, w = (n // 32 * 32 for n in frame.sparse.shape)  # the network's multiple, without padding
-        semantic = frame.semantic[:h, :w] if i % 2 else unknown_map(h, w)
-        rgb, sem = (_image(a[:h, :w]) for a in (frame.rgb, semantic))
-        sparse = torch.from_numpy(np.ascontiguousarray(frame.sparse[:h, :w], dtype=np.float32))[None, None]
-        with torch.no_grad():
-            out = model(rgb, sem, sparse)
-        gt = frame.gt[:h, :w]
-        valid = gt > 0
-        raw = model.raw_uncertainty(out)[0, 0].numpy()[valid]
-        depth = out.depth[0, 0].numpy()[valid]
-        take = rng.permutation(raw.size)[: pixels // frames]
-        raws.append(raw[take])
-        depths.append(depth[take])
-        errors.append((depth - gt[valid])[take])
-    raw_t, depth_t, error_t = (torch.from_numpy(np.concatenate(x)).double() for x in (raws, depths, errors))
-    k, floor = fit_calibration(raw_t, depth_t, error_t)
-    model.calibration.copy_(torch.tensor([k, floor]))
-    log(f"uncertainty calibrated on {frames} held-out world frames: sigma = {k:.3f} u + {floor:.4f} depth")
-    return k, floor
+    per_cell = max(1, -(-frames // len(HELDOUT_CELLS)))
+    parts: list[list[np.ndarray]] = [[] for _ in range(5)]  # raw, depth, far, error, cell
+    for c, (_, kind, pattern, options) in enumerate(HELDOUT_CELLS):
+        for i in range(per_cell):
+            raw, depth, far, error = _pixels(model, CALIBRATION_FIRST + i, (kind, pattern, options), size, i % 2 == 0)
+            take = rng.permutation(raw.size)[: pixels // (per_cell * len(HELDOUT_CELLS))]
+            for part, values in zip(parts, (raw, depth, far, error, np.full(raw.size, c)), strict=True):
+                part.append(values[take])
+    raw_t, depth_t, far_t, error_t, cell_t = (torch.from_numpy(np.concatenate(p)).double() for p in parts)
+    k, floor, far_term = fit_calibration(raw_t, depth_t, far_t, error_t, cell_t)
+    model.calibration.copy_(torch.tensor([k, floor, far_term]))
+    log(
+        f"uncertainty calibrated on {per_cell} held-out world frames in each of {len(HELDOUT_CELLS)} cells: "
+        f"sigma = {k:.3f} u + {floor:.4f} depth + {far_term:.2f} depth * distance / height"
+    )
+    return k, floor, far_term
+
+
+def _pixels(
+    model: Generalist,
+    index: int,
+    cell: tuple[str, str, dict[str, int]],
+    size: tuple[int, int] | None,
+    fallback: bool,
+) -> tuple[np.ndarray, ...]:
+    """``(u, D, r / H, D - truth)`` over the pixels with truth of one held-out world frame, cropped to the
+    network's multiple (no padding), completed as inference completes it."""
+    from semattnet.palette import unknown_map
+    from semattnet.synthetic.world import make_world_frame, world_seed
+
+    kind, pattern, options = cell
+    frame = make_world_frame(world_seed("heldout", index), kind=kind, pattern=pattern, size=size, **options)
+    h, w = (n // 32 * 32 for n in frame.sparse.shape)
+    semantic = unknown_map(h, w) if fallback else frame.semantic[:h, :w]
+    rgb, sem = (_image(a[:h, :w]) for a in (frame.rgb, semantic))
+    sparse = torch.from_numpy(np.ascontiguousarray(frame.sparse[:h, :w], dtype=np.float32))[None, None]
+    with torch.no_grad():
+        inputs = model.prepare(rgb, sparse, sem)
+        out = model.finish(model.net(inputs.rgb, inputs.semantic, inputs.depth), inputs, uncertainty=False)
+        raw, far = model.uncertainty_terms(out, inputs)
+    valid = frame.gt[:h, :w] > 0
+    depth = out.depth[0, 0].numpy()
+    return raw[0, 0].numpy()[valid], depth[valid], far[0, 0].numpy()[valid], (depth - frame.gt[:h, :w])[valid]
 
 
 def _image(a: np.ndarray) -> torch.Tensor:
@@ -318,14 +344,18 @@ def _image(a: np.ndarray) -> torch.Tensor:
 
 
 def finish_generalist(
-    model: Generalist, cfg: GeneralistTrainConfig, frames: int = 24, log: Callable[[str], None] = print
+    model: Generalist,
+    cfg: GeneralistTrainConfig,
+    frames: int = 24,
+    log: Callable[[str], None] = print,
+    size: tuple[int, int] | None = None,
 ) -> Path:
     """Calibrate the trained model's uncertainty (:func:`calibrate_uncertainty`) and write it packed (int8 per
     output channel, as the shipped weights are: 127 levels per sign, 63 for the paper's model, whose 5.7 M
     parameters then ship under 5 MB) to ``out/MODEL.safetensors.gz``."""
     from semattnet.weights.packed import save_packed
 
-    calibrate_uncertainty(model, frames=frames, log=log)
+    calibrate_uncertainty(model, frames=frames, log=log, size=size)
     info = {"recipe": dataclasses.asdict(cfg), "calibration": model.calibration.tolist()}
     levels = 127 if model.config.realtime else 63
     return save_packed(model, Path(cfg.out) / f"{cfg.model}.safetensors.gz", info, levels=levels)
