@@ -36,6 +36,11 @@ def test_scores_match_hand_computed_values() -> None:
     assert s["coverage_2sigma_pct"] == pytest.approx(200 / 3)
     # the 10 % gate keeps sigma <= 0.1 * depth: 0.1 <= 0.4 only (the pixel with no error)
     assert s["gate_kept_pct"] == pytest.approx(100 / 3) and s["gate_rmse_mm"] == 0.0
+    # a pixel with truth and no depth is filled for the depth metrics (as the devkit fills it: from its
+    # neighbour, 9 m) but has no uncertainty to judge
+    holed = score(np.array([[3.0, 4.0], [9.0, 0.0]], np.float32), gt, sigma)
+    assert holed["rmse_mm"] == pytest.approx(1000 * np.sqrt((1 + 0 + 1) / 3))
+    assert holed["coverage_2sigma_pct"] == pytest.approx(100.0) and holed["gate_kept_pct"] == pytest.approx(50.0)
     assert mean_scores([{"a": 1.0, "b": 2.0}, {"a": 3.0}]) == {"a": 2.0}
 
 

@@ -75,10 +75,10 @@ def world_frames(
 
 
 def score(depth: np.ndarray, gt: np.ndarray, uncertainty: np.ndarray | None = None) -> dict[str, float]:
-    """RMSE and MAE (mm), iRMSE and iMAE (1/km), REL, and with an uncertainty its 2-sigma coverage (%), AUSE (RMSE
-    sparsification, normalised curves) and what the cloud gate ``--max-uncertainty 10%`` keeps (% of the pixels,
-    their RMSE), over the pixels with truth (KITTI's hole filling as the
-    devkit does it)."""
+    """RMSE and MAE (mm), iRMSE and iMAE (1/km), REL over the pixels with truth (KITTI's hole filling as the devkit
+    does it), and with an uncertainty its 2-sigma coverage (%), AUSE (RMSE sparsification, normalised curves) and what
+    the cloud gate ``--max-uncertainty 10%`` keeps (% of the pixels, their RMSE) over the pixels with truth and a
+    depth."""
     pred_t, gt_t = torch.from_numpy(np.asarray(depth, np.float32))[None, None], torch.from_numpy(gt)[None, None]
     m = image_metrics(pred_t, gt_t.float())
     out = {
@@ -88,8 +88,8 @@ def score(depth: np.ndarray, gt: np.ndarray, uncertainty: np.ndarray | None = No
         "imae_per_km": 1000 * float(m["imae"][0]),
         "rel": float(m["abs_rel"][0]),
     }
-    if uncertainty is not None:
-        valid = gt > 0
+    if uncertainty is not None:  # over the pixels with truth and a depth (one left without has no uncertainty)
+        valid = (gt > 0) & (np.asarray(depth) > 0)
         err = (depth - gt)[valid].astype(np.float64)
         sigma = np.asarray(uncertainty, np.float64)[valid]
         out["coverage_2sigma_pct"] = 100.0 * float(np.mean(np.abs(err) <= 2 * sigma))

@@ -45,6 +45,7 @@ each of them 91-99 % of the errors lie within ``2 sigma`` (:func:`fit_calibratio
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from typing import NamedTuple
 
 import numpy as np
@@ -211,6 +212,16 @@ class Generalist(nn.Module):
         self.net = _network(config)
         self.register_buffer("calibration", torch.tensor([1.0, 0.0, 0.0]))
 
+    @staticmethod
+    def upgrade_state_dict(state_dict: Mapping[str, torch.Tensor], prefix: str = "") -> dict[str, torch.Tensor]:
+        """``state_dict`` as this version reads it: weights calibrated before the distance term (``(k, f)``) get
+        ``g = 0``, their uncertainty as it was (:func:`semattnet.weights.load_weights` calls this first)."""
+        out = dict(state_dict)
+        old = out.get(prefix + "calibration")
+        if old is not None and old.shape == (2,):
+            out[prefix + "calibration"] = torch.cat((old, old.new_zeros(1)))
+        return out
+
     def _load_from_state_dict(
         self,
         state_dict: dict[str, torch.Tensor],
@@ -221,12 +232,8 @@ class Generalist(nn.Module):
         unexpected_keys: list[str],
         error_msgs: list[str],
     ) -> None:
-        """Weights calibrated before the distance term (``(k, f)``) load with ``g = 0``: their uncertainty as it
-        was."""
-        key = prefix + "calibration"
-        old = state_dict.get(key)
-        if old is not None and old.shape == (2,):
-            state_dict[key] = torch.cat((old, old.new_zeros(1)))
+        """As :meth:`torch.nn.Module._load_from_state_dict`, after :meth:`upgrade_state_dict`."""
+        state_dict.update(self.upgrade_state_dict(state_dict, prefix))
         super()._load_from_state_dict(
             state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys, error_msgs
         )

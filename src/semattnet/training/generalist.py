@@ -318,8 +318,8 @@ def _pixels(
     size: tuple[int, int] | None,
     fallback: bool,
 ) -> tuple[np.ndarray, ...]:
-    """``(u, D, r / H, D - truth)`` over the pixels with truth of one held-out world frame, cropped to the
-    network's multiple (no padding), completed as inference completes it."""
+    """``(u, D, r / H, D - truth)`` over the pixels with truth and a depth of one held-out world frame, cropped to
+    the network's multiple (no padding), completed as inference completes it."""
     from semattnet.palette import unknown_map
     from semattnet.synthetic.world import make_world_frame, world_seed
 
@@ -333,8 +333,8 @@ def _pixels(
         inputs = model.prepare(rgb, sparse, sem)
         out = model.finish(model.net(inputs.rgb, inputs.semantic, inputs.depth), inputs, uncertainty=False)
         raw, far = model.uncertainty_terms(out, inputs)
-    valid = frame.gt[:h, :w] > 0
     depth = out.depth[0, 0].numpy()
+    valid = (frame.gt[:h, :w] > 0) & (depth > 0)  # a pixel left without depth has no uncertainty to judge
     return raw[0, 0].numpy()[valid], depth[valid], far[0, 0].numpy()[valid], (depth - frame.gt[:h, :w])[valid]
 
 

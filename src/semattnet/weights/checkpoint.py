@@ -281,6 +281,9 @@ def load_weights(model: nn.Module, state_dict: Mapping[str, torch.Tensor] | Chec
     """
     source = state_dict.path if isinstance(state_dict, Checkpoint) else "state dict"
     sd = filter_state_dict(state_dict.state_dict if isinstance(state_dict, Checkpoint) else state_dict)
+    upgrade = getattr(model, "upgrade_state_dict", None)  # a model that reads its older files (the generalist)
+    if callable(upgrade):
+        sd = upgrade(sd)
     own = model.state_dict()
     missing = [k for k in own if k not in sd]
     unexpected = [k for k in sd if k not in own]
