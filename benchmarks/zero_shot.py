@@ -133,6 +133,19 @@ def table(results: dict, columns: list[str], metric: str = "rmse_mm") -> str:
     return head + "\n".join(lines) + "\n"
 
 
+def coverage_table(results: dict, columns: list[str]) -> str:
+    """The uncertainty's 2-sigma coverage (%) per cell, for the methods whose uncertainty is calibrated (the
+    generalists'); the goal is 90-99 in every cell."""
+    head = "| method | " + " | ".join(columns) + " |\n|---|" + "---:|" * len(columns) + "\n"
+    lines = []
+    for name, cells in results.items():
+        if "generalist" not in name:
+            continue
+        vals = [cells.get(c, {}).get("coverage_2sigma_pct", float("nan")) for c in columns]
+        lines.append(f"| `{name}` | " + " | ".join(f"{v:.1f}" for v in vals) + " |")
+    return head + "\n".join(lines) + "\n"
+
+
 def real_table(results: dict) -> str:
     """The real frame: every metric per camera, one row per method."""
     keys = ("rmse_mm", "mae_mm", "irmse_per_km", "imae_per_km", "coverage_2sigma_pct", "ause_rmse")
@@ -221,6 +234,8 @@ def main(argv: list[str] | None = None) -> int:
         table(results, cells)
         + "\nREL on the rooms (lower is better):\n\n"
         + table(results, [c for c in cells if c.startswith("indoor")], "rel")
+        + "\nThe generalists' 2-sigma coverage % on the world cells (over the pixels with a depth; goal 90-99):\n\n"
+        + coverage_table(results, cells)
     )
     (args.out / "table.md").write_text(text)
     plot(results, args.out / "zero-shot.png")

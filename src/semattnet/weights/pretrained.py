@@ -415,29 +415,29 @@ _register_rt_demo()
 _GENERALISTS: tuple[tuple[str, str, int, int, tuple[float, float, float, float]], ...] = (
     (
         "semattnet_rt_generalist",
-        "64c832874968f8cc6c91d825cb8d27c875928adab7472ee57b7ffd614b5ca615",
-        578_491,
+        "4aaf290efb8c25abdb5d316afc5841f47afa9d354c12cbb159d612b04b5effce",
+        578_571,
         537_854,
         (1134.8, 238.5, 6.26, 1.46),
     ),
     (
         "semattnet_rt_half_generalist",
-        "b211e1d6d3def1128ea4e6ecc6e875d3e7d665ae8564aaf17c85bc61eb57e133",
-        578_249,
+        "9077d33b30ed725fd1d951e044d7f1fa731d22b9b9f7960cc3f9027abb599080",
+        578_284,
         537_854,
         (1122.0, 241.3, 6.18, 1.49),
     ),
     (
         "semattnet_half_generalist",
-        "921a7f79c03e3317ab3cc36b865cd69281089d4f874c43dada8987ac3dc32052",
-        4_535_455,
+        "032f16af75dbf28cfc1a0997a87913aff76b21496b2536b6ab0e425cebfc08de",
+        4_535_509,
         5_676_421,
         (1133.0, 288.7, 6.68, 1.90),
     ),
     (
         "semattnet_generalist",
-        "ef65745e873125c24a6cf77bfc7a6e02431102a99bdd86eeff869fac85d9a22c",
-        4_528_189,
+        "347822428d6b16e9f2aadf274dd7aaa9dbf1ca56ebbfc206077930e20d9a3cfd",
+        4_528_330,
         5_676_421,
         (1259.8, 398.6, 8.00, 2.89),
     ),
@@ -448,7 +448,9 @@ _GENERALIST_NOTES = (
     "the street-trained network of the same architecture; never shown a real frame. Scale-free and anchored on "
     "the classical completion (docs/guides/generalist.md); its uncertainty is a calibrated standard deviation. "
     "Convolution weights quantised per output channel (127 levels per sign; 63 for the paper's model, to ship "
-    "under 5 MB). The metrics are on the bundled real "
+    "under 5 MB). Its uncertainty's calibration, sigma = k u + f D + g D r/H (r/H: the distance to the nearest "
+    "point as a share of the image's height), was refitted from the same weights so that every held-out world "
+    "cell has 91-99 % of its errors within 2 sigma. The metrics are on the bundled real "
     "KITTI frame (drive 0035, frame 5, camera 02, its own scan projected, no semantic map), zero-shot."
 )
 
