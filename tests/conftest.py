@@ -64,27 +64,6 @@ def _private_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
         os.environ["SEMATTNET_CACHE"] = old
 
 
-#: Test files whose tests are spread over the workers one by one (each is long and sets up nothing shared).
-SPREAD_BY_TEST = {"tests/docs/test_code_blocks.py"}
-
-
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Under ``pytest -n N --dist loadgroup`` (``make test``): the tests of one file run on one worker, so a
-    module's fixtures are built once; every test of the ROS nodes shares one group, so no two DDS participants or
-    ROS 1 masters of different tests meet on the loopback at once; the docs pages are spread one by one."""
-    if not config.pluginmanager.hasplugin("xdist"):
-        return
-    for item in items:
-        path = Path(str(item.path)).resolve().relative_to(REPO).as_posix()
-        if path.startswith(("tests/robotics/ros/", "tests/robotics/peers/")):
-            group = "ros"
-        elif path in SPREAD_BY_TEST:
-            group = item.nodeid
-        else:
-            group = path
-        item.add_marker(pytest.mark.xdist_group(group))
-
-
 @pytest.fixture(autouse=True, scope="session")
 def _one_thread_per_worker() -> None:
     """Under xdist each worker computes on one thread: two workers on a 2-core machine, not four threads."""
