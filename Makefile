@@ -13,15 +13,17 @@ setup: $(BIN)/semattnet
 demo: setup
 	$(BIN)/semattnet demo
 
-# The default suite on two workers (pytest-xdist): each file's tests on one worker, so a module's fixtures are built once.
+# The default suite on two workers (pytest-xdist), the tests handed out one by one (--dist loadgroup: a test marked
+# xdist_group would keep its group on one worker). --dist loadgroup lost a worker here to an abort inside tqdm's lock
+# and then hung; this way ran green four times in a row.
 WORKERS ?= 2
 
 test: setup
-	$(BIN)/python -m pytest -n $(WORKERS) --dist loadfile
+	$(BIN)/python -m pytest -n $(WORKERS) --dist loadgroup
 
 # What the default suite leaves out as slow (minutes each); CI runs it after the default suite.
 test-slow: setup
-	$(BIN)/python -m pytest -m "slow and not ros_peers" -n $(WORKERS) --dist loadfile
+	$(BIN)/python -m pytest -m "slow and not ros_peers" -n $(WORKERS) --dist loadgroup
 
 # The ROS 2 node against Fast DDS and Cyclone DDS C peers (their Debian packages: scripts/setup-ros-peers.sh).
 # The ROS nodes against implementations that are not ours (Fast DDS, Cyclone DDS C, Debian's roscore/rostopic).
@@ -31,7 +33,7 @@ test-ros-peers: setup
 	SEMATTNET_REQUIRE_ROS_PEERS=1 SEMATTNET_REQUIRE_ROS1=1 $(BIN)/python -m pytest -m ros_peers tests/robotics/peers tests/robotics/ros
 
 test-all: setup
-	$(BIN)/python -m pytest -m "slow or not slow" -n $(WORKERS) --dist loadfile
+	$(BIN)/python -m pytest -m "slow or not slow" -n $(WORKERS) --dist loadgroup
 
 lint: setup
 	$(BIN)/ruff check src tests benchmarks hubconf.py
