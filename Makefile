@@ -14,7 +14,7 @@ demo: setup
 	$(BIN)/semattnet demo
 
 # The default suite on two workers (pytest-xdist), the tests handed out one by one (--dist loadgroup: a test marked
-# xdist_group would keep its group on one worker). --dist loadgroup lost a worker here to an abort inside tqdm's lock
+# xdist_group would keep its group on one worker). --dist loadfile lost a worker here to an abort inside tqdm's lock
 # and then hung; this way ran green four times in a row.
 WORKERS ?= 2
 
