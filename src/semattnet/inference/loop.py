@@ -81,8 +81,8 @@ class FrameRun:
         groups: dict[str, list[str]] = {}
         for name, reason in self.journal.reasons("skipped"):
             groups.setdefault(_kind(reason), []).append(name)
-        kinds = Counter({why: len(names) for why, names in groups.items()})
-        lines += [f"  skipped x{n}: {why}: {_some(groups[why])}" for why, n in kinds.most_common()]
+        by_count = sorted(groups.items(), key=lambda kind: -len(kind[1]))  # stable: ties in the frames' order
+        lines += [f"  skipped x{len(names)}: {why}: {_some(names)}" for why, names in by_count]
         return "\n".join(lines)
 
 

@@ -91,8 +91,8 @@ def frame_scale(sparse: torch.Tensor) -> torch.Tensor:
     b = sparse.shape[0]
     flat = sparse.detach().float().reshape(b, -1)
     one = torch.ones((), dtype=flat.dtype, device=flat.device)
-    # the lower middle value of the points alone (as torch's median): a frame's few thousand points, not its pixels
-    med = torch.stack([row[row > 0].median() if bool((row > 0).any()) else one for row in flat])
+    points = [row[row > 0] for row in flat]  # a frame's few thousand points, not its pixels
+    med = torch.stack([p.median() if p.numel() else one for p in points])  # the lower middle value, as torch's
     med = torch.where(torch.isfinite(med) & (med > 0), med, torch.ones_like(med))
     return med.view(b, 1, 1, 1)
 
@@ -216,10 +216,10 @@ class Generalist(nn.Module):
     def upgrade_state_dict(state_dict: Mapping[str, torch.Tensor], prefix: str = "") -> dict[str, torch.Tensor]:
         """``state_dict`` as this version reads it: weights calibrated before the distance term (``(k, f)``) get
         ``g = 0``, their uncertainty as it was (:func:`semattnet.weights.load_weights` calls this first)."""
-        out = dict(state_dict)
-        old = out.get(prefix + "calibration")
+        key, out = prefix + "calibration", dict(state_dict)
+        old = out.get(key)
         if old is not None and old.shape == (2,):
-            out[prefix + "calibration"] = torch.cat((old, old.new_zeros(1)))
+            out[key] = torch.cat((old, old.new_zeros(1)))
         return out
 
     def _load_from_state_dict(
@@ -232,8 +232,11 @@ class Generalist(nn.Module):
         unexpected_keys: list[str],
         error_msgs: list[str],
     ) -> None:
-        """As :meth:`torch.nn.Module._load_from_state_dict`, after :meth:`upgrade_state_dict`."""
-        state_dict.update(self.upgrade_state_dict(state_dict, prefix))
+        """As :meth:`torch.nn.Module._load_from_state_dict`, the calibration upgraded first (:meth:`upgrade_state_dict`,
+        on that one entry)."""
+        key = prefix + "calibration"
+        if key in state_dict:
+            state_dict[key] = self.upgrade_state_dict({key: state_dict[key]}, prefix)[key]
         super()._load_from_state_dict(
             state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys, error_msgs
         )
