@@ -8,12 +8,24 @@ and all; :func:`progress` turns the bar off unless the stream is a TTY (or ``for
 from __future__ import annotations
 
 import sys
+import threading
 from collections.abc import Iterable
 from typing import IO
 
 from tqdm import tqdm
 
 __all__ = ["is_interactive", "progress"]
+
+
+class _Bar(tqdm):  # type: ignore[type-arg]
+    """tqdm with a thread lock of its own.
+
+    tqdm's default lock includes a multiprocessing semaphore, made on first use; a process that forked
+    (a data-loader worker, a test runner's worker) can abort inside it. Our bars are written by one
+    process's threads, so a thread lock is all they need, and tqdm's own class keeps its lock for others.
+    """
+
+    _lock = threading.RLock()
 
 
 def is_interactive(stream: IO[str] | None = None) -> bool:
@@ -57,7 +69,7 @@ def progress(
     """
     stream = sys.stderr if file is None else file
     shown = enabled and (force if force is not None else is_interactive(stream))
-    return tqdm(
+    return _Bar(
         iterable,
         file=stream,
         disable=not shown,
