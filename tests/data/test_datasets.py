@@ -231,3 +231,28 @@ def test_the_cropped_splits_are_the_entrys_not_its_names() -> None:
     assert spec.eval_crop("train", (16, 24)) is None and spec.eval_crop("test", (8, 12)) is None
     assert get_dataset("kitti-dc").eval_crop("val", (375, 1242)) == (352, 1216)
     assert get_dataset("kitti-dc").eval_crop("val_select", (375, 1242)) is None
+
+
+def test_a_scored_run_names_every_bad_file_in_one_line(tmp_path: Path) -> None:
+    """evaluate stops before completing anything when a frame is bad; its one line names each bad file, not
+    only the first, so that one run says what to repair."""
+    from click.testing import CliRunner
+
+    from semattnet.cli import main
+    from tests.data._datasets import make_nyu
+
+    root = make_nyu(tmp_path / "nyu", train=0, test=4)
+    bad_dtype = write_h5(
+        root / "val" / "official" / "00002.h5",
+        {"rgb": np.zeros((3, 8, 8), np.float32), "depth": np.ones((8, 8), np.float32)},
+    )
+    not_hdf5 = root / "val" / "official" / "00004.h5"
+    not_hdf5.write_bytes(b"not hdf5")
+    ckpt = tmp_path / "never-loaded.safetensors"  # every check comes before the weights are read
+    ckpt.write_bytes(b"")
+    args = ["evaluate", "--dataset", "nyuv2", "--data", str(root), "--checkpoint", str(ckpt), "--workers", "0"]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 1, res.output
+    line = res.output.strip()
+    assert line.startswith("Error: 2 of 4 frames cannot be read: ") and "\n" not in line
+    assert f"{bad_dtype}: 'rgb' must be uint8" in line and f"{not_hdf5}: not a readable HDF5 file" in line
