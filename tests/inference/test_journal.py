@@ -4,6 +4,7 @@ checked, never through a link."""
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 from typing import Any
@@ -132,3 +133,18 @@ def test_overwrite_of_a_600_mb_journal_is_refused_in_one_line_without_reading_it
     message = str(info.value)
     assert "\n" not in message and str(big) in message and "not read" in message, message
     assert os.path.getsize(big) == 600 * 2**20  # left as it was
+
+
+@pytest.mark.parametrize("paced", [False, True])
+def test_a_paced_run_saves_its_journal_at_intervals_not_per_frame(tmp_path: Path, paced: bool) -> None:
+    """A small run saves after every frame (a kill loses nothing); a real-time one, whose frames and drops come
+    at the sensor's rate, at most once per SAVE_INTERVAL_S (a kill loses at most that much; resumed frames
+    are done again), and always at the end."""
+    run = journal.RunJournal(tmp_path, ["a", "b"], paced=paced)
+    run.save(force=False)
+    run.mark("a", "dropped", "a newer frame came first")
+    run.save(force=False)  # within the interval of the first save
+    status = json.loads((tmp_path / journal.FRAMES_FILE).read_text())["frames"][0]["status"]
+    assert status == ("pending" if paced else "dropped")
+    run.save(complete=True)
+    assert json.loads((tmp_path / journal.FRAMES_FILE).read_text())["frames"][0]["status"] == "dropped"

@@ -21,9 +21,10 @@ file inside the folder (no absolute path, no ``..``, no symlink) with its record
 other frame is done again.
 
 The file is rewritten atomically (:func:`semattnet._utils.atomic.atomic_path`) after every frame of a small
-run and at most once per :data:`SAVE_INTERVAL_S` of a large one (a kill loses at most that much work; those
-frames are done again on resume), and at the end with ``complete: true``. Under ``torchrun`` each process
-keeps ``.frames.rankR.json`` while it runs and process 0 merges them into ``frames.json`` at the end.
+run and at most once per :data:`SAVE_INTERVAL_S` of a large or a paced (real-time) one (a kill loses at most
+that much work; those frames are done again on resume), and at the end with ``complete: true``. Under
+``torchrun`` each process keeps ``.frames.rankR.json`` while it runs and process 0 merges them into
+``frames.json`` at the end.
 """
 
 from __future__ import annotations
@@ -303,8 +304,10 @@ class RunJournal:
         rank: int = 0,
         world: int = 1,
         expect: Callable[[str], Sequence[str]] | None = None,
+        paced: bool = False,
     ) -> None:
         self.out, self.names, self.run = Path(out), list(names), {**_DEFAULT_RUN, **(run or {})}
+        self.paced = paced  # a real-time run: its frames (and drops) come at the sensor's rate, saves at intervals
         self.rank, self.world, self.expect = rank, world, expect
         self.frames: dict[str, FrameEntry] = {n: {"name": n, "status": "pending"} for n in self.names}
         self.earlier_wall_s = 0.0
@@ -468,7 +471,8 @@ class RunJournal:
     def save(self, complete: bool = False, wall_s: float = 0.0, force: bool = True) -> None:
         """Write this process's file atomically (``force=False``: only when it is due, see the module doc)."""
         now = time.monotonic()
-        if not force and len(self.names) > SMALL_RUN and now - self._saved_at < SAVE_INTERVAL_S:
+        by_interval = self.paced or len(self.names) > SMALL_RUN
+        if not force and by_interval and now - self._saved_at < SAVE_INTERVAL_S:
             return
         self.out.mkdir(parents=True, exist_ok=True)
         with atomic_path(self.path, suffix=".json") as tmp:

@@ -141,7 +141,7 @@ def _acquire(lock: FolderLock) -> None:
 def _plan(source: FrameSource, sinks: Sequence[Sink], out: Path, output: OutputSpec, options: RunOptions) -> RunPlan:
     """:func:`check_frames` once the folder is locked."""
     policy = options.policy(len(source.names))
-    journal = agree(_journal, source, sinks, out, output.run, output.resume)
+    journal = agree(_journal, source, sinks, out, output.run, output.resume, options.realtime is not None)
     if not (output.overwrite or output.resume):  # before the files it left are refused one by one: say --resume
         on_main(_refuse_earlier_run, out)
     on_main(_check_outputs, source, sinks, out, output.overwrite or output.resume, output.inputs)
@@ -156,10 +156,18 @@ def _plan(source: FrameSource, sinks: Sequence[Sink], out: Path, output: OutputS
 
 
 def _journal(
-    source: FrameSource, sinks: Sequence[Sink], out: Path, run: Mapping[str, object] | None, resume: bool
+    source: FrameSource,
+    sinks: Sequence[Sink],
+    out: Path,
+    run: Mapping[str, object] | None,
+    resume: bool,
+    paced: bool,
 ) -> RunJournal:
-    """This process's journal of the run (a resume keeps only frames that recorded this run's files)."""
-    return RunJournal(out, source.names, run, resume, rank(), world_size(), lambda name: output_files([name], sinks))
+    """This process's journal of the run (a resume keeps only frames that recorded this run's files; ``paced``: a
+    real-time run, saved at intervals)."""
+    return RunJournal(
+        out, source.names, run, resume, rank(), world_size(), lambda name: output_files([name], sinks), paced
+    )
 
 
 def _refuse_earlier_run(out: Path) -> None:

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import warnings
 
+import numpy as np
+
 from semattnet._errors import InputError
 from semattnet.data.frames import Frame, FrameSource
 from semattnet.data.sources.semantic import CrossPalette, MapSegmenter
@@ -41,6 +43,7 @@ class SemanticMaps:
         self.cross: CrossPalette | None = None
         self.note: str | None = None
         self._warned = False
+        self._fallback: np.ndarray | None = None  # the last fallback map, read-only, shared by frames of its size
 
     def bind(self, completer: Completer) -> SemanticMaps:
         """Decide for ``completer``: whether it needs maps; a segmenter SPEC is loaded on its device."""
@@ -96,4 +99,8 @@ class SemanticMaps:
                 stacklevel=3,
             )
             self._warned = True
-        return frame.with_semantic(unknown_map(*frame.rgb.shape[:2]))
+        size = frame.rgb.shape[:2]
+        if self._fallback is None or self._fallback.shape[:2] != size:  # made once per size, not per frame
+            self._fallback = unknown_map(*size)
+            self._fallback.flags.writeable = False
+        return frame.with_semantic(self._fallback)

@@ -136,6 +136,15 @@ def _pad_to(x: torch.Tensor, k: int, mode: str) -> torch.Tensor:
     return F.pad(x, (0, pw, 0, ph), mode=mode) if ph or pw else x
 
 
+def _block_mean(x: torch.Tensor, k: int) -> torch.Tensor:
+    """Each ``k`` x ``k`` block's mean of ``x`` (sizes multiples of ``k``): ``avg_pool2d(x, k)`` up to float
+    rounding, as ``k * k`` strided slices summed (several times faster on a CPU for an image whose channels
+    are its last axis in memory, as a camera frame's are)."""
+    total = sum(x[..., i::k, j::k] for i in range(k) for j in range(k))
+    assert isinstance(total, torch.Tensor)
+    return total / (k * k)
+
+
 def work_resolution(
     rgb: torch.Tensor, sparse: torch.Tensor, semantic: torch.Tensor | None, k: int
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
@@ -144,7 +153,7 @@ def work_resolution(
     far = torch.where(sparse > 0, sparse.float(), torch.full_like(sparse, float("inf"), dtype=torch.float32))
     near = -F.max_pool2d(-_pad_to(far, k, "replicate"), k)
     small = torch.where(torch.isfinite(near), near, torch.zeros_like(near))
-    colour = F.avg_pool2d(_pad_to(rgb.float(), k, "replicate"), k)
+    colour = _block_mean(_pad_to(rgb.float(), k, "replicate"), k)
     labels = None if semantic is None else _pad_to(semantic.float(), k, "replicate")[..., ::k, ::k]
     return colour, small, labels
 
