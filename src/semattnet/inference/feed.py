@@ -47,7 +47,6 @@ _R = TypeVar("_R")
 
 __all__ = [
     "FrameFault",
-    "check_frame_inputs",
     "completions",
     "fault_reason",
     "is_frame_fault",
@@ -429,35 +428,6 @@ def completions(
                     yield from _complete_one(completer, batch, timer, current, fault.of_frame)
     finally:
         timer.end()
-
-
-#: Faulty frames named in full in the one line that stops an ``on_error="stop"`` run; the rest counted.
-LISTED_FAULTS = 5
-
-
-def check_frame_inputs(source: FrameSource, names: Sequence[str], on_error: str) -> dict[str, str]:
-    """Decode the inputs of ``names``: ``skip`` returns every faulty frame's reason (frame by frame, in order);
-    ``stop`` raises: the one fault as it is, or one line naming every faulty frame (the first
-    :data:`LISTED_FAULTS`, the rest counted), so that one check tells what to repair."""
-    faults: dict[str, str] = {}
-    first: Exception | None = None
-    for name in names:
-        try:
-            source.check([name])
-        except Exception as exc:
-            if not is_frame_fault(exc):
-                raise
-            first = first or exc
-            faults[name] = " ".join(str(exc).split())
-    if on_error != "stop" or first is None:
-        return faults
-    if len(faults) == 1:
-        raise first
-    from semattnet._errors import DataError
-
-    shown = "; ".join(list(faults.values())[:LISTED_FAULTS])
-    more = f"; and {len(faults) - LISTED_FAULTS} more" if len(faults) > LISTED_FAULTS else ""
-    raise DataError(f"{len(faults)} of {len(names)} frames cannot be read: {shown}{more}") from first
 
 
 def live_completions(

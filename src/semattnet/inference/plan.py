@@ -10,12 +10,13 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from semattnet._errors import DataError
 from semattnet._utils.distributed import rank, world_size
 from semattnet._utils.lock import FolderLock
 from semattnet._utils.outputs import Output, check_no_input_overlap, check_outputs
 from semattnet.data.frames import FrameSource
 from semattnet.inference.completer import Completer
-from semattnet.inference.feed import check_frame_inputs
+from semattnet.inference.feed import is_frame_fault
 from semattnet.inference.journal import FRAMES_FILE, FrameEntry, RunJournal
 from semattnet.inference.loop import FrameRun, execute, nothing_done
 from semattnet.inference.options import OutputSpec, RunOptions
@@ -24,7 +25,7 @@ from semattnet.inference.sharding import agree, gather_rows, on_main, process_gr
 from semattnet.inference.sinks import Sink, output_files
 from semattnet.inference.timing import StageTimes
 
-__all__ = ["RunPlan", "check_frames"]
+__all__ = ["RunPlan", "check_frame_inputs", "check_frames"]
 
 PathLike = str | os.PathLike[str]
 
@@ -136,6 +137,33 @@ def check_frames(
 
 def _acquire(lock: FolderLock) -> None:
     lock.acquire()
+
+
+#: Faulty frames named in full in the one line that stops an ``on_error="stop"`` run; the rest counted.
+LISTED_FAULTS = 5
+
+
+def check_frame_inputs(source: FrameSource, names: Sequence[str], on_error: str) -> dict[str, str]:
+    """Decode the inputs of ``names``: ``skip`` returns every faulty frame's reason (frame by frame, in order);
+    ``stop`` raises: the one fault as it is, or one line naming every faulty frame (the first
+    :data:`LISTED_FAULTS`, the rest counted), so that one check tells what to repair."""
+    faults: dict[str, str] = {}
+    first: Exception | None = None
+    for name in names:
+        try:
+            source.check([name])
+        except Exception as exc:
+            if not is_frame_fault(exc):
+                raise
+            first = first or exc
+            faults[name] = " ".join(str(exc).split())
+    if on_error != "stop" or first is None:
+        return faults
+    if len(faults) == 1:
+        raise first
+    shown = "; ".join(list(faults.values())[:LISTED_FAULTS])
+    more = f"; and {len(faults) - LISTED_FAULTS} more" if len(faults) > LISTED_FAULTS else ""
+    raise DataError(f"{len(faults)} of {len(names)} frames cannot be read: {shown}{more}") from first
 
 
 def _plan(source: FrameSource, sinks: Sequence[Sink], out: Path, output: OutputSpec, options: RunOptions) -> RunPlan:
