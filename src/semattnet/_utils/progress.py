@@ -17,7 +17,7 @@ from tqdm import tqdm
 __all__ = ["is_interactive", "progress"]
 
 
-class _Bar(tqdm):  # type: ignore[type-arg]
+class _Bar(tqdm):
     """tqdm with a thread lock of its own.
 
     tqdm's default lock includes a multiprocessing semaphore, made on first use; a process that forked

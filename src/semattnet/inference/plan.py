@@ -68,7 +68,7 @@ class RunPlan:
         """A plan without the checks, for frames whose inputs and outputs the caller has checked (e.g. the
         thinned frames of a sparsity sweep, into a folder of its stage): nothing to skip or keep, no lock."""
         out, options = Path(out), options or RunOptions()
-        journal = _journal(source, sinks, out, None, False)
+        journal = _journal(source, sinks, out, None, False, options.realtime is not None)
         return cls(
             source, sinks, out, journal, OutputSpec(overwrite=True), options, on_error=options.policy(len(source.names))
         )
