@@ -104,6 +104,7 @@ class RosNodeCommand(GeneratedCommand):
         if ros.log_level is not None:
             _log_level(ros.log_level)
         ctx.meta["semattnet.enclave"] = ros.enclave or "/"
+        ctx.meta["semattnet.rosout"] = ros.rosout
 
 
 class Ros1NodeCommand(RosNodeCommand):

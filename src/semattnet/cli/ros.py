@@ -290,6 +290,7 @@ class NodeOptions:
             cloud_stride=self.cloud_stride,
             latch_camera_info=self.latch_camera_info,
             qos=qos,
+            rosout=bool(click.get_current_context().meta.get("semattnet.rosout", True)),
         )
 
 

@@ -1,11 +1,13 @@
 /* A Cyclone DDS C reader of the ROS 2 graph, as rmw_cyclonedds reads it (the IDL beside it, compiled by idlc):
- * ros_discovery_info (ParticipantEntitiesInfo, reliable, transient local), rt/diagnostics (DiagnosticArray) and
+ * ros_discovery_info (ParticipantEntitiesInfo, reliable, transient local), rt/diagnostics (DiagnosticArray),
+ * rt/rosout (rcl_interfaces/Log, reliable, transient local, as rcl subscribes it) and
  * the DDS built-in topics DCPSParticipant, DCPSPublication and DCPSSubscription (the endpoints' GUIDs, found
  * independently of what the node says). Usage: cyclone_graph NODE_NAME TIMEOUT_S. One line per sample on stdout:
  *   node PARTICIPANT_GID NAMESPACE NAME R READER_GID... W WRITER_GID...   (GIDs in hex)
  *   participant GUID USER_DATA        pub GUID PARTICIPANT_GUID TOPIC TYPE        sub GUID ... (the same)
  *   diag LEVEL NAME|HARDWARE_ID|KEY=VALUE|KEY=VALUE...
- * Exit 0 once NODE_NAME was announced with endpoints and a DiagnosticArray came, 1 at the timeout. */
+ *   log LEVEL NAME|FUNCTION|MSG
+ * Exit 0 once NODE_NAME was announced with endpoints and a DiagnosticArray and a Log came, 1 at the timeout. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -57,6 +59,19 @@ static int take_diag(dds_entity_t rd) {
   return found;
 }
 
+static int take_log(dds_entity_t rd) {
+  void *samples[1] = {NULL};
+  dds_sample_info_t info[1];
+  int found = 0, n = dds_take(rd, samples, info, 1, 1);
+  if (n > 0 && info[0].valid_data) {
+    const rcl_interfaces_msg_dds__Log_ *m = samples[0];
+    printf("log %u %s|%s|%s\n", m->level, m->name, m->function, m->msg);
+    found = 1;
+  }
+  if (n > 0) dds_return_loan(rd, samples, n);
+  return found;
+}
+
 static void take_builtin(dds_entity_t rd, const char *kind) {
   void *samples[1] = {NULL};
   dds_sample_info_t info[1];
@@ -96,6 +111,8 @@ int main(int argc, char **argv) {
   dds_qset_history(qos, DDS_HISTORY_KEEP_ALL, 0);
   dds_entity_t info_tp = dds_create_topic(pp, &rmw_dds_common_msg_dds__ParticipantEntitiesInfo__desc, "ros_discovery_info", NULL, NULL);
   dds_entity_t info_rd = dds_create_reader(pp, info_tp, qos, NULL);
+  dds_entity_t log_tp = dds_create_topic(pp, &rcl_interfaces_msg_dds__Log__desc, "rt/rosout", NULL, NULL);
+  dds_entity_t log_rd = dds_create_reader(pp, log_tp, qos, NULL);
   dds_qset_durability(qos, DDS_DURABILITY_VOLATILE);
   dds_entity_t diag_tp = dds_create_topic(pp, &diagnostic_msgs_msg_dds__DiagnosticArray__desc, "rt/diagnostics", NULL, NULL);
   dds_entity_t diag_rd = dds_create_reader(pp, diag_tp, qos, NULL);
@@ -103,14 +120,15 @@ int main(int argc, char **argv) {
   dds_entity_t parts = dds_create_reader(pp, DDS_BUILTIN_TOPIC_DCPSPARTICIPANT, NULL, NULL);
   dds_entity_t pubs = dds_create_reader(pp, DDS_BUILTIN_TOPIC_DCPSPUBLICATION, NULL, NULL);
   dds_entity_t subs = dds_create_reader(pp, DDS_BUILTIN_TOPIC_DCPSSUBSCRIPTION, NULL, NULL);
-  if (pp < 0 || info_rd < 0 || diag_rd < 0 || parts < 0 || pubs < 0 || subs < 0) {
+  if (pp < 0 || info_rd < 0 || diag_rd < 0 || log_rd < 0 || parts < 0 || pubs < 0 || subs < 0) {
     fprintf(stderr, "cyclone_graph: cannot create the participant or a reader\n");
     return 2;
   }
-  int node = 0, diag = 0;
-  while (!(node && diag) && dds_time() < end) {
+  int node = 0, diag = 0, logged = 0;
+  while (!(node && diag && logged) && dds_time() < end) {
     node |= take_node(info_rd, argv[1]);
     diag |= take_diag(diag_rd);
+    logged |= take_log(log_rd);
     take_builtin(parts, "participant");
     take_builtin(pubs, "pub");
     take_builtin(subs, "sub");
@@ -124,5 +142,5 @@ int main(int argc, char **argv) {
   }
   fflush(stdout);
   dds_delete(pp);
-  return node && diag ? 0 : 1;
+  return node && diag && logged ? 0 : 1;
 }

@@ -1,6 +1,7 @@
 """The node in the ROS 2 graph, read by a program that is not ours: a Cyclone DDS C reader (types from
 rmw_dds_common's and diagnostic_msgs' Humble .msg definitions, ``ros_graph.idl``) decodes ``ros_discovery_info``
-as rmw does (the node's namespace, name and endpoint GIDs) and ``/diagnostics`` with the documented keys, and finds
+as rmw does (the node's namespace, name and endpoint GIDs), ``/diagnostics`` with the documented keys and
+``/rosout`` (rcl_interfaces' Log, the node's logger name and report lines), and finds
 the same endpoints' GUIDs independently in the DDS built-in topics. ``pytest -m ros_peers``."""
 
 from __future__ import annotations
@@ -55,3 +56,8 @@ def test_cyclone_c_reads_the_node_in_the_graph_and_its_diagnostics(peers: dict[s
     fields = rest.split("|")
     assert fields[:2] == ["semattnet: /robot/depth", "/robot/depth"] and level in ("1", "2")
     assert set(KEYS) <= {f.split("=", 1)[0] for f in fields[2:]}
+    assert "rt/rosout" in pubs.values()
+    logs = [line.split(" ", 2)[1:] for line in lines if line.startswith("log ")]
+    level, text = logs[0]
+    name, function, message = text.split("|", 2)
+    assert (level, name, function) == ("20", "robot.depth", "report") and message, logs

@@ -239,6 +239,7 @@ def node(workdir: Path) -> dict[str, Any]:
         argv = {
             "info": ["rostopic", "pub", "-l", topics.camera_info, "sensor_msgs/CameraInfo", info],
             "echo": ["rostopic", "echo", "-n", "1", NODE_DEPTH],
+            "rosout": ["rostopic", "echo", "/rosout_agg"],  # what roscore's rosout node received of /rosout
             "node": [
                 sys.executable,
                 "-m",
@@ -258,6 +259,8 @@ def node(workdir: Path) -> dict[str, Any]:
                 topics.camera_info,
                 "--max-skew",
                 "0.02",
+                "--report-every",
+                "0.2",
             ],
         }
         procs = {}
@@ -267,13 +270,18 @@ def node(workdir: Path) -> dict[str, Any]:
                     cmd, env=os.environ if name == "node" else env, text=True, stdout=out, stderr=subprocess.STDOUT
                 )
         _drive(env, static, frames, procs)
-        for name in ("node", "echo", "info"):  # the node and echo end on their own; stragglers by their PID
-            if name != "info":
+        for name in ("node", "echo", "rosout", "info"):  # the node and echo end on their own; the others by their PID
+            if name in ("node", "echo"):
                 with contextlib.suppress(subprocess.TimeoutExpired):
                     procs[name].wait(10)
             _stop(procs[name])
     read = {name: (workdir / f"{name}.out").read_text() for name in procs}
-    return {"echo": read["echo"], "node": read["node"], "node_returncode": procs["node"].returncode}
+    return {
+        "echo": read["echo"],
+        "rosout": read["rosout"],
+        "node": read["node"],
+        "node_returncode": procs["node"].returncode,
+    }
 
 
 if __name__ == "__main__":

@@ -163,3 +163,6 @@ def test_ros1_node_driven_by_rostopic_pub_reaches_rostopic_echo(tmp_path: Path, 
     want = drive[stamp]
     assert np.count_nonzero(want) and np.ptp(want) > 1.0  # a wall and a box: not a constant image
     np.testing.assert_array_equal(pixels, np.where(want > 0, want, np.float32(np.nan)))
+    # its report lines went over /rosout to roscore's rosout node, which republished them on /rosout_agg
+    ours = [block for block in result["rosout"].split("---") if 'name: "/semattnet"' in block]
+    assert ours and any("level: 2" in block and "frame(s)" in block for block in ours), result["rosout"][-2000:]

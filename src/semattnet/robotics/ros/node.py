@@ -47,6 +47,7 @@ from .inputs import Pair, PairingInputs, Stamped
 from .names import resolve_name
 from .publish import CLOUD_STRIDE, RosPublishSink, gives_uncertainty
 from .qos import default_qos
+from .rosout import Rosout
 from .status import NodeStatus, TopicStatus, udp_drops
 from .transport import QoS, Transport
 
@@ -107,6 +108,7 @@ class DepthNode:
         latch_camera_info: the CameraInfo published transient local (a late subscriber gets it at once).
         qos: the QoS of the topics by role (:meth:`NodeTopics.resolved`'s keys; :func:`~.qos.node_qos`), over
             :func:`~.qos.default_qos`.
+        rosout: the report lines and the ``semattnet.ros`` log published on ``/rosout`` (:mod:`.rosout`).
     """
 
     def __init__(
@@ -131,6 +133,7 @@ class DepthNode:
         cloud_stride: int = CLOUD_STRIDE,
         latch_camera_info: bool = False,
         qos: Mapping[str, QoS] | None = None,
+        rosout: bool = True,
     ) -> None:
         self.transport = transport
         self.completer = completer
@@ -155,7 +158,10 @@ class DepthNode:
         self.sinks: list[Sink] = [self.publisher, *sinks]
         self.run = LiveRun()
         # /diagnostics: published from the report tick (and on stop) with what node_health() reads of the node
-        self.diagnostics = Diagnostics(transport, resolve_name("~", namespace, node).rstrip("/"), report_s)
+        fqn = resolve_name("~", namespace, node).rstrip("/")
+        self.diagnostics = Diagnostics(transport, fqn, report_s)
+        published = [self.names[f"out:{role}"] for role in sorted(publish)]
+        self.rosout = Rosout(transport, fqn, [*published, "/diagnostics", "/rosout"]) if rosout else None
         self._slot: Pair | None = None
         self._dropped: list[Dropped] = []
         self._ready = threading.Condition()
@@ -178,6 +184,8 @@ class DepthNode:
         inp = self.inputs
         self.publisher.advertise()
         self.diagnostics.advertise()
+        if self.rosout is not None:
+            self.rosout.advertise()
         image_type = "sensor_msgs/msg/CompressedImage" if inp.compressed else "sensor_msgs/msg/Image"
         self._subscribe("image", image_type, inp.on_image)
         self._subscribe("scan", "sensor_msgs/msg/Image" if inp.sparse else "sensor_msgs/msg/PointCloud2", inp.on_scan)
@@ -226,8 +234,12 @@ class DepthNode:
             if time.monotonic() - last[0] >= self.report_s:
                 last[0] = time.monotonic()
                 self.diagnostics.publish(node_health(self))  # before the report line starts a new interval
-                self.say(self.report())
+                self._say(self.report())
+            if self.rosout is not None:
+                self.rosout.publish_pending()
 
+        if self.rosout is not None:
+            self.rosout.attach()
         left = None if frames is None else max(0, frames - self.published - self.failed)
         try:
             run_live(
@@ -246,7 +258,16 @@ class DepthNode:
                 said, self._said_final = self._said_final, True
             if not said:
                 self.diagnostics.publish(node_health(self), final=True)
-                self.say(self.report(final=True))
+                self._say(self.report(final=True))
+            if self.rosout is not None:
+                self.rosout.publish_pending()
+                self.rosout.detach()
+
+    def _say(self, line: str) -> None:
+        """A report line: said, and on ``/rosout``."""
+        self.say(line)
+        if self.rosout is not None:
+            self.rosout.line(line)
 
     def _note(self, fault: FrameFault) -> None:
         if fault.status != "dropped":

@@ -4,8 +4,9 @@ maps them onto a command's options).
 - ROS 2 (``rcl``'s grammar): one or more ``--ros-args ... [--]`` sections holding ``-r``/``--remap FROM:=TO``
   (``__ns`` and ``__node`` set the namespace and the node name; ``NODE:FROM:=TO`` applies to node NODE only),
   ``-p``/``--param NAME:=VALUE`` (VALUE read as YAML), ``--params-file FILE``, ``--log-level [NAME:=]LEVEL``,
-  ``-e``/``--enclave E``, and the log switches ``--enable-rosout-logs`` and the like (accepted, no effect: the node
-  has no ``/rosout``). Anything else in a section is refused in one line.
+  ``-e``/``--enclave E``, ``--enable-rosout-logs`` / ``--disable-rosout-logs`` (the node's ``/rosout``, on by
+  default) and the other log switches (accepted, no effect: the node writes no log files). Anything else in a
+  section is refused in one line.
 - ROS 1 (what ``rosrun`` and ``roslaunch`` pass): ``NAME:=VALUE`` words anywhere; ``__ns``, ``__name``,
   ``__master``, ``__ip``, ``__hostname`` set the node's own settings, ``__log`` is ignored, ``_KEY:=VALUE`` is a
   private parameter, any other ``FROM:=TO`` a remap.
@@ -24,7 +25,8 @@ from semattnet._errors import InputError
 
 __all__ = ["ROS1_SPECIALS", "RosArgs", "matches_node", "params_file_values", "split_ros_args", "yaml_value"]
 
-#: ``--ros-args`` flags taking no value that the node accepts without effect (it has no /rosout or log files).
+#: ``--ros-args`` flags taking no value (the rosout pair turns ``/rosout`` on and off; the others have no effect: the
+#: node writes no log files).
 _LOG_SWITCHES = frozenset(
     f"--{on}-{what}-logs" for on in ("enable", "disable") for what in ("rosout", "stdout", "external-lib")
 )
@@ -45,6 +47,7 @@ class RosArgs:
     settings: dict[str, str] = field(default_factory=dict)
     log_level: str | None = None
     enclave: str | None = None
+    rosout: bool = True
 
 
 def _rule(text: str, flag: str) -> tuple[str, str]:
@@ -88,6 +91,7 @@ def _section(words: list[str], at: int, ros: RosArgs) -> int:
             i += 1
             continue
         if word in _LOG_SWITCHES:
+            ros.rosout = word != "--disable-rosout-logs" if word.endswith("-rosout-logs") else ros.rosout
             i += 1
             continue
         if word not in takes:
