@@ -103,11 +103,11 @@ def test_a_registered_engine_runs_predict(echo: EngineEntry, frame: list[str], t
 
 def test_one_model_section_for_every_command_that_runs_a_model() -> None:
     """predict, evaluate, submit and the ROS nodes take the one Model section (submit: no --method); predict stays
-    within its 48 options."""
+    within its 49 options (48, and --prior since --method prior)."""
     names = ("predict", "evaluate", "submit", "ros1", "ros2")
     commands = {name: {p.name: p for p in main.commands[name].params} for name in names}
     model = ["weights", "device", "backend", "precision", "calibration", "amp"]
     for name, params in commands.items():
         assert set(model) <= set(params) and ("method" in params) == (name != "submit"), name
         assert [params[m].help for m in model] == [commands["predict"][m].help for m in model], name
-    assert len(commands["predict"]) <= 48
+    assert len(commands["predict"]) <= 49

@@ -126,6 +126,8 @@ def test_new_source_gets_the_input_rules(toys: None, tmp_path: Path, args: list[
 
 
 def test_predict_has_no_more_options_than_before() -> None:
-    """48 options with the same features (the registries' entries included), as before they were generated."""
+    """48 options with the same features (the registries' entries included), as before they were generated; 49
+    since ``--prior`` (the monocular prior of ``--method prior``, asked by the generalist's issue). A cap on
+    growth: a new option raises it here, with its reason."""
     ctx = click.Context(predict)
-    assert len([p for p in predict.get_params(ctx) if p is not predict.get_help_option(ctx)]) <= 48
+    assert len([p for p in predict.get_params(ctx) if p is not predict.get_help_option(ctx)]) <= 49

@@ -148,6 +148,7 @@ WHY_IT_MAY = {
     "inference/backends/torch_engine.py": "an engine: runs the network on one padded batch",
     "inference/backends/calibration.py": "int8's calibration frames read once to quantise (no completion)",
     "models/generalist.py": "the generalist's forward calls its network",
+    "baselines/prior.py": "the monocular prior's network on the one image a completer call is given",
     "models/macs.py": "counts a forward's multiply-accumulates",
     "models/rt.py": "layers indexed in a forward",
     "models/bn_folding.py": "modules indexed while folding",

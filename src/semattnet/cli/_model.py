@@ -112,7 +112,8 @@ def precision_options(f: _F, backend: bool = True) -> _F:
 
 
 def model_options(method: bool = True) -> Callable[[_F], _F]:
-    """The Model section (``method``: with ``--method semattnet|classical``) in one line: ``@model_options()``.
+    """The Model section (``method``: with ``--method semattnet|classical|prior`` and ``--prior``) in one line:
+    ``@model_options()``.
     The command receives the fields of :class:`ModelOptions` (``values_of(ModelOptions, params)``)."""
 
     def decorate(f: _F) -> _F:
@@ -137,12 +138,21 @@ def model_options(method: bool = True) -> Callable[[_F], _F]:
         f = device_option(cls=_MODEL)(f)
         if method:
             f = click.option(
+                "--prior",
+                cls=_MODEL,
+                metavar="hf:ORG/NAME|hf:PATH",
+                default=None,
+                help="--method prior's monocular depth model (transformers' AutoModelForDepthEstimation, e.g. "
+                "hf:depth-anything/Depth-Anything-V2-Small-hf), fitted to each frame's sparse points.",
+            )(f)
+            f = click.option(
                 "--method",
                 cls=_MODEL,
-                type=click.Choice(["semattnet", "classical"]),
+                type=click.Choice(["semattnet", "classical", "prior"]),
                 default="semattnet",
                 show_default=True,
-                help="classical: the non-learned IP-Basic-style baseline (no weights).",
+                help="classical: the non-learned IP-Basic-style baseline (no weights); prior: a monocular depth "
+                "model (--prior) put on the sparse points' scale (no weights).",
             )(f)
         return weights_option(f)
 
@@ -165,13 +175,17 @@ class ModelOptions:
     backend: str
     precision: str | None
     calibration: Path | None
+    prior: str | None = None
 
     def check(self) -> None:
         """The options agree (usage errors, before any work): no option that would be ignored, weights when the
         method needs them, an engine that runs the precision on the device."""
-        if self.method == "classical":
+        require_with("--method prior", self.method == "prior", "prior")
+        if self.method in ("classical", "prior"):
             if self.weights is not None:
-                raise click.UsageError("--method classical uses no model: drop --checkpoint / --weights")
+                raise click.UsageError(f"--method {self.method} uses no model: drop --checkpoint / --weights")
+            if self.method == "prior" and self.prior is None:
+                raise click.UsageError("--method prior needs --prior hf:ORG/NAME (a monocular depth model)")
             # no semantic map, engine or precision: a spec, backend or --amp given with it would be ignored unread
             require_with("--method semattnet", False, "segment_spec", "backend", "amp")
         elif self.weights is None:
@@ -183,9 +197,9 @@ class ModelOptions:
         check_calibration(self.precision)
         if self.calibration is not None:
             check_calibration_frames(self.calibration)
-        if self.method == "classical":
+        if self.method in ("classical", "prior"):
             if self.precision is not None:
-                raise click.UsageError("--precision is the network's: --method classical runs none")
+                raise click.UsageError(f"--precision is the network's: --method {self.method} runs none")
             return
         from semattnet._utils.device import resolve_device
 
@@ -218,6 +232,11 @@ class ModelOptions:
 
         if self.method == "classical":
             return ClassicalCompleter()
+        if self.method == "prior":
+            from semattnet._utils.device import resolve_device
+            from semattnet.baselines.prior import load_prior
+
+            return load_prior(str(self.prior), str(resolve_device(self.device)))
         if self.weights is None:
             raise click.UsageError(
                 "--checkpoint or --weights is required (they are one option: --checkpoint is an alias)"

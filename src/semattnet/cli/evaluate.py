@@ -112,8 +112,8 @@ def evaluate(
     overwrite: bool,
     **params: object,
 ) -> None:
-    """Evaluate weights on a split with its dataset's metrics (KITTI: the devkit's), or sweep sparser inputs
-    (--method classical: the baseline alone, with --sparsity only)."""
+    """Evaluate weights (or a baseline: --method classical, --method prior) on a split with its dataset's metrics
+    (KITTI: the devkit's), or sweep sparser inputs (--sparsity)."""
     model = values_of(ModelOptions, params)
     weights, method, device = model.weights, model.method, model.device
     split = _split(dataset, split)
@@ -121,6 +121,8 @@ def evaluate(
         raise click.UsageError("--segment is for the model's evaluation, not --sparsity")
     model.check_engine()
     if sparsity:
+        if method == "prior":
+            raise click.UsageError("--sparsity sweeps SemAttNet weights or --method classical, not --method prior")
         _one_process("evaluate --sparsity")
         if out is None:
             raise click.UsageError("--sparsity needs --out")
@@ -132,19 +134,20 @@ def evaluate(
     from semattnet.inference.contract import CompleterFactory
     from semattnet.inference.options import RunOptions
 
-    if method != "semattnet":
-        raise click.UsageError("--method classical needs --sparsity")
     if (save_predictions or pictures) and out is None:
         raise click.UsageError("--save-predictions and --pictures need --out")
-    spec = _required_weights(weights)
+    spec = _required_weights(weights) if method == "semattnet" else None
+    if spec is None:
+        model.check()  # a baseline: no weights (and --prior for the prior)
     semantic = None
     if segment is not None:
         from semattnet.segmentation.datasets import segment_split
 
         semantic = segment_split(dataset, data_root, (split,), segment, device, log=click.echo, max_frames=max_frames)
-    local = Path(spec) if Path(spec).exists() else None
+    local = Path(spec) if spec is not None and Path(spec).exists() else None
+    label = spec or (f"prior {model.prior}" if method == "prior" else method)
     frames = EvalSplit(data_root, split, dataset, max_frames, semantic_root=semantic, palette_mismatch=palette_mismatch)
-    outputs = EvalOutputs(save_predictions, pictures, overwrite, label=spec, inputs=(local, model.calibration))
+    outputs = EvalOutputs(save_predictions, pictures, overwrite, label=label, inputs=(local, model.calibration))
     options = RunOptions(prefetch=workers, batch_size=batch_size)
     res = evaluate_split(CompleterFactory(model.completer), frames, out, outputs, options)  # loaded after every check
     _report(res, out)
