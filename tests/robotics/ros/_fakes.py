@@ -77,3 +77,15 @@ def camera_info(stamp: int = 0, info: CameraInfoData = INFO) -> object:
 
 def tf_static() -> object:
     return tf_message(TS, [("cam", "velo", T_CAM_LIDAR)], 0)
+
+
+def deliver_one_frame(fake: FakeTransport, stamp: int, node: str = "/robot/depth") -> None:
+    """What a rig sends the node ``node`` for one frame: its CameraInfo, ``/tf_static``, an image and a scan 5 ms
+    after it."""
+    for topic, message in (
+        (f"{node}/input/camera_info", camera_info()),
+        ("/tf_static", tf_static()),
+        (f"{node}/input/image", image(stamp)),
+        (f"{node}/input/point_cloud", scan(stamp + 5_000_000)),
+    ):
+        fake.deliver(topic, message)

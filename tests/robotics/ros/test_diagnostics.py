@@ -13,7 +13,7 @@ from semattnet.robotics.bags.deps import rosbags_typestore
 from semattnet.robotics.ros.diagnostics import ERROR, KEYS, OK, STALE, WARN, Diagnostics, NodeHealth
 from semattnet.robotics.ros.node import DepthNode, NodeTopics
 
-from ._fakes import FakeTransport, camera_info, image, scan, tf_static
+from ._fakes import FakeTransport, deliver_one_frame
 from .test_node import _complete
 
 pytest.importorskip("rosbags")
@@ -63,13 +63,7 @@ def test_the_node_publishes_its_status_every_interval_and_stale_on_stop(ros1: bo
     if ros1:
         fake.typestore = rosbags_typestore(True)
     node = DepthNode(fake, _complete, NodeTopics(), namespace="/robot", node="depth", report_s=1e-6).start()
-    for topic, message in (
-        ("/robot/depth/input/camera_info", camera_info()),
-        ("/tf_static", tf_static()),
-        ("/robot/depth/input/image", image(T0)),
-        ("/robot/depth/input/point_cloud", scan(T0 + 5_000_000)),
-    ):
-        fake.deliver(topic, message)
+    deliver_one_frame(fake, T0)
     stop = threading.Event()
     threading.Timer(5.0, stop.set).start()
     node.spin(stop, frames=1)

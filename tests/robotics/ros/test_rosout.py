@@ -19,7 +19,7 @@ from semattnet.robotics.ros.node import DepthNode, NodeTopics
 from semattnet.robotics.ros.ros_args import split_ros_args
 from semattnet.robotics.ros.rosout import LOGGERS, MAX_QUEUED, ROSOUT_QOS, Rosout, logger_name
 
-from ._fakes import FakeTransport, camera_info, image, scan, tf_static
+from ._fakes import FakeTransport, deliver_one_frame
 from .test_node import _complete
 
 pytest.importorskip("rosbags")
@@ -39,13 +39,7 @@ def _run_one_frame(fake: FakeTransport, rosout: bool = True) -> DepthNode:
         fake, _logging_complete, NodeTopics(), namespace="/robot", node="depth", report_s=1e-6, rosout=rosout
     )
     node.start()
-    for topic, message in (
-        ("/robot/depth/input/camera_info", camera_info()),
-        ("/tf_static", tf_static()),
-        ("/robot/depth/input/image", image(T0)),
-        ("/robot/depth/input/point_cloud", scan(T0 + 5_000_000)),
-    ):
-        fake.deliver(topic, message)
+    deliver_one_frame(fake, T0)
     stop = threading.Event()
     threading.Timer(5.0, stop.set).start()
     try:
