@@ -89,7 +89,7 @@ CASES = [
     ("metrics {t}/pred {t}/sem", 1, "16-bit"),
     ("metrics {t}/missing {t}/gt", 2, "'PRED'"),
     # evaluate
-    ("evaluate --data {t}/rgb --method classical --out {t}/new", 2, "--method classical"),
+    ("evaluate --data {t}/rgb --method classical --out {t}/new", 1, "no val_select frames found"),
     ("evaluate --data {t}/missing", 2, "--data"),
     ("evaluate --data {t}/rgb --batch-size 0", 2, "--batch-size"),
     ("evaluate --data {t}/rgb --workers -1", 2, "--workers"),
