@@ -429,10 +429,10 @@ _GENERALISTS: tuple[tuple[str, str, int, int, tuple[float, float, float, float]]
     ),
     (
         "semattnet_half_generalist",
-        "032f16af75dbf28cfc1a0997a87913aff76b21496b2536b6ab0e425cebfc08de",
-        4_535_509,
+        "d8d3f6d7144c0c5a940760be8560247a2ef32fdb4836b7d2b574e6ba6079d2c7",
+        4_534_313,
         5_676_421,
-        (1133.0, 288.7, 6.68, 1.90),
+        (1116.9, 261.6, 6.62, 1.70),
     ),
     (
         "semattnet_generalist",
