@@ -429,8 +429,8 @@ _GENERALISTS: tuple[tuple[str, str, int, int, tuple[float, float, float, float]]
     ),
     (
         "semattnet_half_generalist",
-        "d8d3f6d7144c0c5a940760be8560247a2ef32fdb4836b7d2b574e6ba6079d2c7",
-        4_534_313,
+        "fb0d5713d4d382ee2ebe60e011c2c4f6cc58507c3c751be211966f9aa53e7bc4",
+        4_534_402,
         5_676_421,
         (1116.9, 261.6, 6.62, 1.70),
     ),
