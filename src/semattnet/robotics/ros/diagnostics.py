@@ -35,7 +35,16 @@ if TYPE_CHECKING:
     from .status import NodeStatus
     from .transport import Publisher
 
-__all__ = ["DIAGNOSTICS_QOS", "KEYS", "MISSING_PERIODS", "Diagnostics", "HealthSource", "NodeHealth", "node_health"]
+__all__ = [
+    "DIAGNOSTICS_QOS",
+    "DIAGNOSTICS_TOPIC",
+    "KEYS",
+    "MISSING_PERIODS",
+    "Diagnostics",
+    "HealthSource",
+    "NodeHealth",
+    "node_health",
+]
 
 log = logging.getLogger("semattnet.ros")
 

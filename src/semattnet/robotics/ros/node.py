@@ -42,12 +42,12 @@ from semattnet.inference.live import LiveRun, run_live
 from semattnet.inference.sinks import Sink
 from semattnet.robotics.frame import ROS_TYPES, TOPICS
 
-from .diagnostics import Diagnostics, node_health
+from .diagnostics import DIAGNOSTICS_TOPIC, Diagnostics, node_health
 from .inputs import Pair, PairingInputs, Stamped
 from .names import resolve_name
 from .publish import CLOUD_STRIDE, RosPublishSink, gives_uncertainty
 from .qos import default_qos
-from .rosout import Rosout
+from .rosout import ROSOUT_TOPIC, Rosout
 from .status import NodeStatus, TopicStatus, udp_drops
 from .transport import QoS, Transport
 
@@ -161,7 +161,7 @@ class DepthNode:
         fqn = resolve_name("~", namespace, node).rstrip("/")
         self.diagnostics = Diagnostics(transport, fqn, report_s)
         published = [self.names[f"out:{role}"] for role in sorted(publish)]
-        self.rosout = Rosout(transport, fqn, [*published, "/diagnostics", "/rosout"]) if rosout else None
+        self.rosout = Rosout(transport, fqn, [*published, DIAGNOSTICS_TOPIC, ROSOUT_TOPIC]) if rosout else None
         self._slot: Pair | None = None
         self._dropped: list[Dropped] = []
         self._ready = threading.Condition()

@@ -91,7 +91,8 @@ def _section(words: list[str], at: int, ros: RosArgs) -> int:
             i += 1
             continue
         if word in _LOG_SWITCHES:
-            ros.rosout = word != "--disable-rosout-logs" if word.endswith("-rosout-logs") else ros.rosout
+            if word in ("--enable-rosout-logs", "--disable-rosout-logs"):
+                ros.rosout = word == "--enable-rosout-logs"
             i += 1
             continue
         if word not in takes:

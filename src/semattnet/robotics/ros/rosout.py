@@ -73,7 +73,7 @@ class Rosout(logging.Handler):
         self.msgtype = "rosgraph_msgs/msg/Log" if self.ros1 else "rcl_interfaces/msg/Log"
         self.publisher: Publisher | None = None
         self.dropped = 0  # records dropped from a full queue
-        self._queue: deque[logging.LogRecord] = deque()
+        self._queue: deque[logging.LogRecord] = deque(maxlen=MAX_QUEUED)  # a full one drops its oldest
         self._guard = threading.Lock()
         self._publishing = threading.local()
         self._echo: list[logging.Logger] = []  # loggers given logging.lastResort by attach()
@@ -109,8 +109,7 @@ class Rosout(logging.Handler):
         if getattr(self._publishing, "active", False):
             return
         with self._guard:
-            if len(self._queue) >= MAX_QUEUED:
-                self._queue.popleft()
+            if len(self._queue) == MAX_QUEUED:  # the append drops the oldest
                 self.dropped += 1
             self._queue.append(record)
 
@@ -122,7 +121,8 @@ class Rosout(logging.Handler):
     def publish_pending(self) -> int:
         """Publish the queued records (the loop thread); how many."""
         with self._guard:
-            records, self._queue = list(self._queue), deque()
+            records = list(self._queue)
+            self._queue.clear()
         if self.publisher is None or not records:
             return 0
         self._publishing.active = True
