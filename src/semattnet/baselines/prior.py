@@ -67,7 +67,6 @@ def fit_prior(prediction: np.ndarray, sparse: np.ndarray, relative: bool = True)
     y = 1.0 / z if relative else z
     if relative and float(np.ptp(x)) <= 1e-12:
         raise DataError("the prior's prediction is the same at every sparse point: its scale cannot be fitted")
-    keep = np.ones(x.size, bool)
     s, t = _solve(x, y, relative)
     for _ in range(_REFITS):
         residual = np.abs(s * x + t - y)
